@@ -1,0 +1,22 @@
+# The README's two commands: `make render` (the main job) and `make test`.
+# Both set up .venv and check the system libLLVM first (tools/setup.sh).
+OUT ?= out/default
+SCENE ?=
+PYTEST_ARGS ?=
+
+.PHONY: setup render test bench sweeps
+
+setup:
+	@tools/setup.sh
+
+render: setup
+	.venv/bin/spacefit render $(SCENE) --out $(OUT)
+
+test: setup
+	.venv/bin/python -m pytest -q $(PYTEST_ARGS)
+
+bench: setup
+	.venv/bin/python experiments/bench_render.py
+
+sweeps: setup
+	.venv/bin/python experiments/thesis_sweeps.py --out experiments/out/sweeps

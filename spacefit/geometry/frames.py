@@ -1,0 +1,129 @@
+"""Frames and the pinhole camera model of thesis section 3.2 (world, camera and object frames).
+
+Conventions (all lengths in metres, angles in radians):
+
+* The world frame is right-handed.
+* An attitude ``(alpha, beta, gamma)`` is turned into a rotation with the thesis's matrices exactly as
+  printed in section 3.2, ``R = R1(alpha) @ R2(beta) @ R3(gamma)``, where
+
+      R1(a) = [[1, 0, 0], [0, cos a, sin a], [0, -sin a, cos a]]      (about x)
+      R2(b) = [[cos b, 0, -sin b], [0, 1, 0], [sin b, 0, cos b]]      (about y)
+      R3(c) = [[cos c, sin c, 0], [-sin c, cos c, 0], [0, 0, 1]]      (about z)
+
+  Each is a right-handed rotation by the *negative* angle (clockwise seen from the axis tip), and
+  ``R`` maps object coordinates to world coordinates: ``p_world = R @ p_object + position``.
+  With the thesis's target attitude [90, 0, 0] deg a lander built with +z up ends up with its top
+  along world +y, upright in the default camera's image.
+* A camera with zero attitude looks along world -z with image right along +x and image up along +y;
+  its attitude rotates that frame by ``R`` above.
+* Pixel coordinates are continuous, origin at the top-left corner of the image, u to the right,
+  v down; pixel (i, j) covers [i, i + 1) x [j, j + 1). The principal point is the image centre plus
+  an offset in pixels.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from jaxtyping import Float
+
+from spacefit.errors import InputError
+
+
+def attitude_matrix(angles: Float[np.ndarray, "3"]) -> Float[np.ndarray, "3 3"]:
+    """Rotation ``R1(alpha) R2(beta) R3(gamma)`` of thesis section 3.2 from angles in radians."""
+    a, b, c = np.asarray(angles, dtype=float)
+    r1 = np.array([[1, 0, 0], [0, np.cos(a), np.sin(a)], [0, -np.sin(a), np.cos(a)]])
+    r2 = np.array([[np.cos(b), 0, -np.sin(b)], [0, 1, 0], [np.sin(b), 0, np.cos(b)]])
+    r3 = np.array([[np.cos(c), np.sin(c), 0], [-np.sin(c), np.cos(c), 0], [0, 0, 1]])
+    return r1 @ r2 @ r3
+
+
+def object_to_world(
+    position: Float[np.ndarray, "3"], attitude: Float[np.ndarray, "3"]
+) -> Float[np.ndarray, "4 4"]:
+    """Homogeneous object-to-world matrix from a position (m) and an attitude (rad)."""
+    m = np.eye(4)
+    m[:3, :3] = attitude_matrix(attitude)
+    m[:3, 3] = position
+    return m
+
+
+@dataclass(frozen=True)
+class CameraFrame:
+    """Position (m) and orthonormal axes (world) of a camera: forward is the optical axis."""
+
+    position: Float[np.ndarray, "3"]
+    right: Float[np.ndarray, "3"]
+    up: Float[np.ndarray, "3"]
+    forward: Float[np.ndarray, "3"]
+
+    @classmethod
+    def from_attitude(cls, position: np.ndarray, attitude: np.ndarray) -> CameraFrame:
+        """Camera frame from a position (m) and an attitude (rad), see the module conventions."""
+        r = attitude_matrix(attitude)
+        return cls(np.asarray(position, float), r[:, 0], r[:, 1], -r[:, 2])
+
+    @classmethod
+    def look_at(cls, position: np.ndarray, target: np.ndarray, up: np.ndarray) -> CameraFrame:
+        """Camera frame at ``position`` looking at ``target`` with image up as close to ``up``."""
+        position = np.asarray(position, float)
+        forward = np.asarray(target, float) - position
+        if np.linalg.norm(forward) == 0.0:
+            raise InputError("`camera.look_at_m` must differ from `camera.position_m`.")
+        forward = forward / np.linalg.norm(forward)
+        right = np.cross(forward, np.asarray(up, float))
+        if np.linalg.norm(right) < 1e-9:
+            raise InputError("`camera.up` must not be parallel to the viewing direction.")
+        right = right / np.linalg.norm(right)
+        return cls(position, right, np.cross(right, forward), forward)
+
+    def to_camera(self, points: Float[np.ndarray, "n 3"]) -> Float[np.ndarray, "n 3"]:
+        """World points to camera coordinates (right, up, depth along forward), in metres."""
+        d = np.atleast_2d(points) - self.position
+        return np.stack([d @ self.right, d @ self.up, d @ self.forward], axis=-1)
+
+
+@dataclass(frozen=True)
+class Intrinsics:
+    """Pinhole intrinsics: focal length and pixel pitch (m), size (px), principal point offset (px)."""
+
+    focal_length: float
+    pixel_pitch: float
+    width: int
+    height: int
+    principal_offset: tuple[float, float] = (0.0, 0.0)
+
+    @property
+    def focal_px(self) -> float:
+        """Focal length in pixels."""
+        return self.focal_length / self.pixel_pitch
+
+    @property
+    def principal_point(self) -> tuple[float, float]:
+        """Principal point (u0, v0) in pixel coordinates."""
+        return (self.width / 2 + self.principal_offset[0], self.height / 2 + self.principal_offset[1])
+
+    @property
+    def fov_x(self) -> float:
+        """Horizontal field of view (rad) of the image centred on the optical axis."""
+        return 2.0 * np.arctan(self.width * self.pixel_pitch / (2.0 * self.focal_length))
+
+
+def project(
+    points: Float[np.ndarray, "n 3"], frame: CameraFrame, intrinsics: Intrinsics
+) -> tuple[Float[np.ndarray, "n 2"], Float[np.ndarray, " n"]]:
+    """Central projection of world points (thesis section 3.2).
+
+    Returns:
+        pixel coordinates (u, v) and depth along the optical axis (m); points with depth <= 0 lie
+        behind the camera and their (u, v) is meaningless.
+    """
+    c = frame.to_camera(points)
+    depth = c[:, 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u0, v0 = intrinsics.principal_point
+        u = u0 + intrinsics.focal_px * c[:, 0] / depth
+        v = v0 - intrinsics.focal_px * c[:, 1] / depth
+    return np.stack([u, v], axis=-1), depth

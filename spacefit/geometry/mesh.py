@@ -1,0 +1,123 @@
+"""Triangle meshes of the target's parts: validation, import through trimesh, binary STL export.
+
+A part is a :class:`PartMesh` in the object frame (metres). Files are STL (binary or ASCII), PLY or
+OBJ: either one file per part, or one file whose face groups / objects are the parts.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import trimesh
+from jaxtyping import Float, Int
+
+from spacefit.errors import InputError
+
+MESH_SUFFIXES = (".stl", ".ply", ".obj")
+# A triangle whose area is below this fraction of the squared longest edge of its part is
+# degenerate: it has no usable normal for shading or for displacing wrinkles.
+DEGENERATE_REL_AREA = 1e-12
+
+
+@dataclass(frozen=True)
+class PartMesh:
+    """One part of the target.
+
+    Attributes:
+        vertices: (n, 3) float, object frame, metres.
+        faces: (m, 3) int, counter-clockwise seen from outside.
+        uv: (n, 2) float or None. Texture coordinates define the tangent frame: the microfacet
+            roughness ``alpha_x`` runs along dp/du. Without them Mitsuba takes each triangle's first
+            edge, so anisotropic materials need them.
+    """
+
+    vertices: Float[np.ndarray, "n 3"]
+    faces: Int[np.ndarray, "m 3"]
+    uv: Float[np.ndarray, "n 2"] | None = None
+
+    def to_trimesh(self) -> trimesh.Trimesh:
+        """The part as an unprocessed :class:`trimesh.Trimesh` (vertex order kept)."""
+        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+
+
+def validate_part(name: str, part: PartMesh) -> PartMesh:
+    """Check that a part has faces, finite vertices, valid indices and no degenerate triangles."""
+    v, f = np.asarray(part.vertices, float), np.asarray(part.faces)
+    if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
+        raise InputError(f"part {name!r}: the mesh has no triangles.")
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise InputError(f"part {name!r}: vertices must be an (n, 3) array, got shape {v.shape}.")
+    if not np.all(np.isfinite(v)):
+        raise InputError(f"part {name!r}: vertex coordinates must be finite (found NaN or inf).")
+    if f.min() < 0 or f.max() >= len(v):
+        raise InputError(f"part {name!r}: face indices must be in [0, {len(v) - 1}].")
+    tri = v[f]
+    area2 = np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+    scale = np.max(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2)) ** 2
+    bad = np.flatnonzero(area2 <= DEGENERATE_REL_AREA * scale)
+    if len(bad):
+        raise InputError(
+            f"part {name!r}: {len(bad)} degenerate (zero-area) triangle(s), first at face index "
+            f"{bad[0]}; remove them (e.g. trimesh's `update_faces(nondegenerate_faces())`)."
+        )
+    if part.uv is not None and np.shape(part.uv) != (len(v), 2):
+        raise InputError(f"part {name!r}: uv must have shape ({len(v)}, 2), got {np.shape(part.uv)}.")
+    return PartMesh(v, f.astype(np.int64), None if part.uv is None else np.asarray(part.uv, float))
+
+
+def _load(path: Path, **kwargs: object) -> trimesh.Trimesh | trimesh.Scene:
+    if not path.is_file():
+        raise InputError(f"mesh file {str(path)!r} does not exist.")
+    if path.suffix.lower() not in MESH_SUFFIXES:
+        raise InputError(f"mesh file {str(path)!r}: format must be one of {', '.join(MESH_SUFFIXES)}.")
+    try:
+        return trimesh.load(path, process=False, **kwargs)
+    except Exception as err:  # trimesh raises many types for malformed files
+        raise InputError(f"mesh file {str(path)!r} could not be read: {err}") from None
+
+
+def _from_trimesh(mesh: trimesh.Trimesh) -> PartMesh:
+    uv = getattr(mesh.visual, "uv", None)
+    return PartMesh(np.asarray(mesh.vertices, float), np.asarray(mesh.faces), None if uv is None else np.asarray(uv, float))
+
+
+def load_part(name: str, path: str | Path) -> PartMesh:
+    """Load one file (STL / PLY / OBJ) as the whole of part ``name``; all its groups are merged."""
+    loaded = _load(Path(path), force="mesh")
+    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+        raise InputError(f"part {name!r}: mesh file {str(path)!r} holds no triangles.")
+    return validate_part(name, _from_trimesh(loaded))
+
+
+def load_grouped(path: str | Path) -> dict[str, PartMesh]:
+    """Load one file whose named face groups or objects are the parts (OBJ ``g`` / ``o``)."""
+    scene = _load(Path(path), force="scene", split_groups=True, split_objects=True)
+    parts: dict[str, PartMesh] = {}
+    for node in scene.graph.nodes_geometry:
+        transform, geom_name = scene.graph[node]
+        mesh = scene.geometry[geom_name]
+        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+            continue
+        mesh = mesh.copy()
+        mesh.apply_transform(transform)
+        parts[str(geom_name)] = validate_part(str(geom_name), _from_trimesh(mesh))
+    if not parts:
+        raise InputError(f"mesh file {str(path)!r} holds no triangles.")
+    return parts
+
+
+def export_stl(path: str | Path, vertices: Float[np.ndarray, "n 3"], faces: Int[np.ndarray, "m 3"]) -> None:
+    """Write a binary STL (80-byte header, uint32 count, 50 bytes per triangle), as the thesis did."""
+    trimesh.Trimesh(np.asarray(vertices, float), np.asarray(faces), process=False).export(path, file_type="stl")
+
+
+def merge_parts(parts: Mapping[str, PartMesh]) -> PartMesh:
+    """All parts as one mesh (for bounds and inside tests); uv is dropped."""
+    offsets = np.cumsum([0] + [len(p.vertices) for p in parts.values()])[:-1]
+    return PartMesh(
+        np.concatenate([p.vertices for p in parts.values()]),
+        np.concatenate([p.faces + o for p, o in zip(parts.values(), offsets)]),
+    )

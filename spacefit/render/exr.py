@@ -1,0 +1,27 @@
+"""OpenEXR input and output of float radiance images through Mitsuba's Bitmap."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from spacefit.errors import InputError
+from spacefit.render.backend import mi
+
+
+def write_exr(path: str | Path, image: np.ndarray) -> None:
+    """Write a (height, width, 3) float radiance image as a 32-bit float RGB OpenEXR file."""
+    bitmap = mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB)
+    bitmap.write(str(path))
+
+
+def read_exr(path: str | Path) -> np.ndarray:
+    """Read an OpenEXR file as a (height, width, channels) float32 array."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"image file {str(p)!r} does not exist.")
+    try:
+        return np.array(mi.Bitmap(str(p)), dtype=np.float32)
+    except Exception as err:  # Mitsuba raises RuntimeError subclasses for unreadable files
+        raise InputError(f"image file {str(p)!r} could not be read as OpenEXR: {err}") from None

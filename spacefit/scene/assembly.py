@@ -1,0 +1,145 @@
+"""Assemble a validated :class:`~spacefit.scene.config.Scene` into renderer-agnostic quantities.
+
+The assembly holds the parts' meshes in the object frame, the refinement of each wrinkled part
+(computed once), materials, the object-to-world matrix, the camera and the sun. World-space
+vertices of a wrinkled part are a JAX function of (D, G), so the differentiable renderer can push
+tangents in D and G through :func:`spacefit.geometry.wrinkle.displace` into vertex positions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import jax.numpy as jnp
+import numpy as np
+import trimesh
+from jaxtyping import Array, Float
+
+from spacefit.errors import InputError
+from spacefit.geometry.frames import CameraFrame, Intrinsics, object_to_world, project
+from spacefit.geometry.lander import builtin_lander
+from spacefit.geometry.mesh import PartMesh, load_grouped, load_part, merge_parts
+from spacefit.geometry.wm import wm_n_max, wm_phases
+from spacefit.geometry.wrinkle import Refinement, displace, refine
+from spacefit.materials import Material, make_material
+from spacefit.scene.config import Scene, deg2rad
+
+
+@dataclass(frozen=True)
+class Assembly:
+    """Everything a renderer needs, in SI units and radians, world frame unless stated."""
+
+    scene: Scene
+    parts: Mapping[str, PartMesh]
+    materials: Mapping[str, Material]
+    refinements: Mapping[str, Refinement]
+    phases: np.ndarray
+    to_world: Float[np.ndarray, "4 4"]
+    camera: CameraFrame
+    intrinsics: Intrinsics
+    sun_direction: Float[np.ndarray, "3"]
+
+    def object_vertices(self, name: str, D: float | Array | None = None, G: float | Array | None = None) -> Array:
+        """Object-frame vertices (m) of part ``name``; wrinkled parts at (D, G), scene values by default."""
+        if name not in self.refinements:
+            return jnp.asarray(self.parts[name].vertices)
+        w = self.scene.wrinkles
+        return displace(
+            self.refinements[name],
+            w.D if D is None else D,
+            w.G if G is None else G,
+            gamma=w.gamma,
+            M=w.M,
+            L=w.L,
+            Ls=w.Ls,
+            phases=self.phases,
+        )
+
+    def world_vertices(self, name: str, D: float | Array | None = None, G: float | Array | None = None) -> Array:
+        """World-frame vertices (m) of part ``name``, differentiable in D and G."""
+        m = jnp.asarray(self.to_world)
+        return self.object_vertices(name, D, G) @ m[:3, :3].T + m[:3, 3]
+
+    def faces(self, name: str) -> np.ndarray:
+        """Triangles of part ``name`` (refined for wrinkled parts)."""
+        return self.refinements[name].faces if name in self.refinements else self.parts[name].faces
+
+    def triangle_count(self) -> int:
+        """Number of triangles in the rendered scene."""
+        return int(sum(len(self.faces(n)) for n in self.parts))
+
+
+def _load_parts(scene: Scene) -> dict[str, PartMesh]:
+    source = builtin_lander() if scene.target.mesh in ("builtin", "") else load_grouped(scene.target.mesh)
+    parts: dict[str, PartMesh] = {}
+    for name, spec in scene.parts.items():
+        if spec.file:
+            parts[name] = load_part(name, spec.file)
+        elif name in source:
+            parts[name] = source[name]
+        else:
+            where = "the built-in lander" if scene.target.mesh in ("builtin", "") else repr(scene.target.mesh)
+            raise InputError(
+                f"part {name!r} has no `file` and {where} has no part of that name; "
+                f"it has: {', '.join(sorted(source))}."
+            )
+    return parts
+
+
+def _camera(scene: Scene) -> tuple[CameraFrame, Intrinsics]:
+    c, r = scene.camera, scene.render
+    if c.look_at_m:
+        frame = CameraFrame.look_at(np.array(c.position_m), np.array(c.look_at_m), np.array(c.up))
+    else:
+        frame = CameraFrame.from_attitude(np.array(c.position_m), np.array(deg2rad(c.attitude_deg)))
+    intr = Intrinsics(c.focal_length_mm * 1e-3, c.pixel_pitch_mm * 1e-3, r.resolution[0], r.resolution[1], c.principal_offset_px)
+    return frame, intr
+
+
+def check_view(vertices: Float[np.ndarray, "n 3"], faces: np.ndarray, camera: CameraFrame, intrinsics: Intrinsics) -> None:
+    """Reject a camera inside the target, looking away from it, or seeing none of it.
+
+    ``vertices`` are the whole target's world vertices (m).
+    """
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    lo, hi = mesh.bounds
+    inside_box = np.all(camera.position >= lo) and np.all(camera.position <= hi)
+    if inside_box and (not mesh.is_watertight or mesh.contains(camera.position[None])[0]):
+        raise InputError(
+            f"`camera.position_m` {camera.position.tolist()} is inside the target "
+            f"(bounds {lo.round(3).tolist()} to {hi.round(3).tolist()} m)."
+        )
+    uv, depth = project(vertices, camera, intrinsics)
+    if not np.any(depth > 0):
+        raise InputError("the camera looks away from the target: the whole target is behind it.")
+    front = uv[depth > 0]
+    visible = (front[:, 0] >= 0) & (front[:, 0] <= intrinsics.width) & (front[:, 1] >= 0) & (front[:, 1] <= intrinsics.height)
+    if not visible.any():
+        raise InputError(
+            "the target is outside the camera's field of view; check `camera.attitude_deg` / "
+            "`camera.look_at_m` and `target.position_m`."
+        )
+
+
+def assemble(scene: Scene) -> Assembly:
+    """Load and check geometry, refine wrinkled parts, resolve materials, camera and sun.
+
+    Raises:
+        InputError: before any rendering, for any bad mesh, material or view.
+    """
+    scene.validate()
+    parts = _load_parts(scene)
+    w = scene.wrinkles
+    refinements = {}
+    if w.enabled:
+        refinements = {name: refine(parts[name].vertices, parts[name].faces, w.spacing_m) for name in w.parts}
+    phases = wm_phases(w.M, wm_n_max(w.L, w.Ls, w.gamma), w.seed)
+    materials = {name: make_material(p.material, p.overrides, where=f"parts.{name}") for name, p in scene.parts.items()}
+    to_world = object_to_world(np.array(scene.target.position_m), np.array(deg2rad(scene.target.attitude_deg)))
+    camera, intrinsics = _camera(scene)
+    sun = np.array(scene.sun.direction, float)
+    assembly = Assembly(scene, parts, materials, refinements, phases, to_world, camera, intrinsics, sun / np.linalg.norm(sun))
+    whole = merge_parts({n: PartMesh(np.asarray(assembly.world_vertices(n)), assembly.faces(n)) for n in parts})
+    check_view(whole.vertices, whole.faces, camera, intrinsics)
+    return assembly

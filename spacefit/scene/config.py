@@ -1,0 +1,358 @@
+"""Scene description: dataclasses read from and written to TOML, with overrides and validation.
+
+Defaults are the thesis's Table 4-2. Units are in the key names: metres (``_m``), millimetres for
+the optics as the thesis gives them (``_mm``), degrees at this user-facing edge only (``_deg``),
+irradiance in W m^-2. The sun's ``direction`` is the direction the light travels.
+
+The thesis's "light radiance 5 W m^-2 sr^-1" for its distant light is, in pbrt's convention, the
+irradiance on a surface facing the light: ``sun.irradiance_w_m2 = 5``. ``"physical"`` selects the
+total solar irradiance at 1 au, 1361 W m^-2 (Kopp & Lean 2011).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import math
+import tomllib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import tomli_w
+
+from spacefit.errors import InputError, check_choice, check_range, check_vector
+
+SOLAR_IRRADIANCE_W_M2 = 1361.0
+VARIANTS = ("auto", "llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb")
+FILTERS = ("tent", "box", "gaussian")
+Vec3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class RenderSettings:
+    """Image size (width, height px), samples per pixel, thesis trace depth, seed, backend, filter.
+
+    ``depth`` is the thesis's (pbrt's) trace depth: the number of bounces after the camera ray's
+    first hit; Mitsuba's ``max_depth`` is ``depth + 1``. Depth 1 is direct sun light only.
+    """
+
+    resolution: tuple[int, int] = (600, 600)
+    spp: int = 20
+    depth: int = 2
+    seed: int = 0
+    variant: str = "auto"
+    filter: str = "tent"
+
+    def validate(self) -> None:
+        for i, axis in enumerate(("width", "height")):
+            _check_int(f"render.resolution ({axis})", self.resolution[i], 1, 16384)
+        _check_int("render.spp", self.spp, 1, 1 << 16)
+        _check_int("render.depth", self.depth, 1, 64)
+        _check_int("render.seed", self.seed, 0, 2**31 - 1)
+        check_choice("render.variant", self.variant, VARIANTS)
+        check_choice("render.filter", self.filter, FILTERS)
+
+
+@dataclass(frozen=True)
+class CameraSettings:
+    """Pinhole camera: optics in mm as in Table 4-2, pose by attitude or by ``look_at_m``.
+
+    ``principal_offset_px`` moves the principal point from the image centre (u right, v down).
+    When ``look_at_m`` holds 3 numbers it replaces ``attitude_deg``, with ``up`` as image up.
+    """
+
+    focal_length_mm: float = 7000.0
+    pixel_pitch_mm: float = 4.0
+    principal_offset_px: tuple[float, float] = (0.0, 0.0)
+    position_m: Vec3 = (0.0, 0.0, 70.0)
+    attitude_deg: Vec3 = (0.0, 0.0, 0.0)
+    look_at_m: tuple[float, ...] = ()
+    up: Vec3 = (0.0, 1.0, 0.0)
+
+    def validate(self) -> None:
+        check_range("camera.focal_length_mm", self.focal_length_mm, 0.0, lo_open=True, unit="mm")
+        check_range("camera.pixel_pitch_mm", self.pixel_pitch_mm, 0.0, lo_open=True, unit="mm")
+        check_vector("camera.principal_offset_px", self.principal_offset_px, 2)
+        check_vector("camera.position_m", self.position_m)
+        check_vector("camera.attitude_deg", self.attitude_deg)
+        if len(self.look_at_m) not in (0, 3):
+            raise InputError(f"`camera.look_at_m` must be empty or 3 numbers, got {list(self.look_at_m)}.")
+        if self.look_at_m:
+            check_vector("camera.look_at_m", self.look_at_m)
+        up = check_vector("camera.up", self.up)
+        if not up.any():
+            raise InputError("`camera.up` must not be the zero vector.")
+
+
+@dataclass(frozen=True)
+class SunSettings:
+    """One distant sun: irradiance on a surface facing it (W m^-2) and direction of travel."""
+
+    irradiance_w_m2: float = 5.0
+    direction: Vec3 = (0.0, 0.0, -1.0)
+
+    def validate(self) -> None:
+        check_range("sun.irradiance_w_m2", self.irradiance_w_m2, 0.0, lo_open=True, unit="W m^-2")
+        if not check_vector("sun.direction", self.direction).any():
+            raise InputError("`sun.direction` must not be the zero vector.")
+
+
+@dataclass(frozen=True)
+class TargetSettings:
+    """Target pose and geometry source: ``"builtin"`` or a mesh file whose groups are the parts."""
+
+    position_m: Vec3 = (0.0, 0.0, 0.0)
+    attitude_deg: Vec3 = (90.0, 0.0, 0.0)
+    mesh: str = "builtin"
+
+    def validate(self) -> None:
+        check_vector("target.position_m", self.position_m)
+        check_vector("target.attitude_deg", self.attitude_deg)
+
+
+@dataclass(frozen=True)
+class WrinkleSettings:
+    """W-M wrinkles (thesis eq. 2-1, section 2.2) on the named parts; lengths in metres.
+
+    ``spacing_m`` is the refinement density: the distance between the sample points that carry
+    heights (the thesis's sampling grid inside each triangle).
+    """
+
+    enabled: bool = True
+    parts: tuple[str, ...] = ("body",)
+    D: float = 2.3
+    G: float = 10.0
+    gamma: float = 1.5
+    M: int = 5
+    L: float = 0.1
+    Ls: float = 5e-3
+    seed: int = 0
+    spacing_m: float = 0.02
+
+    def validate(self) -> None:
+        from spacefit.geometry.wm import check_wm_params
+
+        check_wm_params(self.D, self.G, self.gamma, self.M, self.L, self.Ls)
+        _check_int("wrinkles.seed", self.seed, 0, 2**31 - 1)
+        check_range("wrinkles.spacing_m", self.spacing_m, 0.0, lo_open=True, unit="m")
+
+
+@dataclass(frozen=True)
+class PartSettings:
+    """A part's material preset name, optional mesh file, and overrides of the preset's values."""
+
+    material: str
+    file: str = ""
+    overrides: Mapping[str, Any] = field(default_factory=dict)
+
+
+def _default_parts() -> dict[str, PartSettings]:
+    return {
+        "body": PartSettings("mli_thesis"),
+        "panels": PartSettings("panel_thesis"),
+        "legs": PartSettings("white_paint"),
+    }
+
+
+@dataclass(frozen=True)
+class Scene:
+    """A whole scene: what :func:`load_scene` reads and the sidecar of every render records."""
+
+    render: RenderSettings = field(default_factory=RenderSettings)
+    camera: CameraSettings = field(default_factory=CameraSettings)
+    sun: SunSettings = field(default_factory=SunSettings)
+    target: TargetSettings = field(default_factory=TargetSettings)
+    wrinkles: WrinkleSettings = field(default_factory=WrinkleSettings)
+    parts: Mapping[str, PartSettings] = field(default_factory=_default_parts)
+
+    def validate(self) -> Scene:
+        """Check every value; return ``self`` for chaining. Geometry-dependent checks come later."""
+        for section in (self.render, self.camera, self.sun, self.target, self.wrinkles):
+            section.validate()
+        if not self.parts:
+            raise InputError("`parts` must name at least one part.")
+        if self.wrinkles.enabled:
+            for name in self.wrinkles.parts:
+                check_choice("wrinkles.parts", name, self.parts)
+        from spacefit.materials import make_material
+
+        for name, part in self.parts.items():
+            make_material(part.material, part.overrides, where=f"parts.{name}")
+        return self
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain nested dict (TOML-ready): every value, defaults included."""
+        out: dict[str, Any] = {}
+        for f in dataclasses.fields(self):
+            if f.name == "parts":
+                out["parts"] = {
+                    name: {"material": p.material, **({"file": p.file} if p.file else {}), **dict(p.overrides)}
+                    for name, p in self.parts.items()
+                }
+            else:
+                out[f.name] = {k: _plain(v) for k, v in dataclasses.asdict(getattr(self, f.name)).items()}
+        return out
+
+    def to_toml(self) -> str:
+        """The scene as TOML text, loadable by :func:`load_scene`."""
+        return tomli_w.dumps(self.to_dict())
+
+    def replace(self, **sections: Any) -> Scene:
+        """A copy with some sections replaced by keyword (``render=...``)."""
+        return dataclasses.replace(self, **sections)
+
+
+def _plain(value: Any) -> Any:
+    return list(value) if isinstance(value, tuple) else value
+
+
+def _check_int(name: str, value: Any, lo: int, hi: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int):
+        raise InputError(f"`{name}` must be an integer in [{lo}, {hi}], got {value!r}.")
+    return int(check_range(name, value, lo, hi))
+
+
+_SECTIONS = {
+    "render": RenderSettings,
+    "camera": CameraSettings,
+    "sun": SunSettings,
+    "target": TargetSettings,
+    "wrinkles": WrinkleSettings,
+}
+
+
+def _unknown(where: str, key: str, valid: Sequence[str]) -> InputError:
+    close = difflib.get_close_matches(key, list(valid), n=1)
+    hint = f" Did you mean {where}{close[0]!r}?" if close else ""
+    return InputError(f"unknown scene key {where}{key!r}; valid keys here: {', '.join(sorted(valid))}.{hint}")
+
+
+def _coerce(name: str, value: Any, default: Any) -> Any:
+    """Convert a TOML value to the type of the field's default (numbers, vectors, strings)."""
+    if isinstance(default, bool):
+        if not isinstance(value, bool):
+            raise InputError(f"`{name}` must be true or false, got {value!r}.")
+        return value
+    if isinstance(default, int):
+        return value  # range and integrality are checked by validate()
+    if isinstance(default, float):
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise InputError(f"`{name}` must be a number, got {value!r}.")
+        return float(value)
+    if isinstance(default, str):
+        if not isinstance(value, str):
+            raise InputError(f"`{name}` must be a string, got {value!r}.")
+        return value
+    if not isinstance(value, (list, tuple)):
+        raise InputError(f"`{name}` must be a list, got {value!r}.")
+    if default and isinstance(default[0], str):
+        return tuple(str(v) for v in value)
+    if default and len(value) != len(default):
+        raise InputError(f"`{name}` must have {len(default)} entries, got {list(value)}.")
+    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        raise InputError(f"`{name}` must hold numbers, got {list(value)}.")
+    return tuple(v if isinstance(d, int) and not isinstance(d, bool) else float(v) for v, d in zip(value, default or value))
+
+
+def _section(cls: type, data: Mapping[str, Any], where: str) -> Any:
+    defaults = cls()
+    names = [f.name for f in dataclasses.fields(cls)]
+    kwargs = {}
+    for key, value in data.items():
+        if key not in names:
+            raise _unknown(f"{where}.", key, names)
+        if cls is SunSettings and key == "irradiance_w_m2" and value == "physical":
+            value = SOLAR_IRRADIANCE_W_M2
+        kwargs[key] = _coerce(f"{where}.{key}", value, getattr(defaults, key))
+    return cls(**kwargs)
+
+
+def _parts(data: Mapping[str, Any], base_dir: Path) -> dict[str, PartSettings]:
+    parts = {}
+    for name, table in data.items():
+        if not isinstance(table, Mapping):
+            raise InputError(f"`parts.{name}` must be a table with at least `material`, got {table!r}.")
+        if "material" not in table:
+            raise InputError(f"`parts.{name}.material` is missing (a preset name).")
+        file = str(table.get("file", ""))
+        if file and not Path(file).is_absolute():
+            file = str((base_dir / file).resolve())
+        overrides = {k: v for k, v in table.items() if k not in ("material", "file")}
+        parts[name] = PartSettings(str(table["material"]), file, overrides)
+    return parts
+
+
+def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scene:
+    """Build and validate a :class:`Scene` from nested mappings; missing keys take defaults.
+
+    Relative mesh paths are resolved against ``base_dir`` (the TOML file's folder).
+    """
+    base = Path(base_dir)
+    sections: dict[str, Any] = {}
+    for key, value in data.items():
+        if key == "parts":
+            sections["parts"] = _parts(value, base)
+        elif key in _SECTIONS:
+            if not isinstance(value, Mapping):
+                raise InputError(f"`{key}` must be a table, got {value!r}.")
+            sections[key] = _section(_SECTIONS[key], value, key)
+        else:
+            raise _unknown("", key, [*_SECTIONS, "parts"])
+    if "target" in sections and sections["target"].mesh not in ("builtin", ""):
+        mesh = Path(sections["target"].mesh)
+        if not mesh.is_absolute():
+            sections["target"] = dataclasses.replace(sections["target"], mesh=str((base / mesh).resolve()))
+    return Scene(**sections).validate()
+
+
+def parse_override(text: str) -> tuple[list[str], Any]:
+    """Parse ``a.b.c=value`` (value in TOML syntax; bare words are strings) into a key path and value."""
+    key, sep, raw = text.partition("=")
+    if not sep or not key.strip():
+        raise InputError(f"override {text!r} must look like `section.key=value`.")
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        value = raw.strip()
+    return [k.strip() for k in key.split(".")], value
+
+
+def apply_overrides(data: dict[str, Any], overrides: Sequence[str]) -> dict[str, Any]:
+    """Return a deep copy of scene ``data`` with ``key.path=value`` overrides applied."""
+    import copy
+
+    out = copy.deepcopy(data)
+    for text in overrides:
+        path, value = parse_override(text)
+        node = out
+        for k in path[:-1]:
+            node = node.setdefault(k, {})
+            if not isinstance(node, dict):
+                raise InputError(f"override {text!r}: {k!r} is not a table.")
+        node[path[-1]] = value
+    return out
+
+
+def read_scene_dict(path: str | Path) -> dict[str, Any]:
+    """Read a scene TOML file as a nested dict (no validation yet)."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"scene file {str(p)!r} does not exist.")
+    try:
+        return tomllib.loads(p.read_text())
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise InputError(f"scene file {str(p)!r} is not valid TOML: {err}") from None
+
+
+def load_scene(path: str | Path | None = None, overrides: Sequence[str] = ()) -> Scene:
+    """Load a scene TOML file (or the defaults when ``path`` is None) and apply overrides."""
+    data = read_scene_dict(path) if path is not None else {}
+    base = Path(path).parent if path is not None else Path.cwd()
+    return scene_from_dict(apply_overrides(data, overrides), base)
+
+
+def deg2rad(values: Sequence[float]) -> tuple[float, ...]:
+    """Degrees (user-facing) to radians (everything inside)."""
+    return tuple(math.radians(v) for v in values)

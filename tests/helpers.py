@@ -1,0 +1,58 @@
+"""Small test scenes: meshes written to files and scenes that render them with few pixels."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import trimesh
+
+from spacefit.scene.config import Scene, scene_from_dict
+
+
+def write_plate_obj(path: Path, size: float = 2.0) -> Path:
+    """A square plate in the object xy plane facing +z, with uv = (x, y) so alpha_x runs along x."""
+    h = size / 2
+    path.write_text(
+        "o plate\n"
+        f"v {-h} {-h} 0\nv {h} {-h} 0\nv {h} {h} 0\nv {-h} {h} 0\n"
+        f"vt {-h} {-h}\nvt {h} {-h}\nvt {h} {h}\nvt {-h} {h}\n"
+        "f 1/1 2/2 3/3\nf 1/1 3/3 4/4\n"
+    )
+    return path
+
+
+def write_sphere_obj(path: Path, radius: float = 1.0, subdivisions: int = 4) -> Path:
+    """An icosphere of the given radius centred at the object origin."""
+    trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius).export(path)
+    return path
+
+
+def small_scene(mesh: Path, material: dict[str, Any], **sections: dict[str, Any]) -> Scene:
+    """A scene of one part ``plate`` / ``sphere`` from ``mesh`` with no wrinkles; sections override."""
+    data: dict[str, Any] = {
+        "render": {"resolution": [32, 32], "spp": 16, "depth": 1, "seed": 1},
+        "camera": {"position_m": [0.0, 0.0, 10.0], "look_at_m": [0.0, 0.0, 0.0], "focal_length_mm": 50.0, "pixel_pitch_mm": 0.05},
+        "sun": {"irradiance_w_m2": 5.0, "direction": [0.0, 0.0, -1.0]},
+        "target": {"attitude_deg": [0.0, 0.0, 0.0], "mesh": str(mesh)},
+        "wrinkles": {"enabled": False},
+        "parts": {mesh.stem: {"file": str(mesh), **material}},
+    }
+    for key, value in sections.items():
+        data[key] = {**data.get(key, {}), **value}
+    return scene_from_dict(data)
+
+
+def pixel_directions(scene: Scene) -> np.ndarray:
+    """World directions from the camera through each pixel centre, (h, w, 3), unit length."""
+    from spacefit.scene.assembly import assemble
+
+    a = assemble(scene)
+    intr, cam = a.intrinsics, a.camera
+    u0, v0 = intr.principal_point
+    jj, ii = np.meshgrid(np.arange(intr.height) + 0.5, np.arange(intr.width) + 0.5, indexing="ij")
+    x = (ii - u0) / intr.focal_px
+    y = -(jj - v0) / intr.focal_px
+    d = x[..., None] * cam.right + y[..., None] * cam.up + cam.forward
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)

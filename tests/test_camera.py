@@ -1,0 +1,67 @@
+"""The renderer's camera agrees with the pinhole model of thesis section 3.2."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from helpers import small_scene, write_sphere_obj
+
+from spacefit.geometry.frames import CameraFrame, Intrinsics, attitude_matrix, project
+from spacefit.render import render
+from spacefit.scene.assembly import assemble
+
+
+def test_attitude_matrices_are_the_thesis_matrices():
+    a = np.radians(30.0)
+    r1 = attitude_matrix([a, 0.0, 0.0])
+    assert np.allclose(r1, [[1, 0, 0], [0, np.cos(a), np.sin(a)], [0, -np.sin(a), np.cos(a)]])
+    r = attitude_matrix(np.radians([20.0, -35.0, 110.0]))
+    assert np.allclose(r @ r.T, np.eye(3)) and np.linalg.det(r) == pytest.approx(1.0)
+    # Table 4-2's target attitude [90, 0, 0] turns a +z-up lander's top to world +y (image up).
+    assert np.allclose(attitude_matrix(np.radians([90.0, 0.0, 0.0])) @ [0, 0, 1], [0, 1, 0])
+
+
+def test_look_at_and_attitude_agree():
+    by_att = CameraFrame.from_attitude(np.array([0.0, 0.0, 70.0]), np.zeros(3))
+    by_look = CameraFrame.look_at(np.array([0.0, 0.0, 70.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]))
+    for a, b in [(by_att.right, by_look.right), (by_att.up, by_look.up), (by_att.forward, by_look.forward)]:
+        assert np.allclose(a, b)
+
+
+def test_projection_of_thesis_camera():
+    intr = Intrinsics(7.0, 4e-3, 600, 600)
+    cam = CameraFrame.from_attitude(np.array([0.0, 0.0, 70.0]), np.zeros(3))
+    uv, depth = project(np.array([[0.0, 0.0, 0.0], [1.0, 2.0, 0.0]]), cam, intr)
+    assert np.allclose(uv[0], [300.0, 300.0]) and depth[0] == pytest.approx(70.0)
+    # 1 m at 70 m through f = 7 m is 0.1 m on the sensor, 25 pixels of 4 mm; +y is image up
+    assert np.allclose(uv[1], [325.0, 250.0])
+    assert np.degrees(intr.fov_x) == pytest.approx(19.43, abs=0.01)
+
+
+@pytest.mark.parametrize(
+    ("camera", "point"),
+    [
+        ({"position_m": [0.0, 0.0, 10.0], "attitude_deg": [0.0, 0.0, 0.0], "look_at_m": []}, [0.30, -0.20, 0.0]),
+        ({"position_m": [1.0, -2.0, 9.0], "attitude_deg": [12.0, -5.0, 30.0], "look_at_m": [], "principal_offset_px": [6.0, -4.0]}, [1.2, -1.0, 0.5]),
+        ({"position_m": [6.0, 5.0, 4.0], "look_at_m": [0.0, 0.0, 0.0], "up": [0.0, 0.0, 1.0], "principal_offset_px": [-5.0, 3.0]}, [-0.3, 0.2, 0.4]),
+    ],
+)
+def test_point_projects_to_expected_pixel(tmp_path, camera, point):
+    sphere = write_sphere_obj(tmp_path / "sphere.obj", radius=0.04, subdivisions=3)
+    # lit from the camera's side, so the sphere's image is symmetric about its centre
+    sun = np.subtract(point, camera["position_m"]).tolist()
+    scene = small_scene(
+        sphere,
+        {"material": "white_paint", "kd": 1.0},
+        render={"resolution": [80, 60], "spp": 64},
+        camera={"focal_length_mm": 60.0, "pixel_pitch_mm": 0.05, **camera},
+        target={"position_m": point},
+        sun={"direction": sun},
+    )
+    a = assemble(scene)
+    expected, _ = project(np.array([point]), a.camera, a.intrinsics)
+    img = render(scene).sum(axis=-1)
+    v, u = np.nonzero(img > 0)
+    w = img[v, u]
+    centroid = np.array([np.sum((u + 0.5) * w), np.sum((v + 0.5) * w)]) / w.sum()
+    assert np.allclose(centroid, expected[0], atol=0.25)

@@ -1,0 +1,118 @@
+"""The main job end to end: reproducible renders, the output folder, and bad input before rendering."""
+
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from spacefit.cli import main
+from spacefit.errors import InputError
+from spacefit.render import Renderer
+from spacefit.render.exr import read_exr
+from spacefit.scene.assembly import assemble
+from spacefit.scene.config import load_scene
+
+# A CI-sized version of the thesis's scene: same optics scaled to 64 px, coarse wrinkles.
+SMALL = ["render.resolution=[64, 64]", "camera.pixel_pitch_mm=37.5", "render.spp=4", "wrinkles.spacing_m=0.15"]
+
+
+@pytest.fixture(scope="module")
+def small_renderer():
+    return Renderer(assemble(load_scene(None, SMALL)))
+
+
+def test_same_seed_same_image_other_seed_other_noise(small_renderer):
+    a = small_renderer.render(seed=3)
+    b = small_renderer.render(seed=3)
+    c = small_renderer.render(seed=4)
+    assert np.array_equal(a, b)
+    assert not np.array_equal(a, c)
+    assert a.shape == (64, 64, 3) and a.dtype == np.float32 and np.all(np.isfinite(a))
+    assert a.max() > 0.0
+
+
+def test_passes_split_samples_without_bias(small_renderer, monkeypatch):
+    import spacefit.render.renderer as renderer
+
+    one = small_renderer.render(spp=64, seed=1)
+    monkeypatch.setattr(renderer, "MAX_SAMPLES_PER_PASS", 64 * 64 * 16)
+    four = small_renderer.render(spp=64, seed=1)
+    assert not np.array_equal(one, four)
+    assert four.mean() == pytest.approx(one.mean(), rel=0.03)
+
+
+def test_cli_render_writes_the_folder_and_rerenders_identically(tmp_path):
+    out = tmp_path / "run"
+    args = ["render", "--out", str(out), "--quiet"] + [a for s in SMALL for a in ("--set", s)]
+    assert main(args) == 0
+    assert sorted(os.listdir(out)) == ["preview.png", "radiance.exr", "render.json", "scene.toml"]
+    image = read_exr(out / "radiance.exr")
+    sidecar = json.loads((out / "render.json").read_text())
+    assert sidecar["seed"] == 0 and sidecar["scene"]["render"]["resolution"] == [64, 64]
+    assert sidecar["versions"]["mitsuba"] and sidecar["triangles"]["body"] > 12
+    again = tmp_path / "again"
+    assert main(["render", str(out / "scene.toml"), "--out", str(again), "--quiet"]) == 0
+    assert np.array_equal(read_exr(again / "radiance.exr"), image)
+
+
+def test_export_wrinkled_body_stl(tmp_path):
+    out = tmp_path / "body.stl"
+    assert main(["export-stl", "--out", str(out), "--set", "wrinkles.spacing_m=0.2"]) == 0
+    import trimesh
+
+    body = trimesh.load(out)
+    assert body.is_watertight and len(body.faces) > 12
+
+
+@pytest.mark.parametrize(
+    ("overrides", "message"),
+    [
+        (["camera.position_m=[0, 0, 0.1]"], "inside the target"),
+        (["camera.attitude_deg=[180, 0, 0]"], "looks away"),
+        (["camera.attitude_deg=[0, 60, 0]"], "field of view"),
+        (["target.mesh='missing.obj'"], "does not exist"),
+        (["wrinkles.D=3.5"], "wrinkles.D"),
+        (["render.resolution=[0, 10]"], "render.resolution"),
+    ],
+)
+def test_bad_input_fails_before_rendering_and_leaves_nothing(tmp_path, capsys, overrides, message):
+    out = tmp_path / "run"
+    args = ["render", "--out", str(out), "--quiet"] + [a for s in SMALL + overrides for a in ("--set", s)]
+    assert main(args) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_unwritable_output_folder(capsys):
+    # /proc refuses new files even to root, unlike permission bits
+    assert main(["render", "--out", "/proc/spacefit-test/run", "--quiet"] + [a for s in SMALL for a in ("--set", s)]) == 2
+    assert "not writable" in capsys.readouterr().err
+
+
+def test_output_path_that_is_a_file(tmp_path, capsys):
+    f = tmp_path / "file"
+    f.write_text("x")
+    assert main(["render", "--out", str(f), "--quiet"] + [a for s in SMALL for a in ("--set", s)]) == 2
+    assert "not a folder" in capsys.readouterr().err
+    assert f.read_text() == "x"
+
+
+def test_error_inside_writing_removes_partial_output(tmp_path, monkeypatch):
+    import spacefit.pipeline as pipeline
+
+    def broken(path, image):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(pipeline, "write_exr", broken)
+    out = tmp_path / "run"
+    with pytest.raises(OSError):
+        pipeline.render_to_folder(load_scene(None, SMALL), out, quiet=True)
+    assert not out.exists()
+
+
+def test_nan_override_is_rejected():
+    with pytest.raises(InputError, match="finite"):
+        load_scene(None, ["target.position_m=[0, nan, 0]"])

@@ -1,0 +1,28 @@
+#!/usr/bin/env bash
+# Set up spacefit on a fresh machine: check the system libLLVM Dr.Jit needs, create .venv if missing.
+# Dr.Jit's CPU backend loads the system libLLVM; Debian 12's libLLVM 15 (and 16) abort at the first
+# render, libLLVM 19 works.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+have_llvm() {
+    ls /usr/lib/*-linux-gnu/libLLVM.so.{19,2[0-9]}* /usr/lib/*-linux-gnu/libLLVM-{19,2[0-9]}.so* 2>/dev/null | grep -q . \
+        || [ -n "${DRJIT_LIBLLVM_PATH:-}" ]
+}
+if ! have_llvm; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+        echo "setup: installing libllvm19 (Dr.Jit needs libLLVM >= 19)" >&2
+        apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq libllvm19 >/dev/null
+    else
+        echo "setup: Dr.Jit needs libLLVM >= 19. Run: sudo apt-get update && sudo apt-get install -y libllvm19" >&2
+        echo "       (or set DRJIT_LIBLLVM_PATH to a libLLVM >= 19)" >&2
+        exit 1
+    fi
+fi
+
+if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c "import spacefit, pytest" 2>/dev/null; then
+    echo "setup: creating .venv and installing spacefit (a few minutes the first time)" >&2
+    python3 -m venv .venv
+    .venv/bin/python -m pip install -q --upgrade pip
+    .venv/bin/python -m pip install -q -e ".[dev]"
+fi
