@@ -35,33 +35,39 @@ def test_projection_of_thesis_camera():
     assert np.allclose(uv[0], [300.0, 300.0]) and depth[0] == pytest.approx(70.0)
     # 1 m at 70 m through f = 7 m is 0.1 m on the sensor, 25 pixels of 4 mm; +y is image up
     assert np.allclose(uv[1], [325.0, 250.0])
-    assert np.degrees(intr.fov_x) == pytest.approx(19.43, abs=0.01)
+    assert np.degrees(intr.fov_x) == pytest.approx(19.455, abs=0.001)  # 2 atan(1.2 m / 7 m)
 
 
 @pytest.mark.parametrize(
-    ("camera", "point"),
+    ("camera", "pixel"),
     [
-        ({"position_m": [0.0, 0.0, 10.0], "attitude_deg": [0.0, 0.0, 0.0], "look_at_m": []}, [0.30, -0.20, 0.0]),
-        ({"position_m": [1.0, -2.0, 9.0], "attitude_deg": [12.0, -5.0, 30.0], "look_at_m": [], "principal_offset_px": [6.0, -4.0]}, [1.2, -1.0, 0.5]),
-        ({"position_m": [6.0, 5.0, 4.0], "look_at_m": [0.0, 0.0, 0.0], "up": [0.0, 0.0, 1.0], "principal_offset_px": [-5.0, 3.0]}, [-0.3, 0.2, 0.4]),
+        ({"position_m": [0.0, 0.0, 10.0], "attitude_deg": [0.0, 0.0, 0.0]}, [52.3, 21.7]),
+        ({"position_m": [1.0, -2.0, 9.0], "attitude_deg": [12.0, -5.0, 30.0], "principal_offset_px": [6.0, -4.0]}, [20.2, 40.6]),
+        ({"position_m": [6.0, 5.0, 4.0], "look_at_m": [0.0, 0.0, 0.0], "up": [0.0, 0.0, 1.0], "principal_offset_px": [-5.0, 3.0]}, [61.0, 15.4]),
     ],
 )
-def test_point_projects_to_expected_pixel(tmp_path, camera, point):
+def test_point_projects_to_expected_pixel(tmp_path, camera, pixel):
+    """A small sphere placed on the ray through ``pixel`` renders centred on that pixel."""
     sphere = write_sphere_obj(tmp_path / "sphere.obj", radius=0.04, subdivisions=3)
+    settings = {"focal_length_mm": 60.0, "pixel_pitch_mm": 0.05, **camera}
+    probe = small_scene(sphere, {"material": "white_paint", "kd": 1.0}, render={"resolution": [80, 60]}, camera=settings)
+    a = assemble(probe)
+    u0, v0 = a.intrinsics.principal_point
+    f = a.intrinsics.focal_px
+    ray = a.camera.forward + (pixel[0] - u0) / f * a.camera.right - (pixel[1] - v0) / f * a.camera.up
+    point = a.camera.position + 9.0 * ray
+    assert np.allclose(project(point[None], a.camera, a.intrinsics)[0][0], pixel)
     # lit from the camera's side, so the sphere's image is symmetric about its centre
-    sun = np.subtract(point, camera["position_m"]).tolist()
     scene = small_scene(
         sphere,
         {"material": "white_paint", "kd": 1.0},
         render={"resolution": [80, 60], "spp": 64},
-        camera={"focal_length_mm": 60.0, "pixel_pitch_mm": 0.05, **camera},
-        target={"position_m": point},
-        sun={"direction": sun},
+        camera=settings,
+        target={"position_m": point.tolist()},
+        sun={"direction": ray.tolist()},
     )
-    a = assemble(scene)
-    expected, _ = project(np.array([point]), a.camera, a.intrinsics)
     img = render(scene).sum(axis=-1)
     v, u = np.nonzero(img > 0)
     w = img[v, u]
     centroid = np.array([np.sum((u + 0.5) * w), np.sum((v + 0.5) * w)]) / w.sum()
-    assert np.allclose(centroid, expected[0], atol=0.25)
+    assert np.allclose(centroid, pixel, atol=0.25)

@@ -16,8 +16,12 @@ def unit(v):
     return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
-@pytest.mark.parametrize("theta_deg", [0.0, 40.0, 70.0])
-def test_lambert_plate_matches_kd_E_cos_over_pi(tmp_path, theta_deg):
+@pytest.mark.parametrize(("theta_deg", "passes"), [(0.0, 1), (40.0, 1), (70.0, 1), (40.0, 4)])
+def test_lambert_plate_matches_kd_E_cos_over_pi(tmp_path, monkeypatch, theta_deg, passes):
+    """Also with the samples split into passes (as big renders are), which must not bias."""
+    import spacefit.render.renderer as renderer
+
+    monkeypatch.setattr(renderer, "MAX_SAMPLES_PER_PASS", renderer.MAX_SAMPLES_PER_PASS if passes == 1 else 32 * 32 * 4)
     kd = 0.5
     th = np.radians(theta_deg)
     sun = [np.sin(th), 0.0, -np.cos(th)]

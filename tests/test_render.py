@@ -34,16 +34,6 @@ def test_same_seed_same_image_other_seed_other_noise(small_renderer):
     assert a.max() > 0.0
 
 
-def test_passes_split_samples_without_bias(small_renderer, monkeypatch):
-    import spacefit.render.renderer as renderer
-
-    one = small_renderer.render(spp=64, seed=1)
-    monkeypatch.setattr(renderer, "MAX_SAMPLES_PER_PASS", 64 * 64 * 16)
-    four = small_renderer.render(spp=64, seed=1)
-    assert not np.array_equal(one, four)
-    assert four.mean() == pytest.approx(one.mean(), rel=0.03)
-
-
 def test_cli_render_writes_the_folder_and_rerenders_identically(tmp_path):
     out = tmp_path / "run"
     args = ["render", "--out", str(out), "--quiet"] + [a for s in SMALL for a in ("--set", s)]
@@ -73,7 +63,8 @@ def test_export_wrinkled_body_stl(tmp_path):
         (["camera.position_m=[0, 0, 0.1]"], "inside the target"),
         (["camera.attitude_deg=[180, 0, 0]"], "looks away"),
         (["camera.attitude_deg=[0, 60, 0]"], "field of view"),
-        (["target.mesh='missing.obj'"], "does not exist"),
+        (["target.mesh='missing.obj'", "parts.body.material='mli_gold'"], "does not exist"),
+        (["target.mesh='missing.obj'"], "`parts` must list the parts"),
         (["wrinkles.D=3.5"], "wrinkles.D"),
         (["render.resolution=[0, 10]"], "render.resolution"),
     ],

@@ -6,7 +6,6 @@ OBJ: either one file per part, or one file whose face groups / objects are the p
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -113,11 +112,3 @@ def export_stl(path: str | Path, vertices: Float[np.ndarray, "n 3"], faces: Int[
     """Write a binary STL (80-byte header, uint32 count, 50 bytes per triangle), as the thesis did."""
     trimesh.Trimesh(np.asarray(vertices, float), np.asarray(faces), process=False).export(path, file_type="stl")
 
-
-def merge_parts(parts: Mapping[str, PartMesh]) -> PartMesh:
-    """All parts as one mesh (for bounds and inside tests); uv is dropped."""
-    offsets = np.cumsum([0] + [len(p.vertices) for p in parts.values()])[:-1]
-    return PartMesh(
-        np.concatenate([p.vertices for p in parts.values()]),
-        np.concatenate([p.faces + o for p, o in zip(parts.values(), offsets)]),
-    )

@@ -13,13 +13,12 @@ from dataclasses import dataclass
 
 import jax.numpy as jnp
 import numpy as np
-import trimesh
 from jaxtyping import Array, Float
 
 from spacefit.errors import InputError
 from spacefit.geometry.frames import CameraFrame, Intrinsics, object_to_world, project
 from spacefit.geometry.lander import builtin_lander
-from spacefit.geometry.mesh import PartMesh, load_grouped, load_part, merge_parts
+from spacefit.geometry.mesh import PartMesh, load_grouped, load_part
 from spacefit.geometry.wm import wm_n_max, wm_phases
 from spacefit.geometry.wrinkle import Refinement, displace, refine
 from spacefit.materials import Material, make_material
@@ -97,29 +96,45 @@ def _camera(scene: Scene) -> tuple[CameraFrame, Intrinsics]:
     return frame, intr
 
 
-def check_view(vertices: Float[np.ndarray, "n 3"], faces: np.ndarray, camera: CameraFrame, intrinsics: Intrinsics) -> None:
-    """Reject a camera inside the target, looking away from it, or seeing none of it.
+def winding_number(point: Float[np.ndarray, "3"], vertices: Float[np.ndarray, "n 3"], faces: np.ndarray) -> float:
+    """Generalised winding number of a closed mesh about a point: 1 inside, 0 outside.
 
-    ``vertices`` are the whole target's world vertices (m).
+    Sum of the triangles' signed solid angles over 4 pi (Van Oosterom & Strackee 1983).
     """
-    mesh = trimesh.Trimesh(vertices, faces, process=False)
-    lo, hi = mesh.bounds
-    inside_box = np.all(camera.position >= lo) and np.all(camera.position <= hi)
-    if inside_box and (not mesh.is_watertight or mesh.contains(camera.position[None])[0]):
-        raise InputError(
-            f"`camera.position_m` {camera.position.tolist()} is inside the target "
-            f"(bounds {lo.round(3).tolist()} to {hi.round(3).tolist()} m)."
-        )
+    a, b, c = (vertices[faces[:, i]] - point for i in range(3))
+    la, lb, lc = (np.linalg.norm(x, axis=1) for x in (a, b, c))
+    det = np.einsum("ij,ij->i", a, np.cross(b, c))
+    den = la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", b, c) * la + np.einsum("ij,ij->i", c, a) * lb
+    return float(np.sum(2.0 * np.arctan2(det, den)) / (4.0 * np.pi))
+
+
+def check_view(parts: Mapping[str, PartMesh], camera: CameraFrame, intrinsics: Intrinsics) -> None:
+    """Reject a camera inside a part, looking away from the target, or seeing none of it.
+
+    ``parts`` hold world-frame vertices (m). A camera inside a part's bounding box counts as inside
+    unless the part is closed and its winding number says outside. The field-of-view test is
+    conservative: it only rejects views whose projected target box misses the image.
+    """
+    for name, part in parts.items():
+        lo, hi = part.vertices.min(axis=0), part.vertices.max(axis=0)
+        if np.all(camera.position >= lo) and np.all(camera.position <= hi):
+            closed = part.to_trimesh().is_watertight
+            if not closed or abs(winding_number(camera.position, part.vertices, part.faces)) > 0.5:
+                raise InputError(
+                    f"`camera.position_m` {camera.position.tolist()} is inside the target's part {name!r} "
+                    f"(bounds {lo.round(3).tolist()} to {hi.round(3).tolist()} m)."
+                )
+    vertices = np.concatenate([p.vertices for p in parts.values()])
     uv, depth = project(vertices, camera, intrinsics)
     if not np.any(depth > 0):
         raise InputError("the camera looks away from the target: the whole target is behind it.")
-    front = uv[depth > 0]
-    visible = (front[:, 0] >= 0) & (front[:, 0] <= intrinsics.width) & (front[:, 1] >= 0) & (front[:, 1] <= intrinsics.height)
-    if not visible.any():
-        raise InputError(
-            "the target is outside the camera's field of view; check `camera.attitude_deg` / "
-            "`camera.look_at_m` and `target.position_m`."
-        )
+    if np.all(depth > 0):
+        lo, hi = uv.min(axis=0), uv.max(axis=0)
+        if hi[0] < 0 or hi[1] < 0 or lo[0] > intrinsics.width or lo[1] > intrinsics.height:
+            raise InputError(
+                "the target is outside the camera's field of view; check `camera.attitude_deg` / "
+                "`camera.look_at_m` and `target.position_m`."
+            )
 
 
 def assemble(scene: Scene) -> Assembly:
@@ -140,6 +155,5 @@ def assemble(scene: Scene) -> Assembly:
     camera, intrinsics = _camera(scene)
     sun = np.array(scene.sun.direction, float)
     assembly = Assembly(scene, parts, materials, refinements, phases, to_world, camera, intrinsics, sun / np.linalg.norm(sun))
-    whole = merge_parts({n: PartMesh(np.asarray(assembly.world_vertices(n)), assembly.faces(n)) for n in parts})
-    check_view(whole.vertices, whole.faces, camera, intrinsics)
+    check_view({n: PartMesh(np.asarray(assembly.world_vertices(n)), assembly.faces(n)) for n in parts}, camera, intrinsics)
     return assembly

@@ -287,23 +287,34 @@ def _parts(data: Mapping[str, Any], base_dir: Path) -> dict[str, PartSettings]:
 def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scene:
     """Build and validate a :class:`Scene` from nested mappings; missing keys take defaults.
 
-    Relative mesh paths are resolved against ``base_dir`` (the TOML file's folder).
+    With the built-in lander, ``parts`` tables merge into the default parts (so
+    ``parts.panels.alpha_x = 0.1`` keeps the panels' preset); with a mesh file the parts are
+    exactly those given. Relative mesh paths are resolved against ``base_dir`` (the TOML's folder).
     """
     base = Path(base_dir)
     sections: dict[str, Any] = {}
     for key, value in data.items():
         if key == "parts":
-            sections["parts"] = _parts(value, base)
+            if not isinstance(value, Mapping):
+                raise InputError(f"`parts` must be a table of parts, got {value!r}.")
         elif key in _SECTIONS:
             if not isinstance(value, Mapping):
                 raise InputError(f"`{key}` must be a table, got {value!r}.")
             sections[key] = _section(_SECTIONS[key], value, key)
         else:
             raise _unknown("", key, [*_SECTIONS, "parts"])
-    if "target" in sections and sections["target"].mesh not in ("builtin", ""):
-        mesh = Path(sections["target"].mesh)
-        if not mesh.is_absolute():
-            sections["target"] = dataclasses.replace(sections["target"], mesh=str((base / mesh).resolve()))
+    target = sections.get("target", TargetSettings())
+    builtin = target.mesh in ("builtin", "")
+    if not builtin and not Path(target.mesh).is_absolute():
+        sections["target"] = dataclasses.replace(target, mesh=str((base / target.mesh).resolve()))
+    user_parts = data.get("parts", {})
+    if not builtin and not user_parts:
+        raise InputError("`parts` must list the parts of the mesh file `target.mesh`, each with a `material`.")
+    defaults = Scene().to_dict()["parts"] if builtin else {}
+    merged = dict(defaults)
+    for name, table in user_parts.items():
+        merged[name] = {**defaults[name], **table} if name in defaults and isinstance(table, Mapping) else table
+    sections["parts"] = _parts(merged, base)
     return Scene(**sections).validate()
 
 
