@@ -121,12 +121,18 @@ class Renderer:
         seed = r.seed if seed is None else seed
         passes = pass_seeds(seed, spp, r.resolution[0] * r.resolution[1])
         total = None
-        for i, (pass_seed, count) in enumerate(passes):
-            img = mi.render(self.scene, seed=pass_seed, spp=count) * (count / spp)
-            total = img if total is None else total + img
-            dr.eval(total)
-            if progress is not None:
-                progress(i + 1, len(passes))
+        threads = dr.thread_count()
+        if r.deterministic:
+            dr.set_thread_count(1)
+        try:
+            for i, (pass_seed, count) in enumerate(passes):
+                img = mi.render(self.scene, seed=pass_seed, spp=count) * (count / spp)
+                total = img if total is None else total + img
+                dr.eval(total)
+                if progress is not None:
+                    progress(i + 1, len(passes))
+        finally:
+            dr.set_thread_count(threads)
         return np.array(total, dtype=np.float32)
 
 

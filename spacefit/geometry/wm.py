@@ -1,0 +1,128 @@
+"""The 3-D Weierstrass-Mandelbrot (W-M) height field of the wrinkled insulation (thesis eq. 2-1).
+
+Yan & Komvopoulos (1998, J. Appl. Phys. 84(7):3617), as written in the thesis::
+
+    z(x, y) = L (G/L)^(D-2) (ln(gamma)/M)^(1/2) sum_{m=1..M} sum_{n=0..nmax} gamma^((D-3) n)
+              { cos(phi_mn) - cos[2 pi gamma^n r / L cos(theta - pi m / M) + phi_mn] }
+
+with (r, theta) the polar coordinates of (x, y) and nmax = int(log(L/Ls) / log(gamma)). Lengths
+are in metres. Heights are JAX functions of the fractal dimension D and the height scale G, so
+their derivatives can flow into the renderer; every other parameter is a static Python value.
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, ArrayLike, Float
+
+from spacefit.errors import InputError, check_range
+
+# log(L/Ls)/log(gamma) is an integer in exact arithmetic when Ls = L / gamma^k; without this slack
+# rounding can land just below k and drop the finest scale.
+_N_MAX_SLACK = 1e-9
+
+
+def wm_n_max(L: float, Ls: float, gamma: float) -> int:
+    """Index of the finest W-M scale, ``int(log(L/Ls) / log(gamma))`` (7 for 0.1 m, 5 mm, 1.5)."""
+    return int(math.floor(math.log(L / Ls) / math.log(gamma) + _N_MAX_SLACK))
+
+
+def wm_phases(M: int, n_max: int, seed: int) -> Float[np.ndarray, "M K"]:
+    """Random phases phi_mn, uniform in [0, 2 pi), shape (M, n_max + 1), from ``default_rng(seed)``."""
+    return np.random.default_rng(seed).uniform(0.0, 2.0 * np.pi, size=(M, n_max + 1))
+
+
+def check_wm_params(D: float, G: float, gamma: float, M: int, L: float, Ls: float) -> None:
+    """Check the W-M parameters (thesis eq. 2-1); lengths G, L, Ls in metres.
+
+    Raises:
+        InputError: naming ``wrinkles.<name>``, unless D in (2, 3), G > 0, gamma > 1, M an integer
+            >= 1, L > 0 and Ls in (0, L).
+    """
+    check_range("wrinkles.D", D, 2.0, 3.0, lo_open=True, hi_open=True)
+    check_range("wrinkles.G", G, 0.0, lo_open=True, unit="m")
+    check_range("wrinkles.gamma", gamma, 1.0, lo_open=True)
+    try:
+        m = operator.index(M)
+    except TypeError:
+        raise InputError(f"`wrinkles.M` must be an integer, got {M!r}.") from None
+    if isinstance(M, bool) or m < 1:
+        raise InputError(f"`wrinkles.M` must be an integer >= 1, got {M!r}.")
+    length = check_range("wrinkles.L", L, 0.0, lo_open=True, unit="m")
+    check_range("wrinkles.Ls", Ls, 0.0, length, lo_open=True, hi_open=True, unit="m")
+
+
+def wm_height(
+    uv: Float[ArrayLike, "n 2"],
+    D: float | Array,
+    G: float | Array,
+    *,
+    gamma: float,
+    M: int,
+    L: float,
+    Ls: float,
+    phases: Float[np.ndarray, "M K"],
+) -> Float[Array, " n"]:
+    """W-M heights z(u, v) of thesis eq. 2-1 (Yan & Komvopoulos 1998) at points ``uv``.
+
+    Args:
+        uv: (n, 2) plane coordinates, metres.
+        D: fractal dimension in (2, 3); may be a JAX tracer.
+        G: height scale, metres; may be a JAX tracer.
+        gamma, M, L, Ls: frequency ratio, number of ridges, sample and cut-off lengths (metres).
+        phases: (M, nmax + 1) phases phi_mn in radians (see :func:`wm_phases`).
+
+    Returns:
+        (n,) heights, metres.
+    """
+    n = np.arange(wm_n_max(L, Ls, gamma) + 1)
+    phases = np.asarray(phases, dtype=float)
+    if phases.shape != (M, len(n)):
+        raise InputError(f"W-M phases must have shape ({M}, {len(n)}) for these M, L, Ls, gamma; got {phases.shape}.")
+    uv = jnp.asarray(uv, dtype=float)
+    angles = np.pi * np.arange(1, M + 1) / M
+    # r cos(theta - a) = u cos(a) + v sin(a): no polar angle, so no singularity at the origin.
+    along = uv @ jnp.asarray(np.stack([np.cos(angles), np.sin(angles)]))  # (n, M)
+    wavenumbers = 2.0 * np.pi * gamma**n / L
+    weights = jnp.power(gamma, (D - 3.0) * n)
+    # One ridge at a time keeps the intermediate at (n, nmax + 1) rather than (n, M, nmax + 1).
+    waves = sum(jnp.cos(along[:, m, None] * wavenumbers + phases[m]) @ weights for m in range(M))
+    scale = L * (G / L) ** (D - 2.0) * math.sqrt(math.log(gamma) / M)
+    return scale * (jnp.sum(jnp.asarray(np.cos(phases)) @ weights) - waves)
+
+
+def profile_ra(x: Float[ArrayLike, " n"], z: Float[ArrayLike, " n"]) -> float:
+    """Arithmetic mean roughness Ra = mean |z - line| about the least-squares mean line (thesis 2.2).
+
+    ``x`` and ``z`` are the (n,) abscissae and heights of a profile; Ra has the unit of ``z``.
+    """
+    x, z = np.asarray(x, dtype=float), np.asarray(z, dtype=float)
+    residual = z - np.polyval(np.polyfit(x, z, 1), x)
+    return float(np.mean(np.abs(residual)))
+
+
+def wm_section_ra(
+    D: float,
+    G: float,
+    *,
+    gamma: float = 1.5,
+    M: int = 5,
+    L: float = 0.1,
+    Ls: float = 5e-3,
+    length: float | None = None,
+    n_samples: int = 4096,
+    y: float = 0.0,
+) -> float:
+    """Ra (metres) of a section along x of the W-M surface with all phases 0, as in thesis section 2.2.
+
+    The profile is z(x, y) for ``n_samples`` points with x uniform in [0, ``length``] (default L), y fixed.
+    """
+    check_wm_params(D, G, gamma, M, L, Ls)
+    x = np.linspace(0.0, L if length is None else length, n_samples)
+    uv = np.stack([x, np.full_like(x, y)], axis=1)
+    phases = np.zeros((M, wm_n_max(L, Ls, gamma) + 1))
+    return profile_ra(x, np.asarray(wm_height(uv, D, G, gamma=gamma, M=M, L=L, Ls=Ls, phases=phases)))
