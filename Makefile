@@ -19,4 +19,4 @@ bench: setup
 	.venv/bin/python experiments/bench_render.py
 
 sweeps: setup
-	.venv/bin/python experiments/thesis_sweeps.py --out experiments/out/sweeps
+	.venv/bin/python experiments/thesis_sweeps.py

@@ -1,16 +1,17 @@
 """Render-time benchmark of the default scene (Table 4-2: 600 x 600, 20 spp, depth 2) and depths 3-5.
 
-Prints, per depth: triangle count, first render (includes kernel compilation), the median of
-repeated renders after it, and camera samples per second. Run: ``.venv/bin/python experiments/bench_render.py``.
+Prints, per depth and thread mode: scene load, first render (includes kernel compilation), the
+median of repeated renders after it, and camera samples per second. Run: ``.venv/bin/python experiments/bench_render.py``.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import os
-import platform
 import statistics
 import time
+from pathlib import Path
 
 from spacefit.render import Renderer
 from spacefit.scene.assembly import assemble
@@ -29,26 +30,30 @@ def main() -> None:
     t_assemble = time.perf_counter() - t0
     r = base.render
     samples = r.resolution[0] * r.resolution[1] * r.spp
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores")
+    cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
+                if line.startswith("model name")), "unknown CPU")
+    print(f"machine: {cpu}, {os.cpu_count()} cores")
     print(f"scene: {r.resolution[0]}x{r.resolution[1]}, {r.spp} spp, {assembly.triangle_count():,} triangles; "
           f"assembly (W-M refinement) {t_assemble:.2f} s")
-    print(f"{'depth':>5} {'load s':>7} {'first s':>8} {'median s':>9} {'min s':>7} {'Msamples/s':>11}")
+    print(f"{'depth':>5} {'threads':>7} {'load s':>7} {'first s':>8} {'median s':>9} {'min s':>7} {'Msamples/s':>11}")
     for depth in args.depths:
-        scene = base.replace(render=base.render.__class__(**{**base.render.__dict__, "depth": depth}))
-        a = assemble(scene)
-        t0 = time.perf_counter()
-        renderer = Renderer(a)
-        t_load = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        renderer.render(seed=0)
-        t_first = time.perf_counter() - t0
-        times = []
-        for i in range(args.repeats):
+        for deterministic in (True, False):
+            settings = dataclasses.replace(base.render, depth=depth, deterministic=deterministic)
             t0 = time.perf_counter()
-            renderer.render(seed=i + 1)
-            times.append(time.perf_counter() - t0)
-        med = statistics.median(times)
-        print(f"{depth:>5} {t_load:>7.2f} {t_first:>8.2f} {med:>9.3f} {min(times):>7.3f} {samples / med / 1e6:>11.1f}")
+            renderer = Renderer(assemble(base.replace(render=settings)))
+            t_load = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            renderer.render(seed=0)
+            t_first = time.perf_counter() - t0
+            times = []
+            for i in range(args.repeats):
+                t0 = time.perf_counter()
+                renderer.render(seed=i + 1)
+                times.append(time.perf_counter() - t0)
+            med = statistics.median(times)
+            threads = "1" if deterministic else str(os.cpu_count())
+            print(f"{depth:>5} {threads:>7} {t_load:>7.2f} {t_first:>8.2f} {med:>9.3f} {min(times):>7.3f} {samples / med / 1e6:>11.1f}")
+    print("threads 1 = render.deterministic (bitwise-reproducible); load includes W-M displacement and BVH build")
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ distance 50-90 m, focal length 3000-9000 mm. Within a sheet all images share one
 the thesis's default value), so brightness differences are real. A CSV beside the sheets lists
 each image's mean and maximum radiance.
 
-Run: ``.venv/bin/python experiments/thesis_sweeps.py --out experiments/out/sweeps [--size 600]``.
+Run: ``.venv/bin/python experiments/thesis_sweeps.py [--out experiments/results/sweeps] [--size 600]``.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import csv
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -42,15 +43,31 @@ SWEEPS = [
 ]
 
 
-def contact_sheet(path: Path, title: str, unit: str, images: list[tuple[str, object]], scale: float) -> None:
-    """Save a one-row sheet of sRGB previews at a common exposure ``scale``, labelled by value."""
+def common_crop(images: list[np.ndarray], margin: float = 0.1) -> tuple[slice, slice]:
+    """One square window holding every image's lit pixels, so sizes stay comparable across a sheet."""
+    lit = np.any(np.stack([img.max(axis=-1) > 0 for img in images]), axis=0)
+    rows, cols = np.nonzero(lit)
+    h, w = lit.shape
+    if rows.size == 0:
+        return slice(0, h), slice(0, w)
+    cy, cx = (rows.min() + rows.max()) / 2, (cols.min() + cols.max()) / 2
+    half = (1 + margin) * max(rows.max() - rows.min(), cols.max() - cols.min()) / 2 + 2
+    y0, x0 = int(max(cy - half, 0)), int(max(cx - half, 0))
+    return slice(y0, int(min(cy + half, h))), slice(x0, int(min(cx + half, w)))
+
+
+def contact_sheet(path: Path, title: str, unit: str, images: list[tuple[str, np.ndarray]], scale: float) -> None:
+    """Save a one-row sheet of sRGB previews at a common exposure ``scale`` and crop, labelled by value."""
+    crop = common_crop([img for _, img in images])
     fig, axes = plt.subplots(1, len(images), figsize=(2.6 * len(images), 3.0), squeeze=False)
     for ax, (label, img) in zip(axes[0], images):
-        ax.imshow(to_srgb8(img, scale))
+        ax.imshow(to_srgb8(img[crop], scale))
         ax.set_title(f"{label} {unit}".strip(), fontsize=9)
         ax.set_xticks([])
         ax.set_yticks([])
-    fig.suptitle(f"{title} (common exposure: 1 = {1 / scale:.3g} W m$^{{-2}}$ sr$^{{-1}}$)", fontsize=10)
+    rows, cols = crop
+    fig.suptitle(f"{title} (common exposure: white = {1 / scale:.3g} W m$^{{-2}}$ sr$^{{-1}}$; "
+                 f"crop rows {rows.start}-{rows.stop}, cols {cols.start}-{cols.stop})", fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -59,36 +76,41 @@ def contact_sheet(path: Path, title: str, unit: str, images: list[tuple[str, obj
 UNITS = {"attitude": "deg", "depth": "", "light_level": "W m^-2", "light_direction": "", "distance": "m", "focal_length": "mm"}
 
 
+def run_sweeps(out: Path, size: int = 600, spp: int = 20, only: list[str] | None = None,
+               overrides: list[str] | None = None) -> list[dict[str, object]]:
+    """Render the sweeps, save a contact sheet per sweep and sweeps.csv into ``out``; return the rows."""
+    out.mkdir(parents=True, exist_ok=True)
+    # Keep the thesis's field of view at any size: pixel pitch scales inversely with the width.
+    base = [f"render.resolution=[{size}, {size}]", f"camera.pixel_pitch_mm={4.0 * 600 / size}",
+            f"render.spp={spp}", *(overrides or [])]
+    sweeps = [s for s in SWEEPS if only is None or s[0] in only]
+    rows: list[dict[str, object]] = []
+    for name, reference, cases in sweeps:
+        images = []
+        progress = Progress(f"sweep {name}", delay=0.0)
+        for i, (label, case) in enumerate(cases):
+            img = Renderer(assemble(load_scene(None, base + case))).render()
+            images.append((label, img))
+            rows.append({"sweep": name, "value": label, "mean_radiance": float(img.mean()), "max_radiance": float(img.max())})
+            progress(i + 1, len(cases))
+        contact_sheet(out / f"{name}.png", name.replace("_", " "), UNITS[name], images, preview_scale(dict(images)[reference]))
+    with open(out / "sweeps.csv", "w", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
+        writer.writeheader()
+        writer.writerows(rows)
+    return rows
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--out", default="experiments/out/sweeps")
+    p.add_argument("--out", default="experiments/results/sweeps")
     p.add_argument("--size", type=int, default=600, help="image width and height in px (600 = thesis)")
     p.add_argument("--spp", type=int, default=20)
     p.add_argument("--only", nargs="*", default=None, help="sweep names to run (default: all)")
     p.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     args = p.parse_args()
-    out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    # Keep the thesis's field of view at any size: pixel pitch scales inversely with the width.
-    base = [f"render.resolution=[{args.size}, {args.size}]", f"camera.pixel_pitch_mm={4.0 * 600 / args.size}",
-            f"render.spp={args.spp}", *args.overrides]
-    sweeps = [s for s in SWEEPS if args.only is None or s[0] in args.only]
-    rows = []
-    for name, reference, cases in sweeps:
-        images = []
-        progress = Progress(f"sweep {name}", delay=0.0)
-        for i, (label, overrides) in enumerate(cases):
-            img = Renderer(assemble(load_scene(None, base + overrides))).render()
-            images.append((label, img))
-            rows.append({"sweep": name, "value": label, "mean_radiance": float(img.mean()), "max_radiance": float(img.max())})
-            progress(i + 1, len(cases))
-        scale = preview_scale(dict(images)[reference])
-        contact_sheet(out / f"{name}.png", name.replace("_", " "), UNITS[name], images, scale)
-    with open(out / "sweeps.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    print(f"wrote {len(sweeps)} contact sheets and sweeps.csv to {out}")
+    run_sweeps(Path(args.out), args.size, args.spp, args.only, args.overrides)
+    print(f"wrote contact sheets and sweeps.csv to {args.out}")
 
 
 if __name__ == "__main__":

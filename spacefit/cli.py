@@ -1,4 +1,4 @@
-"""Command line: ``spacefit render [SCENE.toml] --out DIR [--set key=value ...]``."""
+"""Command line: ``spacefit render|scene|export-stl [SCENE.toml] --out PATH [--set key=value ...]``."""
 
 from __future__ import annotations
 
@@ -18,6 +18,10 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
                    help="override a scene value, e.g. --set camera.focal_length_mm=5000 (repeatable)")
     r.add_argument("--quiet", action="store_true", help="no progress output")
+    w = sub.add_parser("scene", help="write the resolved scene (defaults: Table 4-2) as TOML to start from")
+    w.add_argument("scene", nargs="?", help="scene TOML file to resolve (default: the thesis's scene)")
+    w.add_argument("--out", required=True, help="TOML file to write")
+    w.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
     e = sub.add_parser("export-stl", help="write a part (wrinkled body by default) as binary STL")
     e.add_argument("scene", nargs="?", help="scene TOML file (default: the thesis's scene)")
     e.add_argument("--part", default="body")
@@ -29,6 +33,7 @@ def _parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code (2 for bad input)."""
     args = _parser().parse_args(argv)
+    from spacefit.output import write_text
     from spacefit.pipeline import export_part_stl, render_to_folder
     from spacefit.scene.config import load_scene
 
@@ -36,6 +41,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         scene = load_scene(args.scene, args.overrides)
         if args.command == "render":
             render_to_folder(scene, args.out, quiet=args.quiet)
+        elif args.command == "scene":
+            write_text(args.out, scene.to_toml())
         else:
             print(export_part_stl(scene, args.part, args.out))
     except InputError as err:

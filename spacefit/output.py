@@ -97,6 +97,14 @@ def staged_output(out_dir: str | Path) -> Iterator[Path]:
     shutil.rmtree(stage, ignore_errors=True)
 
 
+def write_text(path: str | Path, text: str) -> Path:
+    """Write a text file all at once (staged, then moved into place)."""
+    out = Path(path)
+    with staged_output(out.parent if str(out.parent) else ".") as stage:
+        (stage / out.name).write_text(text)
+    return out
+
+
 def write_json(path: str | Path, data: dict[str, Any]) -> None:
     """Write a JSON file with sorted keys and 2-space indent."""
     Path(path).write_text(json.dumps(data, indent=2, sort_keys=True, default=_jsonable) + "\n")

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from spacefit.errors import check_choice
 from spacefit.geometry.mesh import export_stl
 from spacefit.output import check_writable, staged_output, versions, write_render
 from spacefit.progress import Progress
@@ -57,12 +58,9 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False) 
 
 def export_part_stl(scene: Scene, part: str, path: str | Path) -> Path:
     """Write part ``part`` (wrinkled if the scene wrinkles it) as binary STL in the object frame."""
+    check_choice("--part", part, scene.parts)
     assembly = assemble(scene)
-    from spacefit.errors import check_choice
-
-    check_choice("part", part, assembly.parts)
     out = Path(path)
-    check_writable(out.parent if str(out.parent) else ".")
     with staged_output(out.parent) as stage:
         export_stl(stage / out.name, np.asarray(assembly.object_vertices(part)), assembly.faces(part))
     return out

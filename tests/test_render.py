@@ -63,6 +63,18 @@ def test_export_wrinkled_body_stl(tmp_path):
     assert body.is_watertight and len(body.faces) > 12
 
 
+def test_scene_command_writes_loadable_defaults(tmp_path):
+    path = tmp_path / "scene.toml"
+    assert main(["scene", "--out", str(path), "--set", "render.spp=8"]) == 0
+    scene = load_scene(path)
+    assert scene.render.spp == 8 and scene == load_scene(None, ["render.spp=8"])
+
+
+def test_export_unknown_part(tmp_path, capsys):
+    assert main(["export-stl", "--part", "antenna", "--out", str(tmp_path / "a.stl")]) == 2
+    assert "body" in capsys.readouterr().err and not (tmp_path / "a.stl").exists()
+
+
 @pytest.mark.parametrize(
     ("overrides", "message"),
     [

@@ -8,6 +8,7 @@ tangents in D and G through :func:`spacefit.geometry.wrinkle.displace` into vert
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping
 from dataclasses import dataclass
 
@@ -67,6 +68,12 @@ class Assembly:
     def triangle_count(self) -> int:
         """Number of triangles in the rendered scene."""
         return int(sum(len(self.faces(n)) for n in self.parts))
+
+
+@functools.lru_cache(maxsize=8)
+def _refinement(vertices: bytes, faces: bytes, spacing: float) -> Refinement:
+    """Refinement of a part, cached: sweeps and fits re-assemble one geometry many times."""
+    return refine(np.frombuffer(vertices).reshape(-1, 3), np.frombuffer(faces, dtype=np.int64).reshape(-1, 3), spacing)
 
 
 def _load_parts(scene: Scene) -> dict[str, PartMesh]:
@@ -148,7 +155,10 @@ def assemble(scene: Scene) -> Assembly:
     w = scene.wrinkles
     refinements = {}
     if w.enabled:
-        refinements = {name: refine(parts[name].vertices, parts[name].faces, w.spacing_m) for name in w.parts}
+        refinements = {
+            name: _refinement(parts[name].vertices.astype(float).tobytes(), parts[name].faces.astype(np.int64).tobytes(), w.spacing_m)
+            for name in w.parts
+        }
     phases = wm_phases(w.M, wm_n_max(w.L, w.Ls, w.gamma), w.seed)
     materials = {name: make_material(p.material, p.overrides, where=f"parts.{name}") for name, p in scene.parts.items()}
     to_world = object_to_world(np.array(scene.target.position_m), np.array(deg2rad(scene.target.attitude_deg)))

@@ -1,0 +1,21 @@
+"""The thesis's sweeps (section 4.4) at a reduced size: sheets written, radiance linear in the sun."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+import thesis_sweeps  # noqa: E402
+
+
+def test_light_level_sweep_is_linear_in_irradiance(tmp_path):
+    rows = thesis_sweeps.run_sweeps(tmp_path, size=48, spp=2, only=["light_level"], overrides=["wrinkles.spacing_m=0.2"])
+    assert (tmp_path / "light_level.png").stat().st_size > 0 and (tmp_path / "sweeps.csv").exists()
+    mean = {row["value"]: row["mean_radiance"] for row in rows}
+    assert list(mean) == ["0.1", "0.5", "1", "5", "10"]
+    # same seed, same paths: radiance scales exactly with the sun's irradiance
+    for label, value in mean.items():
+        assert value == pytest.approx(mean["1"] * float(label), rel=1e-5)
