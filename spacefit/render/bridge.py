@@ -1,0 +1,197 @@
+"""The seam between JAX and Dr.Jit: the renderer as a JAX function of Mitsuba scene values.
+
+What crosses the seam is a flat mapping from Mitsuba traverse keys (``'panels.bsdf.alpha_u.value'``,
+``'body.vertex_positions'``) to arrays, and seeds; nothing else. ``dr.wrap`` only converts
+Dr.Jit -> JAX, so this module owns both directions:
+
+* :func:`render_values` is a ``jax.custom_vjp`` function of the scene values: its reverse rule is
+  one Dr.Jit backward pass, whatever the number of parameters (``jax.grad`` of a scalar loss).
+* :func:`render_params` is a ``jax.custom_jvp`` function of a small vector of free parameters ``x``
+  with scene values ``values_of(x)`` computed in JAX (e.g. W-M vertex positions from D and G). Its
+  JVP rule builds the Jacobian J (pixels x parameters) one column per parameter, by a Dr.Jit
+  forward-mode render of the tangent ``d values / d x_j`` or by central finite differences with
+  common random numbers, and returns ``J @ t``: plain JAX that JAX can linearize and transpose, so
+  optimistix least squares, ``jax.jacfwd`` and ``jax.grad`` all work.
+
+Renders are deterministic for a seed (JAX treats callbacks as pure). The primal image and finite
+differences use ``seed``; derivative renders use ``seed_grad``, a different seed, so that an L2
+loss's gradient is not biased by noise shared with its residual. Inputs are validated before any
+callback runs: callbacks never raise.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from spacefit.render.backend import dr, mi
+from spacefit.render.renderer import Renderer
+
+SceneValues = Mapping[str, Array]
+
+
+def _to_drjit(template: object, value: np.ndarray) -> object:
+    """A Dr.Jit value of the type of ``template`` from a flat float array."""
+    value = np.asarray(value, dtype=np.float32).ravel()
+    if isinstance(template, mi.Color3f):
+        return mi.Color3f(*(mi.Float(value[i % len(value)]) for i in range(3)))
+    return type(template)(value)
+
+
+def _flat_grad(value: object) -> np.ndarray:
+    return np.asarray(dr.grad(value), dtype=np.float32).ravel()
+
+
+@dataclass
+class DrJitScene:
+    """A loaded Mitsuba scene whose values under ``keys`` are set from JAX, rendered with an AD integrator.
+
+    Args:
+        renderer: the loaded scene (its film, camera and parts).
+        keys: traverse keys the bridge may set.
+        spp: samples per pixel of primal renders.
+        spp_grad: samples per pixel of derivative renders.
+        integrator: Mitsuba AD integrator (``prb``, ``direct_projective``, ``prb_projective``).
+    """
+
+    renderer: Renderer
+    keys: Sequence[str]
+    spp: int
+    spp_grad: int
+    integrator: str = "prb"
+
+    def __post_init__(self) -> None:
+        depth = self.renderer.assembly.scene.render.depth + 1
+        props = {"type": self.integrator, "max_depth": depth, "rr_depth": depth + 1}
+        self._integrator = mi.load_dict(props)
+        self.params = self.renderer.params
+        intr = self.renderer.assembly.intrinsics
+        self.shape = (intr.height, intr.width, 3)
+        mi.set_log_level(mi.LogLevel.Error)  # projective integrators warn about film borders per call
+
+    def _set(self, values: Mapping[str, np.ndarray], grad: bool) -> None:
+        for key, value in values.items():
+            self.params[key] = _to_drjit(self.params[key], value)
+            if grad:
+                dr.enable_grad(self.params[key])
+        self.params.update()
+
+    def _render_ad(self, seed_grad: int) -> object:
+        # The derivative render's own primal is not used: its seed only has to differ from seed_grad.
+        return mi.render(self.renderer.scene, self.params, integrator=self._integrator, seed=seed_grad + 1,
+                         seed_grad=seed_grad, spp=self.spp_grad)
+
+    def primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
+        """Radiance image (h, w, 3) float32 at ``values``."""
+        self._set(values, grad=False)
+        return np.asarray(mi.render(self.renderer.scene, integrator=self._integrator, seed=seed, spp=self.spp), dtype=np.float32)
+
+    def forward(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
+        """Directional derivative of the image along ``tangent`` (same keys as ``values``), one render."""
+        self._set(values, grad=True)
+        for key, t in tangent.items():
+            dr.set_grad(self.params[key], _to_drjit(self.params[key], t))
+        image = self._render_ad(seed_grad)
+        dr.forward_to(image)
+        out = np.asarray(dr.grad(image), dtype=np.float32)
+        self._set(values, grad=False)
+        return out
+
+    def backward(self, values: Mapping[str, np.ndarray], cotangent: np.ndarray, seed_grad: int) -> dict[str, np.ndarray]:
+        """Gradient of sum(cotangent * image) with respect to every key of ``values``, one backward pass."""
+        self._set(values, grad=True)
+        image = self._render_ad(seed_grad)
+        dr.backward_from(image * mi.TensorXf(np.asarray(cotangent, dtype=np.float32)))
+        grads = {key: _flat_grad(self.params[key]) for key in values}
+        self._set(values, grad=False)
+        return grads
+
+
+def _flat(values: Mapping[str, Array]) -> dict[str, Array]:
+    return {k: jnp.ravel(jnp.asarray(v, dtype=jnp.float32)) for k, v in values.items()}
+
+
+def render_values(scene: DrJitScene, seed: int, seed_grad: int) -> Callable[[SceneValues], Float[Array, "h w 3"]]:
+    """The image as a JAX function of scene values, differentiable in reverse mode (one backward pass)."""
+    shape = jax.ShapeDtypeStruct(scene.shape, jnp.float32)
+
+    def primal_cb(values: dict[str, np.ndarray]) -> np.ndarray:
+        return scene.primal(values, seed)
+
+    @jax.custom_vjp
+    def render(flat: dict[str, Array]) -> Array:
+        return jax.pure_callback(primal_cb, shape, flat, vmap_method="sequential")
+
+    def fwd(flat: dict[str, Array]) -> tuple[Array, dict[str, Array]]:
+        return render(flat), flat
+
+    def bwd(flat: dict[str, Array], cotangent: Array) -> tuple[dict[str, Array]]:
+        out = {k: jax.ShapeDtypeStruct(v.shape, jnp.float32) for k, v in flat.items()}
+        return (jax.pure_callback(lambda v, c: scene.backward(v, c, seed_grad), out, flat, cotangent, vmap_method="sequential"),)
+
+    render.defvjp(fwd, bwd)
+
+    def call(values: SceneValues) -> Array:
+        return render(_flat(values))  # JAX's own chain rule undoes the flattening
+
+    return call
+
+
+def render_params(
+    scene: DrJitScene,
+    values_of: Callable[[Array], dict[str, Array]],
+    fd_steps: Float[np.ndarray, " n"],
+    seed: int,
+    seed_grad: int,
+) -> Callable[[Float[Array, " n"]], Float[Array, "h w 3"]]:
+    """The image as a JAX function of free parameters ``x`` (n,), with a materialised Jacobian.
+
+    Args:
+        scene: the Dr.Jit side.
+        values_of: JAX function x -> scene values (traverse key -> array).
+        fd_steps: (n,) step of a central finite difference for each parameter, or 0 to take the
+            column from a Dr.Jit forward-mode render (the integrator's derivative).
+        seed, seed_grad: primal / finite-difference seed and forward-mode seed.
+    """
+    steps = np.asarray(fd_steps, dtype=float)
+    n = len(steps)
+    image = jax.ShapeDtypeStruct(scene.shape, jnp.float32)
+    jac = jax.ShapeDtypeStruct((*scene.shape, n), jnp.float32)
+
+    def primal_cb(values: dict[str, np.ndarray]) -> np.ndarray:
+        return scene.primal(values, seed)
+
+    fd = [j for j in range(n) if steps[j] > 0]
+
+    def jacobian_cb(values, tangents, plus, minus) -> tuple[np.ndarray, np.ndarray]:
+        img = scene.primal(values, seed)
+        cols = []
+        for j in range(n):
+            if j in plus:
+                up, down = scene.primal(plus[j], seed), scene.primal(minus[j], seed)
+                cols.append((up - down) / (2.0 * steps[j]))
+            else:
+                cols.append(scene.forward(values, {k: t[..., j] for k, t in tangents.items()}, seed_grad))
+        return img, np.stack(cols, axis=-1).astype(np.float32)
+
+    @jax.custom_jvp
+    def render(x: Array) -> Array:
+        return jax.pure_callback(primal_cb, image, _flat(values_of(x)), vmap_method="sequential")
+
+    @render.defjvp
+    def render_jvp(primals: tuple[Array], tangents: tuple[Array]) -> tuple[Array, Array]:
+        (x,), (t,) = primals, tangents
+        values = _flat(values_of(x))
+        tangent_cols = {k: jnp.reshape(v, (-1, n)).astype(jnp.float32) for k, v in jax.jacfwd(values_of)(x).items()}
+        eye = jnp.eye(n, dtype=x.dtype) * jnp.asarray(steps, dtype=x.dtype)
+        plus = {j: _flat(values_of(x + eye[j])) for j in fd}
+        minus = {j: _flat(values_of(x - eye[j])) for j in fd}
+        img, J = jax.pure_callback(jacobian_cb, (image, jac), values, tangent_cols, plus, minus, vmap_method="sequential")
+        return img, J @ t.astype(jnp.float32)
+
+    return render
