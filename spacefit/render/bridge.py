@@ -21,7 +21,7 @@ callback runs: callbacks never raise.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import jax
@@ -49,18 +49,16 @@ def _flat_grad(value: object) -> np.ndarray:
 
 @dataclass
 class DrJitScene:
-    """A loaded Mitsuba scene whose values under ``keys`` are set from JAX, rendered with an AD integrator.
+    """A loaded Mitsuba scene whose values are set by traverse key from JAX, rendered with an AD integrator.
 
     Args:
         renderer: the loaded scene (its film, camera and parts).
-        keys: traverse keys the bridge may set.
         spp: samples per pixel of primal renders.
         spp_grad: samples per pixel of derivative renders.
         integrator: Mitsuba AD integrator (``prb``, ``direct_projective``, ``prb_projective``).
     """
 
     renderer: Renderer
-    keys: Sequence[str]
     spp: int
     spp_grad: int
     integrator: str = "prb"

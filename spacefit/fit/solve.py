@@ -1,0 +1,385 @@
+"""``fit``: recover scene parameters from reference images with gradient-based solvers.
+
+One function, one result type. Solvers: optimistix ``LevenbergMarquardt`` (``"lm"``),
+``GaussNewton`` (``"gn"``), ``Dogleg`` (``"dogleg"``), ``BFGS`` (``"bfgs"``), and optax Adam
+(``"adam"``, the stochastic-gradient baseline, with reverse-mode gradients). Every render of a
+solve uses the same seed (common random numbers), so the objective is a deterministic function;
+derivative renders use another seed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optax
+import optimistix as optx
+
+from spacefit.errors import InputError, check_choice, check_range
+from spacefit.fit.losses import residual_fn
+from spacefit.fit.params import FreeParameters, free_parameters, scene_value, scene_values_fn
+from spacefit.progress import ProgressCallback
+from spacefit.render.bridge import DrJitScene, render_params, render_values
+from spacefit.render.renderer import Renderer
+from spacefit.scene.assembly import assemble
+from spacefit.scene.config import Scene
+
+SOLVERS = ("lm", "gn", "dogleg", "bfgs", "adam")
+INTEGRATORS = ("prb", "direct_projective", "prb_projective")
+# |correlation| above which two parameters are reported as not separately determined.
+CORRELATION_WARN = 0.95
+# Relative standard error above which a parameter is reported as poorly determined.
+REL_STDERR_WARN = 0.2
+
+
+@dataclass(frozen=True)
+class Observation:
+    """A reference radiance image (h, w, 3), W m^-2 sr^-1, and the scene it was taken in.
+
+    ``sigma``: the reference's noise standard deviation (scalar or per pixel), or None.
+    """
+
+    scene: Scene
+    reference: np.ndarray
+    sigma: float | np.ndarray | None = None
+
+
+@dataclass
+class FitResult:
+    """Outcome of :func:`fit`: values in physical units and how far to trust them.
+
+    Attributes:
+        names: free parameter names, in order.
+        values: fitted value of each, physical units.
+        stderr: standard error of each (from J^T J and the residual); inf if not determined.
+        correlation: (n, n) correlation matrix of the estimates.
+        success: whether the solver reports convergence.
+        status: the solver's status in words.
+        warnings: identifiability and convergence warnings, in words.
+        history: one entry per step: step, loss, values (physical), time_s since the start.
+        renders: the final render of each observation.
+        loss: final loss, 0.5 * sum of squared residuals.
+        solver, loss_name, steps, wall_time_s, start: what was run.
+    """
+
+    names: tuple[str, ...]
+    values: dict[str, float]
+    stderr: dict[str, float]
+    correlation: np.ndarray
+    success: bool
+    status: str
+    warnings: list[str]
+    history: list[dict[str, Any]]
+    renders: list[np.ndarray]
+    loss: float
+    solver: str
+    loss_name: str
+    steps: int
+    wall_time_s: float
+    start: dict[str, float] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (no images)."""
+        d = dataclasses.asdict(self)
+        d.pop("renders")
+        d["correlation"] = np.asarray(self.correlation).tolist()
+        return d
+
+
+def _status(result: optx.RESULTS) -> tuple[bool, str]:
+    for item, words in [
+        (optx.RESULTS.successful, "converged"),
+        (optx.RESULTS.nonlinear_max_steps_reached, "stopped: maximum number of steps reached"),
+        (optx.RESULTS.nonlinear_divergence, "failed: the solve diverged"),
+        (optx.RESULTS.nonfinite, "failed: non-finite (NaN or inf) values in the solve"),
+    ]:
+        if result == item:
+            return item == optx.RESULTS.successful, words
+    return False, f"failed: {optx.RESULTS[result]}"
+
+
+def _check_reference(obs: Observation, index: int) -> np.ndarray:
+    ref = np.asarray(obs.reference, dtype=np.float32)
+    w, h = obs.scene.render.resolution
+    if ref.ndim == 2:
+        ref = np.repeat(ref[..., None], 3, axis=-1)
+    if ref.shape[:2] != (h, w) or ref.shape[-1] < 3:
+        raise InputError(
+            f"reference {index} has shape {ref.shape}, but its scene renders (height, width) = ({h}, {w}); "
+            "render the reference at the scene's resolution or set `render.resolution`."
+        )
+    ref = ref[..., :3]
+    if not np.all(np.isfinite(ref)):
+        raise InputError(f"reference {index} holds NaN or infinite pixels ({int(np.sum(~np.isfinite(ref)))}).")
+    if np.any(ref < 0):
+        raise InputError(f"reference {index} holds negative radiance; radiance must be >= 0.")
+    return ref
+
+
+@dataclass
+class _Problem:
+    free: FreeParameters
+    residual_x: Callable[[jax.Array], jax.Array]  # physical x -> stacked residuals (J by forward mode)
+    loss_u_reverse: Callable[[jax.Array], jax.Array] | None  # unconstrained u -> loss (reverse mode)
+    renders_x: Callable[[jax.Array], list[jax.Array]]
+
+
+def _problem(
+    observations: Sequence[Observation], free: FreeParameters, loss: str, spp: int | None, spp_grad: int | None,
+    seed: int, seed_grad: int, integrator: str,
+) -> _Problem:
+    renders_x, renders_v, residuals, values_fns = [], [], [], []
+    for i, obs in enumerate(observations):
+        ref = _check_reference(obs, i)
+        assembly = assemble(obs.scene)
+        scene = DrJitScene(Renderer(assembly), spp or obs.scene.render.spp, spp_grad or spp or obs.scene.render.spp, integrator)
+        values_of = scene_values_fn(assembly, free)
+        renders_x.append(render_params(scene, values_of, free.fd_steps, seed, seed_grad))
+        renders_v.append(render_values(scene, seed, seed_grad))
+        residuals.append(residual_fn(ref, loss, obs.sigma))
+        values_fns.append(values_of)
+
+    def residual_x(x: jax.Array) -> jax.Array:
+        return jnp.concatenate([res(render(x)) for res, render in zip(residuals, renders_x)])
+
+    reverse = None
+    if not np.any(free.fd_steps > 0):
+
+        def reverse(u: jax.Array) -> jax.Array:
+            x = free.to_physical(u)
+            r = jnp.concatenate([res(render(vals(x))) for res, render, vals in zip(residuals, renders_v, values_fns)])
+            return 0.5 * jnp.sum(r**2)
+
+    return _Problem(free, residual_x, reverse, lambda x: [render(x) for render in renders_x])
+
+
+def _uncertainty(problem: _Problem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
+    """Standard errors and correlation from J^T J and the residual at ``x`` (physical units)."""
+    r = np.asarray(problem.residual_x(jnp.asarray(x)), dtype=float)
+    J = np.asarray(jax.jacfwd(problem.residual_x)(jnp.asarray(x)), dtype=float)
+    informative = np.any(J != 0, axis=1) | (r != 0)
+    dof = max(int(informative.sum()) - len(x), 1)
+    s2 = float(r @ r) / dof
+    JtJ = J.T @ J
+    eigval, eigvec = np.linalg.eigh(JtJ)
+    tiny = eigval <= 1e-12 * max(eigval.max(), 1e-300)
+    inv = (eigvec[:, ~tiny] / eigval[~tiny]) @ eigvec[:, ~tiny].T
+    cov = s2 * inv
+    var = np.diag(cov).copy()
+    # A direction the images do not constrain leaves every parameter it touches undetermined.
+    if tiny.any():
+        var[np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)] = np.inf
+    stderr = np.sqrt(var)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d = np.sqrt(np.diag(cov))
+        corr = cov / np.outer(d, d)
+    return stderr, np.nan_to_num(corr, nan=0.0), r, 0.5 * float(r @ r)
+
+
+def _warnings(names: Sequence[str], values: np.ndarray, stderr: np.ndarray, corr: np.ndarray) -> list[str]:
+    out = []
+    for i, name in enumerate(names):
+        if not np.isfinite(stderr[i]):
+            out.append(f"{name} is not determined by these observations (singular J^T J).")
+        elif stderr[i] > REL_STDERR_WARN * max(abs(values[i]), 1e-12):
+            out.append(f"{name} is poorly determined: standard error {stderr[i]:.3g} on {values[i]:.4g}.")
+    for i in range(len(names)):
+        for j in range(i + 1, len(names)):
+            if abs(corr[i, j]) > CORRELATION_WARN:
+                out.append(
+                    f"{names[i]} and {names[j]} are correlated ({corr[i, j]:+.3f}): the images determine a "
+                    "combination of them better than each; add views, resolution or samples."
+                )
+    return out
+
+
+def fit(
+    observations: Observation | Sequence[Observation],
+    free: Sequence[str],
+    *,
+    solver: str = "lm",
+    loss: str = "pixel",
+    start: Mapping[str, float] | None = None,
+    spp: int | None = None,
+    spp_grad: int | None = None,
+    max_steps: int = 50,
+    rtol: float = 1e-4,
+    atol: float = 1e-8,
+    learning_rate: float = 0.05,
+    seed: int = 1,
+    seed_grad: int = 2,
+    integrator: str = "prb",
+    geometry_jacobian: str = "fd",
+    progress: ProgressCallback | None = None,
+) -> FitResult:
+    """Fit free scene parameters so that renders match reference images.
+
+    Args:
+        observations: one or several (reference, scene) pairs of the same target; fitted jointly.
+            Fixed parameters come from each scene.
+        free: parameter names (see :mod:`spacefit.fit.params`), e.g. ``["parts.panels.alpha_x"]``.
+        solver: one of :data:`SOLVERS`.
+        loss: ``"pixel"``, ``"pyramid"`` or ``"stats"`` (see :mod:`spacefit.fit.losses`).
+        start: start values (physical units); default: the first scene's values.
+        spp, spp_grad: samples per pixel of primal and derivative renders (default: the scene's).
+        max_steps: solver step limit.
+        rtol, atol: optimistix tolerances (Adam: stop when the relative loss change < rtol).
+        learning_rate: Adam's step size in unconstrained coordinates.
+        seed, seed_grad: seeds of primal and derivative renders; render references with another.
+        integrator: AD integrator for derivative renders, one of :data:`INTEGRATORS`.
+        geometry_jacobian: ``"fd"`` (central differences with common random numbers) or ``"ad"``
+            (the integrator's derivative) for D and G.
+        progress: called with (step, max_steps) after each step.
+
+    Raises:
+        InputError: for any bad input, before rendering.
+    """
+    observations = [observations] if isinstance(observations, Observation) else list(observations)
+    if not observations:
+        raise InputError("`observations` must hold at least one reference image.")
+    check_choice("solver", solver, SOLVERS)
+    check_choice("integrator", integrator, INTEGRATORS)
+    check_choice("geometry_jacobian", geometry_jacobian, ("fd", "ad"))
+    for name, value in (("spp", spp), ("spp_grad", spp_grad)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+            raise InputError(f"`{name}` must be an integer >= 1, got {value!r}.")
+    if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
+        raise InputError(f"`max_steps` must be an integer >= 1, got {max_steps!r}.")
+    check_range("rtol", rtol, 0.0, lo_open=True)
+    check_range("atol", atol, 0.0)
+    check_range("learning_rate", learning_rate, 0.0, lo_open=True)
+    if seed == seed_grad:
+        raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
+    fp = free_parameters(observations[0].scene, free)
+    if geometry_jacobian == "ad":
+        fp = dataclasses.replace(fp, fd_steps=np.zeros_like(fp.fd_steps))
+    start = dict(start or {})
+    for name in start:
+        check_choice("start", name, fp.names)
+    x0 = np.array([start.get(n, scene_value(observations[0].scene, n)) for n in fp.names], dtype=float)
+    fp.check_start(x0)
+    problem = _problem(observations, fp, loss, spp, spp_grad, seed, seed_grad, integrator)
+
+    t0 = time.perf_counter()
+    history: list[dict[str, Any]] = []
+    last: dict[str, Any] = {}
+
+    def record(u: np.ndarray, value: np.ndarray) -> None:
+        last.update(u=np.asarray(u), loss=float(value))
+
+    def residual_u(u: jax.Array, args: Any) -> jax.Array:
+        # renders are float32; the solver works in the dtype of u (float64) throughout
+        r = problem.residual_x(fp.to_physical(u)).astype(u.dtype)
+        jax.debug.callback(record, u, 0.5 * jnp.sum(r**2))
+        return r
+
+    def log_step(step: int) -> bool:
+        """Record the step's evaluation; False if it was not finite."""
+        x = np.asarray(fp.to_physical(jnp.asarray(last["u"])))
+        history.append({"step": step, "loss": last["loss"], "values": dict(zip(fp.names, x.tolist())), "time_s": time.perf_counter() - t0})
+        if progress is not None:
+            progress(step, max_steps)
+        return bool(np.isfinite(last["loss"]) and np.all(np.isfinite(x)))
+
+    u = jnp.asarray(fp.to_unconstrained(jnp.asarray(x0)))
+    if solver == "adam":
+        success, status, u, steps = _adam(problem, residual_u, u, max_steps, rtol, learning_rate, log_step, last)
+    else:
+        success, status, u, steps = _optimistix(solver, residual_u, u, max_steps, rtol, atol, log_step)
+
+    x = np.asarray(fp.to_physical(u), dtype=float)
+    if not np.all(np.isfinite(x)):
+        stderr, corr, loss_value = np.full(len(x), np.nan), np.eye(len(x)), math.nan
+        warnings = ["the solve produced non-finite parameters; no estimate is reported."]
+        success = False
+    else:
+        stderr, corr, _, loss_value = _uncertainty(problem, x)
+        warnings = _warnings(fp.names, x, stderr, corr)
+        if not success:
+            warnings.insert(0, f"the solver did not converge ({status}).")
+    renders = [np.asarray(img) for img in problem.renders_x(jnp.asarray(x))] if np.all(np.isfinite(x)) else []
+    return FitResult(
+        names=fp.names,
+        values=dict(zip(fp.names, x.tolist())),
+        stderr=dict(zip(fp.names, stderr.tolist())),
+        correlation=corr,
+        success=success,
+        status=status,
+        warnings=warnings,
+        history=history,
+        renders=renders,
+        loss=loss_value,
+        solver=solver,
+        loss_name=loss,
+        steps=steps,
+        wall_time_s=time.perf_counter() - t0,
+        start=dict(zip(fp.names, x0.tolist())),
+    )
+
+
+def _optimistix(solver: str, residual_u, u, max_steps, rtol, atol, log_step) -> tuple[bool, str, jax.Array, int]:
+    """Step an optimistix solver interactively, so each step is recorded and shown."""
+    if solver == "bfgs":
+        obj = optx.BFGS(rtol=rtol, atol=atol)
+        f_struct = jax.ShapeDtypeStruct((), u.dtype)
+    else:
+        obj = {"lm": optx.LevenbergMarquardt, "gn": optx.GaussNewton, "dogleg": optx.Dogleg}[solver](rtol=rtol, atol=atol)
+        f_struct = jax.eval_shape(lambda y: residual_u(y, None), u)
+
+    def fn(y: jax.Array, args: Any) -> tuple[jax.Array, None]:
+        # the interactive solver API takes functions with auxiliary output
+        r = residual_u(y, args)
+        return (0.5 * jnp.sum(r**2) if solver == "bfgs" else r), None
+
+    tags: frozenset = frozenset()
+    state = obj.init(fn, u, None, {}, f_struct, None, tags)
+    step = eqx.filter_jit(obj.step)
+    terminate = eqx.filter_jit(obj.terminate)
+    result = optx.RESULTS.nonlinear_max_steps_reached
+    for k in range(1, max_steps + 1):
+        u, state, _ = step(fn, u, None, {}, state, tags)
+        if not log_step(k):
+            return False, "failed: the loss or a parameter became NaN", u, k
+        done, res = terminate(fn, u, None, {}, state, tags)
+        if bool(done):
+            result = res
+            break
+    success, status = _status(result)
+    return success, status, u, k
+
+
+def _adam(problem: _Problem, residual_u, u, max_steps, rtol, learning_rate, log_step, last) -> tuple[bool, str, jax.Array, int]:
+    """optax Adam on the unconstrained vector; reverse-mode gradients unless a Jacobian column needs finite differences."""
+    if problem.loss_u_reverse is not None:
+
+        def loss_u(y: jax.Array) -> jax.Array:
+            value = problem.loss_u_reverse(y)
+            jax.debug.callback(lambda a, b: last.update(u=np.asarray(a), loss=float(b)), y, value)
+            return value
+    else:
+
+        def loss_u(y: jax.Array) -> jax.Array:
+            return 0.5 * jnp.sum(residual_u(y, None) ** 2)
+
+    value_and_grad = jax.jit(jax.value_and_grad(loss_u))
+    opt = optax.adam(learning_rate)
+    opt_state = opt.init(u)
+    previous = math.inf
+    for k in range(1, max_steps + 1):
+        value, grad = value_and_grad(u)
+        if not log_step(k):
+            return False, "failed: the loss or a parameter became NaN", u, k
+        updates, opt_state = opt.update(grad, opt_state)
+        u = optax.apply_updates(u, updates)
+        if abs(previous - float(value)) <= rtol * abs(float(value)):
+            return True, "converged (relative loss change below rtol)", u, k
+        previous = float(value)
+    return False, "stopped: maximum number of steps reached", u, max_steps
