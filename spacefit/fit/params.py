@@ -10,6 +10,7 @@ name                           range        scene value (Mitsuba traverse key)
 =============================  ===========  ======================================================
 ``wrinkles.D``                 (2, 3)       vertex positions of every wrinkled part (W-M, JAX)
 ``wrinkles.G``                 (0, inf) m   vertex positions of every wrinkled part (W-M, JAX)
+``wrinkles.rms_m``             (0, inf) m   the same through G = G(D, rms height), see below
 ``parts.P.alpha_x``            (1e-4, 1)    ``P.bsdf.alpha_u.value`` (rough conductor)
 ``parts.P.alpha_y``            (1e-4, 1)    ``P.bsdf.alpha_v.value``
 ``parts.P.alpha``              (1e-4, 1)    both of the above, tied (isotropic)
@@ -17,6 +18,10 @@ name                           range        scene value (Mitsuba traverse key)
 ``parts.P.kd``                 (0, 1)       ``P.bsdf.reflectance.value`` (Lambert, grey)
 ``sun.irradiance_w_m2``        (0, inf)     ``sun.irradiance.value``
 =============================  ===========  ======================================================
+
+``wrinkles.rms_m`` is the expected rms height of eq. 2-1 (:func:`spacefit.geometry.wm.wm_rms`). In
+an image D and G trade off along a valley of nearly constant rms height; (D, rms) are the better
+determined coordinates, and :func:`spacefit.fit.fit` uses them when D and G are both free.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.errors import InputError, check_choice
+from spacefit.geometry.wm import wm_G_from_rms, wm_rms
 from spacefit.materials import Conductor, Lambert, Mirror
 from spacefit.scene.assembly import Assembly
 from spacefit.scene.config import Scene
@@ -72,6 +78,7 @@ ROUGHNESS = Bijection(1e-4, 1.0)
 BIJECTIONS: Mapping[str, Bijection] = {
     "D": Bijection(2.0, 3.0),
     "G": POSITIVE,
+    "rms_m": POSITIVE,
     "alpha_x": ROUGHNESS,
     "alpha_y": ROUGHNESS,
     "alpha": ROUGHNESS,
@@ -82,14 +89,16 @@ BIJECTIONS: Mapping[str, Bijection] = {
 }
 # Central finite-difference steps of the parameters whose Jacobian columns come from finite
 # differences with common random numbers (geometry: the AD integrators' derivatives in vertex
-# positions disagree with finite differences, see README). D's step is absolute, G's is relative
-# to its start value.
-FD_STEP = {"D": 0.005, "G": 0.01}
+# positions disagree with finite differences, see README). D's step is absolute, G's and the rms
+# height's are relative to their start values. Larger steps than usual: the columns' Monte Carlo
+# noise falls as 1 / step (measured in README), the truncation error of these smooth maps is small.
+FD_STEP = {"D": 0.02, "G": 0.01, "rms_m": 0.03}
+RELATIVE_FD_STEP = ("G", "rms_m")
 
 
 def available(scene: Scene) -> list[str]:
     """Every parameter name that can be freed in ``scene``."""
-    names = ["wrinkles.D", "wrinkles.G"] if scene.wrinkles.enabled else []
+    names = ["wrinkles.D", "wrinkles.G", "wrinkles.rms_m"] if scene.wrinkles.enabled else []
     from spacefit.materials import make_material
 
     for part, spec in scene.parts.items():
@@ -108,8 +117,11 @@ def scene_value(scene: Scene, name: str) -> float:
     from spacefit.materials import make_material
 
     section, *rest = name.split(".")
+    w = scene.wrinkles
+    if name == "wrinkles.rms_m":
+        return float(wm_rms(w.D, w.G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls))
     if section == "wrinkles":
-        return float(getattr(scene.wrinkles, rest[0]))
+        return float(getattr(w, rest[0]))
     if section == "sun":
         return float(scene.sun.irradiance_w_m2)
     part, field = rest
@@ -153,11 +165,13 @@ def free_parameters(scene: Scene, names: Sequence[str]) -> FreeParameters:
         check_choice("free", name, valid)
     if len(set(names)) != len(names):
         raise InputError(f"`free` names a parameter twice: {list(names)}.")
+    if {"wrinkles.G", "wrinkles.rms_m"} <= set(names):
+        raise InputError("`wrinkles.G` and `wrinkles.rms_m` set the same heights; free one of them.")
     for part in {n.split(".")[1] for n in names if n.startswith("parts.") and n.endswith(".alpha")}:
         if {f"parts.{part}.alpha_x", f"parts.{part}.alpha_y"} & set(names):
             raise InputError(f"`parts.{part}.alpha` ties alpha_x and alpha_y; do not free them as well.")
     fields = [n.split(".")[-1] for n in names]
-    steps = np.array([FD_STEP.get(f, 0.0) * (scene_value(scene, n) if f == "G" else 1.0) for n, f in zip(names, fields)])
+    steps = np.array([FD_STEP.get(f, 0.0) * (scene_value(scene, n) if f in RELATIVE_FD_STEP else 1.0) for n, f in zip(names, fields)])
     return FreeParameters(tuple(names), tuple(BIJECTIONS[f] for f in fields), steps)
 
 
@@ -171,17 +185,22 @@ def scene_values_fn(assembly: Assembly, free: FreeParameters) -> Callable[[Array
     JAX W-M heights, so their tangents in D and G are exact.
     """
     index = {name: i for i, name in enumerate(free.names)}
-    geometry = [n for n in ("wrinkles.D", "wrinkles.G") if n in index]
+    w = assembly.scene.wrinkles
+    geometry = [n for n in ("wrinkles.D", "wrinkles.G", "wrinkles.rms_m") if n in index]
 
     def values_of(x: Array) -> dict[str, Array]:
         out: dict[str, Array] = {}
         if geometry:
-            D = x[index["wrinkles.D"]] if "wrinkles.D" in index else None
-            G = x[index["wrinkles.G"]] if "wrinkles.G" in index else None
+            D = x[index["wrinkles.D"]] if "wrinkles.D" in index else w.D
+            G = x[index["wrinkles.G"]] if "wrinkles.G" in index else w.G
+            if "wrinkles.rms_m" in index:
+                G = wm_G_from_rms(D, x[index["wrinkles.rms_m"]], gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)
             for part in assembly.refinements:
                 out[f"{part}.vertex_positions"] = jnp.ravel(assembly.world_vertices(part, D, G))
         for name, i in index.items():
             section, *rest = name.split(".")
+            if section == "wrinkles":
+                continue
             if section == "sun":
                 out["sun.irradiance.value"] = jnp.full(3, x[i])
             elif section == "parts":

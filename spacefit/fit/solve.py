@@ -26,6 +26,7 @@ import optimistix as optx
 from spacefit.errors import InputError, check_choice, check_range
 from spacefit.fit.losses import residual_fn
 from spacefit.fit.params import FreeParameters, free_parameters, scene_value, scene_values_fn
+from spacefit.geometry.wm import wm_G_from_rms, wm_rms
 from spacefit.progress import ProgressCallback
 from spacefit.render.bridge import DrJitScene, render_params, render_values
 from spacefit.render.renderer import Renderer
@@ -68,6 +69,7 @@ class FitResult:
         renders: the final render of each observation.
         loss: final loss, 0.5 * sum of squared residuals.
         solver, loss_name, steps, wall_time_s, start: what was run.
+        extras: derived quantities, e.g. the rms height (and its standard error) of a (D, G) fit.
     """
 
     names: tuple[str, ...]
@@ -85,6 +87,7 @@ class FitResult:
     steps: int
     wall_time_s: float
     start: dict[str, float] = field(default_factory=dict)
+    extras: dict[str, float] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no images)."""
@@ -161,27 +164,44 @@ def _problem(
     return _Problem(free, residual_x, reverse, lambda x: [render(x) for render in renders_x])
 
 
-def _uncertainty(problem: _Problem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Standard errors and correlation from J^T J and the residual at ``x`` (physical units)."""
+def _covariance(problem: _Problem, x: np.ndarray) -> tuple[np.ndarray, float]:
+    """Covariance of the estimate from J^T J and the residual at ``x`` (physical units), and the loss.
+
+    Rows where neither the residual nor the Jacobian is non-zero (black sky) carry no information
+    and are not counted in the degrees of freedom. A direction the images do not constrain (a zero
+    eigenvalue of J^T J) gives infinite variance to every parameter it touches.
+    """
     r = np.asarray(problem.residual_x(jnp.asarray(x)), dtype=float)
     J = np.asarray(jax.jacfwd(problem.residual_x)(jnp.asarray(x)), dtype=float)
     informative = np.any(J != 0, axis=1) | (r != 0)
-    dof = max(int(informative.sum()) - len(x), 1)
-    s2 = float(r @ r) / dof
-    JtJ = J.T @ J
-    eigval, eigvec = np.linalg.eigh(JtJ)
+    s2 = float(r @ r) / max(int(informative.sum()) - len(x), 1)
+    eigval, eigvec = np.linalg.eigh(J.T @ J)
     tiny = eigval <= 1e-12 * max(eigval.max(), 1e-300)
-    inv = (eigvec[:, ~tiny] / eigval[~tiny]) @ eigvec[:, ~tiny].T
-    cov = s2 * inv
-    var = np.diag(cov).copy()
-    # A direction the images do not constrain leaves every parameter it touches undetermined.
+    cov = s2 * (eigvec[:, ~tiny] / eigval[~tiny]) @ eigvec[:, ~tiny].T
     if tiny.any():
-        var[np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)] = np.inf
-    stderr = np.sqrt(var)
+        touched = np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)
+        cov[touched, :] = np.inf
+        cov[:, touched] = np.inf
+    return cov, 0.5 * float(r @ r)
+
+
+def _map_covariance(T: np.ndarray, cov: np.ndarray) -> np.ndarray:
+    """Delta method: covariance of y(x) from that of x, with T = dy/dx; undetermined stays undetermined."""
+    undetermined = ~np.isfinite(np.diag(cov))
+    out = T @ np.where(np.isfinite(cov), cov, 0.0) @ T.T
+    touched = np.any(np.abs(T[:, undetermined]) > 0, axis=1)
+    out[touched, :] = np.inf
+    out[:, touched] = np.inf
+    return out
+
+
+def _stderr_corr(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    stderr = np.sqrt(np.diag(cov))
     with np.errstate(invalid="ignore", divide="ignore"):
-        d = np.sqrt(np.diag(cov))
-        corr = cov / np.outer(d, d)
-    return stderr, np.nan_to_num(corr, nan=0.0), r, 0.5 * float(r @ r)
+        corr = cov / np.outer(stderr, stderr)
+    corr = np.where(np.isfinite(corr), corr, 0.0)
+    np.fill_diagonal(corr, 1.0)
+    return stderr, corr
 
 
 def _warnings(names: Sequence[str], values: np.ndarray, stderr: np.ndarray, corr: np.ndarray) -> list[str]:
@@ -211,13 +231,14 @@ def fit(
     spp: int | None = None,
     spp_grad: int | None = None,
     max_steps: int = 50,
-    rtol: float = 1e-4,
-    atol: float = 1e-8,
+    rtol: float = 1e-3,
+    atol: float = 1e-6,
     learning_rate: float = 0.05,
     seed: int = 1,
     seed_grad: int = 2,
     integrator: str = "prb",
     geometry_jacobian: str = "fd",
+    wrinkle_coordinates: str = "rms",
     progress: ProgressCallback | None = None,
 ) -> FitResult:
     """Fit free scene parameters so that renders match reference images.
@@ -237,6 +258,9 @@ def fit(
         integrator: AD integrator for derivative renders, one of :data:`INTEGRATORS`.
         geometry_jacobian: ``"fd"`` (central differences with common random numbers) or ``"ad"``
             (the integrator's derivative) for D and G.
+        wrinkle_coordinates: with D and G both free, ``"rms"`` solves in (D, rms height), the
+            better-determined coordinates, and reports D and G with their covariance mapped by
+            the delta method; ``"G"`` solves in (D, G) directly.
         progress: called with (step, max_steps) after each step.
 
     Raises:
@@ -248,6 +272,7 @@ def fit(
     check_choice("solver", solver, SOLVERS)
     check_choice("integrator", integrator, INTEGRATORS)
     check_choice("geometry_jacobian", geometry_jacobian, ("fd", "ad"))
+    check_choice("wrinkle_coordinates", wrinkle_coordinates, ("rms", "G"))
     for name, value in (("spp", spp), ("spp_grad", spp_grad)):
         if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
             raise InputError(f"`{name}` must be an integer >= 1, got {value!r}.")
@@ -258,14 +283,31 @@ def fit(
     check_range("learning_rate", learning_rate, 0.0, lo_open=True)
     if seed == seed_grad:
         raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
-    fp = free_parameters(observations[0].scene, free)
-    if geometry_jacobian == "ad":
-        fp = dataclasses.replace(fp, fd_steps=np.zeros_like(fp.fd_steps))
+    user = free_parameters(observations[0].scene, free)
     start = dict(start or {})
     for name in start:
-        check_choice("start", name, fp.names)
-    x0 = np.array([start.get(n, scene_value(observations[0].scene, n)) for n in fp.names], dtype=float)
-    fp.check_start(x0)
+        check_choice("start", name, user.names)
+    x0_user = np.array([start.get(n, scene_value(observations[0].scene, n)) for n in user.names], dtype=float)
+    user.check_start(x0_user)
+    w = observations[0].scene.wrinkles
+    by_rms = wrinkle_coordinates == "rms" and {"wrinkles.D", "wrinkles.G"} <= set(user.names)
+    if by_rms:
+        i_D, i_G = user.names.index("wrinkles.D"), user.names.index("wrinkles.G")
+        internal = [n if n != "wrinkles.G" else "wrinkles.rms_m" for n in user.names]
+        fp = free_parameters(dataclasses.replace(observations[0].scene, wrinkles=dataclasses.replace(w, D=x0_user[i_D], G=x0_user[i_G])), internal)
+        x0 = x0_user.copy()
+        x0[i_G] = float(wm_rms(x0_user[i_D], x0_user[i_G], gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls))
+
+        def to_user(x: jax.Array) -> jax.Array:
+            return x.at[i_G].set(wm_G_from_rms(x[i_D], x[i_G], gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls))
+    else:
+        fp, x0 = user, x0_user
+
+        def to_user(x: jax.Array) -> jax.Array:
+            return x
+
+    if geometry_jacobian == "ad":
+        fp = dataclasses.replace(fp, fd_steps=np.zeros_like(fp.fd_steps))
     problem = _problem(observations, fp, loss, spp, spp_grad, seed, seed_grad, integrator)
 
     t0 = time.perf_counter()
@@ -283,8 +325,8 @@ def fit(
 
     def log_step(step: int) -> bool:
         """Record the step's evaluation; False if it was not finite."""
-        x = np.asarray(fp.to_physical(jnp.asarray(last["u"])))
-        history.append({"step": step, "loss": last["loss"], "values": dict(zip(fp.names, x.tolist())), "time_s": time.perf_counter() - t0})
+        x = np.asarray(to_user(fp.to_physical(jnp.asarray(last["u"]))))
+        history.append({"step": step, "loss": last["loss"], "values": dict(zip(user.names, x.tolist())), "time_s": time.perf_counter() - t0})
         if progress is not None:
             progress(step, max_steps)
         return bool(np.isfinite(last["loss"]) and np.all(np.isfinite(x)))
@@ -296,20 +338,26 @@ def fit(
         success, status, u, steps = _optimistix(solver, residual_u, u, max_steps, rtol, atol, log_step)
 
     x = np.asarray(fp.to_physical(u), dtype=float)
-    if not np.all(np.isfinite(x)):
+    x_user = np.asarray(to_user(jnp.asarray(x)), dtype=float)
+    extras: dict[str, float] = {}
+    if not np.all(np.isfinite(x_user)):
         stderr, corr, loss_value = np.full(len(x), np.nan), np.eye(len(x)), math.nan
         warnings = ["the solve produced non-finite parameters; no estimate is reported."]
         success = False
     else:
-        stderr, corr, _, loss_value = _uncertainty(problem, x)
-        warnings = _warnings(fp.names, x, stderr, corr)
+        cov, loss_value = _covariance(problem, x)
+        if by_rms:
+            extras = {"wrinkles.rms_m": float(x[i_G]), "wrinkles.rms_m.stderr": float(np.sqrt(cov[i_G, i_G]))}
+            cov = _map_covariance(np.asarray(jax.jacfwd(to_user)(jnp.asarray(x))), cov)
+        stderr, corr = _stderr_corr(cov)
+        warnings = _warnings(user.names, x_user, stderr, corr)
         if not success:
             warnings.insert(0, f"the solver did not converge ({status}).")
     renders = [np.asarray(img) for img in problem.renders_x(jnp.asarray(x))] if np.all(np.isfinite(x)) else []
     return FitResult(
-        names=fp.names,
-        values=dict(zip(fp.names, x.tolist())),
-        stderr=dict(zip(fp.names, stderr.tolist())),
+        names=user.names,
+        values=dict(zip(user.names, x_user.tolist())),
+        stderr=dict(zip(user.names, stderr.tolist())),
         correlation=corr,
         success=success,
         status=status,
@@ -321,7 +369,8 @@ def fit(
         loss_name=loss,
         steps=steps,
         wall_time_s=time.perf_counter() - t0,
-        start=dict(zip(fp.names, x0.tolist())),
+        start=dict(zip(user.names, x0_user.tolist())),
+        extras=extras,
     )
 
 

@@ -126,3 +126,23 @@ def wm_section_ra(
     uv = np.stack([x, np.full_like(x, y)], axis=1)
     phases = np.zeros((M, wm_n_max(L, Ls, gamma) + 1))
     return profile_ra(x, np.asarray(wm_height(uv, D, G, gamma=gamma, M=M, L=L, Ls=Ls, phases=phases)))
+
+
+def _rms_factor(D: float | Array, gamma: float, M: int, L: float, Ls: float) -> Array:
+    """rms height / (L (G/L)^(D-2)): sqrt(ln(gamma)/2 * sum_n gamma^(2 (D-3) n))."""
+    n = np.arange(wm_n_max(L, Ls, gamma) + 1)
+    return jnp.sqrt(0.5 * math.log(gamma) * jnp.sum(jnp.power(gamma, 2.0 * (D - 3.0) * n)))
+
+
+def wm_rms(D: float | Array, G: float | Array, *, gamma: float, M: int, L: float, Ls: float) -> Array:
+    """Expected rms height (m) of eq. 2-1 over positions and random phases.
+
+    Each of the M (nmax + 1) cosines has variance 1/2 over the plane, so the rms height is
+    ``L (G/L)^(D-2) sqrt(ln(gamma)/2 * sum_n gamma^(2 (D-3) n))``, independent of M.
+    """
+    return L * (G / L) ** (D - 2.0) * _rms_factor(D, gamma, M, L, Ls)
+
+
+def wm_G_from_rms(D: float | Array, rms: float | Array, *, gamma: float, M: int, L: float, Ls: float) -> Array:
+    """The height scale G (m) that gives rms height ``rms`` (m) at fractal dimension D (inverse of :func:`wm_rms`)."""
+    return L * (rms / (L * _rms_factor(D, gamma, M, L, Ls))) ** (1.0 / (D - 2.0))
