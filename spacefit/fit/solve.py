@@ -122,15 +122,18 @@ def _check_reference(obs: Observation, index: int) -> np.ndarray:
     ref = ref[..., :3]
     if not np.all(np.isfinite(ref)):
         raise InputError(f"reference {index} holds NaN or infinite pixels ({int(np.sum(~np.isfinite(ref)))}).")
-    if np.any(ref < 0):
-        raise InputError(f"reference {index} holds negative radiance; radiance must be >= 0.")
     return ref
+
+
+# Seed offset of the second, independent Jacobian used for the standard errors.
+INDEPENDENT_SEED_OFFSET = 1000
 
 
 @dataclass
 class _Problem:
     free: FreeParameters
     residual_x: Callable[[jax.Array], jax.Array]  # physical x -> stacked residuals (J by forward mode)
+    residual_x_independent: Callable[[jax.Array], jax.Array]  # the same with independent seeds
     loss_u_reverse: Callable[[jax.Array], jax.Array] | None  # unconstrained u -> loss (reverse mode)
     renders_x: Callable[[jax.Array], list[jax.Array]]
 
@@ -139,19 +142,23 @@ def _problem(
     observations: Sequence[Observation], free: FreeParameters, loss: str, spp: int | None, spp_grad: int | None,
     seed: int, seed_grad: int, integrator: str,
 ) -> _Problem:
-    renders_x, renders_v, residuals, values_fns = [], [], [], []
+    renders_x, renders_alt, renders_v, residuals, values_fns = [], [], [], [], []
     for i, obs in enumerate(observations):
         ref = _check_reference(obs, i)
         assembly = assemble(obs.scene)
         scene = DrJitScene(Renderer(assembly), spp or obs.scene.render.spp, spp_grad or spp or obs.scene.render.spp, integrator)
         values_of = scene_values_fn(assembly, free)
         renders_x.append(render_params(scene, values_of, free.fd_steps, seed, seed_grad))
+        alt = INDEPENDENT_SEED_OFFSET
+        renders_alt.append(render_params(scene, values_of, free.fd_steps, seed + alt, seed_grad + alt))
         renders_v.append(render_values(scene, seed, seed_grad))
         residuals.append(residual_fn(ref, loss, obs.sigma))
         values_fns.append(values_of)
 
-    def residual_x(x: jax.Array) -> jax.Array:
-        return jnp.concatenate([res(render(x)) for res, render in zip(residuals, renders_x)])
+    def stack(renders: list[Callable[[jax.Array], jax.Array]]) -> Callable[[jax.Array], jax.Array]:
+        return lambda x: jnp.concatenate([res(render(x)) for res, render in zip(residuals, renders)])
+
+    residual_x = stack(renders_x)
 
     reverse = None
     if not np.any(free.fd_steps > 0):
@@ -161,22 +168,27 @@ def _problem(
             r = jnp.concatenate([res(render(vals(x))) for res, render, vals in zip(residuals, renders_v, values_fns)])
             return 0.5 * jnp.sum(r**2)
 
-    return _Problem(free, residual_x, reverse, lambda x: [render(x) for render in renders_x])
+    return _Problem(free, residual_x, stack(renders_alt), reverse, lambda x: [render(x) for render in renders_x])
 
 
 def _covariance(problem: _Problem, x: np.ndarray) -> tuple[np.ndarray, float]:
-    """Covariance of the estimate from J^T J and the residual at ``x`` (physical units), and the loss.
+    """Covariance of the estimate at ``x`` (physical units), s^2 (J^T J)^-1, and the loss.
 
-    Rows where neither the residual nor the Jacobian is non-zero (black sky) carry no information
-    and are not counted in the degrees of freedom. A direction the images do not constrain (a zero
-    eigenvalue of J^T J) gives infinite variance to every parameter it touches.
+    Monte Carlo noise in the Jacobian columns would add to J^T J as if it were information and
+    shrink the errors, so J^T J is estimated without that bias from two Jacobians with independent
+    seeds, sym(J1^T J2). Rows where neither the residual nor the Jacobian is non-zero (black sky)
+    carry no information and are not counted in the degrees of freedom. Directions the images do
+    not constrain (eigenvalues of sym(J1^T J2) that are not clearly positive) give infinite
+    variance to every parameter they touch.
     """
     r = np.asarray(problem.residual_x(jnp.asarray(x)), dtype=float)
-    J = np.asarray(jax.jacfwd(problem.residual_x)(jnp.asarray(x)), dtype=float)
-    informative = np.any(J != 0, axis=1) | (r != 0)
+    J1 = np.asarray(jax.jacfwd(problem.residual_x)(jnp.asarray(x)), dtype=float)
+    J2 = np.asarray(jax.jacfwd(problem.residual_x_independent)(jnp.asarray(x)), dtype=float)
+    informative = np.any(J1 != 0, axis=1) | (r != 0)
     s2 = float(r @ r) / max(int(informative.sum()) - len(x), 1)
-    eigval, eigvec = np.linalg.eigh(J.T @ J)
-    tiny = eigval <= 1e-12 * max(eigval.max(), 1e-300)
+    cross = 0.5 * (J1.T @ J2 + J2.T @ J1)
+    eigval, eigvec = np.linalg.eigh(cross)
+    tiny = eigval <= 1e-9 * max(np.abs(eigval).max(), 1e-300)
     cov = s2 * (eigvec[:, ~tiny] / eigval[~tiny]) @ eigvec[:, ~tiny].T
     if tiny.any():
         touched = np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)

@@ -30,7 +30,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.render.backend import dr, mi
-from spacefit.render.renderer import Renderer
+from spacefit.render.renderer import Renderer, render_threads
 
 SceneValues = Mapping[str, Array]
 
@@ -85,9 +85,11 @@ class DrJitScene:
                          seed_grad=seed_grad, spp=self.spp_grad)
 
     def primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
-        """Radiance image (h, w, 3) float32 at ``values``."""
+        """Radiance image (h, w, 3) float32 at ``values``; bitwise reproducible if the scene is deterministic."""
         self._set(values, grad=False)
-        return np.asarray(mi.render(self.renderer.scene, integrator=self._integrator, seed=seed, spp=self.spp), dtype=np.float32)
+        with render_threads(self.renderer.assembly.scene.render.deterministic):
+            image = mi.render(self.renderer.scene, integrator=self._integrator, seed=seed, spp=self.spp)
+            return np.asarray(image, dtype=np.float32)
 
     def forward(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
         """Directional derivative of the image along ``tangent`` (same keys as ``values``), one render."""

@@ -7,6 +7,8 @@ Lambert part with kd 0.2 facing a sun of 5 W m^-2 reads 0.2 * 5 / pi in every ch
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -102,6 +104,22 @@ def pass_seeds(seed: int, spp: int, pixels: int) -> list[tuple[int, int]]:
     return [((seed + i * 0x9E3779B1) % (1 << 32), c) for i, c in enumerate(counts)]
 
 
+@contextmanager
+def render_threads(deterministic: bool) -> Iterator[None]:
+    """Render on one thread when ``deterministic``: the film then adds samples in a fixed order.
+
+    Parallel renders differ by float32 rounding (about 1e-7 relative) from call to call, which
+    also breaks common random numbers for finite differences of small effects.
+    """
+    threads = dr.thread_count()
+    if deterministic:
+        dr.set_thread_count(1)
+    try:
+        yield
+    finally:
+        dr.set_thread_count(threads)
+
+
 class Renderer:
     """A scene loaded into Mitsuba once; renders deterministic radiance images (h, w, 3).
 
@@ -121,18 +139,13 @@ class Renderer:
         seed = r.seed if seed is None else seed
         passes = pass_seeds(seed, spp, r.resolution[0] * r.resolution[1])
         total = None
-        threads = dr.thread_count()
-        if r.deterministic:
-            dr.set_thread_count(1)
-        try:
+        with render_threads(r.deterministic):
             for i, (pass_seed, count) in enumerate(passes):
                 img = mi.render(self.scene, seed=pass_seed, spp=count) * (count / spp)
                 total = img if total is None else total + img
                 dr.eval(total)
                 if progress is not None:
                     progress(i + 1, len(passes))
-        finally:
-            dr.set_thread_count(threads)
         return np.array(total, dtype=np.float32)
 
 
