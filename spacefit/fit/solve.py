@@ -171,8 +171,9 @@ def _problem(
     return _Problem(free, residual_x, stack(renders_alt), reverse, lambda x: [render(x) for render in renders_x])
 
 
-def _covariance(problem: _Problem, x: np.ndarray) -> tuple[np.ndarray, float]:
-    """Covariance of the estimate at ``x`` (physical units), s^2 (J^T J)^-1, and the loss.
+def _covariance(problem: _Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
+    """Covariance of the estimate at ``x`` (physical units), s^2 (J^T J)^-1, the loss, and the
+    eigenvalues of the Fisher information (J^T J) / s^2.
 
     Monte Carlo noise in the Jacobian columns would add to J^T J as if it were information and
     shrink the errors, so J^T J is estimated without that bias from two Jacobians with independent
@@ -194,7 +195,7 @@ def _covariance(problem: _Problem, x: np.ndarray) -> tuple[np.ndarray, float]:
         touched = np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)
         cov[touched, :] = np.inf
         cov[:, touched] = np.inf
-    return cov, 0.5 * float(r @ r)
+    return cov, 0.5 * float(r @ r), np.clip(eigval, 0.0, None) / s2
 
 
 def _map_covariance(T: np.ndarray, cov: np.ndarray) -> np.ndarray:
@@ -231,6 +232,78 @@ def _warnings(names: Sequence[str], values: np.ndarray, stderr: np.ndarray, corr
                     "combination of them better than each; add views, resolution or samples."
                 )
     return out
+
+
+@dataclass
+class _Setup:
+    """A checked fitting problem: user-facing and solver parameters and the residuals."""
+
+    user: FreeParameters  # the parameters as the user named them
+    solver_params: FreeParameters  # the ones the solver moves ((D, rms) in place of (D, G))
+    x0_user: np.ndarray
+    x0: np.ndarray
+    to_user: Callable[[jax.Array], jax.Array]
+    problem: _Problem
+    rms_index: int | None
+
+
+def _setup(
+    observations: Observation | Sequence[Observation], free: Sequence[str], start: Mapping[str, float] | None,
+    loss: str, spp: int | None, spp_grad: int | None, seed: int, seed_grad: int, integrator: str,
+    geometry_jacobian: str, wrinkle_coordinates: str,
+) -> _Setup:
+    """Check every input and build the problem; nothing is rendered here."""
+    observations = [observations] if isinstance(observations, Observation) else list(observations)
+    if not observations:
+        raise InputError("`observations` must hold at least one reference image.")
+    check_choice("integrator", integrator, INTEGRATORS)
+    check_choice("geometry_jacobian", geometry_jacobian, ("fd", "ad"))
+    check_choice("wrinkle_coordinates", wrinkle_coordinates, ("rms", "G"))
+    for name, value in (("spp", spp), ("spp_grad", spp_grad)):
+        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
+            raise InputError(f"`{name}` must be an integer >= 1, got {value!r}.")
+    if seed == seed_grad:
+        raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
+    scene = observations[0].scene
+    user = free_parameters(scene, free)
+    start = dict(start or {})
+    for name in start:
+        check_choice("start", name, user.names)
+    x0_user = np.array([start.get(n, scene_value(scene, n)) for n in user.names], dtype=float)
+    user.check_start(x0_user)
+    w = scene.wrinkles
+    rms_index = None
+    if wrinkle_coordinates == "rms" and {"wrinkles.D", "wrinkles.G"} <= set(user.names):
+        i_D, rms_index = user.names.index("wrinkles.D"), user.names.index("wrinkles.G")
+        internal = [n if n != "wrinkles.G" else "wrinkles.rms_m" for n in user.names]
+        at_start = dataclasses.replace(w, D=x0_user[i_D], G=x0_user[rms_index])
+        solver_params = free_parameters(dataclasses.replace(scene, wrinkles=at_start), internal)
+        x0 = x0_user.copy()
+        x0[rms_index] = float(wm_rms(x0_user[i_D], x0_user[rms_index], gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls))
+
+        def to_user(x: jax.Array) -> jax.Array:
+            return x.at[rms_index].set(wm_G_from_rms(x[i_D], x[rms_index], gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls))
+    else:
+        solver_params, x0 = user, x0_user
+
+        def to_user(x: jax.Array) -> jax.Array:
+            return x
+
+    if geometry_jacobian == "ad":
+        solver_params = dataclasses.replace(solver_params, fd_steps=np.zeros_like(solver_params.fd_steps))
+    problem = _problem(observations, solver_params, loss, spp, spp_grad, seed, seed_grad, integrator)
+    return _Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index)
+
+
+def _estimate(setup: _Setup, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, dict[str, Any]]:
+    """User-facing values, their covariance, the loss and extras at solver values ``x``."""
+    cov, loss_value, fisher = _covariance(setup.problem, x)
+    extras: dict[str, Any] = {"fisher_eigenvalues": fisher.tolist()}
+    if setup.rms_index is not None:
+        i = setup.rms_index
+        extras.update({"wrinkles.rms_m": float(x[i]), "wrinkles.rms_m.stderr": float(np.sqrt(cov[i, i]))})
+        cov = _map_covariance(np.asarray(jax.jacfwd(setup.to_user)(jnp.asarray(x))), cov)
+    return np.asarray(setup.to_user(jnp.asarray(x)), dtype=float), cov, loss_value, extras
 
 
 def fit(
@@ -278,49 +351,15 @@ def fit(
     Raises:
         InputError: for any bad input, before rendering.
     """
-    observations = [observations] if isinstance(observations, Observation) else list(observations)
-    if not observations:
-        raise InputError("`observations` must hold at least one reference image.")
     check_choice("solver", solver, SOLVERS)
-    check_choice("integrator", integrator, INTEGRATORS)
-    check_choice("geometry_jacobian", geometry_jacobian, ("fd", "ad"))
-    check_choice("wrinkle_coordinates", wrinkle_coordinates, ("rms", "G"))
-    for name, value in (("spp", spp), ("spp_grad", spp_grad)):
-        if value is not None and (isinstance(value, bool) or not isinstance(value, int) or value < 1):
-            raise InputError(f"`{name}` must be an integer >= 1, got {value!r}.")
     if isinstance(max_steps, bool) or not isinstance(max_steps, int) or max_steps < 1:
         raise InputError(f"`max_steps` must be an integer >= 1, got {max_steps!r}.")
     check_range("rtol", rtol, 0.0, lo_open=True)
     check_range("atol", atol, 0.0)
     check_range("learning_rate", learning_rate, 0.0, lo_open=True)
-    if seed == seed_grad:
-        raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
-    user = free_parameters(observations[0].scene, free)
-    start = dict(start or {})
-    for name in start:
-        check_choice("start", name, user.names)
-    x0_user = np.array([start.get(n, scene_value(observations[0].scene, n)) for n in user.names], dtype=float)
-    user.check_start(x0_user)
-    w = observations[0].scene.wrinkles
-    by_rms = wrinkle_coordinates == "rms" and {"wrinkles.D", "wrinkles.G"} <= set(user.names)
-    if by_rms:
-        i_D, i_G = user.names.index("wrinkles.D"), user.names.index("wrinkles.G")
-        internal = [n if n != "wrinkles.G" else "wrinkles.rms_m" for n in user.names]
-        fp = free_parameters(dataclasses.replace(observations[0].scene, wrinkles=dataclasses.replace(w, D=x0_user[i_D], G=x0_user[i_G])), internal)
-        x0 = x0_user.copy()
-        x0[i_G] = float(wm_rms(x0_user[i_D], x0_user[i_G], gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls))
-
-        def to_user(x: jax.Array) -> jax.Array:
-            return x.at[i_G].set(wm_G_from_rms(x[i_D], x[i_G], gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls))
-    else:
-        fp, x0 = user, x0_user
-
-        def to_user(x: jax.Array) -> jax.Array:
-            return x
-
-    if geometry_jacobian == "ad":
-        fp = dataclasses.replace(fp, fd_steps=np.zeros_like(fp.fd_steps))
-    problem = _problem(observations, fp, loss, spp, spp_grad, seed, seed_grad, integrator)
+    setup = _setup(observations, free, start, loss, spp, spp_grad, seed, seed_grad, integrator, geometry_jacobian,
+                   wrinkle_coordinates)
+    fp, problem = setup.solver_params, setup.problem
 
     t0 = time.perf_counter()
     history: list[dict[str, Any]] = []
@@ -337,39 +376,36 @@ def fit(
 
     def log_step(step: int) -> bool:
         """Record the step's evaluation; False if it was not finite."""
-        x = np.asarray(to_user(fp.to_physical(jnp.asarray(last["u"]))))
-        history.append({"step": step, "loss": last["loss"], "values": dict(zip(user.names, x.tolist())), "time_s": time.perf_counter() - t0})
+        x = np.asarray(setup.to_user(fp.to_physical(jnp.asarray(last["u"]))))
+        history.append({"step": step, "loss": last["loss"], "values": dict(zip(setup.user.names, x.tolist())),
+                        "time_s": time.perf_counter() - t0})
         if progress is not None:
             progress(step, max_steps)
         return bool(np.isfinite(last["loss"]) and np.all(np.isfinite(x)))
 
-    u = jnp.asarray(fp.to_unconstrained(jnp.asarray(x0)))
+    u = jnp.asarray(fp.to_unconstrained(jnp.asarray(setup.x0)))
     if solver == "adam":
         success, status, u, steps = _adam(problem, residual_u, u, max_steps, rtol, learning_rate, log_step, last)
     else:
         success, status, u, steps = _optimistix(solver, residual_u, u, max_steps, rtol, atol, log_step)
 
     x = np.asarray(fp.to_physical(u), dtype=float)
-    x_user = np.asarray(to_user(jnp.asarray(x)), dtype=float)
-    extras: dict[str, float] = {}
-    if not np.all(np.isfinite(x_user)):
-        stderr, corr, loss_value = np.full(len(x), np.nan), np.eye(len(x)), math.nan
-        warnings = ["the solve produced non-finite parameters; no estimate is reported."]
-        success = False
-    else:
-        cov, loss_value = _covariance(problem, x)
-        if by_rms:
-            extras = {"wrinkles.rms_m": float(x[i_G]), "wrinkles.rms_m.stderr": float(np.sqrt(cov[i_G, i_G]))}
-            cov = _map_covariance(np.asarray(jax.jacfwd(to_user)(jnp.asarray(x))), cov)
+    n = len(x)
+    if np.all(np.isfinite(np.asarray(setup.to_user(jnp.asarray(x))))):
+        x_user, cov, loss_value, extras = _estimate(setup, x)
         stderr, corr = _stderr_corr(cov)
-        warnings = _warnings(user.names, x_user, stderr, corr)
+        warnings = _warnings(setup.user.names, x_user, stderr, corr)
         if not success:
             warnings.insert(0, f"the solver did not converge ({status}).")
-    renders = [np.asarray(img) for img in problem.renders_x(jnp.asarray(x))] if np.all(np.isfinite(x)) else []
+        renders = [np.asarray(img) for img in problem.renders_x(jnp.asarray(x))]
+    else:
+        x_user, stderr, corr, loss_value, extras = np.full(n, np.nan), np.full(n, np.nan), np.eye(n), math.nan, {}
+        warnings = ["the solve produced non-finite parameters; no estimate is reported."]
+        success, renders = False, []
     return FitResult(
-        names=user.names,
-        values=dict(zip(user.names, x_user.tolist())),
-        stderr=dict(zip(user.names, stderr.tolist())),
+        names=setup.user.names,
+        values=dict(zip(setup.user.names, x_user.tolist())),
+        stderr=dict(zip(setup.user.names, stderr.tolist())),
         correlation=corr,
         success=success,
         status=status,
@@ -381,9 +417,51 @@ def fit(
         loss_name=loss,
         steps=steps,
         wall_time_s=time.perf_counter() - t0,
-        start=dict(zip(user.names, x0_user.tolist())),
+        start=dict(zip(setup.user.names, setup.x0_user.tolist())),
         extras=extras,
     )
+
+
+@dataclass(frozen=True)
+class Identifiability:
+    """What a set of observations can tell about the free parameters at given values.
+
+    Attributes:
+        names: free parameter names.
+        stderr: standard error each would have (physical units; inf where undetermined).
+        correlation: (n, n) correlation of the estimates.
+        fisher_eigenvalues: eigenvalues of the Fisher information in the solver's coordinates
+            (their square roots are the noise-weighted Jacobian's singular values); 0 marks a
+            direction nothing constrains.
+    """
+
+    names: tuple[str, ...]
+    stderr: dict[str, float]
+    correlation: np.ndarray
+    fisher_eigenvalues: np.ndarray
+
+
+def identifiability(
+    observations: Observation | Sequence[Observation],
+    free: Sequence[str],
+    at: Mapping[str, float],
+    *,
+    loss: str = "pixel",
+    spp: int | None = None,
+    seed: int = 1,
+    seed_grad: int = 2,
+    wrinkle_coordinates: str = "rms",
+) -> Identifiability:
+    """Standard errors and Fisher information of ``free`` parameters at the values ``at``, no fit.
+
+    With references rendered at ``at`` (and their noise ``sigma``), this predicts how well a fit
+    could determine each parameter from these observations.
+    """
+    setup = _setup(observations, free, at, loss, spp, None, seed, seed_grad, "prb", "fd", wrinkle_coordinates)
+    _, cov, _, extras = _estimate(setup, setup.x0)
+    stderr, corr = _stderr_corr(cov)
+    return Identifiability(setup.user.names, dict(zip(setup.user.names, stderr.tolist())), corr,
+                           np.asarray(extras["fisher_eigenvalues"]))
 
 
 def _optimistix(solver: str, residual_u, u, max_steps, rtol, atol, log_step) -> tuple[bool, str, jax.Array, int]:
