@@ -4,7 +4,7 @@ OUT ?= out/default
 SCENE ?=
 PYTEST_ARGS ?=
 
-.PHONY: setup render test bench sweeps
+.PHONY: setup render test bench sweeps synthetic
 
 setup:
 	@tools/setup.sh
@@ -20,3 +20,6 @@ bench: setup
 
 sweeps: setup
 	.venv/bin/python experiments/thesis_sweeps.py
+
+synthetic: setup
+	.venv/bin/python data/synthetic/make_references.py

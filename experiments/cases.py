@@ -69,8 +69,9 @@ MATERIALS = Case(
     reference_spp=16,
 )
 
-# D and G identifiable: the body 11.6 m away at 4.7 cm per pixel, the W-M scales (40 cm down to
-# 12 cm) resolved by 3 to 9 px, direct light, G / L = 0.1.
+# D and G identifiable: the body 11.6 m away at 7.8 cm per pixel, so the W-M scales (40 cm down to
+# 12 cm) span 1.5 to 5 px; direct light (depth 1); G / L = 0.1, where G is not too sensitive to
+# errors in D at a fixed rms height (d ln G / dD = -ln(G / L) / (D - 2) = 5.8).
 WRINKLES = Case(
     "wrinkles",
     ("render.resolution=[64, 64]", "camera.pixel_pitch_mm=47.03", "render.spp=64", "render.depth=1",
@@ -85,5 +86,5 @@ WRINKLES = Case(
 WRINKLES_128 = WRINKLES.with_overrides("render.resolution=[128, 128]", "camera.pixel_pitch_mm=23.52", "render.spp=32",
                                        name="wrinkles_128")
 
-# D and G not identifiable: 60 m away the wrinkles are far below a pixel (35 cm).
+# D and G not identifiable: 60 m away a pixel is 40 cm, as large as the largest wrinkle.
 WRINKLES_FAR = WRINKLES.with_overrides("camera.position_m=[18, -24, 60]", "render.spp=16", name="wrinkles_far")

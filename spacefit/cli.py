@@ -1,4 +1,5 @@
-"""Command line: ``spacefit render|scene|export-stl [SCENE.toml] --out PATH [--set key=value ...]``."""
+"""Command line: ``spacefit render|scene|export-stl [SCENE.toml] --out PATH [--set key=value ...]`` and
+``spacefit fit REFERENCE.exr ... --scene SCENE.toml --free NAME[,NAME...] --out DIR``."""
 
 from __future__ import annotations
 
@@ -6,28 +7,77 @@ import argparse
 import sys
 from collections.abc import Sequence
 
-from spacefit.errors import InputError
+from spacefit.errors import InputError, check_range
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="spacefit", description="Simulate and fit images of space targets.")
+    overrides = argparse.ArgumentParser(add_help=False)
+    overrides.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
+                           help="override a scene value, e.g. --set camera.focal_length_mm=5000 (repeatable)")
     sub = p.add_subparsers(dest="command", required=True)
-    r = sub.add_parser("render", help="render a scene to radiance.exr, preview.png, scene.toml, render.json")
+    r = sub.add_parser("render", parents=[overrides],
+                       help="render a scene to radiance.exr, preview.png, scene.toml, render.json")
     r.add_argument("scene", nargs="?", help="scene TOML file (default: the thesis's Table 4-2 scene)")
     r.add_argument("--out", required=True, help="output folder")
-    r.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                   help="override a scene value, e.g. --set camera.focal_length_mm=5000 (repeatable)")
     r.add_argument("--quiet", action="store_true", help="no progress output")
-    w = sub.add_parser("scene", help="write the resolved scene (defaults: Table 4-2) as TOML to start from")
+    w = sub.add_parser("scene", parents=[overrides],
+                       help="write the resolved scene (defaults: Table 4-2) as TOML to start from")
     w.add_argument("scene", nargs="?", help="scene TOML file to resolve (default: the thesis's scene)")
     w.add_argument("--out", required=True, help="TOML file to write")
-    w.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
-    e = sub.add_parser("export-stl", help="write a part (wrinkled body by default) as binary STL")
+    e = sub.add_parser("export-stl", parents=[overrides], help="write a part (wrinkled body by default) as binary STL")
     e.add_argument("scene", nargs="?", help="scene TOML file (default: the thesis's scene)")
     e.add_argument("--part", default="body")
     e.add_argument("--out", required=True, help="STL file to write")
-    e.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE")
+    f = sub.add_parser("fit", parents=[overrides],
+                       help="fit scene parameters to reference images: fit.json, comparison.png, convergence.png",
+                       description="Fit free scene parameters to reference radiance images. "
+                                   "--set applies to every scene.")
+    f.add_argument("references", nargs="+", metavar="REFERENCE.exr",
+                   help="reference radiance images (OpenEXR, W m^-2 sr^-1), fitted jointly")
+    f.add_argument("--scene", dest="scenes", action="append", required=True, metavar="SCENE.toml",
+                   help="scene of the references: one for all, or one per reference in order (repeatable)")
+    f.add_argument("--free", required=True, metavar="NAME[,NAME...]",
+                   help="parameters to fit, e.g. parts.panels.alpha_x,parts.legs.kd (see spacefit.fit.params)")
+    f.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    f.add_argument("--solver", metavar="lm|gn|dogleg|bfgs|adam", help="solver (default lm)")
+    f.add_argument("--loss", metavar="pixel|pyramid|stats", help="loss (default pixel)")
+    f.add_argument("--resolution", nargs=2, type=int, metavar=("W", "H"),
+                   help="render every scene at W x H px; the references must have that size")
+    f.add_argument("--spp", type=int, metavar="N", help="samples per pixel of the fit's renders (default: the scene's)")
+    f.add_argument("--spp-grad", type=int, metavar="N", help="samples per pixel of derivative renders (default: --spp)")
+    f.add_argument("--max-steps", type=int, metavar="N", help="solver step limit (default 50)")
+    f.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
+                   help="start value of a free parameter (default: the first scene's value; repeatable)")
+    f.add_argument("--sigma", type=float, metavar="S",
+                   help="noise standard deviation of the references, W m^-2 sr^-1 (residuals are divided by it)")
+    f.add_argument("--quiet", action="store_true", help="no progress output (the fitted values are still printed)")
     return p
+
+
+def _start_values(items: Sequence[str]) -> dict[str, float]:
+    """``--start NAME=VALUE`` arguments as parameter name -> start value."""
+    out = {}
+    for text in items:
+        name, sep, value = text.partition("=")
+        if not sep or not name.strip():
+            raise InputError(f"`--start` takes NAME=VALUE, got {text!r}.")
+        out[name.strip()] = check_range(f"--start {name.strip()}", value.strip())
+    return out
+
+
+def _fit(args: argparse.Namespace) -> None:
+    from spacefit.fit.report import format_result
+    from spacefit.pipeline import fit_to_folder
+
+    given = {"solver": args.solver, "loss": args.loss, "spp": args.spp, "spp_grad": args.spp_grad,
+             "max_steps": args.max_steps}
+    result = fit_to_folder(
+        args.references, args.scenes, [name.strip() for name in args.free.split(",")], args.out,
+        overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, quiet=args.quiet,
+        start=_start_values(args.start), **{k: v for k, v in given.items() if v is not None},
+    )
+    print(format_result(result))
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -38,6 +88,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     from spacefit.scene.config import load_scene
 
     try:
+        if args.command == "fit":
+            _fit(args)
+            return 0
         scene = load_scene(args.scene, args.overrides)
         if args.command == "render":
             render_to_folder(scene, args.out, quiet=args.quiet)

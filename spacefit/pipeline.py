@@ -1,22 +1,25 @@
-"""The simulator's main job: scene -> checked assembly -> render -> output folder."""
+"""The main jobs: scene -> checked assembly -> render -> output folder, and reference files -> fit -> report."""
 
 from __future__ import annotations
 
 import sys
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from spacefit.errors import check_choice
+from spacefit.errors import InputError, check_choice
+from spacefit.fit.report import write_fit_report
+from spacefit.fit.solve import FitResult, Observation, fit
 from spacefit.geometry.mesh import export_stl
 from spacefit.output import check_writable, staged_output, versions, write_render
 from spacefit.progress import Progress
-from spacefit.render.exr import write_exr
+from spacefit.render.exr import read_exr, write_exr
 from spacefit.render.renderer import Renderer
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import Scene
+from spacefit.scene.config import Scene, load_scene, parse_override
 
 
 def _say(message: str, quiet: bool) -> None:
@@ -64,3 +67,98 @@ def export_part_stl(scene: Scene, part: str, path: str | Path) -> Path:
     with staged_output(out.parent) as stage:
         export_stl(stage / out.name, np.asarray(assembly.object_vertices(part)), assembly.faces(part))
     return out
+
+
+def fit_to_folder(
+    references: Sequence[str | Path],
+    scenes: Sequence[str | Path],
+    free: Sequence[str],
+    out_dir: str | Path,
+    *,
+    overrides: Sequence[str] = (),
+    resolution: tuple[int, int] | None = None,
+    sigma: float | None = None,
+    quiet: bool = False,
+    **options: Any,
+) -> FitResult:
+    """Fit the ``free`` parameters to reference EXR files; write fit.json and the plots to ``out_dir``.
+
+    Every input is checked before rendering (the folder is checked writable first); on any error
+    nothing is left behind.
+
+    Args:
+        references: reference radiance images (OpenEXR, W m^-2 sr^-1), fitted jointly.
+        scenes: scene TOML files: one for all references, or one per reference in order.
+        free: parameter names (see :mod:`spacefit.fit.params`); their start values are the first
+            scene's unless ``start`` is given.
+        out_dir: output folder of the report (see :mod:`spacefit.fit.report`).
+        overrides: ``key=value`` scene overrides applied to every scene; none may fix a free parameter.
+        resolution: (width, height) px replacing every scene's ``render.resolution``; the
+            references must have that size.
+        sigma: noise standard deviation of the references, W m^-2 sr^-1 (residuals are divided by it).
+        quiet: no progress display or messages on stderr.
+        options: keyword arguments of :func:`spacefit.fit.fit` (``solver``, ``loss``, ``start``,
+            ``spp``, ``spp_grad``, ``max_steps``, ...).
+
+    Returns:
+        The fit's result.
+    """
+    check_writable(out_dir)
+    if len(scenes) not in (1, len(references)):
+        raise InputError(
+            "give one scene for all references or one per reference; "
+            f"got {len(scenes)} scenes for {len(references)} references."
+        )
+    _check_not_fixed(free, overrides)
+    t0 = time.perf_counter()
+    scene_overrides = [*overrides, *([f"render.resolution=[{resolution[0]}, {resolution[1]}]"] if resolution else [])]
+    loaded = [load_scene(path, scene_overrides) for path in scenes]
+    images = [read_exr(path) for path in references]
+    observations = [Observation(loaded[i % len(loaded)], image, sigma) for i, image in enumerate(images)]
+    t_read = time.perf_counter() - t0
+    display, last = Progress(f"fit {', '.join(free)}"), [0, 0]
+
+    def progress(step: int, total: int) -> None:
+        last[:] = step, total
+        if not quiet:
+            display(step, total)
+
+    t0 = time.perf_counter()
+    result = fit(observations, free, progress=progress, **options)
+    t_fit = time.perf_counter() - t0
+    if not quiet and last[0] < last[1]:
+        display(last[0], last[0])  # the solve stopped before its step limit: end the display there
+    inputs = {
+        "references": [str(path) for path in references],
+        "scene_files": [str(path) for path in scenes],
+        "overrides": scene_overrides,
+        "scenes": [scene.to_dict() for scene in loaded],
+        "sigma": sigma,
+        "options": options,
+    }
+    timings = {"read_inputs": t_read, "setup": t_fit - result.wall_time_s}
+    write_fit_report(out_dir, result, images, inputs=inputs, timings_s=timings)
+    _say(f"wrote {Path(out_dir) / 'fit.json'}, comparison.png and convergence.png", quiet)
+    return result
+
+
+def _scene_keys(name: str) -> set[str]:
+    """The scene-file keys whose values the free parameter ``name`` replaces."""
+    head, _, field = name.rpartition(".")
+    if field == "alpha":
+        return {f"{head}.alpha_x", f"{head}.alpha_y"}
+    if name == "wrinkles.rms_m":
+        return {"wrinkles.G"}
+    return {name}
+
+
+def _check_not_fixed(free: Sequence[str], overrides: Sequence[str]) -> None:
+    """Refuse an override of a free parameter: the fit would replace it without a word."""
+    for text in overrides:
+        key = ".".join(parse_override(text)[0])
+        for name in free:
+            if key in _scene_keys(name):
+                raise InputError(
+                    f"`{name}` is both free and fixed by the override {text!r}; drop the override "
+                    f"(its start value can be given as `start`, --start {name}=VALUE)."
+                )

@@ -63,7 +63,7 @@ def test_D_and_G_with_2_percent_noise():
 
 
 def test_unidentifiable_D_and_G_report_errors_that_cover_the_truth():
-    """At 60 m the wrinkles are far below a pixel (35 cm): the fit must say it cannot tell."""
+    """At 60 m a pixel (40 cm) is as large as the largest wrinkle: the fit must say how little it knows."""
     image, sigma = WRINKLES_FAR.reference(0.02, "render.spp=64")
     result = fit(Observation(WRINKLES_FAR.scene(), image, sigma), list(WRINKLES.truth), start=WRINKLES.start, max_steps=10)
     for name, true in WRINKLES.truth.items():

@@ -6,8 +6,14 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 
 have_llvm() {
-    ls /usr/lib/*-linux-gnu/libLLVM.so.{19,2[0-9]}* /usr/lib/*-linux-gnu/libLLVM-{19,2[0-9]}.so* 2>/dev/null | grep -q . \
-        || [ -n "${DRJIT_LIBLLVM_PATH:-}" ]
+    [ -n "${DRJIT_LIBLLVM_PATH:-}" ] && return 0
+    local f major
+    for f in /usr/lib/*-linux-gnu/libLLVM.so.* /usr/lib/*-linux-gnu/libLLVM-*.so*; do
+        [ -e "$f" ] || continue
+        major=$(basename "$f" | grep -oE '[0-9]+' | head -n 1)
+        [ -n "$major" ] && [ "$major" -ge 19 ] && return 0
+    done
+    return 1
 }
 if ! have_llvm; then
     if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then

@@ -65,7 +65,8 @@ class FitResult:
         success: whether the solver reports convergence.
         status: the solver's status in words.
         warnings: identifiability and convergence warnings, in words.
-        history: one entry per step: step, loss, values (physical), time_s since the start.
+        history: one entry per step: the point the step evaluated (step 1 evaluates the start;
+            the accepted point of the last step is ``values``), its loss, time_s since the start.
         renders: the final render of each observation.
         loss: final loss, 0.5 * sum of squared residuals.
         solver, loss_name, steps, wall_time_s, start: what was run.
@@ -87,7 +88,7 @@ class FitResult:
     steps: int
     wall_time_s: float
     start: dict[str, float] = field(default_factory=dict)
-    extras: dict[str, float] = field(default_factory=dict)
+    extras: dict[str, Any] = field(default_factory=dict)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no images)."""
@@ -104,8 +105,8 @@ def _status(result: optx.RESULTS) -> tuple[bool, str]:
         (optx.RESULTS.nonlinear_divergence, "failed: the solve diverged"),
         (optx.RESULTS.nonfinite, "failed: non-finite (NaN or inf) values in the solve"),
     ]:
-        if result == item:
-            return item == optx.RESULTS.successful, words
+        if bool(result == item):
+            return bool(item == optx.RESULTS.successful), words
     return False, f"failed: {optx.RESULTS[result]}"
 
 

@@ -1,0 +1,101 @@
+"""Render the synthetic reference cases: every case of cases.toml, from its scene file beside it.
+
+For case NAME (scene ``NAME.toml``, free parameters listed in ``cases.toml``) this writes the
+folder ``NAME/`` all at once:
+
+* ``reference.exr``: radiance (W m^-2 sr^-1), rendered with the scene's own seed (7);
+* ``preview.png``: 8-bit sRGB preview (99.5th percentile of lit pixels at white);
+* ``reference_noise2.exr``, ``reference_noise5.exr``: the reference plus Gaussian noise, independent
+  per pixel and channel, of standard deviation 2 % / 5 % of the mean radiance of the lit pixels
+  (maximum channel > 0), drawn by ``numpy.random.default_rng([seed, percent])``; values below zero
+  are kept, so the noise stays zero-mean;
+* ``truth.json``: the free parameters' true values (the scene's), the seeds, each noisy file's
+  sigma, the resolved scene, timings and package versions.
+
+Run: ``.venv/bin/python data/synthetic/make_references.py [CASE ...]`` (default: every case), or
+``make synthetic``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import tomllib
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spacefit.errors import check_choice
+from spacefit.fit.params import free_parameters, scene_value
+from spacefit.output import preview_scale, staged_output, to_srgb8, versions, write_json, write_png
+from spacefit.progress import Progress
+from spacefit.render import Renderer
+from spacefit.render.exr import write_exr
+from spacefit.scene.assembly import assemble
+from spacefit.scene.config import load_scene
+
+HERE = Path(__file__).resolve().parent
+NOISE_PERCENT = (2, 5)
+
+
+def add_noise(radiance: np.ndarray, percent: float, seed: int) -> tuple[np.ndarray, float]:
+    """Radiance plus seeded Gaussian noise of ``percent`` % of the lit pixels' mean, and that sigma (W m^-2 sr^-1)."""
+    lit = radiance.max(axis=-1) > 0
+    sigma = percent / 100.0 * float(radiance[lit].mean())
+    noise = np.random.default_rng([seed, int(percent)]).normal(0.0, sigma, radiance.shape)
+    return (radiance + noise).astype(np.float32), sigma
+
+
+def make_case(name: str, free: Sequence[str]) -> dict[str, Any]:
+    """Render case ``name`` into ``HERE / name`` and return its truth record."""
+    scene = load_scene(HERE / f"{name}.toml")
+    names = free_parameters(scene, free).names
+    t0 = time.perf_counter()
+    renderer = Renderer(assemble(scene))
+    t_load = time.perf_counter() - t0
+    r = scene.render
+    t0 = time.perf_counter()
+    radiance = renderer.render(progress=Progress(f"{name} {r.resolution[0]}x{r.resolution[1]} @ {r.spp} spp"))
+    t_render = time.perf_counter() - t0
+    truth: dict[str, Any] = {
+        "case": name,
+        "scene_file": f"{name}.toml",
+        "free": list(names),
+        "truth": {n: scene_value(scene, n) for n in names},
+        "seed": r.seed,
+        "variant": renderer.variant,
+        "mean_lit_radiance_w_m2_sr": float(radiance[radiance.max(axis=-1) > 0].mean()),
+        "noise": {},
+        "units": {"radiance": "W m^-2 sr^-1 per RGB channel", "lengths": "m"},
+        "scene": scene.to_dict(),
+        "timings_s": {"assemble_and_load": t_load, "render": t_render},
+        "versions": versions(),
+    }
+    with staged_output(HERE / name) as stage:
+        write_exr(stage / "reference.exr", radiance)
+        write_png(stage / "preview.png", to_srgb8(radiance, preview_scale(radiance)))
+        for percent in NOISE_PERCENT:
+            noisy, sigma = add_noise(radiance, percent, r.seed)
+            file = f"reference_noise{percent}.exr"
+            write_exr(stage / file, noisy)
+            truth["noise"][file] = {
+                "percent_of_mean_lit_radiance": percent, "sigma_w_m2_sr": sigma, "seed": [r.seed, percent]
+            }
+        write_json(stage / "truth.json", truth)
+    return truth
+
+
+def main() -> None:
+    cases: dict[str, list[str]] = tomllib.loads((HERE / "cases.toml").read_text())
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("cases", nargs="*", metavar="CASE", help=f"cases to render (default: all of {', '.join(cases)})")
+    args = p.parse_args()
+    for name in args.cases or cases:
+        truth = make_case(check_choice("CASE", name, cases), cases[name])
+        print(f"{name}: {truth['truth']} -> {HERE / name}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,126 @@
+"""`spacefit fit` and `fit_to_folder`: the report folder, and every bad input refused before rendering."""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from helpers import small_scene, write_sphere_obj
+
+from spacefit.cli import main
+from spacefit.fit import FitResult
+from spacefit.pipeline import fit_to_folder
+from spacefit.render import render
+from spacefit.render.exr import read_exr, write_exr
+
+TRUE_KD = 0.5
+REPORT = ["comparison.png", "convergence.png", "fit.json"]
+
+
+@pytest.fixture(scope="module")
+def case(tmp_path_factory) -> Path:
+    """A 32 x 32 Lambert sphere: references (kd 0.5, seed 7) from two sun directions, scenes starting at kd 0.3."""
+    d = tmp_path_factory.mktemp("fit")
+    mesh = write_sphere_obj(d / "sphere.obj", subdivisions=3)
+    for name, sun in (("a", [0.3, 0.2, -1.0]), ("b", [-0.5, 0.0, -1.0])):
+        sections = {"camera": {"pixel_pitch_mm": 0.5}, "sun": {"direction": sun}}
+        truth = small_scene(mesh, {"material": "white_paint", "kd": TRUE_KD}, render={"spp": 4, "seed": 7}, **sections)
+        write_exr(d / f"{name}.exr", render(truth))
+        start = small_scene(mesh, {"material": "white_paint", "kd": 0.3}, render={"spp": 4}, **sections)
+        (d / f"{name}.toml").write_text(start.to_toml())
+    return d
+
+
+def _args(case: Path, out: Path, *extra: str, reference: str = "a.exr") -> list[str]:
+    return ["fit", str(case / reference), "--scene", str(case / "a.toml"), "--free", "parts.sphere.kd",
+            "--out", str(out), "--max-steps", "3", "--quiet", *extra]
+
+
+def test_cli_fit_writes_the_report(case, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(_args(case, out, "--spp", "2")) == 0
+    assert sorted(os.listdir(out)) == REPORT
+    report = json.loads((out / "fit.json").read_text())
+    assert report["names"] == ["parts.sphere.kd"] and report["solver"] == "lm"
+    assert abs(report["values"]["parts.sphere.kd"] - TRUE_KD) < 0.01
+    assert len(report["history"]) == report["steps"] and report["inputs"]["options"]["spp"] == 2
+    assert report["timings_s"]["solve"] > 0 and isinstance(report["success"], bool)
+    printed = capsys.readouterr().out
+    assert "parts.sphere.kd = " in printed and "+/-" in printed and "(start 0.3)" in printed
+
+
+def test_fit_to_folder_returns_the_result(case, tmp_path):
+    refs = [case / "a.exr", case / "b.exr"]
+    result = fit_to_folder(refs, [case / "a.toml", case / "b.toml"], ["parts.sphere.kd"], tmp_path / "run",
+                           max_steps=3, solver="gn", quiet=True)
+    assert isinstance(result, FitResult) and result.solver == "gn"
+    assert abs(result.values["parts.sphere.kd"] - TRUE_KD) < 0.01
+    assert len(result.renders) == 2 and result.renders[0].shape == (32, 32, 3)
+    assert sorted(os.listdir(tmp_path / "run")) == REPORT
+
+
+def test_error_while_writing_the_report_leaves_nothing(case, tmp_path, monkeypatch):
+    import spacefit.fit.report as report
+
+    def broken(result):
+        raise OSError("disk full")
+
+    monkeypatch.setattr(report, "_convergence", broken)
+    with pytest.raises(OSError, match="disk full"):
+        fit_to_folder([case / "a.exr"], [case / "a.toml"], ["parts.sphere.kd"], tmp_path / "run", max_steps=1, quiet=True)
+    assert not (tmp_path / "run").exists()
+
+
+def _write_bad_reference(folder: Path, kind: str, reference: Path) -> Path:
+    """A reference that is ``missing``, ``unreadable`` (not OpenEXR) or holds a ``nan`` pixel."""
+    path = folder / f"{kind}.exr"
+    if kind == "unreadable":
+        path.write_text("not an image")
+    elif kind == "nan":
+        image = read_exr(reference)
+        image[5, 5, 0] = np.nan
+        write_exr(path, image)
+    return path
+
+
+@pytest.mark.parametrize(
+    ("kind", "message"),
+    [("missing", "does not exist"), ("unreadable", "could not be read as OpenEXR"), ("nan", "reference 0 holds NaN")],
+)
+def test_bad_reference_exits_2_and_leaves_nothing(case, tmp_path, capsys, kind, message):
+    out = tmp_path / "run"
+    reference = _write_bad_reference(tmp_path, kind, case / "a.exr")
+    assert main(_args(case, out, reference=str(reference))) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--resolution", "16", "16"], "reference 0 has shape (32, 32, 3)"),
+        (["--free", "parts.sphere.alpha_x"], "`free` must be one of"),
+        (["--set", "parts.sphere.kd=0.4"], "`parts.sphere.kd` is both free and fixed by the override 'parts.sphere"),
+        (["--set", "parts.sphere.alpha_x=0.1", "--free", "parts.sphere.alpha"], "`parts.sphere.alpha` is both free"),
+        (["--set", "wrinkles.G=0.1", "--free", "wrinkles.rms_m"], "`wrinkles.rms_m` is both free"),
+        (["--start", "parts.sphere.kd=1.5"], "start of `parts.sphere.kd` must be inside (0, 1)"),
+        (["--start", "parts.sphere.kd=abc"], "`--start parts.sphere.kd` must be a number"),
+        (["--start", "kd"], "`--start` takes NAME=VALUE"),
+        (["--solver", "newton"], "`solver` must be one of"),
+        (["--scene", "b.toml", "--scene", "b.toml"], "3 scenes for 1 references"),
+    ],
+)
+def test_bad_option_exits_2_and_leaves_nothing(case, tmp_path, capsys, extra, message):
+    out = tmp_path / "run"
+    assert main(_args(case, out, *extra)) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
+
+
+def test_unwritable_output_folder(case, capsys):
+    # /proc refuses new files even to root, unlike permission bits
+    assert main(_args(case, Path("/proc/spacefit-test/fit"))) == 2
+    assert "not writable" in capsys.readouterr().err
