@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import sys
 import time
 from collections.abc import Sequence
@@ -51,6 +52,7 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False) 
         "variant": renderer.variant,
         "units": {"radiance": "W m^-2 sr^-1 per RGB channel", "lengths": "m"},
         "triangles": {name: len(assembly.faces(name)) for name in assembly.parts},
+        "wrinkle_model": {name: dataclasses.asdict(choice) for name, choice in assembly.lod.items()},
         "timings_s": {"assemble": t_assemble, "load": t_load, "render": t_render},
         "versions": versions(),
     }

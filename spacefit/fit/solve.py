@@ -144,15 +144,19 @@ def _problem(
     seed: int, seed_grad: int, integrator: str,
 ) -> _Problem:
     renders_x, renders_alt, renders_v, residuals, values_fns = [], [], [], [], []
+    geometry = any(n.startswith("wrinkles.") for n in free.names)
     for i, obs in enumerate(observations):
         ref = _check_reference(obs, i)
-        assembly = assemble(obs.scene)
-        scene = DrJitScene(Renderer(assembly), spp or obs.scene.render.spp, spp_grad or spp or obs.scene.render.spp, integrator)
+        scene = obs.scene
+        if geometry:  # D and G act on the displaced geometry
+            scene = dataclasses.replace(scene, wrinkles=dataclasses.replace(scene.wrinkles, model="geometry"))
+        assembly = assemble(scene)
+        dscene = DrJitScene(Renderer(assembly), spp or scene.render.spp, spp_grad or spp or scene.render.spp, integrator)
         values_of = scene_values_fn(assembly, free)
-        renders_x.append(render_params(scene, values_of, free.fd_steps, seed, seed_grad))
+        renders_x.append(render_params(dscene, values_of, free.fd_steps, seed, seed_grad))
         alt = INDEPENDENT_SEED_OFFSET
-        renders_alt.append(render_params(scene, values_of, free.fd_steps, seed + alt, seed_grad + alt))
-        renders_v.append(render_values(scene, seed, seed_grad))
+        renders_alt.append(render_params(dscene, values_of, free.fd_steps, seed + alt, seed_grad + alt))
+        renders_v.append(render_values(dscene, seed, seed_grad))
         residuals.append(residual_fn(ref, loss, obs.sigma))
         values_fns.append(values_of)
 
@@ -376,13 +380,13 @@ def fit(
         return r
 
     def log_step(step: int) -> bool:
-        """Record the step's evaluation; False if it was not finite."""
+        """Record the step's evaluation; False after a run of non-finite evaluations."""
         x = np.asarray(setup.to_user(fp.to_physical(jnp.asarray(last["u"]))))
         history.append({"step": step, "loss": last["loss"], "values": dict(zip(setup.user.names, x.tolist())),
                         "time_s": time.perf_counter() - t0})
         if progress is not None:
             progress(step, max_steps)
-        return bool(np.isfinite(last["loss"]) and np.all(np.isfinite(x)))
+        return not _nonfinite_run(history)
 
     u = jnp.asarray(fp.to_unconstrained(jnp.asarray(setup.x0)))
     if solver == "adam":
@@ -465,19 +469,35 @@ def identifiability(
                            np.asarray(extras["fisher_eigenvalues"]))
 
 
+# A solve fails when this many consecutive evaluations are not finite; a line search or trust
+# region may try (and reject) a single non-finite point.
+NONFINITE_PATIENCE = 3
+# Adam stops when no unconstrained coordinate moved more than rtol for this many steps.
+ADAM_PATIENCE = 5
+
+
+def _nonfinite_run(history: list[dict[str, Any]]) -> bool:
+    recent = history[-NONFINITE_PATIENCE:]
+    return len(recent) == NONFINITE_PATIENCE and not any(np.isfinite(h["loss"]) for h in recent)
+
+
 def _optimistix(solver: str, residual_u, u, max_steps, rtol, atol, log_step) -> tuple[bool, str, jax.Array, int]:
     """Step an optimistix solver interactively, so each step is recorded and shown."""
     if solver == "bfgs":
         obj = optx.BFGS(rtol=rtol, atol=atol)
         f_struct = jax.ShapeDtypeStruct((), u.dtype)
+        # BFGS's first step is the raw gradient: scale the loss to 1 at the start so that the step
+        # is of order one in unconstrained coordinates (the minimiser is unchanged).
+        scale = 1.0 / max(float(0.5 * jnp.sum(residual_u(u, None) ** 2)), 1e-30)
     else:
         obj = {"lm": optx.LevenbergMarquardt, "gn": optx.GaussNewton, "dogleg": optx.Dogleg}[solver](rtol=rtol, atol=atol)
         f_struct = jax.eval_shape(lambda y: residual_u(y, None), u)
+        scale = 1.0
 
     def fn(y: jax.Array, args: Any) -> tuple[jax.Array, None]:
         # the interactive solver API takes functions with auxiliary output
         r = residual_u(y, args)
-        return (0.5 * jnp.sum(r**2) if solver == "bfgs" else r), None
+        return (scale * 0.5 * jnp.sum(r**2) if solver == "bfgs" else r), None
 
     tags: frozenset = frozenset()
     state = obj.init(fn, u, None, {}, f_struct, None, tags)
@@ -486,7 +506,7 @@ def _optimistix(solver: str, residual_u, u, max_steps, rtol, atol, log_step) -> 
     result = optx.RESULTS.nonlinear_max_steps_reached
     for k in range(1, max_steps + 1):
         u, state, _ = step(fn, u, None, {}, state, tags)
-        if not log_step(k):
+        if not log_step(k) or not np.all(np.isfinite(np.asarray(u))):
             return False, "failed: the loss or a parameter became NaN", u, k
         done, res = terminate(fn, u, None, {}, state, tags)
         if bool(done):
@@ -497,7 +517,8 @@ def _optimistix(solver: str, residual_u, u, max_steps, rtol, atol, log_step) -> 
 
 
 def _adam(problem: _Problem, residual_u, u, max_steps, rtol, learning_rate, log_step, last) -> tuple[bool, str, jax.Array, int]:
-    """optax Adam on the unconstrained vector; reverse-mode gradients unless a Jacobian column needs finite differences."""
+    """optax Adam with a cosine-decaying step on the unconstrained vector; reverse-mode gradients
+    unless a Jacobian column needs finite differences."""
     if problem.loss_u_reverse is not None:
 
         def loss_u(y: jax.Array) -> jax.Array:
@@ -510,16 +531,16 @@ def _adam(problem: _Problem, residual_u, u, max_steps, rtol, learning_rate, log_
             return 0.5 * jnp.sum(residual_u(y, None) ** 2)
 
     value_and_grad = jax.jit(jax.value_and_grad(loss_u))
-    opt = optax.adam(learning_rate)
+    opt = optax.adam(optax.cosine_decay_schedule(learning_rate, max_steps))
     opt_state = opt.init(u)
-    previous = math.inf
+    still = 0
     for k in range(1, max_steps + 1):
-        value, grad = value_and_grad(u)
+        _, grad = value_and_grad(u)
         if not log_step(k):
             return False, "failed: the loss or a parameter became NaN", u, k
         updates, opt_state = opt.update(grad, opt_state)
         u = optax.apply_updates(u, updates)
-        if abs(previous - float(value)) <= rtol * abs(float(value)):
-            return True, "converged (relative loss change below rtol)", u, k
-        previous = float(value)
+        still = still + 1 if float(jnp.max(jnp.abs(updates))) < rtol else 0
+        if still >= ADAM_PATIENCE:
+            return True, f"converged (no parameter moved more than rtol for {ADAM_PATIENCE} steps)", u, k
     return False, "stopped: maximum number of steps reached", u, max_steps

@@ -34,7 +34,8 @@ def make_material(name: str, overrides: Mapping[str, object] | None = None, *, w
 
     Args:
         name: a key of :data:`PRESETS`.
-        overrides: parameter name -> value; only the preset model's own parameters are allowed.
+        overrides: parameter name -> value; only the preset model's own parameters are allowed,
+            and ``alpha`` for both roughnesses of a conductor.
         where: how the user addressed this material, used in messages (e.g. ``"parts.panels"``).
 
     Raises:
@@ -42,6 +43,11 @@ def make_material(name: str, overrides: Mapping[str, object] | None = None, *, w
     """
     preset = PRESETS[check_choice(f"{where}.material", name, PRESETS)]
     overrides = dict(overrides or {})
+    if "alpha" in overrides and isinstance(preset, Conductor):
+        # shorthand for an isotropic roughness
+        if {"alpha_x", "alpha_y"} & set(overrides):
+            raise InputError(f"`{where}.alpha` sets alpha_x and alpha_y; do not give them as well.")
+        overrides["alpha_x"] = overrides["alpha_y"] = overrides.pop("alpha")
     fields = {f.name for f in dataclasses.fields(preset)}
     for key in overrides:
         check_choice(f"{where}.{key} (a parameter of {type(preset).__name__})", key, fields)

@@ -24,6 +24,7 @@ from spacefit.geometry.wm import wm_n_max, wm_phases
 from spacefit.geometry.wrinkle import Refinement, displace, refine
 from spacefit.materials import Material, make_material
 from spacefit.scene.config import Scene, deg2rad
+from spacefit.scene.lod import LodChoice, choose_model
 
 
 @dataclass(frozen=True)
@@ -39,6 +40,7 @@ class Assembly:
     camera: CameraFrame
     intrinsics: Intrinsics
     sun_direction: Float[np.ndarray, "3"]
+    lod: Mapping[str, LodChoice]
 
     def object_vertices(self, name: str, D: float | Array | None = None, G: float | Array | None = None) -> Array:
         """Object-frame vertices (m) of part ``name``; wrinkled parts at (D, G), scene values by default."""
@@ -153,17 +155,20 @@ def assemble(scene: Scene) -> Assembly:
     scene.validate()
     parts = _load_parts(scene)
     w = scene.wrinkles
-    refinements = {}
-    if w.enabled:
-        refinements = {
-            name: _refinement(parts[name].vertices.astype(float).tobytes(), parts[name].faces.astype(np.int64).tobytes(), w.spacing_m)
-            for name in w.parts
-        }
-    phases = wm_phases(w.M, wm_n_max(w.L, w.Ls, w.gamma), w.seed)
     materials = {name: make_material(p.material, p.overrides, where=f"parts.{name}") for name, p in scene.parts.items()}
     to_world = object_to_world(np.array(scene.target.position_m), np.array(deg2rad(scene.target.attitude_deg)))
     camera, intrinsics = _camera(scene)
+    refinements, lod = {}, {}
+    for name in w.parts if w.enabled else ():
+        centroid = to_world[:3, :3] @ parts[name].vertices.mean(axis=0) + to_world[:3, 3]
+        lod[name], effective = choose_model(name, materials[name], centroid, camera, intrinsics, w)
+        if effective is not None:
+            materials[name] = effective
+        else:
+            vertices, faces = parts[name].vertices.astype(float), parts[name].faces.astype(np.int64)
+            refinements[name] = _refinement(vertices.tobytes(), faces.tobytes(), w.spacing_m)
+    phases = wm_phases(w.M, wm_n_max(w.L, w.Ls, w.gamma), w.seed)
     sun = np.array(scene.sun.direction, float)
-    assembly = Assembly(scene, parts, materials, refinements, phases, to_world, camera, intrinsics, sun / np.linalg.norm(sun))
+    assembly = Assembly(scene, parts, materials, refinements, phases, to_world, camera, intrinsics, sun / np.linalg.norm(sun), lod)
     check_view({n: PartMesh(np.asarray(assembly.world_vertices(n)), assembly.faces(n)) for n in parts}, camera, intrinsics)
     return assembly

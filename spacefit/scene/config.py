@@ -27,6 +27,7 @@ from spacefit.errors import InputError, check_choice, check_range, check_vector
 SOLAR_IRRADIANCE_W_M2 = 1361.0
 VARIANTS = ("auto", "llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb")
 FILTERS = ("tent", "box", "gaussian")
+WRINKLE_MODELS = ("auto", "geometry", "effective")
 Vec3 = tuple[float, float, float]
 
 
@@ -124,6 +125,13 @@ class WrinkleSettings:
 
     ``spacing_m`` is the refinement density: the distance between the sample points that carry
     heights (the thesis's sampling grid inside each triangle).
+
+    ``model`` chooses how wrinkles are rendered: ``"geometry"`` displaces a refined mesh (the
+    thesis's way); ``"effective"`` keeps the flat mesh and widens the part's microfacet roughness
+    by the wrinkles' slopes (:func:`spacefit.scene.lod.effective_material`); ``"auto"`` takes the
+    effective model, far cheaper, where a pixel at the part spans at least ``lod_footprint`` times
+    the largest wrinkle (L), the measured condition under which its image error stays small (see
+    README, "Level of detail"), and the displaced geometry otherwise.
     """
 
     enabled: bool = True
@@ -136,6 +144,8 @@ class WrinkleSettings:
     Ls: float = 5e-3
     seed: int = 0
     spacing_m: float = 0.02
+    model: str = "auto"
+    lod_footprint: float = 1.0
 
     def validate(self) -> None:
         from spacefit.geometry.wm import check_wm_params
@@ -143,6 +153,8 @@ class WrinkleSettings:
         check_wm_params(self.D, self.G, self.gamma, self.M, self.L, self.Ls)
         _check_int("wrinkles.seed", self.seed, 0, 2**31 - 1)
         check_range("wrinkles.spacing_m", self.spacing_m, 0.0, lo_open=True, unit="m")
+        check_choice("wrinkles.model", self.model, WRINKLE_MODELS)
+        check_range("wrinkles.lod_footprint", self.lod_footprint, 0.0, lo_open=True)
 
 
 @dataclass(frozen=True)

@@ -1,0 +1,83 @@
+"""Level of detail for wrinkles: displaced geometry, or an effective roughness on the flat part.
+
+When wrinkles are much smaller than a pixel, the image only sees their slope statistics: a flat
+part whose microfacet distribution is widened by the wrinkles' slopes renders nearly the same image
+for a fraction of the triangles. Beckmann's distribution of roughness alpha has slopes of per-axis
+variance alpha^2 / 2 (Walter et al. 2007), so Gaussian slopes of per-axis standard deviation s add
+``2 s^2`` to alpha^2; spacefit uses the same alpha for GGX, an approximation whose error the level
+of detail study measures. The slopes are those of eq. 2-1 at the scales the geometry would carry
+(wavelength >= 2 mesh spacings, :func:`spacefit.geometry.wm.wm_rms_slope`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from spacefit.geometry.frames import CameraFrame, Intrinsics
+from spacefit.geometry.wm import wm_rms_slope
+from spacefit.materials import Conductor, Material, Mirror
+from spacefit.scene.config import WrinkleSettings
+
+
+@dataclass(frozen=True)
+class LodChoice:
+    """Which wrinkle model a part is rendered with, and why (recorded in the render sidecar)."""
+
+    part: str
+    model: str
+    footprint_m: float
+    footprint_over_L: float
+    slope_rms: float
+    effective_alpha: float | None
+    reason: str
+
+
+def effective_alpha(alpha0: float, slope_rms: float) -> float:
+    """Roughness of a flat surface whose microfacets are tilted by wrinkles of rms slope ``slope_rms``."""
+    return math.sqrt(alpha0**2 + 2.0 * slope_rms**2)
+
+
+def effective_material(material: Material, slope_rms: float) -> Material | None:
+    """The part's material widened by the wrinkles' slopes; None if that exceeds GGX's alpha <= 1."""
+    if isinstance(material, Mirror):
+        material = Conductor(material.eta, material.k, 1e-4, 1e-4)
+    if not isinstance(material, Conductor):
+        return None
+    ax, ay = effective_alpha(material.alpha_x, slope_rms), effective_alpha(material.alpha_y, slope_rms)
+    if max(ax, ay) > 1.0:
+        return None
+    return Conductor(material.eta, material.k, ax, ay)
+
+
+def choose_model(
+    part: str, material: Material, centroid: np.ndarray, camera: CameraFrame, intrinsics: Intrinsics, w: WrinkleSettings
+) -> tuple[LodChoice, Material | None]:
+    """Pick geometry or effective roughness for one wrinkled part (world ``centroid``, metres)."""
+    distance = float(np.linalg.norm(centroid - camera.position))
+    footprint = distance * intrinsics.pixel_pitch / intrinsics.focal_length
+    slope = float(wm_rms_slope(w.D, w.G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls, min_wavelength=2 * w.spacing_m))
+    effective = effective_material(material, slope)
+    alpha = None if effective is None else float(effective.alpha_x)
+    ratio = footprint / w.L
+    if w.model == "geometry":
+        model, reason = "geometry", "forced by wrinkles.model"
+    elif w.model == "effective":
+        if effective is None:
+            from spacefit.errors import InputError
+
+            raise InputError(
+                f"`wrinkles.model` = 'effective' needs a conductor part and an effective roughness <= 1; part {part!r} "
+                f"has rms slope {slope:.3g}, which would need alpha {effective_alpha(0.0, slope):.3g}."
+            )
+        model, reason = "effective", "forced by wrinkles.model"
+    elif effective is None:
+        model, reason = "geometry", f"wrinkles too steep for an effective roughness (rms slope {slope:.3g})"
+    elif ratio >= w.lod_footprint:
+        model, reason = "effective", f"a pixel spans {ratio:.3g} L >= wrinkles.lod_footprint = {w.lod_footprint:g}"
+    else:
+        model, reason = "geometry", f"a pixel spans {ratio:.3g} L < wrinkles.lod_footprint = {w.lod_footprint:g}"
+    choice = LodChoice(part, model, footprint, ratio, slope, alpha, reason)
+    return choice, (effective if model == "effective" else None)
