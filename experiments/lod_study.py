@@ -55,10 +55,11 @@ def run_study(out: Path, ranges: list[float], spp: int) -> list[dict[str, object
         geometry, t_geometry, choice = timed_render(base + ["wrinkles.model='geometry'"], seed=1)
         geometry2, _, _ = timed_render(base + ["wrinkles.model='geometry'"], seed=2)
         effective, t_effective, _ = timed_render(base + ["wrinkles.model='effective'"], seed=1)
-        auto = assemble(load_scene(None, base)).lod["body"]
+        auto = assemble(load_scene(None, base + ["wrinkles.model='auto'"])).lod["body"]
         rows.append({
             "range_m": d, "footprint_m": round(choice.footprint_m, 4), "footprint_over_L": round(choice.footprint_over_L, 3),
             "error_effective": round(relative_rmse(effective, geometry), 4),
+            "flux_ratio": round(float(effective.sum() / geometry.sum()), 4),
             "noise_floor": round(relative_rmse(geometry2, geometry), 4),
             "time_geometry_s": round(t_geometry, 3), "time_effective_s": round(t_effective, 3),
             "auto_model": auto.model, "effective_alpha": choice.effective_alpha,
