@@ -19,3 +19,16 @@ def test_light_level_sweep_is_linear_in_irradiance(tmp_path):
     # same seed, same paths: radiance scales exactly with the sun's irradiance
     for label, value in mean.items():
         assert value == pytest.approx(mean["1"] * float(label), rel=1e-5)
+
+
+def test_identifiability_study_shape(tmp_path):
+    import identifiability
+
+    rows = identifiability.run_identifiability(tmp_path, [25.0, 70.0], [64, 128], spp=8)
+    assert (tmp_path / "identifiability.csv").exists() and (tmp_path / "identifiability.png").stat().st_size > 0
+    assert [(r["range_m"], r["width_px"]) for r in rows] == [(25.0, 64), (25.0, 128), (70.0, 64), (70.0, 128)]
+    by = {(r["range_m"], r["width_px"]): r for r in rows}
+    for width in (64, 128):  # information falls with range at a fixed image size
+        assert by[(70.0, width)]["fisher_min"] <= by[(25.0, width)]["fisher_min"]
+    assert by[(25.0, 128)]["fisher_min"] >= by[(25.0, 64)]["fisher_min"]  # and rises with resolution
+    assert all(r["se_D"] > 0 for r in rows)

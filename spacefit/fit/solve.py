@@ -438,12 +438,14 @@ class Identifiability:
         fisher_eigenvalues: eigenvalues of the Fisher information in the solver's coordinates
             (their square roots are the noise-weighted Jacobian's singular values); 0 marks a
             direction nothing constrains.
+        extras: derived quantities, e.g. the rms height's standard error when D and G are free.
     """
 
     names: tuple[str, ...]
     stderr: dict[str, float]
     correlation: np.ndarray
     fisher_eigenvalues: np.ndarray
+    extras: dict[str, Any]
 
 
 def identifiability(
@@ -466,7 +468,7 @@ def identifiability(
     _, cov, _, extras = _estimate(setup, setup.x0)
     stderr, corr = _stderr_corr(cov)
     return Identifiability(setup.user.names, dict(zip(setup.user.names, stderr.tolist())), corr,
-                           np.asarray(extras["fisher_eigenvalues"]))
+                           np.asarray(extras.pop("fisher_eigenvalues")), extras)
 
 
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
