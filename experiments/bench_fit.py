@@ -6,10 +6,9 @@ and of the D, G fit, at 128 x 128 (targets on 2 CPU cores: material fit under 20
 from __future__ import annotations
 
 import argparse
-import os
-from pathlib import Path
 
 from cases import MATERIALS, WRINKLES_128, Case
+from studyio import machine
 
 from spacefit.fit import SOLVERS, Observation, fit
 
@@ -32,9 +31,7 @@ def main() -> None:
     p.add_argument("--cases", nargs="+", default=list(CASES), choices=list(CASES))
     p.add_argument("--max-steps", type=int, default=40)
     args = p.parse_args()
-    cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                if line.startswith("model name")), "unknown CPU")
-    print(f"machine: {cpu}, {os.cpu_count()} cores; errors: D absolute, others relative")
+    print(f"machine: {machine()}; errors: D absolute, others relative")
     for name in args.cases:
         for solver in args.solvers:
             row = run(CASES[name], solver, args.max_steps)

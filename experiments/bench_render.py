@@ -11,7 +11,8 @@ import dataclasses
 import os
 import statistics
 import time
-from pathlib import Path
+
+from studyio import machine
 
 from spacefit.render import Renderer
 from spacefit.scene.assembly import assemble
@@ -30,9 +31,7 @@ def main() -> None:
     t_assemble = time.perf_counter() - t0
     r = base.render
     samples = r.resolution[0] * r.resolution[1] * r.spp
-    cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
-                if line.startswith("model name")), "unknown CPU")
-    print(f"machine: {cpu}, {os.cpu_count()} cores")
+    print(f"machine: {machine()}")
     print(f"scene: {r.resolution[0]}x{r.resolution[1]}, {r.spp} spp, {assembly.triangle_count():,} triangles; "
           f"assembly (W-M refinement) {t_assemble:.2f} s")
     print(f"{'depth':>5} {'threads':>7} {'load s':>7} {'first s':>8} {'median s':>9} {'min s':>7} {'Msamples/s':>11}")

@@ -18,7 +18,6 @@ Run: ``.venv/bin/python experiments/dg_study.py [--quick]`` (quick: fewer points
 from __future__ import annotations
 
 import argparse
-import csv
 import time
 from pathlib import Path
 
@@ -27,6 +26,7 @@ import jax.numpy as jnp
 import matplotlib
 import numpy as np
 from cases import WRINKLES
+from studyio import write_csv
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -45,13 +45,6 @@ NAMES = ["wrinkles.D", "wrinkles.G"]
 def cosine(a: np.ndarray, b: np.ndarray) -> float:
     a, b = np.ravel(a), np.ravel(b)
     return float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
-
-
-def write_csv(path: Path, rows: list[dict[str, object]]) -> None:
-    with open(path, "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
 
 
 def jacobian_methods(out: Path, spp: int) -> list[dict[str, object]]:

@@ -13,11 +13,11 @@ Run: ``.venv/bin/python experiments/identifiability.py [--full]``.
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
 import matplotlib
 import numpy as np
+from studyio import write_csv
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -60,10 +60,7 @@ def run_identifiability(out: Path, ranges: list[float], widths: list[int], spp: 
                 "fisher_min": float(info.fisher_eigenvalues.min()), "fisher_max": float(info.fisher_eigenvalues.max()),
             })
         progress(i + 1, len(ranges))
-    with open(out / "identifiability.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(out / "identifiability.csv", rows)
     fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
     for width in widths:
         sel = [r for r in rows if r["width_px"] == width]

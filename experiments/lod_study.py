@@ -12,12 +12,12 @@ Run: ``.venv/bin/python experiments/lod_study.py [--quick]``.
 from __future__ import annotations
 
 import argparse
-import csv
 import time
 from pathlib import Path
 
 import matplotlib
 import numpy as np
+from studyio import relative_rmse, write_csv
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -30,12 +30,6 @@ from spacefit.scene.config import load_scene  # noqa: E402
 GENTLE = ["wrinkles.L=0.4", "wrinkles.Ls=0.1", "wrinkles.D=2.4", "wrinkles.G=3e-4", "wrinkles.spacing_m=0.03",
           "render.resolution=[128, 128]", "camera.pixel_pitch_mm=18.75", "target.attitude_deg=[20, 30, 0]",
           "sun.direction=[0.3, -0.2, -1]"]
-
-
-def relative_rmse(image: np.ndarray, reference: np.ndarray) -> float:
-    """RMSE over the reference's lit pixels divided by their mean radiance."""
-    lit = reference.max(axis=-1) > 0
-    return float(np.sqrt(np.mean((image[lit] - reference[lit]) ** 2)) / reference[lit].mean())
 
 
 def timed_render(overrides: list[str], seed: int) -> tuple[np.ndarray, float, dict]:
@@ -65,10 +59,7 @@ def run_study(out: Path, ranges: list[float], spp: int) -> list[dict[str, object
             "auto_model": auto.model, "effective_alpha": choice.effective_alpha,
         })
         progress(i + 1, len(ranges))
-    with open(out / "lod.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(out / "lod.csv", rows)
     fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
     ratio = [r["footprint_over_L"] for r in rows]
     ax[0].plot(ratio, [r["error_effective"] for r in rows], "o-", label="effective vs geometry")

@@ -11,11 +11,11 @@ Run: ``.venv/bin/python experiments/thesis_sweeps.py [--out experiments/results/
 from __future__ import annotations
 
 import argparse
-import csv
 from pathlib import Path
 
 import matplotlib
 import numpy as np
+from studyio import write_csv
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -94,10 +94,7 @@ def run_sweeps(out: Path, size: int = 600, spp: int = 20, only: list[str] | None
             rows.append({"sweep": name, "value": label, "mean_radiance": float(img.mean()), "max_radiance": float(img.max())})
             progress(i + 1, len(cases))
         contact_sheet(out / f"{name}.png", name.replace("_", " "), UNITS[name], images, preview_scale(dict(images)[reference]))
-    with open(out / "sweeps.csv", "w", newline="") as f:
-        writer = csv.DictWriter(f, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(out / "sweeps.csv", rows)
     return rows
 
 
