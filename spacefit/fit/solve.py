@@ -190,6 +190,9 @@ def _covariance(problem: _Problem, x: np.ndarray) -> tuple[np.ndarray, float, np
     r = np.asarray(problem.residual_x(jnp.asarray(x)), dtype=float)
     J1 = np.asarray(jax.jacfwd(problem.residual_x)(jnp.asarray(x)), dtype=float)
     J2 = np.asarray(jax.jacfwd(problem.residual_x_independent)(jnp.asarray(x)), dtype=float)
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J1)) and np.all(np.isfinite(J2))):
+        n = len(x)
+        return np.full((n, n), np.nan), math.nan, np.full(n, np.nan)
     informative = np.any(J1 != 0, axis=1) | (r != 0)
     s2 = float(r @ r) / max(int(informative.sum()) - len(x), 1)
     cross = 0.5 * (J1.T @ J2 + J2.T @ J1)
@@ -225,6 +228,8 @@ def _stderr_corr(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _warnings(names: Sequence[str], values: np.ndarray, stderr: np.ndarray, corr: np.ndarray) -> list[str]:
     out = []
     for i, name in enumerate(names):
+        if np.isnan(stderr[i]):
+            continue  # no error estimate at all: reported by the caller
         if not np.isfinite(stderr[i]):
             out.append(f"{name} is not determined by these observations (singular J^T J).")
         elif stderr[i] > REL_STDERR_WARN * max(abs(values[i]), 1e-12):
@@ -400,6 +405,9 @@ def fit(
         x_user, cov, loss_value, extras = _estimate(setup, x)
         stderr, corr = _stderr_corr(cov)
         warnings = _warnings(setup.user.names, x_user, stderr, corr)
+        if not math.isfinite(loss_value):
+            success = False
+            warnings.insert(0, "the render or its Jacobian at the result is not finite (NaN); no errors are reported.")
         if not success:
             warnings.insert(0, f"the solver did not converge ({status}).")
         renders = [np.asarray(img) for img in problem.renders_x(jnp.asarray(x))]

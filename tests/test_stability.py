@@ -1,0 +1,116 @@
+"""Failure classes of a fit against known truth, and the solver-stability study at its reduced size."""
+
+from __future__ import annotations
+
+import csv
+import math
+import sys
+from collections import Counter
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from spacefit.errors import InputError
+from spacefit.fit import FitResult
+from spacefit.fit.failures import FAILURE_CLASSES, classify
+from spacefit.render import Renderer
+from spacefit.scene.assembly import assemble
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
+from cases import PANELS  # noqa: E402
+from stability import CONDITIONS, EDGE_ON, REDUCED, run_stability  # noqa: E402
+
+TRUTH = {"parts.panels.alpha_x": 0.15, "parts.legs.kd": 0.5}
+
+
+def result(values: dict[str, float], stderr: dict[str, float], success: bool = True, status: str = "converged",
+           loss: float = 1.0) -> FitResult:
+    """A FitResult as fit() would return it, without rendering."""
+    names = tuple(values)
+    return FitResult(names=names, values=values, stderr=stderr, correlation=np.eye(len(names)), success=success,
+                     status=status, warnings=[], history=[], renders=[], loss=loss, solver="lm", loss_name="pixel",
+                     steps=5, wall_time_s=1.0)
+
+
+SMALL_SE = {"parts.panels.alpha_x": 0.001, "parts.legs.kd": 0.001}
+NEAR = {"parts.panels.alpha_x": 0.153, "parts.legs.kd": 0.49}  # within 5 %
+FAR = {"parts.panels.alpha_x": 0.153, "parts.legs.kd": 0.40}  # kd 20 % off
+
+
+@pytest.mark.parametrize(
+    ("values", "stderr", "success", "status", "loss", "expected"),
+    [
+        (NEAR, SMALL_SE, True, "converged", 1.0, "success"),
+        (NEAR, SMALL_SE, False, "stopped: maximum number of steps reached", 1.0, "success"),  # close enough
+        ({**NEAR, "parts.legs.kd": math.nan}, SMALL_SE, False, "stopped", math.nan, "nan"),
+        (NEAR, SMALL_SE, True, "converged", math.nan, "nan"),  # the loss alone
+        (NEAR, SMALL_SE, False, "failed: the loss or a parameter became NaN", 1.0, "nan"),  # the status alone
+        (NEAR, SMALL_SE, False, "failed: non-finite (NaN or inf) values in the solve", 1.0, "nan"),
+        (NEAR, {**SMALL_SE, "parts.legs.kd": math.inf}, True, "converged", 1.0, "unidentifiable"),  # lucky hit
+        (FAR, {**SMALL_SE, "parts.legs.kd": math.nan}, True, "converged", 1.0, "unidentifiable"),
+        (FAR, {**SMALL_SE, "parts.legs.kd": 0.06}, True, "converged", 1.0, "unidentifiable"),  # 0.1 <= 2 x 0.06
+        (FAR, {**SMALL_SE, "parts.legs.kd": 0.06}, False, "stopped", 1.0, "unidentifiable"),  # before stalled
+        (FAR, SMALL_SE, False, "stopped: maximum number of steps reached", 1.0, "stalled"),
+        (FAR, SMALL_SE, True, "converged", 1.0, "wrong_minimum"),
+        (FAR, {**SMALL_SE, "parts.legs.kd": 0.04}, True, "converged", 1.0, "wrong_minimum"),  # 0.1 > 2 x 0.04
+    ],
+)
+def test_classify_rules_in_order(values, stderr, success, status, loss, expected):
+    assert classify(result(values, stderr, success, status, loss), TRUTH) == expected
+
+
+def test_nan_comes_before_everything():
+    nan_values = dict.fromkeys(TRUTH, math.nan)
+    assert classify(result(nan_values, dict.fromkeys(TRUTH, math.nan), False, "failed", math.nan), TRUTH) == "nan"
+
+
+def test_tolerance_is_relative_except_D():
+    truth = {"wrinkles.D": 2.4, "wrinkles.G": 0.04}
+    se = {"wrinkles.D": 1e-4, "wrinkles.G": 1e-5}
+    assert classify(result({"wrinkles.D": 2.415, "wrinkles.G": 0.0415}, se), truth) == "success"  # D within 0.02
+    off = result({"wrinkles.D": 2.43, "wrinkles.G": 0.0415}, se)
+    assert classify(off, truth) == "wrong_minimum"
+    assert classify(off, truth, tolerance=0.5) == "wrong_minimum"  # a float leaves D at 0.02 absolute
+    assert classify(off, truth, tolerance={"wrinkles.D": 0.05}) == "success"  # G keeps 5 % relative
+    assert classify(off, truth, tolerance={"wrinkles.D": 0.05, "wrinkles.G": 0.01}) == "wrong_minimum"
+
+
+def test_classify_refuses_incomplete_truth():
+    with pytest.raises(InputError, match="parts.legs.kd"):
+        classify(result(NEAR, SMALL_SE), {"parts.panels.alpha_x": 0.15})
+    with pytest.raises(InputError, match="non-zero"):
+        classify(result(NEAR, SMALL_SE), {**TRUTH, "parts.legs.kd": 0.0})
+
+
+def test_edge_on_view_shows_the_panels_as_a_line():
+    """The study's edge-on attitude: the panels cover a fraction of the pixels they cover face-on."""
+
+    def panel_pixels(*more: str) -> int:
+        # white panels at two albedos, lit from the camera, direct light only: the pixels that change
+        images = [Renderer(assemble(PANELS.scene(
+            "render.resolution=[32, 32]", "camera.pixel_pitch_mm=75", "render.spp=4", "render.depth=1",
+            "sun.direction=[-4, -3, -25]", "parts.panels.material='white_paint'", f"parts.panels.kd={kd}", *more,
+        ))).render(seed=1) for kd in (1.0, 0.5)]
+        return int(np.sum(np.abs(images[0] - images[1]).max(axis=-1) > 0))
+
+    face_on, edge_on = panel_pixels(), panel_pixels(EDGE_ON)
+    assert 0 < edge_on < 0.4 * face_on, (edge_on, face_on)
+
+
+def test_stability_study_shape(tmp_path):
+    """The reduced study: every run present and classified, files written, the easy start recovered."""
+    rows = run_stability(tmp_path, full=False)
+    expected = {(c, v, s) for c, (_, reduced) in CONDITIONS.items() for v in reduced for s in REDUCED.solvers}
+    assert {(r["condition"], r["value"], r["solver"]) for r in rows} == expected and len(rows) == len(expected)
+    assert all(r["class"] in FAILURE_CLASSES for r in rows), [r for r in rows if r["class"] not in FAILURE_CLASSES]
+    counts = Counter(r["class"] for r in rows)
+    assert sum(counts.values()) == len(rows)
+    easy = min(CONDITIONS["start_offset"][1], key=abs)  # the start offset nearest the truth
+    by_run = {(r["condition"], r["value"], r["solver"]): r for r in rows}
+    assert by_run[("start_offset", easy, "lm")]["class"] == "success", by_run[("start_offset", easy, "lm")]
+    with open(tmp_path / "stability.csv", newline="") as f:
+        written = list(csv.DictReader(f))
+    assert len(written) == len(rows)
+    assert {"condition", "value", "solver", "class", "errors", "steps", "time_s"} <= set(written[0])
+    assert (tmp_path / "stability.png").stat().st_size > 0
