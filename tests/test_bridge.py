@@ -23,7 +23,7 @@ CASE = [
 ]
 NAMES = [
     "parts.panels.alpha_x", "parts.panels.alpha_y", "parts.panels.eta", "parts.panels.k", "parts.legs.kd",
-    "sun.irradiance_w_m2", "parts.body.alpha", "wrinkles.D", "wrinkles.rms_m",
+    "sun.irradiance_w_m2", "parts.body.alpha", "wrinkles.D", "wrinkles.rms_m", "sun.elevation_deg", "sun.azimuth_deg",
 ]
 
 
@@ -53,7 +53,7 @@ def cosine(a, b):
 
 
 def test_jacobian_columns_match_finite_differences(case):
-    """AD columns (BSDF, sun) and finite-difference columns (D, rms height) against central
+    """AD columns (BSDF, sun irradiance) and finite-difference columns (D, rms height, sun angles) against central
     differences with common random numbers, at another step (1 % for AD columns, twice the
     column's own step for finite-difference columns)."""
     free, dscene, values_of, x0 = case

@@ -71,6 +71,15 @@ def test_unidentifiable_D_and_G_report_errors_that_cover_the_truth():
     assert result.warnings
 
 
+def test_sun_direction_recovered():
+    case = PANELS.with_overrides("sun.direction=[0.3, 0.2, -1]")
+    truth = {"sun.elevation_deg": 70.173, "sun.azimuth_deg": -146.310}  # towards the sun: -(0.3, 0.2, -1)
+    known = [f"{k}={v}" for k, v in PANELS.truth.items()]
+    result = fit(Observation(case.scene(*known), case.reference()[0]), list(truth), start={k: v + 5.0 for k, v in truth.items()})
+    for name, value in truth.items():
+        assert abs(result.values[name] - value) < 0.1, result.values
+
+
 def test_several_observations_fit_jointly(panels_reference):
     other = PANELS.with_overrides("camera.position_m=[-5, 2, 24]")
     observations = [Observation(PANELS.scene(), panels_reference), Observation(other.scene(), other.reference()[0])]

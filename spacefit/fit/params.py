@@ -17,7 +17,12 @@ name                           range        scene value (Mitsuba traverse key)
 ``parts.P.eta`` / ``.k``       (0, inf)     ``P.bsdf.eta.value`` / ``P.bsdf.k.value`` (grey only)
 ``parts.P.kd``                 (0, 1)       ``P.bsdf.reflectance.value`` (Lambert, grey)
 ``sun.irradiance_w_m2``        (0, inf)     ``sun.irradiance.value``
+``sun.elevation_deg``          (-90, 90)    ``sun.to_world``: the sun's elevation above world xy
+``sun.azimuth_deg``            any          ``sun.to_world``: the sun's azimuth from world +x to +y
 =============================  ===========  ======================================================
+
+The sun's angles give the direction towards it, (cos el cos az, cos el sin az, sin el); the light
+travels the opposite way (the scene's ``sun.direction``). Like the scene file, they are in degrees.
 
 ``wrinkles.rms_m`` is the expected rms height of eq. 2-1 (:func:`spacefit.geometry.wm.wm_rms`). In
 an image D and G trade off along a valley of nearly constant rms height; (D, rms) are the better
@@ -44,19 +49,24 @@ from spacefit.scene.config import Scene
 
 @dataclass(frozen=True)
 class Bijection:
-    """Map from the real line onto the open interval (lo, hi): logistic if bounded, exp if not."""
+    """Map from the real line onto the open interval (lo, hi): logistic if bounded, exp if bounded
+    below only, the identity on the whole line (lo = -inf)."""
 
     lo: float
     hi: float = math.inf
 
     def forward(self, u: Array) -> Array:
         """Unconstrained -> physical."""
+        if math.isinf(self.lo):
+            return u
         if math.isinf(self.hi):
             return self.lo + jnp.exp(u)
         return self.lo + (self.hi - self.lo) * jax.nn.sigmoid(u)
 
     def inverse(self, x: Array) -> Array:
         """Physical -> unconstrained (x must lie strictly inside the interval)."""
+        if math.isinf(self.lo):
+            return x
         if math.isinf(self.hi):
             return jnp.log(x - self.lo)
         p = (x - self.lo) / (self.hi - self.lo)
@@ -86,13 +96,16 @@ BIJECTIONS: Mapping[str, Bijection] = {
     "k": POSITIVE,
     "kd": UNIT,
     "irradiance_w_m2": POSITIVE,
+    "elevation_deg": Bijection(-90.0, 90.0),
+    "azimuth_deg": Bijection(-math.inf),
 }
 # Central finite-difference steps of the parameters whose Jacobian columns come from finite
 # differences with common random numbers (geometry: the AD integrators' derivatives in vertex
-# positions disagree with finite differences, see README). D's step is absolute, G's and the rms
+# positions disagree with finite differences, see README; the sun's direction: its frame is set
+# as a whole transform, without derivatives). D's step is absolute, G's and the rms
 # height's are relative to their start values. Larger steps than usual: the columns' Monte Carlo
 # noise falls as 1 / step (measured in README), the truncation error of these smooth maps is small.
-FD_STEP = {"D": 0.02, "G": 0.01, "rms_m": 0.03}
+FD_STEP = {"D": 0.02, "G": 0.01, "rms_m": 0.03, "elevation_deg": 0.5, "azimuth_deg": 0.5}
 RELATIVE_FD_STEP = ("G", "rms_m")
 
 
@@ -109,7 +122,7 @@ def available(scene: Scene) -> list[str]:
             names += [f"parts.{part}.{p}" for p in ("eta", "k") if not isinstance(getattr(m, p), tuple)]
         if isinstance(m, Lambert) and not isinstance(m.kd, tuple):
             names.append(f"parts.{part}.kd")
-    return names + ["sun.irradiance_w_m2"]
+    return names + ["sun.irradiance_w_m2", "sun.elevation_deg", "sun.azimuth_deg"]
 
 
 def scene_value(scene: Scene, name: str) -> float:
@@ -123,7 +136,12 @@ def scene_value(scene: Scene, name: str) -> float:
     if section == "wrinkles":
         return float(getattr(w, rest[0]))
     if section == "sun":
-        return float(scene.sun.irradiance_w_m2)
+        if rest[0] == "irradiance_w_m2":
+            return float(scene.sun.irradiance_w_m2)
+        towards = -np.asarray(scene.sun.direction, float) / np.linalg.norm(scene.sun.direction)
+        if rest[0] == "elevation_deg":
+            return math.degrees(math.asin(float(np.clip(towards[2], -1.0, 1.0))))
+        return math.degrees(math.atan2(towards[1], towards[0]))
     part, field = rest
     m = make_material(scene.parts[part].material, scene.parts[part].overrides)
     return float(m.alpha_x if field == "alpha" else getattr(m, field))
@@ -188,8 +206,14 @@ def scene_values_fn(assembly: Assembly, free: FreeParameters) -> Callable[[Array
     w = assembly.scene.wrinkles
     geometry = [n for n in ("wrinkles.D", "wrinkles.G", "wrinkles.rms_m") if n in index]
 
+    sun_angles = [n for n in ("sun.elevation_deg", "sun.azimuth_deg") if n in index]
+    start_angles = {n: scene_value(assembly.scene, n) for n in ("sun.elevation_deg", "sun.azimuth_deg")}
+
     def values_of(x: Array) -> dict[str, Array]:
         out: dict[str, Array] = {}
+        if sun_angles:
+            el, az = (jnp.deg2rad(x[index[n]] if n in index else start_angles[n]) for n in ("sun.elevation_deg", "sun.azimuth_deg"))
+            out["sun.to_world"] = -jnp.stack([jnp.cos(el) * jnp.cos(az), jnp.cos(el) * jnp.sin(az), jnp.sin(el)])
         if geometry:
             D = x[index["wrinkles.D"]] if "wrinkles.D" in index else w.D
             G = x[index["wrinkles.G"]] if "wrinkles.G" in index else w.G
@@ -201,7 +225,7 @@ def scene_values_fn(assembly: Assembly, free: FreeParameters) -> Callable[[Array
             section, *rest = name.split(".")
             if section == "wrinkles":
                 continue
-            if section == "sun":
+            if name == "sun.irradiance_w_m2":
                 out["sun.irradiance.value"] = jnp.full(3, x[i])
             elif section == "parts":
                 part, field = rest

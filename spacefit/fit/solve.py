@@ -300,7 +300,8 @@ def _setup(
             return x
 
     if geometry_jacobian == "ad":
-        solver_params = dataclasses.replace(solver_params, fd_steps=np.zeros_like(solver_params.fd_steps))
+        wrinkles = np.array([n.startswith("wrinkles.") for n in solver_params.names])
+        solver_params = dataclasses.replace(solver_params, fd_steps=np.where(wrinkles, 0.0, solver_params.fd_steps))
     problem = _problem(observations, solver_params, loss, spp, spp_grad, seed, seed_grad, integrator)
     return _Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index)
 

@@ -36,8 +36,15 @@ SceneValues = Mapping[str, Array]
 
 
 def _to_drjit(template: object, value: np.ndarray) -> object:
-    """A Dr.Jit value of the type of ``template`` from a flat float array."""
+    """A Dr.Jit value of the type of ``template`` from a flat float array.
+
+    A transform (a distant light's frame) is given by the direction its +z axis points along.
+    """
     value = np.asarray(value, dtype=np.float32).ravel()
+    if isinstance(template, mi.AffineTransform4f):
+        d = value / np.linalg.norm(value)
+        up = [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0]
+        return mi.AffineTransform4f(mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=d.tolist(), up=up))
     if isinstance(template, mi.Color3f):
         return mi.Color3f(*(mi.Float(value[i % len(value)]) for i in range(3)))
     return type(template)(value)
