@@ -52,9 +52,16 @@ def table(path, keys=None):
         return
     rows = list(csv.DictReader(open(path)))
     keys = keys or list(rows[0])
+
+    def cell(text):
+        try:
+            return f"{float(text):.4g}"
+        except ValueError:
+            return text[:14]
+
     print("  ".join(f"{k:>14s}" for k in keys))
     for row in rows:
-        print("  ".join(f"{row[k][:14]:>14s}" for k in keys))"""),
+        print("  ".join(f"{cell(row[k]):>14s}" for k in keys))"""),
     ("md", """## 1. The simulator
 
 The thesis's scene (Table 4-2) at a quarter of its resolution, same field of view."""),
