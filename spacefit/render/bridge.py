@@ -50,6 +50,12 @@ def _to_drjit(template: object, value: np.ndarray) -> object:
     return type(template)(value)
 
 
+def _differentiable(value: object) -> bool:
+    """Whether the bridge differentiates a scene value: a frame (the sun's) is set whole, its
+    Jacobian columns come from finite differences."""
+    return not isinstance(value, mi.AffineTransform4f)
+
+
 def _flat_grad(value: object) -> np.ndarray:
     return np.asarray(dr.grad(value), dtype=np.float32).ravel()
 
@@ -82,7 +88,7 @@ class DrJitScene:
     def _set(self, values: Mapping[str, np.ndarray], grad: bool) -> None:
         for key, value in values.items():
             self.params[key] = _to_drjit(self.params[key], value)
-            if grad:
+            if grad and _differentiable(self.params[key]):
                 dr.enable_grad(self.params[key])
         self.params.update()
 
@@ -102,7 +108,8 @@ class DrJitScene:
         """Directional derivative of the image along ``tangent`` (same keys as ``values``), one render."""
         self._set(values, grad=True)
         for key, t in tangent.items():
-            dr.set_grad(self.params[key], _to_drjit(self.params[key], t))
+            if _differentiable(self.params[key]):
+                dr.set_grad(self.params[key], _to_drjit(self.params[key], t))
         image = self._render_ad(seed_grad)
         dr.forward_to(image)
         out = np.asarray(dr.grad(image), dtype=np.float32)
@@ -114,7 +121,8 @@ class DrJitScene:
         self._set(values, grad=True)
         image = self._render_ad(seed_grad)
         dr.backward_from(image * mi.TensorXf(np.asarray(cotangent, dtype=np.float32)))
-        grads = {key: _flat_grad(self.params[key]) for key in values}
+        grads = {key: _flat_grad(self.params[key]) if _differentiable(self.params[key]) else np.zeros(np.size(values[key]), np.float32)
+                 for key in values}
         self._set(values, grad=False)
         return grads
 
