@@ -26,9 +26,10 @@ solver could succeed; at these image sizes the samples cost little next to the s
 Writes ``stability.csv`` (condition, value, solver, class, errors: signed relative errors, absolute
 in D; steps, time_s, status) and ``stability.png`` (per condition, the class of each solver x value).
 
-Run: ``.venv/bin/python experiments/stability.py [--full] [--out DIR]``. Default (reduced): 32 x 32
-px, solvers lm and adam, two values per condition, 8 steps, no D conditions (about a minute on
-2 cores); ``--full``: 64 x 64 px, all five solvers and values, 30 steps, and the D conditions.
+Run: ``.venv/bin/python experiments/stability.py [--full] [--jobs N] [--out DIR]``. Default (reduced):
+32 x 32 px, solvers lm and adam, two values per condition, 8 steps, no D conditions (about a minute
+on 2 cores); ``--full``: 64 x 64 px, all five solvers and values, 30 steps, and the D conditions.
+``--jobs N`` runs the trials in N processes.
 """
 
 from __future__ import annotations
@@ -36,8 +37,10 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import math
+import multiprocessing
 import time
 from collections import Counter
+from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -138,26 +141,19 @@ def _row(condition: str, value: float | str, solver: str, cls: str, errs: str = 
             "time_s": round(time_s, 2), "status": status}
 
 
-def run_condition(condition: str, value: float | str, size: Size) -> list[dict[str, object]]:
-    """Render the reference of one condition value and fit it with every solver; one row each."""
+def run_trial(condition: str, value: float | str, solver: str, size: Size) -> dict[str, object]:
+    """Render the reference of one condition value (seeded: the same for every solver) and fit it."""
     try:
         case, noise = trial(condition, value, size)
         image, sigma = case.reference(noise)
         observation = Observation(case.scene(), image, sigma)
-    except InputError as e:
-        return [_row(condition, value, s, INVALID, status=str(e)) for s in size.solvers]
-    rows = []
-    for solver in size.solvers:
         t0 = time.perf_counter()
-        try:
-            result = fit(observation, list(case.truth), solver=solver, start=case.start, max_steps=size.max_steps)
-        except InputError as e:
-            rows.append(_row(condition, value, solver, INVALID, status=str(e)))
-            continue
-        errs = "; ".join(f"{k}={v:+.4f}" for k, v in errors(result.values, case.truth).items())
-        rows.append(_row(condition, value, solver, classify(result, case.truth), errs, result.steps,
-                         time.perf_counter() - t0, result.status))
-    return rows
+        result = fit(observation, list(case.truth), solver=solver, start=case.start, max_steps=size.max_steps)
+    except InputError as e:
+        return _row(condition, value, solver, INVALID, status=str(e))
+    errs = "; ".join(f"{k}={v:+.4f}" for k, v in errors(result.values, case.truth).items())
+    return _row(condition, value, solver, classify(result, case.truth), errs, result.steps,
+                time.perf_counter() - t0, result.status)
 
 
 def plot(rows: list[dict[str, object]], path: Path, title: str) -> None:
@@ -189,21 +185,33 @@ def plot(rows: list[dict[str, object]], path: Path, title: str) -> None:
     plt.close(fig)
 
 
-def run_stability(out: Path, full: bool) -> list[dict[str, object]]:
+def run_stability(out: Path, full: bool, jobs: int = 1) -> list[dict[str, object]]:
     """Fit every condition value with every solver, classify each run; write stability.csv / .png.
 
     Reduced (``full`` False): :data:`REDUCED`, the second column of :data:`CONDITIONS` (no D);
-    full: :data:`FULL`, every value. Rows: condition, value, solver, class, errors, steps, time_s
-    (fit wall time, s), status (the solver's, or the input error of an invalid run).
+    full: :data:`FULL`, every value. ``jobs`` > 1 runs the trials in that many processes (each
+    renders on one thread when render.deterministic). Rows, in plan order: condition, value,
+    solver, class, errors, steps, time_s (fit wall time, s), status (the solver's, or the input
+    error of an invalid run).
     """
+    if jobs < 1:
+        raise InputError(f"`jobs` must be >= 1; got {jobs}.")
     size = FULL if full else REDUCED
     out.mkdir(parents=True, exist_ok=True)
-    plan = [(c, v) for c, (all_values, reduced) in CONDITIONS.items() for v in (all_values if full else reduced)]
+    plan = [(c, v, s) for c, (all_values, reduced) in CONDITIONS.items() for v in (all_values if full else reduced)
+            for s in size.solvers]
     progress = Progress("stability", delay=0.0)
-    rows: list[dict[str, object]] = []
-    for i, (condition, value) in enumerate(plan):
-        rows += run_condition(condition, value, size)
-        progress(i + 1, len(plan))
+    if jobs == 1:
+        rows = []
+        for i, (condition, value, solver) in enumerate(plan):
+            rows.append(run_trial(condition, value, solver, size))
+            progress(i + 1, len(plan))
+    else:
+        with ProcessPoolExecutor(jobs, mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = [pool.submit(run_trial, *item, size) for item in plan]
+            for i, _ in enumerate(as_completed(futures)):
+                progress(i + 1, len(plan))
+            rows = [f.result() for f in futures]
     write_csv(out / "stability.csv", rows)
     plot(rows, out / "stability.png", f"solver stability, {size.width} x {size.width} px, {size.spp} spp, "
          f"{size.max_steps} steps")
@@ -214,9 +222,10 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="experiments/results/stability")
     p.add_argument("--full", action="store_true", help="64 x 64 px, all solvers and values, 30 steps, D conditions")
+    p.add_argument("--jobs", type=int, default=1, help="trials run in this many processes (default 1)")
     args = p.parse_args()
     t0 = time.perf_counter()
-    rows = run_stability(Path(args.out), args.full)
+    rows = run_stability(Path(args.out), args.full, args.jobs)
     for solver in dict.fromkeys(r["solver"] for r in rows):
         counts = Counter(r["class"] for r in rows if r["solver"] == solver)
         print(f"{solver:7s}", ", ".join(f"{c} {counts[c]}" for c in [*FAILURE_CLASSES, INVALID] if counts[c]))

@@ -100,7 +100,7 @@ def test_edge_on_view_shows_the_panels_as_a_line():
 
 def test_stability_study_shape(tmp_path):
     """The reduced study: every run present and classified, files written, the easy start recovered."""
-    rows = run_stability(tmp_path, full=False)
+    rows = run_stability(tmp_path, full=False, jobs=2)
     expected = {(c, v, s) for c, (_, reduced) in CONDITIONS.items() for v in reduced for s in REDUCED.solvers}
     assert {(r["condition"], r["value"], r["solver"]) for r in rows} == expected and len(rows) == len(expected)
     assert all(r["class"] in FAILURE_CLASSES for r in rows), [r for r in rows if r["class"] not in FAILURE_CLASSES]
