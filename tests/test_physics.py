@@ -1,4 +1,4 @@
-"""Renders against analytic radiance: Lambert (thesis eq. 2-10) and anisotropic GGX (Walter 2007)."""
+"""Renders against analytic radiance: Lambert (thesis eq. 2-10), anisotropic GGX and Beckmann (Walter 2007)."""
 
 from __future__ import annotations
 
@@ -72,13 +72,22 @@ def fresnel_conductor(cos_i, eta, k):
     return 0.5 * (rp + rs)
 
 
-def ggx_walter(wi, wo, ax, ay, eta, k):
-    """Walter et al. 2007 microfacet BRDF, anisotropic GGX, separable Smith G, in the local frame."""
+def microfacet_walter(wi, wo, ax, ay, eta, k, distribution):
+    """Walter et al. 2007 microfacet BRDF, anisotropic GGX or Beckmann, separable Smith G (Beckmann's
+    Lambda by Walter's rational approximation, eq. 27), in the local frame."""
     h = unit(wi + wo)
-    D = 1.0 / (np.pi * ax * ay * ((h[..., 0] / ax) ** 2 + (h[..., 1] / ay) ** 2 + h[..., 2] ** 2) ** 2)
+    slope2 = (h[..., 0] / ax) ** 2 + (h[..., 1] / ay) ** 2  # tan^2 of h, scaled per axis, times cos^2
+    if distribution == "ggx":
+        D = 1.0 / (np.pi * ax * ay * (slope2 + h[..., 2] ** 2) ** 2)
+    else:
+        D = np.exp(-slope2 / h[..., 2] ** 2) / (np.pi * ax * ay * h[..., 2] ** 4)
 
     def lam(w):
-        return 0.5 * (-1.0 + np.sqrt(1.0 + (ax**2 * w[..., 0] ** 2 + ay**2 * w[..., 1] ** 2) / w[..., 2] ** 2))
+        tan_alpha2 = (ax**2 * w[..., 0] ** 2 + ay**2 * w[..., 1] ** 2) / w[..., 2] ** 2
+        if distribution == "ggx":
+            return 0.5 * (-1.0 + np.sqrt(1.0 + tan_alpha2))
+        a = 1.0 / np.sqrt(tan_alpha2)
+        return np.where(a < 1.6, (1.0 - 1.259 * a + 0.396 * a**2) / (3.535 * a + 2.181 * a**2), 0.0)
 
     G = 1.0 / (1.0 + lam(wi)) / (1.0 + lam(wo))
     F = fresnel_conductor(np.sum(wi * h, axis=-1), eta, k)
@@ -86,18 +95,19 @@ def ggx_walter(wi, wo, ax, ay, eta, k):
 
 
 @pytest.mark.parametrize(
-    ("sun_dir", "ax", "ay"),
+    ("sun_dir", "ax", "ay", "distribution"),
     [
-        ([0.5, 0.0, -1.0], 0.3, 0.1),   # light tilted along alpha_x
-        ([0.0, 0.5, -1.0], 0.3, 0.1),   # the same tilt along alpha_y: different radiance
-        ([0.3, -0.4, -1.0], 0.08, 0.05),  # the thesis's panel roughness
+        ([0.5, 0.0, -1.0], 0.3, 0.1, "ggx"),   # light tilted along alpha_x
+        ([0.0, 0.5, -1.0], 0.3, 0.1, "ggx"),   # the same tilt along alpha_y: different radiance
+        ([0.3, -0.4, -1.0], 0.08, 0.05, "ggx"),  # the thesis's panel roughness
+        ([0.5, 0.0, -1.0], 0.45, 0.3, "beckmann"),  # the level of detail's effective roughness
     ],
 )
-def test_anisotropic_ggx_plate_matches_walter_2007(tmp_path, sun_dir, ax, ay):
+def test_anisotropic_microfacet_plate_matches_walter_2007(tmp_path, sun_dir, ax, ay, distribution):
     eta, k = 2.05, 0.055
     scene = small_scene(
         write_plate_obj(tmp_path / "plate.obj", size=4.0),
-        {"material": "panel_thesis", "alpha_x": ax, "alpha_y": ay, "eta": eta, "k": k},
+        {"material": "panel_thesis", "alpha_x": ax, "alpha_y": ay, "eta": eta, "k": k, "distribution": distribution},
         render={"spp": 256},
         camera={"position_m": [1.0, 0.5, 10.0], "look_at_m": [0.0, 0.0, 0.0], "up": [0.0, 1.0, 0.0],
                 "focal_length_mm": 200.0, "pixel_pitch_mm": 0.1},
@@ -106,5 +116,5 @@ def test_anisotropic_ggx_plate_matches_walter_2007(tmp_path, sun_dir, ax, ay):
     img = render(scene)[..., 0]
     wo = -pixel_directions(scene)  # plate frame = world frame here: x tangent, y bitangent, z normal
     wi = np.broadcast_to(-unit(sun_dir), wo.shape)
-    expected = ggx_walter(wi, wo, ax, ay, eta, k) * E * wi[..., 2]
+    expected = microfacet_walter(wi, wo, ax, ay, eta, k, distribution) * E * wi[..., 2]
     assert np.mean(img[2:-2, 2:-2]) == pytest.approx(np.mean(expected[2:-2, 2:-2]), rel=0.02)

@@ -257,6 +257,24 @@ class _Setup:
     rms_index: int | None
 
 
+def _fit_scene(scene: Scene, free: Sequence[str]) -> Scene:
+    """The scene a fit renders. ``wrinkles.model`` 'auto' becomes 'geometry': the fit's parameters act
+    on the displaced geometry and on the facets' own roughness, which the effective model merges
+    into one roughness. A forced 'effective' model therefore may not free D, G or the rms height,
+    nor the roughness of a wrinkled part."""
+    w = scene.wrinkles
+    if not w.enabled or w.model == "geometry":
+        return scene
+    if w.model == "auto":
+        return dataclasses.replace(scene, wrinkles=dataclasses.replace(w, model="geometry"))
+    merged = [n for n in free if n.startswith("wrinkles.")
+              or (n.startswith("parts.") and n.split(".")[1] in w.parts and n.split(".")[2].startswith("alpha"))]
+    if merged:
+        raise InputError(f"{', '.join(map(repr, merged))} cannot be fitted with `wrinkles.model` = 'effective', which merges "
+                         "the wrinkles' slopes and the facets' roughness into one roughness; use 'geometry' or 'auto'.")
+    return scene
+
+
 def _setup(
     observations: Observation | Sequence[Observation], free: Sequence[str], start: Mapping[str, float] | None,
     loss: str, spp: int | None, spp_grad: int | None, seed: int, seed_grad: int, integrator: str,
@@ -274,8 +292,9 @@ def _setup(
             raise InputError(f"`{name}` must be an integer >= 1, got {value!r}.")
     if seed == seed_grad:
         raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
+    user = free_parameters(observations[0].scene, free)
+    observations = [dataclasses.replace(o, scene=_fit_scene(o.scene, user.names)) for o in observations]
     scene = observations[0].scene
-    user = free_parameters(scene, free)
     start = dict(start or {})
     for name in start:
         check_choice("start", name, user.names)

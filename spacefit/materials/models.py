@@ -14,9 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Union
 
-from spacefit.errors import InputError, check_range
+from spacefit.errors import InputError, check_choice, check_range
 
 Spectrum = Union[float, tuple[float, float, float]]
+DISTRIBUTIONS = ("ggx", "beckmann")
 
 
 def _check_spectrum(name: str, value: Spectrum, lo: float, hi: float, lo_open: bool) -> Spectrum:
@@ -29,23 +30,27 @@ def _check_spectrum(name: str, value: Spectrum, lo: float, hi: float, lo_open: b
 
 @dataclass(frozen=True)
 class Conductor:
-    """Rough conductor: anisotropic GGX (Trowbridge-Reitz) microfacets, conductor Fresnel.
+    """Rough conductor: anisotropic microfacets, conductor Fresnel.
 
     ``alpha_x`` is the roughness along the part's stated tangent axis (for the built-in panels,
-    the span), ``alpha_y`` across it. Both in (0, 1]. Masking is Smith's separable form, as in
-    Walter et al. 2007 and Mitsuba 3.
+    the span), ``alpha_y`` across it. Both in (0, 1]. ``distribution`` is "ggx" (Trowbridge-Reitz,
+    thesis eq. 2-9) or "beckmann" (Gaussian slopes of per-axis variance alpha^2 / 2, which the
+    level of detail uses for wrinkles' slopes). Masking is Smith's separable form, as in Walter et
+    al. 2007 and Mitsuba 3.
     """
 
     eta: Spectrum
     k: Spectrum
     alpha_x: float
     alpha_y: float
+    distribution: str = "ggx"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "eta", _check_spectrum("eta", self.eta, 0.0, 100.0, True))
         object.__setattr__(self, "k", _check_spectrum("k", self.k, 0.0, 100.0, False))
         check_range("alpha_x", self.alpha_x, 0.0, 1.0, lo_open=True)
         check_range("alpha_y", self.alpha_y, 0.0, 1.0, lo_open=True)
+        check_choice("distribution", self.distribution, DISTRIBUTIONS)
 
 
 @dataclass(frozen=True)

@@ -27,11 +27,11 @@ def _spectrum(value: float | tuple[float, ...]) -> dict | float:
 
 
 def bsdf_dict(material: Material) -> dict:
-    """Mitsuba BSDF for a material; the microfacet distribution is named (Mitsuba defaults to Beckmann)."""
+    """Mitsuba BSDF for a material; the microfacet distribution is always named (Mitsuba's default is Beckmann)."""
     if isinstance(material, Conductor):
         return {
             "type": "roughconductor",
-            "distribution": "ggx",
+            "distribution": material.distribution,
             "alpha_u": material.alpha_x,
             "alpha_v": material.alpha_y,
             "eta": _spectrum(material.eta),

@@ -2,11 +2,15 @@
 
 When wrinkles are much smaller than a pixel, the image only sees their slope statistics: a flat
 part whose microfacet distribution is widened by the wrinkles' slopes renders nearly the same image
-for a fraction of the triangles. Beckmann's distribution of roughness alpha has slopes of per-axis
-variance alpha^2 / 2 (Walter et al. 2007), so Gaussian slopes of per-axis standard deviation s add
-``2 s^2`` to alpha^2; spacefit uses the same alpha for GGX, an approximation whose error the level
-of detail study measures. The slopes are those of eq. 2-1 at the scales the geometry would carry
-(wavelength >= 2 mesh spacings, :func:`spacefit.geometry.wm.wm_rms_slope`).
+for a fraction of the triangles. Eq. 2-1 sums many ridges with random phases, so its slopes are
+close to Gaussian; Beckmann's distribution of roughness alpha has Gaussian slopes of per-axis
+variance alpha^2 / 2 (Walter et al. 2007), so wrinkle slopes of per-axis standard deviation s add
+``2 s^2`` to alpha^2 and the effective material is a Beckmann conductor. The facets' own GGX
+roughness alpha0 enters the sum as if it were Beckmann's; it is small beside the wrinkles'. A GGX
+of the same effective alpha would be wrong in shape: its core is narrower and its tail heavier
+than Gaussian slopes', and it rendered the study's body 27-33 % darker than the geometry.
+The slopes are those of eq. 2-1 at the scales the geometry would carry (wavelength >= 2 mesh
+spacings, :func:`spacefit.geometry.wm.wm_rms_slope`).
 """
 
 from __future__ import annotations
@@ -20,6 +24,12 @@ from spacefit.geometry.frames import CameraFrame, Intrinsics
 from spacefit.geometry.wm import wm_rms_slope
 from spacefit.materials import Conductor, Material, Mirror
 from spacefit.scene.config import WrinkleSettings
+
+
+# The effective model's stated accuracy: relative RMSE against the displaced geometry over the lit
+# pixels, Monte Carlo noise taken out (experiments/lod_study.py). The default
+# ``wrinkles.lod_footprint`` is the smallest pixel footprint / L at which the study met it.
+LOD_TOLERANCE = 0.1
 
 
 @dataclass(frozen=True)
@@ -43,13 +53,13 @@ def effective_alpha(alpha0: float, slope_rms: float) -> float:
 def effective_material(material: Material, slope_rms: float) -> Material | None:
     """The part's material widened by the wrinkles' slopes; None if that exceeds GGX's alpha <= 1."""
     if isinstance(material, Mirror):
-        material = Conductor(material.eta, material.k, 1e-4, 1e-4)
+        material = Conductor(material.eta, material.k, 1e-4, 1e-4, "beckmann")
     if not isinstance(material, Conductor):
         return None
     ax, ay = effective_alpha(material.alpha_x, slope_rms), effective_alpha(material.alpha_y, slope_rms)
     if max(ax, ay) > 1.0:
         return None
-    return Conductor(material.eta, material.k, ax, ay)
+    return Conductor(material.eta, material.k, ax, ay, "beckmann")
 
 
 def choose_model(
