@@ -11,7 +11,10 @@ same samples per pixel and records, over the geometry's lit pixels:
   (0 when negative): the part that more samples would not remove, which the tolerance
   (:data:`spacefit.scene.lod.LOD_TOLERANCE`) bounds;
 - ``flux_ratio``: total radiance of the effective image over the geometry's;
-- the cost of each model (assembly + one render) and the model ``wrinkles.model = 'auto'`` picks.
+- the cost of each model (assembly + one render, after a warm-up), and ``speedup_equal_noise``:
+  what the geometry costs over what the effective model costs at the geometry's noise, which
+  needs (noise_e / noise_g)^2 of the samples;
+- the model ``wrinkles.model = 'auto'`` picks.
 
 Writes ``lod.csv`` and ``lod.png`` to ``--out``.
 
@@ -35,7 +38,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
 from spacefit.render import Renderer  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
-from spacefit.scene.config import load_scene  # noqa: E402
+from spacefit.scene.config import WrinkleSettings, load_scene  # noqa: E402
 from spacefit.scene.lod import LOD_TOLERANCE  # noqa: E402
 
 GENTLE = ["wrinkles.L=0.4", "wrinkles.Ls=0.1", "wrinkles.D=2.4", "wrinkles.G=3e-4", "wrinkles.spacing_m=0.03",
@@ -50,60 +53,85 @@ def timed_render(overrides: list[str], seed: int) -> tuple[np.ndarray, float, di
     return image, time.perf_counter() - t0, assembly.lod["body"]
 
 
-def run_study(out: Path, ranges: list[float], spp: int) -> list[dict[str, object]]:
-    """Measure error, noise and cost of both models at each range; write lod.csv and lod.png."""
+def run_study(out: Path, ranges: list[float], spp: int, wrinkle_seeds: tuple[int, ...] = (0,)) -> list[dict[str, object]]:
+    """Measure error, noise and cost of both models at each range; write lod.csv and lod.png.
+
+    Pixels are pooled over ``wrinkle_seeds`` (independent W-M phases), which at long range, where
+    the body covers few pixels, is what makes the bias estimate precise; ``bias_upper`` adds two
+    standard errors of the per-pixel estimate.
+    """
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     progress = Progress("level of detail", delay=0.0)
+    for model in ("geometry", "effective"):  # warm-up: JAX compilation and the cached refinement
+        timed_render(GENTLE + [f"camera.position_m=[0, 0, {ranges[0]}]", "render.spp=1", f"wrinkles.model='{model}'"], 0)
     for i, d in enumerate(ranges):
         base = GENTLE + [f"camera.position_m=[0, 0, {d}]", f"render.spp={spp}"]
-        geometry, t_geometry, choice = timed_render(base + ["wrinkles.model='geometry'"], seed=1)
-        geometry2, _, _ = timed_render(base + ["wrinkles.model='geometry'"], seed=2)
         effective, t_effective, _ = timed_render(base + ["wrinkles.model='effective'"], seed=3)
         effective2, _, _ = timed_render(base + ["wrinkles.model='effective'"], seed=4)
         auto = assemble(load_scene(None, base + ["wrinkles.model='auto'"])).lod["body"]
-        lit = geometry.max(axis=-1) > 0
-
-        def rel(a: np.ndarray, b: np.ndarray) -> float:  # RMSE over the geometry's lit pixels / its mean
-            return float(np.sqrt(np.mean((a[lit] - b[lit]) ** 2)) / geometry[lit].mean())
-
-        error, noise_g, noise_e = rel(effective, geometry), rel(geometry2, geometry), rel(effective2, effective)
+        # per lit pixel and channel: geometry, effective, and the squared differences effective - geometry,
+        # geometry seed to seed, effective seed to seed
+        pooled: list[np.ndarray] = []
+        t_geometry = 0.0
+        for ws in wrinkle_seeds:
+            geometry, t, choice = timed_render(base + ["wrinkles.model='geometry'", f"wrinkles.seed={ws}"], seed=1)
+            geometry2, _, _ = timed_render(base + ["wrinkles.model='geometry'", f"wrinkles.seed={ws}"], seed=2)
+            t_geometry += t / len(wrinkle_seeds)
+            lit = geometry.max(axis=-1) > 0
+            g = geometry[lit]
+            e = effective[lit]
+            pooled.append(np.stack([g, e, (e - g) ** 2, (geometry2[lit] - g) ** 2, (effective2[lit] - e) ** 2]))
+        g, e, d_error, d_geometry, d_effective = np.concatenate(pooled, axis=1)
+        m2 = g.mean() ** 2
+        error, noise_g, noise_e = (math.sqrt(x.mean() / m2) for x in (d_error, d_geometry, d_effective))
+        # per pixel, an unbiased estimate of bias^2 * m^2; its standard error gives an upper bound
+        bias2 = (d_error - d_geometry / 2 - d_effective / 2).mean(axis=-1)
+        bias2_upper = (bias2.mean() + 2 * bias2.std() / math.sqrt(bias2.size)) / m2
         rows.append({
             "range_m": d, "footprint_m": round(choice.footprint_m, 4), "footprint_over_L": round(choice.footprint_over_L, 3),
-            "lit_pixels": int(lit.sum()),
+            "lit_pixels": len(g),
             "error_effective": round(error, 4), "noise_geometry": round(noise_g, 4), "noise_effective": round(noise_e, 4),
-            "bias_effective": round(math.sqrt(max(error**2 - noise_g**2 / 2 - noise_e**2 / 2, 0.0)), 4),
-            "flux_ratio": round(float(effective.sum() / geometry.sum()), 4),
+            "bias_effective": round(math.sqrt(max(bias2.mean() / m2, 0.0)), 4),
+            "bias_upper": round(math.sqrt(max(bias2_upper, 0.0)), 4),
+            "flux_ratio": round(float(e.sum() / g.sum()), 4),
             "time_geometry_s": round(t_geometry, 3), "time_effective_s": round(t_effective, 3),
+            "speedup_equal_noise": round(t_geometry / (t_effective * (noise_e / noise_g) ** 2), 1),
             "auto_model": auto.model, "effective_alpha": round(choice.effective_alpha, 4),
         })
         progress(i + 1, len(ranges))
     write_csv(out / "lod.csv", rows)
-    plot(rows, out / "lod.png", spp)
+    plot(rows, out / "lod.png", spp, len(wrinkle_seeds))
     return rows
 
 
-def plot(rows: list[dict[str, object]], path: Path, spp: int) -> None:
+def plot(rows: list[dict[str, object]], path: Path, spp: int, seeds: int) -> None:
     """Error, bias and noise of the models against footprint / L (left), their cost (right)."""
     fig, ax = plt.subplots(1, 2, figsize=(10, 3.8))
     ratio = [r["footprint_over_L"] for r in rows]
     ax[0].plot(ratio, [r["error_effective"] for r in rows], "o-", label="effective vs geometry")
     ax[0].plot(ratio, [r["bias_effective"] for r in rows], "o-", label="the same, noise taken out (bias)")
+    ax[0].plot(ratio, [r["bias_upper"] for r in rows], "v:", label="bias + 2 standard errors")
     ax[0].plot(ratio, [r["noise_geometry"] for r in rows], "s--", label="geometry, seed to seed")
     ax[0].plot(ratio, [r["noise_effective"] for r in rows], "s--", label="effective, seed to seed")
     ax[0].axhline(LOD_TOLERANCE, color="k", lw=0.8, ls=":", label=f"tolerance {LOD_TOLERANCE:g}")
+    ax[0].axvline(WrinkleSettings.lod_footprint, color="k", lw=0.8, ls="-.",
+                  label=f"default lod_footprint {WrinkleSettings.lod_footprint:g}")
     ax[0].set_xscale("log")
     ax[0].set_yscale("log")
     ax[0].set_xlabel("pixel footprint / L")
     ax[0].set_ylabel("relative RMSE (lit pixels)")
     ax[0].legend(fontsize=7)
     ax[1].plot(ratio, [r["time_geometry_s"] for r in rows], "o-", label="geometry")
-    ax[1].plot(ratio, [r["time_effective_s"] for r in rows], "s-", label="effective")
+    ax[1].plot(ratio, [r["time_effective_s"] for r in rows], "s-", label="effective, same spp")
+    ax[1].plot(ratio, [r["time_geometry_s"] / r["speedup_equal_noise"] for r in rows], "s--",
+               label="effective, at the geometry's noise")
     ax[1].set_xscale("log")
+    ax[1].set_yscale("log")
     ax[1].set_xlabel("pixel footprint / L")
     ax[1].set_ylabel("assembly + render (s)")
     ax[1].legend()
-    fig.suptitle(f"level of detail, gentle wrinkles, 128 x 128 px, {spp} spp")
+    fig.suptitle(f"level of detail, gentle wrinkles, 128 x 128 px, {spp} spp, {seeds} wrinkle seed(s)")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -112,10 +140,10 @@ def plot(rows: list[dict[str, object]], path: Path, spp: int) -> None:
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="experiments/results/lod")
-    p.add_argument("--quick", action="store_true", help="three ranges, 32 spp")
+    p.add_argument("--quick", action="store_true", help="three ranges, 32 spp, one wrinkle seed")
     args = p.parse_args()
-    ranges = [15.0, 60.0, 240.0] if args.quick else [10.0, 20.0, 40.0, 70.0, 120.0, 200.0, 350.0, 600.0]
-    for row in run_study(Path(args.out), ranges, 32 if args.quick else 4096):
+    ranges = [15.0, 60.0, 240.0] if args.quick else [10.0, 20.0, 40.0, 70.0, 120.0, 200.0, 350.0, 450.0, 600.0, 800.0]
+    for row in run_study(Path(args.out), ranges, 32 if args.quick else 4096, (0,) if args.quick else (0, 1, 2, 3)):
         print(row)
 
 

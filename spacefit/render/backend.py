@@ -1,8 +1,8 @@
 """Dr.Jit / Mitsuba start-up: the system libLLVM and the variant (llvm_ad_rgb or cuda_ad_rgb).
 
 Dr.Jit's LLVM backend loads the system's libLLVM at run time. Debian 12's default libLLVM 15 aborts
-at the first render ("LLVM ERROR: Cannot select: ... fminimum"); LLVM 16 and newer work. Unless the
-user has set ``DRJIT_LIBLLVM_PATH``, the newest libLLVM >= 16 found is used. This module must be
+at the first render ("LLVM ERROR: Cannot select: ... fminimum"), and so did 16 here; 19 works.
+Unless the user has set ``DRJIT_LIBLLVM_PATH``, the newest libLLVM >= ``MIN_LLVM_MAJOR`` found is used. This module must be
 imported before ``drjit``; the rendering package does so.
 """
 

@@ -126,13 +126,14 @@ class WrinkleSettings:
     ``spacing_m`` is the refinement density: the distance between the sample points that carry
     heights (the thesis's sampling grid inside each triangle).
 
-    ``model`` chooses how wrinkles are rendered: ``"geometry"`` (default) displaces a refined
-    mesh, the thesis's way; ``"effective"`` keeps the flat mesh and widens the part's microfacet
-    roughness by the wrinkles' slopes (:func:`spacefit.scene.lod.effective_material`); ``"auto"``
-    takes the effective model, far cheaper, where a pixel at the part spans at least
-    ``lod_footprint`` times the largest wrinkle (L), and the geometry otherwise. The level of detail
-    study measured the effective model 30 to 35 % darker than the geometry on the body at every
-    range (README, "Level of detail"), so ``"auto"`` is not the default.
+    ``model`` chooses how wrinkles are rendered: ``"geometry"`` displaces a refined mesh, the
+    thesis's way; ``"effective"`` keeps the flat mesh and widens the part's microfacet roughness by
+    the wrinkles' slopes (:func:`spacefit.scene.lod.effective_material`); ``"auto"`` (default)
+    takes the effective model, cheaper and far less noisy, where a pixel at the part spans at least
+    ``lod_footprint`` times the largest wrinkle (L) and the wrinkles are gentle enough for a
+    roughness, and the geometry otherwise. The default ``lod_footprint`` is where the level of
+    detail study measured the effective model within :data:`spacefit.scene.lod.LOD_TOLERANCE` of
+    the geometry (README, "Level of detail"). Fits render the geometry for ``"auto"``.
     """
 
     enabled: bool = True
@@ -145,8 +146,8 @@ class WrinkleSettings:
     Ls: float = 5e-3
     seed: int = 0
     spacing_m: float = 0.02
-    model: str = "geometry"
-    lod_footprint: float = 1.0
+    model: str = "auto"
+    lod_footprint: float = 4.0
 
     def validate(self) -> None:
         from spacefit.geometry.wm import check_wm_params
