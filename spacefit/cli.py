@@ -9,6 +9,8 @@ from collections.abc import Sequence
 
 from spacefit.errors import InputError, check_range
 
+NOT_CONVERGED = 3
+
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="spacefit", description="Simulate and fit images of space targets.")
@@ -66,7 +68,8 @@ def _start_values(items: Sequence[str]) -> dict[str, float]:
     return out
 
 
-def _fit(args: argparse.Namespace) -> None:
+def _fit(args: argparse.Namespace) -> int:
+    """Run ``spacefit fit``; exit code 0 when the solver converged, NOT_CONVERGED otherwise."""
     from spacefit.fit.report import format_result
     from spacefit.pipeline import fit_to_folder
 
@@ -78,10 +81,14 @@ def _fit(args: argparse.Namespace) -> None:
         start=_start_values(args.start), **{k: v for k, v in given.items() if v is not None},
     )
     print(format_result(result))
+    if not result.success:
+        print(f"spacefit: the fit did not converge ({result.status}); its report is in {args.out}", file=sys.stderr)
+        return NOT_CONVERGED
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the process exit code (2 for bad input)."""
+    """Entry point; returns the process exit code (2 for bad input, 3 for a fit that did not converge)."""
     args = _parser().parse_args(argv)
     from spacefit.output import write_text
     from spacefit.pipeline import export_part_stl, render_to_folder
@@ -89,8 +96,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         if args.command == "fit":
-            _fit(args)
-            return 0
+            return _fit(args)
         scene = load_scene(args.scene, args.overrides)
         if args.command == "render":
             render_to_folder(scene, args.out, quiet=args.quiet)

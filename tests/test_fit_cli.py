@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 from helpers import small_scene, write_sphere_obj
 
-from spacefit.cli import main
+from spacefit.cli import NOT_CONVERGED, main
 from spacefit.fit import FitResult
 from spacefit.pipeline import fit_to_folder
 from spacefit.render import render
@@ -41,15 +41,23 @@ def _args(case: Path, out: Path, *extra: str, reference: str = "a.exr") -> list[
 
 def test_cli_fit_writes_the_report(case, tmp_path, capsys):
     out = tmp_path / "run"
-    assert main(_args(case, out, "--spp", "2")) == 0
+    code = main(_args(case, out, "--spp", "2"))
     assert sorted(os.listdir(out)) == REPORT
     report = json.loads((out / "fit.json").read_text())
+    assert code == (0 if report["success"] else NOT_CONVERGED)
     assert report["names"] == ["parts.sphere.kd"] and report["solver"] == "lm"
     assert abs(report["values"]["parts.sphere.kd"] - TRUE_KD) < 0.01
     assert len(report["history"]) == report["steps"] and report["inputs"]["options"]["spp"] == 2
     assert report["timings_s"]["solve"] > 0 and isinstance(report["success"], bool)
     printed = capsys.readouterr().out
     assert "parts.sphere.kd = " in printed and "+/-" in printed and "(start 0.3)" in printed
+
+
+def test_cli_fit_that_does_not_converge_exits_3_with_its_report(case, tmp_path, capsys):
+    out = tmp_path / "run"
+    assert main(_args(case, out, "--spp", "2", "--max-steps", "1")) == NOT_CONVERGED
+    assert sorted(os.listdir(out)) == REPORT and json.loads((out / "fit.json").read_text())["success"] is False
+    assert "did not converge" in capsys.readouterr().err
 
 
 def test_fit_to_folder_returns_the_result(case, tmp_path):
