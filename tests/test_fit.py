@@ -7,9 +7,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import small_scene, write_sphere_obj
 
 from spacefit.errors import InputError
 from spacefit.fit import Observation, fit, identifiability
+from spacefit.render import render
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
 from cases import PANELS, WRINKLES, WRINKLES_FAR  # noqa: E402
@@ -117,3 +119,14 @@ def test_identifiability_falls_with_range():
     assert near.stderr["wrinkles.D"] < 0.02
     assert far.stderr["wrinkles.D"] > 3 * near.stderr["wrinkles.D"]
     assert near.fisher_eigenvalues.shape == (2,) and np.all(near.fisher_eigenvalues >= 0)
+
+
+def test_a_parameter_pushed_to_its_bound_is_reported(tmp_path):
+    """A reference brighter than kd = 1 can give: kd ends at its bound, and the fit says so."""
+    mesh = write_sphere_obj(tmp_path / "sphere.obj", subdivisions=3)
+    bright = small_scene(mesh, {"material": "white_paint", "kd": 0.8}, sun={"irradiance_w_m2": 2000.0},
+                         camera={"pixel_pitch_mm": 0.5}, render={"spp": 4})
+    scene = small_scene(mesh, {"material": "white_paint", "kd": 0.5}, camera={"pixel_pitch_mm": 0.5}, render={"spp": 4})
+    result = fit(Observation(scene, render(bright)), ["parts.sphere.kd"], max_steps=20)
+    assert result.values["parts.sphere.kd"] > 0.999
+    assert any("upper bound" in w and "parts.sphere.kd" in w for w in result.warnings), result.warnings

@@ -76,6 +76,14 @@ class Bijection:
         """Whether x is strictly inside the interval (a valid start)."""
         return bool(np.isfinite(x) and self.lo < x < self.hi)
 
+    def at_bound(self, x: float, tolerance: float = 1e-3) -> str | None:
+        """"lower" or "upper" when x lies within ``tolerance`` (a fraction of the width) of a bound
+        of a bounded interval, where the logistic saturates and the parameter stops moving."""
+        if math.isinf(self.lo) or math.isinf(self.hi):
+            return None
+        p = (x - self.lo) / (self.hi - self.lo)
+        return "lower" if p < tolerance else "upper" if p > 1.0 - tolerance else None
+
     def describe(self) -> str:
         """The interval as text, e.g. ``(0, 1)``."""
         return f"({self.lo:g}, {self.hi:g})"

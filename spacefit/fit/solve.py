@@ -19,6 +19,7 @@ from typing import Any
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import lineax as lx
 import numpy as np
 import optax
 import optimistix as optx
@@ -225,8 +226,14 @@ def _stderr_corr(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return stderr, corr
 
 
-def _warnings(names: Sequence[str], values: np.ndarray, stderr: np.ndarray, corr: np.ndarray) -> list[str]:
+def _warnings(params: FreeParameters, values: np.ndarray, stderr: np.ndarray, corr: np.ndarray) -> list[str]:
     out = []
+    names = params.names
+    for name, b, value in zip(names, params.bijections, values):
+        if side := b.at_bound(float(value)):
+            out.append(f"{name} = {value:.4g} is at the {side} bound of its range {b.describe()}: the solver pushed "
+                       "it there, so neither it nor its standard error is an estimate; the model may not be able "
+                       "to match the images (another start, or another free parameter?).")
     for i, name in enumerate(names):
         if np.isnan(stderr[i]):
             continue  # no error estimate at all: reported by the caller
@@ -424,7 +431,7 @@ def fit(
     if np.all(np.isfinite(np.asarray(setup.to_user(jnp.asarray(x))))):
         x_user, cov, loss_value, extras = _estimate(setup, x)
         stderr, corr = _stderr_corr(cov)
-        warnings = _warnings(setup.user.names, x_user, stderr, corr)
+        warnings = _warnings(setup.user, x_user, stderr, corr)
         if not math.isfinite(loss_value):
             success = False
             warnings.insert(0, "the render or its Jacobian at the result is not finite (NaN); no errors are reported.")
@@ -520,7 +527,11 @@ def _optimistix(solver: str, residual_u, u, max_steps, rtol, atol, log_step) -> 
         # is of order one in unconstrained coordinates (the minimiser is unchanged).
         scale = 1.0 / max(float(0.5 * jnp.sum(residual_u(u, None) ** 2)), 1e-30)
     else:
-        obj = {"lm": optx.LevenbergMarquardt, "gn": optx.GaussNewton, "dogleg": optx.Dogleg}[solver](rtol=rtol, atol=atol)
+        # Gauss-Newton and dogleg steps by SVD: the default QR returns NaN where the Jacobian is rank
+        # deficient (unidentifiable directions, saturated bijections); SVD takes the minimum-norm step.
+        kwargs = {} if solver == "lm" else {"linear_solver": lx.AutoLinearSolver(well_posed=False)}
+        obj = {"lm": optx.LevenbergMarquardt, "gn": optx.GaussNewton, "dogleg": optx.Dogleg}[solver](
+            rtol=rtol, atol=atol, **kwargs)
         f_struct = jax.eval_shape(lambda y: residual_u(y, None), u)
         scale = 1.0
 

@@ -147,7 +147,7 @@ class WrinkleSettings:
     seed: int = 0
     spacing_m: float = 0.02
     model: str = "auto"
-    lod_footprint: float = 4.0
+    lod_footprint: float = 3.0
 
     def validate(self) -> None:
         from spacefit.geometry.wm import check_wm_params
