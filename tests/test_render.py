@@ -125,3 +125,19 @@ def test_error_inside_writing_removes_partial_output(tmp_path, monkeypatch):
 def test_nan_override_is_rejected():
     with pytest.raises(InputError, match="finite"):
         load_scene(None, ["target.position_m=[0, nan, 0]"])
+
+
+def test_render_crops_to_the_target_and_loses_no_light():
+    """Only the window around the target's projected box is rendered; the whole film is black outside
+    it. Matte parts, so that the totals compare without glint noise."""
+    matte = ["parts.body.material='white_paint'", "parts.panels.material='white_paint'", "render.spp=256"]
+    assembly = assemble(load_scene(None, SMALL + matte))
+    cropped, full = Renderer(assembly), Renderer(assembly, crop=False)
+    x0, y0, w, h = cropped.window
+    assert full.window == (0, 0, 64, 64) and w * h < 0.5 * 64 * 64
+    a, b = cropped.render(seed=1), full.render(seed=1)
+    outside = np.ones((64, 64), dtype=bool)
+    outside[y0:y0 + h, x0:x0 + w] = False
+    assert a.shape == b.shape == (64, 64, 3)
+    assert not a[outside].any() and not b[outside].any()
+    assert a.sum() == pytest.approx(b.sum(), rel=0.01)

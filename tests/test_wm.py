@@ -10,7 +10,16 @@ import pytest
 
 import spacefit  # noqa: F401  (enables float64 before any JAX array exists)
 from spacefit.errors import InputError
-from spacefit.geometry.wm import check_wm_params, profile_ra, wm_height, wm_n_max, wm_phases, wm_section_ra
+from spacefit.geometry.wm import (
+    check_wm_params,
+    profile_ra,
+    wm_height,
+    wm_n_max,
+    wm_phases,
+    wm_rms,
+    wm_rms_slope,
+    wm_section_ra,
+)
 
 THESIS = {"gamma": 1.5, "M": 5, "L": 0.1, "Ls": 5e-3}
 GOOD = {"D": 2.3, "G": 1e-3, **THESIS}
@@ -119,3 +128,18 @@ def test_bad_parameters_are_named(name, value):
 def test_good_parameters_pass():
     check_wm_params(**GOOD)
     check_wm_params(2.999, 10.0, 1.01, 1, 1.0, 0.999)
+
+
+def test_rms_height_and_slope_match_a_sampled_surface():
+    """The closed forms of the rms height and per-axis rms slope against one sampled realisation
+    (8 m x 8 m, 20 L, 5 mm grid; gentle wrinkles: L 0.4 m, Ls 0.1 m)."""
+    params = {"gamma": 1.5, "M": 5, "L": 0.4, "Ls": 0.1}
+    D, G, h = 2.4, 3e-4, 0.005
+    x = np.arange(0.0, 8.0, h)
+    X, Y = np.meshgrid(x, x)
+    phases = wm_phases(params["M"], wm_n_max(params["L"], params["Ls"], params["gamma"]), seed=1)
+    z = np.asarray(wm_height(np.stack([X.ravel(), Y.ravel()], -1), D, G, phases=phases, **params)).reshape(X.shape)
+    slope_y, slope_x = np.gradient(z, h)
+    assert z.std() == pytest.approx(float(wm_rms(D, G, **params)), rel=0.02)
+    for slope in (slope_x, slope_y):
+        assert slope.std() == pytest.approx(float(wm_rms_slope(D, G, **params)), rel=0.02)

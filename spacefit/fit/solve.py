@@ -149,10 +149,10 @@ def _problem(
     for i, obs in enumerate(observations):
         ref = _check_reference(obs, i)
         scene = obs.scene
-        if geometry:  # D and G act on the displaced geometry
-            scene = dataclasses.replace(scene, wrinkles=dataclasses.replace(scene.wrinkles, model="geometry"))
         assembly = assemble(scene)
-        dscene = DrJitScene(Renderer(assembly), spp or scene.render.spp, spp_grad or spp or scene.render.spp, integrator)
+        # D and G move the vertices: render the whole film, the target's window would not hold them
+        renderer = Renderer(assembly, crop=not geometry)
+        dscene = DrJitScene(renderer, spp or scene.render.spp, spp_grad or spp or scene.render.spp, integrator)
         values_of = scene_values_fn(assembly, free)
         renders_x.append(render_params(dscene, values_of, free.fd_steps, seed, seed_grad))
         alt = INDEPENDENT_SEED_OFFSET

@@ -148,18 +148,14 @@ def wm_G_from_rms(D: float | Array, rms: float | Array, *, gamma: float, M: int,
     return L * (rms / (L * _rms_factor(D, gamma, M, L, Ls))) ** (1.0 / (D - 2.0))
 
 
-def wm_rms_slope(
-    D: float | Array, G: float | Array, *, gamma: float, M: int, L: float, Ls: float, min_wavelength: float = 0.0
-) -> Array:
-    """Expected rms slope of eq. 2-1 along one axis, counting scales of wavelength >= ``min_wavelength`` (m).
+def wm_rms_slope(D: float | Array, G: float | Array, *, gamma: float, M: int, L: float, Ls: float) -> Array:
+    """Expected rms slope of eq. 2-1 along one axis (dimensionless).
 
     With wave numbers k_n = 2 pi gamma^n / L and ridges at angles pi m / M (sum of cos^2 over them
     M / 2 for M >= 2), each axis's slope variance is
-    ``L^2 (G/L)^(2(D-2)) ln(gamma)/4 * sum_n gamma^(2(D-3)n) k_n^2``. A mesh of spacing s only
-    carries wavelengths >= 2 s, hence ``min_wavelength``.
+    ``L^2 (G/L)^(2(D-2)) ln(gamma)/4 * sum_n gamma^(2(D-3)n) k_n^2``.
     """
     n = np.arange(wm_n_max(L, Ls, gamma) + 1)
-    n = n[L / gamma**n >= min_wavelength]
     k2 = (2.0 * np.pi * gamma**n / L) ** 2
     spectrum = jnp.sum(jnp.power(gamma, 2.0 * (D - 3.0) * n) * k2)
     return L * (G / L) ** (D - 2.0) * jnp.sqrt(0.25 * math.log(gamma) * spectrum)

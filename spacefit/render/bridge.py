@@ -102,7 +102,7 @@ class DrJitScene:
         self._set(values, grad=False)
         with render_threads(self.renderer.assembly.scene.render.deterministic):
             image = mi.render(self.renderer.scene, integrator=self._integrator, seed=seed, spp=self.spp)
-            return np.asarray(image, dtype=np.float32)
+            return self.renderer.to_film(np.asarray(image, dtype=np.float32))
 
     def forward(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
         """Directional derivative of the image along ``tangent`` (same keys as ``values``), one render."""
@@ -112,7 +112,7 @@ class DrJitScene:
                 dr.set_grad(self.params[key], _to_drjit(self.params[key], t))
         image = self._render_ad(seed_grad)
         dr.forward_to(image)
-        out = np.asarray(dr.grad(image), dtype=np.float32)
+        out = self.renderer.to_film(np.asarray(dr.grad(image), dtype=np.float32))
         self._set(values, grad=False)
         return out
 
@@ -120,7 +120,7 @@ class DrJitScene:
         """Gradient of sum(cotangent * image) with respect to every key of ``values``, one backward pass."""
         self._set(values, grad=True)
         image = self._render_ad(seed_grad)
-        dr.backward_from(image * mi.TensorXf(np.asarray(cotangent, dtype=np.float32)))
+        dr.backward_from(image * mi.TensorXf(self.renderer.to_window(np.asarray(cotangent, dtype=np.float32))))
         grads = {key: _flat_grad(self.params[key]) if _differentiable(self.params[key]) else np.zeros(np.size(values[key]), np.float32)
                  for key in values}
         self._set(values, grad=False)

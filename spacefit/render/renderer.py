@@ -7,11 +7,12 @@ Lambert part with kd 0.2 facing a sun of 5 W m^-2 reads 0.2 * 5 / pi in every ch
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 
 import numpy as np
 
+from spacefit.geometry.frames import project
 from spacefit.materials import Conductor, Lambert, Material, Mirror
 from spacefit.progress import ProgressCallback
 from spacefit.render.backend import dr, mi, select_variant
@@ -20,6 +21,9 @@ from spacefit.scene.config import Scene
 
 # Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.
 MAX_SAMPLES_PER_PASS = 1 << 24
+# Pixels around the target's projected box that its light can still reach: the tent filter's
+# radius (1 px) and one for rounding.
+CROP_MARGIN_PX = 2
 
 
 def _spectrum(value: float | tuple[float, ...]) -> dict | float:
@@ -59,8 +63,24 @@ def mesh_object(name: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarr
     return mesh
 
 
-def scene_dict(assembly: Assembly) -> dict:
-    """The Mitsuba scene dictionary: path tracer, pinhole camera, tent-filtered film, sun, parts."""
+def target_window(assembly: Assembly, vertices: Mapping[str, np.ndarray]) -> tuple[int, int, int, int]:
+    """The film window (x0, y0, width, height), px, outside which the image is black: the projected
+    box of every vertex of the target (world ``vertices`` per part, m), widened by
+    :data:`CROP_MARGIN_PX` and clipped to the film. In black space nothing else is lit. The whole
+    film when a vertex lies behind the camera, where the projected box means nothing."""
+    intr = assembly.intrinsics
+    uv, depth = project(np.concatenate(list(vertices.values())), assembly.camera, intr)
+    size = np.array([intr.width, intr.height])
+    if not np.all(depth > 0):
+        return 0, 0, intr.width, intr.height
+    lo = np.clip(np.floor(uv.min(axis=0)) - CROP_MARGIN_PX, 0, size - 1).astype(int)
+    hi = np.clip(np.ceil(uv.max(axis=0)) + CROP_MARGIN_PX, lo + 1, size).astype(int)
+    return int(lo[0]), int(lo[1]), int(hi[0] - lo[0]), int(hi[1] - lo[1])
+
+
+def scene_dict(assembly: Assembly, vertices: Mapping[str, np.ndarray], window: tuple[int, int, int, int]) -> dict:
+    """The Mitsuba scene dictionary: path tracer, pinhole camera, tent-filtered film rendering the
+    pixel ``window`` (x0, y0, width, height) of the image, sun, and the parts at world ``vertices`` (m)."""
     s = assembly.scene
     cam, intr = assembly.camera, assembly.intrinsics
     # Mitsuba's principal point offset is a fraction of the film, positive towards -u / -v.
@@ -79,6 +99,10 @@ def scene_dict(assembly: Assembly) -> dict:
             "height": intr.height,
             "pixel_format": "rgb",
             "rfilter": {"type": s.render.filter},
+            "crop_offset_x": window[0],
+            "crop_offset_y": window[1],
+            "crop_width": window[2],
+            "crop_height": window[3],
         },
     }
     max_depth = s.render.depth + 1
@@ -91,8 +115,7 @@ def scene_dict(assembly: Assembly) -> dict:
     }
     for name, part in assembly.parts.items():
         uv = None if name in assembly.refinements else part.uv
-        vertices = np.asarray(assembly.world_vertices(name))
-        d[name] = mesh_object(name, vertices, assembly.faces(name), uv, assembly.materials[name])
+        d[name] = mesh_object(name, vertices[name], assembly.faces(name), uv, assembly.materials[name])
     return d
 
 
@@ -123,21 +146,40 @@ def render_threads(deterministic: bool) -> Iterator[None]:
 class Renderer:
     """A scene loaded into Mitsuba once; renders deterministic radiance images (h, w, 3).
 
-    Load once and render many times: reloading scenes leaks memory in Mitsuba (mitsuba3#1890).
+    Only the film window around the target is rendered (:func:`target_window`), the rest of the
+    image is black; ``crop=False`` renders the whole film, for vertices that will move (the
+    window is fixed when the scene is loaded). Load once and render many times: reloading scenes
+    leaks memory in Mitsuba (mitsuba3#1890).
     """
 
-    def __init__(self, assembly: Assembly, variant: str | None = None) -> None:
+    def __init__(self, assembly: Assembly, variant: str | None = None, crop: bool = True) -> None:
         self.variant = select_variant(variant or assembly.scene.render.variant)
         self.assembly = assembly
-        self.scene = mi.load_dict(scene_dict(assembly))
+        intr = assembly.intrinsics
+        vertices = {name: np.asarray(assembly.world_vertices(name)) for name in assembly.parts}
+        self.window = target_window(assembly, vertices) if crop else (0, 0, intr.width, intr.height)
+        self.scene = mi.load_dict(scene_dict(assembly, vertices, self.window))
         self.params = mi.traverse(self.scene)
+
+    def to_film(self, window_image: np.ndarray) -> np.ndarray:
+        """The whole film (height, width, ...) from an image of the rendered window, black outside it."""
+        x0, y0, w, h = self.window
+        intr = self.assembly.intrinsics
+        film = np.zeros((intr.height, intr.width, *window_image.shape[2:]), dtype=np.float32)
+        film[y0:y0 + h, x0:x0 + w] = window_image
+        return film
+
+    def to_window(self, film_image: np.ndarray) -> np.ndarray:
+        """The rendered window's part of a whole-film image (a cotangent, say)."""
+        x0, y0, w, h = self.window
+        return np.ascontiguousarray(film_image[y0:y0 + h, x0:x0 + w])
 
     def render(self, spp: int | None = None, seed: int | None = None, progress: ProgressCallback | None = None) -> np.ndarray:
         """Radiance (W m^-2 sr^-1) as a float32 (height, width, 3) array; same seed, same image."""
         r = self.assembly.scene.render
         spp = r.spp if spp is None else spp
         seed = r.seed if seed is None else seed
-        passes = pass_seeds(seed, spp, r.resolution[0] * r.resolution[1])
+        passes = pass_seeds(seed, spp, self.window[2] * self.window[3])
         total = None
         with render_threads(r.deterministic):
             for i, (pass_seed, count) in enumerate(passes):
@@ -146,7 +188,7 @@ class Renderer:
                 dr.eval(total)
                 if progress is not None:
                     progress(i + 1, len(passes))
-        return np.array(total, dtype=np.float32)
+        return self.to_film(np.array(total, dtype=np.float32))
 
 
 def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray:

@@ -9,8 +9,8 @@ variance alpha^2 / 2 (Walter et al. 2007), so wrinkle slopes of per-axis standar
 roughness alpha0 enters the sum as if it were Beckmann's; it is small beside the wrinkles'. A GGX
 of the same effective alpha would be wrong in shape: its core is narrower and its tail heavier
 than Gaussian slopes', and it rendered the study's body 27-33 % darker than the geometry.
-The slopes are those of eq. 2-1 at the scales the geometry would carry (wavelength >= 2 mesh
-spacings, :func:`spacefit.geometry.wm.wm_rms_slope`).
+The slopes are those of eq. 2-1 down to Ls (:func:`spacefit.geometry.wm.wm_rms_slope`): the
+wrinkles as specified, not as a mesh of some spacing would sample them.
 """
 
 from __future__ import annotations
@@ -68,7 +68,7 @@ def choose_model(
     """Pick geometry or effective roughness for one wrinkled part (world ``centroid``, metres)."""
     distance = float(np.linalg.norm(centroid - camera.position))
     footprint = distance * intrinsics.pixel_pitch / intrinsics.focal_length
-    slope = float(wm_rms_slope(w.D, w.G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls, min_wavelength=2 * w.spacing_m))
+    slope = float(wm_rms_slope(w.D, w.G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls))
     effective = effective_material(material, slope)
     alpha = None if effective is None else float(effective.alpha_x)
     ratio = footprint / w.L
