@@ -9,7 +9,8 @@ same samples per pixel and records, over the geometry's lit pixels:
   sqrt(2) times its Monte Carlo noise;
 - ``bias_effective``: the error with both noises taken out, sqrt(error^2 - noise_g^2/2 - noise_e^2/2)
   (0 when negative): the part that more samples would not remove, which the tolerance
-  (:data:`spacefit.scene.lod.LOD_TOLERANCE`) bounds;
+  (:data:`spacefit.scene.lod.LOD_TOLERANCE`) bounds; ``bias_interior`` / ``bias_edge`` split it
+  (squares add up) between pixels whose four neighbours are lit and the target's edge pixels;
 - ``flux_ratio``: total radiance of the effective image over the geometry's;
 - the cost of each model (assembly + one render, after a warm-up), and ``speedup_equal_noise``:
   what the geometry costs over what the effective model costs at the geometry's noise, which
@@ -79,21 +80,29 @@ def run_study(out: Path, ranges: list[float], spp: int, wrinkle_seeds: tuple[int
             geometry2, _, _ = timed_render(base + ["wrinkles.model='geometry'", f"wrinkles.seed={ws}"], seed=2)
             t_geometry += t / len(wrinkle_seeds)
             lit = geometry.max(axis=-1) > 0
+            interior = lit & np.all([np.roll(lit, s, axis=a) for s in (1, -1) for a in (0, 1)], axis=0)
             g = geometry[lit]
             e = effective[lit]
-            pooled.append(np.stack([g, e, (e - g) ** 2, (geometry2[lit] - g) ** 2, (effective2[lit] - e) ** 2]))
-        g, e, d_error, d_geometry, d_effective = np.concatenate(pooled, axis=1)
+            pooled.append(np.stack([g, e, (e - g) ** 2, (geometry2[lit] - g) ** 2, (effective2[lit] - e) ** 2,
+                                    np.broadcast_to(interior[lit][:, None], g.shape)]))
+        g, e, d_error, d_geometry, d_effective, inside = np.concatenate(pooled, axis=1)
+        inside = inside[:, 0] > 0
         m2 = g.mean() ** 2
         error, noise_g, noise_e = (math.sqrt(x.mean() / m2) for x in (d_error, d_geometry, d_effective))
         # per pixel, an unbiased estimate of bias^2 * m^2; its standard error gives an upper bound
         bias2 = (d_error - d_geometry / 2 - d_effective / 2).mean(axis=-1)
         bias2_upper = (bias2.mean() + 2 * bias2.std() / math.sqrt(bias2.size)) / m2
+        # the bias's share from interior and from edge pixels, same normalisation (squares add up)
+        shares = {name: round(math.sqrt(max(bias2[mask].sum() / bias2.size / m2, 0.0)), 4)
+                  for name, mask in (("bias_interior", inside), ("bias_edge", ~inside))}
+
         rows.append({
             "range_m": d, "footprint_m": round(choice.footprint_m, 4), "footprint_over_L": round(choice.footprint_over_L, 3),
             "lit_pixels": len(g),
             "error_effective": round(error, 4), "noise_geometry": round(noise_g, 4), "noise_effective": round(noise_e, 4),
             "bias_effective": round(math.sqrt(max(bias2.mean() / m2, 0.0)), 4),
             "bias_upper": round(math.sqrt(max(bias2_upper, 0.0)), 4),
+            "interior_pixels": int(inside.sum()), **shares,
             "flux_ratio": round(float(e.sum() / g.sum()), 4),
             "time_geometry_s": round(t_geometry, 3), "time_effective_s": round(t_effective, 3),
             "speedup_equal_noise": round(t_geometry / (t_effective * (noise_e / noise_g) ** 2), 1),
