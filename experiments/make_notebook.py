@@ -110,7 +110,7 @@ print(info.stderr, "correlation", round(float(info.correlation[0, 1]), 3))"""),
 `experiments/lod_study.py`: displaced wrinkles against an effective (Beckmann) roughness on the flat
 body, across range, pooled over four wrinkle seeds at 4096 spp. `bias_effective` is the error with
 both models' Monte Carlo noise taken out, `bias_upper` adds two standard errors; the stated
-tolerance is 0.1. `speedup_equal_noise` is what the geometry costs over what the effective model
+tolerance is 0.15, met from 2.3 L per pixel on; `wrinkles.model = "auto"` switches at 3 L. `speedup_equal_noise` is what the geometry costs over what the effective model
 costs at the geometry's noise."""),
     ("code", """show("lod/lod.png")
 table("lod/lod.csv", ["range_m", "footprint_over_L", "bias_effective", "bias_upper", "noise_geometry",
