@@ -7,10 +7,12 @@ import struct
 import numpy as np
 import pytest
 import trimesh
+from helpers import small_scene, write_sphere_obj
 
 from spacefit.errors import InputError
 from spacefit.geometry.lander import builtin_lander
 from spacefit.geometry.mesh import PartMesh, export_stl, load_grouped, load_part, validate_part
+from spacefit.render import render
 
 
 def same_triangles(a: PartMesh, b: PartMesh) -> bool:
@@ -91,3 +93,20 @@ def test_degenerate_and_empty_meshes():
         validate_part("p", PartMesh(np.where(v == 2, np.nan, v), np.array([[0, 1, 3]])))
     with pytest.raises(InputError, match="face indices"):
         validate_part("p", PartMesh(v, np.array([[0, 1, 7]])))
+
+
+def test_inside_out_closed_part_is_turned_and_renders_as_the_right_one(tmp_path):
+    """A closed mesh wound inward would render black (one-sided BSDFs): it is reversed, with a warning."""
+    right = write_sphere_obj(tmp_path / "sphere.obj", subdivisions=2)
+    mesh = trimesh.load(right, process=False)
+    inverted = tmp_path / "inverted" / "sphere.obj"
+    inverted.parent.mkdir()
+    trimesh.Trimesh(mesh.vertices, mesh.faces[:, ::-1], process=False).export(inverted)
+    with pytest.warns(UserWarning, match="wind inward"):
+        part = load_part("sphere", inverted)
+    assert trimesh.Trimesh(part.vertices, part.faces, process=False).volume > 0
+    image = render(small_scene(right, {"material": "white_paint"}))
+    with pytest.warns(UserWarning, match="wind inward"):
+        turned = render(small_scene(inverted, {"material": "white_paint"}))
+    images = [image, turned]
+    assert images[1].mean() > 0 and np.allclose(images[0], images[1], rtol=1e-4, atol=1e-6)

@@ -6,6 +6,7 @@ OBJ: either one file per part, or one file whose face groups / objects are the p
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,7 +44,11 @@ class PartMesh:
 
 
 def validate_part(name: str, part: PartMesh) -> PartMesh:
-    """Check that a part has faces, finite vertices, valid indices and no degenerate triangles."""
+    """Check that a part has faces, finite vertices, valid indices and no degenerate triangles.
+
+    A closed part whose faces wind inward (negative enclosed volume) would render black: the BSDFs
+    are one-sided. Its face order is reversed, with a warning. Open parts are kept as given.
+    """
     v, f = np.asarray(part.vertices, float), np.asarray(part.faces)
     if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
         raise InputError(f"part {name!r}: the mesh has no triangles.")
@@ -64,6 +69,11 @@ def validate_part(name: str, part: PartMesh) -> PartMesh:
         )
     if part.uv is not None and np.shape(part.uv) != (len(v), 2):
         raise InputError(f"part {name!r}: uv must have shape ({len(v)}, 2), got {np.shape(part.uv)}.")
+    closed = trimesh.Trimesh(v, f, process=False)
+    if closed.is_watertight and closed.volume < 0:
+        warnings.warn(f"part {name!r}: the closed mesh's faces wind inward (negative volume); their order was "
+                      "reversed so that its outside is lit (spacefit's BSDFs are one-sided).", stacklevel=2)
+        f = f[:, ::-1]
     return PartMesh(v, f.astype(np.int64), None if part.uv is None else np.asarray(part.uv, float))
 
 
