@@ -26,7 +26,7 @@ import jax.numpy as jnp
 import matplotlib
 import numpy as np
 from cases import WRINKLES
-from studyio import write_csv
+from studyio import save_figure, write_csv
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -103,9 +103,7 @@ def landscape(out: Path, n: int) -> None:
     ax.set_ylabel("D")
     ax.set_title(f"pixel-L2 loss; dashed: rms height {rms * 100:.1f} cm")
     ax.legend(loc="upper right")
-    fig.tight_layout()
-    fig.savefig(out / "landscape.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "landscape.png")
 
 
 def fits(out: Path, max_steps: int) -> None:
@@ -145,9 +143,7 @@ def ranges(out: Path, distances: list[float]) -> None:
     ax.set_xlabel("camera range (m)")
     ax.legend()
     ax.set_title("wrinkles case, 64 x 64 px, 2 % noise")
-    fig.tight_layout()
-    fig.savefig(out / "range.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "range.png")
 
 
 def main() -> None:

@@ -18,7 +18,7 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 from cases import PANELS, WRINKLES, Case
-from studyio import write_csv
+from studyio import save_figure, write_csv
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -86,9 +86,7 @@ def plot(path: Path, rows: list[dict[str, object]]) -> None:
         ax.set_ylabel("max relative error" if name != "wrinkles" else "max relative error (G), else |D error|")
         ax.set_title(f"{name} case")
         ax.legend(fontsize=7)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main() -> None:

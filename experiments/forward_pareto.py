@@ -24,7 +24,7 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 from cases import REFERENCE_SEED  # noqa: E402
-from studyio import relative_rmse, write_csv  # noqa: E402
+from studyio import relative_rmse, save_figure, write_csv  # noqa: E402
 
 from spacefit.progress import Progress  # noqa: E402
 from spacefit.render import Renderer  # noqa: E402
@@ -119,9 +119,7 @@ def plot(path: Path, rows: list[dict[str, object]], reference_spp: int, referenc
     ax.set_title(f"default scene (Table 4-2 optics): error against a {reference_spp} spp, depth {reference_depth} "
                  "reference", fontsize=10)
     ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main() -> None:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import matplotlib
 import numpy as np
-from studyio import write_csv
+from studyio import save_figure, write_csv
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -73,9 +73,7 @@ def run_identifiability(out: Path, ranges: list[float], widths: list[int], spp: 
         a.set_xlabel("camera range (m)")
         a.legend()
     fig.suptitle("thesis optics and wrinkles, 2 % noise")
-    fig.tight_layout()
-    fig.savefig(out / "identifiability.png", dpi=110)
-    plt.close(fig)
+    save_figure(fig, out / "identifiability.png")
     return rows
 
 

@@ -31,7 +31,7 @@ from pathlib import Path
 
 import matplotlib
 import numpy as np
-from studyio import write_csv
+from studyio import save_figure, write_csv
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -141,9 +141,7 @@ def plot(rows: list[dict[str, object]], path: Path, spp: int, seeds: int) -> Non
     ax[1].set_ylabel("assembly + render (s)")
     ax[1].legend()
     fig.suptitle(f"level of detail, gentle wrinkles, 128 x 128 px, {spp} spp, {seeds} wrinkle seed(s)")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 def main() -> None:

@@ -47,7 +47,7 @@ from pathlib import Path
 import matplotlib
 import numpy as np
 from cases import PANELS, WRINKLES, Case
-from studyio import write_csv
+from studyio import save_figure, write_csv
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -180,9 +180,7 @@ def plot(rows: list[dict[str, object]], path: Path, title: str) -> None:
     fig.legend(handles=[Patch(color=colours(i), label=c) for i, c in enumerate(classes)], loc="lower center",
                ncol=len(classes), frameon=False)
     fig.suptitle(title)
-    fig.tight_layout(rect=(0, 0.07, 1, 1))
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path, rect=(0, 0.07, 1, 1))
 
 
 def run_stability(out: Path, full: bool, jobs: int = 1) -> list[dict[str, object]]:

@@ -1,4 +1,4 @@
-"""Small helpers shared by the study and benchmark scripts: CSV output, image error, machine name."""
+"""Small helpers shared by the study and benchmark scripts: CSV and chart output, image error, machine name."""
 
 from __future__ import annotations
 
@@ -16,6 +16,16 @@ def write_csv(path: Path, rows: Sequence[dict[str, object]]) -> None:
         writer = csv.DictWriter(f, fieldnames=list(rows[0]))
         writer.writeheader()
         writer.writerows(rows)
+
+
+def save_figure(fig: object, path: Path, rect: tuple[float, float, float, float] | None = None) -> None:
+    """Lay out a pyplot figure (within ``rect`` of the canvas, if given), write it as PNG at the
+    studies' resolution (110 dpi) and close it."""
+    import matplotlib.pyplot as plt  # here: each script chooses the Agg backend before pyplot loads
+
+    fig.tight_layout(rect=rect)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
 
 
 def relative_rmse(image: np.ndarray, reference: np.ndarray) -> float:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import matplotlib
 import numpy as np
-from studyio import write_csv
+from studyio import save_figure, write_csv
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -68,9 +68,7 @@ def contact_sheet(path: Path, title: str, unit: str, images: list[tuple[str, np.
     rows, cols = crop
     fig.suptitle(f"{title} (common exposure: white = {1 / scale:.3g} W m$^{{-2}}$ sr$^{{-1}}$; "
                  f"crop rows {rows.start}-{rows.stop}, cols {cols.start}-{cols.stop})", fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_figure(fig, path)
 
 
 UNITS = {"attitude": "deg", "depth": "", "light_level": "W m^-2", "light_direction": "", "distance": "m", "focal_length": "mm"}
