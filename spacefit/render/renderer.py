@@ -156,7 +156,7 @@ class Renderer:
         self.variant = select_variant(variant or assembly.scene.render.variant)
         self.assembly = assembly
         intr = assembly.intrinsics
-        vertices = {name: np.asarray(assembly.world_vertices(name)) for name in assembly.parts}
+        vertices = assembly.scene_vertices
         self.window = target_window(assembly, vertices) if crop else (0, 0, intr.width, intr.height)
         self.scene = mi.load_dict(scene_dict(assembly, vertices, self.window))
         self.params = mi.traverse(self.scene)

@@ -63,6 +63,12 @@ class Assembly:
         m = jnp.asarray(self.to_world)
         return self.object_vertices(name, D, G) @ m[:3, :3].T + m[:3, 3]
 
+    @functools.cached_property
+    def scene_vertices(self) -> dict[str, np.ndarray]:
+        """World-frame vertices (m) of every part at the scene's D and G, evaluated once: the view
+        check and the renderer both need them."""
+        return {name: np.asarray(self.world_vertices(name)) for name in self.parts}
+
     def faces(self, name: str) -> np.ndarray:
         """Triangles of part ``name`` (refined for wrinkled parts)."""
         return self.refinements[name].faces if name in self.refinements else self.parts[name].faces
@@ -170,5 +176,5 @@ def assemble(scene: Scene) -> Assembly:
     phases = wm_phases(w.M, wm_n_max(w.L, w.Ls, w.gamma), w.seed)
     sun = np.array(scene.sun.direction, float)
     assembly = Assembly(scene, parts, materials, refinements, phases, to_world, camera, intrinsics, sun / np.linalg.norm(sun), lod)
-    check_view({n: PartMesh(np.asarray(assembly.world_vertices(n)), assembly.faces(n)) for n in parts}, camera, intrinsics)
+    check_view({n: PartMesh(v, assembly.faces(n)) for n, v in assembly.scene_vertices.items()}, camera, intrinsics)
     return assembly
