@@ -7,18 +7,18 @@ from __future__ import annotations
 
 import argparse
 
-from cases import MATERIALS, WRINKLES_128, Case
 from studyio import machine
 
-from spacefit.fit import SOLVERS, Observation, fit
+import spacefit as sf
+from spacefit import SOLVERS, Observation, fit
 
-CASES = {c.name: c for c in (MATERIALS, WRINKLES_128)}
+CASES = {name: sf.load_case(name) for name in ("materials", "wrinkles_128")}
 
 
-def run(case: Case, solver: str, max_steps: int) -> dict[str, object]:
+def run(case: sf.Case, solver: str, max_steps: int) -> dict[str, object]:
     """Fit ``case`` from its start with ``solver``; return a row of the benchmark table."""
     reference, _ = case.reference()
-    result = fit(Observation(case.scene(), reference), list(case.truth), solver=solver, start=case.start,
+    result = fit(Observation(case.scene(), reference), list(case.free), solver=solver, start=case.start,
                  max_steps=max_steps, learning_rate=0.1)
     errors = {k: result.values[k] - v if k == "wrinkles.D" else result.values[k] / v - 1.0 for k, v in case.truth.items()}
     return {"case": case.name, "solver": solver, "steps": result.steps, "wall_s": result.wall_time_s,

@@ -25,21 +25,23 @@ import jax
 import jax.numpy as jnp
 import matplotlib
 import numpy as np
-from cases import WRINKLES
 from studyio import save_figure, write_csv
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from spacefit.fit import Observation, fit, identifiability  # noqa: E402
-from spacefit.fit.params import free_parameters, scene_values_fn  # noqa: E402
+from spacefit import Observation, fit, identifiability  # noqa: E402
+import spacefit as sf  # noqa: E402
+from spacefit.fit.params import free_parameters  # noqa: E402
+from spacefit.render.values import scene_values_fn  # noqa: E402
 from spacefit.geometry.wm import wm_rms  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
-from spacefit.render import Renderer  # noqa: E402
+from spacefit.render.renderer import Renderer  # noqa: E402
 from spacefit.render.bridge import DrJitScene, render_params  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 
 NAMES = ["wrinkles.D", "wrinkles.G"]
+WRINKLES = sf.load_case("wrinkles")
 
 
 def cosine(a: np.ndarray, b: np.ndarray) -> float:
@@ -48,10 +50,10 @@ def cosine(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def jacobian_methods(out: Path, spp: int) -> list[dict[str, object]]:
-    scene = WRINKLES.scene(*(f"{k}={v}" for k, v in WRINKLES.truth.items()), f"render.spp={spp}")
+    scene = WRINKLES.truth_scene.with_values({"render.spp": spp})
     free = free_parameters(scene, NAMES)
     assembly = assemble(scene)
-    values_of = scene_values_fn(assembly, free)
+    values_of = scene_values_fn(assembly, free.names)
     x0 = jnp.array([WRINKLES.truth[n] for n in NAMES])
     reference_scene = DrJitScene(Renderer(assembly), 4 * spp, 4 * spp)
     steps = free.fd_steps
@@ -82,7 +84,7 @@ def landscape(out: Path, n: int) -> None:
     scene = WRINKLES.scene()
     free = free_parameters(scene, NAMES)
     assembly = assemble(scene)
-    render = render_params(DrJitScene(Renderer(assembly), scene.render.spp, scene.render.spp), scene_values_fn(assembly, free),
+    render = render_params(DrJitScene(Renderer(assembly), scene.render.spp, scene.render.spp), scene_values_fn(assembly, free.names),
                            free.fd_steps, 1, 2)
     loss = np.zeros((n, n))
     progress = Progress("landscape", delay=0.0)
@@ -127,8 +129,8 @@ def ranges(out: Path, distances: list[float]) -> None:
     for d in distances:
         # the same viewing direction, farther away
         position = np.array([3.0, -4.0, 10.0]) / np.linalg.norm([3.0, -4.0, 10.0]) * d
-        case = WRINKLES.with_overrides(f"camera.position_m=[{position[0]}, {position[1]}, {position[2]}]")
-        image, sigma = case.reference(0.02)
+        case = WRINKLES.with_values({"camera.position_m": list(position)})
+        image, sigma = case.reference(2)
         info = identifiability(Observation(case.scene(), image, sigma), NAMES, WRINKLES.truth)
         camera = case.scene().camera
         rows.append({"range_m": d, "pixel_m": round(d * camera.pixel_pitch_mm / camera.focal_length_mm, 4),

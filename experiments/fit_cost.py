@@ -12,31 +12,34 @@ materials and two for the wrinkles, all five solvers, 40 steps.
 
 from __future__ import annotations
 
+import dataclasses
+
 import argparse
 from pathlib import Path
 
 import matplotlib
 import numpy as np
-from cases import PANELS, WRINKLES, Case
 from studyio import save_figure, write_csv
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from spacefit.fit import SOLVERS, Observation, fit  # noqa: E402
+import spacefit as sf  # noqa: E402
+from spacefit import SOLVERS, Observation, fit  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
 
 # case -> [(width px, spp)]; the case's native width and pixel pitch set the field of view.
 REDUCED = {"panels": [(32, 8), (64, 8)]}
 FULL = {"panels": [(64, 16), (128, 16), (128, 64)], "wrinkles": [(64, 32), (64, 128)]}
-CASES = {"panels": (PANELS, 128, 18.75), "wrinkles": (WRINKLES, 64, 47.03)}
+CASES = {"panels": 128, "wrinkles": 64}  # the case name and its native width, px
 
 
-def at_budget(name: str, width: int, spp: int) -> Case:
-    """The case rendered at ``width`` px (same field of view) and ``spp`` samples per pixel."""
-    case, native, pitch = CASES[name]
-    return case.with_overrides(f"render.resolution=[{width}, {width}]", f"camera.pixel_pitch_mm={pitch * native / width}",
-                               f"render.spp={spp}")
+def at_budget(name: str, width: int, spp: int) -> sf.Case:
+    """The case rendered at ``width`` px (same field of view), its fits at ``spp`` samples per pixel."""
+    case = sf.load_case(name)
+    pitch = case.truth_scene.camera.pixel_pitch_mm * CASES[name] / width
+    case = case.with_values({"render.resolution": [width, width], "camera.pixel_pitch_mm": pitch})
+    return dataclasses.replace(case, fit_values={"render.spp": spp})
 
 
 def run_fit_cost(out: Path, full: bool) -> list[dict[str, object]]:
@@ -51,7 +54,7 @@ def run_fit_cost(out: Path, full: bool) -> list[dict[str, object]]:
     for k, (name, (width, spp), solver) in enumerate(runs):
         case = at_budget(name, width, spp)
         reference, _ = case.reference()
-        r = fit(Observation(case.scene(), reference), list(case.truth), solver=solver, start=case.start,
+        r = fit(Observation(case.scene(), reference), list(case.free), solver=solver, start=case.start,
                 max_steps=max_steps, learning_rate=0.1)
         rel = [abs(r.values[n] / v - 1.0) for n, v in case.truth.items() if n != "wrinkles.D"]
         rows.append({"case": name, "width_px": width, "spp": spp, "solver": solver, "steps": r.steps,

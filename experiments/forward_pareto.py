@@ -23,11 +23,13 @@ import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from cases import REFERENCE_SEED  # noqa: E402
 from studyio import relative_rmse, save_figure, write_csv  # noqa: E402
 
 from spacefit.progress import Progress  # noqa: E402
-from spacefit.render import Renderer  # noqa: E402
+
+# Seed of the high-spp references: the synthetic cases' (data/synthetic/*.toml), never a test render's.
+REFERENCE_SEED = 7
+from spacefit.render.renderer import Renderer  # noqa: E402
 from spacefit.render.backend import dr  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 from spacefit.scene.config import load_scene  # noqa: E402

@@ -22,9 +22,9 @@ from studyio import save_figure, write_csv
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-from spacefit.fit import Observation, identifiability  # noqa: E402
+from spacefit import Observation, identifiability  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
-from spacefit.render import Renderer  # noqa: E402
+from spacefit.render.renderer import Renderer  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 from spacefit.scene.config import load_scene  # noqa: E402
 

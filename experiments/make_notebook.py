@@ -27,9 +27,9 @@ from pathlib import Path
 import matplotlib.pyplot as plt
 from IPython.display import Image, display
 
-from spacefit.fit import Observation, fit, identifiability
+from spacefit import Observation, fit, identifiability
 from spacefit.output import preview_scale, to_srgb8
-from spacefit.render import render
+from spacefit.render.renderer import render
 from spacefit.render.exr import read_exr
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import load_scene

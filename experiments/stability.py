@@ -46,7 +46,6 @@ from pathlib import Path
 
 import matplotlib
 import numpy as np
-from cases import PANELS, WRINKLES, Case
 from studyio import save_figure, write_csv
 
 matplotlib.use("Agg")
@@ -54,18 +53,18 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from spacefit.errors import InputError  # noqa: E402
-from spacefit.fit import SOLVERS, Observation, fit  # noqa: E402
-from spacefit.fit.failures import FAILURE_CLASSES, classify, errors  # noqa: E402
-from spacefit.fit.params import BIJECTIONS  # noqa: E402
+from failures import FAILURE_CLASSES, classify, errors  # noqa: E402
+
+import spacefit as sf  # noqa: E402
+from spacefit import SOLVERS, InputError, Observation, fit  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
 
 INVALID = "invalid input"
 # Target attitude, deg, that puts the camera of the panels case ([4, 3, 25] m) in the panel plane
 # (object z = 0.68 m, turned about x): 3 sin a + 25 cos a = 0.68.
-EDGE_ON = "target.attitude_deg=[-81.6, 0, 0]"
+EDGE_ON = {"target.attitude_deg": [-81.6, 0, 0]}
 # Sun travelling up: the panels' upper faces, the ones the camera sees, are in shadow.
-SHADOW = "sun.direction=[0, 0, 1]"
+SHADOW = {"sun.direction": [0, 0, 1]}
 # Condition: (values of the full study, values of the reduced one).
 CONDITIONS: dict[str, tuple[tuple[float | str, ...], tuple[float | str, ...]]] = {
     "start_offset": ((-0.8, -0.5, 0.5, 1.0, 3.0), (-0.5, 3.0)),
@@ -75,6 +74,7 @@ CONDITIONS: dict[str, tuple[tuple[float | str, ...], tuple[float | str, ...]]] =
     "view": (("edge_on", "shadow"), ("edge_on", "shadow")),
     "D": ((2.05, 2.95), ()),
 }
+PANELS, WRINKLES = sf.load_case("panels"), sf.load_case("wrinkles")
 # The panels case's start as a relative offset from its truth (alpha_x -50 %, alpha_y +50 %, kd -50 %).
 PANELS_OFFSET = {k: PANELS.start[k] / v - 1.0 for k, v in PANELS.truth.items()}
 
@@ -100,7 +100,7 @@ def offset_start(truth: dict[str, float], offset: dict[str, float]) -> dict[str,
     beyond a finite bound goes to 90 % of the way from the truth to that bound."""
     start = {}
     for name, value in truth.items():
-        b = BIJECTIONS[name.rsplit(".", 1)[-1]]
+        b = sf.PARAMETERS[name].bijection if name in sf.PARAMETERS else sf.PARAMETERS[f"parts.P.{name.rsplit('.', 1)[-1]}"].bijection
         x = value * (1.0 + offset[name])
         if x >= b.hi:
             x = value + 0.9 * (b.hi - value)
@@ -110,28 +110,28 @@ def offset_start(truth: dict[str, float], offset: dict[str, float]) -> dict[str,
     return start
 
 
-def trial(condition: str, value: float | str, size: Size) -> tuple[Case, float]:
-    """The case (scene overrides, truth, start) and the reference noise of one condition value."""
+def trial(condition: str, value: float | str, size: Size) -> tuple[sf.Case, float]:
+    """The case (truth scene, start) and the reference noise (a fraction of the lit mean) of one condition value."""
     if condition == "D":
         G = WRINKLES.truth["wrinkles.G"]
         start = {"wrinkles.D": 2.5, "wrinkles.G": 1.5 * G}
-        return dataclasses.replace(WRINKLES, truth={"wrinkles.D": float(value), "wrinkles.G": G}, start=start), 0.0
+        return dataclasses.replace(WRINKLES.with_values({"wrinkles.D": float(value)}), start=start), 0.0
     w = size.width
-    base = PANELS.with_overrides(f"render.resolution=[{w}, {w}]", f"camera.pixel_pitch_mm={18.75 * 128 / w}",
-                                 f"render.spp={size.spp}", name=f"{condition}={value}")
-    base = dataclasses.replace(base, reference_spp=size.reference_spp)
+    base = PANELS.with_values({"render.resolution": [w, w], "camera.pixel_pitch_mm": 18.75 * 128 / w,
+                               "render.spp": size.reference_spp}, name=f"{condition}={value}")
+    base = dataclasses.replace(base, fit_values={"render.spp": size.spp})
     if condition == "start_offset":
         return dataclasses.replace(base, start=offset_start(PANELS.truth, dict.fromkeys(PANELS.truth, value))), 0.0
     if condition == "alpha":
         truth = {"parts.panels.alpha_x": value, "parts.panels.alpha_y": value, "parts.legs.kd": 0.5}
-        return dataclasses.replace(base, truth=truth, start=offset_start(truth, PANELS_OFFSET)), 0.0
+        return dataclasses.replace(base.with_values(truth), start=offset_start(truth, PANELS_OFFSET)), 0.0
     if condition == "sun_elevation_deg":
         e = math.radians(float(value))
-        return base.with_overrides(f"sun.direction=[0, {-math.cos(e):.6f}, {-math.sin(e):.6f}]"), 0.0
+        return base.with_values({"sun.direction": [0, -math.cos(e), -math.sin(e)]}), 0.0
     if condition == "noise":
         return base, float(value)
     if condition == "view":
-        return base.with_overrides({"edge_on": EDGE_ON, "shadow": SHADOW}[str(value)]), 0.0
+        return base.with_values({"edge_on": EDGE_ON, "shadow": SHADOW}[str(value)]), 0.0
     raise ValueError(f"unknown condition {condition!r}; valid: {', '.join(CONDITIONS)}.")
 
 
@@ -145,10 +145,10 @@ def run_trial(condition: str, value: float | str, solver: str, size: Size) -> di
     """Render the reference of one condition value (seeded: the same for every solver) and fit it."""
     try:
         case, noise = trial(condition, value, size)
-        image, sigma = case.reference(noise)
+        image, sigma = case.reference(100.0 * noise)
         observation = Observation(case.scene(), image, sigma)
         t0 = time.perf_counter()
-        result = fit(observation, list(case.truth), solver=solver, start=case.start, max_steps=size.max_steps)
+        result = fit(observation, list(case.free), solver=solver, start=case.start, max_steps=size.max_steps)
     except InputError as e:
         return _row(condition, value, solver, INVALID, status=str(e))
     errs = "; ".join(f"{k}={v:+.4f}" for k, v in errors(result.values, case.truth).items())

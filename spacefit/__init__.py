@@ -1,11 +1,55 @@
 """spacefit: a differentiable renderer for BRDF parameter fitting of space targets.
 
-Importing spacefit enables JAX's 64-bit mode: the W-M heights and their derivatives in D and G are
-computed in float64 and only rounded to float32 where Mitsuba takes them.
+``import spacefit as sf`` is the API: every name a user needs is here, listed in ``__all__``; the
+modules behind it are private and may change. Importing spacefit changes no global state: JAX's
+64-bit mode is switched on only inside the calls that need it (:mod:`spacefit.precision`).
 """
 
-import jax
-
-jax.config.update("jax_enable_x64", True)
+from spacefit.cases import Case as Case
+from spacefit.cases import case_names as case_names
+from spacefit.cases import load_case as load_case
+from spacefit.errors import InputError as InputError
+from spacefit.fit.loop import FitResult as FitResult
+from spacefit.fit.loop import fit as fit
+from spacefit.fit.losses import LOSSES as LOSSES
+from spacefit.fit.problem import Observation as Observation
+from spacefit.fit.report import format_result as format_result
+from spacefit.fit.report import write_fit_report as write_fit_report
+from spacefit.fit.solvers import SOLVERS as SOLVERS
+from spacefit.fit.solvers import Status as Status
+from spacefit.fit.uncertainty import Identifiability as Identifiability
+from spacefit.fit.uncertainty import identifiability as identifiability
+from spacefit.geometry.wm import wm_rms as wm_rms
+from spacefit.geometry.wm import wm_rms_slope as wm_rms_slope
+from spacefit.materials import PRESETS as PRESETS
+from spacefit.materials import Conductor as Conductor
+from spacefit.materials import Lambert as Lambert
+from spacefit.materials import Mirror as Mirror
+from spacefit.pipeline import fit_to_folder as fit_to_folder
+from spacefit.pipeline import render_to_folder as render_to_folder
+from spacefit.render.derivatives import Jacobian as Jacobian
+from spacefit.render.derivatives import jacobian as jacobian
+from spacefit.render.derivatives import render_function as render_function
+from spacefit.render.exr import read_exr as read_exr
+from spacefit.render.exr import write_exr as write_exr
+from spacefit.render.renderer import PartImage as PartImage
+from spacefit.render.renderer import Renderer as Renderer
+from spacefit.render.renderer import render as render
+from spacefit.scene.config import Scene as Scene
+from spacefit.scene.config import default_scene as default_scene
+from spacefit.scene.config import load_scene as load_scene
+from spacefit.scene.parameters import PARAMETERS as PARAMETERS
+from spacefit.scene.parameters import Parameter as Parameter
+from spacefit.scene.parameters import available as available_parameters
+from spacefit.scene.parameters import parameter_table as parameter_table
 
 __version__ = "0.1.0"
+
+__all__ = [
+    "PARAMETERS", "PRESETS", "LOSSES", "SOLVERS",
+    "Case", "Conductor", "FitResult", "Identifiability", "InputError", "Jacobian", "Lambert", "Mirror",
+    "Observation", "Parameter", "PartImage", "Renderer", "Scene", "Status",
+    "available_parameters", "case_names", "default_scene", "fit", "fit_to_folder", "format_result", "identifiability",
+    "jacobian", "load_case", "load_scene", "parameter_table", "read_exr", "render", "render_function",
+    "render_to_folder", "wm_rms", "wm_rms_slope", "write_exr", "write_fit_report",
+]

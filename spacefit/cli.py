@@ -8,6 +8,7 @@ import sys
 from collections.abc import Sequence
 
 from spacefit.errors import InputError, check_range
+from spacefit.scene.parameters import PARAMETERS
 
 NOT_CONVERGED = 3
 
@@ -40,7 +41,8 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--scene", dest="scenes", action="append", required=True, metavar="SCENE.toml",
                    help="scene of the references: one for all, or one per reference in order (repeatable)")
     f.add_argument("--free", required=True, metavar="NAME[,NAME...]",
-                   help="parameters to fit, e.g. parts.panels.alpha_x,parts.legs.kd (see spacefit.fit.params)")
+                   help="parameters to fit, e.g. parts.panels.alpha_x,parts.legs.kd (P: a part's name): "
+                        + ", ".join(f"{p.pattern} [{p.unit}] {p.bijection.describe()}" for p in PARAMETERS.values()))
     f.add_argument("--out", required=True, metavar="DIR", help="output folder")
     f.add_argument("--solver", metavar="lm|gn|dogleg|bfgs|adam", help="solver (default lm)")
     f.add_argument("--loss", metavar="pixel|pyramid|stats", help="loss (default pixel)")

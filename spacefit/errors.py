@@ -60,6 +60,12 @@ def check_range(
     return x
 
 
+def check_count(name: str, value: object, lo: int = 1) -> None:
+    """Raise :class:`InputError` unless ``value`` is an integer >= ``lo`` (None passes: the default)."""
+    if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo):
+        raise InputError(f"`{name}` must be an integer >= {lo}, got {value!r}.")
+
+
 def check_vector(name: str, value: Sequence[float], size: int = 3) -> np.ndarray:
     """Check that ``value`` is a finite vector of ``size`` numbers and return it as float64."""
     try:

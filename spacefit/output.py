@@ -8,6 +8,7 @@ image) and ``render.json`` (the sidecar: scene, seed, tone map, timings, package
 from __future__ import annotations
 
 import json
+import math
 import os
 import platform
 import shutil
@@ -106,8 +107,26 @@ def write_text(path: str | Path, text: str) -> Path:
 
 
 def write_json(path: str | Path, data: dict[str, Any]) -> None:
-    """Write a JSON file with sorted keys and 2-space indent."""
-    Path(path).write_text(json.dumps(data, indent=2, sort_keys=True, default=_jsonable) + "\n")
+    """Write a strict JSON file (sorted keys, 2-space indent): a non-finite number is written as null,
+    and a top-level ``"nonfinite_as_null"`` note says so."""
+    plain = json.loads(json.dumps(data, default=_jsonable))  # numpy values -> Python, NaN still a float
+    strict, replaced = _finite_or_null(plain)
+    if replaced:
+        strict["nonfinite_as_null"] = "NaN and infinite numbers are written as null (strict JSON)"
+    Path(path).write_text(json.dumps(strict, indent=2, sort_keys=True, allow_nan=False) + "\n")
+
+
+def _finite_or_null(value: Any) -> tuple[Any, bool]:
+    """``value`` with every non-finite float replaced by None, and whether any was."""
+    if isinstance(value, float):
+        return (value, False) if math.isfinite(value) else (None, True)
+    if isinstance(value, dict):
+        items = {k: _finite_or_null(v) for k, v in value.items()}
+        return {k: v for k, (v, _) in items.items()}, any(r for _, r in items.values())
+    if isinstance(value, list):
+        items = [_finite_or_null(v) for v in value]
+        return [v for v, _ in items], any(r for _, r in items)
+    return value, False
 
 
 def _jsonable(value: Any) -> Any:

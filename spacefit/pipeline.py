@@ -13,7 +13,8 @@ import numpy as np
 
 from spacefit.errors import InputError, check_choice
 from spacefit.fit.report import write_fit_report
-from spacefit.fit.solve import FitResult, Observation, fit
+from spacefit.fit.loop import FitResult, fit
+from spacefit.fit.problem import Observation
 from spacefit.geometry.mesh import export_stl
 from spacefit.output import check_writable, staged_output, versions, write_render
 from spacefit.progress import Progress
@@ -21,6 +22,7 @@ from spacefit.render.exr import read_exr, write_exr
 from spacefit.render.renderer import Renderer
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import Scene, load_scene, parse_override
+from spacefit.scene.parameters import scene_keys
 
 
 def _say(message: str, quiet: bool) -> None:
@@ -46,12 +48,15 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False) 
     t0 = time.perf_counter()
     radiance = renderer.render(progress=None if quiet else Progress(f"render {r.resolution[0]}x{r.resolution[1]} @ {r.spp} spp"))
     t_render = time.perf_counter() - t0
+    parts = renderer.part_image()
     sidecar = {
         "scene": scene.to_dict(),
         "seed": r.seed,
         "variant": renderer.variant,
         "units": {"radiance": "W m^-2 sr^-1 per RGB channel", "lengths": "m"},
         "triangles": {name: len(assembly.faces(name)) for name in assembly.parts},
+        "parts": {"index": {name: i for i, name in enumerate(parts.names)}, "table": parts.table(radiance),
+                  "note": "part index -1 is space; pixels count for the part their centre sees"},
         "wrinkle_model": {name: dataclasses.asdict(choice) for name, choice in assembly.lod.items()},
         "timings_s": {"assemble": t_assemble, "load": t_load, "render": t_render},
         "versions": versions(),
@@ -91,7 +96,7 @@ def fit_to_folder(
     Args:
         references: reference radiance images (OpenEXR, W m^-2 sr^-1), fitted jointly.
         scenes: scene TOML files: one for all references, or one per reference in order.
-        free: parameter names (see :mod:`spacefit.fit.params`); their start values are the first
+        free: parameter names (see :mod:`spacefit.scene.parameters`); their start values are the first
             scene's unless ``start`` is given.
         out_dir: output folder of the report (see :mod:`spacefit.fit.report`).
         overrides: ``key=value`` scene overrides applied to every scene; none may fix a free parameter.
@@ -144,22 +149,12 @@ def fit_to_folder(
     return result
 
 
-def _scene_keys(name: str) -> set[str]:
-    """The scene-file keys whose values the free parameter ``name`` replaces."""
-    head, _, field = name.rpartition(".")
-    if field == "alpha":
-        return {f"{head}.alpha_x", f"{head}.alpha_y"}
-    if name == "wrinkles.rms_m":
-        return {"wrinkles.G"}
-    return {name}
-
-
 def _check_not_fixed(free: Sequence[str], overrides: Sequence[str]) -> None:
     """Refuse an override of a free parameter: the fit would replace it without a word."""
     for text in overrides:
         key = ".".join(parse_override(text)[0])
         for name in free:
-            if key in _scene_keys(name):
+            if key in scene_keys(name):
                 raise InputError(
                     f"`{name}` is both free and fixed by the override {text!r}; drop the override "
                     f"(its start value can be given as `start`, --start {name}=VALUE)."

@@ -38,9 +38,9 @@ def test_overrides_parse_toml_values():
 
 
 def test_unknown_keys_suggest_the_closest():
-    with pytest.raises(InputError, match=r"camera\.'focal_length_mm'"):
+    with pytest.raises(InputError, match=r"`camera\.focal_length_mm`"):
         scene_from_dict({"camera": {"focal_lenght_mm": 5000}})
-    with pytest.raises(InputError, match=r"Did you mean 'wrinkles'"):
+    with pytest.raises(InputError, match=r"Did you mean `wrinkles`"):
         scene_from_dict({"wrinkle": {}})
     with pytest.raises(InputError, match="alpha_x"):
         scene_from_dict({"parts": {"panels": {"material": "panel_thesis", "alpha_z": 0.1}}})

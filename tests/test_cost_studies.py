@@ -3,12 +3,9 @@
 from __future__ import annotations
 
 import csv
-import sys
-from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
 import fit_cost  # noqa: E402
 import forward_pareto  # noqa: E402
 

@@ -2,19 +2,15 @@
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import numpy as np
 import pytest
+from conftest import reference
 from helpers import small_scene, write_sphere_obj
 
-from spacefit.errors import InputError
-from spacefit.fit import Observation, fit, identifiability
-from spacefit.render import render
+import spacefit as sf
+from spacefit import InputError, Observation, fit, identifiability, render
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
-from cases import PANELS, WRINKLES, WRINKLES_FAR  # noqa: E402
+PANELS, WRINKLES, WRINKLES_FAR = (sf.load_case(name) for name in ("panels", "wrinkles", "wrinkles_far"))
 
 
 def relative_errors(result, truth):
@@ -23,12 +19,12 @@ def relative_errors(result, truth):
 
 @pytest.fixture(scope="module")
 def panels_reference():
-    return PANELS.reference()[0]
+    return reference("panels")[0]
 
 
 @pytest.mark.parametrize("solver", ["lm", "gn", "dogleg"])
 def test_material_fit_recovers_truth_within_2_percent(panels_reference, solver):
-    result = fit(Observation(PANELS.scene(), panels_reference), list(PANELS.truth), solver=solver, start=PANELS.start)
+    result = fit(Observation(PANELS.scene(), panels_reference), list(PANELS.free), solver=solver, start=PANELS.start)
     assert result.success, result.status
     assert max(relative_errors(result, PANELS.truth).values()) < 0.02, result.values
     assert result.history and result.history[-1]["loss"] < result.history[0]["loss"]
@@ -37,21 +33,21 @@ def test_material_fit_recovers_truth_within_2_percent(panels_reference, solver):
 
 @pytest.mark.parametrize("solver", ["bfgs", "adam"])
 def test_gradient_solvers_reduce_the_loss(panels_reference, solver):
-    result = fit(Observation(PANELS.scene(), panels_reference), list(PANELS.truth), solver=solver,
+    result = fit(Observation(PANELS.scene(), panels_reference), list(PANELS.free), solver=solver,
                  start=PANELS.start, max_steps=15, learning_rate=0.1)
     assert result.history[-1]["loss"] < 0.5 * result.history[0]["loss"]
     assert all(np.isfinite(v) for v in result.values.values())
 
 
 def test_material_fit_with_2_percent_noise_within_5_percent():
-    image, sigma = PANELS.reference(noise=0.02)
-    result = fit(Observation(PANELS.scene(), image, sigma), list(PANELS.truth), start=PANELS.start)
+    image, sigma = reference("panels", 2)
+    result = fit(Observation(PANELS.scene(), image, sigma), list(PANELS.free), start=PANELS.start)
     assert max(relative_errors(result, PANELS.truth).values()) < 0.05, result.values
 
 
 def test_D_and_G_recovered_where_identifiable():
-    image, _ = WRINKLES.reference()
-    result = fit(Observation(WRINKLES.scene(), image), list(WRINKLES.truth), start=WRINKLES.start, max_steps=30)
+    image, _ = reference("wrinkles")
+    result = fit(Observation(WRINKLES.scene(), image), list(WRINKLES.free), start=WRINKLES.start, max_steps=30)
     assert abs(result.values["wrinkles.D"] - 2.4) < 0.02, result.values
     assert relative_errors(result, {"wrinkles.G": 0.04})["wrinkles.G"] < 0.05, result.values
     assert "wrinkles.rms_m" in result.extras
@@ -62,34 +58,33 @@ def test_D_and_G_recovered_where_identifiable():
 
 
 def test_D_and_G_with_2_percent_noise():
-    image, sigma = WRINKLES.reference(noise=0.02)
-    result = fit(Observation(WRINKLES.scene(), image, sigma), list(WRINKLES.truth), start=WRINKLES.start, max_steps=30)
+    image, sigma = reference("wrinkles", 2)
+    result = fit(Observation(WRINKLES.scene(), image, sigma), list(WRINKLES.free), start=WRINKLES.start, max_steps=30)
     assert abs(result.values["wrinkles.D"] - 2.4) < 0.05, result.values
     assert relative_errors(result, {"wrinkles.G": 0.04})["wrinkles.G"] < 0.10, result.values
 
 
 def test_unidentifiable_D_and_G_report_errors_that_cover_the_truth():
     """At 60 m a pixel (40 cm) is as large as the largest wrinkle: the fit must say how little it knows."""
-    image, sigma = WRINKLES_FAR.reference(0.02, "render.spp=64")
-    result = fit(Observation(WRINKLES_FAR.scene(), image, sigma), list(WRINKLES.truth), start=WRINKLES.start, max_steps=10)
+    image, sigma = reference("wrinkles_far", 2)
+    result = fit(Observation(WRINKLES_FAR.scene(), image, sigma), list(WRINKLES.free), start=WRINKLES.start, max_steps=10)
     for name, true in WRINKLES.truth.items():
         assert abs(result.values[name] - true) <= 2.0 * result.stderr[name], (name, result.values, result.stderr)
     assert result.warnings
 
 
 def test_sun_direction_recovered():
-    case = PANELS.with_overrides("sun.direction=[0.3, 0.2, -1]")
+    case = PANELS.with_values({"sun.direction": [0.3, 0.2, -1]})
     truth = {"sun.elevation_deg": 70.173, "sun.azimuth_deg": -146.310}  # towards the sun: -(0.3, 0.2, -1)
-    known = [f"{k}={v}" for k, v in PANELS.truth.items()]
-    result = fit(Observation(case.scene(*known), case.reference()[0]), list(truth), start={k: v + 5.0 for k, v in truth.items()})
+    result = fit(Observation(case.scene(), case.reference()[0]), list(truth), start={k: v + 5.0 for k, v in truth.items()})
     for name, value in truth.items():
         assert abs(result.values[name] - value) < 0.1, result.values
 
 
 def test_several_observations_fit_jointly(panels_reference):
-    other = PANELS.with_overrides("camera.position_m=[-5, 2, 24]")
+    other = PANELS.with_values({"camera.position_m": [-5, 2, 24]})
     observations = [Observation(PANELS.scene(), panels_reference), Observation(other.scene(), other.reference()[0])]
-    result = fit(observations, list(PANELS.truth), start=PANELS.start)
+    result = fit(observations, list(PANELS.free), start=PANELS.start)
     assert len(result.renders) == 2
     assert max(relative_errors(result, PANELS.truth).values()) < 0.02, result.values
 
@@ -110,16 +105,16 @@ def test_several_observations_fit_jointly(panels_reference):
 )
 def test_bad_fit_input_is_refused_before_rendering(panels_reference, kwargs, message):
     ref = kwargs.pop("reference", panels_reference)
-    free = kwargs.pop("free", list(PANELS.truth))
+    free = kwargs.pop("free", list(PANELS.free))
     with pytest.raises(InputError, match=message):
         fit(Observation(PANELS.scene(), ref), free, **kwargs)
 
 
 def test_identifiability_falls_with_range():
-    near_image, near_sigma = WRINKLES.reference(0.02)
-    far_image, far_sigma = WRINKLES_FAR.reference(0.02, "render.spp=64")
-    near = identifiability(Observation(WRINKLES.scene(), near_image, near_sigma), list(WRINKLES.truth), WRINKLES.truth)
-    far = identifiability(Observation(WRINKLES_FAR.scene(), far_image, far_sigma), list(WRINKLES.truth), WRINKLES.truth)
+    near_image, near_sigma = reference("wrinkles", 2)
+    far_image, far_sigma = reference("wrinkles_far", 2)
+    near = identifiability(Observation(WRINKLES.scene(), near_image, near_sigma), list(WRINKLES.free), WRINKLES.truth)
+    far = identifiability(Observation(WRINKLES_FAR.scene(), far_image, far_sigma), list(WRINKLES.free), WRINKLES.truth)
     assert near.stderr["wrinkles.D"] < 0.02
     assert far.stderr["wrinkles.D"] > 3 * near.stderr["wrinkles.D"]
     assert near.fisher_eigenvalues.shape == (2,) and np.all(near.fisher_eigenvalues >= 0)

@@ -11,9 +11,9 @@ import pytest
 from helpers import small_scene, write_sphere_obj
 
 from spacefit.cli import NOT_CONVERGED, main
-from spacefit.fit import FitResult
+from spacefit import FitResult
 from spacefit.pipeline import fit_to_folder
-from spacefit.render import render
+from spacefit.render.renderer import render
 from spacefit.render.exr import read_exr, write_exr
 
 TRUE_KD = 0.5

@@ -4,23 +4,20 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
 from spacefit.errors import InputError
-from spacefit.fit import Observation, fit
-from spacefit.fit.solve import _fit_scene
+from spacefit import Observation, fit
+from spacefit.fit.problem import fit_scene as _fit_scene
 from spacefit.materials import Conductor, Lambert
 from spacefit.pipeline import render_to_folder
-from spacefit.render import Renderer
+from spacefit.render.renderer import Renderer
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import load_scene
 from spacefit.scene.lod import effective_alpha, effective_material
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
 from lod_study import GENTLE, run_study  # noqa: E402
 
 SMALL = ["render.resolution=[48, 48]", "camera.pixel_pitch_mm=50", "render.spp=16"]

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from helpers import pixel_directions, small_scene, write_plate_obj, write_sphere_obj
 
-from spacefit.render import render
+from spacefit.render.renderer import render
 
 E = 5.0  # sun irradiance, W m^-2
 

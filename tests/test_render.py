@@ -10,7 +10,7 @@ import pytest
 
 from spacefit.cli import main
 from spacefit.errors import InputError
-from spacefit.render import Renderer
+from spacefit.render.renderer import Renderer
 from spacefit.render.exr import read_exr
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import load_scene

@@ -4,27 +4,20 @@ from __future__ import annotations
 
 import csv
 import math
-import sys
 from collections import Counter
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-from spacefit.errors import InputError
-from spacefit.fit import FitResult
-from spacefit.fit.failures import FAILURE_CLASSES, classify
-from spacefit.render import Renderer
-from spacefit.scene.assembly import assemble
+from failures import FAILURE_CLASSES, classify
+from stability import CONDITIONS, EDGE_ON, PANELS, REDUCED, run_stability
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
-from cases import PANELS  # noqa: E402
-from stability import CONDITIONS, EDGE_ON, REDUCED, run_stability  # noqa: E402
+from spacefit import FitResult, InputError, Renderer, Status
 
 TRUTH = {"parts.panels.alpha_x": 0.15, "parts.legs.kd": 0.5}
 
 
-def result(values: dict[str, float], stderr: dict[str, float], success: bool = True, status: str = "converged",
+def result(values: dict[str, float], stderr: dict[str, float], success: bool = True, status: Status = Status.CONVERGED,
            loss: float = 1.0) -> FitResult:
     """A FitResult as fit() would return it, without rendering."""
     names = tuple(values)
@@ -41,19 +34,18 @@ FAR = {"parts.panels.alpha_x": 0.153, "parts.legs.kd": 0.40}  # kd 20 % off
 @pytest.mark.parametrize(
     ("values", "stderr", "success", "status", "loss", "expected"),
     [
-        (NEAR, SMALL_SE, True, "converged", 1.0, "success"),
-        (NEAR, SMALL_SE, False, "stopped: maximum number of steps reached", 1.0, "success"),  # close enough
-        ({**NEAR, "parts.legs.kd": math.nan}, SMALL_SE, False, "stopped", math.nan, "nan"),
-        (NEAR, SMALL_SE, True, "converged", math.nan, "nan"),  # the loss alone
-        (NEAR, SMALL_SE, False, "failed: the loss or a parameter became NaN", 1.0, "nan"),  # the status alone
-        (NEAR, SMALL_SE, False, "failed: non-finite (NaN or inf) values in the solve", 1.0, "nan"),
-        (NEAR, {**SMALL_SE, "parts.legs.kd": math.inf}, True, "converged", 1.0, "unidentifiable"),  # lucky hit
-        (FAR, {**SMALL_SE, "parts.legs.kd": math.nan}, True, "converged", 1.0, "unidentifiable"),
-        (FAR, {**SMALL_SE, "parts.legs.kd": 0.06}, True, "converged", 1.0, "unidentifiable"),  # 0.1 <= 2 x 0.06
-        (FAR, {**SMALL_SE, "parts.legs.kd": 0.06}, False, "stopped", 1.0, "unidentifiable"),  # before stalled
-        (FAR, SMALL_SE, False, "stopped: maximum number of steps reached", 1.0, "stalled"),
-        (FAR, SMALL_SE, True, "converged", 1.0, "wrong_minimum"),
-        (FAR, {**SMALL_SE, "parts.legs.kd": 0.04}, True, "converged", 1.0, "wrong_minimum"),  # 0.1 > 2 x 0.04
+        (NEAR, SMALL_SE, True, Status.CONVERGED, 1.0, "success"),
+        (NEAR, SMALL_SE, False, Status.MAX_STEPS, 1.0, "success"),  # close enough
+        ({**NEAR, "parts.legs.kd": math.nan}, SMALL_SE, False, Status.MAX_STEPS, math.nan, "nan"),
+        (NEAR, SMALL_SE, True, Status.CONVERGED, math.nan, "nan"),  # the loss alone
+        (NEAR, SMALL_SE, False, Status.NONFINITE, 1.0, "nan"),  # the status alone
+        (NEAR, {**SMALL_SE, "parts.legs.kd": math.inf}, True, Status.CONVERGED, 1.0, "unidentifiable"),  # lucky hit
+        (FAR, {**SMALL_SE, "parts.legs.kd": math.nan}, True, Status.CONVERGED, 1.0, "unidentifiable"),
+        (FAR, {**SMALL_SE, "parts.legs.kd": 0.06}, True, Status.CONVERGED, 1.0, "unidentifiable"),  # 0.1 <= 2 x 0.06
+        (FAR, {**SMALL_SE, "parts.legs.kd": 0.06}, False, Status.MAX_STEPS, 1.0, "unidentifiable"),  # before stalled
+        (FAR, SMALL_SE, False, Status.MAX_STEPS, 1.0, "stalled"),
+        (FAR, SMALL_SE, True, Status.CONVERGED, 1.0, "wrong_minimum"),
+        (FAR, {**SMALL_SE, "parts.legs.kd": 0.04}, True, Status.CONVERGED, 1.0, "wrong_minimum"),  # 0.1 > 2 x 0.04
     ],
 )
 def test_classify_rules_in_order(values, stderr, success, status, loss, expected):
@@ -86,12 +78,12 @@ def test_classify_refuses_incomplete_truth():
 def test_edge_on_view_shows_the_panels_as_a_line():
     """The study's edge-on attitude: the panels cover a fraction of the pixels they cover face-on."""
 
-    def panel_pixels(*more: str) -> int:
+    def panel_pixels(more: dict | None = None) -> int:
         # white panels at two albedos, lit from the camera, direct light only: the pixels that change
-        images = [Renderer(assemble(PANELS.scene(
-            "render.resolution=[32, 32]", "camera.pixel_pitch_mm=75", "render.spp=4", "render.depth=1",
-            "sun.direction=[-4, -3, -25]", "parts.panels.material='white_paint'", f"parts.panels.kd={kd}", *more,
-        ))).render(seed=1) for kd in (1.0, 0.5)]
+        images = [Renderer(PANELS.scene().with_values({
+            "render.resolution": [32, 32], "camera.pixel_pitch_mm": 75, "render.spp": 4, "render.depth": 1,
+            "sun.direction": [-4, -3, -25], "parts.panels": {"material": "white_paint", "kd": kd}, **(more or {}),
+        })).render(seed=1) for kd in (1.0, 0.5)]
         return int(np.sum(np.abs(images[0] - images[1]).max(axis=-1) > 0))
 
     face_on, edge_on = panel_pixels(), panel_pixels(EDGE_ON)

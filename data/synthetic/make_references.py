@@ -1,14 +1,13 @@
 """Render the synthetic reference cases: every case of cases.toml, from its scene file beside it.
 
-For case NAME (scene ``NAME.toml``, free parameters listed in ``cases.toml``) this writes the
-folder ``NAME/`` all at once:
+For case NAME of ``cases.toml`` (read by :func:`spacefit.load_case`) this writes the folder
+``NAME/`` all at once:
 
 * ``reference.exr``: radiance (W m^-2 sr^-1), rendered with the scene's own seed (7);
 * ``preview.png``: 8-bit sRGB preview (99.5th percentile of lit pixels at white);
 * ``reference_noise2.exr``, ``reference_noise5.exr``: the reference plus Gaussian noise, independent
   per pixel and channel, of standard deviation 2 % / 5 % of the mean radiance of the lit pixels
-  (maximum channel > 0), drawn by ``numpy.random.default_rng([seed, percent])``; values below zero
-  are kept, so the noise stays zero-mean;
+  (:func:`spacefit.cases.add_noise`, the one noise recipe);
 * ``truth.json``: the free parameters' true values (the scene's), the seeds, each noisy file's
   sigma, the resolved scene, timings and package versions.
 
@@ -20,40 +19,27 @@ from __future__ import annotations
 
 import argparse
 import time
-import tomllib
-from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 
+import spacefit as sf
+from spacefit.cases import add_noise
 from spacefit.errors import check_choice
-from spacefit.fit.params import free_parameters, scene_value
 from spacefit.output import preview_scale, staged_output, to_srgb8, versions, write_json, write_png
 from spacefit.progress import Progress
-from spacefit.render import Renderer
 from spacefit.render.exr import write_exr
-from spacefit.scene.assembly import assemble
-from spacefit.scene.config import load_scene
 
 HERE = Path(__file__).resolve().parent
 NOISE_PERCENT = (2, 5)
 
 
-def add_noise(radiance: np.ndarray, percent: float, seed: int) -> tuple[np.ndarray, float]:
-    """Radiance plus seeded Gaussian noise of ``percent`` % of the lit pixels' mean, and that sigma (W m^-2 sr^-1)."""
-    lit = radiance.max(axis=-1) > 0
-    sigma = percent / 100.0 * float(radiance[lit].mean())
-    noise = np.random.default_rng([seed, int(percent)]).normal(0.0, sigma, radiance.shape)
-    return (radiance + noise).astype(np.float32), sigma
-
-
-def make_case(name: str, free: Sequence[str]) -> dict[str, Any]:
+def make_case(name: str) -> dict[str, Any]:
     """Render case ``name`` into ``HERE / name`` and return its truth record."""
-    scene = load_scene(HERE / f"{name}.toml")
-    names = free_parameters(scene, free).names
+    case = sf.load_case(name)
+    scene, names = case.truth_scene, case.free
     t0 = time.perf_counter()
-    renderer = Renderer(assemble(scene))
+    renderer = sf.Renderer(scene)
     t_load = time.perf_counter() - t0
     r = scene.render
     t0 = time.perf_counter()
@@ -61,9 +47,9 @@ def make_case(name: str, free: Sequence[str]) -> dict[str, Any]:
     t_render = time.perf_counter() - t0
     truth: dict[str, Any] = {
         "case": name,
-        "scene_file": f"{name}.toml",
+        "cases_entry": name,
         "free": list(names),
-        "truth": {n: scene_value(scene, n) for n in names},
+        "truth": case.truth,
         "seed": r.seed,
         "variant": renderer.variant,
         "mean_lit_radiance_w_m2_sr": float(radiance[radiance.max(axis=-1) > 0].mean()),
@@ -88,12 +74,12 @@ def make_case(name: str, free: Sequence[str]) -> dict[str, Any]:
 
 
 def main() -> None:
-    cases: dict[str, list[str]] = tomllib.loads((HERE / "cases.toml").read_text())
+    cases = [name for name in sf.case_names() if (HERE / f"{name}.toml").is_file()]  # derived cases have no files
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("cases", nargs="*", metavar="CASE", help=f"cases to render (default: all of {', '.join(cases)})")
     args = p.parse_args()
     for name in args.cases or cases:
-        truth = make_case(check_choice("CASE", name, cases), cases[name])
+        truth = make_case(check_choice("CASE", name, cases))
         print(f"{name}: {truth['truth']} -> {HERE / name}")
 
 

@@ -30,24 +30,9 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.render.backend import dr, mi
-from spacefit.render.renderer import Renderer, render_threads
+from spacefit.render.renderer import Renderer, to_value, render_threads
 
 SceneValues = Mapping[str, Array]
-
-
-def _to_drjit(template: object, value: np.ndarray) -> object:
-    """A Dr.Jit value of the type of ``template`` from a flat float array.
-
-    A transform (a distant light's frame) is given by the direction its +z axis points along.
-    """
-    value = np.asarray(value, dtype=np.float32).ravel()
-    if isinstance(template, mi.AffineTransform4f):
-        d = value / np.linalg.norm(value)
-        up = [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0]
-        return mi.AffineTransform4f(mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=d.tolist(), up=up))
-    if isinstance(template, mi.Color3f):
-        return mi.Color3f(*(mi.Float(value[i % len(value)]) for i in range(3)))
-    return type(template)(value)
 
 
 def _differentiable(value: object) -> bool:
@@ -87,7 +72,7 @@ class DrJitScene:
 
     def _set(self, values: Mapping[str, np.ndarray], grad: bool) -> None:
         for key, value in values.items():
-            self.params[key] = _to_drjit(self.params[key], value)
+            self.params[key] = to_value(self.params[key], value)
             if grad and _differentiable(self.params[key]):
                 dr.enable_grad(self.params[key])
         self.params.update()
@@ -109,7 +94,7 @@ class DrJitScene:
         self._set(values, grad=True)
         for key, t in tangent.items():
             if _differentiable(self.params[key]):
-                dr.set_grad(self.params[key], _to_drjit(self.params[key], t))
+                dr.set_grad(self.params[key], to_value(self.params[key], t))
         image = self._render_ad(seed_grad)
         dr.forward_to(image)
         out = self.renderer.to_film(np.asarray(dr.grad(image), dtype=np.float32))

@@ -9,9 +9,11 @@ from __future__ import annotations
 import math
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
+from dataclasses import dataclass
 
 import numpy as np
 
+from spacefit.errors import check_range
 from spacefit.geometry.frames import project
 from spacefit.materials import Conductor, Lambert, Material, Mirror
 from spacefit.progress import ProgressCallback
@@ -143,16 +145,42 @@ def render_threads(deterministic: bool) -> Iterator[None]:
         dr.set_thread_count(threads)
 
 
+@dataclass(frozen=True)
+class PartImage:
+    """Which part each pixel sees, and each part's share of a radiance image.
+
+    Attributes:
+        ids: (height, width) int16: the index into ``names`` of the part hit by the ray through
+            each pixel's centre, -1 where it misses the target (black space).
+        names: the parts, in the scene's order.
+    """
+
+    ids: np.ndarray
+    names: tuple[str, ...]
+
+    def table(self, radiance: np.ndarray) -> dict[str, dict[str, float]]:
+        """Per part: ``pixels`` (count whose centre sees it) and ``mean_radiance_w_m2_sr`` (mean of the
+        RGB mean over those pixels, W m^-2 sr^-1; NaN for a part out of view); and the whole
+        ``target``. Edge pixels count for the part at their centre."""
+        grey = np.asarray(radiance, dtype=float)[..., :3].mean(axis=-1)
+        rows = {}
+        for label, mask in [*((name, self.ids == i) for i, name in enumerate(self.names)), ("target", self.ids >= 0)]:
+            n = int(mask.sum())
+            rows[label] = {"pixels": n, "mean_radiance_w_m2_sr": float(grey[mask].mean()) if n else math.nan}
+        return rows
+
+
 class Renderer:
     """A scene loaded into Mitsuba once; renders deterministic radiance images (h, w, 3).
 
     Only the film window around the target is rendered (:func:`target_window`), the rest of the
     image is black; ``crop=False`` renders the whole film, for vertices that will move (the
     window is fixed when the scene is loaded). Load once and render many times: reloading scenes
-    leaks memory in Mitsuba (mitsuba3#1890).
+    leaks memory in Mitsuba (mitsuba3#1890); change values in place with :meth:`set_values`.
     """
 
-    def __init__(self, assembly: Assembly, variant: str | None = None, crop: bool = True) -> None:
+    def __init__(self, scene: Scene | Assembly, variant: str | None = None, crop: bool = True) -> None:
+        assembly = assemble(scene) if isinstance(scene, Scene) else scene
         self.variant = select_variant(variant or assembly.scene.render.variant)
         self.assembly = assembly
         intr = assembly.intrinsics
@@ -174,6 +202,41 @@ class Renderer:
         x0, y0, w, h = self.window
         return np.ascontiguousarray(film_image[y0:y0 + h, x0:x0 + w])
 
+    def set_values(self, values: Mapping[str, float]) -> None:
+        """Set registered parameters (:mod:`spacefit.scene.parameters`, e.g. ``{"parts.panels.alpha_x":
+        0.1, "sun.elevation_deg": 30}``) in the loaded scene, without reloading it.
+
+        Geometry parameters (D, G, rms height) move vertices outside the target's window: render
+        those with ``crop=False``, or build a new Renderer.
+        """
+        from spacefit.render.values import scene_values_fn
+        from spacefit.scene.parameters import check_names
+
+        names = list(values)
+        check_names(self.assembly.scene, names, "values")
+        x = np.array([check_range(n, values[n]) for n in names])
+        for key, value in scene_values_fn(self.assembly, names)(x).items():
+            self.params[key] = to_value(self.params[key], np.asarray(value))
+        self.params.update()
+
+    def part_image(self) -> PartImage:
+        """The part seen through each pixel's centre (one camera ray per pixel, no sampling)."""
+        intr = self.assembly.intrinsics
+        x0, y0, w, h = self.window
+        sensor = self.scene.sensors()[0]
+        index = dr.arange(mi.UInt32, w * h)
+        # sample_ray's position sample spans the whole film, the crop window included
+        position = mi.Point2f((mi.Float(index % w) + 0.5 + x0) / intr.width, (mi.Float(index // w) + 0.5 + y0) / intr.height)
+        ray, _ = sensor.sample_ray(0.0, 0.0, position, mi.Point2f(0.5))
+        hit = self.scene.ray_intersect(ray)
+        names = tuple(self.assembly.parts)
+        ids = dr.full(mi.Int32, -1, w * h)
+        for shape in self.scene.shapes():
+            ids = dr.select(hit.shape == mi.ShapePtr(shape), names.index(shape.id()), ids)
+        film = np.full((intr.height, intr.width), -1, dtype=np.int16)
+        film[y0:y0 + h, x0:x0 + w] = np.asarray(ids, dtype=np.int16).reshape(h, w)
+        return PartImage(film, names)
+
     def render(self, spp: int | None = None, seed: int | None = None, progress: ProgressCallback | None = None) -> np.ndarray:
         """Radiance (W m^-2 sr^-1) as a float32 (height, width, 3) array; same seed, same image."""
         r = self.assembly.scene.render
@@ -193,4 +256,19 @@ class Renderer:
 
 def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray:
     """Render a scene's radiance image (W m^-2 sr^-1, (height, width, 3) float32)."""
-    return Renderer(assemble(scene)).render(progress=progress)
+    return Renderer(scene).render(progress=progress)
+
+
+def to_value(template: object, value: np.ndarray) -> object:
+    """A Dr.Jit value of the type of ``template`` (a scene parameter) from a float array.
+
+    A transform (a distant light's frame) is given by the direction its +z axis points along.
+    """
+    value = np.asarray(value, dtype=np.float32).ravel()
+    if isinstance(template, mi.AffineTransform4f):
+        d = value / np.linalg.norm(value)
+        up = [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0]
+        return mi.AffineTransform4f(mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=d.tolist(), up=up))
+    if isinstance(template, mi.Color3f):
+        return mi.Color3f(*(mi.Float(value[i % len(value)]) for i in range(3)))
+    return type(template)(value)

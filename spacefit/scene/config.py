@@ -223,6 +223,14 @@ class Scene:
         """A copy with some sections replaced by keyword (``render=...``)."""
         return dataclasses.replace(self, **sections)
 
+    def with_values(self, values: Mapping[str, Any]) -> Scene:
+        """A validated copy with scene-file values replaced, by dotted key and Python value.
+
+        ``scene.with_values({"camera.position_m": [0, 0, 50], "parts.panels.alpha_x": 0.1})``;
+        the keys are the scene file's (:func:`load_scene` lists the valid ones on a typo).
+        """
+        return scene_from_dict(apply_overrides(self.to_dict(), values))
+
 
 def _plain(value: Any) -> Any:
     return list(value) if isinstance(value, tuple) else value
@@ -245,8 +253,8 @@ _SECTIONS = {
 
 def _unknown(where: str, key: str, valid: Sequence[str]) -> InputError:
     close = difflib.get_close_matches(key, list(valid), n=1)
-    hint = f" Did you mean {where}{close[0]!r}?" if close else ""
-    return InputError(f"unknown scene key {where}{key!r}; valid keys here: {', '.join(sorted(valid))}.{hint}")
+    hint = f" Did you mean `{where}{close[0]}`?" if close else ""
+    return InputError(f"unknown scene key `{where}{key}`; valid keys here: {', '.join(sorted(valid))}.{hint}")
 
 
 def _coerce(name: str, value: Any, default: Any) -> Any:
@@ -350,18 +358,43 @@ def parse_override(text: str) -> tuple[list[str], Any]:
     return [k.strip() for k in key.split(".")], value
 
 
-def apply_overrides(data: dict[str, Any], overrides: Sequence[str]) -> dict[str, Any]:
-    """Return a deep copy of scene ``data`` with ``key.path=value`` overrides applied."""
+Overrides = Mapping[str, Any] | Sequence[str] | str
+
+
+def _override_items(overrides: Overrides) -> list[tuple[list[str], Any]]:
+    """Key paths and values from a mapping ``{"a.b": value}``, ``"a.b=value"`` strings, or one such string."""
+    if isinstance(overrides, Mapping):
+        for key in overrides:
+            if not isinstance(key, str) or not key.strip():
+                raise InputError(f"scene value keys must be dotted names like 'camera.position_m', got {key!r}.")
+        return [([k.strip() for k in key.split(".")], _plain_value(value)) for key, value in overrides.items()]
+    if isinstance(overrides, str):
+        overrides = [overrides]
+    if not all(isinstance(text, str) for text in overrides):
+        raise InputError(f"scene overrides must be a mapping of key -> value or 'key=value' strings, got {overrides!r}.")
+    return [parse_override(text) for text in overrides]
+
+
+def _plain_value(value: Any) -> Any:
+    """A Python value as the scene file would hold it: numpy / JAX scalars and arrays as numbers and lists."""
+    if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):
+        return value.tolist()
+    if isinstance(value, tuple):
+        return [_plain_value(v) for v in value]
+    return value
+
+
+def apply_overrides(data: dict[str, Any], overrides: Overrides) -> dict[str, Any]:
+    """Return a deep copy of scene ``data`` with overrides applied (see :func:`load_scene`)."""
     import copy
 
     out = copy.deepcopy(data)
-    for text in overrides:
-        path, value = parse_override(text)
+    for path, value in _override_items(overrides):
         node = out
         for k in path[:-1]:
             node = node.setdefault(k, {})
             if not isinstance(node, dict):
-                raise InputError(f"override {text!r}: {k!r} is not a table.")
+                raise InputError(f"scene key {'.'.join(path)!r}: {k!r} is not a table.")
         node[path[-1]] = value
     return out
 
@@ -377,11 +410,21 @@ def read_scene_dict(path: str | Path) -> dict[str, Any]:
         raise InputError(f"scene file {str(p)!r} is not valid TOML: {err}") from None
 
 
-def load_scene(path: str | Path | None = None, overrides: Sequence[str] = ()) -> Scene:
-    """Load a scene TOML file (or the defaults when ``path`` is None) and apply overrides."""
+def load_scene(path: str | Path | None = None, overrides: Overrides = ()) -> Scene:
+    """Load a scene TOML file (or the defaults when ``path`` is None) and apply overrides.
+
+    ``overrides``: a mapping of dotted scene keys to Python values
+    (``{"camera.position_m": [0, 0, 50], "parts.panels.alpha_x": 0.1}``), or ``"key=value"``
+    strings with the value in TOML syntax, as on the command line (``--set``).
+    """
     data = read_scene_dict(path) if path is not None else {}
     base = Path(path).parent if path is not None else Path.cwd()
     return scene_from_dict(apply_overrides(data, overrides), base)
+
+
+def default_scene() -> Scene:
+    """The default scene: the thesis's Table 4-2 (its lander, camera, sun and wrinkles)."""
+    return Scene().validate()
 
 
 def deg2rad(values: Sequence[float]) -> tuple[float, ...]:

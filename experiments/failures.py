@@ -1,17 +1,15 @@
 """Classify a fit against known true values: did it succeed, and if not, how did it fail?
 
 Used by the solver-stability study (``experiments/stability.py``) on synthetic references, where
-the truth is known. Import as ``from spacefit.fit.failures import classify, FAILURE_CLASSES``.
+the truth is known: study-only code, beside the study.
 """
 
 from __future__ import annotations
 
 import math
-import re
 from collections.abc import Mapping, Sequence
 
-from spacefit.errors import InputError
-from spacefit.fit.solve import FitResult
+import spacefit as sf
 
 FAILURE_CLASSES = ("success", "nan", "stalled", "wrong_minimum", "unidentifiable")
 # Relative tolerance of every parameter unless told otherwise.
@@ -21,7 +19,6 @@ DEFAULT_TOLERANCE = 0.05
 ABSOLUTE_TOLERANCE = {"wrinkles.D": 0.02}
 # An estimate within this many standard errors of the truth is one the fit cannot tell from it.
 COVERAGE = 2.0
-_NAN_STATUS = re.compile(r"\bnan\b|non-?finite", re.IGNORECASE)
 
 
 def tolerances(names: Sequence[str], tolerance: Mapping[str, float] | float) -> dict[str, float]:
@@ -36,7 +33,7 @@ def tolerances(names: Sequence[str], tolerance: Mapping[str, float] | float) -> 
     out = {n: float(given.get(n, ABSOLUTE_TOLERANCE.get(n, default))) for n in names}
     for name, value in out.items():
         if not (math.isfinite(value) and value >= 0):
-            raise InputError(f"tolerance of {name} must be a finite number >= 0, got {value!r}.")
+            raise sf.InputError(f"tolerance of {name} must be a finite number >= 0, got {value!r}.")
     return out
 
 
@@ -47,7 +44,7 @@ def errors(values: Mapping[str, float], truth: Mapping[str, float]) -> dict[str,
 
 
 def classify(
-    result: FitResult, truth: Mapping[str, float], tolerance: Mapping[str, float] | float = DEFAULT_TOLERANCE
+    result: sf.FitResult, truth: Mapping[str, float], tolerance: Mapping[str, float] | float = DEFAULT_TOLERANCE
 ) -> str:
     """The outcome of a fit as one of :data:`FAILURE_CLASSES`.
 
@@ -59,8 +56,8 @@ def classify(
 
     The first rule that holds decides:
 
-    1. ``"nan"``: a fitted value or the final loss is not finite, or the status reports NaN /
-       non-finite values.
+    1. ``"nan"``: a fitted value or the final loss is not finite, or the status is
+       :attr:`~spacefit.Status.NONFINITE`.
     2. ``"unidentifiable"``: a standard error is infinite or NaN (the images do not determine that
        parameter, even if its value happens to be close), or the estimate is outside tolerance but
        every parameter outside tolerance is within 2 standard errors of its truth (the fit's own
@@ -76,16 +73,16 @@ def classify(
     """
     missing = [n for n in result.names if n not in truth]
     if missing:
-        raise InputError(f"`truth` has no value for {', '.join(missing)}; give one for every free parameter.")
+        raise sf.InputError(f"`truth` has no value for {', '.join(missing)}; give one for every free parameter.")
     truth = {n: float(truth[n]) for n in result.names}
     for name, value in truth.items():
         if not math.isfinite(value) or (value == 0 and name not in ABSOLUTE_TOLERANCE):
-            raise InputError(f"truth of {name} must be finite (and non-zero for a relative tolerance), got {value!r}.")
+            raise sf.InputError(f"truth of {name} must be finite (and non-zero for a relative tolerance), got {value!r}.")
     tol = tolerances(result.names, tolerance)
 
     values = {n: float(result.values[n]) for n in result.names}
     finite = all(math.isfinite(v) for v in values.values()) and math.isfinite(result.loss)
-    if not finite or _NAN_STATUS.search(result.status):
+    if not finite or result.status is sf.Status.NONFINITE:
         return "nan"
     stderr = {n: float(result.stderr[n]) for n in result.names}
     if not all(math.isfinite(s) for s in stderr.values()):

@@ -1,0 +1,96 @@
+"""Synthetic fitting cases with known truth, read from ``data/synthetic/`` (its scene files and
+``cases.toml``): the one source for the tests, the experiments and ``make_references.py``.
+
+The data folder ships with the repository, not with an installed wheel.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spacefit.errors import InputError, check_choice
+from spacefit.scene.config import Scene, load_scene
+from spacefit.scene.parameters import check_names, scene_value
+
+CASES_DIR = Path(__file__).resolve().parents[1] / "data" / "synthetic"
+
+
+def add_noise(radiance: np.ndarray, percent: float, seed: int) -> tuple[np.ndarray, float]:
+    """Radiance plus Gaussian noise of ``percent`` % of the lit pixels' mean radiance, independent per
+    pixel and channel, drawn by ``numpy.random.default_rng([seed, percent])``; and that sigma
+    (W m^-2 sr^-1). Values below zero are kept, so the noise stays zero-mean."""
+    lit = radiance.max(axis=-1) > 0
+    sigma = percent / 100.0 * float(radiance[lit].mean())
+    noise = np.random.default_rng([seed, int(percent)]).normal(0.0, sigma, radiance.shape)
+    return (radiance + noise).astype(np.float32), sigma
+
+
+@dataclass(frozen=True)
+class Case:
+    """A synthetic case: the truth scene (its reference's), free parameters, start, fit settings.
+
+    Attributes:
+        name: the case's name in ``cases.toml``.
+        truth_scene: the scene at the true values, rendered with the reference's samples and seed.
+        free: the free parameters.
+        start: where fits start (physical units).
+        fit_values: scene values fits render with (e.g. fewer samples).
+    """
+
+    name: str
+    truth_scene: Scene
+    free: tuple[str, ...]
+    start: dict[str, float]
+    fit_values: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def truth(self) -> dict[str, float]:
+        """The true value of each free parameter."""
+        return {n: scene_value(self.truth_scene, n) for n in self.free}
+
+    def scene(self) -> Scene:
+        """The scene a fit renders: the truth scene with :attr:`fit_values` (fits start at :attr:`start`)."""
+        return self.truth_scene.with_values(self.fit_values)
+
+    def reference(self, noise_percent: float = 0.0) -> tuple[np.ndarray, float | None]:
+        """The reference radiance (W m^-2 sr^-1) rendered at the truth, with :func:`add_noise` of
+        ``noise_percent`` % if given, and the noise's sigma (None without noise)."""
+        from spacefit.render.renderer import render
+
+        image = render(self.truth_scene)
+        if not noise_percent:
+            return image, None
+        return add_noise(image, noise_percent, self.truth_scene.render.seed)
+
+    def with_values(self, values: Mapping[str, Any], name: str | None = None) -> Case:
+        """The same case with more scene values (another view, range or size) for truth and fits."""
+        return Case(name or self.name, self.truth_scene.with_values(values), self.free, self.start,
+                    {k: v for k, v in self.fit_values.items() if k not in values})
+
+
+def case_names() -> list[str]:
+    """The names of the synthetic cases."""
+    return list(_table())
+
+
+def _table() -> dict[str, Any]:
+    path = CASES_DIR / "cases.toml"
+    if not path.is_file():
+        raise InputError(f"the synthetic cases are not here ({path}); they ship with the repository, not the wheel.")
+    return tomllib.loads(path.read_text())
+
+
+def load_case(name: str) -> Case:
+    """The synthetic case ``name`` (see :func:`case_names`)."""
+    table = _table()
+    entry = table[check_choice("case", name, table)]
+    scene = load_scene(CASES_DIR / f"{entry.get('scene', name)}.toml", entry.get("values", {}))
+    free = tuple(entry["free"])
+    check_names(scene, list(free))
+    return Case(name, scene, free, {k: float(v) for k, v in entry["start"].items()}, dict(entry.get("fit", {})))

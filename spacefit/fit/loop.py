@@ -1,0 +1,219 @@
+"""``fit``: recover scene parameters from reference images with gradient-based solvers.
+
+One function, one result type. The set-up is :mod:`spacefit.fit.problem`, the solvers
+:mod:`spacefit.fit.solvers`, the standard errors :mod:`spacefit.fit.uncertainty`; this module runs
+the loop and records each step.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from spacefit.errors import check_choice, check_count, check_range
+from spacefit.fit.problem import Observation, setup
+from spacefit.fit.solvers import SOLVERS, Options, Status
+from spacefit.fit.uncertainty import estimate, stderr_corr, warnings_for
+from spacefit.precision import float64
+from spacefit.progress import ProgressCallback
+from spacefit.render.renderer import PartImage
+
+# A solve fails when this many consecutive evaluations are not finite; a line search or trust
+# region may try (and reject) a single non-finite point.
+NONFINITE_PATIENCE = 3
+
+
+@dataclass
+class FitResult:
+    """Outcome of :func:`fit`: values in physical units and how far to trust them.
+
+    Attributes:
+        names: free parameter names, in order.
+        values: fitted value of each, physical units.
+        stderr: standard error of each (from J^T J and the residual); inf if not determined.
+        correlation: (n, n) correlation matrix of the estimates.
+        success: whether the solver reports convergence (and the result is finite).
+        status: how the solve ended (``str(status)`` is its words).
+        warnings: identifiability and convergence warnings, in words.
+        history: one entry per step: the point the step evaluated (step 1 evaluates the start;
+            the accepted point of the last step is ``values``), its loss, time_s since the start.
+        renders: the final render of each observation.
+        loss: final loss, 0.5 * sum of squared residuals.
+        solver, loss_name, steps, wall_time_s, start: what was run.
+        extras: derived quantities, e.g. the rms height (and its standard error) of a (D, G) fit.
+        parts: per observation, per part (and the whole ``target``): the pixels that see it and the
+            mean radiance (W m^-2 sr^-1) of the reference and of the fit's render there.
+    """
+
+    names: tuple[str, ...]
+    values: dict[str, float]
+    stderr: dict[str, float]
+    correlation: np.ndarray
+    success: bool
+    status: Status
+    warnings: list[str]
+    history: list[dict[str, Any]]
+    renders: list[np.ndarray]
+    loss: float
+    solver: str
+    loss_name: str
+    steps: int
+    wall_time_s: float
+    start: dict[str, float] = field(default_factory=dict)
+    extras: dict[str, Any] = field(default_factory=dict)
+    parts: list[dict[str, dict[str, float]]] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (no images)."""
+        d = dataclasses.asdict(self)
+        d.pop("renders")
+        d["correlation"] = np.asarray(self.correlation).tolist()
+        d["status"] = self.status.value
+        return d
+
+
+@float64
+def fit(
+    observations: Observation | Sequence[Observation],
+    free: Sequence[str],
+    *,
+    solver: str = "lm",
+    loss: str = "pixel",
+    start: Mapping[str, float] | None = None,
+    spp: int | None = None,
+    spp_grad: int | None = None,
+    max_steps: int = 50,
+    rtol: float = 1e-3,
+    atol: float = 1e-6,
+    learning_rate: float = 0.05,
+    seed: int = 1,
+    seed_grad: int = 2,
+    integrator: str = "prb",
+    geometry_jacobian: str = "fd",
+    wrinkle_coordinates: str = "rms",
+    progress: ProgressCallback | None = None,
+) -> FitResult:
+    """Fit free scene parameters so that renders match reference images.
+
+    Args:
+        observations: one or several (reference, scene) pairs of the same target; fitted jointly.
+            Fixed parameters come from each scene.
+        free: parameter names (see :mod:`spacefit.fit.params`), e.g. ``["parts.panels.alpha_x"]``.
+        solver: one of :data:`SOLVERS`.
+        loss: ``"pixel"``, ``"pyramid"`` or ``"stats"`` (see :mod:`spacefit.fit.losses`).
+        start: start values (physical units); default: the first scene's values.
+        spp, spp_grad: samples per pixel of primal and derivative renders (default: the scene's).
+        max_steps: solver step limit.
+        rtol, atol: optimistix tolerances (Adam: stop when the relative loss change < rtol).
+        learning_rate: Adam's step size in unconstrained coordinates.
+        seed, seed_grad: seeds of primal and derivative renders; render references with another.
+        integrator: AD integrator for derivative renders, one of :data:`INTEGRATORS`.
+        geometry_jacobian: ``"fd"`` (central differences with common random numbers) or ``"ad"``
+            (the integrator's derivative) for D and G.
+        wrinkle_coordinates: with D and G both free, ``"rms"`` solves in (D, rms height), the
+            better-determined coordinates, and reports D and G with their covariance mapped by
+            the delta method; ``"G"`` solves in (D, G) directly.
+        progress: called with (step, max_steps) after each step.
+
+    Raises:
+        InputError: for any bad input, before rendering.
+    """
+    check_choice("solver", solver, SOLVERS)
+    check_count("max_steps", max_steps)
+    check_range("rtol", rtol, 0.0, lo_open=True)
+    check_range("atol", atol, 0.0)
+    check_range("learning_rate", learning_rate, 0.0, lo_open=True)
+    s = setup(observations, free, start, loss, spp, spp_grad, seed, seed_grad, integrator, geometry_jacobian,
+              wrinkle_coordinates)
+    fp, problem = s.solver_params, s.problem
+
+    t0 = time.perf_counter()
+    history: list[dict[str, Any]] = []
+    last: dict[str, Any] = {}
+
+    def record(u: np.ndarray, value: np.ndarray) -> None:
+        last.update(u=np.asarray(u), loss=float(value))
+
+    def residual_u(u: jax.Array, args: Any) -> jax.Array:
+        # renders are float32; the solver works in the dtype of u (float64) throughout
+        r = problem.residual_x(fp.to_physical(u)).astype(u.dtype)
+        jax.debug.callback(record, u, 0.5 * jnp.sum(r**2))
+        return r
+
+    loss_u_reverse = None
+    if problem.loss_u_reverse is not None:
+
+        def loss_u_reverse(u: jax.Array) -> jax.Array:
+            value = problem.loss_u_reverse(u)
+            jax.debug.callback(record, u, value)
+            return value
+
+    def log_step(step: int) -> bool:
+        """Record the step's evaluation; False after a run of non-finite evaluations."""
+        x = np.asarray(s.to_user(fp.to_physical(jnp.asarray(last["u"]))))
+        history.append({"step": step, "loss": last["loss"], "values": dict(zip(s.user.names, x.tolist())),
+                        "time_s": time.perf_counter() - t0})
+        if progress is not None:
+            progress(step, max_steps)
+        return not _nonfinite_run(history)
+
+    u = jnp.asarray(fp.to_unconstrained(jnp.asarray(s.x0)))
+    outcome = SOLVERS[solver](solver, residual_u, u, Options(max_steps, rtol, atol, learning_rate), log_step, loss_u_reverse)
+    status, u, steps = outcome.status, outcome.u, outcome.steps
+    success = status.success
+
+    x = np.asarray(fp.to_physical(u), dtype=float)
+    n = len(x)
+    if np.all(np.isfinite(np.asarray(s.to_user(jnp.asarray(x))))):
+        x_user, cov, loss_value, extras = estimate(s, x)
+        stderr, corr = stderr_corr(cov)
+        warnings = warnings_for(s.user, x_user, stderr, corr)
+        if not math.isfinite(loss_value):
+            success = False
+            warnings.insert(0, "the render or its Jacobian at the result is not finite (NaN); no errors are reported.")
+        if not success:
+            warnings.insert(0, f"the solver did not converge ({status}).")
+        renders = [np.asarray(img) for img in problem.renders_x(jnp.asarray(x))]
+    else:
+        x_user, stderr, corr, loss_value, extras = np.full(n, np.nan), np.full(n, np.nan), np.eye(n), math.nan, {}
+        warnings = ["the solve produced non-finite parameters; no estimate is reported."]
+        success, renders = False, []
+    return FitResult(
+        names=s.user.names,
+        values=dict(zip(s.user.names, x_user.tolist())),
+        stderr=dict(zip(s.user.names, stderr.tolist())),
+        correlation=corr,
+        success=success,
+        status=status,
+        warnings=warnings,
+        history=history,
+        renders=renders,
+        loss=loss_value,
+        solver=solver,
+        loss_name=loss,
+        steps=steps,
+        wall_time_s=time.perf_counter() - t0,
+        start=dict(zip(s.user.names, s.x0_user.tolist())),
+        extras=extras,
+        parts=[_part_rows(p, ref, img) for p, ref, img in zip(problem.part_images, problem.references, renders)],
+    )
+
+
+def _nonfinite_run(history: list[dict[str, Any]]) -> bool:
+    recent = history[-NONFINITE_PATIENCE:]
+    return len(recent) == NONFINITE_PATIENCE and not any(np.isfinite(h["loss"]) for h in recent)
+
+
+def _part_rows(parts: PartImage, reference: np.ndarray, render: np.ndarray) -> dict[str, dict[str, float]]:
+    """Per part: its pixels, and the mean radiance of the reference and of the fit's render there."""
+    ref, fitted = parts.table(reference), parts.table(render)
+    return {name: {"pixels": row["pixels"], "reference_mean_w_m2_sr": row["mean_radiance_w_m2_sr"],
+                   "fit_mean_w_m2_sr": fitted[name]["mean_radiance_w_m2_sr"]} for name, row in ref.items()}

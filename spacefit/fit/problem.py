@@ -1,0 +1,190 @@
+"""A fitting problem's set-up: observations checked, scenes assembled and loaded, residuals built.
+
+Nothing is rendered here: every input is checked first (:func:`setup`), so that a bad one is
+refused before any work. Every render of a solve uses the same seed (common random numbers), so
+the objective is a deterministic function; derivative renders use another seed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from spacefit.errors import InputError, check_choice, check_count
+from spacefit.fit.losses import residual_fn
+from spacefit.fit.params import FreeParameters, free_parameters
+from spacefit.render.bridge import DrJitScene, render_params, render_values
+from spacefit.render.renderer import PartImage, Renderer
+from spacefit.render.values import scene_values_fn
+from spacefit.scene.assembly import assemble
+from spacefit.scene.config import Scene
+from spacefit.scene.parameters import GEOMETRY, G_of, rms_of, scene_value
+
+INTEGRATORS = ("prb", "direct_projective", "prb_projective")
+# Seed offset of the second, independent Jacobian used for the standard errors.
+INDEPENDENT_SEED_OFFSET = 1000
+
+
+@dataclass(frozen=True)
+class Observation:
+    """A reference radiance image (h, w, 3), W m^-2 sr^-1, and the scene it was taken in.
+
+    ``sigma``: the reference's noise standard deviation (scalar or per pixel), or None.
+    """
+
+    scene: Scene
+    reference: np.ndarray
+    sigma: float | np.ndarray | None = None
+
+
+def check_reference(obs: Observation, index: int) -> np.ndarray:
+    """The observation's reference as a float32 (h, w, 3) array, checked against its scene."""
+    ref = np.asarray(obs.reference, dtype=np.float32)
+    w, h = obs.scene.render.resolution
+    if ref.ndim == 2:
+        ref = np.repeat(ref[..., None], 3, axis=-1)
+    if ref.shape[:2] != (h, w) or ref.shape[-1] < 3:
+        raise InputError(
+            f"reference {index} has shape {ref.shape}, but its scene renders (height, width) = ({h}, {w}); "
+            "render the reference at the scene's resolution or set `render.resolution`."
+        )
+    ref = ref[..., :3]
+    if not np.all(np.isfinite(ref)):
+        raise InputError(f"reference {index} holds NaN or infinite pixels ({int(np.sum(~np.isfinite(ref)))}).")
+    return ref
+
+
+@dataclass
+class Problem:
+    """The residuals of a set of observations as JAX functions of the physical free values x."""
+
+    free: FreeParameters
+    residual_x: Callable[[jax.Array], jax.Array]  # physical x -> stacked residuals (J by forward mode)
+    residual_x_independent: Callable[[jax.Array], jax.Array]  # the same with independent seeds
+    loss_u_reverse: Callable[[jax.Array], jax.Array] | None  # unconstrained u -> loss (reverse mode)
+    renders_x: Callable[[jax.Array], list[jax.Array]]
+    part_images: list[PartImage]  # which part each pixel of each observation sees
+    references: list[np.ndarray]  # the checked references, (h, w, 3) float32
+
+
+def _problem(
+    observations: Sequence[Observation], free: FreeParameters, loss: str, spp: int | None, spp_grad: int | None,
+    seed: int, seed_grad: int, integrator: str,
+) -> Problem:
+    renders_x, renders_alt, renders_v, residuals, values_fns, part_images, references = [], [], [], [], [], [], []
+    geometry = any(n in GEOMETRY for n in free.names)
+    for i, obs in enumerate(observations):
+        ref = check_reference(obs, i)
+        scene = obs.scene
+        assembly = assemble(scene)
+        # D and G move the vertices: render the whole film, the target's window would not hold them
+        renderer = Renderer(assembly, crop=not geometry)
+        dscene = DrJitScene(renderer, spp or scene.render.spp, spp_grad or spp or scene.render.spp, integrator)
+        values_of = scene_values_fn(assembly, free.names)
+        renders_x.append(render_params(dscene, values_of, free.fd_steps, seed, seed_grad))
+        alt = INDEPENDENT_SEED_OFFSET
+        renders_alt.append(render_params(dscene, values_of, free.fd_steps, seed + alt, seed_grad + alt))
+        renders_v.append(render_values(dscene, seed, seed_grad))
+        residuals.append(residual_fn(ref, loss, obs.sigma))
+        values_fns.append(values_of)
+        part_images.append(renderer.part_image())
+        references.append(ref)
+
+    def stack(renders: list[Callable[[jax.Array], jax.Array]]) -> Callable[[jax.Array], jax.Array]:
+        return lambda x: jnp.concatenate([res(render(x)) for res, render in zip(residuals, renders)])
+
+    reverse = None
+    if not np.any(free.fd_steps > 0):
+
+        def reverse(u: jax.Array) -> jax.Array:
+            x = free.to_physical(u)
+            r = jnp.concatenate([res(render(vals(x))) for res, render, vals in zip(residuals, renders_v, values_fns)])
+            return 0.5 * jnp.sum(r**2)
+
+    return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [render(x) for render in renders_x],
+                   part_images, references)
+
+
+@dataclass
+class Setup:
+    """A checked fitting problem: user-facing and solver parameters and the residuals."""
+
+    user: FreeParameters  # the parameters as the user named them
+    solver_params: FreeParameters  # the ones the solver moves ((D, rms) in place of (D, G))
+    x0_user: np.ndarray
+    x0: np.ndarray
+    to_user: Callable[[jax.Array], jax.Array]
+    problem: Problem
+    rms_index: int | None
+
+
+def fit_scene(scene: Scene, free: Sequence[str]) -> Scene:
+    """The scene a fit renders. ``wrinkles.model`` 'auto' becomes 'geometry': the fit's parameters act
+    on the displaced geometry and on the facets' own roughness, which the effective model merges
+    into one roughness. A forced 'effective' model therefore may not free D, G or the rms height,
+    nor the roughness of a wrinkled part."""
+    w = scene.wrinkles
+    if not w.enabled or w.model == "geometry":
+        return scene
+    if w.model == "auto":
+        return dataclasses.replace(scene, wrinkles=dataclasses.replace(w, model="geometry"))
+    merged = [n for n in free if n in GEOMETRY
+              or (n.startswith("parts.") and n.split(".")[1] in w.parts and n.split(".")[2].startswith("alpha"))]
+    if merged:
+        raise InputError(f"{', '.join(map(repr, merged))} cannot be fitted with `wrinkles.model` = 'effective', which merges "
+                         "the wrinkles' slopes and the facets' roughness into one roughness; use 'geometry' or 'auto'.")
+    return scene
+
+
+def setup(
+    observations: Observation | Sequence[Observation], free: Sequence[str], start: Mapping[str, float] | None,
+    loss: str, spp: int | None, spp_grad: int | None, seed: int, seed_grad: int, integrator: str,
+    geometry_jacobian: str, wrinkle_coordinates: str,
+) -> Setup:
+    """Check every input and build the problem; nothing is rendered here."""
+    observations = [observations] if isinstance(observations, Observation) else list(observations)
+    if not observations:
+        raise InputError("`observations` must hold at least one reference image.")
+    check_choice("integrator", integrator, INTEGRATORS)
+    check_choice("geometry_jacobian", geometry_jacobian, ("fd", "ad"))
+    check_choice("wrinkle_coordinates", wrinkle_coordinates, ("rms", "G"))
+    check_count("spp", spp)
+    check_count("spp_grad", spp_grad)
+    if seed == seed_grad:
+        raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
+    user = free_parameters(observations[0].scene, free)
+    observations = [dataclasses.replace(o, scene=fit_scene(o.scene, user.names)) for o in observations]
+    scene = observations[0].scene
+    start = dict(start or {})
+    for name in start:
+        check_choice("start", name, user.names)
+    x0_user = np.array([start.get(n, scene_value(scene, n)) for n in user.names], dtype=float)
+    user.check_start(x0_user)
+    w = scene.wrinkles
+    rms_index = None
+    if wrinkle_coordinates == "rms" and {"wrinkles.D", "wrinkles.G"} <= set(user.names):
+        i_D, rms_index = user.names.index("wrinkles.D"), user.names.index("wrinkles.G")
+        internal = [n if n != "wrinkles.G" else "wrinkles.rms_m" for n in user.names]
+        at_start = dataclasses.replace(w, D=x0_user[i_D], G=x0_user[rms_index])
+        solver_params = free_parameters(dataclasses.replace(scene, wrinkles=at_start), internal)
+        x0 = x0_user.copy()
+        x0[rms_index] = float(rms_of(w, x0_user[i_D], x0_user[rms_index]))
+
+        def to_user(x: jax.Array) -> jax.Array:
+            return x.at[rms_index].set(G_of(w, x[i_D], x[rms_index]))
+    else:
+        solver_params, x0 = user, x0_user
+
+        def to_user(x: jax.Array) -> jax.Array:
+            return x
+
+    if geometry_jacobian == "ad":
+        wrinkles = np.array([n in GEOMETRY for n in solver_params.names])
+        solver_params = dataclasses.replace(solver_params, fd_steps=np.where(wrinkles, 0.0, solver_params.fd_steps))
+    problem = _problem(observations, solver_params, loss, spp, spp_grad, seed, seed_grad, integrator)
+    return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index)

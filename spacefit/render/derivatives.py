@@ -1,0 +1,90 @@
+"""Derivatives of the image with respect to registered parameters, for notebooks and solvers.
+
+:func:`render_function` is the image as a JAX function of the parameters' physical values, with the
+bridge's materialised Jacobian (forward-mode AD for materials and the sun's irradiance, central
+finite differences with common random numbers for geometry and the sun's angles), so that
+``jax.jacfwd``, ``jax.jvp`` and optimistix least squares work on it unchanged. :func:`jacobian`
+evaluates it once: the image and d(image)/d(parameter) for each parameter.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from spacefit.errors import InputError, check_count
+from spacefit.precision import float64
+from spacefit.render.bridge import DrJitScene, render_params
+from spacefit.render.renderer import Renderer
+from spacefit.render.values import scene_values_fn
+from spacefit.scene.config import Scene
+from spacefit.scene.parameters import GEOMETRY, check_names, fd_step, scene_value
+
+
+def render_function(
+    scene: Scene, free: Sequence[str], *, spp: int | None = None, spp_grad: int | None = None, seed: int = 1, seed_grad: int = 2,
+) -> Callable[[Float[Array, " n"]], Float[Array, "h w 3"]]:
+    """The radiance image (W m^-2 sr^-1) as a differentiable JAX function of the physical values of
+    the parameters ``free`` (registry names, in that order).
+
+    The image has the dtype of the input (float32 unless the caller enabled JAX's 64-bit mode).
+    ``spp`` / ``spp_grad``: samples per pixel of the primal and the derivative renders (default:
+    the scene's); ``seed`` / ``seed_grad`` must differ so that an L2 loss's gradient is unbiased.
+    """
+    check_names(scene, list(free))
+    check_count("spp", spp)
+    check_count("spp_grad", spp_grad)
+    if seed == seed_grad:
+        raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
+    renderer = Renderer(scene, crop=not any(n in GEOMETRY for n in free))
+    spp = spp or scene.render.spp
+    dscene = DrJitScene(renderer, spp, spp_grad or spp)
+    steps = np.array([fd_step(scene, n) for n in free])
+    image = render_params(dscene, scene_values_fn(renderer.assembly, list(free)), steps, seed, seed_grad)
+    return lambda x: image(x).astype(jnp.result_type(x))
+
+
+@dataclass(frozen=True)
+class Jacobian:
+    """The image and its derivative with respect to each parameter at one point.
+
+    Attributes:
+        names: the parameters, in order.
+        at: the value of each (physical units).
+        image: (h, w, 3) radiance, W m^-2 sr^-1.
+        columns: name -> (h, w, 3) d(radiance)/d(parameter), W m^-2 sr^-1 per the parameter's unit.
+    """
+
+    names: tuple[str, ...]
+    at: dict[str, float]
+    image: np.ndarray
+    columns: dict[str, np.ndarray]
+
+
+@float64
+def jacobian(
+    scene: Scene, free: Sequence[str], *, at: Mapping[str, float] | None = None, spp: int | None = None,
+    spp_grad: int | None = None, seed: int = 1, seed_grad: int = 2,
+) -> Jacobian:
+    """The image and d(image)/d(parameter) for each of ``free`` at the scene's values (or ``at``)."""
+    names = tuple(free)
+    fn = render_function(scene, names, spp=spp, spp_grad=spp_grad, seed=seed, seed_grad=seed_grad)
+    at = dict(at or {})
+    unknown = set(at) - set(names)
+    if unknown:
+        raise InputError(f"`at` names {sorted(unknown)}, which are not in `free` {list(names)}.")
+    x = np.array([at.get(n, scene_value(scene, n)) for n in names], dtype=float)
+
+    def image_twice(y: Array) -> tuple[Array, Array]:
+        image = fn(y)
+        return image, image  # one evaluation gives the Jacobian and, as auxiliary output, the image
+
+    J, image = jax.jacfwd(image_twice, has_aux=True)(jnp.asarray(x))
+    J = np.asarray(J, dtype=np.float32)
+    return Jacobian(names, dict(zip(names, x.tolist())), np.asarray(image, dtype=np.float32),
+                    {n: J[..., i] for i, n in enumerate(names)})

@@ -1,0 +1,58 @@
+"""Named scene parameters -> the Mitsuba scene values they set, by traverse key (a JAX function).
+
+This is the one place where a registered parameter (:mod:`spacefit.scene.parameters`) meets
+Mitsuba's vocabulary: ``parts.panels.alpha_x`` sets ``'panels.bsdf.alpha_u.value'``, the wrinkles'
+D and G set every wrinkled part's ``vertex_positions`` through the JAX W-M heights (so their
+tangents are exact), the sun's angles set its frame ``'sun.to_world'`` (by the direction its
+light travels). The bridge differentiates through the result; a :class:`Renderer` sets it in place.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
+import jax.numpy as jnp
+from jaxtyping import Array
+
+from spacefit.scene.assembly import Assembly
+from spacefit.scene.parameters import GEOMETRY, G_of, SUN_ANGLES, parameter, scene_value, sun_direction
+
+SceneValuesFn = Callable[[Array], dict[str, Array]]
+
+
+def bsdf_key(part: str, field: str) -> str:
+    """Mitsuba traverse key of BSDF field ``field`` (``alpha_u``, ``reflectance``) of ``part``."""
+    return f"{part}.bsdf.{field}.value"
+
+
+def scene_values_fn(assembly: Assembly, names: Sequence[str]) -> SceneValuesFn:
+    """JAX function: physical values (n,) of the parameters ``names`` -> the scene values they set."""
+    index = {name: i for i, name in enumerate(names)}
+    scene = assembly.scene
+    w = scene.wrinkles
+    geometry = [n for n in GEOMETRY if n in index]
+    sun_angles = [n for n in SUN_ANGLES if n in index]
+    fixed_angles = {n: scene_value(scene, n) for n in SUN_ANGLES}
+
+    def values_of(x: Array) -> dict[str, Array]:
+        out: dict[str, Array] = {}
+        if sun_angles:
+            el, az = (x[index[n]] if n in index else fixed_angles[n] for n in SUN_ANGLES)
+            out["sun.to_world"] = sun_direction(el, az)
+        if geometry:
+            D = x[index["wrinkles.D"]] if "wrinkles.D" in index else w.D
+            G = x[index["wrinkles.G"]] if "wrinkles.G" in index else w.G
+            if "wrinkles.rms_m" in index:
+                G = G_of(w, D, x[index["wrinkles.rms_m"]])
+            for part in assembly.refinements:
+                out[f"{part}.vertex_positions"] = jnp.ravel(assembly.world_vertices(part, D, G))
+        for name, i in index.items():
+            if name == "sun.irradiance_w_m2":
+                out["sun.irradiance.value"] = jnp.full(3, x[i])
+            elif name.startswith("parts."):
+                part = name.split(".")[1]
+                for field in parameter(name).bsdf_fields:
+                    out[bsdf_key(part, field)] = jnp.full(3, x[i]) if field == "reflectance" else x[i]
+        return out
+
+    return values_of

@@ -1,0 +1,261 @@
+"""The registry of free parameters: one home for every fittable (and sweepable) scene value.
+
+Each :class:`Parameter` knows its name pattern, unit, valid range and the bijection a solver works
+through, its finite-difference step (or 0 for forward-mode AD), the scene-file keys it replaces,
+and, for materials, the Mitsuba BSDF fields it sets. The CLI's help, the error messages and the
+README's table (:func:`parameter_table`) are generated from it.
+
+Names address the scene file's keys: ``wrinkles.D``; ``parts.P.alpha_x`` for part ``P``;
+``sun.elevation_deg``. The sun's angles give the direction towards it,
+(cos el cos az, cos el sin az, sin el); the light travels the opposite way (the scene's
+``sun.direction``). Like the scene file, they are in degrees.
+
+``wrinkles.rms_m`` is the expected rms height of eq. 2-1 (:func:`spacefit.geometry.wm.wm_rms`). In an
+image D and G trade off along a valley of nearly constant rms height; (D, rms) are the better
+determined coordinates (:func:`rms_of`, :func:`G_of` are the one place the two are converted).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array
+
+from spacefit.errors import InputError, check_choice
+from spacefit.geometry.wm import wm_G_from_rms, wm_rms
+from spacefit.materials import Conductor, Lambert, Material, Mirror, make_material
+from spacefit.scene.config import Scene, WrinkleSettings
+
+
+@dataclass(frozen=True)
+class Bijection:
+    """Map from the real line onto the open interval (lo, hi): logistic if bounded, exp if bounded
+    below only, the identity on the whole line (lo = -inf)."""
+
+    lo: float
+    hi: float = math.inf
+
+    def forward(self, u: Array) -> Array:
+        """Unconstrained -> physical."""
+        if math.isinf(self.lo):
+            return u
+        if math.isinf(self.hi):
+            return self.lo + jnp.exp(u)
+        return self.lo + (self.hi - self.lo) * jax.nn.sigmoid(u)
+
+    def inverse(self, x: Array) -> Array:
+        """Physical -> unconstrained (x must lie strictly inside the interval)."""
+        if math.isinf(self.lo):
+            return x
+        if math.isinf(self.hi):
+            return jnp.log(x - self.lo)
+        p = (x - self.lo) / (self.hi - self.lo)
+        return jnp.log(p) - jnp.log1p(-p)
+
+    def contains(self, x: float) -> bool:
+        """Whether x is strictly inside the interval (a valid start)."""
+        return bool(np.isfinite(x) and self.lo < x < self.hi)
+
+    def at_bound(self, x: float, tolerance: float = 1e-3) -> str | None:
+        """"lower" or "upper" when x lies within ``tolerance`` (a fraction of the width) of a bound
+        of a bounded interval, where the logistic saturates and the parameter stops moving."""
+        if math.isinf(self.lo) or math.isinf(self.hi):
+            return None
+        p = (x - self.lo) / (self.hi - self.lo)
+        return "lower" if p < tolerance else "upper" if p > 1.0 - tolerance else None
+
+    def describe(self) -> str:
+        """The interval as text, e.g. ``(0, 1)``."""
+        return f"({self.lo:g}, {self.hi:g})"
+
+
+UNIT = Bijection(0.0, 1.0)
+POSITIVE = Bijection(0.0)
+# GGX roughness below 1e-4 is a mirror in float32 and Mitsuba's GGX evaluates to NaN there.
+ROUGHNESS = Bijection(1e-4, 1.0)
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """One kind of free parameter.
+
+    Attributes:
+        pattern: its name, ``P`` standing for a part name (``parts.P.alpha_x``).
+        unit: SI unit ("1" for dimensionless; degrees at the user-facing edge, as in the scene file).
+        bijection: the map from the solver's unconstrained coordinate onto the valid range.
+        doc: what it sets, in words.
+        fd_step: central finite-difference step of its Jacobian column (0: a forward-mode AD render).
+            Geometry columns come from finite differences with common random numbers (the AD
+            integrators' derivatives in vertex positions are biased, README); the sun's frame is
+            set as a whole transform. Larger steps than usual: the columns' Monte Carlo noise falls
+            as 1 / step (README), the truncation error of these smooth maps is small.
+        relative_step: ``fd_step`` is relative to the parameter's value.
+        materials: for ``parts.P.*``, the material types that have it (grey values only).
+        bsdf_fields: for ``parts.P.*``, the Mitsuba BSDF fields it sets.
+        scene_fields: the scene-file fields it replaces (default: its own).
+    """
+
+    pattern: str
+    unit: str
+    bijection: Bijection
+    doc: str
+    fd_step: float = 0.0
+    relative_step: bool = False
+    materials: tuple[type, ...] = ()
+    bsdf_fields: tuple[str, ...] = ()
+    scene_fields: tuple[str, ...] = ()
+
+    @property
+    def field(self) -> str:
+        """The last component of the name (``alpha_x``)."""
+        return self.pattern.rsplit(".", 1)[-1]
+
+    def applies_to(self, material: Material) -> bool:
+        """Whether a part of this material has this parameter (grey, i.e. scalar, values only)."""
+        if not isinstance(material, self.materials):
+            return False
+        value = getattr(material, "alpha_x" if self.field == "alpha" else self.field)
+        return not isinstance(value, tuple)
+
+
+_CONDUCTORS = (Conductor, Mirror)
+PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
+    Parameter("wrinkles.D", "1", Bijection(2.0, 3.0), "W-M fractal dimension (eq. 2-1): vertex positions of every wrinkled part",
+              fd_step=0.02),
+    Parameter("wrinkles.G", "m", POSITIVE, "W-M height scale (eq. 2-1): vertex positions of every wrinkled part",
+              fd_step=0.01, relative_step=True),
+    Parameter("wrinkles.rms_m", "m", POSITIVE, "rms height of the wrinkles: sets G at the current D",
+              fd_step=0.03, relative_step=True, scene_fields=("G",)),
+    Parameter("parts.P.alpha_x", "1", ROUGHNESS, "GGX roughness along the part's tangent axis",
+              materials=(Conductor,), bsdf_fields=("alpha_u",)),
+    Parameter("parts.P.alpha_y", "1", ROUGHNESS, "GGX roughness across the part's tangent axis",
+              materials=(Conductor,), bsdf_fields=("alpha_v",)),
+    Parameter("parts.P.alpha", "1", ROUGHNESS, "both roughnesses, tied (isotropic)",
+              materials=(Conductor,), bsdf_fields=("alpha_u", "alpha_v"), scene_fields=("alpha_x", "alpha_y")),
+    Parameter("parts.P.eta", "1", POSITIVE, "real part of the conductor's refractive index (grey)",
+              materials=_CONDUCTORS, bsdf_fields=("eta",)),
+    Parameter("parts.P.k", "1", POSITIVE, "imaginary part of the conductor's refractive index (grey)",
+              materials=_CONDUCTORS, bsdf_fields=("k",)),
+    Parameter("parts.P.kd", "1", UNIT, "Lambert albedo (grey)", materials=(Lambert,), bsdf_fields=("reflectance",)),
+    Parameter("sun.irradiance_w_m2", "W m^-2", POSITIVE, "the sun's irradiance on a surface facing it"),
+    Parameter("sun.elevation_deg", "deg", Bijection(-90.0, 90.0), "elevation of the direction towards the sun above world xy",
+              fd_step=0.5, scene_fields=("direction",)),
+    Parameter("sun.azimuth_deg", "deg", Bijection(-math.inf), "azimuth of the direction towards the sun, world +x to +y",
+              fd_step=0.5, scene_fields=("direction",)),
+)}
+GEOMETRY = ("wrinkles.D", "wrinkles.G", "wrinkles.rms_m")
+SUN_ANGLES = ("sun.elevation_deg", "sun.azimuth_deg")
+
+
+def _pattern(name: str) -> str:
+    section, *rest = name.split(".")
+    return f"parts.P.{rest[-1]}" if section == "parts" and len(rest) == 2 else name
+
+
+def parameter(name: str) -> Parameter:
+    """The registry entry of a parameter name (``parts.panels.alpha_x`` -> ``parts.P.alpha_x``)."""
+    pattern = _pattern(name)
+    if pattern not in PARAMETERS:
+        check_choice("parameter", name, PARAMETERS)
+    return PARAMETERS[pattern]
+
+
+def _materials(scene: Scene) -> dict[str, Material]:
+    return {part: make_material(spec.material, spec.overrides, where=f"parts.{part}") for part, spec in scene.parts.items()}
+
+
+def available(scene: Scene) -> list[str]:
+    """Every parameter name that can be freed (or swept) in ``scene``, in registry order."""
+    materials = _materials(scene)
+    names = []
+    for p in PARAMETERS.values():
+        if p.pattern.startswith("parts."):
+            names += [p.pattern.replace(".P.", f".{part}.") for part, m in materials.items() if p.applies_to(m)]
+        elif not p.pattern.startswith("wrinkles.") or scene.wrinkles.enabled:
+            names.append(p.pattern)
+    return names
+
+
+def check_names(scene: Scene, names: list[str] | tuple[str, ...], argument: str = "free") -> None:
+    """Raise :class:`InputError` for an unknown or repeated name, or two names that set the same value."""
+    valid = available(scene)
+    if not names:
+        raise InputError(f"`{argument}` must name at least one parameter; valid: {', '.join(valid)}.")
+    for name in names:
+        check_choice(argument, name, valid)
+    if len(set(names)) != len(names):
+        raise InputError(f"`{argument}` names a parameter twice: {list(names)}.")
+    for a in names:
+        for b in names:
+            # the sun's two angles set its direction together
+            if a < b and scene_keys(a) & scene_keys(b) and {a, b} != set(SUN_ANGLES):
+                raise InputError(f"`{a}` and `{b}` set the same scene value; free one of them.")
+
+
+def scene_keys(name: str) -> set[str]:
+    """The scene-file keys whose values parameter ``name`` replaces."""
+    head = name.rsplit(".", 1)[0]
+    return {f"{head}.{f}" for f in parameter(name).scene_fields} or {name}
+
+
+def rms_of(w: WrinkleSettings, D: float | Array, G: float | Array) -> Array:
+    """Expected rms height (m) of the wrinkles ``w`` at (D, G)."""
+    return wm_rms(D, G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)
+
+
+def G_of(w: WrinkleSettings, D: float | Array, rms: float | Array) -> Array:
+    """The height scale G (m) that gives the wrinkles ``w`` an rms height ``rms`` (m) at D."""
+    return wm_G_from_rms(D, rms, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)
+
+
+def sun_angles_deg(direction: tuple[float, float, float] | np.ndarray) -> tuple[float, float]:
+    """Elevation and azimuth (deg) of the direction towards the sun, from its direction of travel."""
+    towards = -np.asarray(direction, float) / np.linalg.norm(direction)
+    return math.degrees(math.asin(float(np.clip(towards[2], -1.0, 1.0)))), math.degrees(math.atan2(towards[1], towards[0]))
+
+
+def sun_direction(elevation_deg: float | Array, azimuth_deg: float | Array) -> Array:
+    """The sun's direction of travel from the elevation and azimuth (deg) of the direction towards it."""
+    el, az = jnp.deg2rad(elevation_deg), jnp.deg2rad(azimuth_deg)
+    return -jnp.stack([jnp.cos(el) * jnp.cos(az), jnp.cos(el) * jnp.sin(az), jnp.sin(el)])
+
+
+_GETTERS: dict[str, Callable[[Scene], float]] = {
+    "wrinkles.D": lambda s: s.wrinkles.D,
+    "wrinkles.G": lambda s: s.wrinkles.G,
+    "wrinkles.rms_m": lambda s: float(rms_of(s.wrinkles, s.wrinkles.D, s.wrinkles.G)),
+    "sun.irradiance_w_m2": lambda s: s.sun.irradiance_w_m2,
+    "sun.elevation_deg": lambda s: sun_angles_deg(s.sun.direction)[0],
+    "sun.azimuth_deg": lambda s: sun_angles_deg(s.sun.direction)[1],
+}
+
+
+def scene_value(scene: Scene, name: str) -> float:
+    """The value of parameter ``name`` in the scene (its fixed value, or a fit's default start)."""
+    if name in _GETTERS:
+        return float(_GETTERS[name](scene))
+    _, part, field = name.split(".")
+    m = make_material(scene.parts[part].material, scene.parts[part].overrides)
+    return float(m.alpha_x if field == "alpha" else getattr(m, field))
+
+
+def fd_step(scene: Scene, name: str) -> float:
+    """The central finite-difference step of ``name`` at the scene's value (0: forward-mode AD)."""
+    p = parameter(name)
+    return p.fd_step * (scene_value(scene, name) if p.relative_step else 1.0)
+
+
+def parameter_table() -> str:
+    """The registry as a Markdown table (the README's list of free parameters is this text)."""
+    rows = ["| name | unit | valid range | Jacobian column | sets |", "|---|---|---|---|---|"]
+    for p in PARAMETERS.values():
+        column = "forward-mode AD" if not p.fd_step else (
+            f"central differences, step {p.fd_step:g}{' x value' if p.relative_step else ' ' + p.unit}")
+        kinds = f" ({', '.join(m.__name__ for m in p.materials)})" if p.materials else ""
+        rows.append(f"| `{p.pattern}` | {p.unit} | {p.bijection.describe()} | {column} | {p.doc}{kinds} |")
+    return "\n".join(rows)

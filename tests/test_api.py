@@ -1,0 +1,142 @@
+"""The public face: ``import spacefit as sf`` reaches every documented name, leaves JAX's global
+configuration alone, and the README's Python examples run."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+import pytest
+from helpers import small_scene, write_plate_obj
+
+import spacefit as sf
+
+README = Path(__file__).resolve().parents[1] / "README.md"
+
+
+def readme_api_names() -> set[str]:
+    """The names in the first column of the README's "Python API" table."""
+    text = README.read_text()
+    section = text.split("## Python API", 1)[1].split("\n## ", 1)[0]
+    return set(re.findall(r"^\| `sf\.(\w+)`", section, flags=re.MULTILINE))
+
+
+def test_all_matches_the_readme_api_table():
+    assert set(sf.__all__) == readme_api_names()
+    for name in sf.__all__:
+        assert getattr(sf, name) is not None, name
+
+
+def test_import_leaves_jax_x64_as_it_was():
+    """A fresh process: importing spacefit (and rendering) must not switch JAX's 64-bit mode."""
+    code = ("import jax; before = jax.config.jax_enable_x64; import spacefit as sf; "
+            "assert jax.config.jax_enable_x64 == before, 'import changed jax_enable_x64'; print(before)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"
+
+
+def plate_scene(tmp_path: Path, kd: float) -> sf.Scene:
+    return small_scene(write_plate_obj(tmp_path / "plate.obj"), {"material": "white_paint", "kd": kd}, render={"spp": 8})
+
+
+def test_images_work_with_plain_optimistix_without_casts(tmp_path):
+    """Recover a plate's albedo with optimistix directly on sf.render_function, in the caller's
+    (default, 32-bit) JAX mode: no dtype casts, and the fit still runs inside spacefit's x64 scope."""
+    assert not jax.config.jax_enable_x64
+    truth = sf.render(plate_scene(tmp_path, 0.6))
+    image = sf.render_function(plate_scene(tmp_path, 0.3), ["parts.plate.kd"])
+
+    def residuals(x, args):
+        return image(x) - truth
+
+    solution = optx.least_squares(residuals, optx.LevenbergMarquardt(rtol=1e-4, atol=1e-6), jnp.array([0.3]), max_steps=20)
+    assert solution.value.dtype == jnp.float32
+    assert float(solution.value[0]) == pytest.approx(0.6, rel=0.02)
+    assert not jax.config.jax_enable_x64
+
+
+def test_jacobian_of_albedo_is_the_image_over_kd(tmp_path):
+    """A Lambert image is linear in kd: d(image)/d(kd) = image / kd (independent seeds, so within noise)."""
+    scene = plate_scene(tmp_path, 0.4)
+    jac = sf.jacobian(scene, ["parts.plate.kd"], spp=64, spp_grad=64)
+    column, expected = jac.columns["parts.plate.kd"], jac.image / 0.4
+    lit = expected.max(axis=-1) > 0
+    assert jac.at == {"parts.plate.kd": pytest.approx(0.4)}
+    assert column[lit].mean() == pytest.approx(expected[lit].mean(), rel=0.01)
+    assert np.all(column[~lit] == 0)
+
+
+def test_scene_values_by_python_value():
+    scene = sf.default_scene().with_values({"camera.position_m": np.array([0, 0, 50]), "parts.panels.alpha_x": np.float32(0.1),
+                                            "render.spp": np.int64(4)})
+    assert scene.camera.position_m == (0.0, 0.0, 50.0)
+    assert scene.parts["panels"].overrides["alpha_x"] == pytest.approx(0.1)
+    assert scene.render.spp == 4
+    assert sf.load_scene(None, "render.spp=3").render.spp == 3  # one string is one override
+    assert sf.load_scene(None, {"render.spp": 5}) == sf.default_scene().with_values({"render.spp": 5})
+    with pytest.raises(sf.InputError, match="camera.positon_m"):
+        scene.with_values({"camera.positon_m": [0, 0, 1]})
+
+
+def test_part_image_and_table_match_the_parts_lit_pixels(tmp_path):
+    """The part-ID image names the part at each pixel: on a scene of the panels case the lit pixels
+    are target pixels, each part's mean is that of its own pixels, and space is -1."""
+    scene = sf.load_case("panels").truth_scene.with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50.0,
+                                                           "render.spp": 4})
+    renderer = sf.Renderer(scene)
+    radiance, parts = renderer.render(), renderer.part_image()
+    assert parts.names == ("body", "panels", "legs")
+    assert parts.ids.shape == (48, 48)
+    assert set(np.unique(parts.ids)) == {-1, 0, 1, 2}
+    lit = radiance.max(axis=-1) > 0
+    interior = lit & (parts.ids == -1)
+    # only pixels on the silhouette, lit through the filter's footprint, may be lit and see space
+    assert interior.sum() < 0.2 * lit.sum()
+    table = parts.table(radiance)
+    grey = radiance.mean(axis=-1)
+    assert table["legs"]["pixels"] == int((parts.ids == 2).sum())
+    assert table["legs"]["mean_radiance_w_m2_sr"] == pytest.approx(float(grey[parts.ids == 2].mean()))
+    assert table["target"]["pixels"] == int((parts.ids >= 0).sum())
+
+
+def test_set_values_in_place_equals_a_reloaded_scene():
+    """Sweeps change values in place: the same image as a scene loaded with those values."""
+    base = sf.load_case("panels").truth_scene.with_values({"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0,
+                                                          "render.spp": 4})
+    changed = {"parts.panels.alpha_x": 0.3, "parts.legs.kd": 0.7, "sun.elevation_deg": 60.0, "sun.azimuth_deg": -100.0}
+    renderer = sf.Renderer(base)
+    renderer.set_values(changed)
+    reloaded = base.with_values({"parts.panels.alpha_x": 0.3, "parts.legs.kd": 0.7,
+                                 "sun.direction": list(np.asarray(travel_direction(60.0, -100.0)))})
+    assert np.allclose(renderer.render(), sf.render(reloaded), rtol=1e-5, atol=1e-7)
+    with pytest.raises(sf.InputError, match="parts.panels.alpha_q"):
+        renderer.set_values({"parts.panels.alpha_q": 0.1})
+
+
+def travel_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
+    el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
+    return -np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+
+
+def test_readme_parameter_table_is_the_registry():
+    assert sf.parameter_table() in README.read_text()
+
+
+def readme_python_blocks() -> list[str]:
+    return re.findall(r"```python\n(.*?)```", README.read_text(), flags=re.DOTALL)
+
+
+@pytest.mark.parametrize("index", range(len(readme_python_blocks())))
+def test_readme_python_block_runs(index, tmp_path, monkeypatch):
+    """Every Python block of the README runs as written (from the repository root), so the docs cannot rot."""
+    monkeypatch.chdir(README.parent)
+    block = readme_python_blocks()[index]
+    assert "sf." in block and "from spacefit." not in block and "import spacefit." not in block
+    exec(compile(block, f"README.md python block {index}", "exec"), {"__name__": "readme", "OUT": tmp_path})
