@@ -15,7 +15,7 @@ import time
 
 from studyio import machine
 
-from spacefit.render.renderer import Renderer
+from spacefit.rendering.renderer import Renderer
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import load_scene
 

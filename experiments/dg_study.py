@@ -32,12 +32,12 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from spacefit import Observation, fit, identifiability  # noqa: E402
 import spacefit as sf  # noqa: E402
-from spacefit.fit.params import free_parameters  # noqa: E402
-from spacefit.render.values import scene_values_fn  # noqa: E402
+from spacefit.fitting.params import free_parameters  # noqa: E402
+from spacefit.rendering.values import scene_values_fn  # noqa: E402
 from spacefit.geometry.wm import wm_rms  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
-from spacefit.render.renderer import Renderer  # noqa: E402
-from spacefit.render.bridge import DrJitScene, render_params  # noqa: E402
+from spacefit.rendering.renderer import Renderer  # noqa: E402
+from spacefit.rendering.bridge import DrJitScene, render_params  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 
 NAMES = ["wrinkles.D", "wrinkles.G"]

@@ -29,8 +29,8 @@ from spacefit.progress import Progress  # noqa: E402
 
 # Seed of the high-spp references: the synthetic cases' (data/synthetic/*.toml), never a test render's.
 REFERENCE_SEED = 7
-from spacefit.render.renderer import Renderer  # noqa: E402
-from spacefit.render.backend import dr  # noqa: E402
+from spacefit.rendering.renderer import Renderer  # noqa: E402
+from spacefit.rendering.backend import dr  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 from spacefit.scene.config import load_scene  # noqa: E402
 

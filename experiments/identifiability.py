@@ -4,7 +4,7 @@ The thesis's scene (Table 4-2: f = 7000 mm, field of view 19.5 deg, target attit
 sun along the view) with the thesis's wrinkles (D 2.3, G 10 m, L 0.1 m), references with 2 %
 Gaussian noise; for each camera range and image width, the standard errors of D, G and the rms
 height that a fit could reach, their correlation, and the Fisher information's eigenvalues (in
-(D, rms height)), from :func:`spacefit.fit.identifiability`, without fitting. Writes
+(D, rms height)), from :func:`spacefit.fitting.identifiability`, without fitting. Writes
 ``identifiability.csv`` and ``identifiability.png`` to ``--out``.
 
 Run: ``.venv/bin/python experiments/identifiability.py [--full]``.
@@ -24,7 +24,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from spacefit import Observation, identifiability  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
-from spacefit.render.renderer import Renderer  # noqa: E402
+from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 from spacefit.scene.config import load_scene  # noqa: E402
 

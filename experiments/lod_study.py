@@ -37,7 +37,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from spacefit.progress import Progress  # noqa: E402
-from spacefit.render.renderer import Renderer  # noqa: E402
+from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 from spacefit.scene.config import WrinkleSettings, load_scene  # noqa: E402
 from spacefit.scene.lod import LOD_TOLERANCE  # noqa: E402

@@ -29,8 +29,8 @@ from IPython.display import Image, display
 
 from spacefit import Observation, fit, identifiability
 from spacefit.output import preview_scale, to_srgb8
-from spacefit.render.renderer import render
-from spacefit.render.exr import read_exr
+from spacefit.rendering.renderer import render
+from spacefit.rendering.exr import read_exr
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import load_scene
 

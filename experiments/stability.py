@@ -3,7 +3,7 @@
 One-dimensional sweeps around the panels case (experiments/cases.py; free: panel alpha_x, alpha_y
 and leg kd), and around the wrinkles case for D (free: D, G). For each condition value a reference
 is rendered at the truth, every solver fits it from the condition's start, and the outcome is
-classified by :func:`spacefit.fit.failures.classify` (default tolerance: 5 % relative, 0.02 in D):
+classified by :func:`spacefit.fitting.failures.classify` (default tolerance: 5 % relative, 0.02 in D):
 
 - ``start_offset``: start = truth * (1 + f) for each parameter (kd held inside (0, 1), below).
 - ``alpha``: true panel alpha_x = alpha_y = a, leg kd 0.5; start 50 % off as in the panels case

@@ -22,7 +22,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from spacefit.output import preview_scale, to_srgb8  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
-from spacefit.render.renderer import Renderer  # noqa: E402
+from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 from spacefit.scene.config import load_scene  # noqa: E402
 

@@ -72,7 +72,7 @@ def _start_values(items: Sequence[str]) -> dict[str, float]:
 
 def _fit(args: argparse.Namespace) -> int:
     """Run ``spacefit fit``; exit code 0 when the solver converged, NOT_CONVERGED otherwise."""
-    from spacefit.fit.report import format_result
+    from spacefit.fitting.report import format_result
     from spacefit.pipeline import fit_to_folder
 
     given = {"solver": args.solver, "loss": args.loss, "spp": args.spp, "spp_grad": args.spp_grad,

@@ -12,14 +12,14 @@ from typing import Any
 import numpy as np
 
 from spacefit.errors import InputError, check_choice
-from spacefit.fit.report import write_fit_report
-from spacefit.fit.loop import FitResult, fit
-from spacefit.fit.problem import Observation
+from spacefit.fitting.report import write_fit_report
+from spacefit.fitting.loop import FitResult, fit
+from spacefit.fitting.problem import Observation
 from spacefit.geometry.mesh import export_stl
 from spacefit.output import check_writable, staged_output, versions, write_render
 from spacefit.progress import Progress
-from spacefit.render.exr import read_exr, write_exr
-from spacefit.render.renderer import Renderer
+from spacefit.rendering.exr import read_exr, write_exr
+from spacefit.rendering.renderer import Renderer
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import Scene, load_scene, parse_override
 from spacefit.scene.parameters import scene_keys
@@ -98,13 +98,13 @@ def fit_to_folder(
         scenes: scene TOML files: one for all references, or one per reference in order.
         free: parameter names (see :mod:`spacefit.scene.parameters`); their start values are the first
             scene's unless ``start`` is given.
-        out_dir: output folder of the report (see :mod:`spacefit.fit.report`).
+        out_dir: output folder of the report (see :mod:`spacefit.fitting.report`).
         overrides: ``key=value`` scene overrides applied to every scene; none may fix a free parameter.
         resolution: (width, height) px replacing every scene's ``render.resolution``; the
             references must have that size.
         sigma: noise standard deviation of the references, W m^-2 sr^-1 (residuals are divided by it).
         quiet: no progress display or messages on stderr.
-        options: keyword arguments of :func:`spacefit.fit.fit` (``solver``, ``loss``, ``start``,
+        options: keyword arguments of :func:`spacefit.fitting.fit` (``solver``, ``loss``, ``start``,
             ``spp``, ``spp_grad``, ``max_steps``, ...).
 
     Returns:

@@ -8,11 +8,11 @@ import numpy as np
 import pytest
 
 from spacefit.errors import InputError
-from spacefit.fit.params import free_parameters
-from spacefit.render.renderer import Renderer
-from spacefit.render.values import scene_values_fn
+from spacefit.fitting.params import free_parameters
+from spacefit.rendering.renderer import Renderer
+from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.parameters import PARAMETERS, scene_value
-from spacefit.render.bridge import DrJitScene, render_params, render_values
+from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import load_scene
 
@@ -26,6 +26,7 @@ CASE = [
 NAMES = [
     "parts.panels.alpha_x", "parts.panels.alpha_y", "parts.panels.eta", "parts.panels.k", "parts.legs.kd",
     "sun.irradiance_w_m2", "parts.body.alpha", "wrinkles.D", "wrinkles.rms_m", "sun.elevation_deg", "sun.azimuth_deg",
+    "target.attitude_x_deg", "target.position_y_m",
 ]
 
 
@@ -51,7 +52,7 @@ def case():
     scene = load_scene(None, CASE)
     free = free_parameters(scene, NAMES)
     assembly = assemble(scene)
-    dscene = DrJitScene(Renderer(assembly), spp=1024, spp_grad=1024)
+    dscene = DrJitScene(Renderer(assembly, crop=False), spp=1024, spp_grad=1024)  # D, G and the pose move vertices
     x0 = jnp.array([scene_value(scene, n) for n in NAMES])
     return free, dscene, scene_values_fn(assembly, free.names), x0
 

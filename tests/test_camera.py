@@ -7,7 +7,7 @@ import pytest
 from helpers import small_scene, write_sphere_obj
 
 from spacefit.geometry.frames import CameraFrame, Intrinsics, attitude_matrix, project
-from spacefit.render.renderer import render
+from spacefit.rendering.renderer import render
 from spacefit.scene.assembly import assemble
 
 

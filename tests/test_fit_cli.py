@@ -13,8 +13,8 @@ from helpers import small_scene, write_sphere_obj
 from spacefit.cli import NOT_CONVERGED, main
 from spacefit import FitResult
 from spacefit.pipeline import fit_to_folder
-from spacefit.render.renderer import render
-from spacefit.render.exr import read_exr, write_exr
+from spacefit.rendering.renderer import render
+from spacefit.rendering.exr import read_exr, write_exr
 
 TRUE_KD = 0.5
 REPORT = ["comparison.png", "convergence.png", "fit.json"]
@@ -71,7 +71,7 @@ def test_fit_to_folder_returns_the_result(case, tmp_path):
 
 
 def test_error_while_writing_the_report_leaves_nothing(case, tmp_path, monkeypatch):
-    import spacefit.fit.report as report
+    import spacefit.fitting.report as report
 
     def broken(result):
         raise OSError("disk full")

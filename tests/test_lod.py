@@ -10,10 +10,10 @@ import pytest
 
 from spacefit.errors import InputError
 from spacefit import Observation, fit
-from spacefit.fit.problem import fit_scene as _fit_scene
+from spacefit.fitting.problem import fit_scene as _fit_scene
 from spacefit.materials import Conductor, Lambert
 from spacefit.pipeline import render_to_folder
-from spacefit.render.renderer import Renderer
+from spacefit.rendering.renderer import Renderer
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import load_scene
 from spacefit.scene.lod import effective_alpha, effective_material

@@ -12,7 +12,7 @@ from helpers import small_scene, write_sphere_obj
 from spacefit.errors import InputError
 from spacefit.geometry.lander import builtin_lander
 from spacefit.geometry.mesh import PartMesh, export_stl, load_grouped, load_part, validate_part
-from spacefit.render.renderer import render
+from spacefit.rendering.renderer import render
 
 
 def same_triangles(a: PartMesh, b: PartMesh) -> bool:

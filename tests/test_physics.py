@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from helpers import pixel_directions, small_scene, write_plate_obj, write_sphere_obj
 
-from spacefit.render.renderer import render
+from spacefit.rendering.renderer import render
 
 E = 5.0  # sun irradiance, W m^-2
 
@@ -19,7 +19,7 @@ def unit(v):
 @pytest.mark.parametrize(("theta_deg", "passes"), [(0.0, 1), (40.0, 1), (70.0, 1), (40.0, 4)])
 def test_lambert_plate_matches_kd_E_cos_over_pi(tmp_path, monkeypatch, theta_deg, passes):
     """Also with the samples split into passes (as big renders are), which must not bias."""
-    import spacefit.render.renderer as renderer
+    import spacefit.rendering.renderer as renderer
 
     monkeypatch.setattr(renderer, "MAX_SAMPLES_PER_PASS", renderer.MAX_SAMPLES_PER_PASS if passes == 1 else 32 * 32 * 4)
     kd = 0.5

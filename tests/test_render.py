@@ -10,8 +10,8 @@ import pytest
 
 from spacefit.cli import main
 from spacefit.errors import InputError
-from spacefit.render.renderer import Renderer
-from spacefit.render.exr import read_exr
+from spacefit.rendering.renderer import Renderer
+from spacefit.rendering.exr import read_exr
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import load_scene
 

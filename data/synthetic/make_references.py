@@ -28,7 +28,7 @@ from spacefit.cases import add_noise
 from spacefit.errors import check_choice
 from spacefit.output import preview_scale, staged_output, to_srgb8, versions, write_json, write_png
 from spacefit.progress import Progress
-from spacefit.render.exr import write_exr
+from spacefit.rendering.exr import write_exr
 
 HERE = Path(__file__).resolve().parent
 NOISE_PERCENT = (2, 5)

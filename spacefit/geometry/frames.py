@@ -24,6 +24,7 @@ Conventions (all lengths in metres, angles in radians):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from types import ModuleType
 
 import numpy as np
 from jaxtyping import Float
@@ -31,12 +32,17 @@ from jaxtyping import Float
 from spacefit.errors import InputError
 
 
-def attitude_matrix(angles: Float[np.ndarray, "3"]) -> Float[np.ndarray, "3 3"]:
-    """Rotation ``R1(alpha) R2(beta) R3(gamma)`` of thesis section 3.2 from angles in radians."""
-    a, b, c = np.asarray(angles, dtype=float)
-    r1 = np.array([[1, 0, 0], [0, np.cos(a), np.sin(a)], [0, -np.sin(a), np.cos(a)]])
-    r2 = np.array([[np.cos(b), 0, -np.sin(b)], [0, 1, 0], [np.sin(b), 0, np.cos(b)]])
-    r3 = np.array([[np.cos(c), np.sin(c), 0], [-np.sin(c), np.cos(c), 0], [0, 0, 1]])
+def attitude_matrix(angles: Float[np.ndarray, "3"], xp: ModuleType = np) -> Float[np.ndarray, "3 3"]:
+    """Rotation ``R1(alpha) R2(beta) R3(gamma)`` of thesis section 3.2 from angles in radians.
+
+    ``xp`` is the array module: NumPy, or ``jax.numpy`` for a rotation differentiable in the angles.
+    """
+    angles = np.asarray(angles, dtype=float) if xp is np else angles
+    a, b, c = angles[0], angles[1], angles[2]
+    one, zero = xp.ones_like(a), xp.zeros_like(a)
+    r1 = xp.stack([xp.stack([one, zero, zero]), xp.stack([zero, xp.cos(a), xp.sin(a)]), xp.stack([zero, -xp.sin(a), xp.cos(a)])])
+    r2 = xp.stack([xp.stack([xp.cos(b), zero, -xp.sin(b)]), xp.stack([zero, one, zero]), xp.stack([xp.sin(b), zero, xp.cos(b)])])
+    r3 = xp.stack([xp.stack([xp.cos(c), xp.sin(c), zero]), xp.stack([-xp.sin(c), xp.cos(c), zero]), xp.stack([zero, zero, one])])
     return r1 @ r2 @ r3
 
 

@@ -147,9 +147,20 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
               fd_step=0.5, scene_fields=("direction",)),
     Parameter("sun.azimuth_deg", "deg", Bijection(-math.inf), "azimuth of the direction towards the sun, world +x to +y",
               fd_step=0.5, scene_fields=("direction",)),
+    *(Parameter(f"target.attitude_{axis}_deg", "deg", Bijection(-math.inf),
+                f"the target's attitude angle {name} (about object {axis}, thesis 3.2): every vertex",
+                fd_step=0.5, scene_fields=("attitude_deg",)) for axis, name in zip("xyz", ("alpha", "beta", "gamma"))),
+    *(Parameter(f"target.position_{axis}_m", "m", Bijection(-math.inf), f"the target's world {axis} position: every vertex",
+                fd_step=0.02, scene_fields=("position_m",)) for axis in "xyz"),
 )}
 GEOMETRY = ("wrinkles.D", "wrinkles.G", "wrinkles.rms_m")
 SUN_ANGLES = ("sun.elevation_deg", "sun.azimuth_deg")
+ATTITUDE = ("target.attitude_x_deg", "target.attitude_y_deg", "target.attitude_z_deg")
+POSITION = ("target.position_x_m", "target.position_y_m", "target.position_z_m")
+# Parameters that move vertices: a render of them needs the whole film, not the target's window.
+MOVES_VERTICES = (*GEOMETRY, *ATTITUDE, *POSITION)
+# Parameters that set one scene value together.
+JOINT = (SUN_ANGLES, ATTITUDE, POSITION)
 
 
 def _pattern(name: str) -> str:
@@ -192,8 +203,7 @@ def check_names(scene: Scene, names: list[str] | tuple[str, ...], argument: str 
         raise InputError(f"`{argument}` names a parameter twice: {list(names)}.")
     for a in names:
         for b in names:
-            # the sun's two angles set its direction together
-            if a < b and scene_keys(a) & scene_keys(b) and {a, b} != set(SUN_ANGLES):
+            if a < b and scene_keys(a) & scene_keys(b) and not any({a, b} <= set(group) for group in JOINT):
                 raise InputError(f"`{a}` and `{b}` set the same scene value; free one of them.")
 
 
@@ -232,6 +242,8 @@ _GETTERS: dict[str, Callable[[Scene], float]] = {
     "sun.irradiance_w_m2": lambda s: s.sun.irradiance_w_m2,
     "sun.elevation_deg": lambda s: sun_angles_deg(s.sun.direction)[0],
     "sun.azimuth_deg": lambda s: sun_angles_deg(s.sun.direction)[1],
+    **{name: (lambda s, i=i: s.target.attitude_deg[i]) for i, name in enumerate(ATTITUDE)},
+    **{name: (lambda s, i=i: s.target.position_m[i]) for i, name in enumerate(POSITION)},
 }
 
 

@@ -29,8 +29,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from spacefit.render.backend import dr, mi
-from spacefit.render.renderer import Renderer, to_value, render_threads
+from spacefit.rendering.backend import dr, mi
+from spacefit.rendering.renderer import Renderer, to_value, render_threads
 
 SceneValues = Mapping[str, Array]
 

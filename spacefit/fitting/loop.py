@@ -1,7 +1,7 @@
 """``fit``: recover scene parameters from reference images with gradient-based solvers.
 
-One function, one result type. The set-up is :mod:`spacefit.fit.problem`, the solvers
-:mod:`spacefit.fit.solvers`, the standard errors :mod:`spacefit.fit.uncertainty`; this module runs
+One function, one result type. The set-up is :mod:`spacefit.fitting.problem`, the solvers
+:mod:`spacefit.fitting.solvers`, the standard errors :mod:`spacefit.fitting.uncertainty`; this module runs
 the loop and records each step.
 """
 
@@ -19,12 +19,12 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import check_choice, check_count, check_range
-from spacefit.fit.problem import Observation, setup
-from spacefit.fit.solvers import SOLVERS, Options, Status
-from spacefit.fit.uncertainty import estimate, stderr_corr, warnings_for
+from spacefit.fitting.problem import Observation, setup
+from spacefit.fitting.solvers import SOLVERS, Options, Status
+from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
-from spacefit.render.renderer import PartImage
+from spacefit.rendering.renderer import PartImage
 
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
 # region may try (and reject) a single non-finite point.
@@ -106,9 +106,9 @@ def fit(
     Args:
         observations: one or several (reference, scene) pairs of the same target; fitted jointly.
             Fixed parameters come from each scene.
-        free: parameter names (see :mod:`spacefit.fit.params`), e.g. ``["parts.panels.alpha_x"]``.
+        free: parameter names (see :mod:`spacefit.fitting.params`), e.g. ``["parts.panels.alpha_x"]``.
         solver: one of :data:`SOLVERS`.
-        loss: ``"pixel"``, ``"pyramid"`` or ``"stats"`` (see :mod:`spacefit.fit.losses`).
+        loss: ``"pixel"``, ``"pyramid"`` or ``"stats"`` (see :mod:`spacefit.fitting.losses`).
         start: start values (physical units); default: the first scene's values.
         spp, spp_grad: samples per pixel of primal and derivative renders (default: the scene's).
         max_steps: solver step limit.

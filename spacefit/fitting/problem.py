@@ -16,14 +16,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_count
-from spacefit.fit.losses import residual_fn
-from spacefit.fit.params import FreeParameters, free_parameters
-from spacefit.render.bridge import DrJitScene, render_params, render_values
-from spacefit.render.renderer import PartImage, Renderer
-from spacefit.render.values import scene_values_fn
+from spacefit.fitting.losses import residual_fn
+from spacefit.fitting.params import FreeParameters, free_parameters
+from spacefit.rendering.bridge import DrJitScene, render_params, render_values
+from spacefit.rendering.renderer import PartImage, Renderer
+from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import Scene
-from spacefit.scene.parameters import GEOMETRY, G_of, rms_of, scene_value
+from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, rms_of, scene_value
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
 # Seed offset of the second, independent Jacobian used for the standard errors.
@@ -77,13 +77,13 @@ def _problem(
     seed: int, seed_grad: int, integrator: str,
 ) -> Problem:
     renders_x, renders_alt, renders_v, residuals, values_fns, part_images, references = [], [], [], [], [], [], []
-    geometry = any(n in GEOMETRY for n in free.names)
+    moving = any(n in MOVES_VERTICES for n in free.names)
     for i, obs in enumerate(observations):
         ref = check_reference(obs, i)
         scene = obs.scene
         assembly = assemble(scene)
-        # D and G move the vertices: render the whole film, the target's window would not hold them
-        renderer = Renderer(assembly, crop=not geometry)
+        # D, G and the pose move the vertices: render the whole film, the target's window would not hold them
+        renderer = Renderer(assembly, crop=not moving)
         dscene = DrJitScene(renderer, spp or scene.render.spp, spp_grad or spp or scene.render.spp, integrator)
         values_of = scene_values_fn(assembly, free.names)
         renders_x.append(render_params(dscene, values_of, free.fd_steps, seed, seed_grad))

@@ -17,7 +17,7 @@ from spacefit.errors import check_range
 from spacefit.geometry.frames import project
 from spacefit.materials import Conductor, Lambert, Material, Mirror
 from spacefit.progress import ProgressCallback
-from spacefit.render.backend import dr, mi, select_variant
+from spacefit.rendering.backend import dr, mi, select_variant
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.config import Scene
 
@@ -206,10 +206,10 @@ class Renderer:
         """Set registered parameters (:mod:`spacefit.scene.parameters`, e.g. ``{"parts.panels.alpha_x":
         0.1, "sun.elevation_deg": 30}``) in the loaded scene, without reloading it.
 
-        Geometry parameters (D, G, rms height) move vertices outside the target's window: render
+        Parameters that move vertices (D, G, rms height, the pose) may move them out of the window: render
         those with ``crop=False``, or build a new Renderer.
         """
-        from spacefit.render.values import scene_values_fn
+        from spacefit.rendering.values import scene_values_fn
         from spacefit.scene.parameters import check_names
 
         names = list(values)

@@ -15,7 +15,8 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from spacefit.scene.assembly import Assembly
-from spacefit.scene.parameters import GEOMETRY, G_of, SUN_ANGLES, parameter, scene_value, sun_direction
+from spacefit.geometry.frames import attitude_matrix
+from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, G_of, parameter, scene_value, sun_direction
 
 SceneValuesFn = Callable[[Array], dict[str, Array]]
 
@@ -31,21 +32,26 @@ def scene_values_fn(assembly: Assembly, names: Sequence[str]) -> SceneValuesFn:
     scene = assembly.scene
     w = scene.wrinkles
     geometry = [n for n in GEOMETRY if n in index]
+    pose = [n for n in (*ATTITUDE, *POSITION) if n in index]
     sun_angles = [n for n in SUN_ANGLES if n in index]
-    fixed_angles = {n: scene_value(scene, n) for n in SUN_ANGLES}
+    fixed = {n: scene_value(scene, n) for n in (*SUN_ANGLES, *ATTITUDE, *POSITION)}
+
+    def value(x: Array, name: str) -> Array:
+        return x[index[name]] if name in index else fixed[name]
 
     def values_of(x: Array) -> dict[str, Array]:
         out: dict[str, Array] = {}
         if sun_angles:
-            el, az = (x[index[n]] if n in index else fixed_angles[n] for n in SUN_ANGLES)
-            out["sun.to_world"] = sun_direction(el, az)
-        if geometry:
+            out["sun.to_world"] = sun_direction(*(value(x, n) for n in SUN_ANGLES))
+        if geometry or pose:
             D = x[index["wrinkles.D"]] if "wrinkles.D" in index else w.D
             G = x[index["wrinkles.G"]] if "wrinkles.G" in index else w.G
             if "wrinkles.rms_m" in index:
                 G = G_of(w, D, x[index["wrinkles.rms_m"]])
-            for part in assembly.refinements:
-                out[f"{part}.vertex_positions"] = jnp.ravel(assembly.world_vertices(part, D, G))
+            rotation = attitude_matrix(jnp.deg2rad(jnp.stack([value(x, n) for n in ATTITUDE])), jnp)
+            position = jnp.stack([value(x, n) for n in POSITION])
+            for part in assembly.parts if pose else assembly.refinements:
+                out[f"{part}.vertex_positions"] = jnp.ravel(assembly.object_vertices(part, D, G) @ rotation.T + position)
         for name, i in index.items():
             if name == "sun.irradiance_w_m2":
                 out["sun.irradiance.value"] = jnp.full(3, x[i])

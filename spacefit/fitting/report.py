@@ -23,7 +23,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
-from spacefit.fit.loop import FitResult
+from spacefit.fitting.loop import FitResult
 from spacefit.output import PREVIEW_PERCENTILE, preview_scale, staged_output, to_srgb8, versions, write_json
 
 RADIANCE_UNIT = "W m$^{-2}$ sr$^{-1}$"

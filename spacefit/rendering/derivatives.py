@@ -19,11 +19,11 @@ from jaxtyping import Array, Float
 
 from spacefit.errors import InputError, check_count
 from spacefit.precision import float64
-from spacefit.render.bridge import DrJitScene, render_params
-from spacefit.render.renderer import Renderer
-from spacefit.render.values import scene_values_fn
+from spacefit.rendering.bridge import DrJitScene, render_params
+from spacefit.rendering.renderer import Renderer
+from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.config import Scene
-from spacefit.scene.parameters import GEOMETRY, check_names, fd_step, scene_value
+from spacefit.scene.parameters import MOVES_VERTICES, check_names, fd_step, scene_value
 
 
 def render_function(
@@ -41,7 +41,7 @@ def render_function(
     check_count("spp_grad", spp_grad)
     if seed == seed_grad:
         raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
-    renderer = Renderer(scene, crop=not any(n in GEOMETRY for n in free))
+    renderer = Renderer(scene, crop=not any(n in MOVES_VERTICES for n in free))
     spp = spp or scene.render.spp
     dscene = DrJitScene(renderer, spp, spp_grad or spp)
     steps = np.array([fd_step(scene, n) for n in free])

@@ -16,8 +16,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.fit.params import FreeParameters
-from spacefit.fit.problem import Observation, Problem, Setup, setup
+from spacefit.fitting.params import FreeParameters
+from spacefit.fitting.problem import Observation, Problem, Setup, setup
 from spacefit.precision import float64
 
 # |correlation| above which two parameters are reported as not separately determined.

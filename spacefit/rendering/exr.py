@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from spacefit.errors import InputError
-from spacefit.render.backend import mi
+from spacefit.rendering.backend import mi
 
 
 def write_exr(path: str | Path, image: np.ndarray) -> None:
