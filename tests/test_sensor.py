@@ -197,3 +197,18 @@ def test_bad_radiance_is_refused_before_any_work():
         expected_dn(np.ones((8, 8, 3)), Sensor(wavelength_m=(5e-7, 6e-7)), intr)
     with pytest.raises(InputError, match="Distortion.k1"):
         Distortion(k1=float("inf"))
+
+
+def test_expected_dn_and_distortion_differentiate_in_jax():
+    import jax
+
+    intr = Intrinsics(7.0, 4e-3, 12, 10)
+    sensor = Sensor(psf_sigma_px=1.0)
+    radiance = np.random.default_rng(0).uniform(0.0, 0.1, size=(10, 12, 3))
+    tangent = np.random.default_rng(1).uniform(0.0, 1.0, size=(10, 12, 3))
+    _, jvp = jax.jvp(lambda r: expected_dn(r, sensor, intr), (radiance,), (tangent,))
+    # linear in the radiance: the derivative along a tangent is the tangent's own DN less the bias
+    assert np.allclose(jvp, np.asarray(expected_dn(tangent, sensor, intr)) - sensor.bias_dn, rtol=1e-10)
+    c = Distortion(k1=0.5)
+    grad = jax.grad(lambda r: distort_image(r, intr, c).sum())(radiance)
+    assert grad.shape == radiance.shape and np.isfinite(grad).all() and grad.sum() > 0
