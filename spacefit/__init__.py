@@ -19,7 +19,14 @@ from spacefit.fitting.solvers import SOLVERS as SOLVERS
 from spacefit.fitting.solvers import Status as Status
 from spacefit.fitting.uncertainty import Identifiability as Identifiability
 from spacefit.fitting.uncertainty import identifiability as identifiability
+from spacefit.geometry.distortion import Distortion as Distortion
+from spacefit.geometry.distortion import distort_image as distort_image
+from spacefit.geometry.frames import Intrinsics as Intrinsics
+from spacefit.geometry.frames import pixel_solid_angles as pixel_solid_angles
 from spacefit.geometry.wm import wm_rms as wm_rms
+from spacefit.imageio import ObservedImage as ObservedImage
+from spacefit.imageio import read_image as read_image
+from spacefit.imageio import write_observation as write_observation
 from spacefit.geometry.wm import wm_rms_slope as wm_rms_slope
 from spacefit.materials import PRESETS as PRESETS
 from spacefit.materials import Conductor as Conductor
@@ -42,6 +49,11 @@ from spacefit.scene.parameters import PARAMETERS as PARAMETERS
 from spacefit.scene.parameters import Parameter as Parameter
 from spacefit.scene.parameters import available as available_parameters
 from spacefit.scene.parameters import parameter_table as parameter_table
+from spacefit.sensor import Sensor as Sensor
+from spacefit.sensor import expected_dn as expected_dn
+from spacefit.sensor import noise_variance_dn as noise_variance_dn
+from spacefit.sensor import observe as observe
+from spacefit.sensor import saturated_mask as saturated_mask
 
 __version__ = "0.1.0"
 
@@ -52,4 +64,6 @@ __all__ = [
     "available_parameters", "case_names", "default_scene", "fit", "fit_to_folder", "format_result", "identifiability",
     "jacobian", "load_case", "load_scene", "parameter_table", "read_exr", "render", "render_function",
     "render_to_folder", "wm_rms", "wm_rms_slope", "write_exr", "write_fit_report",
+    "Distortion", "Intrinsics", "ObservedImage", "Sensor", "distort_image", "expected_dn", "noise_variance_dn", "observe",
+    "pixel_solid_angles", "read_image", "saturated_mask", "write_observation",
 ]

@@ -133,3 +133,27 @@ def project(
         u = u0 + intrinsics.focal_px * c[:, 0] / depth
         v = v0 - intrinsics.focal_px * c[:, 1] / depth
     return np.stack([u, v], axis=-1), depth
+
+
+def pixel_solid_angles(intrinsics: Intrinsics) -> Float[np.ndarray, "h w"]:
+    """Solid angle (sr) of each pixel seen from the pinhole, exact for a flat rectangular pixel.
+
+    A rectangle ``[0, x] x [0, y]`` of the image plane at distance f from the pinhole, with one
+    corner at the foot of the optical axis, subtends ``F(x, y) = atan(x y / (f sqrt(x^2 + y^2 + f^2)))``
+    (integrate ``f dx dy / (x^2 + y^2 + f^2)^(3/2)``); F is odd in x and in y, so a pixel
+    ``[x0, x1] x [y0, y1]`` subtends ``F(x1, y1) - F(x0, y1) - F(x1, y0) + F(x0, y0)`` wherever it
+    lies. For pixels small against f this is the familiar ``(p / f)^2 cos^3(theta)`` (theta the
+    pixel centre's angle off the axis), which it matches to O((p / f)^2) relative. Round-off: the
+    differences of F lose about ``1e-16 (f / p)^2 tan^2(half field)`` relative (1e-11 for the
+    thesis's 4 mm pixels at f = 7 m, 1e-5 for 4 um pixels).
+
+    Returns:
+        (height, width) solid angles in sr, row v, column u (pixel (u, v) covers [u, u + 1) x [v, v + 1)).
+    """
+    f, p = intrinsics.focal_length, intrinsics.pixel_pitch
+    u0, v0 = intrinsics.principal_point
+    x = (np.arange(intrinsics.width + 1) - u0) * p
+    y = (np.arange(intrinsics.height + 1) - v0) * p
+    xx, yy = np.meshgrid(x, y)
+    corner = np.arctan(xx * yy / (f * np.sqrt(xx**2 + yy**2 + f**2)))
+    return corner[1:, 1:] - corner[1:, :-1] - corner[:-1, 1:] + corner[:-1, :-1]

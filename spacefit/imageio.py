@@ -1,0 +1,308 @@
+"""Observation files: simulated DN written as 16-bit PNG, TIFF or FITS; references read from EXR, FITS, PNG, TIFF.
+
+Writing (:func:`write_observation`) stores integer DN (from :func:`spacefit.sensor.observe`) and
+every :class:`~spacefit.sensor.Sensor` value twice: in a JSON sidecar ``<file>.json`` and, for FITS,
+in the header (standard keys where they exist, ``HIERARCH SPACEFIT SENSOR <FIELD>`` for all).
+
+Reading (:func:`read_image`) returns an :class:`ObservedImage`: float data, its unit (``"DN"`` or
+radiance), the metadata found, and the mask of usable pixels (not saturated, not transparent, in the user's
+mask). What each format holds:
+
+* EXR: radiance (W m^-2 sr^-1), as spacefit renders write it.
+* FITS: radiance if ``BUNIT`` says ``W m-2 sr-1``, otherwise DN. ``EXPTIME`` (s), ``GAIN``
+  (electrons per DN, the FITS convention, the inverse of ``Sensor.gain_dn_per_electron``) and
+  ``SATURATE`` (DN) are read where present. The first row of a FITS image is its bottom (FITS
+  standard 4.0, section 8.1; what DS9 shows), so rows are flipped to spacefit's top-down order.
+* PNG and TIFF: integer values whose response must be named: ``"linear"`` (DN) or ``"srgb"`` (the
+  sRGB encoding, IEC 61966-2-1, decoded to values linear in light, scaled to the file's full scale).
+  A spacefit sidecar names it for its own files.
+
+Saturated values are masked: at or above the FITS ``SATURATE`` keyword, else the sidecar's sensor
+``saturation_dn``, else the integer type's full scale (2^bits - 1); float DN without either has no
+saturation mask.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import colour
+import numpy as np
+import tifffile
+from astropy.io import fits
+from jaxtyping import Bool, Float
+
+from spacefit.errors import InputError, check_choice
+from spacefit.sensor import Sensor
+
+RADIANCE_UNIT = "W m^-2 sr^-1"
+UNITS = {"DN": "DN", "radiance": RADIANCE_UNIT}
+RESPONSES = ("linear", "srgb")
+FORMATS = {".exr": "exr", ".fits": "fits", ".fit": "fits", ".fts": "fits", ".png": "png", ".tif": "tiff", ".tiff": "tiff"}
+WRITABLE = (".fits", ".fit", ".fts", ".png", ".tif", ".tiff")
+FITS_RADIANCE_UNIT = "W m-2 sr-1"
+FITS_SENSOR_KEY = "SPACEFIT SENSOR"
+
+
+@dataclass(frozen=True)
+class ObservedImage:
+    """An image read from a file.
+
+    Attributes:
+        data: (height, width, channels) float64 values in ``unit``.
+        unit: ``"DN"`` or ``"W m^-2 sr^-1"``.
+        mask: (height, width, channels) bool, True where a value can be used.
+        metadata: what the file said: ``format``, ``response``, ``saturation_dn`` (None: unknown),
+            ``header`` (FITS cards), ``exposure_time_s``, ``gain_electrons_per_dn`` where present,
+            ``sensor`` (the fields of :class:`Sensor`, from a spacefit FITS header or sidecar),
+            ``sidecar`` (the sidecar's content).
+        path: the file read.
+    """
+
+    data: Float[np.ndarray, "h w c"]
+    unit: str
+    mask: Bool[np.ndarray, "h w c"]
+    metadata: dict[str, Any]
+    path: str
+
+
+def sidecar_path(path: str | Path) -> Path:
+    """The JSON sidecar of an observation file: ``obs.fits`` -> ``obs.fits.json``."""
+    p = Path(path)
+    return p.with_name(p.name + ".json")
+
+
+def _format(path: Path, allowed: tuple[str, ...]) -> str:
+    suffix = path.suffix.lower()
+    if suffix not in allowed:
+        raise InputError(f"{str(path)!r}: unknown image format {suffix or '(no extension)'!r}; supported: {', '.join(allowed)}.")
+    return FORMATS[suffix]
+
+
+def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata: dict[str, Any] | None = None) -> Path:
+    """Write integer DN as 16-bit PNG, TIFF or FITS (by the extension) with its JSON sidecar.
+
+    Args:
+        path: ``.png``, ``.tif`` / ``.tiff`` or ``.fits`` / ``.fit`` / ``.fts``.
+        dn: (height, width, channels) unsigned integers (1 or 3 channels for PNG) in the sensor's
+            ADC range, as :func:`spacefit.sensor.observe` returns.
+        sensor: the sensor that made them; all its values go to the sidecar and the FITS header.
+        metadata: anything JSON can hold, added to the sidecar under ``metadata``.
+    Returns:
+        the sidecar's path.
+    """
+    p = Path(path)
+    kind = _format(p, WRITABLE)
+    data = np.asarray(dn)
+    if data.ndim != 3 or data.dtype.kind != "u":
+        raise InputError(f"`dn` must be (height, width, channels) unsigned integers, got {data.dtype} of shape {data.shape}.")
+    if data.size and int(data.max()) > sensor.adc_max_dn:
+        raise InputError(f"`dn` holds {int(data.max())}, above the sensor's 2^{sensor.bit_depth} - 1 = {sensor.adc_max_dn} DN.")
+    if kind == "png":
+        if sensor.bit_depth > 16 or data.shape[2] not in (1, 3):
+            raise InputError(f"{str(p)!r}: a PNG holds 1 or 3 channels of up to 16 bits; this is {data.shape[2]} channels of {sensor.bit_depth} bits: write TIFF or FITS.")
+        from spacefit.rendering.png import write_png  # Mitsuba's Bitmap: Pillow cannot write 16-bit colour
+
+        write_png(p, data.astype(np.uint16))
+    elif kind == "tiff":
+        tifffile.imwrite(p, data if data.shape[2] > 1 else data[..., 0], photometric="rgb" if data.shape[2] == 3 else "minisblack")
+    else:
+        planes = np.moveaxis(data[::-1], -1, 0)  # FITS rows run bottom-up; channels are NAXIS3
+        fits.PrimaryHDU(np.ascontiguousarray(planes if data.shape[2] > 1 else planes[0]), header=_fits_header(sensor)).writeto(p, overwrite=True)
+    side = sidecar_path(p)
+    content = {"unit": "DN", "response": "linear", "saturation_dn": sensor.saturation_dn, "sensor": sensor.to_dict(), "metadata": metadata or {}}
+    side.write_text(json.dumps(content, indent=2))
+    return side
+
+
+def _fits_header(sensor: Sensor) -> fits.Header:
+    h = fits.Header()
+    h["BUNIT"] = ("adu", "digital numbers (DN)")
+    h["EXPTIME"] = (sensor.exposure_time_s, "[s] exposure time")
+    h["GAIN"] = (1.0 / sensor.gain_dn_per_electron, "[electron/adu] inverse of the ADC gain")
+    h["RDNOISE"] = (sensor.read_noise_electrons, "[electron] read noise rms")
+    h["SATURATE"] = (sensor.saturation_dn, "[adu] lowest saturated value")
+    for name, value in sensor.to_dict().items():
+        if isinstance(value, list):
+            for i, v in enumerate(value):
+                h[f"HIERARCH {FITS_SENSOR_KEY} {name} {i}"] = v
+        else:
+            h[f"HIERARCH {FITS_SENSOR_KEY} {name}"] = value
+    return h
+
+
+def _sensor_from_header(header: fits.Header) -> dict[str, Any] | None:
+    prefix = f"{FITS_SENSOR_KEY} "
+    found = {k[len(prefix) :]: v for k, v in header.items() if k.startswith(prefix)}
+    if not found:
+        return None
+    out: dict[str, Any] = {}
+    for field in dataclasses.fields(Sensor):
+        if field.name == "wavelength_m":
+            indexed = sorted((int(k.split()[-1]), v) for k, v in found.items() if k.startswith("wavelength_m "))
+            out["wavelength_m"] = [v for _, v in indexed]
+        elif field.name in found:
+            out[field.name] = found[field.name]
+    return out
+
+
+def _read_fits(path: Path) -> tuple[np.ndarray, fits.Header]:
+    try:
+        with fits.open(path) as hdus:
+            hdu = next((h for h in hdus if h.data is not None and h.data.ndim >= 2), None)
+            if hdu is None:
+                raise InputError(f"{str(path)!r} holds no image (no HDU with 2 or 3 axes).")
+            data, header = np.array(hdu.data), hdu.header.copy()
+    except OSError as err:
+        raise InputError(f"{str(path)!r} could not be read as FITS: {err}") from None
+    if data.ndim == 2:
+        data = data[None]
+    if data.ndim != 3:
+        raise InputError(f"{str(path)!r}: a FITS image must have 2 or 3 axes (x, y, channel), it has {data.ndim}.")
+    return np.moveaxis(data, 0, -1)[::-1], header
+
+
+def _read_tiff(path: Path) -> np.ndarray:
+    try:
+        with tifffile.TiffFile(path) as tif:
+            series = tif.series[0]
+            data, axes = series.asarray(), series.axes
+    except (OSError, tifffile.TiffFileError) as err:
+        raise InputError(f"{str(path)!r} could not be read as TIFF: {err}") from None
+    if data.ndim == 2:
+        return data[..., None]
+    if axes == "SYX":
+        return np.moveaxis(data, 0, -1)
+    if axes == "YXS":
+        return data
+    raise InputError(f"{str(path)!r}: a TIFF must hold one image (axes YX, YXS or SYX), it has axes {axes}.")
+
+
+def _read_png(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """PNG values and, for grey-alpha or RGBA files, the alpha channel."""
+    from spacefit.rendering.png import read_png  # Mitsuba's Bitmap: Pillow reduces 16-bit colour to 8 bits
+
+    data = read_png(path)
+    if data.shape[2] in (2, 4):
+        return data[..., :-1], data[..., -1]
+    return data, None
+
+
+def _user_mask(mask: str | Path | np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
+    """A (height, width) bool from a mask image or array: nonzero (in any channel) = use."""
+    if isinstance(mask, (str, Path)):
+        p = Path(mask)
+        if not p.is_file():
+            raise InputError(f"mask file {str(p)!r} does not exist.")
+        kind = _format(p, (".fits", ".fit", ".fts", ".png", ".tif", ".tiff"))
+        values = _read_fits(p)[0] if kind == "fits" else _read_tiff(p) if kind == "tiff" else _read_png(p)[0]
+    else:
+        values = np.asarray(mask)
+    values = values if values.ndim == 3 else values[..., None]
+    if values.shape[:2] != shape[:2]:
+        raise InputError(f"`mask` is {values.shape[1]} x {values.shape[0]} px, the image {shape[1]} x {shape[0]} px.")
+    return np.any(values != 0, axis=-1)
+
+
+def read_image(path: str | Path, *, unit: str | None = None, response: str | None = None, mask: str | Path | np.ndarray | None = None) -> ObservedImage:
+    """Read a reference or observation, refusing what cannot be used as asked.
+
+    Args:
+        path: ``.exr``, ``.fits`` / ``.fit`` / ``.fts``, ``.png``, ``.tif`` / ``.tiff``.
+        unit: ``"radiance"`` or ``"DN"`` to require one; None takes the file's.
+        response: for PNG and TIFF, ``"linear"`` or ``"srgb"``; not needed for spacefit's own files.
+        mask: a mask image (FITS, PNG, TIFF) or (height, width) array; nonzero = use the pixel.
+    Returns:
+        the data, unit, metadata and usable-pixel mask (see :class:`ObservedImage`).
+    Raises:
+        InputError: missing file, unknown format, a display image asked for as radiance, PNG / TIFF
+            without a response, NaN or infinity (any unit), negative radiance, a mask of another size.
+    """
+    wanted = UNITS[check_choice("unit", unit, UNITS)] if unit is not None else None
+    if response is not None:
+        check_choice("response", response, RESPONSES)
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"image file {str(p)!r} does not exist.")
+    kind = _format(p, tuple(FORMATS))
+    side = sidecar_path(p)
+    sidecar = json.loads(side.read_text()) if side.is_file() else None
+    meta: dict[str, Any] = {"format": kind, "response": "linear", "saturation_dn": None}
+    if sidecar is not None:
+        meta["sidecar"] = sidecar
+        meta["sensor"] = sidecar.get("sensor")
+        meta["saturation_dn"] = sidecar.get("saturation_dn")
+    alpha = None
+    if kind in ("exr", "fits") and response not in (None, "linear"):
+        raise InputError(f"{str(p)!r}: `response` applies to PNG and TIFF; {kind.upper()} data are linear.")
+    if kind == "exr":
+        if wanted == "DN":
+            raise InputError(f"{str(p)!r}: an EXR holds radiance (W m^-2 sr^-1), not DN; read it with unit='radiance'.")
+        from spacefit.rendering.exr import read_exr  # imports Mitsuba, only needed for EXR
+
+        raw, found_unit = read_exr(p), RADIANCE_UNIT
+    elif kind == "fits":
+        raw, header = _read_fits(p)
+        found_unit = _fits_unit(header, wanted, p)
+        meta["header"] = {k: v for k, v in header.items() if k not in ("COMMENT", "HISTORY", "")}
+        for key, name in (("EXPTIME", "exposure_time_s"), ("GAIN", "gain_electrons_per_dn")):
+            if key in header:
+                meta[name] = float(header[key])
+        meta["sensor"] = _sensor_from_header(header) or meta.get("sensor")
+        if "SATURATE" in header:
+            meta["saturation_dn"] = float(header["SATURATE"])
+    else:
+        if kind == "tiff":
+            raw = _read_tiff(p)
+        else:
+            raw, alpha = _read_png(p)
+        bits = 8 * raw.dtype.itemsize if raw.dtype.kind in "ui" else None
+        what = f"an {bits}-bit {kind.upper()}" if bits else f"a floating-point {kind.upper()}"
+        if wanted == RADIANCE_UNIT:
+            hint = "a display image; " if bits == 8 else ""
+            raise InputError(f"{str(p)!r} is {what}: {hint}it holds digital numbers, not radiance (W m^-2 sr^-1). Give the render's radiance .exr, or read it as DN with its response (response='linear' or 'srgb').")
+        response = response or (sidecar or {}).get("response")
+        if response is None:
+            raise InputError(f"{str(p)!r} is {what} of unknown response; say how its values encode light: response='linear' (DN) or response='srgb' (sRGB-encoded).")
+        meta["response"] = response
+        found_unit = "DN"
+    values = np.asarray(raw, dtype=float)
+    full_scale = float(np.iinfo(raw.dtype).max) if raw.dtype.kind in "ui" else None
+    if meta["saturation_dn"] is None:
+        meta["saturation_dn"] = full_scale if found_unit == "DN" else None
+    _check_values(values, found_unit, p)
+    usable = np.ones(values.shape, dtype=bool)
+    if meta["saturation_dn"] is not None:
+        usable &= values < meta["saturation_dn"]
+    if alpha is not None:
+        usable &= (alpha > 0)[..., None]
+    if mask is not None:
+        usable &= _user_mask(mask, values.shape)[..., None]
+    if meta["response"] == "srgb":
+        scale = full_scale or 1.0
+        values = np.asarray(colour.cctf_decoding(values / scale, function="sRGB")) * scale
+    return ObservedImage(values, found_unit, usable, meta, str(p))
+
+
+def _fits_unit(header: fits.Header, wanted: str | None, path: Path) -> str:
+    bunit = str(header.get("BUNIT", "")).strip()
+    if not bunit:
+        return wanted or "DN"
+    found = RADIANCE_UNIT if bunit.replace(".", " ").split() == FITS_RADIANCE_UNIT.split() else "DN"
+    if wanted is not None and wanted != found:
+        raise InputError(f"{str(path)!r}: its BUNIT = {bunit!r} is {found}, but {wanted} was asked for.")
+    return found
+
+
+def _check_values(values: np.ndarray, unit: str, path: Path) -> None:
+    nonfinite = int(np.count_nonzero(~np.all(np.isfinite(values), axis=-1)))
+    if nonfinite:
+        raise InputError(f"{str(path)!r}: {nonfinite} pixels are NaN or infinite; a reference must be finite: set them to 0 and exclude them with a mask image (`mask=`).")
+    if unit == RADIANCE_UNIT:
+        negative = int(np.count_nonzero(np.any(values < 0, axis=-1)))
+        if negative:
+            raise InputError(f"{str(path)!r}: {negative} pixels have negative radiance; radiance must be >= 0 W m^-2 sr^-1.")

@@ -1,0 +1,137 @@
+"""Observation files: round trips of DN and sensor values, references' units and masks, and every refusal."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import tifffile
+from astropy.io import fits
+
+from spacefit.errors import InputError
+from spacefit.geometry.frames import Intrinsics
+from spacefit.imageio import read_image, sidecar_path, write_observation
+from spacefit.rendering.exr import write_exr
+from spacefit.rendering.png import write_png
+from spacefit.sensor import Sensor, observe
+
+SENSOR = Sensor(exposure_time_s=2e-3, gain_dn_per_electron=0.5, bias_dn=50.0, bit_depth=12, full_well_electrons=None, wavelength_m=(6e-7, 5.5e-7, 4.5e-7), psf_sigma_px=0.7)
+
+
+@pytest.fixture(scope="module")
+def dn() -> np.ndarray:
+    intr = Intrinsics(7.0, 4e-3, 24, 16)
+    radiance = np.linspace(0.0, 0.07, 24 * 16 * 3).reshape(16, 24, 3)  # up to about 3000 DN
+    radiance[3, 4] = 0.5  # about 20,000 DN: saturates the 12-bit ADC (4095) there and in its nearest neighbours
+    return observe(radiance, SENSOR, intr, seed=3)
+
+
+@pytest.mark.parametrize("name", ["obs.fits", "obs.png", "obs.tiff"])
+def test_round_trip_of_dn_and_sensor(tmp_path, dn, name):
+    side = write_observation(tmp_path / name, dn, SENSOR, {"seed": 3})
+    assert side == sidecar_path(tmp_path / name) and side.is_file()
+    img = read_image(tmp_path / name)
+    assert img.unit == "DN" and img.data.shape == dn.shape
+    assert np.array_equal(img.data, dn.astype(float))
+    assert Sensor(**img.metadata["sensor"]) == SENSOR
+    assert img.metadata["sidecar"]["metadata"] == {"seed": 3}
+    # saturated at the sensor's ADC maximum (not the 16-bit file's): exactly those values masked
+    assert np.array_equal(~img.mask, dn >= 4095) and not img.mask[3, 4].any() and (~img.mask).sum() < 30
+
+
+def test_fits_header_holds_every_sensor_value(tmp_path, dn):
+    write_observation(tmp_path / "obs.fits", dn, SENSOR)
+    sidecar_path(tmp_path / "obs.fits").unlink()  # the header alone must carry them
+    img = read_image(tmp_path / "obs.fits")
+    assert Sensor(**img.metadata["sensor"]) == SENSOR
+    assert img.metadata["exposure_time_s"] == 2e-3 and img.metadata["gain_electrons_per_dn"] == pytest.approx(2.0)
+    assert img.metadata["header"]["BUNIT"] == "adu" and img.metadata["saturation_dn"] == 4095
+    with fits.open(tmp_path / "obs.fits") as f:
+        # FITS rows run bottom-up and channels are the third axis
+        assert f[0].data.shape == (3, 16, 24) and np.array_equal(f[0].data[1, -1], dn[0, :, 1])
+
+
+def test_foreign_fits_radiance_and_saturate_keyword(tmp_path):
+    rad = np.array([[1.0, 2.0], [3.0, 4.0]])
+    fits.PrimaryHDU(rad, header=fits.Header([("BUNIT", "W m-2 sr-1"), ("EXPTIME", 0.5)])).writeto(tmp_path / "r.fits")
+    img = read_image(tmp_path / "r.fits", unit="radiance")
+    assert img.unit == "W m^-2 sr^-1" and np.array_equal(img.data[..., 0], rad[::-1]) and img.mask.all()
+    assert img.metadata["exposure_time_s"] == 0.5
+    fits.PrimaryHDU(np.array([[10, 900], [1000, 20]], dtype=np.int32), header=fits.Header([("SATURATE", 900)])).writeto(tmp_path / "d.fits")
+    img = read_image(tmp_path / "d.fits")
+    assert img.unit == "DN" and (~img.mask[..., 0]).tolist() == [[True, False], [False, True]]
+    with pytest.raises(InputError, match="BUNIT = 'W m-2 sr-1' is W m\\^-2 sr\\^-1, but DN"):
+        read_image(tmp_path / "r.fits", unit="DN")
+
+
+def test_exr_radiance_and_its_refusals(tmp_path):
+    rad = np.full((4, 5, 3), 0.25, dtype=np.float32)
+    write_exr(tmp_path / "ok.exr", rad)
+    img = read_image(tmp_path / "ok.exr")
+    assert img.unit == "W m^-2 sr^-1" and np.allclose(img.data, 0.25) and img.mask.all()
+    bad = rad.copy()
+    bad[0, 0, 1], bad[1, 2, 0], bad[1, 2, 2], bad[3, 3, 0] = -1.0, -2.0, -0.5, np.nan
+    write_exr(tmp_path / "bad.exr", bad)
+    with pytest.raises(InputError, match="1 pixels are NaN"):
+        read_image(tmp_path / "bad.exr")
+    bad[3, 3, 0] = 0.0
+    write_exr(tmp_path / "bad.exr", bad)
+    with pytest.raises(InputError, match="2 pixels have negative radiance"):
+        read_image(tmp_path / "bad.exr")
+    with pytest.raises(InputError, match="not DN"):
+        read_image(tmp_path / "ok.exr", unit="DN")
+
+
+def test_png_and_tiff_need_their_response(tmp_path):
+    values = np.array([[0, 32768, 65535]], dtype=np.uint16)[..., None]
+    write_png(tmp_path / "lin.png", values)
+    tifffile.imwrite(tmp_path / "lin.tif", values[..., 0])
+    for name in ("lin.png", "lin.tif"):
+        with pytest.raises(InputError, match="unknown response; .*response='linear'"):
+            read_image(tmp_path / name)
+        img = read_image(tmp_path / name, response="linear")
+        assert img.data[0, :, 0].tolist() == [0, 32768, 65535] and img.mask[0, :, 0].tolist() == [True, True, False]
+    # sRGB: half code value is 21.4 % of full scale in light (IEC 61966-2-1)
+    img = read_image(tmp_path / "lin.png", response="srgb")
+    assert img.data[0, 1, 0] / 65535 == pytest.approx(((32768 / 65535 + 0.055) / 1.055) ** 2.4, rel=1e-6)
+    assert img.data[0, 2, 0] == pytest.approx(65535)
+
+
+def test_8_bit_png_is_refused_as_radiance_and_without_response(tmp_path):
+    write_png(tmp_path / "preview.png", np.full((3, 3, 3), 200, dtype=np.uint8))
+    with pytest.raises(InputError, match="is an 8-bit PNG: a display image; it holds digital numbers, not radiance"):
+        read_image(tmp_path / "preview.png", unit="radiance")
+    with pytest.raises(InputError, match="8-bit PNG of unknown response"):
+        read_image(tmp_path / "preview.png")
+    assert read_image(tmp_path / "preview.png", response="srgb").data.shape == (3, 3, 3)
+
+
+def test_user_mask_and_alpha(tmp_path, dn):
+    write_observation(tmp_path / "obs.tiff", dn, SENSOR)
+    user = np.zeros((16, 24), dtype=np.uint8)
+    user[:, :12] = 255
+    write_png(tmp_path / "mask.png", user)
+    img = read_image(tmp_path / "obs.tiff", mask=tmp_path / "mask.png")
+    assert not img.mask[:, 12:].any() and np.array_equal(img.mask[:, :12], dn[:, :12] < 4095)
+    with pytest.raises(InputError, match="`mask` is 5 x 4 px, the image 24 x 16 px"):
+        read_image(tmp_path / "obs.tiff", mask=np.ones((4, 5)))
+    rgba = np.zeros((2, 2, 4), dtype=np.uint16)
+    rgba[0, 0, 3] = 65535
+    write_png(tmp_path / "rgba.png", rgba)
+    img = read_image(tmp_path / "rgba.png", response="linear")
+    assert img.data.shape == (2, 2, 3) and img.mask[..., 0].tolist() == [[True, False], [False, False]]
+
+
+def test_unknown_formats_and_bad_arguments(tmp_path, dn):
+    (tmp_path / "x.jpg").write_bytes(b"\xff\xd8")
+    with pytest.raises(InputError, match=r"unknown image format '.jpg'; supported: .exr, .fits, .fit, .fts, .png, .tif, .tiff"):
+        read_image(tmp_path / "x.jpg")
+    with pytest.raises(InputError, match="does not exist"):
+        read_image(tmp_path / "missing.fits")
+    with pytest.raises(InputError, match="supported: .fits"):
+        write_observation(tmp_path / "obs.exr", dn, SENSOR)
+    with pytest.raises(InputError, match="`response` must be one of 'linear', 'srgb'"):
+        read_image(tmp_path / "x.jpg", response="gamma")
+    with pytest.raises(InputError, match="holds 5000, above the sensor's 2\\^12 - 1 = 4095 DN"):
+        write_observation(tmp_path / "o.fits", np.full((2, 2, 1), 5000, dtype=np.uint16), SENSOR)
+    with pytest.raises(InputError, match="unsigned integers"):
+        write_observation(tmp_path / "o.fits", np.ones((2, 2, 1)), SENSOR)
