@@ -4,13 +4,18 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
+from pathlib import Path
 from collections.abc import Sequence
 
-from spacefit.errors import InputError, check_range
+from spacefit.errors import InputError, check_range, shorten
+from spacefit.fitting.solvers import Status
 from spacefit.scene.parameters import PARAMETERS
 
 NOT_CONVERGED = 3
+INTERRUPTED = 130  # 128 + SIGINT, as shells report Ctrl-C
+TERMINATED = 143  # 128 + SIGTERM
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -22,12 +27,14 @@ def _parser() -> argparse.ArgumentParser:
     r = sub.add_parser("render", parents=[overrides],
                        help="render a scene to radiance.exr, preview.png, scene.toml, render.json")
     r.add_argument("scene", nargs="?", help="scene TOML file (default: the thesis's Table 4-2 scene)")
-    r.add_argument("--out", required=True, help="output folder")
+    r.add_argument("--out", required=True, help="output folder (new, empty, or a previous render with --overwrite)")
+    r.add_argument("--overwrite", action="store_true", help="replace a previous render in --out")
     r.add_argument("--quiet", action="store_true", help="no progress output")
     w = sub.add_parser("scene", parents=[overrides],
                        help="write the resolved scene (defaults: Table 4-2) as TOML to start from")
     w.add_argument("scene", nargs="?", help="scene TOML file to resolve (default: the thesis's scene)")
-    w.add_argument("--out", required=True, help="TOML file to write")
+    w.add_argument("--out", required=True, help="TOML file to write (not an existing file unless --overwrite)")
+    w.add_argument("--overwrite", action="store_true", help="replace an existing file (never the input scene)")
     e = sub.add_parser("export-stl", parents=[overrides], help="write a part (wrinkled body by default) as binary STL")
     e.add_argument("scene", nargs="?", help="scene TOML file (default: the thesis's scene)")
     e.add_argument("--part", default="body")
@@ -43,7 +50,9 @@ def _parser() -> argparse.ArgumentParser:
     f.add_argument("--free", required=True, metavar="NAME[,NAME...]",
                    help="parameters to fit, e.g. parts.panels.alpha_x,parts.legs.kd (P: a part's name): "
                         + ", ".join(f"{p.pattern} [{p.unit}] {p.bijection.describe()}" for p in PARAMETERS.values()))
-    f.add_argument("--out", required=True, metavar="DIR", help="output folder")
+    f.add_argument("--out", required=True, metavar="DIR", help="output folder (new, empty, or a previous fit with --overwrite)")
+    f.add_argument("--overwrite", action="store_true", help="replace a previous fit report in --out")
+    f.add_argument("--resume", action="store_true", help="continue the interrupted fit whose checkpoint is in --out")
     f.add_argument("--solver", metavar="lm|gn|dogleg|bfgs|adam", help="solver (default lm)")
     f.add_argument("--loss", metavar="pixel|pyramid|stats", help="loss (default pixel)")
     f.add_argument("--resolution", nargs=2, type=int, metavar=("W", "H"),
@@ -80,35 +89,71 @@ def _fit(args: argparse.Namespace) -> int:
     result = fit_to_folder(
         args.references, args.scenes, [name.strip() for name in args.free.split(",")], args.out,
         overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, quiet=args.quiet,
-        start=_start_values(args.start), **{k: v for k, v in given.items() if v is not None},
+        overwrite=args.overwrite, resume=args.resume, start=_start_values(args.start),
+        **{k: v for k, v in given.items() if v is not None},
     )
     print(format_result(result))
+    if result.status is Status.INTERRUPTED:
+        print(f"spacefit: interrupted; the best point so far is in {args.out} (continue with --resume)", file=sys.stderr)
+        return INTERRUPTED
     if not result.success:
         print(f"spacefit: the fit did not converge ({result.status}); its report is in {args.out}", file=sys.stderr)
         return NOT_CONVERGED
     return 0
 
 
-def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the process exit code (2 for bad input, 3 for a fit that did not converge)."""
-    args = _parser().parse_args(argv)
-    from spacefit.output import write_text
-    from spacefit.pipeline import export_part_stl, render_to_folder
-    from spacefit.scene.config import load_scene
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that the same clean-up runs (a fit reports its best point)."""
 
+
+def _terminate(signum: int, frame: object) -> None:
+    raise Terminated()
+
+
+def _write_scene(args: argparse.Namespace, text: str) -> None:
+    from spacefit.output import write_text
+
+    out = Path(args.out)
+    if args.scene and out.exists() and out.resolve() == Path(args.scene).resolve():
+        raise InputError(f"`--out` {args.out!r} is the input scene; spacefit never writes over its input.")
+    if out.exists() and not args.overwrite:
+        raise InputError(f"{args.out!r} exists; pass --overwrite to replace it, or choose a new file name.")
+    write_text(out, text)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Entry point; returns the process exit code: 0, 1 for a file system error, 2 for bad input, 3 for a
+    fit that did not converge, 130 for Ctrl-C and 143 for SIGTERM (one line, no traceback)."""
+    args = _parser().parse_args(argv)
+    previous = signal.signal(signal.SIGTERM, _terminate)
     try:
+        from spacefit.pipeline import export_part_stl, render_to_folder
+        from spacefit.scene.config import load_scene
+
         if args.command == "fit":
             return _fit(args)
         scene = load_scene(args.scene, args.overrides)
         if args.command == "render":
-            render_to_folder(scene, args.out, quiet=args.quiet)
+            render_to_folder(scene, args.out, quiet=args.quiet, overwrite=args.overwrite,
+                             inputs=(args.scene,) if args.scene else ())
         elif args.command == "scene":
-            write_text(args.out, scene.to_toml())
+            _write_scene(args, scene.to_toml())
         else:
             print(export_part_stl(scene, args.part, args.out))
     except InputError as err:
-        print(f"spacefit: error: {err}", file=sys.stderr)
+        print(f"spacefit: error: {shorten(str(err), 2000)}", file=sys.stderr)
         return 2
+    except OSError as err:
+        print(f"spacefit: error: {err}", file=sys.stderr)
+        return 1
+    except Terminated:
+        print("spacefit: terminated; nothing half-written was left behind", file=sys.stderr)
+        return TERMINATED
+    except KeyboardInterrupt:
+        print("spacefit: interrupted; nothing half-written was left behind", file=sys.stderr)
+        return INTERRUPTED
+    finally:
+        signal.signal(signal.SIGTERM, previous)
     return 0
 
 

@@ -16,11 +16,35 @@ class InputError(ValueError):
     """A user-supplied value is missing, malformed or outside its allowed range."""
 
 
+class InputTypeError(InputError, TypeError):
+    """A user-supplied value has the wrong type (a string where a number belongs, say)."""
+
+
+# The longest value a message quotes: a 5-million-number vector must not fill the screen.
+MAX_QUOTE = 120
+
+
+def shorten(text: str, limit: int = MAX_QUOTE) -> str:
+    """``text``, cut in the middle to at most ``limit`` characters."""
+    if len(text) <= limit:
+        return text
+    half = (limit - 5) // 2
+    return f"{text[:half]} ... {text[-half:]}"
+
+
+def quote(value: object) -> str:
+    """A value as messages show it: its repr, shortened."""
+    try:
+        return shorten(repr(value))
+    except RecursionError:
+        return f"<a {type(value).__name__} nested too deep to show>"
+
+
 def check_finite(name: str, value: object) -> None:
     """Raise :class:`InputError` if ``value`` (scalar or array) holds NaN or infinity."""
     arr = np.asarray(value, dtype=float)
     if not np.all(np.isfinite(arr)):
-        raise InputError(f"`{name}` must be finite, got {value!r}.")
+        raise InputError(f"`{name}` must be finite, got {quote(value)}.")
 
 
 def check_range(
@@ -45,10 +69,12 @@ def check_range(
     Raises:
         InputError: naming ``name``, the value and the interval.
     """
+    if isinstance(value, (bool, np.bool_)):
+        raise InputTypeError(f"`{name}` must be a number, got the boolean {value!r}.")
     try:
-        x = float(value)  # type: ignore[arg-type]
+        x = float(value)  # type: ignore[arg-type]  (numpy and JAX scalars convert too)
     except (TypeError, ValueError):
-        raise InputError(f"`{name}` must be a number, got {value!r}.") from None
+        raise InputTypeError(f"`{name}` must be a number, got {quote(value)}.") from None
     check_finite(name, x)
     below = x <= lo if lo_open else x < lo
     above = x >= hi if hi_open else x > hi
@@ -70,12 +96,26 @@ def check_vector(name: str, value: Sequence[float], size: int = 3) -> np.ndarray
     """Check that ``value`` is a finite vector of ``size`` numbers and return it as float64."""
     try:
         arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        raise InputError(f"`{name}` must be {size} numbers, got {value!r}.") from None
+    except (TypeError, ValueError, RecursionError):
+        raise InputTypeError(f"`{name}` must be {size} numbers, got {quote(value)}.") from None
     if arr.shape != (size,):
-        raise InputError(f"`{name}` must be {size} numbers, got {value!r}.")
+        raise InputError(f"`{name}` must be {size} numbers, got {quote(value)}.")
     check_finite(name, arr)
     return arr
+
+
+def check_direction(name: str, value: Sequence[float]) -> np.ndarray:
+    """Check a direction vector (3 finite numbers, not all zero) and return it normalised (float64).
+
+    It is scaled by its largest component first, so tiny or huge vectors (``[0, 0, -1e-200]``) do
+    not under- or overflow on the way to unit length.
+    """
+    v = check_vector(name, value)
+    peak = np.abs(v).max()
+    if not peak > 0:
+        raise InputError(f"`{name}` must not be the zero vector.")
+    v = v / peak
+    return v / np.linalg.norm(v)
 
 
 def check_choice(name: str, value: str, choices: Iterable[str]) -> str:
@@ -83,8 +123,9 @@ def check_choice(name: str, value: str, choices: Iterable[str]) -> str:
     import difflib
 
     valid = sorted(choices)
-    if value in valid:
+    if isinstance(value, str) and value in valid:
         return value
-    close = difflib.get_close_matches(str(value), valid, n=1)
+    close = difflib.get_close_matches(str(value), valid, n=1) if isinstance(value, str) else []
     hint = f" Did you mean {close[0]!r}?" if close else ""
-    raise InputError(f"`{name}` must be one of {', '.join(map(repr, valid))}; got {value!r}.{hint}")
+    error = InputError if isinstance(value, str) else InputTypeError
+    raise error(f"`{name}` must be one of {shorten(', '.join(map(repr, valid)), 2000)}; got {quote(value)}.{hint}")

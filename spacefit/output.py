@@ -7,12 +7,14 @@ image) and ``render.json`` (the sidecar: scene, seed, tone map, timings, package
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
 import platform
 import shutil
 import tempfile
+import warnings
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from importlib import metadata
@@ -36,10 +38,17 @@ def preview_scale(radiance: np.ndarray, percentile: float = PREVIEW_PERCENTILE) 
     return 1.0 / float(np.percentile(lit, percentile)) if lit.size else 1.0
 
 
+# Rows tone-mapped at a time: colour-science works in float64, a whole 16k image would need 6 GiB.
+PREVIEW_ROWS = 256
+
+
 def to_srgb8(radiance: np.ndarray, scale: float) -> np.ndarray:
     """Linear radiance times ``scale``, clipped to [0, 1], sRGB-encoded (IEC 61966-2-1) to uint8."""
-    encoded = colour.cctf_encoding(np.clip(radiance * scale, 0.0, 1.0), function="sRGB")
-    return np.round(np.asarray(encoded) * 255.0).astype(np.uint8)
+    out = np.empty(radiance.shape, dtype=np.uint8)
+    for top in range(0, radiance.shape[0], PREVIEW_ROWS):
+        rows = np.clip(radiance[top:top + PREVIEW_ROWS] * scale, 0.0, 1.0)
+        out[top:top + PREVIEW_ROWS] = np.round(np.asarray(colour.cctf_encoding(rows, function="sRGB")) * 255.0)
+    return out
 
 
 def write_png(path: str | Path, rgb8: np.ndarray) -> None:
@@ -76,16 +85,97 @@ def check_writable(out_dir: str | Path) -> Path:
     return out
 
 
+STAGE_PREFIX = ".spacefit-stage-"
+# The files each command writes into its output folder, and the one that marks it as spacefit's.
+RESULT_FILES = {
+    "render": ({"radiance.exr", "preview.png", "scene.toml", "render.json"}, "render.json"),
+    "fit": ({"fit.json", "comparison.png", "convergence.png", "checkpoint.json"}, "fit.json"),
+}
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def clean_stale_stages(folder: Path) -> list[Path]:
+    """Remove the staging folders in ``folder`` left by spacefit processes that no longer run (a
+    SIGKILL leaves them); return them. A stage of a running process is left alone."""
+    removed = []
+    for stage in folder.glob(f"{STAGE_PREFIX}*") if folder.is_dir() else ():
+        pid = stage.name[len(STAGE_PREFIX):].split("-", 1)[0]
+        if pid.isdigit() and not _alive(int(pid)):
+            shutil.rmtree(stage, ignore_errors=True)
+            removed.append(stage)
+    return removed
+
+
+def _is_result(out: Path, command: str) -> bool:
+    """Whether ``out`` holds a previous spacefit ``command`` result: only its files, its marker readable."""
+    names, marker = RESULT_FILES[command]
+    entries = {p.name for p in out.iterdir() if not p.name.startswith(STAGE_PREFIX)}
+    if not entries <= names:
+        return False
+    if marker not in entries:
+        return entries == {"checkpoint.json"}  # a fit killed before its first report
+    try:
+        return "spacefit" in json.loads((out / marker).read_text()).get("versions", {})
+    except (OSError, ValueError, AttributeError):
+        return False
+
+
+def prepare_output(out_dir: str | Path, command: str, *, overwrite: bool = False, resume: bool = False,
+                   inputs: tuple[str | Path, ...] = ()) -> Path:
+    """Check an output folder before any work: it is new or empty, or holds a previous spacefit result
+    of the same command and the user asked to replace it (``overwrite``) or to continue it
+    (``resume``); no input file would be written over. Staging folders of dead spacefit processes in
+    it are removed (with a warning naming them).
+
+    Raises:
+        InputError: naming the folder and what to do.
+    """
+    if not str(out_dir).strip():
+        raise InputError("`--out` must name a folder, got an empty string.")
+    out = check_writable(out_dir)
+    names, _ = RESULT_FILES[command]
+    for path in inputs:
+        p = Path(path)
+        if p.exists() and p.resolve().parent == out.resolve() and p.name in names:
+            raise InputError(f"input file {str(p)!r} is in the output folder {str(out)!r} and would be written over; "
+                             "choose another `--out`.")
+    if not out.exists():
+        return out
+    for stage in clean_stale_stages(out):
+        warnings.warn(f"removed {str(stage)!r}, a staging folder left by an interrupted spacefit run.", stacklevel=2)
+    entries = sorted(p.name for p in out.iterdir())
+    if not entries:
+        return out
+    if not _is_result(out, command):
+        raise InputError(f"output folder {str(out)!r} holds files spacefit did not write ({', '.join(entries[:8])}"
+                         f"{', ...' if len(entries) > 8 else ''}); choose a new or empty folder.")
+    if not (overwrite or resume):
+        raise InputError(f"output folder {str(out)!r} holds a previous spacefit {command} result; pass --overwrite "
+                         "(overwrite=True) to replace it, or choose a new folder.")
+    return out
+
+
 @contextmanager
 def staged_output(out_dir: str | Path) -> Iterator[Path]:
     """Yield a staging folder; on success its files move into ``out_dir``, on error nothing is left.
 
     Files already in ``out_dir`` with other names are kept; same names are replaced at the end only.
+    On an error or interruption only what this call created goes: its stage, and ``out_dir`` if
+    this call created it and it is still empty (another process may have written there since).
     """
     out = check_writable(out_dir)
     created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=".spacefit-", dir=out))
+    stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}-", dir=out))
     try:
         yield stage
         for item in stage.iterdir():
@@ -93,7 +183,8 @@ def staged_output(out_dir: str | Path) -> Iterator[Path]:
     except BaseException:
         shutil.rmtree(stage, ignore_errors=True)
         if created:
-            shutil.rmtree(out, ignore_errors=True)
+            with contextlib.suppress(OSError):
+                out.rmdir()  # only if empty
         raise
     shutil.rmtree(stage, ignore_errors=True)
 

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import dataclasses
+import json
+import math
+import warnings
 import sys
 import time
 from collections.abc import Sequence
@@ -13,14 +16,15 @@ import numpy as np
 
 from spacefit.errors import InputError, check_choice
 from spacefit.fitting.report import write_fit_report
-from spacefit.fitting.loop import FitResult, fit
+from spacefit.fitting.loop import DEFAULT_MAX_STEPS, FitResult, fit
+from spacefit.fitting.solvers import Status
 from spacefit.fitting.problem import Observation
 from spacefit.geometry.mesh import export_stl
-from spacefit.output import check_writable, staged_output, versions, write_render
+from spacefit.output import prepare_output, staged_output, versions, write_json, write_render
 from spacefit.progress import Progress
 from spacefit.rendering.exr import read_exr, write_exr
-from spacefit.rendering.renderer import Renderer
-from spacefit.scene.assembly import assemble
+from spacefit.rendering.renderer import PartImage, Renderer
+from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.config import Scene, load_scene, parse_override
 from spacefit.scene.parameters import scene_keys
 
@@ -30,13 +34,17 @@ def _say(message: str, quiet: bool) -> None:
         print(message, file=sys.stderr, flush=True)
 
 
-def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False) -> tuple[np.ndarray, dict[str, Any]]:
+def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, overwrite: bool = False,
+                     inputs: tuple[str | Path, ...] = ()) -> tuple[np.ndarray, dict[str, Any]]:
     """Render ``scene`` and write radiance.exr, preview.png, scene.toml and render.json to ``out_dir``.
 
-    Every input is checked and the folder is checked writable before rendering; on any error no
-    file is left behind. Returns the radiance image (W m^-2 sr^-1) and the sidecar dict.
+    Every input is checked and the folder is checked (:func:`~spacefit.output.prepare_output`: new,
+    empty, or a previous render replaced only with ``overwrite``; none of the ``inputs`` files
+    written over) before rendering; on any error or interruption nothing is left behind. A
+    non-finite image is refused, naming the cause; an all-black one is written with a warning that
+    says why. Returns the radiance image (W m^-2 sr^-1) and the sidecar dict.
     """
-    check_writable(out_dir)
+    prepare_output(out_dir, "render", overwrite=overwrite, inputs=inputs)
     t0 = time.perf_counter()
     assembly = assemble(scene)
     t_assemble = time.perf_counter() - t0
@@ -49,7 +57,12 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False) 
     radiance = renderer.render(progress=None if quiet else Progress(f"render {r.resolution[0]}x{r.resolution[1]} @ {r.spp} spp"))
     t_render = time.perf_counter() - t0
     parts = renderer.part_image()
+    check_image(radiance, scene)
+    notes = dark_image_notes(radiance, parts, assembly)
+    for note in notes:
+        warnings.warn(note, stacklevel=2)
     sidecar = {
+        "warnings": notes,
         "scene": scene.to_dict(),
         "seed": r.seed,
         "variant": renderer.variant,
@@ -66,11 +79,41 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False) 
     return radiance, sidecar
 
 
+def check_image(radiance: np.ndarray, scene: Scene) -> None:
+    """Refuse a render with non-finite pixels before anything is written, naming the likely cause."""
+    bad = int(np.size(radiance) - np.count_nonzero(np.isfinite(radiance)))
+    if bad:
+        raise InputError(
+            f"the render holds {bad} non-finite values (NaN or inf); nothing was written. Radiance is float32 "
+            f"(at most 3.4e38): `sun.irradiance_w_m2` = {scene.sun.irradiance_w_m2:g} times a glint's BRDF may "
+            "overflow it, as may a roughness near 0; lower them.")
+
+
+def dark_image_notes(radiance: np.ndarray, parts: PartImage, assembly: Assembly) -> list[str]:
+    """Why a render of a target is all black, in words (empty when some pixel is lit)."""
+    if np.any(radiance > 0):
+        return []
+    if not np.any(parts.ids >= 0):
+        return ["the image is black: no pixel centre sees the target (it is outside the view or smaller than a "
+                "pixel); move the camera closer, lengthen `camera.focal_length_mm` or check `target.position_m`."]
+    towards_sun = -assembly.sun_direction
+    phase = math.degrees(math.acos(float(np.clip(towards_sun @ -assembly.camera.forward, -1.0, 1.0))))
+    if phase > 90.0:
+        return [f"the image is black: the sun is behind the target as the camera sees it (phase angle {phase:.0f} deg), "
+                "so only its unlit side is in view; change `sun.direction`."]
+    return ["the image is black although the target is in view and faces the sun: its parts reflect nothing towards "
+            "the camera at this geometry (a mirror-like part's glints missed); raise `render.spp` or change the view."]
+
+
 def export_part_stl(scene: Scene, part: str, path: str | Path) -> Path:
     """Write part ``part`` (wrinkled if the scene wrinkles it) as binary STL in the object frame."""
     check_choice("--part", part, scene.parts)
-    assembly = assemble(scene)
     out = Path(path)
+    if out.suffix.lower() != ".stl":
+        raise InputError(f"`--out` {str(out)!r} must end in .stl: export-stl writes binary STL.")
+    if out.exists():
+        raise InputError(f"{str(out)!r} exists; choose a new file name (spacefit never writes over a file it did not make).")
+    assembly = assemble(scene)
     with staged_output(out.parent) as stage:
         export_stl(stage / out.name, np.asarray(assembly.object_vertices(part)), assembly.faces(part))
     return out
@@ -86,6 +129,8 @@ def fit_to_folder(
     resolution: tuple[int, int] | None = None,
     sigma: float | None = None,
     quiet: bool = False,
+    overwrite: bool = False,
+    resume: bool = False,
     **options: Any,
 ) -> FitResult:
     """Fit the ``free`` parameters to reference EXR files; write fit.json and the plots to ``out_dir``.
@@ -104,13 +149,15 @@ def fit_to_folder(
             references must have that size.
         sigma: noise standard deviation of the references, W m^-2 sr^-1 (residuals are divided by it).
         quiet: no progress display or messages on stderr.
+        overwrite: replace a previous fit report in ``out_dir``.
+        resume: continue the interrupted fit whose checkpoint is in ``out_dir`` (same inputs).
         options: keyword arguments of :func:`spacefit.fitting.fit` (``solver``, ``loss``, ``start``,
             ``spp``, ``spp_grad``, ``max_steps``, ...).
 
     Returns:
         The fit's result.
     """
-    check_writable(out_dir)
+    prepare_output(out_dir, "fit", overwrite=overwrite, resume=resume, inputs=(*references, *scenes))
     if len(scenes) not in (1, len(references)):
         raise InputError(
             "give one scene for all references or one per reference; "
@@ -130,23 +177,78 @@ def fit_to_folder(
         if not quiet:
             display(step, total)
 
-    t0 = time.perf_counter()
-    result = fit(observations, free, progress=progress, **options)
-    t_fit = time.perf_counter() - t0
-    if not quiet and last[0] < last[1]:
-        display(last[0], last[0])  # the solve stopped before its step limit: end the display there
     inputs = {
         "references": [str(path) for path in references],
         "scene_files": [str(path) for path in scenes],
+        "free": list(free),
         "overrides": scene_overrides,
         "scenes": [scene.to_dict() for scene in loaded],
         "sigma": sigma,
-        "options": options,
+        "options": {k: v for k, v in options.items() if k not in ("start", "max_steps")},
     }
+    checkpoint = Checkpoint(Path(out_dir) / CHECKPOINT, inputs)
+    if resume:
+        options = {**options, **checkpoint.resume(options.get("max_steps", DEFAULT_MAX_STEPS))}
+        _say(f"resuming from step {checkpoint.steps} of the checkpoint in {out_dir}", quiet)
+
+    t0 = time.perf_counter()
+    result = fit(observations, free, progress=progress, on_step=checkpoint.update, **options)
+    t_fit = time.perf_counter() - t0
+    if not quiet and last[0] < last[1]:
+        display(last[0], last[0])  # the solve stopped before its step limit: end the display there
     timings = {"read_inputs": t_read, "setup": t_fit - result.wall_time_s}
     write_fit_report(out_dir, result, images, inputs=inputs, timings_s=timings)
+    if result.status is not Status.INTERRUPTED:
+        checkpoint.remove()
     _say(f"wrote {Path(out_dir) / 'fit.json'}, comparison.png and convergence.png", quiet)
     return result
+
+
+CHECKPOINT = "checkpoint.json"
+
+
+class Checkpoint:
+    """The best point of a fit so far, written atomically into its output folder after every step
+    that improves it, so that an interrupted (even killed) fit can be resumed (``--resume``)."""
+
+    def __init__(self, path: Path, inputs: dict[str, Any]) -> None:
+        self.path, self.inputs = path, json.loads(json.dumps(inputs, default=str))
+        self.best: dict[str, Any] | None = None
+        self.steps = 0
+
+    def update(self, entry: dict[str, Any]) -> None:
+        """Record one step's history entry; write the file when the step is the best so far."""
+        self.steps += 1
+        if np.isfinite(entry["loss"]) and (self.best is None or entry["loss"] < self.best["loss"]):
+            self.best = {"loss": float(entry["loss"]), "values": dict(entry["values"])}
+            with staged_output(self.path.parent) as stage:
+                write_json(stage / self.path.name, {"inputs": self.inputs, "best": self.best, "steps": self.steps,
+                                                    "versions": versions()})
+
+    def resume(self, max_steps: int) -> dict[str, Any]:
+        """The fit options that continue from the checkpoint: its best values as the start, and the
+        steps left of ``max_steps``.
+
+        Raises:
+            InputError: without a checkpoint, or for one made with other inputs (naming them).
+        """
+        if not self.path.is_file():
+            raise InputError(f"there is no checkpoint {str(self.path)!r} to resume from; run without --resume.")
+        try:
+            saved = json.loads(self.path.read_text())
+            best, steps, inputs = saved["best"], int(saved["steps"]), saved["inputs"]
+        except (OSError, ValueError, KeyError, TypeError) as err:
+            raise InputError(f"checkpoint {str(self.path)!r} is unreadable ({err}); run without --resume.") from None
+        differ = sorted(k for k in set(inputs) | set(self.inputs) if inputs.get(k) != self.inputs.get(k))
+        if differ:
+            raise InputError(f"checkpoint {str(self.path)!r} was made with other {', '.join(differ)}; resume with the "
+                             "same references, scenes, free parameters and options, or run without --resume.")
+        self.best, self.steps = best, steps
+        return {"start": best["values"], "max_steps": max(max_steps - steps, 1)}
+
+    def remove(self) -> None:
+        """Remove the checkpoint once a finished report holds the result."""
+        self.path.unlink(missing_ok=True)
 
 
 def _check_not_fixed(free: Sequence[str], overrides: Sequence[str]) -> None:

@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -29,6 +29,7 @@ from spacefit.rendering.renderer import PartImage
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
 # region may try (and reject) a single non-finite point.
 NONFINITE_PATIENCE = 3
+DEFAULT_MAX_STEPS = 50
 
 
 @dataclass
@@ -90,7 +91,7 @@ def fit(
     start: Mapping[str, float] | None = None,
     spp: int | None = None,
     spp_grad: int | None = None,
-    max_steps: int = 50,
+    max_steps: int = DEFAULT_MAX_STEPS,
     rtol: float = 1e-3,
     atol: float = 1e-6,
     learning_rate: float = 0.05,
@@ -100,6 +101,7 @@ def fit(
     geometry_jacobian: str = "fd",
     wrinkle_coordinates: str = "rms",
     progress: ProgressCallback | None = None,
+    on_step: Callable[[dict[str, Any]], None] | None = None,
 ) -> FitResult:
     """Fit free scene parameters so that renders match reference images.
 
@@ -122,6 +124,11 @@ def fit(
             better-determined coordinates, and reports D and G with their covariance mapped by
             the delta method; ``"G"`` solves in (D, G) directly.
         progress: called with (step, max_steps) after each step.
+        on_step: called with each step's history entry (step, loss, values, time_s), e.g. to
+            checkpoint the best point so far.
+
+    An interruption (KeyboardInterrupt, e.g. Ctrl-C) stops the solve and returns the best point
+    evaluated so far with status :attr:`Status.INTERRUPTED`, no standard errors and no renders.
 
     Raises:
         InputError: for any bad input, before rendering.
@@ -161,18 +168,31 @@ def fit(
         x = np.asarray(s.to_user(fp.to_physical(jnp.asarray(last["u"]))))
         history.append({"step": step, "loss": last["loss"], "values": dict(zip(s.user.names, x.tolist())),
                         "time_s": time.perf_counter() - t0})
+        if np.isfinite(last["loss"]) and not last["loss"] >= best.get("loss", np.inf):
+            best.update(u=last["u"], loss=last["loss"])
         if progress is not None:
             progress(step, max_steps)
+        if on_step is not None:
+            on_step(history[-1])
         return not _nonfinite_run(history)
 
+    best: dict[str, Any] = {}
     u = jnp.asarray(fp.to_unconstrained(jnp.asarray(s.x0)))
-    outcome = SOLVERS[solver](solver, residual_u, u, Options(max_steps, rtol, atol, learning_rate), log_step, loss_u_reverse)
-    status, u, steps = outcome.status, outcome.u, outcome.steps
+    try:
+        outcome = SOLVERS[solver](solver, residual_u, u, Options(max_steps, rtol, atol, learning_rate), log_step, loss_u_reverse)
+        status, u, steps = outcome.status, outcome.u, outcome.steps
+    except KeyboardInterrupt:
+        status, steps = Status.INTERRUPTED, len(history)
+        u = jnp.asarray(best["u"]) if best else u
     success = status.success
 
     x = np.asarray(fp.to_physical(u), dtype=float)
     n = len(x)
-    if np.all(np.isfinite(np.asarray(s.to_user(jnp.asarray(x))))):
+    if status is Status.INTERRUPTED:
+        x_user, stderr, corr = np.asarray(s.to_user(jnp.asarray(x)), dtype=float), np.full(n, np.nan), np.eye(n)
+        loss_value, extras, renders = best.get("loss", math.nan), {}, []
+        warnings = ["the fit was interrupted: the values are the best point evaluated so far, with no standard errors."]
+    elif np.all(np.isfinite(np.asarray(s.to_user(jnp.asarray(x))))):
         x_user, cov, loss_value, extras = estimate(s, x)
         stderr, corr = stderr_corr(cov)
         warnings = warnings_for(s.user, x_user, stderr, corr)

@@ -37,6 +37,7 @@ class Status(enum.Enum):
     DIVERGED = "failed: the solve diverged"
     NONFINITE = "failed: the loss or a parameter became NaN"
     FAILED = "failed: the solver reported an error"
+    INTERRUPTED = "stopped: interrupted (the best point so far is reported, without errors)"
 
     @property
     def success(self) -> bool:

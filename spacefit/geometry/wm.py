@@ -24,6 +24,10 @@ from spacefit.errors import InputError, check_range
 # log(L/Ls)/log(gamma) is an integer in exact arithmetic when Ls = L / gamma^k; without this slack
 # rounding can land just below k and drop the finest scale.
 _N_MAX_SLACK = 1e-9
+# Caps on the W-M sum's terms (M ridges x n_max + 1 scales, evaluated at every vertex): the thesis
+# uses 5 x 8; 1e8 ridges or gamma = 1 + 1e-7 exhausted the memory.
+MAX_RIDGES = 64
+MAX_SCALES = 64
 
 
 def wm_n_max(L: float, Ls: float, gamma: float) -> int:
@@ -52,8 +56,15 @@ def check_wm_params(D: float, G: float, gamma: float, M: int, L: float, Ls: floa
         raise InputError(f"`wrinkles.M` must be an integer, got {M!r}.") from None
     if isinstance(M, bool) or m < 1:
         raise InputError(f"`wrinkles.M` must be an integer >= 1, got {M!r}.")
+    if m > MAX_RIDGES:
+        raise InputError(f"`wrinkles.M` must be at most {MAX_RIDGES} (each ridge direction costs a term per scale "
+                         f"at every vertex), got {m}.")
     length = check_range("wrinkles.L", L, 0.0, lo_open=True, unit="m")
     check_range("wrinkles.Ls", Ls, 0.0, length, lo_open=True, hi_open=True, unit="m")
+    scales = math.log(L / Ls) / math.log(gamma)
+    if scales > MAX_SCALES:
+        raise InputError(f"`wrinkles.gamma` = {gamma:.10g} with `wrinkles.L` / `wrinkles.Ls` = {L / Ls:.3g} gives "
+                         f"{scales:.3g} W-M scales (log(L / Ls) / log(gamma)); at most {MAX_SCALES}: raise gamma or Ls.")
 
 
 def wm_height(

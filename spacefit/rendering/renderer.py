@@ -7,13 +7,14 @@ Lambert part with kd 0.2 facing a sun of 5 W m^-2 reads 0.2 * 5 / pi in every ch
 from __future__ import annotations
 
 import math
+import os
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
 
 import numpy as np
 
-from spacefit.errors import check_range
+from spacefit.errors import InputError, check_range
 from spacefit.geometry.frames import project
 from spacefit.materials import Conductor, Lambert, Material, Mirror
 from spacefit.progress import ProgressCallback
@@ -26,6 +27,36 @@ MAX_SAMPLES_PER_PASS = 1 << 24
 # Pixels around the target's projected box that its light can still reach: the tent filter's
 # radius (1 px) and one for rounding.
 CROP_MARGIN_PX = 2
+# Bytes a render holds per film pixel: Mitsuba's film (RGB, alpha, weight in float32), the image and
+# its copies in NumPy (float32 RGB), the part IDs and the preview's tone map (done in row blocks).
+BYTES_PER_PIXEL = 80
+# Bytes per sample in flight in the wavefront (about 1 GB at MAX_SAMPLES_PER_PASS, measured).
+BYTES_PER_SAMPLE = 64
+
+
+def available_memory_bytes() -> int:
+    """Memory the system can still give (MemAvailable of /proc/meminfo; total physical elsewhere)."""
+    try:
+        for line in open("/proc/meminfo"):
+            if line.startswith("MemAvailable:"):
+                return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def check_memory(width: int, height: int, window_pixels: int, spp: int) -> int:
+    """Estimate a render's peak memory (bytes) and refuse one that would not fit in the machine's.
+
+    Samples are traced in passes of at most :data:`MAX_SAMPLES_PER_PASS`, so the wavefront is bounded;
+    the film is not split, so its size is what can exceed the memory.
+    """
+    estimate = BYTES_PER_PIXEL * width * height + BYTES_PER_SAMPLE * min(window_pixels * spp, MAX_SAMPLES_PER_PASS)
+    limit = available_memory_bytes()
+    if estimate > limit:
+        raise InputError(f"a {width} x {height} px render needs about {estimate / 2**30:.1f} GiB and this machine has "
+                         f"{limit / 2**30:.1f} GiB available; lower `render.resolution`.")
+    return estimate
 
 
 def _spectrum(value: float | tuple[float, ...]) -> dict | float:
@@ -186,6 +217,8 @@ class Renderer:
         intr = assembly.intrinsics
         vertices = assembly.scene_vertices
         self.window = target_window(assembly, vertices) if crop else (0, 0, intr.width, intr.height)
+        r = assembly.scene.render
+        self.memory_bytes = check_memory(intr.width, intr.height, self.window[2] * self.window[3], r.spp)
         self.scene = mi.load_dict(scene_dict(assembly, vertices, self.window))
         self.params = mi.traverse(self.scene)
 

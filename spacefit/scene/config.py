@@ -22,13 +22,22 @@ from typing import Any
 
 import tomli_w
 
-from spacefit.errors import InputError, check_choice, check_range, check_vector
+import numpy as np
+
+from spacefit.errors import InputError, check_choice, check_direction, check_range, check_vector, quote
 
 SOLAR_IRRADIANCE_W_M2 = 1361.0
 VARIANTS = ("auto", "llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb")
 FILTERS = ("tent", "box", "gaussian")
 WRINKLE_MODELS = ("auto", "geometry", "effective")
 Vec3 = tuple[float, float, float]
+# Radiance is float32 (at most 3.4e38) and a glint's BRDF can reach 1e6 or more: irradiances above
+# this overflow it (1e39 rendered inf / NaN). The physical sun at 1 au is 1361 W m^-2.
+MAX_IRRADIANCE_W_M2 = 1e20
+# Mitsuba traces in float32 (7 significant digits): beyond 100 km from the origin a position is
+# coarser than 1 cm and a metre-sized target is no longer resolved; the observer of a far target is
+# rendered near and rescaled (light curves), or seen with a long focal length.
+MAX_COORDINATE_M = 1e5
 
 
 @dataclass(frozen=True)
@@ -82,15 +91,13 @@ class CameraSettings:
         check_range("camera.focal_length_mm", self.focal_length_mm, 0.0, lo_open=True, unit="mm")
         check_range("camera.pixel_pitch_mm", self.pixel_pitch_mm, 0.0, lo_open=True, unit="mm")
         check_vector("camera.principal_offset_px", self.principal_offset_px, 2)
-        check_vector("camera.position_m", self.position_m)
+        check_position("camera.position_m", self.position_m)
         check_vector("camera.attitude_deg", self.attitude_deg)
         if len(self.look_at_m) not in (0, 3):
             raise InputError(f"`camera.look_at_m` must be empty or 3 numbers, got {list(self.look_at_m)}.")
         if self.look_at_m:
-            check_vector("camera.look_at_m", self.look_at_m)
-        up = check_vector("camera.up", self.up)
-        if not up.any():
-            raise InputError("`camera.up` must not be the zero vector.")
+            check_position("camera.look_at_m", self.look_at_m)
+        check_direction("camera.up", self.up)
 
 
 @dataclass(frozen=True)
@@ -101,9 +108,8 @@ class SunSettings:
     direction: Vec3 = (0.0, 0.0, -1.0)
 
     def validate(self) -> None:
-        check_range("sun.irradiance_w_m2", self.irradiance_w_m2, 0.0, lo_open=True, unit="W m^-2")
-        if not check_vector("sun.direction", self.direction).any():
-            raise InputError("`sun.direction` must not be the zero vector.")
+        check_range("sun.irradiance_w_m2", self.irradiance_w_m2, 0.0, MAX_IRRADIANCE_W_M2, lo_open=True, unit="W m^-2")
+        check_direction("sun.direction", self.direction)
 
 
 @dataclass(frozen=True)
@@ -115,7 +121,7 @@ class TargetSettings:
     mesh: str = "builtin"
 
     def validate(self) -> None:
-        check_vector("target.position_m", self.position_m)
+        check_position("target.position_m", self.position_m)
         check_vector("target.attitude_deg", self.attitude_deg)
 
 
@@ -230,6 +236,14 @@ class Scene:
         the keys are the scene file's (:func:`load_scene` lists the valid ones on a typo).
         """
         return scene_from_dict(apply_overrides(self.to_dict(), values))
+
+
+def check_position(name: str, value: Sequence[float]) -> None:
+    """Check a position (m): 3 finite numbers, each within :data:`MAX_COORDINATE_M` of the origin."""
+    v = check_vector(name, value)
+    if np.abs(v).max() > MAX_COORDINATE_M:
+        raise InputError(f"`{name}` must lie within {MAX_COORDINATE_M:g} m of the origin on each axis (float32 "
+                         f"tracing), got {quote(list(value))}; render far targets near and rescale, or lengthen the focal length.")
 
 
 def _plain(value: Any) -> Any:
