@@ -170,7 +170,7 @@ def fit(
         x = np.asarray(s.to_user(fp.to_physical(jnp.asarray(last["u"]))))
         history.append({"step": step, "loss": last["loss"], "values": dict(zip(s.user.names, x.tolist())),
                         "time_s": time.perf_counter() - t0})
-        if np.isfinite(last["loss"]) and not last["loss"] >= best.get("loss", np.inf):
+        if np.isfinite(last["loss"]) and last["loss"] < best.get("loss", np.inf):
             best.update(u=last["u"], loss=last["loss"])
         if progress is not None:
             progress(step, max_steps)
