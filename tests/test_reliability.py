@@ -261,8 +261,10 @@ def test_interrupted_fit_reports_its_best_point_and_resumes(fit_case, tmp_path, 
     assert report["status"].startswith("stopped: interrupted")
     checkpoint = json.loads((out / "checkpoint.json").read_text())
     assert report["values"] == pytest.approx(checkpoint["best"]["values"])  # the interruption waits for the step's end
-    # resumed, it ends where an uninterrupted fit ends (kd 0.5, within the fit's accuracy)
-    assert main([*fit_args(fit_case, out), "--resume", "--quiet", "--solver", "lm", "--max-steps", "20"]) == 0
+    # resumed, it ends where an uninterrupted fit ends (kd 0.5, within the fit's accuracy); --max-steps
+    # counts the steps before the interruption, so the budget is the first run's plus 20
+    steps = checkpoint["steps"]
+    assert main([*fit_args(fit_case, out), "--resume", "--quiet", "--solver", "lm", "--max-steps", str(steps + 20)]) == 0
     assert listing(out) == FIT_FILES
     assert json.loads((out / "fit.json").read_text())["values"]["parts.sphere.kd"] == pytest.approx(0.5, abs=0.01)
 

@@ -8,7 +8,7 @@ import jax
 import numpy as np
 import pytest
 
-import spacefit  # noqa: F401  (enables float64 before any JAX array exists)
+import spacefit  # noqa: F401
 from spacefit.errors import InputError
 from spacefit.geometry.wm import (
     check_wm_params,
@@ -23,6 +23,13 @@ from spacefit.geometry.wm import (
 
 THESIS = {"gamma": 1.5, "M": 5, "L": 0.1, "Ls": 5e-3}
 GOOD = {"D": 2.3, "G": 1e-3, **THESIS}
+
+
+@pytest.fixture(autouse=True)
+def float64_mode():
+    """jvp traces D and G from the test: float64 tracers, as in spacefit's own scoped callers."""
+    with jax.enable_x64(True):
+        yield
 
 
 def eq_2_1(x, y, D, G, gamma, M, L, Ls, phases):

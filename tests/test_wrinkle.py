@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 import trimesh
 
-import spacefit  # noqa: F401  (enables float64 before any JAX array exists)
+import spacefit  # noqa: F401
 from spacefit.errors import InputError
 from spacefit.geometry.wm import wm_height, wm_n_max, wm_phases
 from spacefit.geometry.wrinkle import Refinement, displace, refine
@@ -17,6 +17,13 @@ from spacefit.geometry.wrinkle import Refinement, displace, refine
 WM = {"gamma": 1.5, "M": 5, "L": 0.1, "Ls": 5e-3}
 PHASES = wm_phases(WM["M"], wm_n_max(WM["L"], WM["Ls"], WM["gamma"]), seed=0)
 D, G = 2.3, 1e-4  # heights of a few millimetres
+
+
+@pytest.fixture(autouse=True)
+def float64_mode():
+    """jvp traces D and G from the test: float64 tracers, as in spacefit's own scoped callers."""
+    with jax.enable_x64(True):
+        yield
 
 
 def box() -> trimesh.Trimesh:

@@ -20,6 +20,7 @@ import numpy as np
 from jaxtyping import Array, ArrayLike, Float
 
 from spacefit.errors import InputError, check_range
+from spacefit.precision import float64
 
 # log(L/Ls)/log(gamma) is an integer in exact arithmetic when Ls = L / gamma^k; without this slack
 # rounding can land just below k and drop the finest scale.
@@ -67,6 +68,7 @@ def check_wm_params(D: float, G: float, gamma: float, M: int, L: float, Ls: floa
                          f"{scales:.3g} W-M scales (log(L / Ls) / log(gamma)); at most {MAX_SCALES}: raise gamma or Ls.")
 
 
+@float64
 def wm_height(
     uv: Float[ArrayLike, "n 2"],
     D: float | Array,

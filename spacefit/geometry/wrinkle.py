@@ -22,6 +22,7 @@ from jaxtyping import Array, Float, Int
 from scipy.spatial import Delaunay
 
 from spacefit.errors import InputError, check_range
+from spacefit.precision import float64
 from spacefit.geometry.wm import wm_height
 
 # Two faces are coplanar when their unit normals differ by less than this and their plane offsets
@@ -217,6 +218,7 @@ def refine(
     return Refinement(points, np.concatenate(new_faces), face_normals[owner], uv, movable, source_face)
 
 
+@float64
 def displace(
     ref: Refinement,
     D: float | Array,
