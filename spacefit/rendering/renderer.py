@@ -126,6 +126,7 @@ def scene_dict(assembly: Assembly, vertices: Mapping[str, np.ndarray], window: t
         "to_world": mi.ScalarTransform4f().look_at(
             origin=cam.position.tolist(), target=(cam.position + cam.forward).tolist(), up=cam.up.tolist()
         ),
+        "sampler": {"type": s.render.sampler, "sample_count": s.render.spp},
         "film": {
             "type": "hdrfilm",
             "width": intr.width,
@@ -174,6 +175,25 @@ def render_threads(deterministic: bool) -> Iterator[None]:
         yield
     finally:
         dr.set_thread_count(threads)
+
+
+@contextmanager
+def kernel_log() -> Iterator[dict[str, float]]:
+    """Count the Dr.Jit kernels launched inside the block; the yielded dict is filled on exit.
+
+    Keys: ``launched`` (JIT kernels), ``compiled`` (found in neither Dr.Jit's in-memory cache nor
+    its on-disk one, ``~/.drjit``) and ``compile_s`` (wall time of code generation and compilation,
+    s). A kernel recompiled at every call of a loop shows as ``compiled`` growing with the calls.
+    """
+    stats: dict[str, float] = {}
+    dr.kernel_history_clear()
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        try:
+            yield stats
+        finally:
+            jit = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+            stats.update(launched=len(jit), compiled=sum(not (k.get("cache_hit") or k.get("cache_disk")) for k in jit),
+                         compile_s=sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in jit) / 1e3)
 
 
 @dataclass(frozen=True)

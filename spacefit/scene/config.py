@@ -29,6 +29,8 @@ from spacefit.errors import InputError, check_choice, check_direction, check_ran
 SOLAR_IRRADIANCE_W_M2 = 1361.0
 VARIANTS = ("auto", "llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb")
 FILTERS = ("tent", "box", "gaussian")
+# Mitsuba samplers; "independent" draws every sample alone, the others stratify a pixel's samples.
+SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler")
 WRINKLE_MODELS = ("auto", "geometry", "effective")
 Vec3 = tuple[float, float, float]
 # Radiance is float32 (at most 3.4e38) and a glint's BRDF can reach 1e6 or more: irradiances above
@@ -60,6 +62,7 @@ class RenderSettings:
     variant: str = "auto"
     filter: str = "tent"
     deterministic: bool = True
+    sampler: str = "independent"
 
     def validate(self) -> None:
         for i, axis in enumerate(("width", "height")):
@@ -69,6 +72,7 @@ class RenderSettings:
         _check_int("render.seed", self.seed, 0, 2**31 - 1)
         check_choice("render.variant", self.variant, VARIANTS)
         check_choice("render.filter", self.filter, FILTERS)
+        check_choice("render.sampler", self.sampler, SAMPLERS)
 
 
 @dataclass(frozen=True)
