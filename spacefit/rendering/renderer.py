@@ -174,7 +174,11 @@ def render_threads(deterministic: bool) -> Iterator[None]:
     try:
         yield
     finally:
-        dr.set_thread_count(threads)
+        if deterministic:
+            # Kernels run asynchronously on the LLVM backend: resizing the thread pool under a
+            # running one crashed (SIGSEGV in set_thread_count) on a loaded machine.
+            dr.sync_thread()
+            dr.set_thread_count(threads)
 
 
 @contextmanager

@@ -73,6 +73,13 @@ class RenderSettings:
         check_choice("render.variant", self.variant, VARIANTS)
         check_choice("render.filter", self.filter, FILTERS)
         check_choice("render.sampler", self.sampler, SAMPLERS)
+        # Mitsuba would round other counts up (20 -> 25 or 64) with only a log line: more time than asked.
+        if self.sampler == "stratified" and math.isqrt(self.spp) ** 2 != self.spp:
+            raise InputError(f"`render.spp` = {self.spp} must be a perfect square with render.sampler = 'stratified' "
+                             "(4, 9, 16, 25, ...); 'multijitter' takes any count.")
+        if self.sampler == "ldsampler" and (self.spp & (self.spp - 1) or math.isqrt(self.spp) ** 2 != self.spp):
+            raise InputError(f"`render.spp` = {self.spp} must be a power of 4 with render.sampler = 'ldsampler' "
+                             "(4, 16, 64, 256, ...); 'multijitter' takes any count.")
 
 
 @dataclass(frozen=True)
