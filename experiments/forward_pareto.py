@@ -165,7 +165,9 @@ def run_methods(out: Path, full: bool) -> list[dict[str, object]]:
     for view, extra in VIEWS.items():
         base = ["render.deterministic=false", *extra]
         reference = Renderer(assemble(load_scene(None, base))).render(spp=reference_spp, seed=REFERENCE_SEED)
-        renderers = {name: Renderer(assemble(load_scene(None, [*base, f'render.sampler="{sampler}"'])), crop=not film)
+        # render.spp 16 is valid for every sampler; each render passes its own spp
+        renderers = {name: Renderer(assemble(load_scene(None, [*base, "render.spp=16", f'render.sampler="{sampler}"'])),
+                                    crop=not film)
                      for name, (film, sampler) in METHODS.items()}
         view_rows = []
         for spp in spps:
@@ -185,6 +187,41 @@ def run_methods(out: Path, full: bool) -> list[dict[str, object]]:
     write_csv(out / "equal_error.csv", summary)
     plot_methods(out / "methods.png", rows, reference_spp)
     return summary
+
+
+# Equal-error pairs: (spp of plain Mitsuba, spp of spacefit's window with multijitter) that reached
+# about the same error in the --methods sweep (0.31 / 0.30 at 70 m; 0.27 / 0.29 at 25 m).
+PAIR_SPP = (32, 16)
+PAIR_REPEATS = 7
+
+
+def run_pairs(repeats: int = PAIR_REPEATS) -> list[dict[str, object]]:
+    """Plain Mitsuba (whole film, independent, PAIR_SPP[0]) against spacefit (window, multijitter,
+    PAIR_SPP[1]) in both VIEWS, rendered in turn ``repeats`` times: each pair's time ratio is taken
+    within the pair, so that the machine's load drifting between renders cancels."""
+    rows = []
+    for view, extra in VIEWS.items():
+        base = ["render.deterministic=false", *extra]
+        reference = Renderer(assemble(load_scene(None, base))).render(spp=1024, seed=REFERENCE_SEED)
+        plain = Renderer(assemble(load_scene(None, base)), crop=False)
+        ours = Renderer(assemble(load_scene(None, [*base, 'render.sampler="multijitter"'])))
+        runs: dict[str, list[tuple[float, float]]] = {"plain": [], "spacefit": []}
+        for renderer, spp in ((plain, PAIR_SPP[0]), (ours, PAIR_SPP[1])):
+            renderer.render(spp=spp, seed=0)  # compile
+        for seed in range(1, repeats + 1):
+            for name, renderer, spp in (("plain", plain, PAIR_SPP[0]), ("spacefit", ours, PAIR_SPP[1])):
+                t0 = time.perf_counter()
+                image = renderer.render(spp=spp, seed=seed)
+                runs[name].append((time.perf_counter() - t0, relative_rmse(image, reference)))
+        ratios = [b[0] / a[0] for a, b in zip(runs["plain"], runs["spacefit"])]
+        rows.append({"view": view, "plain_spp": PAIR_SPP[0], "spacefit_spp": PAIR_SPP[1],
+                     "plain_s": round(statistics.median(t for t, _ in runs["plain"]), 4),
+                     "spacefit_s": round(statistics.median(t for t, _ in runs["spacefit"]), 4),
+                     "ratio_median": round(statistics.median(ratios), 3), "ratio_min": round(min(ratios), 3),
+                     "ratio_max": round(max(ratios), 3),
+                     "plain_rel_rmse": round(statistics.mean(e for _, e in runs["plain"]), 4),
+                     "spacefit_rel_rmse": round(statistics.mean(e for _, e in runs["spacefit"]), 4)})
+    return rows
 
 
 def plot_methods(path: Path, rows: list[dict[str, object]], reference_spp: int) -> None:
@@ -212,6 +249,10 @@ def main() -> None:
     args = p.parse_args()
     if args.methods:
         for row in run_methods(Path(args.out), args.full):
+            print(row)
+        pairs = run_pairs()
+        write_csv(Path(args.out) / "equal_error_pairs.csv", pairs)
+        for row in pairs:
             print(row)
         return
     rows = run_forward(Path(args.out), args.full)
