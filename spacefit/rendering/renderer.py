@@ -282,8 +282,8 @@ class Renderer:
         x0, y0, w, h = self.window
         sensor = self.scene.sensors()[0]
         index = dr.arange(mi.UInt32, w * h)
-        # sample_ray's position sample spans the whole film, the crop window included
-        position = mi.Point2f((mi.Float(index % w) + 0.5 + x0) / intr.width, (mi.Float(index // w) + 0.5 + y0) / intr.height)
+        # sample_ray's position sample spans the film's crop window, which is the rendered window
+        position = mi.Point2f((mi.Float(index % w) + 0.5) / w, (mi.Float(index // w) + 0.5) / h)
         ray, _ = sensor.sample_ray(0.0, 0.0, position, mi.Point2f(0.5))
         hit = self.scene.ray_intersect(ray)
         names = tuple(self.assembly.parts)
