@@ -12,7 +12,9 @@ column). Writes ``forward.csv`` and ``forward_pareto.png`` to ``--out``.
 (70 m, the target 5 % of the film) and a close one (25 m): plain Mitsuba (the whole film, the
 ``independent`` sampler) against spacefit's window around the target with each sampler of
 ``render.sampler``. For each it sweeps spp and interpolates (log-log) the time at which the error
-reaches each target error; writes ``methods.csv``, ``equal_error.csv`` and ``methods.png``.
+reaches each target error; writes ``methods.csv``, ``equal_error.csv`` and ``methods.png``. Then it
+renders plain Mitsuba and spacefit at spp of equal error (:data:`PAIR_SPP`) in turn and writes the
+time ratios within each pair to ``equal_error_pairs.csv``.
 
 Run: ``.venv/bin/python experiments/forward_pareto.py [--full] [--methods] [--out experiments/results/forward]``.
 """
@@ -195,14 +197,14 @@ PAIR_SPP = (32, 16)
 PAIR_REPEATS = 7
 
 
-def run_pairs(repeats: int = PAIR_REPEATS) -> list[dict[str, object]]:
+def run_pairs(repeats: int = PAIR_REPEATS, reference_spp: int = 1024) -> list[dict[str, object]]:
     """Plain Mitsuba (whole film, independent, PAIR_SPP[0]) against spacefit (window, multijitter,
     PAIR_SPP[1]) in both VIEWS, rendered in turn ``repeats`` times: each pair's time ratio is taken
     within the pair, so that the machine's load drifting between renders cancels."""
     rows = []
     for view, extra in VIEWS.items():
         base = ["render.deterministic=false", *extra]
-        reference = Renderer(assemble(load_scene(None, base))).render(spp=1024, seed=REFERENCE_SEED)
+        reference = Renderer(assemble(load_scene(None, base))).render(spp=reference_spp, seed=REFERENCE_SEED)
         plain = Renderer(assemble(load_scene(None, base)), crop=False)
         ours = Renderer(assemble(load_scene(None, [*base, 'render.sampler="multijitter"'])))
         runs: dict[str, list[tuple[float, float]]] = {"plain": [], "spacefit": []}
@@ -250,7 +252,7 @@ def main() -> None:
     if args.methods:
         for row in run_methods(Path(args.out), args.full):
             print(row)
-        pairs = run_pairs()
+        pairs = run_pairs() if args.full else run_pairs(repeats=3, reference_spp=256)
         write_csv(Path(args.out) / "equal_error_pairs.csv", pairs)
         for row in pairs:
             print(row)
