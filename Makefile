@@ -10,7 +10,7 @@ setup:
 	@tools/setup.sh
 
 render: setup
-	.venv/bin/spacefit render $(SCENE) --out $(OUT)
+	.venv/bin/spacefit render $(SCENE) --out $(OUT) --overwrite
 
 test: setup
 	.venv/bin/python -m pytest -q $(PYTEST_ARGS)

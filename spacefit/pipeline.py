@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
 import math
@@ -213,20 +214,30 @@ def fit_to_folder(
         "overrides": scene_overrides,
         "scenes": [scene.to_dict() for scene in loaded],
         "sigma": sigma,
-        "options": {k: v for k, v in options.items() if k not in ("start", "max_steps")},
+        "options": options,
     }
     checkpoint = Checkpoint(Path(out_dir) / CHECKPOINT, inputs)
     if resume:
         options = {**options, **checkpoint.resume(options.get("max_steps", DEFAULT_MAX_STEPS))}
         _say(f"resuming from step {checkpoint.steps} of the checkpoint in {out_dir}", quiet)
 
+    created = not Path(out_dir).exists()
     t0 = time.perf_counter()
-    result = fit(observations, free, progress=progress, on_step=checkpoint.update, **options)
-    t_fit = time.perf_counter() - t0
-    if not quiet and last[0] < last[1]:
-        display(last[0], last[0])  # the solve stopped before its step limit: end the display there
-    timings = {"read_inputs": t_read, "setup": t_fit - result.wall_time_s}
-    write_fit_report(out_dir, result, images, inputs=inputs, timings_s=timings)
+    try:
+        result = fit(observations, free, progress=progress, on_step=checkpoint.update, **options)
+        t_fit = time.perf_counter() - t0
+        if not quiet and last[0] < last[1]:
+            display(last[0], last[0])  # the solve stopped before its step limit: end the display there
+        timings = {"read_inputs": t_read, "setup": t_fit - result.wall_time_s}
+        write_fit_report(out_dir, result, images, inputs=inputs, timings_s=timings)
+    except Exception:
+        # an error, not an interruption: nothing of this run stays (an interruption keeps the checkpoint)
+        if not resume:
+            checkpoint.remove()
+        if created:
+            with contextlib.suppress(OSError):
+                Path(out_dir).rmdir()
+        raise
     if result.status is not Status.INTERRUPTED:
         checkpoint.remove()
     _say(f"wrote {Path(out_dir) / 'fit.json'}, comparison.png and convergence.png", quiet)
@@ -234,6 +245,13 @@ def fit_to_folder(
 
 
 CHECKPOINT = "checkpoint.json"
+# Options a resumed fit may change: how it solves, not what it fits.
+SOLVE_OPTIONS = ("solver", "max_steps", "start", "learning_rate", "rtol", "atol")
+
+
+def _problem_of(value: Any, key: str) -> Any:
+    """The part of a recorded input that defines the fitting problem (``options`` less how it is solved)."""
+    return {k: v for k, v in value.items() if k not in SOLVE_OPTIONS} if key == "options" and isinstance(value, dict) else value
 
 
 class Checkpoint:
@@ -268,7 +286,7 @@ class Checkpoint:
             best, steps, inputs = saved["best"], int(saved["steps"]), saved["inputs"]
         except (OSError, ValueError, KeyError, TypeError) as err:
             raise InputError(f"checkpoint {str(self.path)!r} is unreadable ({err}); run without --resume.") from None
-        differ = sorted(k for k in set(inputs) | set(self.inputs) if inputs.get(k) != self.inputs.get(k))
+        differ = sorted(k for k in set(inputs) | set(self.inputs) if _problem_of(inputs.get(k), k) != _problem_of(self.inputs.get(k), k))
         if differ:
             raise InputError(f"checkpoint {str(self.path)!r} was made with other {', '.join(differ)}; resume with the "
                              "same references, scenes, free parameters and options, or run without --resume.")

@@ -22,6 +22,7 @@ from spacefit.errors import check_choice, check_count, check_range
 from spacefit.fitting.problem import Observation, setup
 from spacefit.fitting.solvers import SOLVERS, Options, Status
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
+from spacefit.interrupts import deferred_interrupts
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.renderer import PartImage
@@ -127,8 +128,9 @@ def fit(
         on_step: called with each step's history entry (step, loss, values, time_s), e.g. to
             checkpoint the best point so far.
 
-    An interruption (KeyboardInterrupt, e.g. Ctrl-C) stops the solve and returns the best point
-    evaluated so far with status :attr:`Status.INTERRUPTED`, no standard errors and no renders.
+    An interruption (Ctrl-C or SIGTERM; taken at the end of the current step, at once if repeated)
+    stops the solve and returns the best point evaluated so far with status
+    :attr:`Status.INTERRUPTED`, no standard errors and no renders.
 
     Raises:
         InputError: for any bad input, before rendering.
@@ -168,18 +170,21 @@ def fit(
         x = np.asarray(s.to_user(fp.to_physical(jnp.asarray(last["u"]))))
         history.append({"step": step, "loss": last["loss"], "values": dict(zip(s.user.names, x.tolist())),
                         "time_s": time.perf_counter() - t0})
-        if np.isfinite(last["loss"]) and not last["loss"] >= best.get("loss", np.inf):
+        if np.isfinite(last["loss"]) and last["loss"] < best.get("loss", np.inf):
             best.update(u=last["u"], loss=last["loss"])
         if progress is not None:
             progress(step, max_steps)
         if on_step is not None:
             on_step(history[-1])
+        interrupts.check()
         return not _nonfinite_run(history)
 
     best: dict[str, Any] = {}
     u = jnp.asarray(fp.to_unconstrained(jnp.asarray(s.x0)))
     try:
-        outcome = SOLVERS[solver](solver, residual_u, u, Options(max_steps, rtol, atol, learning_rate), log_step, loss_u_reverse)
+        with deferred_interrupts() as interrupts:
+            outcome = SOLVERS[solver](solver, residual_u, u, Options(max_steps, rtol, atol, learning_rate), log_step,
+                                      loss_u_reverse)
         status, u, steps = outcome.status, outcome.u, outcome.steps
     except KeyboardInterrupt:
         status, steps = Status.INTERRUPTED, len(history)

@@ -15,17 +15,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import InputError, check_choice, check_count
+from spacefit.errors import InputError, InputTypeError, check_choice, check_count, quote
 from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.params import FreeParameters, free_parameters
 from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import PartImage, Renderer
 from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import Scene
+from spacefit.scene.config import Scene, check_scene
 from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, rms_of, scene_value
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
+# How far below zero, in noise standard deviations, a reference with stated noise may dip.
+NEGATIVE_SIGMAS = 5.0
 # Seed offset of the second, independent Jacobian used for the standard errors.
 INDEPENDENT_SEED_OFFSET = 1000
 
@@ -40,6 +42,13 @@ class Observation:
     scene: Scene
     reference: np.ndarray
     sigma: float | np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        check_scene(self.scene, "Observation.scene")
+        ref = np.asarray(self.reference)
+        if not (np.issubdtype(ref.dtype, np.floating) or np.issubdtype(ref.dtype, np.integer)):
+            raise InputTypeError(f"`Observation.reference` must be a real-valued radiance image, got dtype {ref.dtype} "
+                                 "(a complex image's imaginary part is not radiance).")
 
 
 def check_reference(obs: Observation, index: int) -> np.ndarray:
@@ -56,6 +65,14 @@ def check_reference(obs: Observation, index: int) -> np.ndarray:
     ref = ref[..., :3]
     if not np.all(np.isfinite(ref)):
         raise InputError(f"reference {index} holds NaN or infinite pixels ({int(np.sum(~np.isfinite(ref)))}).")
+    # Radiance is never negative; a reference with stated noise may dip below zero by that noise.
+    floor = 0.0 if obs.sigma is None else -NEGATIVE_SIGMAS * np.broadcast_to(
+        np.asarray(obs.sigma, float)[..., None] if np.ndim(obs.sigma) == 2 else np.asarray(obs.sigma, float), ref.shape)
+    below = int(np.any(ref < floor, axis=-1).sum())
+    if below:
+        noise = "" if obs.sigma is None else f" by more than {NEGATIVE_SIGMAS:g} of its stated sigma"
+        raise InputError(f"reference {index} holds {below} pixels with negative values{noise}: radiance is never negative; give "
+                         "the image's noise sigma, or fit the DN it was measured in with its sensor.")
     return ref
 
 
@@ -150,6 +167,9 @@ def setup(
     observations = [observations] if isinstance(observations, Observation) else list(observations)
     if not observations:
         raise InputError("`observations` must hold at least one reference image.")
+    for i, obs in enumerate(observations):
+        if not isinstance(obs, Observation):
+            raise InputTypeError(f"`observations[{i}]` must be an sf.Observation(scene, reference), got {quote(obs)}.")
     check_choice("integrator", integrator, INTEGRATORS)
     check_choice("geometry_jacobian", geometry_jacobian, ("fd", "ad"))
     check_choice("wrinkle_coordinates", wrinkle_coordinates, ("rms", "G"))

@@ -94,10 +94,27 @@ def _load(path: Path, **kwargs: object) -> trimesh.Trimesh | trimesh.Scene:
         raise InputError(f"mesh file {str(path)!r} does not exist.")
     if path.suffix.lower() not in MESH_SUFFIXES:
         raise InputError(f"mesh file {str(path)!r}: format must be one of {', '.join(MESH_SUFFIXES)}.")
+    if path.suffix.lower() == ".stl":
+        _check_stl_size(path)
     try:
         return _trimesh().load(path, process=False, **kwargs)
     except Exception as err:  # trimesh raises many types for malformed files
         raise InputError(f"mesh file {str(path)!r} could not be read: {err}") from None
+
+
+def _check_stl_size(path: Path) -> None:
+    """Refuse a truncated binary STL (80-byte header, uint32 count, 50 bytes per triangle) by its size;
+    an ASCII STL starts with ``solid``."""
+    size = path.stat().st_size
+    with open(path, "rb") as f:
+        head = f.read(4096)
+    if head[:5].lower() == b"solid" and b"facet" in head:
+        return
+    count = int.from_bytes(head[80:84], "little") if len(head) >= 84 else None
+    if count is None or size != 84 + 50 * count:
+        expected = f"{84 + 50 * count} bytes for its {count} triangles" if count is not None else "at least 84 bytes"
+        raise InputError(f"mesh file {str(path)!r} is not a whole binary STL: {size} bytes where its header needs "
+                         f"{expected} (truncated or not STL).")
 
 
 def _from_trimesh(mesh: trimesh.Trimesh) -> PartMesh:

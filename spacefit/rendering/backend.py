@@ -62,6 +62,9 @@ def select_variant(requested: str = "auto") -> str:
         requested = "cuda_ad_rgb" if dr.has_backend(dr.JitBackend.CUDA) else "llvm_ad_rgb"
     if requested.startswith("llvm") and (problem := llvm_problem()):
         raise InputError(problem)
+    if requested.startswith("cuda") and not dr.has_backend(dr.JitBackend.CUDA):
+        raise InputError("`render.variant` 'cuda_ad_rgb' needs an NVIDIA GPU with its driver, and none is usable here; "
+                         "use 'auto' or 'llvm_ad_rgb'.")
     if requested not in mi.variants():
         raise InputError(f"`render.variant` {requested!r} is not built into this Mitsuba; it has {mi.variants()}.")
     if mi.variant() != requested:

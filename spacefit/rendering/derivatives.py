@@ -22,7 +22,7 @@ from spacefit.precision import float64
 from spacefit.rendering.bridge import DrJitScene, render_params
 from spacefit.rendering.renderer import Renderer
 from spacefit.rendering.values import scene_values_fn
-from spacefit.scene.config import Scene
+from spacefit.scene.config import Scene, check_scene
 from spacefit.scene.parameters import MOVES_VERTICES, check_names, fd_step, scene_value
 
 
@@ -36,7 +36,7 @@ def render_function(
     ``spp`` / ``spp_grad``: samples per pixel of the primal and the derivative renders (default:
     the scene's); ``seed`` / ``seed_grad`` must differ so that an L2 loss's gradient is unbiased.
     """
-    check_names(scene, list(free))
+    check_names(check_scene(scene), list(free))
     check_count("spp", spp)
     check_count("spp_grad", spp_grad)
     if seed == seed_grad:

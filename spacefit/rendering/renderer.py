@@ -20,7 +20,7 @@ from spacefit.materials import Conductor, Lambert, Material, Mirror
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.backend import dr, mi, select_variant
 from spacefit.scene.assembly import Assembly, assemble
-from spacefit.scene.config import Scene
+from spacefit.scene.config import Scene, check_scene
 
 # Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.
 MAX_SAMPLES_PER_PASS = 1 << 24
@@ -235,7 +235,7 @@ class Renderer:
     """
 
     def __init__(self, scene: Scene | Assembly, variant: str | None = None, crop: bool = True) -> None:
-        assembly = assemble(scene) if isinstance(scene, Scene) else scene
+        assembly = scene if isinstance(scene, Assembly) else assemble(check_scene(scene))
         self.variant = select_variant(variant or assembly.scene.render.variant)
         self.assembly = assembly
         intr = assembly.intrinsics

@@ -24,10 +24,11 @@ import tomli_w
 
 import numpy as np
 
-from spacefit.errors import InputError, check_choice, check_direction, check_range, check_vector, quote
+from spacefit.errors import InputError, InputTypeError, check_choice, check_direction, check_range, check_vector, quote
 
 SOLAR_IRRADIANCE_W_M2 = 1361.0
-VARIANTS = ("auto", "llvm_ad_rgb", "cuda_ad_rgb", "scalar_rgb")
+# The differentiable variants: the bridge needs AD (scalar variants cannot render a Jacobian).
+VARIANTS = ("auto", "llvm_ad_rgb", "cuda_ad_rgb")
 FILTERS = ("tent", "box", "gaussian")
 # Mitsuba samplers; "independent" draws every sample alone, the others stratify a pixel's samples.
 SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler")
@@ -251,7 +252,17 @@ class Scene:
         ``scene.with_values({"camera.position_m": [0, 0, 50], "parts.panels.alpha_x": 0.1})``;
         the keys are the scene file's (:func:`load_scene` lists the valid ones on a typo).
         """
+        if not isinstance(values, Mapping):
+            raise InputTypeError(f"`values` must be a mapping of dotted scene keys to values, got {quote(values)}.")
         return scene_from_dict(apply_overrides(self.to_dict(), values))
+
+
+def check_scene(scene: object, name: str = "scene") -> Scene:
+    """Raise :class:`InputTypeError` unless ``scene`` is a :class:`Scene`."""
+    if not isinstance(scene, Scene):
+        raise InputTypeError(f"`{name}` must be a spacefit Scene (sf.load_scene(path) reads a file, sf.default_scene() "
+                             f"is Table 4-2), got {quote(scene)}.")
+    return scene
 
 
 def check_position(name: str, value: Sequence[float]) -> None:
@@ -267,8 +278,8 @@ def _plain(value: Any) -> Any:
 
 
 def _check_int(name: str, value: Any, lo: int, hi: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int):
-        raise InputError(f"`{name}` must be an integer in [{lo}, {hi}], got {value!r}.")
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise InputTypeError(f"`{name}` must be an integer in [{lo}, {hi}], got {quote(value)}.")
     return int(check_range(name, value, lo, hi))
 
 
@@ -385,6 +396,8 @@ def parse_override(text: str) -> tuple[list[str], Any]:
         value = tomllib.loads(f"v = {raw.strip()}")["v"]
     except tomllib.TOMLDecodeError:
         value = raw.strip()
+    except RecursionError:
+        raise InputError(f"the value of override `{key.strip()}` is nested too deep: {quote(raw)}.") from None
     return [k.strip() for k in key.split(".")], value
 
 
@@ -431,13 +444,19 @@ def apply_overrides(data: dict[str, Any], overrides: Overrides) -> dict[str, Any
 
 def read_scene_dict(path: str | Path) -> dict[str, Any]:
     """Read a scene TOML file as a nested dict (no validation yet)."""
+    if not isinstance(path, (str, Path)):
+        raise InputTypeError(f"the scene file must be a path (str or pathlib.Path), got {quote(path)}.")
     p = Path(path)
+    if p.is_dir():
+        raise InputError(f"scene file {str(p)!r} is a folder; give the TOML file in it.")
     if not p.is_file():
         raise InputError(f"scene file {str(p)!r} does not exist.")
     try:
-        return tomllib.loads(p.read_text())
+        return tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a byte-order mark is not TOML
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
         raise InputError(f"scene file {str(p)!r} is not valid TOML: {err}") from None
+    except RecursionError:
+        raise InputError(f"scene file {str(p)!r} holds arrays or tables nested too deep to read.") from None
 
 
 def load_scene(path: str | Path | None = None, overrides: Overrides = ()) -> Scene:
