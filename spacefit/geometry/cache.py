@@ -15,6 +15,7 @@ costs time, never a render: the arrays are built as if it were off.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import os
 import tempfile
@@ -22,6 +23,7 @@ import zipfile
 from collections.abc import Callable, Iterable, Mapping
 from importlib import metadata
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -51,6 +53,7 @@ def cache_dir() -> Path | None:
     return (Path(base) if base else Path.home() / ".cache") / "spacefit"
 
 
+@functools.cache
 def _code_identity() -> str:
     """The spacefit version, :data:`FORMAT`, the versions of :data:`PACKAGES` and the SHA-256 of :data:`SOURCES`."""
     h = hashlib.sha256(f"{__version__}|{FORMAT}".encode())
@@ -65,10 +68,9 @@ def _code_identity() -> str:
     return h.hexdigest()
 
 
-def cache_key(kind: str, parts: Iterable[object]) -> str:
-    """SHA-256 (hex) of ``kind``, the code's identity (:func:`_code_identity`) and ``parts``: arrays
-    by dtype, shape and bytes, anything else by ``repr`` (floats as their exact ``repr``)."""
-    h = hashlib.sha256(f"{kind}|{_code_identity()}".encode())
+def _digest(h: Any, parts: Iterable[object]) -> str:
+    """Feed ``parts`` to the hashlib hash ``h`` (arrays by dtype, shape and bytes, anything else by
+    ``repr``: floats as their exact ``repr``) and return its hex digest."""
     for part in parts:
         if isinstance(part, np.ndarray):
             array = np.ascontiguousarray(part)
@@ -79,13 +81,14 @@ def cache_key(kind: str, parts: Iterable[object]) -> str:
     return h.hexdigest()
 
 
+def cache_key(kind: str, parts: Iterable[object]) -> str:
+    """SHA-256 (hex) of ``kind``, the code's identity (:func:`_code_identity`) and ``parts``."""
+    return _digest(hashlib.sha256(f"{kind}|{_code_identity()}".encode()), parts)
+
+
 def _checksum(arrays: Mapping[str, np.ndarray]) -> str:
-    h = hashlib.sha256()
-    for name in sorted(arrays):
-        array = np.ascontiguousarray(arrays[name])
-        h.update(f"|{name} {array.dtype.str} {array.shape}|".encode())
-        h.update(array.tobytes())
-    return h.hexdigest()
+    """SHA-256 (hex) of an entry's arrays and their names."""
+    return _digest(hashlib.sha256(), [x for name in sorted(arrays) for x in (name, np.asarray(arrays[name]))])
 
 
 def _read(path: Path, key: str) -> dict[str, np.ndarray] | None:

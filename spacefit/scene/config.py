@@ -55,10 +55,11 @@ class RenderSettings:
     deterministic renders run on one thread (about 2x slower on 2 cores). On CUDA images agree to
     that rounding only.
 
-    ``sampler`` is Mitsuba's: ``multijitter`` (default) stratifies each pixel's samples on a jittered
-    grid of any count and reaches the error of ``independent`` (the earlier default, still
-    available) with about half the samples on the default scene (``experiments/forward_pareto.py
-    --methods``). Each is unbiased and one seed gives one image.
+    ``sampler`` is Mitsuba's: ``multijitter`` stratifies each pixel's samples on a jittered grid of
+    any count and reaches the error of ``independent`` (the default) with about half the samples on
+    the default scene (``experiments/forward_pareto.py --methods``). Each is unbiased and one seed
+    gives one image. ``independent`` stays the default until fits stop reliably at the lower noise
+    floor that ``multijitter`` gives (a resumed LM fit then ran into its step limit).
     """
 
     resolution: tuple[int, int] = (600, 600)
@@ -68,7 +69,7 @@ class RenderSettings:
     variant: str = "auto"
     filter: str = "tent"
     deterministic: bool = True
-    sampler: str = "multijitter"
+    sampler: str = "independent"
 
     def validate(self) -> None:
         for i, axis in enumerate(("width", "height")):
