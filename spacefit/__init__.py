@@ -80,6 +80,7 @@ __all__ = [
 
 
 def __getattr__(name: str) -> object:
+    """Import a public name's module on first use (PEP 562)."""
     if name not in _EXPORTS:
         raise AttributeError(f"module 'spacefit' has no attribute {name!r}")
     module, attr = _EXPORTS[name]
@@ -89,4 +90,5 @@ def __getattr__(name: str) -> object:
 
 
 def __dir__() -> list[str]:
+    """The public names, imported or not, and the module's own."""
     return sorted({*globals(), *_EXPORTS})

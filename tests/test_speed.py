@@ -110,6 +110,7 @@ def test_keys_change_with_every_input_and_concurrent_writers_leave_a_whole_entry
 
 def test_every_public_name_resolves_and_is_listed():
     assert set(sf.__all__) <= set(dir(sf))
+    assert set(sf._EXPORTS) == set(sf.__all__)  # every lazily imported name is public, and the reverse
     for name in sf.__all__:
         assert getattr(sf, name) is not None
     with pytest.raises(AttributeError):
