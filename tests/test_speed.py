@@ -162,3 +162,9 @@ def test_samplers_keep_one_image_per_seed_and_refuse_counts_they_would_round():
         with pytest.raises(sf.InputError, match="render.s"):
             sf.load_scene(None, {"render.sampler": sampler, "render.spp": spp})
     sf.load_scene(None, {"render.sampler": "ldsampler", "render.spp": 64})
+
+
+def test_a_refinement_held_in_memory_says_so(monkeypatch, tmp_path):
+    scene = _fresh(monkeypatch, tmp_path)
+    assert assemble(scene).cache["body.refinement"] == "miss"
+    assert assemble(scene).cache["body.refinement"] == "memory"

@@ -17,7 +17,6 @@ import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
-
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -42,8 +41,8 @@ class Assembly:
 
     ``scene_vertices`` are the world-frame vertices (m) of every part at the scene's D and G,
     evaluated once (the view check and the renderer both need them); ``cache`` says what the disk
-    cache did for each cached mesh (``"hit"``, ``"miss"`` or ``"off"``), e.g. ``{"lander": "hit",
-    "body.refinement": "hit", "body.displaced": "miss"}``.
+    cache did for each cached mesh (``"hit"``, ``"miss"``, ``"off"``, or ``"memory"`` for a refinement
+    this process already holds), e.g. ``{"lander": "hit", "body.refinement": "hit", "body.displaced": "miss"}``.
     """
 
     scene: Scene
@@ -237,7 +236,9 @@ def assemble(scene: Scene) -> Assembly:
         else:
             check_refinement_size(name, parts[name], w.spacing_m)
             vertices, faces = parts[name].vertices.astype(float), parts[name].faces.astype(np.int64)
-            refinements[name], cache[f"{name}.refinement"] = _refinement(vertices.tobytes(), faces.tobytes(), w.spacing_m)
+            hits = _refinement.cache_info().hits
+            refinements[name], status = _refinement(vertices.tobytes(), faces.tobytes(), w.spacing_m)
+            cache[f"{name}.refinement"] = "memory" if _refinement.cache_info().hits > hits else status
     phases = wm_phases(w.M, wm_n_max(w.L, w.Ls, w.gamma), w.seed)
     object_vertices = {}
     for name, part in parts.items():
