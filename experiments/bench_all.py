@@ -77,7 +77,8 @@ def main() -> None:
         forward = [sys.executable, str(HERE / "forward_pareto.py"), "--methods", "--out", out, *(["--full"] if args.full else [])]
         wall, peak, text = child(forward)
         print(f"\n## forward renders at equal error (600 px, depth 2; {wall:.0f} s, {peak:.0f} MiB)")
-        print("\n".join(line[line.index("{"):] for line in text.splitlines() if "{'view'" in line))
+        # interpolations the sweep's spp cannot bracket are NaN: left out
+        print("\n".join(line[line.index("{"):] for line in text.splitlines() if "{'view'" in line and "nan" not in line))
     wall, peak, text = child([sys.executable, str(HERE / "bench_fit.py")])
     print(f"\n## fits (bench_fit.py; {wall:.0f} s whole process, peak {peak:.0f} MiB)\n{text.strip()}")
     wall, peak, text = child([sys.executable, "-c", LONG_FIT.replace("STEPS", str(args.long_fit_steps))],
