@@ -16,7 +16,7 @@ test: setup
 	.venv/bin/python -m pytest -q $(PYTEST_ARGS)
 
 bench: setup
-	.venv/bin/python experiments/bench_render.py
+	.venv/bin/python experiments/bench_all.py
 
 sweeps: setup
 	.venv/bin/python experiments/thesis_sweeps.py

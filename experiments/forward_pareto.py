@@ -8,7 +8,15 @@ missing bounces as well as the noise. Wall time is the median of a few renders a
 (compiling) render, with ``render.deterministic=false`` (all render threads; the CSV's ``threads``
 column). Writes ``forward.csv`` and ``forward_pareto.png`` to ``--out``.
 
-Run: ``.venv/bin/python experiments/forward_pareto.py [--full] [--out experiments/results/forward]``.
+``--methods`` compares ways of spending a render's time at 600 px, depth 2, in the default view
+(70 m, the target 5 % of the film) and a close one (25 m): plain Mitsuba (the whole film, the
+``independent`` sampler) against spacefit's window around the target with each sampler of
+``render.sampler``. For each it sweeps spp and interpolates (log-log) the time at which the error
+reaches each target error; writes ``methods.csv``, ``equal_error.csv`` and ``methods.png``. Then it
+renders plain Mitsuba and spacefit at spp of equal error (:data:`PAIR_SPP`) in turn and writes the
+time ratios within each pair to ``equal_error_pairs.csv``.
+
+Run: ``.venv/bin/python experiments/forward_pareto.py [--full] [--methods] [--out experiments/results/forward]``.
 """
 
 from __future__ import annotations
@@ -124,11 +132,131 @@ def plot(path: Path, rows: list[dict[str, object]], reference_spp: int, referenc
     save_figure(fig, path)
 
 
+# name -> (render the whole film?, sampler); the first is plain Mitsuba, the yardstick.
+METHODS = {
+    "mitsuba film, independent": (True, "independent"),
+    "window, independent": (False, "independent"),
+    "window, stratified": (False, "stratified"),
+    "window, multijitter": (False, "multijitter"),
+    "window, ldsampler": (False, "ldsampler"),
+}
+VIEWS = {"default (70 m)": [], "close (25 m)": ["camera.position_m=[0, 0, 25]"]}
+# spp swept per method (ldsampler rounds to powers of 2) and errors at which times are compared
+METHOD_SPP = {"reduced": [4, 16], "full": [4, 8, 16, 32, 64]}
+TARGET_ERRORS = (0.4, 0.3, 0.2)
+
+
+def time_at_error(rows: list[dict[str, object]], target: float) -> float:
+    """Wall time (s) at which a method's error reaches ``target``: log-log interpolation between the
+    two spp that bracket it (NaN when none does)."""
+    pts = sorted((float(r["rel_rmse"]), float(r["time_s"])) for r in rows)
+    for (e0, t0), (e1, t1) in zip(pts, pts[1:]):
+        if e0 <= target <= e1 and e1 > e0:
+            w = np.log(target / e0) / np.log(e1 / e0)
+            return float(np.exp(np.log(t0) + w * (np.log(t1) - np.log(t0))))
+    return float("nan")
+
+
+def run_methods(out: Path, full: bool) -> list[dict[str, object]]:
+    """Time and error of every method of METHODS in both VIEWS; the methods take turns at each spp
+    so that a drift in the machine's load falls on all of them alike."""
+    spps = METHOD_SPP["full" if full else "reduced"]
+    reference_spp = 1024 if full else 256
+    out.mkdir(parents=True, exist_ok=True)
+    rows, summary = [], []
+    for view, extra in VIEWS.items():
+        base = ["render.deterministic=false", *extra]
+        reference = Renderer(assemble(load_scene(None, base))).render(spp=reference_spp, seed=REFERENCE_SEED)
+        # render.spp 16 is valid for every sampler; each render passes its own spp
+        renderers = {name: Renderer(assemble(load_scene(None, [*base, "render.spp=16", f'render.sampler="{sampler}"'])),
+                                    crop=not film)
+                     for name, (film, sampler) in METHODS.items()}
+        view_rows = []
+        for spp in spps:
+            for name, renderer in renderers.items():
+                time_s, image = timed(renderer, spp)
+                sampler = renderer.scene.sensors()[0].sampler()
+                view_rows.append({"view": view, "method": name, "spp": spp, "samples_per_pixel": sampler.sample_count(),
+                                  "time_s": round(time_s, 5), "rel_rmse": round(relative_rmse(image, reference), 5),
+                                  "threads": dr.thread_count()})
+        rows += view_rows
+        for target in TARGET_ERRORS:
+            times = {name: time_at_error([r for r in view_rows if r["method"] == name], target) for name in METHODS}
+            plain = times[next(iter(METHODS))]
+            summary += [{"view": view, "rel_rmse": target, "method": name, "time_s": round(t, 5),
+                         "time_over_plain_mitsuba": round(t / plain, 3)} for name, t in times.items()]
+    write_csv(out / "methods.csv", rows)
+    write_csv(out / "equal_error.csv", summary)
+    plot_methods(out / "methods.png", rows, reference_spp)
+    return summary
+
+
+# Equal-error pairs: (spp of plain Mitsuba, spp of spacefit's window with multijitter) that reached
+# about the same error in the --methods sweep (0.31 / 0.30 at 70 m; 0.27 / 0.29 at 25 m).
+PAIR_SPP = (32, 16)
+PAIR_REPEATS = 7
+
+
+def run_pairs(repeats: int = PAIR_REPEATS, reference_spp: int = 1024) -> list[dict[str, object]]:
+    """Plain Mitsuba (whole film, independent, PAIR_SPP[0]) against spacefit (window, multijitter,
+    PAIR_SPP[1]) in both VIEWS, rendered in turn ``repeats`` times: each pair's time ratio is taken
+    within the pair, so that the machine's load drifting between renders cancels."""
+    rows = []
+    for view, extra in VIEWS.items():
+        base = ["render.deterministic=false", *extra]
+        reference = Renderer(assemble(load_scene(None, base))).render(spp=reference_spp, seed=REFERENCE_SEED)
+        plain = Renderer(assemble(load_scene(None, base)), crop=False)
+        ours = Renderer(assemble(load_scene(None, [*base, 'render.sampler="multijitter"'])))
+        runs: dict[str, list[tuple[float, float]]] = {"plain": [], "spacefit": []}
+        for renderer, spp in ((plain, PAIR_SPP[0]), (ours, PAIR_SPP[1])):
+            renderer.render(spp=spp, seed=0)  # compile
+        for seed in range(1, repeats + 1):
+            for name, renderer, spp in (("plain", plain, PAIR_SPP[0]), ("spacefit", ours, PAIR_SPP[1])):
+                t0 = time.perf_counter()
+                image = renderer.render(spp=spp, seed=seed)
+                runs[name].append((time.perf_counter() - t0, relative_rmse(image, reference)))
+        ratios = [b[0] / a[0] for a, b in zip(runs["plain"], runs["spacefit"])]
+        rows.append({"view": view, "plain_spp": PAIR_SPP[0], "spacefit_spp": PAIR_SPP[1],
+                     "plain_s": round(statistics.median(t for t, _ in runs["plain"]), 4),
+                     "spacefit_s": round(statistics.median(t for t, _ in runs["spacefit"]), 4),
+                     "ratio_median": round(statistics.median(ratios), 3), "ratio_min": round(min(ratios), 3),
+                     "ratio_max": round(max(ratios), 3),
+                     "plain_rel_rmse": round(statistics.mean(e for _, e in runs["plain"]), 4),
+                     "spacefit_rel_rmse": round(statistics.mean(e for _, e in runs["spacefit"]), 4)})
+    return rows
+
+
+def plot_methods(path: Path, rows: list[dict[str, object]], reference_spp: int) -> None:
+    """Error against time per method, one panel per view."""
+    fig, axes = plt.subplots(1, len(VIEWS), figsize=(11, 4.5))
+    for ax, view in zip(axes, VIEWS):
+        for name in METHODS:
+            pts = sorted((r["time_s"], r["rel_rmse"], r["samples_per_pixel"]) for r in rows
+                         if r["view"] == view and r["method"] == name)
+            ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", ms=4, label=name)
+        ax.set_xscale("log")
+        ax.set_yscale("log")
+        ax.set_title(f"{view}, 600 px, depth 2", fontsize=10)
+        ax.set_xlabel(f"render wall time (s), median of {REPEATS}, {rows[0]['threads']} threads")
+    axes[0].set_ylabel(f"relative RMSE over lit pixels (reference {reference_spp} spp)")
+    axes[0].legend(fontsize=7)
+    save_figure(fig, path)
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="experiments/results/forward")
     p.add_argument("--full", action="store_true", help="150/300/600 px, spp 1-64, depths 1-5, reference 1024 spp")
+    p.add_argument("--methods", action="store_true", help="compare samplers and the window with plain Mitsuba instead")
     args = p.parse_args()
+    if args.methods:
+        for row in run_methods(Path(args.out), args.full):
+            print(row)
+        pairs = run_pairs() if args.full else run_pairs(repeats=3, reference_spp=256)
+        write_csv(Path(args.out) / "equal_error_pairs.csv", pairs)
+        for row in pairs:
+            print(row)
+        return
     rows = run_forward(Path(args.out), args.full)
     front = pareto_front([(r["time_s"], r["rel_rmse"]) for r in rows])
     print(f"wrote {len(rows)} configurations to {args.out}; Pareto front:")

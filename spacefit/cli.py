@@ -6,19 +6,31 @@ from __future__ import annotations
 import argparse
 import signal
 import sys
+import time
 from pathlib import Path
 from collections.abc import Sequence
 
 from spacefit.errors import InputError, check_range, shorten
-from spacefit.fitting.solvers import Status
-from spacefit.scene.parameters import PARAMETERS
 
 NOT_CONVERGED = 3
 INTERRUPTED = 130  # 128 + SIGINT, as shells report Ctrl-C
 TERMINATED = 143  # 128 + SIGTERM
 
 
-def _parser() -> argparse.ArgumentParser:
+def _free_help(command: str | None) -> str:
+    """Help of ``fit --free``: the parameter registry, listed only for ``spacefit fit`` (the registry
+    imports JAX, 0.6 s that ``spacefit render`` does not need)."""
+    text = "parameters to fit, e.g. parts.panels.alpha_x,parts.legs.kd (P: a part's name)"
+    if command != "fit":
+        return text + "; see spacefit fit --help"
+    from spacefit.scene.parameters import PARAMETERS
+
+    return text + ": " + ", ".join(f"{p.pattern} [{p.unit}] {p.bijection.describe()}" for p in PARAMETERS.values())
+
+
+def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
+    """The command line's parser; ``command`` (the first argument) decides whether ``fit --free``'s
+    help lists the parameter registry."""
     p = argparse.ArgumentParser(prog="spacefit", description="Simulate and fit images of space targets.")
     overrides = argparse.ArgumentParser(add_help=False)
     overrides.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
@@ -30,6 +42,7 @@ def _parser() -> argparse.ArgumentParser:
     r.add_argument("--out", required=True, help="output folder (new, empty, or a previous render with --overwrite)")
     r.add_argument("--overwrite", action="store_true", help="replace a previous render in --out")
     r.add_argument("--quiet", action="store_true", help="no progress output")
+    r.add_argument("--timings", action="store_true", help="print where the time went (also in render.json: timings_s)")
     w = sub.add_parser("scene", parents=[overrides],
                        help="write the resolved scene (defaults: Table 4-2) as TOML to start from")
     w.add_argument("scene", nargs="?", help="scene TOML file to resolve (default: the thesis's scene)")
@@ -47,9 +60,7 @@ def _parser() -> argparse.ArgumentParser:
                    help="reference radiance images (OpenEXR, W m^-2 sr^-1), fitted jointly")
     f.add_argument("--scene", dest="scenes", action="append", required=True, metavar="SCENE.toml",
                    help="scene of the references: one for all, or one per reference in order (repeatable)")
-    f.add_argument("--free", required=True, metavar="NAME[,NAME...]",
-                   help="parameters to fit, e.g. parts.panels.alpha_x,parts.legs.kd (P: a part's name): "
-                        + ", ".join(f"{p.pattern} [{p.unit}] {p.bijection.describe()}" for p in PARAMETERS.values()))
+    f.add_argument("--free", required=True, metavar="NAME[,NAME...]", help=_free_help(command))
     f.add_argument("--out", required=True, metavar="DIR", help="output folder (new, empty, or a previous fit with --overwrite)")
     f.add_argument("--overwrite", action="store_true", help="replace a previous fit report in --out")
     f.add_argument("--resume", action="store_true", help="continue the interrupted fit whose checkpoint is in --out")
@@ -82,6 +93,7 @@ def _start_values(items: Sequence[str]) -> dict[str, float]:
 def _fit(args: argparse.Namespace) -> int:
     """Run ``spacefit fit``; exit code 0 when the solver converged, NOT_CONVERGED otherwise."""
     from spacefit.fitting.report import format_result
+    from spacefit.fitting.solvers import Status
     from spacefit.pipeline import fit_to_folder
 
     given = {"solver": args.solver, "loss": args.loss, "spp": args.spp, "spp_grad": args.spp_grad,
@@ -124,18 +136,23 @@ def _write_scene(args: argparse.Namespace, text: str) -> None:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code: 0, 1 for a file system error, 2 for bad input, 3 for a
     fit that did not converge, 130 for Ctrl-C and 143 for SIGTERM (one line, no traceback)."""
-    args = _parser().parse_args(argv)
+    argv = sys.argv[1:] if argv is None else list(argv)
+    args = _parser(argv[0] if argv else None).parse_args(argv)
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
+        t0 = time.perf_counter()
         from spacefit.pipeline import export_part_stl, render_to_folder
         from spacefit.scene.config import load_scene
+
+        imports_s = time.perf_counter() - t0
 
         if args.command == "fit":
             return _fit(args)
         scene = load_scene(args.scene, args.overrides)
         if args.command == "render":
             render_to_folder(scene, args.out, quiet=args.quiet, overwrite=args.overwrite,
-                             inputs=(args.scene,) if args.scene else ())
+                             inputs=(args.scene,) if args.scene else (), timings_s={"imports": imports_s},
+                             show_timings=args.timings)
         elif args.command == "scene":
             _write_scene(args, scene.to_toml())
         else:

@@ -9,25 +9,23 @@ import math
 import warnings
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from spacefit.errors import InputError, check_choice
-from spacefit.fitting.report import write_fit_report
-from spacefit.fitting.loop import DEFAULT_MAX_STEPS, FitResult, fit
-from spacefit.fitting.solvers import Status
-from spacefit.fitting.problem import Observation
 from spacefit.geometry.mesh import export_stl
 from spacefit.output import prepare_output, staged_output, versions, write_json, write_render
 from spacefit.progress import Progress
 from spacefit.rendering.exr import read_exr, write_exr
-from spacefit.rendering.renderer import PartImage, Renderer
+from spacefit.rendering.renderer import PartImage, Renderer, kernel_log
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.config import Scene, load_scene, parse_override
-from spacefit.scene.parameters import scene_keys
+
+if TYPE_CHECKING:
+    from spacefit.fitting.loop import FitResult
 
 
 def _say(message: str, quiet: bool) -> None:
@@ -36,7 +34,8 @@ def _say(message: str, quiet: bool) -> None:
 
 
 def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, overwrite: bool = False,
-                     inputs: tuple[str | Path, ...] = ()) -> tuple[np.ndarray, dict[str, Any]]:
+                     inputs: tuple[str | Path, ...] = (), timings_s: Mapping[str, float] = {},
+                     show_timings: bool = False) -> tuple[np.ndarray, dict[str, Any]]:
     """Render ``scene`` and write radiance.exr, preview.png, scene.toml and render.json to ``out_dir``.
 
     Every input is checked and the folder is checked (:func:`~spacefit.output.prepare_output`: new,
@@ -44,19 +43,26 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     written over) before rendering; on any error or interruption nothing is left behind. A
     non-finite image is refused, naming the cause; an all-black one is written with a warning that
     says why. Returns the radiance image (W m^-2 sr^-1) and the sidecar dict.
+
+    The sidecar's ``timings_s`` holds the wall time (s) of each stage, after the caller's earlier
+    ones (``timings_s``, e.g. the CLI's imports); ``show_timings`` prints them as a table on stderr,
+    with the writing of the folder (which render.json cannot hold).
     """
     prepare_output(out_dir, "render", overwrite=overwrite, inputs=inputs)
+    timings = dict(timings_s)
     t0 = time.perf_counter()
     assembly = assemble(scene)
-    t_assemble = time.perf_counter() - t0
-    _say(f"scene: {assembly.triangle_count():,} triangles, assembled in {t_assemble:.2f} s", quiet)
+    timings["assemble"] = time.perf_counter() - t0
+    _say(f"scene: {assembly.triangle_count():,} triangles, assembled in {timings['assemble']:.2f} s", quiet)
     t0 = time.perf_counter()
     renderer = Renderer(assembly)
-    t_load = time.perf_counter() - t0
+    timings["load"] = time.perf_counter() - t0
     r = scene.render
     t0 = time.perf_counter()
-    radiance = renderer.render(progress=None if quiet else Progress(f"render {r.resolution[0]}x{r.resolution[1]} @ {r.spp} spp"))
-    t_render = time.perf_counter() - t0
+    with kernel_log() as kernels:
+        radiance = renderer.render(progress=None if quiet else Progress(f"render {r.resolution[0]}x{r.resolution[1]} @ {r.spp} spp"))
+    timings["render"] = t_render = time.perf_counter() - t0
+    t0 = time.perf_counter()
     parts = renderer.part_image()
     check_image(radiance, scene)
     notes = dark_image_notes(radiance, parts, assembly)
@@ -72,12 +78,30 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
         "parts": {"index": {name: i for i, name in enumerate(parts.names)}, "table": parts.table(radiance),
                   "note": "part index -1 is space; pixels count for the part their centre sees"},
         "wrinkle_model": {name: dataclasses.asdict(choice) for name, choice in assembly.lod.items()},
-        "timings_s": {"assemble": t_assemble, "load": t_load, "render": t_render},
+        "mesh_cache": dict(assembly.cache),
+        "kernels": kernels,
         "versions": versions(),
     }
+    timings["part_ids"] = time.perf_counter() - t0
+    sidecar["timings_s"] = timings
+    t0 = time.perf_counter()
     write_render(out_dir, radiance, scene.to_toml(), sidecar, write_exr)
+    if show_timings:
+        print(timings_table({**timings, "write": time.perf_counter() - t0}, assembly.cache, kernels), file=sys.stderr)
     _say(f"wrote {Path(out_dir) / 'radiance.exr'} (max {radiance.max():.4g} W m^-2 sr^-1) in {t_render:.2f} s", quiet)
     return radiance, sidecar
+
+
+def timings_table(timings: Mapping[str, float], cache: Mapping[str, str], kernels: Mapping[str, float]) -> str:
+    """Where a render's wall time went, one stage a line, with the mesh cache's and Dr.Jit's kernel
+    cache's outcome on the lines they explain."""
+    notes = {"assemble": "mesh cache: " + (", ".join(f"{k} {v}" for k, v in cache.items()) or "nothing cached"),
+             "render": f"{kernels['launched']} kernels, {kernels['compiled']} compiled (not in Dr.Jit's caches); "
+                       f"code generation and compilation {kernels['compile_s']:.3f} s"}
+    lines = [f"{'stage':<10} {'s':>7}"]
+    lines += [f"{stage:<10} {seconds:>7.3f}  {notes.get(stage, '')}".rstrip() for stage, seconds in timings.items()]
+    lines.append(f"{'total':<10} {sum(timings.values()):>7.3f}")
+    return "\n".join(lines)
 
 
 def check_image(radiance: np.ndarray, scene: Scene) -> None:
@@ -158,6 +182,11 @@ def fit_to_folder(
     Returns:
         The fit's result.
     """
+    from spacefit.fitting.loop import DEFAULT_MAX_STEPS, fit  # the fitting stack: only fits pay its 1.5 s import
+    from spacefit.fitting.problem import Observation
+    from spacefit.fitting.report import write_fit_report
+    from spacefit.fitting.solvers import Status
+
     prepare_output(out_dir, "fit", overwrite=overwrite, resume=resume, inputs=(*references, *scenes))
     if len(scenes) not in (1, len(references)):
         raise InputError(
@@ -271,6 +300,8 @@ class Checkpoint:
 
 def _check_not_fixed(free: Sequence[str], overrides: Sequence[str]) -> None:
     """Refuse an override of a free parameter: the fit would replace it without a word."""
+    from spacefit.scene.parameters import scene_keys
+
     for text in overrides:
         key = ".".join(parse_override(text)[0])
         for name in free:

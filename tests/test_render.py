@@ -141,3 +141,13 @@ def test_render_crops_to_the_target_and_loses_no_light():
     assert a.shape == b.shape == (64, 64, 3)
     assert not a[outside].any() and not b[outside].any()
     assert a.sum() == pytest.approx(b.sum(), rel=0.01)
+
+
+def test_part_image_of_the_window_equals_the_whole_films():
+    """The part IDs come from one ray per pixel centre, whether the renderer traces a window or the film."""
+    scene = load_scene(None, {"render.resolution": [128, 128], "camera.pixel_pitch_mm": 18.75, "render.spp": 1})
+    windowed, film = Renderer(scene), Renderer(scene, crop=False)
+    assert windowed.window[2] * windowed.window[3] < 0.2 * 128 * 128
+    ids, expected = windowed.part_image().ids, film.part_image().ids
+    assert set(np.unique(expected)) == {-1, 0, 1, 2}
+    assert np.mean(ids == expected) > 0.999, np.mean(ids == expected)

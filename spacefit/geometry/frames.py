@@ -26,10 +26,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from types import ModuleType
 
+from typing import TYPE_CHECKING
+
 import numpy as np
-from jaxtyping import Float
 
 from spacefit.errors import InputError
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need
+    from jaxtyping import Float
 
 
 def attitude_matrix(angles: Float[np.ndarray, "3"], xp: ModuleType = np) -> Float[np.ndarray, "3 3"]:

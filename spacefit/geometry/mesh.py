@@ -10,11 +10,23 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 
+from types import ModuleType
+from typing import TYPE_CHECKING
+
 import numpy as np
-import trimesh
-from jaxtyping import Float, Int
 
 from spacefit.errors import InputError
+
+if TYPE_CHECKING:
+    from jaxtyping import Float, Int
+    import trimesh
+
+def _trimesh() -> ModuleType:
+    """The trimesh module, imported on first use: a render of cached meshes never needs it (0.5 s)."""
+    import trimesh
+
+    return trimesh
+
 
 MESH_SUFFIXES = (".stl", ".ply", ".obj")
 # A triangle whose area is below this fraction of the squared longest edge of its part is
@@ -40,7 +52,7 @@ class PartMesh:
 
     def to_trimesh(self) -> trimesh.Trimesh:
         """The part as an unprocessed :class:`trimesh.Trimesh` (vertex order kept)."""
-        return trimesh.Trimesh(self.vertices, self.faces, process=False)
+        return _trimesh().Trimesh(self.vertices, self.faces, process=False)
 
 
 def validate_part(name: str, part: PartMesh) -> PartMesh:
@@ -69,7 +81,7 @@ def validate_part(name: str, part: PartMesh) -> PartMesh:
         )
     if part.uv is not None and np.shape(part.uv) != (len(v), 2):
         raise InputError(f"part {name!r}: uv must have shape ({len(v)}, 2), got {np.shape(part.uv)}.")
-    closed = trimesh.Trimesh(v, f, process=False)
+    closed = _trimesh().Trimesh(v, f, process=False)
     if closed.is_watertight and closed.volume < 0:
         warnings.warn(f"part {name!r}: the closed mesh's faces wind inward (negative volume); their order was "
                       "reversed so that its outside is lit (spacefit's BSDFs are one-sided).", stacklevel=2)
@@ -85,7 +97,7 @@ def _load(path: Path, **kwargs: object) -> trimesh.Trimesh | trimesh.Scene:
     if path.suffix.lower() == ".stl":
         _check_stl_size(path)
     try:
-        return trimesh.load(path, process=False, **kwargs)
+        return _trimesh().load(path, process=False, **kwargs)
     except Exception as err:  # trimesh raises many types for malformed files
         raise InputError(f"mesh file {str(path)!r} could not be read: {err}") from None
 
@@ -113,7 +125,7 @@ def _from_trimesh(mesh: trimesh.Trimesh) -> PartMesh:
 def load_part(name: str, path: str | Path) -> PartMesh:
     """Load one file (STL / PLY / OBJ) as the whole of part ``name``; all its groups are merged."""
     loaded = _load(Path(path), force="mesh")
-    if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
+    if not isinstance(loaded, _trimesh().Trimesh) or len(loaded.faces) == 0:
         raise InputError(f"part {name!r}: mesh file {str(path)!r} holds no triangles.")
     return validate_part(name, _from_trimesh(loaded))
 
@@ -125,7 +137,7 @@ def load_grouped(path: str | Path) -> dict[str, PartMesh]:
     for node in scene.graph.nodes_geometry:
         transform, geom_name = scene.graph[node]
         mesh = scene.geometry[geom_name]
-        if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
+        if not isinstance(mesh, _trimesh().Trimesh) or len(mesh.faces) == 0:
             continue
         mesh = mesh.copy()
         mesh.apply_transform(transform)
@@ -137,5 +149,5 @@ def load_grouped(path: str | Path) -> dict[str, PartMesh]:
 
 def export_stl(path: str | Path, vertices: Float[np.ndarray, "n 3"], faces: Int[np.ndarray, "m 3"]) -> None:
     """Write a binary STL (80-byte header, uint32 count, 50 bytes per triangle), as the thesis did."""
-    trimesh.Trimesh(np.asarray(vertices, float), np.asarray(faces), process=False).export(path, file_type="stl")
+    _trimesh().Trimesh(np.asarray(vertices, float), np.asarray(faces), process=False).export(path, file_type="stl")
 

@@ -14,13 +14,17 @@ from __future__ import annotations
 
 import math
 import operator
+import sys
+from types import ModuleType
+from typing import TYPE_CHECKING
 
-import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float
 
 from spacefit.errors import InputError, check_range
 from spacefit.precision import float64
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need
+    from jaxtyping import Array, ArrayLike, Float
 
 # log(L/Ls)/log(gamma) is an integer in exact arithmetic when Ls = L / gamma^k; without this slack
 # rounding can land just below k and drop the finest scale.
@@ -29,6 +33,15 @@ _N_MAX_SLACK = 1e-9
 # uses 5 x 8; 1e8 ridges or gamma = 1 + 1e-7 exhausted the memory.
 MAX_RIDGES = 64
 MAX_SCALES = 64
+
+
+def _xp(*values: object) -> ModuleType:
+    """``jax.numpy`` when a value is a JAX array or tracer, else NumPy: the level of detail's slope
+    of plain numbers then needs no JAX, whose import alone takes 0.6 s of a render."""
+    jax = sys.modules.get("jax")
+    if jax is not None and any(isinstance(v, jax.Array) for v in values):
+        return jax.numpy
+    return np
 
 
 def wm_n_max(L: float, Ls: float, gamma: float) -> int:
@@ -92,6 +105,8 @@ def wm_height(
     Returns:
         (n,) heights, metres.
     """
+    import jax.numpy as jnp  # here: a render of cached vertices never needs JAX
+
     n = np.arange(wm_n_max(L, Ls, gamma) + 1)
     phases = np.asarray(phases, dtype=float)
     if phases.shape != (M, len(n)):
@@ -144,7 +159,8 @@ def wm_section_ra(
 def _rms_factor(D: float | Array, gamma: float, M: int, L: float, Ls: float) -> Array:
     """rms height / (L (G/L)^(D-2)): sqrt(ln(gamma)/2 * sum_n gamma^(2 (D-3) n))."""
     n = np.arange(wm_n_max(L, Ls, gamma) + 1)
-    return jnp.sqrt(0.5 * math.log(gamma) * jnp.sum(jnp.power(gamma, 2.0 * (D - 3.0) * n)))
+    xp = _xp(D)
+    return xp.sqrt(0.5 * math.log(gamma) * xp.sum(xp.power(gamma, 2.0 * (D - 3.0) * n)))
 
 
 def wm_rms(D: float | Array, G: float | Array, *, gamma: float, M: int, L: float, Ls: float) -> Array:
@@ -170,5 +186,6 @@ def wm_rms_slope(D: float | Array, G: float | Array, *, gamma: float, M: int, L:
     """
     n = np.arange(wm_n_max(L, Ls, gamma) + 1)
     k2 = (2.0 * np.pi * gamma**n / L) ** 2
-    spectrum = jnp.sum(jnp.power(gamma, 2.0 * (D - 3.0) * n) * k2)
-    return L * (G / L) ** (D - 2.0) * jnp.sqrt(0.25 * math.log(gamma) * spectrum)
+    xp = _xp(D, G)
+    spectrum = xp.sum(xp.power(gamma, 2.0 * (D - 3.0) * n) * k2)
+    return L * (G / L) ** (D - 2.0) * xp.sqrt(0.25 * math.log(gamma) * spectrum)

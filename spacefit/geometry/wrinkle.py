@@ -16,14 +16,16 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import jax.numpy as jnp
+from typing import TYPE_CHECKING
+
 import numpy as np
-from jaxtyping import Array, Float, Int
-from scipy.spatial import Delaunay
 
 from spacefit.errors import InputError, check_range
 from spacefit.precision import float64
 from spacefit.geometry.wm import wm_height
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need
+    from jaxtyping import Array, Float, Int
 
 # Two faces are coplanar when their unit normals differ by less than this and their plane offsets
 # by less than this times the mesh size: tight, so only truly flat neighbours share heights.
@@ -114,6 +116,8 @@ def _triangulate(points2d: Float[np.ndarray, "p 2"], sides: np.ndarray, area2: f
         sides: (p, 3) bool, whether each sample lies on each base edge.
         area2: twice the base triangle's signed area in the projection plane.
     """
+    from scipy.spatial import Delaunay  # here: a render of a cached refinement never needs SciPy (0.4 s)
+
     simplices = Delaunay(points2d).simplices
     # Points on one base edge are collinear only up to rounding, and Delaunay may join them into
     # zero-area triangles; every such triangle has all three corners on one base edge.
@@ -235,5 +239,7 @@ def displace(
     Differentiable in the fractal dimension ``D`` and height scale ``G`` (metres); the other W-M
     parameters are as in :func:`spacefit.geometry.wm.wm_height`.
     """
+    import jax.numpy as jnp  # here: a render of cached vertices never needs JAX (0.6 s)
+
     heights = wm_height(ref.uv, D, G, gamma=gamma, M=M, L=L, Ls=Ls, phases=phases)
     return jnp.asarray(ref.vertices) + (jnp.asarray(ref.movable) * heights)[:, None] * jnp.asarray(ref.normals)

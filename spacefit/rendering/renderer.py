@@ -126,6 +126,7 @@ def scene_dict(assembly: Assembly, vertices: Mapping[str, np.ndarray], window: t
         "to_world": mi.ScalarTransform4f().look_at(
             origin=cam.position.tolist(), target=(cam.position + cam.forward).tolist(), up=cam.up.tolist()
         ),
+        "sampler": {"type": s.render.sampler, "sample_count": s.render.spp},
         "film": {
             "type": "hdrfilm",
             "width": intr.width,
@@ -173,7 +174,30 @@ def render_threads(deterministic: bool) -> Iterator[None]:
     try:
         yield
     finally:
-        dr.set_thread_count(threads)
+        if deterministic:
+            # Kernels run asynchronously on the LLVM backend: resizing the thread pool under a
+            # running one crashed (SIGSEGV in set_thread_count) on a loaded machine.
+            dr.sync_thread()
+            dr.set_thread_count(threads)
+
+
+@contextmanager
+def kernel_log() -> Iterator[dict[str, float]]:
+    """Count the Dr.Jit kernels launched inside the block; the yielded dict is filled on exit.
+
+    Keys: ``launched`` (JIT kernels), ``compiled`` (found in neither Dr.Jit's in-memory cache nor
+    its on-disk one, ``~/.drjit``) and ``compile_s`` (wall time of code generation and compilation,
+    s). A kernel recompiled at every call of a loop shows as ``compiled`` growing with the calls.
+    """
+    stats: dict[str, float] = {}
+    dr.kernel_history_clear()
+    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
+        try:
+            yield stats
+        finally:
+            jit = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+            stats.update(launched=len(jit), compiled=sum(not (k.get("cache_hit") or k.get("cache_disk")) for k in jit),
+                         compile_s=sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in jit) / 1e3)
 
 
 @dataclass(frozen=True)
@@ -258,8 +282,8 @@ class Renderer:
         x0, y0, w, h = self.window
         sensor = self.scene.sensors()[0]
         index = dr.arange(mi.UInt32, w * h)
-        # sample_ray's position sample spans the whole film, the crop window included
-        position = mi.Point2f((mi.Float(index % w) + 0.5 + x0) / intr.width, (mi.Float(index // w) + 0.5 + y0) / intr.height)
+        # sample_ray's position sample spans the film's crop window, which is the rendered window
+        position = mi.Point2f((mi.Float(index % w) + 0.5) / w, (mi.Float(index // w) + 0.5) / h)
         ray, _ = sensor.sample_ray(0.0, 0.0, position, mi.Point2f(0.5))
         hit = self.scene.ray_intersect(ray)
         names = tuple(self.assembly.parts)

@@ -4,33 +4,46 @@ The assembly holds the parts' meshes in the object frame, the refinement of each
 (computed once), materials, the object-to-world matrix, the camera and the sun. World-space
 vertices of a wrinkled part are a JAX function of (D, G), so the differentiable renderer can push
 tangents in D and G through :func:`spacefit.geometry.wrinkle.displace` into vertex positions.
+
+The built-in lander, each refinement and the displaced vertices at the scene's (D, G) come from the
+disk cache (:mod:`spacefit.geometry.cache`), so that a render needs neither JAX, SciPy nor trimesh
+once they are cached: those imports alone take about 1.5 s, and refining the default body 2 s.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
-import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
 from spacefit.errors import InputError, check_direction
+from spacefit.geometry.cache import cached
 from spacefit.geometry.frames import CameraFrame, Intrinsics, object_to_world, project
-from spacefit.geometry.lander import builtin_lander
 from spacefit.geometry.mesh import PartMesh, load_grouped, load_part
 from spacefit.geometry.wm import wm_n_max, wm_phases
 from spacefit.geometry.wrinkle import Refinement, displace, refine
 from spacefit.materials import Material, make_material
-from spacefit.scene.config import Scene, deg2rad
+from spacefit.scene.config import Scene, WrinkleSettings, deg2rad
 from spacefit.scene.lod import LodChoice, choose_model
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need
+    from jaxtyping import Array, Float
 
 
 @dataclass(frozen=True)
 class Assembly:
-    """Everything a renderer needs, in SI units and radians, world frame unless stated."""
+    """Everything a renderer needs, in SI units and radians, world frame unless stated.
+
+    ``scene_vertices`` are the world-frame vertices (m) of every part at the scene's D and G,
+    evaluated once (the view check and the renderer both need them); ``cache`` says what the disk
+    cache did for each cached mesh (``"hit"``, ``"miss"``, ``"off"``, or ``"memory"`` for a refinement
+    this process already holds), e.g. ``{"lander": "hit", "body.refinement": "hit", "body.displaced": "miss"}``.
+    """
 
     scene: Scene
     parts: Mapping[str, PartMesh]
@@ -42,9 +55,13 @@ class Assembly:
     intrinsics: Intrinsics
     sun_direction: Float[np.ndarray, "3"]
     lod: Mapping[str, LodChoice]
+    scene_vertices: Mapping[str, Float[np.ndarray, "n 3"]]
+    cache: Mapping[str, str]
 
     def object_vertices(self, name: str, D: float | Array | None = None, G: float | Array | None = None) -> Array:
         """Object-frame vertices (m) of part ``name``; wrinkled parts at (D, G), scene values by default."""
+        import jax.numpy as jnp  # here, not at the top: a plain render never needs JAX (0.6 s to import)
+
         if name not in self.refinements:
             return jnp.asarray(self.parts[name].vertices)
         w = self.scene.wrinkles
@@ -61,14 +78,10 @@ class Assembly:
 
     def world_vertices(self, name: str, D: float | Array | None = None, G: float | Array | None = None) -> Array:
         """World-frame vertices (m) of part ``name``, differentiable in D and G."""
+        import jax.numpy as jnp
+
         m = jnp.asarray(self.to_world)
         return self.object_vertices(name, D, G) @ m[:3, :3].T + m[:3, 3]
-
-    @functools.cached_property
-    def scene_vertices(self) -> dict[str, np.ndarray]:
-        """World-frame vertices (m) of every part at the scene's D and G, evaluated once: the view
-        check and the renderer both need them."""
-        return {name: np.asarray(self.world_vertices(name)) for name in self.parts}
 
     def faces(self, name: str) -> np.ndarray:
         """Triangles of part ``name`` (refined for wrinkled parts)."""
@@ -80,13 +93,43 @@ class Assembly:
 
 
 @functools.lru_cache(maxsize=8)
-def _refinement(vertices: bytes, faces: bytes, spacing: float) -> Refinement:
-    """Refinement of a part, cached: sweeps and fits re-assemble one geometry many times."""
-    return refine(np.frombuffer(vertices).reshape(-1, 3), np.frombuffer(faces, dtype=np.int64).reshape(-1, 3), spacing)
+def _refinement(vertices: bytes, faces: bytes, spacing: float) -> tuple[Refinement, str]:
+    """Refinement of a part and the disk cache's status; also kept in memory: sweeps and fits
+    re-assemble one geometry many times."""
+    v, f = np.frombuffer(vertices).reshape(-1, 3), np.frombuffer(faces, dtype=np.int64).reshape(-1, 3)
+    arrays, status = cached("refinement", (v, f, float(spacing)), lambda: dataclasses.asdict(refine(v, f, spacing)))
+    return Refinement(**arrays), status
 
 
-def _load_parts(scene: Scene) -> dict[str, PartMesh]:
-    source = builtin_lander() if scene.target.mesh in ("builtin", "") else load_grouped(scene.target.mesh)
+def _displaced(part: PartMesh, refinement: Refinement, w: WrinkleSettings, phases: np.ndarray) -> tuple[np.ndarray, str]:
+    """Object-frame vertices (m) of a wrinkled part at the scene's (D, G), and the disk cache's status."""
+    key = (np.asarray(part.vertices, float), np.asarray(part.faces, np.int64), float(w.spacing_m), float(w.D),
+           float(w.G), float(w.gamma), int(w.M), float(w.L), float(w.Ls), phases)
+    arrays, status = cached("displaced", key, lambda: {"vertices": np.asarray(
+        displace(refinement, w.D, w.G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls, phases=phases))})
+    return arrays["vertices"], status
+
+
+def _builtin_lander() -> tuple[dict[str, PartMesh], str]:
+    """The built-in lander's parts and the disk cache's status (building it imports trimesh, 0.5 s)."""
+
+    def build() -> dict[str, np.ndarray]:
+        from spacefit.geometry.lander import builtin_lander
+
+        return {f"{name}.{field}": value for name, part in builtin_lander().items()
+                for field, value in (("vertices", part.vertices), ("faces", part.faces), ("uv", part.uv))
+                if value is not None}
+
+    arrays, status = cached("lander", (), build)
+    names = dict.fromkeys(key.split(".")[0] for key in arrays)
+    return {n: PartMesh(arrays[f"{n}.vertices"], arrays[f"{n}.faces"], arrays.get(f"{n}.uv")) for n in names}, status
+
+
+def _load_parts(scene: Scene, cache: dict[str, str]) -> dict[str, PartMesh]:
+    if scene.target.mesh in ("builtin", ""):
+        source, cache["lander"] = _builtin_lander()
+    else:
+        source = load_grouped(scene.target.mesh)
     parts: dict[str, PartMesh] = {}
     for name, spec in scene.parts.items():
         if spec.file:
@@ -178,7 +221,8 @@ def assemble(scene: Scene) -> Assembly:
         InputError: before any rendering, for any bad mesh, material or view.
     """
     scene.validate()
-    parts = _load_parts(scene)
+    cache: dict[str, str] = {}
+    parts = _load_parts(scene, cache)
     w = scene.wrinkles
     materials = {name: make_material(p.material, p.overrides, where=f"parts.{name}") for name, p in scene.parts.items()}
     to_world = object_to_world(np.array(scene.target.position_m), np.array(deg2rad(scene.target.attitude_deg)))
@@ -192,8 +236,18 @@ def assemble(scene: Scene) -> Assembly:
         else:
             check_refinement_size(name, parts[name], w.spacing_m)
             vertices, faces = parts[name].vertices.astype(float), parts[name].faces.astype(np.int64)
-            refinements[name] = _refinement(vertices.tobytes(), faces.tobytes(), w.spacing_m)
+            hits = _refinement.cache_info().hits
+            refinements[name], status = _refinement(vertices.tobytes(), faces.tobytes(), w.spacing_m)
+            cache[f"{name}.refinement"] = "memory" if _refinement.cache_info().hits > hits else status
     phases = wm_phases(w.M, wm_n_max(w.L, w.Ls, w.gamma), w.seed)
-    assembly = Assembly(scene, parts, materials, refinements, phases, to_world, camera, intrinsics, check_direction("sun.direction", scene.sun.direction), lod)
-    check_view({n: PartMesh(v, assembly.faces(n)) for n, v in assembly.scene_vertices.items()}, camera, intrinsics)
+    object_vertices = {}
+    for name, part in parts.items():
+        if name in refinements:
+            object_vertices[name], cache[f"{name}.displaced"] = _displaced(part, refinements[name], w, phases)
+        else:
+            object_vertices[name] = part.vertices
+    world = {name: v @ to_world[:3, :3].T + to_world[:3, 3] for name, v in object_vertices.items()}
+    assembly = Assembly(scene, parts, materials, refinements, phases, to_world, camera, intrinsics,
+                        check_direction("sun.direction", scene.sun.direction), lod, world, cache)
+    check_view({n: PartMesh(v, assembly.faces(n)) for n, v in world.items()}, camera, intrinsics)
     return assembly

@@ -1,0 +1,90 @@
+"""Every speed figure in one run (``make bench``): the main job's wall time cold and warm, forward
+renders at equal error against plain Mitsuba, the fits' solve times and accuracy, peak memory, and
+Dr.Jit kernel compilations over a long fit.
+
+Each figure comes from a child process, so that its wall time includes the start-up a user pays and
+its peak memory (``ru_maxrss`` from ``os.wait4``; tracemalloc cannot see Dr.Jit's allocations) is
+its own. "cold" clears spacefit's mesh cache (a fresh ``SPACEFIT_CACHE_DIR``); Dr.Jit's kernel
+cache (``~/.drjit``) is left as it is. Run: ``.venv/bin/python experiments/bench_all.py [--full]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from studyio import machine
+
+HERE = Path(__file__).resolve().parent
+ROOT = HERE.parent
+# A long fit: Adam runs all its steps (it has no early stop here), each one a render and a Jacobian.
+LONG_FIT = """
+import spacefit as sf
+from spacefit.rendering.renderer import kernel_log
+case = sf.load_case("panels")
+scene = case.truth_scene.with_values({"render.resolution": [64, 64], "camera.pixel_pitch_mm": 37.5, "render.spp": 8})
+reference = sf.Renderer(scene).render(seed=7)
+for steps in (5, STEPS):
+    with kernel_log() as k:
+        r = sf.fit(sf.Observation(scene, reference), list(case.free), solver="adam", start=case.start, max_steps=steps)
+    print(f"adam {r.steps} steps: {k['launched']} kernels launched, {k['compiled']} compiled ({k['compile_s']:.2f} s)")
+"""
+
+
+def child(args: list[str], env: dict[str, str] | None = None) -> tuple[float, float, str]:
+    """Run a command; its wall time (s), peak resident memory (MiB) and output."""
+    t0 = time.perf_counter()
+    proc = subprocess.Popen(args, cwd=ROOT, env={**os.environ, **(env or {})}, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True)
+    out = proc.stdout.read()
+    _, status, usage = os.wait4(proc.pid, 0)
+    wall = time.perf_counter() - t0
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    if proc.returncode:
+        raise RuntimeError(f"{' '.join(args)} failed ({proc.returncode}):\n{out[-2000:]}")
+    return wall, usage.ru_maxrss / 1024, out
+
+
+def main_job(repeats: int) -> None:
+    """``spacefit render`` of the default scene: cold (empty mesh cache) once, then warm."""
+    print("\n## spacefit render, default scene (wall s, whole process; peak MiB)")
+    with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
+        env = {"SPACEFIT_CACHE_DIR": cache, "PYTHONPATH": str(ROOT)}
+        render = [sys.executable, "-m", "spacefit.cli", "render", "--quiet", "--overwrite", "--timings", "--out", out]
+        wall, peak, text = child(render, env)
+        print(f"cold (mesh cache empty): {wall:.2f} s, {peak:.0f} MiB\n{text.strip()}")
+        runs = [child(render, env) for _ in range(repeats)]
+        walls = sorted(r[0] for r in runs)
+        print(f"warm: median {statistics.median(walls):.2f} s (min {walls[0]:.2f}, max {walls[-1]:.2f}, {repeats} runs), "
+              f"{runs[-1][1]:.0f} MiB\n{runs[-1][2].strip()}")
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--full", action="store_true", help="the forward study at full size (1024 spp references, spp 4-64)")
+    p.add_argument("--repeats", type=int, default=5, help="warm runs of the main job")
+    p.add_argument("--long-fit-steps", type=int, default=60)
+    args = p.parse_args()
+    print(f"machine: {machine()}, load average {os.getloadavg()[0]:.1f}")
+    main_job(args.repeats)
+    with tempfile.TemporaryDirectory() as out:
+        forward = [sys.executable, str(HERE / "forward_pareto.py"), "--methods", "--out", out, *(["--full"] if args.full else [])]
+        wall, peak, text = child(forward)
+        print(f"\n## forward renders at equal error (600 px, depth 2; {wall:.0f} s, {peak:.0f} MiB)")
+        # interpolations the sweep's spp cannot bracket are NaN: left out
+        print("\n".join(line[line.index("{"):] for line in text.splitlines() if "{'view'" in line and "nan" not in line))
+    wall, peak, text = child([sys.executable, str(HERE / "bench_fit.py")])
+    print(f"\n## fits (bench_fit.py; {wall:.0f} s whole process, peak {peak:.0f} MiB)\n{text.strip()}")
+    wall, peak, text = child([sys.executable, "-c", LONG_FIT.replace("STEPS", str(args.long_fit_steps))],
+                             {"PYTHONPATH": str(ROOT)})
+    print(f"\n## Dr.Jit kernels over a long fit ({wall:.0f} s, peak {peak:.0f} MiB)\n{text.strip()}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,170 @@
+"""The start-up savings: the disk cache of meshes, imports on first use, and the render's timings."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import spacefit as sf
+from spacefit import cli
+from spacefit.geometry import cache
+from spacefit.output import srgb_encode
+from spacefit.scene import assembly as assembly_module
+from spacefit.scene.assembly import assemble
+
+# A wrinkled default scene small enough to refine in well under a second.
+SMALL = {"wrinkles.spacing_m": 0.1, "render.resolution": [64, 64], "camera.pixel_pitch_mm": 37.5, "render.spp": 4}
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _fresh(monkeypatch: pytest.MonkeyPatch, where: str | Path) -> sf.Scene:
+    """Point the cache at ``where`` and forget the in-memory refinements, so the disk is consulted."""
+    monkeypatch.setenv(cache.ENV, str(where))
+    assembly_module._refinement.cache_clear()
+    return sf.load_scene(None, SMALL)
+
+
+def _assert_same(a, b) -> None:
+    for name in a.parts:
+        np.testing.assert_array_equal(a.scene_vertices[name], b.scene_vertices[name])
+        np.testing.assert_array_equal(a.faces(name), b.faces(name))
+    for name, ref in a.refinements.items():
+        for field, value in dataclasses.asdict(ref).items():
+            got = getattr(b.refinements[name], field)
+            assert got.dtype == value.dtype, field
+            np.testing.assert_array_equal(got, value)
+
+
+def test_cached_meshes_equal_a_fresh_refinement(monkeypatch, tmp_path):
+    fresh = assemble(_fresh(monkeypatch, cache.DISABLED))
+    assert set(fresh.cache.values()) == {"off"}
+    first = assemble(_fresh(monkeypatch, tmp_path))
+    assert first.cache == {"lander": "miss", "body.refinement": "miss", "body.displaced": "miss"}
+    second = assemble(_fresh(monkeypatch, tmp_path))
+    assert second.cache == {"lander": "hit", "body.refinement": "hit", "body.displaced": "hit"}
+    _assert_same(fresh, first)
+    _assert_same(fresh, second)
+    for name, part in fresh.parts.items():
+        np.testing.assert_array_equal(part.vertices, second.parts[name].vertices)
+        assert (part.uv is None) == (second.parts[name].uv is None)
+    # another height scale is another entry; the refinement is shared
+    other = assemble(_fresh(monkeypatch, tmp_path).with_values({"wrinkles.G": 0.02}))
+    assert other.cache["body.refinement"] == "hit" and other.cache["body.displaced"] == "miss"
+
+
+@pytest.mark.parametrize("damage", ["truncate", "garbage", "tampered array"])
+def test_a_damaged_entry_is_rebuilt_not_trusted(monkeypatch, tmp_path, damage):
+    fresh = assemble(_fresh(monkeypatch, cache.DISABLED))
+    assemble(_fresh(monkeypatch, tmp_path))
+    entry = next(tmp_path.glob("displaced-*.npz"))
+    if damage == "truncate":
+        entry.write_bytes(entry.read_bytes()[: entry.stat().st_size // 2])
+    elif damage == "garbage":
+        entry.write_bytes(b"not a cache entry")
+    else:  # a readable file whose array no longer matches its checksum
+        with np.load(entry) as data:
+            arrays = {k: data[k] for k in data.files}
+        arrays["vertices"] = arrays["vertices"] + np.float32(1e-3)
+        np.savez(entry, **arrays)
+    rebuilt = assemble(_fresh(monkeypatch, tmp_path))
+    assert rebuilt.cache["body.displaced"] == "miss"
+    _assert_same(fresh, rebuilt)
+    assert assemble(_fresh(monkeypatch, tmp_path)).cache["body.displaced"] == "hit"
+
+
+def test_off_disables_the_cache_and_an_unwritable_folder_costs_only_time(monkeypatch, tmp_path):
+    monkeypatch.setenv(cache.ENV, "off")
+    assert cache.cache_dir() is None
+    blocked = tmp_path / "file"
+    blocked.write_text("a file where the cache folder would be")
+    built = assemble(_fresh(monkeypatch, blocked / "cache"))
+    assert set(built.cache.values()) == {"miss"}
+    monkeypatch.delenv(cache.ENV)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    assert cache.cache_dir() == tmp_path / "xdg" / "spacefit"
+
+
+def test_keys_change_with_every_input_and_concurrent_writers_leave_a_whole_entry(tmp_path):
+    base = ("a", np.arange(3.0), 0.02)
+    keys = {cache.cache_key("k", base), cache.cache_key("k", ("a", np.arange(3.0), 0.021)),
+            cache.cache_key("k", ("a", np.arange(3.0, dtype=np.float32), 0.02)), cache.cache_key("j", base)}
+    assert len(keys) == 4
+    arrays = {"x": np.arange(200_000.0)}
+    path = tmp_path / "k-entry.npz"
+    writers = [threading.Thread(target=cache._write, args=(tmp_path, path, "key", arrays)) for _ in range(4)]
+    for w in writers:
+        w.start()
+    for w in writers:
+        w.join()
+    np.testing.assert_array_equal(cache._read(path, "key")["x"], arrays["x"])
+    assert cache._read(path, "other key") is None
+    assert list(tmp_path.glob(".tmp-*")) == []
+
+
+def test_every_public_name_resolves_and_is_listed():
+    assert set(sf.__all__) <= set(dir(sf))
+    assert set(sf._EXPORTS) == set(sf.__all__)  # every lazily imported name is public, and the reverse
+    for name in sf.__all__:
+        assert getattr(sf, name) is not None
+    with pytest.raises(AttributeError):
+        sf.no_such_name  # noqa: B018
+
+
+def test_a_cached_render_imports_neither_jax_nor_the_fitting_or_plotting_stacks(tmp_path):
+    script = (
+        "import sys, spacefit, spacefit.cli, spacefit.pipeline\n"
+        "from spacefit.rendering.renderer import Renderer\n"
+        f"Renderer(spacefit.load_scene(None, {SMALL!r})).render()\n"
+        "heavy = ('jax', 'jaxtyping', 'optimistix', 'matplotlib', 'colour', 'trimesh', 'scipy')\n"
+        "print(sorted(m for m in heavy if m in sys.modules))\n"
+    )
+    env = {"SPACEFIT_CACHE_DIR": str(tmp_path), "PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    run = [subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+           for _ in range(2)]
+    assert "jax" in run[0].stdout  # the first run refines and displaces the body
+    assert run[1].stdout.strip() == "[]", run[1].stdout
+
+
+def test_render_reports_where_the_time_went(monkeypatch, tmp_path, capsys):
+    monkeypatch.setenv(cache.ENV, str(tmp_path / "cache"))
+    overrides = [arg for key, value in SMALL.items() for arg in ("--set", f"{key}={json.dumps(value)}")]
+    assert cli.main(["render", "--out", str(tmp_path / "out"), "--quiet", "--timings", *overrides]) == 0
+    table = capsys.readouterr().err
+    for stage in ("imports", "assemble", "load", "render", "part_ids", "write", "total"):
+        assert stage in table
+    assert "mesh cache: lander" in table and "kernels" in table
+    sidecar = json.loads((tmp_path / "out" / "render.json").read_text())
+    assert set(sidecar["timings_s"]) == {"imports", "assemble", "load", "render", "part_ids"}
+    assert set(sidecar["mesh_cache"]) == {"lander", "body.refinement", "body.displaced"}
+    assert sidecar["kernels"]["launched"] >= 1
+
+
+def test_srgb_encoding_equals_colour_science():
+    colour = pytest.importorskip("colour")
+    x = np.concatenate([np.linspace(0.0, 0.01, 101), np.linspace(0.0, 1.0, 1001)])
+    np.testing.assert_allclose(srgb_encode(x), colour.cctf_encoding(x, function="sRGB"), rtol=0, atol=1e-12)
+
+
+def test_samplers_keep_one_image_per_seed_and_refuse_counts_they_would_round():
+    scene = sf.load_scene(None, {**SMALL, "render.sampler": "multijitter"})
+    renderer = sf.Renderer(scene)
+    a, b, c = renderer.render(seed=3), renderer.render(seed=3), renderer.render(seed=4)
+    assert np.array_equal(a, b) and not np.array_equal(a, c)
+    assert renderer.scene.sensors()[0].sampler().sample_count() == scene.render.spp
+    for sampler, spp in (("stratified", 20), ("ldsampler", 32), ("ldsampler", 36), ("nope", 16)):
+        with pytest.raises(sf.InputError, match="render.s"):
+            sf.load_scene(None, {"render.sampler": sampler, "render.spp": spp})
+    sf.load_scene(None, {"render.sampler": "ldsampler", "render.spp": 64})
+
+
+def test_a_refinement_held_in_memory_says_so(monkeypatch, tmp_path):
+    scene = _fresh(monkeypatch, tmp_path)
+    assert assemble(scene).cache["body.refinement"] == "miss"
+    assert assemble(scene).cache["body.refinement"] == "memory"
