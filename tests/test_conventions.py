@@ -171,3 +171,17 @@ def test_reverse_derivative_renders_use_seed_grad_only(rough_sphere):
     base = gradient(1, 2)
     assert relative_difference(gradient(5, 2), base) < 1e-5
     assert relative_difference(gradient(1, 3), base) > 0.02
+
+
+def test_free_sun_angles_give_back_the_scenes_light_direction(tmp_path):
+    """Fitting the sun's angles: at the scene's own elevation and azimuth the light travels along the
+    scene's ``sun.direction`` (away from the sun), as it does when the angles are fixed."""
+    direction = np.array([0.3, -0.2, -1.0])
+    scene = small_scene(write_sphere_obj(tmp_path / "sphere.obj", subdivisions=1), {"material": "white_paint"},
+                        sun={"direction": direction.tolist()})
+    free = free_parameters(scene, ["sun.elevation_deg", "sun.azimuth_deg"])
+    x0 = jnp.array([scene_value(scene, n) for n in free.names])
+    # towards the sun: -(0.3, -0.2, -1) / |.|, elevation asin(1 / 1.0630) = 70.17 deg, azimuth atan2(0.2, -0.3)
+    assert np.asarray(x0) == pytest.approx([70.17, 146.31], abs=0.01)
+    light = np.asarray(scene_values_fn(assemble(scene), free)(x0)["sun.to_world"])
+    assert np.allclose(light, direction / np.linalg.norm(direction))
