@@ -4,7 +4,7 @@ OUT ?= out/default
 SCENE ?=
 PYTEST_ARGS ?=
 
-.PHONY: setup render test bench sweeps synthetic
+.PHONY: setup render test bench sweeps synthetic mutants
 
 setup:
 	@tools/setup.sh
@@ -14,6 +14,10 @@ render: setup
 
 test: setup
 	.venv/bin/python -m pytest -q $(PYTEST_ARGS)
+
+# Plant each named one-line bug of tools/mutants.py and check that its tests catch it (minutes; not in CI).
+mutants: setup
+	.venv/bin/python tools/mutants.py $(MUTANTS)
 
 bench: setup
 	.venv/bin/python experiments/bench_all.py

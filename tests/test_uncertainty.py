@@ -1,0 +1,174 @@
+"""Standard errors against closed forms, in both directions: an error too large fails as surely as one
+too small (the fit tests only ask that the truth lies within k standard errors).
+
+The covariance code reads residuals and Jacobians from a problem's two residual functions only, so a
+linear residual r(x) = A x - b stands in for the renderer and every quantity has a closed form.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from spacefit.fit.losses import residual_fn
+# The one line to change when the covariance code moves module.
+from spacefit.fit.solve import _covariance as covariance, _map_covariance as map_covariance
+from spacefit.geometry.wm import wm_G_from_rms
+
+N, P = 12, 3  # few rows, so that the small-sample factor n / (n - p) = 4/3 is far from 1
+
+
+@dataclass
+class LinearProblem:
+    """The two residual functions the covariance reads: r(x) = A x - b and r2(x) = A2 x - b2."""
+
+    residual_x: object
+    residual_x_independent: object
+
+
+def linear(A, b, A2=None, b2=None) -> LinearProblem:
+    A2, b2 = (A, b) if A2 is None else (A2, b2)
+    return LinearProblem(lambda x: jnp.asarray(A) @ x - jnp.asarray(b), lambda x: jnp.asarray(A2) @ x - jnp.asarray(b2))
+
+
+@pytest.fixture
+def heteroscedastic():
+    """A, the estimate x_hat, and residuals at x_hat whose size varies 30-fold from row to row
+    (glints), orthogonal to A's columns as at a least-squares solution."""
+    rng = np.random.default_rng(4)
+    A = rng.normal(size=(N, P))
+    x_hat = np.array([0.4, -1.2, 2.5])
+    e = rng.normal(size=N) * np.geomspace(0.1, 3.0, N)
+    r = e - A @ np.linalg.solve(A.T @ A, A.T @ e)
+    return A, x_hat, r
+
+
+def sandwich(A, r):
+    """White's HC1 covariance, written out: (A^T A)^-1 A^T diag(r^2) A (A^T A)^-1 n / (n - p)."""
+    bread = np.linalg.inv(A.T @ A)
+    n, p = A.shape
+    return bread @ A.T @ np.diag(r**2) @ A @ bread * n / (n - p)
+
+
+def test_covariance_is_the_hc1_sandwich(heteroscedastic):
+    A, x_hat, r = heteroscedastic
+    with jax.enable_x64(True):
+        cov, loss, fisher = covariance(linear(A, A @ x_hat - r), x_hat)
+    expected = sandwich(A, r)
+    np.testing.assert_allclose(cov, expected, rtol=1e-9)
+    # with these residuals the uniform-noise form s^2 (A^T A)^-1 is another matrix: the test can tell
+    assert not np.allclose(np.linalg.inv(A.T @ A) * (r @ r) / (N - P), expected, rtol=0.1)
+    assert loss == pytest.approx(0.5 * r @ r, rel=1e-12)
+    # the Fisher information under uniform noise: eigenvalues of A^T A / s^2
+    np.testing.assert_allclose(np.sort(fisher), np.linalg.eigvalsh(A.T @ A) / ((r @ r) / (N - P)), rtol=1e-9)
+
+
+def test_covariance_does_not_depend_on_the_noise_scale_or_the_units(heteroscedastic):
+    """Dividing every residual by c (a sigma c times larger) leaves the errors unchanged: the
+    sandwich takes the noise level from the residuals, the stated sigma only weighs pixels. Stating
+    x in other units (x = K y, metres to millimetres, say) scales the errors by the same units."""
+    A, x_hat, r = heteroscedastic
+    c = 7.0
+    K = np.diag([1e-2, 1.0, 5.0])
+    with jax.enable_x64(True):
+        base, *_ = covariance(linear(A, A @ x_hat - r), x_hat)
+        scaled, *_ = covariance(linear(A / c, (A @ x_hat - r) / c), x_hat)
+        units, *_ = covariance(linear(A @ K, A @ x_hat - r), np.linalg.solve(K, x_hat))
+    np.testing.assert_allclose(scaled, base, rtol=1e-9)
+    np.testing.assert_allclose(K @ units @ K.T, base, rtol=1e-9)
+
+
+def test_rows_with_nothing_in_them_do_not_count(heteroscedastic):
+    """Black sky (residual and Jacobian row both 0) adds no degrees of freedom: n counts only the
+    informative rows, and the covariance is the same with 30 such rows appended."""
+    A, x_hat, r = heteroscedastic
+    A_sky = np.vstack([A, np.zeros((30, P))])
+    r_sky = np.concatenate([r, np.zeros(30)])
+    with jax.enable_x64(True):
+        cov, *_ = covariance(linear(A_sky, A_sky @ x_hat - r_sky), x_hat)
+    np.testing.assert_allclose(cov, sandwich(A, r), rtol=1e-9)
+
+
+def test_two_jacobians_enter_as_their_symmetrised_cross_product(heteroscedastic):
+    """Monte Carlo noise in a Jacobian would add to J^T J as if it were information; the covariance
+    uses sym(J1^T W J2) of two independently seeded Jacobians, whose noise does not correlate."""
+    A, x_hat, r = heteroscedastic
+    A2 = A + 0.1 * np.random.default_rng(5).normal(size=A.shape)
+    n, p = A.shape
+
+    def sym(W):
+        return 0.5 * (A.T @ W @ A2 + A2.T @ W @ A)
+
+    meat = sym(np.diag(r**2 * n / (n - p)))
+    assert np.all(np.linalg.eigvalsh(meat) > 0)  # so no clipping of the meat's eigenvalues applies
+    bread = np.linalg.inv(sym(np.eye(n)))
+    with jax.enable_x64(True):
+        cov, *_ = covariance(linear(A, A @ x_hat - r, A2, A2 @ x_hat - r), x_hat)
+    np.testing.assert_allclose(cov, bread @ meat @ bread, rtol=1e-9)
+
+
+def test_a_parameter_nothing_constrains_gets_infinite_error_and_leaves_the_others(heteroscedastic):
+    A, x_hat, r = heteroscedastic
+    A_blind = A.copy()
+    A_blind[:, 2] = 0.0  # the images do not depend on x_2
+    with jax.enable_x64(True):
+        cov, *_ = covariance(linear(A_blind, A_blind @ x_hat - r), x_hat)
+    assert np.all(np.isinf(cov[2, :])) and np.all(np.isinf(cov[:, 2]))
+    # the others: the sandwich of the two columns that matter, with the blind one still counted in
+    # the small-sample factor (n / (n - 3), not n / (n - 2))
+    two = sandwich(A[:, :2], r) * (N - 2) / (N - P)
+    np.testing.assert_allclose(cov[:2, :2], two, rtol=1e-9)
+
+
+def test_map_covariance_is_T_C_T_transposed():
+    C = np.array([[0.04, 0.01], [0.01, 0.09]])
+    T = np.array([[1.0, 0.0], [0.7, 2.5]])  # not symmetric: T C T^T differs from T^T C T
+    expected = np.array(
+        [
+            [0.04, 0.7 * 0.04 + 2.5 * 0.01],
+            [0.7 * 0.04 + 2.5 * 0.01, 0.7**2 * 0.04 + 2 * 0.7 * 2.5 * 0.01 + 2.5**2 * 0.09],
+        ]
+    )
+    np.testing.assert_allclose(map_covariance(T, C), expected, rtol=1e-12)
+
+
+def test_map_covariance_keeps_undetermined_undetermined():
+    C = np.array([[0.04, np.inf], [np.inf, np.inf]])
+    T = np.array([[2.0, 0.0], [0.7, 2.5]])  # y_0 = 2 x_0 is determined; y_1 mixes in x_1
+    out = map_covariance(T, C)
+    assert out[0, 0] == pytest.approx(4 * 0.04)
+    assert np.all(np.isinf(out[1, :])) and np.all(np.isinf(out[:, 1]))
+
+
+def test_D_rms_to_D_G_covariance_matches_the_scatter_of_mapped_samples():
+    """The (D, rms) -> (D, G) map of a fit, by the delta method with T = d(D, G) / d(D, rms) from
+    JAX, against the covariance of Gaussian samples pushed through G(D, rms) itself."""
+    w = {"gamma": 1.5, "M": 5, "L": 0.1, "Ls": 5e-3}
+    x = np.array([2.4, 2e-3])  # D, rms height (m)
+    C = np.array([[1e-4, 2e-9], [2e-9, 1e-10]])  # small, so the map is close to linear over the spread
+    with jax.enable_x64(True):
+        def to_user(v):
+            return jnp.stack([v[0], wm_G_from_rms(v[0], v[1], **w)])
+
+        T = np.asarray(jax.jacfwd(to_user)(jnp.asarray(x)))
+        samples = np.random.default_rng(6).multivariate_normal(x, C, size=200_000)
+        mapped = np.asarray(jax.vmap(to_user)(jnp.asarray(samples)))
+    assert abs(T[1, 0]) * np.sqrt(C[0, 0]) > 0.1 * abs(T[1, 1]) * np.sqrt(C[1, 1])  # T is far from diagonal
+    np.testing.assert_allclose(map_covariance(T, C), np.cov(mapped.T), rtol=0.03)
+
+
+def test_per_pixel_sigma_makes_residuals_standard_normal():
+    """Noise drawn with a per-pixel sigma map comes back as the standard normal draws themselves."""
+    rng = np.random.default_rng(7)
+    h, w = 6, 5
+    ref = rng.uniform(0.5, 2.0, size=(h, w, 3))
+    z = rng.normal(size=(h, w, 3))
+    for sigma in (rng.uniform(0.02, 0.5, size=(h, w)), rng.uniform(0.02, 0.5, size=(h, w, 3))):
+        noise = (sigma[..., None] if sigma.ndim == 2 else sigma) * z
+        r = np.asarray(residual_fn(ref, "pixel", sigma)(jnp.asarray(ref + noise, dtype=jnp.float32)))
+        # float32 images: the difference is exact to ~1e-7 of the radiance, i.e. 2e-7 / 0.02 in z
+        np.testing.assert_allclose(r, z.ravel(), atol=1e-4)

@@ -1,0 +1,187 @@
+"""Named mutants: plausible one-line bugs in the physics, camera, bridge and uncertainty code, each
+of which some test must catch (``make mutants``; not part of ``make test``).
+
+Each mutant names a file, an exact snippet of it, the snippet's replacement, and the tests that
+should fail. The script copies the checkout (tracked and untracked, not ignored files) to a
+temporary folder once, then for each mutant writes the mutated file there, runs only that mutant's
+tests with ``-x -q`` and restores the file: the checkout itself is never changed. A snippet that is
+no longer in its file, or not exactly once, is reported as stale: update the mutant.
+
+Usage: python tools/mutants.py [NAME ...] [--list] [--no-baseline]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+# The covariance code's module: the one line to change when it moves.
+COVARIANCE = "spacefit/fit/solve.py"
+FRAMES = "spacefit/geometry/frames.py"
+RENDERER = "spacefit/render/renderer.py"
+BRIDGE = "spacefit/render/bridge.py"
+WM = "spacefit/geometry/wm.py"
+# A mutant whose tests run longer than this is counted as killed (the suite would hang on it).
+TIMEOUT_S = 900
+
+CONVENTIONS = "tests/test_conventions.py"
+UNCERTAINTY = "tests/test_uncertainty.py"
+PROPERTIES = "tests/test_properties.py"
+PHYSICS = "tests/test_physics.py"
+
+
+@dataclass(frozen=True)
+class Mutant:
+    name: str
+    path: str
+    original: str
+    replacement: str
+    tests: tuple[str, ...]
+
+
+MUTANTS = (
+    # camera and frames (thesis section 3.2)
+    Mutant("euler-order", FRAMES, "return r1 @ r2 @ r3", "return r3 @ r2 @ r1", (CONVENTIONS,)),
+    Mutant("r1-turns-the-other-way", FRAMES, "[0, np.cos(a), np.sin(a)], [0, -np.sin(a), np.cos(a)]",
+           "[0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]", (CONVENTIONS, "tests/test_camera.py")),
+    Mutant("camera-looks-along-plus-z", FRAMES, "r[:, 1], -r[:, 2])", "r[:, 1], r[:, 2])", (CONVENTIONS,)),
+    Mutant("look-at-up-flipped", FRAMES, "np.cross(right, forward), forward)", "np.cross(forward, right), forward)",
+           ("tests/test_camera.py",)),
+    Mutant("principal-point-sign", FRAMES, "self.width / 2 + self.principal_offset[0]",
+           "self.width / 2 - self.principal_offset[0]", (CONVENTIONS,)),
+    Mutant("v-runs-up", FRAMES, "v = v0 - intrinsics.focal_px", "v = v0 + intrinsics.focal_px", (CONVENTIONS,)),
+    Mutant("fov-from-height", FRAMES, "np.arctan(self.width * self.pixel_pitch", "np.arctan(self.height * self.pixel_pitch",
+           (CONVENTIONS,)),
+    Mutant("pixel-pitch-in-microns", "spacefit/scene/assembly.py", "c.pixel_pitch_mm * 1e-3", "c.pixel_pitch_mm * 1e-6",
+           (CONVENTIONS,)),
+    Mutant("mitsuba-principal-point-sign", RENDERER, '"principal_point_offset_x": -intr.principal_offset[0]',
+           '"principal_point_offset_x": intr.principal_offset[0]', (CONVENTIONS,)),
+    # materials and the renderer's BSDFs (thesis section 2.3)
+    Mutant("alpha-u-v-swapped", RENDERER, '"alpha_u": material.alpha_x,\n            "alpha_v": material.alpha_y,',
+           '"alpha_u": material.alpha_y,\n            "alpha_v": material.alpha_x,', (PHYSICS,)),
+    Mutant("beckmann-for-ggx", RENDERER, '"distribution": material.distribution,', '"distribution": "beckmann",', (PHYSICS,)),
+    Mutant("fresnel-k-dropped", RENDERER, '"k": _spectrum(material.k),', '"k": 0.0,', (PHYSICS, PROPERTIES)),
+    Mutant("kd-over-pi-twice", RENDERER, '"value": list(kd)}', '"value": [v / math.pi for v in kd]}', (PHYSICS,)),
+    Mutant("path-depth-off-by-one", RENDERER, "max_depth = s.render.depth + 1", "max_depth = s.render.depth", (PHYSICS,)),
+    Mutant("default-distribution-beckmann", "spacefit/materials/models.py", 'distribution: str = "ggx"',
+           'distribution: str = "beckmann"', (PHYSICS, PROPERTIES)),
+    # W-M height field (thesis eq. 2-1)
+    Mutant("wm-G-exponent-sign", WM, "scale = L * (G / L) ** (D - 2.0)", "scale = L * (G / L) ** (2.0 - D)",
+           ("tests/test_wm.py", PROPERTIES)),
+    Mutant("wm-scale-weights-sign", WM, "weights = jnp.power(gamma, (D - 3.0) * n)", "weights = jnp.power(gamma, (3.0 - D) * n)",
+           ("tests/test_wm.py",)),
+    Mutant("wm-rms-variance-not-halved", WM, "jnp.sqrt(0.5 * math.log(gamma) * jnp.sum(", "jnp.sqrt(math.log(gamma) * jnp.sum(",
+           ("tests/test_wm.py",)),
+    Mutant("wm-G-from-rms-exponent", WM, "** (1.0 / (D - 2.0))", "** (D - 2.0)", (PROPERTIES,)),
+    # the JAX / Dr.Jit seam and the parameters
+    Mutant("fd-column-one-sided-step", BRIDGE, "(up - down) / (2.0 * steps[j])", "(up - down) / steps[j]",
+           ("tests/test_bridge.py::test_jacobian_columns_match_finite_differences",)),
+    Mutant("forward-derivative-with-primal-seed", BRIDGE,
+           "{k: t[..., j] for k, t in tangents.items()}, seed_grad))", "{k: t[..., j] for k, t in tangents.items()}, seed))",
+           (CONVENTIONS,)),
+    Mutant("backward-with-primal-seed", BRIDGE, "scene.backward(v, c, seed_grad)", "scene.backward(v, c, seed)", (CONVENTIONS,)),
+    Mutant("logistic-inverse-width", "spacefit/fit/params.py", "p = (x - self.lo) / (self.hi - self.lo)\n        return jnp.log(p)",
+           "p = (x - self.lo) / self.hi\n        return jnp.log(p)", (PROPERTIES,)),
+    Mutant("sun-to-world-towards-the-sun", "spacefit/fit/params.py", 'out["sun.to_world"] = -jnp.stack(',
+           'out["sun.to_world"] = jnp.stack(', (CONVENTIONS,)),
+    # noise weights and the uncertainty
+    Mutant("residual-over-sigma-squared", "spacefit/fit/losses.py", "weight = jnp.asarray(1.0 / s,",
+           "weight = jnp.asarray(1.0 / s**2,", (UNCERTAINTY,)),
+    Mutant("covariance-plain-inverse", COVARIANCE, "cov = bread @ meat @ bread", "cov = bread", (UNCERTAINTY,)),
+    Mutant("covariance-uniform-noise", COVARIANCE, "cov = bread @ meat @ bread", "cov = s2 * bread", (UNCERTAINTY,)),
+    Mutant("covariance-no-hc1-factor", COVARIANCE, "cross(r**2 * informative / dof)", "cross(r**2)", (UNCERTAINTY,)),
+    Mutant("covariance-counts-black-sky", COVARIANCE, "informative = int((np.any(J1 != 0, axis=1) | (r != 0)).sum())",
+           "informative = len(r)", (UNCERTAINTY,)),
+    Mutant("covariance-one-jacobian", COVARIANCE, "J2 = np.asarray(jax.jacfwd(problem.residual_x_independent)",
+           "J2 = np.asarray(jax.jacfwd(problem.residual_x)", (UNCERTAINTY,)),
+    Mutant("covariance-undetermined-finite", COVARIANCE, "touched = np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)",
+           "touched = np.zeros(len(x), dtype=bool)", (UNCERTAINTY,)),
+    Mutant("fisher-times-s2", COVARIANCE, "np.clip(eigval, 0.0, None) / s2", "np.clip(eigval, 0.0, None) * s2", (UNCERTAINTY,)),
+    Mutant("map-covariance-transposed", COVARIANCE, "out = T @ np.where(np.isfinite(cov), cov, 0.0) @ T.T",
+           "out = T.T @ np.where(np.isfinite(cov), cov, 0.0) @ T", (UNCERTAINTY,)),
+)
+
+
+def copy_checkout(dest: Path) -> None:
+    """Tracked and untracked files that git does not ignore: the tree the tests see, without .venv or outputs."""
+    files = subprocess.run(["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"], cwd=ROOT,
+                           check=True, capture_output=True).stdout.decode().split("\0")
+    for name in filter(None, files):
+        if (ROOT / name).is_file():
+            (dest / name).parent.mkdir(parents=True, exist_ok=True)
+            shutil.copy2(ROOT / name, dest / name)
+
+
+def run_tests(tree: Path, tests: tuple[str, ...]) -> tuple[int | None, str]:
+    """pytest's exit code (None on timeout) and the first failing test, run in the copy."""
+    env = {**os.environ, "PYTHONPATH": str(tree), "PYTHONDONTWRITEBYTECODE": "1"}
+    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *tests]
+    try:
+        out = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        return None, f"timeout after {TIMEOUT_S} s"
+    failed = [line.split(" ", 1)[1].split(" - ")[0] for line in out.stdout.splitlines() if line.startswith(("FAILED ", "ERROR "))]
+    return out.returncode, failed[0] if failed else out.stdout.strip().splitlines()[-1] if out.stdout.strip() else ""
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("names", nargs="*", help="run only these mutants (default: all)")
+    parser.add_argument("--list", action="store_true", help="list the mutants and exit")
+    parser.add_argument("--no-baseline", action="store_true", help="skip the check that the targeted tests pass unmutated")
+    args = parser.parse_args()
+    known = {m.name for m in MUTANTS}
+    if unknown := [n for n in args.names if n not in known]:
+        parser.error(f"unknown mutants {unknown}; --list shows them")
+    mutants = [m for m in MUTANTS if not args.names or m.name in args.names]
+    if args.list:
+        for m in mutants:
+            print(f"{m.name:38s} {m.path:30s} {' '.join(m.tests)}")
+        return 0
+
+    with tempfile.TemporaryDirectory(prefix="spacefit-mutants-") as tmp:
+        tree = Path(tmp)
+        copy_checkout(tree)
+        if not args.no_baseline:
+            targets = tuple(dict.fromkeys(t for m in mutants for t in m.tests))
+            code, first = run_tests(tree, targets)
+            if code != 0:
+                print(f"the targeted tests fail without any mutant ({first}); fix them first", file=sys.stderr)
+                return 2
+        rows = []
+        for m in mutants:
+            path = tree / m.path
+            source = path.read_text()
+            if source.count(m.original) != 1:
+                rows.append((m, "stale", 0.0, f"snippet found {source.count(m.original)} times in {m.path}"))
+                continue
+            t0 = time.perf_counter()
+            try:
+                path.write_text(source.replace(m.original, m.replacement))
+                code, first = run_tests(tree, m.tests)
+            finally:
+                path.write_text(source)
+            # pytest exits 1 when a test fails and 2 when a module no longer imports (both kill the
+            # mutant); 3-5 are pytest's own errors or no tests collected: the mutant's entry is wrong
+            status = "killed" if code in (1, 2, None) else "SURVIVED" if code == 0 else f"error {code}"
+            rows.append((m, status, time.perf_counter() - t0, first))
+            print(f"{m.name:38s} {status:8s} {rows[-1][2]:6.1f} s  {first}", flush=True)
+
+    killed = sum(r[1] == "killed" for r in rows)
+    print(f"\nscore: {killed} / {len(rows)} mutants killed")
+    for m, status, _, detail in rows:
+        if status != "killed":
+            print(f"  {status}: {m.name} ({m.path}): {detail}")
+    return 0 if killed == len(rows) else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
