@@ -13,11 +13,13 @@ import numpy as np
 import pytest
 from helpers import small_scene, write_sphere_obj
 
-from spacefit.fit.params import free_parameters, scene_value, scene_values_fn
+from spacefit import Renderer, render
+from spacefit.fitting.params import free_parameters
 from spacefit.geometry.frames import CameraFrame, Intrinsics, attitude_matrix, object_to_world, project
-from spacefit.render import Renderer, render
-from spacefit.render.bridge import DrJitScene, render_params, render_values
+from spacefit.rendering.bridge import DrJitScene, render_params, render_values
+from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.assembly import assemble
+from spacefit.scene.parameters import scene_value
 
 
 def r1(a):
@@ -141,7 +143,7 @@ def rough_sphere(tmp_path_factory):
     free = free_parameters(scene, ["parts.sphere.alpha", "parts.sphere.eta"])
     assembly = assemble(scene)
     x0 = jnp.array([scene_value(scene, n) for n in free.names])
-    return DrJitScene(Renderer(assembly), spp=4, spp_grad=4), scene_values_fn(assembly, free), free, x0
+    return DrJitScene(Renderer(assembly), spp=4, spp_grad=4), scene_values_fn(assembly, free.names), free, x0
 
 
 def relative_difference(a, b):
@@ -183,5 +185,5 @@ def test_free_sun_angles_give_back_the_scenes_light_direction(tmp_path):
     x0 = jnp.array([scene_value(scene, n) for n in free.names])
     # towards the sun: -(0.3, -0.2, -1) / |.|, elevation asin(1 / 1.0630) = 70.17 deg, azimuth atan2(0.2, -0.3)
     assert np.asarray(x0) == pytest.approx([70.17, 146.31], abs=0.01)
-    light = np.asarray(scene_values_fn(assemble(scene), free)(x0)["sun.to_world"])
+    light = np.asarray(scene_values_fn(assemble(scene), free.names)(x0)["sun.to_world"])
     assert np.allclose(light, direction / np.linalg.norm(direction))

@@ -12,10 +12,10 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 from test_physics import microfacet_walter, unit
 
-from spacefit.fit.params import BIJECTIONS
+import spacefit as sf
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.geometry.wm import wm_G_from_rms, wm_height, wm_n_max, wm_phases, wm_rms
-from spacefit.render import render
+from spacefit.scene.parameters import PARAMETERS
 
 # No example database in the checkout; cheap laws get many examples, renders few and reproducible ones.
 CHEAP = settings(max_examples=60, deadline=None, database=None)
@@ -33,11 +33,11 @@ def test_attitude_matrix_is_a_proper_rotation(angles):
 
 
 @CHEAP
-@given(st.sampled_from(sorted(BIJECTIONS)), st.floats(-20.0, 20.0), st.floats(1e-6, 1.0 - 1e-6))
+@given(st.sampled_from(sorted(PARAMETERS)), st.floats(-20.0, 20.0), st.floats(1e-6, 1.0 - 1e-6))
 def test_bijections_round_trip_both_ways(name, u, fraction):
     """u -> x -> u on the solver's side, and x -> u -> x for x anywhere inside the range (a
     fraction of a bounded range; a distance above the bound of a half-line; anything on the line)."""
-    b = BIJECTIONS[name]
+    b = PARAMETERS[name].bijection
     with jax.enable_x64(True):
         x = float(b.forward(u))
         assert b.lo < x < b.hi
@@ -102,7 +102,7 @@ def test_conductor_plate_radiance_is_walter_2007_for_any_index(tmp_path_factory,
                 "focal_length_mm": 200.0, "pixel_pitch_mm": 0.1},
         sun={"direction": unit(sun).tolist(), "irradiance_w_m2": E},
     )
-    img = render(scene)
+    img = sf.render(scene)
     assert np.all(img >= 0.0) and np.all(np.isfinite(img))
     wo = -pixel_directions(scene)  # plate frame = world frame: x tangent, y bitangent, z normal
     wi = np.broadcast_to(-unit(sun), wo.shape)

@@ -14,9 +14,8 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from spacefit.fit.losses import residual_fn
-# The one line to change when the covariance code moves module.
-from spacefit.fit.solve import _covariance as covariance, _map_covariance as map_covariance
+from spacefit.fitting.losses import residual_fn
+from spacefit.fitting.uncertainty import covariance, map_covariance
 from spacefit.geometry.wm import wm_G_from_rms
 
 N, P = 12, 3  # few rows, so that the small-sample factor n / (n - p) = 4/3 is far from 1
