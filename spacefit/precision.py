@@ -11,8 +11,6 @@ import functools
 from collections.abc import Callable
 from typing import ParamSpec, TypeVar
 
-import jax
-
 P = ParamSpec("P")
 R = TypeVar("R")
 
@@ -22,6 +20,8 @@ def float64(fn: Callable[P, R]) -> Callable[P, R]:
 
     @functools.wraps(fn)
     def wrapped(*args: P.args, **kwargs: P.kwargs) -> R:
+        import jax  # on first call: a cached render imports spacefit's geometry without needing JAX
+
         with jax.enable_x64(True):
             return fn(*args, **kwargs)
 
