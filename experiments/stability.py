@@ -91,7 +91,7 @@ class Size:
     solvers: tuple[str, ...]
 
 
-REDUCED = Size(32, 128, 256, 8, ("lm", "adam"))
+REDUCED = Size(32, 32, 128, 6, ("lm", "adam"))
 FULL = Size(64, 128, 256, 30, SOLVERS)
 
 
