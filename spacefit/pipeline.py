@@ -17,6 +17,7 @@ import numpy as np
 
 from spacefit.errors import InputError, check_choice
 from spacefit.geometry.mesh import export_stl
+from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
 from spacefit.output import prepare_output, staged_output, versions, write_json, write_render
 from spacefit.progress import Progress
 from spacefit.rendering.exr import read_exr, write_exr
@@ -78,6 +79,8 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
         "parts": {"index": {name: i for i, name in enumerate(parts.names)}, "table": parts.table(radiance),
                   "note": "part index -1 is space; pixels count for the part their centre sees"},
         "wrinkle_model": {name: dataclasses.asdict(choice) for name, choice in assembly.lod.items()},
+        "fold_fraction": {"parts": dict(assembly.folds), "warn_above": FOLD_WARN_FRACTION,
+                          "note": "fraction of a displaced part's faces turned more than 90 deg from the surface under them"},
         "mesh_cache": dict(assembly.cache),
         "kernels": kernels,
         "versions": versions(),
