@@ -124,8 +124,8 @@ def warn_folds(folds: Mapping[str, float], w: WrinkleSettings) -> None:
     for name, fraction in folds.items():
         if fraction > FOLD_WARN_FRACTION:
             warnings.warn(f"part {name!r}: {100 * fraction:.1f} % of its wrinkled faces fold over (turned more than "
-                          f"90 deg from the surface under them; wrinkles.G = {w.G:g} m, D = {w.D:g}): the wrinkles are "
-                          "taller than the body's faces are wide, not crumpled foil (README, \"Wrinkles\").",
+                          f"90 deg from the surface under them; wrinkles.G = {w.G:g} m, D = {w.D:g}): wrinkles this steep fold "
+                          "the part over itself at its edges, unlike crumpled MLI foil (README, \"Wrinkles\").",
                           stacklevel=3)
 
 
