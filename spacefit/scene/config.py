@@ -480,7 +480,7 @@ def load_scene(path: str | Path | None = None, overrides: Overrides = ()) -> Sce
 
 
 def default_scene() -> Scene:
-    """The default scene: the thesis's Table 4-2 (its lander, camera, sun and wrinkles)."""
+    """The default scene: the thesis's Table 4-2 (its lander, camera, sun and wrinkles, G read as micrometres: 1e-5 m)."""
     return Scene().validate()
 
 
