@@ -22,7 +22,7 @@ from spacefit.output import prepare_output, staged_output, versions, write_json,
 from spacefit.progress import Progress
 from spacefit.rendering.exr import read_exr, write_exr
 from spacefit.rendering.renderer import PartImage, Renderer, kernel_log
-from spacefit.scene.assembly import Assembly, assemble
+from spacefit.scene.assembly import Assembly, assemble, fold_notes
 from spacefit.scene.config import Scene, load_scene, parse_override
 
 if TYPE_CHECKING:
@@ -69,6 +69,7 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     notes = dark_image_notes(radiance, parts, assembly)
     for note in notes:
         warnings.warn(note, stacklevel=2)
+    notes = notes + fold_notes(assembly.folds, scene.wrinkles)  # these were warned when the scene was assembled
     sidecar = {
         "warnings": notes,
         "scene": scene.to_dict(),

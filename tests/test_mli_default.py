@@ -54,6 +54,7 @@ def test_render_json_records_the_fold_fraction(tmp_path):
         _, sidecar = sf.render_to_folder(scene, tmp_path / "out", quiet=True)
     recorded = sidecar["fold_fraction"]
     assert recorded["parts"]["body"] == assemble(scene).folds["body"] > recorded["warn_above"]
+    assert any("fold over" in note for note in sidecar["warnings"])
 
 
 def test_fold_fraction_counts_faces_turned_over_the_surface_under_them():

@@ -119,14 +119,12 @@ def _displaced(part: PartMesh, refinement: Refinement, w: WrinkleSettings, phase
     return arrays["vertices"], float(arrays["fold_fraction"]), status
 
 
-def warn_folds(folds: Mapping[str, float], w: WrinkleSettings) -> None:
-    """Warn for each part whose fold fraction exceeds :data:`~spacefit.geometry.wrinkle.FOLD_WARN_FRACTION`."""
-    for name, fraction in folds.items():
-        if fraction > FOLD_WARN_FRACTION:
-            warnings.warn(f"part {name!r}: {100 * fraction:.1f} % of its wrinkled faces fold over (turned more than "
-                          f"90 deg from the surface under them; wrinkles.G = {w.G:g} m, D = {w.D:g}): wrinkles this steep fold "
-                          "the part over itself at its edges, unlike crumpled MLI foil (README, \"Wrinkles\").",
-                          stacklevel=3)
+def fold_notes(folds: Mapping[str, float], w: WrinkleSettings) -> list[str]:
+    """A note for each part whose fold fraction exceeds :data:`~spacefit.geometry.wrinkle.FOLD_WARN_FRACTION`."""
+    return [f"part {name!r}: {100 * fraction:.1f} % of its wrinkled faces fold over (turned more than 90 deg from "
+            f"the surface under them; wrinkles.G = {w.G:g} m, D = {w.D:g}): wrinkles this steep fold the part over "
+            "itself at its edges, unlike crumpled MLI foil (README, \"Wrinkles\")."
+            for name, fraction in folds.items() if fraction > FOLD_WARN_FRACTION]
 
 
 def _builtin_lander() -> tuple[dict[str, PartMesh], str]:
@@ -268,6 +266,7 @@ def assemble(scene: Scene) -> Assembly:
     world = {name: v @ to_world[:3, :3].T + to_world[:3, 3] for name, v in object_vertices.items()}
     assembly = Assembly(scene, parts, materials, refinements, phases, to_world, camera, intrinsics,
                         check_direction("sun.direction", scene.sun.direction), lod, world, cache, folds)
-    warn_folds(folds, w)
+    for note in fold_notes(folds, w):
+        warnings.warn(note, stacklevel=2)
     check_view({n: PartMesh(v, assembly.faces(n)) for n, v in world.items()}, camera, intrinsics)
     return assembly
