@@ -1,7 +1,8 @@
 """Identifiability of D and G against range and resolution at the thesis's optics.
 
 The thesis's scene (Table 4-2: f = 7000 mm, field of view 19.5 deg, target attitude [90, 0, 0],
-sun along the view) with the thesis's wrinkles (D 2.3, G 10 m, L 0.1 m), references with 2 %
+sun along the view) with the thesis's wrinkles read literally (``data/scenes/thesis-literal.toml``:
+D 2.3, G 10 m, L 0.1 m; the default scene's G is 1e-5 m since issue 13), references with 2 %
 Gaussian noise; for each camera range and image width, the standard errors of D, G and the rms
 height that a fit could reach, their correlation, and the Fisher information's eigenvalues (in
 (D, rms height)), from :func:`spacefit.fitting.identifiability`, without fitting. Writes
@@ -28,6 +29,7 @@ from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 from spacefit.scene.config import load_scene  # noqa: E402
 
+LITERAL = Path(__file__).resolve().parents[1] / "data" / "scenes" / "thesis-literal.toml"
 FREE = ["wrinkles.D", "wrinkles.G"]
 NOISE = 0.02
 NOISE_SEED = 11
@@ -35,7 +37,7 @@ NOISE_SEED = 11
 
 def observation(range_m: float, width: int, spp: int) -> Observation:
     """The thesis's view from ``range_m`` at ``width`` px (same field of view), with 2 % noise."""
-    scene = load_scene(None, [f"camera.position_m=[0, 0, {range_m}]", f"render.resolution=[{width}, {width}]",
+    scene = load_scene(LITERAL, [f"camera.position_m=[0, 0, {range_m}]", f"render.resolution=[{width}, {width}]",
                               f"camera.pixel_pitch_mm={4.0 * 600 / width}", f"render.spp={spp}", "render.seed=7"])
     image = Renderer(assemble(scene)).render()
     sigma = NOISE * float(image[image.max(axis=-1) > 0].mean())

@@ -36,6 +36,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "pixel_solid_angles": ("spacefit.geometry.frames", "pixel_solid_angles"),
     "wm_rms": ("spacefit.geometry.wm", "wm_rms"),
     "wm_rms_slope": ("spacefit.geometry.wm", "wm_rms_slope"),
+    "MLI_SLOPE_RANGE": ("spacefit.geometry.wrinkle", "MLI_SLOPE_RANGE"),
     "ObservedImage": ("spacefit.imageio", "ObservedImage"),
     "read_image": ("spacefit.imageio", "read_image"),
     "write_observation": ("spacefit.imageio", "write_observation"),
@@ -76,6 +77,7 @@ __all__ = [
     "render_to_folder", "wm_rms", "wm_rms_slope", "write_exr", "write_fit_report",
     "Distortion", "Intrinsics", "ObservedImage", "Sensor", "distort_image", "expected_dn", "noise_variance_dn", "observe",
     "pixel_solid_angles", "read_image", "saturated_mask", "write_observation",
+    "MLI_SLOPE_RANGE",
 ]
 
 

@@ -17,11 +17,12 @@ import numpy as np
 
 from spacefit.errors import InputError, check_choice
 from spacefit.geometry.mesh import export_stl
+from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
 from spacefit.output import prepare_output, staged_output, versions, write_json, write_render
 from spacefit.progress import Progress
 from spacefit.rendering.exr import read_exr, write_exr
 from spacefit.rendering.renderer import PartImage, Renderer, kernel_log
-from spacefit.scene.assembly import Assembly, assemble
+from spacefit.scene.assembly import Assembly, assemble, fold_notes
 from spacefit.scene.config import Scene, load_scene, parse_override
 
 if TYPE_CHECKING:
@@ -68,6 +69,7 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     notes = dark_image_notes(radiance, parts, assembly)
     for note in notes:
         warnings.warn(note, stacklevel=2)
+    notes = notes + fold_notes(assembly.folds, scene.wrinkles)  # these were warned when the scene was assembled
     sidecar = {
         "warnings": notes,
         "scene": scene.to_dict(),
@@ -78,6 +80,8 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
         "parts": {"index": {name: i for i, name in enumerate(parts.names)}, "table": parts.table(radiance),
                   "note": "part index -1 is space; pixels count for the part their centre sees"},
         "wrinkle_model": {name: dataclasses.asdict(choice) for name, choice in assembly.lod.items()},
+        "fold_fraction": {"parts": dict(assembly.folds), "warn_above": FOLD_WARN_FRACTION,
+                          "note": "fraction of a displaced part's faces turned more than 90 deg from the surface under them"},
         "mesh_cache": dict(assembly.cache),
         "kernels": kernels,
         "versions": versions(),

@@ -10,6 +10,7 @@ from spacefit.scene.config import Scene, apply_overrides, load_scene, scene_from
 
 
 def test_defaults_are_table_4_2():
+    """Table 4-2, and the thesis's wrinkles but G: 1e-5 m, its "10" read as micrometres (issue 13)."""
     s = Scene()
     assert s.render.resolution == (600, 600) and s.render.spp == 20 and s.render.depth == 2
     assert s.camera.pixel_pitch_mm == 4.0 and s.camera.focal_length_mm == 7000.0
@@ -17,7 +18,7 @@ def test_defaults_are_table_4_2():
     assert s.target.position_m == (0.0, 0.0, 0.0) and s.target.attitude_deg == (90.0, 0.0, 0.0)
     assert s.sun.irradiance_w_m2 == 5.0 and s.sun.direction == (0.0, 0.0, -1.0)
     w = s.wrinkles
-    assert (w.D, w.G, w.gamma, w.M, w.L, w.Ls) == (2.3, 10.0, 1.5, 5, 0.1, 5e-3)
+    assert (w.D, w.G, w.gamma, w.M, w.L, w.Ls) == (2.3, 1e-5, 1.5, 5, 0.1, 5e-3)
     assert make_material(s.parts["panels"].material) == Conductor(2.05, 0.055, 0.08, 0.05)
     assert make_material(s.parts["legs"].material) == Lambert(0.2)
     body = make_material(s.parts["body"].material)

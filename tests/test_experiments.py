@@ -29,3 +29,15 @@ def test_identifiability_study_shape(tmp_path):
         assert by[(70.0, width)]["fisher_min"] <= by[(25.0, width)]["fisher_min"]
     assert by[(25.0, 128)]["fisher_min"] >= by[(25.0, 64)]["fisher_min"]  # and rises with resolution
     assert all(r["se_D"] > 0 for r in rows)
+
+
+def test_wrinkle_previews_put_the_default_in_the_mli_range_and_the_literal_reading_beyond(tmp_path):
+    import wrinkle_previews
+
+    import spacefit as sf
+
+    rows = {row["reading"]: row for row in wrinkle_previews.run_previews(tmp_path, size=48, spp=1)}
+    assert {p.name for p in tmp_path.iterdir()} == {"default.png", "thesis_literal.png", "wrinkles.csv"}
+    lo, hi = sf.MLI_SLOPE_RANGE
+    assert lo <= rows["default"]["rms_slope"] <= hi and rows["default"]["fold_fraction"] < 0.01
+    assert rows["thesis_literal"]["rms_slope"] > hi and rows["thesis_literal"]["fold_fraction"] > 0.01

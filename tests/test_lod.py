@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ from spacefit.scene.lod import effective_alpha, effective_material
 
 from lod_study import GENTLE, run_study  # noqa: E402
 
+LITERAL = Path(__file__).resolve().parents[1] / "data" / "scenes" / "thesis-literal.toml"
 SMALL = ["render.resolution=[48, 48]", "camera.pixel_pitch_mm=50", "render.spp=16"]
 
 
@@ -39,11 +41,15 @@ def test_auto_model_follows_the_pixel_footprint(distance, model):
     assert (len(a.faces("body")) == 12) == (model == "effective")
 
 
-def test_thesis_wrinkles_are_too_steep_for_an_effective_roughness():
-    a = assemble(load_scene(None, SMALL + ["camera.position_m=[0, 0, 2000]", "camera.pixel_pitch_mm=1", "wrinkles.model='auto'"]))
+def test_thesis_literal_wrinkles_are_too_steep_for_an_effective_roughness():
+    far = SMALL + ["camera.position_m=[0, 0, 2000]", "camera.pixel_pitch_mm=1", "wrinkles.model='auto'"]
+    with pytest.warns(UserWarning, match="fold over"):
+        a = assemble(load_scene(LITERAL, far))
     assert a.lod["body"].model == "geometry" and "steep" in a.lod["body"].reason
     with pytest.raises(InputError, match="wrinkles.model"):
-        assemble(load_scene(None, SMALL + ["wrinkles.model='effective'"]))
+        assemble(load_scene(LITERAL, SMALL + ["wrinkles.model='effective'"]))
+    farther = SMALL + ["camera.position_m=[0, 0, 4000]", "camera.pixel_pitch_mm=1"]  # a pixel 5.7 L
+    assert assemble(load_scene(None, farther)).lod["body"].model == "effective"  # the default's crumpled foil
 
 
 def test_sidecar_records_the_choice(tmp_path):

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import struct
+import warnings
 
 import numpy as np
 import pytest
@@ -96,7 +97,7 @@ def test_degenerate_and_empty_meshes():
 
 
 def test_inside_out_closed_part_is_turned_and_renders_as_the_right_one(tmp_path):
-    """A closed mesh wound inward would render black (one-sided BSDFs): it is reversed, with a warning."""
+    """A closed mesh wound inward is reversed, with a warning, so its normals point outward."""
     right = write_sphere_obj(tmp_path / "sphere.obj", subdivisions=2)
     mesh = trimesh.load(right, process=False)
     inverted = tmp_path / "inverted" / "sphere.obj"
@@ -110,3 +111,22 @@ def test_inside_out_closed_part_is_turned_and_renders_as_the_right_one(tmp_path)
         turned = render(small_scene(inverted, {"material": "white_paint"}))
     images = [image, turned]
     assert images[1].mean() > 0 and np.allclose(images[0], images[1], rtol=1e-4, atol=1e-6)
+
+
+@pytest.mark.parametrize("suffix", [".stl", "ascii.stl", ".ply", ".obj"])
+def test_inward_closed_mesh_is_detected_in_every_format(tmp_path, suffix):
+    """STL stores each triangle's corners apart: vertices are merged before the closed check, so an
+    inward STL is turned like an OBJ or PLY; an outward one gives no warning."""
+    sphere = trimesh.creation.icosphere(subdivisions=1)
+    inward = trimesh.Trimesh(sphere.vertices, sphere.faces[:, ::-1], process=False)
+    for mesh, name in [(inward, "inward"), (sphere, "outward")]:
+        path = tmp_path / f"{name}{suffix}"
+        if suffix == "ascii.stl":
+            path.write_text(trimesh.exchange.stl.export_stl_ascii(mesh))
+        else:
+            mesh.export(path)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            part = load_part(name, path)
+        assert any("wind inward" in str(w.message) for w in caught) == (name == "inward")
+        assert trimesh.Trimesh(part.vertices, part.faces, process=False).volume > 0

@@ -107,6 +107,13 @@ MUTANTS = (
     Mutant("fisher-times-s2", COVARIANCE, "np.clip(eigval, 0.0, None) / s2", "np.clip(eigval, 0.0, None) * s2", (UNCERTAINTY,)),
     Mutant("map-covariance-transposed", COVARIANCE, "out = T @ np.where(np.isfinite(cov), cov, 0.0) @ T.T",
            "out = T.T @ np.where(np.isfinite(cov), cov, 0.0) @ T", (UNCERTAINTY,)),
+    # back faces, closed meshes and folded wrinkles (issues 11 and 13)
+    Mutant("back-faces-one-sided", RENDERER, 'return {"type": "twosided", "bsdf": _one_sided(material)}',
+           "return _one_sided(material)", ("tests/test_back_faces.py",)),
+    Mutant("closed-check-without-merging", "spacefit/geometry/mesh.py", "    closed.merge_vertices(merge_tex=True, merge_norm=True)\n",
+           "", ("tests/test_mesh_io.py",)),
+    Mutant("fold-against-own-base-face", "spacefit/geometry/wrinkle.py", "ref.normals[movable][nearest]) < 0.0",
+           "ref.normals[ref.faces[:, 0]]) < 0.0", ("tests/test_mli_default.py",)),
 )
 
 

@@ -58,8 +58,11 @@ class PartMesh:
 def validate_part(name: str, part: PartMesh) -> PartMesh:
     """Check that a part has faces, finite vertices, valid indices and no degenerate triangles.
 
-    A closed part whose faces wind inward (negative enclosed volume) would render black: the BSDFs
-    are one-sided. Its face order is reversed, with a warning. Open parts are kept as given.
+    A closed part whose faces wind inward (negative enclosed volume) is reversed, with a warning:
+    wrinkles displace along the faces' normals, and spacefit's outward convention is what every
+    part's normals follow (its BSDFs shade both sides, so the part is lit either way). Closedness
+    is judged after merging vertices at equal positions, for every format: an STL stores each
+    triangle's corners apart, so it is never closed before merging. Open parts are kept as given.
     """
     v, f = np.asarray(part.vertices, float), np.asarray(part.faces)
     if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0:
@@ -82,9 +85,10 @@ def validate_part(name: str, part: PartMesh) -> PartMesh:
     if part.uv is not None and np.shape(part.uv) != (len(v), 2):
         raise InputError(f"part {name!r}: uv must have shape ({len(v)}, 2), got {np.shape(part.uv)}.")
     closed = _trimesh().Trimesh(v, f, process=False)
+    closed.merge_vertices(merge_tex=True, merge_norm=True)
     if closed.is_watertight and closed.volume < 0:
         warnings.warn(f"part {name!r}: the closed mesh's faces wind inward (negative volume); their order was "
-                      "reversed so that its outside is lit (spacefit's BSDFs are one-sided).", stacklevel=2)
+                      "reversed so that its normals point outward (wrinkles displace along them).", stacklevel=2)
         f = f[:, ::-1]
     return PartMesh(v, f.astype(np.int64), None if part.uv is None else np.asarray(part.uv, float))
 

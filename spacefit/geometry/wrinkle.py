@@ -35,6 +35,14 @@ COPLANAR_TOL = 1e-9
 _AXIS_DECIMALS = 9
 # Which base edges (corner i to corner i + 1) each corner of a triangle lies on.
 _CORNER_SIDES = np.array([[True, False, True], [True, True, False], [False, True, True]])
+# The rms slope (per axis, dimensionless, :func:`spacefit.geometry.wm.wm_rms_slope`) of wrinkles
+# that look like crumpled MLI foil: from about 11 deg (gentler reads as a flat sheet with a
+# ripple) to 45 deg (steeper starts to fold the body over itself: the default body's fold
+# fraction is 0.45 % at rms slope 2.3, 7.6 % at the thesis's literal 37). A stated modelling
+# choice: no published slope statistics of crumpled MLI or foil were found (README, "Wrinkles").
+MLI_SLOPE_RANGE = (0.2, 1.0)
+# Fraction of a wrinkled part's faces folded over (:func:`fold_fraction`) above which assembly warns.
+FOLD_WARN_FRACTION = 0.01
 
 
 @dataclass(frozen=True)
@@ -243,3 +251,25 @@ def displace(
 
     heights = wm_height(ref.uv, D, G, gamma=gamma, M=M, L=L, Ls=Ls, phases=phases)
     return jnp.asarray(ref.vertices) + (jnp.asarray(ref.movable) * heights)[:, None] * jnp.asarray(ref.normals)
+
+
+def fold_fraction(ref: Refinement, vertices: Float[np.ndarray, "N 3"]) -> float:
+    """Fraction of the displaced faces folded over: turned more than 90 deg from the base surface under them.
+
+    Inside one base face the wrinkles are a height field along its normal (thesis section 2.2), so
+    no face turns over its own base face; a body folds over itself where wrinkles taller than
+    their distance to an edge of the base mesh push a face across into a neighbour's side (the
+    "hair" at the silhouette of the thesis's literal G = 10 m). A face counts as folded when its
+    normal points against the normal of the nearest undisplaced movable sample to its centroid:
+    seen from outside there, it shows its back. ``vertices`` (N, 3, metres) are the displaced
+    positions of ``ref`` (:func:`displace`); 0 for no faces.
+    """
+    from scipy.spatial import cKDTree  # here: a render of a cached displaced part never needs SciPy (0.4 s)
+
+    movable = ref.movable > 0
+    if not np.any(movable) or len(ref.faces) == 0:
+        return 0.0
+    tri = np.asarray(vertices, float)[ref.faces]
+    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    _, nearest = cKDTree(ref.vertices[movable]).query(tri.mean(axis=1))
+    return float(np.mean(np.einsum("ij,ij->i", normals, ref.normals[movable][nearest]) < 0.0))

@@ -64,7 +64,17 @@ def _spectrum(value: float | tuple[float, ...]) -> dict | float:
 
 
 def bsdf_dict(material: Material) -> dict:
-    """Mitsuba BSDF for a material; the microfacet distribution is always named (Mitsuba's default is Beckmann)."""
+    """Mitsuba BSDF for a material, shading both sides of every face alike (Mitsuba's ``twosided``).
+
+    The thesis's renderer, pbrt-v3, shades the back of a face as its front (its BSDFs flip the
+    shading frame to the side of the outgoing ray), so a folded or inward-wound face is lit, not
+    black; ``twosided`` does the same. Traverse keys: :func:`spacefit.rendering.values.bsdf_key`.
+    """
+    return {"type": "twosided", "bsdf": _one_sided(material)}
+
+
+def _one_sided(material: Material) -> dict:
+    """The material's one-sided Mitsuba BSDF; the microfacet distribution is always named (Mitsuba's default is Beckmann)."""
     if isinstance(material, Conductor):
         return {
             "type": "roughconductor",

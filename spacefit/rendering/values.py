@@ -1,7 +1,7 @@
 """Named scene parameters -> the Mitsuba scene values they set, by traverse key (a JAX function).
 
 This is the one place where a registered parameter (:mod:`spacefit.scene.parameters`) meets
-Mitsuba's vocabulary: ``parts.panels.alpha_x`` sets ``'panels.bsdf.alpha_u.value'``, the wrinkles'
+Mitsuba's vocabulary: ``parts.panels.alpha_x`` sets ``'panels.bsdf.brdf_0.alpha_u.value'``, the wrinkles'
 D and G set every wrinkled part's ``vertex_positions`` through the JAX W-M heights (so their
 tangents are exact), the sun's angles set its frame ``'sun.to_world'`` (by the direction its
 light travels). The bridge differentiates through the result; a :class:`Renderer` sets it in place.
@@ -22,8 +22,12 @@ SceneValuesFn = Callable[[Array], dict[str, Array]]
 
 
 def bsdf_key(part: str, field: str) -> str:
-    """Mitsuba traverse key of BSDF field ``field`` (``alpha_u``, ``reflectance``) of ``part``."""
-    return f"{part}.bsdf.{field}.value"
+    """Mitsuba traverse key of BSDF field ``field`` (``alpha_u``, ``reflectance``) of ``part``.
+
+    Every part's BSDF is wrapped in Mitsuba's ``twosided`` (:func:`spacefit.rendering.renderer.bsdf_dict`),
+    which names the BSDF it shades both sides with ``brdf_0``.
+    """
+    return f"{part}.bsdf.brdf_0.{field}.value"
 
 
 def scene_values_fn(assembly: Assembly, names: Sequence[str]) -> SceneValuesFn:

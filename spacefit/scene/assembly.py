@@ -15,6 +15,7 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -26,7 +27,7 @@ from spacefit.geometry.cache import cached
 from spacefit.geometry.frames import CameraFrame, Intrinsics, object_to_world, project
 from spacefit.geometry.mesh import PartMesh, load_grouped, load_part
 from spacefit.geometry.wm import wm_n_max, wm_phases
-from spacefit.geometry.wrinkle import Refinement, displace, refine
+from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION, Refinement, displace, fold_fraction, refine
 from spacefit.materials import Material, make_material
 from spacefit.scene.config import Scene, WrinkleSettings, deg2rad
 from spacefit.scene.lod import LodChoice, choose_model
@@ -42,7 +43,9 @@ class Assembly:
     ``scene_vertices`` are the world-frame vertices (m) of every part at the scene's D and G,
     evaluated once (the view check and the renderer both need them); ``cache`` says what the disk
     cache did for each cached mesh (``"hit"``, ``"miss"``, ``"off"``, or ``"memory"`` for a refinement
-    this process already holds), e.g. ``{"lander": "hit", "body.refinement": "hit", "body.displaced": "miss"}``.
+    this process already holds), e.g. ``{"lander": "hit", "body.refinement": "hit", "body.displaced": "miss"}``;
+    ``folds`` is the fraction of each displaced part's faces folded over at the scene's D and G
+    (:func:`spacefit.geometry.wrinkle.fold_fraction`).
     """
 
     scene: Scene
@@ -57,6 +60,7 @@ class Assembly:
     lod: Mapping[str, LodChoice]
     scene_vertices: Mapping[str, Float[np.ndarray, "n 3"]]
     cache: Mapping[str, str]
+    folds: Mapping[str, float]
 
     def object_vertices(self, name: str, D: float | Array | None = None, G: float | Array | None = None) -> Array:
         """Object-frame vertices (m) of part ``name``; wrinkled parts at (D, G), scene values by default."""
@@ -101,13 +105,26 @@ def _refinement(vertices: bytes, faces: bytes, spacing: float) -> tuple[Refineme
     return Refinement(**arrays), status
 
 
-def _displaced(part: PartMesh, refinement: Refinement, w: WrinkleSettings, phases: np.ndarray) -> tuple[np.ndarray, str]:
-    """Object-frame vertices (m) of a wrinkled part at the scene's (D, G), and the disk cache's status."""
+def _displaced(part: PartMesh, refinement: Refinement, w: WrinkleSettings, phases: np.ndarray) -> tuple[np.ndarray, float, str]:
+    """Object-frame vertices (m) of a wrinkled part at the scene's (D, G), their fold fraction and the
+    disk cache's status."""
     key = (np.asarray(part.vertices, float), np.asarray(part.faces, np.int64), float(w.spacing_m), float(w.D),
            float(w.G), float(w.gamma), int(w.M), float(w.L), float(w.Ls), phases)
-    arrays, status = cached("displaced", key, lambda: {"vertices": np.asarray(
-        displace(refinement, w.D, w.G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls, phases=phases))})
-    return arrays["vertices"], status
+
+    def build() -> dict[str, np.ndarray]:
+        vertices = np.asarray(displace(refinement, w.D, w.G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls, phases=phases))
+        return {"vertices": vertices, "fold_fraction": np.array(fold_fraction(refinement, vertices))}
+
+    arrays, status = cached("displaced", key, build)
+    return arrays["vertices"], float(arrays["fold_fraction"]), status
+
+
+def fold_notes(folds: Mapping[str, float], w: WrinkleSettings) -> list[str]:
+    """A note for each part whose fold fraction exceeds :data:`~spacefit.geometry.wrinkle.FOLD_WARN_FRACTION`."""
+    return [f"part {name!r}: {100 * fraction:.1f} % of its wrinkled faces fold over (turned more than 90 deg from "
+            f"the surface under them; wrinkles.G = {w.G:g} m, D = {w.D:g}): wrinkles this steep fold the part over "
+            "itself at its edges, unlike crumpled MLI foil (README, \"Wrinkles\")."
+            for name, fraction in folds.items() if fraction > FOLD_WARN_FRACTION]
 
 
 def _builtin_lander() -> tuple[dict[str, PartMesh], str]:
@@ -240,14 +257,16 @@ def assemble(scene: Scene) -> Assembly:
             refinements[name], status = _refinement(vertices.tobytes(), faces.tobytes(), w.spacing_m)
             cache[f"{name}.refinement"] = "memory" if _refinement.cache_info().hits > hits else status
     phases = wm_phases(w.M, wm_n_max(w.L, w.Ls, w.gamma), w.seed)
-    object_vertices = {}
+    object_vertices, folds = {}, {}
     for name, part in parts.items():
         if name in refinements:
-            object_vertices[name], cache[f"{name}.displaced"] = _displaced(part, refinements[name], w, phases)
+            object_vertices[name], folds[name], cache[f"{name}.displaced"] = _displaced(part, refinements[name], w, phases)
         else:
             object_vertices[name] = part.vertices
     world = {name: v @ to_world[:3, :3].T + to_world[:3, 3] for name, v in object_vertices.items()}
     assembly = Assembly(scene, parts, materials, refinements, phases, to_world, camera, intrinsics,
-                        check_direction("sun.direction", scene.sun.direction), lod, world, cache)
+                        check_direction("sun.direction", scene.sun.direction), lod, world, cache, folds)
+    for note in fold_notes(folds, w):
+        warnings.warn(note, stacklevel=2)
     check_view({n: PartMesh(v, assembly.faces(n)) for n, v in world.items()}, camera, intrinsics)
     return assembly

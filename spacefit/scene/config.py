@@ -147,6 +147,13 @@ class TargetSettings:
 class WrinkleSettings:
     """W-M wrinkles (thesis eq. 2-1, section 2.2) on the named parts; lengths in metres.
 
+    D, gamma, M, L and Ls are the thesis's values. Its G = 10 read in metres, like L and Ls, gives
+    an rms height of 0.27 m on a 1.4 m body and an rms slope of 37 (spikes like hair; the body
+    folds over itself), and no common unit for all lengths changes the slope. The default G is
+    1e-5 m, the thesis's "10" read as micrometres with L and Ls in metres: rms height 4.3 mm, rms
+    slope 0.59, inside :data:`spacefit.geometry.wrinkle.MLI_SLOPE_RANGE` (crumpled foil). The literal
+    reading is kept as the scene ``data/scenes/thesis-literal.toml`` (README, "Wrinkles").
+
     ``spacing_m`` is the refinement density: the distance between the sample points that carry
     heights (the thesis's sampling grid inside each triangle).
 
@@ -163,7 +170,7 @@ class WrinkleSettings:
     enabled: bool = True
     parts: tuple[str, ...] = ("body",)
     D: float = 2.3
-    G: float = 10.0
+    G: float = 1e-5
     gamma: float = 1.5
     M: int = 5
     L: float = 0.1
@@ -473,7 +480,7 @@ def load_scene(path: str | Path | None = None, overrides: Overrides = ()) -> Sce
 
 
 def default_scene() -> Scene:
-    """The default scene: the thesis's Table 4-2 (its lander, camera, sun and wrinkles)."""
+    """The default scene: the thesis's Table 4-2 (its lander, camera, sun and wrinkles, G read as micrometres: 1e-5 m)."""
     return Scene().validate()
 
 
