@@ -37,9 +37,10 @@ BYTES_PER_SAMPLE = 64
 def available_memory_bytes() -> int:
     """Memory the system can still give (MemAvailable of /proc/meminfo; total physical elsewhere)."""
     try:
-        for line in open("/proc/meminfo"):
-            if line.startswith("MemAvailable:"):
-                return int(line.split()[1]) * 1024
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
     except OSError:
         pass
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
