@@ -201,7 +201,12 @@ def template(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple
     if images:
         coords["channel"] = np.array(["R", "G", "B"], dtype=object)
     if derivatives:
+        from spacefit.scene.parameters import parameter
+        from spacefit.studies.sensitivity import normalisation
+
         coords["parameter"] = np.array(derivatives, dtype=object)
+        coords["parameter_unit"] = ("parameter", np.array([parameter(n).unit for n in derivatives], dtype=object))
+        coords["normalised_unit"] = ("parameter", np.array([normalisation(n, 1.0)[1] for n in derivatives], dtype=object))
     return xr.Dataset(variables, coords=coords, attrs=dict(attrs))
 
 

@@ -115,5 +115,7 @@ def run_task(task: Task) -> dict[str, np.ndarray]:
 
         render = {k: v for k, v in (("render.seed", task.seed), ("render.spp", task.spp)) if v is not None}
         point = scene_with(scene.with_values(render), dict(task.in_place))
-        out.update(point_summaries(sensitivity(point, task.derivatives, seeds=task.derivative_seeds, quiet=True)))
+        sens = sensitivity(point, task.derivatives, seeds=task.derivative_seeds, quiet=True)
+        order = [sens.regions.index(r) for r in regions(scene)]
+        out.update({k: v[:, order] for k, v in point_summaries(sens).items()})
     return out
