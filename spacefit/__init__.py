@@ -64,6 +64,8 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "sweep": ("spacefit.studies.sweep", "sweep"),
     "Sensitivity": ("spacefit.studies.sensitivity", "Sensitivity"),
     "sensitivity": ("spacefit.studies.sensitivity", "sensitivity"),
+    "LightCurve": ("spacefit.studies.lightcurve", "LightCurve"),
+    "light_curve": ("spacefit.studies.lightcurve", "light_curve"),
     "read_sweep_file": ("spacefit.studies.sweep", "read_sweep_file"),
     "expected_dn": ("spacefit.sensor", "expected_dn"),
     "noise_variance_dn": ("spacefit.sensor", "noise_variance_dn"),
@@ -80,7 +82,7 @@ __all__ = [
     "render_to_folder", "wm_rms", "wm_rms_slope", "write_exr", "write_fit_report",
     "Distortion", "Intrinsics", "ObservedImage", "Sensor", "distort_image", "expected_dn", "noise_variance_dn", "observe",
     "pixel_solid_angles", "read_image", "saturated_mask", "write_observation",
-    "read_sweep_file", "sweep", "Sensitivity", "sensitivity",
+    "read_sweep_file", "sweep", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
 ]
 
 
