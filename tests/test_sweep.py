@@ -142,3 +142,13 @@ def test_sweep_command_line(tmp_path):
                          capture_output=True, text=True, timeout=300)
     assert bad.returncode == 2 and bad.stderr.startswith("spacefit: error:") and "sun.elevation_deg" in bad.stderr
     assert "Traceback" not in bad.stderr and not (tmp_path / "b.zarr").exists()
+
+
+def test_a_two_worker_dask_cluster_gives_the_in_process_dataset(tmp_path):
+    """Workers keep their loaded scene, are restarted after 3 renders here, and give identical numbers."""
+    scene = sphere_scene(tmp_path)
+    axes = {"sun.elevation_deg": [30.0, 60.0, 90.0], "render.seed": [1, 2]}
+    local = sf.sweep(scene, axes, quiet=True).load()
+    distributed = sf.sweep(scene, axes, workers=2, max_renders_per_worker=3, store=tmp_path / "d.zarr", quiet=True).load()
+    xr.testing.assert_identical(local.drop_attrs(), distributed.drop_attrs())
+    assert local.attrs["spacefit_sweep"] == distributed.attrs["spacefit_sweep"]
