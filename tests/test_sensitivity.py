@@ -87,3 +87,13 @@ def test_bad_input_names_the_argument(tmp_path):
         sf.sensitivity(scene, ["parts.sphere.alpha_x"], quiet=True)
     with pytest.raises(sf.InputError, match="seeds"):
         sf.sensitivity(scene, ["parts.sphere.kd"], seeds=1, quiet=True)
+
+
+def test_a_sweep_stores_derivatives_per_point(tmp_path):
+    scene = sphere_scene(tmp_path)
+    ds = sf.sweep(scene, {"sun.elevation_deg": [40.0, 80.0]}, derivatives=["parts.sphere.kd", "target.attitude_x_deg"],
+                  quiet=True).load()
+    assert ds.sensitivity.dims == ("sun.elevation_deg", "parameter", "region")
+    assert list(ds.normalised_unit.values) == ["1", "rad^-1"] and list(ds.parameter_unit.values) == ["1", "deg"]
+    np.testing.assert_allclose(ds.sensitivity.sel(parameter="parts.sphere.kd").values, 1.0, atol=0.01)
+    assert ds.resolved.sel(parameter="parts.sphere.kd").all() and not ds.resolved.sel(parameter="target.attitude_x_deg").any()
