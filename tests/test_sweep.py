@@ -152,3 +152,23 @@ def test_a_two_worker_dask_cluster_gives_the_in_process_dataset(tmp_path):
     distributed = sf.sweep(scene, axes, workers=2, max_renders_per_worker=3, store=tmp_path / "d.zarr", quiet=True).load()
     xr.testing.assert_identical(local.drop_attrs(), distributed.drop_attrs())
     assert local.attrs["spacefit_sweep"] == distributed.attrs["spacefit_sweep"]
+
+
+def test_ctrl_c_stops_the_command_line_sweep_cleanly(tmp_path):
+    mesh = write_sphere_obj(tmp_path / "sphere.obj", subdivisions=2)
+    (tmp_path / "scene.toml").write_text(small_scene(mesh, {"material": "white_paint"}, render={"spp": 256}).to_toml())
+    (tmp_path / "sweep.toml").write_text('scene = "scene.toml"\n[axes]\n"sun.elevation_deg" = {linspace = [10, 90, 400]}\n')
+    store = tmp_path / "s.zarr"
+    proc = subprocess.Popen([sys.executable, "-m", "spacefit.cli", "sweep", str(tmp_path / "sweep.toml"), "--out", str(store),
+                             "--quiet"], stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while (not store.exists() or done_points(store) < 2) and proc.poll() is None and time.time() < deadline:
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines() == [f"spacefit: interrupted; every finished point is in {store} (rerun the same command to finish)"]
+    ds = xr.open_zarr(store)
+    assert 2 <= int(ds.done.sum()) < 400
+    finished = ds.done.values
+    assert np.all(np.isfinite(ds.mean_radiance.values[finished]))
