@@ -109,11 +109,12 @@ class Sensitivity:
 
     def table(self) -> str:
         """The regions' derivatives and normalised sensitivities as text, each with its standard error;
-        an unresolved one is marked ``UNRESOLVED``."""
+        an unresolved one is marked ``UNRESOLVED``, one without a finite error ``NOT FINITE``."""
         lines = [f"{'parameter':28s} {'region':10s} {'dL/dp (W m^-2 sr^-1 per unit)':>34s} {'normalised':>26s}"]
         for i, name in enumerate(self.names):
             for j, region in enumerate(self.regions):
-                flag = "" if self.resolved[i, j] else "  UNRESOLVED (noise)"
+                finite = np.isfinite(self.d_mean_radiance_se[i, j])
+                flag = "" if self.resolved[i, j] else "  UNRESOLVED (noise)" if finite else "  NOT FINITE (no pixels, or NaN renders)"
                 d = f"{self.d_mean_radiance[i, j]:+.4g} +- {self.d_mean_radiance_se[i, j]:.2g}"
                 s = f"{self.sensitivity[i, j]:+.4g} +- {self.sensitivity_se[i, j]:.2g} {self.normalised_units[name]}"
                 lines.append(f"{name:28s} {region:10s} {d:>34s} {s:>26s}{flag}")
