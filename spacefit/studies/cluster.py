@@ -29,7 +29,7 @@ def render_on_worker(task: Task) -> tuple[dict[str, np.ndarray], str, int]:
     from spacefit.studies import worker
 
     result = worker.run_task(task)
-    return result, get_worker().address, worker._Loaded.renders
+    return result, get_worker().address, worker.render_count()
 
 
 def connect(workers: int | None, scheduler: str | None) -> tuple[object, Callable[[], None]]:

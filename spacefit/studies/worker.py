@@ -94,6 +94,11 @@ def loaded(task: Task) -> type[_Loaded]:
     return _Loaded
 
 
+def render_count() -> int:
+    """Renders this process has made for sweeps (a dask worker is restarted after a bound)."""
+    return _Loaded.renders
+
+
 def run_task(task: Task) -> dict[str, np.ndarray]:
     """Render one point; returns its variables by name (see :func:`summaries`; ``radiance`` (h, w, 3)
     when asked; the derivative summaries of :func:`spacefit.studies.sensitivity.point_summaries`)."""
