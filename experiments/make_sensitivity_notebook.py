@@ -69,7 +69,7 @@ print("V magnitudes:", np.round(phase.magnitude, 2))
 phase.figure()"""),
     ("md", """And under a spin of 6 deg/s about the target's z axis for a minute, with the sun given as an
 elevation and azimuth in the target's own frame:"""),
-    ("code", """spin = sf.light_curve(scene, times_s=np.linspace(0, 60, 31), spin_rate_deg_s=6.0, axis="z", sun=(35.0, 60.0),
+    ("code", """spin = sf.light_curve(scene, times_s=np.linspace(0, 60, 31), spin_rate_deg_s=6.0, axis="z", sun=(45.0, -120.0),
                       observer_range_m=3.844e8, quiet=True)
 print(f"phase angle {spin.phase_angle_deg[0]:.1f} deg, magnitude {spin.magnitude.min():.2f} to {spin.magnitude.max():.2f}")
 spin.figure()"""),

@@ -126,19 +126,21 @@ class Sensitivity:
         from matplotlib.figure import Figure
 
         n = len(self.names)
-        fig = Figure(figsize=(4.0 * n + 5.0, 4.0), layout="constrained")
-        axes = fig.subplots(1, n + 1, width_ratios=[1] * n + [1.4])
+        columns = min(n, 3)
+        rows = math.ceil(n / columns)
+        fig = Figure(figsize=(4.2 * columns, 3.4 * rows + 3.6), layout="constrained")
+        grid = fig.add_gridspec(rows + 1, columns)
         for i, name in enumerate(self.names):
             d = self.derivative[i].mean(axis=-1)
             shown = np.where(self.resolved_pixels(name), d, np.nan)
             limit = float(np.nanmax(np.abs(shown))) if np.isfinite(shown).any() else 1.0
-            ax = axes[i]
+            ax = fig.add_subplot(grid[i // columns, i % columns])
             ax.imshow(np.zeros_like(d), cmap="Greys", vmin=-1, vmax=4)  # grey under unresolved pixels
             im = ax.imshow(shown, cmap="RdBu_r", vmin=-limit, vmax=limit)
             fig.colorbar(im, ax=ax, shrink=0.8, label=f"W m$^{{-2}}$ sr$^{{-1}}$ per {self.units[name]}")
             ax.set_title(f"d radiance / d {name}", fontsize=9)
             ax.axis("off")
-        ax = axes[-1]
+        ax = fig.add_subplot(grid[rows, :])
         width = 0.8 / n
         x = np.arange(len(self.regions))
         for i, name in enumerate(self.names):
