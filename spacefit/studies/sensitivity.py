@@ -190,6 +190,7 @@ def sensitivity(
     or ``at`` (by name, in the parameters' units), each from ``seeds`` independent estimates (>= 2)
     with its standard error. ``spp`` / ``spp_grad``: samples per pixel of the primal and finite
     difference renders / of the AD renders (default: the scene's)."""
+    from spacefit.fitting.problem import fit_scene
     from spacefit.progress import progress_bar
     from spacefit.rendering.derivatives import jacobians
     from spacefit.scene.parameters import check_names, parameter, scene_with
@@ -202,6 +203,7 @@ def sensitivity(
     if at:
         check_names(scene, list(at), "at")
         scene = scene_with(scene, at)
+    scene = fit_scene(scene, names)  # as the fit: wrinkles rendered as geometry, where D and G act
     s0 = scene.render.seed
     pairs = tuple((s0 + 2 * k, s0 + 2 * k + 1) for k in range(seeds))
     bar = progress_bar(seeds, "sensitivity", quiet=quiet)

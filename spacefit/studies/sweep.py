@@ -4,9 +4,10 @@ A sweep's axes are scene values (``axes``): ``{"sun.elevation_deg": [10, 20, 30]
 three points; several keys are a grid (every combination); a table of keys of equal length is one
 zipped axis named by the table (``{"pose": {"sun.azimuth_deg": [...], "target.attitude_z_deg": [...]}}``);
 ``{"linspace": [start, stop, num]}`` or ``{"arange": [start, stop, step]}`` stand for lists. A key is a
-registered parameter (``sf.available_parameters``: materials, sun angles, pose, wrinkles), set in
-place on the loaded scene, ``render.seed`` / ``render.spp``, or any other scene-file key
-(``camera.position_m``...), for which the scene is loaded again (its meshes come from the cache).
+registered parameter (``sf.available_parameters``: materials, sun angles, pose), set in place on the
+loaded scene, ``render.seed`` / ``render.spp``, or any other scene-file key (``camera.position_m``...)
+or the wrinkles' D, G or rms height, for which the scene is assembled and loaded again (the meshes
+and the refinement from the caches, the displacement redone).
 
 The result is an xarray Dataset whose dimensions are the axes, with coordinates in the keys' units
 (``units`` attributes), and per point: ``mean_radiance``, ``pixels`` and ``irradiance`` of each part
@@ -132,12 +133,21 @@ def _canonical(scene: Scene, axes: list[Axis], options: Mapping[str, Any]) -> st
     return json.dumps({"scene": scene.to_toml(), "axes": [[a.name, a.values] for a in axes], **options}, sort_keys=True)
 
 
+def in_place_names(scene: Scene) -> set[str]:
+    """The registered parameters a sweep sets on the loaded scene: all but the wrinkles' D, G and rms
+    height, whose points assemble the scene again (the refinement is kept, the displacement redone, and
+    the level of detail's effective roughness follows them)."""
+    from spacefit.scene.parameters import GEOMETRY, available
+
+    return set(available(scene)) - set(GEOMETRY)
+
+
 def tasks(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple[str, ...], derivative_seeds: int
           ) -> Callable[[tuple[int, ...]], Task]:
     """The task of each point (its index along every axis)."""
-    from spacefit.scene.parameters import MOVES_VERTICES, available
+    from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, scene_with
 
-    names = set(available(scene))
+    names = in_place_names(scene)
     in_place = [k for a in axes for k in a.values if k in names]
     crop = not any(k in MOVES_VERTICES for k in in_place)
     base = Task(scene.to_toml(), crop=crop, images=images, derivatives=derivatives, derivative_seeds=derivative_seeds)
@@ -148,7 +158,9 @@ def tasks(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple[st
         scene_keys = {k: v for k, v in values.items() if k not in names and k not in RENDER_ARGUMENTS}
         key = json.dumps(scene_keys, sort_keys=True)
         if key not in tomls:
-            tomls[key] = scene.with_values(scene_keys).to_toml() if scene_keys else base.scene_toml
+            parameters = {k: v for k, v in scene_keys.items() if k in GEOMETRY}
+            edited = scene.with_values({k: v for k, v in scene_keys.items() if k not in parameters})
+            tomls[key] = scene_with(edited, parameters).to_toml() if scene_keys else base.scene_toml
         seed, spp = (values.get(k) for k in RENDER_ARGUMENTS)
         return replace(base, scene_toml=tomls[key], in_place=tuple((k, float(values[k])) for k in in_place),
                        spp=None if spp is None else int(spp), seed=None if seed is None else int(seed))
@@ -328,9 +340,7 @@ def sweep(
     group = open_store(store, spec, lambda: template(scene, parsed, images=images, derivatives=derivatives, attrs=attrs),
                        overwrite)
     task_of = tasks(scene, parsed, images=images, derivatives=derivatives, derivative_seeds=derivative_seeds)
-    from spacefit.scene.parameters import available
-
-    names = set(available(scene))
+    names = in_place_names(scene)
     # points that load another scene vary slowest, so that a scene is loaded once per value
     order = sorted(range(len(parsed)), key=lambda a: all(k in names or k in RENDER_ARGUMENTS for k in parsed[a].values))
     todo = pending(np.asarray(group["done"][...]), order)
