@@ -138,10 +138,10 @@ show("stability/stability.png")"""),
 ]
 
 
-def build(path: Path) -> None:
-    """Write the notebook and execute it in place (outputs stored)."""
+def build(path: Path, cells: list[tuple[str, str]] = CELLS) -> None:
+    """Write the notebook of ``cells`` (kind "md" or "code", source) and execute it in place (outputs stored)."""
     nb = nbformat.v4.new_notebook()
-    nb.cells = [nbformat.v4.new_markdown_cell(src) if kind == "md" else nbformat.v4.new_code_cell(src) for kind, src in CELLS]
+    nb.cells = [nbformat.v4.new_markdown_cell(src) if kind == "md" else nbformat.v4.new_code_cell(src) for kind, src in cells]
     NotebookClient(nb, timeout=600, kernel_name="python3", resources={"metadata": {"path": str(HERE)}}).execute()
     nbformat.write(nb, path)
 

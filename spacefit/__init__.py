@@ -62,6 +62,12 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "available_parameters": ("spacefit.scene.parameters", "available"),
     "parameter_table": ("spacefit.scene.parameters", "parameter_table"),
     "Sensor": ("spacefit.sensor", "Sensor"),
+    "sweep": ("spacefit.studies.sweep", "sweep"),
+    "Sensitivity": ("spacefit.studies.sensitivity", "Sensitivity"),
+    "sensitivity": ("spacefit.studies.sensitivity", "sensitivity"),
+    "LightCurve": ("spacefit.studies.lightcurve", "LightCurve"),
+    "light_curve": ("spacefit.studies.lightcurve", "light_curve"),
+    "read_sweep_file": ("spacefit.studies.sweep", "read_sweep_file"),
     "expected_dn": ("spacefit.sensor", "expected_dn"),
     "noise_variance_dn": ("spacefit.sensor", "noise_variance_dn"),
     "observe": ("spacefit.sensor", "observe"),
@@ -78,6 +84,7 @@ __all__ = [
     "Distortion", "Intrinsics", "ObservedImage", "Sensor", "distort_image", "expected_dn", "noise_variance_dn", "observe",
     "pixel_solid_angles", "read_image", "saturated_mask", "write_observation",
     "MLI_SLOPE_RANGE",
+    "read_sweep_file", "sweep", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
 ]
 
 

@@ -1,5 +1,6 @@
 """Command line: ``spacefit render|scene|export-stl [SCENE.toml] --out PATH [--set key=value ...]`` and
-``spacefit fit REFERENCE.exr ... --scene SCENE.toml --free NAME[,NAME...] --out DIR``."""
+``spacefit fit REFERENCE.exr ... --scene SCENE.toml --free NAME[,NAME...] --out DIR``,
+``spacefit sweep SWEEP.toml --out STORE``."""
 
 from __future__ import annotations
 
@@ -76,7 +77,30 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     f.add_argument("--sigma", type=float, metavar="S",
                    help="noise standard deviation of the references, W m^-2 sr^-1 (residuals are divided by it)")
     f.add_argument("--quiet", action="store_true", help="no progress output (the fitted values are still printed)")
+    s = sub.add_parser("sweep", parents=[overrides], help="render a sweep of scene values into a resumable Zarr store",
+                       description="Render a scene at every point of a sweep file's axes into a Zarr store, point by "
+                                   "point; rerun the same command to finish an interrupted sweep. --set applies to the scene.")
+    s.add_argument("sweep", metavar="SWEEP.toml", help="sweep file: scene, [axes], options (README, Sweeps)")
+    s.add_argument("--out", required=True, metavar="STORE", help="Zarr store folder (new, or this sweep's to finish it)")
+    s.add_argument("--overwrite", action="store_true", help="replace a store that holds another sweep")
+    s.add_argument("--workers", type=int, metavar="N", help="run on a local dask cluster of N worker processes")
+    s.add_argument("--scheduler", metavar="ADDRESS", help="run on the dask scheduler at ADDRESS (tcp://host:8786)")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
     return p
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    """Run ``spacefit sweep``; on Ctrl-C say where the finished points are."""
+    from spacefit.studies.sweep import read_sweep_file, sweep
+
+    scene, axes, options = read_sweep_file(args.sweep, args.overrides)
+    try:
+        sweep(scene, axes, store=args.out, overwrite=args.overwrite, workers=args.workers, scheduler=args.scheduler,
+              quiet=args.quiet, **options)
+    except KeyboardInterrupt:
+        print(f"spacefit: interrupted; every finished point is in {args.out} (rerun the same command to finish)", file=sys.stderr)
+        return INTERRUPTED
+    return 0
 
 
 def _start_values(items: Sequence[str]) -> dict[str, float]:
@@ -148,6 +172,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         if args.command == "fit":
             return _fit(args)
+        if args.command == "sweep":
+            return _sweep(args)
         scene = load_scene(args.scene, args.overrides)
         if args.command == "render":
             render_to_folder(scene, args.out, quiet=args.quiet, overwrite=args.overwrite,

@@ -36,17 +36,35 @@ def render_function(
     ``spp`` / ``spp_grad``: samples per pixel of the primal and the derivative renders (default:
     the scene's); ``seed`` / ``seed_grad`` must differ so that an L2 loss's gradient is unbiased.
     """
+    check_seeds([(seed, seed_grad)])
+    return render_functions(scene, free, spp=spp, spp_grad=spp_grad)[0](seed, seed_grad)
+
+
+def check_seeds(seeds: Sequence[tuple[int, int]]) -> None:
+    """Raise :class:`InputError` for a pair whose primal and derivative seeds are equal."""
+    if any(seed == seed_grad for seed, seed_grad in seeds):
+        raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
+
+
+def render_functions(
+    scene: Scene, free: Sequence[str], *, spp: int | None = None, spp_grad: int | None = None,
+) -> tuple[Callable[[int, int], Callable[[Float[Array, " n"]], Float[Array, "h w 3"]]], Renderer]:
+    """:func:`render_function` for any seeds on one loaded scene: ``(seed, seed_grad) -> image function``,
+    and the renderer (its part image, say)."""
     check_names(check_scene(scene), list(free))
     check_count("spp", spp)
     check_count("spp_grad", spp_grad)
-    if seed == seed_grad:
-        raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
     renderer = Renderer(scene, crop=not any(n in MOVES_VERTICES for n in free))
     spp = spp or scene.render.spp
     dscene = DrJitScene(renderer, spp, spp_grad or spp)
     steps = np.array([fd_step(scene, n) for n in free])
-    image = render_params(dscene, scene_values_fn(renderer.assembly, list(free)), steps, seed, seed_grad)
-    return lambda x: image(x).astype(jnp.result_type(x))
+    values_of = scene_values_fn(renderer.assembly, list(free))
+
+    def function(seed: int, seed_grad: int) -> Callable[[Float[Array, " n"]], Float[Array, "h w 3"]]:
+        image = render_params(dscene, values_of, steps, seed, seed_grad)
+        return lambda x: image(x).astype(jnp.result_type(x))
+
+    return function, renderer
 
 
 @dataclass(frozen=True)
@@ -72,19 +90,36 @@ def jacobian(
     spp_grad: int | None = None, seed: int = 1, seed_grad: int = 2,
 ) -> Jacobian:
     """The image and d(image)/d(parameter) for each of ``free`` at the scene's values (or ``at``)."""
+    return jacobians(scene, free, [(seed, seed_grad)], at=at, spp=spp, spp_grad=spp_grad)[0][0]
+
+
+@float64
+def jacobians(
+    scene: Scene, free: Sequence[str], seeds: Sequence[tuple[int, int]], *, at: Mapping[str, float] | None = None,
+    spp: int | None = None, spp_grad: int | None = None, progress: Callable[[], None] | None = None,
+) -> tuple[list[Jacobian], Renderer]:
+    """:func:`jacobian` for each ``(seed, seed_grad)`` pair of ``seeds`` on one loaded scene (independent
+    seeds give Monte Carlo errors), and the renderer; ``progress()`` is called after each."""
     names = tuple(free)
-    fn = render_function(scene, names, spp=spp, spp_grad=spp_grad, seed=seed, seed_grad=seed_grad)
+    check_seeds(seeds)
+    function, renderer = render_functions(scene, names, spp=spp, spp_grad=spp_grad)
     at = dict(at or {})
     unknown = set(at) - set(names)
     if unknown:
         raise InputError(f"`at` names {sorted(unknown)}, which are not in `free` {list(names)}.")
     x = np.array([at.get(n, scene_value(scene, n)) for n in names], dtype=float)
+    out = []
+    for seed, seed_grad in seeds:
+        fn = function(seed, seed_grad)
 
-    def image_twice(y: Array) -> tuple[Array, Array]:
-        image = fn(y)
-        return image, image  # one evaluation gives the Jacobian and, as auxiliary output, the image
+        def image_twice(y: Array) -> tuple[Array, Array]:
+            image = fn(y)  # noqa: B023  (called at once, within this iteration)
+            return image, image  # one evaluation gives the Jacobian and, as auxiliary output, the image
 
-    J, image = jax.jacfwd(image_twice, has_aux=True)(jnp.asarray(x))
-    J = np.asarray(J, dtype=np.float32)
-    return Jacobian(names, dict(zip(names, x.tolist())), np.asarray(image, dtype=np.float32),
-                    {n: J[..., i] for i, n in enumerate(names)})
+        J, image = jax.jacfwd(image_twice, has_aux=True)(jnp.asarray(x))
+        J = np.asarray(J, dtype=np.float32)
+        out.append(Jacobian(names, dict(zip(names, x.tolist())), np.asarray(image, dtype=np.float32),
+                            {n: J[..., i] for i, n in enumerate(names)}))
+        if progress is not None:
+            progress()
+    return out, renderer

@@ -17,6 +17,7 @@ import numpy as np
 from spacefit.errors import InputError, check_range
 from spacefit.geometry.frames import project
 from spacefit.materials import Conductor, Lambert, Material, Mirror
+from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.backend import dr, mi, select_variant
 from spacefit.scene.assembly import Assembly, assemble
@@ -270,6 +271,7 @@ class Renderer:
         x0, y0, w, h = self.window
         return np.ascontiguousarray(film_image[y0:y0 + h, x0:x0 + w])
 
+    @float64  # the pose and the W-M heights in float64, rounded to float32 only where Mitsuba takes them
     def set_values(self, values: Mapping[str, float]) -> None:
         """Set registered parameters (:mod:`spacefit.scene.parameters`, e.g. ``{"parts.panels.alpha_x":
         0.1, "sun.elevation_deg": 30}``) in the loaded scene, without reloading it.

@@ -18,7 +18,7 @@ determined coordinates (:func:`rms_of`, :func:`G_of` are the one place the two a
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
 import jax
@@ -27,6 +27,7 @@ import numpy as np
 from jaxtyping import Array
 
 from spacefit.errors import InputError, check_choice
+from spacefit.precision import float64
 from spacefit.geometry.wm import wm_G_from_rms, wm_rms
 from spacefit.materials import Conductor, Lambert, Material, Mirror, make_material
 from spacefit.scene.config import Scene, WrinkleSettings
@@ -271,3 +272,29 @@ def parameter_table() -> str:
         kinds = f" ({', '.join(m.__name__ for m in p.materials)})" if p.materials else ""
         rows.append(f"| `{p.pattern}` | {p.unit} | {p.bijection.describe()} | {column} | {p.doc}{kinds} |")
     return "\n".join(rows)
+
+
+@float64
+def scene_with(scene: Scene, values: Mapping[str, float]) -> Scene:
+    """A validated copy of ``scene`` with registered parameters set by name (the inverse of
+    :func:`scene_value`): the sun's angles become ``sun.direction``, the pose angles and positions
+    components of ``target.attitude_deg`` / ``position_m``, the rms height a G at the scene's D."""
+    keys: dict[str, object] = {}
+    for name, value in values.items():
+        check_names(scene, [name], "values")
+        if name not in (*SUN_ANGLES, *ATTITUDE, *POSITION, "wrinkles.rms_m") and _pattern(name) != "parts.P.alpha":
+            keys[name] = float(value)
+    if set(SUN_ANGLES) & set(values):
+        el, az = (float(values.get(n, scene_value(scene, n))) for n in SUN_ANGLES)
+        keys["sun.direction"] = np.asarray(sun_direction(el, az), dtype=float).tolist()
+    for group, key in ((ATTITUDE, "target.attitude_deg"), (POSITION, "target.position_m")):
+        if set(group) & set(values):
+            keys[key] = [float(values.get(n, scene_value(scene, n))) for n in group]
+    if "wrinkles.rms_m" in values:
+        D = float(values.get("wrinkles.D", scene.wrinkles.D))
+        keys["wrinkles.G"] = float(G_of(scene.wrinkles, D, float(values["wrinkles.rms_m"])))
+    for name, value in values.items():
+        if _pattern(name) == "parts.P.alpha":
+            head = name.rsplit(".", 1)[0]
+            keys[f"{head}.alpha_x"] = keys[f"{head}.alpha_y"] = float(value)
+    return scene.with_values(keys)

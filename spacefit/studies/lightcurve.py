@@ -1,0 +1,214 @@
+"""Light curves: what a ground telescope sees of an unresolved target, from sweeps of renders.
+
+The irradiance at the camera's pinhole is the sum over the image of radiance times each pixel's
+solid angle (:func:`spacefit.geometry.frames.pixel_solid_angles`), W m^-2, radiance being the mean
+of the RGB channels (grey materials: the reflectance in the band is taken equal to it). It is
+rendered at the scene's camera range and rescaled to the observer's range by the inverse square law,
+E_obs = E (d_rendered / d_obs)^2, exact for an unresolved target (Mitsuba traces in float32, so a far
+target is rendered near: ``scene.MAX_COORDINATE_M``).
+
+The apparent magnitude in a band is m = m_sun - 2.5 log10(E_obs / E_sun), with E_sun the sun's
+irradiance at the target (``sun.irradiance_w_m2``) and m_sun the sun's apparent magnitude in that
+band at the same distance from the sun: the target and the observer are taken at the same
+heliocentric distance (1 au for a target near the Earth or the Moon). The V band's m_sun is -26.74
+(Cox 2000, Allen's Astrophysical Quantities, 4th ed., section 14.7; Willmer 2018, ApJS 236, 47
+gives -26.76).
+
+Directions towards the sun and the observer are given as world vectors (3 numbers, from the target
+towards them) or as (elevation, azimuth) in degrees in the target's frame: elevation above its x-y
+plane, azimuth from its +x towards +y, turned into the world by its attitude (thesis section 3.2).
+The solar phase angle is the angle at the target between the directions towards the sun and towards
+the observer.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spacefit.errors import InputError, check_choice, check_count, check_direction, check_range, check_vector
+from spacefit.geometry.frames import attitude_matrix
+from spacefit.precision import float64
+from spacefit.scene.config import Scene, check_scene, deg2rad
+
+# The sun's apparent magnitude by band (module docstring gives the source).
+SUN_MAGNITUDES = {"V": -26.74}
+
+
+def direction(scene: Scene, value: Sequence[float], name: str) -> np.ndarray:
+    """A unit world vector from a world vector (3 numbers) or (elevation, azimuth) in degrees in the
+    target's frame (2 numbers)."""
+    if len(value) == 2:
+        el, az = check_vector(name, value, 2)
+        check_range(f"{name} elevation", el, -90.0, 90.0, unit="deg")
+        el, az = math.radians(el), math.radians(az)
+        local = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+        return attitude_matrix(np.array(deg2rad(scene.target.attitude_deg))) @ local
+    if len(value) != 3:
+        raise InputError(f"`{name}` must be a world vector (3 numbers) or (elevation_deg, azimuth_deg) in the target's "
+                         f"frame (2 numbers), got {list(value)}.")
+    return check_direction(name, value)
+
+
+def observer_view(scene: Scene, towards: np.ndarray) -> dict[str, Any]:
+    """Scene values putting the camera along ``towards`` from the target at the scene's range, looking at it."""
+    target = np.array(scene.target.position_m)
+    rendered_range = float(np.linalg.norm(np.array(scene.camera.position_m) - target))
+    up = np.array(scene.camera.up) if abs(np.dot(scene.camera.up, towards)) < 0.99 * np.linalg.norm(scene.camera.up) else np.eye(3)[0]
+    return {"camera.position_m": (target + rendered_range * towards).tolist(), "camera.look_at_m": target.tolist(),
+            "camera.up": up.tolist()}
+
+
+def phase_plane_sun(scene: Scene, phase_deg: np.ndarray) -> dict[str, list[float]]:
+    """Sun elevation and azimuth (deg, world, as the registry has them) for each phase angle: the sun
+    turns away from the observer's direction towards the camera's image right."""
+    from spacefit.scene.assembly import assemble
+    from spacefit.scene.parameters import sun_angles_deg
+
+    camera = assemble(scene).camera
+    v = camera.position - np.array(scene.target.position_m)
+    v /= np.linalg.norm(v)
+    w = camera.right - np.dot(camera.right, v) * v
+    w /= np.linalg.norm(w)
+    angles = [sun_angles_deg(-(math.cos(a) * v + math.sin(a) * w)) for a in np.radians(phase_deg)]
+    return {"sun.elevation_deg": [a[0] for a in angles], "sun.azimuth_deg": [a[1] for a in angles]}
+
+
+@float64
+def phase_angles_deg(scene: Scene, dataset: Any) -> np.ndarray:
+    """The solar phase angle (deg) at each point of a light curve's sweep (the camera is fixed)."""
+    from spacefit.scene.parameters import scene_value, sun_direction
+
+    v = np.array(scene.camera.position_m) - np.array(scene.target.position_m)
+    v /= np.linalg.norm(v)
+    el = dataset["sun.elevation_deg"].values if "sun.elevation_deg" in dataset.coords else scene_value(scene, "sun.elevation_deg")
+    az = dataset["sun.azimuth_deg"].values if "sun.azimuth_deg" in dataset.coords else scene_value(scene, "sun.azimuth_deg")
+    towards = -np.asarray(sun_direction(el, az), dtype=float)
+    return np.degrees(np.arccos(np.clip(np.tensordot(v, towards, axes=1), -1.0, 1.0)))
+
+
+@dataclass(frozen=True)
+class LightCurve:
+    """A light curve against one swept quantity.
+
+    Attributes:
+        against: what was swept (``phase_angle_deg``, an attitude key, or ``time_s``); ``x`` its values.
+        irradiance_w_m2: at the observer, W m^-2 (rescaled from the rendered range).
+        magnitude: apparent magnitude in ``band`` with the sun's ``sun_magnitude``.
+        phase_angle_deg: the solar phase angle of each point.
+        rendered_range_m, observer_range_m: camera range rendered and observer range (m).
+        sun_irradiance_w_m2: the sun's irradiance at the target.
+        dataset: the sweep's Dataset.
+    """
+
+    against: str
+    x: np.ndarray
+    irradiance_w_m2: np.ndarray
+    magnitude: np.ndarray
+    phase_angle_deg: np.ndarray
+    band: str
+    sun_magnitude: float
+    rendered_range_m: float
+    observer_range_m: float
+    sun_irradiance_w_m2: float
+    dataset: Any
+
+    def figure(self) -> Any:
+        """A matplotlib Figure: magnitude (brighter up) and irradiance against the swept quantity."""
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(9.0, 3.6), layout="constrained")
+        left, right = fig.subplots(1, 2)
+        left.semilogy(self.x, self.irradiance_w_m2, "o-")
+        left.set_ylabel("irradiance at the observer (W m$^{-2}$)")
+        right.plot(self.x, self.magnitude, "o-")
+        right.invert_yaxis()  # brighter up
+        right.set_ylabel(f"apparent {self.band} magnitude (m_sun = {self.sun_magnitude:g})")
+        for ax in (left, right):
+            ax.set_xlabel(self.against)
+        fig.suptitle(f"observer at {self.observer_range_m:.4g} m (rendered at {self.rendered_range_m:.4g} m, inverse square)",
+                     fontsize=9)
+        return fig
+
+
+def light_curve(
+    scene: Scene,
+    *,
+    phase_deg: Sequence[float] | None = None,
+    attitude_deg: Sequence[float] | None = None,
+    times_s: Sequence[float] | None = None,
+    spin_rate_deg_s: float | None = None,
+    axis: str = "z",
+    sun: Sequence[float] | None = None,
+    observer: Sequence[float] | None = None,
+    observer_range_m: float | None = None,
+    band: str = "V",
+    sun_magnitude: float | None = None,
+    store: str | Path | None = None,
+    seeds: Sequence[int] | None = None,
+    quiet: bool = False,
+    workers: int | None = None,
+    scheduler: str | None = None,
+) -> LightCurve:
+    """The light curve of ``scene``'s target against one of: the solar phase angle ``phase_deg`` (the sun
+    turns about the target from the observer's direction), the attitude angle about ``axis``
+    (``attitude_deg``), or time ``times_s`` under a spin of ``spin_rate_deg_s`` about ``axis`` from the
+    scene's attitude. ``sun`` / ``observer``: directions towards them (module docstring), else the
+    scene's; ``observer_range_m``: the observer's distance (default: the rendered one). ``band`` and
+    ``sun_magnitude`` (default: :data:`SUN_MAGNITUDES`) give the magnitudes. ``seeds`` averages
+    renders of these seeds. The rest is :func:`spacefit.studies.sweep.sweep`'s."""
+    from spacefit.studies.sweep import sweep
+
+    check_scene(scene)
+    given = [n for n, v in (("phase_deg", phase_deg), ("attitude_deg", attitude_deg), ("times_s", times_s)) if v is not None]
+    if len(given) != 1:
+        raise InputError(f"give exactly one of `phase_deg`, `attitude_deg`, `times_s` (with `spin_rate_deg_s`); got {given or 'none'}.")
+    check_choice("axis", axis, ("x", "y", "z"))
+    if sun_magnitude is None:
+        sun_magnitude = SUN_MAGNITUDES[check_choice("band", band, SUN_MAGNITUDES)]
+    check_range("sun_magnitude", sun_magnitude)
+    values: dict[str, Any] = {}
+    if sun is not None:
+        values["sun.direction"] = (-direction(scene, sun, "sun")).tolist()
+    if observer is not None:
+        values.update(observer_view(scene, direction(scene, observer, "observer")))
+    scene = scene.with_values(values) if values else scene
+    rendered_range = float(np.linalg.norm(np.array(scene.camera.position_m) - np.array(scene.target.position_m)))
+    observer_range = rendered_range if observer_range_m is None else check_range("observer_range_m", observer_range_m, 0.0,
+                                                                                 lo_open=True, unit="m")
+    key = f"target.attitude_{axis}_deg"
+    if phase_deg is not None:
+        x = np.asarray(phase_deg, dtype=float)
+        for a in x:
+            check_range("phase_deg", a, 0.0, 180.0, hi_open=True, unit="deg")
+        against, axes = "phase_angle_deg", {"phase_angle_deg": phase_plane_sun(scene, x)}
+    elif attitude_deg is not None:
+        x = np.asarray(attitude_deg, dtype=float)
+        against, axes = key, {key: x.tolist()}
+    else:
+        check_range("spin_rate_deg_s", spin_rate_deg_s if spin_rate_deg_s is not None else math.nan, unit="deg s^-1")
+        x = np.asarray(times_s, dtype=float)
+        start = scene.target.attitude_deg["xyz".index(axis)]
+        against, axes = "time_s", {"time_s": {key: (start + spin_rate_deg_s * x).tolist()}}
+    if seeds is not None:
+        for s in seeds:
+            check_count("seeds", s, 0)
+        axes["render.seed"] = list(seeds)
+    ds = sweep(scene, axes, store=store, quiet=quiet, workers=workers, scheduler=scheduler)
+    if against in ds.dims:
+        ds = ds.assign_coords({against: (against, x, {"units": against.rsplit("_", 1)[1]})})
+    irradiance = ds.irradiance.sel(region="target")
+    if seeds is not None:
+        irradiance = irradiance.mean("render.seed")
+    e_obs = irradiance.values * (rendered_range / observer_range) ** 2
+    e_sun = scene.sun.irradiance_w_m2
+    with np.errstate(divide="ignore"):
+        magnitude = sun_magnitude - 2.5 * np.log10(e_obs / e_sun)
+    phase = np.broadcast_to(phase_angles_deg(scene, ds), x.shape).copy()
+    return LightCurve(against, x, e_obs, magnitude, phase, band, float(sun_magnitude), rendered_range, observer_range,
+                      e_sun, ds)

@@ -1,0 +1,239 @@
+"""Sensitivity of the image to scene parameters, each derivative with its Monte Carlo standard error.
+
+A derivative is estimated ``seeds`` times with independent seeds, on one loaded scene
+(:func:`spacefit.rendering.derivatives.jacobians`), by the method the fit uses for that parameter
+(the registry's ``fd_step``): forward-mode AD for materials and the sun's irradiance, central finite
+differences with common random numbers for geometry, the pose and the sun's angles. The result is
+their mean, and its standard error is the seeds' standard deviation over sqrt(seeds). A derivative
+is *resolved* when its 95 % confidence interval (Student's t with seeds - 1 degrees of freedom)
+excludes zero; one that is not is flagged as such wherever it is shown, never given as a bare number.
+
+The normalised sensitivity of a region's mean radiance L to a parameter p is (p / L) dL/dp, the
+relative change of radiance per relative change of p, for positive quantities (materials, the
+irradiance, D, G, the rms height); for angles and positions, which have no natural zero, it is
+(1 / L) dL/dp per radian or per metre.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from spacefit.errors import check_count
+from spacefit.scene.config import Scene, check_scene
+
+CONFIDENCE = 0.95  # two-sided: a derivative is resolved when this interval excludes zero
+# The sweep's per-point variables of a sensitivity: name -> (dtype, fill, unit, description).
+SUMMARY_VARIABLES: dict[str, tuple[Any, Any, str, str]] = {
+    "d_mean_radiance": (np.float64, np.nan, "W m^-2 sr^-1 per parameter_unit", "derivative of the region's mean radiance"),
+    "d_mean_radiance_se": (np.float64, np.nan, "W m^-2 sr^-1 per parameter_unit", "its Monte Carlo standard error"),
+    "sensitivity": (np.float64, np.nan, "normalised_unit", "normalised sensitivity of the region's mean radiance"),
+    "sensitivity_se": (np.float64, np.nan, "normalised_unit", "its Monte Carlo standard error"),
+    "resolved": (bool, False, "1", f"the derivative's {CONFIDENCE:.0%} confidence interval excludes zero"),
+}
+
+
+def normalisation(name: str, value: float) -> tuple[float, str]:
+    """Factor turning dL/dp / L into the normalised sensitivity of parameter ``name`` at ``value``,
+    and its unit: p ("1") for positive quantities, per radian or per metre for angles and positions."""
+    from spacefit.scene.parameters import parameter
+
+    p = parameter(name)
+    if p.bijection.lo >= 0.0:
+        return value, "1"
+    if p.unit == "deg":
+        return 180.0 / math.pi, "rad^-1"
+    return 1.0, f"{p.unit}^-1"
+
+
+def mean_and_error(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Mean over the first axis (independent seeds) and its standard error (sample std / sqrt(n))."""
+    return samples.mean(axis=0), samples.std(axis=0, ddof=1) / math.sqrt(samples.shape[0])
+
+
+def t_critical(seeds: int) -> float:
+    """Student's t quantile of the two-sided :data:`CONFIDENCE` interval with seeds - 1 degrees of freedom."""
+    from scipy.stats import t
+
+    return float(t.ppf(0.5 + CONFIDENCE / 2.0, seeds - 1))
+
+
+@dataclass(frozen=True)
+class Sensitivity:
+    """Derivatives of the image and of each region's mean radiance at one point, with standard errors.
+
+    Attributes:
+        names: the parameters; ``units`` their units (degrees for angles, as in the scene file).
+        at: each parameter's value.
+        seeds: the (primal and finite-difference seed, AD seed) pair of each independent estimate.
+        image: (h, w, 3) radiance, W m^-2 sr^-1, mean over the seeds.
+        derivative, derivative_se: (n, h, w, 3) d(radiance)/d(parameter), W m^-2 sr^-1 per unit, and its error.
+        regions: each part, then ``target`` (all parts); ``pixels`` whose centre sees each.
+        mean_radiance: (regions,) W m^-2 sr^-1.
+        d_mean_radiance, d_mean_radiance_se: (n, regions) derivative of each region's mean radiance.
+        sensitivity, sensitivity_se: (n, regions) normalised sensitivities (module docstring),
+            in ``normalised_units``.
+        t: the Student t factor of the confidence interval (``t * se``).
+    """
+
+    names: tuple[str, ...]
+    units: dict[str, str]
+    at: dict[str, float]
+    seeds: tuple[tuple[int, int], ...]
+    image: np.ndarray
+    derivative: np.ndarray
+    derivative_se: np.ndarray
+    regions: tuple[str, ...]
+    pixels: np.ndarray
+    mean_radiance: np.ndarray
+    d_mean_radiance: np.ndarray
+    d_mean_radiance_se: np.ndarray
+    sensitivity: np.ndarray
+    sensitivity_se: np.ndarray
+    normalised_units: dict[str, str]
+    t: float
+
+    @property
+    def resolved(self) -> np.ndarray:
+        """(n, regions) whether each region's derivative is resolved from its noise."""
+        return np.abs(self.d_mean_radiance) > self.t * self.d_mean_radiance_se
+
+    def resolved_pixels(self, name: str) -> np.ndarray:
+        """(h, w) pixels where d(radiance)/d(``name``) (RGB mean) is resolved from its noise."""
+        i = self.names.index(name)
+        return np.abs(self.derivative[i].mean(axis=-1)) > self.t * self.derivative_se[i].mean(axis=-1)
+
+    def table(self) -> str:
+        """The regions' derivatives and normalised sensitivities as text, each with its standard error;
+        an unresolved one is marked ``UNRESOLVED``, one without a finite error ``NOT FINITE``."""
+        lines = [f"{'parameter':28s} {'region':10s} {'dL/dp (W m^-2 sr^-1 per unit)':>34s} {'normalised':>26s}"]
+        for i, name in enumerate(self.names):
+            for j, region in enumerate(self.regions):
+                finite = np.isfinite(self.d_mean_radiance_se[i, j])
+                flag = "" if self.resolved[i, j] else "  UNRESOLVED (noise)" if finite else "  NOT FINITE (no pixels, or NaN renders)"
+                d = f"{self.d_mean_radiance[i, j]:+.4g} +- {self.d_mean_radiance_se[i, j]:.2g}"
+                s = f"{self.sensitivity[i, j]:+.4g} +- {self.sensitivity_se[i, j]:.2g} {self.normalised_units[name]}"
+                lines.append(f"{name:28s} {region:10s} {d:>34s} {s:>26s}{flag}")
+        return "\n".join(lines)
+
+    def figure(self) -> Any:
+        """A matplotlib Figure: each derivative image (unresolved pixels grey), and the regions'
+        normalised sensitivities with their confidence intervals (unresolved bars hatched)."""
+        from matplotlib.figure import Figure
+
+        n = len(self.names)
+        columns = min(n, 3)
+        rows = math.ceil(n / columns)
+        fig = Figure(figsize=(4.2 * columns, 3.4 * rows + 3.6), layout="constrained")
+        grid = fig.add_gridspec(rows + 1, columns)
+        for i, name in enumerate(self.names):
+            d = self.derivative[i].mean(axis=-1)
+            shown = np.where(self.resolved_pixels(name), d, np.nan)
+            limit = float(np.nanmax(np.abs(shown))) if np.isfinite(shown).any() else 1.0
+            ax = fig.add_subplot(grid[i // columns, i % columns])
+            ax.imshow(np.zeros_like(d), cmap="Greys", vmin=-1, vmax=4)  # grey under unresolved pixels
+            im = ax.imshow(shown, cmap="RdBu_r", vmin=-limit, vmax=limit)
+            fig.colorbar(im, ax=ax, shrink=0.8, label=f"W m$^{{-2}}$ sr$^{{-1}}$ per {self.units[name]}")
+            ax.set_title(f"d radiance / d {name}", fontsize=9)
+            ax.axis("off")
+        ax = fig.add_subplot(grid[rows, :])
+        width = 0.8 / n
+        x = np.arange(len(self.regions))
+        for i, name in enumerate(self.names):
+            for j in range(len(self.regions)):
+                ax.bar(x[j] + i * width, self.sensitivity[i, j], width, yerr=self.t * self.sensitivity_se[i, j],
+                       color=f"C{i}", hatch="" if self.resolved[i, j] else "//", alpha=1.0 if self.resolved[i, j] else 0.4,
+                       label=f"{name} [{self.normalised_units[name]}]" if j == 0 else None)
+        ax.axhline(0.0, color="k", lw=0.5)
+        ax.set_xticks(x + width * (n - 1) / 2, self.regions)
+        ax.set_ylabel("normalised sensitivity of mean radiance")
+        ax.set_title(f"{CONFIDENCE:.0%} intervals; hatched: unresolved", fontsize=9)
+        ax.legend(fontsize=7)
+        return fig
+
+    def to_dataset(self) -> Any:
+        """The sensitivity as a labelled xarray Dataset (dimensions parameter, region, y, x, channel)."""
+        import xarray as xr
+
+        per_unit = "W m^-2 sr^-1 per parameter_unit"
+        return xr.Dataset(
+            {"image": (("y", "x", "channel"), self.image, {"units": "W m^-2 sr^-1"}),
+             "derivative": (("parameter", "y", "x", "channel"), self.derivative, {"units": per_unit}),
+             "derivative_se": (("parameter", "y", "x", "channel"), self.derivative_se, {"units": per_unit}),
+             "mean_radiance": (("region",), self.mean_radiance, {"units": "W m^-2 sr^-1"}),
+             "pixels": (("region",), self.pixels),
+             **{k: (("parameter", "region"), v, {"units": SUMMARY_VARIABLES[k][2], "description": SUMMARY_VARIABLES[k][3]})
+                for k, v in point_summaries(self).items()}},
+            coords={"parameter": list(self.names), "region": list(self.regions),
+                    "parameter_unit": ("parameter", [self.units[n] for n in self.names]),
+                    "normalised_unit": ("parameter", [self.normalised_units[n] for n in self.names]),
+                    "at": ("parameter", [self.at[n] for n in self.names])},
+            attrs={"seeds": [list(s) for s in self.seeds], "confidence": CONFIDENCE})
+
+
+def point_summaries(s: Sensitivity) -> dict[str, np.ndarray]:
+    """The per-region variables of a sensitivity that a sweep stores (:data:`SUMMARY_VARIABLES`)."""
+    return {"d_mean_radiance": s.d_mean_radiance, "d_mean_radiance_se": s.d_mean_radiance_se,
+            "sensitivity": s.sensitivity, "sensitivity_se": s.sensitivity_se, "resolved": s.resolved}
+
+
+def sensitivity(
+    scene: Scene, names: Sequence[str], *, at: Mapping[str, float] | None = None, seeds: int = 4,
+    spp: int | None = None, spp_grad: int | None = None, quiet: bool = False,
+) -> Sensitivity:
+    """Derivatives of the image and of each part's and the whole target's mean radiance with respect
+    to the registered parameters ``names`` (``sf.available_parameters(scene)``), at the scene's values
+    or ``at`` (by name, in the parameters' units), each from ``seeds`` independent estimates (>= 2)
+    with its standard error. ``spp`` / ``spp_grad``: samples per pixel of the primal and finite
+    difference renders / of the AD renders (default: the scene's)."""
+    from spacefit.fitting.problem import fit_scene
+    from spacefit.progress import progress_bar
+    from spacefit.rendering.derivatives import jacobians
+    from spacefit.scene.parameters import check_names, parameter, scene_with
+    from spacefit.studies.worker import TARGET
+
+    check_scene(scene)
+    check_count("seeds", seeds, 2)
+    names = tuple(names)
+    check_names(scene, list(names), "names")
+    if at:
+        check_names(scene, list(at), "at")
+        scene = scene_with(scene, at)
+    scene = fit_scene(scene, names)  # as the fit: wrinkles rendered as geometry, where D and G act
+    s0 = scene.render.seed
+    pairs = tuple((s0 + 2 * k, s0 + 2 * k + 1) for k in range(seeds))
+    bar = progress_bar(seeds, "sensitivity", quiet=quiet)
+    try:
+        results, renderer = jacobians(scene, names, pairs, spp=spp, spp_grad=spp_grad, progress=bar.update)
+    finally:
+        bar.close()
+    part_image = renderer.part_image()
+    regions = (*part_image.names, TARGET)
+    masks = [part_image.ids == i for i in range(len(part_image.names))] + [part_image.ids >= 0]
+    images = np.stack([r.image for r in results]).astype(float)
+    columns = np.stack([[r.columns[n] for n in names] for r in results]).astype(float)  # (seeds, n, h, w, 3)
+
+    def region_means(a: np.ndarray) -> np.ndarray:  # (..., h, w, 3) -> (..., regions), NaN where none
+        grey = a.mean(axis=-1)
+        return np.stack([grey[..., m].mean(axis=-1) if m.any() else np.full(grey.shape[:-2], np.nan) for m in masks], axis=-1)
+
+    L = region_means(images)  # (seeds, regions)
+    dL = region_means(columns)  # (seeds, n, regions)
+    at_values = results[0].at
+    scale = {n: normalisation(n, at_values[n]) for n in names}
+    factors = np.array([scale[n][0] for n in names])[None, :, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        normalised = factors * dL / L[:, None, :]
+    image, _ = mean_and_error(images)
+    derivative, derivative_se = mean_and_error(columns)
+    mean_L, _ = mean_and_error(L)
+    d, d_se = mean_and_error(dL)
+    sens, sens_se = mean_and_error(normalised)
+    return Sensitivity(names, {n: parameter(n).unit for n in names}, dict(at_values), pairs, image.astype(np.float32),
+                       derivative.astype(np.float32), derivative_se.astype(np.float32), regions,
+                       np.array([int(m.sum()) for m in masks]), mean_L, d, d_se, sens, sens_se,
+                       {n: scale[n][1] for n in names}, t_critical(seeds))

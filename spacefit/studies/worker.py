@@ -1,0 +1,126 @@
+"""One sweep point, rendered in a process that keeps its loaded scene: the in-process sweep and each
+dask worker run :func:`run_task` alike, so both give the same numbers for the same seeds.
+
+A point's scene-file values (camera, resolution, sun direction, mesh...) select the loaded scene; its
+registered parameters (materials, sun angles, pose, wrinkles) are set in place on it
+(:meth:`~spacefit.rendering.renderer.Renderer.set_values`), about 25x faster than loading the scene
+again. The process keeps one loaded scene at a time: Mitsuba leaks memory on every load
+(mitsuba3#1890), and a sweep visits its points grouped by scene values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from spacefit.geometry.frames import pixel_solid_angles
+from spacefit.scene.config import Scene, scene_from_dict
+
+TARGET = "target"  # the region of every part together, beside the parts
+
+
+@dataclass(frozen=True)
+class Task:
+    """A whole render: the scene (TOML text), what to set in place, and what to return.
+
+    Attributes:
+        scene_toml: the scene with this point's scene-file values.
+        in_place: registered parameter name -> value (its unit), set on the loaded scene.
+        crop: render only the target's window (False when the swept values move vertices).
+        spp, seed: samples per pixel and seed of the render (None: the scene's).
+        images: return the radiance image.
+        derivatives: parameters whose derivatives to return (:func:`spacefit.studies.sensitivity.sensitivity`).
+        derivative_seeds: independent seeds of each derivative.
+    """
+
+    scene_toml: str
+    in_place: tuple[tuple[str, float], ...] = ()
+    crop: bool = True
+    spp: int | None = None
+    seed: int | None = None
+    images: bool = False
+    derivatives: tuple[str, ...] = ()
+    derivative_seeds: int = 4
+
+
+class _Loaded:
+    """The process's loaded scene: (scene TOML, crop) -> renderer, its pixels' solid angles, part image."""
+
+    key: tuple[str, bool] | None = None
+    renderer = None
+    solid_angles: np.ndarray | None = None
+    part_image = None
+    renders = 0
+
+
+def scene_of(toml: str) -> Scene:
+    """The scene a task's TOML text describes (mesh paths in it are absolute)."""
+    import tomllib
+
+    return scene_from_dict(tomllib.loads(toml))
+
+
+def regions(scene: Scene) -> list[str]:
+    """The regions a sweep summarises: each part, then the whole target."""
+    return [*scene.parts, TARGET]
+
+
+def summaries(radiance: np.ndarray, part_image: object, solid_angles: np.ndarray, names: list[str]) -> dict[str, np.ndarray]:
+    """Per region: ``mean_radiance`` (W m^-2 sr^-1, mean over the pixels whose centre sees it, NaN if
+    none), ``pixels`` and ``irradiance`` (W m^-2: the sum of radiance times pixel solid angle over
+    its pixels, at the camera's pinhole; for the target, over the whole image, edges included).
+    Radiance is the mean of the RGB channels (the sun's irradiance is the same in each)."""
+    table = part_image.table(radiance)
+    grey = np.asarray(radiance, dtype=float).mean(axis=-1) * solid_angles
+    ids = part_image.ids
+    irradiance = [grey.sum() if n == TARGET else grey[ids == part_image.names.index(n)].sum() for n in names]
+    return {"mean_radiance": np.array([table[n]["mean_radiance_w_m2_sr"] for n in names]),
+            "pixels": np.array([table[n]["pixels"] for n in names], dtype=np.int32),
+            "irradiance": np.array(irradiance)}
+
+
+def loaded(task: Task) -> type[_Loaded]:
+    """The process's renderer for the task's scene, loaded if the scene changed."""
+    from spacefit.rendering.renderer import Renderer
+
+    key = (task.scene_toml, task.crop)
+    if _Loaded.key != key:
+        _Loaded.key, _Loaded.renderer = None, None  # drop the old scene before loading the new one
+        renderer = Renderer(scene_of(task.scene_toml), crop=task.crop)
+        _Loaded.key, _Loaded.renderer = key, renderer
+        _Loaded.solid_angles = pixel_solid_angles(renderer.assembly.intrinsics)
+        _Loaded.part_image = renderer.part_image()
+    return _Loaded
+
+
+def render_count() -> int:
+    """Renders this process has made for sweeps (a dask worker is restarted after a bound)."""
+    return _Loaded.renders
+
+
+def run_task(task: Task) -> dict[str, np.ndarray]:
+    """Render one point; returns its variables by name (see :func:`summaries`; ``radiance`` (h, w, 3)
+    when asked; the derivative summaries of :func:`spacefit.studies.sensitivity.point_summaries`)."""
+    state = loaded(task)
+    renderer = state.renderer
+    if task.in_place:
+        renderer.set_values(dict(task.in_place))
+        if not task.crop:  # the swept values move vertices: which part each pixel sees changes
+            state.part_image = renderer.part_image()
+    radiance = renderer.render(spp=task.spp, seed=task.seed)
+    state.renders += 1
+    scene = renderer.assembly.scene
+    out = summaries(radiance, state.part_image, state.solid_angles, regions(scene))
+    if task.images:
+        out["radiance"] = radiance
+    if task.derivatives:
+        from spacefit.scene.parameters import scene_with
+        from spacefit.studies.sensitivity import point_summaries, sensitivity
+
+        render = {k: v for k, v in (("render.seed", task.seed), ("render.spp", task.spp)) if v is not None}
+        point = scene_with(scene.with_values(render), dict(task.in_place))
+        sens = sensitivity(point, task.derivatives, seeds=task.derivative_seeds, quiet=True)
+        order = [sens.regions.index(r) for r in regions(scene)]
+        out.update({k: v[:, order] for k, v in point_summaries(sens).items()})
+    return out

@@ -1,0 +1,80 @@
+"""Light curves: a Lambert sphere against its analytic phase function, the inverse-square rescaling
+and magnitudes, directions as angles in the target's frame, and spins."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from helpers import small_scene, write_sphere_obj
+
+import spacefit as sf
+from spacefit.studies.lightcurve import direction
+
+
+def test_lambert_sphere_follows_its_phase_function(tmp_path):
+    """E(a) = E_sun kd (R / d)^2 (2 / (3 pi)) (sin a + (pi - a) cos a) (Lambert sphere, e.g. Russell 1916),
+    within 1 % from 0 to 150 deg. A box filter: the tent filter's weighted mean of few samples per
+    pixel biases the thin crescent's flux (-1.5 % at 150 deg, 16 spp, measured)."""
+    mesh = write_sphere_obj(tmp_path / "sphere.obj", radius=1.0, subdivisions=5)
+    scene = small_scene(mesh, {"material": "white_paint", "kd": 0.5}, render={"spp": 16, "resolution": [96, 96], "filter": "box"},
+                        camera={"position_m": [0.0, 0.0, 1000.0], "focal_length_mm": 3000.0, "pixel_pitch_mm": 0.1})
+    phase = np.arange(0.0, 151.0, 10.0)
+    lc = sf.light_curve(scene, phase_deg=phase, quiet=True)
+    a = np.radians(phase)
+    model = 5.0 * 0.5 * (1.0 / 1000.0) ** 2 * 2 / (3 * np.pi) * (np.sin(a) + (np.pi - a) * np.cos(a))
+    np.testing.assert_allclose(lc.irradiance_w_m2, model, rtol=0.01)
+    np.testing.assert_allclose(lc.phase_angle_deg, phase, atol=1e-6)
+    assert lc.against == "phase_angle_deg" and list(lc.dataset.phase_angle_deg.values) == list(phase)
+
+
+@pytest.fixture
+def sphere(tmp_path):
+    return small_scene(write_sphere_obj(tmp_path / "sphere.obj", subdivisions=2), {"material": "white_paint"},
+                       render={"spp": 4}, camera={"focal_length_mm": 5.0})
+
+
+def test_magnitudes_and_inverse_square(sphere):
+    near = sf.light_curve(sphere, attitude_deg=[0.0, 30.0], quiet=True)
+    far = sf.light_curve(sphere, attitude_deg=[0.0, 30.0], observer_range_m=20.0, quiet=True)
+    assert near.rendered_range_m == pytest.approx(10.0) and far.observer_range_m == 20.0
+    np.testing.assert_allclose(far.irradiance_w_m2, near.irradiance_w_m2 / 4, rtol=1e-12)
+    np.testing.assert_allclose(far.magnitude - near.magnitude, 2.5 * math.log10(4), rtol=1e-9)
+    np.testing.assert_allclose(near.magnitude, -26.74 - 2.5 * np.log10(near.irradiance_w_m2 / 5.0))
+    other = sf.light_curve(sphere, attitude_deg=[0.0], band="R", sun_magnitude=-27.1, quiet=True)
+    assert other.magnitude[0] == pytest.approx(near.magnitude[0] - 0.36)
+
+
+def test_directions_as_angles_in_the_target_frame(sphere):
+    turned = sphere.with_values({"target.attitude_deg": [90.0, 0.0, 30.0]})
+    towards = direction(turned, (40.0, 25.0), "sun")
+    # (el, az) in the object frame, turned into the world by R = R1 R2 R3 of the attitude
+    from spacefit.geometry.frames import attitude_matrix
+
+    el, az = np.radians(40.0), np.radians(25.0)
+    local = [np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)]
+    np.testing.assert_allclose(towards, attitude_matrix(np.radians([90.0, 0.0, 30.0])) @ local, atol=1e-12)
+    by_angles = sf.light_curve(turned, attitude_deg=[30.0], sun=(40.0, 25.0), quiet=True)
+    by_vector = sf.light_curve(turned, attitude_deg=[30.0], sun=towards.tolist(), quiet=True)
+    np.testing.assert_allclose(by_angles.irradiance_w_m2, by_vector.irradiance_w_m2, rtol=1e-6)
+    seen = sf.light_curve(turned, attitude_deg=[30.0], observer=(0.0, 0.0), sun=(0.0, 0.0), quiet=True)
+    assert seen.phase_angle_deg[0] == pytest.approx(0.0, abs=1e-6)
+
+
+def test_spin_is_attitude_over_time(sphere):
+    spin = sf.light_curve(sphere, times_s=[0.0, 1.0, 2.0], spin_rate_deg_s=15.0, axis="x", quiet=True)
+    turn = sf.light_curve(sphere, attitude_deg=[0.0, 15.0, 30.0], axis="x", quiet=True)
+    np.testing.assert_array_equal(spin.irradiance_w_m2, turn.irradiance_w_m2)
+    assert spin.against == "time_s" and list(spin.x) == [0.0, 1.0, 2.0]
+
+
+def test_bad_input(sphere):
+    with pytest.raises(sf.InputError, match="exactly one"):
+        sf.light_curve(sphere, phase_deg=[0.0], attitude_deg=[0.0], quiet=True)
+    with pytest.raises(sf.InputError, match="band"):
+        sf.light_curve(sphere, phase_deg=[0.0], band="K", quiet=True)
+    with pytest.raises(sf.InputError, match="phase_deg"):
+        sf.light_curve(sphere, phase_deg=[190.0], quiet=True)
+    with pytest.raises(sf.InputError, match="observer"):
+        sf.light_curve(sphere, phase_deg=[0.0], observer=[1.0, 0.0, 0.0, 0.0], quiet=True)
