@@ -118,6 +118,8 @@ def test_sweep_killed_half_way_resumes_to_the_uninterrupted_result(tmp_path, mon
     monkeypatch.setattr(worker, "run_task", lambda task: (calls.append(task), run(task))[1])
     sf.sweep(sphere_scene(tmp_path), AXES, store=store, quiet=True)
     assert calls == []  # a finished store: nothing to do
+    sf.sweep(sphere_scene(tmp_path), {**AXES, "sun.elevation_deg": [30, 50, 70, 90]}, store=store, quiet=True)
+    assert calls == []  # the same numbers written as integers are the same sweep
     with pytest.raises(sf.InputError, match="other arguments"):
         sf.sweep(sphere_scene(tmp_path), {**AXES, "render.seed": [1, 2]}, store=store, quiet=True)
 

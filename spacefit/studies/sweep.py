@@ -129,8 +129,17 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
 
 
 def _canonical(scene: Scene, axes: list[Axis], options: Mapping[str, Any]) -> str:
-    """The arguments that decide a store's contents, as JSON: a rerun must match them."""
-    return json.dumps({"scene": scene.to_toml(), "axes": [[a.name, a.values] for a in axes], **options}, sort_keys=True)
+    """The arguments that decide a store's contents, as JSON: a rerun must match them (numbers
+    compared as floats, so that ``[30, 60]`` and ``[30.0, 60.0]`` are the same sweep)."""
+    axes_json = [[a.name, {k: _floats(v) for k, v in a.values.items()}] for a in axes]
+    return json.dumps({"scene": scene.to_toml(), "axes": axes_json, **options}, sort_keys=True)
+
+
+def _floats(value: Any) -> Any:
+    """``value`` with every integer (not bool) as a float, lists kept."""
+    if isinstance(value, list):
+        return [_floats(v) for v in value]
+    return float(value) if isinstance(value, int) and not isinstance(value, bool) else value
 
 
 def in_place_names(scene: Scene) -> set[str]:
