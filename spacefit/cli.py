@@ -12,6 +12,7 @@ from pathlib import Path
 from collections.abc import Sequence
 
 from spacefit.errors import InputError, check_range, shorten
+from spacefit.interrupts import Terminated
 
 NOT_CONVERGED = 3
 INTERRUPTED = 130  # 128 + SIGINT, as shells report Ctrl-C
@@ -97,9 +98,9 @@ def _sweep(args: argparse.Namespace) -> int:
     try:
         sweep(scene, axes, store=args.out, overwrite=args.overwrite, workers=args.workers, scheduler=args.scheduler,
               quiet=args.quiet, **options)
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as stop:
         print(f"spacefit: interrupted; every finished point is in {args.out} (rerun the same command to finish)", file=sys.stderr)
-        return INTERRUPTED
+        return TERMINATED if isinstance(stop, Terminated) else INTERRUPTED
     return 0
 
 
@@ -136,10 +137,6 @@ def _fit(args: argparse.Namespace) -> int:
         print(f"spacefit: the fit did not converge ({result.status}); its report is in {args.out}", file=sys.stderr)
         return NOT_CONVERGED
     return 0
-
-
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised like Ctrl-C so that the same clean-up runs (a fit reports its best point)."""
 
 
 def _terminate(signum: int, frame: object) -> None:

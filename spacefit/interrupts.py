@@ -17,8 +17,13 @@ from types import FrameType
 SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that the same clean-up runs (a fit reports its best point)."""
+
+
 class Deferred:
-    """Records the first SIGINT / SIGTERM; :meth:`check` raises KeyboardInterrupt at a safe point."""
+    """Records the first SIGINT / SIGTERM; :meth:`check` raises KeyboardInterrupt (:class:`Terminated`
+    for SIGTERM) at a safe point."""
 
     def __init__(self) -> None:
         self.requested: int | None = None
@@ -29,7 +34,9 @@ class Deferred:
         self.requested = signum
 
     def check(self) -> None:
-        """Raise KeyboardInterrupt if a signal arrived since the loop began."""
+        """Raise KeyboardInterrupt (Terminated for SIGTERM) if a signal arrived since the loop began."""
+        if self.requested == signal.SIGTERM:
+            raise Terminated
         if self.requested is not None:
             raise KeyboardInterrupt
 

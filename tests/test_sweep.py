@@ -157,7 +157,8 @@ def test_a_two_worker_dask_cluster_gives_the_in_process_dataset(tmp_path):
     assert local.attrs["spacefit_sweep"] == distributed.attrs["spacefit_sweep"]
 
 
-def test_ctrl_c_stops_the_command_line_sweep_cleanly(tmp_path):
+@pytest.mark.parametrize(("signum", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_ctrl_c_stops_the_command_line_sweep_cleanly(tmp_path, signum, code):
     mesh = write_sphere_obj(tmp_path / "sphere.obj", subdivisions=2)
     (tmp_path / "scene.toml").write_text(small_scene(mesh, {"material": "white_paint"}, render={"spp": 256}).to_toml())
     (tmp_path / "sweep.toml").write_text('scene = "scene.toml"\n[axes]\n"sun.elevation_deg" = {linspace = [10, 90, 400]}\n')
@@ -167,9 +168,9 @@ def test_ctrl_c_stops_the_command_line_sweep_cleanly(tmp_path):
     deadline = time.time() + 120
     while (not store.exists() or done_points(store) < 2) and proc.poll() is None and time.time() < deadline:
         time.sleep(0.05)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(signum)
     _, err = proc.communicate(timeout=120)
-    assert proc.returncode == 130, err
+    assert proc.returncode == code, err
     assert err.strip().splitlines() == [f"spacefit: interrupted; every finished point is in {store} (rerun the same command to finish)"]
     ds = xr.open_zarr(store)
     assert 2 <= int(ds.done.sum()) < 400
