@@ -65,6 +65,8 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "noise_variance_dn": ("spacefit.sensor", "noise_variance_dn"),
     "observe": ("spacefit.sensor", "observe"),
     "saturated_mask": ("spacefit.sensor", "saturated_mask"),
+    "plot_comparison": ("spacefit.fitting.plots", "plot_comparison"),
+    "plot_convergence": ("spacefit.fitting.plots", "plot_convergence"),
 }
 
 __all__ = [
@@ -76,6 +78,7 @@ __all__ = [
     "render_to_folder", "wm_rms", "wm_rms_slope", "write_exr", "write_fit_report",
     "Distortion", "Intrinsics", "ObservedImage", "Sensor", "distort_image", "expected_dn", "noise_variance_dn", "observe",
     "pixel_solid_angles", "read_image", "saturated_mask", "write_observation",
+    "plot_comparison", "plot_convergence",
 ]
 
 

@@ -76,7 +76,7 @@ def test_error_while_writing_the_report_leaves_nothing(case, tmp_path, monkeypat
     def broken(result):
         raise OSError("disk full")
 
-    monkeypatch.setattr(report, "_convergence", broken)
+    monkeypatch.setattr(report, "plot_convergence", broken)
     with pytest.raises(OSError, match="disk full"):
         fit_to_folder([case / "a.exr"], [case / "a.toml"], ["parts.sphere.kd"], tmp_path / "run", max_steps=1, quiet=True)
     assert not (tmp_path / "run").exists()

@@ -21,6 +21,7 @@ import numpy as np
 from spacefit.errors import check_choice, check_count, check_range
 from spacefit.fitting.problem import Observation, setup
 from spacefit.fitting.solvers import SOLVERS, Options, Status
+from spacefit.fitting.stopping import NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import deferred_interrupts
 from spacefit.precision import float64
@@ -31,6 +32,7 @@ from spacefit.rendering.renderer import PartImage
 # region may try (and reject) a single non-finite point.
 NONFINITE_PATIENCE = 3
 DEFAULT_MAX_STEPS = 50
+STOP_RULES = ("noise", "tolerance")
 
 
 @dataclass
@@ -46,7 +48,10 @@ class FitResult:
         status: how the solve ended (``str(status)`` is its words).
         warnings: identifiability and convergence warnings, in words.
         history: one entry per step: the point the step evaluated (step 1 evaluates the start;
-            the accepted point of the last step is ``values``), its loss, time_s since the start.
+            the accepted point of the last step is ``values``), its loss, ``accepted`` (the step
+            lowered the best loss so far: accepted losses never rise), ``loss_noise`` (the loss's
+            Monte Carlo noise at the best point so far, :mod:`~spacefit.fitting.stopping`),
+            time_s since the start.
         renders: the final render of each observation.
         loss: final loss, 0.5 * sum of squared residuals.
         solver, loss_name, steps, wall_time_s, start: what was run.
@@ -98,6 +103,7 @@ def fit(
     learning_rate: float = 0.05,
     seed: int = 1,
     seed_grad: int = 2,
+    stop: str = "noise",
     integrator: str = "prb",
     geometry_jacobian: str = "fd",
     wrinkle_coordinates: str = "rms",
@@ -118,6 +124,9 @@ def fit(
         rtol, atol: optimistix tolerances (Adam: stop when the relative loss change < rtol).
         learning_rate: Adam's step size in unconstrained coordinates.
         seed, seed_grad: seeds of primal and derivative renders; render references with another.
+        stop: ``"noise"``: stop as well when the expected decrease of the loss is below its Monte
+            Carlo noise (:attr:`Status.NOISE_FLOOR`, :mod:`spacefit.fitting.stopping`; one more
+            primal render per accepted step); ``"tolerance"``: only on the solver's tolerances.
         integrator: AD integrator for derivative renders, one of :data:`INTEGRATORS`.
         geometry_jacobian: ``"fd"`` (central differences with common random numbers) or ``"ad"``
             (the integrator's derivative) for D and G.
@@ -140,6 +149,7 @@ def fit(
     check_range("rtol", rtol, 0.0, lo_open=True)
     check_range("atol", atol, 0.0)
     check_range("learning_rate", learning_rate, 0.0, lo_open=True)
+    check_choice("stop", stop, STOP_RULES)
     s = setup(observations, free, start, loss, spp, spp_grad, seed, seed_grad, integrator, geometry_jacobian,
               wrinkle_coordinates)
     fp, problem = s.solver_params, s.problem
@@ -148,13 +158,13 @@ def fit(
     history: list[dict[str, Any]] = []
     last: dict[str, Any] = {}
 
-    def record(u: np.ndarray, value: np.ndarray) -> None:
-        last.update(u=np.asarray(u), loss=float(value))
+    def record(u: np.ndarray, value: np.ndarray, r: np.ndarray | None = None) -> None:
+        last.update(u=np.asarray(u), loss=float(value), r=None if r is None else np.asarray(r))
 
     def residual_u(u: jax.Array, args: Any) -> jax.Array:
         # renders are float32; the solver works in the dtype of u (float64) throughout
         r = problem.residual_x(fp.to_physical(u)).astype(u.dtype)
-        jax.debug.callback(record, u, 0.5 * jnp.sum(r**2))
+        jax.debug.callback(record, u, 0.5 * jnp.sum(r**2), r)
         return r
 
     loss_u_reverse = None
@@ -165,27 +175,37 @@ def fit(
             jax.debug.callback(record, u, value)
             return value
 
-    def log_step(step: int) -> bool:
-        """Record the step's evaluation; False after a run of non-finite evaluations."""
-        x = np.asarray(s.to_user(fp.to_physical(jnp.asarray(last["u"]))))
-        history.append({"step": step, "loss": last["loss"], "values": dict(zip(s.user.names, x.tolist())),
-                        "time_s": time.perf_counter() - t0})
-        if np.isfinite(last["loss"]) and last["loss"] < best.get("loss", np.inf):
+    def log_step(step: int) -> Status | None:
+        """Record the step's evaluation; a status after a run of non-finite evaluations or at the noise floor."""
+        x_solver = fp.to_physical(jnp.asarray(last["u"]))
+        accepted = floor.record(last["loss"])
+        if accepted:
             best.update(u=last["u"], loss=last["loss"])
+            if stop == "noise":
+                r = last["r"] if last["r"] is not None else np.asarray(problem.residual_x(x_solver))
+                floor.set_noise(loss_noise(r, np.asarray(problem.residual_x_independent(x_solver))))
+        x = np.asarray(s.to_user(x_solver))
+        history.append({"step": step, "loss": last["loss"], "accepted": accepted, "loss_noise": floor.noise,
+                        "values": dict(zip(s.user.names, x.tolist())), "time_s": time.perf_counter() - t0})
         if progress is not None:
             progress(step, max_steps)
         if on_step is not None:
             on_step(history[-1])
         interrupts.check()
-        return not _nonfinite_run(history)
+        if _nonfinite_run(history):
+            return Status.NONFINITE
+        return Status.NOISE_FLOOR if stop == "noise" and floor.reached(last["loss"], accepted) else None
 
     best: dict[str, Any] = {}
+    floor = NoiseFloor()
     u = jnp.asarray(fp.to_unconstrained(jnp.asarray(s.x0)))
     try:
         with deferred_interrupts() as interrupts:
             outcome = SOLVERS[solver](solver, residual_u, u, Options(max_steps, rtol, atol, learning_rate), log_step,
                                       loss_u_reverse)
         status, u, steps = outcome.status, outcome.u, outcome.steps
+        if status is Status.NOISE_FLOOR:
+            u = jnp.asarray(best["u"])  # the step that stopped the solve may be a rejected trial
     except KeyboardInterrupt:
         status, steps = Status.INTERRUPTED, len(history)
         u = jnp.asarray(best["u"]) if best else u
