@@ -208,6 +208,13 @@ def _pixel_weights(offsets: Float[np.ndarray, " n"], radius: int, sigma_px: floa
     return np.diff(cdf, axis=0)
 
 
+def gaussian_pixel_weights(sigma_px: Float[Array, ""], radius: int) -> Float[Array, " k"]:
+    """The Gaussian of ``psf_kernel`` without diffraction, per axis and in JAX (differentiable in
+    ``sigma_px`` > 0): ``Phi((k + 1/2) / sigma) - Phi((k - 1/2) / sigma)`` for k = -radius..radius."""
+    edges = jnp.arange(-radius, radius + 2) - 0.5
+    return jnp.diff(jax.scipy.special.ndtr(edges / sigma_px))
+
+
 def psf_kernel(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> Float[np.ndarray, "k k"]:
     """The PSF integrated over pixels: kernel[dv, du] is the fraction of a point's light that lands du, dv px away.
 

@@ -27,6 +27,7 @@ from spacefit.interrupts import deferred_interrupts
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.renderer import PartImage
+from spacefit.scene.parameters import NUISANCES
 
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
 # region may try (and reject) a single non-finite point.
@@ -41,7 +42,7 @@ class FitResult:
 
     Attributes:
         names: free parameter names, in order.
-        values: fitted value of each, physical units.
+        values: fitted value of each, physical units; :attr:`estimates` and :attr:`nuisances` split them.
         stderr: standard error of each (from J^T J and the residual); inf if not determined.
         correlation: (n, n) correlation matrix of the estimates.
         success: whether the solver reports convergence (and the result is finite).
@@ -78,10 +79,21 @@ class FitResult:
     extras: dict[str, Any] = field(default_factory=dict)
     parts: list[dict[str, dict[str, float]]] = field(default_factory=list)
 
+    @property
+    def nuisances(self) -> dict[str, float]:
+        """The fitted nuisance parameters (image gain, offset, PSF, shift; the target's pose), physical units."""
+        return {n: v for n, v in self.values.items() if n in NUISANCES}
+
+    @property
+    def estimates(self) -> dict[str, float]:
+        """The fitted values of the parameters that are not nuisances (materials, wrinkles, sun)."""
+        return {n: v for n, v in self.values.items() if n not in NUISANCES}
+
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (no images)."""
+        """JSON-ready summary (no images); ``nuisances`` names the nuisance parameters among ``names``."""
         d = dataclasses.asdict(self)
         d.pop("renders")
+        d["nuisances"] = list(self.nuisances)
         d["correlation"] = np.asarray(self.correlation).tolist()
         d["status"] = self.status.value
         return d

@@ -17,6 +17,7 @@ import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_choice, check_count, quote
 from spacefit.fitting.losses import residual_fn
+from spacefit.fitting.nuisance import split
 from spacefit.fitting.params import FreeParameters, free_parameters
 from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import PartImage, Renderer
@@ -95,6 +96,10 @@ def _problem(
 ) -> Problem:
     renders_x, renders_alt, renders_v, residuals, values_fns, part_images, references = [], [], [], [], [], [], []
     moving = any(n in MOVES_VERTICES for n in free.names)
+    # the image nuisances act on the render in JAX; the renderer sees the other parameters
+    rendered, image_model = split(free.names)
+    rendered_names = [free.names[i] for i in rendered]
+    steps = free.fd_steps[rendered]
     for i, obs in enumerate(observations):
         ref = check_reference(obs, i)
         scene = obs.scene
@@ -102,28 +107,32 @@ def _problem(
         # D, G and the pose move the vertices: render the whole film, the target's window would not hold them
         renderer = Renderer(assembly, crop=not moving)
         dscene = DrJitScene(renderer, spp or scene.render.spp, spp_grad or spp or scene.render.spp, integrator)
-        values_of = scene_values_fn(assembly, free.names)
-        renders_x.append(render_params(dscene, values_of, free.fd_steps, seed, seed_grad))
+        values_of = scene_values_fn(assembly, rendered_names)
+        renders_x.append(render_params(dscene, values_of, steps, seed, seed_grad))
         alt = INDEPENDENT_SEED_OFFSET
-        renders_alt.append(render_params(dscene, values_of, free.fd_steps, seed + alt, seed_grad + alt))
+        renders_alt.append(render_params(dscene, values_of, steps, seed + alt, seed_grad + alt))
         renders_v.append(render_values(dscene, seed, seed_grad))
         residuals.append(residual_fn(ref, loss, obs.sigma))
         values_fns.append(values_of)
         part_images.append(renderer.part_image())
         references.append(ref)
 
+    def modelled(render: Callable[[jax.Array], jax.Array]) -> Callable[[jax.Array], jax.Array]:
+        return lambda x: image_model(render(x[rendered]), x)
+
     def stack(renders: list[Callable[[jax.Array], jax.Array]]) -> Callable[[jax.Array], jax.Array]:
-        return lambda x: jnp.concatenate([res(render(x)) for res, render in zip(residuals, renders)])
+        return lambda x: jnp.concatenate([res(modelled(render)(x)) for res, render in zip(residuals, renders)])
 
     reverse = None
     if not np.any(free.fd_steps > 0):
 
         def reverse(u: jax.Array) -> jax.Array:
             x = free.to_physical(u)
-            r = jnp.concatenate([res(render(vals(x))) for res, render, vals in zip(residuals, renders_v, values_fns)])
+            r = jnp.concatenate([res(image_model(render(vals(x[rendered])), x))
+                                 for res, render, vals in zip(residuals, renders_v, values_fns)])
             return 0.5 * jnp.sum(r**2)
 
-    return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [render(x) for render in renders_x],
+    return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [modelled(render)(x) for render in renders_x],
                    part_images, references)
 
 

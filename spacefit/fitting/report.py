@@ -61,9 +61,12 @@ def format_result(result: FitResult) -> str:
         f"{result.solver} on the {result.loss_name} loss: {result.status} after {result.steps} steps "
         f"({result.wall_time_s:.1f} s), loss {result.loss:.4g}"
     ]
-    for name in result.names:
-        value, stderr, start = result.values[name], result.stderr[name], result.start[name]
-        lines.append(f"  {name:<{width}} = {value:.6g} +/- {stderr:.3g}  (start {start:.6g})")
+    for heading, group in (("", result.estimates), ("nuisance parameters:", result.nuisances)):
+        if heading and group:
+            lines.append(f"  {heading}")
+        for name in group:
+            value, stderr, start = result.values[name], result.stderr[name], result.start[name]
+            lines.append(f"  {name:<{width}} = {value:.6g} +/- {stderr:.3g}  (start {start:.6g})")
     for name in derived:
         value, stderr = result.extras[name], result.extras[f"{name}.stderr"]
         lines.append(f"  {name:<{width}} = {value:.6g} +/- {stderr:.3g}  (derived)")
