@@ -19,11 +19,13 @@ from spacefit.errors import InputError, InputTypeError, check_choice, check_coun
 from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.nuisance import split
 from spacefit.fitting.params import FreeParameters, free_parameters
+from spacefit.geometry.frames import Intrinsics
 from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import PartImage, Renderer
 from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import Scene, check_scene
+from spacefit.sensor import Sensor, dn_fn, noise_variance_dn, saturated_mask
 from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, rms_of, scene_value
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
@@ -38,14 +40,25 @@ class Observation:
     """A reference radiance image (h, w, 3), W m^-2 sr^-1, and the scene it was taken in.
 
     ``sigma``: the reference's noise standard deviation (scalar or per pixel), or None.
+    ``sensor``: the camera that measured it, if known: the reference is then in DN (as
+    :func:`~spacefit.imageio.read_image` gives it), the model is the sensor's
+    :func:`~spacefit.sensor.expected_dn` of the render, each pixel is weighted by its predicted
+    Poisson-Gaussian noise (:func:`~spacefit.sensor.noise_variance_dn` at the model's DN, held fixed in derivatives),
+    saturated pixels are left out, and the standard errors are the noise model's (J^T W J)^-1
+    instead of the sandwich. ``sigma`` must then be None.
     """
 
     scene: Scene
     reference: np.ndarray
     sigma: float | np.ndarray | None = None
+    sensor: Sensor | None = None
 
     def __post_init__(self) -> None:
         check_scene(self.scene, "Observation.scene")
+        if self.sensor is not None and not isinstance(self.sensor, Sensor):
+            raise InputTypeError(f"`Observation.sensor` must be an sf.Sensor or None, got {quote(self.sensor)}.")
+        if self.sensor is not None and self.sigma is not None:
+            raise InputError("`Observation.sigma` must be None when `Observation.sensor` is given: the sensor predicts each pixel's noise.")
         ref = np.asarray(self.reference)
         if not (np.issubdtype(ref.dtype, np.floating) or np.issubdtype(ref.dtype, np.integer)):
             raise InputTypeError(f"`Observation.reference` must be a real-valued radiance image, got dtype {ref.dtype} "
@@ -88,6 +101,7 @@ class Problem:
     renders_x: Callable[[jax.Array], list[jax.Array]]
     part_images: list[PartImage]  # which part each pixel of each observation sees
     references: list[np.ndarray]  # the checked references, (h, w, 3) float32
+    noise_known: bool = False  # every residual is divided by its predicted noise (a sensor per observation)
 
 
 def _problem(
@@ -112,7 +126,7 @@ def _problem(
         alt = INDEPENDENT_SEED_OFFSET
         renders_alt.append(render_params(dscene, values_of, steps, seed + alt, seed_grad + alt))
         renders_v.append(render_values(dscene, seed, seed_grad))
-        residuals.append(residual_fn(ref, loss, obs.sigma))
+        residuals.append(_residual(obs, ref, loss, assembly.intrinsics))
         values_fns.append(values_of)
         part_images.append(renderer.part_image())
         references.append(ref)
@@ -133,7 +147,24 @@ def _problem(
             return 0.5 * jnp.sum(r**2)
 
     return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [modelled(render)(x) for render in renders_x],
-                   part_images, references)
+                   part_images, references, all(o.sensor is not None for o in observations))
+
+
+def _residual(obs: Observation, reference: np.ndarray, loss: str, intrinsics: Intrinsics) -> Callable[[jax.Array], jax.Array]:
+    """The residuals of a model radiance image against the observation: in radiance, or with a
+    sensor, in DN divided by the noise the sensor predicts at the model's DN (saturated pixels of
+    the reference weigh 0)."""
+    if obs.sensor is None:
+        return residual_fn(reference, loss, obs.sigma)
+    sensor = obs.sensor
+    saturated = jnp.asarray(saturated_mask(reference, sensor))
+
+    def sigma(dn: jax.Array) -> jax.Array:
+        return jnp.where(saturated, jnp.inf, jnp.sqrt(noise_variance_dn(dn, sensor)))
+
+    to_dn = dn_fn(sensor, intrinsics, reference.shape[-1])
+    res = residual_fn(reference, loss, sigma)
+    return lambda image: res(to_dn(image))
 
 
 @dataclass

@@ -40,6 +40,10 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
     Jacobian is non-zero (black sky) carry no information and are not counted in the degrees of
     freedom. Directions the images do not constrain (eigenvalues of sym(J1^T J2) that are not
     clearly positive) give infinite variance to every parameter they touch.
+
+    With the noise known (``problem.noise_known``: every observation has a sensor, each residual is
+    divided by its predicted noise), the residuals are unit normal at the truth and the covariance
+    is the noise model's own, sym(J1^T J2)^-1, with no scale estimated from the residuals.
     """
     r = np.asarray(problem.residual_x(jnp.asarray(x)), dtype=float)
     J1 = np.asarray(jax.jacfwd(problem.residual_x)(jnp.asarray(x)), dtype=float)
@@ -57,9 +61,12 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
     eigval, eigvec = np.linalg.eigh(cross(np.ones_like(r)))
     tiny = eigval <= 1e-9 * max(np.abs(eigval).max(), 1e-300)
     bread = (eigvec[:, ~tiny] / eigval[~tiny]) @ eigvec[:, ~tiny].T
-    m_val, m_vec = np.linalg.eigh(cross(r**2 * informative / dof))
-    meat = (m_vec * np.clip(m_val, 0.0, None)) @ m_vec.T  # the cross form is not PSD by construction
-    cov = bread @ meat @ bread
+    if problem.noise_known:
+        cov, s2 = bread, 1.0
+    else:
+        m_val, m_vec = np.linalg.eigh(cross(r**2 * informative / dof))
+        meat = (m_vec * np.clip(m_val, 0.0, None)) @ m_vec.T  # the cross form is not PSD by construction
+        cov = bread @ meat @ bread
     if tiny.any():
         touched = np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)
         cov[touched, :] = np.inf
