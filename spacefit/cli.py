@@ -53,7 +53,7 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     e.add_argument("--part", default="body")
     e.add_argument("--out", required=True, help="STL file to write")
     f = sub.add_parser("fit", parents=[overrides],
-                       help="fit scene parameters to reference images: fit.json, comparison.png, convergence.png",
+                       help="fit scene parameters to reference images: fit.json, fit.toml, uncertainty.json, comparison.png, convergence.png",
                        description="Fit free scene parameters to reference radiance images. "
                                    "--set applies to every scene.")
     f.add_argument("references", nargs="+", metavar="REFERENCE.exr",

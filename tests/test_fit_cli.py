@@ -17,7 +17,7 @@ from spacefit.rendering.renderer import render
 from spacefit.rendering.exr import read_exr, write_exr
 
 TRUE_KD = 0.5
-REPORT = ["comparison.png", "convergence.png", "fit.json"]
+REPORT = ["comparison.png", "convergence.png", "fit.json", "fit.toml", "uncertainty.json"]
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import check_choice, check_count, check_range
+from spacefit.errors import InputError, check_choice, check_count, check_range
 from spacefit.fitting.problem import Observation, setup
 from spacefit.fitting.solvers import SOLVERS, Options, Status
 from spacefit.fitting.stopping import NoiseFloor, loss_noise
@@ -27,7 +27,8 @@ from spacefit.interrupts import deferred_interrupts
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.renderer import PartImage
-from spacefit.scene.parameters import NUISANCES
+from spacefit.scene.config import Scene
+from spacefit.scene.parameters import NUISANCES, parameter, scene_with_values
 
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
 # region may try (and reject) a single non-finite point.
@@ -59,6 +60,9 @@ class FitResult:
         extras: derived quantities, e.g. the rms height (and its standard error) of a (D, G) fit.
         parts: per observation, per part (and the whole ``target``): the pixels that see it and the
             mean radiance (W m^-2 sr^-1) of the reference and of the fit's render there.
+        scene: the first observation's scene with the fitted values: ``scene.to_toml()`` is a scene
+            file that renders the fit again (the image nuisances are not scene values); None if
+            the values are not finite.
     """
 
     names: tuple[str, ...]
@@ -78,6 +82,26 @@ class FitResult:
     start: dict[str, float] = field(default_factory=dict)
     extras: dict[str, Any] = field(default_factory=dict)
     parts: list[dict[str, dict[str, float]]] = field(default_factory=list)
+    scene: Scene | None = None
+
+    def mitsuba_scene_dict(self) -> dict[str, Any]:
+        """The fitted scene as a Mitsuba scene dictionary (``mi.load_dict`` loads it).
+
+        Raises:
+            InputError: if the fit has no scene (its values are not finite).
+        """
+        if self.scene is None:
+            raise InputError("this fit has no fitted scene: its values are not finite.")
+        from spacefit.rendering.renderer import mitsuba_scene_dict
+
+        return mitsuba_scene_dict(self.scene)
+
+    def uncertainty(self) -> dict[str, Any]:
+        """The values, standard errors and correlation matrix (rows and columns in ``names`` order),
+        with each parameter's unit: JSON-ready (``uncertainty.json`` of a fit's folder)."""
+        return {"names": list(self.names), "values": self.values, "stderr": self.stderr,
+                "units": {n: parameter(n).unit for n in self.names},
+                "correlation": np.asarray(self.correlation).tolist(), "nuisances": list(self.nuisances)}
 
     @property
     def nuisances(self) -> dict[str, float]:
@@ -93,6 +117,7 @@ class FitResult:
         """JSON-ready summary (no images); ``nuisances`` names the nuisance parameters among ``names``."""
         d = dataclasses.asdict(self)
         d.pop("renders")
+        d.pop("scene")
         d["nuisances"] = list(self.nuisances)
         d["correlation"] = np.asarray(self.correlation).tolist()
         d["status"] = self.status.value
@@ -261,6 +286,7 @@ def fit(
         start=dict(zip(s.user.names, s.x0_user.tolist())),
         extras=extras,
         parts=[_part_rows(p, ref, img) for p, ref, img in zip(problem.part_images, problem.references, renders)],
+        scene=scene_with_values(s.scene, dict(zip(s.user.names, x_user.tolist()))) if np.all(np.isfinite(x_user)) else None,
     )
 
 

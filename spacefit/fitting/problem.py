@@ -178,6 +178,7 @@ class Setup:
     to_user: Callable[[jax.Array], jax.Array]
     problem: Problem
     rms_index: int | None
+    scene: Scene  # the first observation's scene, as given
 
 
 def fit_scene(scene: Scene, free: Sequence[str]) -> Scene:
@@ -218,6 +219,7 @@ def setup(
     if seed == seed_grad:
         raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
     user = free_parameters(observations[0].scene, free)
+    given = observations[0].scene
     observations = [dataclasses.replace(o, scene=fit_scene(o.scene, user.names)) for o in observations]
     scene = observations[0].scene
     start = dict(start or {})
@@ -247,4 +249,4 @@ def setup(
         wrinkles = np.array([n in GEOMETRY for n in solver_params.names])
         solver_params = dataclasses.replace(solver_params, fd_steps=np.where(wrinkles, 0.0, solver_params.fd_steps))
     problem = _problem(observations, solver_params, loss, spp, spp_grad, seed, seed_grad, integrator)
-    return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index)
+    return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index, given)

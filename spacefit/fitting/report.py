@@ -2,6 +2,9 @@
 
 * ``fit.json``: :meth:`FitResult.to_dict` (values, standard errors, correlation, status, warnings,
   history) plus ``timings_s``, ``versions`` and, if given, the ``inputs``;
+* ``fit.toml``: the fitted scene (:attr:`FitResult.scene`), which renders the fit again;
+* ``uncertainty.json``: :meth:`FitResult.uncertainty`, values, standard errors, units and the
+  correlation matrix (strict JSON: a non-finite error is null);
 * ``comparison.png``, ``convergence.png``: :func:`~spacefit.fitting.plots.plot_comparison` and
   :func:`~spacefit.fitting.plots.plot_convergence`, saved through matplotlib's Agg canvas.
 """
@@ -29,7 +32,7 @@ def write_fit_report(
     inputs: Mapping[str, Any] | None = None,
     timings_s: Mapping[str, float] | None = None,
 ) -> Path:
-    """Write fit.json, comparison.png and convergence.png into ``out_dir`` all at once.
+    """Write fit.json, fit.toml, uncertainty.json, comparison.png and convergence.png into ``out_dir`` all at once.
 
     Args:
         out_dir: output folder (created; on any error nothing is left behind).
@@ -48,6 +51,9 @@ def write_fit_report(
     }
     with staged_output(out_dir) as stage:
         write_json(stage / "fit.json", data)
+        write_json(stage / "uncertainty.json", result.uncertainty())
+        if result.scene is not None:
+            (stage / "fit.toml").write_text(result.scene.to_toml(), encoding="utf-8")
         _save(plot_comparison(result, references), stage / "comparison.png")
         _save(plot_convergence(result), stage / "convergence.png")
     return Path(out_dir)

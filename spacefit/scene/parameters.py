@@ -24,8 +24,9 @@ determined coordinates (:func:`rms_of`, :func:`G_of` are the one place the two a
 from __future__ import annotations
 
 import math
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -280,6 +281,28 @@ def scene_value(scene: Scene, name: str) -> float:
     _, part, field = name.split(".")
     m = make_material(scene.parts[part].material, scene.parts[part].overrides)
     return float(m.alpha_x if field == "alpha" else getattr(m, field))
+
+
+def scene_with_values(scene: Scene, values: Mapping[str, float]) -> Scene:
+    """``scene`` with registered parameters set to ``values`` (physical units, the registry's names):
+    the scene file that renders them. The fit-only :data:`IMAGE` nuisances are not scene values and
+    are left out; the sun's angles and the pose's components set their whole scene-file value."""
+    check_names(scene, [n for n in values if n not in IMAGE], "values")
+    v = {n: float(x) for n, x in values.items() if n not in IMAGE}
+    out: dict[str, Any] = {}
+    for name, x in v.items():
+        if name.startswith("parts."):
+            head = name.rsplit(".", 1)[0]
+            out.update({f"{head}.{f}": x for f in (parameter(name).scene_fields or (parameter(name).field,))})
+        elif name == "wrinkles.rms_m":
+            out["wrinkles.G"] = float(G_of(scene.wrinkles, v.get("wrinkles.D", scene.wrinkles.D), x))
+        elif name in ("wrinkles.D", "wrinkles.G", "sun.irradiance_w_m2"):
+            out[name] = x
+    for group, key in ((SUN_ANGLES, "sun.direction"), (ATTITUDE, "target.attitude_deg"), (POSITION, "target.position_m")):
+        if any(n in v for n in group):
+            current = [v.get(n, scene_value(scene, n)) for n in group]
+            out[key] = np.asarray(sun_direction(*current)).tolist() if group is SUN_ANGLES else current
+    return scene.with_values(out)
 
 
 def fd_step(scene: Scene, name: str) -> float:
