@@ -246,7 +246,7 @@ def fit_to_folder(
 
 CHECKPOINT = "checkpoint.json"
 # Options a resumed fit may change: how it solves, not what it fits.
-SOLVE_OPTIONS = ("solver", "max_steps", "start", "learning_rate", "rtol", "atol")
+SOLVE_OPTIONS = ("solver", "max_steps", "start", "learning_rate", "rtol", "atol", "stop")
 
 
 def _problem_of(value: Any, key: str) -> Any:

@@ -118,6 +118,7 @@ def test_bad_reference_exits_2_and_leaves_nothing(case, tmp_path, capsys, kind, 
         (["--start", "parts.sphere.kd=abc"], "`--start parts.sphere.kd` must be a number"),
         (["--start", "kd"], "`--start` takes NAME=VALUE"),
         (["--solver", "newton"], "`solver` must be one of"),
+        (["--stop", "never"], "`stop` must be one of"),
         (["--scene", "b.toml", "--scene", "b.toml"], "3 scenes for 1 references"),
     ],
 )
