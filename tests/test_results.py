@@ -10,7 +10,7 @@ import pytest
 import spacefit as sf
 from spacefit.scene.parameters import scene_value, scene_with_values
 
-TINY = {"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50.0, "render.spp": 8}
+TINY = {"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0, "render.spp": 8}
 
 
 @pytest.fixture(scope="module")
