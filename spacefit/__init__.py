@@ -72,6 +72,8 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "noise_variance_dn": ("spacefit.sensor", "noise_variance_dn"),
     "observe": ("spacefit.sensor", "observe"),
     "saturated_mask": ("spacefit.sensor", "saturated_mask"),
+    "plot_comparison": ("spacefit.fitting.plots", "plot_comparison"),
+    "plot_convergence": ("spacefit.fitting.plots", "plot_convergence"),
 }
 
 __all__ = [
@@ -85,6 +87,7 @@ __all__ = [
     "pixel_solid_angles", "read_image", "saturated_mask", "write_observation",
     "MLI_SLOPE_RANGE",
     "read_sweep_file", "sweep", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
+    "plot_comparison", "plot_convergence",
 ]
 
 

@@ -55,7 +55,7 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     e.add_argument("--part", default="body")
     e.add_argument("--out", required=True, help="STL file to write")
     f = sub.add_parser("fit", parents=[overrides],
-                       help="fit scene parameters to reference images: fit.json, comparison.png, convergence.png",
+                       help="fit scene parameters to reference images: fit.json, fit.toml, uncertainty.json, comparison.png, convergence.png",
                        description="Fit free scene parameters to reference radiance images. "
                                    "--set applies to every scene.")
     f.add_argument("references", nargs="+", metavar="REFERENCE.exr",
@@ -73,6 +73,9 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     f.add_argument("--spp", type=int, metavar="N", help="samples per pixel of the fit's renders (default: the scene's)")
     f.add_argument("--spp-grad", type=int, metavar="N", help="samples per pixel of derivative renders (default: --spp)")
     f.add_argument("--max-steps", type=int, metavar="N", help="solver step limit (default 50)")
+    f.add_argument("--stop", metavar="noise|tolerance",
+                   help="stop also when a step would gain less than the loss's Monte Carlo noise (noise, default), "
+                        "or on the solver's tolerances alone")
     f.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
                    help="start value of a free parameter (default: the first scene's value; repeatable)")
     f.add_argument("--sigma", type=float, metavar="S",
@@ -122,7 +125,7 @@ def _fit(args: argparse.Namespace) -> int:
     from spacefit.pipeline import fit_to_folder
 
     given = {"solver": args.solver, "loss": args.loss, "spp": args.spp, "spp_grad": args.spp_grad,
-             "max_steps": args.max_steps}
+             "max_steps": args.max_steps, "stop": args.stop}
     result = fit_to_folder(
         args.references, args.scenes, [name.strip() for name in args.free.split(",")], args.out,
         overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, quiet=args.quiet,

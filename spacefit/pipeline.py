@@ -162,7 +162,7 @@ def fit_to_folder(
     resume: bool = False,
     **options: Any,
 ) -> FitResult:
-    """Fit the ``free`` parameters to reference EXR files; write fit.json and the plots to ``out_dir``.
+    """Fit the ``free`` parameters to reference EXR files; write fit.json, fit.toml, uncertainty.json and the plots to ``out_dir``.
 
     Every input is checked before rendering (the folder is checked writable first); on any error
     nothing is left behind.
@@ -244,13 +244,13 @@ def fit_to_folder(
         raise
     if result.status is not Status.INTERRUPTED:
         checkpoint.remove()
-    _say(f"wrote {Path(out_dir) / 'fit.json'}, comparison.png and convergence.png", quiet)
+    _say(f"wrote {Path(out_dir) / 'fit.json'}, fit.toml, uncertainty.json, comparison.png and convergence.png", quiet)
     return result
 
 
 CHECKPOINT = "checkpoint.json"
 # Options a resumed fit may change: how it solves, not what it fits.
-SOLVE_OPTIONS = ("solver", "max_steps", "start", "learning_rate", "rtol", "atol")
+SOLVE_OPTIONS = ("solver", "max_steps", "start", "learning_rate", "rtol", "atol", "stop")
 
 
 def _problem_of(value: Any, key: str) -> Any:

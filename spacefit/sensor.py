@@ -30,6 +30,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass
+from collections.abc import Callable
 from typing import Any
 
 import jax
@@ -208,6 +209,13 @@ def _pixel_weights(offsets: Float[np.ndarray, " n"], radius: int, sigma_px: floa
     return np.diff(cdf, axis=0)
 
 
+def gaussian_pixel_weights(sigma_px: Float[Array, ""], radius: int) -> Float[Array, " k"]:
+    """The Gaussian of ``psf_kernel`` without diffraction, per axis and in JAX (differentiable in
+    ``sigma_px`` > 0): ``Phi((k + 1/2) / sigma) - Phi((k - 1/2) / sigma)`` for k = -radius..radius."""
+    edges = jnp.arange(-radius, radius + 2) - 0.5
+    return jnp.diff(jax.scipy.special.ndtr(edges / sigma_px))
+
+
 def psf_kernel(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> Float[np.ndarray, "k k"]:
     """The PSF integrated over pixels: kernel[dv, du] is the fraction of a point's light that lands du, dv px away.
 
@@ -243,6 +251,25 @@ def _convolve(image: Float[Array, "h w"], kernel: np.ndarray) -> Float[Array, "h
     return jax.scipy.signal.fftconvolve(image, jnp.asarray(kernel), mode="same")
 
 
+def electrons_fn(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> Callable[[Float[Array, "h w c"]], Float[Array, "h w c"]]:
+    """:func:`expected_electrons` as a JAX function of radiance, with the sensor's per-pixel factors
+    and PSF kernels computed once and no check of the values (a fit's model may dip below zero)."""
+    factor = electrons_per_radiance(sensor, intrinsics, channels)
+    kernels = [psf_kernel(sensor, intrinsics, w) for w in sensor.wavelengths(channels)]
+
+    def electrons(radiance: Float[Array, "h w c"]) -> Float[Array, "h w c"]:
+        e = jnp.asarray(radiance) * factor
+        return jnp.stack([_convolve(e[..., c], k) for c, k in enumerate(kernels)], axis=-1)
+
+    return electrons
+
+
+def dn_fn(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> Callable[[Float[Array, "h w c"]], Float[Array, "h w c"]]:
+    """:func:`expected_dn` as a JAX function of radiance, set up once (see :func:`electrons_fn`)."""
+    electrons = electrons_fn(sensor, intrinsics, channels)
+    return lambda radiance: sensor.bias_dn + sensor.gain_dn_per_electron * electrons(radiance)
+
+
 def expected_electrons(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Intrinsics) -> Float[Array, "h w c"]:
     """Mean photo-electrons per pixel (steps 1 to 3 of the module): collected, converted, blurred.
 
@@ -253,10 +280,7 @@ def expected_electrons(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsi
         (height, width, channels) float64 JAX array of electrons. Not clipped at the full well.
     """
     _check_radiance(radiance, intrinsics)
-    channels = np.shape(radiance)[2]
-    electrons = jnp.asarray(radiance) * electrons_per_radiance(sensor, intrinsics, channels)
-    kernels = [psf_kernel(sensor, intrinsics, w) for w in sensor.wavelengths(channels)]
-    return jnp.stack([_convolve(electrons[..., c], k) for c, k in enumerate(kernels)], axis=-1)
+    return electrons_fn(sensor, intrinsics, np.shape(radiance)[2])(radiance)
 
 
 def expected_dn(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Intrinsics) -> Float[Array, "h w c"]:
@@ -267,7 +291,8 @@ def expected_dn(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Int
     Returns:
         (height, width, channels) float64 JAX array, DN.
     """
-    return sensor.bias_dn + sensor.gain_dn_per_electron * expected_electrons(radiance, sensor, intrinsics)
+    _check_radiance(radiance, intrinsics)
+    return dn_fn(sensor, intrinsics, np.shape(radiance)[2])(radiance)
 
 
 def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Array, "..."]:

@@ -17,7 +17,7 @@ from spacefit.rendering.renderer import render
 from spacefit.rendering.exr import read_exr, write_exr
 
 TRUE_KD = 0.5
-REPORT = ["comparison.png", "convergence.png", "fit.json"]
+REPORT = ["comparison.png", "convergence.png", "fit.json", "fit.toml", "uncertainty.json"]
 
 
 @pytest.fixture(scope="module")
@@ -76,7 +76,7 @@ def test_error_while_writing_the_report_leaves_nothing(case, tmp_path, monkeypat
     def broken(result):
         raise OSError("disk full")
 
-    monkeypatch.setattr(report, "_convergence", broken)
+    monkeypatch.setattr(report, "plot_convergence", broken)
     with pytest.raises(OSError, match="disk full"):
         fit_to_folder([case / "a.exr"], [case / "a.toml"], ["parts.sphere.kd"], tmp_path / "run", max_steps=1, quiet=True)
     assert not (tmp_path / "run").exists()
@@ -118,6 +118,7 @@ def test_bad_reference_exits_2_and_leaves_nothing(case, tmp_path, capsys, kind, 
         (["--start", "parts.sphere.kd=abc"], "`--start parts.sphere.kd` must be a number"),
         (["--start", "kd"], "`--start` takes NAME=VALUE"),
         (["--solver", "newton"], "`solver` must be one of"),
+        (["--stop", "never"], "`stop` must be one of"),
         (["--scene", "b.toml", "--scene", "b.toml"], "3 scenes for 1 references"),
     ],
 )

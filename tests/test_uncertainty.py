@@ -23,15 +23,17 @@ N, P = 12, 3  # few rows, so that the small-sample factor n / (n - p) = 4/3 is f
 
 @dataclass
 class LinearProblem:
-    """The two residual functions the covariance reads: r(x) = A x - b and r2(x) = A2 x - b2."""
+    """The two residual functions the covariance reads: r(x) = A x - b and r2(x) = A2 x - b2, and
+    whether the residuals are divided by a known noise."""
 
     residual_x: object
     residual_x_independent: object
+    noise_known: bool = False
 
 
-def linear(A, b, A2=None, b2=None) -> LinearProblem:
+def linear(A, b, A2=None, b2=None, noise_known=False) -> LinearProblem:
     A2, b2 = (A, b) if A2 is None else (A2, b2)
-    return LinearProblem(lambda x: jnp.asarray(A) @ x - jnp.asarray(b), lambda x: jnp.asarray(A2) @ x - jnp.asarray(b2))
+    return LinearProblem(lambda x: jnp.asarray(A) @ x - jnp.asarray(b), lambda x: jnp.asarray(A2) @ x - jnp.asarray(b2), noise_known)
 
 
 @pytest.fixture
@@ -64,6 +66,15 @@ def test_covariance_is_the_hc1_sandwich(heteroscedastic):
     assert loss == pytest.approx(0.5 * r @ r, rel=1e-12)
     # the Fisher information under uniform noise: eigenvalues of A^T A / s^2
     np.testing.assert_allclose(np.sort(fisher), np.linalg.eigvalsh(A.T @ A) / ((r @ r) / (N - P)), rtol=1e-9)
+
+
+def test_with_the_noise_known_the_covariance_is_the_inverse_information(heteroscedastic):
+    """Residuals divided by their predicted noise: (A^T A)^-1, no scale taken from the residuals."""
+    A, x_hat, r = heteroscedastic
+    with jax.enable_x64(True):
+        cov, _, fisher = covariance(linear(A, A @ x_hat - r, noise_known=True), x_hat)
+    np.testing.assert_allclose(cov, np.linalg.inv(A.T @ A), rtol=1e-9)
+    np.testing.assert_allclose(np.sort(fisher), np.linalg.eigvalsh(A.T @ A), rtol=1e-9)
 
 
 def test_covariance_does_not_depend_on_the_noise_scale_or_the_units(heteroscedastic):

@@ -18,19 +18,23 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import check_choice, check_count, check_range
+from spacefit.errors import InputError, check_choice, check_count, check_range
 from spacefit.fitting.problem import Observation, setup
 from spacefit.fitting.solvers import SOLVERS, Options, Status
+from spacefit.fitting.stopping import NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import deferred_interrupts
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.renderer import PartImage
+from spacefit.scene.config import Scene
+from spacefit.scene.parameters import NUISANCES, parameter, scene_with_values
 
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
 # region may try (and reject) a single non-finite point.
 NONFINITE_PATIENCE = 3
 DEFAULT_MAX_STEPS = 50
+STOP_RULES = ("noise", "tolerance")
 
 
 @dataclass
@@ -39,20 +43,26 @@ class FitResult:
 
     Attributes:
         names: free parameter names, in order.
-        values: fitted value of each, physical units.
+        values: fitted value of each, physical units; :attr:`estimates` and :attr:`nuisances` split them.
         stderr: standard error of each (from J^T J and the residual); inf if not determined.
         correlation: (n, n) correlation matrix of the estimates.
         success: whether the solver reports convergence (and the result is finite).
         status: how the solve ended (``str(status)`` is its words).
         warnings: identifiability and convergence warnings, in words.
         history: one entry per step: the point the step evaluated (step 1 evaluates the start;
-            the accepted point of the last step is ``values``), its loss, time_s since the start.
+            the accepted point of the last step is ``values``), its loss, ``accepted`` (the step
+            lowered the best loss so far: accepted losses never rise), ``loss_noise`` (the loss's
+            Monte Carlo noise at the best point so far, :mod:`~spacefit.fitting.stopping`),
+            time_s since the start.
         renders: the final render of each observation.
         loss: final loss, 0.5 * sum of squared residuals.
         solver, loss_name, steps, wall_time_s, start: what was run.
         extras: derived quantities, e.g. the rms height (and its standard error) of a (D, G) fit.
         parts: per observation, per part (and the whole ``target``): the pixels that see it and the
             mean radiance (W m^-2 sr^-1) of the reference and of the fit's render there.
+        scene: the first observation's scene with the fitted values: ``scene.to_toml()`` is a scene
+            file that renders the fit again (the image nuisances are not scene values); None if
+            the values are not finite.
     """
 
     names: tuple[str, ...]
@@ -72,11 +82,43 @@ class FitResult:
     start: dict[str, float] = field(default_factory=dict)
     extras: dict[str, Any] = field(default_factory=dict)
     parts: list[dict[str, dict[str, float]]] = field(default_factory=list)
+    scene: Scene | None = None
+
+    def mitsuba_scene_dict(self) -> dict[str, Any]:
+        """The fitted scene as a Mitsuba scene dictionary (``mi.load_dict`` loads it).
+
+        Raises:
+            InputError: if the fit has no scene (its values are not finite).
+        """
+        if self.scene is None:
+            raise InputError("this fit has no fitted scene: its values are not finite.")
+        from spacefit.rendering.renderer import mitsuba_scene_dict
+
+        return mitsuba_scene_dict(self.scene)
+
+    def uncertainty(self) -> dict[str, Any]:
+        """The values, standard errors and correlation matrix (rows and columns in ``names`` order),
+        with each parameter's unit: JSON-ready (``uncertainty.json`` of a fit's folder)."""
+        return {"names": list(self.names), "values": self.values, "stderr": self.stderr,
+                "units": {n: parameter(n).unit for n in self.names},
+                "correlation": np.asarray(self.correlation).tolist(), "nuisances": list(self.nuisances)}
+
+    @property
+    def nuisances(self) -> dict[str, float]:
+        """The fitted nuisance parameters (image gain, offset, PSF, shift; the target's pose), physical units."""
+        return {n: v for n, v in self.values.items() if n in NUISANCES}
+
+    @property
+    def estimates(self) -> dict[str, float]:
+        """The fitted values of the parameters that are not nuisances (materials, wrinkles, sun)."""
+        return {n: v for n, v in self.values.items() if n not in NUISANCES}
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (no images)."""
+        """JSON-ready summary (no images); ``nuisances`` names the nuisance parameters among ``names``."""
         d = dataclasses.asdict(self)
         d.pop("renders")
+        d.pop("scene")
+        d["nuisances"] = list(self.nuisances)
         d["correlation"] = np.asarray(self.correlation).tolist()
         d["status"] = self.status.value
         return d
@@ -98,6 +140,7 @@ def fit(
     learning_rate: float = 0.05,
     seed: int = 1,
     seed_grad: int = 2,
+    stop: str = "noise",
     integrator: str = "prb",
     geometry_jacobian: str = "fd",
     wrinkle_coordinates: str = "rms",
@@ -118,6 +161,9 @@ def fit(
         rtol, atol: optimistix tolerances (Adam: stop when the relative loss change < rtol).
         learning_rate: Adam's step size in unconstrained coordinates.
         seed, seed_grad: seeds of primal and derivative renders; render references with another.
+        stop: ``"noise"``: stop as well when the expected decrease of the loss is below its Monte
+            Carlo noise (:attr:`Status.NOISE_FLOOR`, :mod:`spacefit.fitting.stopping`; one more
+            primal render per accepted step); ``"tolerance"``: only on the solver's tolerances.
         integrator: AD integrator for derivative renders, one of :data:`INTEGRATORS`.
         geometry_jacobian: ``"fd"`` (central differences with common random numbers) or ``"ad"``
             (the integrator's derivative) for D and G.
@@ -140,6 +186,7 @@ def fit(
     check_range("rtol", rtol, 0.0, lo_open=True)
     check_range("atol", atol, 0.0)
     check_range("learning_rate", learning_rate, 0.0, lo_open=True)
+    check_choice("stop", stop, STOP_RULES)
     s = setup(observations, free, start, loss, spp, spp_grad, seed, seed_grad, integrator, geometry_jacobian,
               wrinkle_coordinates)
     fp, problem = s.solver_params, s.problem
@@ -148,13 +195,13 @@ def fit(
     history: list[dict[str, Any]] = []
     last: dict[str, Any] = {}
 
-    def record(u: np.ndarray, value: np.ndarray) -> None:
-        last.update(u=np.asarray(u), loss=float(value))
+    def record(u: np.ndarray, value: np.ndarray, r: np.ndarray | None = None) -> None:
+        last.update(u=np.asarray(u), loss=float(value), r=None if r is None else np.asarray(r))
 
     def residual_u(u: jax.Array, args: Any) -> jax.Array:
         # renders are float32; the solver works in the dtype of u (float64) throughout
         r = problem.residual_x(fp.to_physical(u)).astype(u.dtype)
-        jax.debug.callback(record, u, 0.5 * jnp.sum(r**2))
+        jax.debug.callback(record, u, 0.5 * jnp.sum(r**2), r)
         return r
 
     loss_u_reverse = None
@@ -165,27 +212,37 @@ def fit(
             jax.debug.callback(record, u, value)
             return value
 
-    def log_step(step: int) -> bool:
-        """Record the step's evaluation; False after a run of non-finite evaluations."""
-        x = np.asarray(s.to_user(fp.to_physical(jnp.asarray(last["u"]))))
-        history.append({"step": step, "loss": last["loss"], "values": dict(zip(s.user.names, x.tolist())),
-                        "time_s": time.perf_counter() - t0})
-        if np.isfinite(last["loss"]) and last["loss"] < best.get("loss", np.inf):
+    def log_step(step: int) -> Status | None:
+        """Record the step's evaluation; a status after a run of non-finite evaluations or at the noise floor."""
+        x_solver = fp.to_physical(jnp.asarray(last["u"]))
+        accepted = floor.record(last["loss"])
+        if accepted:
             best.update(u=last["u"], loss=last["loss"])
+            if stop == "noise":
+                r = last["r"] if last["r"] is not None else np.asarray(problem.residual_x(x_solver))
+                floor.set_noise(loss_noise(r, np.asarray(problem.residual_x_independent(x_solver))))
+        x = np.asarray(s.to_user(x_solver))
+        history.append({"step": step, "loss": last["loss"], "accepted": accepted, "loss_noise": floor.noise,
+                        "values": dict(zip(s.user.names, x.tolist())), "time_s": time.perf_counter() - t0})
         if progress is not None:
             progress(step, max_steps)
         if on_step is not None:
             on_step(history[-1])
         interrupts.check()
-        return not _nonfinite_run(history)
+        if _nonfinite_run(history):
+            return Status.NONFINITE
+        return Status.NOISE_FLOOR if stop == "noise" and floor.reached(last["loss"], accepted) else None
 
     best: dict[str, Any] = {}
+    floor = NoiseFloor()
     u = jnp.asarray(fp.to_unconstrained(jnp.asarray(s.x0)))
     try:
         with deferred_interrupts() as interrupts:
             outcome = SOLVERS[solver](solver, residual_u, u, Options(max_steps, rtol, atol, learning_rate), log_step,
                                       loss_u_reverse)
         status, u, steps = outcome.status, outcome.u, outcome.steps
+        if status is Status.NOISE_FLOOR:
+            u = jnp.asarray(best["u"])  # the step that stopped the solve may be a rejected trial
     except KeyboardInterrupt:
         status, steps = Status.INTERRUPTED, len(history)
         u = jnp.asarray(best["u"]) if best else u
@@ -229,6 +286,7 @@ def fit(
         start=dict(zip(s.user.names, s.x0_user.tolist())),
         extras=extras,
         parts=[_part_rows(p, ref, img) for p, ref, img in zip(problem.part_images, problem.references, renders)],
+        scene=scene_with_values(s.scene, dict(zip(s.user.names, x_user.tolist()))) if np.all(np.isfinite(x_user)) else None,
     )
 
 

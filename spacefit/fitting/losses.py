@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -37,7 +38,8 @@ def _statistics(image: Array, mask: np.ndarray) -> Array:
     return jnp.concatenate([jnp.stack([lit.mean(), lit.std()]), jnp.quantile(lit, jnp.asarray(STATS_QUANTILES))])
 
 
-def residual_fn(reference: Float[np.ndarray, "h w 3"], loss: str = "pixel", sigma: float | np.ndarray | None = None) -> Residual:
+def residual_fn(reference: Float[np.ndarray, "h w 3"], loss: str = "pixel",
+                sigma: float | np.ndarray | Callable[[Array], Array] | None = None) -> Residual:
     """The residual function ``image -> r`` of a loss against ``reference``.
 
     Args:
@@ -45,21 +47,36 @@ def residual_fn(reference: Float[np.ndarray, "h w 3"], loss: str = "pixel", sigm
         loss: one of :data:`LOSSES`.
         sigma: noise standard deviation of the reference (scalar or (h, w) / (h, w, 3)); residuals
             are divided by it, so at the truth they are unit normal and the reported standard
-            errors are on the right scale. None: unweighted.
+            errors are on the right scale; +inf leaves a pixel out (a saturated one). Or a function
+            of the model image, the noise it predicts (held fixed in derivatives: a quasi-likelihood,
+            unbiased where weights from the reference's own noisy values would favour low pixels).
+            None: unweighted.
     """
     check_choice("loss", loss, LOSSES)
     ref = jnp.asarray(reference, dtype=jnp.float32)
-    weight = 1.0
-    if sigma is not None:
+
+    def weight(image: Array) -> Array | float:
+        return 1.0
+
+    if callable(sigma):
+        predicted = sigma
+
+        def weight(image: Array) -> Array | float:
+            return 1.0 / jax.lax.stop_gradient(predicted(image))
+    elif sigma is not None:
         s = np.broadcast_to(np.asarray(sigma, dtype=float)[..., None] if np.ndim(sigma) == 2 else np.asarray(sigma, dtype=float), ref.shape)
-        if not np.all(np.isfinite(s)) or np.any(s <= 0):
-            raise InputError("`sigma` must be positive and finite everywhere.")
-        weight = jnp.asarray(1.0 / s, dtype=jnp.float32)
+        if np.any(np.isnan(s)) or np.any(s <= 0) or np.all(np.isinf(s)):
+            raise InputError("`sigma` must be positive everywhere (+inf leaves a pixel out) and finite somewhere.")
+        fixed = jnp.asarray(1.0 / s, dtype=jnp.float32)
+
+        def weight(image: Array) -> Array | float:
+            return fixed
+
     if loss == "pixel":
-        return lambda image: jnp.ravel((image - ref) * weight)
+        return lambda image: jnp.ravel((image - ref) * weight(image))
     if loss == "pyramid":
         sizes = [2**level for level in range(PYRAMID_LEVELS) if 2**level <= min(ref.shape[:2])]
-        return lambda image: jnp.concatenate([jnp.ravel(_block_mean((image - ref) * weight, s) * s) for s in sizes])
+        return lambda image: jnp.concatenate([jnp.ravel(_block_mean((image - ref) * weight(image), s) * s) for s in sizes])
     mask = np.asarray(reference).mean(axis=-1) > 0
     if mask.sum() < 16:
         raise InputError("the `stats` loss needs at least 16 lit pixels in the reference.")

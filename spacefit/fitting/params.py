@@ -51,6 +51,6 @@ def free_parameters(scene: Scene, names: Sequence[str]) -> FreeParameters:
             the valid ones).
     """
     names = tuple(names)
-    check_names(scene, names)
+    check_names(scene, names, image=True)
     steps = np.array([fd_step(scene, n) for n in names])
     return FreeParameters(names, tuple(parameter(n).bijection for n in names), steps)

@@ -17,12 +17,15 @@ import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_choice, check_count, quote
 from spacefit.fitting.losses import residual_fn
+from spacefit.fitting.nuisance import split
 from spacefit.fitting.params import FreeParameters, free_parameters
+from spacefit.geometry.frames import Intrinsics
 from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import PartImage, Renderer
 from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import Scene, check_scene
+from spacefit.sensor import Sensor, dn_fn, noise_variance_dn, saturated_mask
 from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, rms_of, scene_value
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
@@ -39,14 +42,25 @@ class Observation:
     """A reference radiance image (h, w, 3), W m^-2 sr^-1, and the scene it was taken in.
 
     ``sigma``: the reference's noise standard deviation (scalar or per pixel), or None.
+    ``sensor``: the camera that measured it, if known: the reference is then in DN (as
+    :func:`~spacefit.imageio.read_image` gives it), the model is the sensor's
+    :func:`~spacefit.sensor.expected_dn` of the render, each pixel is weighted by its predicted
+    Poisson-Gaussian noise (:func:`~spacefit.sensor.noise_variance_dn` at the model's DN, held fixed in derivatives),
+    saturated pixels are left out, and the standard errors are the noise model's (J^T W J)^-1
+    instead of the sandwich. ``sigma`` must then be None.
     """
 
     scene: Scene
     reference: np.ndarray
     sigma: float | np.ndarray | None = None
+    sensor: Sensor | None = None
 
     def __post_init__(self) -> None:
         check_scene(self.scene, "Observation.scene")
+        if self.sensor is not None and not isinstance(self.sensor, Sensor):
+            raise InputTypeError(f"`Observation.sensor` must be an sf.Sensor or None, got {quote(self.sensor)}.")
+        if self.sensor is not None and self.sigma is not None:
+            raise InputError("`Observation.sigma` must be None when `Observation.sensor` is given: the sensor predicts each pixel's noise.")
         ref = np.asarray(self.reference)
         if not (np.issubdtype(ref.dtype, np.floating) or np.issubdtype(ref.dtype, np.integer)):
             raise InputTypeError(f"`Observation.reference` must be a real-valued radiance image, got dtype {ref.dtype} "
@@ -89,6 +103,7 @@ class Problem:
     renders_x: Callable[[jax.Array], list[jax.Array]]
     part_images: list[PartImage]  # which part each pixel of each observation sees
     references: list[np.ndarray]  # the checked references, (h, w, 3) float32
+    noise_known: bool = False  # every residual is divided by its predicted noise (a sensor per observation)
 
 
 def _problem(
@@ -97,6 +112,10 @@ def _problem(
 ) -> Problem:
     renders_x, renders_alt, renders_v, residuals, values_fns, part_images, references = [], [], [], [], [], [], []
     moving = any(n in MOVES_VERTICES for n in free.names)
+    # the image nuisances act on the render in JAX; the renderer sees the other parameters
+    rendered, image_model = split(free.names)
+    rendered_names = [free.names[i] for i in rendered]
+    steps = free.fd_steps[rendered]
     for i, obs in enumerate(observations):
         ref = check_reference(obs, i)
         scene = obs.scene
@@ -104,29 +123,50 @@ def _problem(
         # D, G and the pose move the vertices: render the whole film, the target's window would not hold them
         renderer = Renderer(assembly, crop=not moving)
         dscene = DrJitScene(renderer, spp or scene.render.spp, spp_grad or spp or scene.render.spp, integrator)
-        values_of = scene_values_fn(assembly, free.names)
-        renders_x.append(render_params(dscene, values_of, free.fd_steps, seed, seed_grad))
+        values_of = scene_values_fn(assembly, rendered_names)
+        renders_x.append(render_params(dscene, values_of, steps, seed, seed_grad))
         alt = INDEPENDENT_SEED_OFFSET
-        renders_alt.append(render_params(dscene, values_of, free.fd_steps, seed + alt, seed_grad + alt))
+        renders_alt.append(render_params(dscene, values_of, steps, seed + alt, seed_grad + alt))
         renders_v.append(render_values(dscene, seed, seed_grad))
-        residuals.append(residual_fn(ref, loss, obs.sigma))
+        residuals.append(_residual(obs, ref, loss, assembly.intrinsics))
         values_fns.append(values_of)
         part_images.append(renderer.part_image())
         references.append(ref)
 
+    def modelled(render: Callable[[jax.Array], jax.Array]) -> Callable[[jax.Array], jax.Array]:
+        return lambda x: image_model(render(x[rendered]), x)
+
     def stack(renders: list[Callable[[jax.Array], jax.Array]]) -> Callable[[jax.Array], jax.Array]:
-        return lambda x: jnp.concatenate([res(render(x)) for res, render in zip(residuals, renders)])
+        return lambda x: jnp.concatenate([res(modelled(render)(x)) for res, render in zip(residuals, renders)])
 
     reverse = None
     if not np.any(free.fd_steps > 0):
 
         def reverse(u: jax.Array) -> jax.Array:
             x = free.to_physical(u)
-            r = jnp.concatenate([res(render(vals(x))) for res, render, vals in zip(residuals, renders_v, values_fns)])
+            r = jnp.concatenate([res(image_model(render(vals(x[rendered])), x))
+                                 for res, render, vals in zip(residuals, renders_v, values_fns)])
             return 0.5 * jnp.sum(r**2)
 
-    return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [render(x) for render in renders_x],
-                   part_images, references)
+    return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [modelled(render)(x) for render in renders_x],
+                   part_images, references, all(o.sensor is not None for o in observations))
+
+
+def _residual(obs: Observation, reference: np.ndarray, loss: str, intrinsics: Intrinsics) -> Callable[[jax.Array], jax.Array]:
+    """The residuals of a model radiance image against the observation: in radiance, or with a
+    sensor, in DN divided by the noise the sensor predicts at the model's DN (saturated pixels of
+    the reference weigh 0)."""
+    if obs.sensor is None:
+        return residual_fn(reference, loss, obs.sigma)
+    sensor = obs.sensor
+    saturated = jnp.asarray(saturated_mask(reference, sensor))
+
+    def sigma(dn: jax.Array) -> jax.Array:
+        return jnp.where(saturated, jnp.inf, jnp.sqrt(noise_variance_dn(dn, sensor)))
+
+    to_dn = dn_fn(sensor, intrinsics, reference.shape[-1])
+    res = residual_fn(reference, loss, sigma)
+    return lambda image: res(to_dn(image))
 
 
 @dataclass
@@ -140,6 +180,7 @@ class Setup:
     to_user: Callable[[jax.Array], jax.Array]
     problem: Problem
     rms_index: int | None
+    scene: Scene  # the first observation's scene, as given
 
 
 def fit_scene(scene: Scene, free: Sequence[str]) -> Scene:
@@ -180,6 +221,7 @@ def setup(
     if seed == seed_grad:
         raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
     user = free_parameters(observations[0].scene, free)
+    given = observations[0].scene
     observations = [dataclasses.replace(o, scene=fit_scene(o.scene, user.names)) for o in observations]
     scene = observations[0].scene
     start = dict(start or {})
@@ -209,4 +251,4 @@ def setup(
         wrinkles = np.array([n in GEOMETRY for n in solver_params.names])
         solver_params = dataclasses.replace(solver_params, fd_steps=np.where(wrinkles, 0.0, solver_params.fd_steps))
     problem = _problem(observations, solver_params, loss, spp, spp_grad, seed, seed_grad, integrator)
-    return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index)
+    return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index, given)

@@ -23,8 +23,9 @@ import optimistix as optx
 
 # Residuals of an unconstrained vector u (with the optimistix ``args``, unused).
 ResidualFn = Callable[[jax.Array, Any], jax.Array]
-# Records the step's evaluation; False stops the solve (a run of non-finite evaluations).
-StepLogger = Callable[[int], bool]
+# Records the step's evaluation; a Status stops the solve (a run of non-finite evaluations, the
+# noise floor), None goes on.
+StepLogger = Callable[[int], "Status | None"]
 # Adam stops when no unconstrained coordinate moved more than rtol for this many steps.
 ADAM_PATIENCE = 5
 
@@ -33,6 +34,7 @@ class Status(enum.Enum):
     """How a solve ended. ``value`` is the words a report prints."""
 
     CONVERGED = "converged"
+    NOISE_FLOOR = "converged: the expected decrease of the loss is below its Monte Carlo noise"
     MAX_STEPS = "stopped: maximum number of steps reached"
     DIVERGED = "failed: the solve diverged"
     NONFINITE = "failed: the loss or a parameter became NaN"
@@ -42,7 +44,7 @@ class Status(enum.Enum):
     @property
     def success(self) -> bool:
         """Whether the solver reports convergence."""
-        return self is Status.CONVERGED
+        return self in (Status.CONVERGED, Status.NOISE_FLOOR)
 
     def __str__(self) -> str:
         return self.value
@@ -110,7 +112,10 @@ def _optimistix(name: str, residual_u: ResidualFn, u: jax.Array, opts: Options, 
     k = 0
     for k in range(1, opts.max_steps + 1):
         u, state, _ = step(fn, u, None, {}, state, tags)
-        if not log_step(k) or not np.all(np.isfinite(np.asarray(u))):
+        stop = log_step(k)
+        if stop is not None:
+            return Outcome(stop, u, k)
+        if not np.all(np.isfinite(np.asarray(u))):
             return Outcome(Status.NONFINITE, u, k)
         done, res = terminate(fn, u, None, {}, state, tags)
         if bool(done):
@@ -135,8 +140,9 @@ def _adam(name: str, residual_u: ResidualFn, u: jax.Array, opts: Options, log_st
     still = 0
     for k in range(1, opts.max_steps + 1):
         _, grad = value_and_grad(u)
-        if not log_step(k):
-            return Outcome(Status.NONFINITE, u, k)
+        stop = log_step(k)
+        if stop is not None:
+            return Outcome(stop, u, k)
         updates, opt_state = opt.update(grad, opt_state)
         u = optax.apply_updates(u, updates)
         still = still + 1 if float(jnp.max(jnp.abs(updates))) < opts.rtol else 0

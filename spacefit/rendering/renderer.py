@@ -165,6 +165,15 @@ def scene_dict(assembly: Assembly, vertices: Mapping[str, np.ndarray], window: t
     return d
 
 
+def mitsuba_scene_dict(scene: Scene) -> dict:
+    """The Mitsuba scene dictionary of ``scene`` (``mi.load_dict`` loads it; the whole film): the
+    integrator, camera, film and sun as dictionaries, each part an ``mi.Mesh`` with its BSDF."""
+    assembly = assemble(check_scene(scene))
+    select_variant(scene.render.variant)
+    intr = assembly.intrinsics
+    return scene_dict(assembly, assembly.scene_vertices, (0, 0, intr.width, intr.height))
+
+
 def pass_seeds(seed: int, spp: int, pixels: int) -> list[tuple[int, int]]:
     """Split ``spp`` into passes of at most :data:`MAX_SAMPLES_PER_PASS` samples: (seed, spp) each."""
     per_pass = max(1, MAX_SAMPLES_PER_PASS // max(pixels, 1))

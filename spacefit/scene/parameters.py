@@ -10,6 +10,12 @@ Names address the scene file's keys: ``wrinkles.D``; ``parts.P.alpha_x`` for par
 (cos el cos az, cos el sin az, sin el); the light travels the opposite way (the scene's
 ``sun.direction``). Like the scene file, they are in degrees.
 
+``image.*`` are nuisances of the image formation (an exposure scale, an offset, a Gaussian PSF, a
+sub-pixel shift): a fit applies them to the render in JAX (:mod:`spacefit.fitting.nuisance`), so
+they are fit-only names; a render or a sweep refuses them. Without them free, none is applied. Together
+with the target's pose (``target.attitude_*_deg``, ``target.position_*_m``) they are a fit's
+nuisance parameters (:data:`NUISANCES`), reported apart from the materials.
+
 ``wrinkles.rms_m`` is the expected rms height of eq. 2-1 (:func:`spacefit.geometry.wm.wm_rms`). In an
 image D and G trade off along a valley of nearly constant rms height; (D, rms) are the better
 determined coordinates (:func:`rms_of`, :func:`G_of` are the one place the two are converted).
@@ -20,6 +26,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -79,6 +86,8 @@ UNIT = Bijection(0.0, 1.0)
 POSITIVE = Bijection(0.0)
 # GGX roughness below 1e-4 is a mirror in float32 and Mitsuba's GGX evaluates to NaN there.
 ROUGHNESS = Bijection(1e-4, 1.0)
+# The widest Gaussian PSF (sigma, px) a fit may try; its kernel reaches out to 5 sigma.
+PSF_SIGMA_MAX_PX = 4.0
 
 
 @dataclass(frozen=True)
@@ -153,6 +162,13 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
                 fd_step=0.5, scene_fields=("attitude_deg",)) for axis, name in zip("xyz", ("alpha", "beta", "gamma"))),
     *(Parameter(f"target.position_{axis}_m", "m", Bijection(-math.inf), f"the target's world {axis} position: every vertex",
                 fd_step=0.02, scene_fields=("position_m",)) for axis in "xyz"),
+    Parameter("image.gain", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1)"),
+    Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", Bijection(-math.inf), "offset added to every pixel (fit only; default 0)"),
+    Parameter("image.psf_sigma_px", "px", Bijection(0.0, PSF_SIGMA_MAX_PX),
+              "sigma of a pixel-integrated Gaussian PSF (fit only; not free: no blur; default start 0.5)"),
+    *(Parameter(f"image.shift_{axis}_px", "px", Bijection(-math.inf),
+                f"sub-pixel shift of the image towards +{axis} ({where}), by a Fourier phase (fit only; default 0)")
+      for axis, where in (("x", "columns, rightwards"), ("y", "rows, downwards"))),
 )}
 GEOMETRY = ("wrinkles.D", "wrinkles.G", "wrinkles.rms_m")
 SUN_ANGLES = ("sun.elevation_deg", "sun.azimuth_deg")
@@ -160,6 +176,11 @@ ATTITUDE = ("target.attitude_x_deg", "target.attitude_y_deg", "target.attitude_z
 POSITION = ("target.position_x_m", "target.position_y_m", "target.position_z_m")
 # Parameters that move vertices: a render of them needs the whole film, not the target's window.
 MOVES_VERTICES = (*GEOMETRY, *ATTITUDE, *POSITION)
+IMAGE = ("image.gain", "image.offset_w_m2_sr", "image.psf_sigma_px", "image.shift_x_px", "image.shift_y_px")
+# The nuisance parameters of a fit: reported apart from the materials.
+NUISANCES = (*IMAGE, *ATTITUDE, *POSITION)
+# Default start of the PSF width (px): 0, no blur, is outside its open range, and its derivative vanishes there.
+PSF_SIGMA_START_PX = 0.5
 # Parameters that set one scene value together.
 JOINT = (SUN_ANGLES, ATTITUDE, POSITION)
 
@@ -193,9 +214,10 @@ def available(scene: Scene) -> list[str]:
     return names
 
 
-def check_names(scene: Scene, names: list[str] | tuple[str, ...], argument: str = "free") -> None:
-    """Raise :class:`InputError` for an unknown or repeated name, or two names that set the same value."""
-    valid = available(scene)
+def check_names(scene: Scene, names: list[str] | tuple[str, ...], argument: str = "free", image: bool = False) -> None:
+    """Raise :class:`InputError` for an unknown or repeated name, or two names that set the same value;
+    ``image``: whether the fit-only :data:`IMAGE` nuisances are valid."""
+    valid = [n for n in available(scene) if image or n not in IMAGE]
     if not names:
         raise InputError(f"`{argument}` must name at least one parameter; valid: {', '.join(valid)}.")
     for name in names:
@@ -245,6 +267,11 @@ _GETTERS: dict[str, Callable[[Scene], float]] = {
     "sun.azimuth_deg": lambda s: sun_angles_deg(s.sun.direction)[1],
     **{name: (lambda s, i=i: s.target.attitude_deg[i]) for i, name in enumerate(ATTITUDE)},
     **{name: (lambda s, i=i: s.target.position_m[i]) for i, name in enumerate(POSITION)},
+    "image.gain": lambda s: 1.0,
+    "image.offset_w_m2_sr": lambda s: 0.0,
+    "image.psf_sigma_px": lambda s: PSF_SIGMA_START_PX,
+    "image.shift_x_px": lambda s: 0.0,
+    "image.shift_y_px": lambda s: 0.0,
 }
 
 
@@ -255,6 +282,28 @@ def scene_value(scene: Scene, name: str) -> float:
     _, part, field = name.split(".")
     m = make_material(scene.parts[part].material, scene.parts[part].overrides)
     return float(m.alpha_x if field == "alpha" else getattr(m, field))
+
+
+def scene_with_values(scene: Scene, values: Mapping[str, float]) -> Scene:
+    """``scene`` with registered parameters set to ``values`` (physical units, the registry's names):
+    the scene file that renders them. The fit-only :data:`IMAGE` nuisances are not scene values and
+    are left out; the sun's angles and the pose's components set their whole scene-file value."""
+    check_names(scene, [n for n in values if n not in IMAGE], "values")
+    v = {n: float(x) for n, x in values.items() if n not in IMAGE}
+    out: dict[str, Any] = {}
+    for name, x in v.items():
+        if name.startswith("parts."):
+            head = name.rsplit(".", 1)[0]
+            out.update({f"{head}.{f}": x for f in (parameter(name).scene_fields or (parameter(name).field,))})
+        elif name == "wrinkles.rms_m":
+            out["wrinkles.G"] = float(G_of(scene.wrinkles, v.get("wrinkles.D", scene.wrinkles.D), x))
+        elif name in ("wrinkles.D", "wrinkles.G", "sun.irradiance_w_m2"):
+            out[name] = x
+    for group, key in ((SUN_ANGLES, "sun.direction"), (ATTITUDE, "target.attitude_deg"), (POSITION, "target.position_m")):
+        if any(n in v for n in group):
+            current = [v.get(n, scene_value(scene, n)) for n in group]
+            out[key] = np.asarray(sun_direction(*current)).tolist() if group is SUN_ANGLES else current
+    return scene.with_values(out)
 
 
 def fd_step(scene: Scene, name: str) -> float:

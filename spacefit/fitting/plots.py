@@ -1,0 +1,97 @@
+"""A fit's plots, public as ``sf.plot_comparison`` and ``sf.plot_convergence``.
+
+Each returns a matplotlib :class:`~matplotlib.figure.Figure` made without pyplot, so the global
+backend (a notebook's) is left alone: show it in a notebook by evaluating it, or save it with
+``fig.savefig(path)``. matplotlib is imported with this module, which ``import spacefit`` loads
+only on first use of these names.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+from matplotlib.figure import Figure
+from matplotlib.ticker import MaxNLocator
+
+from spacefit.fitting.loop import FitResult
+from spacefit.output import PREVIEW_PERCENTILE, preview_scale, to_srgb8
+
+RADIANCE_UNIT = "W m$^{-2}$ sr$^{-1}$"
+
+
+def plot_comparison(result: FitResult, references: Sequence[np.ndarray]) -> Figure:
+    """Reference | fit | residual fit - reference, one row per observation.
+
+    Args:
+        result: the fit's outcome (its renders; missing where the solve failed).
+        references: the reference radiance images (h, w, 3), W m^-2 sr^-1, in observation order.
+    Returns:
+        a matplotlib Figure (not attached to pyplot): the fit at the reference's sRGB exposure, the
+        residual's RGB mean (W m^-2 sr^-1) on a diverging colour map centred at 0.
+    """
+    n = len(references)
+    fig = Figure(figsize=(10.5, 3.2 * n), layout="constrained")
+    axes = fig.subplots(n, 3, squeeze=False)
+    for i, (row, reference) in enumerate(zip(axes, references)):
+        ref = np.asarray(reference, dtype=np.float32)[..., :3]
+        scale = preview_scale(ref)
+        row[0].imshow(to_srgb8(ref, scale))
+        row[0].set_title(f"reference {i} (white = {1 / scale:.3g} {RADIANCE_UNIT})", fontsize=9)
+        if i < len(result.renders):
+            render = np.asarray(result.renders[i], dtype=np.float32)
+            row[1].imshow(to_srgb8(render, scale))
+            row[1].set_title(f"fit {i} (same exposure)", fontsize=9)
+            residual = (render - ref).mean(axis=-1)
+            limit = float(np.percentile(np.abs(residual), PREVIEW_PERCENTILE)) or float(np.abs(residual).max()) or 1.0
+            image = row[2].imshow(residual, cmap="RdBu_r", vmin=-limit, vmax=limit)
+            row[2].set_title(f"fit - reference {i}", fontsize=9)
+            fig.colorbar(image, ax=row[2], extend="both", label=RADIANCE_UNIT)
+        else:
+            for ax in row[1:]:
+                ax.text(0.5, 0.5, "no render: the solve failed", ha="center", va="center", transform=ax.transAxes)
+        for ax in row:
+            ax.set_xticks([])
+            ax.set_yticks([])
+    fig.suptitle(f"{result.solver}, {result.loss_name} loss: {result.status}", fontsize=10)
+    return fig
+
+
+def plot_convergence(result: FitResult) -> Figure:
+    """The loss per step (log axis; accepted steps joined, rejected trials as crosses, the loss's
+    Monte Carlo noise as a band above the best loss) and each parameter per step divided by its
+    fitted value.
+
+    Returns:
+        a matplotlib Figure (not attached to pyplot).
+    """
+    fig = Figure(figsize=(10.0, 3.6), layout="constrained")
+    ax_loss, ax_values = fig.subplots(1, 2)
+    history = result.history
+    steps = np.array([h["step"] for h in history])
+    losses = np.array([h["loss"] for h in history], dtype=float)
+    accepted = np.array([h.get("accepted", True) for h in history], dtype=bool)
+    ax_loss.semilogy(steps[accepted], losses[accepted], "o-", ms=3, label="accepted")
+    if (~accepted).any():
+        ax_loss.semilogy(steps[~accepted], losses[~accepted], "x", color="C3", ms=5, label="rejected")
+    noise = np.array([h.get("loss_noise", np.nan) for h in history], dtype=float)
+    if np.isfinite(noise).any():
+        best = np.minimum.accumulate(np.where(np.isfinite(losses), losses, np.inf))
+        ax_loss.fill_between(steps, best, best + noise, color="0.6", alpha=0.4, step="post", label="Monte Carlo noise")
+    ax_loss.set_xlabel("step")
+    ax_loss.set_ylabel("loss 0.5 sum r$^2$")
+    ax_loss.set_title(f"{result.solver}, {result.loss_name} loss: {result.status.name.lower()}", fontsize=9)
+    ax_loss.legend(fontsize=8)
+    for name in result.names:
+        final = result.values[name]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = np.array([h["values"][name] for h in history]) / final
+        ax_values.plot(steps, ratio, "o-", ms=3, label=f"{name} (fit {final:.4g})")
+    ax_values.axhline(1.0, color="0.5", lw=0.8)
+    ax_values.set_xlabel("step")
+    ax_values.set_ylabel("value / fitted value")
+    ax_values.legend(fontsize=8)
+    for ax in (ax_loss, ax_values):
+        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
+        ax.grid(alpha=0.3)
+    return fig

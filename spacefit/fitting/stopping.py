@@ -1,0 +1,88 @@
+"""When a fit has learned what the data hold: the Monte Carlo noise of the loss and the stop rule.
+
+Renders with another seed scatter the fitted values by their Monte Carlo standard errors; a
+step that moves the parameters by a fraction of that scatter steers by render noise. In loss
+units, a move of one standard deviation of the render-noise scatter changes the loss 0.5 sum r^2
+by half the residuals' render variance (for any direction, the covariance being v (J^T J)^-1):
+:func:`loss_noise` estimates it from the residuals of one point rendered with two independent
+seeds. :class:`NoiseFloor` watches the steps of a solve: a step is *accepted* when it lowers the
+best loss so far (so accepted losses never rise), and the solve stops
+(:attr:`~spacefit.fitting.solvers.Status.NOISE_FLOOR`) as soon as
+
+* the decrease the next step can be expected to bring, the last accepted decrease scaled by the
+  ratio of the last two (a converging solver's decreases shrink), is below :data:`NOISE_FACTOR`
+  times that noise, or
+* a step is rejected by less than that: the solver is chasing noise.
+
+The loss is 0.5 sum r^2 (dimensionless when the residuals are divided by a noise sigma, else
+(W m^-2 sr^-1)^2).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+# The solve stops when the expected decrease is below this fraction of the loss's noise: steps
+# that would move the parameters by less than sqrt(0.1) = 0.3 of their Monte Carlo scatter.
+NOISE_FACTOR = 0.1
+
+
+def loss_noise(r: np.ndarray, r_alt: np.ndarray) -> float:
+    """The loss change of a parameter move of one Monte Carlo standard deviation, from the
+    residuals ``r`` and ``r_alt`` of one point rendered with two independent seeds (same shape).
+
+    Half the mean render variance, (r - r_alt)^2 / 2, of the elements either render sees (pixels
+    of black sky carry no noise and no information); 0 if there are none.
+    """
+    r, r_alt = np.ravel(np.asarray(r, dtype=float)), np.ravel(np.asarray(r_alt, dtype=float))
+    seen = (r != 0) | (r_alt != 0)
+    return float(0.5 * np.mean(0.5 * (r[seen] - r_alt[seen]) ** 2)) if seen.any() else 0.0
+
+
+@dataclass
+class NoiseFloor:
+    """The accepted / rejected bookkeeping of a solve and its noise-floor stop rule.
+
+    Attributes:
+        best: the lowest finite loss evaluated so far.
+        noise: the loss's noise at the best point, :func:`loss_noise` (NaN until set by :meth:`set_noise`).
+        decreases: the decrease of the best loss at each accepted step after the first.
+    """
+
+    best: float = math.inf
+    noise: float = math.nan
+    decreases: list[float] = field(default_factory=list)
+
+    def record(self, loss: float) -> bool:
+        """Record a step's loss; True if the step is accepted (a finite loss below the best so far)."""
+        if not (math.isfinite(loss) and loss < self.best):
+            return False
+        if math.isfinite(self.best):
+            self.decreases.append(self.best - loss)
+        self.best = loss
+        return True
+
+    def set_noise(self, noise: float) -> None:
+        """The loss's noise at the best point (:func:`loss_noise`)."""
+        self.noise = float(noise)
+
+    def predicted_decrease(self) -> float:
+        """The decrease the next accepted step can be expected to bring (inf before two accepted steps)."""
+        if not self.decreases:
+            return math.inf
+        last = self.decreases[-1]
+        if len(self.decreases) == 1 or self.decreases[-2] <= 0.0:
+            return last
+        return last * min(1.0, last / self.decreases[-2])
+
+    def reached(self, loss: float, accepted: bool) -> bool:
+        """Whether the solve should stop after a step of ``loss`` (accepted or not)."""
+        if not (self.decreases and math.isfinite(self.noise)):
+            return False  # the solve has not moved yet
+        threshold = NOISE_FACTOR * self.noise
+        if accepted:
+            return self.predicted_decrease() < threshold
+        return math.isfinite(loss) and loss - self.best < threshold

@@ -1,0 +1,66 @@
+"""The noise-aware likelihood: an observation in DN with its sensor known, residuals weighted by the
+predicted Poisson-Gaussian noise, and standard errors that cover the truth (reduced coverage study)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import spacefit as sf
+from spacefit.fitting.problem import setup
+from spacefit.fitting.uncertainty import covariance
+from spacefit.precision import float64
+from spacefit.scene.assembly import assemble
+
+# The panels case at 32 x 32 px (same field of view), 32 spp.
+TINY = {"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0, "render.spp": 32}
+REALISATIONS = 10
+
+
+def test_sensor_observation_is_checked():
+    scene = sf.load_case("panels").scene()
+    with pytest.raises(sf.InputError, match="sigma"):
+        sf.Observation(scene, np.zeros((128, 128, 3)), 0.1, sensor=sf.Sensor())
+    with pytest.raises(sf.InputError, match="sensor"):
+        sf.Observation(scene, np.zeros((128, 128, 3)), sensor="camera")
+
+
+@pytest.fixture(scope="module")
+def study():
+    """At the truth: for each of 10 simulated exposures (their own noise and render seeds), the
+    one Gauss-Newton step from the truth (the linearised estimate) and the noise model's errors."""
+    case = sf.load_case("panels").with_values(TINY)
+    scene = case.scene()
+    truth = np.asarray(sf.render(case.truth_scene.with_values({"render.spp": 1024})), dtype=float)
+    intrinsics = assemble(scene).intrinsics
+    sensor = sf.Sensor(exposure_time_s=1e-8, psf_sigma_px=1.0, full_well_electrons=None, bit_depth=16)
+    free = list(case.free)
+
+    @float64
+    def one(k: int) -> tuple[np.ndarray, np.ndarray, bool]:
+        dn = sf.observe(truth, sensor, intrinsics, seed=k).astype(float)
+        s = setup(sf.Observation(scene, dn, sensor=sensor), free, case.truth, "pixel", None, None, 2 * k + 11, 2 * k + 12,
+                  "prb", "fd", "rms")
+        x = jnp.asarray(s.x0)
+        r, J = np.asarray(s.problem.residual_x(x)), np.asarray(jax.jacfwd(s.problem.residual_x)(x))
+        step = -np.linalg.lstsq(J, r, rcond=None)[0]
+        cov = covariance(s.problem, s.x0)[0]
+        return step, np.sqrt(np.diag(cov)), s.problem.noise_known
+
+    out = [one(k) for k in range(REALISATIONS)]
+    return free, np.array([o[0] for o in out]), np.array([o[1] for o in out]), [o[2] for o in out]
+
+
+def test_errors_cover_the_truth_at_about_one_sigma(study):
+    free, errors, stderr, known = study
+    assert all(known)
+    covered = np.abs(errors) <= stderr
+    # 68 % of 10 is 6.8; a binomial of n = 10 lies in 3..10 with probability 0.99
+    for j, name in enumerate(free):
+        assert 3 <= covered[:, j].sum() <= 10, (name, errors[:, j], stderr[:, j])
+    # and the errors are small: no parameter more than 4 of its standard errors off, and the
+    # standard errors themselves bounded (alpha_y 0.03 and kd 0.5 within 5 %, alpha_x 0.15 within 10 %)
+    assert np.all(np.abs(errors) <= 4 * stderr), errors / stderr
+    assert np.all(stderr.mean(axis=0) / np.array([0.15, 0.03, 0.5]) < [0.10, 0.05, 0.05]), stderr.mean(axis=0)

@@ -1,0 +1,90 @@
+"""The noise-floor stop rule, the history's accepted / rejected flags and the public fit plots."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+import spacefit as sf
+from spacefit.fitting.stopping import NOISE_FACTOR, NoiseFloor, loss_noise
+
+# The panels case at 64 x 64 px (same field of view), 8 spp: a fit takes a few seconds.
+TINY = {"render.resolution": [64, 64], "camera.pixel_pitch_mm": 37.5, "render.spp": 8}
+
+
+def test_loss_noise_is_half_the_render_variance_of_the_seen_elements():
+    rng = np.random.default_rng(0)
+    sigma = 0.3
+    r = np.concatenate([rng.normal(0.0, sigma, 200_000), np.zeros(1000)])  # black sky: no noise, not counted
+    r_alt = np.concatenate([rng.normal(0.0, sigma, 200_000), np.zeros(1000)])
+    assert loss_noise(r, r_alt) == pytest.approx(0.5 * sigma**2, rel=0.02)
+    assert loss_noise(np.zeros(5), np.zeros(5)) == 0.0
+
+
+def test_noise_floor_accepts_only_improvements_and_stops_below_the_noise():
+    floor = NoiseFloor()
+    assert floor.record(10.0) and not floor.record(11.0) and not floor.record(math.nan)
+    floor.set_noise(1.0)
+    assert not floor.reached(10.5, accepted=False)  # nothing accepted after the start yet
+    assert floor.record(4.0) and floor.predicted_decrease() == 6.0
+    assert not floor.reached(4.0, accepted=True)
+    assert not floor.reached(4.0 + 2 * NOISE_FACTOR, accepted=False)  # a real overshoot: go on
+    assert floor.reached(4.0 + 0.5 * NOISE_FACTOR, accepted=False)  # rejected by less than the noise
+    assert floor.record(3.9) and floor.predicted_decrease() == pytest.approx(0.1 * 0.1 / 6.0)
+    assert floor.reached(3.9, accepted=True)
+
+
+@pytest.fixture(scope="module")
+def tiny_fits():
+    case = sf.load_case("panels").with_values(TINY)
+    reference, _ = case.reference()
+    obs = sf.Observation(case.scene(), reference)
+    return case, reference, {stop: sf.fit(obs, list(case.free), start=case.start, max_steps=15, stop=stop)
+                             for stop in ("noise", "tolerance")}
+
+
+def test_fit_stops_at_the_noise_floor_with_fewer_rejected_steps_and_the_same_accuracy(tiny_fits):
+    case, _, fits = tiny_fits
+    noise, tolerance = fits["noise"], fits["tolerance"]
+    assert noise.status is sf.Status.NOISE_FLOOR and noise.success
+    rejected = {k: sum(not h["accepted"] for h in r.history) for k, r in fits.items()}
+    assert rejected["noise"] < rejected["tolerance"], rejected
+    assert noise.steps < tolerance.steps
+    for name, truth in case.truth.items():
+        assert abs(noise.values[name] / truth - 1.0) < 0.02, noise.values
+        # the same accuracy: the steps it skipped move the values by a fraction of their standard error
+        assert abs(noise.values[name] - tolerance.values[name]) < 0.5 * noise.stderr[name], (name, noise.values, tolerance.values)
+
+
+@pytest.mark.parametrize("stop", ["noise", "tolerance"])
+def test_history_flags_match_the_loss_sequence(tiny_fits, stop):
+    history = tiny_fits[2][stop].history
+    best = math.inf
+    for h in history:
+        assert h["accepted"] == (h["loss"] < best), h
+        best = min(best, h["loss"])
+    accepted = [h["loss"] for h in history if h["accepted"]]
+    assert accepted == sorted(accepted, reverse=True)
+    assert tiny_fits[2][stop].loss == pytest.approx(accepted[-1], rel=1e-6)
+    if stop == "noise":
+        assert all(h["loss_noise"] > 0 for h in history)
+
+
+def test_stop_rule_is_checked():
+    case = sf.load_case("panels").with_values(TINY)
+    with pytest.raises(sf.InputError, match="stop"):
+        sf.fit(sf.Observation(case.scene(), np.zeros((64, 64, 3))), list(case.free), stop="never")
+
+
+def test_public_plots_draw_the_fit(tiny_fits, tmp_path):
+    _, reference, fits = tiny_fits
+    fig = sf.plot_convergence(fits["tolerance"])
+    assert {"accepted", "rejected"} <= set(fig.axes[0].get_legend_handles_labels()[1])
+    assert "Monte Carlo noise" in sf.plot_convergence(fits["noise"]).axes[0].get_legend_handles_labels()[1]
+    fig.savefig(tmp_path / "convergence.png")
+    comparison = sf.plot_comparison(fits["noise"], [reference])
+    assert len(comparison.axes) >= 3
+    comparison.savefig(tmp_path / "comparison.png")
+    assert (tmp_path / "convergence.png").stat().st_size > 0 and (tmp_path / "comparison.png").stat().st_size > 0
