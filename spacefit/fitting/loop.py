@@ -28,7 +28,7 @@ from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.renderer import PartImage
 from spacefit.scene.config import Scene
-from spacefit.scene.parameters import NUISANCES, parameter, scene_with_values
+from spacefit.scene.parameters import is_nuisance, parameter, scene_with_values
 
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
 # region may try (and reject) a single non-finite point.
@@ -105,13 +105,14 @@ class FitResult:
 
     @property
     def nuisances(self) -> dict[str, float]:
-        """The fitted nuisance parameters (image gain, offset, PSF, shift; the target's pose), physical units."""
-        return {n: v for n, v in self.values.items() if n in NUISANCES}
+        """The fitted nuisance parameters (image gain, offset, PSF, shift; the target's pose, the camera's
+        roll), physical units."""
+        return {n: v for n, v in self.values.items() if is_nuisance(n)}
 
     @property
     def estimates(self) -> dict[str, float]:
         """The fitted values of the parameters that are not nuisances (materials, wrinkles, sun)."""
-        return {n: v for n, v in self.values.items() if n not in NUISANCES}
+        return {n: v for n, v in self.values.items() if not is_nuisance(n)}
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no images); ``nuisances`` names the nuisance parameters among ``names``."""

@@ -3,7 +3,8 @@
 The model image of a fit is ``gain * shift(psf * render) + offset``: ``psf`` the pixel-integrated
 Gaussian of :func:`spacefit.sensor.gaussian_pixel_weights` (sigma in px), ``shift`` a sub-pixel
 translation by a Fourier phase (px; +x rightwards along columns, +y downwards along rows; the image
-is padded with black sky first, so nothing wraps round). Only the free ones are applied; their
+is padded with black sky first, so nothing wraps round). The gain and the offset may be each
+observation's own (``image.gain@k``, :func:`~spacefit.scene.parameters.observation_name`). Only the free ones are applied; their
 Jacobian columns are JAX's own derivatives (no render). The pose nuisances move vertices and are
 rendered (:mod:`spacefit.rendering.values`, central differences with common random numbers).
 """
@@ -18,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from spacefit.scene.parameters import IMAGE, PSF_SIGMA_MAX_PX
+from spacefit.scene.parameters import IMAGE, PSF_SIGMA_MAX_PX, is_image, observation_name
 from spacefit.sensor import GAUSSIAN_RADIUS_SIGMA, gaussian_pixel_weights
 
 # The blur kernel reaches out to 5 sigma of the widest PSF a fit may try (a static shape for JAX).
@@ -26,7 +27,7 @@ PSF_RADIUS_PX = math.ceil(GAUSSIAN_RADIUS_SIGMA * PSF_SIGMA_MAX_PX)
 # Black sky added round the image before a Fourier shift, px.
 SHIFT_PAD_PX = 8
 
-ImageModel = Callable[[Float[Array, "h w c"], Float[Array, " n"]], Float[Array, "h w c"]]
+ImageModel = Callable[[Float[Array, "h w c"], Float[Array, " n"], int], Float[Array, "h w c"]]
 
 
 def blur(image: Float[Array, "h w c"], sigma_px: Float[Array, ""]) -> Float[Array, "h w c"]:
@@ -49,11 +50,14 @@ def shift(image: Float[Array, "h w c"], dx_px: Float[Array, ""], dy_px: Float[Ar
 
 def split(names: Sequence[str]) -> tuple[np.ndarray, ImageModel]:
     """The indices of the free parameters ``names`` that the renderer sees (all but :data:`IMAGE`),
-    and ``model(render, x)``: the render with the image nuisances of the full vector ``x`` applied."""
-    index = {n: i for i, n in enumerate(names) if n in IMAGE}
-    rendered = np.array([i for i, n in enumerate(names) if n not in IMAGE], dtype=int)
+    and ``model(render, x, k)``: observation k's render with the image nuisances of the full vector
+    ``x`` applied (a per-observation value, ``image.gain@k``, where free, else the shared one)."""
+    free = {n: i for i, n in enumerate(names) if is_image(n)}
+    rendered = np.array([i for i, n in enumerate(names) if not is_image(n)], dtype=int)
 
-    def model(image: Float[Array, "h w c"], x: Float[Array, " n"]) -> Float[Array, "h w c"]:
+    def model(image: Float[Array, "h w c"], x: Float[Array, " n"], k: int) -> Float[Array, "h w c"]:
+        index = {n: free.get(observation_name(n, k), free.get(n)) for n in IMAGE}
+        index = {n: i for n, i in index.items() if i is not None}
         if "image.psf_sigma_px" in index:
             image = blur(image, x[index["image.psf_sigma_px"]])
         if "image.shift_x_px" in index or "image.shift_y_px" in index:

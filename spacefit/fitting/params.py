@@ -43,14 +43,15 @@ class FreeParameters:
                 raise InputError(f"start of `{name}` must be inside {b.describe()}, got {float(v):g}.")
 
 
-def free_parameters(scene: Scene, names: Sequence[str]) -> FreeParameters:
-    """Resolve and check free parameter names against a scene.
+def free_parameters(scene: Scene, names: Sequence[str], observations: int = 1) -> FreeParameters:
+    """Resolve and check free parameter names against a scene, for a fit of ``observations``
+    observations (the range of a per-observation name's index, ``image.gain@k``).
 
     Raises:
         InputError: for an unknown or repeated name, or two that set one value (the message lists
             the valid ones).
     """
     names = tuple(names)
-    check_names(scene, names, image=True)
+    check_names(scene, names, image=True, observations=observations)
     steps = np.array([fd_step(scene, n) for n in names])
     return FreeParameters(names, tuple(parameter(n).bijection for n in names), steps)

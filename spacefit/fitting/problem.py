@@ -133,22 +133,22 @@ def _problem(
         part_images.append(renderer.part_image())
         references.append(ref)
 
-    def modelled(render: Callable[[jax.Array], jax.Array]) -> Callable[[jax.Array], jax.Array]:
-        return lambda x: image_model(render(x[rendered]), x)
+    def modelled(render: Callable[[jax.Array], jax.Array], k: int) -> Callable[[jax.Array], jax.Array]:
+        return lambda x: image_model(render(x[rendered]), x, k)
 
     def stack(renders: list[Callable[[jax.Array], jax.Array]]) -> Callable[[jax.Array], jax.Array]:
-        return lambda x: jnp.concatenate([res(modelled(render)(x)) for res, render in zip(residuals, renders)])
+        return lambda x: jnp.concatenate([res(modelled(render, k)(x)) for k, (res, render) in enumerate(zip(residuals, renders))])
 
     reverse = None
     if not np.any(free.fd_steps > 0):
 
         def reverse(u: jax.Array) -> jax.Array:
             x = free.to_physical(u)
-            r = jnp.concatenate([res(image_model(render(vals(x[rendered])), x))
-                                 for res, render, vals in zip(residuals, renders_v, values_fns)])
+            r = jnp.concatenate([res(image_model(render(vals(x[rendered])), x, k))
+                                 for k, (res, render, vals) in enumerate(zip(residuals, renders_v, values_fns))])
             return 0.5 * jnp.sum(r**2)
 
-    return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [modelled(render)(x) for render in renders_x],
+    return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [modelled(render, k)(x) for k, render in enumerate(renders_x)],
                    part_images, references, all(o.sensor is not None for o in observations))
 
 
@@ -220,7 +220,7 @@ def setup(
     check_count("spp_grad", spp_grad)
     if seed == seed_grad:
         raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
-    user = free_parameters(observations[0].scene, free)
+    user = free_parameters(observations[0].scene, free, len(observations))
     given = observations[0].scene
     observations = [dataclasses.replace(o, scene=fit_scene(o.scene, user.names)) for o in observations]
     scene = observations[0].scene
@@ -235,7 +235,7 @@ def setup(
         i_D, rms_index = user.names.index("wrinkles.D"), user.names.index("wrinkles.G")
         internal = [n if n != "wrinkles.G" else "wrinkles.rms_m" for n in user.names]
         at_start = dataclasses.replace(w, D=x0_user[i_D], G=x0_user[rms_index])
-        solver_params = free_parameters(dataclasses.replace(scene, wrinkles=at_start), internal)
+        solver_params = free_parameters(dataclasses.replace(scene, wrinkles=at_start), internal, len(observations))
         x0 = x0_user.copy()
         x0[rms_index] = float(rms_of(w, x0_user[i_D], x0_user[rms_index]))
 

@@ -15,7 +15,8 @@ Conventions (all lengths in metres, angles in radians):
   With the thesis's target attitude [90, 0, 0] deg a lander built with +z up ends up with its top
   along world +y, upright in the default camera's image.
 * A camera with zero attitude looks along world -z with image right along +x and image up along +y;
-  its attitude rotates that frame by ``R`` above.
+  its attitude rotates that frame by ``R`` above. A roll then turns it about its optical axis,
+  right-handed about the viewing direction (:func:`roll_axes`).
 * Pixel coordinates are continuous, origin at the top-left corner of the image, u to the right,
   v down; pixel (i, j) covers [i, i + 1) x [j, j + 1). The principal point is the image centre plus
   an offset in pixels.
@@ -60,6 +61,16 @@ def object_to_world(
     return m
 
 
+def roll_axes(
+    right: Float[np.ndarray, "3"], up: Float[np.ndarray, "3"], roll: object, xp: ModuleType = np
+) -> tuple[Float[np.ndarray, "3"], Float[np.ndarray, "3"]]:
+    """A camera's (right, up) turned by ``roll`` (rad) about its viewing direction, right-handed:
+    image up turns towards image right, so the scene turns anticlockwise in the image.
+    ``xp``: NumPy, or ``jax.numpy`` for axes differentiable in the roll."""
+    c, s = xp.cos(roll), xp.sin(roll)
+    return c * right - s * up, c * up + s * right
+
+
 @dataclass(frozen=True)
 class CameraFrame:
     """Position (m) and orthonormal axes (world) of a camera: forward is the optical axis."""
@@ -88,6 +99,18 @@ class CameraFrame:
             raise InputError("`camera.up` must not be parallel to the viewing direction.")
         right = right / np.linalg.norm(right)
         return cls(position, right, np.cross(right, forward), forward)
+
+    def rolled(self, roll: float) -> CameraFrame:
+        """This frame turned by ``roll`` (rad) about its optical axis (:func:`roll_axes`)."""
+        return CameraFrame(self.position, *roll_axes(self.right, self.up, roll), self.forward)
+
+    def mitsuba_to_world(self, roll: object = 0.0, xp: ModuleType = np) -> Float[np.ndarray, "4 4"]:
+        """The 4 x 4 camera-to-world matrix of Mitsuba's perspective sensor (columns: image left, image
+        up, forward, position) of this frame turned by a further ``roll`` (rad; a JAX scalar with
+        ``xp`` = ``jax.numpy``, for a matrix differentiable in it)."""
+        right, up = roll_axes(xp.asarray(self.right), xp.asarray(self.up), roll, xp)
+        columns = xp.stack([-right, up, xp.asarray(self.forward), xp.asarray(self.position)], axis=1)
+        return xp.concatenate([columns, xp.asarray([[0.0, 0.0, 0.0, 1.0]])], axis=0)
 
     def to_camera(self, points: Float[np.ndarray, "n 3"]) -> Float[np.ndarray, "n 3"]:
         """World points to camera coordinates (right, up, depth along forward), in metres."""

@@ -135,9 +135,7 @@ def scene_dict(assembly: Assembly, vertices: Mapping[str, np.ndarray], window: t
         "fov_axis": "x",
         "principal_point_offset_x": -intr.principal_offset[0] / intr.width,
         "principal_point_offset_y": -intr.principal_offset[1] / intr.height,
-        "to_world": mi.ScalarTransform4f().look_at(
-            origin=cam.position.tolist(), target=(cam.position + cam.forward).tolist(), up=cam.up.tolist()
-        ),
+        "to_world": mi.ScalarTransform4f(cam.mitsuba_to_world()),
         "sampler": {"type": s.render.sampler, "sample_count": s.render.spp},
         "film": {
             "type": "hdrfilm",
@@ -341,9 +339,12 @@ def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray
 def to_value(template: object, value: np.ndarray) -> object:
     """A Dr.Jit value of the type of ``template`` (a scene parameter) from a float array.
 
-    A transform (a distant light's frame) is given by the direction its +z axis points along.
+    A transform is given whole (16 numbers, the camera's :meth:`~spacefit.geometry.frames.CameraFrame.mitsuba_to_world`)
+    or, for a distant light's frame, by the direction its +z axis points along (3 numbers).
     """
     value = np.asarray(value, dtype=np.float32).ravel()
+    if isinstance(template, mi.AffineTransform4f) and value.size == 16:
+        return mi.AffineTransform4f(value.reshape(4, 4))
     if isinstance(template, mi.AffineTransform4f):
         d = value / np.linalg.norm(value)
         up = [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0]

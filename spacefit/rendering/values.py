@@ -4,7 +4,7 @@ This is the one place where a registered parameter (:mod:`spacefit.scene.paramet
 Mitsuba's vocabulary: ``parts.panels.alpha_x`` sets ``'panels.bsdf.brdf_0.alpha_u.value'``, the wrinkles'
 D and G set every wrinkled part's ``vertex_positions`` through the JAX W-M heights (so their
 tangents are exact), the sun's angles set its frame ``'sun.to_world'`` (by the direction its
-light travels). The bridge differentiates through the result; a :class:`Renderer` sets it in place.
+light travels), the camera's roll the camera's frame ``'sensor.to_world'`` (whole). The bridge differentiates through the result; a :class:`Renderer` sets it in place.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from jaxtyping import Array
 
 from spacefit.scene.assembly import Assembly
 from spacefit.geometry.frames import attitude_matrix
-from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, G_of, parameter, scene_value, sun_direction
+from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, ROLL, SUN_ANGLES, G_of, parameter, scene_value, sun_direction
 
 SceneValuesFn = Callable[[Array], dict[str, Array]]
 
@@ -47,6 +47,8 @@ def scene_values_fn(assembly: Assembly, names: Sequence[str]) -> SceneValuesFn:
         out: dict[str, Array] = {}
         if sun_angles:
             out["sun.to_world"] = sun_direction(*(value(x, n) for n in SUN_ANGLES))
+        if ROLL in index:  # the assembled camera is turned by the scene's roll already
+            out["sensor.to_world"] = assembly.camera.mitsuba_to_world(jnp.deg2rad(x[index[ROLL]] - scene.camera.roll_deg), jnp)
         if geometry or pose:
             D = x[index["wrinkles.D"]] if "wrinkles.D" in index else w.D
             G = x[index["wrinkles.G"]] if "wrinkles.G" in index else w.G

@@ -168,6 +168,7 @@ def _camera(scene: Scene) -> tuple[CameraFrame, Intrinsics]:
         frame = CameraFrame.look_at(np.array(c.position_m), np.array(c.look_at_m), np.array(c.up))
     else:
         frame = CameraFrame.from_attitude(np.array(c.position_m), np.array(deg2rad(c.attitude_deg)))
+    frame = frame.rolled(math.radians(c.roll_deg))
     intr = Intrinsics(c.focal_length_mm * 1e-3, c.pixel_pitch_mm * 1e-3, r.resolution[0], r.resolution[1], c.principal_offset_px)
     return frame, intr
 

@@ -95,6 +95,8 @@ class CameraSettings:
 
     ``principal_offset_px`` moves the principal point from the image centre (u right, v down).
     When ``look_at_m`` holds 3 numbers it replaces ``attitude_deg``, with ``up`` as image up.
+    ``roll_deg`` then turns the camera about its optical axis, in either mode (right-handed about the
+    viewing direction: image up turns towards image right, the scene turns anticlockwise in the image).
     """
 
     focal_length_mm: float = 7000.0
@@ -104,6 +106,7 @@ class CameraSettings:
     attitude_deg: Vec3 = (0.0, 0.0, 0.0)
     look_at_m: tuple[float, ...] = ()
     up: Vec3 = (0.0, 1.0, 0.0)
+    roll_deg: float = 0.0
 
     def validate(self) -> None:
         check_range("camera.focal_length_mm", self.focal_length_mm, 0.0, lo_open=True, unit="mm")
@@ -116,6 +119,7 @@ class CameraSettings:
         if self.look_at_m:
             check_position("camera.look_at_m", self.look_at_m)
         check_direction("camera.up", self.up)
+        check_range("camera.roll_deg", self.roll_deg, unit="deg")
 
 
 @dataclass(frozen=True)

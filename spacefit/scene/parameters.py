@@ -12,9 +12,12 @@ Names address the scene file's keys: ``wrinkles.D``; ``parts.P.alpha_x`` for par
 
 ``image.*`` are nuisances of the image formation (an exposure scale, an offset, a Gaussian PSF, a
 sub-pixel shift): a fit applies them to the render in JAX (:mod:`spacefit.fitting.nuisance`), so
-they are fit-only names; a render or a sweep refuses them. Without them free, none is applied. Together
-with the target's pose (``target.attitude_*_deg``, ``target.position_*_m``) they are a fit's
-nuisance parameters (:data:`NUISANCES`), reported apart from the materials.
+they are fit-only names; a render or a sweep refuses them. Without them free, none is applied. The
+gain and the offset may be one per observation of a joint fit: ``image.gain@k`` is observation k's
+alone (k from 0, in the order the observations are given), ``image.gain`` one shared by all
+(:func:`observation_name`). Together with the target's pose (``target.attitude_*_deg``,
+``target.position_*_m``) and the camera's roll about its optical axis (``camera.roll_deg``) they are
+a fit's nuisance parameters (:data:`NUISANCES`), reported apart from the materials.
 
 ``wrinkles.rms_m`` is the expected rms height of eq. 2-1 (:func:`spacefit.geometry.wm.wm_rms`). In an
 image D and G trade off along a valley of nearly constant rms height; (D, rms) are the better
@@ -108,6 +111,7 @@ class Parameter:
         materials: for ``parts.P.*``, the material types that have it (grey values only).
         bsdf_fields: for ``parts.P.*``, the Mitsuba BSDF fields it sets.
         scene_fields: the scene-file fields it replaces (default: its own).
+        per_observation: a joint fit may free it once per observation (``image.gain@k``).
     """
 
     pattern: str
@@ -119,6 +123,7 @@ class Parameter:
     materials: tuple[type, ...] = ()
     bsdf_fields: tuple[str, ...] = ()
     scene_fields: tuple[str, ...] = ()
+    per_observation: bool = False
 
     @property
     def field(self) -> str:
@@ -162,8 +167,12 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
                 fd_step=0.5, scene_fields=("attitude_deg",)) for axis, name in zip("xyz", ("alpha", "beta", "gamma"))),
     *(Parameter(f"target.position_{axis}_m", "m", Bijection(-math.inf), f"the target's world {axis} position: every vertex",
                 fd_step=0.02, scene_fields=("position_m",)) for axis in "xyz"),
-    Parameter("image.gain", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1)"),
-    Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", Bijection(-math.inf), "offset added to every pixel (fit only; default 0)"),
+    Parameter("camera.roll_deg", "deg", Bijection(-math.inf),
+              "the camera's turn about its optical axis (image up towards image right), either camera mode", fd_step=0.5),
+    Parameter("image.gain", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1; "
+              "`image.gain@k`: observation k's own)", per_observation=True),
+    Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", Bijection(-math.inf),
+              "offset added to every pixel (fit only; default 0; `image.offset_w_m2_sr@k`: observation k's own)", per_observation=True),
     Parameter("image.psf_sigma_px", "px", Bijection(0.0, PSF_SIGMA_MAX_PX),
               "sigma of a pixel-integrated Gaussian PSF (fit only; not free: no blur; default start 0.5)"),
     *(Parameter(f"image.shift_{axis}_px", "px", Bijection(-math.inf),
@@ -174,18 +183,43 @@ GEOMETRY = ("wrinkles.D", "wrinkles.G", "wrinkles.rms_m")
 SUN_ANGLES = ("sun.elevation_deg", "sun.azimuth_deg")
 ATTITUDE = ("target.attitude_x_deg", "target.attitude_y_deg", "target.attitude_z_deg")
 POSITION = ("target.position_x_m", "target.position_y_m", "target.position_z_m")
-# Parameters that move vertices: a render of them needs the whole film, not the target's window.
-MOVES_VERTICES = (*GEOMETRY, *ATTITUDE, *POSITION)
+ROLL = "camera.roll_deg"
+# Parameters that move vertices (or the camera about them): a render of them needs the whole film, not the target's window.
+MOVES_VERTICES = (*GEOMETRY, *ATTITUDE, *POSITION, ROLL)
 IMAGE = ("image.gain", "image.offset_w_m2_sr", "image.psf_sigma_px", "image.shift_x_px", "image.shift_y_px")
-# The nuisance parameters of a fit: reported apart from the materials.
-NUISANCES = (*IMAGE, *ATTITUDE, *POSITION)
+# The nuisance parameters of a fit: reported apart from the materials (with the per-observation forms of IMAGE's).
+NUISANCES = (*IMAGE, *ATTITUDE, *POSITION, ROLL)
+# Joins a per-observation parameter's name and its observation's index: ``image.gain@1``.
+OBSERVATION_MARK = "@"
 # Default start of the PSF width (px): 0, no blur, is outside its open range, and its derivative vanishes there.
 PSF_SIGMA_START_PX = 0.5
 # Parameters that set one scene value together.
 JOINT = (SUN_ANGLES, ATTITUDE, POSITION)
 
 
+def observation_name(name: str, observation: int) -> str:
+    """The name of per-observation parameter ``name`` for observation ``observation`` alone (``image.gain@1``)."""
+    return f"{name}{OBSERVATION_MARK}{observation}"
+
+
+def observation_of(name: str) -> tuple[str, int | None]:
+    """A parameter name without its observation index, and the index (None: not per observation)."""
+    base, mark, index = name.partition(OBSERVATION_MARK)
+    return base, (int(index) if mark and index.isdigit() else None)
+
+
+def is_image(name: str) -> bool:
+    """Whether ``name`` is a fit-only image nuisance (:data:`IMAGE`), shared or one observation's."""
+    return observation_of(name)[0] in IMAGE
+
+
+def is_nuisance(name: str) -> bool:
+    """Whether ``name`` is a nuisance parameter (:data:`NUISANCES`), shared or one observation's."""
+    return observation_of(name)[0] in NUISANCES
+
+
 def _pattern(name: str) -> str:
+    name = observation_of(name)[0]
     section, *rest = name.split(".")
     return f"parts.P.{rest[-1]}" if section == "parts" and len(rest) == 2 else name
 
@@ -214,14 +248,37 @@ def available(scene: Scene) -> list[str]:
     return names
 
 
-def check_names(scene: Scene, names: list[str] | tuple[str, ...], argument: str = "free", image: bool = False) -> None:
+def _check_observation(argument: str, name: str, observations: int) -> None:
+    """Raise :class:`InputError` unless ``name`` is a per-observation name (``image.gain@k``) with k in range."""
+    base, _, index = name.partition(OBSERVATION_MARK)
+    if base not in PARAMETERS or not PARAMETERS[base].per_observation:
+        per = [p.pattern for p in PARAMETERS.values() if p.per_observation]
+        raise InputError(f"`{argument}` names {name!r}, but only {', '.join(per)} may be one observation's "
+                         f"(`{per[0]}{OBSERVATION_MARK}k`).")
+    if index not in [str(k) for k in range(observations)]:
+        raise InputError(f"`{argument}` names {name!r}: the observation index {index!r} must be an integer from 0 to "
+                         f"{observations - 1} (the fit has {observations} observation{'s' * (observations > 1)}).")
+
+
+def check_names(
+    scene: Scene, names: list[str] | tuple[str, ...], argument: str = "free", image: bool = False, observations: int = 0,
+) -> None:
     """Raise :class:`InputError` for an unknown or repeated name, or two names that set the same value;
-    ``image``: whether the fit-only :data:`IMAGE` nuisances are valid."""
+    ``image``: whether the fit-only :data:`IMAGE` nuisances are valid; ``observations``: how many
+    observations a fit has (0: none, no per-observation name is valid)."""
     valid = [n for n in available(scene) if image or n not in IMAGE]
     if not names:
         raise InputError(f"`{argument}` must name at least one parameter; valid: {', '.join(valid)}.")
     for name in names:
-        check_choice(argument, name, valid)
+        if OBSERVATION_MARK in name and image:
+            _check_observation(argument, name, observations)
+        else:
+            check_choice(argument, name, valid)
+    for name in names:
+        base, k = observation_of(name)
+        if k is not None and base in names:
+            raise InputError(f"`{argument}` names both {base!r} (one for every observation) and {name!r} (observation {k}'s "
+                             "own); free one of the two forms.")
     if len(set(names)) != len(names):
         raise InputError(f"`{argument}` names a parameter twice: {list(names)}.")
     for a in names:
@@ -267,6 +324,7 @@ _GETTERS: dict[str, Callable[[Scene], float]] = {
     "sun.azimuth_deg": lambda s: sun_angles_deg(s.sun.direction)[1],
     **{name: (lambda s, i=i: s.target.attitude_deg[i]) for i, name in enumerate(ATTITUDE)},
     **{name: (lambda s, i=i: s.target.position_m[i]) for i, name in enumerate(POSITION)},
+    ROLL: lambda s: s.camera.roll_deg,
     "image.gain": lambda s: 1.0,
     "image.offset_w_m2_sr": lambda s: 0.0,
     "image.psf_sigma_px": lambda s: PSF_SIGMA_START_PX,
@@ -277,6 +335,7 @@ _GETTERS: dict[str, Callable[[Scene], float]] = {
 
 def scene_value(scene: Scene, name: str) -> float:
     """The value of parameter ``name`` in the scene (its fixed value, or a fit's default start)."""
+    name = observation_of(name)[0]
     if name in _GETTERS:
         return float(_GETTERS[name](scene))
     _, part, field = name.split(".")
@@ -288,8 +347,8 @@ def scene_with_values(scene: Scene, values: Mapping[str, float]) -> Scene:
     """``scene`` with registered parameters set to ``values`` (physical units, the registry's names):
     the scene file that renders them. The fit-only :data:`IMAGE` nuisances are not scene values and
     are left out; the sun's angles and the pose's components set their whole scene-file value."""
-    check_names(scene, [n for n in values if n not in IMAGE], "values")
-    v = {n: float(x) for n, x in values.items() if n not in IMAGE}
+    check_names(scene, [n for n in values if not is_image(n)], "values")
+    v = {n: float(x) for n, x in values.items() if not is_image(n)}
     out: dict[str, Any] = {}
     for name, x in v.items():
         if name.startswith("parts."):
@@ -297,7 +356,7 @@ def scene_with_values(scene: Scene, values: Mapping[str, float]) -> Scene:
             out.update({f"{head}.{f}": x for f in (parameter(name).scene_fields or (parameter(name).field,))})
         elif name == "wrinkles.rms_m":
             out["wrinkles.G"] = float(G_of(scene.wrinkles, v.get("wrinkles.D", scene.wrinkles.D), x))
-        elif name in ("wrinkles.D", "wrinkles.G", "sun.irradiance_w_m2"):
+        elif name in ("wrinkles.D", "wrinkles.G", "sun.irradiance_w_m2", ROLL):
             out[name] = x
     for group, key in ((SUN_ANGLES, "sun.direction"), (ATTITUDE, "target.attitude_deg"), (POSITION, "target.position_m")):
         if any(n in v for n in group):
