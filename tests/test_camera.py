@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from helpers import small_scene, write_sphere_obj
 
+from spacefit.cases import load_case
 from spacefit.geometry.frames import CameraFrame, Intrinsics, attitude_matrix, project
 from spacefit.rendering.renderer import render
 from spacefit.scene.assembly import assemble
@@ -26,6 +27,21 @@ def test_look_at_and_attitude_agree():
     by_look = CameraFrame.look_at(np.array([0.0, 0.0, 70.0]), np.zeros(3), np.array([0.0, 1.0, 0.0]))
     for a, b in [(by_att.right, by_look.right), (by_att.up, by_look.up), (by_att.forward, by_look.forward)]:
         assert np.allclose(a, b)
+
+
+def test_roll_turns_either_camera_mode_about_its_optical_axis():
+    """``camera.roll_deg`` acts alike with an attitude and with look_at + up: right-handed about the
+    viewing direction, image up turns towards image right; a point right of centre moves up in the image."""
+    scene = load_case("panels").scene().with_values({"camera.position_m": [0.0, 0.0, 70.0], "camera.roll_deg": 30.0})
+    by_att = assemble(scene.with_values({"camera.look_at_m": [], "camera.attitude_deg": [0.0, 0.0, 0.0]})).camera
+    by_look = assemble(scene.with_values({"camera.look_at_m": [0.0, 0.0, 0.0], "camera.up": [0.0, 1.0, 0.0]})).camera
+    r = np.radians(30.0)
+    for frame in (by_att, by_look):
+        assert np.allclose(frame.up, [np.sin(r), np.cos(r), 0.0]) and np.allclose(frame.right, [np.cos(r), -np.sin(r), 0.0])
+        assert np.allclose(frame.forward, [0.0, 0.0, -1.0])
+    intr = Intrinsics(7.0, 4e-3, 600, 600)
+    uv, _ = project(np.array([[1.0, 0.0, 0.0]]), by_look, intr)
+    assert np.allclose(uv[0], [300.0 + 25.0 * np.cos(r), 300.0 - 25.0 * np.sin(r)])  # anticlockwise in the image
 
 
 def test_projection_of_thesis_camera():

@@ -347,8 +347,9 @@ def scene_with_values(scene: Scene, values: Mapping[str, float]) -> Scene:
     """``scene`` with registered parameters set to ``values`` (physical units, the registry's names):
     the scene file that renders them. The fit-only :data:`IMAGE` nuisances are not scene values and
     are left out; the sun's angles and the pose's components set their whole scene-file value."""
-    check_names(scene, [n for n in values if not is_image(n)], "values")
     v = {n: float(x) for n, x in values.items() if not is_image(n)}
+    if v:  # a fit of image nuisances alone renders its scene as given
+        check_names(scene, list(v), "values")
     out: dict[str, Any] = {}
     for name, x in v.items():
         if name.startswith("parts."):
