@@ -166,6 +166,7 @@ def test_per_observation_gain_and_offset_columns_match_finite_differences_and_ac
     (["image.gain@-1"], r"'image\.gain@-1'.*'-1'.*from 0 to 1"),
     (["image.offset_w_m2_sr@one"], r"'image\.offset_w_m2_sr@one'.*'one'.*from 0 to 1"),
     (["image.gain@01"], r"'image\.gain@01'.*from 0 to 1"),
+    (["image.gain@\u00b2"], r"'image\.gain@\u00b2'.*from 0 to 1"),  # a superscript two: a digit to str.isdigit
     (["parts.legs.kd@1"], r"'parts\.legs\.kd@1'.*only image\.gain, image\.offset_w_m2_sr"),
     (["image.gain", "image.gain@1"], r"both 'image\.gain'.*'image\.gain@1'"),
 ])

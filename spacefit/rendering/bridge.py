@@ -36,7 +36,7 @@ SceneValues = Mapping[str, Array]
 
 
 def _differentiable(value: object) -> bool:
-    """Whether the bridge differentiates a scene value: a frame (the sun's) is set whole, its
+    """Whether the bridge differentiates a scene value: a frame (the sun's, the camera's) is set whole, its
     Jacobian columns come from finite differences."""
     return not isinstance(value, mi.AffineTransform4f)
 

@@ -205,7 +205,7 @@ def observation_name(name: str, observation: int) -> str:
 def observation_of(name: str) -> tuple[str, int | None]:
     """A parameter name without its observation index, and the index (None: not per observation)."""
     base, mark, index = name.partition(OBSERVATION_MARK)
-    return base, (int(index) if mark and index.isdigit() else None)
+    return base, (int(index) if mark and index.isascii() and index.isdigit() else None)
 
 
 def is_image(name: str) -> bool:
@@ -261,11 +261,11 @@ def _check_observation(argument: str, name: str, observations: int) -> None:
 
 
 def check_names(
-    scene: Scene, names: list[str] | tuple[str, ...], argument: str = "free", image: bool = False, observations: int = 0,
+    scene: Scene, names: list[str] | tuple[str, ...], argument: str = "free", image: bool = False, observations: int = 1,
 ) -> None:
     """Raise :class:`InputError` for an unknown or repeated name, or two names that set the same value;
     ``image``: whether the fit-only :data:`IMAGE` nuisances are valid; ``observations``: how many
-    observations a fit has (0: none, no per-observation name is valid)."""
+    observations a fit has (the range of a per-observation name's index, ``image.gain@k``)."""
     valid = [n for n in available(scene) if image or n not in IMAGE]
     if not names:
         raise InputError(f"`{argument}` must name at least one parameter; valid: {', '.join(valid)}.")
