@@ -182,6 +182,7 @@ def test_bad_per_observation_names_are_refused(free, match):
 GAINS = (1.15, 0.85)
 
 
+@pytest.mark.slow  # CI: the nuisance Jacobian columns and the roll recovery; this fit takes 30 to 50 s
 def test_two_observations_with_different_gains_recover_each():
     """Two views of the panels case, the truth at 256 spp times gains 1.15 and 0.85; the fit (64 spp)
     frees the materials (from 50 % off) and each observation's gain (from 1). Measured: gains +0.0 %
@@ -213,6 +214,7 @@ RECOVERY = {"render.resolution": [64, 64], "camera.pixel_pitch_mm": 37.5, "rende
 TRUE_NUISANCES = {"image.gain": 1.15, "image.offset_w_m2_sr": 0.02, "image.psf_sigma_px": 0.7, "target.attitude_x_deg": 0.3}
 
 
+@pytest.mark.slow  # CI: the nuisance Jacobian columns and the roll recovery; this fit takes 30 to 50 s
 def test_recovery_with_unknown_gain_offset_psf_width_and_a_03_degree_attitude_error():
     """A simulated observation: the truth rendered at 256 spp with a 0.3 deg attitude error, times
     a gain, blurred by a Gaussian PSF, plus an offset. The fit starts 50 % off on the materials, at

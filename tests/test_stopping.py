@@ -41,7 +41,7 @@ def tiny_fits():
     case = sf.load_case("panels").with_values(TINY)
     reference, _ = case.reference()
     obs = sf.Observation(case.scene(), reference)
-    return case, reference, {stop: sf.fit(obs, list(case.free), start=case.start, max_steps=15, stop=stop)
+    return case, reference, {stop: sf.fit(obs, list(case.free), start=case.start, max_steps=10, stop=stop)
                              for stop in ("noise", "tolerance")}
 
 
