@@ -3,6 +3,8 @@
 OUT ?= out/default
 SCENE ?=
 PYTEST_ARGS ?=
+# Test processes (pytest-xdist): one per core; tests sharing a module's fixtures stay in one process.
+JOBS ?= 2
 
 .PHONY: setup render test bench sweeps synthetic mutants
 
@@ -13,7 +15,7 @@ render: setup
 	.venv/bin/spacefit render $(SCENE) --out $(OUT) --overwrite
 
 test: setup
-	.venv/bin/python -m pytest -q $(PYTEST_ARGS)
+	.venv/bin/python -m pytest -q -n $(JOBS) --dist loadscope $(PYTEST_ARGS)
 
 # Plant each named one-line bug of tools/mutants.py and check that its tests catch it (minutes; not in CI).
 mutants: setup

@@ -26,7 +26,7 @@ if ! have_llvm; then
     fi
 fi
 
-if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c "import spacefit, pytest, hypothesis" 2>/dev/null; then
+if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c "import spacefit, pytest, xdist, hypothesis, xarray, zarr, dask.distributed, tqdm" 2>/dev/null; then
     echo "setup: creating .venv and installing spacefit (a few minutes the first time)" >&2
     python3 -m venv .venv
     .venv/bin/python -m pip install -q --upgrade pip
