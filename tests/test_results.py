@@ -58,3 +58,12 @@ def test_mitsuba_scene_dict_loads_and_renders_like_the_scene(fitted):
 def test_scene_with_values_refuses_unknown_names():
     with pytest.raises(sf.InputError, match="values"):
         scene_with_values(sf.load_case("panels").scene(), {"parts.panels.shininess": 1.0})
+
+
+def test_scene_with_values_spells_alpha_as_the_scene_does():
+    """The materials case gives the body `alpha`: the fitted scene sets `alpha`, not alpha_x and
+    alpha_y beside it (which the scene would refuse); a scene without it gets both roughnesses."""
+    materials = scene_with_values(sf.load_case("materials").scene(), {"parts.body.alpha": 0.2})
+    assert materials.parts["body"].overrides["alpha"] == 0.2 and "alpha_x" not in materials.parts["body"].overrides
+    panels = scene_with_values(sf.load_case("panels").scene(), {"parts.body.alpha": 0.2})
+    assert panels.parts["body"].overrides["alpha_x"] == panels.parts["body"].overrides["alpha_y"] == 0.2

@@ -11,7 +11,7 @@ import pytest
 from helpers import small_scene, write_sphere_obj
 
 import spacefit as sf
-from spacefit.scene.parameters import scene_with
+from spacefit.scene.parameters import scene_with_values
 
 
 def sphere_scene(tmp_path: Path, spp: int = 4) -> sf.Scene:
@@ -24,7 +24,7 @@ def central_difference(scene: sf.Scene, name: str, step: float) -> np.ndarray:
     from spacefit.scene.parameters import scene_value
 
     p = scene_value(scene, name)
-    return (sf.render(scene_with(scene, {name: p + step})) - sf.render(scene_with(scene, {name: p - step}))) / (2 * step)
+    return (sf.render(scene_with_values(scene, {name: p + step})) - sf.render(scene_with_values(scene, {name: p - step}))) / (2 * step)
 
 
 @pytest.fixture(scope="module")

@@ -343,29 +343,6 @@ def scene_value(scene: Scene, name: str) -> float:
     return float(m.alpha_x if field == "alpha" else getattr(m, field))
 
 
-def scene_with_values(scene: Scene, values: Mapping[str, float]) -> Scene:
-    """``scene`` with registered parameters set to ``values`` (physical units, the registry's names):
-    the scene file that renders them. The fit-only :data:`IMAGE` nuisances are not scene values and
-    are left out; the sun's angles and the pose's components set their whole scene-file value."""
-    v = {n: float(x) for n, x in values.items() if not is_image(n)}
-    if v:  # a fit of image nuisances alone renders its scene as given
-        check_names(scene, list(v), "values")
-    out: dict[str, Any] = {}
-    for name, x in v.items():
-        if name.startswith("parts."):
-            head = name.rsplit(".", 1)[0]
-            out.update({f"{head}.{f}": x for f in (parameter(name).scene_fields or (parameter(name).field,))})
-        elif name == "wrinkles.rms_m":
-            out["wrinkles.G"] = float(G_of(scene.wrinkles, v.get("wrinkles.D", scene.wrinkles.D), x))
-        elif name in ("wrinkles.D", "wrinkles.G", "sun.irradiance_w_m2", ROLL):
-            out[name] = x
-    for group, key in ((SUN_ANGLES, "sun.direction"), (ATTITUDE, "target.attitude_deg"), (POSITION, "target.position_m")):
-        if any(n in v for n in group):
-            current = [v.get(n, scene_value(scene, n)) for n in group]
-            out[key] = np.asarray(sun_direction(*current)).tolist() if group is SUN_ANGLES else current
-    return scene.with_values(out)
-
-
 def fd_step(scene: Scene, name: str) -> float:
     """The central finite-difference step of ``name`` at the scene's value (0: forward-mode AD)."""
     p = parameter(name)
@@ -384,26 +361,33 @@ def parameter_table() -> str:
 
 
 @float64
-def scene_with(scene: Scene, values: Mapping[str, float]) -> Scene:
-    """A validated copy of ``scene`` with registered parameters set by name (the inverse of
-    :func:`scene_value`): the sun's angles become ``sun.direction``, the pose angles and positions
-    components of ``target.attitude_deg`` / ``position_m``, the rms height a G at the scene's D."""
-    keys: dict[str, object] = {}
-    for name, value in values.items():
-        check_names(scene, [name], "values")
-        if name not in (*SUN_ANGLES, *ATTITUDE, *POSITION, "wrinkles.rms_m") and _pattern(name) != "parts.P.alpha":
-            keys[name] = float(value)
-    if set(SUN_ANGLES) & set(values):
-        el, az = (float(values.get(n, scene_value(scene, n))) for n in SUN_ANGLES)
+def scene_with_values(scene: Scene, values: Mapping[str, float]) -> Scene:
+    """A validated copy of ``scene`` with registered parameters set by name (physical units; the
+    inverse of :func:`scene_value`): the scene file that renders them. The sun's angles become
+    ``sun.direction``, the pose's components set ``target.attitude_deg`` / ``position_m``, the rms
+    height a G at the scene's (or the given) D, a conductor's ``alpha`` the field the scene spells it
+    with (``alpha``, or ``alpha_x`` and ``alpha_y``). The fit-only :data:`IMAGE` nuisances are not
+    scene values and are left out.
+
+    Raises:
+        InputError: for a name the scene cannot free, or a value out of its range.
+    """
+    v = {n: float(x) for n, x in values.items() if not is_image(n)}
+    if v:  # a fit of image nuisances alone renders its scene as given
+        check_names(scene, list(v), "values")
+    keys: dict[str, Any] = {n: x for n, x in v.items()
+                            if n not in (*SUN_ANGLES, *ATTITUDE, *POSITION, "wrinkles.rms_m") and _pattern(n) != "parts.P.alpha"}
+    if set(SUN_ANGLES) & set(v):
+        el, az = (v.get(n, scene_value(scene, n)) for n in SUN_ANGLES)
         keys["sun.direction"] = np.asarray(sun_direction(el, az), dtype=float).tolist()
     for group, key in ((ATTITUDE, "target.attitude_deg"), (POSITION, "target.position_m")):
-        if set(group) & set(values):
-            keys[key] = [float(values.get(n, scene_value(scene, n))) for n in group]
-    if "wrinkles.rms_m" in values:
-        D = float(values.get("wrinkles.D", scene.wrinkles.D))
-        keys["wrinkles.G"] = float(G_of(scene.wrinkles, D, float(values["wrinkles.rms_m"])))
-    for name, value in values.items():
+        if set(group) & set(v):
+            keys[key] = [v.get(n, scene_value(scene, n)) for n in group]
+    if "wrinkles.rms_m" in v:
+        keys["wrinkles.G"] = float(G_of(scene.wrinkles, v.get("wrinkles.D", scene.wrinkles.D), v["wrinkles.rms_m"]))
+    for name, x in v.items():
         if _pattern(name) == "parts.P.alpha":
-            head = name.rsplit(".", 1)[0]
-            keys[f"{head}.alpha_x"] = keys[f"{head}.alpha_y"] = float(value)
+            _, part, _ = name.split(".")
+            fields = ("alpha",) if "alpha" in scene.parts[part].overrides else ("alpha_x", "alpha_y")
+            keys.update({f"parts.{part}.{f}": x for f in fields})
     return scene.with_values(keys)

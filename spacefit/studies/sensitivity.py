@@ -193,7 +193,7 @@ def sensitivity(
     from spacefit.fitting.problem import fit_scene
     from spacefit.progress import progress_bar
     from spacefit.rendering.derivatives import jacobians
-    from spacefit.scene.parameters import check_names, parameter, scene_with
+    from spacefit.scene.parameters import check_names, parameter, scene_with_values
     from spacefit.studies.worker import TARGET
 
     check_scene(scene)
@@ -202,7 +202,7 @@ def sensitivity(
     check_names(scene, list(names), "names")
     if at:
         check_names(scene, list(at), "at")
-        scene = scene_with(scene, at)
+        scene = scene_with_values(scene, at)
     scene = fit_scene(scene, names)  # as the fit: wrinkles rendered as geometry, where D and G act
     s0 = scene.render.seed
     pairs = tuple((s0 + 2 * k, s0 + 2 * k + 1) for k in range(seeds))

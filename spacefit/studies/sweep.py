@@ -94,7 +94,7 @@ def _values(key: str, spec: Any) -> list[Any]:
 
 def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
     """Check a sweep's axes against the scene (every key and value) and return them in order."""
-    from spacefit.scene.parameters import available, parameter, scene_with
+    from spacefit.scene.parameters import available, parameter, scene_with_values
 
     if not isinstance(axes, Mapping) or not axes:
         raise InputTypeError(f"`axes` must be a non-empty mapping of scene keys to lists of values, got {quote(axes)}.")
@@ -120,7 +120,7 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
                     if key in names:
                         bounds = parameter(key).bijection
                         check_range(key, value, bounds.lo, bounds.hi, unit=parameter(key).unit)
-                        scene_with(scene, {key: value})
+                        scene_with_values(scene, {key: value})
                     else:
                         scene.with_values({key: value})
                 except InputError as err:
@@ -154,7 +154,7 @@ def in_place_names(scene: Scene) -> set[str]:
 def tasks(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple[str, ...], derivative_seeds: int
           ) -> Callable[[tuple[int, ...]], Task]:
     """The task of each point (its index along every axis)."""
-    from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, scene_with
+    from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, scene_with_values
 
     names = in_place_names(scene)
     in_place = [k for a in axes for k in a.values if k in names]
@@ -169,7 +169,7 @@ def tasks(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple[st
         if key not in tomls:
             parameters = {k: v for k, v in scene_keys.items() if k in GEOMETRY}
             edited = scene.with_values({k: v for k, v in scene_keys.items() if k not in parameters})
-            tomls[key] = scene_with(edited, parameters).to_toml() if scene_keys else base.scene_toml
+            tomls[key] = scene_with_values(edited, parameters).to_toml() if scene_keys else base.scene_toml
         seed, spp = (values.get(k) for k in RENDER_ARGUMENTS)
         return replace(base, scene_toml=tomls[key], in_place=tuple((k, float(values[k])) for k in in_place),
                        spp=None if spp is None else int(spp), seed=None if seed is None else int(seed))

@@ -115,11 +115,11 @@ def run_task(task: Task) -> dict[str, np.ndarray]:
     if task.images:
         out["radiance"] = radiance
     if task.derivatives:
-        from spacefit.scene.parameters import scene_with
+        from spacefit.scene.parameters import scene_with_values
         from spacefit.studies.sensitivity import point_summaries, sensitivity
 
         render = {k: v for k, v in (("render.seed", task.seed), ("render.spp", task.spp)) if v is not None}
-        point = scene_with(scene.with_values(render), dict(task.in_place))
+        point = scene_with_values(scene.with_values(render), dict(task.in_place))
         sens = sensitivity(point, task.derivatives, seeds=task.derivative_seeds, quiet=True)
         order = [sens.regions.index(r) for r in regions(scene)]
         out.update({k: v[:, order] for k, v in point_summaries(sens).items()})
