@@ -37,6 +37,8 @@ def test_gradient_solvers_reduce_the_loss(panels_reference, solver):
                  start=PANELS.start, max_steps=15, learning_rate=0.1)
     assert result.history[-1]["loss"] < 0.5 * result.history[0]["loss"]
     assert all(np.isfinite(v) for v in result.values.values())
+    assert result.status is not sf.Status.NOISE_FLOOR  # the noise-floor stop is the least-squares solvers'
+    assert all(np.isnan(h["loss_noise"]) for h in result.history)  # nor does it pay the noise renders
 
 
 def test_material_fit_with_2_percent_noise_within_5_percent():

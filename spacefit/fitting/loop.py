@@ -20,7 +20,7 @@ import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_count, check_range
 from spacefit.fitting.problem import Observation, setup
-from spacefit.fitting.solvers import SOLVERS, Options, Status
+from spacefit.fitting.solvers import LEAST_SQUARES, SOLVERS, Options, Status
 from spacefit.fitting.stopping import NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import deferred_interrupts
@@ -162,9 +162,10 @@ def fit(
         rtol, atol: optimistix tolerances (Adam: stop when the relative loss change < rtol).
         learning_rate: Adam's step size in unconstrained coordinates.
         seed, seed_grad: seeds of primal and derivative renders; render references with another.
-        stop: ``"noise"``: stop as well when the expected decrease of the loss is below its Monte
-            Carlo noise (:attr:`Status.NOISE_FLOOR`, :mod:`spacefit.fitting.stopping`; one more
-            primal render per accepted step); ``"tolerance"``: only on the solver's tolerances.
+        stop: ``"noise"``: the least-squares solvers (:data:`LEAST_SQUARES`) stop as well when the
+            expected decrease of the loss is below its Monte Carlo noise (:attr:`Status.NOISE_FLOOR`,
+            :mod:`spacefit.fitting.stopping`; one more primal render per accepted step), BFGS and
+            Adam on their tolerances; ``"tolerance"``: every solver only on its tolerances.
         integrator: AD integrator for derivative renders, one of :data:`INTEGRATORS`.
         geometry_jacobian: ``"fd"`` (central differences with common random numbers) or ``"ad"``
             (the integrator's derivative) for D and G.
@@ -188,6 +189,7 @@ def fit(
     check_range("atol", atol, 0.0)
     check_range("learning_rate", learning_rate, 0.0, lo_open=True)
     check_choice("stop", stop, STOP_RULES)
+    noise_stop = stop == "noise" and solver in LEAST_SQUARES
     s = setup(observations, free, start, loss, spp, spp_grad, seed, seed_grad, integrator, geometry_jacobian,
               wrinkle_coordinates)
     fp, problem = s.solver_params, s.problem
@@ -219,7 +221,7 @@ def fit(
         accepted = floor.record(last["loss"])
         if accepted:
             best.update(u=last["u"], loss=last["loss"])
-            if stop == "noise":
+            if noise_stop:
                 r = last["r"] if last["r"] is not None else np.asarray(problem.residual_x(x_solver))
                 floor.set_noise(loss_noise(r, np.asarray(problem.residual_x_independent(x_solver))))
         x = np.asarray(s.to_user(x_solver))
@@ -232,7 +234,7 @@ def fit(
         interrupts.check()
         if _nonfinite_run(history):
             return Status.NONFINITE
-        return Status.NOISE_FLOOR if stop == "noise" and floor.reached(last["loss"], accepted) else None
+        return Status.NOISE_FLOOR if noise_stop and floor.reached(last["loss"], accepted) else None
 
     best: dict[str, Any] = {}
     floor = NoiseFloor()
