@@ -77,6 +77,21 @@ def test_with_the_noise_known_the_covariance_is_the_inverse_information(heterosc
     np.testing.assert_allclose(np.sort(fisher), np.linalg.eigvalsh(A.T @ A), rtol=1e-9)
 
 
+def test_with_the_noise_known_a_noisy_jacobian_adds_its_own_term(heteroscedastic):
+    """Two Jacobians from independent seeds, A and A + E, with the same residuals: the fit stopped
+    where A^T r = 0 for its noisy A, off by (A^T A)^-1 E^T r, so the covariance is the inverse
+    information plus B sum_i r_i^2 e_i e_i^T / 2 B, with e_i the rows of the difference."""
+    A, x_hat, r = heteroscedastic
+    E = np.random.default_rng(5).normal(size=A.shape)
+    A2 = A + E
+    with jax.enable_x64(True):
+        cov, *_ = covariance(linear(A, A @ x_hat - r, A2, A2 @ x_hat - r, noise_known=True), x_hat)
+    bread = np.linalg.inv(0.5 * (A.T @ A2 + A2.T @ A))
+    expected = bread + bread @ (0.5 * E.T @ np.diag(r**2) @ E) @ bread
+    np.testing.assert_allclose(cov, expected, rtol=1e-9)
+    assert np.all(np.diag(cov) > 1.05 * np.diag(bread))  # the term matters here: the test can tell
+
+
 def test_covariance_does_not_depend_on_the_noise_scale_or_the_units(heteroscedastic):
     """Dividing every residual by c (a sigma c times larger) leaves the errors unchanged: the
     sandwich takes the noise level from the residuals, the stated sigma only weighs pixels. Stating

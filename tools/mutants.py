@@ -110,6 +110,7 @@ MUTANTS = (
            "J2 = np.asarray(jax.jacfwd(problem.residual_x)", (UNCERTAINTY,)),
     Mutant("covariance-undetermined-finite", COVARIANCE, "touched = np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)",
            "touched = np.zeros(len(x), dtype=bool)", (UNCERTAINTY,)),
+    Mutant("covariance-no-jacobian-noise", COVARIANCE, "meat(render) + jacobian_noise", "meat(render)", (UNCERTAINTY,)),
     Mutant("fisher-times-s2", COVARIANCE, "np.clip(eigval, 0.0, None) / s2", "np.clip(eigval, 0.0, None) * s2", (UNCERTAINTY,)),
     Mutant("map-covariance-transposed", COVARIANCE, "out = T @ np.where(np.isfinite(cov), cov, 0.0) @ T.T",
            "out = T.T @ np.where(np.isfinite(cov), cov, 0.0) @ T", (UNCERTAINTY,)),

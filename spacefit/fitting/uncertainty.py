@@ -46,7 +46,9 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
     is the noise model's own, sym(J1^T J2)^-1, with no scale estimated from the residuals, plus
     the part of the fit's own render noise (not in the sensor's model; measured at 32 spp it made
     the errors 1.4 to 2.1 times the noise model's): the sandwich of the per-residual render variance
-    (r - r_alt)^2 / 2, r_alt rendered with independent seeds.
+    (r - r_alt)^2 / 2, r_alt rendered with independent seeds; and the Monte Carlo noise of the
+    Jacobian the fit steered by, which moves the point where J^T r = 0 by (J^T J)^-1 dJ^T r: per
+    residual r^2 (J1 - J2)(J1 - J2)^T / 2 through the same bread.
     """
     r = np.asarray(problem.residual_x(jnp.asarray(x)), dtype=float)
     J1 = np.asarray(jax.jacfwd(problem.residual_x)(jnp.asarray(x)), dtype=float)
@@ -70,10 +72,14 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
     bread = (eigvec[:, ~tiny] / eigval[~tiny]) @ eigvec[:, ~tiny].T
     if problem.noise_known:
         # the observation's noise, (J^T J)^-1, plus the fit's own render noise, per residual
-        # (r - r_alt)^2 / 2 from the two seeds, through the sandwich
+        # (r - r_alt)^2 / 2 from the two seeds, through the sandwich, plus the noise of the
+        # Jacobian the fit steered by: it stops where J^T r = 0 for its noisy J, off by
+        # (J^T J)^-1 dJ^T r, whose covariance per row is r^2 (J1 - J2)(J1 - J2)^T / 2
         r_alt = np.asarray(problem.residual_x_independent(jnp.asarray(x)), dtype=float)
         render = 0.5 * (r - r_alt) ** 2
-        cov, s2 = bread + bread @ meat(render) @ bread, 1.0
+        dJ = J1 - J2
+        jacobian_noise = 0.5 * (dJ * (r**2)[:, None]).T @ dJ
+        cov, s2 = bread + bread @ (meat(render) + jacobian_noise) @ bread, 1.0
     else:
         cov = bread @ meat(r**2 * informative / dof) @ bread
     if tiny.any():
