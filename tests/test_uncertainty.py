@@ -29,6 +29,7 @@ class LinearProblem:
     residual_x: object
     residual_x_independent: object
     noise_known: bool = False
+    references: tuple = ()  # no image layout: each residual its own block
 
 
 def linear(A, b, A2=None, b2=None, noise_known=False) -> LinearProblem:
@@ -90,6 +91,32 @@ def test_with_the_noise_known_a_noisy_jacobian_adds_its_own_term(heteroscedastic
     expected = bread + bread @ (0.5 * E.T @ np.diag(r**2) @ E) @ bread
     np.testing.assert_allclose(cov, expected, rtol=1e-9)
     assert np.all(np.diag(cov) > 1.05 * np.diag(bread))  # the term matters here: the test can tell
+
+
+def test_render_noise_shared_within_a_block_counts_as_one(heteroscedastic):
+    """With the noise known, the fit's render noise d = (r - r_alt) / sqrt(2) enters as the
+    cluster-robust meat sum_b s_b s_b^T, s_b = sum of A_i d_i over a block of pixels (all channels):
+    render noise that one path gives all three channels is counted with its correlation. Here an
+    8 x 4 px RGB image, so two 4 x 4 px blocks, and noise equal in the three channels of a pixel."""
+    from spacefit.fitting.uncertainty import NOISE_BLOCK_PX
+
+    assert NOISE_BLOCK_PX == 4
+    rng = np.random.default_rng(6)
+    A = rng.normal(size=(8 * 4 * 3, P))
+    x_hat = np.array([0.4, -1.2, 2.5])
+    r = rng.normal(size=len(A))
+    d = np.repeat(rng.normal(size=8 * 4), 3)  # one draw per pixel, shared by its channels
+    problem = LinearProblem(lambda x: jnp.asarray(A) @ x - jnp.asarray(A @ x_hat - r),
+                            lambda x: jnp.asarray(A) @ x - jnp.asarray(A @ x_hat - r + np.sqrt(2.0) * d),
+                            noise_known=True, references=(np.zeros((8, 4, 3)),))
+    with jax.enable_x64(True):
+        cov, *_ = covariance(problem, x_hat)
+    blocks = [slice(0, 48), slice(48, 96)]
+    meat = sum(np.outer(A[b].T @ d[b], A[b].T @ d[b]) for b in blocks)
+    bread = np.linalg.inv(A.T @ A)
+    np.testing.assert_allclose(cov, bread + bread @ meat @ bread, rtol=1e-9)
+    per_residual = bread + bread @ (A.T @ np.diag(d**2) @ A) @ bread
+    assert not np.allclose(cov, per_residual, rtol=0.1)  # the blocks matter: the test can tell
 
 
 def test_covariance_does_not_depend_on_the_noise_scale_or_the_units(heteroscedastic):

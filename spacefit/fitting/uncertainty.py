@@ -24,6 +24,9 @@ from spacefit.precision import float64
 CORRELATION_WARN = 0.95
 # Relative standard error above which a parameter is reported as poorly determined.
 REL_STDERR_WARN = 0.2
+# Side (px) of the blocks whose render noise is taken as shared: the tent filter's 2 px footprint
+# and a PSF of about 1 px.
+NOISE_BLOCK_PX = 4
 
 
 def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
@@ -45,8 +48,9 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
     divided by its predicted noise), the residuals are unit normal at the truth and the covariance
     is the noise model's own, sym(J1^T J2)^-1, with no scale estimated from the residuals, plus
     the part of the fit's own render noise (not in the sensor's model; measured at 32 spp it made
-    the errors 1.4 to 2.1 times the noise model's): the sandwich of the per-residual render variance
-    (r - r_alt)^2 / 2, r_alt rendered with independent seeds; and the Monte Carlo noise of the
+    the errors 1.4 to 2.1 times the noise model's): :func:`render_meat` of the render noise
+    (r - r_alt) / sqrt(2), r_alt rendered with independent seeds, summed over blocks of pixels that
+    share it (cluster-robust); and the Monte Carlo noise of the
     Jacobian the fit steered by, which moves the point where J^T r = 0 by (J^T J)^-1 dJ^T r: per
     residual r^2 (J1 - J2)(J1 - J2)^T / 2 through the same bread.
     """
@@ -76,10 +80,9 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
         # Jacobian the fit steered by: it stops where J^T r = 0 for its noisy J, off by
         # (J^T J)^-1 dJ^T r, whose covariance per row is r^2 (J1 - J2)(J1 - J2)^T / 2
         r_alt = np.asarray(problem.residual_x_independent(jnp.asarray(x)), dtype=float)
-        render = 0.5 * (r - r_alt) ** 2
         dJ = J1 - J2
         jacobian_noise = 0.5 * (dJ * (r**2)[:, None]).T @ dJ
-        cov, s2 = bread + bread @ (meat(render) + jacobian_noise) @ bread, 1.0
+        cov, s2 = bread + bread @ (render_meat(J1, J2, (r - r_alt) / math.sqrt(2.0), problem) + jacobian_noise) @ bread, 1.0
     else:
         cov = bread @ meat(r**2 * informative / dof) @ bread
     if tiny.any():
@@ -87,6 +90,35 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
         cov[touched, :] = np.inf
         cov[:, touched] = np.inf
     return cov, 0.5 * float(r @ r), np.clip(eigval, 0.0, None) / s2
+
+
+def render_meat(J1: np.ndarray, J2: np.ndarray, d: np.ndarray, problem: Problem) -> np.ndarray:
+    """The fit's render noise through the sandwich's meat, sym(sum_b s1_b s2_b^T) with s_b = sum of
+    J_i d_i over the residuals i of block b: the colour channels of a pixel and its neighbours within
+    :data:`NOISE_BLOCK_PX` share their render noise (one path lights all channels; the pixel filter
+    and a PSF spread a sample over neighbours), which a per-residual variance would miss (Liang &
+    Zeger 1986, cluster-robust covariance). ``d`` is one draw of the render noise per residual,
+    (r - r_alt) / sqrt(2). Residuals not laid out as the references' pixels are their own blocks."""
+    blocks = _pixel_blocks(problem, d.size)
+    s1, s2 = (np.stack([np.bincount(blocks, weights=J[:, k] * d) for k in range(J.shape[1])], axis=1) for J in (J1, J2))
+    m_val, m_vec = np.linalg.eigh(0.5 * (s1.T @ s2 + s2.T @ s1))
+    return (m_vec * np.clip(m_val, 0.0, None)) @ m_vec.T
+
+
+def _pixel_blocks(problem: Problem, n: int) -> np.ndarray:
+    """Block index of each of ``n`` residuals: pixel residuals (the references' (h, w, c) stacked)
+    in squares of :data:`NOISE_BLOCK_PX`, channels together; any other layout one block each."""
+    shapes = [np.shape(ref) for ref in problem.references]
+    if sum(int(np.prod(sh)) for sh in shapes) != n:
+        return np.arange(n)
+    out, offset = [], 0
+    for h, w, c in shapes:
+        y, x = np.divmod(np.arange(h * w), w)
+        nx = -(-w // NOISE_BLOCK_PX)
+        block = (y // NOISE_BLOCK_PX) * nx + x // NOISE_BLOCK_PX
+        out.append(np.repeat(block, c) + offset)
+        offset += nx * -(-h // NOISE_BLOCK_PX)
+    return np.concatenate(out)
 
 
 def map_covariance(T: np.ndarray, cov: np.ndarray) -> np.ndarray:
