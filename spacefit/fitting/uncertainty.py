@@ -67,9 +67,8 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
     def cross(w: np.ndarray) -> np.ndarray:  # sym(J1^T diag(w) J2)
         return 0.5 * ((J1 * w[:, None]).T @ J2 + (J2 * w[:, None]).T @ J1)
 
-    def meat(w: np.ndarray) -> np.ndarray:  # cross(w) less its negative part: the cross form is not PSD by construction
-        m_val, m_vec = np.linalg.eigh(cross(w))
-        return (m_vec * np.clip(m_val, 0.0, None)) @ m_vec.T
+    def meat(w: np.ndarray) -> np.ndarray:
+        return _psd_part(cross(w))
 
     eigval, eigvec = np.linalg.eigh(cross(np.ones_like(r)))
     tiny = eigval <= 1e-9 * max(np.abs(eigval).max(), 1e-300)
@@ -101,7 +100,13 @@ def render_meat(J1: np.ndarray, J2: np.ndarray, d: np.ndarray, problem: Problem)
     (r - r_alt) / sqrt(2). Residuals not laid out as the references' pixels are their own blocks."""
     blocks = _pixel_blocks(problem, d.size)
     s1, s2 = (np.stack([np.bincount(blocks, weights=J[:, k] * d) for k in range(J.shape[1])], axis=1) for J in (J1, J2))
-    m_val, m_vec = np.linalg.eigh(0.5 * (s1.T @ s2 + s2.T @ s1))
+    return _psd_part(0.5 * (s1.T @ s2 + s2.T @ s1))
+
+
+def _psd_part(m: np.ndarray) -> np.ndarray:
+    """A symmetric matrix less its negative part: a cross form sym(a^T b) of two independent
+    estimates is not positive semi-definite by construction."""
+    m_val, m_vec = np.linalg.eigh(m)
     return (m_vec * np.clip(m_val, 0.0, None)) @ m_vec.T
 
 
