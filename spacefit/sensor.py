@@ -245,6 +245,18 @@ def psf_kernel(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> F
     return kernel / kernel.sum()
 
 
+def psf_rms_px(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> float:
+    """The rms width (px, per axis) of the widest channel's :func:`psf_kernel`: how far the PSF
+    spreads a point's light over pixels (0 without any blur; sqrt(sigma^2 + 1/12) for a Gaussian
+    of sigma alone, the pixel's width included)."""
+    widths = []
+    for wavelength in sensor.wavelengths(channels):
+        kernel = psf_kernel(sensor, intrinsics, wavelength)
+        offsets = np.arange(kernel.shape[1]) - (kernel.shape[1] - 1) / 2
+        widths.append(math.sqrt(float(kernel.sum(axis=0) @ offsets**2)))
+    return max(widths)
+
+
 def _convolve(image: Float[Array, "h w"], kernel: np.ndarray) -> Float[Array, "h w"]:
     if kernel.shape == (1, 1):
         return image

@@ -7,7 +7,8 @@ linear residual r(x) = A x - b stands in for the renderer and every quantity has
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import jax
 import jax.numpy as jnp
@@ -30,6 +31,8 @@ class LinearProblem:
     residual_x_independent: object
     noise_known: bool = False
     references: tuple = ()  # no image layout: each residual its own block
+    noise_spread_px: tuple = ()  # per reference: (pixel filter radius, PSF rms width), px
+    free: object = field(default_factory=lambda: SimpleNamespace(names=()))  # no image nuisance is free
 
 
 def linear(A, b, A2=None, b2=None, noise_known=False) -> LinearProblem:
@@ -93,30 +96,46 @@ def test_with_the_noise_known_a_noisy_jacobian_adds_its_own_term(heteroscedastic
     assert np.all(np.diag(cov) > 1.05 * np.diag(bread))  # the term matters here: the test can tell
 
 
-def test_render_noise_shared_within_a_block_counts_as_one(heteroscedastic):
-    """With the noise known, the fit's render noise d = (r - r_alt) / sqrt(2) enters as the
-    cluster-robust meat sum_b s_b s_b^T, s_b = sum of A_i d_i over a block of pixels (all channels):
-    render noise that one path gives all three channels is counted with its correlation. Here an
-    8 x 4 px RGB image, so two 4 x 4 px blocks, and noise equal in the three channels of a pixel."""
-    from spacefit.fitting.uncertainty import NOISE_BLOCK_PX
+@pytest.mark.parametrize(("spread", "reach"), [((0.5, 0.0), 0), ((1.0, 0.0), 1), ((1.0, 1.0), 4)])
+def test_render_noise_shared_by_neighbouring_pixels_is_counted(spread, reach):
+    """With the noise known, the fit's render noise d = (r - r_alt) / sqrt(2) enters as the spatial
+    HAC meat sum_i s_i sum_{j near i} s_j^T, s_i = sum of A_i d_i over pixel i's channels, j within
+    the reach: the box filter's samples stay in their pixel (0), the tent's reach the next pixel
+    (1), a PSF of rms width 1 px spreads them 2 sqrt(2) px further (4). Written out pair by pair
+    here on an 8 x 5 px RGB image."""
+    from spacefit.fitting.uncertainty import noise_reach_px
 
-    assert NOISE_BLOCK_PX == 4
     rng = np.random.default_rng(6)
-    A = rng.normal(size=(8 * 4 * 3, P))
+    h, w = 8, 5
+    A = rng.normal(size=(h * w * 3, P))
     x_hat = np.array([0.4, -1.2, 2.5])
     r = rng.normal(size=len(A))
-    d = np.repeat(rng.normal(size=8 * 4), 3)  # one draw per pixel, shared by its channels
+    d = rng.normal(size=len(A))
     problem = LinearProblem(lambda x: jnp.asarray(A) @ x - jnp.asarray(A @ x_hat - r),
                             lambda x: jnp.asarray(A) @ x - jnp.asarray(A @ x_hat - r + np.sqrt(2.0) * d),
-                            noise_known=True, references=(np.zeros((8, 4, 3)),))
+                            noise_known=True, references=(np.zeros((h, w, 3)),), noise_spread_px=(spread,))
+    assert noise_reach_px(problem, x_hat, 0) == reach
     with jax.enable_x64(True):
         cov, *_ = covariance(problem, x_hat)
-    blocks = [slice(0, 48), slice(48, 96)]
-    meat = sum(np.outer(A[b].T @ d[b], A[b].T @ d[b]) for b in blocks)
+    s = (A * d[:, None]).reshape(h, w, 3, P).sum(axis=2)
+    meat = sum(np.outer(s[i, j], s[k, m]) for i in range(h) for j in range(w) for k in range(h) for m in range(w)
+               if max(abs(i - k), abs(j - m)) <= reach)
+    eigval, eigvec = np.linalg.eigh(meat)
+    meat = (eigvec * np.clip(eigval, 0.0, None)) @ eigvec.T
     bread = np.linalg.inv(A.T @ A)
     np.testing.assert_allclose(cov, bread + bread @ meat @ bread, rtol=1e-9)
     per_residual = bread + bread @ (A.T @ np.diag(d**2) @ A) @ bread
-    assert not np.allclose(cov, per_residual, rtol=0.1)  # the blocks matter: the test can tell
+    assert not np.allclose(cov, per_residual, rtol=0.1)  # channels and neighbours matter: the test can tell
+
+
+def test_a_free_psf_widens_the_reach_of_the_render_noise():
+    """A free ``image.psf_sigma_px`` (its value at x) adds to the sensor's PSF in quadrature."""
+    from spacefit.fitting.uncertainty import noise_reach_px
+
+    problem = LinearProblem(None, None, noise_spread_px=((1.0, 0.0), (1.0, 0.0)),
+                            free=SimpleNamespace(names=("parts.legs.kd", "image.psf_sigma_px@1")))
+    assert noise_reach_px(problem, np.array([0.5, 2.0]), 0) == 1  # observation 0 has no PSF of its own
+    assert noise_reach_px(problem, np.array([0.5, 2.0]), 1) == 7  # ceil(1 + 2 sqrt(2) 2)
 
 
 def test_covariance_does_not_depend_on_the_noise_scale_or_the_units(heteroscedastic):

@@ -48,16 +48,23 @@ def shift(image: Float[Array, "h w c"], dx_px: Float[Array, ""], dy_px: Float[Ar
     return moved[p:-p, p:-p]
 
 
+def nuisance_index(names: Sequence[str], name: str, k: int) -> int | None:
+    """Where observation k's image nuisance ``name`` is in the free ``names``: its own
+    (``name@k``) if free, else the shared one, else None (not free)."""
+    for candidate in (observation_name(name, k), name):
+        if candidate in names:
+            return list(names).index(candidate)
+    return None
+
+
 def split(names: Sequence[str]) -> tuple[np.ndarray, ImageModel]:
     """The indices of the free parameters ``names`` that the renderer sees (all but :data:`IMAGE`),
     and ``model(render, x, k)``: observation k's render with the image nuisances of the full vector
     ``x`` applied (a per-observation value, ``image.gain@k``, where free, else the shared one)."""
-    free = {n: i for i, n in enumerate(names) if is_image(n)}
     rendered = np.array([i for i, n in enumerate(names) if not is_image(n)], dtype=int)
 
     def model(image: Float[Array, "h w c"], x: Float[Array, " n"], k: int) -> Float[Array, "h w c"]:
-        index = {n: free.get(observation_name(n, k), free.get(n)) for n in IMAGE}
-        index = {n: i for n, i in index.items() if i is not None}
+        index = {n: i for n in IMAGE if (i := nuisance_index(names, n, k)) is not None}
         if "image.psf_sigma_px" in index:
             image = blur(image, x[index["image.psf_sigma_px"]])
         if "image.shift_x_px" in index or "image.shift_y_px" in index:

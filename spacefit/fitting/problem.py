@@ -24,8 +24,8 @@ from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import PartImage, Renderer
 from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import Scene, check_scene
-from spacefit.sensor import Sensor, dn_fn, noise_variance_dn, saturated_mask
+from spacefit.scene.config import FILTER_RADIUS_PX, Scene, check_scene
+from spacefit.sensor import Sensor, dn_fn, noise_variance_dn, psf_rms_px, saturated_mask
 from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, rms_of, scene_value
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
@@ -104,13 +104,16 @@ class Problem:
     part_images: list[PartImage]  # which part each pixel of each observation sees
     references: list[np.ndarray]  # the checked references, (h, w, 3) float32
     noise_known: bool = False  # every residual is divided by its predicted noise (a sensor per observation)
+    # per observation, how far (px) its render noise spreads before the residuals: the pixel
+    # filter's radius and the rms width of the sensor's PSF (0 without a sensor)
+    noise_spread_px: tuple[tuple[float, float], ...] = ()
 
 
 def _problem(
     observations: Sequence[Observation], free: FreeParameters, loss: str, spp: int | None, spp_grad: int | None,
     seed: int, seed_grad: int, integrator: str,
 ) -> Problem:
-    renders_x, renders_alt, renders_v, residuals, values_fns, part_images, references = [], [], [], [], [], [], []
+    renders_x, renders_alt, renders_v, residuals, values_fns, part_images, references, spread = [], [], [], [], [], [], [], []
     moving = any(n in MOVES_VERTICES for n in free.names)
     # the image nuisances act on the render in JAX; the renderer sees the other parameters
     rendered, image_model = split(free.names)
@@ -132,6 +135,8 @@ def _problem(
         values_fns.append(values_of)
         part_images.append(renderer.part_image())
         references.append(ref)
+        blur = 0.0 if obs.sensor is None else psf_rms_px(obs.sensor, assembly.intrinsics, ref.shape[-1])
+        spread.append((FILTER_RADIUS_PX[scene.render.filter], blur))
 
     def modelled(render: Callable[[jax.Array], jax.Array], k: int) -> Callable[[jax.Array], jax.Array]:
         return lambda x: image_model(render(x[rendered]), x, k)
@@ -149,7 +154,7 @@ def _problem(
             return 0.5 * jnp.sum(r**2)
 
     return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [modelled(render, k)(x) for k, render in enumerate(renders_x)],
-                   part_images, references, all(o.sensor is not None for o in observations))
+                   part_images, references, all(o.sensor is not None for o in observations), tuple(spread))
 
 
 def _residual(obs: Observation, reference: np.ndarray, loss: str, intrinsics: Intrinsics) -> Callable[[jax.Array], jax.Array]:

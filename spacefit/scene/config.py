@@ -29,7 +29,10 @@ from spacefit.errors import InputError, InputTypeError, check_choice, check_dire
 SOLAR_IRRADIANCE_W_M2 = 1361.0
 # The differentiable variants: the bridge needs AD (scalar variants cannot render a Jacobian).
 VARIANTS = ("auto", "llvm_ad_rgb", "cuda_ad_rgb")
-FILTERS = ("tent", "box", "gaussian")
+# Mitsuba's pixel filters and how far (px) each spreads a sample: the tent's radius 1, the box's
+# half pixel, the Gaussian's 4 standard deviations of 0.5 px.
+FILTER_RADIUS_PX = {"tent": 1.0, "box": 0.5, "gaussian": 2.0}
+FILTERS = tuple(FILTER_RADIUS_PX)
 # Mitsuba samplers; "independent" draws every sample alone, the others stratify a pixel's samples.
 SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler")
 WRINKLE_MODELS = ("auto", "geometry", "effective")
