@@ -41,3 +41,18 @@ def test_wrinkle_previews_put_the_default_in_the_mli_range_and_the_literal_readi
     lo, hi = sf.MLI_SLOPE_RANGE
     assert lo <= rows["default"]["rms_slope"] <= hi and rows["default"]["fold_fraction"] < 0.01
     assert rows["thesis_literal"]["rms_slope"] > hi and rows["thesis_literal"]["fold_fraction"] > 0.01
+
+
+def test_sample_allocation_bound_matches_its_closed_form():
+    """Two pixels of sigma 1 and 3: samples in proportion to sigma need (mean sigma)^2 / mean sigma^2
+    = 4 / 5 of uniform sampling's; a first pass that knows sigma exactly and spends a quarter
+    uniformly gets n = 0.25 + 0.75 * 2 sigma / 4 = (0.625, 1.375) and needs (1 / 0.625 + 9 / 1.375) / 10."""
+    import numpy as np
+    import sample_allocation
+
+    gains = sample_allocation.allocation_gains(np.array([1.0, 3.0]), np.array([1.0, 3.0]))
+    assert gains["ideal"] == pytest.approx(0.8)
+    assert gains["two_pass"] == pytest.approx((1 / 0.625 + 9 / 1.375) / 10)
+    # equal sigmas: nothing to gain; a noisy first pass only loses
+    flat = sample_allocation.allocation_gains(np.ones(4), np.array([0.5, 1.0, 1.5, 1.0]))
+    assert flat["ideal"] == pytest.approx(1.0) and flat["two_pass"] > 1.0
