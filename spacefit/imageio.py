@@ -19,7 +19,8 @@ mask). What each format holds:
 
 Saturated values are masked: at or above the FITS ``SATURATE`` keyword, else the sidecar's sensor
 ``saturation_dn``, else the integer type's full scale (2^bits - 1); float DN without either has no
-saturation mask.
+saturation mask. Pixels a user mask or a PNG's alpha leaves out are not checked and read as 0.
+:func:`sensor_of` gives the sensor of a DN image.
 """
 
 from __future__ import annotations

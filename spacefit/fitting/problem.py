@@ -90,7 +90,7 @@ class Observation:
         of a mapping ``sensor`` replacing its. A one-channel image is taken as grey.
 
         Raises:
-            InputError: DN with no sensor, a sensor or no ``sigma`` for the wrong unit, and every
+            InputError: DN with no sensor, a ``sensor`` for radiance or a ``sigma`` for DN, and every
                 refusal of ``read_image``, naming the file.
         """
         from spacefit.imageio import RADIANCE_UNIT, read_image, sensor_of  # FITS and TIFF readers: only files need them
