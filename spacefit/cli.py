@@ -1,5 +1,5 @@
 """Command line: ``spacefit render|scene|export-stl [SCENE.toml] --out PATH [--set key=value ...]`` and
-``spacefit fit REFERENCE.exr ... --scene SCENE.toml --free NAME[,NAME...] --out DIR``,
+``spacefit fit REFERENCE ... --scene SCENE.toml --free NAME[,NAME...] --out DIR [--mask M] [--sensor S]``,
 ``spacefit sweep SWEEP.toml --out STORE``."""
 
 from __future__ import annotations
@@ -56,10 +56,12 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     e.add_argument("--out", required=True, help="STL file to write")
     f = sub.add_parser("fit", parents=[overrides],
                        help="fit scene parameters to reference images: fit.json, fit.toml, uncertainty.json, comparison.png, convergence.png",
-                       description="Fit free scene parameters to reference radiance images. "
+                       description="Fit free scene parameters to reference images: radiance (EXR, FITS) or "
+                                   "DN (FITS, 16-bit PNG / TIFF) with their sensor's noise model. "
                                    "--set applies to every scene.")
-    f.add_argument("references", nargs="+", metavar="REFERENCE.exr",
-                   help="reference radiance images (OpenEXR, W m^-2 sr^-1), fitted jointly")
+    f.add_argument("references", nargs="+", metavar="REFERENCE",
+                   help="reference images fitted jointly: .exr radiance (W m^-2 sr^-1); .fits radiance (BUNIT "
+                        "'W m-2 sr-1') or DN; .png / .tif DN (give --response unless spacefit wrote them)")
     f.add_argument("--scene", dest="scenes", action="append", required=True, metavar="SCENE.toml",
                    help="scene of the references: one for all, or one per reference in order (repeatable)")
     f.add_argument("--free", required=True, metavar="NAME[,NAME...]", help=_free_help(command))
@@ -79,7 +81,16 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     f.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
                    help="start value of a free parameter (default: the first scene's value; repeatable)")
     f.add_argument("--sigma", type=float, metavar="S",
-                   help="noise standard deviation of the references, W m^-2 sr^-1 (residuals are divided by it)")
+                   help="noise standard deviation of radiance references, W m^-2 sr^-1 (residuals are divided by it)")
+    f.add_argument("--mask", dest="masks", action="append", default=[], metavar="MASK",
+                   help="mask image (FITS, PNG, TIFF; nonzero = use the pixel): one for all references, or one per "
+                        "reference in order (repeatable); saturated pixels are left out in any case")
+    f.add_argument("--sensor", metavar="SENSOR.json|.toml",
+                   help="sf.Sensor fields (JSON or TOML) of the camera of DN references: they replace those of a "
+                        "file's own sensor (FITS header or spacefit sidecar), or describe one that names none")
+    f.add_argument("--unit", metavar="radiance|DN", help="require the references to hold this unit")
+    f.add_argument("--response", metavar="linear|srgb",
+                   help="how PNG / TIFF values encode light: linear DN or sRGB-encoded (spacefit's own files say)")
     f.add_argument("--quiet", action="store_true", help="no progress output (the fitted values are still printed)")
     s = sub.add_parser("sweep", parents=[overrides], help="render a sweep of scene values into a resumable Zarr store",
                        description="Render a scene at every point of a sweep file's axes into a Zarr store, point by "
@@ -128,7 +139,8 @@ def _fit(args: argparse.Namespace) -> int:
              "max_steps": args.max_steps, "stop": args.stop}
     result = fit_to_folder(
         args.references, args.scenes, [name.strip() for name in args.free.split(",")], args.out,
-        overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, quiet=args.quiet,
+        overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, masks=args.masks, sensor=args.sensor,
+        unit=args.unit, response=args.response, quiet=args.quiet,
         overwrite=args.overwrite, resume=args.resume, start=_start_values(args.start),
         **{k: v for k, v in given.items() if v is not None},
     )

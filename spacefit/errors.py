@@ -20,6 +20,10 @@ class InputTypeError(InputError, TypeError):
     """A user-supplied value has the wrong type (a string where a number belongs, say)."""
 
 
+# How far below zero, in noise standard deviations, a radiance image with stated noise may dip: Gaussian
+# noise passes 5 sigma once in 3.5 million values, so a 600 x 600 RGB image with 2 % noise was refused
+# about one time in four; 8 sigma (6e-16 per value) refuses no honest image.
+NEGATIVE_SIGMAS = 8.0
 # The longest value a message quotes: a 5-million-number vector must not fill the screen.
 MAX_QUOTE = 120
 
@@ -129,3 +133,14 @@ def check_choice(name: str, value: str, choices: Iterable[str]) -> str:
     hint = f" Did you mean {close[0]!r}?" if close else ""
     error = InputError if isinstance(value, str) else InputTypeError
     raise error(f"`{name}` must be one of {shorten(', '.join(map(repr, valid)), 2000)}; got {quote(value)}.{hint}")
+
+
+def negative_pixels(values: np.ndarray, sigma: float | np.ndarray | None = None,
+                    used: np.ndarray | None = None) -> int:
+    """How many pixels of a radiance image have a used value below zero, or, with the image's noise
+    ``sigma`` (scalar, (h, w) or (h, w, c)) stated, below -:data:`NEGATIVE_SIGMAS` sigma."""
+    values = np.asarray(values, dtype=float)
+    floor = 0.0 if sigma is None else -NEGATIVE_SIGMAS * np.broadcast_to(
+        np.asarray(sigma, float)[..., None] if np.ndim(sigma) == 2 else np.asarray(sigma, float), values.shape)
+    below = values < floor
+    return int(np.count_nonzero(np.any(below if used is None else below & used, axis=-1)))

@@ -19,7 +19,8 @@ mask). What each format holds:
 
 Saturated values are masked: at or above the FITS ``SATURATE`` keyword, else the sidecar's sensor
 ``saturation_dn``, else the integer type's full scale (2^bits - 1); float DN without either has no
-saturation mask.
+saturation mask. Pixels a user mask or a PNG's alpha leaves out are not checked and read as 0.
+:func:`sensor_of` gives the sensor of a DN image.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from __future__ import annotations
 import dataclasses
 import json
 from dataclasses import dataclass
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -36,7 +38,7 @@ import tifffile
 from astropy.io import fits
 from jaxtyping import Bool, Float
 
-from spacefit.errors import InputError, check_choice
+from spacefit.errors import NEGATIVE_SIGMAS, InputError, check_choice, negative_pixels
 from spacefit.sensor import Sensor
 
 RADIANCE_UNIT = "W m^-2 sr^-1"
@@ -208,7 +210,8 @@ def _user_mask(mask: str | Path | np.ndarray, shape: tuple[int, ...]) -> np.ndar
     return np.any(values != 0, axis=-1)
 
 
-def read_image(path: str | Path, *, unit: str | None = None, response: str | None = None, mask: str | Path | np.ndarray | None = None) -> ObservedImage:
+def read_image(path: str | Path, *, unit: str | None = None, response: str | None = None, mask: str | Path | np.ndarray | None = None,
+               sigma: float | np.ndarray | None = None) -> ObservedImage:
     """Read a reference or observation, refusing what cannot be used as asked.
 
     Args:
@@ -216,11 +219,15 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         unit: ``"radiance"`` or ``"DN"`` to require one; None takes the file's.
         response: for PNG and TIFF, ``"linear"`` or ``"srgb"``; not needed for spacefit's own files.
         mask: a mask image (FITS, PNG, TIFF) or (height, width) array; nonzero = use the pixel.
+            Pixels it (or a PNG's alpha) leaves out may hold anything, NaN included: they read as 0.
+        sigma: the noise standard deviation of a radiance image (W m^-2 sr^-1, scalar or per
+            pixel): its values may then dip below 0 by up to :data:`NEGATIVE_SIGMAS` sigma.
     Returns:
         the data, unit, metadata and usable-pixel mask (see :class:`ObservedImage`).
     Raises:
         InputError: missing file, unknown format, a display image asked for as radiance, PNG / TIFF
-            without a response, NaN or infinity (any unit), negative radiance, a mask of another size.
+            without a response, NaN or infinity (any unit), negative radiance, a mask of another
+            size; each naming the file and the number of pixels.
     """
     wanted = UNITS[check_choice("unit", unit, UNITS)] if unit is not None else None
     if response is not None:
@@ -274,14 +281,16 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
     full_scale = float(np.iinfo(raw.dtype).max) if raw.dtype.kind in "ui" else None
     if meta["saturation_dn"] is None:
         meta["saturation_dn"] = full_scale if found_unit == "DN" else None
-    _check_values(values, found_unit, p)
-    usable = np.ones(values.shape, dtype=bool)
+    included = np.ones(values.shape[:2], dtype=bool)
+    if alpha is not None:
+        included &= alpha > 0
+    if mask is not None:
+        included &= _user_mask(mask, values.shape)
+    _check_values(values, found_unit, p, included, sigma)
+    values[~included] = 0.0
+    usable = np.broadcast_to(included[..., None], values.shape).copy()
     if meta["saturation_dn"] is not None:
         usable &= values < meta["saturation_dn"]
-    if alpha is not None:
-        usable &= (alpha > 0)[..., None]
-    if mask is not None:
-        usable &= _user_mask(mask, values.shape)[..., None]
     if meta["response"] == "srgb":
         scale = full_scale or 1.0
         values = np.asarray(colour.cctf_decoding(values / scale, function="sRGB")) * scale
@@ -298,11 +307,37 @@ def _fits_unit(header: fits.Header, wanted: str | None, path: Path) -> str:
     return found
 
 
-def _check_values(values: np.ndarray, unit: str, path: Path) -> None:
-    nonfinite = int(np.count_nonzero(~np.all(np.isfinite(values), axis=-1)))
+def _check_values(values: np.ndarray, unit: str, path: Path, included: np.ndarray, sigma: float | np.ndarray | None) -> None:
+    """Refuse NaN or infinity (any unit) and negative radiance in the pixels not masked out (``included``, (h, w))."""
+    nonfinite = int(np.count_nonzero(~np.all(np.isfinite(values), axis=-1) & included))
     if nonfinite:
-        raise InputError(f"{str(path)!r}: {nonfinite} pixels are NaN or infinite; a reference must be finite: set them to 0 and exclude them with a mask image (`mask=`).")
+        raise InputError(f"{str(path)!r}: {nonfinite} pixels are NaN or infinite; a reference must be finite where it is used: "
+                         "exclude them with a mask image (`mask=`, --mask: zero there).")
     if unit == RADIANCE_UNIT:
-        negative = int(np.count_nonzero(np.any(values < 0, axis=-1)))
+        negative = negative_pixels(values, sigma, np.broadcast_to(included[..., None], values.shape))
         if negative:
-            raise InputError(f"{str(path)!r}: {negative} pixels have negative radiance; radiance must be >= 0 W m^-2 sr^-1.")
+            noise = "" if sigma is None else f" by more than {NEGATIVE_SIGMAS:g} of its stated sigma"
+            raise InputError(f"{str(path)!r}: {negative} pixels have negative radiance{noise}; radiance must be >= 0 W m^-2 sr^-1 "
+                             "(give the image's noise sigma, or mask them out).")
+
+
+def sensor_of(image: ObservedImage, sensor: Sensor | Mapping[str, Any] | None = None) -> Sensor:
+    """The sensor that measured a DN image: ``sensor`` if it is an :class:`Sensor`; else the file's
+    own (spacefit FITS header or sidecar; for another FITS its ``EXPTIME`` and ``GAIN``) with the
+    fields of ``sensor`` (a mapping, e.g. a sensor file's) replacing its.
+
+    Raises:
+        InputError: when neither the file nor ``sensor`` describes a sensor (a DN image is not radiance).
+    """
+    if isinstance(sensor, Sensor):
+        return sensor
+    meta = image.metadata
+    header = {name: value for name, value in (("exposure_time_s", meta.get("exposure_time_s")),
+                                              ("gain_dn_per_electron", 1.0 / meta["gain_electrons_per_dn"] if meta.get("gain_electrons_per_dn") else None))
+              if value is not None}
+    if meta.get("sensor") is None and sensor is None:
+        found = f" (its header gives only {', '.join(f'{k} = {v:g}' for k, v in header.items())})" if header else ""
+        raise InputError(f"{image.path!r} holds DN (digital numbers), not radiance, and names no sensor{found}: give the camera "
+                         "that measured it, sensor=sf.Sensor(...) or a JSON / TOML file of its fields (spacefit fit --sensor FILE).")
+    fields = {**header, **(meta.get("sensor") or {}), **(sensor or {})}
+    return Sensor.from_dict(fields, f"the sensor of {image.path!r}")

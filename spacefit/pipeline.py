@@ -20,7 +20,7 @@ from spacefit.geometry.mesh import export_stl
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
 from spacefit.output import prepare_output, staged_output, versions, write_json, write_render
 from spacefit.progress import Progress
-from spacefit.rendering.exr import read_exr, write_exr
+from spacefit.rendering.exr import write_exr
 from spacefit.rendering.renderer import PartImage, Renderer, kernel_log
 from spacefit.scene.assembly import Assembly, assemble, fold_notes
 from spacefit.scene.config import Scene, load_scene, parse_override
@@ -157,18 +157,24 @@ def fit_to_folder(
     overrides: Sequence[str] = (),
     resolution: tuple[int, int] | None = None,
     sigma: float | None = None,
+    masks: Sequence[str | Path] = (),
+    sensor: str | Path | None = None,
+    unit: str | None = None,
+    response: str | None = None,
     quiet: bool = False,
     overwrite: bool = False,
     resume: bool = False,
     **options: Any,
 ) -> FitResult:
-    """Fit the ``free`` parameters to reference EXR files; write fit.json, fit.toml, uncertainty.json and the plots to ``out_dir``.
+    """Fit the ``free`` parameters to reference image files; write fit.json, fit.toml, uncertainty.json and the plots to ``out_dir``.
 
     Every input is checked before rendering (the folder is checked writable first); on any error
     nothing is left behind.
 
     Args:
-        references: reference radiance images (OpenEXR, W m^-2 sr^-1), fitted jointly.
+        references: reference images, fitted jointly, read by :meth:`Observation.from_file
+            <spacefit.fitting.problem.Observation.from_file>`: radiance (EXR, FITS with a radiance
+            ``BUNIT``), or DN (FITS, 16-bit PNG / TIFF) fitted with their sensor's noise model.
         scenes: scene TOML files: one for all references, or one per reference in order.
         free: parameter names (see :mod:`spacefit.scene.parameters`); their start values are the first
             scene's unless ``start`` is given.
@@ -176,7 +182,15 @@ def fit_to_folder(
         overrides: ``key=value`` scene overrides applied to every scene; none may fix a free parameter.
         resolution: (width, height) px replacing every scene's ``render.resolution``; the
             references must have that size.
-        sigma: noise standard deviation of the references, W m^-2 sr^-1 (residuals are divided by it).
+        sigma: noise standard deviation of radiance references, W m^-2 sr^-1 (residuals are divided by it).
+        masks: mask images (FITS, PNG, TIFF; nonzero = use the pixel): one for all references, or
+            one per reference in order; saturated pixels are left out in any case.
+        sensor: a JSON or TOML file of :class:`~spacefit.sensor.Sensor` fields
+            (:func:`~spacefit.sensor.read_sensor_file`) for DN references: they replace the
+            fields of each file's own sensor (FITS header or sidecar), or describe the camera of a
+            file that names none.
+        unit, response: ``"radiance"`` / ``"DN"`` to require one, and ``"linear"`` / ``"srgb"`` for
+            PNG and TIFF (:func:`~spacefit.imageio.read_image`).
         quiet: no progress display or messages on stderr.
         overwrite: replace a previous fit report in ``out_dir``.
         resume: continue the interrupted fit whose checkpoint is in ``out_dir`` (same inputs).
@@ -190,19 +204,23 @@ def fit_to_folder(
     from spacefit.fitting.problem import Observation
     from spacefit.fitting.report import write_fit_report
     from spacefit.fitting.solvers import Status
+    from spacefit.sensor import read_sensor_file
 
-    prepare_output(out_dir, "fit", overwrite=overwrite, resume=resume, inputs=(*references, *scenes))
-    if len(scenes) not in (1, len(references)):
-        raise InputError(
-            "give one scene for all references or one per reference; "
-            f"got {len(scenes)} scenes for {len(references)} references."
-        )
+    prepare_output(out_dir, "fit", overwrite=overwrite, resume=resume,
+                   inputs=(*references, *scenes, *masks, *([sensor] if sensor is not None else [])))
+    for what, given in (("scene", scenes), ("mask", masks)):
+        if len(given) not in ((0, 1, len(references)) if what == "mask" else (1, len(references))):
+            raise InputError(f"give one {what} for all references or one per reference; "
+                             f"got {len(given)} {what}s for {len(references)} references.")
     _check_not_fixed(free, overrides)
     t0 = time.perf_counter()
     scene_overrides = [*overrides, *([f"render.resolution=[{resolution[0]}, {resolution[1]}]"] if resolution else [])]
     loaded = [load_scene(path, scene_overrides) for path in scenes]
-    images = [read_exr(path) for path in references]
-    observations = [Observation(loaded[i % len(loaded)], image, sigma) for i, image in enumerate(images)]
+    sensor_fields = read_sensor_file(sensor) if sensor is not None else None
+    observations = [Observation.from_file(path, loaded[i % len(loaded)], sensor=sensor_fields, unit=unit, response=response,
+                                          mask=masks[i % len(masks)] if masks else None, sigma=sigma)
+                    for i, path in enumerate(references)]
+    images = [obs.reference for obs in observations]
     t_read = time.perf_counter() - t0
     display, last = Progress(f"fit {', '.join(free)}"), [0, 0]
 
@@ -218,6 +236,11 @@ def fit_to_folder(
         "overrides": scene_overrides,
         "scenes": [scene.to_dict() for scene in loaded],
         "sigma": sigma,
+        "masks": [str(path) for path in masks],
+        "sensor_file": None if sensor is None else str(sensor),
+        "sensors": [None if obs.sensor is None else obs.sensor.to_dict() for obs in observations],
+        "unit": unit,
+        "response": response,
         "options": options,
     }
     checkpoint = Checkpoint(Path(out_dir) / CHECKPOINT, inputs)

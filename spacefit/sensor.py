@@ -28,9 +28,12 @@ is the Poisson-Gaussian variance of step 4 (Janesick 2007, "Photon Transfer", ch
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
+import tomllib
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -39,7 +42,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 from scipy import constants, optimize, special
 
-from spacefit.errors import InputError, check_range
+from spacefit.errors import InputError, InputTypeError, check_choice, check_range, quote
 from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
 
 AIRY_FIRST_ZERO = 3.8317059702075125
@@ -141,10 +144,41 @@ class Sensor:
         return self.wavelength_m
 
     def to_dict(self) -> dict[str, Any]:
-        """Every field as plain JSON values; ``Sensor(**d)`` rebuilds it."""
+        """Every field as plain JSON values; :meth:`from_dict` rebuilds it."""
         d = dataclasses.asdict(self)
         d["wavelength_m"] = list(self.wavelength_m)
         return d
+
+    @classmethod
+    def from_dict(cls, fields: Mapping[str, Any], where: str = "sensor") -> Sensor:
+        """A sensor from some or all of its fields (the others take their defaults), checked;
+        ``where`` names the source in messages (a file, an argument)."""
+        if not isinstance(fields, Mapping):
+            raise InputTypeError(f"{where} must be a table of sf.Sensor's fields, got {quote(fields)}.")
+        names = [f.name for f in dataclasses.fields(cls)]
+        for key in fields:
+            check_choice(f"{where}: field", key, names)
+        return cls(**fields)
+
+
+def read_sensor_file(path: str | Path) -> dict[str, Any]:
+    """The fields of :class:`Sensor` in a JSON or TOML file, checked (unknown fields and bad values
+    refused, naming the file): a table of fields, or a file whose ``sensor`` table holds them (a
+    spacefit sidecar ``obs.fits.json``). TOML has no null: a sensor without a full well
+    (``full_well_electrons = null``) is written as JSON."""
+    p = Path(path)
+    if not p.is_file():
+        raise InputError(f"sensor file {str(p)!r} does not exist.")
+    suffix = p.suffix.lower()
+    if suffix not in (".json", ".toml"):
+        raise InputError(f"sensor file {str(p)!r} must be .json or .toml, got {suffix or '(no extension)'!r}.")
+    try:
+        data = json.loads(p.read_text()) if suffix == ".json" else tomllib.loads(p.read_text())
+    except (ValueError, UnicodeDecodeError) as err:
+        raise InputError(f"sensor file {str(p)!r} could not be read as {suffix[1:].upper()}: {err}") from None
+    fields = data.get("sensor", data) if isinstance(data, dict) else data
+    Sensor.from_dict(fields, f"sensor file {str(p)!r}")
+    return dict(fields)
 
 
 def _check_radiance(radiance: Any, intrinsics: Intrinsics) -> None:

@@ -10,8 +10,13 @@ import numpy as np
 import pytest
 from helpers import small_scene, write_sphere_obj
 
+import spacefit as sf
 from spacefit.cli import NOT_CONVERGED, main
 from spacefit import FitResult
+from spacefit.imageio import sidecar_path
+from spacefit.rendering.png import write_png
+from spacefit.scene.assembly import assemble
+from spacefit.scene.config import load_scene
 from spacefit.pipeline import fit_to_folder
 from spacefit.rendering.renderer import render
 from spacefit.rendering.exr import read_exr, write_exr
@@ -32,6 +37,75 @@ def case(tmp_path_factory) -> Path:
         start = small_scene(mesh, {"material": "white_paint", "kd": 0.3}, render={"spp": 4}, **sections)
         (d / f"{name}.toml").write_text(start.to_toml())
     return d
+
+
+# About 2000 DN on the lit sphere in 12 bits, no full well.
+SENSOR = sf.Sensor(exposure_time_s=1e-6, gain_dn_per_electron=0.5, bias_dn=50.0, bit_depth=12, full_well_electrons=None)
+
+
+@pytest.fixture(scope="module")
+def dn_case(case) -> Path:
+    """The sphere's reference a.exr observed by SENSOR: obs.fits (the sensor in its header and sidecar),
+    bare.png (no sidecar: no sensor), sensor.json, and mask.png leaving out the left half."""
+    dn = sf.observe(read_exr(case / "a.exr"), SENSOR, assemble(load_scene(case / "a.toml")).intrinsics, seed=3)
+    sf.write_observation(case / "obs.fits", dn, SENSOR)
+    sf.write_observation(case / "bare.png", dn, SENSOR)
+    sidecar_path(case / "bare.png").unlink()
+    (case / "sensor.json").write_text(json.dumps(SENSOR.to_dict()))
+    mask = np.full((32, 32), 255, dtype=np.uint8)
+    mask[:, :16] = 0
+    write_png(case / "mask.png", mask)
+    return case
+
+
+def test_cli_fits_dn_with_its_sensor_and_records_it(dn_case, tmp_path):
+    out = tmp_path / "run"
+    code = main(_args(dn_case, out, "--spp", "2", reference="obs.fits"))
+    assert sorted(os.listdir(out)) == REPORT
+    report = json.loads((out / "fit.json").read_text())
+    assert code == (0 if report["success"] else NOT_CONVERGED)
+    assert abs(report["values"]["parts.sphere.kd"] - TRUE_KD) < 0.03
+    assert report["inputs"]["sensors"] == [SENSOR.to_dict()] and report["inputs"]["masks"] == []
+
+
+def test_cli_takes_a_sensor_file_a_response_and_a_mask(dn_case, tmp_path):
+    out = tmp_path / "run"
+    extra = ["--spp", "2", "--sensor", str(dn_case / "sensor.json"), "--response", "linear", "--mask", str(dn_case / "mask.png")]
+    code = main(_args(dn_case, out, *extra, reference="bare.png"))
+    assert sorted(os.listdir(out)) == REPORT
+    report = json.loads((out / "fit.json").read_text())
+    assert code == (0 if report["success"] else NOT_CONVERGED)
+    assert abs(report["values"]["parts.sphere.kd"] - TRUE_KD) < 0.03
+    inputs = report["inputs"]
+    assert inputs["sensors"] == [SENSOR.to_dict()] and inputs["sensor_file"] == str(dn_case / "sensor.json")
+    assert inputs["masks"] == [str(dn_case / "mask.png")] and inputs["response"] == "linear"
+
+
+@pytest.mark.parametrize(
+    ("reference", "extra", "message"),
+    [
+        ("bare.png", ["--response", "linear"], "holds DN (digital numbers), not radiance, and names no sensor"),
+        ("bare.png", [], "of unknown response; say how its values encode light"),
+        ("obs.fits", ["--sensor", "missing.json"], "sensor file 'missing.json' does not exist"),
+        ("obs.fits", ["--sensor", "{case}/mask.png"], "must be .json or .toml, got '.png'"),
+        ("obs.fits", ["--sensor", "{case}/bad_sensor.json"], "Did you mean 'bit_depth'?"),
+        ("obs.fits", ["--mask", "missing.png"], "mask file 'missing.png' does not exist"),
+        ("obs.fits", ["--mask", "{case}/mask.png", "--mask", "{case}/mask.png"], "got 2 masks for 1 references"),
+        ("obs.fits", ["--mask", "{case}/small_mask.png"], "`mask` is 8 x 8 px, the image 32 x 32 px"),
+        ("obs.fits", ["--unit", "radiance"], "BUNIT = 'adu' is DN, but W m^-2 sr^-1 was asked for"),
+        ("obs.fits", ["--sigma", "0.01"], "holds DN: its noise is its sensor's; leave `sigma` out"),
+        ("a.exr", ["--sensor", "{case}/sensor.json"], "`sensor` describes the camera of a DN image"),
+        ("a.exr", ["--response", "gamma"], "`response` must be one of 'linear', 'srgb'"),
+    ],
+)
+def test_bad_observation_inputs_exit_2_and_leave_nothing(dn_case, tmp_path, capsys, reference, extra, message):
+    (dn_case / "bad_sensor.json").write_text('{"bitdepth": 12}')
+    write_png(dn_case / "small_mask.png", np.ones((8, 8), dtype=np.uint8))
+    out = tmp_path / "run"
+    extra = [e.replace("{case}", str(dn_case)) for e in extra]
+    assert main(_args(dn_case, out, *extra, reference=reference)) == 2
+    assert message in capsys.readouterr().err
+    assert not out.exists()
 
 
 def _args(case: Path, out: Path, *extra: str, reference: str = "a.exr") -> list[str]:
@@ -96,7 +170,7 @@ def _write_bad_reference(folder: Path, kind: str, reference: Path) -> Path:
 
 @pytest.mark.parametrize(
     ("kind", "message"),
-    [("missing", "does not exist"), ("unreadable", "could not be read as OpenEXR"), ("nan", "reference 0 holds NaN")],
+    [("missing", "does not exist"), ("unreadable", "could not be read as OpenEXR"), ("nan", "nan.exr': 1 pixels are NaN or infinite")],
 )
 def test_bad_reference_exits_2_and_leaves_nothing(case, tmp_path, capsys, kind, message):
     out = tmp_path / "run"

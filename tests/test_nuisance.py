@@ -161,13 +161,59 @@ def test_per_observation_gain_and_offset_columns_match_finite_differences_and_ac
     assert np.all(J[:half, 3] == 0) and np.all(J[half:, 3] == 1)  # offset@1: every pixel of observation 1
 
 
+def test_per_observation_psf_and_shift_columns_match_finite_differences_and_act_on_their_own_observation():
+    scenes = two_observations(4)
+    free = ["parts.panels.alpha_x", "image.psf_sigma_px@0", "image.psf_sigma_px@1", "image.shift_x_px@1", "image.shift_y_px@0"]
+    at = {"image.psf_sigma_px@0": 0.6, "image.psf_sigma_px@1": 1.2, "image.shift_x_px@1": 0.3, "image.shift_y_px@0": -0.2}
+    observations = [sf.Observation(s, np.asarray(sf.render(s))) for s in scenes]
+
+    @float64
+    def run():
+        s = setup(observations, free, at, "pixel", None, None, 1, 2, "prb", "fd", "rms")
+        x = jnp.asarray(s.x0)
+        J = np.asarray(jax.jacfwd(s.problem.residual_x)(x))
+        fd = []
+        for j in range(1, len(free)):
+            e = jnp.zeros(len(x)).at[j].set(1e-4)
+            fd.append((np.asarray(s.problem.residual_x(x + e)) - np.asarray(s.problem.residual_x(x - e))) / 2e-4)
+        return J, fd
+
+    J, fd = run()
+    half = J.shape[0] // 2
+    for j, column in enumerate(fd, start=1):
+        assert cosine(J[:, j], column) >= 0.99
+        np.testing.assert_allclose(np.linalg.norm(J[:, j]), np.linalg.norm(column), rtol=1e-2)
+        own = slice(None, half) if free[j].endswith("@0") else slice(half, None)
+        other = slice(half, None) if free[j].endswith("@0") else slice(None, half)
+        assert np.all(J[other, j] == 0) and np.any(J[own, j] != 0), free[j]
+
+
+PSF_WIDTHS = (0.5, 1.3)
+
+
+def test_two_observations_with_different_psf_widths_and_shifts_recover_each():
+    """Two views of the tiny panels case rendered at 256 spp, blurred by Gaussians of 0.5 and 1.3 px
+    and the second moved 0.4 px rightwards; a fit (64 spp, materials at their truth) of each one's
+    PSF width (from 0.9 px) and the second's x shift (from 0) recovers them."""
+    fitted, truths = two_observations(64), two_observations(256)
+    observed = [np.asarray(blur(jnp.asarray(np.asarray(sf.render(t), float)), w)) for w, t in zip(PSF_WIDTHS, truths)]
+    observed[1] = np.asarray(shift(jnp.asarray(observed[1]), 0.4, 0.0))
+    observations = [sf.Observation(s, np.clip(o, 0.0, None)) for s, o in zip(fitted, observed)]
+    free = ["image.psf_sigma_px@0", "image.psf_sigma_px@1", "image.shift_x_px@1"]
+    result = sf.fit(observations, free, start={"image.psf_sigma_px@0": 0.9, "image.psf_sigma_px@1": 0.9})
+    assert result.success, result.status
+    for k, w in enumerate(PSF_WIDTHS):
+        assert abs(result.values[f"image.psf_sigma_px@{k}"] - w) < 0.1, result.values
+    assert abs(result.values["image.shift_x_px@1"] - 0.4) < 0.05, result.values
+
+
 @pytest.mark.parametrize("free, match", [
     (["image.gain@2"], r"'image\.gain@2'.*'2'.*from 0 to 1 \(the fit has 2 observations\)"),
     (["image.gain@-1"], r"'image\.gain@-1'.*'-1'.*from 0 to 1"),
     (["image.offset_w_m2_sr@one"], r"'image\.offset_w_m2_sr@one'.*'one'.*from 0 to 1"),
     (["image.gain@01"], r"'image\.gain@01'.*from 0 to 1"),
     (["image.gain@\u00b2"], r"'image\.gain@\u00b2'.*from 0 to 1"),  # a superscript two: a digit to str.isdigit
-    (["parts.legs.kd@1"], r"'parts\.legs\.kd@1'.*only image\.gain, image\.offset_w_m2_sr"),
+    (["parts.legs.kd@1"], r"'parts\.legs\.kd@1'.*only image\.gain, image\.offset_w_m2_sr, image\.psf_sigma_px, image\.shift_x_px, image\.shift_y_px"),
     (["image.gain", "image.gain@1"], r"both 'image\.gain'.*'image\.gain@1'"),
 ])
 def test_bad_per_observation_names_are_refused(free, match):

@@ -16,7 +16,7 @@ from collections.abc import Callable
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 from spacefit.errors import InputError, check_choice
 
@@ -39,7 +39,8 @@ def _statistics(image: Array, mask: np.ndarray) -> Array:
 
 
 def residual_fn(reference: Float[np.ndarray, "h w 3"], loss: str = "pixel",
-                sigma: float | np.ndarray | Callable[[Array], Array] | None = None) -> Residual:
+                sigma: float | np.ndarray | Callable[[Array], Array] | None = None,
+                mask: Bool[np.ndarray, "h w 3"] | None = None) -> Residual:
     """The residual function ``image -> r`` of a loss against ``reference``.
 
     Args:
@@ -51,9 +52,12 @@ def residual_fn(reference: Float[np.ndarray, "h w 3"], loss: str = "pixel",
             of the model image, the noise it predicts (held fixed in derivatives: a quasi-likelihood,
             unbiased where weights from the reference's own noisy values would favour low pixels).
             None: unweighted.
+        mask: the values to compare (True) and those left out (their differences are 0 in every
+            loss; the reference must be finite there); None: all.
     """
     check_choice("loss", loss, LOSSES)
     ref = jnp.asarray(reference, dtype=jnp.float32)
+    keep = 1.0 if mask is None else jnp.asarray(np.broadcast_to(mask, ref.shape), dtype=jnp.float32)
 
     def weight(image: Array) -> Array | float:
         return 1.0
@@ -72,20 +76,25 @@ def residual_fn(reference: Float[np.ndarray, "h w 3"], loss: str = "pixel",
         def weight(image: Array) -> Array | float:
             return fixed
 
+    def difference(image: Array) -> Array:
+        return (image - ref) * weight(image) * keep
+
     if loss == "pixel":
-        return lambda image: jnp.ravel((image - ref) * weight(image))
+        return lambda image: jnp.ravel(difference(image))
     if loss == "pyramid":
         sizes = [2**level for level in range(PYRAMID_LEVELS) if 2**level <= min(ref.shape[:2])]
-        return lambda image: jnp.concatenate([jnp.ravel(_block_mean((image - ref) * weight(image), s) * s) for s in sizes])
-    mask = np.asarray(reference).mean(axis=-1) > 0
-    if mask.sum() < 16:
-        raise InputError("the `stats` loss needs at least 16 lit pixels in the reference.")
-    ref_stats = _statistics(ref, mask)
-    scale = float(np.asarray(reference)[mask].mean())
-    n_stats = float(np.sqrt(mask.sum()))  # weigh the statistics like a block of that many pixels
+        return lambda image: jnp.concatenate([jnp.ravel(_block_mean(difference(image), s) * s) for s in sizes])
+    lit = np.asarray(reference).mean(axis=-1) > 0
+    if mask is not None:
+        lit &= np.all(np.broadcast_to(mask, ref.shape), axis=-1)
+    if lit.sum() < 16:
+        raise InputError("the `stats` loss needs at least 16 lit pixels (not masked out) in the reference.")
+    ref_stats = _statistics(ref, lit)
+    scale = float(np.asarray(reference)[lit].mean())
+    n_stats = float(np.sqrt(lit.sum()))  # weigh the statistics like a block of that many pixels
 
     def stats(image: Array) -> Array:
-        coarse = jnp.ravel(_block_mean(image - ref, STATS_BLOCK)) * STATS_BLOCK
-        return jnp.concatenate([(_statistics(image, mask) - ref_stats) / scale * n_stats, coarse / scale])
+        coarse = jnp.ravel(_block_mean((image - ref) * keep, STATS_BLOCK)) * STATS_BLOCK
+        return jnp.concatenate([(_statistics(image, lit) - ref_stats) / scale * n_stats, coarse / scale])
 
     return stats

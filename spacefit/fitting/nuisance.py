@@ -3,8 +3,8 @@
 The model image of a fit is ``gain * shift(psf * render) + offset``: ``psf`` the pixel-integrated
 Gaussian of :func:`spacefit.sensor.gaussian_pixel_weights` (sigma in px), ``shift`` a sub-pixel
 translation by a Fourier phase (px; +x rightwards along columns, +y downwards along rows; the image
-is padded with black sky first, so nothing wraps round). The gain and the offset may be each
-observation's own (``image.gain@k``, :func:`~spacefit.scene.parameters.observation_name`). Only the free ones are applied; their
+is padded with black sky first, so nothing wraps round). Each may be one observation's own
+(``image.psf_sigma_px@k``, :func:`~spacefit.scene.parameters.observation_name`). Only the free ones are applied; their
 Jacobian columns are JAX's own derivatives (no render). The pose nuisances move vertices and are
 rendered (:mod:`spacefit.rendering.values`, central differences with common random numbers).
 """

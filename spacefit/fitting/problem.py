@@ -10,12 +10,14 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import InputError, InputTypeError, check_choice, check_count, quote
+from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_choice, check_count, negative_pixels, quote
 from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.nuisance import split
 from spacefit.fitting.params import FreeParameters, free_parameters
@@ -29,10 +31,6 @@ from spacefit.sensor import Sensor, dn_fn, noise_variance_dn, psf_rms_px, satura
 from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, rms_of, scene_value
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
-# How far below zero, in noise standard deviations, a reference with stated noise may dip: Gaussian
-# noise passes 5 sigma once in 3.5 million values, so a 600 x 600 RGB image with 2 % noise was refused
-# about one time in four; 8 sigma (6e-16 per value) refuses no honest image.
-NEGATIVE_SIGMAS = 8.0
 # Seed offset of the second, independent Jacobian used for the standard errors.
 INDEPENDENT_SEED_OFFSET = 1000
 
@@ -48,12 +46,17 @@ class Observation:
     Poisson-Gaussian noise (:func:`~spacefit.sensor.noise_variance_dn` at the model's DN, held fixed in derivatives),
     saturated pixels are left out, and the standard errors are the noise model's (J^T W J)^-1
     instead of the sandwich. ``sigma`` must then be None.
+    ``mask``: which values to fit, (h, w) or (h, w, channels) bool, True = use (None: all). The
+    residuals of the others are 0 in every loss and they count for nothing (not in the degrees of
+    freedom, not in the noise floor); they may hold anything, NaN included.
+    :meth:`from_file` reads all of these from an image file.
     """
 
     scene: Scene
     reference: np.ndarray
     sigma: float | np.ndarray | None = None
     sensor: Sensor | None = None
+    mask: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         check_scene(self.scene, "Observation.scene")
@@ -65,10 +68,48 @@ class Observation:
         if not (np.issubdtype(ref.dtype, np.floating) or np.issubdtype(ref.dtype, np.integer)):
             raise InputTypeError(f"`Observation.reference` must be a real-valued radiance image, got dtype {ref.dtype} "
                                  "(a complex image's imaginary part is not radiance).")
+        if self.mask is not None:
+            mask = np.asarray(self.mask)
+            if mask.dtype != bool:
+                raise InputTypeError(f"`Observation.mask` must be a bool array (True = fit the value), got dtype {mask.dtype}.")
+            if not mask.any():
+                raise InputError(f"`Observation.mask` is False everywhere ({mask.size} values): it leaves nothing to fit.")
+
+    @classmethod
+    def from_file(
+        cls, path: str | Path, scene: Scene, *, sensor: Sensor | Mapping[str, Any] | None = None, unit: str | None = None,
+        response: str | None = None, mask: str | Path | np.ndarray | None = None, sigma: float | np.ndarray | None = None,
+    ) -> Observation:
+        """The observation in an image file (EXR, FITS, PNG, TIFF; :func:`~spacefit.imageio.read_image`,
+        which takes ``unit``, ``response``, ``mask`` and ``sigma``), with its usable-pixel mask
+        (saturated, transparent and user-masked pixels left out).
+
+        Radiance is fitted as radiance (``sigma`` its noise). DN are fitted with their sensor
+        (:func:`~spacefit.imageio.sensor_of`): ``sensor`` as given (an sf.Sensor), or the file's own
+        (spacefit FITS header or sidecar; a foreign FITS's ``EXPTIME`` and ``GAIN``) with the fields
+        of a mapping ``sensor`` replacing its. A one-channel image is taken as grey.
+
+        Raises:
+            InputError: DN with no sensor, a ``sensor`` for radiance or a ``sigma`` for DN, and every
+                refusal of ``read_image``, naming the file.
+        """
+        from spacefit.imageio import RADIANCE_UNIT, read_image, sensor_of  # FITS and TIFF readers: only files need them
+
+        image = read_image(path, unit=unit, response=response, mask=mask, sigma=sigma)
+        data, used = (image.data[..., 0], image.mask[..., 0]) if image.data.shape[-1] == 1 else (image.data, image.mask)
+        if image.unit == RADIANCE_UNIT:
+            if sensor is not None:
+                raise InputError(f"{image.path!r} holds radiance ({RADIANCE_UNIT}); `sensor` describes the camera of a DN "
+                                 "image: leave it out.")
+            return cls(scene, data, sigma, mask=used)
+        if sigma is not None:
+            raise InputError(f"{image.path!r} holds DN: its noise is its sensor's; leave `sigma` out.")
+        return cls(scene, data, sensor=sensor_of(image, sensor), mask=used)
 
 
-def check_reference(obs: Observation, index: int) -> np.ndarray:
-    """The observation's reference as a float32 (h, w, 3) array, checked against its scene."""
+def check_reference(obs: Observation, index: int) -> tuple[np.ndarray, np.ndarray]:
+    """The observation's reference as a float32 (h, w, 3) array, checked against its scene, with
+    masked-out values set to 0, and its (h, w, 3) bool mask of the values to fit."""
     ref = np.asarray(obs.reference, dtype=np.float32)
     w, h = obs.scene.render.resolution
     if ref.ndim == 2:
@@ -78,18 +119,28 @@ def check_reference(obs: Observation, index: int) -> np.ndarray:
             f"reference {index} has shape {ref.shape}, but its scene renders (height, width) = ({h}, {w}); "
             "render the reference at the scene's resolution or set `render.resolution`."
         )
-    ref = ref[..., :3]
-    if not np.all(np.isfinite(ref)):
-        raise InputError(f"reference {index} holds NaN or infinite pixels ({int(np.sum(~np.isfinite(ref)))}).")
-    # Radiance is never negative; a reference with stated noise may dip below zero by that noise.
-    floor = 0.0 if obs.sigma is None else -NEGATIVE_SIGMAS * np.broadcast_to(
-        np.asarray(obs.sigma, float)[..., None] if np.ndim(obs.sigma) == 2 else np.asarray(obs.sigma, float), ref.shape)
-    below = int(np.any(ref < floor, axis=-1).sum())
+    used = np.ones(ref.shape, dtype=bool) if obs.mask is None else _mask(obs.mask, ref.shape, index)
+    ref, used = ref[..., :3], used[..., :3]
+    nonfinite = int(np.any(~np.isfinite(ref) & used, axis=-1).sum())
+    if nonfinite:
+        raise InputError(f"reference {index} holds NaN or infinite pixels ({nonfinite}); leave them out with its mask "
+                         "(`Observation.mask` False there).")
+    below = negative_pixels(ref, obs.sigma, used)
     if below:
         noise = "" if obs.sigma is None else f" by more than {NEGATIVE_SIGMAS:g} of its stated sigma"
         raise InputError(f"reference {index} holds {below} pixels with negative values{noise}: radiance is never negative; give "
                          "the image's noise sigma, or fit the DN it was measured in with its sensor.")
-    return ref
+    return np.where(used, ref, np.float32(0.0)), used
+
+
+def _mask(mask: np.ndarray, shape: tuple[int, ...], index: int) -> np.ndarray:
+    """An observation's mask broadcast to its reference's (h, w, c) shape."""
+    m = np.asarray(mask)
+    m = m[..., None] if m.ndim == 2 else m
+    if m.ndim != 3 or m.shape[:2] != shape[:2] or m.shape[2] not in (1, shape[2]):
+        raise InputError(f"mask {index} (`Observation.mask`) has shape {m.shape}; its reference is {shape}: give "
+                         f"(height, width) = {shape[:2]} or (height, width, channels) = {shape}.")
+    return np.broadcast_to(m, shape)
 
 
 @dataclass
@@ -120,7 +171,7 @@ def _problem(
     rendered_names = [free.names[i] for i in rendered]
     steps = free.fd_steps[rendered]
     for i, obs in enumerate(observations):
-        ref = check_reference(obs, i)
+        ref, used = check_reference(obs, i)
         scene = obs.scene
         assembly = assemble(scene)
         # D, G and the pose move the vertices: render the whole film, the target's window would not hold them
@@ -131,7 +182,7 @@ def _problem(
         alt = INDEPENDENT_SEED_OFFSET
         renders_alt.append(render_params(dscene, values_of, steps, seed + alt, seed_grad + alt))
         renders_v.append(render_values(dscene, seed, seed_grad))
-        residuals.append(_residual(obs, ref, loss, assembly.intrinsics))
+        residuals.append(_residual(obs, ref, used, loss, assembly.intrinsics))
         values_fns.append(values_of)
         part_images.append(renderer.part_image())
         references.append(ref)
@@ -157,20 +208,16 @@ def _problem(
                    part_images, references, all(o.sensor is not None for o in observations), tuple(spread))
 
 
-def _residual(obs: Observation, reference: np.ndarray, loss: str, intrinsics: Intrinsics) -> Callable[[jax.Array], jax.Array]:
-    """The residuals of a model radiance image against the observation: in radiance, or with a
-    sensor, in DN divided by the noise the sensor predicts at the model's DN (saturated pixels of
-    the reference weigh 0)."""
+def _residual(obs: Observation, reference: np.ndarray, used: np.ndarray, loss: str,
+              intrinsics: Intrinsics) -> Callable[[jax.Array], jax.Array]:
+    """The residuals of a model radiance image against the observation, 0 where ``used`` is False:
+    in radiance, or with a sensor, in DN divided by the noise the sensor predicts at the model's DN
+    (saturated pixels of the reference left out)."""
     if obs.sensor is None:
-        return residual_fn(reference, loss, obs.sigma)
+        return residual_fn(reference, loss, obs.sigma, used)
     sensor = obs.sensor
-    saturated = jnp.asarray(saturated_mask(reference, sensor))
-
-    def sigma(dn: jax.Array) -> jax.Array:
-        return jnp.where(saturated, jnp.inf, jnp.sqrt(noise_variance_dn(dn, sensor)))
-
     to_dn = dn_fn(sensor, intrinsics, reference.shape[-1])
-    res = residual_fn(reference, loss, sigma)
+    res = residual_fn(reference, loss, lambda dn: jnp.sqrt(noise_variance_dn(dn, sensor)), used & ~saturated_mask(reference, sensor))
     return lambda image: res(to_dn(image))
 
 

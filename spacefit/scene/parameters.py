@@ -12,10 +12,10 @@ Names address the scene file's keys: ``wrinkles.D``; ``parts.P.alpha_x`` for par
 
 ``image.*`` are nuisances of the image formation (an exposure scale, an offset, a Gaussian PSF, a
 sub-pixel shift): a fit applies them to the render in JAX (:mod:`spacefit.fitting.nuisance`), so
-they are fit-only names; a render or a sweep refuses them. Without them free, none is applied. The
-gain and the offset may be one per observation of a joint fit: ``image.gain@k`` is observation k's
-alone (k from 0, in the order the observations are given), ``image.gain`` one shared by all
-(:func:`observation_name`). Together with the target's pose (``target.attitude_*_deg``,
+they are fit-only names; a render or a sweep refuses them. Without them free, none is applied. Each
+may be one per observation of a joint fit (:attr:`Parameter.per_observation`): ``image.gain@k`` is
+observation k's alone (k from 0, in the order the observations are given), ``image.gain`` one
+shared by all (:func:`observation_name`). Together with the target's pose (``target.attitude_*_deg``,
 ``target.position_*_m``) and the camera's roll about its optical axis (``camera.roll_deg``) they are
 a fit's nuisance parameters (:data:`NUISANCES`), reported apart from the materials.
 
@@ -169,14 +169,15 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
                 fd_step=0.02, scene_fields=("position_m",)) for axis in "xyz"),
     Parameter("camera.roll_deg", "deg", Bijection(-math.inf),
               "the camera's turn about its optical axis (image up towards image right), either camera mode", fd_step=0.5),
-    Parameter("image.gain", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1; "
-              "`image.gain@k`: observation k's own)", per_observation=True),
-    Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", Bijection(-math.inf),
-              "offset added to every pixel (fit only; default 0; `image.offset_w_m2_sr@k`: observation k's own)", per_observation=True),
+    Parameter("image.gain", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1)",
+              per_observation=True),
+    Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", Bijection(-math.inf), "offset added to every pixel (fit only; default 0)",
+              per_observation=True),
     Parameter("image.psf_sigma_px", "px", Bijection(0.0, PSF_SIGMA_MAX_PX),
-              "sigma of a pixel-integrated Gaussian PSF (fit only; not free: no blur; default start 0.5)"),
+              "sigma of a pixel-integrated Gaussian PSF (fit only; not free: no blur; default start 0.5)", per_observation=True),
     *(Parameter(f"image.shift_{axis}_px", "px", Bijection(-math.inf),
-                f"sub-pixel shift of the image towards +{axis} ({where}), by a Fourier phase (fit only; default 0)")
+                f"sub-pixel shift of the image towards +{axis} ({where}), by a Fourier phase (fit only; default 0)",
+                per_observation=True)
       for axis, where in (("x", "columns, rightwards"), ("y", "rows, downwards"))),
 )}
 GEOMETRY = ("wrinkles.D", "wrinkles.G", "wrinkles.rms_m")
@@ -197,7 +198,7 @@ PSF_SIGMA_START_PX = 0.5
 JOINT = (SUN_ANGLES, ATTITUDE, POSITION)
 
 
-def observation_name(name: str, observation: int) -> str:
+def observation_name(name: str, observation: int | str) -> str:
     """The name of per-observation parameter ``name`` for observation ``observation`` alone (``image.gain@1``)."""
     return f"{name}{OBSERVATION_MARK}{observation}"
 
@@ -356,7 +357,8 @@ def parameter_table() -> str:
         column = "forward-mode AD" if not p.fd_step else (
             f"central differences, step {p.fd_step:g}{' x value' if p.relative_step else ' ' + p.unit}")
         kinds = f" ({', '.join(m.__name__ for m in p.materials)})" if p.materials else ""
-        rows.append(f"| `{p.pattern}` | {p.unit} | {p.bijection.describe()} | {column} | {p.doc}{kinds} |")
+        own = f"; `{observation_name(p.pattern, 'k')}`: observation k's own" if p.per_observation else ""
+        rows.append(f"| `{p.pattern}` | {p.unit} | {p.bijection.describe()} | {column} | {p.doc}{kinds}{own} |")
     return "\n".join(rows)
 
 

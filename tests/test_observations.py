@@ -1,0 +1,165 @@
+"""Observations from files and their masks: `Observation.mask` in every residual path, the
+degrees of freedom and the noise floor, and `Observation.from_file` for EXR, FITS and PNG."""
+
+from __future__ import annotations
+
+import json
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from astropy.io import fits
+from helpers import small_scene, write_sphere_obj
+
+import spacefit as sf
+from spacefit.fitting.problem import setup
+from spacefit.fitting.stopping import loss_noise
+from spacefit.imageio import sidecar_path
+from spacefit.precision import float64
+from spacefit.rendering.exr import write_exr
+from spacefit.rendering.png import write_png
+from spacefit.scene.assembly import assemble
+from spacefit.sensor import read_sensor_file
+
+TRUE_KD = 0.5
+# 32 x 32 px: bright enough for about 2000 DN on the sphere in a 12-bit sensor; no full well.
+SENSOR = sf.Sensor(exposure_time_s=1e-6, gain_dn_per_electron=0.5, bias_dn=50.0, bit_depth=12, full_well_electrons=None)
+SQUARE = (slice(4, 12), slice(14, 22))  # on the sphere's lit limb
+
+
+@pytest.fixture(scope="module")
+def sphere(tmp_path_factory):
+    """A 32 x 32 Lambert sphere: the truth (kd 0.5, 16 spp, seed 7), the scene to fit (kd 0.3, 4 spp), a mask without SQUARE."""
+    d = tmp_path_factory.mktemp("obs")
+    mesh = write_sphere_obj(d / "sphere.obj", subdivisions=3)
+    sections = {"camera": {"pixel_pitch_mm": 0.5}, "sun": {"direction": [0.3, 0.2, -1.0]}}
+    truth = small_scene(mesh, {"material": "white_paint", "kd": TRUE_KD}, render={"spp": 16, "seed": 7}, **sections)
+    scene = small_scene(mesh, {"material": "white_paint", "kd": 0.3}, render={"spp": 4}, **sections)
+    mask = np.ones((32, 32), dtype=bool)
+    mask[SQUARE] = False
+    return d, scene, np.asarray(sf.render(truth), float), mask
+
+
+def _garbage(image: np.ndarray, value: float) -> np.ndarray:
+    out = image.copy()
+    out[SQUARE] = value
+    return out
+
+
+def _fit(observation: sf.Observation) -> float:
+    return sf.fit(observation, ["parts.sphere.kd"], max_steps=6, spp=4).values["parts.sphere.kd"]
+
+
+@pytest.mark.parametrize("sensor", [None, SENSOR], ids=["radiance", "dn"])
+def test_masked_garbage_changes_nothing_and_its_residuals_are_zero(sphere, sensor):
+    """A bright square under the mask: the same fitted kd as the clean image under the
+    same mask (to 1e-9: two fits of the same problem differ by 1e-10 relative); unmasked, the bright square pulls kd away. Masked residuals and Jacobian
+    rows, NaN under the mask too, are 0 (so neither the degrees of freedom nor the noise floor counts them)."""
+    d, scene, truth, mask = sphere
+    clean = truth if sensor is None else sf.observe(truth, sensor, assemble(scene).intrinsics, seed=1).astype(float)
+    bright = 10.0 * clean.max() if sensor is None else 0.9 * sensor.saturation_dn  # not saturated: left to the mask
+
+    def obs(image: np.ndarray, m: np.ndarray | None) -> sf.Observation:
+        return sf.Observation(scene, image, sensor=sensor, mask=m)
+
+    kd_clean = _fit(obs(clean, mask))
+    assert abs(kd_clean - TRUE_KD) < 0.03
+    assert _fit(obs(_garbage(clean, bright), mask)) == pytest.approx(kd_clean, rel=1e-9)
+    assert abs(_fit(obs(_garbage(clean, bright), None)) - kd_clean) > 0.05  # the test can fail
+
+    @float64
+    def rows():
+        s = setup(obs(_garbage(clean, np.nan), mask), ["parts.sphere.kd"], None, "pixel", None, None, 1, 2, "prb", "fd", "rms")
+        x = jnp.asarray(s.x0)
+        return (np.asarray(s.problem.residual_x(x)), np.asarray(jax.jacfwd(s.problem.residual_x)(x)),
+                np.asarray(s.problem.residual_x_independent(x)))
+
+    r, J, r_alt = rows()
+    out = ~np.broadcast_to(mask[..., None], (32, 32, 3)).ravel()
+    assert np.all(r[out] == 0) and np.all(J[out] == 0) and np.all(r_alt[out] == 0)
+    assert np.count_nonzero(r[~out]) > 100
+    assert loss_noise(r, r_alt) == loss_noise(r[~out], r_alt[~out])
+
+
+def test_mask_is_checked(sphere):
+    _, scene, truth, mask = sphere
+    with pytest.raises(sf.InputError, match="`Observation.mask` must be a bool array.*got dtype int64"):
+        sf.Observation(scene, truth, mask=mask.astype(np.int64))
+    with pytest.raises(sf.InputError, match=r"`Observation.mask` is False everywhere \(1024 values\)"):
+        sf.Observation(scene, truth, mask=np.zeros((32, 32), dtype=bool))
+    with pytest.raises(sf.InputError, match=r"mask 0 .* has shape \(16, 32, 1\); its reference is \(32, 32, 3\)"):
+        sf.fit(sf.Observation(scene, truth, mask=np.ones((16, 32), dtype=bool)), ["parts.sphere.kd"])
+    with pytest.raises(sf.InputError, match=r"reference 0 holds NaN or infinite pixels \(64\); leave them out with its mask"):
+        sf.fit(sf.Observation(scene, _garbage(truth, np.nan)), ["parts.sphere.kd"])
+    with pytest.raises(sf.InputError, match="reference 0 holds 64 pixels with negative values"):
+        sf.fit(sf.Observation(scene, _garbage(truth, -1.0)), ["parts.sphere.kd"])
+
+
+@pytest.mark.parametrize("name", ["obs.fits", "obs.png"])
+def test_from_file_round_trip_gives_the_sensor_and_the_dn(sphere, tmp_path, name):
+    _, scene, truth, _ = sphere
+    dn = sf.observe(truth, SENSOR, assemble(scene).intrinsics, seed=2)
+    dn[0, 0] = SENSOR.adc_max_dn  # one saturated pixel
+    sf.write_observation(tmp_path / name, dn, SENSOR)
+    obs = sf.Observation.from_file(tmp_path / name, scene)
+    assert obs.sensor == SENSOR and obs.sigma is None
+    assert np.array_equal(obs.reference, dn.astype(float))
+    assert np.array_equal(obs.mask, dn < SENSOR.saturation_dn) and not obs.mask[0, 0].any()
+    # a sensor given whole replaces the file's; a mapping replaces the fields it names
+    other = sf.Sensor(bit_depth=16)
+    assert sf.Observation.from_file(tmp_path / name, scene, sensor=other).sensor == other
+    assert sf.Observation.from_file(tmp_path / name, scene, sensor={"read_noise_electrons": 2.0}).sensor == sf.Sensor(
+        **{**SENSOR.to_dict(), "read_noise_electrons": 2.0})
+
+
+def test_from_file_refuses_dn_without_a_sensor_and_takes_a_sensor_file(sphere, tmp_path):
+    _, scene, truth, _ = sphere
+    dn = sf.observe(truth, SENSOR, assemble(scene).intrinsics, seed=2)
+    sf.write_observation(tmp_path / "obs.png", dn, SENSOR)
+    sidecar_path(tmp_path / "obs.png").unlink()
+    with pytest.raises(sf.InputError, match="obs.png' holds DN .*, not radiance, and names no sensor: give the camera"):
+        sf.Observation.from_file(tmp_path / "obs.png", scene, response="linear")
+    (tmp_path / "sensor.json").write_text(json.dumps(SENSOR.to_dict()))
+    obs = sf.Observation.from_file(tmp_path / "obs.png", scene, response="linear", sensor=read_sensor_file(tmp_path / "sensor.json"))
+    assert obs.sensor == SENSOR and np.array_equal(obs.reference, dn.astype(float))
+    # a foreign FITS: EXPTIME and GAIN are named in the refusal, and used under a partial sensor file
+    header = fits.Header([("EXPTIME", 2e-6), ("GAIN", 4.0)])
+    fits.PrimaryHDU(dn[::-1, :, 0].astype(np.int32), header=header).writeto(tmp_path / "foreign.fits")
+    with pytest.raises(sf.InputError, match="its header gives only exposure_time_s = 2e-06, gain_dn_per_electron = 0.25"):
+        sf.Observation.from_file(tmp_path / "foreign.fits", scene)
+    (tmp_path / "sensor.toml").write_text("[sensor]\nbias_dn = 50.0\nbit_depth = 12\n")
+    obs = sf.Observation.from_file(tmp_path / "foreign.fits", scene, sensor=read_sensor_file(tmp_path / "sensor.toml"))
+    assert obs.sensor == sf.Sensor(exposure_time_s=2e-6, gain_dn_per_electron=0.25, bias_dn=50.0, bit_depth=12)
+    assert obs.reference.shape == (32, 32) and np.array_equal(obs.reference, dn[..., 0])  # one channel: grey
+
+
+@pytest.mark.parametrize("text, suffix, match", [
+    ('{"bitdepth": 12}', ".json", "field` must be one of .*Did you mean 'bit_depth'"),
+    ("bit_depth = 40", ".toml", r"`Sensor.bit_depth` must be an integer in \[1, 32\], got 40"),
+    ("bit_depth = ", ".toml", "could not be read as TOML"),
+    ("{}", ".yaml", "must be .json or .toml, got '.yaml'"),
+])
+def test_bad_sensor_files_are_refused(tmp_path, text, suffix, match):
+    path = tmp_path / f"sensor{suffix}"
+    path.write_text(text)
+    with pytest.raises(sf.InputError, match=match):
+        read_sensor_file(path)
+
+
+def test_from_file_radiance_refusals_and_masked_nan(sphere, tmp_path):
+    d, scene, truth, mask = sphere
+    write_exr(tmp_path / "nan.exr", _garbage(truth, np.nan).astype(np.float32))
+    with pytest.raises(sf.InputError, match="nan.exr': 64 pixels are NaN or infinite"):
+        sf.Observation.from_file(tmp_path / "nan.exr", scene)
+    obs = sf.Observation.from_file(tmp_path / "nan.exr", scene, mask=mask)  # a dead region the user masked
+    assert obs.sensor is None and np.all(obs.reference[SQUARE] == 0) and np.array_equal(obs.mask[..., 0], mask)
+    write_exr(tmp_path / "low.exr", _garbage(truth, -0.01).astype(np.float32))
+    with pytest.raises(sf.InputError, match="low.exr': 64 pixels have negative radiance"):
+        sf.Observation.from_file(tmp_path / "low.exr", scene)
+    assert sf.Observation.from_file(tmp_path / "low.exr", scene, sigma=0.01).sigma == 0.01  # within 8 sigma
+    with pytest.raises(sf.InputError, match="holds radiance .*`sensor` describes the camera of a DN image"):
+        sf.Observation.from_file(tmp_path / "nan.exr", scene, mask=mask, sensor=SENSOR)
+    write_png(tmp_path / "preview.png", np.full((32, 32, 3), 200, dtype=np.uint8))
+    with pytest.raises(sf.InputError, match="8-bit PNG: a display image; it holds digital numbers, not radiance"):
+        sf.Observation.from_file(tmp_path / "preview.png", scene, unit="radiance")
