@@ -54,7 +54,7 @@ def _fit(observation: sf.Observation) -> float:
 @pytest.mark.parametrize("sensor", [None, SENSOR], ids=["radiance", "dn"])
 def test_masked_garbage_changes_nothing_and_its_residuals_are_zero(sphere, sensor):
     """A bright square under the mask: the same fitted kd as the clean image under the
-    same mask (to 1e-9: two fits of the same problem differ by 1e-10 relative); unmasked, the bright square pulls kd away. Masked residuals and Jacobian
+    same mask (to 1e-6: two fits of the same problem differ by up to 7e-8 relative, float32 sums in threads); unmasked, the bright square pulls kd away. Masked residuals and Jacobian
     rows, NaN under the mask too, are 0 (so neither the degrees of freedom nor the noise floor counts them)."""
     d, scene, truth, mask = sphere
     clean = truth if sensor is None else sf.observe(truth, sensor, assemble(scene).intrinsics, seed=1).astype(float)
@@ -65,7 +65,7 @@ def test_masked_garbage_changes_nothing_and_its_residuals_are_zero(sphere, senso
 
     kd_clean = _fit(obs(clean, mask))
     assert abs(kd_clean - TRUE_KD) < 0.03
-    assert _fit(obs(_garbage(clean, bright), mask)) == pytest.approx(kd_clean, rel=1e-9)
+    assert _fit(obs(_garbage(clean, bright), mask)) == pytest.approx(kd_clean, rel=1e-6)
     assert abs(_fit(obs(_garbage(clean, bright), None)) - kd_clean) > 0.05  # the test can fail
 
     @float64
