@@ -39,10 +39,9 @@ from astropy.io import fits
 from jaxtyping import Bool, Float
 
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, check_choice, negative_pixels
-from spacefit.sensor import Sensor
+from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor
 
-RADIANCE_UNIT = "W m^-2 sr^-1"
-UNITS = {"DN": "DN", "radiance": RADIANCE_UNIT}
+UNITS = {"DN": DN_UNIT, "radiance": RADIANCE_UNIT}
 RESPONSES = ("linear", "srgb")
 FORMATS = {".exr": "exr", ".fits": "fits", ".fit": "fits", ".fts": "fits", ".png": "png", ".tif": "tiff", ".tiff": "tiff"}
 WRITABLE = (".fits", ".fit", ".fts", ".png", ".tif", ".tiff")

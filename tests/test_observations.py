@@ -3,6 +3,7 @@ degrees of freedom and the noise floor, and `Observation.from_file` for EXR, FIT
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import jax
@@ -163,3 +164,28 @@ def test_from_file_radiance_refusals_and_masked_nan(sphere, tmp_path):
     write_png(tmp_path / "preview.png", np.full((32, 32, 3), 200, dtype=np.uint8))
     with pytest.raises(sf.InputError, match="8-bit PNG: a display image; it holds digital numbers, not radiance"):
         sf.Observation.from_file(tmp_path / "preview.png", scene, unit="radiance")
+
+
+# SENSOR's exposure saturates the sphere's brightest pixels, which the part means would count.
+DIM = dataclasses.replace(SENSOR, exposure_time_s=4e-7)
+
+
+@pytest.mark.parametrize("sensor", [None, DIM], ids=["radiance", "dn"])
+def test_the_fits_model_image_is_in_the_references_unit(sphere, sensor):
+    """A fit's renders, part means and comparison are in its reference's unit: DN with a sensor
+    (the sensor's expected DN of the render, bias included), radiance without."""
+    _, scene, truth, _ = sphere
+    reference = truth if sensor is None else sf.observe(truth, sensor, assemble(scene).intrinsics, seed=1).astype(float)
+    result = sf.fit(sf.Observation(scene, reference, sensor=sensor), ["parts.sphere.kd"], max_steps=6, spp=4)
+    unit = "W m^-2 sr^-1" if sensor is None else "DN"
+    assert result.units == [unit]
+    suffix = "w_m2_sr" if sensor is None else "dn"
+    target = result.parts[0]["target"]
+    assert target[f"fit_mean_{suffix}"] == pytest.approx(target[f"reference_mean_{suffix}"], rel=0.03)
+    # a corner sees black sky: 0 radiance, or the sensor's bias (read noise 2.5 DN rms)
+    sky = 0.0 if sensor is None else sensor.bias_dn
+    assert result.renders[0][0, 0, 0] == pytest.approx(sky, abs=1e-6) and reference[0, 0, 0] == pytest.approx(sky, abs=10.0)
+    if sensor is not None:
+        assert not sf.saturated_mask(reference, sensor).any() and result.renders[0].max() > 100 * truth.max()
+    figure = sf.plot_comparison(result, [reference])
+    assert unit.split()[0] in figure.axes[0].get_title()

@@ -29,6 +29,7 @@ from spacefit.progress import ProgressCallback
 from spacefit.rendering.renderer import PartImage
 from spacefit.scene.config import Scene
 from spacefit.scene.parameters import is_nuisance, parameter, scene_with_values
+from spacefit.sensor import DN_UNIT
 
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
 # region may try (and reject) a single non-finite point.
@@ -54,12 +55,16 @@ class FitResult:
             lowered the best loss so far: accepted losses never rise), ``loss_noise`` (the loss's
             Monte Carlo noise at the best point so far, :mod:`~spacefit.fitting.stopping`),
             time_s since the start.
-        renders: the final render of each observation.
+        renders: each observation's final model image (the render with the image nuisances), in the
+            unit of its reference: ``units``.
+        units: per observation, the unit of its reference and render: W m^-2 sr^-1 (radiance), or
+            DN where the observation has a sensor (the sensor's expected DN of the render).
         loss: final loss, 0.5 * sum of squared residuals.
         solver, loss_name, steps, wall_time_s, start: what was run.
         extras: derived quantities, e.g. the rms height (and its standard error) of a (D, G) fit.
         parts: per observation, per part (and the whole ``target``): the pixels that see it and the
-            mean radiance (W m^-2 sr^-1) of the reference and of the fit's render there.
+            mean of the reference and of the fit's render there, in ``units`` (keys
+            ``reference_mean_w_m2_sr`` and ``fit_mean_w_m2_sr``, or ``reference_mean_dn`` and ``fit_mean_dn``).
         scene: the first observation's scene with the fitted values: ``scene.to_toml()`` is a scene
             file that renders the fit again (the image nuisances are not scene values); None if
             the values are not finite.
@@ -83,6 +88,7 @@ class FitResult:
     extras: dict[str, Any] = field(default_factory=dict)
     parts: list[dict[str, dict[str, float]]] = field(default_factory=list)
     scene: Scene | None = None
+    units: list[str] = field(default_factory=list)
 
     def mitsuba_scene_dict(self) -> dict[str, Any]:
         """The fitted scene as a Mitsuba scene dictionary (``mi.load_dict`` loads it).
@@ -288,8 +294,9 @@ def fit(
         wall_time_s=time.perf_counter() - t0,
         start=dict(zip(s.user.names, s.x0_user.tolist())),
         extras=extras,
-        parts=[_part_rows(p, ref, img) for p, ref, img in zip(problem.part_images, problem.references, renders)],
+        parts=[_part_rows(p, ref, img, unit) for p, ref, img, unit in zip(problem.part_images, problem.references, renders, problem.units)],
         scene=scene_with_values(s.scene, dict(zip(s.user.names, x_user.tolist()))) if np.all(np.isfinite(x_user)) else None,
+        units=list(problem.units),
     )
 
 
@@ -298,8 +305,9 @@ def _nonfinite_run(history: list[dict[str, Any]]) -> bool:
     return len(recent) == NONFINITE_PATIENCE and not any(np.isfinite(h["loss"]) for h in recent)
 
 
-def _part_rows(parts: PartImage, reference: np.ndarray, render: np.ndarray) -> dict[str, dict[str, float]]:
-    """Per part: its pixels, and the mean radiance of the reference and of the fit's render there."""
+def _part_rows(parts: PartImage, reference: np.ndarray, render: np.ndarray, unit: str) -> dict[str, dict[str, float]]:
+    """Per part: its pixels, and the mean of the reference and of the fit's render there, in ``unit``."""
     ref, fitted = parts.table(reference), parts.table(render)
-    return {name: {"pixels": row["pixels"], "reference_mean_w_m2_sr": row["mean_radiance_w_m2_sr"],
-                   "fit_mean_w_m2_sr": fitted[name]["mean_radiance_w_m2_sr"]} for name, row in ref.items()}
+    suffix = "dn" if unit == DN_UNIT else "w_m2_sr"
+    return {name: {"pixels": row["pixels"], f"reference_mean_{suffix}": row["mean_radiance_w_m2_sr"],
+                   f"fit_mean_{suffix}": fitted[name]["mean_radiance_w_m2_sr"]} for name, row in ref.items()}

@@ -16,8 +16,10 @@ from matplotlib.ticker import MaxNLocator
 
 from spacefit.fitting.loop import FitResult
 from spacefit.output import PREVIEW_PERCENTILE, preview_scale, to_srgb8
+from spacefit.sensor import DN_UNIT, RADIANCE_UNIT
 
-RADIANCE_UNIT = "W m$^{-2}$ sr$^{-1}$"
+# The image units as axis labels.
+PLOT_UNITS = {RADIANCE_UNIT: "W m$^{-2}$ sr$^{-1}$", DN_UNIT: "DN"}
 
 
 def plot_comparison(result: FitResult, references: Sequence[np.ndarray]) -> Figure:
@@ -25,19 +27,21 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray]) -> Figu
 
     Args:
         result: the fit's outcome (its renders; missing where the solve failed).
-        references: the reference radiance images (h, w, 3), W m^-2 sr^-1, in observation order.
+        references: the reference images (h, w, 3), in observation order, each in the unit of the
+            fit's model image (``result.units``: radiance, or DN for an observation with a sensor).
     Returns:
         a matplotlib Figure (not attached to pyplot): the fit at the reference's sRGB exposure, the
-        residual's RGB mean (W m^-2 sr^-1) on a diverging colour map centred at 0.
+        residual's RGB mean in that unit on a diverging colour map centred at 0.
     """
     n = len(references)
     fig = Figure(figsize=(10.5, 3.2 * n), layout="constrained")
     axes = fig.subplots(n, 3, squeeze=False)
     for i, (row, reference) in enumerate(zip(axes, references)):
         ref = np.asarray(reference, dtype=np.float32)[..., :3]
+        unit = PLOT_UNITS[result.units[i] if i < len(result.units) else RADIANCE_UNIT]
         scale = preview_scale(ref)
         row[0].imshow(to_srgb8(ref, scale))
-        row[0].set_title(f"reference {i} (white = {1 / scale:.3g} {RADIANCE_UNIT})", fontsize=9)
+        row[0].set_title(f"reference {i} (white = {1 / scale:.3g} {unit})", fontsize=9)
         if i < len(result.renders):
             render = np.asarray(result.renders[i], dtype=np.float32)
             row[1].imshow(to_srgb8(render, scale))
@@ -46,7 +50,7 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray]) -> Figu
             limit = float(np.percentile(np.abs(residual), PREVIEW_PERCENTILE)) or float(np.abs(residual).max()) or 1.0
             image = row[2].imshow(residual, cmap="RdBu_r", vmin=-limit, vmax=limit)
             row[2].set_title(f"fit - reference {i}", fontsize=9)
-            fig.colorbar(image, ax=row[2], extend="both", label=RADIANCE_UNIT)
+            fig.colorbar(image, ax=row[2], extend="both", label=unit)
         else:
             for ax in row[1:]:
                 ax.text(0.5, 0.5, "no render: the solve failed", ha="center", va="center", transform=ax.transAxes)

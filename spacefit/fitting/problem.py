@@ -21,13 +21,12 @@ from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_c
 from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.nuisance import split
 from spacefit.fitting.params import FreeParameters, free_parameters
-from spacefit.geometry.frames import Intrinsics
 from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import PartImage, Renderer
 from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import FILTER_RADIUS_PX, Scene, check_scene
-from spacefit.sensor import Sensor, dn_fn, noise_variance_dn, psf_rms_px, saturated_mask
+from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, dn_fn, noise_variance_dn, psf_rms_px, saturated_mask
 from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, rms_of, scene_value
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
@@ -93,7 +92,7 @@ class Observation:
             InputError: DN with no sensor, a ``sensor`` for radiance or a ``sigma`` for DN, and every
                 refusal of ``read_image``, naming the file.
         """
-        from spacefit.imageio import RADIANCE_UNIT, read_image, sensor_of  # FITS and TIFF readers: only files need them
+        from spacefit.imageio import read_image, sensor_of  # FITS and TIFF readers: only files need them
 
         image = read_image(path, unit=unit, response=response, mask=mask, sigma=sigma)
         data, used = (image.data[..., 0], image.mask[..., 0]) if image.data.shape[-1] == 1 else (image.data, image.mask)
@@ -151,13 +150,14 @@ class Problem:
     residual_x: Callable[[jax.Array], jax.Array]  # physical x -> stacked residuals (J by forward mode)
     residual_x_independent: Callable[[jax.Array], jax.Array]  # the same with independent seeds
     loss_u_reverse: Callable[[jax.Array], jax.Array] | None  # unconstrained u -> loss (reverse mode)
-    renders_x: Callable[[jax.Array], list[jax.Array]]
+    renders_x: Callable[[jax.Array], list[jax.Array]]  # each observation's model image in its reference's unit
     part_images: list[PartImage]  # which part each pixel of each observation sees
     references: list[np.ndarray]  # the checked references, (h, w, 3) float32
     noise_known: bool = False  # every residual is divided by its predicted noise (a sensor per observation)
     # per observation, how far (px) its render noise spreads before the residuals: the pixel
     # filter's radius and the rms width of the sensor's PSF (0 without a sensor)
     noise_spread_px: tuple[tuple[float, float], ...] = ()
+    units: tuple[str, ...] = ()  # per observation, the unit of its reference and model image (radiance or DN)
 
 
 def _problem(
@@ -165,6 +165,7 @@ def _problem(
     seed: int, seed_grad: int, integrator: str,
 ) -> Problem:
     renders_x, renders_alt, renders_v, residuals, values_fns, part_images, references, spread = [], [], [], [], [], [], [], []
+    to_units, units = [], []
     moving = any(n in MOVES_VERTICES for n in free.names)
     # the image nuisances act on the render in JAX; the renderer sees the other parameters
     rendered, image_model = split(free.names)
@@ -182,7 +183,9 @@ def _problem(
         alt = INDEPENDENT_SEED_OFFSET
         renders_alt.append(render_params(dscene, values_of, steps, seed + alt, seed_grad + alt))
         renders_v.append(render_values(dscene, seed, seed_grad))
-        residuals.append(_residual(obs, ref, used, loss, assembly.intrinsics))
+        residuals.append(_residual(obs, ref, used, loss))
+        to_units.append((lambda image: image) if obs.sensor is None else dn_fn(obs.sensor, assembly.intrinsics, ref.shape[-1]))
+        units.append(RADIANCE_UNIT if obs.sensor is None else DN_UNIT)
         values_fns.append(values_of)
         part_images.append(renderer.part_image())
         references.append(ref)
@@ -190,7 +193,7 @@ def _problem(
         spread.append((FILTER_RADIUS_PX[scene.render.filter], blur))
 
     def modelled(render: Callable[[jax.Array], jax.Array], k: int) -> Callable[[jax.Array], jax.Array]:
-        return lambda x: image_model(render(x[rendered]), x, k)
+        return lambda x: to_units[k](image_model(render(x[rendered]), x, k))
 
     def stack(renders: list[Callable[[jax.Array], jax.Array]]) -> Callable[[jax.Array], jax.Array]:
         return lambda x: jnp.concatenate([res(modelled(render, k)(x)) for k, (res, render) in enumerate(zip(residuals, renders))])
@@ -200,25 +203,22 @@ def _problem(
 
         def reverse(u: jax.Array) -> jax.Array:
             x = free.to_physical(u)
-            r = jnp.concatenate([res(image_model(render(vals(x[rendered])), x, k))
+            r = jnp.concatenate([res(to_units[k](image_model(render(vals(x[rendered])), x, k)))
                                  for k, (res, render, vals) in enumerate(zip(residuals, renders_v, values_fns))])
             return 0.5 * jnp.sum(r**2)
 
     return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [modelled(render, k)(x) for k, render in enumerate(renders_x)],
-                   part_images, references, all(o.sensor is not None for o in observations), tuple(spread))
+                   part_images, references, all(o.sensor is not None for o in observations), tuple(spread), tuple(units))
 
 
-def _residual(obs: Observation, reference: np.ndarray, used: np.ndarray, loss: str,
-              intrinsics: Intrinsics) -> Callable[[jax.Array], jax.Array]:
-    """The residuals of a model radiance image against the observation, 0 where ``used`` is False:
-    in radiance, or with a sensor, in DN divided by the noise the sensor predicts at the model's DN
+def _residual(obs: Observation, reference: np.ndarray, used: np.ndarray, loss: str) -> Callable[[jax.Array], jax.Array]:
+    """The residuals of a model image in the reference's unit, 0 where ``used`` is False: in
+    radiance, or with a sensor, in DN divided by the noise the sensor predicts at the model's DN
     (saturated pixels of the reference left out)."""
     if obs.sensor is None:
         return residual_fn(reference, loss, obs.sigma, used)
     sensor = obs.sensor
-    to_dn = dn_fn(sensor, intrinsics, reference.shape[-1])
-    res = residual_fn(reference, loss, lambda dn: jnp.sqrt(noise_variance_dn(dn, sensor)), used & ~saturated_mask(reference, sensor))
-    return lambda image: res(to_dn(image))
+    return residual_fn(reference, loss, lambda dn: jnp.sqrt(noise_variance_dn(dn, sensor)), used & ~saturated_mask(reference, sensor))
 
 
 @dataclass

@@ -37,7 +37,7 @@ def write_fit_report(
     Args:
         out_dir: output folder (created; on any error nothing is left behind).
         result: the fit's outcome.
-        references: the reference radiance images (h, w, 3), W m^-2 sr^-1, in observation order.
+        references: the reference images (h, w, 3), in observation order, in the units of the fit (``result.units``).
         inputs: what was fitted (reference files, scenes, options), recorded in fit.json.
         timings_s: timings (s) to record besides the solve's own ``result.wall_time_s``.
     """
