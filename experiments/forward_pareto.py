@@ -146,6 +146,12 @@ METHOD_SPP = {"reduced": [4, 16], "full": [4, 8, 16, 32, 64]}
 TARGET_ERRORS = (0.4, 0.3, 0.2)
 
 
+def view_reference(extra: list[str], spp: int) -> np.ndarray:
+    """The error yardstick of a view of VIEWS (its ``extra`` overrides): spacefit's default render (the
+    window, ``independent``) at ``spp`` with REFERENCE_SEED, all threads."""
+    return Renderer(assemble(load_scene(None, ["render.deterministic=false", *extra]))).render(spp=spp, seed=REFERENCE_SEED)
+
+
 def time_at_error(rows: list[dict[str, object]], target: float) -> float:
     """Wall time (s) at which a method's error reaches ``target``: log-log interpolation between the
     two spp that bracket it (NaN when none does)."""
@@ -166,7 +172,7 @@ def run_methods(out: Path, full: bool) -> list[dict[str, object]]:
     rows, summary = [], []
     for view, extra in VIEWS.items():
         base = ["render.deterministic=false", *extra]
-        reference = Renderer(assemble(load_scene(None, base))).render(spp=reference_spp, seed=REFERENCE_SEED)
+        reference = view_reference(extra, reference_spp)
         # render.spp 16 is valid for every sampler; each render passes its own spp
         renderers = {name: Renderer(assemble(load_scene(None, [*base, "render.spp=16", f'render.sampler="{sampler}"'])),
                                     crop=not film)
@@ -204,7 +210,7 @@ def run_pairs(repeats: int = PAIR_REPEATS, reference_spp: int = 1024) -> list[di
     rows = []
     for view, extra in VIEWS.items():
         base = ["render.deterministic=false", *extra]
-        reference = Renderer(assemble(load_scene(None, base))).render(spp=reference_spp, seed=REFERENCE_SEED)
+        reference = view_reference(extra, reference_spp)
         plain = Renderer(assemble(load_scene(None, base)), crop=False)
         ours = Renderer(assemble(load_scene(None, [*base, 'render.sampler="multijitter"'])))
         runs: dict[str, list[tuple[float, float]]] = {"plain": [], "spacefit": []}
