@@ -161,8 +161,9 @@ def run_view(view: str, extra: list[str], full: bool) -> tuple[list[dict], list[
             for spp in spps:
                 for name, renderer in renderers.items():
                     time_s, image = timed(renderer, spp)
+                    error = round(relative_rmse(image, spacefit_ref), 5)  # Mitsuba's own reference is spacefit's
                     sweep.append({"view": view, "round": r, "method": name, "spp": spp, "time_s": round(time_s, 5),
-                                  "rel_rmse": round(relative_rmse(image, spacefit_ref), 5), "rel_rmse_own_ref": "",
+                                  "rel_rmse": error, "rel_rmse_own_ref": error,
                                   "threads": dr.thread_count(), "load_1min": round(load, 2)})
             timings, images = render_cycles(scene_dir, cycles_out, spps, REPEATS, 1 + r * REPEATS)
             load = os.getloadavg()[0]

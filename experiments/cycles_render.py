@@ -215,6 +215,8 @@ def render_once(bpy: object, scene: object, spp: int, seed: int) -> float:
     """One Cycles render at ``spp`` with ``seed``; the wall time (s) of the render call alone."""
     scene.cycles.samples = spp
     scene.cycles.seed = seed
+    # with persistent data a render re-reads only what is tagged: untagged, the new spp and seed were ignored
+    scene.update_tag()
     t0 = time.perf_counter()
     bpy.ops.render.render(write_still=False)
     return time.perf_counter() - t0
