@@ -6,7 +6,8 @@ and ``scene.json`` with the camera, sun, materials and render settings) and rend
 ``cycles_render.py`` in ``.venv-peers`` (``make peers``). First a validation: a high-spp Cycles render
 against spacefit's reference (part means over the pixels whose centre sees each part). Then rounds in
 turn, A B A B: spacefit (its window, ``multijitter``) and plain Mitsuba (whole film, ``independent``)
-sweep spp in this process, then Cycles sweeps spp in its own; each time is the median of
+sweep spp in this process, then Cycles sweeps spp in its own, on the whole film and on spacefit's window
+only (a render border: the same trick, to tell the window's share from the renderer's); each time is the median of
 ``forward_pareto.REPEATS`` renders after a first one (Cycles: after its syncing render, with persistent
 data). Errors are ``studyio.relative_rmse`` against spacefit's reference (``forward_pareto.view_reference``)
 and, for Cycles, also against its own high-spp render, so that a mismatch of models or pixel filters is
@@ -42,7 +43,7 @@ from studyio import machine, relative_rmse, save_figure, write_csv  # noqa: E402
 from spacefit.materials import Conductor, Lambert, Material  # noqa: E402
 from spacefit.rendering.backend import dr  # noqa: E402
 from spacefit.rendering.exr import read_exr  # noqa: E402
-from spacefit.rendering.renderer import Renderer  # noqa: E402
+from spacefit.rendering.renderer import Renderer, target_window  # noqa: E402
 from spacefit.scene.assembly import Assembly, assemble  # noqa: E402
 from spacefit.scene.config import load_scene  # noqa: E402
 
@@ -58,6 +59,8 @@ FULL = ([1, 2, 4, 8, 16, 32, 64], 3, 1024, 1024)
 CYCLES_FILTERS = {"tent": ("GAUSSIAN", 4.0 * math.sqrt(1.0 / 6.0)), "gaussian": ("GAUSSIAN", 2.0), "box": ("BOX", 1.0)}
 # The methods of forward_pareto.METHODS timed beside Cycles: spacefit's and the plain Mitsuba yardstick.
 SPACEFIT, PLAIN = "window, multijitter", "mitsuba film, independent"
+# Cycles' methods -> render only spacefit's window (a render border)? The whole film is how Cycles renders.
+CYCLES_METHODS = {"cycles": False, "cycles, window": True}
 
 
 def write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None) -> None:
@@ -95,7 +98,7 @@ def material_description(material: Material, has_uv: bool) -> dict[str, object]:
 
 def export_view(assembly: Assembly, folder: Path) -> dict[str, object]:
     """Write each part's PLY (world coordinates, m; the float32 vertices Mitsuba gets) and ``scene.json``
-    (camera, sun, render settings, materials) to ``folder``; returns the JSON's content."""
+    (camera, sun, render settings with spacefit's window, materials) to ``folder``; returns the JSON's content."""
     folder.mkdir(parents=True, exist_ok=True)
     s, cam, intr = assembly.scene, assembly.camera, assembly.intrinsics
     parts = {}
@@ -106,7 +109,8 @@ def export_view(assembly: Assembly, folder: Path) -> dict[str, object]:
     filter_type, filter_width = CYCLES_FILTERS[s.render.filter]
     description = {
         "render": {"width": intr.width, "height": intr.height, "depth": s.render.depth, "threads": THREADS,
-                   "filter": s.render.filter, "filter_type": filter_type, "filter_width_px": filter_width},
+                   "filter": s.render.filter, "filter_type": filter_type, "filter_width_px": filter_width,
+                   "window": list(target_window(assembly, assembly.scene_vertices))},
         "camera": {"position_m": cam.position.tolist(), "right": cam.right.tolist(), "up": cam.up.tolist(),
                    "forward": cam.forward.tolist(), "focal_px": intr.focal_px,
                    "principal_offset_px": list(intr.principal_offset), "clip_m": [0.01, 1e5]},
@@ -117,13 +121,15 @@ def export_view(assembly: Assembly, folder: Path) -> dict[str, object]:
     return description
 
 
-def render_cycles(scene_dir: Path, out: Path, spps: list[int], repeats: int, seed: int) -> tuple[dict, dict[int, np.ndarray]]:
-    """Run ``cycles_render.py`` in ``.venv-peers``: its timings.json and the first image of each spp."""
+def render_cycles(scene_dir: Path, out: Path, spps: list[int], repeats: int, seed: int,
+                  window: bool = False) -> tuple[dict, dict[int, np.ndarray]]:
+    """Run ``cycles_render.py`` in ``.venv-peers`` (``window``: spacefit's window only): its timings.json
+    and the first image of each spp."""
     if not PEER_PYTHON.exists():
         raise SystemExit(f"{PEER_PYTHON} is missing: run `make peers` first (bpy 5.0.1 in a venv of its own).")
     with open(out / "cycles.log", "a") as log:
         subprocess.run([str(PEER_PYTHON), str(CYCLES_SCRIPT), str(scene_dir), "--out", str(out), "--spp", *map(str, spps),
-                        "--repeats", str(repeats), "--seed", str(seed)], check=True, stdout=log, stderr=subprocess.STDOUT)
+                        "--repeats", str(repeats), "--seed", str(seed), *(["--window"] if window else [])], check=True, stdout=log, stderr=subprocess.STDOUT)
     timings = json.loads((out / "timings.json").read_text())
     return timings, {spp: read_exr(out / f"cycles_{spp}.exr")[..., :3] for spp in spps}
 
@@ -165,15 +171,16 @@ def run_view(view: str, extra: list[str], full: bool) -> tuple[list[dict], list[
                     sweep.append({"view": view, "round": r, "method": name, "spp": spp, "time_s": round(time_s, 5),
                                   "rel_rmse": error, "rel_rmse_own_ref": error,
                                   "threads": dr.thread_count(), "load_1min": round(load, 2)})
-            timings, images = render_cycles(scene_dir, cycles_out, spps, REPEATS, 1 + r * REPEATS)
-            load = os.getloadavg()[0]
-            sweep += [{"view": view, "round": r, "method": "cycles", "spp": spp,
-                       "time_s": round(statistics.median(timings["renders"][str(spp)]), 5),
-                       "rel_rmse": round(relative_rmse(images[spp], spacefit_ref), 5),
-                       "rel_rmse_own_ref": round(relative_rmse(images[spp], cycles_ref), 5),
-                       "threads": timings["threads"], "load_1min": round(load, 2)} for spp in spps]
-            print(f"{view} round {r}: Cycles build {timings['build_s']:.2f} s, first render {timings['first_render_s']:.2f} s, "
-                  f"{timings['sampling_pattern']}, Blender {timings['blender']}")
+            for method, window in CYCLES_METHODS.items():
+                timings, images = render_cycles(scene_dir, cycles_out, spps, REPEATS, 1 + r * REPEATS, window)
+                load = os.getloadavg()[0]
+                sweep += [{"view": view, "round": r, "method": method, "spp": spp,
+                           "time_s": round(statistics.median(timings["renders"][str(spp)]), 5),
+                           "rel_rmse": round(relative_rmse(images[spp], spacefit_ref), 5),
+                           "rel_rmse_own_ref": round(relative_rmse(images[spp], cycles_ref), 5),
+                           "threads": timings["threads"], "load_1min": round(load, 2)} for spp in spps]
+                print(f"{view} round {r}, {method}: build {timings['build_s']:.2f} s, first render {timings['first_render_s']:.2f} s, "
+                      f"{timings['sampling_pattern']}, Blender {timings['blender']}")
     return validation, sweep, equal_error_rows(view, sweep)
 
 
@@ -190,22 +197,22 @@ def equal_error_rows(view: str, sweep: list[dict]) -> list[dict]:
         runs = [row for row in sweep if row["round"] == r]
         for target in TARGET_ERRORS:
             t = {"spacefit": _time_at(runs, SPACEFIT, target), "plain": _time_at(runs, PLAIN, target),
-                 "cycles": _time_at(runs, "cycles", target), "cycles_own_ref": _time_at(runs, "cycles", target, "rel_rmse_own_ref")}
+                 "cycles": _time_at(runs, "cycles", target), "cycles_own_ref": _time_at(runs, "cycles", target, "rel_rmse_own_ref"),
+                 "cycles_window": _time_at(runs, "cycles, window", target)}
             rows.append({"view": view, "round": r, "rel_rmse": target, **{f"{k}_s": round(v, 5) for k, v in t.items()},
-                         "spacefit_over_plain": round(t["spacefit"] / t["plain"], 4),
-                         "spacefit_over_cycles": round(t["spacefit"] / t["cycles"], 4),
-                         "spacefit_over_cycles_own_ref": round(t["spacefit"] / t["cycles_own_ref"], 4)})
+                         **{f"spacefit_over_{k}": round(t["spacefit"] / t[k], 4) for k in t if k != "spacefit"}})
     return rows
 
 
 def plot(path: Path, sweep: list[dict], reference_spp: int) -> None:
     """Error against time per method (median time, mean error over rounds), one panel per view."""
     fig, axes = plt.subplots(1, len(VIEWS), figsize=(11, 4.5))
-    curves = {SPACEFIT: ("rel_rmse", "spacefit (window, multijitter)", "o-"), PLAIN: ("rel_rmse", "plain Mitsuba (film, independent)", "s-"),
-              "cycles": ("rel_rmse", "Cycles vs spacefit's reference", "D-"), "cycles own": ("rel_rmse_own_ref", "Cycles vs its own reference", "D--")}
+    curves = [(SPACEFIT, "rel_rmse", "spacefit (window, multijitter)", "o-"), (PLAIN, "rel_rmse", "plain Mitsuba (film, independent)", "s-"),
+              ("cycles", "rel_rmse", "Cycles vs spacefit's reference", "D-"), ("cycles", "rel_rmse_own_ref", "Cycles vs its own reference", "D--"),
+              ("cycles, window", "rel_rmse", "Cycles, spacefit's window (border)", "v-")]
     for ax, view in zip(axes, VIEWS):
-        for method, (key, label, style) in curves.items():
-            rows = [r for r in sweep if r["view"] == view and r["method"] == method.split()[0]]
+        for method, key, label, style in curves:
+            rows = [r for r in sweep if r["view"] == view and r["method"] == method]
             spps = sorted({r["spp"] for r in rows})
             t = [statistics.median(r["time_s"] for r in rows if r["spp"] == s) for s in spps]
             e = [statistics.mean(r[key] for r in rows if r["spp"] == s) for s in spps]

@@ -6,11 +6,11 @@ Runs in ``.venv-peers`` (``make peers``), never in spacefit's own environment: b
 The scene folder holds ``scene.json`` (camera, sun, render settings, parts with their materials) and
 one binary PLY per part in world coordinates, flat-shaded (spacefit's Mitsuba meshes have no vertex
 normals). Writes ``cycles_<spp>.exr`` (radiance, W m^-2 sr^-1, float32 RGB; the first timed render of
-each spp) and ``timings.json`` to ``--out``: the scene build, the first (syncing) render and, per spp,
+each spp) and ``timings.json`` to ``--out``; ``--window`` renders only spacefit's window (a render border): the scene build, the first (syncing) render and, per spp,
 the wall time of every timed ``bpy.ops.render.render`` call alone (the EXR is written after the clock
 stops).
 
-Run: ``.venv-peers/bin/python experiments/cycles_render.py SCENE_DIR --out DIR --spp 1 4 16 [--repeats 3] [--seed 0]``.
+Run: ``.venv-peers/bin/python experiments/cycles_render.py SCENE_DIR --out DIR --spp 1 4 16 [--repeats 3] [--seed 0] [--window]``.
 """
 
 from __future__ import annotations
@@ -205,6 +205,16 @@ def build_scene(bpy: object, description: dict, folder: Path) -> object:
     return scene
 
 
+def set_border(scene: object, render: dict) -> None:
+    """Render only the pixel window (x0, y0, width, height; rows from the top) of ``render["window"]``,
+    on a film of full size that stays black outside it (Blender's border counts y from the bottom)."""
+    x0, y0, w, h = render["window"]
+    r = scene.render
+    r.use_border, r.use_crop_to_border = True, False
+    r.border_min_x, r.border_max_x = x0 / render["width"], (x0 + w) / render["width"]
+    r.border_min_y, r.border_max_y = 1.0 - (y0 + h) / render["height"], 1.0 - y0 / render["height"]
+
+
 def _matrix(bpy: object, rows: list[list[float]]) -> object:
     import mathutils  # bpy's; only in .venv-peers
 
@@ -231,10 +241,14 @@ def main() -> None:
     p.add_argument("--spp", type=int, nargs="+", required=True)
     p.add_argument("--repeats", type=int, default=3, help="timed renders per spp, after one syncing render")
     p.add_argument("--seed", type=int, default=0, help="seed of the first timed render; later ones count up")
+    p.add_argument("--window", action="store_true", help="render only spacefit's window (a render border), the rest black")
     args = p.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    scene = build_scene(bpy, json.loads((args.scene_dir / "scene.json").read_text()), args.scene_dir)
+    description = json.loads((args.scene_dir / "scene.json").read_text())
+    scene = build_scene(bpy, description, args.scene_dir)
+    if args.window:
+        set_border(scene, description["render"])
     timings = {"build_s": time.perf_counter() - t0, "first_render_s": render_once(bpy, scene, min(args.spp), 10_000 + args.seed),
                "threads": scene.render.threads, "sampling_pattern": scene.cycles.sampling_pattern,
                "blender": bpy.app.version_string, "renders": {}}

@@ -59,7 +59,9 @@ def test_camera_sees_what_spacefit_sees(exported):
     right = panels[panels[:, 0] > 0]
     centre = (right.min(axis=0) + right.max(axis=0)) / 2
     u, v = pinhole(centre[None], camera, render["width"], render["height"])[0]
-    ids = Renderer(assembly).part_image()
+    renderer = Renderer(assembly)
+    assert tuple(render["window"]) == renderer.window  # Cycles' render border is spacefit's window
+    ids = renderer.part_image()
     assert ids.names[ids.ids[int(v), int(u)]] == "panels"
     assert v < render["height"] / 2  # the panels are at the top of the default image: v grows downwards
     # and the horizontal field of view agrees with Mitsuba's
