@@ -168,14 +168,13 @@ def run_view(view: str, extra: list[str], full: bool) -> tuple[list[dict], list[
                 for name, renderer in renderers.items():
                     time_s, image = timed(renderer, spp)
                     error = round(relative_rmse(image, spacefit_ref), 5)  # Mitsuba's own reference is spacefit's
-                    sweep.append({"view": view, "round": r, "method": name, "spp": spp,
-                                  "samples_per_pixel": renderer.scene.sensors()[0].sampler().sample_count(), "time_s": round(time_s, 5),
+                    sweep.append({"view": view, "round": r, "method": name, "spp": spp, "time_s": round(time_s, 5),
                                   "rel_rmse": error, "rel_rmse_own_ref": error,
                                   "threads": dr.thread_count(), "load_1min": round(load, 2)})
             for method, window in CYCLES_METHODS.items():
                 timings, images = render_cycles(scene_dir, cycles_out, spps, REPEATS, 1 + r * REPEATS, window)
                 load = os.getloadavg()[0]
-                sweep += [{"view": view, "round": r, "method": method, "spp": spp, "samples_per_pixel": spp,
+                sweep += [{"view": view, "round": r, "method": method, "spp": spp,
                            "time_s": round(statistics.median(timings["renders"][str(spp)]), 5),
                            "rel_rmse": round(relative_rmse(images[spp], spacefit_ref), 5),
                            "rel_rmse_own_ref": round(relative_rmse(images[spp], cycles_ref), 5),
