@@ -37,7 +37,8 @@ import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
-from forward_pareto import METHODS, REFERENCE_SEED, REPEATS, TARGET_ERRORS, VIEWS, time_at_error, timed, view_reference  # noqa: E402
+from forward_pareto import (  # noqa: E402
+    METHODS, REFERENCE_SEED, REPEATS, TARGET_ERRORS, VIEWS, label_view_axes, time_at_error, timed, view_reference)
 from studyio import machine, relative_rmse, save_figure, write_csv  # noqa: E402
 
 from spacefit.materials import Conductor, Lambert, Material  # noqa: E402
@@ -217,19 +218,14 @@ def plot(path: Path, sweep: list[dict], reference_spp: int) -> None:
             t = [statistics.median(r["time_s"] for r in rows if r["spp"] == s) for s in spps]
             e = [statistics.mean(r[key] for r in rows if r["spp"] == s) for s in spps]
             ax.plot(t, e, style, ms=4, label=label)
-        ax.set_xscale("log")
-        ax.set_yscale("log")
-        ax.set_title(f"{view}, 600 px, depth 2", fontsize=10)
-        ax.set_xlabel(f"render wall time (s), median of {REPEATS}, {THREADS} threads")
-    axes[0].set_ylabel(f"relative RMSE over lit pixels (reference {reference_spp} spp)")
-    axes[0].legend(fontsize=7)
+    label_view_axes(axes, reference_spp, THREADS)
     save_figure(fig, path)
 
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=Path("experiments/results/cycles"))
-    p.add_argument("--full", action="store_true", help="spp 1-64, 3 rounds, 1024 spp references (about 15 min)")
+    p.add_argument("--full", action="store_true", help="spp 1-64, 3 rounds, 1024 spp references (about 12 min)")
     args = p.parse_args()
     dr.set_thread_count(THREADS)
     args.out.mkdir(parents=True, exist_ok=True)

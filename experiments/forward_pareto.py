@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import matplotlib
@@ -240,13 +241,19 @@ def plot_methods(path: Path, rows: list[dict[str, object]], reference_spp: int) 
             pts = sorted((r["time_s"], r["rel_rmse"], r["samples_per_pixel"]) for r in rows
                          if r["view"] == view and r["method"] == name)
             ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", ms=4, label=name)
+    label_view_axes(axes, reference_spp, rows[0]["threads"])
+    save_figure(fig, path)
+
+
+def label_view_axes(axes: Sequence[object], reference_spp: int, threads: object) -> None:
+    """Log-log error-against-time panels, one per view of VIEWS: scales, titles, labels, legend."""
+    for ax, view in zip(axes, VIEWS):
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_title(f"{view}, 600 px, depth 2", fontsize=10)
-        ax.set_xlabel(f"render wall time (s), median of {REPEATS}, {rows[0]['threads']} threads")
+        ax.set_xlabel(f"render wall time (s), median of {REPEATS}, {threads} threads")
     axes[0].set_ylabel(f"relative RMSE over lit pixels (reference {reference_spp} spp)")
     axes[0].legend(fontsize=7)
-    save_figure(fig, path)
 
 
 def main() -> None:
