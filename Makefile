@@ -6,7 +6,7 @@ PYTEST_ARGS ?=
 # Test processes (pytest-xdist): one per core; tests sharing a module's fixtures stay in one process.
 JOBS ?= 2
 
-.PHONY: setup render test bench sweeps synthetic mutants
+.PHONY: setup render test bench sweeps synthetic mutants peers
 
 setup:
 	@tools/setup.sh
@@ -26,6 +26,13 @@ bench: setup
 
 sweeps: setup
 	.venv/bin/python experiments/thesis_sweeps.py
+
+# Blender Cycles for experiments/cycles_peer.py, in a venv of its own (.venv-peers; bpy needs
+# CPython 3.11). spacefit and its tests never import it. BPY_WHEELS: a folder holding the wheel already.
+BPY_WHEELS ?=
+peers:
+	@[ -x .venv-peers/bin/python ] || python3.11 -m venv .venv-peers
+	.venv-peers/bin/python -m pip install -q $(if $(BPY_WHEELS),--find-links $(BPY_WHEELS)) bpy==5.0.1
 
 synthetic: setup
 	.venv/bin/python data/synthetic/make_references.py

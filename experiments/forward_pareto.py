@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import statistics
 import time
+from collections.abc import Sequence
 from pathlib import Path
 
 import matplotlib
@@ -146,6 +147,12 @@ METHOD_SPP = {"reduced": [4, 16], "full": [4, 8, 16, 32, 64]}
 TARGET_ERRORS = (0.4, 0.3, 0.2)
 
 
+def view_reference(extra: list[str], spp: int) -> np.ndarray:
+    """The error yardstick of a view of VIEWS (its ``extra`` overrides): spacefit's default render (the
+    window, ``independent``) at ``spp`` with REFERENCE_SEED, all threads."""
+    return Renderer(assemble(load_scene(None, ["render.deterministic=false", *extra]))).render(spp=spp, seed=REFERENCE_SEED)
+
+
 def time_at_error(rows: list[dict[str, object]], target: float) -> float:
     """Wall time (s) at which a method's error reaches ``target``: log-log interpolation between the
     two spp that bracket it (NaN when none does)."""
@@ -166,7 +173,7 @@ def run_methods(out: Path, full: bool) -> list[dict[str, object]]:
     rows, summary = [], []
     for view, extra in VIEWS.items():
         base = ["render.deterministic=false", *extra]
-        reference = Renderer(assemble(load_scene(None, base))).render(spp=reference_spp, seed=REFERENCE_SEED)
+        reference = view_reference(extra, reference_spp)
         # render.spp 16 is valid for every sampler; each render passes its own spp
         renderers = {name: Renderer(assemble(load_scene(None, [*base, "render.spp=16", f'render.sampler="{sampler}"'])),
                                     crop=not film)
@@ -204,7 +211,7 @@ def run_pairs(repeats: int = PAIR_REPEATS, reference_spp: int = 1024) -> list[di
     rows = []
     for view, extra in VIEWS.items():
         base = ["render.deterministic=false", *extra]
-        reference = Renderer(assemble(load_scene(None, base))).render(spp=reference_spp, seed=REFERENCE_SEED)
+        reference = view_reference(extra, reference_spp)
         plain = Renderer(assemble(load_scene(None, base)), crop=False)
         ours = Renderer(assemble(load_scene(None, [*base, 'render.sampler="multijitter"'])))
         runs: dict[str, list[tuple[float, float]]] = {"plain": [], "spacefit": []}
@@ -234,13 +241,19 @@ def plot_methods(path: Path, rows: list[dict[str, object]], reference_spp: int) 
             pts = sorted((r["time_s"], r["rel_rmse"], r["samples_per_pixel"]) for r in rows
                          if r["view"] == view and r["method"] == name)
             ax.plot([p[0] for p in pts], [p[1] for p in pts], "o-", ms=4, label=name)
+    label_view_axes(axes, reference_spp, rows[0]["threads"])
+    save_figure(fig, path)
+
+
+def label_view_axes(axes: Sequence[object], reference_spp: int, threads: object) -> None:
+    """Log-log error-against-time panels, one per view of VIEWS: scales, titles, labels, legend."""
+    for ax, view in zip(axes, VIEWS):
         ax.set_xscale("log")
         ax.set_yscale("log")
         ax.set_title(f"{view}, 600 px, depth 2", fontsize=10)
-        ax.set_xlabel(f"render wall time (s), median of {REPEATS}, {rows[0]['threads']} threads")
+        ax.set_xlabel(f"render wall time (s), median of {REPEATS}, {threads} threads")
     axes[0].set_ylabel(f"relative RMSE over lit pixels (reference {reference_spp} spp)")
     axes[0].legend(fontsize=7)
-    save_figure(fig, path)
 
 
 def main() -> None:

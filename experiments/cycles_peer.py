@@ -1,0 +1,246 @@
+"""spacefit's forward render against Blender Cycles (bpy 5.0.1) at equal image error, in both views.
+
+For each view of ``forward_pareto.VIEWS`` (600 px, depth 2, 2 threads) the scene spacefit assembles is
+exported (:func:`export_view`: a PLY per part in world coordinates, flat-shaded as spacefit renders it,
+and ``scene.json`` with the camera, sun, materials and render settings) and rendered by
+``cycles_render.py`` in ``.venv-peers`` (``make peers``). First a validation: a high-spp Cycles render
+against spacefit's reference (part means over the pixels whose centre sees each part). Then rounds in
+turn, A B A B: spacefit (its window, ``multijitter``) and plain Mitsuba (whole film, ``independent``)
+sweep spp in this process, then Cycles sweeps spp in its own, on the whole film and on spacefit's window
+only (a render border: the same trick, to tell the window's share from the renderer's); each time is the median of
+``forward_pareto.REPEATS`` renders after a first one (Cycles: after its syncing render, with persistent
+data). Errors are ``studyio.relative_rmse`` against spacefit's reference (``forward_pareto.view_reference``)
+and, for Cycles, also against its own high-spp render, so that a mismatch of models or pixel filters is
+not counted as noise. Times at equal error are interpolated log-log (``forward_pareto.time_at_error``)
+and compared within each round. Writes ``validation.csv``, ``sweep.csv``, ``equal_error.csv`` and
+``cycles.png`` to ``--out``.
+
+Cycles has no tent filter: spacefit's tent (radius 1 px) is matched by Cycles' Gaussian of the same
+standard deviation, sqrt(1/6) px (Cycles' filter width is 4 standard deviations).
+
+Run: ``make peers`` then ``.venv/bin/python experiments/cycles_peer.py [--full] [--out experiments/results/cycles]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import statistics
+import subprocess
+import tempfile
+from pathlib import Path
+
+import matplotlib
+import numpy as np
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+from forward_pareto import (  # noqa: E402
+    METHODS, REFERENCE_SEED, REPEATS, TARGET_ERRORS, VIEWS, label_view_axes, time_at_error, timed, view_reference)
+from studyio import machine, relative_rmse, save_figure, write_csv  # noqa: E402
+
+from spacefit.materials import Conductor, Lambert, Material  # noqa: E402
+from spacefit.rendering.backend import dr  # noqa: E402
+from spacefit.rendering.exr import read_exr  # noqa: E402
+from spacefit.rendering.renderer import Renderer, target_window  # noqa: E402
+from spacefit.scene.assembly import Assembly, assemble  # noqa: E402
+from spacefit.scene.config import load_scene  # noqa: E402
+
+ROOT = Path(__file__).resolve().parent.parent
+PEER_PYTHON = ROOT / ".venv-peers" / "bin" / "python"
+CYCLES_SCRIPT = Path(__file__).resolve().parent / "cycles_render.py"
+THREADS = 2
+# (spp swept, rounds, spacefit's reference spp, Cycles' reference spp)
+REDUCED = ([1, 4, 16], 1, 256, 256)
+FULL = ([1, 2, 4, 8, 16, 32, 64], 3, 1024, 1024)
+# spacefit's render.filter -> Cycles' (pixel_filter_type, filter_width px); Cycles' Gaussian of width w has
+# standard deviation w / 4: the tent of radius 1 px has sqrt(1/6) px, Mitsuba's Gaussian 0.5 px.
+CYCLES_FILTERS = {"tent": ("GAUSSIAN", 4.0 * math.sqrt(1.0 / 6.0)), "gaussian": ("GAUSSIAN", 2.0), "box": ("BOX", 1.0)}
+# The methods of forward_pareto.METHODS timed beside Cycles: spacefit's and the plain Mitsuba yardstick.
+SPACEFIT, PLAIN = "window, multijitter", "mitsuba film, independent"
+# Cycles' methods -> render only spacefit's window (a render border)? The whole film is how Cycles renders.
+CYCLES_METHODS = {"cycles": False, "cycles, window": True}
+
+
+def write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None) -> None:
+    """A binary little-endian triangle PLY: float32 x, y, z (and s, t for uv), int32 vertex indices."""
+    names = ["x", "y", "z", *(["s", "t"] if uv is not None else [])]
+    vertex = np.empty(len(vertices), dtype=[(n, "<f4") for n in names])
+    for i, n in enumerate("xyz"):
+        vertex[n] = vertices[:, i]
+    if uv is not None:
+        vertex["s"], vertex["t"] = uv[:, 0], uv[:, 1]
+    face = np.empty(len(faces), dtype=[("n", "u1"), ("i", "<i4", 3)])
+    face["n"], face["i"] = 3, faces
+    header = ["ply", "format binary_little_endian 1.0", f"element vertex {len(vertices)}",
+              *(f"property float {n}" for n in names), f"element face {len(faces)}",
+              "property list uchar int vertex_indices", "end_header"]
+    with open(path, "wb") as f:
+        f.write(("\n".join(header) + "\n").encode("ascii"))
+        f.write(vertex.tobytes())
+        f.write(face.tobytes())
+
+
+def _rgb(value: float | tuple[float, ...]) -> list[float]:
+    return list(value) if isinstance(value, tuple) else [float(value)] * 3
+
+
+def material_description(material: Material, has_uv: bool) -> dict[str, object]:
+    """A material as ``cycles_render.py`` reads it; a conductor's alpha_x lies along dp/du where the part has uv."""
+    if isinstance(material, Conductor):
+        return {"type": "conductor", "eta": _rgb(material.eta), "k": _rgb(material.k), "alpha_x": material.alpha_x,
+                "alpha_y": material.alpha_y, "distribution": material.distribution, "tangent": "uv" if has_uv else None}
+    if isinstance(material, Lambert):
+        return {"type": "lambert", "kd": _rgb(material.kd)}
+    raise ValueError(f"no Cycles material for {type(material).__name__}")
+
+
+def export_view(assembly: Assembly, folder: Path) -> dict[str, object]:
+    """Write each part's PLY (world coordinates, m; the float32 vertices Mitsuba gets) and ``scene.json``
+    (camera, sun, render settings with spacefit's window, materials) to ``folder``; returns the JSON's content."""
+    folder.mkdir(parents=True, exist_ok=True)
+    s, cam, intr = assembly.scene, assembly.camera, assembly.intrinsics
+    parts = {}
+    for name, part in assembly.parts.items():
+        uv = None if name in assembly.refinements else part.uv
+        write_ply(folder / f"{name}.ply", assembly.scene_vertices[name], assembly.faces(name), uv)
+        parts[name] = {"ply": f"{name}.ply", "material": material_description(assembly.materials[name], uv is not None)}
+    filter_type, filter_width = CYCLES_FILTERS[s.render.filter]
+    description = {
+        "render": {"width": intr.width, "height": intr.height, "depth": s.render.depth, "threads": THREADS,
+                   "filter": s.render.filter, "filter_type": filter_type, "filter_width_px": filter_width,
+                   "window": list(target_window(assembly, assembly.scene_vertices))},
+        "camera": {"position_m": cam.position.tolist(), "right": cam.right.tolist(), "up": cam.up.tolist(),
+                   "forward": cam.forward.tolist(), "focal_px": intr.focal_px,
+                   "principal_offset_px": list(intr.principal_offset), "clip_m": [0.01, 1e5]},
+        "sun": {"direction": assembly.sun_direction.tolist(), "irradiance_w_m2": s.sun.irradiance_w_m2},
+        "parts": parts,
+    }
+    (folder / "scene.json").write_text(json.dumps(description, indent=1))
+    return description
+
+
+def render_cycles(scene_dir: Path, out: Path, spps: list[int], repeats: int, seed: int,
+                  window: bool = False) -> tuple[dict, dict[int, np.ndarray]]:
+    """Run ``cycles_render.py`` in ``.venv-peers`` (``window``: spacefit's window only): its timings.json
+    and the first image of each spp."""
+    if not PEER_PYTHON.exists():
+        raise SystemExit(f"{PEER_PYTHON} is missing: run `make peers` first (bpy 5.0.1 in a venv of its own).")
+    with open(out / "cycles.log", "a") as log:
+        subprocess.run([str(PEER_PYTHON), str(CYCLES_SCRIPT), str(scene_dir), "--out", str(out), "--spp", *map(str, spps),
+                        "--repeats", str(repeats), "--seed", str(seed), *(["--window"] if window else [])], check=True, stdout=log, stderr=subprocess.STDOUT)
+    timings = json.loads((out / "timings.json").read_text())
+    return timings, {spp: read_exr(out / f"cycles_{spp}.exr")[..., :3] for spp in spps}
+
+
+def validation_rows(view: str, renderer: Renderer, spacefit_ref: np.ndarray, cycles_ref: np.ndarray) -> list[dict[str, object]]:
+    """Per part (pixels whose centre sees it) and for the whole target: both renderers' mean radiance and their ratio."""
+    parts = renderer.part_image()
+    ours, theirs = parts.table(spacefit_ref), parts.table(cycles_ref)
+    return [{"view": view, "part": name, "pixels": ours[name]["pixels"],
+             "spacefit_mean": round(ours[name]["mean_radiance_w_m2_sr"], 6),
+             "cycles_mean": round(theirs[name]["mean_radiance_w_m2_sr"], 6),
+             "cycles_over_spacefit": round(theirs[name]["mean_radiance_w_m2_sr"] / ours[name]["mean_radiance_w_m2_sr"], 5)}
+            for name in ours]
+
+
+def run_view(view: str, extra: list[str], full: bool) -> tuple[list[dict], list[dict], list[dict]]:
+    """Validation, sweep and equal-error rows of one view (see the module docstring)."""
+    spps, rounds, reference_spp, cycles_reference_spp = FULL if full else REDUCED
+    base = ["render.deterministic=false", *extra]
+    spacefit_ref = view_reference(extra, reference_spp)
+    renderers = {name: Renderer(assemble(load_scene(None, [*base, f'render.sampler="{METHODS[name][1]}"'])), crop=not METHODS[name][0])
+                 for name in (SPACEFIT, PLAIN)}
+    with tempfile.TemporaryDirectory() as tmp:
+        scene_dir, cycles_out = Path(tmp) / "scene", Path(tmp) / "cycles"
+        cycles_out.mkdir()
+        export_view(renderers[SPACEFIT].assembly, scene_dir)
+        ref_timings, ref_images = render_cycles(scene_dir, cycles_out, [cycles_reference_spp], 1, REFERENCE_SEED)
+        cycles_ref = ref_images[cycles_reference_spp]
+        validation = validation_rows(view, renderers[SPACEFIT], spacefit_ref, cycles_ref)
+        validation.append({"view": view, "part": "rel_rmse(cycles_ref, spacefit_ref)", "pixels": "",
+                           "spacefit_mean": "", "cycles_mean": "", "cycles_over_spacefit": round(relative_rmse(cycles_ref, spacefit_ref), 5)})
+        sweep = []
+        for r in range(rounds):
+            load = os.getloadavg()[0]
+            for spp in spps:
+                for name, renderer in renderers.items():
+                    time_s, image = timed(renderer, spp)
+                    error = round(relative_rmse(image, spacefit_ref), 5)  # Mitsuba's own reference is spacefit's
+                    sweep.append({"view": view, "round": r, "method": name, "spp": spp, "time_s": round(time_s, 5),
+                                  "rel_rmse": error, "rel_rmse_own_ref": error,
+                                  "threads": dr.thread_count(), "load_1min": round(load, 2)})
+            for method, window in CYCLES_METHODS.items():
+                timings, images = render_cycles(scene_dir, cycles_out, spps, REPEATS, 1 + r * REPEATS, window)
+                load = os.getloadavg()[0]
+                sweep += [{"view": view, "round": r, "method": method, "spp": spp,
+                           "time_s": round(statistics.median(timings["renders"][str(spp)]), 5),
+                           "rel_rmse": round(relative_rmse(images[spp], spacefit_ref), 5),
+                           "rel_rmse_own_ref": round(relative_rmse(images[spp], cycles_ref), 5),
+                           "threads": timings["threads"], "load_1min": round(load, 2)} for spp in spps]
+                print(f"{view} round {r}, {method}: build {timings['build_s']:.2f} s, first render {timings['first_render_s']:.2f} s, "
+                      f"{timings['sampling_pattern']}, Blender {timings['blender']}")
+    return validation, sweep, equal_error_rows(view, sweep)
+
+
+def _time_at(rows: list[dict], method: str, target: float, key: str = "rel_rmse") -> float:
+    """``forward_pareto.time_at_error`` of one method's rows, its error read from column ``key``."""
+    return time_at_error([{"rel_rmse": row[key], "time_s": row["time_s"]} for row in rows if row["method"] == method], target)
+
+
+def equal_error_rows(view: str, sweep: list[dict]) -> list[dict]:
+    """Per round and target error: the times of spacefit, plain Mitsuba and Cycles (against spacefit's reference
+    and its own) at that error, and spacefit's time over each."""
+    rows = []
+    for r in sorted({row["round"] for row in sweep}):
+        runs = [row for row in sweep if row["round"] == r]
+        for target in TARGET_ERRORS:
+            t = {"spacefit": _time_at(runs, SPACEFIT, target), "plain": _time_at(runs, PLAIN, target),
+                 "cycles": _time_at(runs, "cycles", target), "cycles_own_ref": _time_at(runs, "cycles", target, "rel_rmse_own_ref"),
+                 "cycles_window": _time_at(runs, "cycles, window", target)}
+            rows.append({"view": view, "round": r, "rel_rmse": target, **{f"{k}_s": round(v, 5) for k, v in t.items()},
+                         **{f"spacefit_over_{k}": round(t["spacefit"] / t[k], 4) for k in t if k != "spacefit"}})
+    return rows
+
+
+def plot(path: Path, sweep: list[dict], reference_spp: int) -> None:
+    """Error against time per method (median time, mean error over rounds), one panel per view."""
+    fig, axes = plt.subplots(1, len(VIEWS), figsize=(11, 4.5))
+    curves = [(SPACEFIT, "rel_rmse", "spacefit (window, multijitter)", "o-"), (PLAIN, "rel_rmse", "plain Mitsuba (film, independent)", "s-"),
+              ("cycles", "rel_rmse", "Cycles vs spacefit's reference", "D-"), ("cycles", "rel_rmse_own_ref", "Cycles vs its own reference", "D--"),
+              ("cycles, window", "rel_rmse", "Cycles, spacefit's window (border)", "v-")]
+    for ax, view in zip(axes, VIEWS):
+        for method, key, label, style in curves:
+            rows = [r for r in sweep if r["view"] == view and r["method"] == method]
+            spps = sorted({r["spp"] for r in rows})
+            t = [statistics.median(r["time_s"] for r in rows if r["spp"] == s) for s in spps]
+            e = [statistics.mean(r[key] for r in rows if r["spp"] == s) for s in spps]
+            ax.plot(t, e, style, ms=4, label=label)
+    label_view_axes(axes, reference_spp, THREADS)
+    save_figure(fig, path)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--out", type=Path, default=Path("experiments/results/cycles"))
+    p.add_argument("--full", action="store_true", help="spp 1-64, 3 rounds, 1024 spp references (about 12 min)")
+    args = p.parse_args()
+    dr.set_thread_count(THREADS)
+    args.out.mkdir(parents=True, exist_ok=True)
+    print(f"{machine()}, load {os.getloadavg()}")
+    validation, sweep, summary = [], [], []
+    for view, extra in VIEWS.items():
+        v, s, e = run_view(view, extra, args.full)
+        validation, sweep, summary = validation + v, sweep + s, summary + e
+        for row in v + e:
+            print(row)
+    write_csv(args.out / "validation.csv", validation)
+    write_csv(args.out / "sweep.csv", sweep)
+    write_csv(args.out / "equal_error.csv", summary)
+    plot(args.out / "cycles.png", sweep, (FULL if args.full else REDUCED)[2])
+
+
+if __name__ == "__main__":
+    main()
