@@ -16,7 +16,7 @@ render seed, so that the render noise of the fit is part of what the errors must
 
 Writes ``coverage.csv`` (one row per fit), ``coverage_summary.csv`` and ``coverage.png`` to ``--out``.
 Run: ``.venv/bin/python experiments/coverage.py [--full]``: by default 10 exposures for the coverage
-and 2 per chart point (about 5 minutes on 2 cores); ``--full``: 50 and 5 (about 20 minutes), the
+and 2 per chart point (about 5 minutes on 2 cores); ``--full``: 50 and 5 (about 20 minutes on a quiet machine), the
 results in ``experiments/results/coverage/``. A fit takes 8 to 18 s at 48 px, 32 spp, mostly JAX's
 compilation of the solver's step for the new problem, so the study has no CI test of its own; the
 reduced, linearised study is ``tests/test_noise_model.py``.
