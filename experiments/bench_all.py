@@ -1,6 +1,7 @@
 """Every speed figure in one run (``make bench``): the main job's wall time cold and warm, forward
 renders at equal error against plain Mitsuba, the fits' solve times and accuracy, peak memory, and
-Dr.Jit kernel compilations over a long fit.
+Dr.Jit kernel compilations over a long fit, and where a CUDA GPU is usable, the default forward
+render and the panels fit on it against the CPU.
 
 Each figure comes from a child process, so that its wall time includes the start-up a user pays and
 its peak memory (``ru_maxrss`` from ``os.wait4``; tracemalloc cannot see Dr.Jit's allocations) is
@@ -46,6 +47,28 @@ for steps in (5, 60):
         r = sf.fit(obs, list(case.free), solver="adam", start=case.start, max_steps=steps, rtol=1e-12)
     print(f"adam {r.steps} steps: {k['launched']} kernels launched, {k['compiled']} compiled ({k['compile_s']:.2f} s)")
 """
+# One variant's default forward render (median of 7 after a compiling one; the CPU on 2 threads, as
+# on the benchmark machine) and the panels fit of bench_fit.py (LM): "forward <s>", "fit <s> <max |error|>".
+VARIANT_RUN = """
+import statistics, sys, time
+sys.path.insert(0, "experiments")
+from bench_fit import run
+from spacefit.rendering.backend import dr
+import spacefit as sf
+variant = sys.argv[1]
+dr.set_thread_count(2)
+renderer = sf.Renderer(sf.load_scene(None, {"render.variant": variant, "render.deterministic": False}))
+renderer.render(seed=0)
+times = []
+for seed in range(1, 8):
+    t0 = time.perf_counter()
+    renderer.render(seed=seed)
+    times.append(time.perf_counter() - t0)
+print(f"forward {statistics.median(times):.5f}")
+row = run(sf.load_case("panels").with_values({"render.variant": variant}), "lm", 40)
+print(f"fit {row['wall_s']:.3f} {max(abs(e) for e in row['errors'].values()):.5f}")
+"""
+CUDA_PROBE = "from spacefit.rendering.backend import dr; print(dr.has_backend(dr.JitBackend.CUDA))"
 
 
 def child(args: list[str], env: dict[str, str] | None = None) -> tuple[float, float, str]:
@@ -76,6 +99,25 @@ def main_job(repeats: int) -> None:
               f"{runs[-1][1]:.0f} MiB\n{runs[-1][2].strip()}")
 
 
+def gpu_against_cpu() -> None:
+    """The default forward render and the panels fit with ``cuda_ad_rgb`` against ``llvm_ad_rgb`` on 2
+    threads, where a CUDA GPU is usable (each variant in its own process)."""
+    env = {"PYTHONPATH": str(ROOT)}
+    if child([sys.executable, "-c", CUDA_PROBE], env)[2].strip() != "True":
+        print("\n## GPU: no CUDA GPU usable here; cuda_ad_rgb not measured")
+        return
+    print("\n## GPU (cuda_ad_rgb) against the CPU (llvm_ad_rgb, 2 threads)")
+    runs = {}
+    for variant in ("llvm_ad_rgb", "cuda_ad_rgb"):
+        lines = dict(line.split(" ", 1) for line in child([sys.executable, "-c", VARIANT_RUN, variant], env)[2].splitlines()
+                     if line.startswith(("forward ", "fit ")))
+        runs[variant] = (float(lines["forward"]), *map(float, lines["fit"].split()))
+        forward, fit, error = runs[variant]
+        print(f"{variant}: default forward render {forward * 1e3:.1f} ms, panels fit (LM) {fit:.2f} s, largest error {error:.2%}")
+    cpu, gpu = runs["llvm_ad_rgb"], runs["cuda_ad_rgb"]
+    print(f"GPU / CPU time: forward {gpu[0] / cpu[0]:.3f}, fit {gpu[1] / cpu[1]:.3f}")
+
+
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--full", action="store_true", help="the forward study at full size (1024 spp references, spp 4-64)")
@@ -95,6 +137,7 @@ def main() -> None:
     wall, peak, text = child([sys.executable, "-c", LONG_FIT.replace("STEPS", str(args.long_fit_steps))],
                              {"PYTHONPATH": str(ROOT)})
     print(f"\n## a long fit: peak memory and Dr.Jit kernels ({wall:.0f} s, peak {peak:.0f} MiB)\n{text.strip()}")
+    gpu_against_cpu()
 
 
 if __name__ == "__main__":
