@@ -132,7 +132,7 @@ def test_from_file_refuses_dn_without_a_sensor_and_takes_a_sensor_file(sphere, t
     (tmp_path / "sensor.toml").write_text("[sensor]\nbias_dn = 50.0\nbit_depth = 12\n")
     obs = sf.Observation.from_file(tmp_path / "foreign.fits", scene, sensor=read_sensor_file(tmp_path / "sensor.toml"))
     assert obs.sensor == sf.Sensor(exposure_time_s=2e-6, gain_dn_per_electron=0.25, bias_dn=50.0, bit_depth=12)
-    assert obs.reference.shape == (32, 32) and np.array_equal(obs.reference, dn[..., 0])  # one channel: grey
+    assert obs.reference.shape == (32, 32, 1) and np.array_equal(obs.reference, dn[..., :1])  # one channel: grey
 
 
 @pytest.mark.parametrize("text, suffix, match", [
@@ -189,3 +189,22 @@ def test_the_fits_model_image_is_in_the_references_unit(sphere, sensor):
         assert not sf.saturated_mask(reference, sensor).any() and result.renders[0].max() > 100 * truth.max()
     figure = sf.plot_comparison(result, [reference])
     assert unit.split()[0] in figure.axes[0].get_title()
+
+
+def test_a_grey_observation_counts_each_pixel_once(sphere):
+    """A one-channel image is one measurement per pixel, not three copies: with the noise known, its
+    errors are sqrt(3) those of an RGB image whose three channels are independent exposures of the
+    same light (photon-limited, render noise negligible at 256 spp), and a fit of it works."""
+    _, scene, truth, _ = sphere
+    dim = dataclasses.replace(SENSOR, exposure_time_s=1e-7, read_noise_electrons=1.0)
+    intrinsics = assemble(scene).intrinsics
+    grey = sf.observe(truth[..., :1], dim, intrinsics, seed=3).astype(float)
+    rgb = sf.observe(truth, dim, intrinsics, seed=4).astype(float)
+    assert grey.shape == (32, 32, 1)
+    errors = [sf.identifiability(sf.Observation(scene, image, sensor=dim), ["parts.sphere.kd"], {"parts.sphere.kd": TRUE_KD},
+                                 spp=256).stderr["parts.sphere.kd"] for image in (grey[..., 0], rgb)]
+    assert errors[0] / errors[1] == pytest.approx(np.sqrt(3.0), rel=0.1)
+    result = sf.fit(sf.Observation(scene, grey, sensor=dim), ["parts.sphere.kd"], max_steps=6, spp=4)
+    assert abs(result.values["parts.sphere.kd"] - TRUE_KD) < 4 * result.stderr["parts.sphere.kd"]
+    assert result.renders[0].shape == (32, 32, 1)
+    sf.plot_comparison(result, [grey])

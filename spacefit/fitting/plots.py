@@ -37,13 +37,13 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray]) -> Figu
     fig = Figure(figsize=(10.5, 3.2 * n), layout="constrained")
     axes = fig.subplots(n, 3, squeeze=False)
     for i, (row, reference) in enumerate(zip(axes, references)):
-        ref = np.asarray(reference, dtype=np.float32)[..., :3]
+        ref = _rgb(reference)
         unit = PLOT_UNITS[result.units[i] if i < len(result.units) else RADIANCE_UNIT]
         scale = preview_scale(ref)
         row[0].imshow(to_srgb8(ref, scale))
         row[0].set_title(f"reference {i} (white = {1 / scale:.3g} {unit})", fontsize=9)
         if i < len(result.renders):
-            render = np.asarray(result.renders[i], dtype=np.float32)
+            render = _rgb(result.renders[i])
             row[1].imshow(to_srgb8(render, scale))
             row[1].set_title(f"fit {i} (same exposure)", fontsize=9)
             residual = (render - ref).mean(axis=-1)
@@ -59,6 +59,13 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray]) -> Figu
             ax.set_yticks([])
     fig.suptitle(f"{result.solver}, {result.loss_name} loss: {result.status}", fontsize=10)
     return fig
+
+
+def _rgb(image: np.ndarray) -> np.ndarray:
+    """An (h, w) or (h, w, c) image as (h, w, 3) float32 for display (a grey image in all three)."""
+    image = np.asarray(image, dtype=np.float32)
+    image = image[..., None] if image.ndim == 2 else image
+    return np.repeat(image, 3, axis=-1) if image.shape[-1] == 1 else image[..., :3]
 
 
 def plot_convergence(result: FitResult) -> Figure:

@@ -21,6 +21,7 @@ from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_c
 from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.nuisance import split
 from spacefit.fitting.params import FreeParameters, free_parameters
+from spacefit.geometry.frames import Intrinsics
 from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import PartImage, Renderer
 from spacefit.rendering.values import scene_values_fn
@@ -86,7 +87,8 @@ class Observation:
         Radiance is fitted as radiance (``sigma`` its noise). DN are fitted with their sensor
         (:func:`~spacefit.imageio.sensor_of`): ``sensor`` as given (an sf.Sensor), or the file's own
         (spacefit FITS header or sidecar; a foreign FITS's ``EXPTIME`` and ``GAIN``) with the fields
-        of a mapping ``sensor`` replacing its. A one-channel image is taken as grey.
+        of a mapping ``sensor`` replacing its. A one-channel image is fitted as grey (one residual
+        per pixel, against the mean of the render's channels).
 
         Raises:
             InputError: DN with no sensor, a ``sensor`` for radiance or a ``sigma`` for DN, and every
@@ -95,28 +97,28 @@ class Observation:
         from spacefit.imageio import read_image, sensor_of  # FITS and TIFF readers: only files need them
 
         image = read_image(path, unit=unit, response=response, mask=mask, sigma=sigma)
-        data, used = (image.data[..., 0], image.mask[..., 0]) if image.data.shape[-1] == 1 else (image.data, image.mask)
         if image.unit == RADIANCE_UNIT:
             if sensor is not None:
                 raise InputError(f"{image.path!r} holds radiance ({RADIANCE_UNIT}); `sensor` describes the camera of a DN "
                                  "image: leave it out.")
-            return cls(scene, data, sigma, mask=used)
+            return cls(scene, image.data, sigma, mask=image.mask)
         if sigma is not None:
             raise InputError(f"{image.path!r} holds DN: its noise is its sensor's; leave `sigma` out.")
-        return cls(scene, data, sensor=sensor_of(image, sensor), mask=used)
+        return cls(scene, image.data, sensor=sensor_of(image, sensor), mask=image.mask)
 
 
 def check_reference(obs: Observation, index: int) -> tuple[np.ndarray, np.ndarray]:
-    """The observation's reference as a float32 (h, w, 3) array, checked against its scene, with
-    masked-out values set to 0, and its (h, w, 3) bool mask of the values to fit."""
+    """The observation's reference as a float32 (h, w, 3) array, or (h, w, 1) for a one-channel
+    (grey) image, checked against its scene, with masked-out values set to 0, and its bool mask of
+    the values to fit (same shape)."""
     ref = np.asarray(obs.reference, dtype=np.float32)
     w, h = obs.scene.render.resolution
     if ref.ndim == 2:
-        ref = np.repeat(ref[..., None], 3, axis=-1)
-    if ref.shape[:2] != (h, w) or ref.shape[-1] < 3:
+        ref = ref[..., None]
+    if ref.ndim != 3 or ref.shape[:2] != (h, w) or ref.shape[-1] == 2:
         raise InputError(
-            f"reference {index} has shape {ref.shape}, but its scene renders (height, width) = ({h}, {w}); "
-            "render the reference at the scene's resolution or set `render.resolution`."
+            f"reference {index} has shape {ref.shape}, but its scene renders (height, width) = ({h}, {w}) with 1 (grey) "
+            "or 3 (RGB) channels; render the reference at the scene's resolution or set `render.resolution`."
         )
     used = np.ones(ref.shape, dtype=bool) if obs.mask is None else _mask(obs.mask, ref.shape, index)
     ref, used = ref[..., :3], used[..., :3]
@@ -184,7 +186,7 @@ def _problem(
         renders_alt.append(render_params(dscene, values_of, steps, seed + alt, seed_grad + alt))
         renders_v.append(render_values(dscene, seed, seed_grad))
         residuals.append(_residual(obs, ref, used, loss))
-        to_units.append((lambda image: image) if obs.sensor is None else dn_fn(obs.sensor, assembly.intrinsics, ref.shape[-1]))
+        to_units.append(_in_unit_of(obs, ref.shape[-1], assembly.intrinsics))
         units.append(RADIANCE_UNIT if obs.sensor is None else DN_UNIT)
         values_fns.append(values_of)
         part_images.append(renderer.part_image())
@@ -209,6 +211,16 @@ def _problem(
 
     return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [modelled(render, k)(x) for k, render in enumerate(renders_x)],
                    part_images, references, all(o.sensor is not None for o in observations), tuple(spread), tuple(units))
+
+
+def _in_unit_of(obs: Observation, channels: int, intrinsics: Intrinsics) -> Callable[[jax.Array], jax.Array]:
+    """A model radiance image (h, w, 3) as the observation sees it: its ``channels`` (a grey image
+    sees the mean of the render's channels, which are equal: the scene is grey), in radiance or,
+    with a sensor, in the sensor's expected DN."""
+    to_dn = (lambda image: image) if obs.sensor is None else dn_fn(obs.sensor, intrinsics, channels)
+    if channels == 1:
+        return lambda image: to_dn(jnp.mean(image, axis=-1, keepdims=True))
+    return to_dn
 
 
 def _residual(obs: Observation, reference: np.ndarray, used: np.ndarray, loss: str) -> Callable[[jax.Array], jax.Array]:
