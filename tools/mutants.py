@@ -112,6 +112,11 @@ MUTANTS = (
            "touched = np.zeros(len(x), dtype=bool)", (UNCERTAINTY,)),
     Mutant("covariance-no-jacobian-noise", COVARIANCE, "problem) + jacobian_noise) @ bread", "problem)) @ bread", (UNCERTAINTY,)),
     Mutant("render-noise-per-pixel", COVARIANCE, "size = 2 * noise_reach_px(problem, x, k) + 1", "size = 1", (UNCERTAINTY,)),
+    # observations from files (issue 10): masks and grey images
+    Mutant("mask-ignored", "spacefit/fitting/losses.py", "keep = 1.0 if mask is None else",
+           "keep = 1.0 if True else", ("tests/test_observations.py",)),
+    Mutant("grey-reference-three-copies", "spacefit/fitting/problem.py", "        ref = ref[..., None]\n",
+           "        ref = np.repeat(ref[..., None], 3, axis=-1)\n", ("tests/test_observations.py",)),
     Mutant("fisher-times-s2", COVARIANCE, "np.clip(eigval, 0.0, None) / s2", "np.clip(eigval, 0.0, None) * s2", (UNCERTAINTY,)),
     Mutant("map-covariance-transposed", COVARIANCE, "out = T @ np.where(np.isfinite(cov), cov, 0.0) @ T.T",
            "out = T.T @ np.where(np.isfinite(cov), cov, 0.0) @ T", (UNCERTAINTY,)),
