@@ -173,15 +173,18 @@ DIM = dataclasses.replace(SENSOR, exposure_time_s=4e-7)
 @pytest.mark.parametrize("sensor", [None, DIM], ids=["radiance", "dn"])
 def test_the_fits_model_image_is_in_the_references_unit(sphere, sensor):
     """A fit's renders, part means and comparison are in its reference's unit: DN with a sensor
-    (the sensor's expected DN of the render, bias included), radiance without."""
-    _, scene, truth, _ = sphere
+    (the sensor's expected DN of the render, bias included), radiance without. The part means
+    count only the fitted pixels (here a square of garbage is masked out)."""
+    _, scene, truth, mask = sphere
     reference = truth if sensor is None else sf.observe(truth, sensor, assemble(scene).intrinsics, seed=1).astype(float)
-    result = sf.fit(sf.Observation(scene, reference, sensor=sensor), ["parts.sphere.kd"], max_steps=6, spp=4)
+    observation = sf.Observation(scene, _garbage(reference, 100.0 * reference.max()), sensor=sensor, mask=mask)
+    result = sf.fit(observation, ["parts.sphere.kd"], max_steps=6, spp=4)
     unit = "W m^-2 sr^-1" if sensor is None else "DN"
     assert result.units == [unit]
     suffix = "w_m2_sr" if sensor is None else "dn"
     target = result.parts[0]["target"]
     assert target[f"fit_mean_{suffix}"] == pytest.approx(target[f"reference_mean_{suffix}"], rel=0.03)
+    assert target["pixels"] == int((sf.Renderer(scene).part_image().ids >= 0)[mask].sum())
     # a corner sees black sky: 0 radiance, or the sensor's bias (read noise 2.5 DN rms)
     sky = 0.0 if sensor is None else sensor.bias_dn
     assert result.renders[0][0, 0, 0] == pytest.approx(sky, abs=1e-6) and reference[0, 0, 0] == pytest.approx(sky, abs=10.0)

@@ -62,8 +62,8 @@ class FitResult:
         loss: final loss, 0.5 * sum of squared residuals.
         solver, loss_name, steps, wall_time_s, start: what was run.
         extras: derived quantities, e.g. the rms height (and its standard error) of a (D, G) fit.
-        parts: per observation, per part (and the whole ``target``): the pixels that see it and the
-            mean of the reference and of the fit's render there, in ``units`` (keys
+        parts: per observation, per part (and the whole ``target``): the fitted pixels (not masked
+            out) that see it and the mean of the reference and of the fit's render there, in ``units`` (keys
             ``reference_mean_w_m2_sr`` and ``fit_mean_w_m2_sr``, or ``reference_mean_dn`` and ``fit_mean_dn``).
         scene: the first observation's scene with the fitted values: ``scene.to_toml()`` is a scene
             file that renders the fit again (the image nuisances are not scene values); None if
@@ -294,7 +294,7 @@ def fit(
         wall_time_s=time.perf_counter() - t0,
         start=dict(zip(s.user.names, s.x0_user.tolist())),
         extras=extras,
-        parts=[_part_rows(p, ref, img, unit) for p, ref, img, unit in zip(problem.part_images, problem.references, renders, problem.units)],
+        parts=[_part_rows(*row) for row in zip(problem.part_images, problem.references, renders, problem.units, problem.used)],
         scene=scene_with_values(s.scene, dict(zip(s.user.names, x_user.tolist()))) if np.all(np.isfinite(x_user)) else None,
         units=list(problem.units),
     )
@@ -305,9 +305,10 @@ def _nonfinite_run(history: list[dict[str, Any]]) -> bool:
     return len(recent) == NONFINITE_PATIENCE and not any(np.isfinite(h["loss"]) for h in recent)
 
 
-def _part_rows(parts: PartImage, reference: np.ndarray, render: np.ndarray, unit: str) -> dict[str, dict[str, float]]:
-    """Per part: its pixels, and the mean of the reference and of the fit's render there, in ``unit``."""
-    ref, fitted = parts.table(reference), parts.table(render)
+def _part_rows(parts: PartImage, reference: np.ndarray, render: np.ndarray, unit: str,
+               used: np.ndarray) -> dict[str, dict[str, float]]:
+    """Per part: its fitted pixels (``used``), and the mean of the reference and of the fit's render there, in ``unit``."""
+    ref, fitted = parts.table(reference, used), parts.table(render, used)
     suffix = "dn" if unit == DN_UNIT else "w_m2_sr"
     return {name: {"pixels": row["pixels"], f"reference_mean_{suffix}": row["mean_radiance_w_m2_sr"],
                    f"fit_mean_{suffix}": fitted[name]["mean_radiance_w_m2_sr"]} for name, row in ref.items()}

@@ -154,12 +154,13 @@ class Problem:
     loss_u_reverse: Callable[[jax.Array], jax.Array] | None  # unconstrained u -> loss (reverse mode)
     renders_x: Callable[[jax.Array], list[jax.Array]]  # each observation's model image in its reference's unit
     part_images: list[PartImage]  # which part each pixel of each observation sees
-    references: list[np.ndarray]  # the checked references, (h, w, 3) float32
+    references: list[np.ndarray]  # the checked references, (h, w, 3) or (h, w, 1) float32, 0 where not used
     noise_known: bool = False  # every residual is divided by its predicted noise (a sensor per observation)
     # per observation, how far (px) its render noise spreads before the residuals: the pixel
     # filter's radius and the rms width of the sensor's PSF (0 without a sensor)
     noise_spread_px: tuple[tuple[float, float], ...] = ()
     units: tuple[str, ...] = ()  # per observation, the unit of its reference and model image (radiance or DN)
+    used: tuple[np.ndarray, ...] = ()  # per observation, (h, w) bool: the pixels fitted in every channel
 
 
 def _problem(
@@ -167,7 +168,7 @@ def _problem(
     seed: int, seed_grad: int, integrator: str,
 ) -> Problem:
     renders_x, renders_alt, renders_v, residuals, values_fns, part_images, references, spread = [], [], [], [], [], [], [], []
-    to_units, units = [], []
+    to_units, units, used_pixels = [], [], []
     moving = any(n in MOVES_VERTICES for n in free.names)
     # the image nuisances act on the render in JAX; the renderer sees the other parameters
     rendered, image_model = split(free.names)
@@ -185,12 +186,15 @@ def _problem(
         alt = INDEPENDENT_SEED_OFFSET
         renders_alt.append(render_params(dscene, values_of, steps, seed + alt, seed_grad + alt))
         renders_v.append(render_values(dscene, seed, seed_grad))
+        if obs.sensor is not None:
+            used = used & ~saturated_mask(ref, obs.sensor)  # a saturated value says only "at least this bright"
         residuals.append(_residual(obs, ref, used, loss))
         to_units.append(_in_unit_of(obs, ref.shape[-1], assembly.intrinsics))
         units.append(RADIANCE_UNIT if obs.sensor is None else DN_UNIT)
         values_fns.append(values_of)
         part_images.append(renderer.part_image())
         references.append(ref)
+        used_pixels.append(np.all(used, axis=-1))
         blur = 0.0 if obs.sensor is None else psf_rms_px(obs.sensor, assembly.intrinsics, ref.shape[-1])
         spread.append((FILTER_RADIUS_PX[scene.render.filter], blur))
 
@@ -210,7 +214,8 @@ def _problem(
             return 0.5 * jnp.sum(r**2)
 
     return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [modelled(render, k)(x) for k, render in enumerate(renders_x)],
-                   part_images, references, all(o.sensor is not None for o in observations), tuple(spread), tuple(units))
+                   part_images, references, all(o.sensor is not None for o in observations), tuple(spread), tuple(units),
+                   tuple(used_pixels))
 
 
 def _in_unit_of(obs: Observation, channels: int, intrinsics: Intrinsics) -> Callable[[jax.Array], jax.Array]:
@@ -225,12 +230,11 @@ def _in_unit_of(obs: Observation, channels: int, intrinsics: Intrinsics) -> Call
 
 def _residual(obs: Observation, reference: np.ndarray, used: np.ndarray, loss: str) -> Callable[[jax.Array], jax.Array]:
     """The residuals of a model image in the reference's unit, 0 where ``used`` is False: in
-    radiance, or with a sensor, in DN divided by the noise the sensor predicts at the model's DN
-    (saturated pixels of the reference left out)."""
+    radiance, or with a sensor, in DN divided by the noise the sensor predicts at the model's DN."""
     if obs.sensor is None:
         return residual_fn(reference, loss, obs.sigma, used)
     sensor = obs.sensor
-    return residual_fn(reference, loss, lambda dn: jnp.sqrt(noise_variance_dn(dn, sensor)), used & ~saturated_mask(reference, sensor))
+    return residual_fn(reference, loss, lambda dn: jnp.sqrt(noise_variance_dn(dn, sensor)), used)
 
 
 @dataclass

@@ -232,13 +232,16 @@ class PartImage:
     ids: np.ndarray
     names: tuple[str, ...]
 
-    def table(self, radiance: np.ndarray) -> dict[str, dict[str, float]]:
+    def table(self, radiance: np.ndarray, used: np.ndarray | None = None) -> dict[str, dict[str, float]]:
         """Per part: ``pixels`` (count whose centre sees it) and ``mean_radiance_w_m2_sr`` (mean of the
         RGB mean over those pixels, W m^-2 sr^-1; NaN for a part out of view); and the whole
-        ``target``. Edge pixels count for the part at their centre."""
+        ``target``. Edge pixels count for the part at their centre. ``used``: (height, width) bool,
+        the pixels to count (default: all)."""
         grey = np.asarray(radiance, dtype=float)[..., :3].mean(axis=-1)
+        counted = np.ones(self.ids.shape, dtype=bool) if used is None else np.asarray(used, dtype=bool)
         rows = {}
         for label, mask in [*((name, self.ids == i) for i, name in enumerate(self.names)), ("target", self.ids >= 0)]:
+            mask = mask & counted
             n = int(mask.sum())
             rows[label] = {"pixels": n, "mean_radiance_w_m2_sr": float(grey[mask].mean()) if n else math.nan}
         return rows
