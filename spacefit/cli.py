@@ -145,9 +145,9 @@ def _fit(args: argparse.Namespace) -> int:
         **{k: v for k, v in given.items() if v is not None},
     )
     print(format_result(result))
-    if result.status is Status.INTERRUPTED:
+    if result.status.interrupted:
         print(f"spacefit: interrupted; the best point so far is in {args.out} (continue with --resume)", file=sys.stderr)
-        return INTERRUPTED
+        return TERMINATED if result.status is Status.TERMINATED else INTERRUPTED
     if not result.success:
         print(f"spacefit: the fit did not converge ({result.status}); its report is in {args.out}", file=sys.stderr)
         return NOT_CONVERGED

@@ -203,7 +203,6 @@ def fit_to_folder(
     from spacefit.fitting.loop import DEFAULT_MAX_STEPS, fit  # the fitting stack: only fits pay its 1.5 s import
     from spacefit.fitting.problem import Observation
     from spacefit.fitting.report import write_fit_report
-    from spacefit.fitting.solvers import Status
     from spacefit.sensor import read_sensor_file
 
     prepare_output(out_dir, "fit", overwrite=overwrite, resume=resume,
@@ -265,7 +264,7 @@ def fit_to_folder(
             with contextlib.suppress(OSError):
                 Path(out_dir).rmdir()
         raise
-    if result.status is not Status.INTERRUPTED:
+    if not result.status.interrupted:
         checkpoint.remove()
     _say(f"wrote {Path(out_dir) / 'fit.json'}, fit.toml, uncertainty.json, comparison.png and convergence.png", quiet)
     return result

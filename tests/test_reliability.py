@@ -246,7 +246,7 @@ def wait_for(path: Path, process: subprocess.Popen, timeout: float = 240.0) -> N
         time.sleep(0.2)
 
 
-@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, INTERRUPTED), (signal.SIGTERM, INTERRUPTED)])
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, INTERRUPTED), (signal.SIGTERM, TERMINATED)])
 def test_interrupted_fit_reports_its_best_point_and_resumes(fit_case, tmp_path, sig, code):
     out = tmp_path / "run"
     p = spacefit_process(fit_args(fit_case, out))
@@ -258,7 +258,7 @@ def test_interrupted_fit_reports_its_best_point_and_resumes(fit_case, tmp_path, 
     assert "Traceback" not in err and "interrupted" in err
     assert listing(out) == sorted([*FIT_FILES, "checkpoint.json"])
     report = json.loads((out / "fit.json").read_text())
-    assert report["status"].startswith("stopped: interrupted")
+    assert report["status"].startswith({signal.SIGINT: "stopped: interrupted", signal.SIGTERM: "stopped: terminated"}[sig])
     checkpoint = json.loads((out / "checkpoint.json").read_text())
     assert report["values"] == pytest.approx(checkpoint["best"]["values"])  # the interruption waits for the step's end
     # resumed, it ends where an uninterrupted fit ends (kd 0.5, within the fit's accuracy); --max-steps

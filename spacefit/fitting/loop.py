@@ -23,7 +23,7 @@ from spacefit.fitting.problem import Observation, setup
 from spacefit.fitting.solvers import LEAST_SQUARES, SOLVERS, Options, Status
 from spacefit.fitting.stopping import NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
-from spacefit.interrupts import deferred_interrupts
+from spacefit.interrupts import Terminated, deferred_interrupts
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.renderer import PartImage
@@ -184,7 +184,7 @@ def fit(
 
     An interruption (Ctrl-C or SIGTERM; taken at the end of the current step, at once if repeated)
     stops the solve and returns the best point evaluated so far with status
-    :attr:`Status.INTERRUPTED`, no standard errors and no renders.
+    :attr:`Status.INTERRUPTED` (:attr:`Status.TERMINATED` for SIGTERM), no standard errors and no renders.
 
     Raises:
         InputError: for any bad input, before rendering.
@@ -252,14 +252,14 @@ def fit(
         status, u, steps = outcome.status, outcome.u, outcome.steps
         if status is Status.NOISE_FLOOR:
             u = jnp.asarray(best["u"])  # the step that stopped the solve may be a rejected trial
-    except KeyboardInterrupt:
-        status, steps = Status.INTERRUPTED, len(history)
+    except KeyboardInterrupt as stop:
+        status, steps = Status.TERMINATED if isinstance(stop, Terminated) else Status.INTERRUPTED, len(history)
         u = jnp.asarray(best["u"]) if best else u
     success = status.success
 
     x = np.asarray(fp.to_physical(u), dtype=float)
     n = len(x)
-    if status is Status.INTERRUPTED:
+    if status.interrupted:
         x_user, stderr, corr = np.asarray(s.to_user(jnp.asarray(x)), dtype=float), np.full(n, np.nan), np.eye(n)
         loss_value, extras, renders = best.get("loss", math.nan), {}, []
         warnings = ["the fit was interrupted: the values are the best point evaluated so far, with no standard errors."]

@@ -40,11 +40,17 @@ class Status(enum.Enum):
     NONFINITE = "failed: the loss or a parameter became NaN"
     FAILED = "failed: the solver reported an error"
     INTERRUPTED = "stopped: interrupted (the best point so far is reported, without errors)"
+    TERMINATED = "stopped: terminated by SIGTERM (the best point so far is reported, without errors)"
 
     @property
     def success(self) -> bool:
         """Whether the solver reports convergence."""
         return self in (Status.CONVERGED, Status.NOISE_FLOOR)
+
+    @property
+    def interrupted(self) -> bool:
+        """Whether a signal (Ctrl-C or SIGTERM) stopped the solve."""
+        return self in (Status.INTERRUPTED, Status.TERMINATED)
 
     def __str__(self) -> str:
         return self.value
