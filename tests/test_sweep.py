@@ -176,3 +176,16 @@ def test_ctrl_c_stops_the_command_line_sweep_cleanly(tmp_path, signum, code):
     assert 2 <= int(ds.done.sum()) < 400
     finished = ds.done.values
     assert np.all(np.isfinite(ds.mean_radiance.values[finished]))
+
+
+def test_an_edited_mesh_file_is_another_sweep(tmp_path):
+    """The store's identity holds the mesh files' contents: the same scene file over an edited mesh
+    at the same path is refused, not completed with the old results."""
+    store = tmp_path / "store.zarr"
+    axes = {"parts.sphere.kd": [0.2, 0.5]}
+    sf.sweep(sphere_scene(tmp_path), axes, store=store, quiet=True)
+    sf.sweep(sphere_scene(tmp_path), axes, store=store, quiet=True)  # the same file written again: the same sweep
+    scene = sphere_scene(tmp_path)
+    write_sphere_obj(tmp_path / "sphere.obj", subdivisions=3)
+    with pytest.raises(sf.InputError, match=r"other arguments \(scene, mesh files"):
+        sf.sweep(scene, axes, store=store, quiet=True)

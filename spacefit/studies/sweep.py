@@ -20,6 +20,7 @@ the missing ones. A store of other arguments is refused, never mixed.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 import os
@@ -130,9 +131,17 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
 
 def _canonical(scene: Scene, axes: list[Axis], options: Mapping[str, Any]) -> str:
     """The arguments that decide a store's contents, as JSON: a rerun must match them (numbers
-    compared as floats, so that ``[30, 60]`` and ``[30.0, 60.0]`` are the same sweep)."""
+    compared as floats, so that ``[30, 60]`` and ``[30.0, 60.0]`` are the same sweep), and so must
+    the contents of the mesh files the scene reads (an edited mesh at the same path is another sweep)."""
     axes_json = [[a.name, {k: _floats(v) for k, v in a.values.items()}] for a in axes]
-    return json.dumps({"scene": scene.to_toml(), "axes": axes_json, **options}, sort_keys=True)
+    return json.dumps({"scene": scene.to_toml(), "axes": axes_json, "mesh_files": _mesh_digests(scene), **options},
+                      sort_keys=True)
+
+
+def _mesh_digests(scene: Scene) -> dict[str, str]:
+    """SHA-256 of each mesh file the scene reads (none for the built-in lander)."""
+    paths = [p for p in (scene.target.mesh, *(part.file for part in scene.parts.values())) if p not in ("", "builtin")]
+    return {p: hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in dict.fromkeys(paths)}
 
 
 def _floats(value: Any) -> Any:
@@ -248,7 +257,7 @@ def open_store(store: str | Path | None, spec: str, make: Callable[[], Any], ove
         if old is None and (not target.is_dir() or any(target.iterdir())):
             raise InputError(f"`store` {str(target)!r} exists and is not a spacefit sweep store; choose a new folder.")
         if old is not None and old != spec and not overwrite:
-            raise InputError(f"`store` {str(target)!r} holds a sweep with other arguments (scene, axes or options); rerun "
+            raise InputError(f"`store` {str(target)!r} holds a sweep with other arguments (scene, mesh files, axes or options); rerun "
                              "with the same ones to finish it, pass overwrite=True (--overwrite) to replace it, or choose a new store.")
         if old == spec and not overwrite:
             return zarr.open_group(str(target), mode="r+", zarr_format=STORE_FORMAT)
