@@ -66,6 +66,7 @@ def test_cli_fits_dn_with_its_sensor_and_records_it(dn_case, tmp_path):
     assert code == (0 if report["success"] else NOT_CONVERGED)
     assert abs(report["values"]["parts.sphere.kd"] - TRUE_KD) < 0.03
     assert report["inputs"]["sensors"] == [SENSOR.to_dict()] and report["inputs"]["masks"] == []
+    assert report["units"]["observations"] == ["DN"] and "fit_mean_dn" in report["parts"][0]["target"]
 
 
 def test_cli_takes_a_sensor_file_a_response_and_a_mask(dn_case, tmp_path):

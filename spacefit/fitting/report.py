@@ -45,7 +45,8 @@ def write_fit_report(
         **result.to_dict(),
         "success": bool(result.success),  # the solver's flag can be a JAX boolean
         "timings_s": {"solve": result.wall_time_s, **(timings_s or {})},
-        "units": {"radiance": "W m^-2 sr^-1 per RGB channel", "lengths": "m"},
+        # the observations' units (radiance, or DN with a sensor) are those of ``parts`` and the renders
+        "units": {"radiance": "W m^-2 sr^-1 per RGB channel", "lengths": "m", "observations": list(result.units)},
         "versions": versions(),
         **({"inputs": dict(inputs)} if inputs is not None else {}),
     }
