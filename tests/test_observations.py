@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 
 import jax
 import jax.numpy as jnp
@@ -174,10 +175,10 @@ DIM = dataclasses.replace(SENSOR, exposure_time_s=4e-7)
 def test_the_fits_model_image_is_in_the_references_unit(sphere, sensor):
     """A fit's renders, part means and comparison are in its reference's unit: DN with a sensor
     (the sensor's expected DN of the render, bias included), radiance without. The part means
-    count only the fitted pixels (here a square of garbage is masked out)."""
+    count only the fitted pixels (here a square of NaN is masked out)."""
     _, scene, truth, mask = sphere
     reference = truth if sensor is None else sf.observe(truth, sensor, assemble(scene).intrinsics, seed=1).astype(float)
-    observation = sf.Observation(scene, _garbage(reference, 100.0 * reference.max()), sensor=sensor, mask=mask)
+    observation = sf.Observation(scene, _garbage(reference, np.nan), sensor=sensor, mask=mask)
     result = sf.fit(observation, ["parts.sphere.kd"], max_steps=6, spp=4)
     unit = "W m^-2 sr^-1" if sensor is None else "DN"
     assert result.units == [unit]
@@ -190,7 +191,9 @@ def test_the_fits_model_image_is_in_the_references_unit(sphere, sensor):
     assert result.renders[0][0, 0, 0] == pytest.approx(sky, abs=1e-6) and reference[0, 0, 0] == pytest.approx(sky, abs=10.0)
     if sensor is not None:
         assert not sf.saturated_mask(reference, sensor).any() and result.renders[0].max() > 100 * truth.max()
-    figure = sf.plot_comparison(result, [reference])
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # the masked NaN is shown as 0, with no warning
+        figure = sf.plot_comparison(result, [observation.reference])
     assert unit.split()[0] in figure.axes[0].get_title()
 
 

@@ -62,8 +62,9 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray]) -> Figu
 
 
 def _rgb(image: np.ndarray) -> np.ndarray:
-    """An (h, w) or (h, w, c) image as (h, w, 3) float32 for display (a grey image in all three)."""
-    image = np.asarray(image, dtype=np.float32)
+    """An (h, w) or (h, w, c) image as (h, w, 3) float32 for display (a grey image in all three;
+    values that are not finite, which a mask may have left out of the fit, shown as 0)."""
+    image = np.nan_to_num(np.asarray(image, dtype=np.float32), nan=0.0, posinf=0.0, neginf=0.0)
     image = image[..., None] if image.ndim == 2 else image
     return np.repeat(image, 3, axis=-1) if image.shape[-1] == 1 else image[..., :3]
 
