@@ -100,7 +100,7 @@ def offset_start(truth: dict[str, float], offset: dict[str, float]) -> dict[str,
     beyond a finite bound goes to 90 % of the way from the truth to that bound."""
     start = {}
     for name, value in truth.items():
-        b = sf.PARAMETERS[name].bijection if name in sf.PARAMETERS else sf.PARAMETERS[f"parts.P.{name.rsplit('.', 1)[-1]}"].bijection
+        b = sf.PARAMETERS[name].bounds if name in sf.PARAMETERS else sf.PARAMETERS[f"parts.P.{name.rsplit('.', 1)[-1]}"].bounds
         x = value * (1.0 + offset[name])
         if x >= b.hi:
             x = value + 0.9 * (b.hi - value)

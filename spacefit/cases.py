@@ -61,7 +61,7 @@ class Case:
     def reference(self, noise_percent: float = 0.0) -> tuple[np.ndarray, float | None]:
         """The reference radiance (W m^-2 sr^-1) rendered at the truth, with :func:`add_noise` of
         ``noise_percent`` % if given, and the noise's sigma (None without noise)."""
-        from spacefit.rendering.renderer import render
+        from spacefit.rendering.renderer import render  # here: Mitsuba takes seconds to import; reading a case never renders
 
         image = render(self.truth_scene)
         if not noise_percent:

@@ -13,6 +13,7 @@ from collections.abc import Sequence
 
 from spacefit.errors import InputError, check_range, shorten
 from spacefit.interrupts import Terminated
+from spacefit.scene.parameters import PARAMETERS
 
 NOT_CONVERGED = 3
 INTERRUPTED = 130  # 128 + SIGINT, as shells report Ctrl-C
@@ -20,14 +21,11 @@ TERMINATED = 143  # 128 + SIGTERM
 
 
 def _free_help(command: str | None) -> str:
-    """Help of ``fit --free``: the parameter registry, listed only for ``spacefit fit`` (the registry
-    imports JAX, 0.6 s that ``spacefit render`` does not need)."""
+    """Help of ``fit --free``: the parameter registry, listed only for ``spacefit fit``."""
     text = "parameters to fit, e.g. parts.panels.alpha_x,parts.legs.kd (P: a part's name)"
     if command != "fit":
         return text + "; see spacefit fit --help"
-    from spacefit.scene.parameters import PARAMETERS
-
-    return text + ": " + ", ".join(f"{p.pattern} [{p.unit}] {p.bijection.describe()}" for p in PARAMETERS.values())
+    return text + ": " + ", ".join(f"{p.pattern} [{p.unit}] {p.bounds.describe()}" for p in PARAMETERS.values())
 
 
 def _parser(command: str | None = "fit") -> argparse.ArgumentParser:

@@ -6,6 +6,7 @@ and the allowed range, before any rendering starts.
 
 from __future__ import annotations
 
+import difflib
 import math
 from collections.abc import Iterable, Sequence
 
@@ -124,8 +125,6 @@ def check_direction(name: str, value: Sequence[float]) -> np.ndarray:
 
 def check_choice(name: str, value: str, choices: Iterable[str]) -> str:
     """Check that ``value`` is one of ``choices``; the message lists them and suggests the closest."""
-    import difflib
-
     valid = sorted(choices)
     if isinstance(value, str) and value in valid:
         return value

@@ -24,6 +24,7 @@ from spacefit.rendering.exr import write_exr
 from spacefit.rendering.renderer import PartImage, Renderer, kernel_log
 from spacefit.scene.assembly import Assembly, assemble, fold_notes
 from spacefit.scene.config import Scene, load_scene, parse_override
+from spacefit.scene.parameters import scene_keys
 
 if TYPE_CHECKING:
     from spacefit.fitting.loop import FitResult
@@ -326,8 +327,6 @@ class Checkpoint:
 
 def _check_not_fixed(free: Sequence[str], overrides: Sequence[str]) -> None:
     """Refuse an override of a free parameter: the fit would replace it without a word."""
-    from spacefit.scene.parameters import scene_keys
-
     for text in overrides:
         key = ".".join(parse_override(text)[0])
         for name in free:

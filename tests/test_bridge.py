@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from spacefit.errors import InputError
-from spacefit.fitting.params import free_parameters
+from spacefit.fitting.params import bijection, free_parameters
 from spacefit.rendering.renderer import Renderer
 from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.parameters import PARAMETERS, scene_value
@@ -39,7 +39,7 @@ def x64():
 
 @pytest.mark.parametrize("name", sorted(PARAMETERS))
 def test_bijection_round_trip(name):
-    b = PARAMETERS[name].bijection
+    b = bijection(name)
     u = jnp.linspace(-8.0, 8.0, 33)
     x = b.forward(u)
     assert jnp.all((x > b.lo) & (x < b.hi))

@@ -15,6 +15,7 @@ from test_physics import microfacet_walter, unit
 import spacefit as sf
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.geometry.wm import wm_G_from_rms, wm_height, wm_n_max, wm_phases, wm_rms
+from spacefit.fitting.params import bijection
 from spacefit.scene.parameters import PARAMETERS
 
 # No example database in the checkout; cheap laws get many examples, renders few and reproducible ones.
@@ -37,7 +38,7 @@ def test_attitude_matrix_is_a_proper_rotation(angles):
 def test_bijections_round_trip_both_ways(name, u, fraction):
     """u -> x -> u on the solver's side, and x -> u -> x for x anywhere inside the range (a
     fraction of a bounded range; a distance above the bound of a half-line; anything on the line)."""
-    b = PARAMETERS[name].bijection
+    b = bijection(name)
     with jax.enable_x64(True):
         x = float(b.forward(u))
         assert b.lo < x < b.hi

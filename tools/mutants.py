@@ -94,10 +94,10 @@ MUTANTS = (
            "{k: t[..., j] for k, t in tangents.items()}, seed_grad))", "{k: t[..., j] for k, t in tangents.items()}, seed))",
            (CONVENTIONS,)),
     Mutant("backward-with-primal-seed", BRIDGE, "scene.backward(v, c, seed_grad)", "scene.backward(v, c, seed)", (CONVENTIONS,)),
-    Mutant("logistic-inverse-width", "spacefit/scene/parameters.py", "p = (x - self.lo) / (self.hi - self.lo)\n        return jnp.log(p)",
+    Mutant("logistic-inverse-width", "spacefit/fitting/params.py", "p = (x - self.lo) / (self.hi - self.lo)\n        return jnp.log(p)",
            "p = (x - self.lo) / self.hi\n        return jnp.log(p)", (PROPERTIES,)),
-    Mutant("sun-to-world-towards-the-sun", "spacefit/scene/parameters.py", 'return -jnp.stack([jnp.cos(el) * jnp.cos(az)',
-           'return jnp.stack([jnp.cos(el) * jnp.cos(az)', (CONVENTIONS,)),
+    Mutant("sun-to-world-towards-the-sun", "spacefit/scene/parameters.py", 'return -xp.stack([xp.cos(el) * xp.cos(az)',
+           'return xp.stack([xp.cos(el) * xp.cos(az)', (CONVENTIONS,)),
     # noise weights and the uncertainty
     Mutant("residual-over-sigma-squared", "spacefit/fitting/losses.py", "fixed = jnp.asarray(1.0 / s,",
            "fixed = jnp.asarray(1.0 / s**2,", (UNCERTAINTY,)),

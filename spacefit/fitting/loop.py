@@ -295,7 +295,7 @@ def fit(
         start=dict(zip(s.user.names, s.x0_user.tolist())),
         extras=extras,
         parts=[_part_rows(*row) for row in zip(problem.part_images, problem.references, renders, problem.units, problem.used)],
-        scene=scene_with_values(s.scene, dict(zip(s.user.names, x_user.tolist()))) if np.all(np.isfinite(x_user)) else None,
+        scene=scene_with_values(s.scene, dict(zip(s.user.names, x_user.tolist())), observation=0) if np.all(np.isfinite(x_user)) else None,
         units=list(problem.units),
     )
 

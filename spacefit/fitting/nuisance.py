@@ -16,10 +16,9 @@ from collections.abc import Callable, Sequence
 
 import jax
 import jax.numpy as jnp
-import numpy as np
 from jaxtyping import Array, Float
 
-from spacefit.scene.parameters import IMAGE, PSF_SIGMA_MAX_PX, is_image, observation_name
+from spacefit.scene.parameters import IMAGE, PSF_SIGMA_MAX_PX, observation_name
 from spacefit.sensor import GAUSSIAN_RADIUS_SIGMA, gaussian_pixel_weights
 
 # The blur kernel reaches out to 5 sigma of the widest PSF a fit may try (a static shape for JAX).
@@ -57,11 +56,10 @@ def nuisance_index(names: Sequence[str], name: str, k: int) -> int | None:
     return None
 
 
-def split(names: Sequence[str]) -> tuple[np.ndarray, ImageModel]:
-    """The indices of the free parameters ``names`` that the renderer sees (all but :data:`IMAGE`),
-    and ``model(render, x, k)``: observation k's render with the image nuisances of the full vector
-    ``x`` applied (a per-observation value, ``image.gain@k``, where free, else the shared one)."""
-    rendered = np.array([i for i, n in enumerate(names) if not is_image(n)], dtype=int)
+def image_model(names: Sequence[str]) -> ImageModel:
+    """``model(render, x, k)``: observation k's render with the image nuisances of the full vector
+    ``x`` of the free parameters ``names`` applied (a per-observation value, ``image.gain@k``, where
+    free, else the shared one)."""
 
     def model(image: Float[Array, "h w c"], x: Float[Array, " n"], k: int) -> Float[Array, "h w c"]:
         index = {n: i for n in IMAGE if (i := nuisance_index(names, n, k)) is not None}
@@ -75,4 +73,4 @@ def split(names: Sequence[str]) -> tuple[np.ndarray, ImageModel]:
             image = image + x[index["image.offset_w_m2_sr"]]
         return image
 
-    return rendered, model
+    return model

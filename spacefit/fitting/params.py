@@ -1,23 +1,56 @@
-"""A fit's free parameters: the ordered names with their bijections and finite-difference steps.
+"""A fit's free parameters: the ordered names with the solver's coordinates and finite-difference steps.
 
 What each name means (range, unit, step, what it sets) is the registry's,
 :mod:`spacefit.scene.parameters`. A solver works on an unconstrained vector ``u``; each free
-parameter is ``x = b.forward(u)`` with a bijection ``b`` onto its open valid range, so a solver
-never sees a clipped or invalid value.
+parameter is ``x = b.forward(u)`` with a :class:`Bijection` ``b`` onto the open interval of its
+registered :class:`~spacefit.scene.parameters.Bounds`, so a solver never sees a clipped or invalid
+value. Per observation k of a joint fit, :meth:`FreeParameters.rendered` says which free values its
+renderer sees (its own ``target.attitude_z_deg@k`` in place of a shared one).
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.errors import InputError
 from spacefit.scene.config import Scene
-from spacefit.scene.parameters import Bijection, check_names, fd_step, parameter
+from spacefit.scene.parameters import Bounds, check_names, fd_step, is_image, observation_of, parameter
+
+
+@dataclass(frozen=True)
+class Bijection(Bounds):
+    """Map from the real line onto the open interval (lo, hi): logistic if bounded, exp if bounded
+    below only, the identity on the whole line (lo = -inf)."""
+
+    def forward(self, u: Array) -> Array:
+        """Unconstrained -> physical."""
+        if math.isinf(self.lo):
+            return u
+        if math.isinf(self.hi):
+            return self.lo + jnp.exp(u)
+        return self.lo + (self.hi - self.lo) * jax.nn.sigmoid(u)
+
+    def inverse(self, x: Array) -> Array:
+        """Physical -> unconstrained (x must lie strictly inside the interval)."""
+        if math.isinf(self.lo):
+            return x
+        if math.isinf(self.hi):
+            return jnp.log(x - self.lo)
+        p = (x - self.lo) / (self.hi - self.lo)
+        return jnp.log(p) - jnp.log1p(-p)
+
+
+def bijection(name: str) -> Bijection:
+    """The solver's coordinate of parameter ``name``: a bijection onto its registered bounds."""
+    bounds = parameter(name).bounds
+    return Bijection(bounds.lo, bounds.hi)
 
 
 @dataclass(frozen=True)
@@ -42,6 +75,20 @@ class FreeParameters:
             if not b.contains(float(v)):
                 raise InputError(f"start of `{name}` must be inside {b.describe()}, got {float(v):g}.")
 
+    def rendered(self, k: int) -> tuple[tuple[str, ...], np.ndarray]:
+        """What observation k's renderer sees: the registered names (without ``@k``) of the free
+        values that are not image nuisances, and their indices in the free vector. Its own
+        per-observation value (``target.attitude_z_deg@k``) stands for the parameter; other
+        observations' own values are not among them."""
+        names, indices = [], []
+        for i, name in enumerate(self.names):
+            base, j = observation_of(name)
+            if is_image(name) or (j is not None and j != k):
+                continue
+            names.append(base)
+            indices.append(i)
+        return tuple(names), np.array(indices, dtype=int)
+
 
 def free_parameters(scene: Scene, names: Sequence[str], observations: int = 1) -> FreeParameters:
     """Resolve and check free parameter names against a scene, for a fit of ``observations``
@@ -54,4 +101,4 @@ def free_parameters(scene: Scene, names: Sequence[str], observations: int = 1) -
     names = tuple(names)
     check_names(scene, names, image=True, observations=observations)
     steps = np.array([fd_step(scene, n) for n in names])
-    return FreeParameters(names, tuple(parameter(n).bijection for n in names), steps)
+    return FreeParameters(names, tuple(bijection(n) for n in names), steps)

@@ -2,7 +2,10 @@
 
 Nothing is rendered here: every input is checked first (:func:`setup`), so that a bad one is
 refused before any work. Every render of a solve uses the same seed (common random numbers), so
-the objective is a deterministic function; derivative renders use another seed.
+the objective is a deterministic function; derivative renders use another seed. In a joint fit
+each observation's renderer sees the free values that are its own (``target.attitude_z_deg@k``)
+or shared (:meth:`~spacefit.fitting.params.FreeParameters.rendered`); the image nuisances act on
+its render in JAX (:mod:`spacefit.fitting.nuisance`).
 """
 
 from __future__ import annotations
@@ -19,7 +22,7 @@ import numpy as np
 
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_choice, check_count, negative_pixels, quote
 from spacefit.fitting.losses import residual_fn
-from spacefit.fitting.nuisance import split
+from spacefit.fitting.nuisance import image_model as image_model_of
 from spacefit.fitting.params import FreeParameters, free_parameters
 from spacefit.geometry.frames import Intrinsics
 from spacefit.rendering.bridge import DrJitScene, render_params, render_values
@@ -28,7 +31,7 @@ from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.assembly import assemble
 from spacefit.scene.config import FILTER_RADIUS_PX, Scene, check_scene
 from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, dn_fn, noise_variance_dn, psf_rms_px, saturated_mask
-from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, rms_of, scene_value
+from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, observation_of, rms_of, scene_value
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
 # Seed offset of the second, independent Jacobian used for the standard errors.
@@ -169,12 +172,13 @@ def _problem(
 ) -> Problem:
     renders_x, renders_alt, renders_v, residuals, values_fns, part_images, references, spread = [], [], [], [], [], [], [], []
     to_units, units, used_pixels = [], [], []
-    moving = any(n in MOVES_VERTICES for n in free.names)
-    # the image nuisances act on the render in JAX; the renderer sees the other parameters
-    rendered, image_model = split(free.names)
-    rendered_names = [free.names[i] for i in rendered]
-    steps = free.fd_steps[rendered]
+    moving = any(observation_of(n)[0] in MOVES_VERTICES for n in free.names)
+    # the image nuisances act on the render in JAX; each renderer sees the other parameters, an
+    # observation's own pose (``target.attitude_z_deg@k``) in place of the shared one
+    image_model = image_model_of(free.names)
+    rendered = [free.rendered(k) for k in range(len(observations))]
     for i, obs in enumerate(observations):
+        rendered_names, steps = rendered[i][0], free.fd_steps[rendered[i][1]]
         ref, used = check_reference(obs, i)
         scene = obs.scene
         assembly = assemble(scene)
@@ -199,7 +203,7 @@ def _problem(
         spread.append((FILTER_RADIUS_PX[scene.render.filter], blur))
 
     def modelled(render: Callable[[jax.Array], jax.Array], k: int) -> Callable[[jax.Array], jax.Array]:
-        return lambda x: to_units[k](image_model(render(x[rendered]), x, k))
+        return lambda x: to_units[k](image_model(render(x[rendered[k][1]]), x, k))
 
     def stack(renders: list[Callable[[jax.Array], jax.Array]]) -> Callable[[jax.Array], jax.Array]:
         return lambda x: jnp.concatenate([res(modelled(render, k)(x)) for k, (res, render) in enumerate(zip(residuals, renders))])
@@ -209,7 +213,7 @@ def _problem(
 
         def reverse(u: jax.Array) -> jax.Array:
             x = free.to_physical(u)
-            r = jnp.concatenate([res(to_units[k](image_model(render(vals(x[rendered])), x, k)))
+            r = jnp.concatenate([res(to_units[k](image_model(render(vals(x[rendered[k][1]])), x, k)))
                                  for k, (res, render, vals) in enumerate(zip(residuals, renders_v, values_fns))])
             return 0.5 * jnp.sum(r**2)
 
@@ -295,7 +299,9 @@ def setup(
     start = dict(start or {})
     for name in start:
         check_choice("start", name, user.names)
-    x0_user = np.array([start.get(n, scene_value(scene, n)) for n in user.names], dtype=float)
+    # an observation's own value (``target.attitude_z_deg@k``) starts at its scene's
+    x0_user = np.array([start.get(n, scene_value(observations[observation_of(n)[1] or 0].scene, n)) for n in user.names],
+                       dtype=float)
     user.check_start(x0_user)
     w = scene.wrinkles
     rms_index = None

@@ -22,6 +22,7 @@ from spacefit.progress import ProgressCallback
 from spacefit.rendering.backend import dr, mi, select_variant
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.config import Scene, check_scene
+from spacefit.scene.parameters import check_names
 
 # Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.
 MAX_SAMPLES_PER_PASS = 1 << 24
@@ -289,8 +290,7 @@ class Renderer:
         Parameters that move vertices (D, G, rms height, the pose) may move them out of the window: render
         those with ``crop=False``, or build a new Renderer.
         """
-        from spacefit.rendering.values import scene_values_fn
-        from spacefit.scene.parameters import check_names
+        from spacefit.rendering.values import scene_values_fn  # here: it imports JAX (0.6 s), which a plain render never needs
 
         names = list(values)
         check_names(self.assembly.scene, names, "values")

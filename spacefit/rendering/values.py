@@ -46,7 +46,7 @@ def scene_values_fn(assembly: Assembly, names: Sequence[str]) -> SceneValuesFn:
     def values_of(x: Array) -> dict[str, Array]:
         out: dict[str, Array] = {}
         if sun_angles:
-            out["sun.to_world"] = sun_direction(*(value(x, n) for n in SUN_ANGLES))
+            out["sun.to_world"] = sun_direction(*(value(x, n) for n in SUN_ANGLES), xp=jnp)
         if ROLL in index:  # the assembled camera is turned by the scene's roll already
             out["sensor.to_world"] = assembly.camera.mitsuba_to_world(jnp.deg2rad(x[index[ROLL]] - scene.camera.roll_deg), jnp)
         if geometry or pose:

@@ -82,7 +82,7 @@ class Assembly:
 
     def world_vertices(self, name: str, D: float | Array | None = None, G: float | Array | None = None) -> Array:
         """World-frame vertices (m) of part ``name``, differentiable in D and G."""
-        import jax.numpy as jnp
+        import jax.numpy as jnp  # here: a plain render never needs JAX (0.6 s to import)
 
         m = jnp.asarray(self.to_world)
         return self.object_vertices(name, D, G) @ m[:3, :3].T + m[:3, 3]
@@ -131,7 +131,7 @@ def _builtin_lander() -> tuple[dict[str, PartMesh], str]:
     """The built-in lander's parts and the disk cache's status (building it imports trimesh, 0.5 s)."""
 
     def build() -> dict[str, np.ndarray]:
-        from spacefit.geometry.lander import builtin_lander
+        from spacefit.geometry.lander import builtin_lander  # here: it imports trimesh (0.5 s), only to build the cache
 
         return {f"{name}.{field}": value for name, part in builtin_lander().items()
                 for field, value in (("vertices", part.vertices), ("faces", part.faces), ("uv", part.uv))

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from spacefit.errors import InputError
 from spacefit.geometry.frames import CameraFrame, Intrinsics
 from spacefit.geometry.wm import wm_rms_slope
 from spacefit.materials import Conductor, Material, Mirror
@@ -76,8 +77,6 @@ def choose_model(
         model, reason = "geometry", "forced by wrinkles.model"
     elif w.model == "effective":
         if effective is None:
-            from spacefit.errors import InputError
-
             raise InputError(
                 f"`wrinkles.model` = 'effective' needs a conductor part and an effective roughness <= 1; part {part!r} "
                 f"has rms slope {slope:.3g}, which would need alpha {effective_alpha(0.0, slope):.3g}."

@@ -1,9 +1,15 @@
-"""The registry of free parameters: one home for every fittable (and sweepable) scene value.
+"""The registry of free parameters, as data: one home for every fittable (and sweepable) scene value.
 
-Each :class:`Parameter` knows its name pattern, unit, valid range and the bijection a solver works
-through, its finite-difference step (or 0 for forward-mode AD), the scene-file keys it replaces,
-and, for materials, the Mitsuba BSDF fields it sets. The CLI's help, the error messages and the
-README's table (:func:`parameter_table`) are generated from it.
+Each :class:`Parameter` is one entry of :data:`PARAMETERS` carrying everything about it: its name
+pattern, unit, valid range (:class:`Bounds`), how to read its value from a scene and which
+scene-file keys it sets (its getter and setter), its groups (:data:`GROUPS`: moves vertices, a
+nuisance, image-space, one per observation, set jointly with others), its finite-difference step
+(or 0 for forward-mode AD), the scene-file fields it replaces and, for materials, the Mitsuba BSDF
+fields it sets. The group tuples (:data:`GEOMETRY`, :data:`ATTITUDE`, :data:`NUISANCES`, ...) are
+derived from the entries, so a new parameter is added in one place. The CLI's help, the error
+messages and the README's table (:func:`parameter_table`) are generated from it. The module is
+plain Python and NumPy: the solver's coordinates on these ranges (bijections, in JAX) are the
+fitting code's, :mod:`spacefit.fitting.params`.
 
 Names address the scene file's keys: ``wrinkles.D``; ``parts.P.alpha_x`` for part ``P``;
 ``sun.elevation_deg``. The sun's angles give the direction towards it,
@@ -12,12 +18,13 @@ Names address the scene file's keys: ``wrinkles.D``; ``parts.P.alpha_x`` for par
 
 ``image.*`` are nuisances of the image formation (an exposure scale, an offset, a Gaussian PSF, a
 sub-pixel shift): a fit applies them to the render in JAX (:mod:`spacefit.fitting.nuisance`), so
-they are fit-only names; a render or a sweep refuses them. Without them free, none is applied. Each
-may be one per observation of a joint fit (:attr:`Parameter.per_observation`): ``image.gain@k`` is
-observation k's alone (k from 0, in the order the observations are given), ``image.gain`` one
-shared by all (:func:`observation_name`). Together with the target's pose (``target.attitude_*_deg``,
-``target.position_*_m``) and the camera's roll about its optical axis (``camera.roll_deg``) they are
-a fit's nuisance parameters (:data:`NUISANCES`), reported apart from the materials.
+they are fit-only names; a render or a sweep refuses them. Without them free, none is applied.
+Together with the target's pose (``target.attitude_*_deg``, ``target.position_*_m``) and the
+camera's roll about its optical axis (``camera.roll_deg``) they are a fit's nuisance parameters
+(:data:`NUISANCES`), reported apart from the materials. Each nuisance may be one per observation
+of a joint fit (:data:`PER_OBSERVATION`): ``image.gain@k`` or ``target.attitude_z_deg@k`` is
+observation k's alone (k from 0, in the order the observations are given; the others keep the
+shared or their scene's value), ``image.gain`` one shared by all (:func:`observation_name`).
 
 ``wrinkles.rms_m`` is the expected rms height of eq. 2-1 (:func:`spacefit.geometry.wm.wm_rms`). In an
 image D and G trade off along a valley of nearly constant rms height; (D, rms) are the better
@@ -29,44 +36,46 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
 
-import jax
-import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array
 
-from spacefit.errors import InputError, check_choice
-from spacefit.precision import float64
+from spacefit.errors import InputError, check_choice, check_range
 from spacefit.geometry.wm import wm_G_from_rms, wm_rms
 from spacefit.materials import Conductor, Lambert, Material, Mirror, make_material
-from spacefit.scene.config import Scene, WrinkleSettings
+
+if TYPE_CHECKING:  # annotations only: the scene schema may check its values here (check_value) without a circle
+    from spacefit.scene.config import Scene, WrinkleSettings
+
+# A scene's value of parameter ``name`` (its full name, ``parts.panels.kd``).
+Getter = Callable[["Scene", str], float]
+# The scene-file keys (and their values) that set parameter ``name`` to ``values[name]``, given every
+# value being set (a joint scene value takes its siblings from them, or from the scene).
+Setter = Callable[["Scene", str, Mapping[str, float]], dict[str, Any]]
+
+# The groups a parameter may belong to.
+GROUPS = {
+    "wrinkles": "the W-M height field's parameters (D, G, rms height)",
+    "sun-angles": "the direction towards the sun",
+    "attitude": "the target's attitude angles",
+    "position": "the target's position",
+    "roll": "the camera's roll",
+    "moves-vertices": "moves vertices (or the camera about them): a render needs the whole film, not the target's window",
+    "image": "a fit-only nuisance of the image formation, applied to the render in JAX",
+    "nuisance": "a fit's nuisance parameter, reported apart from the materials",
+    "per-observation": "a joint fit may free it once per observation (name@k)",
+    "joint": "sets one scene value together with the others of its group (they may be freed together)",
+}
 
 
 @dataclass(frozen=True)
-class Bijection:
-    """Map from the real line onto the open interval (lo, hi): logistic if bounded, exp if bounded
-    below only, the identity on the whole line (lo = -inf)."""
+class Bounds:
+    """A parameter's valid range: the open interval (lo, hi) a fit moves in (-inf / inf: unbounded);
+    a scene value may lie on a finite bound."""
 
     lo: float
     hi: float = math.inf
-
-    def forward(self, u: Array) -> Array:
-        """Unconstrained -> physical."""
-        if math.isinf(self.lo):
-            return u
-        if math.isinf(self.hi):
-            return self.lo + jnp.exp(u)
-        return self.lo + (self.hi - self.lo) * jax.nn.sigmoid(u)
-
-    def inverse(self, x: Array) -> Array:
-        """Physical -> unconstrained (x must lie strictly inside the interval)."""
-        if math.isinf(self.lo):
-            return x
-        if math.isinf(self.hi):
-            return jnp.log(x - self.lo)
-        p = (x - self.lo) / (self.hi - self.lo)
-        return jnp.log(p) - jnp.log1p(-p)
 
     def contains(self, x: float) -> bool:
         """Whether x is strictly inside the interval (a valid start)."""
@@ -85,12 +94,15 @@ class Bijection:
         return f"({self.lo:g}, {self.hi:g})"
 
 
-UNIT = Bijection(0.0, 1.0)
-POSITIVE = Bijection(0.0)
+UNIT = Bounds(0.0, 1.0)
+POSITIVE = Bounds(0.0)
+WHOLE_LINE = Bounds(-math.inf)
 # GGX roughness below 1e-4 is a mirror in float32 and Mitsuba's GGX evaluates to NaN there.
-ROUGHNESS = Bijection(1e-4, 1.0)
+ROUGHNESS = Bounds(1e-4, 1.0)
 # The widest Gaussian PSF (sigma, px) a fit may try; its kernel reaches out to 5 sigma.
 PSF_SIGMA_MAX_PX = 4.0
+# Default start of the PSF width (px): 0, no blur, is outside its open range, and its derivative vanishes there.
+PSF_SIGMA_START_PX = 0.5
 
 
 @dataclass(frozen=True)
@@ -100,8 +112,11 @@ class Parameter:
     Attributes:
         pattern: its name, ``P`` standing for a part name (``parts.P.alpha_x``).
         unit: SI unit ("1" for dimensionless; degrees at the user-facing edge, as in the scene file).
-        bijection: the map from the solver's unconstrained coordinate onto the valid range.
+        bounds: its valid range (the solver's coordinate maps the real line onto its inside).
         doc: what it sets, in words.
+        get: its value in a scene (its fixed value, or a fit's default start).
+        set: the scene-file keys that set it.
+        groups: the :data:`GROUPS` it belongs to.
         fd_step: central finite-difference step of its Jacobian column (0: a forward-mode AD render).
             Geometry columns come from finite differences with common random numbers (the AD
             integrators' derivatives in vertex positions are biased, README); the sun's frame is
@@ -111,19 +126,20 @@ class Parameter:
         materials: for ``parts.P.*``, the material types that have it (grey values only).
         bsdf_fields: for ``parts.P.*``, the Mitsuba BSDF fields it sets.
         scene_fields: the scene-file fields it replaces (default: its own).
-        per_observation: a joint fit may free it once per observation (``image.gain@k``).
     """
 
     pattern: str
     unit: str
-    bijection: Bijection
+    bounds: Bounds
     doc: str
+    get: Getter
+    set: Setter
+    groups: frozenset[str] = frozenset()
     fd_step: float = 0.0
     relative_step: bool = False
     materials: tuple[type, ...] = ()
     bsdf_fields: tuple[str, ...] = ()
     scene_fields: tuple[str, ...] = ()
-    per_observation: bool = False
 
     @property
     def field(self) -> str:
@@ -138,64 +154,169 @@ class Parameter:
         return not isinstance(value, tuple)
 
 
+def rms_of(w: WrinkleSettings, D: Any, G: Any) -> Any:
+    """Expected rms height (m) of the wrinkles ``w`` at (D, G) (floats, NumPy or JAX arrays)."""
+    return wm_rms(D, G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)
+
+
+def G_of(w: WrinkleSettings, D: Any, rms: Any) -> Any:
+    """The height scale G (m) that gives the wrinkles ``w`` an rms height ``rms`` (m) at D."""
+    return wm_G_from_rms(D, rms, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)
+
+
+def sun_angles_deg(direction: tuple[float, float, float] | np.ndarray) -> tuple[float, float]:
+    """Elevation and azimuth (deg) of the direction towards the sun, from its direction of travel."""
+    towards = -np.asarray(direction, float) / np.linalg.norm(direction)
+    return math.degrees(math.asin(float(np.clip(towards[2], -1.0, 1.0)))), math.degrees(math.atan2(towards[1], towards[0]))
+
+
+def sun_direction(elevation_deg: Any, azimuth_deg: Any, xp: ModuleType = np) -> Any:
+    """The sun's direction of travel from the elevation and azimuth (deg) of the direction towards
+    it, in the array module ``xp`` (NumPy, or ``jax.numpy`` to differentiate it)."""
+    el, az = xp.deg2rad(elevation_deg), xp.deg2rad(azimuth_deg)
+    return -xp.stack([xp.cos(el) * xp.cos(az), xp.cos(el) * xp.sin(az), xp.sin(el)])
+
+
+# Getters and setters shared by several entries.
+def _scene_field(scene: Scene, name: str) -> float:
+    section, field = name.split(".")
+    return getattr(getattr(scene, section), field)
+
+
+def _own_key(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, Any]:
+    return {name: values[name]}
+
+
+def _material_value(scene: Scene, name: str) -> float:
+    _, part, field = name.split(".")
+    m = make_material(scene.parts[part].material, scene.parts[part].overrides)
+    return m.alpha_x if field == "alpha" else getattr(m, field)
+
+
+def _set_alpha(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, Any]:
+    """Both roughnesses, in the fields the scene spells them with (``alpha``, or ``alpha_x`` and ``alpha_y``)."""
+    _, part, _ = name.split(".")
+    fields = ("alpha",) if "alpha" in scene.parts[part].overrides else ("alpha_x", "alpha_y")
+    return {f"parts.{part}.{f}": values[name] for f in fields}
+
+
+def _constant(value: float) -> Getter:
+    return lambda scene, name: value
+
+
+def _not_a_scene_value(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, Any]:
+    return {}
+
+
+def _get_rms(scene: Scene, name: str) -> float:
+    return rms_of(scene.wrinkles, scene.wrinkles.D, scene.wrinkles.G)
+
+
+def _set_rms(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, Any]:
+    """G at the scene's (or the given) D."""
+    w = scene.wrinkles
+    return {"wrinkles.G": float(G_of(w, values.get("wrinkles.D", w.D), values[name]))}
+
+
+def _sun_angles(names: tuple[str, str], docs: tuple[str, str], bounds: tuple[Bounds, Bounds]) -> tuple[Parameter, ...]:
+    """The sun's elevation and azimuth: both set ``sun.direction``."""
+
+    def get(scene: Scene, name: str) -> float:
+        return sun_angles_deg(scene.sun.direction)[names.index(name)]
+
+    def set_(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, Any]:
+        angles = (values.get(n, get(scene, n)) for n in names)
+        return {"sun.direction": sun_direction(*angles).tolist()}
+
+    return tuple(Parameter(n, "deg", b, doc, get, set_, frozenset({"sun-angles", "joint"}), fd_step=0.5,
+                           scene_fields=("direction",)) for n, doc, b in zip(names, docs, bounds))
+
+
+def _components(
+    key: str, unit: str, group: str, docs: Mapping[str, str], fd_step: float,
+) -> tuple[Parameter, ...]:
+    """The x, y, z components of the scene vector ``key`` (``target.attitude_deg``), each a
+    per-observation nuisance that moves every vertex: ``target.attitude_x_deg``."""
+    head, unit_suffix = key.rsplit("_", 1)
+    names = tuple(f"{head}_{axis}_{unit_suffix}" for axis in "xyz")
+    section, field = key.split(".")
+
+    def get(scene: Scene, name: str) -> float:
+        return getattr(getattr(scene, section), field)[names.index(name)]
+
+    def set_(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, Any]:
+        return {key: [values.get(n, get(scene, n)) for n in names]}
+
+    groups = frozenset({group, "joint", "moves-vertices", "nuisance", "per-observation"})
+    return tuple(Parameter(n, unit, WHOLE_LINE, docs[axis], get, set_, groups, fd_step=fd_step, scene_fields=(field,))
+                 for n, axis in zip(names, "xyz"))
+
+
 _CONDUCTORS = (Conductor, Mirror)
+_WRINKLES = frozenset({"wrinkles", "moves-vertices"})
+_IMAGE = frozenset({"image", "nuisance", "per-observation"})
 PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
-    Parameter("wrinkles.D", "1", Bijection(2.0, 3.0), "W-M fractal dimension (eq. 2-1): vertex positions of every wrinkled part",
-              fd_step=0.02),
+    Parameter("wrinkles.D", "1", Bounds(2.0, 3.0), "W-M fractal dimension (eq. 2-1): vertex positions of every wrinkled part",
+              _scene_field, _own_key, _WRINKLES, fd_step=0.02),
     Parameter("wrinkles.G", "m", POSITIVE, "W-M height scale (eq. 2-1): vertex positions of every wrinkled part",
-              fd_step=0.01, relative_step=True),
+              _scene_field, _own_key, _WRINKLES, fd_step=0.01, relative_step=True),
     Parameter("wrinkles.rms_m", "m", POSITIVE, "rms height of the wrinkles: sets G at the current D",
-              fd_step=0.03, relative_step=True, scene_fields=("G",)),
-    Parameter("parts.P.alpha_x", "1", ROUGHNESS, "GGX roughness along the part's tangent axis",
+              _get_rms, _set_rms, _WRINKLES, fd_step=0.03, relative_step=True, scene_fields=("G",)),
+    Parameter("parts.P.alpha_x", "1", ROUGHNESS, "GGX roughness along the part's tangent axis", _material_value, _own_key,
               materials=(Conductor,), bsdf_fields=("alpha_u",)),
-    Parameter("parts.P.alpha_y", "1", ROUGHNESS, "GGX roughness across the part's tangent axis",
+    Parameter("parts.P.alpha_y", "1", ROUGHNESS, "GGX roughness across the part's tangent axis", _material_value, _own_key,
               materials=(Conductor,), bsdf_fields=("alpha_v",)),
-    Parameter("parts.P.alpha", "1", ROUGHNESS, "both roughnesses, tied (isotropic)",
+    Parameter("parts.P.alpha", "1", ROUGHNESS, "both roughnesses, tied (isotropic)", _material_value, _set_alpha,
               materials=(Conductor,), bsdf_fields=("alpha_u", "alpha_v"), scene_fields=("alpha_x", "alpha_y")),
-    Parameter("parts.P.eta", "1", POSITIVE, "real part of the conductor's refractive index (grey)",
+    Parameter("parts.P.eta", "1", POSITIVE, "real part of the conductor's refractive index (grey)", _material_value, _own_key,
               materials=_CONDUCTORS, bsdf_fields=("eta",)),
-    Parameter("parts.P.k", "1", POSITIVE, "imaginary part of the conductor's refractive index (grey)",
+    Parameter("parts.P.k", "1", POSITIVE, "imaginary part of the conductor's refractive index (grey)", _material_value, _own_key,
               materials=_CONDUCTORS, bsdf_fields=("k",)),
-    Parameter("parts.P.kd", "1", UNIT, "Lambert albedo (grey)", materials=(Lambert,), bsdf_fields=("reflectance",)),
-    Parameter("sun.irradiance_w_m2", "W m^-2", POSITIVE, "the sun's irradiance on a surface facing it"),
-    Parameter("sun.elevation_deg", "deg", Bijection(-90.0, 90.0), "elevation of the direction towards the sun above world xy",
-              fd_step=0.5, scene_fields=("direction",)),
-    Parameter("sun.azimuth_deg", "deg", Bijection(-math.inf), "azimuth of the direction towards the sun, world +x to +y",
-              fd_step=0.5, scene_fields=("direction",)),
-    *(Parameter(f"target.attitude_{axis}_deg", "deg", Bijection(-math.inf),
-                f"the target's attitude angle {name} (about object {axis}, thesis 3.2): every vertex",
-                fd_step=0.5, scene_fields=("attitude_deg",)) for axis, name in zip("xyz", ("alpha", "beta", "gamma"))),
-    *(Parameter(f"target.position_{axis}_m", "m", Bijection(-math.inf), f"the target's world {axis} position: every vertex",
-                fd_step=0.02, scene_fields=("position_m",)) for axis in "xyz"),
-    Parameter("camera.roll_deg", "deg", Bijection(-math.inf),
-              "the camera's turn about its optical axis (image up towards image right), either camera mode", fd_step=0.5),
+    Parameter("parts.P.kd", "1", UNIT, "Lambert albedo (grey)", _material_value, _own_key,
+              materials=(Lambert,), bsdf_fields=("reflectance",)),
+    Parameter("sun.irradiance_w_m2", "W m^-2", POSITIVE, "the sun's irradiance on a surface facing it", _scene_field, _own_key),
+    *_sun_angles(("sun.elevation_deg", "sun.azimuth_deg"),
+                 ("elevation of the direction towards the sun above world xy", "azimuth of the direction towards the sun, world +x to +y"),
+                 (Bounds(-90.0, 90.0), WHOLE_LINE)),
+    *_components("target.attitude_deg", "deg", "attitude",
+                 {axis: f"the target's attitude angle {angle} (about object {axis}, thesis 3.2): every vertex"
+                  for axis, angle in zip("xyz", ("alpha", "beta", "gamma"))}, fd_step=0.5),
+    *_components("target.position_m", "m", "position", {axis: f"the target's world {axis} position: every vertex" for axis in "xyz"},
+                 fd_step=0.02),
+    Parameter("camera.roll_deg", "deg", WHOLE_LINE,
+              "the camera's turn about its optical axis (image up towards image right), either camera mode", _scene_field, _own_key,
+              frozenset({"roll", "moves-vertices", "nuisance", "per-observation"}), fd_step=0.5),
     Parameter("image.gain", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1)",
-              per_observation=True),
-    Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", Bijection(-math.inf), "offset added to every pixel (fit only; default 0)",
-              per_observation=True),
-    Parameter("image.psf_sigma_px", "px", Bijection(0.0, PSF_SIGMA_MAX_PX),
-              "sigma of a pixel-integrated Gaussian PSF (fit only; not free: no blur; default start 0.5)", per_observation=True),
-    *(Parameter(f"image.shift_{axis}_px", "px", Bijection(-math.inf),
+              _constant(1.0), _not_a_scene_value, _IMAGE),
+    Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", WHOLE_LINE, "offset added to every pixel (fit only; default 0)",
+              _constant(0.0), _not_a_scene_value, _IMAGE),
+    Parameter("image.psf_sigma_px", "px", Bounds(0.0, PSF_SIGMA_MAX_PX),
+              "sigma of a pixel-integrated Gaussian PSF (fit only; not free: no blur; default start 0.5)",
+              _constant(PSF_SIGMA_START_PX), _not_a_scene_value, _IMAGE),
+    *(Parameter(f"image.shift_{axis}_px", "px", WHOLE_LINE,
                 f"sub-pixel shift of the image towards +{axis} ({where}), by a Fourier phase (fit only; default 0)",
-                per_observation=True)
+                _constant(0.0), _not_a_scene_value, _IMAGE)
       for axis, where in (("x", "columns, rightwards"), ("y", "rows, downwards"))),
 )}
-GEOMETRY = ("wrinkles.D", "wrinkles.G", "wrinkles.rms_m")
-SUN_ANGLES = ("sun.elevation_deg", "sun.azimuth_deg")
-ATTITUDE = ("target.attitude_x_deg", "target.attitude_y_deg", "target.attitude_z_deg")
-POSITION = ("target.position_x_m", "target.position_y_m", "target.position_z_m")
-ROLL = "camera.roll_deg"
-# Parameters that move vertices (or the camera about them): a render of them needs the whole film, not the target's window.
-MOVES_VERTICES = (*GEOMETRY, *ATTITUDE, *POSITION, ROLL)
-IMAGE = ("image.gain", "image.offset_w_m2_sr", "image.psf_sigma_px", "image.shift_x_px", "image.shift_y_px")
-# The nuisance parameters of a fit: reported apart from the materials (with the per-observation forms of IMAGE's).
-NUISANCES = (*IMAGE, *ATTITUDE, *POSITION, ROLL)
+
+
+def group(name: str) -> tuple[str, ...]:
+    """The parameters of group ``name`` (:data:`GROUPS`), in registry order."""
+    check_choice("group", name, GROUPS)
+    return tuple(p.pattern for p in PARAMETERS.values() if name in p.groups)
+
+
+GEOMETRY = group("wrinkles")
+SUN_ANGLES = group("sun-angles")
+ATTITUDE = group("attitude")
+POSITION = group("position")
+(ROLL,) = group("roll")
+MOVES_VERTICES = group("moves-vertices")
+IMAGE = group("image")
+NUISANCES = group("nuisance")
+PER_OBSERVATION = group("per-observation")
 # Joins a per-observation parameter's name and its observation's index: ``image.gain@1``.
 OBSERVATION_MARK = "@"
-# Default start of the PSF width (px): 0, no blur, is outside its open range, and its derivative vanishes there.
-PSF_SIGMA_START_PX = 0.5
-# Parameters that set one scene value together.
-JOINT = (SUN_ANGLES, ATTITUDE, POSITION)
 
 
 def observation_name(name: str, observation: int | str) -> str:
@@ -233,6 +354,32 @@ def parameter(name: str) -> Parameter:
     return PARAMETERS[pattern]
 
 
+def check_value(name: str, value: float, argument: str | None = None) -> float:
+    """``value`` as a float if it is a valid value of parameter ``name`` (finite, within its bounds,
+    which a scene value may reach), else :class:`InputError` naming ``argument`` (default: ``name``),
+    the value and the range."""
+    p = parameter(name)
+    return check_range(argument or name, value, p.bounds.lo, p.bounds.hi, unit="" if p.unit == "1" else p.unit)
+
+
+def scene_keys(name: str) -> set[str]:
+    """The scene-file keys whose values parameter ``name`` replaces."""
+    head = observation_of(name)[0].rsplit(".", 1)[0]
+    return {f"{head}.{f}" for f in parameter(name).scene_fields} or {observation_of(name)[0]}
+
+
+def _joint() -> tuple[tuple[str, ...], ...]:
+    """The "joint" parameters grouped by the scene value they set together."""
+    by_key: dict[frozenset[str], tuple[str, ...]] = {}
+    for name in group("joint"):
+        by_key[frozenset(scene_keys(name))] = (*by_key.get(frozenset(scene_keys(name)), ()), name)
+    return tuple(by_key.values())
+
+
+# Parameters that set one scene value together.
+JOINT = _joint()
+
+
 def _materials(scene: Scene) -> dict[str, Material]:
     return {part: make_material(spec.material, spec.overrides, where=f"parts.{part}") for part, spec in scene.parts.items()}
 
@@ -244,7 +391,7 @@ def available(scene: Scene) -> list[str]:
     for p in PARAMETERS.values():
         if p.pattern.startswith("parts."):
             names += [p.pattern.replace(".P.", f".{part}.") for part, m in materials.items() if p.applies_to(m)]
-        elif not p.pattern.startswith("wrinkles.") or scene.wrinkles.enabled:
+        elif "wrinkles" not in p.groups or scene.wrinkles.enabled:
             names.append(p.pattern)
     return names
 
@@ -252,10 +399,9 @@ def available(scene: Scene) -> list[str]:
 def _check_observation(argument: str, name: str, observations: int) -> None:
     """Raise :class:`InputError` unless ``name`` is a per-observation name (``image.gain@k``) with k in range."""
     base, _, index = name.partition(OBSERVATION_MARK)
-    if base not in PARAMETERS or not PARAMETERS[base].per_observation:
-        per = [p.pattern for p in PARAMETERS.values() if p.per_observation]
-        raise InputError(f"`{argument}` names {name!r}, but only {', '.join(per)} may be one observation's "
-                         f"(`{per[0]}{OBSERVATION_MARK}k`).")
+    if base not in PER_OBSERVATION:
+        raise InputError(f"`{argument}` names {name!r}, but only {', '.join(PER_OBSERVATION)} may be one observation's "
+                         f"(`{PER_OBSERVATION[0]}{OBSERVATION_MARK}k`).")
     if index not in [str(k) for k in range(observations)]:
         raise InputError(f"`{argument}` names {name!r}: the observation index {index!r} must be an integer from 0 to "
                          f"{observations - 1} (the fit has {observations} observation{'s' * (observations > 1)}).")
@@ -265,8 +411,9 @@ def check_names(
     scene: Scene, names: list[str] | tuple[str, ...], argument: str = "free", image: bool = False, observations: int = 1,
 ) -> None:
     """Raise :class:`InputError` for an unknown or repeated name, or two names that set the same value;
-    ``image``: whether the fit-only :data:`IMAGE` nuisances are valid; ``observations``: how many
-    observations a fit has (the range of a per-observation name's index, ``image.gain@k``)."""
+    ``image``: whether the names are a fit's (the fit-only :data:`IMAGE` nuisances and the
+    per-observation forms are valid); ``observations``: how many observations a fit has (the range
+    of a per-observation name's index, ``image.gain@k``)."""
     valid = [n for n in available(scene) if image or n not in IMAGE]
     if not names:
         raise InputError(f"`{argument}` must name at least one parameter; valid: {', '.join(valid)}.")
@@ -284,64 +431,16 @@ def check_names(
         raise InputError(f"`{argument}` names a parameter twice: {list(names)}.")
     for a in names:
         for b in names:
-            if a < b and scene_keys(a) & scene_keys(b) and not any({a, b} <= set(group) for group in JOINT):
+            (base_a, k_a), (base_b, k_b) = observation_of(a), observation_of(b)
+            if (a < b and base_a != base_b and (k_a is None or k_b is None or k_a == k_b) and scene_keys(a) & scene_keys(b)
+                    and not any({base_a, base_b} <= set(g) for g in JOINT)):
                 raise InputError(f"`{a}` and `{b}` set the same scene value; free one of them.")
-
-
-def scene_keys(name: str) -> set[str]:
-    """The scene-file keys whose values parameter ``name`` replaces."""
-    head = name.rsplit(".", 1)[0]
-    return {f"{head}.{f}" for f in parameter(name).scene_fields} or {name}
-
-
-def rms_of(w: WrinkleSettings, D: float | Array, G: float | Array) -> Array:
-    """Expected rms height (m) of the wrinkles ``w`` at (D, G)."""
-    return wm_rms(D, G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)
-
-
-def G_of(w: WrinkleSettings, D: float | Array, rms: float | Array) -> Array:
-    """The height scale G (m) that gives the wrinkles ``w`` an rms height ``rms`` (m) at D."""
-    return wm_G_from_rms(D, rms, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)
-
-
-def sun_angles_deg(direction: tuple[float, float, float] | np.ndarray) -> tuple[float, float]:
-    """Elevation and azimuth (deg) of the direction towards the sun, from its direction of travel."""
-    towards = -np.asarray(direction, float) / np.linalg.norm(direction)
-    return math.degrees(math.asin(float(np.clip(towards[2], -1.0, 1.0)))), math.degrees(math.atan2(towards[1], towards[0]))
-
-
-def sun_direction(elevation_deg: float | Array, azimuth_deg: float | Array) -> Array:
-    """The sun's direction of travel from the elevation and azimuth (deg) of the direction towards it."""
-    el, az = jnp.deg2rad(elevation_deg), jnp.deg2rad(azimuth_deg)
-    return -jnp.stack([jnp.cos(el) * jnp.cos(az), jnp.cos(el) * jnp.sin(az), jnp.sin(el)])
-
-
-_GETTERS: dict[str, Callable[[Scene], float]] = {
-    "wrinkles.D": lambda s: s.wrinkles.D,
-    "wrinkles.G": lambda s: s.wrinkles.G,
-    "wrinkles.rms_m": lambda s: float(rms_of(s.wrinkles, s.wrinkles.D, s.wrinkles.G)),
-    "sun.irradiance_w_m2": lambda s: s.sun.irradiance_w_m2,
-    "sun.elevation_deg": lambda s: sun_angles_deg(s.sun.direction)[0],
-    "sun.azimuth_deg": lambda s: sun_angles_deg(s.sun.direction)[1],
-    **{name: (lambda s, i=i: s.target.attitude_deg[i]) for i, name in enumerate(ATTITUDE)},
-    **{name: (lambda s, i=i: s.target.position_m[i]) for i, name in enumerate(POSITION)},
-    ROLL: lambda s: s.camera.roll_deg,
-    "image.gain": lambda s: 1.0,
-    "image.offset_w_m2_sr": lambda s: 0.0,
-    "image.psf_sigma_px": lambda s: PSF_SIGMA_START_PX,
-    "image.shift_x_px": lambda s: 0.0,
-    "image.shift_y_px": lambda s: 0.0,
-}
 
 
 def scene_value(scene: Scene, name: str) -> float:
     """The value of parameter ``name`` in the scene (its fixed value, or a fit's default start)."""
     name = observation_of(name)[0]
-    if name in _GETTERS:
-        return float(_GETTERS[name](scene))
-    _, part, field = name.split(".")
-    m = make_material(scene.parts[part].material, scene.parts[part].overrides)
-    return float(m.alpha_x if field == "alpha" else getattr(m, field))
+    return float(parameter(name).get(scene, name))
 
 
 def fd_step(scene: Scene, name: str) -> float:
@@ -357,39 +456,37 @@ def parameter_table() -> str:
         column = "forward-mode AD" if not p.fd_step else (
             f"central differences, step {p.fd_step:g}{' x value' if p.relative_step else ' ' + p.unit}")
         kinds = f" ({', '.join(m.__name__ for m in p.materials)})" if p.materials else ""
-        own = f"; `{observation_name(p.pattern, 'k')}`: observation k's own" if p.per_observation else ""
-        rows.append(f"| `{p.pattern}` | {p.unit} | {p.bijection.describe()} | {column} | {p.doc}{kinds}{own} |")
+        own = f"; `{observation_name(p.pattern, 'k')}`: observation k's own" if "per-observation" in p.groups else ""
+        rows.append(f"| `{p.pattern}` | {p.unit} | {p.bounds.describe()} | {column} | {p.doc}{kinds}{own} |")
     return "\n".join(rows)
 
 
-@float64
-def scene_with_values(scene: Scene, values: Mapping[str, float]) -> Scene:
+def scene_with_values(scene: Scene, values: Mapping[str, float], observation: int | None = None) -> Scene:
     """A validated copy of ``scene`` with registered parameters set by name (physical units; the
-    inverse of :func:`scene_value`): the scene file that renders them. The sun's angles become
-    ``sun.direction``, the pose's components set ``target.attitude_deg`` / ``position_m``, the rms
-    height a G at the scene's (or the given) D, a conductor's ``alpha`` the field the scene spells it
-    with (``alpha``, or ``alpha_x`` and ``alpha_y``). The fit-only :data:`IMAGE` nuisances are not
-    scene values and are left out.
+    inverse of :func:`scene_value`): the scene file that renders them. Each entry's setter gives
+    the keys: the sun's angles become ``sun.direction``, the pose's components set
+    ``target.attitude_deg`` / ``position_m``, the rms height a G at the scene's (or the given) D, a
+    conductor's ``alpha`` the field the scene spells it with (``alpha``, or ``alpha_x`` and
+    ``alpha_y``). The fit-only :data:`IMAGE` nuisances are not scene values and are left out.
+    ``observation``: the scene is a joint fit's observation k: its own per-observation values
+    (``target.attitude_z_deg@k``) are set, and other observations' left out.
 
     Raises:
         InputError: for a name the scene cannot free, or a value out of its range.
     """
-    v = {n: float(x) for n, x in values.items() if not is_image(n)}
-    if v:  # a fit of image nuisances alone renders its scene as given
-        check_names(scene, list(v), "values")
-    keys: dict[str, Any] = {n: x for n, x in v.items()
-                            if n not in (*SUN_ANGLES, *ATTITUDE, *POSITION, "wrinkles.rms_m") and _pattern(n) != "parts.P.alpha"}
-    if set(SUN_ANGLES) & set(v):
-        el, az = (v.get(n, scene_value(scene, n)) for n in SUN_ANGLES)
-        keys["sun.direction"] = np.asarray(sun_direction(el, az), dtype=float).tolist()
-    for group, key in ((ATTITUDE, "target.attitude_deg"), (POSITION, "target.position_m")):
-        if set(group) & set(v):
-            keys[key] = [v.get(n, scene_value(scene, n)) for n in group]
-    if "wrinkles.rms_m" in v:
-        keys["wrinkles.G"] = float(G_of(scene.wrinkles, v.get("wrinkles.D", scene.wrinkles.D), v["wrinkles.rms_m"]))
-    for name, x in v.items():
-        if _pattern(name) == "parts.P.alpha":
-            _, part, _ = name.split(".")
-            fields = ("alpha",) if "alpha" in scene.parts[part].overrides else ("alpha_x", "alpha_y")
-            keys.update({f"parts.{part}.{f}": x for f in fields})
+    v: dict[str, float] = {}
+    for name, x in values.items():
+        base, k = observation_of(name)
+        if observation is not None and k is not None:
+            if k == observation:
+                v[base] = float(x)
+        else:
+            v[name] = float(x)
+    v = {n: x for n, x in v.items() if not is_image(n)}
+    if not v:  # a fit of image nuisances alone renders its scene as given
+        return scene.with_values({})
+    check_names(scene, list(v), "values")
+    keys: dict[str, Any] = {}
+    for name in v:
+        keys.update(parameter(name).set(scene, name, v))
     return scene.with_values(keys)

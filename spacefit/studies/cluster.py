@@ -17,6 +17,7 @@ from collections.abc import Callable, Iterator
 import numpy as np
 
 from spacefit.errors import InputError
+from spacefit.studies import worker
 from spacefit.studies.worker import Task
 
 IN_FLIGHT_PER_WORKER = 2
@@ -24,9 +25,7 @@ IN_FLIGHT_PER_WORKER = 2
 
 def render_on_worker(task: Task) -> tuple[dict[str, np.ndarray], str, int]:
     """Run one task on a dask worker: its result, the worker's address and its process's render count."""
-    from distributed import get_worker
-
-    from spacefit.studies import worker
+    from distributed import get_worker  # here: dask.distributed takes seconds to import; only a cluster needs it
 
     result = worker.run_task(task)
     return result, get_worker().address, worker.render_count()
@@ -35,7 +34,7 @@ def render_on_worker(task: Task) -> tuple[dict[str, np.ndarray], str, int]:
 def connect(workers: int | None, scheduler: str | None) -> tuple[object, Callable[[], None]]:
     """A dask client, on a new local cluster of ``workers`` single-threaded processes or on the
     scheduler at ``scheduler``, and the function that closes what this call opened."""
-    from distributed import Client, LocalCluster
+    from distributed import Client, LocalCluster  # here: only a cluster needs dask.distributed (seconds to import)
 
     if scheduler is not None:
         try:
@@ -57,7 +56,7 @@ def connect(workers: int | None, scheduler: str | None) -> tuple[object, Callabl
 def run_on_dask(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]], Task], *, workers: int | None,
                 scheduler: str | None, max_renders_per_worker: int) -> Iterator[tuple[tuple[int, ...], dict[str, np.ndarray]]]:
     """Yield ``(index, result)`` for every point of ``todo`` as dask workers finish them."""
-    from distributed import as_completed
+    from distributed import as_completed  # here: only a cluster needs dask.distributed (seconds to import)
 
     client, close = connect(workers, scheduler)
     try:

@@ -33,8 +33,10 @@ import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_count, check_direction, check_range, check_vector
 from spacefit.geometry.frames import attitude_matrix
-from spacefit.precision import float64
+from spacefit.scene.assembly import assemble
 from spacefit.scene.config import Scene, check_scene, deg2rad
+from spacefit.scene.parameters import scene_value, sun_angles_deg, sun_direction
+from spacefit.studies.sweep import sweep
 
 # The sun's apparent magnitude by band (module docstring gives the source).
 SUN_MAGNITUDES = {"V": -26.74}
@@ -67,9 +69,6 @@ def observer_view(scene: Scene, towards: np.ndarray) -> dict[str, Any]:
 def phase_plane_sun(scene: Scene, phase_deg: np.ndarray) -> dict[str, list[float]]:
     """Sun elevation and azimuth (deg, world, as the registry has them) for each phase angle: the sun
     turns away from the observer's direction towards the camera's image right."""
-    from spacefit.scene.assembly import assemble
-    from spacefit.scene.parameters import sun_angles_deg
-
     camera = assemble(scene).camera
     v = camera.position - np.array(scene.target.position_m)
     v /= np.linalg.norm(v)
@@ -79,11 +78,8 @@ def phase_plane_sun(scene: Scene, phase_deg: np.ndarray) -> dict[str, list[float
     return {"sun.elevation_deg": [a[0] for a in angles], "sun.azimuth_deg": [a[1] for a in angles]}
 
 
-@float64
 def phase_angles_deg(scene: Scene, dataset: Any) -> np.ndarray:
     """The solar phase angle (deg) at each point of a light curve's sweep (the camera is fixed)."""
-    from spacefit.scene.parameters import scene_value, sun_direction
-
     v = np.array(scene.camera.position_m) - np.array(scene.target.position_m)
     v /= np.linalg.norm(v)
     el = dataset["sun.elevation_deg"].values if "sun.elevation_deg" in dataset.coords else scene_value(scene, "sun.elevation_deg")
@@ -120,7 +116,7 @@ class LightCurve:
 
     def figure(self) -> Any:
         """A matplotlib Figure: magnitude (brighter up) and irradiance against the swept quantity."""
-        from matplotlib.figure import Figure
+        from matplotlib.figure import Figure  # here: only a figure needs matplotlib (optional; slow to import)
 
         fig = Figure(figsize=(9.0, 3.6), layout="constrained")
         left, right = fig.subplots(1, 2)
@@ -162,8 +158,6 @@ def light_curve(
     scene's; ``observer_range_m``: the observer's distance (default: the rendered one). ``band`` and
     ``sun_magnitude`` (default: :data:`SUN_MAGNITUDES`) give the magnitudes. ``seeds`` averages
     renders of these seeds. The rest is :func:`spacefit.studies.sweep.sweep`'s."""
-    from spacefit.studies.sweep import sweep
-
     check_scene(scene)
     given = [n for n, v in (("phase_deg", phase_deg), ("attitude_deg", attitude_deg), ("times_s", times_s)) if v is not None]
     if len(given) != 1:

@@ -24,8 +24,11 @@ from typing import Any
 import numpy as np
 
 from spacefit.errors import check_count
+from spacefit.progress import progress_bar
 from spacefit.scene.config import Scene, check_scene
+from spacefit.scene.parameters import check_names, parameter, scene_with_values
 
+TARGET = "target"  # the region of every part together, beside the parts
 CONFIDENCE = 0.95  # two-sided: a derivative is resolved when this interval excludes zero
 # The sweep's per-point variables of a sensitivity: name -> (dtype, fill, unit, description).
 SUMMARY_VARIABLES: dict[str, tuple[Any, Any, str, str]] = {
@@ -40,10 +43,8 @@ SUMMARY_VARIABLES: dict[str, tuple[Any, Any, str, str]] = {
 def normalisation(name: str, value: float) -> tuple[float, str]:
     """Factor turning dL/dp / L into the normalised sensitivity of parameter ``name`` at ``value``,
     and its unit: p ("1") for positive quantities, per radian or per metre for angles and positions."""
-    from spacefit.scene.parameters import parameter
-
     p = parameter(name)
-    if p.bijection.lo >= 0.0:
+    if p.bounds.lo >= 0.0:
         return value, "1"
     if p.unit == "deg":
         return 180.0 / math.pi, "rad^-1"
@@ -57,7 +58,7 @@ def mean_and_error(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def t_critical(seeds: int) -> float:
     """Student's t quantile of the two-sided :data:`CONFIDENCE` interval with seeds - 1 degrees of freedom."""
-    from scipy.stats import t
+    from scipy.stats import t  # here: SciPy's statistics take 0.4 s to import, which a sweep without derivatives never needs
 
     return float(t.ppf(0.5 + CONFIDENCE / 2.0, seeds - 1))
 
@@ -123,7 +124,7 @@ class Sensitivity:
     def figure(self) -> Any:
         """A matplotlib Figure: each derivative image (unresolved pixels grey), and the regions'
         normalised sensitivities with their confidence intervals (unresolved bars hatched)."""
-        from matplotlib.figure import Figure
+        from matplotlib.figure import Figure  # here: only a figure needs matplotlib (optional; slow to import)
 
         n = len(self.names)
         columns = min(n, 3)
@@ -157,7 +158,7 @@ class Sensitivity:
 
     def to_dataset(self) -> Any:
         """The sensitivity as a labelled xarray Dataset (dimensions parameter, region, y, x, channel)."""
-        import xarray as xr
+        import xarray as xr  # here: only a dataset needs xarray (slow to import)
 
         per_unit = "W m^-2 sr^-1 per parameter_unit"
         return xr.Dataset(
@@ -190,11 +191,9 @@ def sensitivity(
     or ``at`` (by name, in the parameters' units), each from ``seeds`` independent estimates (>= 2)
     with its standard error. ``spp`` / ``spp_grad``: samples per pixel of the primal and finite
     difference renders / of the AD renders (default: the scene's)."""
+    # here: the fitting and rendering stack imports JAX and Mitsuba (seconds), which a sweep without derivatives never needs
     from spacefit.fitting.problem import fit_scene
-    from spacefit.progress import progress_bar
     from spacefit.rendering.derivatives import jacobians
-    from spacefit.scene.parameters import check_names, parameter, scene_with_values
-    from spacefit.studies.worker import TARGET
 
     check_scene(scene)
     check_count("seeds", seeds, 2)

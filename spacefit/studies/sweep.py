@@ -33,9 +33,16 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, InputTypeError, check_count, check_range, quote
+from spacefit import __version__
+from spacefit.errors import InputError, InputTypeError, check_count, quote
+from spacefit.interrupts import deferred_interrupts
 from spacefit.output import STAGE_PREFIX, check_writable
-from spacefit.scene.config import Scene, check_scene
+from spacefit.progress import progress_bar
+from spacefit.scene.config import Scene, check_scene, load_scene, read_scene_dict
+from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, available, check_names, check_value, parameter, scene_with_values
+from spacefit.studies.cluster import run_on_dask
+from spacefit.studies.sensitivity import SUMMARY_VARIABLES, normalisation
+from spacefit.studies import worker
 from spacefit.studies.worker import Task, regions
 
 RENDER_ARGUMENTS = ("render.seed", "render.spp")
@@ -61,8 +68,6 @@ class Axis:
 
 def units(key: str) -> str:
     """The unit of a swept key: the registry's for a parameter, else from the key's suffix ("1" if none)."""
-    from spacefit.scene.parameters import parameter
-
     try:
         return parameter(key).unit
     except InputError:
@@ -95,8 +100,6 @@ def _values(key: str, spec: Any) -> list[Any]:
 
 def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
     """Check a sweep's axes against the scene (every key and value) and return them in order."""
-    from spacefit.scene.parameters import available, parameter, scene_with_values
-
     if not isinstance(axes, Mapping) or not axes:
         raise InputTypeError(f"`axes` must be a non-empty mapping of scene keys to lists of values, got {quote(axes)}.")
     parsed = []
@@ -119,8 +122,7 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
                 value = json.loads(v)
                 try:
                     if key in names:
-                        bounds = parameter(key).bijection
-                        check_range(key, value, bounds.lo, bounds.hi, unit=parameter(key).unit)
+                        check_value(key, value)
                         scene_with_values(scene, {key: value})
                     else:
                         scene.with_values({key: value})
@@ -155,16 +157,12 @@ def in_place_names(scene: Scene) -> set[str]:
     """The registered parameters a sweep sets on the loaded scene: all but the wrinkles' D, G and rms
     height, whose points assemble the scene again (the refinement is kept, the displacement redone, and
     the level of detail's effective roughness follows them)."""
-    from spacefit.scene.parameters import GEOMETRY, available
-
     return set(available(scene)) - set(GEOMETRY)
 
 
 def tasks(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple[str, ...], derivative_seeds: int
           ) -> Callable[[tuple[int, ...]], Task]:
     """The task of each point (its index along every axis)."""
-    from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, scene_with_values
-
     names = in_place_names(scene)
     in_place = [k for a in axes for k in a.values if k in names]
     crop = not any(k in MOVES_VERTICES for k in in_place)
@@ -200,7 +198,7 @@ def _coords(axes: list[Axis]) -> dict[str, Any]:
 
 def template(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple[str, ...], attrs: Mapping[str, Any]) -> Any:
     """The store's empty Dataset (dask arrays, never computed): dimensions, coordinates, chunks of one point."""
-    import dask.array as da
+    import dask.array as da  # here: dask and xarray take a second to import; only a sweep's store needs them
     import xarray as xr
 
     dims = tuple(a.name for a in axes)
@@ -222,8 +220,6 @@ def template(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple
         w, h = scene.render.resolution
         add("radiance", ("y", "x", "channel"), (h, w, 3), np.float32, np.nan, "W m^-2 sr^-1", "the rendered image")
     if derivatives:
-        from spacefit.studies.sensitivity import SUMMARY_VARIABLES
-
         for name, (dtype, fill, unit, doc) in SUMMARY_VARIABLES.items():
             add(name, ("parameter", "region"), (len(derivatives), len(names)), dtype, fill, unit, doc)
     variables["done"] = (dims, da.zeros(shape, dtype=bool, chunks=one), {"description": "the point is written"})
@@ -231,9 +227,6 @@ def template(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple
     if images:
         coords["channel"] = np.array(["R", "G", "B"], dtype=object)
     if derivatives:
-        from spacefit.scene.parameters import parameter
-        from spacefit.studies.sensitivity import normalisation
-
         coords["parameter"] = np.array(derivatives, dtype=object)
         coords["parameter_unit"] = ("parameter", np.array([parameter(n).unit for n in derivatives], dtype=object))
         coords["normalised_unit"] = ("parameter", np.array([normalisation(n, 1.0)[1] for n in derivatives], dtype=object))
@@ -243,7 +236,7 @@ def template(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple
 def open_store(store: str | Path | None, spec: str, make: Callable[[], Any], overwrite: bool) -> Any:
     """The Zarr group of the sweep ``spec``: created from ``make()`` when new (or ``overwrite``), reopened
     when it holds the same sweep; refused when it holds another one or other files."""
-    import zarr
+    import zarr  # here: only a sweep's store needs Zarr (slow to import)
 
     if store is None:
         memory = zarr.storage.MemoryStore()
@@ -277,7 +270,7 @@ def open_store(store: str | Path | None, spec: str, make: Callable[[], Any], ove
 
 def _stored_spec(path: Path) -> str | None:
     """The arguments of the sweep stored at ``path``, or None if it is not a sweep store."""
-    import zarr
+    import zarr  # here: only a sweep's store needs Zarr (slow to import)
 
     try:
         return zarr.open_group(str(path), mode="r", zarr_format=STORE_FORMAT).attrs.get("spacefit_sweep")
@@ -335,8 +328,7 @@ def sweep(
     Ctrl-C (or SIGTERM) stops after the point being rendered; every finished point stays in the
     store and KeyboardInterrupt is raised.
     """
-    import spacefit
-    import xarray as xr
+    import xarray as xr  # here: only a sweep's store needs xarray (slow to import)
 
     check_scene(scene)
     check_count("derivative_seeds", derivative_seeds, 2)
@@ -346,14 +338,12 @@ def sweep(
         raise InputError("give `workers` (a local cluster) or `scheduler` (an address), not both.")
     derivatives = tuple(derivatives)
     if derivatives:
-        from spacefit.scene.parameters import check_names
-
         check_names(scene, list(derivatives), "derivatives")
     parsed = parse_axes(scene, axes)
     options = {"images": bool(images), "derivatives": list(derivatives), "derivative_seeds": derivative_seeds}
     spec = _canonical(scene, parsed, options)
     seeds = parsed_seeds(scene, parsed)
-    attrs = {"spacefit_version": spacefit.__version__, "scene_toml": scene.to_toml(), "seeds": seeds,
+    attrs = {"spacefit_version": __version__, "scene_toml": scene.to_toml(), "seeds": seeds,
              "spacefit_sweep": spec, "description": "spacefit sweep: radiance of each region at each point"}
     group = open_store(store, spec, lambda: template(scene, parsed, images=images, derivatives=derivatives, attrs=attrs),
                        overwrite)
@@ -378,8 +368,6 @@ def read_sweep_file(path: str | Path, overrides: Sequence[str] = ()) -> tuple[Sc
 
     Returns ``(scene, axes, options)``: ``sf.sweep(scene, axes, store=..., **options)`` runs it.
     """
-    from spacefit.scene.config import load_scene, read_scene_dict
-
     data = read_scene_dict(path)  # the same checks and messages as a scene file's
     unknown = set(data) - {"scene", "axes", *SWEEP_FILE_OPTIONS}
     if unknown:
@@ -403,20 +391,13 @@ def parsed_seeds(scene: Scene, axes: list[Axis]) -> list[int]:
 def run_points(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]], Task], group: Any, *, total: int,
                workers: int | None, scheduler: str | None, max_renders_per_worker: int, quiet: bool) -> None:
     """Render the points ``todo`` in-process or on dask, writing each to ``group`` as it finishes."""
-    from spacefit.interrupts import deferred_interrupts
-    from spacefit.progress import progress_bar
-
     bar = progress_bar(total, "sweep", initial=total - len(todo), quiet=quiet)
     try:
         with deferred_interrupts() as interrupts:
             results: Iterator[tuple[tuple[int, ...], dict[str, np.ndarray]]]
             if workers is None and scheduler is None:
-                from spacefit.studies.worker import run_task
-
-                results = ((index, run_task(task_of(index))) for index in todo)
+                results = ((index, worker.run_task(task_of(index))) for index in todo)
             else:
-                from spacefit.studies.cluster import run_on_dask
-
                 results = run_on_dask(todo, task_of, workers=workers, scheduler=scheduler,
                                       max_renders_per_worker=max_renders_per_worker)
             for index, result in results:

@@ -10,14 +10,15 @@ again. The process keeps one loaded scene at a time: Mitsuba leaks memory on eve
 
 from __future__ import annotations
 
+import tomllib
 from dataclasses import dataclass
 
 import numpy as np
 
 from spacefit.geometry.frames import pixel_solid_angles
 from spacefit.scene.config import Scene, scene_from_dict
-
-TARGET = "target"  # the region of every part together, beside the parts
+from spacefit.scene.parameters import scene_with_values
+from spacefit.studies.sensitivity import TARGET, point_summaries, sensitivity
 
 
 @dataclass(frozen=True)
@@ -56,8 +57,6 @@ class _Loaded:
 
 def scene_of(toml: str) -> Scene:
     """The scene a task's TOML text describes (mesh paths in it are absolute)."""
-    import tomllib
-
     return scene_from_dict(tomllib.loads(toml))
 
 
@@ -82,7 +81,7 @@ def summaries(radiance: np.ndarray, part_image: object, solid_angles: np.ndarray
 
 def loaded(task: Task) -> type[_Loaded]:
     """The process's renderer for the task's scene, loaded if the scene changed."""
-    from spacefit.rendering.renderer import Renderer
+    from spacefit.rendering.renderer import Renderer  # here: Mitsuba takes seconds to import; a sweep's planning never renders
 
     key = (task.scene_toml, task.crop)
     if _Loaded.key != key:
@@ -115,9 +114,6 @@ def run_task(task: Task) -> dict[str, np.ndarray]:
     if task.images:
         out["radiance"] = radiance
     if task.derivatives:
-        from spacefit.scene.parameters import scene_with_values
-        from spacefit.studies.sensitivity import point_summaries, sensitivity
-
         render = {k: v for k, v in (("render.seed", task.seed), ("render.spp", task.spp)) if v is not None}
         point = scene_with_values(scene.with_values(render), dict(task.in_place))
         sens = sensitivity(point, task.derivatives, seeds=task.derivative_seeds, quiet=True)
