@@ -26,9 +26,9 @@ from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import PartImage, Renderer
 from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import FILTER_RADIUS_PX, Scene, check_scene
+from spacefit.scene.schema import FILTER_RADIUS_PX, Scene, check_scene
 from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, dn_fn, noise_variance_dn, psf_rms_px, saturated_mask
-from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, rms_of, scene_value
+from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, rms_of, scene_value, scene_with_values
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
 # Seed offset of the second, independent Jacobian used for the standard errors.
@@ -295,6 +295,7 @@ def setup(
     start = dict(start or {})
     for name in start:
         check_choice("start", name, user.names)
+    scene_with_values(scene, start)  # a start value is refused as the scene file would refuse it, with its message
     x0_user = np.array([start.get(n, scene_value(scene, n)) for n in user.names], dtype=float)
     user.check_start(x0_user)
     w = scene.wrinkles

@@ -36,11 +36,12 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array
 
-from spacefit.errors import InputError, check_choice
+from spacefit.errors import InputError, check_choice, check_range
 from spacefit.precision import float64
 from spacefit.geometry.wm import wm_G_from_rms, wm_rms
-from spacefit.materials import Conductor, Lambert, Material, Mirror, make_material
-from spacefit.scene.config import Scene, WrinkleSettings
+from spacefit.materials import Conductor, Lambert, Material, Mirror
+from spacefit.materials.models import MIN_ALPHA
+from spacefit.scene.schema import Scene, WrinkleSettings, unknown_part
 
 
 @dataclass(frozen=True)
@@ -87,8 +88,7 @@ class Bijection:
 
 UNIT = Bijection(0.0, 1.0)
 POSITIVE = Bijection(0.0)
-# GGX roughness below 1e-4 is a mirror in float32 and Mitsuba's GGX evaluates to NaN there.
-ROUGHNESS = Bijection(1e-4, 1.0)
+ROUGHNESS = Bijection(MIN_ALPHA, 1.0)
 # The widest Gaussian PSF (sigma, px) a fit may try; its kernel reaches out to 5 sigma.
 PSF_SIGMA_MAX_PX = 4.0
 
@@ -160,7 +160,7 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
     Parameter("sun.irradiance_w_m2", "W m^-2", POSITIVE, "the sun's irradiance on a surface facing it"),
     Parameter("sun.elevation_deg", "deg", Bijection(-90.0, 90.0), "elevation of the direction towards the sun above world xy",
               fd_step=0.5, scene_fields=("direction",)),
-    Parameter("sun.azimuth_deg", "deg", Bijection(-math.inf), "azimuth of the direction towards the sun, world +x to +y",
+    Parameter("sun.azimuth_deg", "deg", Bijection(-math.inf), "azimuth of the direction towards the sun, world +x to +y (reads 0 at the zenith, the default sun)",
               fd_step=0.5, scene_fields=("direction",)),
     *(Parameter(f"target.attitude_{axis}_deg", "deg", Bijection(-math.inf),
                 f"the target's attitude angle {name} (about object {axis}, thesis 3.2): every vertex",
@@ -234,7 +234,7 @@ def parameter(name: str) -> Parameter:
 
 
 def _materials(scene: Scene) -> dict[str, Material]:
-    return {part: make_material(spec.material, spec.overrides, where=f"parts.{part}") for part, spec in scene.parts.items()}
+    return {part: spec.material for part, spec in scene.parts.items()}
 
 
 def available(scene: Scene) -> list[str]:
@@ -271,8 +271,14 @@ def check_names(
     if not names:
         raise InputError(f"`{argument}` must name at least one parameter; valid: {', '.join(valid)}.")
     for name in names:
+        forms = [n for n in valid if name not in valid and n not in IMAGE and name in scene_keys(n)]
         if OBSERVATION_MARK in name and image:
             _check_observation(argument, name, observations)
+        elif isinstance(name, str) and name.count(".") == 2 and name.startswith("parts.") and name.split(".")[1] not in scene.parts:
+            raise unknown_part(name, list(scene.parts))
+        elif forms:
+            raise InputError(f"`{argument}` names the scene-file key `{name}`, which holds several numbers; a parameter is "
+                             f"one number: give {', '.join(f'`{n}`' for n in forms)}.")
         else:
             check_choice(argument, name, valid)
     for name in names:
@@ -286,6 +292,22 @@ def check_names(
         for b in names:
             if a < b and scene_keys(a) & scene_keys(b) and not any({a, b} <= set(group) for group in JOINT):
                 raise InputError(f"`{a}` and `{b}` set the same scene value; free one of them.")
+
+
+def check_value(name: str, value: float) -> float:
+    """Check a parameter's value and return it as a float: the one check every entry point runs.
+
+    A parameter that is a scene-file key (``parts.P.alpha_x``, ``wrinkles.D``) is checked here for
+    being a finite number only, and by the scene section or material it lands in for its range, so
+    its message is a scene file's. The others (the sun's angles, the pose's components, the rms
+    height) are checked here against their range, closed but at a lower bound of 0
+    (:func:`spacefit.errors.check_range` builds the message: name, value, range, unit).
+    """
+    p = parameter(name)
+    if not p.scene_fields or p.field == "alpha":
+        return check_range(name, value)
+    b = p.bijection
+    return check_range(name, value, b.lo, b.hi, lo_open=b.lo == 0.0, unit="" if p.unit == "1" else p.unit)
 
 
 def scene_keys(name: str) -> set[str]:
@@ -304,10 +326,18 @@ def G_of(w: WrinkleSettings, D: float | Array, rms: float | Array) -> Array:
     return wm_G_from_rms(D, rms, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)
 
 
+# A sun at the zenith or the nadir (the default sun is at the zenith) has no azimuth of its own: it
+# reads STATED_AZIMUTH_DEG (world +x), and setting its elevation alone turns it towards +x.
+STATED_AZIMUTH_DEG = 0.0
+VERTICAL_SUN = 1e-9
+
+
 def sun_angles_deg(direction: tuple[float, float, float] | np.ndarray) -> tuple[float, float]:
     """Elevation and azimuth (deg) of the direction towards the sun, from its direction of travel."""
     towards = -np.asarray(direction, float) / np.linalg.norm(direction)
-    return math.degrees(math.asin(float(np.clip(towards[2], -1.0, 1.0)))), math.degrees(math.atan2(towards[1], towards[0]))
+    vertical = np.hypot(towards[0], towards[1]) < VERTICAL_SUN
+    azimuth = STATED_AZIMUTH_DEG if vertical else math.degrees(math.atan2(towards[1], towards[0]))
+    return math.degrees(math.asin(float(np.clip(towards[2], -1.0, 1.0)))), azimuth
 
 
 def sun_direction(elevation_deg: float | Array, azimuth_deg: float | Array) -> Array:
@@ -340,7 +370,7 @@ def scene_value(scene: Scene, name: str) -> float:
     if name in _GETTERS:
         return float(_GETTERS[name](scene))
     _, part, field = name.split(".")
-    m = make_material(scene.parts[part].material, scene.parts[part].overrides)
+    m = scene.parts[part].material
     return float(m.alpha_x if field == "alpha" else getattr(m, field))
 
 
@@ -367,18 +397,18 @@ def scene_with_values(scene: Scene, values: Mapping[str, float]) -> Scene:
     """A validated copy of ``scene`` with registered parameters set by name (physical units; the
     inverse of :func:`scene_value`): the scene file that renders them. The sun's angles become
     ``sun.direction``, the pose's components set ``target.attitude_deg`` / ``position_m``, the rms
-    height a G at the scene's (or the given) D, a conductor's ``alpha`` the field the scene spells it
-    with (``alpha``, or ``alpha_x`` and ``alpha_y``). The fit-only :data:`IMAGE` nuisances are not
-    scene values and are left out.
+    height a G at the scene's (or the given) D, a conductor's ``alpha`` both its roughnesses. The
+    fit-only :data:`IMAGE` nuisances are not scene values and are left out.
 
     Raises:
         InputError: for a name the scene cannot free, or a value out of its range.
     """
-    v = {n: float(x) for n, x in values.items() if not is_image(n)}
-    if v:  # a fit of image nuisances alone renders its scene as given
-        check_names(scene, list(v), "values")
+    names = [n for n in values if not is_image(n)]
+    if names:  # a fit of image nuisances alone renders its scene as given
+        check_names(scene, names, "values")
+    v = {n: check_value(n, values[n]) for n in names}
     keys: dict[str, Any] = {n: x for n, x in v.items()
-                            if n not in (*SUN_ANGLES, *ATTITUDE, *POSITION, "wrinkles.rms_m") and _pattern(n) != "parts.P.alpha"}
+                            if n not in (*SUN_ANGLES, *ATTITUDE, *POSITION, "wrinkles.rms_m")}
     if set(SUN_ANGLES) & set(v):
         el, az = (v.get(n, scene_value(scene, n)) for n in SUN_ANGLES)
         keys["sun.direction"] = np.asarray(sun_direction(el, az), dtype=float).tolist()
@@ -387,9 +417,4 @@ def scene_with_values(scene: Scene, values: Mapping[str, float]) -> Scene:
             keys[key] = [v.get(n, scene_value(scene, n)) for n in group]
     if "wrinkles.rms_m" in v:
         keys["wrinkles.G"] = float(G_of(scene.wrinkles, v.get("wrinkles.D", scene.wrinkles.D), v["wrinkles.rms_m"]))
-    for name, x in v.items():
-        if _pattern(name) == "parts.P.alpha":
-            _, part, _ = name.split(".")
-            fields = ("alpha",) if "alpha" in scene.parts[part].overrides else ("alpha_x", "alpha_y")
-            keys.update({f"parts.{part}.{f}": x for f in fields})
     return scene.with_values(keys)

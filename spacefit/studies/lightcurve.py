@@ -34,7 +34,7 @@ import numpy as np
 from spacefit.errors import InputError, check_choice, check_count, check_direction, check_range, check_vector
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.precision import float64
-from spacefit.scene.config import Scene, check_scene, deg2rad
+from spacefit.scene.schema import Scene, check_scene, deg2rad
 
 # The sun's apparent magnitude by band (module docstring gives the source).
 SUN_MAGNITUDES = {"V": -26.74}

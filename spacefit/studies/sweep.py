@@ -33,9 +33,9 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, InputTypeError, check_count, check_range, quote
+from spacefit.errors import InputError, InputTypeError, check_count, quote
 from spacefit.output import STAGE_PREFIX, check_writable
-from spacefit.scene.config import Scene, check_scene
+from spacefit.scene.schema import Scene, check_scene
 from spacefit.studies.worker import Task, regions
 
 RENDER_ARGUMENTS = ("render.seed", "render.spp")
@@ -95,7 +95,6 @@ def _values(key: str, spec: Any) -> list[Any]:
 
 def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
     """Check a sweep's axes against the scene (every key and value) and return them in order."""
-    from spacefit.scene.parameters import available, parameter, scene_with_values
 
     if not isinstance(axes, Mapping) or not axes:
         raise InputTypeError(f"`axes` must be a non-empty mapping of scene keys to lists of values, got {quote(axes)}.")
@@ -110,7 +109,6 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
     keys = [k for a in parsed for k in a.values]
     if len(set(keys)) != len(keys):
         raise InputError(f"`axes` names a key twice: {keys}.")
-    names = available(scene)
     for axis in parsed:
         for key, vals in axis.values.items():
             if key in FIXED_KEYS:
@@ -118,12 +116,7 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
             for v in dict.fromkeys(map(json.dumps, vals)):  # every distinct value, checked as the scene would
                 value = json.loads(v)
                 try:
-                    if key in names:
-                        bounds = parameter(key).bijection
-                        check_range(key, value, bounds.lo, bounds.hi, unit=parameter(key).unit)
-                        scene_with_values(scene, {key: value})
-                    else:
-                        scene.with_values({key: value})
+                    scene.with_values({key: value})
                 except InputError as err:
                     raise type(err)(f"`axes[{key!r}]` holds {quote(value)}: {err}") from None
     return parsed
@@ -378,7 +371,7 @@ def read_sweep_file(path: str | Path, overrides: Sequence[str] = ()) -> tuple[Sc
 
     Returns ``(scene, axes, options)``: ``sf.sweep(scene, axes, store=..., **options)`` runs it.
     """
-    from spacefit.scene.config import load_scene, read_scene_dict
+    from spacefit.scene.toml import load_scene, read_scene_dict
 
     data = read_scene_dict(path)  # the same checks and messages as a scene file's
     unknown = set(data) - {"scene", "axes", *SWEEP_FILE_OPTIONS}

@@ -15,7 +15,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from spacefit.geometry.frames import pixel_solid_angles
-from spacefit.scene.config import Scene, scene_from_dict
+from spacefit.scene.schema import Scene
+from spacefit.scene.toml import scene_from_dict
 
 TARGET = "target"  # the region of every part together, beside the parts
 
