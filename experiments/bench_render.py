@@ -17,7 +17,7 @@ from studyio import machine
 
 from spacefit.rendering.renderer import Renderer
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import load_scene
+from spacefit.scene.toml import load_scene
 
 
 def main() -> None:

@@ -46,7 +46,7 @@ from spacefit.rendering.backend import dr  # noqa: E402
 from spacefit.rendering.exr import read_exr  # noqa: E402
 from spacefit.rendering.renderer import Renderer, target_window  # noqa: E402
 from spacefit.scene.assembly import Assembly, assemble  # noqa: E402
-from spacefit.scene.config import load_scene  # noqa: E402
+from spacefit.scene.toml import load_scene  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 PEER_PYTHON = ROOT / ".venv-peers" / "bin" / "python"

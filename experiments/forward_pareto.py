@@ -41,7 +41,7 @@ REFERENCE_SEED = 7
 from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.rendering.backend import dr  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
-from spacefit.scene.config import load_scene  # noqa: E402
+from spacefit.scene.toml import load_scene  # noqa: E402
 
 # (widths px, spp values, depths, reference spp)
 REDUCED = ([64, 128], [1, 2, 4, 8, 16], [1, 2, 3], 256)

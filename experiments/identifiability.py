@@ -27,7 +27,7 @@ from spacefit import Observation, identifiability  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
 from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
-from spacefit.scene.config import load_scene  # noqa: E402
+from spacefit.scene.toml import load_scene  # noqa: E402
 
 LITERAL = Path(__file__).resolve().parents[1] / "data" / "scenes" / "thesis-literal.toml"
 FREE = ["wrinkles.D", "wrinkles.G"]

@@ -39,7 +39,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
 from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
-from spacefit.scene.config import WrinkleSettings, load_scene  # noqa: E402
+from spacefit.scene.schema import WrinkleSettings  # noqa: E402
+from spacefit.scene.toml import load_scene
 from spacefit.scene.lod import LOD_TOLERANCE  # noqa: E402
 
 GENTLE = ["wrinkles.L=0.4", "wrinkles.Ls=0.1", "wrinkles.D=2.4", "wrinkles.G=3e-4", "wrinkles.spacing_m=0.03",

@@ -33,7 +33,7 @@ from spacefit.output import preview_scale, to_srgb8
 from spacefit.rendering.renderer import render
 from spacefit.rendering.exr import read_exr
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import load_scene
+from spacefit.scene.toml import load_scene
 
 ROOT = Path.cwd().parent if Path.cwd().name == "experiments" else Path.cwd()
 RESULTS = ROOT / "experiments" / "results"

@@ -30,7 +30,7 @@ from studyio import machine, write_csv
 
 from spacefit.rendering.renderer import Renderer
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import load_scene
+from spacefit.scene.toml import load_scene
 
 # Share of the samples a two-pass sampler spends on its uniform first pass.
 PILOT_FRACTION = 0.25

@@ -24,7 +24,7 @@ from spacefit.output import preview_scale, to_srgb8  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
 from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
-from spacefit.scene.config import load_scene  # noqa: E402
+from spacefit.scene.toml import load_scene  # noqa: E402
 
 # (sweep name, label of the value whose exposure the sheet uses, [(label, overrides), ...])
 SWEEPS = [

@@ -54,9 +54,15 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "PartImage": ("spacefit.rendering.renderer", "PartImage"),
     "Renderer": ("spacefit.rendering.renderer", "Renderer"),
     "render": ("spacefit.rendering.renderer", "render"),
-    "Scene": ("spacefit.scene.config", "Scene"),
-    "default_scene": ("spacefit.scene.config", "default_scene"),
-    "load_scene": ("spacefit.scene.config", "load_scene"),
+    "Scene": ("spacefit.scene.schema", "Scene"),
+    "RenderSettings": ("spacefit.scene.schema", "RenderSettings"),
+    "CameraSettings": ("spacefit.scene.schema", "CameraSettings"),
+    "SunSettings": ("spacefit.scene.schema", "SunSettings"),
+    "TargetSettings": ("spacefit.scene.schema", "TargetSettings"),
+    "WrinkleSettings": ("spacefit.scene.schema", "WrinkleSettings"),
+    "PartSettings": ("spacefit.scene.schema", "PartSettings"),
+    "default_scene": ("spacefit.scene.toml", "default_scene"),
+    "load_scene": ("spacefit.scene.toml", "load_scene"),
     "PARAMETERS": ("spacefit.scene.parameters", "PARAMETERS"),
     "Parameter": ("spacefit.scene.parameters", "Parameter"),
     "available_parameters": ("spacefit.scene.parameters", "available"),
@@ -89,6 +95,7 @@ __all__ = [
     "MLI_SLOPE_RANGE",
     "read_sweep_file", "sweep", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
     "plot_comparison", "plot_convergence",
+    "RenderSettings", "CameraSettings", "SunSettings", "TargetSettings", "WrinkleSettings", "PartSettings",
 ]
 
 

@@ -15,7 +15,8 @@ from typing import Any
 import numpy as np
 
 from spacefit.errors import InputError, check_choice
-from spacefit.scene.config import Scene, load_scene
+from spacefit.scene.schema import Scene
+from spacefit.scene.toml import load_scene
 from spacefit.scene.parameters import check_names, scene_value
 
 CASES_DIR = Path(__file__).resolve().parents[1] / "data" / "synthetic"

@@ -176,7 +176,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         t0 = time.perf_counter()
         from spacefit.pipeline import export_part_stl, render_to_folder
-        from spacefit.scene.config import load_scene
+        from spacefit.scene.toml import load_scene
 
         imports_s = time.perf_counter() - t0
 

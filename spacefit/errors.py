@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import difflib
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Iterator, Sequence
+from contextlib import contextmanager
 
 import numpy as np
 
@@ -43,6 +44,17 @@ def quote(value: object) -> str:
         return shorten(repr(value))
     except RecursionError:
         return f"<a {type(value).__name__} nested too deep to show>"
+
+
+@contextmanager
+def inside(where: str) -> Iterator[None]:
+    """Name the values checked in this block by their full key: an :class:`InputError` about
+    ``alpha_x`` raised inside ``inside("parts.panels")`` is re-raised about ``parts.panels.alpha_x``."""
+    try:
+        yield
+    except InputError as err:
+        text = str(err)
+        raise type(err)(f"`{where}.{text[1:]}" if text.startswith("`") else f"{where}: {text}") from None
 
 
 def check_finite(name: str, value: object) -> None:
@@ -123,13 +135,19 @@ def check_direction(name: str, value: Sequence[float]) -> np.ndarray:
     return v / np.linalg.norm(v)
 
 
+def closest(word: str, valid: Iterable[str]) -> str | None:
+    """The valid word closest to a typo (difflib's ratio of at least 0.6), or None."""
+    close = difflib.get_close_matches(word, list(valid), n=1)
+    return close[0] if close else None
+
+
 def check_choice(name: str, value: str, choices: Iterable[str]) -> str:
     """Check that ``value`` is one of ``choices``; the message lists them and suggests the closest."""
     valid = sorted(choices)
     if isinstance(value, str) and value in valid:
         return value
-    close = difflib.get_close_matches(str(value), valid, n=1) if isinstance(value, str) else []
-    hint = f" Did you mean {close[0]!r}?" if close else ""
+    close = closest(value, valid) if isinstance(value, str) else None
+    hint = f" Did you mean {close!r}?" if close else ""
     error = InputError if isinstance(value, str) else InputTypeError
     raise error(f"`{name}` must be one of {shorten(', '.join(map(repr, valid)), 2000)}; got {quote(value)}.{hint}")
 

@@ -23,8 +23,10 @@ from spacefit.progress import Progress
 from spacefit.rendering.exr import write_exr
 from spacefit.rendering.renderer import PartImage, Renderer, kernel_log
 from spacefit.scene.assembly import Assembly, assemble, fold_notes
-from spacefit.scene.config import Scene, load_scene, parse_override
+from spacefit.scene.overrides import parse_override
 from spacefit.scene.parameters import scene_keys
+from spacefit.scene.schema import Scene
+from spacefit.scene.toml import load_scene
 
 if TYPE_CHECKING:
     from spacefit.fitting.loop import FitResult

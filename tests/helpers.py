@@ -8,7 +8,8 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from spacefit.scene.config import Scene, scene_from_dict
+from spacefit.scene.schema import Scene
+from spacefit.scene.toml import scene_from_dict
 
 
 def write_plate_obj(path: Path, size: float = 2.0) -> Path:

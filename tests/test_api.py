@@ -77,7 +77,7 @@ def test_scene_values_by_python_value():
     scene = sf.default_scene().with_values({"camera.position_m": np.array([0, 0, 50]), "parts.panels.alpha_x": np.float32(0.1),
                                             "render.spp": np.int64(4)})
     assert scene.camera.position_m == (0.0, 0.0, 50.0)
-    assert scene.parts["panels"].overrides["alpha_x"] == pytest.approx(0.1)
+    assert scene.parts["panels"].material.alpha_x == pytest.approx(0.1)
     assert scene.render.spp == 4
     assert sf.load_scene(None, "render.spp=3").render.spp == 3  # one string is one override
     assert sf.load_scene(None, {"render.spp": 5}) == sf.default_scene().with_values({"render.spp": 5})

@@ -14,7 +14,7 @@ from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.parameters import PARAMETERS, scene_value
 from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import load_scene
+from spacefit.scene.toml import load_scene
 
 # 32 x 32 px of the wrinkles case: panels, legs and the wrinkled body all in view, direct light.
 CASE = [

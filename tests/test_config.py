@@ -2,11 +2,15 @@
 
 from __future__ import annotations
 
+import re
+
 import pytest
 
 from spacefit.errors import InputError
 from spacefit.materials import Conductor, Lambert, make_material
-from spacefit.scene.config import Scene, apply_overrides, load_scene, scene_from_dict
+from spacefit.scene.overrides import apply_overrides
+from spacefit.scene.schema import Scene
+from spacefit.scene.toml import load_scene, scene_from_dict
 
 
 def test_defaults_are_table_4_2():
@@ -19,9 +23,9 @@ def test_defaults_are_table_4_2():
     assert s.sun.irradiance_w_m2 == 5.0 and s.sun.direction == (0.0, 0.0, -1.0)
     w = s.wrinkles
     assert (w.D, w.G, w.gamma, w.M, w.L, w.Ls) == (2.3, 1e-5, 1.5, 5, 0.1, 5e-3)
-    assert make_material(s.parts["panels"].material) == Conductor(2.05, 0.055, 0.08, 0.05)
-    assert make_material(s.parts["legs"].material) == Lambert(0.2)
-    body = make_material(s.parts["body"].material)
+    assert s.parts["panels"].material == Conductor(2.05, 0.055, 0.08, 0.05) == make_material("panel_thesis")
+    assert s.parts["legs"].material == Lambert(0.2)
+    body = s.parts["body"].material
     assert (body.eta, body.k) == (0.18, 0.01)
 
 
@@ -61,11 +65,13 @@ def test_unknown_material_lists_the_valid_ones():
         ("wrinkles.gamma=1.0", "wrinkles.gamma"),
         ("wrinkles.G=-1.0", "wrinkles.G"),
         ("wrinkles.spacing_m=0.0", "wrinkles.spacing_m"),
-        ("parts.panels.alpha_x=0.0", "alpha_x"),
-        ("parts.panels.alpha_y=-0.1", "alpha_y"),
-        ("parts.legs.kd=1.5", "kd"),
-        ("parts.legs.kd=-0.1", "kd"),
-        ("parts.body.eta=nan", "eta"),
+        ("parts.panels.alpha_x=0.0", "parts.panels.alpha_x` must be in [0.0001, 1], got 0"),
+        ("parts.panels.alpha_y=-0.1", "parts.panels.alpha_y"),
+        ("parts.panels.alpha=2", "parts.panels.alpha_x` must be in [0.0001, 1], got 2"),
+        ("parts.legs.kd=1.5", "parts.legs.kd` must be in [0, 1], got 1.5"),
+        ("parts.legs.kd=-0.1", "parts.legs.kd"),
+        ("parts.body.eta=nan", "parts.body.eta` must be finite"),
+        ("sun.elevation_deg=120", "sun.elevation_deg` must be in [-90, 90] deg, got 120"),
         ("render.resolution=[0, 600]", "render.resolution"),
         ("render.spp=0", "render.spp"),
         ("render.spp=2.5", "render.spp"),
@@ -80,7 +86,7 @@ def test_unknown_material_lists_the_valid_ones():
     ],
 )
 def test_bad_values_name_the_argument_and_range(override, names):
-    with pytest.raises(InputError, match=names.replace(".", r"\.")):
+    with pytest.raises(InputError, match=re.escape(names)):
         load_scene(None, [override])
 
 

@@ -13,7 +13,7 @@ from cycles_render import cycles_roughness, read_ply
 
 from spacefit.rendering.renderer import Renderer
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import load_scene
+from spacefit.scene.toml import load_scene
 
 # the close view of forward_pareto.VIEWS, where a panel is several pixels thick; coarse wrinkles for speed
 SMALL = ["camera.position_m=[0, 0, 25]", "wrinkles.spacing_m=0.2"]

@@ -16,7 +16,7 @@ from spacefit import FitResult
 from spacefit.imageio import sidecar_path
 from spacefit.rendering.png import write_png
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import load_scene
+from spacefit.scene.toml import load_scene
 from spacefit.pipeline import fit_to_folder
 from spacefit.rendering.renderer import render
 from spacefit.rendering.exr import read_exr, write_exr

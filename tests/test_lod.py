@@ -16,7 +16,7 @@ from spacefit.materials import Conductor, Lambert
 from spacefit.pipeline import render_to_folder
 from spacefit.rendering.renderer import Renderer
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import load_scene
+from spacefit.scene.toml import load_scene
 from spacefit.scene.lod import effective_alpha, effective_material
 
 from lod_study import GENTLE, run_study  # noqa: E402

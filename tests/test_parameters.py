@@ -70,7 +70,7 @@ def test_every_getter_reads_what_its_setter_wrote_and_nothing_else_moves():
                 continue
             assert scene_value(moved, other) == pytest.approx(scene_value(scene, other), rel=1e-9, abs=1e-12), (name, other)
     body = scene_with_values(scene, {"parts.body.alpha": 0.2})
-    assert body.parts["body"].overrides["alpha_x"] == body.parts["body"].overrides["alpha_y"] == 0.2
+    assert body.parts["body"].material.alpha_x == body.parts["body"].material.alpha_y == 0.2
 
 
 def test_joint_values_keep_their_siblings():

@@ -13,7 +13,7 @@ from spacefit.errors import InputError
 from spacefit.rendering.renderer import Renderer
 from spacefit.rendering.exr import read_exr
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import load_scene
+from spacefit.scene.toml import load_scene
 
 # A CI-sized version of the thesis's scene: same optics scaled to 64 px, coarse wrinkles, rendered as
 # geometry (at 37.5 cm per pixel "auto" would take the default wrinkles' effective roughness).

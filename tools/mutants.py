@@ -121,6 +121,14 @@ MUTANTS = (
     Mutant("map-covariance-transposed", COVARIANCE, "out = T @ np.where(np.isfinite(cov), cov, 0.0) @ T.T",
            "out = T.T @ np.where(np.isfinite(cov), cov, 0.0) @ T", (UNCERTAINTY,)),
     # back faces, closed meshes and folded wrinkles (issues 11 and 13)
+    # one vocabulary, checked everywhere (issue 18 item 7)
+    Mutant("set-values-unchecked", RENDERER, "scene = scene_with_values(self.current_scene, given)  # refused",
+           "scene = self.current_scene  # refused", ("tests/test_vocabulary.py",)),
+    Mutant("sun-elevation-resets-the-azimuth", "spacefit/scene/parameters.py",
+           "el, az = (v.get(n, scene_value(scene, n)) for n in SUN_ANGLES)", "el, az = (v.get(n, 0.0) for n in SUN_ANGLES)",
+           ("tests/test_vocabulary.py",)),
+    Mutant("part-typo-without-suggestion", "spacefit/scene/schema.py", "close = closest(path[1], parts)", "close = None",
+           ("tests/test_vocabulary.py",)),
     Mutant("back-faces-one-sided", RENDERER, 'return {"type": "twosided", "bsdf": _one_sided(material)}',
            "return _one_sided(material)", ("tests/test_back_faces.py",)),
     Mutant("closed-check-without-merging", "spacefit/geometry/mesh.py", "    closed.merge_vertices(merge_tex=True, merge_norm=True)\n",

@@ -27,7 +27,7 @@ from spacefit.interrupts import Terminated, deferred_interrupts
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.renderer import PartImage
-from spacefit.scene.config import Scene
+from spacefit.scene.schema import Scene
 from spacefit.scene.parameters import is_nuisance, parameter, scene_with_values
 from spacefit.sensor import DN_UNIT
 

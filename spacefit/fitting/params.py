@@ -20,7 +20,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.errors import InputError
-from spacefit.scene.config import Scene
+from spacefit.scene.schema import Scene
 from spacefit.scene.parameters import Bounds, check_names, fd_step, is_image, observation_of, parameter
 
 

@@ -29,9 +29,9 @@ from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import PartImage, Renderer
 from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import FILTER_RADIUS_PX, Scene, check_scene
+from spacefit.scene.schema import FILTER_RADIUS_PX, Scene, check_scene
 from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, dn_fn, noise_variance_dn, psf_rms_px, saturated_mask
-from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, observation_of, rms_of, scene_value
+from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, observation_of, rms_of, scene_value, scene_with_values
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
 # Seed offset of the second, independent Jacobian used for the standard errors.
@@ -299,6 +299,8 @@ def setup(
     start = dict(start or {})
     for name in start:
         check_choice("start", name, user.names)
+    for k, obs in enumerate(observations):  # a start value is refused as the scene file would refuse it, with its message
+        scene_with_values(obs.scene, start, observation=k)
     # an observation's own value (``target.attitude_z_deg@k``) starts at its scene's
     x0_user = np.array([start.get(n, scene_value(observations[observation_of(n)[1] or 0].scene, n)) for n in user.names],
                        dtype=float)

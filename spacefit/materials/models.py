@@ -18,6 +18,8 @@ from spacefit.errors import InputError, check_choice, check_range
 
 Spectrum = Union[float, tuple[float, float, float]]
 DISTRIBUTIONS = ("ggx", "beckmann")
+# The smallest microfacet roughness: below it GGX is a mirror in float32 and Mitsuba's GGX evaluates to NaN.
+MIN_ALPHA = 1e-4
 
 
 def _check_spectrum(name: str, value: Spectrum, lo: float, hi: float, lo_open: bool) -> Spectrum:
@@ -33,7 +35,7 @@ class Conductor:
     """Rough conductor: anisotropic microfacets, conductor Fresnel.
 
     ``alpha_x`` is the roughness along the part's stated tangent axis (for the built-in panels,
-    the span), ``alpha_y`` across it. Both in (0, 1]. ``distribution`` is "ggx" (Trowbridge-Reitz,
+    the span), ``alpha_y`` across it. Both in [:data:`MIN_ALPHA`, 1]. ``distribution`` is "ggx" (Trowbridge-Reitz,
     thesis eq. 2-9) or "beckmann" (Gaussian slopes of per-axis variance alpha^2 / 2, which the
     level of detail uses for wrinkles' slopes). Masking is Smith's separable form, as in Walter et
     al. 2007 and Mitsuba 3.
@@ -48,8 +50,8 @@ class Conductor:
     def __post_init__(self) -> None:
         object.__setattr__(self, "eta", _check_spectrum("eta", self.eta, 0.0, 100.0, True))
         object.__setattr__(self, "k", _check_spectrum("k", self.k, 0.0, 100.0, False))
-        check_range("alpha_x", self.alpha_x, 0.0, 1.0, lo_open=True)
-        check_range("alpha_y", self.alpha_y, 0.0, 1.0, lo_open=True)
+        object.__setattr__(self, "alpha_x", check_range("alpha_x", self.alpha_x, MIN_ALPHA, 1.0))
+        object.__setattr__(self, "alpha_y", check_range("alpha_y", self.alpha_y, MIN_ALPHA, 1.0))
         check_choice("distribution", self.distribution, DISTRIBUTIONS)
 
 

@@ -22,7 +22,7 @@ from spacefit.precision import float64
 from spacefit.rendering.bridge import DrJitScene, render_params
 from spacefit.rendering.renderer import Renderer
 from spacefit.rendering.values import scene_values_fn
-from spacefit.scene.config import Scene, check_scene
+from spacefit.scene.schema import Scene, check_scene
 from spacefit.scene.parameters import MOVES_VERTICES, check_names, fd_step, scene_value
 
 

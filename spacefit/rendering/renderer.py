@@ -14,15 +14,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spacefit.errors import InputError, check_range
+from spacefit.errors import InputError
 from spacefit.geometry.frames import project
 from spacefit.materials import Conductor, Lambert, Material, Mirror
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.backend import dr, mi, select_variant
 from spacefit.scene.assembly import Assembly, assemble
-from spacefit.scene.config import Scene, check_scene
-from spacefit.scene.parameters import check_names
+from spacefit.scene.schema import Scene, check_scene
 
 # Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.
 MAX_SAMPLES_PER_PASS = 1 << 24
@@ -261,6 +260,7 @@ class Renderer:
         assembly = scene if isinstance(scene, Assembly) else assemble(check_scene(scene))
         self.variant = select_variant(variant or assembly.scene.render.variant)
         self.assembly = assembly
+        self.current_scene = assembly.scene
         intr = assembly.intrinsics
         vertices = assembly.scene_vertices
         self.window = target_window(assembly, vertices) if crop else (0, 0, intr.width, intr.height)
@@ -284,20 +284,39 @@ class Renderer:
 
     @float64  # the pose and the W-M heights in float64, rounded to float32 only where Mitsuba takes them
     def set_values(self, values: Mapping[str, float]) -> None:
-        """Set registered parameters (:mod:`spacefit.scene.parameters`, e.g. ``{"parts.panels.alpha_x":
-        0.1, "sun.elevation_deg": 30}``) in the loaded scene, without reloading it.
+        """Set values by name in the loaded scene, without reloading it: parameter names
+        (:mod:`spacefit.scene.parameters`, e.g. ``{"parts.panels.alpha_x": 0.1, "sun.elevation_deg": 30}``)
+        or the scene-file keys they spell another way (``sun.direction``, ``target.attitude_deg``,
+        :func:`spacefit.scene.overrides.as_parameters`). Each value is checked as
+        :func:`~spacefit.scene.toml.load_scene` checks it, with the same message, before anything is
+        set. Values set earlier stay: setting one sun angle keeps the other. :attr:`current_scene`
+        is the scene the renderer now renders.
 
         Parameters that move vertices (D, G, rms height, the pose) may move them out of the window: render
         those with ``crop=False``, or build a new Renderer.
         """
-        from spacefit.rendering.values import scene_values_fn  # here: it imports JAX (0.6 s), which a plain render never needs
+        # here: values imports JAX (0.6 s), which a plain render never needs
+        from spacefit.rendering.values import scene_values_fn
+        from spacefit.scene.overrides import as_parameters
+        from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
 
-        names = list(values)
-        check_names(self.assembly.scene, names, "values")
-        x = np.array([check_range(n, values[n]) for n in names])
+        given = as_parameters(self.current_scene, values)
+        scene = scene_with_values(self.current_scene, given)  # refused as load_scene refuses it, before anything is set
+        # Parameters set as one scene value travel together, so that those not given keep their current values.
+        names = []
+        for name in given:
+            if name in SUN_ANGLES:
+                names += SUN_ANGLES
+            elif name in (*GEOMETRY, *ATTITUDE, *POSITION):
+                names += [*ATTITUDE, *POSITION, *(("wrinkles.D", "wrinkles.G") if scene.wrinkles.enabled else ())]
+            else:
+                names.append(name)
+        names = list(dict.fromkeys(names))
+        x = np.array([float(given[n]) if n in given else scene_value(scene, n) for n in names])
         for key, value in scene_values_fn(self.assembly, names)(x).items():
             self.params[key] = to_value(self.params[key], np.asarray(value))
         self.params.update()
+        self.current_scene = scene
 
     def part_image(self) -> PartImage:
         """The part seen through each pixel's centre (one camera ray per pixel, no sampling)."""

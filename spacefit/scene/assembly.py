@@ -1,4 +1,4 @@
-"""Assemble a validated :class:`~spacefit.scene.config.Scene` into renderer-agnostic quantities.
+"""Assemble a validated :class:`~spacefit.scene.schema.Scene` into renderer-agnostic quantities.
 
 The assembly holds the parts' meshes in the object frame, the refinement of each wrinkled part
 (computed once), materials, the object-to-world matrix, the camera and the sun. World-space
@@ -28,8 +28,8 @@ from spacefit.geometry.frames import CameraFrame, Intrinsics, object_to_world, p
 from spacefit.geometry.mesh import PartMesh, load_grouped, load_part
 from spacefit.geometry.wm import wm_n_max, wm_phases
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION, Refinement, displace, fold_fraction, refine
-from spacefit.materials import Material, make_material
-from spacefit.scene.config import Scene, WrinkleSettings, deg2rad
+from spacefit.materials import Material
+from spacefit.scene.schema import Scene, WrinkleSettings, check_scene, deg2rad
 from spacefit.scene.lod import LodChoice, choose_model
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need
@@ -238,11 +238,11 @@ def assemble(scene: Scene) -> Assembly:
     Raises:
         InputError: before any rendering, for any bad mesh, material or view.
     """
-    scene.validate()
+    check_scene(scene)
     cache: dict[str, str] = {}
     parts = _load_parts(scene, cache)
     w = scene.wrinkles
-    materials = {name: make_material(p.material, p.overrides, where=f"parts.{name}") for name, p in scene.parts.items()}
+    materials = {name: p.material for name, p in scene.parts.items()}
     to_world = object_to_world(np.array(scene.target.position_m), np.array(deg2rad(scene.target.attitude_deg)))
     camera, intrinsics = _camera(scene)
     refinements, lod = {}, {}

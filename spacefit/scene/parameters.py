@@ -37,16 +37,16 @@ import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from types import ModuleType
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_range
 from spacefit.geometry.wm import wm_G_from_rms, wm_rms
-from spacefit.materials import Conductor, Lambert, Material, Mirror, make_material
+from spacefit.materials import Conductor, Lambert, Material, Mirror
+from spacefit.materials.models import MIN_ALPHA
 
-if TYPE_CHECKING:  # annotations only: the scene schema may check its values here (check_value) without a circle
-    from spacefit.scene.config import Scene, WrinkleSettings
+from spacefit.scene.schema import Scene, WrinkleSettings, unknown_part
 
 # A scene's value of parameter ``name`` (its full name, ``parts.panels.kd``).
 Getter = Callable[["Scene", str], float]
@@ -97,8 +97,7 @@ class Bounds:
 UNIT = Bounds(0.0, 1.0)
 POSITIVE = Bounds(0.0)
 WHOLE_LINE = Bounds(-math.inf)
-# GGX roughness below 1e-4 is a mirror in float32 and Mitsuba's GGX evaluates to NaN there.
-ROUGHNESS = Bounds(1e-4, 1.0)
+ROUGHNESS = Bounds(MIN_ALPHA, 1.0)
 # The widest Gaussian PSF (sigma, px) a fit may try; its kernel reaches out to 5 sigma.
 PSF_SIGMA_MAX_PX = 4.0
 # Default start of the PSF width (px): 0, no blur, is outside its open range, and its derivative vanishes there.
@@ -164,10 +163,18 @@ def G_of(w: WrinkleSettings, D: Any, rms: Any) -> Any:
     return wm_G_from_rms(D, rms, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)
 
 
+# A sun at the zenith or the nadir (the default sun is at the zenith) has no azimuth of its own: it
+# reads STATED_AZIMUTH_DEG (world +x), and setting its elevation alone turns it towards +x.
+STATED_AZIMUTH_DEG = 0.0
+VERTICAL_SUN = 1e-9
+
+
 def sun_angles_deg(direction: tuple[float, float, float] | np.ndarray) -> tuple[float, float]:
     """Elevation and azimuth (deg) of the direction towards the sun, from its direction of travel."""
     towards = -np.asarray(direction, float) / np.linalg.norm(direction)
-    return math.degrees(math.asin(float(np.clip(towards[2], -1.0, 1.0)))), math.degrees(math.atan2(towards[1], towards[0]))
+    vertical = np.hypot(towards[0], towards[1]) < VERTICAL_SUN
+    azimuth = STATED_AZIMUTH_DEG if vertical else math.degrees(math.atan2(towards[1], towards[0]))
+    return math.degrees(math.asin(float(np.clip(towards[2], -1.0, 1.0)))), azimuth
 
 
 def sun_direction(elevation_deg: Any, azimuth_deg: Any, xp: ModuleType = np) -> Any:
@@ -189,15 +196,8 @@ def _own_key(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, 
 
 def _material_value(scene: Scene, name: str) -> float:
     _, part, field = name.split(".")
-    m = make_material(scene.parts[part].material, scene.parts[part].overrides)
+    m = scene.parts[part].material
     return m.alpha_x if field == "alpha" else getattr(m, field)
-
-
-def _set_alpha(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, Any]:
-    """Both roughnesses, in the fields the scene spells them with (``alpha``, or ``alpha_x`` and ``alpha_y``)."""
-    _, part, _ = name.split(".")
-    fields = ("alpha",) if "alpha" in scene.parts[part].overrides else ("alpha_x", "alpha_y")
-    return {f"parts.{part}.{f}": values[name] for f in fields}
 
 
 def _constant(value: float) -> Getter:
@@ -266,7 +266,7 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
               materials=(Conductor,), bsdf_fields=("alpha_u",)),
     Parameter("parts.P.alpha_y", "1", ROUGHNESS, "GGX roughness across the part's tangent axis", _material_value, _own_key,
               materials=(Conductor,), bsdf_fields=("alpha_v",)),
-    Parameter("parts.P.alpha", "1", ROUGHNESS, "both roughnesses, tied (isotropic)", _material_value, _set_alpha,
+    Parameter("parts.P.alpha", "1", ROUGHNESS, "both roughnesses, tied (isotropic)", _material_value, _own_key,
               materials=(Conductor,), bsdf_fields=("alpha_u", "alpha_v"), scene_fields=("alpha_x", "alpha_y")),
     Parameter("parts.P.eta", "1", POSITIVE, "real part of the conductor's refractive index (grey)", _material_value, _own_key,
               materials=_CONDUCTORS, bsdf_fields=("eta",)),
@@ -276,7 +276,7 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
               materials=(Lambert,), bsdf_fields=("reflectance",)),
     Parameter("sun.irradiance_w_m2", "W m^-2", POSITIVE, "the sun's irradiance on a surface facing it", _scene_field, _own_key),
     *_sun_angles(("sun.elevation_deg", "sun.azimuth_deg"),
-                 ("elevation of the direction towards the sun above world xy", "azimuth of the direction towards the sun, world +x to +y"),
+                 ("elevation of the direction towards the sun above world xy", "azimuth of the direction towards the sun, world +x to +y (reads 0 at the zenith, the default sun)"),
                  (Bounds(-90.0, 90.0), WHOLE_LINE)),
     *_components("target.attitude_deg", "deg", "attitude",
                  {axis: f"the target's attitude angle {angle} (about object {axis}, thesis 3.2): every vertex"
@@ -357,7 +357,7 @@ def parameter(name: str) -> Parameter:
 def check_value(name: str, value: float, argument: str | None = None) -> float:
     """``value`` as a float if it is a valid value of parameter ``name`` (finite, within its bounds,
     which a scene value may reach), else :class:`InputError` naming ``argument`` (default: ``name``),
-    the value and the range."""
+    the value and the range: the one check every entry point runs."""
     p = parameter(name)
     return check_range(argument or name, value, p.bounds.lo, p.bounds.hi, unit="" if p.unit == "1" else p.unit)
 
@@ -381,7 +381,7 @@ JOINT = _joint()
 
 
 def _materials(scene: Scene) -> dict[str, Material]:
-    return {part: make_material(spec.material, spec.overrides, where=f"parts.{part}") for part, spec in scene.parts.items()}
+    return {part: spec.material for part, spec in scene.parts.items()}
 
 
 def available(scene: Scene) -> list[str]:
@@ -418,8 +418,14 @@ def check_names(
     if not names:
         raise InputError(f"`{argument}` must name at least one parameter; valid: {', '.join(valid)}.")
     for name in names:
+        forms = [n for n in valid if name not in valid and n not in IMAGE and name in scene_keys(n)]
         if OBSERVATION_MARK in name and image:
             _check_observation(argument, name, observations)
+        elif isinstance(name, str) and name.count(".") == 2 and name.startswith("parts.") and name.split(".")[1] not in scene.parts:
+            raise unknown_part(name, list(scene.parts))
+        elif forms:
+            raise InputError(f"`{argument}` names the scene-file key `{name}`, which holds several numbers; a parameter is "
+                             f"one number: give {', '.join(f'`{n}`' for n in forms)}.")
         else:
             check_choice(argument, name, valid)
     for name in names:
@@ -466,26 +472,26 @@ def scene_with_values(scene: Scene, values: Mapping[str, float], observation: in
     inverse of :func:`scene_value`): the scene file that renders them. Each entry's setter gives
     the keys: the sun's angles become ``sun.direction``, the pose's components set
     ``target.attitude_deg`` / ``position_m``, the rms height a G at the scene's (or the given) D, a
-    conductor's ``alpha`` the field the scene spells it with (``alpha``, or ``alpha_x`` and
-    ``alpha_y``). The fit-only :data:`IMAGE` nuisances are not scene values and are left out.
+    conductor's ``alpha`` both its roughnesses. Each value is checked (:func:`check_value`). The fit-only :data:`IMAGE` nuisances are not scene values and are left out.
     ``observation``: the scene is a joint fit's observation k: its own per-observation values
     (``target.attitude_z_deg@k``) are set, and other observations' left out.
 
     Raises:
         InputError: for a name the scene cannot free, or a value out of its range.
     """
-    v: dict[str, float] = {}
+    v: dict[str, Any] = {}
     for name, x in values.items():
         base, k = observation_of(name)
         if observation is not None and k is not None:
             if k == observation:
-                v[base] = float(x)
+                v[base] = x
         else:
-            v[name] = float(x)
+            v[name] = x
     v = {n: x for n, x in v.items() if not is_image(n)}
     if not v:  # a fit of image nuisances alone renders its scene as given
         return scene.with_values({})
     check_names(scene, list(v), "values")
+    v = {n: check_value(n, x) for n, x in v.items()}
     keys: dict[str, Any] = {}
     for name in v:
         keys.update(parameter(name).set(scene, name, v))

@@ -34,8 +34,8 @@ import numpy as np
 from spacefit.errors import InputError, check_choice, check_count, check_direction, check_range, check_vector
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.scene.assembly import assemble
-from spacefit.scene.config import Scene, check_scene, deg2rad
 from spacefit.scene.parameters import scene_value, sun_angles_deg, sun_direction
+from spacefit.scene.schema import Scene, check_scene, deg2rad
 from spacefit.studies.sweep import sweep
 
 # The sun's apparent magnitude by band (module docstring gives the source).

@@ -25,8 +25,8 @@ import numpy as np
 
 from spacefit.errors import check_count
 from spacefit.progress import progress_bar
-from spacefit.scene.config import Scene, check_scene
 from spacefit.scene.parameters import check_names, parameter, scene_with_values
+from spacefit.scene.schema import Scene, check_scene
 
 TARGET = "target"  # the region of every part together, beside the parts
 CONFIDENCE = 0.95  # two-sided: a derivative is resolved when this interval excludes zero
@@ -188,7 +188,7 @@ def sensitivity(
 ) -> Sensitivity:
     """Derivatives of the image and of each part's and the whole target's mean radiance with respect
     to the registered parameters ``names`` (``sf.available_parameters(scene)``), at the scene's values
-    or ``at`` (by name, in the parameters' units), each from ``seeds`` independent estimates (>= 2)
+    or ``at`` (by name, parameter names or scene-file keys, as :meth:`Scene.with_values` takes them), each from ``seeds`` independent estimates (>= 2)
     with its standard error. ``spp`` / ``spp_grad``: samples per pixel of the primal and finite
     difference renders / of the AD renders (default: the scene's)."""
     # here: the fitting and rendering stack imports JAX and Mitsuba (seconds), which a sweep without derivatives never needs
@@ -200,8 +200,7 @@ def sensitivity(
     names = tuple(names)
     check_names(scene, list(names), "names")
     if at:
-        check_names(scene, list(at), "at")
-        scene = scene_with_values(scene, at)
+        scene = scene.with_values(at)
     scene = fit_scene(scene, names)  # as the fit: wrinkles rendered as geometry, where D and G act
     s0 = scene.render.seed
     pairs = tuple((s0 + 2 * k, s0 + 2 * k + 1) for k in range(seeds))

@@ -38,7 +38,8 @@ from spacefit.errors import InputError, InputTypeError, check_count, quote
 from spacefit.interrupts import deferred_interrupts
 from spacefit.output import STAGE_PREFIX, check_writable
 from spacefit.progress import progress_bar
-from spacefit.scene.config import Scene, check_scene, load_scene, read_scene_dict
+from spacefit.scene.schema import Scene, check_scene
+from spacefit.scene.toml import load_scene, read_scene_dict
 from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, available, check_names, check_value, parameter, scene_with_values
 from spacefit.studies.cluster import run_on_dask
 from spacefit.studies.sensitivity import SUMMARY_VARIABLES, normalisation
@@ -113,7 +114,6 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
     keys = [k for a in parsed for k in a.values]
     if len(set(keys)) != len(keys):
         raise InputError(f"`axes` names a key twice: {keys}.")
-    names = available(scene)
     for axis in parsed:
         for key, vals in axis.values.items():
             if key in FIXED_KEYS:
@@ -121,11 +121,7 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
             for v in dict.fromkeys(map(json.dumps, vals)):  # every distinct value, checked as the scene would
                 value = json.loads(v)
                 try:
-                    if key in names:
-                        check_value(key, value)
-                        scene_with_values(scene, {key: value})
-                    else:
-                        scene.with_values({key: value})
+                    scene.with_values({key: value})
                 except InputError as err:
                     raise type(err)(f"`axes[{key!r}]` holds {quote(value)}: {err}") from None
     return parsed

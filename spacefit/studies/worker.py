@@ -16,8 +16,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from spacefit.geometry.frames import pixel_solid_angles
-from spacefit.scene.config import Scene, scene_from_dict
 from spacefit.scene.parameters import scene_with_values
+from spacefit.scene.schema import Scene
+from spacefit.scene.toml import scene_from_dict
 from spacefit.studies.sensitivity import TARGET, point_summaries, sensitivity
 
 

@@ -1,4 +1,10 @@
-"""Scene description: dataclasses read from and written to TOML, with overrides and validation.
+"""The scene's schema: one frozen dataclass per scene-file section, each checked on construction.
+
+A section coerces what a TOML file or Python gives (lists to tuples, integers to floats where a
+number belongs) and checks every value before it exists, naming ``section.key``, the value and the
+allowed range (:func:`spacefit.errors.check_range`): ``Scene(render=RenderSettings(spp=-1))``
+raises at once. A part's material is a :mod:`spacefit.materials` object from the start. Reading a
+file is :mod:`spacefit.scene.toml`; changing values by name is :mod:`spacefit.scene.overrides`.
 
 Defaults are the thesis's Table 4-2. Units are in the key names: metres (``_m``), millimetres for
 the optics as the thesis gives them (``_mm``), degrees at this user-facing edge only (``_deg``),
@@ -12,19 +18,17 @@ total solar irradiance at 1 au, 1361 W m^-2 (Kopp & Lean 2011).
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import math
-import tomllib
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from pathlib import Path
-from typing import Any
-
-import tomli_w
+from typing import Any, ClassVar
 
 import numpy as np
+import tomli_w
 
-from spacefit.errors import InputError, InputTypeError, check_choice, check_direction, check_range, check_vector, quote
+from spacefit.errors import InputError, InputTypeError, check_choice, closest, check_direction, check_range, check_vector, quote
+from spacefit.geometry.wm import check_wm_params
+from spacefit.materials import MODELS, PRESETS, Material, material_table
 
 SOLAR_IRRADIANCE_W_M2 = 1361.0
 # The differentiable variants: the bridge needs AD (scalar variants cannot render a Jacobian).
@@ -46,8 +50,24 @@ MAX_IRRADIANCE_W_M2 = 1e20
 MAX_COORDINATE_M = 1e5
 
 
+class Section:
+    """A scene-file section: coerced to its fields' types and checked on construction."""
+
+    SECTION: ClassVar[str] = ""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+            default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
+            value = _coerce(f"{self.SECTION}.{f.name}", getattr(self, f.name), default)
+            object.__setattr__(self, f.name, value)
+        self.check()
+
+    def check(self) -> None:
+        """Check the coerced values (each section's own ranges)."""
+
+
 @dataclass(frozen=True)
-class RenderSettings:
+class RenderSettings(Section):
     """Image size (width, height px), samples per pixel, thesis trace depth, seed, backend, filter.
 
     ``depth`` is the thesis's (pbrt's) trace depth: the number of bounces after the camera ray's
@@ -74,7 +94,10 @@ class RenderSettings:
     deterministic: bool = True
     sampler: str = "independent"
 
-    def validate(self) -> None:
+    SECTION: ClassVar[str] = "render"
+
+    def check(self) -> None:
+        """Check this section's values (:class:`Section`)."""
         for i, axis in enumerate(("width", "height")):
             _check_int(f"render.resolution ({axis})", self.resolution[i], 1, 16384)
         _check_int("render.spp", self.spp, 1, 1 << 16)
@@ -93,7 +116,7 @@ class RenderSettings:
 
 
 @dataclass(frozen=True)
-class CameraSettings:
+class CameraSettings(Section):
     """Pinhole camera: optics in mm as in Table 4-2, pose by attitude or by ``look_at_m``.
 
     ``principal_offset_px`` moves the principal point from the image centre (u right, v down).
@@ -111,7 +134,10 @@ class CameraSettings:
     up: Vec3 = (0.0, 1.0, 0.0)
     roll_deg: float = 0.0
 
-    def validate(self) -> None:
+    SECTION: ClassVar[str] = "camera"
+
+    def check(self) -> None:
+        """Check this section's values (:class:`Section`)."""
         check_range("camera.focal_length_mm", self.focal_length_mm, 0.0, lo_open=True, unit="mm")
         check_range("camera.pixel_pitch_mm", self.pixel_pitch_mm, 0.0, lo_open=True, unit="mm")
         check_vector("camera.principal_offset_px", self.principal_offset_px, 2)
@@ -126,32 +152,43 @@ class CameraSettings:
 
 
 @dataclass(frozen=True)
-class SunSettings:
+class SunSettings(Section):
     """One distant sun: irradiance on a surface facing it (W m^-2) and direction of travel."""
 
     irradiance_w_m2: float = 5.0
     direction: Vec3 = (0.0, 0.0, -1.0)
 
-    def validate(self) -> None:
+    SECTION: ClassVar[str] = "sun"
+
+    def __post_init__(self) -> None:
+        if isinstance(self.irradiance_w_m2, str) and self.irradiance_w_m2 == "physical":
+            object.__setattr__(self, "irradiance_w_m2", SOLAR_IRRADIANCE_W_M2)
+        super().__post_init__()
+
+    def check(self) -> None:
+        """Check this section's values (:class:`Section`)."""
         check_range("sun.irradiance_w_m2", self.irradiance_w_m2, 0.0, MAX_IRRADIANCE_W_M2, lo_open=True, unit="W m^-2")
         check_direction("sun.direction", self.direction)
 
 
 @dataclass(frozen=True)
-class TargetSettings:
+class TargetSettings(Section):
     """Target pose and geometry source: ``"builtin"`` or a mesh file whose groups are the parts."""
 
     position_m: Vec3 = (0.0, 0.0, 0.0)
     attitude_deg: Vec3 = (90.0, 0.0, 0.0)
     mesh: str = "builtin"
 
-    def validate(self) -> None:
+    SECTION: ClassVar[str] = "target"
+
+    def check(self) -> None:
+        """Check this section's values (:class:`Section`)."""
         check_position("target.position_m", self.position_m)
         check_vector("target.attitude_deg", self.attitude_deg)
 
 
 @dataclass(frozen=True)
-class WrinkleSettings:
+class WrinkleSettings(Section):
     """W-M wrinkles (thesis eq. 2-1, section 2.2) on the named parts; lengths in metres.
 
     D, gamma, M, L and Ls are the thesis's values. Its G = 10 read in metres, like L and Ls, gives
@@ -187,9 +224,10 @@ class WrinkleSettings:
     model: str = "auto"
     lod_footprint: float = 3.0
 
-    def validate(self) -> None:
-        from spacefit.geometry.wm import check_wm_params
+    SECTION: ClassVar[str] = "wrinkles"
 
+    def check(self) -> None:
+        """Check this section's values (:class:`Section`)."""
         check_wm_params(self.D, self.G, self.gamma, self.M, self.L, self.Ls)
         _check_int("wrinkles.seed", self.seed, 0, 2**31 - 1)
         check_range("wrinkles.spacing_m", self.spacing_m, 0.0, lo_open=True, unit="m")
@@ -199,24 +237,31 @@ class WrinkleSettings:
 
 @dataclass(frozen=True)
 class PartSettings:
-    """A part's material preset name, optional mesh file, and overrides of the preset's values."""
+    """A part: its material (a :mod:`spacefit.materials` object) and, for a part of its own, a mesh file."""
 
-    material: str
+    material: Material
     file: str = ""
-    overrides: Mapping[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.material, tuple(MODELS.values())):
+            raise InputTypeError(f"`material` must be a spacefit material (sf.materials.Conductor, Mirror, Lambert; a "
+                                 f"scene file names a preset), got {quote(self.material)}.")
+        if not isinstance(self.file, str):
+            raise InputTypeError(f"`file` must be a path string, got {quote(self.file)}.")
+
+
+# The built-in lander's parts and their presets (thesis Table 4-2).
+DEFAULT_PRESETS = {"body": "mli_thesis", "panels": "panel_thesis", "legs": "white_paint"}
 
 
 def _default_parts() -> dict[str, PartSettings]:
-    return {
-        "body": PartSettings("mli_thesis"),
-        "panels": PartSettings("panel_thesis"),
-        "legs": PartSettings("white_paint"),
-    }
+    return {name: PartSettings(PRESETS[preset]) for name, preset in DEFAULT_PRESETS.items()}
 
 
 @dataclass(frozen=True)
 class Scene:
-    """A whole scene: what :func:`load_scene` reads and the sidecar of every render records."""
+    """A whole scene: what :func:`~spacefit.scene.toml.load_scene` reads and the sidecar of every render
+    records. Checked on construction, each section by itself and here what joins them."""
 
     render: RenderSettings = field(default_factory=RenderSettings)
     camera: CameraSettings = field(default_factory=CameraSettings)
@@ -225,51 +270,53 @@ class Scene:
     wrinkles: WrinkleSettings = field(default_factory=WrinkleSettings)
     parts: Mapping[str, PartSettings] = field(default_factory=_default_parts)
 
-    def validate(self) -> Scene:
-        """Check every value; return ``self`` for chaining. Geometry-dependent checks come later."""
-        for section in (self.render, self.camera, self.sun, self.target, self.wrinkles):
-            section.validate()
-        if not self.parts:
-            raise InputError("`parts` must name at least one part.")
+    def __post_init__(self) -> None:
+        for name, cls in SECTIONS.items():
+            if not isinstance(getattr(self, name), cls):
+                raise InputTypeError(f"`{name}` must be a {cls.__name__}, got {quote(getattr(self, name))}.")
+        if not isinstance(self.parts, Mapping) or not self.parts:
+            raise InputError(f"`parts` must name at least one part, got {quote(self.parts)}.")
+        for name, part in self.parts.items():
+            if not isinstance(part, PartSettings):
+                raise InputTypeError(f"`parts.{name}` must be a PartSettings, got {quote(part)}.")
+        object.__setattr__(self, "parts", dict(self.parts))
         if self.wrinkles.enabled:
             for name in self.wrinkles.parts:
                 check_choice("wrinkles.parts", name, self.parts)
-        from spacefit.materials import make_material
-
-        for name, part in self.parts.items():
-            make_material(part.material, part.overrides, where=f"parts.{name}")
-        return self
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain nested dict (TOML-ready): every value, defaults included."""
-        out: dict[str, Any] = {}
-        for f in dataclasses.fields(self):
-            if f.name == "parts":
-                out["parts"] = {
-                    name: {"material": p.material, **({"file": p.file} if p.file else {}), **dict(p.overrides)}
-                    for name, p in self.parts.items()
-                }
-            else:
-                out[f.name] = {k: _plain(v) for k, v in dataclasses.asdict(getattr(self, f.name)).items()}
+        """Plain nested dict (TOML-ready): every value, defaults included; each material in full."""
+        out: dict[str, Any] = {name: {k: _plain(v) for k, v in dataclasses.asdict(getattr(self, name)).items()}
+                               for name in SECTIONS}
+        out["parts"] = {name: {**material_table(p.material), **({"file": p.file} if p.file else {})}
+                        for name, p in self.parts.items()}
         return out
 
     def to_toml(self) -> str:
-        """The scene as TOML text, loadable by :func:`load_scene`."""
+        """The scene as TOML text, loadable by :func:`~spacefit.scene.toml.load_scene` to an equal scene."""
         return tomli_w.dumps(self.to_dict())
 
     def replace(self, **sections: Any) -> Scene:
-        """A copy with some sections replaced by keyword (``render=...``)."""
+        """A checked copy with some sections replaced by keyword (``render=...``)."""
         return dataclasses.replace(self, **sections)
 
     def with_values(self, values: Mapping[str, Any]) -> Scene:
-        """A validated copy with scene-file values replaced, by dotted key and Python value.
+        """A checked copy with values replaced by name: scene-file keys (``camera.position_m``,
+        ``parts.panels.alpha_x``) or parameter names (``sun.elevation_deg``); see
+        :func:`spacefit.scene.overrides.with_values`."""
+        # The override language sits above the schema (it reads the parameter table, which reads Scene).
+        from spacefit.scene.overrides import with_values
 
-        ``scene.with_values({"camera.position_m": [0, 0, 50], "parts.panels.alpha_x": 0.1})``;
-        the keys are the scene file's (:func:`load_scene` lists the valid ones on a typo).
-        """
-        if not isinstance(values, Mapping):
-            raise InputTypeError(f"`values` must be a mapping of dotted scene keys to values, got {quote(values)}.")
-        return scene_from_dict(apply_overrides(self.to_dict(), values))
+        return with_values(self, values)
+
+
+SECTIONS: Mapping[str, type[Section]] = {
+    "render": RenderSettings,
+    "camera": CameraSettings,
+    "sun": SunSettings,
+    "target": TargetSettings,
+    "wrinkles": WrinkleSettings,
+}
 
 
 def check_scene(scene: object, name: str = "scene") -> Scene:
@@ -280,12 +327,25 @@ def check_scene(scene: object, name: str = "scene") -> Scene:
     return scene
 
 
+def unknown_part(key: str, parts: Sequence[str]) -> InputError:
+    """The error for a name ``parts.P...`` whose part P the scene lacks, suggesting the closest part."""
+    path = key.split(".")
+    close = closest(path[1], parts)
+    hint = f" Did you mean `{'.'.join(['parts', close, *path[2:]])}`?" if close else ""
+    return InputError(f"unknown scene key `{key}`: `{path[1]}` is not a part of the scene (parts: {', '.join(parts)}).{hint}")
+
+
 def check_position(name: str, value: Sequence[float]) -> None:
     """Check a position (m): 3 finite numbers, each within :data:`MAX_COORDINATE_M` of the origin."""
     v = check_vector(name, value)
     if np.abs(v).max() > MAX_COORDINATE_M:
         raise InputError(f"`{name}` must lie within {MAX_COORDINATE_M:g} m of the origin on each axis (float32 "
                          f"tracing), got {quote(list(value))}; render far targets near and rescale, or lengthen the focal length.")
+
+
+def deg2rad(values: Sequence[float]) -> tuple[float, ...]:
+    """Degrees (user-facing) to radians (everything inside)."""
+    return tuple(math.radians(v) for v in values)
 
 
 def _plain(value: Any) -> Any:
@@ -298,199 +358,33 @@ def _check_int(name: str, value: Any, lo: int, hi: int) -> int:
     return int(check_range(name, value, lo, hi))
 
 
-_SECTIONS = {
-    "render": RenderSettings,
-    "camera": CameraSettings,
-    "sun": SunSettings,
-    "target": TargetSettings,
-    "wrinkles": WrinkleSettings,
-}
-
-
-def _unknown(where: str, key: str, valid: Sequence[str]) -> InputError:
-    close = difflib.get_close_matches(key, list(valid), n=1)
-    hint = f" Did you mean `{where}{close[0]}`?" if close else ""
-    return InputError(f"unknown scene key `{where}{key}`; valid keys here: {', '.join(sorted(valid))}.{hint}")
+_NUMBER = (int, float, np.integer, np.floating)
 
 
 def _coerce(name: str, value: Any, default: Any) -> Any:
-    """Convert a TOML value to the type of the field's default (numbers, vectors, strings)."""
+    """Convert a TOML or Python value to the type of the field's default (numbers, vectors, strings)."""
     if isinstance(default, bool):
         if not isinstance(value, bool):
-            raise InputError(f"`{name}` must be true or false, got {value!r}.")
+            raise InputTypeError(f"`{name}` must be true or false, got {quote(value)}.")
         return value
     if isinstance(default, int):
-        return value  # range and integrality are checked by validate()
+        return int(value) if isinstance(value, np.integer) else value  # range and integrality: each section's check
     if isinstance(default, float):
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise InputError(f"`{name}` must be a number, got {value!r}.")
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, _NUMBER):
+            raise InputTypeError(f"`{name}` must be a number, got {quote(value)}.")
         return float(value)
     if isinstance(default, str):
         if not isinstance(value, str):
-            raise InputError(f"`{name}` must be a string, got {value!r}.")
+            raise InputTypeError(f"`{name}` must be a string, got {quote(value)}.")
         return value
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
     if not isinstance(value, (list, tuple)):
-        raise InputError(f"`{name}` must be a list, got {value!r}.")
+        raise InputTypeError(f"`{name}` must be a list, got {quote(value)}.")
     if default and isinstance(default[0], str):
         return tuple(str(v) for v in value)
     if default and len(value) != len(default):
         raise InputError(f"`{name}` must have {len(default)} entries, got {list(value)}.")
-    if not all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+    if not all(isinstance(v, _NUMBER) and not isinstance(v, (bool, np.bool_)) for v in value):
         raise InputError(f"`{name}` must hold numbers, got {list(value)}.")
     return tuple(v if isinstance(d, int) and not isinstance(d, bool) else float(v) for v, d in zip(value, default or value))
-
-
-def _section(cls: type, data: Mapping[str, Any], where: str) -> Any:
-    defaults = cls()
-    names = [f.name for f in dataclasses.fields(cls)]
-    kwargs = {}
-    for key, value in data.items():
-        if key not in names:
-            raise _unknown(f"{where}.", key, names)
-        if cls is SunSettings and key == "irradiance_w_m2" and value == "physical":
-            value = SOLAR_IRRADIANCE_W_M2
-        kwargs[key] = _coerce(f"{where}.{key}", value, getattr(defaults, key))
-    return cls(**kwargs)
-
-
-def _parts(data: Mapping[str, Any], base_dir: Path) -> dict[str, PartSettings]:
-    parts = {}
-    for name, table in data.items():
-        if not isinstance(table, Mapping):
-            raise InputError(f"`parts.{name}` must be a table with at least `material`, got {table!r}.")
-        if "material" not in table:
-            raise InputError(f"`parts.{name}.material` is missing (a preset name).")
-        file = str(table.get("file", ""))
-        if file and not Path(file).is_absolute():
-            file = str((base_dir / file).resolve())
-        overrides = {k: v for k, v in table.items() if k not in ("material", "file")}
-        parts[name] = PartSettings(str(table["material"]), file, overrides)
-    return parts
-
-
-def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scene:
-    """Build and validate a :class:`Scene` from nested mappings; missing keys take defaults.
-
-    With the built-in lander, ``parts`` tables merge into the default parts (so
-    ``parts.panels.alpha_x = 0.1`` keeps the panels' preset); with a mesh file the parts are
-    exactly those given. Relative mesh paths are resolved against ``base_dir`` (the TOML's folder).
-    """
-    base = Path(base_dir)
-    sections: dict[str, Any] = {}
-    for key, value in data.items():
-        if key == "parts":
-            if not isinstance(value, Mapping):
-                raise InputError(f"`parts` must be a table of parts, got {value!r}.")
-        elif key in _SECTIONS:
-            if not isinstance(value, Mapping):
-                raise InputError(f"`{key}` must be a table, got {value!r}.")
-            sections[key] = _section(_SECTIONS[key], value, key)
-        else:
-            raise _unknown("", key, [*_SECTIONS, "parts"])
-    target = sections.get("target", TargetSettings())
-    builtin = target.mesh in ("builtin", "")
-    if not builtin and not Path(target.mesh).is_absolute():
-        sections["target"] = dataclasses.replace(target, mesh=str((base / target.mesh).resolve()))
-    user_parts = data.get("parts", {})
-    if not builtin and not user_parts:
-        raise InputError("`parts` must list the parts of the mesh file `target.mesh`, each with a `material`.")
-    defaults = Scene().to_dict()["parts"] if builtin else {}
-    merged = dict(defaults)
-    for name, table in user_parts.items():
-        merged[name] = {**defaults[name], **table} if name in defaults and isinstance(table, Mapping) else table
-    sections["parts"] = _parts(merged, base)
-    return Scene(**sections).validate()
-
-
-def parse_override(text: str) -> tuple[list[str], Any]:
-    """Parse ``a.b.c=value`` (value in TOML syntax; bare words are strings) into a key path and value."""
-    key, sep, raw = text.partition("=")
-    if not sep or not key.strip():
-        raise InputError(f"override {text!r} must look like `section.key=value`.")
-    try:
-        value = tomllib.loads(f"v = {raw.strip()}")["v"]
-    except tomllib.TOMLDecodeError:
-        value = raw.strip()
-    except RecursionError:
-        raise InputError(f"the value of override `{key.strip()}` is nested too deep: {quote(raw)}.") from None
-    return [k.strip() for k in key.split(".")], value
-
-
-Overrides = Mapping[str, Any] | Sequence[str] | str
-
-
-def _override_items(overrides: Overrides) -> list[tuple[list[str], Any]]:
-    """Key paths and values from a mapping ``{"a.b": value}``, ``"a.b=value"`` strings, or one such string."""
-    if isinstance(overrides, Mapping):
-        for key in overrides:
-            if not isinstance(key, str) or not key.strip():
-                raise InputError(f"scene value keys must be dotted names like 'camera.position_m', got {key!r}.")
-        return [([k.strip() for k in key.split(".")], _plain_value(value)) for key, value in overrides.items()]
-    if isinstance(overrides, str):
-        overrides = [overrides]
-    if not all(isinstance(text, str) for text in overrides):
-        raise InputError(f"scene overrides must be a mapping of key -> value or 'key=value' strings, got {overrides!r}.")
-    return [parse_override(text) for text in overrides]
-
-
-def _plain_value(value: Any) -> Any:
-    """A Python value as the scene file would hold it: numpy / JAX scalars and arrays as numbers and lists."""
-    if hasattr(value, "tolist") and not isinstance(value, (str, bytes)):
-        return value.tolist()
-    if isinstance(value, tuple):
-        return [_plain_value(v) for v in value]
-    return value
-
-
-def apply_overrides(data: dict[str, Any], overrides: Overrides) -> dict[str, Any]:
-    """Return a deep copy of scene ``data`` with overrides applied (see :func:`load_scene`)."""
-    import copy
-
-    out = copy.deepcopy(data)
-    for path, value in _override_items(overrides):
-        node = out
-        for k in path[:-1]:
-            node = node.setdefault(k, {})
-            if not isinstance(node, dict):
-                raise InputError(f"scene key {'.'.join(path)!r}: {k!r} is not a table.")
-        node[path[-1]] = value
-    return out
-
-
-def read_scene_dict(path: str | Path) -> dict[str, Any]:
-    """Read a scene TOML file as a nested dict (no validation yet)."""
-    if not isinstance(path, (str, Path)):
-        raise InputTypeError(f"the scene file must be a path (str or pathlib.Path), got {quote(path)}.")
-    p = Path(path)
-    if p.is_dir():
-        raise InputError(f"scene file {str(p)!r} is a folder; give the TOML file in it.")
-    if not p.is_file():
-        raise InputError(f"scene file {str(p)!r} does not exist.")
-    try:
-        return tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a byte-order mark is not TOML
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
-        raise InputError(f"scene file {str(p)!r} is not valid TOML: {err}") from None
-    except RecursionError:
-        raise InputError(f"scene file {str(p)!r} holds arrays or tables nested too deep to read.") from None
-
-
-def load_scene(path: str | Path | None = None, overrides: Overrides = ()) -> Scene:
-    """Load a scene TOML file (or the defaults when ``path`` is None) and apply overrides.
-
-    ``overrides``: a mapping of dotted scene keys to Python values
-    (``{"camera.position_m": [0, 0, 50], "parts.panels.alpha_x": 0.1}``), or ``"key=value"``
-    strings with the value in TOML syntax, as on the command line (``--set``).
-    """
-    data = read_scene_dict(path) if path is not None else {}
-    base = Path(path).parent if path is not None else Path.cwd()
-    return scene_from_dict(apply_overrides(data, overrides), base)
-
-
-def default_scene() -> Scene:
-    """The default scene: the thesis's Table 4-2 (its lander, camera, sun and wrinkles, G read as micrometres: 1e-5 m)."""
-    return Scene().validate()
-
-
-def deg2rad(values: Sequence[float]) -> tuple[float, ...]:
-    """Degrees (user-facing) to radians (everything inside)."""
-    return tuple(math.radians(v) for v in values)

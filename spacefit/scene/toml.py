@@ -1,0 +1,136 @@
+"""Reading scene files: TOML text to a checked :class:`~spacefit.scene.schema.Scene`.
+
+Defaults are the thesis's Table 4-2. Units are in the key names: metres (``_m``), millimetres for
+the optics as the thesis gives them (``_mm``), degrees at this user-facing edge only (``_deg``),
+irradiance in W m^-2. The sun's ``direction`` is the direction the light travels.
+
+The thesis's "light radiance 5 W m^-2 sr^-1" for its distant light is, in pbrt's convention, the
+irradiance on a surface facing the light: ``sun.irradiance_w_m2 = 5``. ``"physical"`` selects the
+total solar irradiance at 1 au, 1361 W m^-2 (Kopp & Lean 2011).
+
+A part's ``material`` names a preset (:data:`spacefit.materials.PRESETS`, the other keys of its
+table replacing the preset's values) or a model (``"conductor"``, ``"mirror"``, ``"lambert"``, with
+every value given, as :meth:`Scene.to_toml` writes it); it becomes a material object here, when
+the file is read. A section may also give parameter names (``[sun] elevation_deg = 30``,
+:mod:`spacefit.scene.overrides`); they are set after the file's own keys.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tomllib
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from spacefit.errors import InputError, InputTypeError, quote
+from spacefit.materials import make_material
+from spacefit.scene.overrides import Overrides, apply_overrides, section_keys, unknown_key, with_values
+from spacefit.scene.schema import DEFAULT_PRESETS, SECTIONS, PartSettings, Scene, TargetSettings
+
+
+def read_scene_dict(path: str | Path) -> dict[str, Any]:
+    """Read a scene TOML file as a nested dict (no checks of its values yet)."""
+    if not isinstance(path, (str, Path)):
+        raise InputTypeError(f"the scene file must be a path (str or pathlib.Path), got {quote(path)}.")
+    p = Path(path)
+    if p.is_dir():
+        raise InputError(f"scene file {str(p)!r} is a folder; give the TOML file in it.")
+    if not p.is_file():
+        raise InputError(f"scene file {str(p)!r} does not exist.")
+    try:
+        return tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a byte-order mark is not TOML
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
+        raise InputError(f"scene file {str(p)!r} is not valid TOML: {err}") from None
+    except RecursionError:
+        raise InputError(f"scene file {str(p)!r} holds arrays or tables nested too deep to read.") from None
+
+
+def _section(name: str, data: Mapping[str, Any], later: dict[str, Any]) -> Any:
+    """A section from its table; parameter names (not fields) go to ``later``."""
+    cls = SECTIONS[name]
+    fields = {f.name for f in dataclasses.fields(cls)}
+    kwargs = {}
+    for key, value in data.items():
+        if key in fields:
+            kwargs[key] = value
+        elif key in section_keys(name):
+            later[f"{name}.{key}"] = value
+        else:
+            raise unknown_key([name, key], [])
+    return cls(**kwargs)
+
+
+def _parts(data: Mapping[str, Any], builtin: bool, base: Path) -> dict[str, PartSettings]:
+    """The parts: with the built-in lander, tables merge into its default parts (a table without a
+    ``material`` changes the preset's values); with a mesh file exactly those given."""
+    names = list(DEFAULT_PRESETS) if builtin else []
+    tables: dict[str, dict[str, Any]] = {name: {"material": preset} for name, preset in DEFAULT_PRESETS.items()} if builtin else {}
+    for name, table in data.items():
+        if not isinstance(table, Mapping):
+            raise InputError(f"`parts.{name}` must be a table with at least `material`, got {quote(table)}.")
+        if "material" in table:
+            tables[name] = dict(table)
+        elif name in tables:
+            tables[name] = {**tables[name], **table}
+        else:
+            key = next(iter(table), "material")
+            if names:
+                raise unknown_key(["parts", name, key], names)
+            raise InputError(f"`parts.{name}.material` is missing (a preset name or a model).")
+    parts = {}
+    for name, table in tables.items():
+        file = table.pop("file", "")
+        if not isinstance(file, str):
+            raise InputTypeError(f"`parts.{name}.file` must be a path string, got {quote(file)}.")
+        if file and not Path(file).is_absolute():
+            file = str((base / file).resolve())
+        parts[name] = PartSettings(make_material(table.pop("material"), table, where=f"parts.{name}"), file)
+    return parts
+
+
+def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scene:
+    """Build a checked :class:`Scene` from nested mappings as a scene file holds them; missing keys
+    take defaults.
+
+    With the built-in lander, ``parts`` tables merge into the default parts (so
+    ``parts.panels.alpha_x = 0.1`` keeps the panels' preset); with a mesh file the parts are
+    exactly those given. Relative mesh paths are resolved against ``base_dir`` (the TOML's folder).
+    """
+    base = Path(base_dir)
+    sections: dict[str, Any] = {}
+    later: dict[str, Any] = {}
+    for key, value in data.items():
+        if key not in [*SECTIONS, "parts"]:
+            raise unknown_key([key, *(value if isinstance(value, Mapping) else {})][:2], [])
+        if not isinstance(value, Mapping):
+            raise InputError(f"`{key}` must be a table, got {quote(value)}.")
+        if key != "parts":
+            sections[key] = _section(key, value, later)
+    target = sections.get("target", TargetSettings())
+    builtin = target.mesh in ("builtin", "")
+    if not builtin and not Path(target.mesh).is_absolute():
+        sections["target"] = dataclasses.replace(target, mesh=str((base / target.mesh).resolve()))
+    user_parts = data.get("parts", {})
+    if not builtin and not user_parts:
+        raise InputError("`parts` must list the parts of the mesh file `target.mesh`, each with a `material`.")
+    scene = Scene(**sections, parts=_parts(user_parts, builtin, base))
+    return with_values(scene, later) if later else scene
+
+
+def load_scene(path: str | Path | None = None, overrides: Overrides = ()) -> Scene:
+    """Load a scene TOML file (or the defaults when ``path`` is None) and apply overrides.
+
+    ``overrides``: a mapping of names (scene-file keys or parameter names,
+    :mod:`spacefit.scene.overrides`) to Python values (``{"camera.position_m": [0, 0, 50],
+    "parts.panels.alpha_x": 0.1, "sun.elevation_deg": 30}``), or ``"key=value"`` strings with the
+    value in TOML syntax, as on the command line (``--set``).
+    """
+    data = read_scene_dict(path) if path is not None else {}
+    base = Path(path).parent if path is not None else Path.cwd()
+    return scene_from_dict(apply_overrides(data, overrides), base)
+
+
+def default_scene() -> Scene:
+    """The default scene: the thesis's Table 4-2 (its lander, camera, sun and wrinkles, G read as micrometres: 1e-5 m)."""
+    return Scene()
