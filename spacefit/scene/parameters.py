@@ -13,8 +13,8 @@ Names address the scene file's keys: ``wrinkles.D``; ``parts.P.alpha_x`` for par
 ``image.*`` are nuisances of the image formation (an exposure scale, an offset, a Gaussian PSF, a
 sub-pixel shift): a fit applies them to the render in JAX (:mod:`spacefit.fitting.nuisance`), so
 they are fit-only names; a render or a sweep refuses them. Without them free, none is applied. Each
-may be one per observation of a joint fit (:attr:`Parameter.per_observation`): ``image.gain@k`` is
-observation k's alone (k from 0, in the order the observations are given), ``image.gain`` one
+may be one per observation of a joint fit (:attr:`Parameter.per_observation`): ``image.scale@k`` is
+observation k's alone (k from 0, in the order the observations are given), ``image.scale`` one
 shared by all (:func:`observation_name`). Together with the target's pose (``target.attitude_*_deg``,
 ``target.position_*_m``) and the camera's roll about its optical axis (``camera.roll_deg``) they are
 a fit's nuisance parameters (:data:`NUISANCES`), reported apart from the materials.
@@ -111,7 +111,7 @@ class Parameter:
         materials: for ``parts.P.*``, the material types that have it (grey values only).
         bsdf_fields: for ``parts.P.*``, the Mitsuba BSDF fields it sets.
         scene_fields: the scene-file fields it replaces (default: its own).
-        per_observation: a joint fit may free it once per observation (``image.gain@k``).
+        per_observation: a joint fit may free it once per observation (``image.scale@k``).
     """
 
     pattern: str
@@ -169,12 +169,12 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
                 fd_step=0.02, scene_fields=("position_m",)) for axis in "xyz"),
     Parameter("camera.roll_deg", "deg", Bijection(-math.inf),
               "the camera's turn about its optical axis (image up towards image right), either camera mode", fd_step=0.5),
-    Parameter("image.gain", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1)",
+    Parameter("image.scale", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1)",
               per_observation=True),
     Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", Bijection(-math.inf), "offset added to every pixel (fit only; default 0)",
               per_observation=True),
-    Parameter("image.psf_sigma_px", "px", Bijection(0.0, PSF_SIGMA_MAX_PX),
-              "sigma of a pixel-integrated Gaussian PSF (fit only; not free: no blur; default start 0.5)", per_observation=True),
+    Parameter("image.blur_sigma_px", "px", Bijection(0.0, PSF_SIGMA_MAX_PX),
+              "sigma of a continuous Gaussian blur before the pixel (fit only; not free: no blur; default start 0.5)", per_observation=True),
     *(Parameter(f"image.shift_{axis}_px", "px", Bijection(-math.inf),
                 f"sub-pixel shift of the image towards +{axis} ({where}), by a Fourier phase (fit only; default 0)",
                 per_observation=True)
@@ -187,10 +187,10 @@ POSITION = ("target.position_x_m", "target.position_y_m", "target.position_z_m")
 ROLL = "camera.roll_deg"
 # Parameters that move vertices (or the camera about them): a render of them needs the whole film, not the target's window.
 MOVES_VERTICES = (*GEOMETRY, *ATTITUDE, *POSITION, ROLL)
-IMAGE = ("image.gain", "image.offset_w_m2_sr", "image.psf_sigma_px", "image.shift_x_px", "image.shift_y_px")
+IMAGE = ("image.scale", "image.offset_w_m2_sr", "image.blur_sigma_px", "image.shift_x_px", "image.shift_y_px")
 # The nuisance parameters of a fit: reported apart from the materials (with the per-observation forms of IMAGE's).
 NUISANCES = (*IMAGE, *ATTITUDE, *POSITION, ROLL)
-# Joins a per-observation parameter's name and its observation's index: ``image.gain@1``.
+# Joins a per-observation parameter's name and its observation's index: ``image.scale@1``.
 OBSERVATION_MARK = "@"
 # Default start of the PSF width (px): 0, no blur, is outside its open range, and its derivative vanishes there.
 PSF_SIGMA_START_PX = 0.5
@@ -199,7 +199,7 @@ JOINT = (SUN_ANGLES, ATTITUDE, POSITION)
 
 
 def observation_name(name: str, observation: int | str) -> str:
-    """The name of per-observation parameter ``name`` for observation ``observation`` alone (``image.gain@1``)."""
+    """The name of per-observation parameter ``name`` for observation ``observation`` alone (``image.scale@1``)."""
     return f"{name}{OBSERVATION_MARK}{observation}"
 
 
@@ -250,7 +250,7 @@ def available(scene: Scene) -> list[str]:
 
 
 def _check_observation(argument: str, name: str, observations: int) -> None:
-    """Raise :class:`InputError` unless ``name`` is a per-observation name (``image.gain@k``) with k in range."""
+    """Raise :class:`InputError` unless ``name`` is a per-observation name (``image.scale@k``) with k in range."""
     base, _, index = name.partition(OBSERVATION_MARK)
     if base not in PARAMETERS or not PARAMETERS[base].per_observation:
         per = [p.pattern for p in PARAMETERS.values() if p.per_observation]
@@ -266,7 +266,7 @@ def check_names(
 ) -> None:
     """Raise :class:`InputError` for an unknown or repeated name, or two names that set the same value;
     ``image``: whether the fit-only :data:`IMAGE` nuisances are valid; ``observations``: how many
-    observations a fit has (the range of a per-observation name's index, ``image.gain@k``)."""
+    observations a fit has (the range of a per-observation name's index, ``image.scale@k``)."""
     valid = [n for n in available(scene) if image or n not in IMAGE]
     if not names:
         raise InputError(f"`{argument}` must name at least one parameter; valid: {', '.join(valid)}.")
@@ -326,9 +326,9 @@ _GETTERS: dict[str, Callable[[Scene], float]] = {
     **{name: (lambda s, i=i: s.target.attitude_deg[i]) for i, name in enumerate(ATTITUDE)},
     **{name: (lambda s, i=i: s.target.position_m[i]) for i, name in enumerate(POSITION)},
     ROLL: lambda s: s.camera.roll_deg,
-    "image.gain": lambda s: 1.0,
+    "image.scale": lambda s: 1.0,
     "image.offset_w_m2_sr": lambda s: 0.0,
-    "image.psf_sigma_px": lambda s: PSF_SIGMA_START_PX,
+    "image.blur_sigma_px": lambda s: PSF_SIGMA_START_PX,
     "image.shift_x_px": lambda s: 0.0,
     "image.shift_y_px": lambda s: 0.0,
 }
