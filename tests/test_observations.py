@@ -252,3 +252,25 @@ def test_a_grey_observation_counts_each_pixel_once(sphere):
     assert abs(result.values["parts.sphere.kd"] - TRUE_KD) < 4 * result.stderr["parts.sphere.kd"]
     assert result.renders[0].shape == (32, 32, 1)
     sf.plot_comparison(result, [grey])
+
+
+@pytest.mark.slow  # about 35 s
+def test_a_continuous_gaussian_psf_of_08_px_is_fitted_as_080():
+    """The optical convention end to end: the panels case rendered with a box filter at 4x the
+    resolution, blurred there by a continuous Gaussian (its 1/4 px box's variance 1/192 px^2 taken
+    off, so that the camera's PSF is 0.8 px), binned 4 x 4; fitted at 1x with the box filter, the
+    blur and the exposure scale free: 0.80 within its standard error (a blur integrated over the
+    pixel again would give about 0.75)."""
+    from spacefit.fitting.nuisance import blur
+
+    case, n = sf.load_case("panels"), 32
+    grid = {"render.resolution": [n, n], "camera.pixel_pitch_mm": 18.75 * 128 / n, "render.filter": "box"}
+    fine = case.truth_scene.with_values({**grid, "render.resolution": [4 * n, 4 * n], "camera.pixel_pitch_mm": 18.75 * 32 / n,
+                                         "render.spp": 64})
+    sharp = jnp.asarray(sf.render(fine), dtype=jnp.float32)
+    camera = np.asarray(blur(sharp, 4.0 * np.sqrt(0.8**2 - 1.0 / 192.0)), dtype=float)
+    reference = np.maximum(camera.reshape(n, 4, n, 4, 3).mean(axis=(1, 3)), 0.0)  # FFT round-off leaves -1e-8 in the sky
+    result = sf.fit(sf.Observation(case.truth_scene.with_values({**grid, "render.spp": 16}), reference),
+                    ["image.blur_sigma_px", "image.scale"], start={"image.blur_sigma_px": 0.5}, spp=16, max_steps=10)
+    sigma, stderr = result.values["image.blur_sigma_px"], result.stderr["image.blur_sigma_px"]
+    assert round(sigma, 2) == 0.80 and abs(sigma - 0.8) < stderr < 0.01, (sigma, stderr)
