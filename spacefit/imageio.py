@@ -489,9 +489,9 @@ def sensor_of(image: ObservedImage, sensor: Sensor | Mapping[str, Any] | None = 
         raise InputError(f"{image.path!r} holds DN (digital numbers), and a fit of them needs {len(missing)} sensor value(s) that "
                          f"neither the file nor the options give: {names}. Or ask for the illustrative defaults by name: "
                          "sensor_defaults='illustrative' (--sensor-defaults illustrative).")
+    optics = "aperture_diameter_m" in fields and "wavelength_m" in fields
     rules = {"full_well_electrons": (None, "rule: none given (the saturation level or the ADC's range saturates)"),
-             "diffraction": (("aperture_diameter_m" in fields and "wavelength_m" in fields),
-                             "rule: on when the aperture and the wavelength are given")}
+             "diffraction": (optics, f"rule: {'on, the aperture and wavelength given' if optics else 'off, no aperture and wavelength given'}")}
     for name, (value, source) in rules.items():
         if name not in fields:
             fields[name], sources[name] = value, source

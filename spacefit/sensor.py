@@ -335,7 +335,7 @@ def gaussian_transfer(sigma_px: Float[Array, ""], fy: Float[Array, "..."], fx: F
     return jnp.exp(-2.0 * jnp.pi**2 * sigma_px**2 * (fx**2 + fy**2))
 
 
-def fourier_filter(image: Float[Array, "h w c"], transfer: Callable[[Array, Array], Array], pad: int) -> Float[Array, "h w c"]:
+def fourier_filter(image: Float[Array, "h w c"], transfer: Callable[[np.ndarray, np.ndarray], Array], pad: int) -> Float[Array, "h w c"]:
     """``image`` multiplied in Fourier space by ``transfer(fy, fx)`` (frequencies in cycles per px,
     shaped (H, 1, 1) and (1, W, 1); the result broadcasts against (H, W, channels)), after
     ``pad`` px of black sky on every side so that nothing wraps round: a convolution with a kernel
@@ -343,8 +343,8 @@ def fourier_filter(image: Float[Array, "h w c"], transfer: Callable[[Array, Arra
     (:mod:`spacefit.fitting.nuisance`) and the sensor's PSF share it."""
     h, w = image.shape[:2]
     padded = jnp.pad(image, ((pad, pad), (pad, pad), (0, 0)))
-    fy = jnp.fft.fftfreq(padded.shape[0])[:, None, None]
-    fx = jnp.fft.fftfreq(padded.shape[1])[None, :, None]
+    fy = np.fft.fftfreq(padded.shape[0])[:, None, None]  # NumPy: known while JAX traces, for NumPy transfers too
+    fx = np.fft.fftfreq(padded.shape[1])[None, :, None]
     filtered = jnp.real(jnp.fft.ifft2(jnp.fft.fft2(padded, axes=(0, 1)) * transfer(fy, fx), axes=(0, 1)))
     return filtered[pad : pad + h, pad : pad + w]
 
@@ -355,16 +355,16 @@ def psf_reach_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) ->
     return math.ceil(GAUSSIAN_RADIUS_SIGMA * sensor.psf_sigma_px + airy)
 
 
-def psf_transfer(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> Callable[[Array, Array], Array]:
+def psf_transfer(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> Callable[[np.ndarray, np.ndarray], Array]:
     """The PSF's transfer function ``(fy, fx) -> T`` (cycles per px) at one wavelength: the
     continuous Gaussian's times, with diffraction, the circular pupil's MTF (:func:`airy_transfer`)."""
     cutoff = 1.0 / (np.pi * _airy_px(sensor, intrinsics, wavelength_m))  # D / lambda in cycles per px
 
-    def transfer(fy: Array, fx: Array) -> Array:
+    def transfer(fy: np.ndarray, fx: np.ndarray) -> Array:
         gauss = gaussian_transfer(sensor.psf_sigma_px, fy, fx)
         if not sensor.diffraction:
             return gauss
-        return gauss * jnp.asarray(airy_transfer(np.hypot(np.asarray(fx), np.asarray(fy)) / cutoff))
+        return gauss * airy_transfer(np.hypot(fx, fy) / cutoff)
 
     return transfer
 

@@ -37,7 +37,7 @@ def blur_and_shift(image: Float[Array, "h w c"], sigma_px: Float[Array, ""], dx_
     """``image`` blurred by a continuous Gaussian of ``sigma_px`` (px, >= 0) and moved by (dx, dy)
     px (+x rightwards, +y downwards), per channel, on black sky: no light enters from outside."""
 
-    def transfer(fy: Array, fx: Array) -> Array:
+    def transfer(fy: np.ndarray, fx: np.ndarray) -> Array:
         return gaussian_transfer(sigma_px, fy, fx) * jnp.exp(-2j * jnp.pi * (fx * dx_px + fy * dy_px))
 
     return fourier_filter(image, transfer, PAD_PX)
