@@ -86,6 +86,15 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     f.add_argument("--sensor", metavar="SENSOR.json|.toml",
                    help="sf.Sensor fields (JSON or TOML) of the camera of DN references: they replace those of a "
                         "file's own sensor (FITS header or spacefit sidecar), or describe one that names none")
+    f.add_argument("--sensor-value", dest="sensor_values", action="append", default=[], metavar="FIELD=VALUE",
+                   help="one sf.Sensor field of DN references, e.g. --sensor-value read_noise_electrons=3.2 (TOML value; "
+                        "repeatable): it replaces the file's and the sensor file's")
+    f.add_argument("--sensor-defaults", metavar="illustrative",
+                   help="fill the sensor values that no file or option gives with the illustrative defaults (otherwise "
+                        "a missing value is refused)")
+    f.add_argument("--row-order", metavar="top-down|bottom-up",
+                   help="how the rows of FITS references run, whatever their headers say (default: as ROWORDER or "
+                        "a WCS states, else the FITS standard, bottom-up, with a note)")
     f.add_argument("--unit", metavar="radiance|DN", help="require the references to hold this unit")
     f.add_argument("--response", metavar="linear|srgb",
                    help="how PNG / TIFF values encode light: linear DN or sRGB-encoded (spacefit's own files say)")
@@ -127,6 +136,22 @@ def _start_values(items: Sequence[str]) -> dict[str, float]:
     return out
 
 
+def _sensor_values(items: Sequence[str]) -> dict[str, object]:
+    """``--sensor-value FIELD=VALUE`` arguments as sensor field -> value (a TOML value; ``null``: None)."""
+    import tomllib
+
+    out: dict[str, object] = {}
+    for text in items:
+        name, sep, value = text.partition("=")
+        if not sep or not name.strip() or not value.strip():
+            raise InputError(f"`--sensor-value` takes FIELD=VALUE, got {text!r}.")
+        try:
+            out[name.strip()] = None if value.strip() == "null" else tomllib.loads(f"v = {value.strip()}")["v"]
+        except tomllib.TOMLDecodeError:
+            raise InputError(f"`--sensor-value {text}`: {value.strip()!r} is not a number, true / false, null or [list].") from None
+    return out
+
+
 def _fit(args: argparse.Namespace) -> int:
     """Run ``spacefit fit``; exit code 0 when the solver converged, NOT_CONVERGED otherwise."""
     from spacefit.fitting.report import format_result
@@ -138,6 +163,7 @@ def _fit(args: argparse.Namespace) -> int:
     result = fit_to_folder(
         args.references, args.scenes, [name.strip() for name in args.free.split(",")], args.out,
         overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, masks=args.masks, sensor=args.sensor,
+        sensor_values=_sensor_values(args.sensor_values) or None, sensor_defaults=args.sensor_defaults, row_order=args.row_order,
         unit=args.unit, response=args.response, quiet=args.quiet,
         overwrite=args.overwrite, resume=args.resume, start=_start_values(args.start),
         **{k: v for k, v in given.items() if v is not None},

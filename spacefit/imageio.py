@@ -9,10 +9,22 @@ radiance), the metadata found, and the mask of usable pixels (not saturated, not
 mask). What each format holds:
 
 * EXR: radiance (W m^-2 sr^-1), as spacefit renders write it.
-* FITS: radiance if ``BUNIT`` says ``W m-2 sr-1``, otherwise DN. ``EXPTIME`` (s), ``GAIN``
-  (electrons per DN, the FITS convention, the inverse of ``Sensor.gain_dn_per_electron``) and
-  ``SATURATE`` (DN) are read where present. The first row of a FITS image is its bottom (FITS
-  standard 4.0, section 8.1; what DS9 shows), so rows are flipped to spacefit's top-down order.
+* FITS: radiance if ``BUNIT`` says ``W m-2 sr-1``, otherwise DN. Every keyword with a sensor
+  meaning is read (:data:`HEADER_KEYWORDS`; the first of a field's aliases present counts, and
+  aliases that disagree are refused): ``EXPTIME`` / ``EXPOSURE`` (s), ``GAIN`` / ``EGAIN``
+  (electrons per DN, the FITS convention, the inverse of ``Sensor.gain_dn_per_electron``),
+  ``RDNOISE`` / ``READNOIS`` / ``RON`` (electrons rms), ``BIAS`` / ``PEDESTAL`` (the DN offset added
+  to every pixel), ``SATURATE`` (DN), ``RADSCALE`` (DN per W m^-2 sr^-1, a calibrated camera),
+  ``PSFSIGMA`` (px, the continuous Gaussian PSF's sigma), the bits of integer data (``BITPIX``),
+  spacefit's ``HIERARCH SPACEFIT SENSOR <field>`` for every field, and ``DATE-OBS`` (kept as an
+  ISO time in ``metadata["date_obs"]``).
+* Row order. spacefit's arrays run top-down. A FITS file's rows are read in the order it states,
+  first found of: the ``row_order`` argument; ``ROWORDER = 'TOP-DOWN'`` or ``'BOTTOM-UP'``; a
+  celestial WCS's parity (the sky seen from inside, north up and east left as sky images show it,
+  has det(CD) < 0 with its first row at the bottom: det < 0 is read bottom-up, det > 0, a mirrored
+  sky, top-down; optics with a mirror break this rule: give ``row_order``); else the FITS standard
+  (4.0, section 8.1: the first row is the bottom, as DS9 shows it), with a warning and a note.
+  ``metadata`` says which (``row_order``, ``row_order_source``, ``notes``).
 * PNG and TIFF: integer values whose response must be named: ``"linear"`` (DN) or ``"srgb"`` (the
   sRGB encoding, IEC 61966-2-1, decoded to values linear in light, scaled to the file's full scale).
   A spacefit sidecar names it for its own files.
@@ -27,6 +39,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import warnings
 from dataclasses import dataclass
 from collections.abc import Mapping
 from pathlib import Path
@@ -39,7 +52,7 @@ from astropy.io import fits
 from jaxtyping import Bool, Float
 
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, check_choice, negative_pixels
-from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor
+from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, missing_for_measurement, used_fields
 
 UNITS = {"DN": DN_UNIT, "radiance": RADIANCE_UNIT}
 RESPONSES = ("linear", "srgb")
@@ -47,6 +60,23 @@ FORMATS = {".exr": "exr", ".fits": "fits", ".fit": "fits", ".fts": "fits", ".png
 WRITABLE = (".fits", ".fit", ".fts", ".png", ".tif", ".tiff")
 FITS_RADIANCE_UNIT = "W m-2 sr-1"
 FITS_SENSOR_KEY = "SPACEFIT SENSOR"
+ROW_ORDERS = ("top-down", "bottom-up")
+SENSOR_DEFAULTS = ("illustrative",)
+HEADER_KEYWORDS = {
+    "exposure_time_s": ("EXPTIME", "EXPOSURE"),
+    "gain_dn_per_electron": ("GAIN", "EGAIN"),  # electrons per DN in the header: inverted
+    "read_noise_electrons": ("RDNOISE", "READNOIS", "RON"),
+    "bias_dn": ("BIAS", "PEDESTAL"),
+    "saturation_level_dn": ("SATURATE",),
+    "radiometric_scale_dn_per_w_m2_sr": ("RADSCALE",),
+    "psf_sigma_px": ("PSFSIGMA",),
+}
+"""Standard FITS keywords of :class:`Sensor` fields, aliases in order of precedence; every field
+also has spacefit's own ``HIERARCH SPACEFIT SENSOR <field>``, and ``bit_depth`` an integer image's ``BITPIX``."""
+
+
+class RowOrderWarning(UserWarning):
+    """A FITS image states no row order: it is read by the FITS standard (first row = bottom)."""
 
 
 @dataclass(frozen=True)
@@ -58,9 +88,10 @@ class ObservedImage:
         unit: ``"DN"`` or ``"W m^-2 sr^-1"``.
         mask: (height, width, channels) bool, True where a value can be used.
         metadata: what the file said: ``format``, ``response``, ``saturation_dn`` (None: unknown),
-            ``header`` (FITS cards), ``exposure_time_s``, ``gain_electrons_per_dn`` where present,
-            ``sensor`` (the fields of :class:`Sensor`, from a spacefit FITS header or sidecar),
-            ``sidecar`` (the sidecar's content).
+            ``header`` (FITS cards), ``sensor_found`` (field -> [value, source], every sensor
+            value the file gives: header keywords, the data type's bits, the sidecar),
+            ``date_obs`` (ISO time, FITS ``DATE-OBS``), ``row_order`` and ``row_order_source``
+            (FITS), ``notes`` (what a report should say about the file), ``sidecar`` (its content).
         path: the file read.
     """
 
@@ -115,7 +146,9 @@ def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata
         planes = np.moveaxis(data[::-1], -1, 0)  # FITS rows run bottom-up; channels are NAXIS3
         fits.PrimaryHDU(np.ascontiguousarray(planes if data.shape[2] > 1 else planes[0]), header=_fits_header(sensor)).writeto(p, overwrite=True)
     side = sidecar_path(p)
-    content = {"unit": "DN", "response": "linear", "saturation_dn": sensor.saturation_dn, "sensor": sensor.to_dict(), "metadata": metadata or {}}
+    defaults = [f.name for f in dataclasses.fields(Sensor) if getattr(sensor, f.name) == f.default]
+    content = {"unit": "DN", "response": "linear", "saturation_dn": sensor.saturation_dn, "sensor": sensor.to_dict(),
+               "sensor_defaults": defaults, "metadata": metadata or {}}
     side.write_text(json.dumps(content, indent=2))
     return side
 
@@ -123,9 +156,14 @@ def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata
 def _fits_header(sensor: Sensor) -> fits.Header:
     h = fits.Header()
     h["BUNIT"] = ("adu", "digital numbers (DN)")
+    h["ROWORDER"] = ("BOTTOM-UP", "first row is the image's bottom (FITS standard)")
     h["EXPTIME"] = (sensor.exposure_time_s, "[s] exposure time")
     h["GAIN"] = (1.0 / sensor.gain_dn_per_electron, "[electron/adu] inverse of the ADC gain")
     h["RDNOISE"] = (sensor.read_noise_electrons, "[electron] read noise rms")
+    h["BIAS"] = (sensor.bias_dn, "[adu] offset added to every pixel")
+    h["PSFSIGMA"] = (sensor.psf_sigma_px, "[pixel] sigma of the continuous Gaussian PSF")
+    if sensor.calibrated:
+        h["RADSCALE"] = (sensor.radiometric_scale_dn_per_w_m2_sr, "[adu / (W m-2 sr-1)] radiometric scale")
     h["SATURATE"] = (sensor.saturation_dn, "[adu] lowest saturated value")
     for name, value in sensor.to_dict().items():
         if isinstance(value, list):
@@ -151,7 +189,66 @@ def _sensor_from_header(header: fits.Header) -> dict[str, Any] | None:
     return out
 
 
-def _read_fits(path: Path) -> tuple[np.ndarray, fits.Header]:
+def _header_sensor(header: fits.Header, data: np.ndarray) -> dict[str, tuple[Any, str]]:
+    """Every sensor value of a FITS header as field -> (value, source): standard keywords, then
+    the data's bits (``BITPIX``), then spacefit's own keys, each replacing the ones before."""
+    found: dict[str, tuple[Any, str]] = {}
+    for field, keys in HEADER_KEYWORDS.items():
+        present = [(k, header[k]) for k in keys if k in header and header[k] is not None and not isinstance(header[k], fits.card.Undefined)]
+        values = {float(v) for _, v in present}
+        if len(values) > 1:
+            raise InputError(f"the FITS header gives {field} {len(values)} ways: {', '.join(f'{k} = {v}' for k, v in present)}; "
+                             "make them agree or give the value (`sensor=`, --sensor-value).")
+        if present:
+            key, value = present[0]
+            found[field] = (1.0 / float(value) if field == "gain_dn_per_electron" else float(value), f"header {key}")
+    if data.dtype.kind in "ui":
+        found["bit_depth"] = (8 * data.dtype.itemsize, "header BITPIX")
+    found.update({k: (v, f"header {FITS_SENSOR_KEY} {k}") for k, v in (_sensor_from_header(header) or {}).items()})
+    return found
+
+
+def _wcs_row_order(header: fits.Header) -> str | None:
+    """The row order a celestial WCS implies by its parity (see the module), or None without one."""
+    from astropy.wcs import WCS, FITSFixedWarning
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FITSFixedWarning)
+        try:
+            wcs = WCS(header, naxis=2)
+        except (ValueError, KeyError, MemoryError):
+            return None
+    if not wcs.has_celestial or wcs.wcs.lng < 0 or wcs.wcs.lat < 0:
+        return None
+    det = float(np.linalg.det(wcs.pixel_scale_matrix)) * (1.0 if wcs.wcs.lng < wcs.wcs.lat else -1.0)
+    if not np.isfinite(det) or det == 0.0:
+        return None
+    return "bottom-up" if det < 0 else "top-down"
+
+
+def _row_order(header: fits.Header, row_order: str | None, path: Path) -> tuple[str, str, list[str]]:
+    """The row order of a FITS image, its source and notes (see the module)."""
+    notes = []
+    implied = _wcs_row_order(header)
+    stated = str(header.get("ROWORDER", "")).strip().lower() or None
+    if stated is not None and stated not in ROW_ORDERS:
+        raise InputError(f"{str(path)!r}: ROWORDER = {header['ROWORDER']!r} is neither 'TOP-DOWN' nor 'BOTTOM-UP'; "
+                         "give the order (`row_order=`, --row-order).")
+    if row_order is not None:
+        return row_order, "option/argument", notes
+    if stated is not None:
+        if implied is not None and implied != stated:
+            notes.append(f"ROWORDER = {stated.upper()!r} was used; the WCS's parity implies {implied}.")
+        return stated, "header ROWORDER", notes
+    if implied is not None:
+        return implied, "header WCS (parity of the sky)", notes
+    note = (f"{path.name}: no ROWORDER and no celestial WCS: rows read by the FITS standard (first row = bottom); "
+            "give row_order= (--row-order) if it was written top-down.")
+    warnings.warn(note, RowOrderWarning, stacklevel=4)
+    return "bottom-up", "FITS standard (no ROWORDER, no WCS)", [note]
+
+
+def _read_fits(path: Path, row_order: str | None = None) -> tuple[np.ndarray, fits.Header, tuple[str, str, list[str]]]:
     try:
         with fits.open(path) as hdus:
             hdu = next((h for h in hdus if h.data is not None and h.data.ndim >= 2), None)
@@ -164,7 +261,9 @@ def _read_fits(path: Path) -> tuple[np.ndarray, fits.Header]:
         data = data[None]
     if data.ndim != 3:
         raise InputError(f"{str(path)!r}: a FITS image must have 2 or 3 axes (x, y, channel), it has {data.ndim}.")
-    return np.moveaxis(data, 0, -1)[::-1], header
+    order = _row_order(header, row_order, path)
+    planes = np.moveaxis(data, 0, -1)
+    return (planes[::-1] if order[0] == "bottom-up" else planes), header, order
 
 
 def _read_tiff(path: Path) -> np.ndarray:
@@ -210,7 +309,7 @@ def _user_mask(mask: str | Path | np.ndarray, shape: tuple[int, ...]) -> np.ndar
 
 
 def read_image(path: str | Path, *, unit: str | None = None, response: str | None = None, mask: str | Path | np.ndarray | None = None,
-               sigma: float | np.ndarray | None = None) -> ObservedImage:
+               sigma: float | np.ndarray | None = None, row_order: str | None = None) -> ObservedImage:
     """Read a reference or observation, refusing what cannot be used as asked.
 
     Args:
@@ -221,6 +320,8 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
             Pixels it (or a PNG's alpha) leaves out may hold anything, NaN included: they read as 0.
         sigma: the noise standard deviation of a radiance image (W m^-2 sr^-1, scalar or per
             pixel): its values may then dip below 0 by up to :data:`NEGATIVE_SIGMAS` sigma.
+        row_order: ``"top-down"`` or ``"bottom-up"``: how a FITS file's rows run, whatever it says
+            (None: as it states, see the module).
     Returns:
         the data, unit, metadata and usable-pixel mask (see :class:`ObservedImage`).
     Raises:
@@ -231,16 +332,17 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
     wanted = UNITS[check_choice("unit", unit, UNITS)] if unit is not None else None
     if response is not None:
         check_choice("response", response, RESPONSES)
+    if row_order is not None:
+        check_choice("row_order", row_order, ROW_ORDERS)
     p = Path(path)
     if not p.is_file():
         raise InputError(f"image file {str(p)!r} does not exist.")
     kind = _format(p, tuple(FORMATS))
     side = sidecar_path(p)
     sidecar = json.loads(side.read_text()) if side.is_file() else None
-    meta: dict[str, Any] = {"format": kind, "response": "linear", "saturation_dn": None}
+    meta: dict[str, Any] = {"format": kind, "response": "linear", "saturation_dn": None, "notes": [], "sensor_found": {}}
     if sidecar is not None:
         meta["sidecar"] = sidecar
-        meta["sensor"] = sidecar.get("sensor")
         meta["saturation_dn"] = sidecar.get("saturation_dn")
     alpha = None
     if kind in ("exr", "fits") and response not in (None, "linear"):
@@ -252,13 +354,13 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
 
         raw, found_unit = read_exr(p), RADIANCE_UNIT
     elif kind == "fits":
-        raw, header = _read_fits(p)
+        raw, header, (meta["row_order"], meta["row_order_source"], notes) = _read_fits(p, row_order)
         found_unit = _fits_unit(header, wanted, p)
+        meta["notes"] += notes
         meta["header"] = {k: v for k, v in header.items() if k not in ("COMMENT", "HISTORY", "")}
-        for key, name in (("EXPTIME", "exposure_time_s"), ("GAIN", "gain_electrons_per_dn")):
-            if key in header:
-                meta[name] = float(header[key])
-        meta["sensor"] = _sensor_from_header(header) or meta.get("sensor")
+        meta["sensor_found"] = _header_sensor(header, raw)
+        if "DATE-OBS" in header:
+            meta["date_obs"] = _iso_time(header["DATE-OBS"], p)
         if "SATURATE" in header:
             meta["saturation_dn"] = float(header["SATURATE"])
     else:
@@ -276,6 +378,13 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
             raise InputError(f"{str(p)!r} is {what} of unknown response; say how its values encode light: response='linear' (DN) or response='srgb' (sRGB-encoded).")
         meta["response"] = response
         found_unit = "DN"
+        if bits:
+            meta["sensor_found"]["bit_depth"] = (bits, f"file data type ({raw.dtype})")
+    if sidecar is not None and sidecar.get("sensor") is not None:
+        in_header = {k for k, (_, source) in meta["sensor_found"].items() if source.startswith("header")}  # the file outranks its sidecar
+        found = {**meta["sensor_found"], **{k: (v, "spacefit sidecar") for k, v in sidecar["sensor"].items() if k not in in_header}}
+        meta["sensor_found"] = {k: (v, source + (" (simulated with an illustrative default)" if k in sidecar.get("sensor_defaults", ()) else ""))
+                                for k, (v, source) in found.items()}
     values = np.asarray(raw, dtype=float)
     full_scale = float(np.iinfo(raw.dtype).max) if raw.dtype.kind in "ui" else None
     if meta["saturation_dn"] is None:
@@ -294,6 +403,16 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         scale = full_scale or 1.0
         values = np.asarray(colour.cctf_decoding(values / scale, function="sRGB")) * scale
     return ObservedImage(values, found_unit, usable, meta, str(p))
+
+
+def _iso_time(value: Any, path: Path) -> str:
+    """A FITS ``DATE-OBS`` as an ISO time (astropy Time, UTC unless it says otherwise)."""
+    from astropy.time import Time
+
+    try:
+        return Time(str(value).strip()).isot
+    except ValueError as err:
+        raise InputError(f"{str(path)!r}: DATE-OBS = {value!r} is not an ISO time ({err}).") from None
 
 
 def _fits_unit(header: fits.Header, wanted: str | None, path: Path) -> str:
@@ -320,23 +439,71 @@ def _check_values(values: np.ndarray, unit: str, path: Path, included: np.ndarra
                              "(give the image's noise sigma, or mask them out).")
 
 
-def sensor_of(image: ObservedImage, sensor: Sensor | Mapping[str, Any] | None = None) -> Sensor:
-    """The sensor that measured a DN image: ``sensor`` if it is an :class:`Sensor`; else the file's
-    own (spacefit FITS header or sidecar; for another FITS its ``EXPTIME`` and ``GAIN``) with the
-    fields of ``sensor`` (a mapping, e.g. a sensor file's) replacing its.
+def _ways(field: str) -> str:
+    """The three ways to give a sensor field, for an error message."""
+    keys = [*HEADER_KEYWORDS.get(field, ()), *(("BITPIX (integer data)",) if field == "bit_depth" else ()),
+            f"HIERARCH {FITS_SENSOR_KEY} {field}"]
+    return (f"header keyword {' / '.join(keys)}; sensor file key {field} (--sensor FILE); "
+            f"option --sensor-value {field}=VALUE (Python: sensor={{{field!r}: ...}})")
 
+
+def sensor_of(image: ObservedImage, sensor: Sensor | Mapping[str, Any] | None = None, *,
+              sensor_file: Mapping[str, Any] | None = None, defaults: str | None = None) -> tuple[Sensor, dict[str, str]]:
+    """The sensor that measured a DN image, and where each value it uses came from.
+
+    ``sensor`` given as an :class:`Sensor` is taken whole. Otherwise the values are, each
+    replacing the ones before: the illustrative defaults (only with ``defaults="illustrative"``),
+    the file's (its integer type's bits, a spacefit sidecar, the FITS header's keywords,
+    :data:`HEADER_KEYWORDS`), ``sensor_file`` (the fields of a sensor file,
+    :func:`~spacefit.sensor.read_sensor_file`), and the mapping ``sensor`` (an option or argument).
+    Without defaults, the values not given follow documented rules, not illustrative numbers: no
+    full well (the ``SATURATE`` level or the ADC's range saturates); diffraction only when both the
+    aperture and the wavelength are given; vignetting off for a calibrated camera (a radiometric
+    scale), on otherwise.
+
+    Returns:
+        the sensor and, for each field it uses (:func:`~spacefit.sensor.used_fields`), its source:
+        ``"header KEY"``, ``"spacefit sidecar"``, ``"sensor file"``, ``"option/argument"``,
+        ``"default (illustrative)"`` or ``"rule: ..."``.
     Raises:
-        InputError: when neither the file nor ``sensor`` describes a sensor (a DN image is not radiance).
+        InputError: a value a fit needs (:func:`~spacefit.sensor.missing_for_measurement`) that no
+            source gives, naming each and the three ways to give it.
     """
     if isinstance(sensor, Sensor):
-        return sensor
-    meta = image.metadata
-    header = {name: value for name, value in (("exposure_time_s", meta.get("exposure_time_s")),
-                                              ("gain_dn_per_electron", 1.0 / meta["gain_electrons_per_dn"] if meta.get("gain_electrons_per_dn") else None))
-              if value is not None}
-    if meta.get("sensor") is None and sensor is None:
-        found = f" (its header gives only {', '.join(f'{k} = {v:g}' for k, v in header.items())})" if header else ""
-        raise InputError(f"{image.path!r} holds DN (digital numbers), not radiance, and names no sensor{found}: give the camera "
-                         "that measured it, sensor=sf.Sensor(...) or a JSON / TOML file of its fields (spacefit fit --sensor FILE).")
-    fields = {**header, **(meta.get("sensor") or {}), **(sensor or {})}
-    return Sensor.from_dict(fields, f"the sensor of {image.path!r}")
+        return sensor, {name: "option/argument" for name in used_fields(sensor)}
+    if defaults is not None:
+        check_choice("sensor_defaults", defaults, SENSOR_DEFAULTS)
+    layers: list[tuple[Mapping[str, Any], str]] = []
+    if defaults is not None:
+        layers.append(({f.name: getattr(Sensor(), f.name) for f in dataclasses.fields(Sensor)}, "default (illustrative)"))
+    found = image.metadata.get("sensor_found", {})
+    layers += [({k: v[0] for k, v in found.items()}, ""), (sensor_file or {}, "sensor file"), (sensor or {}, "option/argument")]
+    fields: dict[str, Any] = {}
+    sources: dict[str, str] = {}
+    for values, source in layers:
+        fields.update(values)
+        sources.update({k: source or found[k][1] for k in values})
+    missing = missing_for_measurement(fields)
+    if missing:
+        names = "; ".join(f"{m}: {_ways(m.split()[0])}" for m in missing)
+        raise InputError(f"{image.path!r} holds DN (digital numbers), and a fit of them needs {len(missing)} sensor value(s) that "
+                         f"neither the file nor the options give: {names}. Or ask for the illustrative defaults by name: "
+                         "sensor_defaults='illustrative' (--sensor-defaults illustrative).")
+    optics = "aperture_diameter_m" in fields and "wavelength_m" in fields
+    rules = {"full_well_electrons": (None, "rule: none given (the saturation level or the ADC's range saturates)"),
+             "diffraction": (optics, f"rule: {'on, the aperture and wavelength given' if optics else 'off, no aperture and wavelength given'}")}
+    for name, (value, source) in rules.items():
+        if name not in fields:
+            fields[name], sources[name] = value, source
+    result = Sensor.from_dict(fields, f"the sensor of {image.path!r}")
+    if "vignetting" not in fields:
+        sources["vignetting"] = f"rule: {'off for a calibrated camera' if result.calibrated else 'on (cos^4) without a radiometric scale'}"
+    return result, {name: sources[name] for name in used_fields(result)}
+
+
+def format_sensor_sources(sensor: Sensor, sources: Mapping[str, str]) -> str:
+    """The values of ``sensor`` that a fit uses with their sources (:func:`sensor_of`), one line each."""
+    width = max(map(len, sources), default=0)
+    lines = [f"  {name:<{width}} = {getattr(sensor, name) if name != 'vignetting' else sensor.vignetted}  ({source})"
+             for name, source in sources.items()]
+    return "\n".join(["sensor values and their sources:", *lines])

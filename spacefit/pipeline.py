@@ -162,6 +162,9 @@ def fit_to_folder(
     sigma: float | None = None,
     masks: Sequence[str | Path] = (),
     sensor: str | Path | None = None,
+    sensor_values: Mapping[str, Any] | None = None,
+    sensor_defaults: str | None = None,
+    row_order: str | None = None,
     unit: str | None = None,
     response: str | None = None,
     quiet: bool = False,
@@ -192,6 +195,9 @@ def fit_to_folder(
             (:func:`~spacefit.sensor.read_sensor_file`) for DN references: they replace the
             fields of each file's own sensor (FITS header or sidecar), or describe the camera of a
             file that names none.
+        sensor_values, sensor_defaults, row_order: sensor fields replacing the file's and the
+            sensor file's, ``"illustrative"`` to fill missing sensor values with the illustrative
+            defaults, and a FITS row order (:meth:`~spacefit.fitting.problem.Observation.from_file`).
         unit, response: ``"radiance"`` / ``"DN"`` to require one, and ``"linear"`` / ``"srgb"`` for
             PNG and TIFF (:func:`~spacefit.imageio.read_image`).
         quiet: no progress display or messages on stderr.
@@ -206,7 +212,7 @@ def fit_to_folder(
     from spacefit.fitting.loop import DEFAULT_MAX_STEPS, fit  # the fitting stack: only fits pay its 1.5 s import
     from spacefit.fitting.problem import Observation
     from spacefit.fitting.report import write_fit_report
-    from spacefit.sensor import read_sensor_file
+    from spacefit.imageio import format_sensor_sources
 
     prepare_output(out_dir, "fit", overwrite=overwrite, resume=resume,
                    inputs=(*references, *scenes, *masks, *([sensor] if sensor is not None else [])))
@@ -218,10 +224,13 @@ def fit_to_folder(
     t0 = time.perf_counter()
     scene_overrides = [*overrides, *([f"render.resolution=[{resolution[0]}, {resolution[1]}]"] if resolution else [])]
     loaded = [load_scene(path, scene_overrides) for path in scenes]
-    sensor_fields = read_sensor_file(sensor) if sensor is not None else None
-    observations = [Observation.from_file(path, loaded[i % len(loaded)], sensor=sensor_fields, unit=unit, response=response,
-                                          mask=masks[i % len(masks)] if masks else None, sigma=sigma)
+    observations = [Observation.from_file(path, loaded[i % len(loaded)], sensor=sensor_values, sensor_file=sensor, unit=unit,
+                                          response=response, mask=masks[i % len(masks)] if masks else None, sigma=sigma,
+                                          sensor_defaults=sensor_defaults, row_order=row_order)
                     for i, path in enumerate(references)]
+    for path, obs in zip(references, observations):  # what each file said, and the source of every sensor value
+        said = "\n".join([*obs.notes, *([f"{path}: " + format_sensor_sources(obs.sensor, obs.sensor_sources)] if obs.sensor_sources else [])])
+        _say(said, quiet or not said)
     images = [obs.reference for obs in observations]
     t_read = time.perf_counter() - t0
     display, last = Progress(f"fit {', '.join(free)}"), [0, 0]
@@ -241,6 +250,8 @@ def fit_to_folder(
         "masks": [str(path) for path in masks],
         "sensor_file": None if sensor is None else str(sensor),
         "sensors": [None if obs.sensor is None else obs.sensor.to_dict() for obs in observations],
+        "sensor_sources": [obs.sensor_sources for obs in observations],
+        "notes": [list(obs.notes) for obs in observations],
         "unit": unit,
         "response": response,
         "options": options,

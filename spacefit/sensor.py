@@ -7,21 +7,31 @@ numbers (DN) in this order:
    (m^2), Omega the pixel's solid angle seen from the pinhole (sr, :func:`pixel_solid_angles`), theta
    the pixel centre's angle off the optical axis and t the exposure time (s). ``A cos(theta)`` is
    the aperture's area seen from the pixel, so off axis the image darkens as cos^4(theta)
-   ("natural vignetting"); on the axis E = L A Omega t. The optics are taken as lossless.
+   ("natural vignetting"); on the axis E = L A Omega t. The optics are taken as lossless. With
+   ``vignetting`` off (a flat-fielded image) every pixel collects what the on-axis pixel does.
 2. **Photo-electrons**: ``QE E / (h c / lambda)``. *Single-wavelength assumption*: each channel's
    radiance is taken as all at one wavelength ``Sensor.wavelength_m[channel]`` (the renders are
    band-integrated radiances of a grey sun, so a channel carries no spectrum to integrate over).
-3. **Point spread function**, applied to the electrons (energy on the focal plane): the Airy pattern
-   of a circular aperture (Airy 1835) at the channel's wavelength, convolved with a Gaussian of
-   ``psf_sigma_px`` for everything else (aberrations, jitter, charge diffusion), integrated over
-   each pixel. Taken as the same across the field (shift-invariant).
+   *A calibrated camera* gives instead its radiometric scale s (DN per W m^-2 sr^-1, the FITS
+   keyword ``RADSCALE``): ``DN = bias + s L``, with vignetting off unless asked for; exposure,
+   aperture, QE and wavelength are then not used (the wavelength and aperture only for diffraction).
+3. **Point spread function**, applied to the collected signal: the Airy pattern of a circular
+   aperture (Airy 1835) at the channel's wavelength, convolved with a continuous Gaussian of
+   ``psf_sigma_px`` for everything else (aberrations, jitter, charge diffusion): the optical
+   convention, a PSF on the focal plane before the pixel integrates it. The render is already
+   integrated over each pixel (its pixel filter), so the PSF is applied as its continuous transfer
+   function on the pixel grid (:func:`fourier_filter`): ``exp(-2 pi^2 sigma^2 f^2)`` for the
+   Gaussian and, for the Airy pattern, the diffraction-limited MTF of a circular pupil (Goodman,
+   "Introduction to Fourier Optics", 3rd ed., eq. 6-32), which a pixel grid samples only below its
+   Nyquist frequency (half a cycle per px): an Airy disc far smaller than a pixel changes nothing.
+   Taken as the same across the field (shift-invariant).
 4. **Noise and digitising** (:func:`observe`): Poisson shot noise in electrons, the full well's clip,
    Gaussian read noise (electrons rms), ``DN = bias + gain * electrons``, rounding to the nearest
    integer and the ADC's range [0, 2^bits - 1].
 
-:func:`expected_dn` is steps 1 to 3 with ``bias + gain * electrons``: the noise-free mean, linear in
-the radiance and written in JAX so that a fit can differentiate through it; :func:`noise_variance_dn`
-is the Poisson-Gaussian variance of step 4 (Janesick 2007, "Photon Transfer", ch. 2), and
+:func:`expected_dn` is steps 1 to 3 in DN: the noise-free mean, linear in the radiance and written
+in JAX so that a fit can differentiate through it; :func:`noise_variance_dn` is the
+Poisson-Gaussian variance of step 4 (Janesick 2007, "Photon Transfer", ch. 2), and
 :func:`saturated_mask` marks the pixels where the linear model does not hold.
 """
 
@@ -55,10 +65,6 @@ PSF_ENERGY = 0.99
 """The Airy kernel reaches out to the radius that encloses this fraction of the energy (then it is normalised)."""
 GAUSSIAN_RADIUS_SIGMA = 5.0
 """The Gaussian kernel reaches out to this many sigma (2.9e-7 of its energy lies beyond, per axis)."""
-AIRY_SAMPLES_PER_ZERO = 8
-"""Sub-pixel samples per first-zero radius when the Airy pattern is integrated over pixels ..."""
-AIRY_SAMPLES_PER_PX = (8, 257)
-"""... bounded to this many per pixel side (odd, so that one sample sits at each pixel's centre)."""
 SATURATION_MARGIN_READ_SIGMA = 3.0
 """A pixel within this many read-noise sigmas of the full well's DN counts as saturated."""
 
@@ -81,8 +87,15 @@ class Sensor:
         read_noise_electrons: rms of the Gaussian read noise (electrons), >= 0.
         full_well_electrons: charge a pixel holds (electrons), > 0; None: the ADC saturates first.
         bit_depth: the ADC's bits, 1 to 32: DN in [0, 2^bits - 1].
-        psf_sigma_px: sigma (px) of a Gaussian blur besides diffraction, >= 0 (0: none).
+        psf_sigma_px: sigma (px) of a continuous Gaussian blur on the focal plane besides
+            diffraction, before the pixel integrates it (the optical convention), >= 0 (0: none).
         diffraction: whether to blur with the aperture's Airy pattern.
+        radiometric_scale_dn_per_w_m2_sr: a calibrated camera's DN per W m^-2 sr^-1 (> 0), used in
+            place of exposure x aperture x QE / photon energy x gain; None: not calibrated.
+        saturation_level_dn: the lowest saturated DN when known directly (FITS ``SATURATE``);
+            None: from the full well and the ADC (:attr:`saturation_dn`).
+        vignetting: whether the cos^4 fall-off off axis is in the image; None: yes, unless the
+            camera is calibrated (``radiometric_scale_dn_per_w_m2_sr`` given: a flat-fielded image).
     """
 
     exposure_time_s: float = 1e-3
@@ -96,6 +109,9 @@ class Sensor:
     bit_depth: int = 14
     psf_sigma_px: float = 0.0
     diffraction: bool = True
+    radiometric_scale_dn_per_w_m2_sr: float | None = None
+    saturation_level_dn: float | None = None
+    vignetting: bool | None = None
 
     def __post_init__(self) -> None:
         def check(field: str, lo: float, hi: float = math.inf, *, lo_open: bool = False, unit: str = "") -> None:
@@ -112,8 +128,13 @@ class Sensor:
         check_range("Sensor.bias_dn", self.bias_dn, 0.0, self.adc_max_dn, hi_open=True, unit="DN")
         if self.full_well_electrons is not None:
             check("full_well_electrons", 0.0, lo_open=True, unit="electrons")
-        if not isinstance(self.diffraction, bool):
-            raise InputError(f"`Sensor.diffraction` must be true or false, got {self.diffraction!r}.")
+        for flag in ("diffraction", "vignetting"):
+            if not isinstance(getattr(self, flag), bool) and (flag == "diffraction" or getattr(self, flag) is not None):
+                raise InputError(f"`Sensor.{flag}` must be true or false, got {getattr(self, flag)!r}.")
+        if self.radiometric_scale_dn_per_w_m2_sr is not None:
+            check("radiometric_scale_dn_per_w_m2_sr", 0.0, lo_open=True, unit="DN per W m^-2 sr^-1")
+        if self.saturation_level_dn is not None:
+            check_range("Sensor.saturation_level_dn", self.saturation_level_dn, self.bias_dn, lo_open=True, unit="DN")
         waves = np.atleast_1d(np.asarray(self.wavelength_m, dtype=object))
         if waves.ndim != 1 or waves.size == 0:
             raise InputError(f"`Sensor.wavelength_m` must be one wavelength (m) per channel, got {self.wavelength_m!r}.")
@@ -132,8 +153,21 @@ class Sensor:
         return 2**self.bit_depth - 1
 
     @property
+    def calibrated(self) -> bool:
+        """Whether the camera gives its radiometric scale (DN per W m^-2 sr^-1) directly."""
+        return self.radiometric_scale_dn_per_w_m2_sr is not None
+
+    @property
+    def vignetted(self) -> bool:
+        """Whether the cos^4 fall-off is applied: ``vignetting``, or by default unless :attr:`calibrated`."""
+        return (not self.calibrated) if self.vignetting is None else self.vignetting
+
+    @property
     def saturation_dn(self) -> float:
-        """The lowest DN counted as saturated: the ADC's maximum, or the full well's DN less a margin of read noise."""
+        """The lowest DN counted as saturated: ``saturation_level_dn`` if given, else the ADC's
+        maximum, or the full well's DN less a margin of read noise."""
+        if self.saturation_level_dn is not None:
+            return float(self.saturation_level_dn)
         if self.full_well_electrons is None:
             return float(self.adc_max_dn)
         well = self.bias_dn + self.gain_dn_per_electron * (self.full_well_electrons - SATURATION_MARGIN_READ_SIGMA * self.read_noise_electrons)
@@ -163,6 +197,40 @@ class Sensor:
         for key in fields:
             check_choice(f"{where}: field", key, names)
         return cls(**fields)
+
+
+SCALE_FIELD = "radiometric_scale_dn_per_w_m2_sr"
+RESPONSE_FIELDS = ("exposure_time_s", "aperture_diameter_m", "wavelength_m", "quantum_efficiency")
+"""What an uncalibrated camera needs to turn radiance into electrons (a calibrated one: its :data:`SCALE_FIELD`)."""
+DETECTOR_FIELDS = ("gain_dn_per_electron", "read_noise_electrons", "bias_dn", "psf_sigma_px")
+"""What every measurement needs: the noise model's gain and read noise, the offset, the PSF's width."""
+
+
+def used_fields(sensor: Sensor) -> tuple[str, ...]:
+    """The fields of ``sensor`` that change a fit's likelihood (its expected DN, noise, saturation
+    or PSF), in the order of :class:`Sensor`'s fields."""
+    names = {SCALE_FIELD} if sensor.calibrated else set(RESPONSE_FIELDS)
+    names |= {*DETECTOR_FIELDS, "diffraction", "vignetting"}
+    names |= {"saturation_level_dn"} if sensor.saturation_level_dn is not None else {"full_well_electrons", "bit_depth"}
+    if sensor.diffraction:
+        names |= {"aperture_diameter_m", "wavelength_m"}
+    return tuple(f.name for f in dataclasses.fields(Sensor) if f.name in names)
+
+
+def missing_for_measurement(given: Mapping[str, Any]) -> list[str]:
+    """What a fit of a sensor's observation needs and ``given`` (the fields the files and the user
+    gave) lacks: the radiometric response (a scale, or exposure, aperture, wavelength and QE), gain,
+    read noise, bias, the PSF's sigma, and a saturation level (``saturation_level_dn`` or
+    ``bit_depth``); with ``diffraction`` the aperture and wavelength. Each as ``field`` or
+    ``field (or other)``."""
+    calibrated = given.get(SCALE_FIELD) is not None
+    missing = [] if calibrated else [f"{n} (or {SCALE_FIELD})" for n in RESPONSE_FIELDS if n not in given]
+    missing += [n for n in DETECTOR_FIELDS if n not in given]
+    if given.get("saturation_level_dn") is None and "bit_depth" not in given:
+        missing.append("saturation_level_dn (or bit_depth)")
+    if given.get("diffraction") is True and calibrated:
+        missing += [f"{n} (for diffraction)" for n in ("aperture_diameter_m", "wavelength_m") if n not in given]
+    return missing
 
 
 def read_sensor_file(path: str | Path) -> dict[str, Any]:
@@ -201,9 +269,13 @@ def pixel_etendue(sensor: Sensor, intrinsics: Intrinsics) -> Float[np.ndarray, "
     """Etendue ``A cos(theta) Omega`` (m^2 sr) of each pixel through the aperture.
 
     Omega from :func:`~spacefit.geometry.frames.pixel_solid_angles` (cos^3 off axis), times the
-    aperture's area seen along the pixel's centre ray: together the cos^4 law.
+    aperture's area seen along the pixel's centre ray: together the cos^4 law. Without
+    :attr:`Sensor.vignetted`, every pixel's is that of a pixel centred on the axis.
     """
     f, p = intrinsics.focal_length, intrinsics.pixel_pitch
+    if not sensor.vignetted:
+        on_axis = pixel_solid_angles(Intrinsics(f, p, 1, 1))[0, 0]
+        return np.full((intrinsics.height, intrinsics.width), sensor.aperture_area_m2 * on_axis)
     u0, v0 = intrinsics.principal_point
     x = (np.arange(intrinsics.width) + 0.5 - u0) * p
     y = (np.arange(intrinsics.height) + 0.5 - v0) * p
@@ -214,8 +286,14 @@ def pixel_etendue(sensor: Sensor, intrinsics: Intrinsics) -> Float[np.ndarray, "
 def electrons_per_radiance(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> Float[np.ndarray, "h w c"]:
     """Mean photo-electrons per W m^-2 sr^-1 of each pixel and channel, before the PSF.
 
-    ``QE t A cos(theta) Omega lambda / (h c)``, single wavelength per channel.
+    ``QE t A cos(theta) Omega lambda / (h c)``, single wavelength per channel; for a calibrated
+    camera, its radiometric scale over its gain (times the cos^4 fall-off relative to the axis if
+    :attr:`Sensor.vignetted`).
     """
+    if sensor.calibrated:
+        shading = pixel_etendue(sensor, intrinsics) / pixel_etendue(dataclasses.replace(sensor, vignetting=False), intrinsics)
+        per_dn = sensor.radiometric_scale_dn_per_w_m2_sr / sensor.gain_dn_per_electron
+        return np.repeat(per_dn * shading[..., None], channels, axis=-1)
     photon_energy = constants.h * constants.c / np.asarray(sensor.wavelengths(channels))
     return (sensor.quantum_efficiency * sensor.exposure_time_s * pixel_etendue(sensor, intrinsics))[..., None] / photon_energy
 
@@ -238,78 +316,87 @@ def _airy_radius(fraction: float) -> float:
     return optimize.brentq(lambda x: 1.0 - special.j0(x) ** 2 - special.j1(x) ** 2 - fraction, 1e-6, 1e6)
 
 
-def _pixel_weights(offsets: Float[np.ndarray, " n"], radius: int, sigma_px: float) -> Float[np.ndarray, "k n"]:
-    """Fraction of a point at each offset (px from a pixel centre) that a Gaussian of sigma_px puts in pixels -radius..radius."""
-    edges = np.arange(-radius, radius + 2) - 0.5
-    if sigma_px == 0.0:
-        return ((offsets >= edges[:-1, None]) & (offsets < edges[1:, None])).astype(float)
-    cdf = special.ndtr((edges[:, None] - offsets[None, :]) / sigma_px)
-    return np.diff(cdf, axis=0)
+def _airy_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> float:
+    """Pixels per unit of x = pi D theta / lambda (theta in radians, a pixel ``pitch / focal length``)."""
+    return wavelength_m / (np.pi * sensor.aperture_diameter_m * intrinsics.pixel_pitch / intrinsics.focal_length)
 
 
-def gaussian_pixel_weights(sigma_px: Float[Array, ""], radius: int) -> Float[Array, " k"]:
-    """The Gaussian of ``psf_kernel`` without diffraction, per axis and in JAX (differentiable in
-    ``sigma_px`` > 0): ``Phi((k + 1/2) / sigma) - Phi((k - 1/2) / sigma)`` for k = -radius..radius."""
-    edges = jnp.arange(-radius, radius + 2) - 0.5
-    return jnp.diff(jax.scipy.special.ndtr(edges / sigma_px))
+def airy_transfer(rho: Float[np.ndarray, "..."]) -> Float[np.ndarray, "..."]:
+    """The MTF of a diffraction-limited circular pupil at ``rho`` = frequency / cut-off (D / lambda
+    cycles per radian): ``(2 / pi) (acos rho - rho sqrt(1 - rho^2))``, 0 beyond 1 (Goodman,
+    "Introduction to Fourier Optics", 3rd ed., eq. 6-32): the Fourier transform of :func:`airy_psf`."""
+    r = np.clip(np.abs(np.asarray(rho, dtype=float)), 0.0, 1.0)
+    return 2.0 / np.pi * (np.arccos(r) - r * np.sqrt(1.0 - r**2))
 
 
-def psf_kernel(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> Float[np.ndarray, "k k"]:
-    """The PSF integrated over pixels: kernel[dv, du] is the fraction of a point's light that lands du, dv px away.
+def gaussian_transfer(sigma_px: Float[Array, ""], fy: Float[Array, "..."], fx: Float[Array, "..."]) -> Float[Array, "..."]:
+    """The Fourier transform of a continuous 2-D Gaussian of ``sigma_px`` at frequencies (cycles
+    per px) fy, fx: ``exp(-2 pi^2 sigma^2 (fx^2 + fy^2))``. JAX, differentiable in sigma."""
+    return jnp.exp(-2.0 * jnp.pi**2 * sigma_px**2 * (fx**2 + fy**2))
 
-    The Airy pattern (if ``sensor.diffraction``) is sampled at sub-pixel points, the Gaussian is
-    integrated exactly (error function) from each point over each pixel, and the kernel is
-    normalised to sum 1. The pixel's angular size is ``pixel_pitch / focal_length``. A Gaussian
-    alone gives ``Phi((k + 1/2) / sigma) - Phi((k - 1/2) / sigma)`` per axis, whose discrete second
-    moment is sigma^2 + 1/12 (the pixel's own width, Sheppard's correction).
 
-    Returns:
-        (k, k) float64 kernel, k odd, centred, summing to 1; (1, 1) = [[1]] without any blur.
-    """
-    sigma = sensor.psf_sigma_px
-    gauss_radius = math.ceil(GAUSSIAN_RADIUS_SIGMA * sigma)
-    if sensor.diffraction:
-        pixel_angle = intrinsics.pixel_pitch / intrinsics.focal_length
-        zero_px = AIRY_FIRST_ZERO * wavelength_m / (np.pi * sensor.aperture_diameter_m * pixel_angle)
-        airy_radius = max(1, math.ceil(_airy_radius(PSF_ENERGY) / AIRY_FIRST_ZERO * zero_px))
-        n = int(np.clip(math.ceil(AIRY_SAMPLES_PER_ZERO / zero_px), *AIRY_SAMPLES_PER_PX)) | 1
-        offsets = (np.arange((2 * airy_radius + 1) * n) - ((2 * airy_radius + 1) * n - 1) / 2) / n
-        theta = np.hypot(offsets[:, None], offsets[None, :]) * pixel_angle
-        points = airy_psf(theta, wavelength_m, sensor.aperture_diameter_m)
-    else:
-        airy_radius, offsets, points = 0, np.zeros(1), np.ones((1, 1))
-    weights = _pixel_weights(offsets, airy_radius + gauss_radius, sigma)
-    kernel = weights @ points @ weights.T
-    return kernel / kernel.sum()
+def fourier_filter(image: Float[Array, "h w c"], transfer: Callable[[np.ndarray, np.ndarray], Array], pad: int) -> Float[Array, "h w c"]:
+    """``image`` multiplied in Fourier space by ``transfer(fy, fx)`` (frequencies in cycles per px,
+    shaped (H, 1, 1) and (1, W, 1); the result broadcasts against (H, W, channels)), after
+    ``pad`` px of black sky on every side so that nothing wraps round: a convolution with a kernel
+    that reaches ``pad`` px at most, no light entering from outside. The fit's blur and shift
+    (:mod:`spacefit.fitting.nuisance`) and the sensor's PSF share it."""
+    h, w = image.shape[:2]
+    padded = jnp.pad(image, ((pad, pad), (pad, pad), (0, 0)))
+    fy = np.fft.fftfreq(padded.shape[0])[:, None, None]  # NumPy: known while JAX traces, for NumPy transfers too
+    fx = np.fft.fftfreq(padded.shape[1])[None, :, None]
+    filtered = jnp.real(jnp.fft.ifft2(jnp.fft.fft2(padded, axes=(0, 1)) * transfer(fy, fx), axes=(0, 1)))
+    return filtered[pad : pad + h, pad : pad + w]
+
+
+def psf_reach_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> int:
+    """How far (px) the PSF reaches: 5 sigma of the Gaussian plus the radius holding 99 % of the Airy pattern's energy."""
+    airy = _airy_radius(PSF_ENERGY) * _airy_px(sensor, intrinsics, wavelength_m) if sensor.diffraction else 0.0
+    return math.ceil(GAUSSIAN_RADIUS_SIGMA * sensor.psf_sigma_px + airy)
+
+
+def psf_transfer(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> Callable[[np.ndarray, np.ndarray], Array]:
+    """The PSF's transfer function ``(fy, fx) -> T`` (cycles per px) at one wavelength: the
+    continuous Gaussian's times, with diffraction, the circular pupil's MTF (:func:`airy_transfer`)."""
+    cutoff = 1.0 / (np.pi * _airy_px(sensor, intrinsics, wavelength_m))  # D / lambda in cycles per px
+
+    def transfer(fy: np.ndarray, fx: np.ndarray) -> Array:
+        gauss = gaussian_transfer(sensor.psf_sigma_px, fy, fx)
+        if not sensor.diffraction:
+            return gauss
+        return gauss * airy_transfer(np.hypot(fx, fy) / cutoff)
+
+    return transfer
 
 
 def psf_rms_px(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> float:
-    """The rms width (px, per axis) of the widest channel's :func:`psf_kernel`: how far the PSF
-    spreads a point's light over pixels (0 without any blur; sqrt(sigma^2 + 1/12) for a Gaussian
-    of sigma alone, the pixel's width included)."""
+    """The rms width (px, per axis) of the widest channel's PSF: sqrt(sigma^2 + a^2), a the Airy
+    pattern's within the radius X that holds 99 % of its energy: ``a^2 = X^2 (J1^2 - J0 J2) /
+    (2 (1 - J0^2 - J1^2))`` at X, in px (from the integral of x J1(x)^2, Watson 1944, 5.11)."""
     widths = []
     for wavelength in sensor.wavelengths(channels):
-        kernel = psf_kernel(sensor, intrinsics, wavelength)
-        offsets = np.arange(kernel.shape[1]) - (kernel.shape[1] - 1) / 2
-        widths.append(math.sqrt(float(kernel.sum(axis=0) @ offsets**2)))
+        airy = 0.0
+        if sensor.diffraction:
+            x = _airy_radius(PSF_ENERGY)
+            j0, j1, j2 = (special.jv(n, x) for n in (0, 1, 2))
+            airy = _airy_px(sensor, intrinsics, wavelength) * x * math.sqrt((j1**2 - j0 * j2) / (2.0 * (1.0 - j0**2 - j1**2)))
+        widths.append(math.hypot(sensor.psf_sigma_px, airy))
     return max(widths)
-
-
-def _convolve(image: Float[Array, "h w"], kernel: np.ndarray) -> Float[Array, "h w"]:
-    if kernel.shape == (1, 1):
-        return image
-    return jax.scipy.signal.fftconvolve(image, jnp.asarray(kernel), mode="same")
 
 
 def electrons_fn(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> Callable[[Float[Array, "h w c"]], Float[Array, "h w c"]]:
     """:func:`expected_electrons` as a JAX function of radiance, with the sensor's per-pixel factors
-    and PSF kernels computed once and no check of the values (a fit's model may dip below zero)."""
+    and PSF transfer computed once and no check of the values (a fit's model may dip below zero)."""
     factor = electrons_per_radiance(sensor, intrinsics, channels)
-    kernels = [psf_kernel(sensor, intrinsics, w) for w in sensor.wavelengths(channels)]
+    waves = sensor.wavelengths(channels)
+    transfers = [psf_transfer(sensor, intrinsics, w) for w in waves]
+    pad = max(psf_reach_px(sensor, intrinsics, w) for w in waves)
 
     def electrons(radiance: Float[Array, "h w c"]) -> Float[Array, "h w c"]:
         e = jnp.asarray(radiance) * factor
-        return jnp.stack([_convolve(e[..., c], k) for c, k in enumerate(kernels)], axis=-1)
+        if pad == 0:
+            return e
+        return fourier_filter(e, lambda fy, fx: jnp.concatenate([t(fy, fx) for t in transfers], axis=-1), pad)
 
     return electrons
 

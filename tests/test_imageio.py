@@ -9,7 +9,7 @@ from astropy.io import fits
 
 from spacefit.errors import InputError
 from spacefit.geometry.frames import Intrinsics
-from spacefit.imageio import read_image, sidecar_path, write_observation
+from spacefit.imageio import RowOrderWarning, format_sensor_sources, read_image, sensor_of, sidecar_path, write_observation
 from spacefit.rendering.exr import write_exr
 from spacefit.rendering.png import write_png
 from spacefit.sensor import Sensor, observe
@@ -32,8 +32,11 @@ def test_round_trip_of_dn_and_sensor(tmp_path, dn, name):
     img = read_image(tmp_path / name)
     assert img.unit == "DN" and img.data.shape == dn.shape
     assert np.array_equal(img.data, dn.astype(float))
-    assert Sensor(**img.metadata["sensor"]) == SENSOR
+    assert sensor_of(img)[0] == SENSOR
     assert img.metadata["sidecar"]["metadata"] == {"seed": 3}
+    # the simulation's illustrative defaults are named in the sidecar and in the sources
+    assert "quantum_efficiency" in img.metadata["sidecar"]["sensor_defaults"] and "bias_dn" not in img.metadata["sidecar"]["sensor_defaults"]
+    assert "illustrative default" in sensor_of(img)[1]["quantum_efficiency"] and "illustrative" not in sensor_of(img)[1]["bias_dn"]
     # saturated at the sensor's ADC maximum (not the 16-bit file's): exactly those values masked
     assert np.array_equal(~img.mask, dn >= 4095) and not img.mask[3, 4].any() and (~img.mask).sum() < 30
 
@@ -42,9 +45,11 @@ def test_fits_header_holds_every_sensor_value(tmp_path, dn):
     write_observation(tmp_path / "obs.fits", dn, SENSOR)
     sidecar_path(tmp_path / "obs.fits").unlink()  # the header alone must carry them
     img = read_image(tmp_path / "obs.fits")
-    assert Sensor(**img.metadata["sensor"]) == SENSOR
-    assert img.metadata["exposure_time_s"] == 2e-3 and img.metadata["gain_electrons_per_dn"] == pytest.approx(2.0)
+    sensor, sources = sensor_of(img)
+    assert sensor == SENSOR and sources["bias_dn"] == "header SPACEFIT SENSOR bias_dn"
+    assert img.metadata["header"]["GAIN"] == pytest.approx(2.0) and img.metadata["header"]["RDNOISE"] == 5.0
     assert img.metadata["header"]["BUNIT"] == "adu" and img.metadata["saturation_dn"] == 4095
+    assert (img.metadata["row_order"], img.metadata["row_order_source"]) == ("bottom-up", "header ROWORDER")
     with fits.open(tmp_path / "obs.fits") as f:
         # FITS rows run bottom-up and channels are the third axis
         assert f[0].data.shape == (3, 16, 24) and np.array_equal(f[0].data[1, -1], dn[0, :, 1])
@@ -53,9 +58,10 @@ def test_fits_header_holds_every_sensor_value(tmp_path, dn):
 def test_foreign_fits_radiance_and_saturate_keyword(tmp_path):
     rad = np.array([[1.0, 2.0], [3.0, 4.0]])
     fits.PrimaryHDU(rad, header=fits.Header([("BUNIT", "W m-2 sr-1"), ("EXPTIME", 0.5)])).writeto(tmp_path / "r.fits")
-    img = read_image(tmp_path / "r.fits", unit="radiance")
+    with pytest.warns(RowOrderWarning, match="no ROWORDER and no celestial WCS"):
+        img = read_image(tmp_path / "r.fits", unit="radiance")
     assert img.unit == "W m^-2 sr^-1" and np.array_equal(img.data[..., 0], rad[::-1]) and img.mask.all()
-    assert img.metadata["exposure_time_s"] == 0.5
+    assert img.metadata["sensor_found"]["exposure_time_s"] == (0.5, "header EXPTIME")
     fits.PrimaryHDU(np.array([[10, 900], [1000, 20]], dtype=np.int32), header=fits.Header([("SATURATE", 900)])).writeto(tmp_path / "d.fits")
     img = read_image(tmp_path / "d.fits")
     assert img.unit == "DN" and (~img.mask[..., 0]).tolist() == [[True, False], [False, True]]
@@ -135,3 +141,68 @@ def test_unknown_formats_and_bad_arguments(tmp_path, dn):
         write_observation(tmp_path / "o.fits", np.full((2, 2, 1), 5000, dtype=np.uint16), SENSOR)
     with pytest.raises(InputError, match="unsigned integers"):
         write_observation(tmp_path / "o.fits", np.ones((2, 2, 1)), SENSOR)
+
+
+IMAGE = np.arange(12, dtype=np.uint16).reshape(3, 4) * 100 + 7  # top-down: row 0 is the image's top
+
+
+def _write(path, rows: np.ndarray, **cards) -> None:
+    fits.PrimaryHDU(rows, header=fits.Header(list(cards.items()))).writeto(path)
+
+
+def test_fits_row_order_from_roworder_wcs_or_the_standard(tmp_path):
+    """Bottom-up with and without ROWORDER, top-down with ROWORDER = 'TOP-DOWN', and a WCS's parity: all read to the same array."""
+    _write(tmp_path / "plain.fits", IMAGE[::-1])
+    _write(tmp_path / "up.fits", IMAGE[::-1], ROWORDER="BOTTOM-UP")
+    _write(tmp_path / "down.fits", IMAGE, ROWORDER="TOP-DOWN")
+    sky = dict(CTYPE1="RA---TAN", CTYPE2="DEC--TAN", CRVAL1=10.0, CRVAL2=20.0, CRPIX1=2.0, CRPIX2=2.0, CD1_2=0.0, CD2_1=0.0)
+    _write(tmp_path / "sky_up.fits", IMAGE[::-1], CD1_1=-1e-4, CD2_2=1e-4, **sky)  # east left, north up: det < 0
+    _write(tmp_path / "sky_down.fits", IMAGE, CD1_1=-1e-4, CD2_2=-1e-4, **sky)  # the same sky stored top-down: det > 0
+    with pytest.warns(RowOrderWarning):
+        plain = read_image(tmp_path / "plain.fits")
+    assert plain.metadata["row_order_source"] == "FITS standard (no ROWORDER, no WCS)" and "first row = bottom" in plain.metadata["notes"][0]
+    expected = {"up.fits": "header ROWORDER", "down.fits": "header ROWORDER", "sky_up.fits": "header WCS (parity of the sky)",
+                "sky_down.fits": "header WCS (parity of the sky)"}
+    for name, source in expected.items():
+        img = read_image(tmp_path / name)
+        assert np.array_equal(img.data[..., 0], IMAGE) and img.metadata["row_order_source"] == source and not img.metadata["notes"], name
+    assert read_image(tmp_path / "down.fits").metadata["row_order"] == "top-down"
+    # the override wins over what the file says
+    flipped = read_image(tmp_path / "down.fits", row_order="bottom-up")
+    assert np.array_equal(flipped.data[..., 0], IMAGE[::-1]) and flipped.metadata["row_order_source"] == "option/argument"
+    _write(tmp_path / "odd.fits", IMAGE, ROWORDER="LEFT-RIGHT")
+    with pytest.raises(InputError, match="ROWORDER = 'LEFT-RIGHT' is neither 'TOP-DOWN' nor 'BOTTOM-UP'"):
+        read_image(tmp_path / "odd.fits")
+    with pytest.raises(InputError, match="`row_order` must be one of 'bottom-up', 'top-down'; got 'upside-down'"):
+        read_image(tmp_path / "down.fits", row_order="upside-down")
+
+
+def test_foreign_header_is_mapped_field_by_field(tmp_path):
+    """A header written by another program with plain keywords: each maps to its sensor field, with its source."""
+    cards = dict(ROWORDER="TOP-DOWN", BUNIT="adu", EXPTIME=0.02, GAIN=2.5, RDNOISE=3.2, BIAS=100.0, SATURATE=60000.0,
+                 RADSCALE=1234.5, PSFSIGMA=0.8, **{"DATE-OBS": "2026-03-04T05:06:07.5"})
+    _write(tmp_path / "cam.fits", IMAGE, **cards)
+    img = read_image(tmp_path / "cam.fits")
+    assert img.unit == "DN" and img.metadata["date_obs"] == "2026-03-04T05:06:07.500"
+    sensor, sources = sensor_of(img)
+    assert sensor.gain_dn_per_electron == pytest.approx(0.4) and sources["gain_dn_per_electron"] == "header GAIN"
+    assert (sensor.read_noise_electrons, sources["read_noise_electrons"]) == (3.2, "header RDNOISE")
+    assert (sensor.bias_dn, sources["bias_dn"]) == (100.0, "header BIAS")
+    assert (sensor.saturation_dn, sources["saturation_level_dn"]) == (60000.0, "header SATURATE")
+    assert (sensor.radiometric_scale_dn_per_w_m2_sr, sources["radiometric_scale_dn_per_w_m2_sr"]) == (1234.5, "header RADSCALE")
+    assert (sensor.psf_sigma_px, sources["psf_sigma_px"]) == (0.8, "header PSFSIGMA")
+    assert img.metadata["sensor_found"]["exposure_time_s"] == (0.02, "header EXPTIME")
+    # calibrated: no diffraction without an aperture, no vignetting, both by a stated rule
+    assert not sensor.diffraction and not sensor.vignetted and sources["vignetting"].startswith("rule: off")
+    assert set(sources) == {"gain_dn_per_electron", "bias_dn", "read_noise_electrons", "psf_sigma_px", "diffraction",
+                            "radiometric_scale_dn_per_w_m2_sr", "saturation_level_dn", "vignetting"}
+    table = format_sensor_sources(sensor, sources)
+    assert "read_noise_electrons" in table and "(header RDNOISE)" in table and len(table.splitlines()) == 1 + len(sources)
+    # aliases: READNOIS, RON, PEDESTAL; aliases that disagree are refused
+    _write(tmp_path / "alias.fits", IMAGE, ROWORDER="TOP-DOWN", READNOIS=4.0, PEDESTAL=30.0)
+    found = read_image(tmp_path / "alias.fits").metadata["sensor_found"]
+    assert found["read_noise_electrons"] == (4.0, "header READNOIS") and found["bias_dn"] == (30.0, "header PEDESTAL")
+    assert found["bit_depth"] == (16, "header BITPIX")
+    _write(tmp_path / "both.fits", IMAGE, ROWORDER="TOP-DOWN", RDNOISE=4.0, RON=5.0)
+    with pytest.raises(InputError, match="read_noise_electrons 2 ways: RDNOISE = 4.0, RON = 5.0"):
+        read_image(tmp_path / "both.fits")

@@ -14,7 +14,7 @@ from spacefit.fitting.problem import setup
 from spacefit.geometry.frames import Intrinsics
 from spacefit.precision import float64
 from spacefit.scene.parameters import ATTITUDE, IMAGE, NUISANCES, POSITION, ROLL, fd_step, observation_name, scene_value, scene_with_values
-from spacefit.sensor import Sensor, psf_kernel
+from spacefit.sensor import Sensor, expected_dn
 
 # The panels case at 48 x 48 px (same field of view), 4 spp: renders take milliseconds.
 TINY = {"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50.0, "render.spp": 4, "render.seed": 1}
@@ -28,14 +28,17 @@ def cosine(a: np.ndarray, b: np.ndarray) -> float:
     return float(a @ b / (np.linalg.norm(a) * np.linalg.norm(b)))
 
 
-def test_blur_is_the_sensors_gaussian_psf_and_keeps_the_light():
+def test_blur_is_the_sensors_continuous_gaussian_and_keeps_the_light():
+    """The fit's blur and the sensor's Gaussian PSF are one operation: a continuous Gaussian on the
+    pixel-integrated render (variance sigma^2, not sigma^2 + 1/12: no second pixel integration)."""
     image = np.zeros((31, 31, 1))
     image[15, 15, 0] = 1.0
     out = np.asarray(blur(jnp.asarray(image), 1.3))[..., 0]
-    kernel = psf_kernel(Sensor(psf_sigma_px=1.3, diffraction=False), Intrinsics(0.1, 1e-5, 31, 31), 550e-9)
-    k = kernel.shape[0] // 2
-    np.testing.assert_allclose(out[15 - k:16 + k, 15 - k:16 + k], kernel, atol=1e-6)  # float32 FFT round-off
+    sensor = Sensor(psf_sigma_px=1.3, diffraction=False, radiometric_scale_dn_per_w_m2_sr=1.0, gain_dn_per_electron=1.0, bias_dn=0.0)
+    np.testing.assert_allclose(out, np.asarray(expected_dn(image, sensor, Intrinsics(0.1, 1e-5, 31, 31)))[..., 0], atol=1e-6)
     assert out.sum() == pytest.approx(1.0, abs=1e-5)
+    row = out.sum(axis=0)
+    assert row @ (np.arange(31) - 15.0) ** 2 == pytest.approx(1.3**2, rel=1e-3)  # float32; +1/12 if integrated again
 
 
 def test_shift_by_whole_pixels_moves_the_image_and_by_sub_pixels_its_centroid():
@@ -55,10 +58,10 @@ def test_nuisances_are_registered_and_fit_only():
     assert set(IMAGE) <= set(sf.PARAMETERS) and set(NUISANCES) == {*IMAGE, *ATTITUDE, *POSITION, ROLL}
     scene = sf.load_case("panels").scene()
     assert set(IMAGE) <= set(sf.available_parameters(scene))
-    with pytest.raises(sf.InputError, match="image.gain"):
-        sf.render_function(scene, ["image.gain"])  # no render has it: a fit applies it
-    with pytest.raises(sf.InputError, match=r"image.psf_sigma_px.*\(0, 4\)"):
-        sf.fit(sf.Observation(scene, np.zeros((128, 128, 3))), ["image.psf_sigma_px"], start={"image.psf_sigma_px": 0.0})
+    with pytest.raises(sf.InputError, match="image.scale"):
+        sf.render_function(scene, ["image.scale"])  # no render has it: a fit applies it
+    with pytest.raises(sf.InputError, match=r"image.blur_sigma_px.*\(0, 4\)"):
+        sf.fit(sf.Observation(scene, np.zeros((128, 128, 3))), ["image.blur_sigma_px"], start={"image.blur_sigma_px": 0.0})
 
 
 @pytest.fixture(scope="module")
@@ -68,7 +71,7 @@ def columns():
     case = sf.load_case("panels").with_values(TINY)
     scene = case.scene()
     free = ["parts.panels.alpha_x", *IMAGE]
-    at = {"image.gain": 1.2, "image.offset_w_m2_sr": 0.01, "image.psf_sigma_px": 0.8, "image.shift_x_px": 0.3, "image.shift_y_px": -0.2}
+    at = {"image.scale": 1.2, "image.offset_w_m2_sr": 0.01, "image.blur_sigma_px": 0.8, "image.shift_x_px": 0.3, "image.shift_y_px": -0.2}
     reference = np.asarray(sf.render(scene))
 
     @float64
@@ -152,17 +155,17 @@ def columns_against_finite_differences(free: list[str], at: dict[str, float]) ->
 
 
 def test_per_observation_gain_and_offset_columns_match_finite_differences_and_act_on_their_own_observation():
-    free = ["parts.panels.alpha_x", "image.gain@0", "image.gain@1", "image.offset_w_m2_sr@1"]
-    J, half = columns_against_finite_differences(free, {"image.gain@0": 1.2, "image.gain@1": 0.8, "image.offset_w_m2_sr@1": 0.01})
+    free = ["parts.panels.alpha_x", "image.scale@0", "image.scale@1", "image.offset_w_m2_sr@1"]
+    J, half = columns_against_finite_differences(free, {"image.scale@0": 1.2, "image.scale@1": 0.8, "image.offset_w_m2_sr@1": 0.01})
     assert np.all(J[half:, 1] == 0) and np.any(J[:half, 1] != 0)  # gain@0: observation 0 only
     assert np.all(J[:half, 2] == 0) and np.any(J[half:, 2] != 0)  # gain@1: observation 1 only
     assert np.all(J[:half, 3] == 0) and np.all(J[half:, 3] == 1)  # offset@1: every pixel of observation 1
 
 
 def test_per_observation_psf_and_shift_columns_match_finite_differences_and_act_on_their_own_observation():
-    free = ["parts.panels.alpha_x", "image.psf_sigma_px@0", "image.psf_sigma_px@1", "image.shift_x_px@1", "image.shift_y_px@0"]
+    free = ["parts.panels.alpha_x", "image.blur_sigma_px@0", "image.blur_sigma_px@1", "image.shift_x_px@1", "image.shift_y_px@0"]
     J, half = columns_against_finite_differences(
-        free, {"image.psf_sigma_px@0": 0.6, "image.psf_sigma_px@1": 1.2, "image.shift_x_px@1": 0.3, "image.shift_y_px@0": -0.2})
+        free, {"image.blur_sigma_px@0": 0.6, "image.blur_sigma_px@1": 1.2, "image.shift_x_px@1": 0.3, "image.shift_y_px@0": -0.2})
     for j in range(1, len(free)):
         own = slice(None, half) if free[j].endswith("@0") else slice(half, None)
         other = slice(half, None) if free[j].endswith("@0") else slice(None, half)
@@ -180,30 +183,30 @@ def test_two_observations_with_different_psf_widths_and_shifts_recover_each():
     observed = [np.asarray(blur(jnp.asarray(np.asarray(sf.render(t), float)), w)) for w, t in zip(PSF_WIDTHS, truths)]
     observed[1] = np.asarray(shift(jnp.asarray(observed[1]), 0.4, 0.0))
     observations = [sf.Observation(s, np.clip(o, 0.0, None)) for s, o in zip(fitted, observed)]
-    free = ["image.psf_sigma_px@0", "image.psf_sigma_px@1", "image.shift_x_px@1"]
-    result = sf.fit(observations, free, start={"image.psf_sigma_px@0": 0.9, "image.psf_sigma_px@1": 0.9})
+    free = ["image.blur_sigma_px@0", "image.blur_sigma_px@1", "image.shift_x_px@1"]
+    result = sf.fit(observations, free, start={"image.blur_sigma_px@0": 0.9, "image.blur_sigma_px@1": 0.9})
     assert result.success, result.status
     for k, w in enumerate(PSF_WIDTHS):
-        assert abs(result.values[f"image.psf_sigma_px@{k}"] - w) < 0.1, result.values
+        assert abs(result.values[f"image.blur_sigma_px@{k}"] - w) < 0.1, result.values
     assert abs(result.values["image.shift_x_px@1"] - 0.4) < 0.05, result.values
 
 
 @pytest.mark.parametrize("free, match", [
-    (["image.gain@2"], r"'image\.gain@2'.*'2'.*from 0 to 1 \(the fit has 2 observations\)"),
-    (["image.gain@-1"], r"'image\.gain@-1'.*'-1'.*from 0 to 1"),
+    (["image.scale@2"], r"'image\.scale@2'.*'2'.*from 0 to 1 \(the fit has 2 observations\)"),
+    (["image.scale@-1"], r"'image\.scale@-1'.*'-1'.*from 0 to 1"),
     (["image.offset_w_m2_sr@one"], r"'image\.offset_w_m2_sr@one'.*'one'.*from 0 to 1"),
-    (["image.gain@01"], r"'image\.gain@01'.*from 0 to 1"),
-    (["image.gain@\u00b2"], r"'image\.gain@\u00b2'.*from 0 to 1"),  # a superscript two: a digit to str.isdigit
-    (["parts.legs.kd@1"], r"'parts\.legs\.kd@1'.*only target\.attitude_x_deg, .*camera\.roll_deg, image\.gain, image\.offset_w_m2_sr, image\.psf_sigma_px, image\.shift_x_px, image\.shift_y_px"),
-    (["image.gain", "image.gain@1"], r"both 'image\.gain'.*'image\.gain@1'"),
+    (["image.scale@01"], r"'image\.scale@01'.*from 0 to 1"),
+    (["image.scale@\u00b2"], r"'image\.scale@\u00b2'.*from 0 to 1"),  # a superscript two: a digit to str.isdigit
+    (["parts.legs.kd@1"], r"'parts\.legs\.kd@1'.*only target\.attitude_x_deg, .*camera\.roll_deg, image\.scale, image\.offset_w_m2_sr, image\.blur_sigma_px, image\.shift_x_px, image\.shift_y_px"),
+    (["image.scale", "image.scale@1"], r"both 'image\.scale'.*'image\.scale@1'"),
 ])
 def test_bad_per_observation_names_are_refused(free, match):
     scenes = two_observations(4)
     observations = [sf.Observation(s, np.zeros((48, 48, 3))) for s in scenes]
     with pytest.raises(sf.InputError, match=match):
         setup(observations, free, None, "pixel", None, None, 1, 2, "prb", "fd", "rms")
-    with pytest.raises(sf.InputError, match="image.gain@0"):
-        sf.render_function(scenes[0], ["image.gain@0"])  # a render has no observations
+    with pytest.raises(sf.InputError, match="image.scale@0"):
+        sf.render_function(scenes[0], ["image.scale@0"])  # a render has no observations
 
 
 GAINS = (1.15, 0.85)
@@ -217,13 +220,13 @@ def test_two_observations_with_different_gains_recover_each():
     case = sf.load_case("panels")
     truths = two_observations(256)
     observations = [sf.Observation(s, g * np.asarray(sf.render(t), float)) for g, s, t in zip(GAINS, two_observations(64), truths)]
-    free = [*case.free, observation_name("image.gain", 0), observation_name("image.gain", 1)]
+    free = [*case.free, observation_name("image.scale", 0), observation_name("image.scale", 1)]
     result = sf.fit(observations, free, start=case.start)
     assert result.success, result.status
     for k, g in enumerate(GAINS):
-        assert abs(result.values[f"image.gain@{k}"] / g - 1.0) < 0.02, result.values
+        assert abs(result.values[f"image.scale@{k}"] / g - 1.0) < 0.02, result.values
     assert abs(result.values["parts.legs.kd"] / case.truth["parts.legs.kd"] - 1.0) < 0.03, result.values
-    assert set(result.nuisances) == {"image.gain@0", "image.gain@1"}
+    assert set(result.nuisances) == {"image.scale@0", "image.scale@1"}
 
 
 def test_a_03_degree_camera_roll_is_recovered():
@@ -238,7 +241,7 @@ def test_a_03_degree_camera_roll_is_recovered():
 
 
 RECOVERY = {"render.resolution": [64, 64], "camera.pixel_pitch_mm": 37.5, "render.spp": 64}
-TRUE_NUISANCES = {"image.gain": 1.15, "image.offset_w_m2_sr": 0.02, "image.psf_sigma_px": 0.7, "target.attitude_x_deg": 0.3}
+TRUE_NUISANCES = {"image.scale": 1.15, "image.offset_w_m2_sr": 0.02, "image.blur_sigma_px": 0.7, "target.attitude_x_deg": 0.3}
 
 
 @pytest.mark.slow  # CI: the nuisance Jacobian columns and the roll recovery; this fit takes 30 to 50 s
@@ -248,7 +251,7 @@ def test_recovery_with_unknown_gain_offset_psf_width_and_a_03_degree_attitude_er
     gain 1, offset 0, sigma 0.5 px and the nominal attitude, and fits all of them jointly."""
     case = sf.load_case("panels").with_values(RECOVERY)
     truth = case.truth_scene.with_values({"target.attitude_deg": [TRUE_NUISANCES["target.attitude_x_deg"], 0.0, 0.0], "render.spp": 256})
-    g, o, sigma = (TRUE_NUISANCES[n] for n in ("image.gain", "image.offset_w_m2_sr", "image.psf_sigma_px"))
+    g, o, sigma = (TRUE_NUISANCES[n] for n in ("image.scale", "image.offset_w_m2_sr", "image.blur_sigma_px"))
     observed = g * np.asarray(blur(jnp.asarray(np.asarray(sf.render(truth), float)), sigma)) + o
     result = sf.fit(sf.Observation(case.scene(), observed), [*case.free, *TRUE_NUISANCES], start=case.start)
     assert result.success, result.status
@@ -256,7 +259,7 @@ def test_recovery_with_unknown_gain_offset_psf_width_and_a_03_degree_attitude_er
     assert errors["parts.panels.alpha_x"] < 0.05 and errors["parts.panels.alpha_y"] < 0.05, result.values
     assert errors["parts.legs.kd"] < 0.03, result.values
     assert abs(result.values["target.attitude_x_deg"] - 0.3) < 0.05, result.values
-    assert abs(result.values["image.gain"] / g - 1.0) < 0.02 and abs(result.values["image.psf_sigma_px"] - sigma) < 0.05
+    assert abs(result.values["image.scale"] / g - 1.0) < 0.02 and abs(result.values["image.blur_sigma_px"] - sigma) < 0.05
     assert result.nuisances.keys() == TRUE_NUISANCES.keys() and result.estimates.keys() == case.truth.keys()
     assert "nuisance parameters:" in sf.format_result(result)
 

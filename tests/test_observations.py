@@ -120,20 +120,58 @@ def test_from_file_refuses_dn_without_a_sensor_and_takes_a_sensor_file(sphere, t
     dn = sf.observe(truth, SENSOR, assemble(scene).intrinsics, seed=2)
     sf.write_observation(tmp_path / "obs.png", dn, SENSOR)
     sidecar_path(tmp_path / "obs.png").unlink()
-    with pytest.raises(sf.InputError, match="obs.png' holds DN .*, not radiance, and names no sensor: give the camera"):
+    with pytest.raises(sf.InputError, match="obs.png' holds DN .*needs 8 sensor value.*: exposure_time_s .or radiometric_scale"):
         sf.Observation.from_file(tmp_path / "obs.png", scene, response="linear")
     (tmp_path / "sensor.json").write_text(json.dumps(SENSOR.to_dict()))
-    obs = sf.Observation.from_file(tmp_path / "obs.png", scene, response="linear", sensor=read_sensor_file(tmp_path / "sensor.json"))
+    obs = sf.Observation.from_file(tmp_path / "obs.png", scene, response="linear", sensor_file=tmp_path / "sensor.json")
     assert obs.sensor == SENSOR and np.array_equal(obs.reference, dn.astype(float))
-    # a foreign FITS: EXPTIME and GAIN are named in the refusal, and used under a partial sensor file
-    header = fits.Header([("EXPTIME", 2e-6), ("GAIN", 4.0)])
-    fits.PrimaryHDU(dn[::-1, :, 0].astype(np.int32), header=header).writeto(tmp_path / "foreign.fits")
-    with pytest.raises(sf.InputError, match="its header gives only exposure_time_s = 2e-06, gain_dn_per_electron = 0.25"):
-        sf.Observation.from_file(tmp_path / "foreign.fits", scene)
+    assert obs.sensor_sources["bias_dn"] == "sensor file" and obs.sensor_sources["diffraction"] == "sensor file"
+    # a foreign FITS with EXPTIME and GAIN and a sensor file of bias and bits only: what is missing is
+    # named with its three ways, never filled in silently
+    header = fits.Header([("EXPTIME", 2e-6), ("GAIN", 4.0), ("ROWORDER", "TOP-DOWN")])
+    fits.PrimaryHDU(dn[:, :, 0].astype(np.int32), header=header).writeto(tmp_path / "foreign.fits")
     (tmp_path / "sensor.toml").write_text("[sensor]\nbias_dn = 50.0\nbit_depth = 12\n")
-    obs = sf.Observation.from_file(tmp_path / "foreign.fits", scene, sensor=read_sensor_file(tmp_path / "sensor.toml"))
+    with pytest.raises(sf.InputError) as refused:
+        sf.Observation.from_file(tmp_path / "foreign.fits", scene, sensor_file=tmp_path / "sensor.toml")
+    message = str(refused.value)
+    for missing in ("aperture_diameter_m", "wavelength_m", "quantum_efficiency", "read_noise_electrons", "psf_sigma_px"):
+        assert f"{missing} " in message, missing
+    assert "header keyword RDNOISE / READNOIS / RON / HIERARCH SPACEFIT SENSOR read_noise_electrons; sensor file key " \
+           "read_noise_electrons (--sensor FILE); option --sensor-value read_noise_electrons=VALUE" in message
+    assert "sensor_defaults='illustrative' (--sensor-defaults illustrative)" in message and "exposure_time_s" not in message
+    # the illustrative defaults only when asked for by name, and named as such
+    obs = sf.Observation.from_file(tmp_path / "foreign.fits", scene, sensor_file=tmp_path / "sensor.toml", sensor_defaults="illustrative")
     assert obs.sensor == sf.Sensor(exposure_time_s=2e-6, gain_dn_per_electron=0.25, bias_dn=50.0, bit_depth=12)
+    assert obs.sensor_sources["exposure_time_s"] == "header EXPTIME" and obs.sensor_sources["gain_dn_per_electron"] == "header GAIN"
+    assert obs.sensor_sources["quantum_efficiency"] == "default (illustrative)" and obs.sensor_sources["bit_depth"] == "sensor file"
     assert obs.reference.shape == (32, 32, 1) and np.array_equal(obs.reference, dn[..., :1])  # one channel: grey
+    # or every missing value as an argument
+    given = {"aperture_diameter_m": 0.01, "wavelength_m": [5.5e-7], "quantum_efficiency": 0.6, "read_noise_electrons": 5.0,
+             "psf_sigma_px": 0.0, "full_well_electrons": 20000.0}
+    obs = sf.Observation.from_file(tmp_path / "foreign.fits", scene, sensor_file=tmp_path / "sensor.toml", sensor=given)
+    assert obs.sensor == sf.Sensor(exposure_time_s=2e-6, gain_dn_per_electron=0.25, bias_dn=50.0, bit_depth=12)
+    assert obs.sensor_sources["read_noise_electrons"] == "option/argument" and obs.sensor_sources["diffraction"].startswith("rule: on")
+    with pytest.raises(sf.InputError, match="`sensor_defaults` must be one of 'illustrative'"):
+        sf.Observation.from_file(tmp_path / "foreign.fits", scene, sensor_defaults="typical")
+
+
+def test_cli_refuses_a_missing_sensor_value_and_writes_nothing(sphere, tmp_path, capsys):
+    """The CLI: exit 2 naming the missing value and the three ways; the fit folder is not made."""
+    from spacefit.cli import main
+
+    d, scene, truth, _ = sphere
+    dn = sf.observe(truth, SENSOR, assemble(scene).intrinsics, seed=2)
+    fits.PrimaryHDU(dn[::-1, :, 0].astype(np.uint16), header=fits.Header([
+        ("ROWORDER", "BOTTOM-UP"), ("EXPTIME", 1e-6), ("GAIN", 2.0), ("BIAS", 50.0), ("SATURATE", 4095.0), ("PSFSIGMA", 0.0)])).writeto(tmp_path / "cam.fits")
+    (tmp_path / "scene.toml").write_text(scene.to_toml())
+    args = ["fit", str(tmp_path / "cam.fits"), "--scene", str(tmp_path / "scene.toml"), "--free", "parts.sphere.kd", "--out", str(tmp_path / "out")]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "read_noise_electrons: header keyword RDNOISE" in err and "--sensor-value read_noise_electrons=VALUE" in err
+    assert "aperture_diameter_m (or radiometric_scale_dn_per_w_m2_sr)" in err
+    assert not (tmp_path / "out").exists()
+    assert main([*args, "--sensor-value", "read_noise_electrons=x"]) == 2
+    assert "`--sensor-value read_noise_electrons=x`: 'x' is not a number" in capsys.readouterr().err
 
 
 @pytest.mark.parametrize("text, suffix, match", [
@@ -214,3 +252,25 @@ def test_a_grey_observation_counts_each_pixel_once(sphere):
     assert abs(result.values["parts.sphere.kd"] - TRUE_KD) < 4 * result.stderr["parts.sphere.kd"]
     assert result.renders[0].shape == (32, 32, 1)
     sf.plot_comparison(result, [grey])
+
+
+@pytest.mark.slow  # about 35 s
+def test_a_continuous_gaussian_psf_of_08_px_is_fitted_as_080():
+    """The optical convention end to end: the panels case rendered with a box filter at 4x the
+    resolution, blurred there by a continuous Gaussian (its 1/4 px box's variance 1/192 px^2 taken
+    off, so that the camera's PSF is 0.8 px), binned 4 x 4; fitted at 1x with the box filter, the
+    blur and the exposure scale free: 0.80 within its standard error (a blur integrated over the
+    pixel again would give about 0.75)."""
+    from spacefit.fitting.nuisance import blur
+
+    case, n = sf.load_case("panels"), 32
+    grid = {"render.resolution": [n, n], "camera.pixel_pitch_mm": 18.75 * 128 / n, "render.filter": "box"}
+    fine = case.truth_scene.with_values({**grid, "render.resolution": [4 * n, 4 * n], "camera.pixel_pitch_mm": 18.75 * 32 / n,
+                                         "render.spp": 64})
+    sharp = jnp.asarray(sf.render(fine), dtype=jnp.float32)
+    camera = np.asarray(blur(sharp, 4.0 * np.sqrt(0.8**2 - 1.0 / 192.0)), dtype=float)
+    reference = np.maximum(camera.reshape(n, 4, n, 4, 3).mean(axis=(1, 3)), 0.0)  # FFT round-off leaves -1e-8 in the sky
+    result = sf.fit(sf.Observation(case.truth_scene.with_values({**grid, "render.spp": 16}), reference),
+                    ["image.blur_sigma_px", "image.scale"], start={"image.blur_sigma_px": 0.5}, spp=16, max_steps=10)
+    sigma, stderr = result.values["image.blur_sigma_px"], result.stderr["image.blur_sigma_px"]
+    assert round(sigma, 2) == 0.80 and abs(sigma - 0.8) < stderr < 0.01, (sigma, stderr)

@@ -41,7 +41,7 @@ def test_group_tuples_come_from_the_entries():
     assert POSITION == tuple(f"target.position_{a}_m" for a in "xyz")
     assert ROLL == "camera.roll_deg"
     assert MOVES_VERTICES == (*GEOMETRY, *ATTITUDE, *POSITION, ROLL)
-    assert IMAGE == ("image.gain", "image.offset_w_m2_sr", "image.psf_sigma_px", "image.shift_x_px", "image.shift_y_px")
+    assert IMAGE == ("image.scale", "image.offset_w_m2_sr", "image.blur_sigma_px", "image.shift_x_px", "image.shift_y_px")
     assert set(NUISANCES) == set(PER_OBSERVATION) == {*IMAGE, *ATTITUDE, *POSITION, ROLL}
     assert JOINT == (SUN_ANGLES, ATTITUDE, POSITION)
 
@@ -84,7 +84,7 @@ def test_joint_values_keep_their_siblings():
 
 def test_an_observations_own_values_set_its_scene_only():
     scene = sf.load_case("panels").scene()
-    values = {"target.attitude_z_deg@0": 1.5, "target.attitude_z_deg@1": -2.0, "camera.roll_deg@1": 0.4, "image.gain@1": 1.1,
+    values = {"target.attitude_z_deg@0": 1.5, "target.attitude_z_deg@1": -2.0, "camera.roll_deg@1": 0.4, "image.scale@1": 1.1,
               "parts.panels.alpha_x": 0.2}
     first, second = (scene_with_values(scene, values, observation=k) for k in (0, 1))
     assert first.target.attitude_deg[2] == pytest.approx(1.5) and first.camera.roll_deg == scene.camera.roll_deg

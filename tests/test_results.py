@@ -17,7 +17,7 @@ TINY = {"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0, "render.sp
 def fitted(tmp_path_factory):
     case = sf.load_case("panels").with_values(TINY)
     reference, _ = case.reference()
-    free = [*case.free, "image.gain"]
+    free = [*case.free, "image.scale"]
     result = sf.fit(sf.Observation(case.scene(), reference), free, start=case.start)
     out = tmp_path_factory.mktemp("fit")
     sf.write_fit_report(out, result, [reference])
@@ -31,17 +31,17 @@ def test_fit_toml_renders_the_fit_again(fitted):
         assert scene_value(scene, name) == pytest.approx(value, rel=1e-9)
     assert scene.render == case.scene().render and scene.camera == case.scene().camera
     # the fitted gain is not a scene value: the scene renders the fit divided by it
-    again = np.asarray(sf.render(scene), float) * result.values["image.gain"]
+    again = np.asarray(sf.render(scene), float) * result.values["image.scale"]
     assert again.mean() == pytest.approx(np.asarray(result.renders[0], float).mean(), rel=0.02)
 
 
 def test_uncertainty_json_holds_errors_and_correlations(fitted):
     _, result, out = fitted
     data = json.loads((out / "uncertainty.json").read_text())  # strict JSON: json.loads would refuse NaN only via parse_constant
-    assert data["names"] == list(result.names) and data["nuisances"] == ["image.gain"]
+    assert data["names"] == list(result.names) and data["nuisances"] == ["image.scale"]
     corr = np.array(data["correlation"])
     assert corr.shape == (4, 4) and np.allclose(corr, corr.T) and np.allclose(np.diag(corr), 1.0)
-    assert data["stderr"] == pytest.approx(result.stderr) and data["units"]["image.gain"] == "1"
+    assert data["stderr"] == pytest.approx(result.stderr) and data["units"]["image.scale"] == "1"
 
 
 def test_mitsuba_scene_dict_loads_and_renders_like_the_scene(fitted):

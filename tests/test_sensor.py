@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import constants
+from scipy import constants, integrate, special
 
 from spacefit.errors import InputError
 from spacefit.geometry.distortion import Distortion, distort, distort_image, undistort
@@ -12,11 +12,12 @@ from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
 from spacefit.sensor import (
     Sensor,
     airy_psf,
+    airy_transfer,
     expected_dn,
     expected_electrons,
     noise_variance_dn,
     observe,
-    psf_kernel,
+    psf_rms_px,
     quantise,
     saturated_mask,
 )
@@ -53,36 +54,70 @@ def test_electrons_for_uniform_radiance_are_the_hand_formula():
     assert np.allclose(dn, sensor.bias_dn + sensor.gain_dn_per_electron * e)
 
 
-def test_gaussian_kernel_sums_to_one_and_has_the_stated_width():
-    k = psf_kernel(Sensor(psf_sigma_px=1.5, diffraction=False), THESIS, 550e-9)
-    assert k.sum() == pytest.approx(1.0, abs=1e-12)
-    offsets = np.arange(k.shape[0]) - k.shape[0] // 2
+def _spot(sensor: Sensor, intr: Intrinsics) -> np.ndarray:
+    """A single lit pixel at the centre through the sensor's PSF, as the fraction of its electrons in each pixel."""
+    spot = np.zeros((intr.height, intr.width, 1))
+    spot[intr.height // 2, intr.width // 2] = 1.0
+    out = np.asarray(expected_electrons(spot, sensor, intr), dtype=float)[..., 0]
+    return out / np.asarray(expected_electrons(spot, Sensor(**{**sensor.to_dict(), **SHARP}), intr)).sum()
+
+
+def test_gaussian_psf_is_continuous_with_the_stated_width():
+    """The optical convention: a continuous Gaussian applied to the pixel-integrated render, so a
+    point's blurred image has variance sigma^2 per axis (not sigma^2 + 1/12: no second pixel integration)."""
+    intr = Intrinsics(7.0, 4e-3, 41, 41)
+    k = _spot(Sensor(psf_sigma_px=1.5, diffraction=False), intr)
+    assert k.sum() == pytest.approx(1.0, abs=1e-6)
+    offsets = np.arange(41) - 20
     row = k.sum(axis=0)
-    assert row @ offsets == pytest.approx(0.0, abs=1e-12)
-    # pixel-integrated Gaussian: sigma^2 plus the pixel's own 1/12 (Sheppard)
-    assert row @ offsets**2 == pytest.approx(1.5**2 + 1 / 12, rel=1e-5)
-    assert np.allclose(k, np.outer(row, row))
-    assert psf_kernel(Sensor(**SHARP), THESIS, 550e-9).tolist() == [[1.0]]
+    assert row @ offsets == pytest.approx(0.0, abs=1e-6)
+    assert row @ offsets**2 == pytest.approx(1.5**2, rel=1e-4)
+    assert np.allclose(k, np.outer(row, k.sum(axis=1)), atol=1e-7)
+    assert np.array_equal(_spot(Sensor(**SHARP), intr)[20, 20], 1.0)
+    assert psf_rms_px(Sensor(psf_sigma_px=1.5, diffraction=False), intr, 1) == pytest.approx(1.5)
 
 
-def test_airy_first_zero_and_kernel():
+def test_airy_first_zero_and_transfer_function():
     lam, d = 550e-9, 0.01
     theta = np.linspace(1.0, 1.5, 50001) * lam / d
     assert theta[np.argmin(airy_psf(theta, lam, d))] / (lam / d) == pytest.approx(1.21967, abs=2e-5)
     assert airy_psf(0.0, lam, d) == pytest.approx(np.pi * d**2 / (4 * lam**2))
-    # a camera whose first dark ring lies 6 px out: the kernel's profile has its minimum there
+    # the MTF is the Hankel transform of the Airy pattern: 2 pi int PSF(theta) J0(2 pi nu theta) theta dtheta
+    for rho in (0.0, 0.3, 0.8):
+        nu = rho * d / lam
+        hankel = integrate.quad(lambda t: 2 * np.pi * t * airy_psf(t, lam, d) * special.j0(2 * np.pi * nu * t), 0, 400 * lam / d, limit=2000)[0]
+        assert airy_transfer(rho) == pytest.approx(hankel, abs=3e-3)
+    assert airy_transfer(1.0) == 0.0 and airy_transfer(2.0) == 0.0
+    # a camera whose first dark ring lies 6 px out (band-limited below Nyquist): the blurred spot has its minimum there
     wide = Intrinsics(1.0, 1.21967 * lam / d / 6.0, 64, 64)
-    k = psf_kernel(Sensor(psf_sigma_px=0.0), wide, lam)
-    c = k.shape[0] // 2
-    assert k.sum() == pytest.approx(1.0) and np.allclose(k, k.T) and np.allclose(k, k[::-1, ::-1])
-    assert np.argmin(k[c, c : c + 10]) == 6
-    # the thesis camera: the Airy disc (0.12 px) is well inside a pixel
-    assert psf_kernel(Sensor(), THESIS, lam)[2, 2] > 0.95
+    k = _spot(Sensor(psf_sigma_px=0.0), wide)
+    assert 0.95 < k.sum() < 1.0 and np.allclose(k[1:, 1:], k[1:, 1:].T, atol=1e-7)  # the far rings leave the 64 px image
+    assert np.argmin(k[32, 32:42]) == 6
+    # the thesis camera: the Airy disc (0.12 px) is far inside a pixel: a point stays in its pixel
+    assert _spot(Sensor(), Intrinsics(7.0, 4e-3, 41, 41))[20, 20] > 0.95
     # diffraction of a huge aperture adds (almost) nothing to a Gaussian
-    both = psf_kernel(Sensor(psf_sigma_px=1.5, aperture_diameter_m=2.0), THESIS, lam)
-    gauss = psf_kernel(Sensor(psf_sigma_px=1.5, diffraction=False), THESIS, lam)
-    pad = (both.shape[0] - gauss.shape[0]) // 2
-    assert np.abs(both[pad : pad + gauss.shape[0], pad : pad + gauss.shape[0]] - gauss).max() < 2e-3
+    both = _spot(Sensor(psf_sigma_px=1.5, aperture_diameter_m=2.0), Intrinsics(7.0, 4e-3, 41, 41))
+    gauss = _spot(Sensor(psf_sigma_px=1.5, diffraction=False), Intrinsics(7.0, 4e-3, 41, 41))
+    assert np.abs(both - gauss).max() < 2e-3
+
+
+def test_calibrated_sensor_is_scale_times_radiance_plus_bias_without_vignetting():
+    """A radiometric scale s (DN per W m^-2 sr^-1): expected DN = s L + bias in every pixel, the
+    corners included (vignetting off by default); vignetting on darkens them by cos^4 as for an exposure."""
+    intr = Intrinsics(1.0, 0.02, 21, 21)  # wide field: the corners are 19 degrees off axis
+    radiance = np.random.default_rng(0).uniform(0.0, 3.0, (21, 21, 2))
+    calibrated = Sensor(radiometric_scale_dn_per_w_m2_sr=250.0, bias_dn=90.0, gain_dn_per_electron=0.4, **SHARP)
+    assert not calibrated.vignetted
+    np.testing.assert_allclose(np.asarray(expected_dn(radiance, calibrated, intr)), 250.0 * radiance + 90.0, rtol=1e-6)
+    on = Sensor(**{**calibrated.to_dict(), "vignetting": True})
+    tan2 = 2 * (10 * 0.02) ** 2
+    dn = np.asarray(expected_dn(np.ones((21, 21, 1)), on, intr))
+    assert dn[10, 10, 0] == pytest.approx(340.0, rel=1e-6) and dn[0, 0, 0] == pytest.approx(90.0 + 250.0 / (1 + tan2) ** 2, rel=1e-3)
+    # an exposure-model sensor with vignetting off: every pixel collects what the axis pixel does
+    flat = np.asarray(expected_electrons(np.ones((21, 21, 1)), Sensor(vignetting=False, **SHARP), intr))
+    assert np.allclose(flat, flat[10, 10]) and Sensor(**SHARP).vignetted
+    with pytest.raises(InputError, match="radiometric_scale_dn_per_w_m2_sr"):
+        Sensor(radiometric_scale_dn_per_w_m2_sr=-1.0)
 
 
 def test_psf_conserves_the_flux_of_a_spot():
@@ -90,7 +125,7 @@ def test_psf_conserves_the_flux_of_a_spot():
     spot = np.zeros((41, 41, 1))
     spot[20, 20] = 1.0
     sharp = np.asarray(expected_electrons(spot, Sensor(**SHARP), intr))
-    blurred = np.asarray(expected_electrons(spot, Sensor(psf_sigma_px=2.0), intr))
+    blurred = np.asarray(expected_electrons(spot, Sensor(psf_sigma_px=2.0, diffraction=False), intr))  # the Airy rings reach past the image
     assert blurred.sum() == pytest.approx(sharp.sum(), rel=1e-6)  # float32, as a caller without x64 gets it
     assert blurred[20, 20, 0] < 0.1 * sharp[20, 20, 0]
 
@@ -208,7 +243,7 @@ def test_expected_dn_and_distortion_differentiate_in_jax():
     tangent = np.random.default_rng(1).uniform(0.0, 1.0, size=(10, 12, 3))
     _, jvp = jax.jvp(lambda r: expected_dn(r, sensor, intr), (radiance,), (tangent,))
     # linear in the radiance: the derivative along a tangent is the tangent's own DN less the bias
-    assert np.allclose(jvp, np.asarray(expected_dn(tangent, sensor, intr)) - sensor.bias_dn, rtol=1e-10)
+    assert np.allclose(jvp, np.asarray(expected_dn(tangent, sensor, intr)) - sensor.bias_dn, rtol=1e-5)  # float32 renders
     c = Distortion(k1=0.5)
     grad = jax.grad(lambda r: distort_image(r, intr, c).sum())(radiance)
     assert grad.shape == radiance.shape and np.isfinite(grad).all() and grad.sum() > 0

@@ -129,11 +129,11 @@ def test_render_noise_shared_by_neighbouring_pixels_is_counted(spread, reach):
 
 
 def test_a_free_psf_widens_the_reach_of_the_render_noise():
-    """A free ``image.psf_sigma_px`` (its value at x) adds to the sensor's PSF in quadrature."""
+    """A free ``image.blur_sigma_px`` (its value at x) adds to the sensor's PSF in quadrature."""
     from spacefit.fitting.uncertainty import noise_reach_px
 
     problem = LinearProblem(None, None, noise_spread_px=((1.0, 0.0), (1.0, 0.0)),
-                            free=SimpleNamespace(names=("parts.legs.kd", "image.psf_sigma_px@1")))
+                            free=SimpleNamespace(names=("parts.legs.kd", "image.blur_sigma_px@1")))
     assert noise_reach_px(problem, np.array([0.5, 2.0]), 0) == 1  # observation 0 has no PSF of its own
     assert noise_reach_px(problem, np.array([0.5, 2.0]), 1) == 7  # ceil(1 + 2 sqrt(2) 2)
 

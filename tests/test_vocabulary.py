@@ -144,7 +144,7 @@ def test_scene_keys_and_parameter_names_are_one_vocabulary(tmp_path, renderer):
     np.testing.assert_allclose(sf.load_scene(None, ["sun.elevation_deg=30"]).sun.direction, by_key.sun.direction, atol=1e-15)
     pose = sf.default_scene().with_values({"target.attitude_y_deg": 5.0, "target.position_m": [1.0, 2.0, 3.0]})
     assert pose.target.attitude_deg == (90.0, 5.0, 0.0) and pose.target.position_m == (1.0, 2.0, 3.0)
-    assert "`image.gain` is a fit-only nuisance" in message(lambda: sf.default_scene().with_values({"image.gain": 2.0}))
+    assert "`image.scale` is a fit-only nuisance" in message(lambda: sf.default_scene().with_values({"image.scale": 2.0}))
     assert "give `sun.elevation_deg`, `sun.azimuth_deg`" in message(lambda: check_names(sf.default_scene(), ["sun.direction"]))
     renderer.set_values({"sun.direction": by_key.sun.direction})
     assert scene_value(renderer.current_scene, "sun.elevation_deg") == pytest.approx(30.0)

@@ -92,7 +92,7 @@ class FreeParameters:
 
 def free_parameters(scene: Scene, names: Sequence[str], observations: int = 1) -> FreeParameters:
     """Resolve and check free parameter names against a scene, for a fit of ``observations``
-    observations (the range of a per-observation name's index, ``image.gain@k``).
+    observations (the range of a per-observation name's index, ``image.scale@k``).
 
     Raises:
         InputError: for an unknown or repeated name, or two that set one value (the message lists

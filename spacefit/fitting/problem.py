@@ -52,6 +52,9 @@ class Observation:
     ``mask``: which values to fit, (h, w) or (h, w, channels) bool, True = use (None: all). The
     residuals of the others are 0 in every loss and they count for nothing (not in the degrees of
     freedom, not in the noise floor); they may hold anything, NaN included.
+    ``sensor_sources``: where each sensor value came from (field -> "header KEY", "sensor file",
+    ...; :func:`~spacefit.imageio.sensor_of`), None for a sensor given whole.
+    ``notes``: what a report should say about the file (e.g. a row order it did not state).
     :meth:`from_file` reads all of these from an image file.
     """
 
@@ -60,6 +63,8 @@ class Observation:
     sigma: float | np.ndarray | None = None
     sensor: Sensor | None = None
     mask: np.ndarray | None = None
+    sensor_sources: Mapping[str, str] | None = None
+    notes: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         check_scene(self.scene, "Observation.scene")
@@ -82,32 +87,40 @@ class Observation:
     def from_file(
         cls, path: str | Path, scene: Scene, *, sensor: Sensor | Mapping[str, Any] | None = None, unit: str | None = None,
         response: str | None = None, mask: str | Path | np.ndarray | None = None, sigma: float | np.ndarray | None = None,
+        sensor_file: str | Path | None = None, sensor_defaults: str | None = None, row_order: str | None = None,
     ) -> Observation:
         """The observation in an image file (EXR, FITS, PNG, TIFF; :func:`~spacefit.imageio.read_image`,
-        which takes ``unit``, ``response``, ``mask`` and ``sigma``), with its usable-pixel mask
-        (saturated, transparent and user-masked pixels left out).
+        which takes ``unit``, ``response``, ``mask``, ``sigma`` and ``row_order``), with its
+        usable-pixel mask (saturated, transparent and user-masked pixels left out).
 
         Radiance is fitted as radiance (``sigma`` its noise). DN are fitted with their sensor
         (:func:`~spacefit.imageio.sensor_of`): ``sensor`` as given (an sf.Sensor), or the file's own
-        (spacefit FITS header or sidecar; a foreign FITS's ``EXPTIME`` and ``GAIN``) with the fields
-        of a mapping ``sensor`` replacing its. A one-channel image is fitted as grey (one residual
-        per pixel, against the mean of the render's channels).
+        values (FITS header keywords, spacefit sidecar) replaced by those of the sensor file
+        ``sensor_file`` (:func:`~spacefit.sensor.read_sensor_file`) and then of a mapping ``sensor``;
+        a value the fit needs that none gives is refused unless ``sensor_defaults="illustrative"``.
+        The sources are kept in ``sensor_sources``. A one-channel image is fitted as grey (one
+        residual per pixel, against the mean of the render's channels).
 
         Raises:
-            InputError: DN with no sensor, a ``sensor`` for radiance or a ``sigma`` for DN, and every
-                refusal of ``read_image``, naming the file.
+            InputError: DN with a sensor value missing (naming each and the three ways to give it),
+                a ``sensor`` for radiance or a ``sigma`` for DN, and every refusal of ``read_image``,
+                naming the file.
         """
         from spacefit.imageio import read_image, sensor_of  # FITS and TIFF readers: only files need them
+        from spacefit.sensor import read_sensor_file
 
-        image = read_image(path, unit=unit, response=response, mask=mask, sigma=sigma)
+        image = read_image(path, unit=unit, response=response, mask=mask, sigma=sigma, row_order=row_order)
+        notes = tuple(image.metadata["notes"])
         if image.unit == RADIANCE_UNIT:
-            if sensor is not None:
+            if sensor is not None or sensor_file is not None:
                 raise InputError(f"{image.path!r} holds radiance ({RADIANCE_UNIT}); `sensor` describes the camera of a DN "
                                  "image: leave it out.")
-            return cls(scene, image.data, sigma, mask=image.mask)
+            return cls(scene, image.data, sigma, mask=image.mask, notes=notes)
         if sigma is not None:
             raise InputError(f"{image.path!r} holds DN: its noise is its sensor's; leave `sigma` out.")
-        return cls(scene, image.data, sensor=sensor_of(image, sensor), mask=image.mask)
+        from_file = read_sensor_file(sensor_file) if sensor_file is not None else None
+        measured, sources = sensor_of(image, sensor, sensor_file=from_file, defaults=sensor_defaults)
+        return cls(scene, image.data, sensor=measured, mask=image.mask, sensor_sources=sources, notes=notes)
 
 
 def check_reference(obs: Observation, index: int) -> tuple[np.ndarray, np.ndarray]:

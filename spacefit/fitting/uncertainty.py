@@ -119,10 +119,10 @@ def render_meat(J1: np.ndarray, J2: np.ndarray, d: np.ndarray, problem: Problem,
 def noise_reach_px(problem: Problem, x: np.ndarray, k: int) -> int:
     """How far apart (px, Chebyshev) two pixels of observation k may share render noise: pixels
     closer than twice the pixel filter's radius share samples, and a blur of rms width sigma (the
-    sensor's PSF and a free ``image.psf_sigma_px`` at ``x``, in quadrature) correlates the noise
+    sensor's PSF and a free ``image.blur_sigma_px`` at ``x``, in quadrature) correlates the noise
     over about 2 sqrt(2) sigma more (twice the width of the blur's autocorrelation)."""
     filter_radius, blur = problem.noise_spread_px[k]
-    i = nuisance_index(problem.free.names, "image.psf_sigma_px", k)
+    i = nuisance_index(problem.free.names, "image.blur_sigma_px", k)
     sigma = math.hypot(blur, 0.0 if i is None else float(x[i]))
     return max(0, math.ceil(2.0 * filter_radius - 1.0 + 2.0 * math.sqrt(2.0) * sigma))
 

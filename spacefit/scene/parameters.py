@@ -22,9 +22,9 @@ they are fit-only names; a render or a sweep refuses them. Without them free, no
 Together with the target's pose (``target.attitude_*_deg``, ``target.position_*_m``) and the
 camera's roll about its optical axis (``camera.roll_deg``) they are a fit's nuisance parameters
 (:data:`NUISANCES`), reported apart from the materials. Each nuisance may be one per observation
-of a joint fit (:data:`PER_OBSERVATION`): ``image.gain@k`` or ``target.attitude_z_deg@k`` is
+of a joint fit (:data:`PER_OBSERVATION`): ``image.scale@k`` or ``target.attitude_z_deg@k`` is
 observation k's alone (k from 0, in the order the observations are given; the others keep the
-shared or their scene's value), ``image.gain`` one shared by all (:func:`observation_name`).
+shared or their scene's value), ``image.scale`` one shared by all (:func:`observation_name`).
 
 ``wrinkles.rms_m`` is the expected rms height of eq. 2-1 (:func:`spacefit.geometry.wm.wm_rms`). In an
 image D and G trade off along a valley of nearly constant rms height; (D, rms) are the better
@@ -286,12 +286,12 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
     Parameter("camera.roll_deg", "deg", WHOLE_LINE,
               "the camera's turn about its optical axis (image up towards image right), either camera mode", _scene_field, _own_key,
               frozenset({"roll", "moves-vertices", "nuisance", "per-observation"}), fd_step=0.5),
-    Parameter("image.gain", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1)",
+    Parameter("image.scale", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1)",
               _constant(1.0), _not_a_scene_value, _IMAGE),
     Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", WHOLE_LINE, "offset added to every pixel (fit only; default 0)",
               _constant(0.0), _not_a_scene_value, _IMAGE),
-    Parameter("image.psf_sigma_px", "px", Bounds(0.0, PSF_SIGMA_MAX_PX),
-              "sigma of a pixel-integrated Gaussian PSF (fit only; not free: no blur; default start 0.5)",
+    Parameter("image.blur_sigma_px", "px", Bounds(0.0, PSF_SIGMA_MAX_PX),
+              "sigma of a continuous Gaussian blur before the pixel (fit only; not free: no blur; default start 0.5)",
               _constant(PSF_SIGMA_START_PX), _not_a_scene_value, _IMAGE),
     *(Parameter(f"image.shift_{axis}_px", "px", WHOLE_LINE,
                 f"sub-pixel shift of the image towards +{axis} ({where}), by a Fourier phase (fit only; default 0)",
@@ -315,12 +315,12 @@ MOVES_VERTICES = group("moves-vertices")
 IMAGE = group("image")
 NUISANCES = group("nuisance")
 PER_OBSERVATION = group("per-observation")
-# Joins a per-observation parameter's name and its observation's index: ``image.gain@1``.
+# Joins a per-observation parameter's name and its observation's index: ``image.scale@1``.
 OBSERVATION_MARK = "@"
 
 
 def observation_name(name: str, observation: int | str) -> str:
-    """The name of per-observation parameter ``name`` for observation ``observation`` alone (``image.gain@1``)."""
+    """The name of per-observation parameter ``name`` for observation ``observation`` alone (``image.scale@1``)."""
     return f"{name}{OBSERVATION_MARK}{observation}"
 
 
@@ -397,7 +397,7 @@ def available(scene: Scene) -> list[str]:
 
 
 def _check_observation(argument: str, name: str, observations: int) -> None:
-    """Raise :class:`InputError` unless ``name`` is a per-observation name (``image.gain@k``) with k in range."""
+    """Raise :class:`InputError` unless ``name`` is a per-observation name (``image.scale@k``) with k in range."""
     base, _, index = name.partition(OBSERVATION_MARK)
     if base not in PER_OBSERVATION:
         raise InputError(f"`{argument}` names {name!r}, but only {', '.join(PER_OBSERVATION)} may be one observation's "
@@ -413,7 +413,7 @@ def check_names(
     """Raise :class:`InputError` for an unknown or repeated name, or two names that set the same value;
     ``image``: whether the names are a fit's (the fit-only :data:`IMAGE` nuisances and the
     per-observation forms are valid); ``observations``: how many observations a fit has (the range
-    of a per-observation name's index, ``image.gain@k``)."""
+    of a per-observation name's index, ``image.scale@k``)."""
     valid = [n for n in available(scene) if image or n not in IMAGE]
     if not names:
         raise InputError(f"`{argument}` must name at least one parameter; valid: {', '.join(valid)}.")
