@@ -1,7 +1,7 @@
 """spacefit's forward render against Blender Cycles (bpy 5.0.1) at equal image error, in both views.
 
 For each view of ``forward_pareto.VIEWS`` (600 px, depth 2, 2 threads) the scene spacefit assembles is
-exported (:func:`export_view`: a PLY per part in world coordinates, flat-shaded as spacefit renders it,
+exported (:func:`spacefit.rendering.cycles.export_view`: a PLY per part in world coordinates, flat-shaded as spacefit renders it,
 and ``scene.json`` with the camera, sun, materials and render settings) and rendered by
 ``cycles_render.py`` in ``.venv-peers`` (``make peers``). First a validation: a high-spp Cycles render
 against spacefit's reference (part means over the pixels whose centre sees each part). Then rounds in
@@ -15,8 +15,8 @@ not counted as noise. Times at equal error are interpolated log-log (``forward_p
 and compared within each round. Writes ``validation.csv``, ``sweep.csv``, ``equal_error.csv`` and
 ``cycles.png`` to ``--out``.
 
-Cycles has no tent filter: spacefit's tent (radius 1 px) is matched by Cycles' Gaussian of the same
-standard deviation, sqrt(1/6) px (Cycles' filter width is 4 standard deviations).
+Cycles has no tent filter: spacefit's tent is matched by Cycles' Gaussian of the same standard
+deviation (:data:`spacefit.rendering.cycles.CYCLES_FILTERS`).
 
 Run: ``make peers`` then ``.venv/bin/python experiments/cycles_peer.py [--full] [--out experiments/results/cycles]``.
 """
@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import statistics
 import subprocess
@@ -41,85 +40,23 @@ from forward_pareto import (  # noqa: E402
     METHODS, REFERENCE_SEED, REPEATS, TARGET_ERRORS, VIEWS, label_view_axes, time_at_error, timed, view_reference)
 from studyio import machine, relative_rmse, save_figure, write_csv  # noqa: E402
 
-from spacefit.materials import Conductor, Lambert, Material  # noqa: E402
 from spacefit.rendering.backend import dr  # noqa: E402
+from spacefit.rendering.cycles import THREADS, export_view  # noqa: E402
 from spacefit.rendering.exr import read_exr  # noqa: E402
-from spacefit.rendering.renderer import Renderer, target_window  # noqa: E402
-from spacefit.scene.assembly import Assembly, assemble  # noqa: E402
+from spacefit.rendering.renderer import Renderer  # noqa: E402
+from spacefit.scene.assembly import assemble  # noqa: E402
 from spacefit.scene.toml import load_scene  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 PEER_PYTHON = ROOT / ".venv-peers" / "bin" / "python"
 CYCLES_SCRIPT = Path(__file__).resolve().parent / "cycles_render.py"
-THREADS = 2
 # (spp swept, rounds, spacefit's reference spp, Cycles' reference spp)
 REDUCED = ([1, 4, 16], 1, 256, 256)
 FULL = ([1, 2, 4, 8, 16, 32, 64], 3, 1024, 1024)
-# spacefit's render.filter -> Cycles' (pixel_filter_type, filter_width px); Cycles' Gaussian of width w has
-# standard deviation w / 4: the tent of radius 1 px has sqrt(1/6) px, Mitsuba's Gaussian 0.5 px.
-CYCLES_FILTERS = {"tent": ("GAUSSIAN", 4.0 * math.sqrt(1.0 / 6.0)), "gaussian": ("GAUSSIAN", 2.0), "box": ("BOX", 1.0)}
 # The methods of forward_pareto.METHODS timed beside Cycles: spacefit's and the plain Mitsuba yardstick.
 SPACEFIT, PLAIN = "window, multijitter", "mitsuba film, independent"
 # Cycles' methods -> render only spacefit's window (a render border)? The whole film is how Cycles renders.
 CYCLES_METHODS = {"cycles": False, "cycles, window": True}
-
-
-def write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None) -> None:
-    """A binary little-endian triangle PLY: float32 x, y, z (and s, t for uv), int32 vertex indices."""
-    names = ["x", "y", "z", *(["s", "t"] if uv is not None else [])]
-    vertex = np.empty(len(vertices), dtype=[(n, "<f4") for n in names])
-    for i, n in enumerate("xyz"):
-        vertex[n] = vertices[:, i]
-    if uv is not None:
-        vertex["s"], vertex["t"] = uv[:, 0], uv[:, 1]
-    face = np.empty(len(faces), dtype=[("n", "u1"), ("i", "<i4", 3)])
-    face["n"], face["i"] = 3, faces
-    header = ["ply", "format binary_little_endian 1.0", f"element vertex {len(vertices)}",
-              *(f"property float {n}" for n in names), f"element face {len(faces)}",
-              "property list uchar int vertex_indices", "end_header"]
-    with open(path, "wb") as f:
-        f.write(("\n".join(header) + "\n").encode("ascii"))
-        f.write(vertex.tobytes())
-        f.write(face.tobytes())
-
-
-def _rgb(value: float | tuple[float, ...]) -> list[float]:
-    return list(value) if isinstance(value, tuple) else [float(value)] * 3
-
-
-def material_description(material: Material, has_uv: bool) -> dict[str, object]:
-    """A material as ``cycles_render.py`` reads it; a conductor's alpha_x lies along dp/du where the part has uv."""
-    if isinstance(material, Conductor):
-        return {"type": "conductor", "eta": _rgb(material.eta), "k": _rgb(material.k), "alpha_x": material.alpha_x,
-                "alpha_y": material.alpha_y, "distribution": material.distribution, "tangent": "uv" if has_uv else None}
-    if isinstance(material, Lambert):
-        return {"type": "lambert", "kd": _rgb(material.kd)}
-    raise ValueError(f"no Cycles material for {type(material).__name__}")
-
-
-def export_view(assembly: Assembly, folder: Path) -> dict[str, object]:
-    """Write each part's PLY (world coordinates, m; the float32 vertices Mitsuba gets) and ``scene.json``
-    (camera, sun, render settings with spacefit's window, materials) to ``folder``; returns the JSON's content."""
-    folder.mkdir(parents=True, exist_ok=True)
-    s, cam, intr = assembly.scene, assembly.camera, assembly.intrinsics
-    parts = {}
-    for name, part in assembly.parts.items():
-        uv = None if name in assembly.refinements else part.uv
-        write_ply(folder / f"{name}.ply", assembly.scene_vertices[name], assembly.faces(name), uv)
-        parts[name] = {"ply": f"{name}.ply", "material": material_description(assembly.materials[name], uv is not None)}
-    filter_type, filter_width = CYCLES_FILTERS[s.render.filter]
-    description = {
-        "render": {"width": intr.width, "height": intr.height, "depth": s.render.depth, "threads": THREADS,
-                   "filter": s.render.filter, "filter_type": filter_type, "filter_width_px": filter_width,
-                   "window": list(target_window(assembly, assembly.scene_vertices))},
-        "camera": {"position_m": cam.position.tolist(), "right": cam.right.tolist(), "up": cam.up.tolist(),
-                   "forward": cam.forward.tolist(), "focal_px": intr.focal_px,
-                   "principal_offset_px": list(intr.principal_offset), "clip_m": [0.01, 1e5]},
-        "sun": {"direction": assembly.sun_direction.tolist(), "irradiance_w_m2": s.sun.irradiance_w_m2},
-        "parts": parts,
-    }
-    (folder / "scene.json").write_text(json.dumps(description, indent=1))
-    return description
 
 
 def render_cycles(scene_dir: Path, out: Path, spps: list[int], repeats: int, seed: int,
@@ -129,8 +66,10 @@ def render_cycles(scene_dir: Path, out: Path, spps: list[int], repeats: int, see
     if not PEER_PYTHON.exists():
         raise SystemExit(f"{PEER_PYTHON} is missing: run `make peers` first (bpy 5.0.1 in a venv of its own).")
     with open(out / "cycles.log", "a") as log:
+        # bpy's Python imports spacefit.rendering.cycles (numpy only) from this checkout
         subprocess.run([str(PEER_PYTHON), str(CYCLES_SCRIPT), str(scene_dir), "--out", str(out), "--spp", *map(str, spps),
-                        "--repeats", str(repeats), "--seed", str(seed), *(["--window"] if window else [])], check=True, stdout=log, stderr=subprocess.STDOUT)
+                        "--repeats", str(repeats), "--seed", str(seed), *(["--window"] if window else [])], check=True, stdout=log,
+                       stderr=subprocess.STDOUT, env={**os.environ, "PYTHONPATH": str(ROOT)})
     timings = json.loads((out / "timings.json").read_text())
     return timings, {spp: read_exr(out / f"cycles_{spp}.exr")[..., :3] for spp in spps}
 

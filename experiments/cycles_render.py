@@ -1,7 +1,8 @@
 """Render a scene exported by ``cycles_peer.py`` with Blender Cycles (bpy 5.0.1), CPU, at a list of spp.
 
-Runs in ``.venv-peers`` (``make peers``), never in spacefit's own environment: bpy is imported inside
-:func:`main` only, so that spacefit's tests can import :func:`read_ply` and :func:`cycles_roughness`.
+Runs in ``.venv-peers`` (``make peers``), never in spacefit's own environment; it reads the export
+with :mod:`spacefit.rendering.cycles` (numpy only; ``cycles_peer.py`` puts the checkout on its
+``PYTHONPATH``).
 
 The scene folder holds ``scene.json`` (camera, sun, render settings, parts with their materials) and
 one binary PLY per part in world coordinates, flat-shaded (spacefit's Mitsuba meshes have no vertex
@@ -17,56 +18,14 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import time
 from pathlib import Path
 
 import numpy as np
 
+from spacefit.rendering.cycles import cycles_roughness, read_ply
+
 # PLY property types of the files cycles_peer.py writes
-_PLY_TYPES = {"float": "<f4", "double": "<f8", "int": "<i4", "uint": "<u4", "uchar": "u1"}
-
-
-def read_ply(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Vertices (n, 3), triangles (m, 3) and per-vertex uv (n, 2) or None of a binary little-endian
-    triangle PLY with properties x, y, z[, s, t] and a ``list uchar int vertex_indices`` face list."""
-    data = Path(path).read_bytes()
-    end = data.index(b"end_header\n") + len(b"end_header\n")
-    counts, props, element = {}, {"vertex": [], "face": []}, ""
-    for line in data[:end].decode("ascii").splitlines():
-        words = line.split()
-        if words[0] == "format" and words[1] != "binary_little_endian":
-            raise ValueError(f"{path}: only binary_little_endian PLY is read, not {words[1]}")
-        if words[0] == "element":
-            element, counts[words[1]] = words[1], int(words[2])
-        elif words[0] == "property":
-            props[element].append(words[1:])
-    vertex_dtype = np.dtype([(p[1], _PLY_TYPES[p[0]]) for p in props["vertex"]])
-    vertices = np.frombuffer(data, vertex_dtype, counts["vertex"], end)
-    face_dtype = np.dtype([("n", "u1"), ("i", _PLY_TYPES[props["face"][0][2]], 3)])
-    faces = np.frombuffer(data, face_dtype, counts["face"], end + vertex_dtype.itemsize * counts["vertex"])
-    if np.any(faces["n"] != 3):
-        raise ValueError(f"{path}: only triangles are read")
-    xyz = np.stack([vertices[c] for c in "xyz"], axis=-1).astype(float)
-    uv = np.stack([vertices["s"], vertices["t"]], axis=-1).astype(float) if "s" in vertex_dtype.names else None
-    return xyz, faces["i"].astype(np.int64), uv
-
-
-def cycles_roughness(alpha_x: float, alpha_y: float) -> tuple[float, float, float]:
-    """Cycles' Metallic BSDF (Roughness, Anisotropy, Rotation) inputs for GGX or Beckmann alphas along
-    (alpha_x) and across (alpha_y) the tangent.
-
-    Cycles 5.0 (svm closure of the Metallic BSDF) squares Roughness into r, and for Anisotropy a in
-    (0, 1] takes aspect = sqrt(1 - 0.9 a), alpha along the tangent r / aspect and across it r aspect:
-    the tangent's alpha is the larger one. Rotation 0.25 turns the tangent by 90 deg when alpha_y is.
-    """
-    hi, lo = max(alpha_x, alpha_y), min(alpha_x, alpha_y)
-    aspect2 = lo / hi
-    if aspect2 < 0.1:
-        raise ValueError(f"Cycles' anisotropy reaches an alpha ratio of 10 at most, not {hi / lo:.3g}")
-    return math.sqrt(math.sqrt(hi * lo)), (1.0 - aspect2) / 0.9, 0.0 if alpha_x >= alpha_y else 0.25
-
-
 def _material(bpy: object, name: str, spec: dict) -> object:
     """A Cycles material: Metallic BSDF (physical conductor Fresnel) or a Lambertian Diffuse BSDF."""
     mat = bpy.data.materials.new(name)

@@ -32,12 +32,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 from spacefit import Observation, fit, identifiability  # noqa: E402
 import spacefit as sf  # noqa: E402
-from spacefit.fitting.params import free_parameters  # noqa: E402
-from spacefit.rendering.values import scene_values_fn  # noqa: E402
 from spacefit.geometry.wm import wm_rms  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
-from spacefit.rendering.renderer import Renderer  # noqa: E402
-from spacefit.rendering.bridge import DrJitScene, render_params  # noqa: E402
+from spacefit.rendering.derivatives import render_chain  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 
 NAMES = ["wrinkles.D", "wrinkles.G"]
@@ -51,21 +48,19 @@ def cosine(a: np.ndarray, b: np.ndarray) -> float:
 
 def jacobian_methods(out: Path, spp: int) -> list[dict[str, object]]:
     scene = WRINKLES.truth_scene.with_values({"render.spp": spp})
-    free = free_parameters(scene, NAMES)
     assembly = assemble(scene)
-    values_of = scene_values_fn(assembly, free.names)
     x0 = jnp.array([WRINKLES.truth[n] for n in NAMES])
-    reference_scene = DrJitScene(Renderer(assembly), 4 * spp, 4 * spp)
-    steps = free.fd_steps
+    reference = render_chain(assembly, NAMES, spp=4 * spp)
+    steps = reference.fd_steps
     ref = []
     for j in range(len(NAMES)):
         e = np.zeros(len(NAMES))
         e[j] = steps[j]
-        ref.append((reference_scene.primal(values_of(x0 + e), 99) - reference_scene.primal(values_of(x0 - e), 99)) / (2 * steps[j]))
+        ref.append((reference.primal(x0 + e, 99) - reference.primal(x0 - e, 99)) / (2 * steps[j]))
     rows = []
     for method in ("fd", "prb", "direct_projective", "prb_projective"):
-        dscene = DrJitScene(Renderer(assembly), spp, spp, "prb" if method == "fd" else method)
-        render = render_params(dscene, values_of, steps if method == "fd" else np.zeros(len(NAMES)), 1, 2)
+        render = render_chain(assembly, NAMES, spp=spp, integrator="prb" if method == "fd" else method,
+                              fd_steps=steps if method == "fd" else np.zeros(len(NAMES))).forward(1, 2)
         t0 = time.perf_counter()
         J = np.asarray(jax.jacfwd(render)(x0))
         elapsed = time.perf_counter() - t0
@@ -82,10 +77,7 @@ def landscape(out: Path, n: int) -> None:
     Ds = np.linspace(2.3, 2.5, n)
     Gs = np.geomspace(0.02, 0.08, n)
     scene = WRINKLES.scene()
-    free = free_parameters(scene, NAMES)
-    assembly = assemble(scene)
-    render = render_params(DrJitScene(Renderer(assembly), scene.render.spp, scene.render.spp), scene_values_fn(assembly, free.names),
-                           free.fd_steps, 1, 2)
+    render = render_chain(scene, NAMES).forward(1, 2)
     loss = np.zeros((n, n))
     progress = Progress("landscape", delay=0.0)
     for i, D in enumerate(Ds):

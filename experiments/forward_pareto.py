@@ -36,32 +36,19 @@ from studyio import relative_rmse, save_figure, write_csv  # noqa: E402
 
 from spacefit.progress import Progress  # noqa: E402
 
-# Seed of the high-spp references: the synthetic cases' (data/synthetic/*.toml), never a test render's.
+# Seed of the high-spp references: the synthetic cases' (spacefit/synthetic/*.toml), never a test render's.
 REFERENCE_SEED = 7
 from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.rendering.backend import dr  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 from spacefit.scene.toml import load_scene  # noqa: E402
+from spacefit.studies.costs import pareto_front  # noqa: E402
 
 # (widths px, spp values, depths, reference spp)
 REDUCED = ([64, 128], [1, 2, 4, 8, 16], [1, 2, 3], 256)
 FULL = ([150, 300, 600], [1, 2, 4, 8, 16, 32, 64], [1, 2, 3, 4, 5], 1024)
 # Timed renders per configuration, after one untimed (compiling) render.
 REPEATS = 3
-
-
-def pareto_front(points: list[tuple[float, float]]) -> list[int]:
-    """Indices of the non-dominated (time, error) points, sorted by time (errors then strictly fall).
-
-    A point is dominated when another is no slower and no less accurate; of identical points the
-    first is kept.
-    """
-    order = sorted(range(len(points)), key=lambda i: (points[i][0], points[i][1], i))
-    front: list[int] = []
-    for i in order:
-        if not front or points[i][1] < points[front[-1]][1]:
-            front.append(i)
-    return front
 
 
 def scene_overrides(width: int, depth: int) -> list[str]:

@@ -1,7 +1,7 @@
 """Level of detail: displaced wrinkle geometry against an effective roughness, across range.
 
-Gentle wrinkles (L 0.4 m, Ls 0.1 m, D 2.4, G 3e-4 m: rms height 1.7 cm, rms slope 0.3) on the MLI
-body, thesis optics at 128 x 128 px. For each range, renders each model twice (two seeds) at the
+Gentle wrinkles (``data/scenes/gentle-wrinkles.toml``: L 0.4 m, Ls 0.1 m, D 2.4, G 3e-4 m, rms
+height 1.7 cm, rms slope 0.3) on the MLI body, thesis optics at 128 x 128 px. For each range, renders each model twice (two seeds) at the
 same samples per pixel and records, over the geometry's lit pixels:
 
 - ``error_effective``: relative RMSE of the effective image against the geometry image;
@@ -19,7 +19,7 @@ same samples per pixel and records, over the geometry's lit pixels:
 
 Writes ``lod.csv`` and ``lod.png`` to ``--out``.
 
-Run: ``.venv/bin/python experiments/lod_study.py [--quick]``.
+Run: ``.venv/bin/python experiments/lod_study.py [--quick] [--ranges M ...] [--spp N]``.
 """
 
 from __future__ import annotations
@@ -43,14 +43,12 @@ from spacefit.scene.schema import WrinkleSettings  # noqa: E402
 from spacefit.scene.toml import load_scene
 from spacefit.scene.lod import LOD_TOLERANCE  # noqa: E402
 
-GENTLE = ["wrinkles.L=0.4", "wrinkles.Ls=0.1", "wrinkles.D=2.4", "wrinkles.G=3e-4", "wrinkles.spacing_m=0.03",
-          "render.resolution=[128, 128]", "camera.pixel_pitch_mm=18.75", "target.attitude_deg=[20, 30, 0]",
-          "sun.direction=[0.3, -0.2, -1]"]
+GENTLE = Path(__file__).resolve().parents[1] / "data" / "scenes" / "gentle-wrinkles.toml"
 
 
 def timed_render(overrides: list[str], seed: int) -> tuple[np.ndarray, float, dict]:
     t0 = time.perf_counter()
-    assembly = assemble(load_scene(None, overrides))
+    assembly = assemble(load_scene(GENTLE, overrides))
     image = Renderer(assembly).render(seed=seed)
     return image, time.perf_counter() - t0, assembly.lod["body"]
 
@@ -66,12 +64,12 @@ def run_study(out: Path, ranges: list[float], spp: int, wrinkle_seeds: tuple[int
     rows = []
     progress = Progress("level of detail", delay=0.0)
     for model in ("geometry", "effective"):  # warm-up: JAX compilation and the cached refinement
-        timed_render(GENTLE + [f"camera.position_m=[0, 0, {ranges[0]}]", "render.spp=1", f"wrinkles.model='{model}'"], 0)
+        timed_render([f"camera.position_m=[0, 0, {ranges[0]}]", "render.spp=1", f"wrinkles.model='{model}'"], 0)
     for i, d in enumerate(ranges):
-        base = GENTLE + [f"camera.position_m=[0, 0, {d}]", f"render.spp={spp}"]
+        base = [f"camera.position_m=[0, 0, {d}]", f"render.spp={spp}"]
         effective, t_effective, _ = timed_render(base + ["wrinkles.model='effective'"], seed=3)
         effective2, _, _ = timed_render(base + ["wrinkles.model='effective'"], seed=4)
-        auto = assemble(load_scene(None, base + ["wrinkles.model='auto'"])).lod["body"]
+        auto = assemble(load_scene(GENTLE, base + ["wrinkles.model='auto'"])).lod["body"]
         # per lit pixel and channel: geometry, effective, and the squared differences effective - geometry,
         # geometry seed to seed, effective seed to seed
         pooled: list[np.ndarray] = []
@@ -149,9 +147,12 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", default="experiments/results/lod")
     p.add_argument("--quick", action="store_true", help="three ranges, 32 spp, one wrinkle seed")
+    p.add_argument("--ranges", type=float, nargs="+", metavar="M", help="camera ranges, m (default: --quick's or the full study's)")
+    p.add_argument("--spp", type=int, help="samples per pixel (default: 32 with --quick, else 4096)")
     args = p.parse_args()
-    ranges = [15.0, 60.0, 240.0] if args.quick else [10.0, 20.0, 40.0, 70.0, 120.0, 200.0, 350.0, 450.0, 600.0, 800.0]
-    for row in run_study(Path(args.out), ranges, 32 if args.quick else 4096, (0,) if args.quick else (0, 1, 2, 3)):
+    ranges = args.ranges or ([15.0, 60.0, 240.0] if args.quick else [10.0, 20.0, 40.0, 70.0, 120.0, 200.0, 350.0, 450.0, 600.0, 800.0])
+    spp = args.spp or (32 if args.quick else 4096)
+    for row in run_study(Path(args.out), ranges, spp, (0,) if args.quick else (0, 1, 2, 3)):
         print(row)
 
 

@@ -80,9 +80,9 @@ exposure: attitudes, light level and range."""),
     show(f"sweeps/{name}.png")"""),
     ("md", """## 2. Fitting materials
 
-The synthetic panels case (`data/synthetic/`), fitted from starts 50 % off with Levenberg-Marquardt."""),
-    ("code", """case = ROOT / "data" / "synthetic"
-obs = Observation(load_scene(case / "panels.toml"), read_exr(case / "panels" / "reference.exr"))
+The synthetic panels case (its scene `spacefit/synthetic/panels.toml`, its reference `data/synthetic/panels/`), fitted from starts 50 % off with Levenberg-Marquardt."""),
+    ("code", """obs = Observation(load_scene(ROOT / "spacefit" / "synthetic" / "panels.toml"),
+                  read_exr(ROOT / "data" / "synthetic" / "panels" / "reference.exr"))
 result = fit(obs, ["parts.panels.alpha_x", "parts.panels.alpha_y", "parts.legs.kd"],
              start={"parts.panels.alpha_x": 0.075, "parts.panels.alpha_y": 0.045, "parts.legs.kd": 0.25})
 truth = {"parts.panels.alpha_x": 0.15, "parts.panels.alpha_y": 0.03, "parts.legs.kd": 0.5}

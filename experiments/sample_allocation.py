@@ -7,7 +7,8 @@ the same total of samples, that mean is smallest when n_i is proportional to sig
 ideal adaptive sampler needs ``(mean sigma)^2 / mean(sigma^2)`` of the uniform sampler's samples.
 A practical one estimates sigma_i from a first pass: here a quarter of the samples, uniform, then
 the rest in proportion to the spread of each pixel's first-pass samples (rendered one sample at a
-time); its error follows from the true sigma_i, with no further render.
+time); its error follows from the true sigma_i, with no further render
+(:func:`spacefit.studies.costs.allocation_gains`).
 
 For each view of ``forward_pareto.VIEWS`` (600 px, depth 2, spacefit's window, ``multijitter``),
 sigma_i is measured from ``--seeds`` renders at ``--spp`` (all channels of a pixel share its
@@ -31,26 +32,13 @@ from studyio import machine, write_csv
 from spacefit.rendering.renderer import Renderer
 from spacefit.scene.assembly import assemble
 from spacefit.scene.toml import load_scene
-
-# Share of the samples a two-pass sampler spends on its uniform first pass.
-PILOT_FRACTION = 0.25
+from spacefit.studies.costs import PILOT_FRACTION, allocation_gains
 
 
 def pixel_sigma(images: np.ndarray) -> np.ndarray:
     """Per-pixel standard deviation of one render from ``images`` (seeds, h, w, c): the root mean
     over channels of the variance across seeds."""
     return np.sqrt(images.var(axis=0, ddof=1).mean(axis=-1))
-
-
-def allocation_gains(sigma: np.ndarray, pilot_sigma: np.ndarray) -> dict[str, float]:
-    """Samples needed at equal error relative to uniform sampling: ideal (n_i proportional to the
-    true ``sigma``) and two-pass (a uniform :data:`PILOT_FRACTION`, then the rest in proportion to
-    ``pilot_sigma``, one noisy estimate), for the pixels given (lit ones)."""
-    uniform = np.mean(sigma**2)
-    ideal = np.mean(sigma) ** 2 / uniform
-    share = pilot_sigma / pilot_sigma.sum() if pilot_sigma.sum() > 0 else np.full(sigma.shape, 1.0 / sigma.size)
-    n = PILOT_FRACTION + (1.0 - PILOT_FRACTION) * share * sigma.size  # samples per pixel, mean 1
-    return {"ideal": float(ideal), "two_pass": float(np.mean(sigma**2 / n) / uniform)}
 
 
 def main() -> None:

@@ -53,7 +53,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from matplotlib.colors import ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 
-from failures import FAILURE_CLASSES, classify, errors  # noqa: E402
+from spacefit.studies.failures import FAILURE_CLASSES, classify, errors  # noqa: E402
 
 import spacefit as sf  # noqa: E402
 from spacefit import SOLVERS, InputError, Observation, fit  # noqa: E402

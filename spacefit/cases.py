@@ -1,7 +1,10 @@
-"""Synthetic fitting cases with known truth, read from ``data/synthetic/`` (its scene files and
-``cases.toml``): the one source for the tests, the experiments and ``make_references.py``.
+"""Synthetic fitting cases with known truth: the one source for the tests, the experiments and
+``data/synthetic/make_references.py``.
 
-The data folder ships with the repository, not with an installed wheel.
+The cases are package data, ``spacefit/synthetic/`` (``cases.toml`` and the scene files it names),
+found through :mod:`importlib.resources`, so an installed wheel has them (``pyproject.toml``'s
+package-data). The references rendered from them (``reference.exr``, ...) are the generator's
+output and stay with it in the repository's ``data/synthetic/NAME/``.
 """
 
 from __future__ import annotations
@@ -9,7 +12,7 @@ from __future__ import annotations
 import tomllib
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from pathlib import Path
+from importlib.resources import as_file, files
 from typing import Any
 
 import numpy as np
@@ -19,7 +22,8 @@ from spacefit.scene.schema import Scene
 from spacefit.scene.toml import load_scene
 from spacefit.scene.parameters import check_names, scene_value
 
-CASES_DIR = Path(__file__).resolve().parents[1] / "data" / "synthetic"
+# The package-data folder of the cases (a Traversable: a folder, or a place in a zip).
+CASES_DIR = files("spacefit") / "synthetic"
 
 
 def add_noise(radiance: np.ndarray, percent: float, seed: int) -> tuple[np.ndarray, float]:
@@ -83,7 +87,8 @@ def case_names() -> list[str]:
 def _table() -> dict[str, Any]:
     path = CASES_DIR / "cases.toml"
     if not path.is_file():
-        raise InputError(f"the synthetic cases are not here ({path}); they ship with the repository, not the wheel.")
+        raise InputError(f"the synthetic cases are missing from this installation of spacefit ({path}): reinstall it "
+                         "from a wheel built with the package data of pyproject.toml.")
     return tomllib.loads(path.read_text())
 
 
@@ -91,7 +96,8 @@ def load_case(name: str) -> Case:
     """The synthetic case ``name`` (see :func:`case_names`)."""
     table = _table()
     entry = table[check_choice("case", name, table)]
-    scene = load_scene(CASES_DIR / f"{entry.get('scene', name)}.toml", entry.get("values", {}))
+    with as_file(CASES_DIR / f"{entry.get('scene', name)}.toml") as path:
+        scene = load_scene(path, entry.get("values", {}))
     free = tuple(entry["free"])
     check_names(scene, list(free))
     return Case(name, scene, free, {k: float(v) for k, v in entry["start"].items()}, dict(entry.get("fit", {})))

@@ -1,4 +1,4 @@
-"""Shared fixtures: the synthetic cases (one source: data/synthetic/) and their references, rendered
+"""Shared fixtures: the synthetic cases (one source: spacefit/synthetic/, package data) and their references, rendered
 once per test session."""
 
 from __future__ import annotations

@@ -9,11 +9,8 @@ import pytest
 
 from spacefit.errors import InputError
 from spacefit.fitting.params import bijection, free_parameters
-from spacefit.rendering.renderer import Renderer
-from spacefit.rendering.values import scene_values_fn
+from spacefit.rendering.derivatives import render_chain
 from spacefit.scene.parameters import PARAMETERS, scene_value
-from spacefit.rendering.bridge import DrJitScene, render_params, render_values
-from spacefit.scene.assembly import assemble
 from spacefit.scene.toml import load_scene
 
 # 32 x 32 px of the wrinkles case: panels, legs and the wrinkled body all in view, direct light.
@@ -51,10 +48,10 @@ def test_bijection_round_trip(name):
 def case():
     scene = load_scene(None, CASE)
     free = free_parameters(scene, NAMES)
-    assembly = assemble(scene)
-    dscene = DrJitScene(Renderer(assembly, crop=False), spp=1024, spp_grad=1024)  # D, G and the pose move vertices
-    x0 = jnp.array([scene_value(scene, n) for n in NAMES])
-    return free, dscene, scene_values_fn(assembly, free.names), x0
+    chain = render_chain(scene, NAMES, spp=1024, spp_grad=1024)
+    assert chain.renderer.window[2:] == (32, 32)  # D, G and the pose move vertices: the whole film
+    np.testing.assert_array_equal(chain.fd_steps, free.fd_steps)
+    return free, chain, jnp.array([scene_value(scene, n) for n in NAMES])
 
 
 def cosine(a, b):
@@ -66,34 +63,32 @@ def test_jacobian_columns_match_finite_differences(case):
     """AD columns (BSDF, sun irradiance) and finite-difference columns (D, rms height, sun angles) against central
     differences with common random numbers, at another step (1 % for AD columns, twice the
     column's own step for finite-difference columns)."""
-    free, dscene, values_of, x0 = case
-    J = np.asarray(jax.jacfwd(render_params(dscene, values_of, free.fd_steps, seed=1, seed_grad=2))(x0))
+    free, chain, x0 = case
+    J = np.asarray(jax.jacfwd(chain.forward(seed=1, seed_grad=2))(x0))
     assert J.shape == (32, 32, 3, len(NAMES))
     for j, name in enumerate(NAMES):
         step = 2 * free.fd_steps[j] if free.fd_steps[j] > 0 else 1e-2 * float(x0[j])
         e = np.zeros(len(NAMES))
         e[j] = step
-        fd = (dscene.primal(values_of(x0 + e), 1) - dscene.primal(values_of(x0 - e), 1)) / (2 * step)
+        fd = (chain.primal(x0 + e, 1) - chain.primal(x0 - e, 1)) / (2 * step)
         assert cosine(J[..., j], fd) >= 0.98, name
         assert np.linalg.norm(J[..., j]) == pytest.approx(np.linalg.norm(fd), rel=0.1), name
 
 
 def test_reverse_mode_gradient_equals_forward_jacobian_gradient(case):
-    free, dscene, values_of, x0 = case
+    _, chain, x0 = case
     bsdf = slice(0, 7)  # reverse mode carries AD derivatives only
-    free_bsdf = free_parameters(load_scene(None, CASE), NAMES[bsdf])
-    values_bsdf = scene_values_fn(dscene.renderer.assembly, free_bsdf.names)
-    target = jnp.asarray(dscene.primal(values_bsdf(x0[bsdf]), 9))
-    forward = render_params(dscene, values_bsdf, free_bsdf.fd_steps, seed=1, seed_grad=2)
-    reverse = render_values(dscene, seed=1, seed_grad=2)
+    chain = render_chain(chain.renderer.assembly, NAMES[bsdf], spp=1024, spp_grad=1024)
+    target = jnp.asarray(chain.primal(x0[bsdf], 9))
+    forward, reverse = chain.forward(seed=1, seed_grad=2), chain.reverse(seed=1, seed_grad=2)
     g_fwd = jax.grad(lambda x: jnp.sum((forward(x) - target) ** 2))(x0[bsdf])
-    g_rev = jax.grad(lambda x: jnp.sum((reverse(values_bsdf(x)) - target) ** 2))(x0[bsdf])
+    g_rev = jax.grad(lambda x: jnp.sum((reverse(x) - target) ** 2))(x0[bsdf])
     assert np.allclose(g_rev, g_fwd, rtol=1e-3, atol=1e-6 * float(jnp.max(jnp.abs(g_fwd))))
 
 
 def test_same_seed_same_render(case):
-    _, dscene, values_of, x0 = case
-    assert np.array_equal(dscene.primal(values_of(x0), 3), dscene.primal(values_of(x0), 3))
+    _, chain, x0 = case
+    assert np.array_equal(chain.primal(x0, 3), chain.primal(x0, 3))
 
 
 @pytest.mark.parametrize(

@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 from helpers import small_scene, write_sphere_obj
 
-from spacefit import Renderer, render
+from spacefit import render
 from spacefit.fitting.params import free_parameters
 from spacefit.geometry.frames import CameraFrame, Intrinsics, attitude_matrix, object_to_world, project
-from spacefit.rendering.bridge import DrJitScene, render_params, render_values
+from spacefit.rendering.derivatives import render_chain
 from spacefit.rendering.values import scene_values_fn
 from spacefit.scene.assembly import assemble
 from spacefit.scene.parameters import scene_value
@@ -140,10 +140,8 @@ def rough_sphere(tmp_path_factory):
     sphere = write_sphere_obj(tmp_path_factory.mktemp("seeds") / "sphere.obj", radius=1.0, subdivisions=3)
     scene = small_scene(sphere, {"material": "panel_thesis", "alpha": 0.2}, render={"resolution": [16, 16], "spp": 4},
                         camera={"pixel_pitch_mm": 1.0}, sun={"direction": [0.3, 0.1, -1.0]})
-    free = free_parameters(scene, ["parts.sphere.alpha", "parts.sphere.eta"])
-    assembly = assemble(scene)
-    x0 = jnp.array([scene_value(scene, n) for n in free.names])
-    return DrJitScene(Renderer(assembly), spp=4, spp_grad=4), scene_values_fn(assembly, free.names), free, x0
+    names = ["parts.sphere.alpha", "parts.sphere.eta"]
+    return render_chain(scene, names, spp=4, spp_grad=4), jnp.array([scene_value(scene, n) for n in names])
 
 
 def relative_difference(a, b):
@@ -151,10 +149,10 @@ def relative_difference(a, b):
 
 
 def test_forward_derivative_renders_use_seed_grad_only(rough_sphere):
-    dscene, values_of, free, x0 = rough_sphere
+    chain, x0 = rough_sphere
 
     def jacobian(seed, seed_grad):
-        return np.asarray(jax.jacfwd(render_params(dscene, values_of, free.fd_steps, seed, seed_grad))(x0))
+        return np.asarray(jax.jacfwd(chain.forward(seed, seed_grad))(x0))
 
     base = jacobian(1, 2)
     # float32 sums in another thread order differ by ~1e-7; other samples by far more (measured 0.15)
@@ -163,12 +161,12 @@ def test_forward_derivative_renders_use_seed_grad_only(rough_sphere):
 
 
 def test_reverse_derivative_renders_use_seed_grad_only(rough_sphere):
-    dscene, values_of, _, x0 = rough_sphere
-    weight = jnp.asarray(np.random.default_rng(8).uniform(size=dscene.shape), dtype=jnp.float32)
+    chain, x0 = rough_sphere
+    weight = jnp.asarray(np.random.default_rng(8).uniform(size=chain.drjit.shape), dtype=jnp.float32)
 
     def gradient(seed, seed_grad):
-        image = render_values(dscene, seed, seed_grad)
-        return np.asarray(jax.grad(lambda x: jnp.sum(weight * image(values_of(x))))(x0))
+        image = chain.reverse(seed, seed_grad)
+        return np.asarray(jax.grad(lambda x: jnp.sum(weight * image(x)))(x0))
 
     base = gradient(1, 2)
     assert relative_difference(gradient(5, 2), base) < 1e-5

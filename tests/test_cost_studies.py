@@ -1,37 +1,39 @@
-"""The forward-cost and fit-cost studies at their reduced sizes: the shape of their results."""
+"""The forward-cost and fit-cost studies at their reduced sizes, run as scripts: the shape of their
+results; and the Pareto front in closed form."""
 
 from __future__ import annotations
 
-import csv
-
 import numpy as np
+from scripts import read_csv, run_script
 
-import fit_cost  # noqa: E402
-import forward_pareto  # noqa: E402
+from spacefit.studies.costs import pareto_front
 
 
 def test_pareto_front_of_a_hand_made_set():
     points = [(1.0, 0.5), (2.0, 0.6), (2.0, 0.3), (3.0, 0.3), (4.0, 0.1), (0.5, 0.9)]
-    assert forward_pareto.pareto_front(points) == [5, 0, 2, 4]
+    assert pareto_front(points) == [5, 0, 2, 4]
 
 
 def test_forward_study_shape(tmp_path):
-    rows = forward_pareto.run_forward(tmp_path, full=False)
-    widths, spps, depths, _ = forward_pareto.REDUCED
-    assert len(rows) == len(widths) * len(spps) * len(depths)
+    out = run_script("forward_pareto", "--out", str(tmp_path))
+    rows = [{k: float(v) for k, v in row.items()} for row in read_csv(tmp_path / "forward.csv")]
+    # the reduced study (forward_pareto.REDUCED): 64 and 128 px, spp 1 to 16, depths 1 to 3
+    spps, depths = (1, 2, 4, 8, 16), (1, 2, 3)
+    assert sorted((r["resolution"], r["spp"], r["depth"]) for r in rows) == [(w, s, d) for w in (64, 128) for s in spps for d in depths]
     assert (tmp_path / "forward_pareto.png").stat().st_size > 0
-    assert len(list(csv.DictReader(open(tmp_path / "forward.csv")))) == len(rows)
     deepest = [r for r in rows if r["depth"] == max(depths)]
     error = {s: np.mean([r["rel_rmse"] for r in deepest if r["spp"] == s]) for s in spps}
     assert error[max(spps)] < error[min(spps)]  # more samples, less error, on average over resolutions
-    front = forward_pareto.pareto_front([(r["time_s"], r["rel_rmse"]) for r in rows])
+    front = pareto_front([(r["time_s"], r["rel_rmse"]) for r in rows])
     assert front and all(rows[a]["time_s"] <= rows[b]["time_s"] and rows[a]["rel_rmse"] > rows[b]["rel_rmse"]
                          for a, b in zip(front, front[1:]))
+    assert f"{len(rows)} configurations" in out and len(out.splitlines()) == len(front) + 1  # the front, printed
 
 
 def test_fit_cost_study_shape(tmp_path):
-    rows = fit_cost.run_fit_cost(tmp_path, full=False)
-    expected = {(w, s, solver) for w, s in fit_cost.REDUCED["panels"] for solver in ("lm", "adam")}
-    assert {(r["width_px"], r["spp"], r["solver"]) for r in rows} == expected
-    assert all(np.isfinite(r["time_s"]) and r["time_s"] > 0 and r["max_rel_error"] >= 0 for r in rows)
+    run_script("fit_cost", "--out", str(tmp_path))
+    rows = read_csv(tmp_path / "fit_cost.csv")
+    # the reduced study (fit_cost.REDUCED): the panels case at 32 and 64 px, 8 spp, with lm and adam
+    assert {(int(r["width_px"]), int(r["spp"]), r["solver"]) for r in rows} == {(w, 8, s) for w in (32, 64) for s in ("lm", "adam")}
+    assert all(np.isfinite(float(r["time_s"])) and float(r["time_s"]) > 0 and float(r["max_rel_error"]) >= 0 for r in rows)
     assert (tmp_path / "fit_cost.png").stat().st_size > 0

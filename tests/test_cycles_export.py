@@ -1,4 +1,5 @@
-"""The scene description experiments/cycles_peer.py hands to Blender Cycles matches the scene spacefit renders (no bpy needed)."""
+"""The scene description spacefit hands to Blender Cycles (spacefit.rendering.cycles, for
+experiments/cycles_peer.py) matches the scene spacefit renders (no bpy needed)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,7 @@ import math
 import numpy as np
 import pytest
 
-import cycles_peer
-from cycles_render import cycles_roughness, read_ply
-
+from spacefit.rendering.cycles import cycles_roughness, export_view, read_ply
 from spacefit.rendering.renderer import Renderer
 from spacefit.scene.assembly import assemble
 from spacefit.scene.toml import load_scene
@@ -23,7 +22,7 @@ SMALL = ["camera.position_m=[0, 0, 25]", "wrinkles.spacing_m=0.2"]
 def exported(tmp_path_factory):
     assembly = assemble(load_scene(None, SMALL))
     folder = tmp_path_factory.mktemp("cycles_scene")
-    description = cycles_peer.export_view(assembly, folder)
+    description = export_view(assembly, folder)
     return assembly, folder, description
 
 

@@ -1,17 +1,21 @@
-"""The thesis's sweeps (section 4.4) at a reduced size: sheets written, radiance linear in the sun."""
+"""The thesis's sweeps (section 4.4) and other studies at a reduced size, run as scripts: sheets
+written, radiance linear in the sun; and the sample-allocation bound in closed form."""
 
 from __future__ import annotations
 
-
+import numpy as np
 import pytest
+from scripts import read_csv, run_script
 
-import thesis_sweeps  # noqa: E402
+import spacefit as sf
+from spacefit.studies.costs import allocation_gains
 
 
 def test_light_level_sweep_is_linear_in_irradiance(tmp_path):
-    rows = thesis_sweeps.run_sweeps(tmp_path, size=48, spp=2, only=["light_level"], overrides=["wrinkles.spacing_m=0.2"])
-    assert (tmp_path / "light_level.png").stat().st_size > 0 and (tmp_path / "sweeps.csv").exists()
-    mean = {row["value"]: row["mean_radiance"] for row in rows}
+    run_script("thesis_sweeps", "--out", str(tmp_path), "--size", "48", "--spp", "2", "--only", "light_level",
+               "--set", "wrinkles.spacing_m=0.2")
+    assert (tmp_path / "light_level.png").stat().st_size > 0
+    mean = {row["value"]: float(row["mean_radiance"]) for row in read_csv(tmp_path / "sweeps.csv")}
     assert list(mean) == ["0.1", "0.5", "1", "5", "10"]
     # same seed, same paths: radiance scales exactly with the sun's irradiance
     for label, value in mean.items():
@@ -19,10 +23,9 @@ def test_light_level_sweep_is_linear_in_irradiance(tmp_path):
 
 
 def test_identifiability_study_shape(tmp_path):
-    import identifiability
-
-    rows = identifiability.run_identifiability(tmp_path, [25.0, 70.0], [64, 128], spp=8)
-    assert (tmp_path / "identifiability.csv").exists() and (tmp_path / "identifiability.png").stat().st_size > 0
+    run_script("identifiability", "--out", str(tmp_path))  # the reduced study: 25 and 70 m at 64 and 128 px, 8 spp
+    assert (tmp_path / "identifiability.png").stat().st_size > 0
+    rows = [{k: float(v) for k, v in row.items()} for row in read_csv(tmp_path / "identifiability.csv")]
     assert [(r["range_m"], r["width_px"]) for r in rows] == [(25.0, 64), (25.0, 128), (70.0, 64), (70.0, 128)]
     by = {(r["range_m"], r["width_px"]): r for r in rows}
     for width in (64, 128):  # information falls with range at a fixed image size
@@ -32,11 +35,8 @@ def test_identifiability_study_shape(tmp_path):
 
 
 def test_wrinkle_previews_put_the_default_in_the_mli_range_and_the_literal_reading_beyond(tmp_path):
-    import wrinkle_previews
-
-    import spacefit as sf
-
-    rows = {row["reading"]: row for row in wrinkle_previews.run_previews(tmp_path, size=48, spp=1)}
+    run_script("wrinkle_previews", "--out", str(tmp_path), "--size", "48", "--spp", "1")
+    rows = {row["reading"]: {k: float(v) for k, v in row.items() if k != "reading"} for row in read_csv(tmp_path / "wrinkles.csv")}
     assert {p.name for p in tmp_path.iterdir()} == {"default.png", "thesis_literal.png", "wrinkles.csv"}
     lo, hi = sf.MLI_SLOPE_RANGE
     assert lo <= rows["default"]["rms_slope"] <= hi and rows["default"]["fold_fraction"] < 0.01
@@ -47,12 +47,9 @@ def test_sample_allocation_bound_matches_its_closed_form():
     """Two pixels of sigma 1 and 3: samples in proportion to sigma need (mean sigma)^2 / mean sigma^2
     = 4 / 5 of uniform sampling's; a first pass that knows sigma exactly and spends a quarter
     uniformly gets n = 0.25 + 0.75 * 2 sigma / 4 = (0.625, 1.375) and needs (1 / 0.625 + 9 / 1.375) / 10."""
-    import numpy as np
-    import sample_allocation
-
-    gains = sample_allocation.allocation_gains(np.array([1.0, 3.0]), np.array([1.0, 3.0]))
+    gains = allocation_gains(np.array([1.0, 3.0]), np.array([1.0, 3.0]))
     assert gains["ideal"] == pytest.approx(0.8)
     assert gains["two_pass"] == pytest.approx((1 / 0.625 + 9 / 1.375) / 10)
     # equal sigmas: nothing to gain; a noisy first pass only loses
-    flat = sample_allocation.allocation_gains(np.ones(4), np.array([0.5, 1.0, 1.5, 1.0]))
+    flat = allocation_gains(np.ones(4), np.array([0.5, 1.0, 1.5, 1.0]))
     assert flat["ideal"] == pytest.approx(1.0) and flat["two_pass"] > 1.0

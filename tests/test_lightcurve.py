@@ -78,3 +78,45 @@ def test_bad_input(sphere):
         sf.light_curve(sphere, phase_deg=[190.0], quiet=True)
     with pytest.raises(sf.InputError, match="observer"):
         sf.light_curve(sphere, phase_deg=[0.0], observer=[1.0, 0.0, 0.0, 0.0], quiet=True)
+
+
+def test_seeds_average_with_their_standard_error(sphere):
+    """Two seeds: the mean (a + b) / 2 of the one-seed curves, its standard error |a - b| / 2 (sample
+    std over sqrt 2), the magnitude's 2.5 / ln 10 se / E, and an asymmetric interval m(E +- se)."""
+    a = sf.light_curve(sphere, attitude_deg=[0.0, 30.0], seeds=[3], quiet=True)
+    b = sf.light_curve(sphere, attitude_deg=[0.0, 30.0], seeds=[4], quiet=True)
+    both = sf.light_curve(sphere, attitude_deg=[0.0, 30.0], seeds=[3, 4], observer_range_m=20.0, quiet=True)
+    assert both.seeds == 2 and a.seeds == 1
+    mean, se = (a.irradiance_w_m2 + b.irradiance_w_m2) / 8, np.abs(a.irradiance_w_m2 - b.irradiance_w_m2) / 8  # range 10 -> 20 m
+    assert np.all(se > 1e-4 * mean)  # the seeds differ: the test can tell a mean from one seed
+    np.testing.assert_allclose(both.irradiance_w_m2, mean, rtol=1e-6)
+    np.testing.assert_allclose(both.irradiance_se_w_m2, se, rtol=1e-5)
+    np.testing.assert_allclose(both.magnitude_se, 2.5 / math.log(10) * se / mean, rtol=1e-5)
+    bright, faint = both.magnitude_interval()
+    np.testing.assert_allclose(bright, -26.74 - 2.5 * np.log10((mean + se) / 5.0), rtol=1e-9)
+    np.testing.assert_allclose(faint, -26.74 - 2.5 * np.log10((mean - se) / 5.0), rtol=1e-9)
+    ds = both.dataset
+    np.testing.assert_allclose(ds.magnitude_se.values, both.magnitude_se)
+    assert ds.irradiance_observer_se.attrs["units"] == "W m^-2" and ds.magnitude.attrs["units"] == "mag"
+    rows = both.table().splitlines()
+    assert "mean of 2 seeds" in rows[1] and len(rows) == 4 and "+-" in rows[2] and "unknown" not in both.table()
+    assert len(both.figure().axes[1].containers) == 1  # the magnitudes' error bars
+
+
+def test_one_seed_says_its_error_is_unknown(sphere):
+    lc = sf.light_curve(sphere, attitude_deg=[0.0, 30.0], quiet=True)
+    assert lc.seeds == 1 and np.all(np.isnan(lc.irradiance_se_w_m2)) and np.all(np.isnan(lc.magnitude_se))
+    assert "error is unknown" in lc.table() and lc.table().count("+- unknown") == 4
+    assert "unknown" in lc.figure()._suptitle.get_text()
+    with pytest.raises(sf.InputError, match="one seed"):
+        lc.seeds_for(0.01)
+
+
+def test_seeds_for_a_precision_scale_as_one_over_sqrt_seeds(sphere):
+    lc = sf.light_curve(sphere, attitude_deg=[0.0, 30.0], seeds=[1, 2, 3], quiet=True)
+    worst = float(np.max(lc.magnitude_se))
+    assert lc.seeds_for(worst * 1.0001) == 3
+    assert lc.seeds_for(worst / 2) == 12  # half the error: four times the seeds
+    assert lc.seeds_for(worst / 10) == 300
+    with pytest.raises(sf.InputError, match="precision_mag"):
+        lc.seeds_for(0.0)

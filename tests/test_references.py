@@ -1,7 +1,7 @@
 """The committed synthetic references are what the current code renders at their seed (issue 11 item 7).
 
 ``data/synthetic/make_references.py`` (``make synthetic``) writes each case's ``reference.exr`` from
-its scene file at the scene's seed; a change of the renderer, the geometry or a default that moves
+its scene file (package data, ``spacefit/synthetic/``) at the scene's seed; a change of the renderer, the geometry or a default that moves
 the image must come with regenerated references. Renders are bitwise deterministic on one machine
 (one render thread); the stated bound, relative L1 1e-3 over the image, leaves room for another
 CPU's float rounding and is far below what a changed scene gives (the stale references of issue 11
@@ -17,6 +17,7 @@ import pytest
 from conftest import reference
 
 import spacefit as sf
+from spacefit.cases import CASES_DIR
 
 HERE = Path(__file__).resolve().parents[1] / "data" / "synthetic"
 REL_L1 = 1e-3
@@ -24,7 +25,7 @@ COMMITTED = [name for name in sf.case_names() if (HERE / name / "reference.exr")
 
 
 def test_every_scene_file_has_a_committed_reference():
-    assert COMMITTED == [name for name in sf.case_names() if (HERE / f"{name}.toml").is_file()] != []
+    assert COMMITTED == [name for name in sf.case_names() if (CASES_DIR / f"{name}.toml").is_file()] != []
 
 
 @pytest.mark.parametrize("name", COMMITTED)

@@ -2,17 +2,16 @@
 
 from __future__ import annotations
 
-import csv
 import math
 from collections import Counter
 
 import numpy as np
 import pytest
+from scripts import read_csv, run_script
 
-from failures import FAILURE_CLASSES, classify
-from stability import CONDITIONS, EDGE_ON, PANELS, REDUCED, run_stability
-
+import spacefit as sf
 from spacefit import FitResult, InputError, Renderer, Status
+from spacefit.studies.failures import FAILURE_CLASSES, classify
 
 TRUTH = {"parts.panels.alpha_x": 0.15, "parts.legs.kd": 0.5}
 
@@ -76,33 +75,37 @@ def test_classify_refuses_incomplete_truth():
 
 
 def test_edge_on_view_shows_the_panels_as_a_line():
-    """The study's edge-on attitude: the panels cover a fraction of the pixels they cover face-on."""
+    """The study's edge-on attitude (experiments/stability.py EDGE_ON): the panels cover a fraction of
+    the pixels they cover face-on."""
+    edge_on_attitude = {"target.attitude_deg": [-81.6, 0, 0]}  # 3 sin a + 25 cos a = 0.68: the camera in the panel plane
 
     def panel_pixels(more: dict | None = None) -> int:
         # white panels at two albedos, lit from the camera, direct light only: the pixels that change
-        images = [Renderer(PANELS.scene().with_values({
+        images = [Renderer(sf.load_case("panels").scene().with_values({
             "render.resolution": [32, 32], "camera.pixel_pitch_mm": 75, "render.spp": 4, "render.depth": 1,
             "sun.direction": [-4, -3, -25], "parts.panels": {"material": "white_paint", "kd": kd}, **(more or {}),
         })).render(seed=1) for kd in (1.0, 0.5)]
         return int(np.sum(np.abs(images[0] - images[1]).max(axis=-1) > 0))
 
-    face_on, edge_on = panel_pixels(), panel_pixels(EDGE_ON)
+    face_on, edge_on = panel_pixels(), panel_pixels(edge_on_attitude)
     assert 0 < edge_on < 0.4 * face_on, (edge_on, face_on)
 
 
 def test_stability_study_shape(tmp_path):
-    """The reduced study: every run present and classified, files written, the easy start recovered."""
-    rows = run_stability(tmp_path, full=False, jobs=2)
-    expected = {(c, v, s) for c, (_, reduced) in CONDITIONS.items() for v in reduced for s in REDUCED.solvers}
-    assert {(r["condition"], r["value"], r["solver"]) for r in rows} == expected and len(rows) == len(expected)
+    """The reduced study, run as a script: every condition's values with both solvers, each run
+    classified, files written, the easy start recovered."""
+    run_script("stability", "--out", str(tmp_path), "--jobs", "2")
+    rows = read_csv(tmp_path / "stability.csv")
+    assert {"condition", "value", "solver", "class", "errors", "steps", "time_s"} <= set(rows[0])
+    # the reduced conditions (stability.CONDITIONS' second column, no D), each value with lm and adam
+    assert {r["condition"] for r in rows} == {"start_offset", "alpha", "sun_elevation_deg", "noise", "view"}
+    runs = [(r["condition"], r["value"], r["solver"]) for r in rows]
+    assert len(set(runs)) == len(runs) == 2 * len({(c, v) for c, v, _ in runs})
+    assert {s for _, _, s in runs} == {"lm", "adam"}
     assert all(r["class"] in FAILURE_CLASSES for r in rows), [r for r in rows if r["class"] not in FAILURE_CLASSES]
     counts = Counter(r["class"] for r in rows)
     assert sum(counts.values()) == len(rows)
-    easy = min(CONDITIONS["start_offset"][1], key=abs)  # the start offset nearest the truth
-    by_run = {(r["condition"], r["value"], r["solver"]): r for r in rows}
+    easy = min((v for c, v, _ in runs if c == "start_offset"), key=lambda v: abs(float(v)))  # the start nearest the truth
+    by_run = {run: r for run, r in zip(runs, rows)}
     assert by_run[("start_offset", easy, "lm")]["class"] == "success", by_run[("start_offset", easy, "lm")]
-    with open(tmp_path / "stability.csv", newline="") as f:
-        written = list(csv.DictReader(f))
-    assert len(written) == len(rows)
-    assert {"condition", "value", "solver", "class", "errors", "steps", "time_s"} <= set(written[0])
     assert (tmp_path / "stability.png").stat().st_size > 0

@@ -36,6 +36,8 @@ CONVENTIONS = "tests/test_conventions.py"
 UNCERTAINTY = "tests/test_uncertainty.py"
 PROPERTIES = "tests/test_properties.py"
 PHYSICS = "tests/test_physics.py"
+PLUMBING = "tests/test_error_plumbing.py"
+SENSITIVITY = "spacefit/studies/sensitivity.py"
 
 
 @dataclass(frozen=True)
@@ -135,6 +137,25 @@ MUTANTS = (
            "", ("tests/test_mesh_io.py",)),
     Mutant("fold-against-own-base-face", "spacefit/geometry/wrinkle.py", "ref.normals[movable][nearest]) < 0.0",
            "ref.normals[ref.faces[:, 0]]) < 0.0", ("tests/test_mli_default.py",)),
+    # the error plumbing (issue 18): Monte Carlo errors, warnings, the render noise's reach, resumable sweeps
+    Mutant("mc-error-population-std", SENSITIVITY, "samples.std(axis=0, ddof=1)", "samples.std(axis=0, ddof=0)",
+           (PLUMBING,)),
+    Mutant("mc-error-not-over-sqrt-n", SENSITIVITY, "ddof=1) / math.sqrt(samples.shape[0])", "ddof=1)", (PLUMBING,)),
+    Mutant("t-quantile-n-degrees-of-freedom", SENSITIVITY, "CONFIDENCE / 2.0, seeds - 1))", "CONFIDENCE / 2.0, seeds))",
+           (PLUMBING,)),
+    Mutant("t-quantile-one-sided", SENSITIVITY, "t.ppf(0.5 + CONFIDENCE / 2.0,", "t.ppf(CONFIDENCE,", (PLUMBING,)),
+    Mutant("correlation-warning-positive-only", COVARIANCE, "if abs(corr[i, j]) > CORRELATION_WARN:",
+           "if corr[i, j] > CORRELATION_WARN:", (PLUMBING,)),
+    Mutant("psf-widths-added-linearly", COVARIANCE, "sigma = math.hypot(blur, 0.0 if i is None else float(x[i]))",
+           "sigma = blur + (0.0 if i is None else float(x[i]))", (PLUMBING,)),
+    Mutant("render-noise-spread-without-sensor-psf", "spacefit/fitting/problem.py",
+           "blur = 0.0 if obs.sensor is None else psf_rms_px(", "blur = 0.0 if True else psf_rms_px(", (PLUMBING,)),
+    Mutant("light-curve-first-seed-only", "spacefit/studies/lightcurve.py", "mean, se = mean_and_error(samples) if",
+           "mean, se = (samples[0], mean_and_error(samples)[1]) if", ("tests/test_lightcurve.py",)),
+    Mutant("sweep-done-before-data", "spacefit/studies/sweep.py",
+           '    for name, value in result.items():\n        group[name][index] = value\n    group["done"][index] = True\n',
+           '    group["done"][index] = True\n    for name, value in result.items():\n        group[name][index] = value\n',
+           (PLUMBING,)),
 )
 
 

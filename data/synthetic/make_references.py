@@ -1,7 +1,7 @@
-"""Render the synthetic reference cases: every case of cases.toml, from its scene file beside it.
+"""Render the synthetic reference cases: every case of ``spacefit/synthetic/cases.toml`` that has a
+scene file of its own there (the package data :func:`spacefit.load_case` reads).
 
-For case NAME of ``cases.toml`` (read by :func:`spacefit.load_case`) this writes the folder
-``NAME/`` all at once:
+For case NAME this writes the folder ``data/synthetic/NAME/`` (beside this script) all at once:
 
 * ``reference.exr``: radiance (W m^-2 sr^-1), rendered with the scene's own seed (7);
 * ``preview.png``: 8-bit sRGB preview (99.5th percentile of lit pixels at white);
@@ -24,7 +24,7 @@ from typing import Any
 
 
 import spacefit as sf
-from spacefit.cases import add_noise
+from spacefit.cases import CASES_DIR, add_noise
 from spacefit.errors import check_choice
 from spacefit.output import preview_scale, staged_output, to_srgb8, versions, write_json, write_png
 from spacefit.progress import Progress
@@ -74,7 +74,7 @@ def make_case(name: str) -> dict[str, Any]:
 
 
 def main() -> None:
-    cases = [name for name in sf.case_names() if (HERE / f"{name}.toml").is_file()]  # derived cases have no files
+    cases = [name for name in sf.case_names() if (CASES_DIR / f"{name}.toml").is_file()]  # derived cases have no files
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("cases", nargs="*", metavar="CASE", help=f"cases to render (default: all of {', '.join(cases)})")
     args = p.parse_args()

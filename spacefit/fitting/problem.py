@@ -25,13 +25,12 @@ from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.nuisance import image_model as image_model_of
 from spacefit.fitting.params import FreeParameters, free_parameters
 from spacefit.geometry.frames import Intrinsics
-from spacefit.rendering.bridge import DrJitScene, render_params, render_values
-from spacefit.rendering.renderer import PartImage, Renderer
-from spacefit.rendering.values import scene_values_fn
+from spacefit.rendering.derivatives import render_chain
+from spacefit.rendering.renderer import PartImage
 from spacefit.scene.assembly import assemble
 from spacefit.scene.schema import FILTER_RADIUS_PX, Scene, check_scene
 from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, dn_fn, noise_variance_dn, psf_rms_px, saturated_mask
-from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, G_of, observation_of, rms_of, scene_value, scene_with_values
+from spacefit.scene.parameters import GEOMETRY, G_of, observation_of, rms_of, scene_value, scene_with_values
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
 # Seed offset of the second, independent Jacobian used for the standard errors.
@@ -183,9 +182,8 @@ def _problem(
     observations: Sequence[Observation], free: FreeParameters, loss: str, spp: int | None, spp_grad: int | None,
     seed: int, seed_grad: int, integrator: str,
 ) -> Problem:
-    renders_x, renders_alt, renders_v, residuals, values_fns, part_images, references, spread = [], [], [], [], [], [], [], []
+    renders_x, renders_alt, renders_v, residuals, part_images, references, spread = [], [], [], [], [], [], []
     to_units, units, used_pixels = [], [], []
-    moving = any(observation_of(n)[0] in MOVES_VERTICES for n in free.names)
     # the image nuisances act on the render in JAX; each renderer sees the other parameters, an
     # observation's own pose (``target.attitude_z_deg@k``) in place of the shared one
     image_model = image_model_of(free.names)
@@ -195,21 +193,17 @@ def _problem(
         ref, used = check_reference(obs, i)
         scene = obs.scene
         assembly = assemble(scene)
-        # D, G and the pose move the vertices: render the whole film, the target's window would not hold them
-        renderer = Renderer(assembly, crop=not moving)
-        dscene = DrJitScene(renderer, spp or scene.render.spp, spp_grad or spp or scene.render.spp, integrator)
-        values_of = scene_values_fn(assembly, rendered_names)
-        renders_x.append(render_params(dscene, values_of, steps, seed, seed_grad))
+        chain = render_chain(assembly, rendered_names, spp=spp, spp_grad=spp_grad, integrator=integrator, fd_steps=steps)
+        renders_x.append(chain.forward(seed, seed_grad))
         alt = INDEPENDENT_SEED_OFFSET
-        renders_alt.append(render_params(dscene, values_of, steps, seed + alt, seed_grad + alt))
-        renders_v.append(render_values(dscene, seed, seed_grad))
+        renders_alt.append(chain.forward(seed + alt, seed_grad + alt))
+        renders_v.append(chain.reverse(seed, seed_grad))
         if obs.sensor is not None:
             used = used & ~saturated_mask(ref, obs.sensor)  # a saturated value says only "at least this bright"
         residuals.append(_residual(obs, ref, used, loss))
         to_units.append(_in_unit_of(obs, ref.shape[-1], assembly.intrinsics))
         units.append(RADIANCE_UNIT if obs.sensor is None else DN_UNIT)
-        values_fns.append(values_of)
-        part_images.append(renderer.part_image())
+        part_images.append(chain.renderer.part_image())
         references.append(ref)
         used_pixels.append(np.all(used, axis=-1))
         blur = 0.0 if obs.sensor is None else psf_rms_px(obs.sensor, assembly.intrinsics, ref.shape[-1])
@@ -226,8 +220,8 @@ def _problem(
 
         def reverse(u: jax.Array) -> jax.Array:
             x = free.to_physical(u)
-            r = jnp.concatenate([res(to_units[k](image_model(render(vals(x[rendered[k][1]])), x, k)))
-                                 for k, (res, render, vals) in enumerate(zip(residuals, renders_v, values_fns))])
+            r = jnp.concatenate([res(to_units[k](image_model(render(x[rendered[k][1]]), x, k)))
+                                 for k, (res, render) in enumerate(zip(residuals, renders_v))])
             return 0.5 * jnp.sum(r**2)
 
     return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [modelled(render, k)(x) for k, render in enumerate(renders_x)],

@@ -13,6 +13,9 @@ Dr.Jit -> JAX, so this module owns both directions:
   common random numbers, and returns ``J @ t``: plain JAX that JAX can linearize and transpose, so
   optimistix least squares, ``jax.jacfwd`` and ``jax.grad`` all work.
 
+Both are built on a loaded scene by :func:`spacefit.rendering.derivatives.render_chain`, the one
+place that wires Renderer -> :class:`DrJitScene` -> scene values -> these functions.
+
 Renders are deterministic for a seed (JAX treats callbacks as pure). The primal image and finite
 differences use ``seed``; derivative renders use ``seed_grad``, a different seed, so that an L2
 loss's gradient is not biased by noise shared with its residual. Inputs are validated before any

@@ -1,6 +1,11 @@
 """Derivatives of the image with respect to registered parameters, for notebooks and solvers.
 
-:func:`render_function` is the image as a JAX function of the parameters' physical values, with the
+:func:`render_chain` is the one constructor of the chain "loaded scene -> JAX image function":
+Renderer (the scene loaded into Mitsuba) -> :class:`~spacefit.rendering.bridge.DrJitScene` ->
+scene values (:func:`~spacefit.rendering.values.scene_values_fn`) -> the bridge's forward
+(:func:`~spacefit.rendering.bridge.render_params`) or reverse
+(:func:`~spacefit.rendering.bridge.render_values`) function; the fit, the sensitivities, the
+experiments and the tests all build it here. :func:`render_function` is the image as a JAX function of the parameters' physical values, with the
 bridge's materialised Jacobian (forward-mode AD for materials and the sun's irradiance, central
 finite differences with common random numbers for geometry and the sun's angles), so that
 ``jax.jacfwd``, ``jax.jvp`` and optimistix least squares work on it unchanged. :func:`jacobian`
@@ -19,11 +24,76 @@ from jaxtyping import Array, Float
 
 from spacefit.errors import InputError, check_count
 from spacefit.precision import float64
-from spacefit.rendering.bridge import DrJitScene, render_params
+from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import Renderer
-from spacefit.rendering.values import scene_values_fn
+from spacefit.rendering.values import SceneValuesFn, scene_values_fn
+from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.schema import Scene, check_scene
 from spacefit.scene.parameters import MOVES_VERTICES, check_names, fd_step, scene_value
+
+
+ImageFn = Callable[[Float[Array, " n"]], Float[Array, "h w 3"]]
+
+
+@dataclass(frozen=True)
+class RenderChain:
+    """A loaded scene's radiance image (W m^-2 sr^-1, float32) as JAX functions of the physical
+    values x of the parameters ``names``; built by :func:`render_chain`.
+
+    Attributes:
+        names: the parameters, in the order of x (registry names).
+        renderer: the loaded scene (its assembly, part image, film window).
+        drjit: its Dr.Jit side, rendered by traverse key.
+        values_of: JAX function x -> the Mitsuba scene values it sets.
+        fd_steps: (n,) central finite-difference step of each parameter, 0 where its Jacobian
+            column comes from a forward-mode AD render.
+    """
+
+    names: tuple[str, ...]
+    renderer: Renderer
+    drjit: DrJitScene
+    values_of: SceneValuesFn
+    fd_steps: np.ndarray
+
+    def forward(self, seed: int, seed_grad: int) -> ImageFn:
+        """The image with a materialised Jacobian (:func:`~spacefit.rendering.bridge.render_params`):
+        ``jax.jacfwd``, ``jax.jvp``, ``jax.grad`` and optimistix least squares work on it."""
+        return render_params(self.drjit, self.values_of, self.fd_steps, seed, seed_grad)
+
+    def reverse(self, seed: int, seed_grad: int) -> ImageFn:
+        """The image differentiable in reverse mode, one Dr.Jit backward pass whatever the number of
+        parameters (:func:`~spacefit.rendering.bridge.render_values`); it carries AD derivatives only
+        (a frame's, the sun's or the camera's, is zero)."""
+        image = render_values(self.drjit, seed, seed_grad)
+        return lambda x: image(self.values_of(x))
+
+    def primal(self, x: Float[np.ndarray, " n"], seed: int) -> np.ndarray:
+        """The image (h, w, 3) at x for ``seed``, rendered directly (no JAX transformation)."""
+        return self.drjit.primal(self.values_of(jnp.asarray(x)), seed)
+
+
+def render_chain(
+    scene: Scene | Assembly, names: Sequence[str], *, spp: int | None = None, spp_grad: int | None = None,
+    integrator: str = "prb", fd_steps: Float[np.ndarray, " n"] | None = None,
+) -> RenderChain:
+    """Load ``scene`` (or its assembly) once and chain it to JAX for the parameters ``names``.
+
+    ``spp`` / ``spp_grad``: samples per pixel of the primal and derivative renders (default: the
+    scene's, and ``spp``); ``integrator``: Mitsuba's AD integrator (``prb``, ``direct_projective``,
+    ``prb_projective``); ``fd_steps``: each parameter's finite-difference step, 0 for an AD column
+    (default: the registry's). Only the film window around the target is rendered unless a
+    parameter moves vertices (D, G, the pose), which the window would not hold. The names are not
+    checked here: the callers check them against their own vocabulary first.
+    """
+    check_count("spp", spp)
+    check_count("spp_grad", spp_grad)
+    assembly = scene if isinstance(scene, Assembly) else assemble(check_scene(scene))
+    names = tuple(names)
+    renderer = Renderer(assembly, crop=not any(n in MOVES_VERTICES for n in names))
+    spp = spp or assembly.scene.render.spp
+    steps = np.array([fd_step(assembly.scene, n) for n in names], dtype=float) if fd_steps is None else np.asarray(fd_steps, float)
+    return RenderChain(names, renderer, DrJitScene(renderer, spp, spp_grad or spp, integrator), scene_values_fn(assembly, names),
+                       steps)
 
 
 def render_function(
@@ -52,19 +122,13 @@ def render_functions(
     """:func:`render_function` for any seeds on one loaded scene: ``(seed, seed_grad) -> image function``,
     and the renderer (its part image, say)."""
     check_names(check_scene(scene), list(free))
-    check_count("spp", spp)
-    check_count("spp_grad", spp_grad)
-    renderer = Renderer(scene, crop=not any(n in MOVES_VERTICES for n in free))
-    spp = spp or scene.render.spp
-    dscene = DrJitScene(renderer, spp, spp_grad or spp)
-    steps = np.array([fd_step(scene, n) for n in free])
-    values_of = scene_values_fn(renderer.assembly, list(free))
+    chain = render_chain(scene, free, spp=spp, spp_grad=spp_grad)
 
-    def function(seed: int, seed_grad: int) -> Callable[[Float[Array, " n"]], Float[Array, "h w 3"]]:
-        image = render_params(dscene, values_of, steps, seed, seed_grad)
+    def function(seed: int, seed_grad: int) -> ImageFn:
+        image = chain.forward(seed, seed_grad)
         return lambda x: image(x).astype(jnp.result_type(x))
 
-    return function, renderer
+    return function, chain.renderer
 
 
 @dataclass(frozen=True)

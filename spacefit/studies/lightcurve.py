@@ -19,6 +19,16 @@ towards them) or as (elevation, azimuth) in degrees in the target's frame: eleva
 plane, azimuth from its +x towards +y, turned into the world by its attitude (thesis section 3.2).
 The solar phase angle is the angle at the target between the directions towards the sun and towards
 the observer.
+
+Monte Carlo errors: with ``seeds`` (two or more), each point's irradiance is the mean of the seeds'
+renders and carries its standard error, the seeds' standard deviation over sqrt(seeds)
+(:func:`spacefit.studies.sensitivity.mean_and_error`). The magnitude's error follows by the delta
+method, sigma_m = 2.5 / ln 10 * sigma_E / E (about 1.086 sigma_E / E); where sigma_E / E is large
+that linearisation fails, so :meth:`LightCurve.magnitude_interval` gives the asymmetric interval
+m(E + sigma_E), m(E - sigma_E) (the faint side infinite when sigma_E >= E), which the figure draws.
+With one seed the error is unknown: NaN in the arrays, "unknown" in the table, no error bars. The
+error of a mean falls as 1 / sqrt(seeds): :meth:`LightCurve.seeds_for` says how many seeds a
+requested magnitude precision needs.
 """
 
 from __future__ import annotations
@@ -36,10 +46,14 @@ from spacefit.geometry.frames import attitude_matrix
 from spacefit.scene.assembly import assemble
 from spacefit.scene.parameters import scene_value, sun_angles_deg, sun_direction
 from spacefit.scene.schema import Scene, check_scene, deg2rad
+from spacefit.studies.sensitivity import mean_and_error
 from spacefit.studies.sweep import sweep
 
 # The sun's apparent magnitude by band (module docstring gives the source).
 SUN_MAGNITUDES = {"V": -26.74}
+# d m / d ln E: the magnitude's error per relative error of the irradiance.
+MAGNITUDE_PER_LN = 2.5 / math.log(10.0)
+SEED_AXIS = "render.seed"
 
 
 def direction(scene: Scene, value: Sequence[float], name: str) -> np.ndarray:
@@ -94,12 +108,15 @@ class LightCurve:
 
     Attributes:
         against: what was swept (``phase_angle_deg``, an attitude key, or ``time_s``); ``x`` its values.
-        irradiance_w_m2: at the observer, W m^-2 (rescaled from the rendered range).
+        irradiance_w_m2: at the observer, W m^-2 (rescaled from the rendered range), mean over the seeds.
+        irradiance_se_w_m2: its Monte Carlo standard error (NaN with one seed: unknown).
         magnitude: apparent magnitude in ``band`` with the sun's ``sun_magnitude``.
+        magnitude_se: its standard error by the delta method, 2.5 / ln 10 * se / E (NaN with one seed).
+        seeds: the number of independent seeds averaged at each point.
         phase_angle_deg: the solar phase angle of each point.
         rendered_range_m, observer_range_m: camera range rendered and observer range (m).
         sun_irradiance_w_m2: the sun's irradiance at the target.
-        dataset: the sweep's Dataset.
+        dataset: the sweep's Dataset, with ``irradiance_observer``, ``magnitude`` and their ``_se`` added.
     """
 
     against: str
@@ -113,22 +130,74 @@ class LightCurve:
     observer_range_m: float
     sun_irradiance_w_m2: float
     dataset: Any
+    irradiance_se_w_m2: np.ndarray
+    magnitude_se: np.ndarray
+    seeds: int
+
+    def magnitude_interval(self) -> tuple[np.ndarray, np.ndarray]:
+        """(bright, faint): the magnitudes at E + se and E - se, an asymmetric one-sigma interval exact
+        where the delta method's ``magnitude_se`` is not (faint is inf when se >= E; NaN with one seed)."""
+        e, se = self.irradiance_w_m2, self.irradiance_se_w_m2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            bright = self.sun_magnitude - 2.5 * np.log10((e + se) / self.sun_irradiance_w_m2)
+            faint = np.where(se >= e, np.inf, self.sun_magnitude - 2.5 * np.log10((e - se) / self.sun_irradiance_w_m2))
+        return bright, faint
+
+    def seeds_for(self, precision_mag: float) -> int:
+        """The number of seeds at which every point's magnitude standard error is at most
+        ``precision_mag`` (mag), from the errors measured here (which need two or more seeds):
+        se falls as 1 / sqrt(seeds), so seeds x (se / precision)^2 at the worst point."""
+        check_range("precision_mag", precision_mag, 0.0, lo_open=True, unit="mag")
+        if self.seeds < 2:
+            raise InputError("the light curve was rendered with one seed, so its error is unknown: run it with `seeds` "
+                             "(two or more, e.g. seeds=[1, 2, 3, 4]) to measure the error that `seeds_for` scales.")
+        worst = float(np.nanmax(self.magnitude_se)) if np.isfinite(self.magnitude_se).any() else math.inf
+        if not math.isfinite(worst):
+            raise InputError("no point has a finite magnitude error (the target is dark at every point); "
+                             "no number of seeds reaches a precision there.")
+        return max(2, math.ceil(self.seeds * (worst / precision_mag) ** 2))
+
+    def table(self) -> str:
+        """The light curve as text: each point's phase angle, irradiance and magnitude with their
+        standard errors ("unknown" with one seed; an asymmetric interval where it is over 10 % wide)."""
+        lines = [f"{self.against:>18s} {'phase (deg)':>11s} {'irradiance (W m^-2)':>28s} {'magnitude ' + self.band:>28s}",
+                 f"(mean of {self.seeds} seed{'s' * (self.seeds > 1)}; Monte Carlo standard errors)" if self.seeds > 1
+                 else "(one seed: the Monte Carlo error is unknown; run with `seeds` to measure it)"]
+        bright, faint = self.magnitude_interval()
+        for i in range(len(self.x)):
+            e, m = self.irradiance_w_m2[i], self.magnitude[i]
+            if self.seeds < 2:
+                e_text, m_text = f"{e:.5g} +- unknown", f"{m:.4f} +- unknown"
+            else:
+                e_text = f"{e:.5g} +- {self.irradiance_se_w_m2[i]:.2g}"
+                asymmetric = self.irradiance_se_w_m2[i] > 0.1 * e
+                m_text = (f"{m:.4f} -{m - bright[i]:.3f} +{faint[i] - m:.3f}" if asymmetric
+                          else f"{m:.4f} +- {self.magnitude_se[i]:.3f}")
+            lines.append(f"{self.x[i]:18.6g} {self.phase_angle_deg[i]:11.3f} {e_text:>28s} {m_text:>28s}")
+        return "\n".join(lines)
 
     def figure(self) -> Any:
-        """A matplotlib Figure: magnitude (brighter up) and irradiance against the swept quantity."""
+        """A matplotlib Figure: magnitude (brighter up) and irradiance against the swept quantity, with
+        one-sigma Monte Carlo error bars when more than one seed was run (asymmetric in magnitude)."""
         from matplotlib.figure import Figure  # here: only a figure needs matplotlib (optional; slow to import)
 
         fig = Figure(figsize=(9.0, 3.6), layout="constrained")
         left, right = fig.subplots(1, 2)
-        left.semilogy(self.x, self.irradiance_w_m2, "o-")
+        known = self.seeds > 1
+        bright, faint = self.magnitude_interval()
+        faint = np.where(np.isfinite(faint), faint, np.nanmax(np.where(np.isfinite(faint), faint, self.magnitude)) + 1.0)
+        left.errorbar(self.x, self.irradiance_w_m2, yerr=self.irradiance_se_w_m2 if known else None, fmt="o-", capsize=2)
+        left.set_yscale("log")
         left.set_ylabel("irradiance at the observer (W m$^{-2}$)")
-        right.plot(self.x, self.magnitude, "o-")
+        right.errorbar(self.x, self.magnitude, yerr=np.stack([self.magnitude - bright, faint - self.magnitude]) if known else None,
+                       fmt="o-", capsize=2)
         right.invert_yaxis()  # brighter up
         right.set_ylabel(f"apparent {self.band} magnitude (m_sun = {self.sun_magnitude:g})")
         for ax in (left, right):
             ax.set_xlabel(self.against)
-        fig.suptitle(f"observer at {self.observer_range_m:.4g} m (rendered at {self.rendered_range_m:.4g} m, inverse square)",
-                     fontsize=9)
+        errors = f"1-sigma Monte Carlo errors of {self.seeds} seeds" if known else "one seed: Monte Carlo error unknown"
+        fig.suptitle(f"observer at {self.observer_range_m:.4g} m (rendered at {self.rendered_range_m:.4g} m, inverse square); "
+                     f"{errors}", fontsize=9)
         return fig
 
 
@@ -157,7 +226,8 @@ def light_curve(
     scene's attitude. ``sun`` / ``observer``: directions towards them (module docstring), else the
     scene's; ``observer_range_m``: the observer's distance (default: the rendered one). ``band`` and
     ``sun_magnitude`` (default: :data:`SUN_MAGNITUDES`) give the magnitudes. ``seeds`` averages
-    renders of these seeds. The rest is :func:`spacefit.studies.sweep.sweep`'s."""
+    renders of these seeds, two or more giving each point's Monte Carlo standard error (module
+    docstring). The rest is :func:`spacefit.studies.sweep.sweep`'s."""
     check_scene(scene)
     given = [n for n, v in (("phase_deg", phase_deg), ("attitude_deg", attitude_deg), ("times_s", times_s)) if v is not None]
     if len(given) != 1:
@@ -192,17 +262,29 @@ def light_curve(
     if seeds is not None:
         for s in seeds:
             check_count("seeds", s, 0)
-        axes["render.seed"] = list(seeds)
+        axes[SEED_AXIS] = list(seeds)
     ds = sweep(scene, axes, store=store, quiet=quiet, workers=workers, scheduler=scheduler)
     if against in ds.dims:
         ds = ds.assign_coords({against: (against, x, {"units": against.rsplit("_", 1)[1]})})
     irradiance = ds.irradiance.sel(region="target")
-    if seeds is not None:
-        irradiance = irradiance.mean("render.seed")
-    e_obs = irradiance.values * (rendered_range / observer_range) ** 2
+    if seeds is None:
+        irradiance = irradiance.expand_dims(SEED_AXIS)
+    samples = np.moveaxis(irradiance.values, irradiance.dims.index(SEED_AXIS), 0)
+    scale = (rendered_range / observer_range) ** 2
+    mean, se = mean_and_error(samples) if len(samples) > 1 else (samples[0], np.full(samples.shape[1:], np.nan))
+    e_obs, e_se = mean * scale, se * scale
     e_sun = scene.sun.irradiance_w_m2
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):
         magnitude = sun_magnitude - 2.5 * np.log10(e_obs / e_sun)
+        magnitude_se = MAGNITUDE_PER_LN * e_se / e_obs
+    dims = [d for d in irradiance.dims if d != SEED_AXIS]
+    ds = ds.assign({
+        "irradiance_observer": (dims, e_obs, {"units": "W m^-2", "description": f"at the observer, {observer_range:.6g} m, "
+                                                                                  "mean over the seeds"}),
+        "irradiance_observer_se": (dims, e_se, {"units": "W m^-2", "description": "its Monte Carlo standard error (NaN: one seed)"}),
+        "magnitude": (dims, magnitude, {"units": "mag", "description": f"apparent {band} magnitude"}),
+        "magnitude_se": (dims, magnitude_se, {"units": "mag", "description": "2.5 / ln 10 * se / E (NaN: one seed)"}),
+    })
     phase = np.broadcast_to(phase_angles_deg(scene, ds), x.shape).copy()
     return LightCurve(against, x, e_obs, magnitude, phase, band, float(sun_magnitude), rendered_range, observer_range,
-                      e_sun, ds)
+                      e_sun, ds, e_se, magnitude_se, len(samples))

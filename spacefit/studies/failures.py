@@ -1,15 +1,19 @@
 """Classify a fit against known true values: did it succeed, and if not, how did it fail?
 
-Used by the solver-stability study (``experiments/stability.py``) on synthetic references, where
-the truth is known: study-only code, beside the study.
+For studies on synthetic references, where the truth is known: the solver-stability study
+(``experiments/stability.py``) classifies every run with it.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING
 
-import spacefit as sf
+from spacefit.errors import InputError
+
+if TYPE_CHECKING:
+    from spacefit.fitting.loop import FitResult
 
 FAILURE_CLASSES = ("success", "nan", "stalled", "wrong_minimum", "unidentifiable")
 # Relative tolerance of every parameter unless told otherwise.
@@ -33,7 +37,7 @@ def tolerances(names: Sequence[str], tolerance: Mapping[str, float] | float) -> 
     out = {n: float(given.get(n, ABSOLUTE_TOLERANCE.get(n, default))) for n in names}
     for name, value in out.items():
         if not (math.isfinite(value) and value >= 0):
-            raise sf.InputError(f"tolerance of {name} must be a finite number >= 0, got {value!r}.")
+            raise InputError(f"tolerance of {name} must be a finite number >= 0, got {value!r}.")
     return out
 
 
@@ -44,7 +48,7 @@ def errors(values: Mapping[str, float], truth: Mapping[str, float]) -> dict[str,
 
 
 def classify(
-    result: sf.FitResult, truth: Mapping[str, float], tolerance: Mapping[str, float] | float = DEFAULT_TOLERANCE
+    result: FitResult, truth: Mapping[str, float], tolerance: Mapping[str, float] | float = DEFAULT_TOLERANCE
 ) -> str:
     """The outcome of a fit as one of :data:`FAILURE_CLASSES`.
 
@@ -73,16 +77,18 @@ def classify(
     """
     missing = [n for n in result.names if n not in truth]
     if missing:
-        raise sf.InputError(f"`truth` has no value for {', '.join(missing)}; give one for every free parameter.")
+        raise InputError(f"`truth` has no value for {', '.join(missing)}; give one for every free parameter.")
     truth = {n: float(truth[n]) for n in result.names}
     for name, value in truth.items():
         if not math.isfinite(value) or (value == 0 and name not in ABSOLUTE_TOLERANCE):
-            raise sf.InputError(f"truth of {name} must be finite (and non-zero for a relative tolerance), got {value!r}.")
+            raise InputError(f"truth of {name} must be finite (and non-zero for a relative tolerance), got {value!r}.")
     tol = tolerances(result.names, tolerance)
+
+    from spacefit.fitting.solvers import Status  # deferred: it imports JAX, loaded already by whoever holds a FitResult
 
     values = {n: float(result.values[n]) for n in result.names}
     finite = all(math.isfinite(v) for v in values.values()) and math.isfinite(result.loss)
-    if not finite or result.status is sf.Status.NONFINITE:
+    if not finite or result.status is Status.NONFINITE:
         return "nan"
     stderr = {n: float(result.stderr[n]) for n in result.names}
     if not all(math.isfinite(s) for s in stderr.values()):
