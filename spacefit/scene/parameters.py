@@ -112,6 +112,9 @@ class Parameter:
         bsdf_fields: for ``parts.P.*``, the Mitsuba BSDF fields it sets.
         scene_fields: the scene-file fields it replaces (default: its own).
         per_observation: a joint fit may free it once per observation (``image.gain@k``).
+        scale: the size of a change that matters, in its unit, for a parameter whose value may be
+            near 0 (angles, shifts): a standard error is judged against the larger of it and the
+            value ("poorly determined", :mod:`spacefit.fitting.uncertainty`); 0: against the value.
     """
 
     pattern: str
@@ -124,6 +127,7 @@ class Parameter:
     bsdf_fields: tuple[str, ...] = ()
     scene_fields: tuple[str, ...] = ()
     per_observation: bool = False
+    scale: float = 0.0
 
     @property
     def field(self) -> str:
@@ -159,25 +163,27 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
     Parameter("parts.P.kd", "1", UNIT, "Lambert albedo (grey)", materials=(Lambert,), bsdf_fields=("reflectance",)),
     Parameter("sun.irradiance_w_m2", "W m^-2", POSITIVE, "the sun's irradiance on a surface facing it"),
     Parameter("sun.elevation_deg", "deg", Bijection(-90.0, 90.0), "elevation of the direction towards the sun above world xy",
-              fd_step=0.5, scene_fields=("direction",)),
+              fd_step=0.5, scene_fields=("direction",), scale=0.1),
     Parameter("sun.azimuth_deg", "deg", Bijection(-math.inf), "azimuth of the direction towards the sun, world +x to +y",
-              fd_step=0.5, scene_fields=("direction",)),
+              fd_step=0.5, scene_fields=("direction",), scale=0.1),
     *(Parameter(f"target.attitude_{axis}_deg", "deg", Bijection(-math.inf),
                 f"the target's attitude angle {name} (about object {axis}, thesis 3.2): every vertex",
-                fd_step=0.5, scene_fields=("attitude_deg",)) for axis, name in zip("xyz", ("alpha", "beta", "gamma"))),
+                fd_step=0.5, scene_fields=("attitude_deg",), scale=0.1) for axis, name in zip("xyz", ("alpha", "beta", "gamma"))),
     *(Parameter(f"target.position_{axis}_m", "m", Bijection(-math.inf), f"the target's world {axis} position: every vertex",
-                fd_step=0.02, scene_fields=("position_m",)) for axis in "xyz"),
+                fd_step=0.02, scene_fields=("position_m",), scale=0.01) for axis in "xyz"),
     Parameter("camera.roll_deg", "deg", Bijection(-math.inf),
-              "the camera's turn about its optical axis (image up towards image right), either camera mode", fd_step=0.5),
+              "the camera's turn about its optical axis (image up towards image right), either camera mode", fd_step=0.5,
+              scale=0.1),
     Parameter("image.gain", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1)",
               per_observation=True),
     Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", Bijection(-math.inf), "offset added to every pixel (fit only; default 0)",
-              per_observation=True),
+              per_observation=True, scale=0.01),
     Parameter("image.psf_sigma_px", "px", Bijection(0.0, PSF_SIGMA_MAX_PX),
-              "sigma of a pixel-integrated Gaussian PSF (fit only; not free: no blur; default start 0.5)", per_observation=True),
+              "sigma of a pixel-integrated Gaussian PSF (fit only; not free: no blur; default start 0.5)", per_observation=True,
+              scale=0.1),
     *(Parameter(f"image.shift_{axis}_px", "px", Bijection(-math.inf),
                 f"sub-pixel shift of the image towards +{axis} ({where}), by a Fourier phase (fit only; default 0)",
-                per_observation=True)
+                per_observation=True, scale=0.1)
       for axis, where in (("x", "columns, rightwards"), ("y", "rows, downwards"))),
 )}
 GEOMETRY = ("wrinkles.D", "wrinkles.G", "wrinkles.rms_m")
