@@ -18,6 +18,11 @@ render seed, so that the render noise of the fit is part of what the errors must
   its own, only diffraction); fits start from the scene's pose, no shift and the PSF's default start.
   ``coverage_table.md`` says per parameter whether its errors are calibrated, and if not, whether the
   estimates are biased (mean z) or the errors too small (rms z); no error chart;
+* ``--linearised``: the nuisance study without fits, each exposure's estimate one Gauss-Newton step
+  from the truth: the fit's own minimum of 0.5 |r|^2 (with the errors of a fit that stops there)
+  against the two-seed estimate spacefit reports, to tell a bias of the estimate from a scale of
+  its errors in seconds per exposure (``linearised.csv``, ``linearised_fit_minimum.md``,
+  ``linearised_two-seed.md``);
 * error chart: the rms error (relative) of each parameter over ``--chart-realisations`` exposures,
   for each PSF width and noise level, beside the mean reported standard error.
 
@@ -35,6 +40,7 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import jax
 import jax.numpy as jnp
 import matplotlib
 import numpy as np
@@ -45,6 +51,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 import spacefit as sf  # noqa: E402
 from spacefit.fitting.nuisance import split  # noqa: E402
+from spacefit.fitting.problem import setup  # noqa: E402
+from spacefit.fitting.uncertainty import covariance  # noqa: E402
+from spacefit.precision import float64  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 from spacefit.scene.parameters import scene_with_values  # noqa: E402
 from spacefit.sensor import electrons_per_radiance  # noqa: E402
@@ -146,6 +155,40 @@ def verdict(row: dict[str, object]) -> str:
     return f"not calibrated: errors too small, rms z {rms_z:.2f}"
 
 
+@float64
+def linearised(case: sf.Case, truth: np.ndarray, sensor: sf.Sensor, count: int, first_seed: int) -> list[dict[str, object]]:
+    """The nuisance study linearised at the truth, fit by fit as :func:`realisations` seeds them:
+    per exposure the fit's minimum of 0.5 |r|^2 (one Gauss-Newton step from the truth with the
+    fit's Jacobian) with the errors of a fit that stops there (the render and Jacobian noise at
+    full weight), and the estimate spacefit reports (the root of the two-seed equation,
+    :func:`~spacefit.fitting.uncertainty.covariance`) with its errors. No solver, so no compilation:
+    seconds per exposure. One row per exposure, estimator and parameter (``study`` = estimator)."""
+    scene = case.scene()
+    intrinsics = assemble(scene).intrinsics
+    truths = {**case.truth, **NUISANCE_TRUTH}
+    rows = []
+    for k in range(count):
+        seed = first_seed + k
+        dn = sf.observe(truth, sensor, intrinsics, seed).astype(float)
+        s = setup(sf.Observation(scene, dn, sensor=sensor), list(truths), truths, "pixel", None, None, 2 * seed + 101,
+                  2 * seed + 102, "prb", "fd", "rms")
+        x = jnp.asarray(s.x0)
+        r = np.asarray(s.problem.residual_x(x))
+        J1, J2 = (np.asarray(jax.jacfwd(f)(x)) for f in (s.problem.residual_x, s.problem.residual_x_independent))
+        cov, _, _, step = covariance(s.problem, s.x0)
+        bread = np.linalg.inv(0.5 * (J1.T @ J2 + J2.T @ J1))
+        # cov = bread + B N B / 2 (the two-seed estimate); a fit that stops at its minimum has bread + B N B
+        estimators = {"fit minimum": (-np.linalg.lstsq(J1, r, rcond=None)[0], 2.0 * cov - bread), "two-seed": (step, cov)}
+        for study, (error, c) in estimators.items():
+            for j, (name, true) in enumerate(truths.items()):
+                stderr = float(np.sqrt(c[j, j]))
+                rows.append({"study": study, "noise": "high", "seed": seed, "psf_sigma_px": sensor.psf_sigma_px,
+                             "parameter": name, "truth": true, "value": true + float(error[j]), "stderr": stderr,
+                             "z": float(error[j]) / stderr, "covered": bool(abs(error[j]) <= stderr)})
+        print(f"seed {seed}: linearised", flush=True)
+    return rows
+
+
 def run_coverage(out: Path, *, size: int, spp: int, truth_spp: int, realisations_count: int,
                  chart_realisations: int, nuisances: bool = False) -> tuple[list[dict[str, object]], list[dict[str, object]]]:
     """The coverage study (high noise: 2000 electrons in the brightest glint; the sensor's PSF 1 px,
@@ -169,6 +212,31 @@ def run_coverage(out: Path, *, size: int, spp: int, truth_spp: int, realisations
     return write_summary(out, rows)
 
 
+def run_linearised(out: Path, *, size: int, spp: int, truth_spp: int, count: int) -> None:
+    """The nuisance study linearised at the truth (:func:`linearised`, the sensor of
+    :func:`run_coverage`): writes ``linearised.csv`` and one table per estimator,
+    ``linearised_fit_minimum.md`` and ``linearised_two-seed.md``."""
+    out.mkdir(parents=True, exist_ok=True)
+    case = case_at(size, spp)
+    truth = truth_image(case, truth_spp, True)
+    rows = linearised(case, truth, sensor_for(truth, case.scene(), NOISE_LEVELS["high"], 0.0), count, first_seed=1)
+    write_csv(out / "linearised.csv", rows)
+    for study in ("fit minimum", "two-seed"):
+        mine = [r for r in rows if r["study"] == study]
+        (out / f"linearised_{study.replace(' ', '_')}.md").write_text(table(mine, summarise(mine, ("noise", "psf_sigma_px"))))
+
+
+def table(rows: list[dict[str, object]], coverage: list[dict[str, object]]) -> str:
+    """The per-parameter coverage of :func:`summarise` as a Markdown table, with :func:`verdict`."""
+    lines = ["| parameter | truth | exposures | 1-sigma coverage | mean z | rms z | rms error | mean stderr | verdict |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in coverage:
+        truth = float(next(x["truth"] for x in rows if x["parameter"] == r["parameter"]))
+        lines.append(f"| {r['parameter']} | {truth:g} | {r['n']} | {100 * r['coverage']:.0f} % | {r['mean_z']:+.2f} | {r['rms_z']:.2f} | "
+                     f"{r['rms_error_rel'] * abs(truth):.3g} | {r['mean_stderr_rel'] * abs(truth):.3g} | {verdict(r)} |")
+    return "\n".join(lines) + "\n"
+
+
 def write_summary(out: Path, rows: list[dict[str, object]]) -> tuple[list[dict[str, object]], list[dict[str, object]]]:
     """Summarise the fits' ``rows`` (of :func:`realisations`, with ``study`` and ``noise``): write
     ``coverage_summary.csv``, ``coverage_table.md`` and ``coverage.png``; return the coverage and
@@ -177,13 +245,7 @@ def write_summary(out: Path, rows: list[dict[str, object]]) -> tuple[list[dict[s
     coverage = summarise([r for r in rows if r["study"] == "coverage"], key)
     chart = summarise([r for r in rows if r["study"] == "chart"], key)
     write_csv(out / "coverage_summary.csv", [{"study": "coverage", **r} for r in coverage] + [{"study": "chart", **r} for r in chart])
-    lines = ["| parameter | truth | exposures | 1-sigma coverage | mean z | rms z | rms error | mean stderr | verdict |",
-             "|---|---|---|---|---|---|---|---|---|"]
-    for r in coverage:
-        truth = float(next(x["truth"] for x in rows if x["parameter"] == r["parameter"]))
-        lines.append(f"| {r['parameter']} | {truth:g} | {r['n']} | {100 * r['coverage']:.0f} % | {r['mean_z']:+.2f} | {r['rms_z']:.2f} | "
-                     f"{r['rms_error_rel'] * abs(truth):.3g} | {r['mean_stderr_rel'] * abs(truth):.3g} | {verdict(r)} |")
-    (out / "coverage_table.md").write_text("\n".join(lines) + "\n")
+    (out / "coverage_table.md").write_text(table([r for r in rows if r["study"] == "coverage"], coverage))
     _chart(out / "coverage.png", chart, coverage)
     return coverage, chart
 
@@ -227,10 +289,17 @@ def main() -> None:
     parser.add_argument("--free", choices=("materials", "nuisances"), default="materials",
                         help="free the materials only, or the nuisances too (pose, shift, PSF width; no chart)")
     parser.add_argument("--realisations", type=int, help="exposures for the coverage (default 10, --full 50)")
+    parser.add_argument("--linearised", action="store_true",
+                        help="the nuisance study linearised at the truth, fit minimum against the two-seed estimate (no fits)")
     args = parser.parse_args()
-    nuisances = args.free == "nuisances"
+    nuisances = args.free == "nuisances" or args.linearised
     out = args.out or Path(__file__).parent / "results" / "coverage" / ("nuisances" if nuisances else "")
     count = args.realisations or (50 if args.full else 10)
+    if args.linearised:
+        run_linearised(out, size=args.size, spp=args.spp, truth_spp=args.truth_spp, count=count)
+        for study in ("fit_minimum", "two-seed"):
+            print(study, (out / f"linearised_{study}.md").read_text(), sep="\n")
+        return
     coverage, chart = run_coverage(out, size=args.size, spp=args.spp, truth_spp=args.truth_spp, realisations_count=count,
                                    chart_realisations=5 if args.full else 2, nuisances=nuisances)
     print((out / "coverage_table.md").read_text())
