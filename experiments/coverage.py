@@ -11,13 +11,26 @@ render seed, so that the render noise of the fit is part of what the errors must
 
 * coverage: over ``--realisations`` exposures, the fraction whose 1-sigma interval holds the truth,
   per parameter (68 % if the errors are calibrated);
+* with ``--free nuisances``, the coverage with the nuisances free beside the materials: the target's
+  attitude (x and z), the image shift and the PSF width (:data:`BLUR`), whose truths (:data:`NUISANCE_TRUTH`:
+  0.3 and -0.2 deg, 0.4 and -0.25 px, 0.8 px) the simulated exposures carry: the truth is rendered at
+  the turned pose and blurred and shifted by the fit's own image model (the sensor then has no PSF of
+  its own, only diffraction); fits start from the scene's pose, no shift and the PSF's default start.
+  ``coverage_table.md`` says per parameter whether its errors are calibrated, and if not, whether the
+  estimates are biased (mean z) or the errors too small (rms z); no error chart;
+* ``--linearised``: the nuisance study without fits, each exposure's estimate one Gauss-Newton step
+  from the truth: the fit's own minimum of 0.5 |r|^2 (with the errors of a fit that stops there)
+  against the two-seed estimate spacefit reports, to tell a bias of the estimate from a scale of
+  its errors in seconds per exposure (``linearised.csv``, ``linearised_fit_minimum.md``,
+  ``linearised_two-seed.md``);
 * error chart: the rms error (relative) of each parameter over ``--chart-realisations`` exposures,
   for each PSF width and noise level, beside the mean reported standard error.
 
-Writes ``coverage.csv`` (one row per fit), ``coverage_summary.csv`` and ``coverage.png`` to ``--out``.
-Run: ``.venv/bin/python experiments/coverage.py [--full]``: by default 10 exposures for the coverage
-and 2 per chart point (about 5 minutes on 2 cores); ``--full``: 50 and 5 (about 20 minutes on a quiet machine), the
-results in ``experiments/results/coverage/``. A fit takes 8 to 18 s at 48 px, 32 spp, mostly JAX's
+Writes ``coverage.csv`` (one row per fit), ``coverage_summary.csv``, ``coverage_table.md`` and
+``coverage.png`` to ``--out``. Run: ``.venv/bin/python experiments/coverage.py [--full] [--free nuisances]``:
+by default 10 exposures for the coverage and 2 per chart point (about 5 minutes on 2 cores); ``--full``:
+50 and 5 (about 20 minutes on a quiet machine), the results in ``experiments/results/coverage/``
+(``experiments/results/coverage/nuisances/`` with the nuisances free; ``--realisations`` overrides the count). A fit takes 8 to 18 s at 48 px, 32 spp, mostly JAX's
 compilation of the solver's step for the new problem, so the study has no CI test of its own; the
 reduced, linearised study is ``tests/test_noise_model.py``.
 """
@@ -27,6 +40,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+import jax
+import jax.numpy as jnp
 import matplotlib
 import numpy as np
 from studyio import save_figure, write_csv
@@ -35,7 +50,12 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 import spacefit as sf  # noqa: E402
+from spacefit.fitting.nuisance import split  # noqa: E402
+from spacefit.fitting.problem import setup  # noqa: E402
+from spacefit.fitting.uncertainty import covariance  # noqa: E402
+from spacefit.precision import float64  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
+from spacefit.scene.parameters import scene_with_values  # noqa: E402
 from spacefit.sensor import electrons_per_radiance  # noqa: E402
 
 CASE = "panels"
@@ -43,6 +63,13 @@ START_FACTOR = 1.2
 ONE_SIGMA = 0.6827
 NOISE_LEVELS = {"low": 20000.0, "high": 2000.0}  # peak electrons of the brightest glint
 PSF_WIDTHS_PX = (0.0, 1.0, 2.0)
+# The fit's PSF width (px): one name for the whole study.
+BLUR = "image.psf_sigma_px"
+# The nuisances' truths in the exposures of ``--free nuisances`` (deg, px); fits start from the
+# scene's pose (0 deg), no shift and the PSF width's default start.
+NUISANCE_TRUTH = {"target.attitude_x_deg": 0.3, "target.attitude_z_deg": -0.2, "image.shift_x_px": 0.4,
+                  "image.shift_y_px": -0.25, BLUR: 0.8}
+CALIBRATED = (ONE_SIGMA - 0.1, ONE_SIGMA + 0.1)
 
 
 def case_at(size: int, spp: int) -> sf.Case:
@@ -58,28 +85,46 @@ def sensor_for(truth: np.ndarray, scene: sf.Scene, peak_electrons: float, psf_si
     return sf.Sensor(exposure_time_s=peak_electrons / per_second, psf_sigma_px=psf_sigma_px, full_well_electrons=None, bit_depth=16)
 
 
-def realisations(case: sf.Case, truth: np.ndarray, sensor: sf.Sensor, count: int, first_seed: int) -> list[dict[str, object]]:
-    """Fit ``count`` simulated exposures of ``truth``; one row per fit and parameter."""
+def truth_image(case: sf.Case, truth_spp: int, nuisances: bool) -> np.ndarray:
+    """The case's truth rendered at ``truth_spp``; with ``nuisances``, at the turned pose of
+    :data:`NUISANCE_TRUTH` and then blurred and shifted by the fit's image model (its Fourier
+    ringing, at most 0.05 % of the brightest pixel, clipped at 0: radiance is never negative)."""
+    scene = case.truth_scene.with_values({"render.spp": truth_spp})
+    if not nuisances:
+        return np.asarray(sf.render(scene), dtype=float)
+    pose = {n: v for n, v in NUISANCE_TRUTH.items() if n.startswith("target.")}
+    render = np.asarray(sf.render(scene_with_values(scene, pose)), dtype=float)
+    image = [n for n in NUISANCE_TRUTH if n not in pose]
+    _, model = split(image)
+    return np.maximum(np.asarray(model(jnp.asarray(render), jnp.asarray([NUISANCE_TRUTH[n] for n in image]), 0), dtype=float), 0.0)
+
+
+def realisations(case: sf.Case, truth: np.ndarray, sensor: sf.Sensor, count: int, first_seed: int,
+                 nuisances: bool = False) -> list[dict[str, object]]:
+    """Fit ``count`` simulated exposures of ``truth`` (with the nuisances of :data:`NUISANCE_TRUTH`
+    free if ``nuisances``); one row per fit and parameter."""
     scene = case.scene()
     intrinsics = assemble(scene).intrinsics
     start = {n: START_FACTOR * v for n, v in case.truth.items()}
+    truths = {**case.truth, **(NUISANCE_TRUTH if nuisances else {})}
     rows = []
     for k in range(count):
         seed = first_seed + k
         dn = sf.observe(truth, sensor, intrinsics, seed).astype(float)
-        result = sf.fit(sf.Observation(scene, dn, sensor=sensor), list(case.free), start=start, seed=2 * seed + 101,
+        result = sf.fit(sf.Observation(scene, dn, sensor=sensor), list(truths), start=start, seed=2 * seed + 101,
                         seed_grad=2 * seed + 102)
-        for name, true in case.truth.items():
+        for name, true in truths.items():
             value, stderr = result.values[name], result.stderr[name]
             rows.append({"seed": seed, "psf_sigma_px": sensor.psf_sigma_px, "exposure_time_s": sensor.exposure_time_s,
-                         "parameter": name, "truth": true, "value": value, "stderr": stderr,
+                         "parameter": name, "truth": true, "value": value, "stderr": stderr, "z": (value - true) / stderr,
                          "covered": bool(abs(value - true) <= stderr), "steps": result.steps, "status": result.status.name})
         print(f"seed {seed}, sigma {sensor.psf_sigma_px:g} px: {result.status.name}, {result.wall_time_s:.1f} s", flush=True)
     return rows
 
 
 def summarise(rows: list[dict[str, object]], key: tuple[str, ...]) -> list[dict[str, object]]:
-    """Per ``key`` group and parameter: coverage, rms relative error and mean relative standard error."""
+    """Per ``key`` group and parameter: coverage, rms relative error, mean relative standard error,
+    and the mean and rms of the z-scores (error / standard error)."""
     groups: dict[tuple, list[dict[str, object]]] = {}
     for row in rows:
         groups.setdefault(tuple(row[k] for k in key) + (row["parameter"],), []).append(row)
@@ -87,47 +132,128 @@ def summarise(rows: list[dict[str, object]], key: tuple[str, ...]) -> list[dict[
     for group, items in groups.items():
         truth = float(items[0]["truth"])
         errors = np.array([float(r["value"]) - truth for r in items])
+        z = np.array([float(r["z"]) for r in items])
         out.append({**dict(zip((*key, "parameter"), group)), "n": len(items),
                     "coverage": float(np.mean([r["covered"] for r in items])),
-                    "rms_error_rel": float(np.sqrt(np.mean(errors**2)) / truth),
-                    "mean_stderr_rel": float(np.mean([float(r["stderr"]) for r in items]) / truth)})
+                    "rms_error_rel": float(np.sqrt(np.mean(errors**2)) / abs(truth)),
+                    "mean_stderr_rel": float(np.mean([float(r["stderr"]) for r in items]) / abs(truth)),
+                    "mean_z": float(np.mean(z)), "rms_z": float(np.sqrt(np.mean(z**2)))})
     return out
 
 
+def verdict(row: dict[str, object]) -> str:
+    """Whether a parameter's 1-sigma intervals are calibrated (coverage 68 +- 10 %), and if not, why:
+    errors too large (coverage above), a bias (the mean z-score carries more than half of the mean
+    square) or errors too small."""
+    if CALIBRATED[0] <= float(row["coverage"]) <= CALIBRATED[1]:
+        return "calibrated"
+    mean_z, rms_z = float(row["mean_z"]), float(row["rms_z"])
+    if float(row["coverage"]) > CALIBRATED[1]:
+        return f"not calibrated: errors too large, rms z {rms_z:.2f}"
+    if mean_z**2 > 0.5 * rms_z**2:
+        return f"not calibrated: biased, mean z {mean_z:+.2f}"
+    return f"not calibrated: errors too small, rms z {rms_z:.2f}"
+
+
+@float64
+def linearised(case: sf.Case, truth: np.ndarray, sensor: sf.Sensor, count: int, first_seed: int) -> list[dict[str, object]]:
+    """The nuisance study linearised at the truth, fit by fit as :func:`realisations` seeds them:
+    per exposure the fit's minimum of 0.5 |r|^2 (one Gauss-Newton step from the truth with the
+    fit's Jacobian) with the errors of a fit that stops there (the render and Jacobian noise at
+    full weight), and the estimate spacefit reports (the root of the two-seed equation,
+    :func:`~spacefit.fitting.uncertainty.covariance`) with its errors. No solver, so no compilation:
+    seconds per exposure. One row per exposure, estimator and parameter (``study`` = estimator)."""
+    scene = case.scene()
+    intrinsics = assemble(scene).intrinsics
+    truths = {**case.truth, **NUISANCE_TRUTH}
+    rows = []
+    for k in range(count):
+        seed = first_seed + k
+        dn = sf.observe(truth, sensor, intrinsics, seed).astype(float)
+        s = setup(sf.Observation(scene, dn, sensor=sensor), list(truths), truths, "pixel", None, None, 2 * seed + 101,
+                  2 * seed + 102, "prb", "fd", "rms")
+        x = jnp.asarray(s.x0)
+        r = np.asarray(s.problem.residual_x(x))
+        J1, J2 = (np.asarray(jax.jacfwd(f)(x)) for f in (s.problem.residual_x, s.problem.residual_x_independent))
+        cov, _, _, step = covariance(s.problem, s.x0)
+        bread = np.linalg.inv(0.5 * (J1.T @ J2 + J2.T @ J1))
+        # cov = bread + B N B / 2 (the two-seed estimate); a fit that stops at its minimum has bread + B N B
+        estimators = {"fit minimum": (-np.linalg.lstsq(J1, r, rcond=None)[0], 2.0 * cov - bread), "two-seed": (step, cov)}
+        for study, (error, c) in estimators.items():
+            for j, (name, true) in enumerate(truths.items()):
+                stderr = float(np.sqrt(c[j, j]))
+                rows.append({"study": study, "noise": "high", "seed": seed, "psf_sigma_px": sensor.psf_sigma_px,
+                             "parameter": name, "truth": true, "value": true + float(error[j]), "stderr": stderr,
+                             "z": float(error[j]) / stderr, "covered": bool(abs(error[j]) <= stderr)})
+        print(f"seed {seed}: linearised", flush=True)
+    return rows
+
+
 def run_coverage(out: Path, *, size: int, spp: int, truth_spp: int, realisations_count: int,
-                 chart_realisations: int) -> tuple[list[dict[str, object]], list[dict[str, object]]]:
-    """The coverage study (high noise: 2000 electrons in the brightest glint; the sensor's PSF 1 px)
-    and the error chart; writes the CSVs and the PNG."""
+                 chart_realisations: int, nuisances: bool = False) -> tuple[list[dict[str, object]], list[dict[str, object]]]:
+    """The coverage study (high noise: 2000 electrons in the brightest glint; the sensor's PSF 1 px,
+    or with ``nuisances`` free, none of its own but the blur of :data:`NUISANCE_TRUTH`) and, without
+    ``nuisances``, the error chart; writes the CSVs, the table and the PNG."""
     out.mkdir(parents=True, exist_ok=True)
     case = case_at(size, spp)
-    truth = np.asarray(sf.render(case.truth_scene.with_values({"render.spp": truth_spp})), dtype=float)
+    truth = truth_image(case, truth_spp, nuisances)
     rows = []
-    coverage_sensor = sensor_for(truth, case.scene(), NOISE_LEVELS["high"], 1.0)
-    for row in realisations(case, truth, coverage_sensor, realisations_count, first_seed=1):
+    coverage_sensor = sensor_for(truth, case.scene(), NOISE_LEVELS["high"], 0.0 if nuisances else 1.0)
+    for row in realisations(case, truth, coverage_sensor, realisations_count, first_seed=1, nuisances=nuisances):
         rows.append({**row, "study": "coverage", "noise": "high"})
-    for noise, peak in NOISE_LEVELS.items():
-        for width in PSF_WIDTHS_PX:
-            sensor = sensor_for(truth, case.scene(), peak, width)
-            for row in realisations(case, truth, sensor, chart_realisations, first_seed=1000):
-                rows.append({**row, "study": "chart", "noise": noise})
+    if not nuisances:
+        plain = truth_image(case, truth_spp, False)
+        for noise, peak in NOISE_LEVELS.items():
+            for width in PSF_WIDTHS_PX:
+                sensor = sensor_for(plain, case.scene(), peak, width)
+                for row in realisations(case, plain, sensor, chart_realisations, first_seed=1000):
+                    rows.append({**row, "study": "chart", "noise": noise})
     write_csv(out / "coverage.csv", rows)
     return write_summary(out, rows)
 
 
+def run_linearised(out: Path, *, size: int, spp: int, truth_spp: int, count: int) -> None:
+    """The nuisance study linearised at the truth (:func:`linearised`, the sensor of
+    :func:`run_coverage`): writes ``linearised.csv`` and one table per estimator,
+    ``linearised_fit_minimum.md`` and ``linearised_two-seed.md``."""
+    out.mkdir(parents=True, exist_ok=True)
+    case = case_at(size, spp)
+    truth = truth_image(case, truth_spp, True)
+    rows = linearised(case, truth, sensor_for(truth, case.scene(), NOISE_LEVELS["high"], 0.0), count, first_seed=1)
+    write_csv(out / "linearised.csv", rows)
+    for study in ("fit minimum", "two-seed"):
+        mine = [r for r in rows if r["study"] == study]
+        (out / f"linearised_{study.replace(' ', '_')}.md").write_text(table(mine, summarise(mine, ("noise", "psf_sigma_px"))))
+
+
+def table(rows: list[dict[str, object]], coverage: list[dict[str, object]]) -> str:
+    """The per-parameter coverage of :func:`summarise` as a Markdown table, with :func:`verdict`."""
+    lines = ["| parameter | truth | exposures | 1-sigma coverage | mean z | rms z | rms error | mean stderr | verdict |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for r in coverage:
+        truth = float(next(x["truth"] for x in rows if x["parameter"] == r["parameter"]))
+        lines.append(f"| {r['parameter']} | {truth:g} | {r['n']} | {100 * r['coverage']:.0f} % | {r['mean_z']:+.2f} | {r['rms_z']:.2f} | "
+                     f"{r['rms_error_rel'] * abs(truth):.3g} | {r['mean_stderr_rel'] * abs(truth):.3g} | {verdict(r)} |")
+    return "\n".join(lines) + "\n"
+
+
 def write_summary(out: Path, rows: list[dict[str, object]]) -> tuple[list[dict[str, object]], list[dict[str, object]]]:
     """Summarise the fits' ``rows`` (of :func:`realisations`, with ``study`` and ``noise``): write
-    ``coverage_summary.csv`` and ``coverage.png``; return the coverage and the chart's summaries."""
+    ``coverage_summary.csv``, ``coverage_table.md`` and ``coverage.png``; return the coverage and
+    the chart's summaries."""
     key = ("noise", "psf_sigma_px")
     coverage = summarise([r for r in rows if r["study"] == "coverage"], key)
     chart = summarise([r for r in rows if r["study"] == "chart"], key)
     write_csv(out / "coverage_summary.csv", [{"study": "coverage", **r} for r in coverage] + [{"study": "chart", **r} for r in chart])
+    (out / "coverage_table.md").write_text(table([r for r in rows if r["study"] == "coverage"], coverage))
     _chart(out / "coverage.png", chart, coverage)
     return coverage, chart
 
 
 def _chart(path: Path, chart: list[dict[str, object]], coverage: list[dict[str, object]]) -> None:
     names = sorted({str(r["parameter"]) for r in chart})
-    fig, axes = plt.subplots(1, len(names) + 1, figsize=(4.0 * (len(names) + 1), 3.6))
+    fig, axes = plt.subplots(1, len(names) + 1, figsize=(4.0 * len(names) + max(4.0, 0.6 * len(coverage)), 3.6), squeeze=False)
+    axes = axes[0]
     for ax, name in zip(axes, names):
         for i, noise in enumerate(NOISE_LEVELS):
             rows = sorted((r for r in chart if r["parameter"] == name and r["noise"] == noise), key=lambda r: r["psf_sigma_px"])
@@ -138,11 +264,13 @@ def _chart(path: Path, chart: list[dict[str, object]], coverage: list[dict[str, 
         ax.set_xlabel("PSF sigma (px)")
         ax.set_ylabel("relative error (%)")
         ax.grid(alpha=0.3)
-    axes[0].legend(fontsize=7)
+    if names:
+        axes[0].legend(fontsize=7)
     ax = axes[-1]
     ax.bar(range(len(coverage)), [100 * r["coverage"] for r in coverage], color="C2")
     ax.axhspan(58, 78, color="0.8", zorder=0, label="68 +- 10 %")
-    ax.set_xticks(range(len(coverage)), [str(r["parameter"]).split(".", 1)[1] for r in coverage], fontsize=8)
+    ax.set_xticks(range(len(coverage)), [str(r["parameter"]).split(".", 1)[1] for r in coverage], fontsize=8,
+                  rotation=30 if len(coverage) > 3 else 0, ha="right" if len(coverage) > 3 else "center")
     ax.set_ylabel("1-sigma coverage (%)")
     ax.set_title(f"coverage over {coverage[0]['n']} exposures", fontsize=9)
     ax.legend(fontsize=7)
@@ -151,17 +279,31 @@ def _chart(path: Path, chart: list[dict[str, object]], coverage: list[dict[str, 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--out", type=Path, default=Path(__file__).parent / "results" / "coverage")
+    parser.add_argument("--out", type=Path, help="default: experiments/results/coverage/ (nuisances/ under it with --free nuisances)")
     parser.add_argument("--size", type=int, default=48)
     parser.add_argument("--spp", type=int, default=32)
     # the truth render's own noise is one error shared by every exposure, which no error bar covers:
     # at 512 spp (a quarter of the fits' noise at 32 spp) it was 0.5 % of kd
     parser.add_argument("--truth-spp", type=int, default=4096)
     parser.add_argument("--full", action="store_true", help="50 exposures for the coverage, 5 per chart point")
+    parser.add_argument("--free", choices=("materials", "nuisances"), default="materials",
+                        help="free the materials only, or the nuisances too (pose, shift, PSF width; no chart)")
+    parser.add_argument("--realisations", type=int, help="exposures for the coverage (default 10, --full 50)")
+    parser.add_argument("--linearised", action="store_true",
+                        help="the nuisance study linearised at the truth, fit minimum against the two-seed estimate (no fits)")
     args = parser.parse_args()
-    coverage, chart = run_coverage(args.out, size=args.size, spp=args.spp, truth_spp=args.truth_spp,
-                                   realisations_count=50 if args.full else 10, chart_realisations=5 if args.full else 2)
-    for row in coverage + chart:
+    nuisances = args.free == "nuisances" or args.linearised
+    out = args.out or Path(__file__).parent / "results" / "coverage" / ("nuisances" if nuisances else "")
+    count = args.realisations or (50 if args.full else 10)
+    if args.linearised:
+        run_linearised(out, size=args.size, spp=args.spp, truth_spp=args.truth_spp, count=count)
+        for study in ("fit_minimum", "two-seed"):
+            print(study, (out / f"linearised_{study}.md").read_text(), sep="\n")
+        return
+    coverage, chart = run_coverage(out, size=args.size, spp=args.spp, truth_spp=args.truth_spp, realisations_count=count,
+                                   chart_realisations=5 if args.full else 2, nuisances=nuisances)
+    print((out / "coverage_table.md").read_text())
+    for row in chart:
         print(row)
 
 

@@ -15,8 +15,10 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import spacefit as sf
 from spacefit.fitting.losses import residual_fn
-from spacefit.fitting.uncertainty import covariance, map_covariance
+from spacefit.fitting.params import free_parameters
+from spacefit.fitting.uncertainty import covariance, map_covariance, warnings_for
 from spacefit.geometry.wm import wm_G_from_rms
 
 N, P = 12, 3  # few rows, so that the small-sample factor n / (n - p) = 4/3 is far from 1
@@ -62,7 +64,7 @@ def sandwich(A, r):
 def test_covariance_is_the_hc1_sandwich(heteroscedastic):
     A, x_hat, r = heteroscedastic
     with jax.enable_x64(True):
-        cov, loss, fisher = covariance(linear(A, A @ x_hat - r), x_hat)
+        cov, loss, fisher, _ = covariance(linear(A, A @ x_hat - r), x_hat)
     expected = sandwich(A, r)
     np.testing.assert_allclose(cov, expected, rtol=1e-9)
     # with these residuals the uniform-noise form s^2 (A^T A)^-1 is another matrix: the test can tell
@@ -76,22 +78,24 @@ def test_with_the_noise_known_the_covariance_is_the_inverse_information(heterosc
     """Residuals divided by their predicted noise: (A^T A)^-1, no scale taken from the residuals."""
     A, x_hat, r = heteroscedastic
     with jax.enable_x64(True):
-        cov, _, fisher = covariance(linear(A, A @ x_hat - r, noise_known=True), x_hat)
+        cov, _, fisher, correction = covariance(linear(A, A @ x_hat - r, noise_known=True), x_hat)
     np.testing.assert_allclose(cov, np.linalg.inv(A.T @ A), rtol=1e-9)
     np.testing.assert_allclose(np.sort(fisher), np.linalg.eigvalsh(A.T @ A), rtol=1e-9)
+    np.testing.assert_allclose(correction, 0.0, atol=1e-12)  # x_hat is the least-squares root already
 
 
 def test_with_the_noise_known_a_noisy_jacobian_adds_its_own_term(heteroscedastic):
-    """Two Jacobians from independent seeds, A and A + E, with the same residuals: the fit stopped
-    where A^T r = 0 for its noisy A, off by (A^T A)^-1 E^T r, so the covariance is the inverse
-    information plus B sum_i r_i^2 e_i e_i^T / 2 B, with e_i the rows of the difference."""
+    """Two Jacobians from independent seeds, A and A + E, with the same residuals: a fit that stops
+    where A^T r = 0 for its noisy A is off by (A^T A)^-1 E^T r, whose covariance is
+    B sum_i r_i^2 e_i e_i^T / 2 B, with e_i the rows of the difference; the estimate averages the
+    two seeds' equations, so half of that adds to the inverse information."""
     A, x_hat, r = heteroscedastic
     E = np.random.default_rng(5).normal(size=A.shape)
     A2 = A + E
     with jax.enable_x64(True):
         cov, *_ = covariance(linear(A, A @ x_hat - r, A2, A2 @ x_hat - r, noise_known=True), x_hat)
     bread = np.linalg.inv(0.5 * (A.T @ A2 + A2.T @ A))
-    expected = bread + bread @ (0.5 * E.T @ np.diag(r**2) @ E) @ bread
+    expected = bread + 0.5 * bread @ (0.5 * E.T @ np.diag(r**2) @ E) @ bread
     np.testing.assert_allclose(cov, expected, rtol=1e-9)
     assert np.all(np.diag(cov) > 1.05 * np.diag(bread))  # the term matters here: the test can tell
 
@@ -100,7 +104,7 @@ def test_with_the_noise_known_a_noisy_jacobian_adds_its_own_term(heteroscedastic
 def test_render_noise_shared_by_neighbouring_pixels_is_counted(spread, reach):
     """With the noise known, the fit's render noise d = (r - r_alt) / sqrt(2) enters as the spatial
     HAC meat sum_i s_i sum_{j near i} s_j^T, s_i = sum of A_i d_i over pixel i's channels, j within
-    the reach: the box filter's samples stay in their pixel (0), the tent's reach the next pixel
+    the reach, at half weight (the estimate averages the two seeds' renders): the box filter's samples stay in their pixel (0), the tent's reach the next pixel
     (1), a PSF of rms width 1 px spreads them 2 sqrt(2) px further (4). Written out pair by pair
     here on an 8 x 5 px RGB image."""
     from spacefit.fitting.uncertainty import noise_reach_px
@@ -123,9 +127,36 @@ def test_render_noise_shared_by_neighbouring_pixels_is_counted(spread, reach):
     eigval, eigvec = np.linalg.eigh(meat)
     meat = (eigvec * np.clip(eigval, 0.0, None)) @ eigvec.T
     bread = np.linalg.inv(A.T @ A)
-    np.testing.assert_allclose(cov, bread + bread @ meat @ bread, rtol=1e-9)
+    np.testing.assert_allclose(cov, bread + 0.5 * bread @ meat @ bread, rtol=1e-9)
     per_residual = bread + bread @ (A.T @ np.diag(d**2) @ A) @ bread
     assert not np.allclose(cov, per_residual, rtol=0.1)  # channels and neighbours matter: the test can tell
+
+
+def test_with_the_noise_known_the_estimate_solves_the_two_seed_equation():
+    """The fit's minimum of |r1|^2 is biased when the render noise is in the Jacobian too: here a
+    gain x of a template t, the render t + d1, r1 = x (t + d1) - y; the minimum x (t + d1).y /
+    |t + d1|^2 is low by the factor |t|^2 / (|t|^2 + n s^2) = 1/2 on average (n = 40 pixels of render
+    noise s = |t| / sqrt(n)). The correction takes it to the root of 0.5 (J1^T r2 + J2^T r1) = 0,
+    (2 t + d1 + d2).y / (2 (t + d1).(t + d2)), whose mean over 100 draws is the truth within its
+    Monte Carlo error, and the uncorrected minimum's is half of it."""
+    rng = np.random.default_rng(8)
+    n, truth = 40, 2.0
+    t = rng.uniform(0.5, 1.5, size=n)
+    s = np.linalg.norm(t) / np.sqrt(n)
+    fitted, corrected = [], []
+    with jax.enable_x64(True):
+        for _ in range(100):
+            d1, d2, e = rng.normal(0.0, s, size=n), rng.normal(0.0, s, size=n), rng.normal(0.0, 0.1, size=n)
+            y = truth * t + e
+            x_hat = np.array([(t + d1) @ y / ((t + d1) @ (t + d1))])  # the minimum of |r1|^2
+            problem = LinearProblem(lambda x, m=t + d1, y=y: x[0] * m - y, lambda x, m=t + d2, y=y: x[0] * m - y, noise_known=True)
+            *_, correction = covariance(problem, x_hat)
+            expected = (2 * t + d1 + d2) @ y / (2 * (t + d1) @ (t + d2))
+            np.testing.assert_allclose(x_hat + correction, [expected], rtol=1e-9)
+            fitted.append(x_hat[0])
+            corrected.append(x_hat[0] + correction[0])
+    assert np.mean(fitted) == pytest.approx(truth / 2, rel=0.05)
+    assert np.mean(corrected) == pytest.approx(truth, abs=4 * np.std(corrected) / np.sqrt(len(corrected)))
 
 
 def test_a_free_psf_widens_the_reach_of_the_render_noise():
@@ -243,3 +274,20 @@ def test_per_pixel_sigma_makes_residuals_standard_normal():
         r = np.asarray(residual_fn(ref, "pixel", sigma)(jnp.asarray(ref + noise, dtype=jnp.float32)))
         # float32 images: the difference is exact to ~1e-7 of the radiance, i.e. 2e-7 / 0.02 in z
         np.testing.assert_allclose(r, z.ravel(), atol=1e-4)
+
+
+def test_poorly_determined_is_judged_against_the_parameters_own_scale():
+    """A standard error is compared with 0.2 of the larger of the value and the parameter's own scale
+    (0.1 px for a shift, 0.1 deg for an attitude angle): a shift of 0.001 px determined to 0.004 px
+    and an angle of 0 deg determined to 0.008 deg are well determined; a roughness of 0.1 determined
+    to 0.2 is not, and neither is a shift known only to 0.021 px (0.2 x 0.1 px is the line)."""
+    names = ["image.shift_x_px", "target.attitude_x_deg", "parts.panels.alpha_x"]
+    params = free_parameters(sf.load_case("panels").scene(), names, 1)
+    values = np.array([0.001, 0.0, 0.1])
+
+    def poorly(stderr):
+        return [m.split()[0] for m in warnings_for(params, values, np.array(stderr), np.eye(3)) if "poorly determined" in m]
+
+    assert poorly([0.004, 0.008, 0.2]) == ["parts.panels.alpha_x"]
+    assert poorly([0.021, 0.021, 0.019]) == ["image.shift_x_px", "target.attitude_x_deg"]
+    assert poorly([0.019, 0.019, 0.021]) == ["parts.panels.alpha_x"]

@@ -112,8 +112,12 @@ MUTANTS = (
            "J2 = np.asarray(jax.jacfwd(problem.residual_x)", (UNCERTAINTY,)),
     Mutant("covariance-undetermined-finite", COVARIANCE, "touched = np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)",
            "touched = np.zeros(len(x), dtype=bool)", (UNCERTAINTY,)),
-    Mutant("covariance-no-jacobian-noise", COVARIANCE, "problem, x) + jacobian_noise) @ bread", "problem, x)) @ bread", (UNCERTAINTY,)),
+    Mutant("covariance-no-jacobian-noise", COVARIANCE, "problem, x) + jacobian_noise\n", "problem, x)\n", (UNCERTAINTY,)),
     Mutant("render-noise-per-pixel", COVARIANCE, "size = 2 * noise_reach_px(problem, x, k) + 1", "size = 1", (UNCERTAINTY,)),
+    Mutant("debias-with-the-fits-own-seed", COVARIANCE, "correction = -bread @ (0.5 * (J1.T @ r_alt + J2.T @ r))",
+           "correction = -bread @ (J1.T @ r)", (UNCERTAINTY,)),
+    Mutant("poorly-determined-against-the-value", COVARIANCE, "max(abs(values[i]), parameter(name).scale, 1e-12)",
+           "max(abs(values[i]), 1e-12)", (UNCERTAINTY,)),
     # observations from files (issue 10): masks and grey images
     Mutant("mask-ignored", "spacefit/fitting/losses.py", "keep = 1.0 if mask is None else",
            "keep = 1.0 if True else", ("tests/test_observations.py",)),

@@ -23,16 +23,19 @@ from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
 from spacefit.fitting.problem import Observation, Problem, Setup, setup
 from spacefit.precision import float64
+from spacefit.scene.parameters import parameter
 
 # |correlation| above which two parameters are reported as not separately determined.
 CORRELATION_WARN = 0.95
-# Relative standard error above which a parameter is reported as poorly determined.
+# Standard error, relative to the larger of the value and the parameter's own scale
+# (:attr:`~spacefit.scene.parameters.Parameter.scale`), above which it is reported as poorly determined.
 REL_STDERR_WARN = 0.2
 
 
-def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.ndarray]:
-    """Covariance of the estimate at ``x`` (physical units), the loss, and the eigenvalues of the
-    Fisher information (J^T J) / s^2 under uniform noise.
+def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+    """Covariance of the estimate at ``x`` (physical units), the loss, the eigenvalues of the
+    Fisher information (J^T J) / s^2 under uniform noise, and the correction that takes the fit's
+    ``x`` to the estimate the covariance is of (0 but with the noise known).
 
     The covariance is the heteroscedasticity-consistent "sandwich" (White 1980, with the HC1
     small-sample factor), (J^T J)^-1 J^T diag(r^2) J (J^T J)^-1: glints make the image noise
@@ -54,13 +57,21 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
     neighbouring pixels (spatial HAC); and the Monte Carlo noise of the
     Jacobian the fit steered by, which moves the point where J^T r = 0 by (J^T J)^-1 dJ^T r: per
     residual r^2 (J1 - J2)(J1 - J2)^T / 2 through the same bread.
+
+    The fit's minimum of 0.5 |r|^2 is biased: the loss's expectation holds the render noise's own
+    variance, which the parameters change (a wider PSF smooths the render noise away, so the PSF
+    width came out 0.8 of its standard error too wide, README), and the noisy Jacobian the fit
+    steers by shares the render's seed. With the noise known the estimate is therefore the root of
+    the unbiased estimating equation 0.5 (J1^T r_alt + J2^T r) = 0 (each Jacobian against the other
+    seed's residuals), one Gauss-Newton step from ``x`` (the returned correction); it averages the
+    two seeds' render and Jacobian noise, so those two terms enter the covariance at half weight.
     """
     r = np.asarray(problem.residual_x(jnp.asarray(x)), dtype=float)
     J1 = np.asarray(jax.jacfwd(problem.residual_x)(jnp.asarray(x)), dtype=float)
     J2 = np.asarray(jax.jacfwd(problem.residual_x_independent)(jnp.asarray(x)), dtype=float)
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J1)) and np.all(np.isfinite(J2))):
         n = len(x)
-        return np.full((n, n), np.nan), math.nan, np.full(n, np.nan)
+        return np.full((n, n), np.nan), math.nan, np.full(n, np.nan), np.zeros(n)
     informative = int((np.any(J1 != 0, axis=1) | (r != 0)).sum())
     dof = max(informative - len(x), 1)
     s2 = float(r @ r) / dof
@@ -82,14 +93,17 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
         r_alt = np.asarray(problem.residual_x_independent(jnp.asarray(x)), dtype=float)
         dJ = J1 - J2
         jacobian_noise = 0.5 * (dJ * (r**2)[:, None]).T @ dJ
-        cov, s2 = bread + bread @ (render_meat(J1, J2, (r - r_alt) / math.sqrt(2.0), problem, x) + jacobian_noise) @ bread, 1.0
+        noise = render_meat(J1, J2, (r - r_alt) / math.sqrt(2.0), problem, x) + jacobian_noise
+        cov, s2 = bread + 0.5 * bread @ noise @ bread, 1.0
+        correction = -bread @ (0.5 * (J1.T @ r_alt + J2.T @ r))
     else:
-        cov = bread @ meat(r**2 * informative / dof) @ bread
+        cov, correction = bread @ meat(r**2 * informative / dof) @ bread, np.zeros(len(x))
     if tiny.any():
         touched = np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)
         cov[touched, :] = np.inf
         cov[:, touched] = np.inf
-    return cov, 0.5 * float(r @ r), np.clip(eigval, 0.0, None) / s2
+        correction = np.zeros(len(x))  # a step in the determined directions alone would move the undetermined
+    return cov, 0.5 * float(r @ r), np.clip(eigval, 0.0, None) / s2, correction
 
 
 def render_meat(J1: np.ndarray, J2: np.ndarray, d: np.ndarray, problem: Problem, x: np.ndarray) -> np.ndarray:
@@ -166,8 +180,9 @@ def warnings_for(params: FreeParameters, values: np.ndarray, stderr: np.ndarray,
             continue  # no error estimate at all: reported by the caller
         if not np.isfinite(stderr[i]):
             out.append(f"{name} is not determined by these observations (singular J^T J).")
-        elif stderr[i] > REL_STDERR_WARN * max(abs(values[i]), 1e-12):
-            out.append(f"{name} is poorly determined: standard error {stderr[i]:.3g} on {values[i]:.4g}.")
+        elif stderr[i] > REL_STDERR_WARN * (scale := max(abs(values[i]), parameter(name).scale, 1e-12)):
+            out.append(f"{name} is poorly determined: standard error {stderr[i]:.3g} on {values[i]:.4g} "
+                       f"(more than {REL_STDERR_WARN:g} x {scale:.3g}, the larger of its value and its scale).")
     for i in range(len(names)):
         for j in range(i + 1, len(names)):
             if abs(corr[i, j]) > CORRELATION_WARN:
@@ -179,9 +194,16 @@ def warnings_for(params: FreeParameters, values: np.ndarray, stderr: np.ndarray,
 
 
 def estimate(s: Setup, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, dict[str, Any]]:
-    """User-facing values, their covariance, the loss and extras at solver values ``x``."""
-    cov, loss_value, fisher = covariance(s.problem, x)
-    extras: dict[str, Any] = {"fisher_eigenvalues": fisher.tolist()}
+    """User-facing values, their covariance, the loss and extras at solver values ``x``: the
+    values are ``x`` moved by :func:`covariance`'s correction for the render noise's bias (where
+    it keeps every value in its range; extras ``noise_bias_correction``, solver coordinates)."""
+    cov, loss_value, fisher, correction = covariance(s.problem, x)
+    if all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
+        x = x + correction
+    else:
+        correction = np.zeros(len(x))
+    extras: dict[str, Any] = {"fisher_eigenvalues": fisher.tolist(),
+                              "noise_bias_correction": dict(zip(s.solver_params.names, correction.tolist()))}
     if s.rms_index is not None:
         i = s.rms_index
         extras.update({"wrinkles.rms_m": float(x[i]), "wrinkles.rms_m.stderr": float(np.sqrt(cov[i, i]))})

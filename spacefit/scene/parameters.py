@@ -125,6 +125,9 @@ class Parameter:
         materials: for ``parts.P.*``, the material types that have it (grey values only).
         bsdf_fields: for ``parts.P.*``, the Mitsuba BSDF fields it sets.
         scene_fields: the scene-file fields it replaces (default: its own).
+        scale: the size of a change that matters, in its unit, for a parameter whose value may be
+            near 0 (angles, shifts): a standard error is judged against the larger of it and the
+            value ("poorly determined", :mod:`spacefit.fitting.uncertainty`); 0: against the value.
     """
 
     pattern: str
@@ -139,6 +142,7 @@ class Parameter:
     materials: tuple[type, ...] = ()
     bsdf_fields: tuple[str, ...] = ()
     scene_fields: tuple[str, ...] = ()
+    scale: float = 0.0
 
     @property
     def field(self) -> str:
@@ -229,11 +233,11 @@ def _sun_angles(names: tuple[str, str], docs: tuple[str, str], bounds: tuple[Bou
         return {"sun.direction": sun_direction(*angles).tolist()}
 
     return tuple(Parameter(n, "deg", b, doc, get, set_, frozenset({"sun-angles", "joint"}), fd_step=0.5,
-                           scene_fields=("direction",)) for n, doc, b in zip(names, docs, bounds))
+                           scene_fields=("direction",), scale=0.1) for n, doc, b in zip(names, docs, bounds))
 
 
 def _components(
-    key: str, unit: str, group: str, docs: Mapping[str, str], fd_step: float,
+    key: str, unit: str, group: str, docs: Mapping[str, str], fd_step: float, scale: float,
 ) -> tuple[Parameter, ...]:
     """The x, y, z components of the scene vector ``key`` (``target.attitude_deg``), each a
     per-observation nuisance that moves every vertex: ``target.attitude_x_deg``."""
@@ -248,7 +252,8 @@ def _components(
         return {key: [values.get(n, get(scene, n)) for n in names]}
 
     groups = frozenset({group, "joint", "moves-vertices", "nuisance", "per-observation"})
-    return tuple(Parameter(n, unit, WHOLE_LINE, docs[axis], get, set_, groups, fd_step=fd_step, scene_fields=(field,))
+    return tuple(Parameter(n, unit, WHOLE_LINE, docs[axis], get, set_, groups, fd_step=fd_step, scene_fields=(field,),
+                           scale=scale)
                  for n, axis in zip(names, "xyz"))
 
 
@@ -280,22 +285,22 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
                  (Bounds(-90.0, 90.0), WHOLE_LINE)),
     *_components("target.attitude_deg", "deg", "attitude",
                  {axis: f"the target's attitude angle {angle} (about object {axis}, thesis 3.2): every vertex"
-                  for axis, angle in zip("xyz", ("alpha", "beta", "gamma"))}, fd_step=0.5),
+                  for axis, angle in zip("xyz", ("alpha", "beta", "gamma"))}, fd_step=0.5, scale=0.1),
     *_components("target.position_m", "m", "position", {axis: f"the target's world {axis} position: every vertex" for axis in "xyz"},
-                 fd_step=0.02),
+                 fd_step=0.02, scale=0.01),
     Parameter("camera.roll_deg", "deg", WHOLE_LINE,
               "the camera's turn about its optical axis (image up towards image right), either camera mode", _scene_field, _own_key,
-              frozenset({"roll", "moves-vertices", "nuisance", "per-observation"}), fd_step=0.5),
+              frozenset({"roll", "moves-vertices", "nuisance", "per-observation"}), fd_step=0.5, scale=0.1),
     Parameter("image.scale", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1)",
               _constant(1.0), _not_a_scene_value, _IMAGE),
     Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", WHOLE_LINE, "offset added to every pixel (fit only; default 0)",
-              _constant(0.0), _not_a_scene_value, _IMAGE),
+              _constant(0.0), _not_a_scene_value, _IMAGE, scale=0.01),
     Parameter("image.blur_sigma_px", "px", Bounds(0.0, PSF_SIGMA_MAX_PX),
               "sigma of a continuous Gaussian blur before the pixel (fit only; not free: no blur; default start 0.5)",
-              _constant(PSF_SIGMA_START_PX), _not_a_scene_value, _IMAGE),
+              _constant(PSF_SIGMA_START_PX), _not_a_scene_value, _IMAGE, scale=0.1),
     *(Parameter(f"image.shift_{axis}_px", "px", WHOLE_LINE,
                 f"sub-pixel shift of the image towards +{axis} ({where}), by a Fourier phase (fit only; default 0)",
-                _constant(0.0), _not_a_scene_value, _IMAGE)
+                _constant(0.0), _not_a_scene_value, _IMAGE, scale=0.1)
       for axis, where in (("x", "columns, rightwards"), ("y", "rows, downwards"))),
 )}
 
