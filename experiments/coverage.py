@@ -67,8 +67,8 @@ def realisations(case: sf.Case, truth: np.ndarray, sensor: sf.Sensor, count: int
     for k in range(count):
         seed = first_seed + k
         dn = sf.observe(truth, sensor, intrinsics, seed).astype(float)
-        result = sf.fit(sf.Observation(scene, dn, sensor=sensor), list(case.free), start=start, seed=2 * seed + 101,
-                        seed_grad=2 * seed + 102)
+        result = sf.fit(sf.Observation(scene, dn, sensor=sensor), list(case.free), start=start,
+                        render=sf.FitRender(seed=2 * seed + 101, seed_grad=2 * seed + 102))
         for name, true in case.truth.items():
             value, stderr = result.values[name], result.stderr[name]
             rows.append({"seed": seed, "psf_sigma_px": sensor.psf_sigma_px, "exposure_time_s": sensor.exposure_time_s,

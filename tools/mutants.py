@@ -127,6 +127,13 @@ MUTANTS = (
            "", ("tests/test_mesh_io.py",)),
     Mutant("fold-against-own-base-face", "spacefit/geometry/wrinkle.py", "ref.normals[movable][nearest]) < 0.0",
            "ref.normals[ref.faces[:, 0]]) < 0.0", ("tests/test_mli_default.py",)),
+    # the fit's verdicts (spacefit/fitting/goodness.py, loop.py)
+    Mutant("misfit-threshold-flipped", "spacefit/fitting/goodness.py", "bool(chi2_dof > limit)", "bool(chi2_dof < limit)",
+           ("tests/test_goodness.py",)),
+    Mutant("no-progress-check-removed", "spacefit/fitting/loop.py", "    if not moved:\n        return Status.NO_PROGRESS\n", "",
+           ("tests/test_goodness.py",)),
+    Mutant("dof-miscounted", "spacefit/fitting/goodness.py", "dof = max(values - n_free, 1)", "dof = max(values, 1)",
+           ("tests/test_goodness.py",)),
 )
 
 
