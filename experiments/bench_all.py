@@ -38,13 +38,13 @@ obs = sf.Observation(scene, reference)
 peak = {}
 def on_step(h):
     peak[h["step"]] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-sf.fit(obs, list(case.free), solver="adam", start=case.start, max_steps=STEPS, rtol=1e-12, on_step=on_step)
+sf.fit(obs, list(case.free), solver=sf.Adam(rtol=1e-12), start=case.start, max_steps=STEPS, on_step=on_step)
 last = max(peak)
 print(f"peak memory: {peak[10]:.1f} MiB after step 10, {peak[last]:.1f} MiB after step {last} "
       f"({peak[last] / peak[10] - 1:+.2%})")
 for steps in (5, 60):
     with kernel_log() as k:
-        r = sf.fit(obs, list(case.free), solver="adam", start=case.start, max_steps=steps, rtol=1e-12)
+        r = sf.fit(obs, list(case.free), solver=sf.Adam(rtol=1e-12), start=case.start, max_steps=steps)
     print(f"adam {r.steps} steps: {k['launched']} kernels launched, {k['compiled']} compiled ({k['compile_s']:.2f} s)")
 """
 # One variant's default forward render (median of 7 after a compiling one; the CPU on 2 threads, as

@@ -10,7 +10,7 @@ import argparse
 from studyio import machine
 
 import spacefit as sf
-from spacefit import SOLVERS, Observation, fit
+from spacefit import SOLVERS, Adam, Observation, fit
 
 CASES = {name: sf.load_case(name) for name in ("materials", "wrinkles_128")}
 
@@ -18,8 +18,8 @@ CASES = {name: sf.load_case(name) for name in ("materials", "wrinkles_128")}
 def run(case: sf.Case, solver: str, max_steps: int) -> dict[str, object]:
     """Fit ``case`` from its start with ``solver``; return a row of the benchmark table."""
     reference, _ = case.reference()
-    result = fit(Observation(case.scene(), reference), list(case.free), solver=solver, start=case.start,
-                 max_steps=max_steps, learning_rate=0.1)
+    result = fit(Observation(case.scene(), reference), list(case.free), solver=Adam(0.1) if solver == "adam" else solver,
+                 start=case.start, max_steps=max_steps)
     errors = {k: result.values[k] - v if k == "wrinkles.D" else result.values[k] / v - 1.0 for k, v in case.truth.items()}
     return {"case": case.name, "solver": solver, "steps": result.steps, "wall_s": result.wall_time_s,
             "status": result.status, "errors": errors, "stderr": result.stderr}

@@ -111,8 +111,8 @@ def realisations(case: sf.Case, truth: np.ndarray, sensor: sf.Sensor, count: int
     for k in range(count):
         seed = first_seed + k
         dn = sf.observe(truth, sensor, intrinsics, seed).astype(float)
-        result = sf.fit(sf.Observation(scene, dn, sensor=sensor), list(truths), start=start, seed=2 * seed + 101,
-                        seed_grad=2 * seed + 102)
+        result = sf.fit(sf.Observation(scene, dn, sensor=sensor), list(truths), start=start,
+                        render=sf.FitRender(seed=2 * seed + 101, seed_grad=2 * seed + 102))
         for name, true in truths.items():
             value, stderr = result.values[name], result.stderr[name]
             rows.append({"seed": seed, "psf_sigma_px": sensor.psf_sigma_px, "exposure_time_s": sensor.exposure_time_s,
@@ -170,8 +170,8 @@ def linearised(case: sf.Case, truth: np.ndarray, sensor: sf.Sensor, count: int, 
     for k in range(count):
         seed = first_seed + k
         dn = sf.observe(truth, sensor, intrinsics, seed).astype(float)
-        s = setup(sf.Observation(scene, dn, sensor=sensor), list(truths), truths, "pixel", None, None, 2 * seed + 101,
-                  2 * seed + 102, "prb", "fd", "rms")
+        s = setup(sf.Observation(scene, dn, sensor=sensor), list(truths), start=truths,
+                  render=sf.FitRender(seed=2 * seed + 101, seed_grad=2 * seed + 102))
         x = jnp.asarray(s.x0)
         r = np.asarray(s.problem.residual_x(x))
         J1, J2 = (np.asarray(jax.jacfwd(f)(x)) for f in (s.problem.residual_x, s.problem.residual_x_independent))

@@ -25,7 +25,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 import spacefit as sf  # noqa: E402
-from spacefit import SOLVERS, Observation, fit  # noqa: E402
+from spacefit import SOLVERS, Adam, Observation, fit  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
 
 # case -> [(width px, spp)]; the case's native width and pixel pitch set the field of view.
@@ -54,8 +54,8 @@ def run_fit_cost(out: Path, full: bool) -> list[dict[str, object]]:
     for k, (name, (width, spp), solver) in enumerate(runs):
         case = at_budget(name, width, spp)
         reference, _ = case.reference()
-        r = fit(Observation(case.scene(), reference), list(case.free), solver=solver, start=case.start,
-                max_steps=max_steps, learning_rate=0.1)
+        r = fit(Observation(case.scene(), reference), list(case.free), solver=Adam(0.1) if solver == "adam" else solver,
+                start=case.start, max_steps=max_steps)
         rel = [abs(r.values[n] / v - 1.0) for n, v in case.truth.items() if n != "wrinkles.D"]
         rows.append({"case": name, "width_px": width, "spp": spp, "solver": solver, "steps": r.steps,
                      "time_s": round(r.wall_time_s, 3), "max_rel_error": round(max(rel), 5) if rel else "",

@@ -104,7 +104,8 @@ D and the smallest Fisher eigenvalue against range, for three image sizes."""),
 table("identifiability/identifiability.csv", ["range_m", "width_px", "pixel_m", "se_D", "se_G_rel", "corr_DG"])"""),
     ("md", """The same question asked of a single observation through the API: how well could one 64 px
 reference of the wrinkles case determine D and G?"""),
-    ("code", """obs = Observation(load_scene(case / "wrinkles.toml"), read_exr(case / "wrinkles" / "reference_noise2.exr"), sigma=0.00488)
+    ("code", """obs = Observation(load_scene(ROOT / "spacefit" / "synthetic" / "wrinkles.toml"),
+                  read_exr(ROOT / "data" / "synthetic" / "wrinkles" / "reference_noise2.exr"), sigma=0.00488)
 with warnings.catch_warnings():
     warnings.filterwarnings("ignore", message=".*fold over")  # the wrinkles case folds 1.2 % of its faces (README, "Wrinkles")
     info = identifiability(obs, ["wrinkles.D", "wrinkles.G"], {"wrinkles.D": 2.4, "wrinkles.G": 0.04})

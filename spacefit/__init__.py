@@ -23,9 +23,11 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "FitResult": ("spacefit.fitting.loop", "FitResult"),
     "fit": ("spacefit.fitting.loop", "fit"),
     "LOSSES": ("spacefit.fitting.losses", "LOSSES"),
+    "FitRender": ("spacefit.fitting.problem", "FitRender"),
     "Observation": ("spacefit.fitting.problem", "Observation"),
     "format_result": ("spacefit.fitting.report", "format_result"),
     "write_fit_report": ("spacefit.fitting.report", "write_fit_report"),
+    "Adam": ("spacefit.fitting.solvers", "Adam"),
     "SOLVERS": ("spacefit.fitting.solvers", "SOLVERS"),
     "Status": ("spacefit.fitting.solvers", "Status"),
     "Identifiability": ("spacefit.fitting.uncertainty", "Identifiability"),
@@ -87,7 +89,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
 
 __all__ = [
     "PARAMETERS", "PRESETS", "LOSSES", "SOLVERS",
-    "Case", "Conductor", "FitResult", "Identifiability", "InputError", "Jacobian", "Lambert", "Mirror",
+    "Adam", "Case", "Conductor", "FitRender", "FitResult", "Identifiability", "InputError", "Jacobian", "Lambert", "Mirror",
     "Observation", "Parameter", "PartImage", "Renderer", "Scene", "Status",
     "available_parameters", "case_names", "default_scene", "fit", "fit_to_folder", "format_result", "identifiability",
     "jacobian", "load_case", "load_scene", "parameter_table", "read_exr", "render", "render_function",

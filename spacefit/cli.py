@@ -10,12 +10,20 @@ import sys
 import time
 from pathlib import Path
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 from spacefit.errors import InputError, check_range, shorten
 from spacefit.interrupts import Terminated
 from spacefit.scene.parameters import PARAMETERS
 
-NOT_CONVERGED = 3
+if TYPE_CHECKING:
+    from spacefit.fitting.solvers import Status
+
+# Exit codes of `spacefit fit` that is not a success (its report is written in each case).
+NOT_CONVERGED = 3  # the solver stopped without converging (step limit, divergence, NaN)
+NO_PROGRESS = 4  # no step lowered the loss: the values are the start
+MISFIT = 5  # the residuals exceed the noise: the model or its nuisances miss something
+AT_BOUND = 6  # a parameter ended at a bound of its range
 INTERRUPTED = 130  # 128 + SIGINT, as shells report Ctrl-C
 TERMINATED = 143  # 128 + SIGTERM
 
@@ -53,10 +61,15 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     e.add_argument("--part", default="body")
     e.add_argument("--out", required=True, help="STL file to write")
     f = sub.add_parser("fit", parents=[overrides],
-                       help="fit scene parameters to reference images: fit.json, fit.toml, uncertainty.json, comparison.png, convergence.png",
+                       help="fit scene parameters to reference images: fit.json, fit.toml, uncertainty.json, comparison.png, "
+                            "convergence.png, residuals.fits, residuals.png",
                        description="Fit free scene parameters to reference images: radiance (EXR, FITS) or "
                                    "DN (FITS, 16-bit PNG / TIFF) with their sensor's noise model. "
-                                   "--set applies to every scene.")
+                                   "--set applies to every scene. The report's first line is the verdict. Exit codes: "
+                                   f"0 converged, 1 file system error, 2 bad input, {NOT_CONVERGED} not converged, "
+                                   f"{NO_PROGRESS} no progress (no step lowered the loss), {MISFIT} misfit (chi^2/dof "
+                                   f"beyond its expected range: the model misses something), {AT_BOUND} a parameter at a "
+                                   f"bound, {INTERRUPTED} Ctrl-C, {TERMINATED} SIGTERM; the report is written for 0 and 3 to 6.")
     f.add_argument("references", nargs="+", metavar="REFERENCE",
                    help="reference images fitted jointly: .exr radiance (W m^-2 sr^-1); .fits radiance (BUNIT "
                         "'W m-2 sr-1') or DN; .png / .tif DN (give --response unless spacefit wrote them)")
@@ -66,7 +79,7 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     f.add_argument("--out", required=True, metavar="DIR", help="output folder (new, empty, or a previous fit with --overwrite)")
     f.add_argument("--overwrite", action="store_true", help="replace a previous fit report in --out")
     f.add_argument("--resume", action="store_true", help="continue the interrupted fit whose checkpoint is in --out")
-    f.add_argument("--solver", metavar="lm|gn|dogleg|bfgs|adam", help="solver (default lm)")
+    f.add_argument("--solver", metavar="lm|gn|dogleg|bfgs|adam", help="solver with its default tolerances (default lm)")
     f.add_argument("--loss", metavar="pixel|pyramid|stats", help="loss (default pixel)")
     f.add_argument("--resolution", nargs=2, type=int, metavar=("W", "H"),
                    help="render every scene at W x H px; the references must have that size")
@@ -153,29 +166,41 @@ def _sensor_values(items: Sequence[str]) -> dict[str, object]:
 
 
 def _fit(args: argparse.Namespace) -> int:
-    """Run ``spacefit fit``; exit code 0 when the solver converged, NOT_CONVERGED otherwise."""
+    """Run ``spacefit fit``; exit code 0 when the fit succeeded, else the verdict's (:func:`exit_code`)."""
+    from spacefit.fitting.problem import FitRender
     from spacefit.fitting.report import format_result
-    from spacefit.fitting.solvers import Status
     from spacefit.pipeline import fit_to_folder
 
-    given = {"solver": args.solver, "loss": args.loss, "spp": args.spp, "spp_grad": args.spp_grad,
-             "max_steps": args.max_steps, "stop": args.stop}
+    render = FitRender(**{k: v for k, v in (("spp", args.spp), ("spp_grad", args.spp_grad)) if v is not None})
+    given = {"solver": args.solver, "loss": args.loss, "max_steps": args.max_steps, "stop": args.stop}
     result = fit_to_folder(
         args.references, args.scenes, [name.strip() for name in args.free.split(",")], args.out,
         overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, masks=args.masks, sensor=args.sensor,
         sensor_values=_sensor_values(args.sensor_values) or None, sensor_defaults=args.sensor_defaults, row_order=args.row_order,
         unit=args.unit, response=args.response, quiet=args.quiet,
-        overwrite=args.overwrite, resume=args.resume, start=_start_values(args.start),
+        overwrite=args.overwrite, resume=args.resume, start=_start_values(args.start), render=render,
         **{k: v for k, v in given.items() if v is not None},
     )
     print(format_result(result))
+    code = exit_code(result.status)
     if result.status.interrupted:
         print(f"spacefit: interrupted; the best point so far is in {args.out} (continue with --resume)", file=sys.stderr)
-        return TERMINATED if result.status is Status.TERMINATED else INTERRUPTED
-    if not result.success:
+    elif code == NOT_CONVERGED:
         print(f"spacefit: the fit did not converge ({result.status}); its report is in {args.out}", file=sys.stderr)
-        return NOT_CONVERGED
-    return 0
+    elif code:
+        print(f"spacefit: {result.status}; its report is in {args.out}", file=sys.stderr)
+    return code
+
+
+def exit_code(status: Status) -> int:
+    """The exit code of a fit that ended with ``status``: 0 for a success, else NO_PROGRESS, MISFIT,
+    AT_BOUND, INTERRUPTED, TERMINATED, or NOT_CONVERGED for the solver's other endings."""
+    from spacefit.fitting.solvers import Status
+
+    if status.success:
+        return 0
+    return {Status.NO_PROGRESS: NO_PROGRESS, Status.MISFIT: MISFIT, Status.AT_BOUND: AT_BOUND,
+            Status.INTERRUPTED: INTERRUPTED, Status.TERMINATED: TERMINATED}.get(status, NOT_CONVERGED)
 
 
 def _terminate(signum: int, frame: object) -> None:
@@ -194,8 +219,9 @@ def _write_scene(args: argparse.Namespace, text: str) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point; returns the process exit code: 0, 1 for a file system error, 2 for bad input, 3 for a
-    fit that did not converge, 130 for Ctrl-C and 143 for SIGTERM (one line, no traceback)."""
+    """Entry point; returns the process exit code: 0, 1 for a file system error, 2 for bad input, for a
+    fit 3 not converged, 4 no progress, 5 misfit, 6 a parameter at a bound (:func:`exit_code`), 130 for
+    Ctrl-C and 143 for SIGTERM (one line, no traceback)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     args = _parser(argv[0] if argv else None).parse_args(argv)
     previous = signal.signal(signal.SIGTERM, _terminate)

@@ -95,7 +95,8 @@ STAGE_PREFIX = ".spacefit-stage-"
 # The files each command writes into its output folder, and the one that marks it as spacefit's.
 RESULT_FILES = {
     "render": ({"radiance.exr", "preview.png", "scene.toml", "render.json"}, "render.json"),
-    "fit": ({"fit.json", "fit.toml", "uncertainty.json", "comparison.png", "convergence.png", "checkpoint.json"}, "fit.json"),
+    "fit": ({"fit.json", "fit.toml", "uncertainty.json", "comparison.png", "convergence.png", "residuals.fits", "residuals.png",
+             "checkpoint.json"}, "fit.json"),
 }
 
 

@@ -204,7 +204,7 @@ def fit_to_folder(
         overwrite: replace a previous fit report in ``out_dir``.
         resume: continue the interrupted fit whose checkpoint is in ``out_dir`` (same inputs).
         options: keyword arguments of :func:`spacefit.fitting.fit` (``solver``, ``loss``, ``start``,
-            ``spp``, ``spp_grad``, ``max_steps``, ...).
+            ``render``, ``max_steps``, ``stop``, ...), recorded in fit.json's ``inputs.options``.
 
     Returns:
         The fit's result.
@@ -254,7 +254,7 @@ def fit_to_folder(
         "notes": [list(obs.notes) for obs in observations],
         "unit": unit,
         "response": response,
-        "options": options,
+        "options": _recorded(options),
     }
     checkpoint = Checkpoint(Path(out_dir) / CHECKPOINT, inputs)
     if resume:
@@ -280,13 +280,23 @@ def fit_to_folder(
         raise
     if not result.status.interrupted:
         checkpoint.remove()
-    _say(f"wrote {Path(out_dir) / 'fit.json'}, fit.toml, uncertainty.json, comparison.png and convergence.png", quiet)
+    _say(f"wrote {Path(out_dir) / 'fit.json'}, fit.toml, uncertainty.json, comparison.png, convergence.png and residuals", quiet)
     return result
+
+
+def _recorded(options: Mapping[str, Any]) -> dict[str, Any]:
+    """Fit options as fit.json records them: the render settings as a table, a solver object by its repr."""
+    out = dict(options)
+    if dataclasses.is_dataclass(out.get("render")):
+        out["render"] = dataclasses.asdict(out["render"])
+    if "solver" in out and not isinstance(out["solver"], str):
+        out["solver"] = repr(out["solver"])
+    return out
 
 
 CHECKPOINT = "checkpoint.json"
 # Options a resumed fit may change: how it solves, not what it fits.
-SOLVE_OPTIONS = ("solver", "max_steps", "start", "learning_rate", "rtol", "atol", "stop")
+SOLVE_OPTIONS = ("solver", "max_steps", "start", "stop")
 
 
 def _problem_of(value: Any, key: str) -> Any:

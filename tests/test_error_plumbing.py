@@ -98,7 +98,7 @@ def test_problem_spreads_render_noise_by_the_sensors_psf(tmp_path):
     scene = sphere(tmp_path).with_values({"camera.focal_length_mm": 500.0, "camera.pixel_pitch_mm": 0.005})
     sensor = sf.Sensor()
     observations = [sf.Observation(scene, np.full((16, 16, 3), 100.0), sensor=sensor), sf.Observation(scene, np.full((16, 16, 3), 0.1))]
-    s = setup(observations, ["parts.sphere.kd"], None, "pixel", None, None, 1, 2, "prb", "fd", "rms")
+    s = setup(observations, ["parts.sphere.kd"])
     blur = psf_rms_px(sensor, assemble(scene).intrinsics, 3)
     assert blur > 1.0
     assert s.problem.noise_spread_px == ((FILTER_RADIUS_PX[scene.render.filter], blur), (FILTER_RADIUS_PX[scene.render.filter], 0.0))

@@ -33,8 +33,8 @@ def test_material_fit_recovers_truth_within_2_percent(panels_reference, solver):
 
 @pytest.mark.parametrize("solver", ["bfgs", "adam"])
 def test_gradient_solvers_reduce_the_loss(panels_reference, solver):
-    result = fit(Observation(PANELS.scene(), panels_reference), list(PANELS.free), solver=solver,
-                 start=PANELS.start, max_steps=15, learning_rate=0.1)
+    result = fit(Observation(PANELS.scene(), panels_reference), list(PANELS.free), solver=sf.Adam(0.1) if solver == "adam" else solver,
+                 start=PANELS.start, max_steps=15)
     assert result.history[-1]["loss"] < 0.5 * result.history[0]["loss"]
     assert all(np.isfinite(v) for v in result.values.values())
     assert result.status is not sf.Status.NOISE_FLOOR  # the noise-floor stop is the least-squares solvers'
@@ -106,7 +106,7 @@ def test_several_observations_fit_jointly(panels_reference):
         ({"start": {"wrinkles.D": 2.5}}, "start"),
         ({"solver": "newton"}, "solver"),
         ({"loss": "l1"}, "loss"),
-        ({"seed": 3, "seed_grad": 3}, "seed"),
+        ({"render": "prb"}, "FitRender"),
     ],
 )
 def test_bad_fit_input_is_refused_before_rendering(panels_reference, kwargs, message):
@@ -114,6 +114,13 @@ def test_bad_fit_input_is_refused_before_rendering(panels_reference, kwargs, mes
     free = kwargs.pop("free", list(PANELS.free))
     with pytest.raises(InputError, match=message):
         fit(Observation(PANELS.scene(), ref), free, **kwargs)
+
+
+@pytest.mark.parametrize(("kwargs", "message"), [({"seed": 3, "seed_grad": 3}, "seed"), ({"spp": 0}, "spp"),
+                                               ({"integrator": "path"}, "integrator"), ({"geometry_jacobian": "x"}, "geometry_jacobian")])
+def test_render_settings_are_checked_on_construction(kwargs, message):
+    with pytest.raises(InputError, match=message):
+        sf.FitRender(**kwargs)
 
 
 def test_identifiability_falls_with_range():
@@ -135,3 +142,20 @@ def test_a_parameter_pushed_to_its_bound_is_reported(tmp_path):
     result = fit(Observation(scene, render(bright)), ["parts.sphere.kd"], max_steps=20)
     assert result.values["parts.sphere.kd"] > 0.999
     assert any("upper bound" in w and "parts.sphere.kd" in w for w in result.warnings), result.warnings
+    assert result.status is sf.Status.AT_BOUND and not result.success
+    assert sf.format_result(result).startswith("failed: a parameter is at a bound")
+
+
+def test_solver_by_name_or_object_with_its_own_tolerances():
+    import optimistix as optx
+
+    from spacefit.fitting.solvers import make_solver, solver_name
+
+    assert isinstance(make_solver("gn"), optx.GaussNewton) and make_solver("lm").rtol == 1e-3
+    own = optx.LevenbergMarquardt(rtol=1e-5, atol=1e-9)
+    assert make_solver(own) is own and solver_name(own) == "lm"
+    assert make_solver("adam") == sf.Adam() and solver_name(sf.Adam(0.1)) == "adam"
+    with pytest.raises(InputError, match="solver"):
+        make_solver(42)
+    with pytest.raises(InputError, match="learning_rate"):
+        sf.Adam(learning_rate=0.0)

@@ -8,10 +8,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from astropy.io import fits
 from helpers import small_scene, write_sphere_obj
 
 import spacefit as sf
-from spacefit.cli import NOT_CONVERGED, main
+from spacefit.cli import AT_BOUND, MISFIT, NO_PROGRESS, NOT_CONVERGED, exit_code, main
 from spacefit import FitResult
 from spacefit.imageio import sidecar_path
 from spacefit.rendering.png import write_png
@@ -22,7 +23,7 @@ from spacefit.rendering.renderer import render
 from spacefit.rendering.exr import read_exr, write_exr
 
 TRUE_KD = 0.5
-REPORT = ["comparison.png", "convergence.png", "fit.json", "fit.toml", "uncertainty.json"]
+REPORT = ["comparison.png", "convergence.png", "fit.json", "fit.toml", "residuals.fits", "residuals.png", "uncertainty.json"]
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +64,7 @@ def test_cli_fits_dn_with_its_sensor_and_records_it(dn_case, tmp_path):
     code = main(_args(dn_case, out, "--spp", "2", reference="obs.fits"))
     assert sorted(os.listdir(out)) == REPORT
     report = json.loads((out / "fit.json").read_text())
-    assert code == (0 if report["success"] else NOT_CONVERGED)
+    assert code == exit_code(sf.Status(report["status"])) and (code == 0) == report["success"]
     assert abs(report["values"]["parts.sphere.kd"] - TRUE_KD) < 0.03
     assert report["inputs"]["sensors"] == [SENSOR.to_dict()] and report["inputs"]["masks"] == []
     assert report["units"]["observations"] == ["DN"] and "fit_mean_dn" in report["parts"][0]["target"]
@@ -75,7 +76,7 @@ def test_cli_takes_a_sensor_file_a_response_and_a_mask(dn_case, tmp_path):
     code = main(_args(dn_case, out, *extra, reference="bare.png"))
     assert sorted(os.listdir(out)) == REPORT
     report = json.loads((out / "fit.json").read_text())
-    assert code == (0 if report["success"] else NOT_CONVERGED)
+    assert code == exit_code(sf.Status(report["status"])) and (code == 0) == report["success"]
     assert abs(report["values"]["parts.sphere.kd"] - TRUE_KD) < 0.03
     inputs = report["inputs"]
     assert inputs["sensors"] == [SENSOR.to_dict()] and inputs["sensor_file"] == str(dn_case / "sensor.json")
@@ -119,10 +120,10 @@ def test_cli_fit_writes_the_report(case, tmp_path, capsys):
     code = main(_args(case, out, "--spp", "2"))
     assert sorted(os.listdir(out)) == REPORT
     report = json.loads((out / "fit.json").read_text())
-    assert code == (0 if report["success"] else NOT_CONVERGED)
+    assert code == exit_code(sf.Status(report["status"])) and (code == 0) == report["success"]
     assert report["names"] == ["parts.sphere.kd"] and report["solver"] == "lm"
     assert abs(report["values"]["parts.sphere.kd"] - TRUE_KD) < 0.01
-    assert len(report["history"]) == report["steps"] and report["inputs"]["options"]["spp"] == 2
+    assert len(report["history"]) == report["steps"] and report["inputs"]["options"]["render"]["spp"] == 2
     assert report["timings_s"]["solve"] > 0 and isinstance(report["success"], bool)
     printed = capsys.readouterr().out
     assert "parts.sphere.kd = " in printed and "+/-" in printed and "(start 0.3)" in printed
@@ -130,7 +131,7 @@ def test_cli_fit_writes_the_report(case, tmp_path, capsys):
 
 def test_cli_fit_that_does_not_converge_exits_3_with_its_report(case, tmp_path, capsys):
     out = tmp_path / "run"
-    assert main(_args(case, out, "--spp", "2", "--max-steps", "1")) == NOT_CONVERGED
+    assert main(_args(case, out, "--spp", "2", "--max-steps", "2")) == NOT_CONVERGED
     assert sorted(os.listdir(out)) == REPORT and json.loads((out / "fit.json").read_text())["success"] is False
     assert "did not converge" in capsys.readouterr().err
 
@@ -143,6 +144,32 @@ def test_fit_to_folder_returns_the_result(case, tmp_path):
     assert abs(result.values["parts.sphere.kd"] - TRUE_KD) < 0.01
     assert len(result.renders) == 2 and result.renders[0].shape == (32, 32, 3)
     assert sorted(os.listdir(tmp_path / "run")) == REPORT
+    # residuals.fits: reference - model per observation, in the reference's unit, top row first
+    with fits.open(tmp_path / "run" / "residuals.fits") as hdus:
+        assert [h.name for h in hdus[1:]] == ["OBS0", "OBS1"] and hdus["OBS1"].header["ROWORDER"] == "TOP-DOWN"
+        residual = np.moveaxis(hdus["OBS1"].data, 0, -1)
+    reference = read_exr(case / "b.exr")
+    lit = np.argwhere(reference[..., 0] > 0)[0]
+    assert residual[tuple(lit)] == pytest.approx(reference[tuple(lit)] - result.renders[1][tuple(lit)], rel=1e-6)
+    assert np.allclose(residual, result.residuals[1], equal_nan=True)
+
+
+def test_cli_fit_that_makes_no_progress_exits_4_and_says_so(case, tmp_path, capsys):
+    """The sun behind the sphere: kd changes no pixel, no step lowers the loss, the start is returned."""
+    out = tmp_path / "run"
+    assert main(_args(case, out, "--spp", "2", "--set", "sun.direction=[0, 0, 1]")) == NO_PROGRESS
+    report = json.loads((out / "fit.json").read_text())
+    assert report["success"] is False and report["status"] == sf.Status.NO_PROGRESS.value
+    assert report["values"] == report["start"]
+    assert capsys.readouterr().out.startswith("failed: no step lowered the loss")
+
+
+def test_exit_codes_are_distinct():
+    codes = {status: exit_code(status) for status in sf.Status}
+    assert codes[sf.Status.CONVERGED] == codes[sf.Status.NOISE_FLOOR] == 0
+    assert (codes[sf.Status.NO_PROGRESS], codes[sf.Status.MISFIT], codes[sf.Status.AT_BOUND]) == (NO_PROGRESS, MISFIT, AT_BOUND)
+    assert codes[sf.Status.MAX_STEPS] == codes[sf.Status.NONFINITE] == NOT_CONVERGED
+    assert len({NOT_CONVERGED, NO_PROGRESS, MISFIT, AT_BOUND, 0, 1, 2, 130, 143}) == 9
 
 
 def test_error_while_writing_the_report_leaves_nothing(case, tmp_path, monkeypatch):

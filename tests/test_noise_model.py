@@ -40,8 +40,8 @@ def study():
     @float64
     def one(k: int) -> tuple[np.ndarray, np.ndarray, bool]:
         dn = sf.observe(truth, sensor, intrinsics, seed=k).astype(float)
-        s = setup(sf.Observation(scene, dn, sensor=sensor), free, case.truth, "pixel", None, None, 2 * k + 11, 2 * k + 12,
-                  "prb", "fd", "rms")
+        s = setup(sf.Observation(scene, dn, sensor=sensor), free, start=case.truth,
+                  render=sf.FitRender(seed=2 * k + 11, seed_grad=2 * k + 12))
         cov, _, _, step = covariance(s.problem, s.x0)
         return step, np.sqrt(np.diag(cov)), s.problem.noise_known
 

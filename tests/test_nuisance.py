@@ -76,7 +76,7 @@ def columns():
 
     @float64
     def run():
-        s = setup(sf.Observation(scene, reference), free, at, "pixel", None, None, 1, 2, "prb", "fd", "rms")
+        s = setup(sf.Observation(scene, reference), free, start=at)
         x = jnp.asarray(s.x0)
         return s, x, np.asarray(jax.jacfwd(s.problem.residual_x)(x))
 
@@ -103,7 +103,7 @@ def pose_columns():
 
     @float64
     def run():
-        s = setup(sf.Observation(scene, np.asarray(sf.render(scene))), free, None, "pixel", None, None, 1, 2, "prb", "fd", "rms")
+        s = setup(sf.Observation(scene, np.asarray(sf.render(scene))), free)
         return np.asarray(jax.jacfwd(s.problem.residual_x)(jnp.asarray(s.x0)))
 
     return scene, free, run()
@@ -143,7 +143,7 @@ def columns_against_finite_differences(free: list[str], at: dict[str, float]) ->
     its columns after the first checked against central differences (cosine >= 0.99, norms within
     1 %), and the row where observation 1's residuals begin."""
     observations = [sf.Observation(s, np.asarray(sf.render(s))) for s in two_observations(4)]
-    s = setup(observations, free, at, "pixel", None, None, 1, 2, "prb", "fd", "rms")
+    s = setup(observations, free, start=at)
     x = jnp.asarray(s.x0)
     J = np.asarray(jax.jacfwd(s.problem.residual_x)(x))
     for j in range(1, len(free)):
@@ -204,7 +204,7 @@ def test_bad_per_observation_names_are_refused(free, match):
     scenes = two_observations(4)
     observations = [sf.Observation(s, np.zeros((48, 48, 3))) for s in scenes]
     with pytest.raises(sf.InputError, match=match):
-        setup(observations, free, None, "pixel", None, None, 1, 2, "prb", "fd", "rms")
+        setup(observations, free)
     with pytest.raises(sf.InputError, match="image.scale@0"):
         sf.render_function(scenes[0], ["image.scale@0"])  # a render has no observations
 
@@ -279,7 +279,7 @@ def per_observation_pose_columns():
 
     @float64
     def jacobian() -> np.ndarray:
-        s = setup(observations, own, None, "pixel", None, None, 1, 2, "prb", "fd", "rms")
+        s = setup(observations, own)
         return np.asarray(jax.jacfwd(s.problem.residual_x)(jnp.asarray(s.x0)))
 
     return scenes, own, jacobian()
@@ -304,8 +304,7 @@ def test_per_observation_pose_columns_match_finite_differences_and_act_on_their_
 def test_an_observations_own_pose_starts_at_its_scenes():
     scenes = two_observations(4)
     observations = [sf.Observation(s, np.zeros((48, 48, 3))) for s in scenes]
-    s = setup(observations, ["target.attitude_z_deg@0", "target.attitude_z_deg@1"], None, "pixel", None, None, 1, 2, "prb", "fd",
-              "rms")
+    s = setup(observations, ["target.attitude_z_deg@0", "target.attitude_z_deg@1"])
     np.testing.assert_array_equal(s.x0_user, [scenes[0].target.attitude_deg[2], 25.0])
 
 

@@ -50,7 +50,7 @@ def _garbage(image: np.ndarray, value: float) -> np.ndarray:
 
 
 def _fit(observation: sf.Observation) -> float:
-    return sf.fit(observation, ["parts.sphere.kd"], max_steps=6, spp=4).values["parts.sphere.kd"]
+    return sf.fit(observation, ["parts.sphere.kd"], max_steps=6, render=sf.FitRender(spp=4)).values["parts.sphere.kd"]
 
 
 @pytest.mark.parametrize("sensor", [None, SENSOR], ids=["radiance", "dn"])
@@ -72,7 +72,7 @@ def test_masked_garbage_changes_nothing_and_its_residuals_are_zero(sphere, senso
 
     @float64
     def rows():
-        s = setup(obs(_garbage(clean, np.nan), mask), ["parts.sphere.kd"], None, "pixel", None, None, 1, 2, "prb", "fd", "rms")
+        s = setup(obs(_garbage(clean, np.nan), mask), ["parts.sphere.kd"])
         x = jnp.asarray(s.x0)
         return (np.asarray(s.problem.residual_x(x)), np.asarray(jax.jacfwd(s.problem.residual_x)(x)),
                 np.asarray(s.problem.residual_x_independent(x)))
@@ -217,7 +217,7 @@ def test_the_fits_model_image_is_in_the_references_unit(sphere, sensor):
     _, scene, truth, mask = sphere
     reference = truth if sensor is None else sf.observe(truth, sensor, assemble(scene).intrinsics, seed=1).astype(float)
     observation = sf.Observation(scene, _garbage(reference, np.nan), sensor=sensor, mask=mask)
-    result = sf.fit(observation, ["parts.sphere.kd"], max_steps=6, spp=4)
+    result = sf.fit(observation, ["parts.sphere.kd"], max_steps=6, render=sf.FitRender(spp=4))
     unit = "W m^-2 sr^-1" if sensor is None else "DN"
     assert result.units == [unit]
     suffix = "w_m2_sr" if sensor is None else "dn"
@@ -248,7 +248,7 @@ def test_a_grey_observation_counts_each_pixel_once(sphere):
     errors = [sf.identifiability(sf.Observation(scene, image, sensor=dim), ["parts.sphere.kd"], {"parts.sphere.kd": TRUE_KD},
                                  spp=256).stderr["parts.sphere.kd"] for image in (grey[..., 0], rgb)]
     assert errors[0] / errors[1] == pytest.approx(np.sqrt(3.0), rel=0.1)
-    result = sf.fit(sf.Observation(scene, grey, sensor=dim), ["parts.sphere.kd"], max_steps=6, spp=4)
+    result = sf.fit(sf.Observation(scene, grey, sensor=dim), ["parts.sphere.kd"], max_steps=6, render=sf.FitRender(spp=4))
     assert abs(result.values["parts.sphere.kd"] - TRUE_KD) < 4 * result.stderr["parts.sphere.kd"]
     assert result.renders[0].shape == (32, 32, 1)
     sf.plot_comparison(result, [grey])
@@ -271,6 +271,6 @@ def test_a_continuous_gaussian_psf_of_08_px_is_fitted_as_080():
     camera = np.asarray(blur(sharp, 4.0 * np.sqrt(0.8**2 - 1.0 / 192.0)), dtype=float)
     reference = np.maximum(camera.reshape(n, 4, n, 4, 3).mean(axis=(1, 3)), 0.0)  # FFT round-off leaves -1e-8 in the sky
     result = sf.fit(sf.Observation(case.truth_scene.with_values({**grid, "render.spp": 16}), reference),
-                    ["image.blur_sigma_px", "image.scale"], start={"image.blur_sigma_px": 0.5}, spp=16, max_steps=10)
+                    ["image.blur_sigma_px", "image.scale"], start={"image.blur_sigma_px": 0.5}, render=sf.FitRender(spp=16), max_steps=10)
     sigma, stderr = result.values["image.blur_sigma_px"], result.stderr["image.blur_sigma_px"]
     assert round(sigma, 2) == 0.80 and abs(sigma - 0.8) < stderr < 0.01, (sigma, stderr)

@@ -85,7 +85,7 @@ def test_airy_first_zero_and_transfer_function():
     # the MTF is the Hankel transform of the Airy pattern: 2 pi int PSF(theta) J0(2 pi nu theta) theta dtheta
     for rho in (0.0, 0.3, 0.8):
         nu = rho * d / lam
-        hankel = integrate.quad(lambda t: 2 * np.pi * t * airy_psf(t, lam, d) * special.j0(2 * np.pi * nu * t), 0, 400 * lam / d, limit=2000)[0]
+        hankel = integrate.quad(lambda t, nu=nu: 2 * np.pi * t * airy_psf(t, lam, d) * special.j0(2 * np.pi * nu * t), 0, 400 * lam / d, limit=2000)[0]
         assert airy_transfer(rho) == pytest.approx(hankel, abs=3e-3)
     assert airy_transfer(1.0) == 0.0 and airy_transfer(2.0) == 0.0
     # a camera whose first dark ring lies 6 px out (band-limited below Nyquist): the blurred spot has its minimum there

@@ -160,6 +160,13 @@ MUTANTS = (
            '    for name, value in result.items():\n        group[name][index] = value\n    group["done"][index] = True\n',
            '    group["done"][index] = True\n    for name, value in result.items():\n        group[name][index] = value\n',
            (PLUMBING,)),
+    # the fit's verdicts (spacefit/fitting/goodness.py, loop.py)
+    Mutant("misfit-threshold-flipped", "spacefit/fitting/goodness.py", "bool(chi2_dof > limit)", "bool(chi2_dof < limit)",
+           ("tests/test_goodness.py",)),
+    Mutant("no-progress-check-removed", "spacefit/fitting/loop.py", "    if not moved:\n        return Status.NO_PROGRESS\n", "",
+           ("tests/test_goodness.py",)),
+    Mutant("dof-miscounted", "spacefit/fitting/goodness.py", "dof = max(values - n_free, 1)", "dof = max(values, 1)",
+           ("tests/test_goodness.py",)),
 )
 
 

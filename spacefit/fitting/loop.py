@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Generator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -18,9 +18,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import InputError, check_choice, check_count, check_range
-from spacefit.fitting.problem import Observation, setup
-from spacefit.fitting.solvers import LEAST_SQUARES, SOLVERS, Options, Status
+from spacefit.errors import InputError, check_choice, check_count
+from spacefit.fitting.goodness import Goodness, goodness, part_chi2
+from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, setup
+from spacefit.fitting.solvers import Outcome, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name
 from spacefit.fitting.stopping import NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
@@ -47,12 +48,14 @@ class FitResult:
         values: fitted value of each, physical units; :attr:`estimates` and :attr:`nuisances` split them.
         stderr: standard error of each (from J^T J and the residual); inf if not determined.
         correlation: (n, n) correlation matrix of the estimates.
-        success: whether the solver reports convergence (and the result is finite).
-        status: how the solve ended (``str(status)`` is its words).
+        success: whether the fit succeeded: the solver converged, at least one step lowered the
+            loss, no parameter is at a bound and the residuals are within the noise
+            (``status.success``).
+        status: how the fit ended, a verdict (``str(status)`` is its words; :class:`Status`).
         warnings: identifiability and convergence warnings, in words.
         history: one entry per step: the point the step evaluated (step 1 evaluates the start;
             the accepted point of the last step is ``values``), its loss, ``accepted`` (the step
-            lowered the best loss so far: accepted losses never rise), ``loss_noise`` (the loss's
+            evaluated another point than the best so far and lowered its loss: accepted losses never rise), ``loss_noise`` (the loss's
             Monte Carlo noise at the best point so far, :mod:`~spacefit.fitting.stopping`),
             time_s since the start.
         renders: each observation's final model image (the render with the image nuisances), in the
@@ -65,9 +68,14 @@ class FitResult:
         parts: per observation, per part (and the whole ``target``): the fitted pixels (not masked
             out) that see it and the mean of the reference and of the fit's render there, in ``units`` (keys
             ``reference_mean_w_m2_sr`` and ``fit_mean_w_m2_sr``, or ``reference_mean_dn`` and ``fit_mean_dn``).
+            With the pixel loss, each row also holds ``chi2_per_value`` (the noise known) or
+            ``r2_over_render_noise`` (mean r^2 over the render noise's, :mod:`~spacefit.fitting.goodness`).
         scene: the first observation's scene with the fitted values: ``scene.to_toml()`` is a scene
             file that renders the fit again (the image nuisances are not scene values); None if
             the values are not finite.
+        goodness: the goodness of fit at the result (:class:`~spacefit.fitting.goodness.Goodness`);
+            None where there is no finite result (interrupted, non-finite).
+        residuals: per observation, reference - model image in ``units`` (NaN where not fitted).
     """
 
     names: tuple[str, ...]
@@ -89,6 +97,8 @@ class FitResult:
     parts: list[dict[str, dict[str, float]]] = field(default_factory=list)
     scene: Scene | None = None
     units: list[str] = field(default_factory=list)
+    goodness: Goodness | None = None
+    residuals: list[np.ndarray] = field(default_factory=list)
 
     def mitsuba_scene_dict(self) -> dict[str, Any]:
         """The fitted scene as a Mitsuba scene dictionary (``mi.load_dict`` loads it).
@@ -104,10 +114,20 @@ class FitResult:
 
     def uncertainty(self) -> dict[str, Any]:
         """The values, standard errors and correlation matrix (rows and columns in ``names`` order),
-        with each parameter's unit: JSON-ready (``uncertainty.json`` of a fit's folder)."""
+        with each parameter's unit: JSON-ready (``uncertainty.json`` of a fit's folder).
+        ``stderr_valid`` is False for a misfit (the errors assume a correct model: they are too
+        small, not scaled) and where the fit did not succeed; ``stderr_note`` says why."""
         return {"names": list(self.names), "values": self.values, "stderr": self.stderr,
                 "units": {n: parameter(n).unit for n in self.names},
-                "correlation": np.asarray(self.correlation).tolist(), "nuisances": list(self.nuisances)}
+                "correlation": np.asarray(self.correlation).tolist(), "nuisances": list(self.nuisances),
+                "stderr_valid": self.success, "stderr_note": self.stderr_note}
+
+    @property
+    def stderr_note(self) -> str:
+        """Whether the standard errors can be taken as such, in words ("" when they can)."""
+        if self.status is Status.MISFIT:
+            return "misfit: the errors assume a correct model and are too small (not scaled)"
+        return "" if self.success else f"not an estimate: {self.status}"
 
     @property
     def nuisances(self) -> dict[str, float]:
@@ -124,7 +144,9 @@ class FitResult:
         """JSON-ready summary (no images); ``nuisances`` names the nuisance parameters among ``names``."""
         d = dataclasses.asdict(self)
         d.pop("renders")
+        d.pop("residuals")
         d.pop("scene")
+        d["goodness"] = None if self.goodness is None else self.goodness.to_dict()
         d["nuisances"] = list(self.nuisances)
         d["correlation"] = np.asarray(self.correlation).tolist()
         d["status"] = self.status.value
@@ -136,20 +158,12 @@ def fit(
     observations: Observation | Sequence[Observation],
     free: Sequence[str],
     *,
-    solver: str = "lm",
+    solver: str | Solver = "lm",
     loss: str = "pixel",
     start: Mapping[str, float] | None = None,
-    spp: int | None = None,
-    spp_grad: int | None = None,
+    render: FitRender = FitRender(),
     max_steps: int = DEFAULT_MAX_STEPS,
-    rtol: float = 1e-3,
-    atol: float = 1e-6,
-    learning_rate: float = 0.05,
-    seed: int = 1,
-    seed_grad: int = 2,
     stop: str = "noise",
-    integrator: str = "prb",
-    geometry_jacobian: str = "fd",
     wrinkle_coordinates: str = "rms",
     progress: ProgressCallback | None = None,
     on_step: Callable[[dict[str, Any]], None] | None = None,
@@ -160,21 +174,18 @@ def fit(
         observations: one or several (reference, scene) pairs of the same target; fitted jointly.
             Fixed parameters come from each scene.
         free: parameter names (see :mod:`spacefit.fitting.params`), e.g. ``["parts.panels.alpha_x"]``.
-        solver: one of :data:`SOLVERS`.
+        solver: a name in :data:`SOLVERS` (its defaults: rtol 1e-3, atol 1e-6; Adam's learning rate
+            0.05), or an optimistix least-squares solver or minimiser, or :class:`Adam`, with its own
+            tolerances (e.g. ``optx.LevenbergMarquardt(rtol=1e-4, atol=1e-8)``, ``sf.Adam(0.1)``).
         loss: ``"pixel"``, ``"pyramid"`` or ``"stats"`` (see :mod:`spacefit.fitting.losses`).
         start: start values (physical units); default: the first scene's values.
-        spp, spp_grad: samples per pixel of primal and derivative renders (default: the scene's).
+        render: how the fit renders (:class:`FitRender`: samples per pixel, seeds, integrator,
+            the wrinkles' Jacobian method); render references with other seeds.
         max_steps: solver step limit.
-        rtol, atol: optimistix tolerances (Adam: stop when the relative loss change < rtol).
-        learning_rate: Adam's step size in unconstrained coordinates.
-        seed, seed_grad: seeds of primal and derivative renders; render references with another.
-        stop: ``"noise"``: the least-squares solvers (:data:`LEAST_SQUARES`) stop as well when the
-            expected decrease of the loss is below its Monte Carlo noise (:attr:`Status.NOISE_FLOOR`,
-            :mod:`spacefit.fitting.stopping`; one more primal render per accepted step), BFGS and
-            Adam on their tolerances; ``"tolerance"``: every solver only on its tolerances.
-        integrator: AD integrator for derivative renders, one of :data:`INTEGRATORS`.
-        geometry_jacobian: ``"fd"`` (central differences with common random numbers) or ``"ad"``
-            (the integrator's derivative) for D and G.
+        stop: ``"noise"``: least-squares solvers stop as well when the expected decrease of the loss
+            is below its Monte Carlo noise (:attr:`Status.NOISE_FLOOR`, :mod:`spacefit.fitting.stopping`;
+            one more primal render per accepted step), BFGS and Adam on their tolerances;
+            ``"tolerance"``: every solver only on its tolerances.
         wrinkle_coordinates: with D and G both free, ``"rms"`` solves in (D, rms height), the
             better-determined coordinates, and reports D and G with their covariance mapped by
             the delta method; ``"G"`` solves in (D, G) directly.
@@ -182,122 +193,170 @@ def fit(
         on_step: called with each step's history entry (step, loss, values, time_s), e.g. to
             checkpoint the best point so far.
 
-    An interruption (Ctrl-C or SIGTERM; taken at the end of the current step, at once if repeated)
-    stops the solve and returns the best point evaluated so far with status
-    :attr:`Status.INTERRUPTED` (:attr:`Status.TERMINATED` for SIGTERM), no standard errors and no renders.
+    The result's :attr:`~FitResult.status` is a verdict (:class:`Status`): no step that lowered
+    the loss (:attr:`Status.NO_PROGRESS`), a parameter at a bound (:attr:`Status.AT_BOUND`) and
+    residuals beyond the noise (:attr:`Status.MISFIT`, :mod:`spacefit.fitting.goodness`) are
+    failures, whatever the solver said. An interruption (Ctrl-C or SIGTERM; taken at the end of
+    the current step, at once if repeated) stops the solve and returns the best point evaluated so
+    far with status :attr:`Status.INTERRUPTED` (:attr:`Status.TERMINATED` for SIGTERM), no
+    standard errors and no renders.
 
     Raises:
         InputError: for any bad input, before rendering.
     """
-    check_choice("solver", solver, SOLVERS)
+    engine = make_solver(solver)
     check_count("max_steps", max_steps)
-    check_range("rtol", rtol, 0.0, lo_open=True)
-    check_range("atol", atol, 0.0)
-    check_range("learning_rate", learning_rate, 0.0, lo_open=True)
     check_choice("stop", stop, STOP_RULES)
-    noise_stop = stop == "noise" and solver in LEAST_SQUARES
-    s = setup(observations, free, start, loss, spp, spp_grad, seed, seed_grad, integrator, geometry_jacobian,
-              wrinkle_coordinates)
+    s = setup(observations, free, start=start, loss=loss, render=render, wrinkle_coordinates=wrinkle_coordinates)
     fp, problem = s.solver_params, s.problem
 
-    t0 = time.perf_counter()
-    history: list[dict[str, Any]] = []
-    last: dict[str, Any] = {}
-
-    def record(u: np.ndarray, value: np.ndarray, r: np.ndarray | None = None) -> None:
-        last.update(u=np.asarray(u), loss=float(value), r=None if r is None else np.asarray(r))
-
-    def residual_u(u: jax.Array, args: Any) -> jax.Array:
+    def residual_u(u: jax.Array) -> jax.Array:
         # renders are float32; the solver works in the dtype of u (float64) throughout
-        r = problem.residual_x(fp.to_physical(u)).astype(u.dtype)
-        jax.debug.callback(record, u, 0.5 * jnp.sum(r**2), r)
-        return r
+        return problem.residual_x(fp.to_physical(u)).astype(u.dtype)
 
-    loss_u_reverse = None
-    if problem.loss_u_reverse is not None:
-
-        def loss_u_reverse(u: jax.Array) -> jax.Array:
-            value = problem.loss_u_reverse(u)
-            jax.debug.callback(record, u, value)
-            return value
-
-    def log_step(step: int) -> Status | None:
-        """Record the step's evaluation; a status after a run of non-finite evaluations or at the noise floor."""
-        x_solver = fp.to_physical(jnp.asarray(last["u"]))
-        accepted = floor.record(last["loss"])
-        if accepted:
-            best.update(u=last["u"], loss=last["loss"])
-            if noise_stop:
-                r = last["r"] if last["r"] is not None else np.asarray(problem.residual_x(x_solver))
-                floor.set_noise(loss_noise(r, np.asarray(problem.residual_x_independent(x_solver))))
-        x = np.asarray(s.to_user(x_solver))
-        history.append({"step": step, "loss": last["loss"], "accepted": accepted, "loss_noise": floor.noise,
-                        "values": dict(zip(s.user.names, x.tolist())), "time_s": time.perf_counter() - t0})
-        if progress is not None:
-            progress(step, max_steps)
-        if on_step is not None:
-            on_step(history[-1])
-        interrupts.check()
-        if _nonfinite_run(history):
-            return Status.NONFINITE
-        return Status.NOISE_FLOOR if noise_stop and floor.reached(last["loss"], accepted) else None
-
-    best: dict[str, Any] = {}
-    floor = NoiseFloor()
+    steps = _Steps(s, stop == "noise" and is_least_squares(engine), max_steps, progress, on_step)
     u = jnp.asarray(fp.to_unconstrained(jnp.asarray(s.x0)))
     try:
         with deferred_interrupts() as interrupts:
-            outcome = SOLVERS[solver](solver, residual_u, u, Options(max_steps, rtol, atol, learning_rate), log_step,
-                                      loss_u_reverse)
-        status, u, steps = outcome.status, outcome.u, outcome.steps
-        if status is Status.NOISE_FLOOR:
-            u = jnp.asarray(best["u"])  # the step that stopped the solve may be a rejected trial
-    except KeyboardInterrupt as stop:
-        status, steps = Status.TERMINATED if isinstance(stop, Terminated) else Status.INTERRUPTED, len(history)
-        u = jnp.asarray(best["u"]) if best else u
-    success = status.success
+            outcome = steps.run(drive(engine, residual_u, u, max_steps, problem.loss_u_reverse), interrupts)
+    except KeyboardInterrupt as signal:
+        best = steps.best_u if steps.best_u is not None else u
+        outcome = Outcome(Status.TERMINATED if isinstance(signal, Terminated) else Status.INTERRUPTED, best, len(steps.history))
+    return _result(s, outcome, steps, solver_name(engine), loss)
 
-    x = np.asarray(fp.to_physical(u), dtype=float)
+
+class _Steps:
+    """The record of a solve: each step the driver yields becomes a history entry; the accepted /
+    rejected bookkeeping and the stops that are not the solver's own (non-finite run, noise floor)."""
+
+    def __init__(self, s: Setup, noise_stop: bool, max_steps: int, progress: ProgressCallback | None,
+                 on_step: Callable[[dict[str, Any]], None] | None) -> None:
+        self.s, self.noise_stop, self.max_steps, self.progress, self.on_step = s, noise_stop, max_steps, progress, on_step
+        self.history: list[dict[str, Any]] = []
+        self.floor = NoiseFloor()
+        self.best_u: np.ndarray | None = None
+        self.best_loss = math.nan
+        self.t0 = time.perf_counter()
+
+    def run(self, driver: Generator[Step, None, Outcome], interrupts: Any) -> Outcome:
+        """Record the driver's steps until it ends or a stop of this record's own."""
+        k = 0
+        while True:
+            try:
+                step = next(driver)
+            except StopIteration as end:
+                return end.value
+            k += 1
+            status = self.record(k, step)
+            interrupts.check()
+            if _nonfinite_run(self.history):
+                status = Status.NONFINITE
+            if status is not None:
+                driver.close()
+                # the step that reached the noise floor may be a rejected trial: the best point is the result
+                return Outcome(status, jnp.asarray(self.best_u) if status is Status.NOISE_FLOOR else step.iterate, k)
+
+    def record(self, k: int, step: Step) -> Status | None:
+        """Record one step; :attr:`Status.NOISE_FLOOR` when the solve should stop there."""
+        s, problem = self.s, self.s.problem
+        x_solver = s.solver_params.to_physical(jnp.asarray(step.u))
+        # the same point evaluated again is no step, whatever the rounding of its loss (a solver that
+        # cannot move re-evaluates its point, and the sum's rounding differs between compiled steps)
+        same = self.best_u is not None and np.array_equal(step.u, self.best_u)
+        accepted = not same and self.floor.record(step.loss)
+        if accepted:
+            self.best_u, self.best_loss = step.u, step.loss
+            if self.noise_stop:
+                r = step.residuals if step.residuals is not None else np.asarray(problem.residual_x(x_solver))
+                self.floor.set_noise(loss_noise(r, np.asarray(problem.residual_x_independent(x_solver))))
+        x = np.asarray(s.to_user(x_solver))
+        self.history.append({"step": k, "loss": step.loss, "accepted": accepted, "loss_noise": self.floor.noise,
+                             "values": dict(zip(s.user.names, x.tolist())), "time_s": time.perf_counter() - self.t0})
+        if self.progress is not None:
+            self.progress(k, self.max_steps)
+        if self.on_step is not None:
+            self.on_step(self.history[-1])
+        return Status.NOISE_FLOOR if self.noise_stop and self.floor.reached(step.loss, accepted) else None
+
+    @property
+    def moved(self) -> bool:
+        """Whether a step after the first (which evaluates the start) lowered the loss."""
+        return any(h["accepted"] for h in self.history[1:])
+
+
+def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool) -> Status:
+    """The fit's status from the solver's: a solve that ended without failing is
+    :attr:`Status.NO_PROGRESS` if no step lowered the loss, else :attr:`Status.AT_BOUND` if a
+    parameter ended at a bound, else :attr:`Status.MISFIT` if the residuals exceed the noise."""
+    if status not in (Status.CONVERGED, Status.NOISE_FLOOR, Status.MAX_STEPS):
+        return status
+    if not moved:
+        return Status.NO_PROGRESS
+    if at_bound:
+        return Status.AT_BOUND
+    if misfit:
+        return Status.MISFIT
+    return status
+
+
+def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -> FitResult:
+    """The :class:`FitResult` of a solve's outcome: values, errors, goodness of fit, verdict, images."""
+    problem, status = s.problem, outcome.status
+    x = np.asarray(s.solver_params.to_physical(outcome.u), dtype=float)
     n = len(x)
+    x_user = np.asarray(s.to_user(jnp.asarray(x)), dtype=float)
+    stderr, corr, loss_value, extras, renders, residuals, quality = np.full(n, np.nan), np.eye(n), math.nan, {}, [], [], None
+    per_part: list[dict[str, dict[str, float]]] = [{} for _ in problem.references]
     if status.interrupted:
-        x_user, stderr, corr = np.asarray(s.to_user(jnp.asarray(x)), dtype=float), np.full(n, np.nan), np.eye(n)
-        loss_value, extras, renders = best.get("loss", math.nan), {}, []
+        loss_value = steps.best_loss
         warnings = ["the fit was interrupted: the values are the best point evaluated so far, with no standard errors."]
-    elif np.all(np.isfinite(np.asarray(s.to_user(jnp.asarray(x))))):
+    elif np.all(np.isfinite(x_user)):
         x_user, cov, loss_value, extras = estimate(s, x)
         stderr, corr = stderr_corr(cov)
         warnings = warnings_for(s.user, x_user, stderr, corr)
-        if not math.isfinite(loss_value):
-            success = False
-            warnings.insert(0, "the render or its Jacobian at the result is not finite (NaN); no errors are reported.")
-        if not success:
-            warnings.insert(0, f"the solver did not converge ({status}).")
         renders = [np.asarray(img) for img in problem.renders_x(jnp.asarray(x))]
+        residuals = [np.where(used[..., None], ref - render, np.nan) for ref, render, used in zip(problem.references, renders, problem.used)]
+        r = np.asarray(problem.residual_x(jnp.asarray(x)), dtype=float)
+        r_alt = np.asarray(problem.residual_x_independent(jnp.asarray(x)), dtype=float)
+        shapes = [ref.shape for ref in problem.references] if loss == "pixel" else []
+        quality = goodness(r, r_alt, n, s.noise_given, shapes)
+        if shapes:
+            per_part = _per_part(r, r_alt, problem, quality)
+        at_bound = any(b.at_bound(float(v)) for b, v in zip(s.user.bijections, x_user))
+        status = verdict(status, steps.moved, at_bound, quality.misfit and loss == "pixel")
+        if not math.isfinite(loss_value):
+            status = Status.NONFINITE
+            warnings.insert(0, "the render or its Jacobian at the result is not finite (NaN); no errors are reported.")
+        if status is Status.MISFIT:
+            warnings.insert(0, f"a misfit: {quality.line()}; the standard errors assume a correct model and are too small.")
+        elif not status.success:
+            warnings.insert(0, f"the fit did not succeed ({status}).")
     else:
-        x_user, stderr, corr, loss_value, extras = np.full(n, np.nan), np.full(n, np.nan), np.eye(n), math.nan, {}
         warnings = ["the solve produced non-finite parameters; no estimate is reported."]
-        success, renders = False, []
+        status = Status.NONFINITE
+    values = dict(zip(s.user.names, x_user.tolist()))
     return FitResult(
-        names=s.user.names,
-        values=dict(zip(s.user.names, x_user.tolist())),
-        stderr=dict(zip(s.user.names, stderr.tolist())),
-        correlation=corr,
-        success=success,
-        status=status,
-        warnings=warnings,
-        history=history,
-        renders=renders,
-        loss=loss_value,
-        solver=solver,
-        loss_name=loss,
-        steps=steps,
-        wall_time_s=time.perf_counter() - t0,
-        start=dict(zip(s.user.names, s.x0_user.tolist())),
-        extras=extras,
-        parts=[_part_rows(*row) for row in zip(problem.part_images, problem.references, renders, problem.units, problem.used)],
-        scene=scene_with_values(s.scene, dict(zip(s.user.names, x_user.tolist())), observation=0) if np.all(np.isfinite(x_user)) else None,
-        units=list(problem.units),
+        names=s.user.names, values=values, stderr=dict(zip(s.user.names, stderr.tolist())), correlation=corr,
+        success=status.success, status=status, warnings=warnings, history=steps.history, renders=renders, loss=loss_value,
+        solver=solver, loss_name=loss, steps=outcome.steps, wall_time_s=time.perf_counter() - steps.t0,
+        start=dict(zip(s.user.names, s.x0_user.tolist())), extras=extras,
+        parts=[_part_rows(*row) for row in zip(problem.part_images, problem.references, renders, problem.units, problem.used, per_part)],
+        scene=scene_with_values(s.scene, values, observation=0) if np.all(np.isfinite(x_user)) else None,
+        units=list(problem.units), goodness=quality, residuals=residuals,
     )
+
+
+def _per_part(r: np.ndarray, r_alt: np.ndarray, problem: Problem, quality: Goodness) -> list[dict[str, dict[str, float]]]:
+    """Per observation, per part: ``chi2_per_value`` (noise known) or ``r2_over_render_noise``."""
+    key = "chi2_per_value" if quality.noise_known else "r2_over_render_noise"
+    out, offset = [], 0
+    for parts, ref, used in zip(problem.part_images, problem.references, problem.used):
+        rows = slice(offset, offset + ref.size)
+        offset = rows.stop
+        values = part_chi2(r[rows].reshape(ref.shape), r_alt[rows].reshape(ref.shape), parts, used,
+                           1.0 if quality.noise_known else quality.render_noise)
+        out.append({name: {key: value} for name, value in values.items()})
+    return out
 
 
 def _nonfinite_run(history: list[dict[str, Any]]) -> bool:
@@ -305,10 +364,13 @@ def _nonfinite_run(history: list[dict[str, Any]]) -> bool:
     return len(recent) == NONFINITE_PATIENCE and not any(np.isfinite(h["loss"]) for h in recent)
 
 
-def _part_rows(parts: PartImage, reference: np.ndarray, render: np.ndarray, unit: str,
-               used: np.ndarray) -> dict[str, dict[str, float]]:
-    """Per part: its fitted pixels (``used``), and the mean of the reference and of the fit's render there, in ``unit``."""
+def _part_rows(parts: PartImage, reference: np.ndarray, render: np.ndarray, unit: str, used: np.ndarray,
+               spread: Mapping[str, float]) -> dict[str, dict[str, float]]:
+    """Per part: its fitted pixels (``used``), the mean of the reference and of the fit's render there, in ``unit``,
+    and ``spread``'s value (chi^2 per value, or mean r^2 over the render noise's; absent for the losses that
+    are not per pixel)."""
     ref, fitted = parts.table(reference, used), parts.table(render, used)
     suffix = "dn" if unit == DN_UNIT else "w_m2_sr"
     return {name: {"pixels": row["pixels"], f"reference_mean_{suffix}": row["mean_radiance_w_m2_sr"],
-                   f"fit_mean_{suffix}": fitted[name]["mean_radiance_w_m2_sr"]} for name, row in ref.items()}
+                   f"fit_mean_{suffix}": fitted[name]["mean_radiance_w_m2_sr"], **spread.get(name, {})}
+            for name, row in ref.items()}

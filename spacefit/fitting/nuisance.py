@@ -19,6 +19,7 @@ import math
 from collections.abc import Callable, Sequence
 
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.scene.parameters import IMAGE, PSF_SIGMA_MAX_PX, observation_name

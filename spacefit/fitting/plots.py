@@ -11,6 +11,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 import numpy as np
+from matplotlib import colormaps
 from matplotlib.figure import Figure
 from matplotlib.ticker import MaxNLocator
 
@@ -58,6 +59,32 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray]) -> Figu
             ax.set_xticks([])
             ax.set_yticks([])
     fig.suptitle(f"{result.solver}, {result.loss_name} loss: {result.status}", fontsize=10)
+    return fig
+
+
+def plot_residuals(result: FitResult) -> Figure:
+    """Each observation's residual, reference - model (:attr:`FitResult.residuals`), the channels'
+    mean in the observation's unit on a diverging colour map centred at 0 (grey where not fitted).
+
+    Returns:
+        a matplotlib Figure (not attached to pyplot); one that says so where the fit has no residuals.
+    """
+    n = max(len(result.residuals), 1)
+    fig = Figure(figsize=(4.0 * n, 3.6), layout="constrained")
+    axes = fig.subplots(1, n, squeeze=False)[0]
+    for k, (ax, residual) in enumerate(zip(axes, result.residuals)):
+        mean = np.asarray(residual, dtype=float).mean(axis=-1)
+        limit = float(np.nanpercentile(np.abs(mean), PREVIEW_PERCENTILE)) if np.isfinite(mean).any() else 0.0
+        limit = limit or float(np.nanmax(np.abs(mean), initial=0.0)) or 1.0
+        cmap = colormaps["RdBu_r"].with_extremes(bad="0.6")
+        image = ax.imshow(np.ma.masked_invalid(mean), cmap=cmap, vmin=-limit, vmax=limit)
+        ax.set_title(f"reference - fit, observation {k}", fontsize=9)
+        fig.colorbar(image, ax=ax, extend="both", label=PLOT_UNITS[result.units[k] if k < len(result.units) else RADIANCE_UNIT])
+        ax.set_xticks([])
+        ax.set_yticks([])
+    if not result.residuals:
+        axes[0].text(0.5, 0.5, "no residuals: the fit has no render", ha="center", va="center", transform=axes[0].transAxes)
+    fig.suptitle(f"{result.status}", fontsize=9)
     return fig
 
 

@@ -260,6 +260,7 @@ class Setup:
     problem: Problem
     rms_index: int | None
     scene: Scene  # the first observation's scene, as given
+    noise_given: bool = False  # every observation has a sensor or a sigma: the residuals are in units of the noise
 
 
 def fit_scene(scene: Scene, free: Sequence[str]) -> Scene:
@@ -280,25 +281,54 @@ def fit_scene(scene: Scene, free: Sequence[str]) -> Scene:
     return scene
 
 
+@dataclass(frozen=True)
+class FitRender:
+    """How a fit renders: checked on construction.
+
+    Attributes:
+        spp, spp_grad: samples per pixel of the primal and the derivative renders (None: the
+            scene's ``render.spp``; ``spp_grad`` None: ``spp``).
+        seed, seed_grad: seeds of the primal and the derivative renders (must differ: a shared seed
+            biases L2 gradients); render references with another.
+        integrator: AD integrator of the derivative renders, one of :data:`INTEGRATORS`.
+        geometry_jacobian: ``"fd"`` (central differences with common random numbers) or ``"ad"``
+            (the integrator's derivative) for the wrinkles' D and G.
+    """
+
+    spp: int | None = None
+    spp_grad: int | None = None
+    seed: int = 1
+    seed_grad: int = 2
+    integrator: str = "prb"
+    geometry_jacobian: str = "fd"
+
+    def __post_init__(self) -> None:
+        check_count("spp", self.spp)
+        check_count("spp_grad", self.spp_grad)
+        check_choice("integrator", self.integrator, INTEGRATORS)
+        check_choice("geometry_jacobian", self.geometry_jacobian, ("fd", "ad"))
+        if self.seed == self.seed_grad:
+            raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
+
+
 def setup(
-    observations: Observation | Sequence[Observation], free: Sequence[str], start: Mapping[str, float] | None,
-    loss: str, spp: int | None, spp_grad: int | None, seed: int, seed_grad: int, integrator: str,
-    geometry_jacobian: str, wrinkle_coordinates: str,
+    observations: Observation | Sequence[Observation], free: Sequence[str], *, start: Mapping[str, float] | None = None,
+    loss: str = "pixel", render: FitRender = FitRender(), wrinkle_coordinates: str = "rms",
 ) -> Setup:
-    """Check every input and build the problem; nothing is rendered here."""
+    """Check every input and build the problem; nothing is rendered here.
+
+    Raises:
+        InputError: for any bad input.
+    """
     observations = [observations] if isinstance(observations, Observation) else list(observations)
     if not observations:
         raise InputError("`observations` must hold at least one reference image.")
     for i, obs in enumerate(observations):
         if not isinstance(obs, Observation):
             raise InputTypeError(f"`observations[{i}]` must be an sf.Observation(scene, reference), got {quote(obs)}.")
-    check_choice("integrator", integrator, INTEGRATORS)
-    check_choice("geometry_jacobian", geometry_jacobian, ("fd", "ad"))
+    if not isinstance(render, FitRender):
+        raise InputTypeError(f"`render` must be an sf.FitRender(spp=..., seed=...), got {quote(render)}.")
     check_choice("wrinkle_coordinates", wrinkle_coordinates, ("rms", "G"))
-    check_count("spp", spp)
-    check_count("spp_grad", spp_grad)
-    if seed == seed_grad:
-        raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
     user = free_parameters(observations[0].scene, free, len(observations))
     given = observations[0].scene
     observations = [dataclasses.replace(o, scene=fit_scene(o.scene, user.names)) for o in observations]
@@ -330,8 +360,10 @@ def setup(
         def to_user(x: jax.Array) -> jax.Array:
             return x
 
-    if geometry_jacobian == "ad":
+    if render.geometry_jacobian == "ad":
         wrinkles = np.array([n in GEOMETRY for n in solver_params.names])
         solver_params = dataclasses.replace(solver_params, fd_steps=np.where(wrinkles, 0.0, solver_params.fd_steps))
-    problem = _problem(observations, solver_params, loss, spp, spp_grad, seed, seed_grad, integrator)
-    return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index, given)
+    problem = _problem(observations, solver_params, loss, render.spp, render.spp_grad, render.seed, render.seed_grad,
+                       render.integrator)
+    noise_given = all(o.sensor is not None or o.sigma is not None for o in observations)
+    return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index, given, noise_given)

@@ -1,12 +1,19 @@
 """A fit's output folder: ``fit.json``, ``comparison.png`` and ``convergence.png``, and a text summary.
 
 * ``fit.json``: :meth:`FitResult.to_dict` (values, standard errors, correlation, status, warnings,
-  history) plus ``timings_s``, ``versions`` and, if given, the ``inputs``;
+  goodness of fit, per-part chi^2, history) plus ``timings_s``, ``versions`` and, if given, the ``inputs``;
 * ``fit.toml``: the fitted scene (:attr:`FitResult.scene`), which renders the fit again;
 * ``uncertainty.json``: :meth:`FitResult.uncertainty`, values, standard errors, units and the
   correlation matrix (strict JSON: a non-finite error is null);
 * ``comparison.png``, ``convergence.png``: :func:`~spacefit.fitting.plots.plot_comparison` and
-  :func:`~spacefit.fitting.plots.plot_convergence`, saved through matplotlib's Agg canvas.
+  :func:`~spacefit.fitting.plots.plot_convergence`, saved through matplotlib's Agg canvas;
+* ``residuals.fits``: :attr:`FitResult.residuals`, reference - model, one image extension per
+  observation (``EXTNAME`` ``OBS<k>``, (channels, height, width) float32 in the unit ``BUNIT`` of the
+  observation, NaN where not fitted; rows stored top row first, ``ROWORDER = 'TOP-DOWN'``), and
+  ``residuals.png``, its picture (:func:`~spacefit.fitting.plots.plot_residuals`).
+
+The summary's (:func:`format_result`) first line is the verdict, :class:`~spacefit.fitting.solvers.Status`;
+the second the goodness of fit (:mod:`spacefit.fitting.goodness`).
 """
 
 from __future__ import annotations
@@ -19,9 +26,16 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from astropy.io import fits
+
 from spacefit.fitting.loop import FitResult
-from spacefit.fitting.plots import plot_comparison, plot_convergence
+from spacefit.fitting.solvers import Status
+from spacefit.fitting.plots import plot_comparison, plot_convergence, plot_residuals
 from spacefit.output import staged_output, versions, write_json
+from spacefit.sensor import DN_UNIT
+
+# The residual images' units as FITS BUNIT.
+FITS_UNITS = {DN_UNIT: "adu"}
 
 
 def write_fit_report(
@@ -32,7 +46,8 @@ def write_fit_report(
     inputs: Mapping[str, Any] | None = None,
     timings_s: Mapping[str, float] | None = None,
 ) -> Path:
-    """Write fit.json, fit.toml, uncertainty.json, comparison.png and convergence.png into ``out_dir`` all at once.
+    """Write fit.json, fit.toml, uncertainty.json, comparison.png, convergence.png, residuals.fits and
+    residuals.png into ``out_dir`` all at once.
 
     Args:
         out_dir: output folder (created; on any error nothing is left behind).
@@ -57,26 +72,47 @@ def write_fit_report(
             (stage / "fit.toml").write_text(result.scene.to_toml(), encoding="utf-8")
         _save(plot_comparison(result, references), stage / "comparison.png")
         _save(plot_convergence(result), stage / "convergence.png")
+        write_residuals(stage / "residuals.fits", result)
+        _save(plot_residuals(result), stage / "residuals.png")
     return Path(out_dir)
 
 
+def write_residuals(path: Path, result: FitResult) -> None:
+    """The residual images, reference - model, as FITS: one extension per observation (none without renders)."""
+    hdus: list[fits.PrimaryHDU | fits.ImageHDU] = [fits.PrimaryHDU()]
+    for k, residual in enumerate(result.residuals):
+        header = fits.Header()
+        header["BUNIT"] = FITS_UNITS.get(result.units[k], "W m-2 sr-1")
+        header["ROWORDER"] = ("TOP-DOWN", "the first row stored is the top of the image")
+        header["COMMENT"] = "reference - model of the fit; NaN where not fitted"
+        hdus.append(fits.ImageHDU(np.moveaxis(np.asarray(residual, dtype=np.float32), -1, 0), header, name=f"OBS{k}"))
+    fits.HDUList(hdus).writeto(path)
+
+
 def format_result(result: FitResult) -> str:
-    """The fitted values with standard errors, the status and the warnings, as lines of text."""
+    """The verdict (first line), the goodness of fit, the fitted values with standard errors (marked
+    where they are not valid: a misfit's are too small), chi^2 per part, and the warnings, as lines of text."""
     derived = [name for name in result.extras if f"{name}.stderr" in result.extras]  # e.g. wrinkles.rms_m
     width = max(len(name) for name in (*result.names, *derived))
-    lines = [
-        f"{result.solver} on the {result.loss_name} loss: {result.status} after {result.steps} steps "
-        f"({result.wall_time_s:.1f} s), loss {result.loss:.4g}"
-    ]
+    lines = [f"{result.status} ({result.solver} on the {result.loss_name} loss, {result.steps} steps, "
+             f"{result.wall_time_s:.1f} s, loss {result.loss:.4g})"]
+    if result.goodness is not None:
+        lines.append(result.goodness.line())
+    mark = f"  [{result.stderr_note}]" if result.status is Status.MISFIT else ""
     for heading, group in (("", result.estimates), ("nuisance parameters:", result.nuisances)):
         if heading and group:
             lines.append(f"  {heading}")
         for name in group:
             value, stderr, start = result.values[name], result.stderr[name], result.start[name]
-            lines.append(f"  {name:<{width}} = {value:.6g} +/- {stderr:.3g}  (start {start:.6g})")
+            lines.append(f"  {name:<{width}} = {value:.6g} +/- {stderr:.3g}  (start {start:.6g}){mark}")
     for name in derived:
         value, stderr = result.extras[name], result.extras[f"{name}.stderr"]
         lines.append(f"  {name:<{width}} = {value:.6g} +/- {stderr:.3g}  (derived)")
+    for k, parts in enumerate(result.parts):
+        spread = {name: row[key] for name, row in parts.items() for key in ("chi2_per_value", "r2_over_render_noise") if key in row}
+        if spread:
+            what = "chi^2 per value" if result.goodness is not None and result.goodness.noise_known else "mean r^2 / render noise"
+            lines.append(f"  {what}, observation {k}: " + ", ".join(f"{name} {value:.3g}" for name, value in spread.items()))
     lines += [f"warning: {w}" for w in result.warnings]
     return "\n".join(lines)
 

@@ -1,17 +1,20 @@
-"""The solver registry: a name -> a driver that steps one solver and reports a structured status.
+"""The solvers: a name or an optimistix solver object -> a driver that steps it and yields its steps.
 
-Drivers: optimistix ``LevenbergMarquardt`` (``"lm"``), ``GaussNewton`` (``"gn"``), ``Dogleg``
-(``"dogleg"``), ``BFGS`` (``"bfgs"``), and optax Adam (``"adam"``, the stochastic-gradient
-baseline, with reverse-mode gradients when every column allows it). Each is stepped interactively
-so that every step is recorded and shown; each returns a :class:`Status`, never text to parse.
+By name, the defaults: optimistix ``LevenbergMarquardt`` (``"lm"``), ``GaussNewton`` (``"gn"``),
+``Dogleg`` (``"dogleg"``), ``BFGS`` (``"bfgs"``), and optax Adam (``"adam"``, :class:`Adam`, the
+stochastic-gradient baseline, with reverse-mode gradients when every column allows it). Any
+optimistix least-squares solver or minimiser object may be given instead; its tolerances travel
+with it. Each is stepped interactively: a driver is a generator that yields one :class:`Step` per
+evaluation (the point, its loss and residuals) and returns an :class:`Outcome` with a
+:class:`Status`, never text to parse; the caller records the steps and may stop the solve.
 """
 
 from __future__ import annotations
 
 import enum
-from collections.abc import Callable
+from collections.abc import Callable, Generator
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Union
 
 import equinox as eqx
 import jax
@@ -21,21 +24,32 @@ import numpy as np
 import optax
 import optimistix as optx
 
-# Residuals of an unconstrained vector u (with the optimistix ``args``, unused).
-ResidualFn = Callable[[jax.Array, Any], jax.Array]
-# Records the step's evaluation; a Status stops the solve (a run of non-finite evaluations, the
-# noise floor), None goes on.
-StepLogger = Callable[[int], "Status | None"]
+from spacefit.errors import InputTypeError, check_choice, check_range, quote
+
+# Residuals of an unconstrained vector u.
+ResidualFn = Callable[[jax.Array], jax.Array]
 # Adam stops when no unconstrained coordinate moved more than rtol for this many steps.
 ADAM_PATIENCE = 5
+# The tolerances of the solvers named by :data:`SOLVERS`.
+DEFAULT_RTOL, DEFAULT_ATOL = 1e-3, 1e-6
 
 
 class Status(enum.Enum):
-    """How a solve ended. ``value`` is the words a report prints."""
+    """How a fit ended. ``value`` is the words a report prints on its first line.
+
+    The solver's own endings (converged, noise floor, step limit, failures, signals), and three
+    verdicts on a solve that ended without a failure, in this order of precedence:
+    :attr:`NO_PROGRESS` (no step lowered the loss: the start is returned), :attr:`AT_BOUND` (a
+    parameter ended at a bound of its range) and :attr:`MISFIT` (the residuals exceed the noise,
+    :mod:`spacefit.fitting.goodness`). Only :attr:`CONVERGED` and :attr:`NOISE_FLOOR` are a success.
+    """
 
     CONVERGED = "converged"
     NOISE_FLOOR = "converged: the expected decrease of the loss is below its Monte Carlo noise"
     MAX_STEPS = "stopped: maximum number of steps reached"
+    NO_PROGRESS = "failed: no step lowered the loss; the values are the start"
+    AT_BOUND = "failed: a parameter is at a bound of its range; neither it nor its error is an estimate"
+    MISFIT = "misfit: the residuals exceed the noise; the model or its nuisances miss something, the error bars are too small"
     DIVERGED = "failed: the solve diverged"
     NONFINITE = "failed: the loss or a parameter became NaN"
     FAILED = "failed: the solver reported an error"
@@ -44,7 +58,7 @@ class Status(enum.Enum):
 
     @property
     def success(self) -> bool:
-        """Whether the solver reports convergence."""
+        """Whether the fit converged to an estimate that its data do not contradict."""
         return self in (Status.CONVERGED, Status.NOISE_FLOOR)
 
     @property
@@ -57,12 +71,125 @@ class Status(enum.Enum):
 
 
 @dataclass(frozen=True)
+class Adam:
+    """optax Adam (Kingma & Ba 2015, arXiv:1412.6980) with a cosine-decaying step on the
+    unconstrained vector.
+
+    Attributes:
+        learning_rate: the initial step size in unconstrained coordinates.
+        rtol: stop when no unconstrained coordinate moved more than this for :data:`ADAM_PATIENCE` steps.
+    """
+
+    learning_rate: float = 0.05
+    rtol: float = DEFAULT_RTOL
+
+    def __post_init__(self) -> None:
+        check_range("Adam.learning_rate", self.learning_rate, 0.0, lo_open=True)
+        check_range("Adam.rtol", self.rtol, 0.0, lo_open=True)
+
+
+Solver = Union[optx.AbstractLeastSquaresSolver, optx.AbstractMinimiser, Adam]
+
+
+def _no_qr(cls: type) -> Callable[[], Solver]:
+    # Gauss-Newton and dogleg steps by SVD: the default QR returns NaN where the Jacobian is rank
+    # deficient (unidentifiable directions, saturated bijections); SVD takes the minimum-norm step.
+    return lambda: cls(rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL, linear_solver=lx.AutoLinearSolver(well_posed=False))
+
+
+# The solvers by name, each with its default settings.
+SOLVERS: dict[str, Callable[[], Solver]] = {
+    "lm": lambda: optx.LevenbergMarquardt(rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL),
+    "gn": _no_qr(optx.GaussNewton),
+    "dogleg": _no_qr(optx.Dogleg),
+    "bfgs": lambda: optx.BFGS(rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL),
+    "adam": Adam,
+}
+
+
+def make_solver(solver: str | Solver) -> Solver:
+    """The solver object of a name in :data:`SOLVERS` (its defaults), or ``solver`` itself if it is one.
+
+    Raises:
+        InputError: an unknown name, or an object that is no optimistix solver nor :class:`Adam`.
+    """
+    if isinstance(solver, str):
+        check_choice("solver", solver, tuple(SOLVERS))
+        return SOLVERS[solver]()
+    if not isinstance(solver, (optx.AbstractLeastSquaresSolver, optx.AbstractMinimiser, Adam)):
+        raise InputTypeError(f"`solver` must be a name ({', '.join(SOLVERS)}), an optimistix least-squares solver or "
+                             f"minimiser, or sf.Adam, got {quote(solver)}.")
+    return solver
+
+
+def solver_name(solver: Solver) -> str:
+    """A solver's name in :data:`SOLVERS` if it is of one of their types, else its class name."""
+    names = {optx.LevenbergMarquardt: "lm", optx.GaussNewton: "gn", optx.Dogleg: "dogleg", optx.BFGS: "bfgs", Adam: "adam"}
+    return names.get(type(solver), type(solver).__name__)
+
+
+def is_least_squares(solver: Solver) -> bool:
+    """Whether the solver takes residuals (a rejected step then means "no better point nearby", where
+    the noise-floor stop applies); BFGS rejects line-search trials and Adam takes noisy steps by
+    design (stopped there by the noise rule, BFGS's D, G fit ended at D +0.016 and G +7.5 %
+    against +0.002 and +2 % by its tolerances)."""
+    return isinstance(solver, optx.AbstractLeastSquaresSolver)
+
+
+@dataclass(frozen=True)
+class Step:
+    """One evaluation of a solve, as a driver yields it.
+
+    Attributes:
+        u: the unconstrained point evaluated.
+        loss: its loss, 0.5 sum r^2.
+        residuals: its residuals (None where only the loss was evaluated: Adam's reverse mode).
+        iterate: the solver's point after the step (the accepted point so far).
+    """
+
+    u: np.ndarray
+    loss: float
+    residuals: np.ndarray | None
+    iterate: jax.Array
+
+
+@dataclass(frozen=True)
 class Outcome:
     """What a driver returns: the status, the unconstrained point reached and the steps taken."""
 
     status: Status
     u: jax.Array
     steps: int
+
+
+Driver = Generator[Step, None, Outcome]
+
+
+class _Evaluations:
+    """The last point a compiled solver step evaluated, taken out with ``jax.debug.callback``: the
+    solvers evaluate trial points inside their compiled steps and return only the accepted ones."""
+
+    def __init__(self) -> None:
+        self.last: tuple[np.ndarray, float, np.ndarray | None] | None = None
+
+    def keep(self, u: jax.Array, value: jax.Array, r: jax.Array | None = None) -> None:
+        jax.debug.callback(self._store, u, value, r)
+
+    def _store(self, u: np.ndarray, value: np.ndarray, r: np.ndarray | None) -> None:
+        self.last = (np.asarray(u), float(value), None if r is None else np.asarray(r))
+
+    def step(self, iterate: jax.Array) -> Step:
+        assert self.last is not None, "the solver step evaluated nothing"
+        return Step(*self.last, iterate=iterate)
+
+
+def drive(solver: Solver, residual_u: ResidualFn, u: jax.Array, max_steps: int,
+          loss_u_reverse: Callable[[jax.Array], jax.Array] | None) -> Driver:
+    """Step ``solver`` from ``u`` for at most ``max_steps`` steps, yielding each :class:`Step`.
+    ``loss_u_reverse``: the loss by reverse mode, which Adam uses where given."""
+    if isinstance(solver, Adam):
+        return _adam(solver, residual_u, u, max_steps, loss_u_reverse)
+    return _optimistix(solver, residual_u, u, max_steps)
 
 
 def _status(result: optx.RESULTS) -> Status:
@@ -77,50 +204,35 @@ def _status(result: optx.RESULTS) -> Status:
     return Status.FAILED
 
 
-@dataclass(frozen=True)
-class Options:
-    """Solver settings shared by every driver."""
-
-    max_steps: int
-    rtol: float
-    atol: float
-    learning_rate: float
-
-
-def _optimistix(name: str, residual_u: ResidualFn, u: jax.Array, opts: Options, log_step: StepLogger,
-                loss_u_reverse: Callable[[jax.Array], jax.Array] | None) -> Outcome:
+def _optimistix(solver: Solver, residual_u: ResidualFn, u: jax.Array, max_steps: int) -> Driver:
     """Step an optimistix solver interactively, so each step is recorded and shown."""
-    if name == "bfgs":
-        obj = optx.BFGS(rtol=opts.rtol, atol=opts.atol)
-        f_struct = jax.ShapeDtypeStruct((), u.dtype)
-        # BFGS's first step is the raw gradient: scale the loss to 1 at the start so that the step
-        # is of order one in unconstrained coordinates (the minimiser is unchanged).
-        scale = 1.0 / max(float(0.5 * jnp.sum(residual_u(u, None) ** 2)), 1e-30)
-    else:
-        # Gauss-Newton and dogleg steps by SVD: the default QR returns NaN where the Jacobian is rank
-        # deficient (unidentifiable directions, saturated bijections); SVD takes the minimum-norm step.
-        kwargs = {} if name == "lm" else {"linear_solver": lx.AutoLinearSolver(well_posed=False)}
-        obj = {"lm": optx.LevenbergMarquardt, "gn": optx.GaussNewton, "dogleg": optx.Dogleg}[name](
-            rtol=opts.rtol, atol=opts.atol, **kwargs)
-        f_struct = jax.eval_shape(lambda y: residual_u(y, None), u)
+    seen = _Evaluations()
+    least_squares = is_least_squares(solver)
+    if least_squares:
+        f_struct = jax.eval_shape(residual_u, u)
         scale = 1.0
+    else:
+        f_struct = jax.ShapeDtypeStruct((), u.dtype)
+        # a minimiser's (BFGS's) first step is the raw gradient: scale the loss to 1 at the start so
+        # that the step is of order one in unconstrained coordinates (the minimiser is unchanged).
+        scale = 1.0 / max(float(0.5 * jnp.sum(residual_u(u) ** 2)), 1e-30)
 
     def fn(y: jax.Array, args: Any) -> tuple[jax.Array, None]:
         # the interactive solver API takes functions with auxiliary output
-        r = residual_u(y, args)
-        return (scale * 0.5 * jnp.sum(r**2) if name == "bfgs" else r), None
+        r = residual_u(y)
+        value = 0.5 * jnp.sum(r**2)
+        seen.keep(y, value, r)
+        return (r if least_squares else scale * value), None
 
     tags: frozenset = frozenset()
-    state = obj.init(fn, u, None, {}, f_struct, None, tags)
-    step = eqx.filter_jit(obj.step)
-    terminate = eqx.filter_jit(obj.terminate)
+    state = solver.init(fn, u, None, {}, f_struct, None, tags)
+    step = eqx.filter_jit(solver.step)
+    terminate = eqx.filter_jit(solver.terminate)
     result = optx.RESULTS.nonlinear_max_steps_reached
     k = 0
-    for k in range(1, opts.max_steps + 1):
+    for k in range(1, max_steps + 1):
         u, state, _ = step(fn, u, None, {}, state, tags)
-        stop = log_step(k)
-        if stop is not None:
-            return Outcome(stop, u, k)
+        yield seen.step(u)
         if not np.all(np.isfinite(np.asarray(u))):
             return Outcome(Status.NONFINITE, u, k)
         done, res = terminate(fn, u, None, {}, state, tags)
@@ -130,36 +242,32 @@ def _optimistix(name: str, residual_u: ResidualFn, u: jax.Array, opts: Options, 
     return Outcome(_status(result), u, k)
 
 
-def _adam(name: str, residual_u: ResidualFn, u: jax.Array, opts: Options, log_step: StepLogger,
-          loss_u_reverse: Callable[[jax.Array], jax.Array] | None) -> Outcome:
+def _adam(solver: Adam, residual_u: ResidualFn, u: jax.Array, max_steps: int,
+          loss_u_reverse: Callable[[jax.Array], jax.Array] | None) -> Driver:
     """optax Adam with a cosine-decaying step on the unconstrained vector; reverse-mode gradients
     (``loss_u_reverse``) unless a Jacobian column needs finite differences."""
+    seen = _Evaluations()
 
     def loss_u(y: jax.Array) -> jax.Array:
         if loss_u_reverse is not None:
-            return loss_u_reverse(y)
-        return 0.5 * jnp.sum(residual_u(y, None) ** 2)
+            value = loss_u_reverse(y)
+            seen.keep(y, value)
+            return value
+        r = residual_u(y)
+        value = 0.5 * jnp.sum(r**2)
+        seen.keep(y, value, r)
+        return value
 
     value_and_grad = jax.jit(jax.value_and_grad(loss_u))
-    opt = optax.adam(optax.cosine_decay_schedule(opts.learning_rate, opts.max_steps))
+    opt = optax.adam(optax.cosine_decay_schedule(solver.learning_rate, max_steps))
     opt_state = opt.init(u)
     still = 0
-    for k in range(1, opts.max_steps + 1):
+    for k in range(1, max_steps + 1):
         _, grad = value_and_grad(u)
-        stop = log_step(k)
-        if stop is not None:
-            return Outcome(stop, u, k)
+        yield seen.step(u)
         updates, opt_state = opt.update(grad, opt_state)
         u = optax.apply_updates(u, updates)
-        still = still + 1 if float(jnp.max(jnp.abs(updates))) < opts.rtol else 0
+        still = still + 1 if float(jnp.max(jnp.abs(updates))) < solver.rtol else 0
         if still >= ADAM_PATIENCE:
             return Outcome(Status.CONVERGED, u, k)
-    return Outcome(Status.MAX_STEPS, u, opts.max_steps)
-
-
-Driver = Callable[[str, ResidualFn, jax.Array, Options, StepLogger, Callable[[jax.Array], jax.Array] | None], Outcome]
-SOLVERS: dict[str, Driver] = {"lm": _optimistix, "gn": _optimistix, "dogleg": _optimistix, "bfgs": _optimistix, "adam": _adam}
-# The solvers whose rejected steps mean "no better point nearby", where the noise-floor stop applies;
-# BFGS rejects line-search trials and Adam takes noisy steps by design (stopped there by the noise
-# rule, BFGS's D, G fit ended at D +0.016 and G +7.5 % against +0.002 and +2 % by its tolerances).
-LEAST_SQUARES = ("lm", "gn", "dogleg")
+    return Outcome(Status.MAX_STEPS, u, max_steps)

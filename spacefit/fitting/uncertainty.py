@@ -21,7 +21,7 @@ from scipy import ndimage
 
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.problem import Observation, Problem, Setup, setup
+from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, setup
 from spacefit.precision import float64
 from spacefit.scene.parameters import parameter
 
@@ -249,7 +249,8 @@ def identifiability(
     With references rendered at ``at`` (and their noise ``sigma``), this predicts how well a fit
     could determine each parameter from these observations.
     """
-    s = setup(observations, free, at, loss, spp, None, seed, seed_grad, "prb", "fd", wrinkle_coordinates)
+    s = setup(observations, free, start=at, loss=loss, render=FitRender(spp=spp, seed=seed, seed_grad=seed_grad),
+              wrinkle_coordinates=wrinkle_coordinates)
     _, cov, _, extras = estimate(s, s.x0)
     stderr, corr = stderr_corr(cov)
     return Identifiability(s.user.names, dict(zip(s.user.names, stderr.tolist())), corr,

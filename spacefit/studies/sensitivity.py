@@ -25,7 +25,7 @@ import numpy as np
 
 from spacefit.errors import check_count
 from spacefit.progress import progress_bar
-from spacefit.scene.parameters import check_names, parameter, scene_with_values
+from spacefit.scene.parameters import check_names, parameter
 from spacefit.scene.schema import Scene, check_scene
 
 TARGET = "target"  # the region of every part together, beside the parts

@@ -40,7 +40,7 @@ from spacefit.output import STAGE_PREFIX, check_writable
 from spacefit.progress import progress_bar
 from spacefit.scene.schema import Scene, check_scene
 from spacefit.scene.toml import load_scene, read_scene_dict
-from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, available, check_names, check_value, parameter, scene_with_values
+from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, available, check_names, parameter, scene_with_values
 from spacefit.studies.cluster import run_on_dask
 from spacefit.studies.sensitivity import SUMMARY_VARIABLES, normalisation
 from spacefit.studies import worker
