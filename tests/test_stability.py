@@ -43,6 +43,9 @@ FAR = {"parts.panels.alpha_x": 0.153, "parts.legs.kd": 0.40}  # kd 20 % off
         (FAR, {**SMALL_SE, "parts.legs.kd": 0.06}, True, Status.CONVERGED, 1.0, "unidentifiable"),  # 0.1 <= 2 x 0.06
         (FAR, {**SMALL_SE, "parts.legs.kd": 0.06}, False, Status.MAX_STEPS, 1.0, "unidentifiable"),  # before stalled
         (FAR, SMALL_SE, False, Status.MAX_STEPS, 1.0, "stalled"),
+        (FAR, SMALL_SE, False, Status.NO_PROGRESS, 1.0, "stalled"),
+        (FAR, SMALL_SE, False, Status.MISFIT, 1.0, "wrong_minimum"),  # the solver converged; the verdict says misfit
+        (FAR, SMALL_SE, False, Status.AT_BOUND, 1.0, "wrong_minimum"),
         (FAR, SMALL_SE, True, Status.CONVERGED, 1.0, "wrong_minimum"),
         (FAR, {**SMALL_SE, "parts.legs.kd": 0.04}, True, Status.CONVERGED, 1.0, "wrong_minimum"),  # 0.1 > 2 x 0.04
     ],

@@ -67,7 +67,8 @@ def classify(
        every parameter outside tolerance is within 2 standard errors of its truth (the fit's own
        errors cannot tell the truth apart).
     3. ``"success"``: every parameter is within tolerance of its truth (converged or not).
-    4. ``"stalled"``: the solver did not report convergence (``result.success`` False).
+    4. ``"stalled"``: the solver did not report convergence (``result.success`` False, and the status
+       is no verdict on a converged solve: a misfit or a parameter at a bound).
     5. ``"wrong_minimum"``: it converged to a point outside tolerance that its standard errors
        exclude (some parameter more than 2 standard errors from its truth).
 
@@ -98,4 +99,5 @@ def classify(
         return "unidentifiable"
     if not outside:
         return "success"
-    return "wrong_minimum" if result.success else "stalled"
+    converged = result.success or result.status in (sf.Status.MISFIT, sf.Status.AT_BOUND)
+    return "wrong_minimum" if converged else "stalled"
