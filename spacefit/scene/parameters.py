@@ -492,10 +492,9 @@ def scene_with_values(scene: Scene, values: Mapping[str, float], observation: in
                 v[base] = x
         else:
             v[name] = x
-    v = {n: x for n, x in v.items() if not is_image(n)}
-    if not v:  # a fit of image nuisances alone renders its scene as given
-        return scene.with_values({})
-    check_names(scene, list(v), "values")
+    in_scene = [n for n in v if not is_image(n)]
+    if in_scene:  # a fit of image nuisances alone renders its scene as given
+        check_names(scene, in_scene, "values")
     v = {n: check_value(n, x) for n, x in v.items()}
     keys: dict[str, Any] = {}
     for name in v:
