@@ -170,7 +170,7 @@ def with_values(scene: Scene, values: Mapping[str, Any]) -> Scene:
             if path[1] not in scene.parts and not any(p[:2] == ["parts", path[1]] and p[2] == "material" for p, _ in items):
                 raise unknown_key(path, list(scene.parts))
             parts.setdefault(path[1], {})[path[2]] = value
-        elif is_file_key(path) and (path[0] != "parts" or path[2] in part_keys(scene.parts[path[1]])):
+        elif is_file_key(path):
             sections.setdefault(path[0], {})[path[1]] = value
         elif key in _table().PARAMETERS and not _table().is_image(key):
             parameters[key] = value
@@ -193,7 +193,6 @@ def with_values(scene: Scene, values: Mapping[str, Any]) -> Scene:
         changed["parts"] = new_parts
     out = dataclasses.replace(scene, **changed) if changed else scene
     return _table().scene_with_values(out, parameters) if parameters else out
-
 
 
 def as_parameters(scene: Scene, values: Mapping[str, Any]) -> dict[str, Any]:
@@ -223,7 +222,7 @@ def as_parameters(scene: Scene, values: Mapping[str, Any]) -> dict[str, Any]:
         elif forms:
             vector = check_vector(key, value)
             out.update(zip(forms, vector.tolist()))
-        elif is_file_key(path) and (path[0] != "parts" or path[2] in part_keys(scene.parts[path[1]])):
+        elif is_file_key(path):
             raise InputError(f"`{key}` is a scene-file key that no parameter sets: it changes what a Renderer assembled; "
                              "build a new Renderer from `scene.with_values(...)`.")
         else:
