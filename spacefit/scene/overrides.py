@@ -222,7 +222,7 @@ def as_parameters(scene: Scene, values: Mapping[str, Any]) -> dict[str, Any]:
         elif forms:
             vector = check_vector(key, value)
             out.update(zip(forms, vector.tolist()))
-        elif is_file_key(path):
+        elif is_file_key(path) and (path[0] != "parts" or path[2] in part_keys(scene.parts[path[1]])):
             raise InputError(f"`{key}` is a scene-file key that no parameter sets: it changes what a Renderer assembled; "
                              "build a new Renderer from `scene.with_values(...)`.")
         else:

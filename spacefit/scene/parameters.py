@@ -295,20 +295,13 @@ def check_names(
                 raise InputError(f"`{a}` and `{b}` set the same scene value; free one of them.")
 
 
-def check_value(name: str, value: float) -> float:
-    """Check a parameter's value and return it as a float: the one check every entry point runs.
-
-    A parameter that is a scene-file key (``parts.P.alpha_x``, ``wrinkles.D``) is checked here for
-    being a finite number only, and by the scene section or material it lands in for its range, so
-    its message is a scene file's. The others (the sun's angles, the pose's components, the rms
-    height) are checked here against their range, closed but at a lower bound of 0
-    (:func:`spacefit.errors.check_range` builds the message: name, value, range, unit).
-    """
+def check_value(name: str, value: float, argument: str | None = None) -> float:
+    """``value`` as a float if it is a valid value of parameter ``name`` (finite, within its bounds,
+    which a scene value may reach), else :class:`InputError` naming ``argument`` (default: ``name``),
+    the value and the range. A value within them is checked again by the scene section or material
+    it lands in, so a scene-file key's value gets the scene file's message."""
     p = parameter(name)
-    if not p.scene_fields or p.field == "alpha":
-        return check_range(name, value)
-    b = p.bijection
-    return check_range(name, value, b.lo, b.hi, lo_open=b.lo == 0.0, unit="" if p.unit == "1" else p.unit)
+    return check_range(argument or name, value, p.bijection.lo, p.bijection.hi, unit="" if p.unit == "1" else p.unit)
 
 
 def scene_keys(name: str) -> set[str]:
