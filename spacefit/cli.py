@@ -42,7 +42,8 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="spacefit", description="Simulate and fit images of space targets.")
     overrides = argparse.ArgumentParser(add_help=False)
     overrides.add_argument("--set", dest="overrides", action="append", default=[], metavar="KEY=VALUE",
-                           help="override a scene value, e.g. --set camera.focal_length_mm=5000 (repeatable)")
+                           help="set a scene value by scene-file key or parameter name, e.g. --set camera.focal_length_mm=5000 "
+                                "or --set sun.elevation_deg=30 (repeatable)")
     sub = p.add_subparsers(dest="command", required=True)
     r = sub.add_parser("render", parents=[overrides],
                        help="render a scene to radiance.exr, preview.png, scene.toml, render.json")

@@ -353,7 +353,7 @@ def _check_not_fixed(free: Sequence[str], overrides: Sequence[str]) -> None:
     for text in overrides:
         key = ".".join(parse_override(text)[0])
         for name in free:
-            if key in scene_keys(name):
+            if key == name or key in scene_keys(name):
                 raise InputError(
                     f"`{name}` is both free and fixed by the override {text!r}; drop the override "
                     f"(its start value can be given as `start`, --start {name}=VALUE)."

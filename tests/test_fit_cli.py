@@ -216,7 +216,9 @@ def test_bad_reference_exits_2_and_leaves_nothing(case, tmp_path, capsys, kind, 
         (["--set", "parts.sphere.kd=0.4"], "`parts.sphere.kd` is both free and fixed by the override 'parts.sphere"),
         (["--set", "parts.sphere.alpha_x=0.1", "--free", "parts.sphere.alpha"], "`parts.sphere.alpha` is both free"),
         (["--set", "wrinkles.G=0.1", "--free", "wrinkles.rms_m"], "`wrinkles.rms_m` is both free"),
-        (["--start", "parts.sphere.kd=1.5"], "start of `parts.sphere.kd` must be inside (0, 1)"),
+        (["--start", "parts.sphere.kd=1.5"], "`parts.sphere.kd` must be in [0, 1], got 1.5."),  # as a scene file's
+        (["--start", "parts.sphere.kd=1"], "start of `parts.sphere.kd` must be inside (0, 1)"),  # a fit's open range
+        (["--set", "sun.elevation_deg=30", "--free", "sun.elevation_deg"], "`sun.elevation_deg` is both free"),
         (["--start", "parts.sphere.kd=abc"], "`--start parts.sphere.kd` must be a number"),
         (["--start", "kd"], "`--start` takes NAME=VALUE"),
         (["--solver", "newton"], "`solver` must be one of"),

@@ -423,10 +423,12 @@ def check_names(
     if not names:
         raise InputError(f"`{argument}` must name at least one parameter; valid: {', '.join(valid)}.")
     for name in names:
+        if not isinstance(name, str):
+            check_choice(argument, name, valid)
         forms = [n for n in valid if name not in valid and n not in IMAGE and name in scene_keys(n)]
         if OBSERVATION_MARK in name and image:
             _check_observation(argument, name, observations)
-        elif isinstance(name, str) and name.count(".") == 2 and name.startswith("parts.") and name.split(".")[1] not in scene.parts:
+        elif name.count(".") == 2 and name.startswith("parts.") and name.split(".")[1] not in scene.parts:
             raise unknown_part(name, list(scene.parts))
         elif forms:
             raise InputError(f"`{argument}` names the scene-file key `{name}`, which holds several numbers; a parameter is "

@@ -102,7 +102,8 @@ def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scen
     later: dict[str, Any] = {}
     for key, value in data.items():
         if key not in [*SECTIONS, "parts"]:
-            raise unknown_key([key, *(value if isinstance(value, Mapping) else {})][:2], [])
+            first = next(iter(value), None) if isinstance(value, Mapping) else None
+            raise unknown_key([key] if first is None else [key, str(first)], [])
         if not isinstance(value, Mapping):
             raise InputError(f"`{key}` must be a table, got {quote(value)}.")
         if key != "parts":

@@ -188,8 +188,8 @@ def sensitivity(
 ) -> Sensitivity:
     """Derivatives of the image and of each part's and the whole target's mean radiance with respect
     to the registered parameters ``names`` (``sf.available_parameters(scene)``), at the scene's values
-    or ``at`` (by name, parameter names or scene-file keys, as :meth:`Scene.with_values` takes them), each from ``seeds`` independent estimates (>= 2)
-    with its standard error. ``spp`` / ``spp_grad``: samples per pixel of the primal and finite
+    or ``at`` (parameter names or scene-file keys, as :meth:`Scene.with_values` takes them), each
+    from ``seeds`` independent estimates (>= 2) with its standard error. ``spp`` / ``spp_grad``: samples per pixel of the primal and finite
     difference renders / of the AD renders (default: the scene's)."""
     # here: the fitting and rendering stack imports JAX and Mitsuba (seconds), which a sweep without derivatives never needs
     from spacefit.fitting.problem import fit_scene
