@@ -243,7 +243,7 @@ def test_expected_dn_and_distortion_differentiate_in_jax():
     tangent = np.random.default_rng(1).uniform(0.0, 1.0, size=(10, 12, 3))
     _, jvp = jax.jvp(lambda r: expected_dn(r, sensor, intr), (radiance,), (tangent,))
     # linear in the radiance: the derivative along a tangent is the tangent's own DN less the bias
-    assert np.allclose(jvp, np.asarray(expected_dn(tangent, sensor, intr)) - sensor.bias_dn, rtol=1e-10)
+    assert np.allclose(jvp, np.asarray(expected_dn(tangent, sensor, intr)) - sensor.bias_dn, rtol=1e-6)  # float32 round-off
     c = Distortion(k1=0.5)
     grad = jax.grad(lambda r: distort_image(r, intr, c).sum())(radiance)
     assert grad.shape == radiance.shape and np.isfinite(grad).all() and grad.sum() > 0
