@@ -383,7 +383,8 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
     if sidecar is not None and sidecar.get("sensor") is not None:
         in_header = {k for k, (_, source) in meta["sensor_found"].items() if source.startswith("header")}  # the file outranks its sidecar
         found = {**meta["sensor_found"], **{k: (v, "spacefit sidecar") for k, v in sidecar["sensor"].items() if k not in in_header}}
-        meta["sensor_found"] = {k: (v, source + (" (simulated with an illustrative default)" if k in sidecar.get("sensor_defaults", ()) else ""))
+        illustrative = set(sidecar.get("sensor_defaults", ()))
+        meta["sensor_found"] = {k: (v, source + (" (simulated with an illustrative default)" if k in illustrative else ""))
                                 for k, (v, source) in found.items()}
     values = np.asarray(raw, dtype=float)
     full_scale = float(np.iinfo(raw.dtype).max) if raw.dtype.kind in "ui" else None
@@ -491,7 +492,8 @@ def sensor_of(image: ObservedImage, sensor: Sensor | Mapping[str, Any] | None = 
                          "sensor_defaults='illustrative' (--sensor-defaults illustrative).")
     optics = "aperture_diameter_m" in fields and "wavelength_m" in fields
     rules = {"full_well_electrons": (None, "rule: none given (the saturation level or the ADC's range saturates)"),
-             "diffraction": (optics, f"rule: {'on, the aperture and wavelength given' if optics else 'off, no aperture and wavelength given'}")}
+             "diffraction": (optics, "rule: " + ("on, the aperture and wavelength given" if optics else
+                                                 "off, no aperture and wavelength given"))}
     for name, (value, source) in rules.items():
         if name not in fields:
             fields[name], sources[name] = value, source

@@ -174,7 +174,7 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
     Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", Bijection(-math.inf), "offset added to every pixel (fit only; default 0)",
               per_observation=True),
     Parameter("image.blur_sigma_px", "px", Bijection(0.0, PSF_SIGMA_MAX_PX),
-              "sigma of a continuous Gaussian blur before the pixel (fit only; not free: no blur; default start 0.5)", per_observation=True),
+              "sigma of a continuous Gaussian blur, before the pixel (fit only; no blur unless free; start 0.5)", per_observation=True),
     *(Parameter(f"image.shift_{axis}_px", "px", Bijection(-math.inf),
                 f"sub-pixel shift of the image towards +{axis} ({where}), by a Fourier phase (fit only; default 0)",
                 per_observation=True)
