@@ -109,6 +109,8 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     f.add_argument("--row-order", metavar="top-down|bottom-up",
                    help="how the rows of FITS references run, whatever their headers say (default: as ROWORDER or "
                         "a WCS states, else the FITS standard, bottom-up, with a note)")
+    f.add_argument("--flat", metavar="FLAT", help="flat-field image (FITS, PNG, TIFF) of DN references: the detector's relative "
+                                                  "response, multiplying the expected signal above the bias")
     f.add_argument("--unit", metavar="radiance|DN", help="require the references to hold this unit")
     f.add_argument("--response", metavar="linear|srgb",
                    help="how PNG / TIFF values encode light: linear DN or sRGB-encoded (spacefit's own files say)")
@@ -178,7 +180,7 @@ def _fit(args: argparse.Namespace) -> int:
         args.references, args.scenes, [name.strip() for name in args.free.split(",")], args.out,
         overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, masks=args.masks, sensor=args.sensor,
         sensor_values=_sensor_values(args.sensor_values) or None, sensor_defaults=args.sensor_defaults, row_order=args.row_order,
-        unit=args.unit, response=args.response, quiet=args.quiet,
+        flat=args.flat, unit=args.unit, response=args.response, quiet=args.quiet,
         overwrite=args.overwrite, resume=args.resume, start=_start_values(args.start), render=render,
         **{k: v for k, v in given.items() if v is not None},
     )

@@ -189,15 +189,19 @@ def _sensor_from_header(header: fits.Header) -> dict[str, Any] | None:
     return out
 
 
-def _header_sensor(header: fits.Header, data: np.ndarray) -> dict[str, tuple[Any, str]]:
+def _header_sensor(header: fits.Header, data: np.ndarray, path: Path) -> dict[str, tuple[Any, str]]:
     """Every sensor value of a FITS header as field -> (value, source): standard keywords, then
     the data's bits (``BITPIX``), then spacefit's own keys, each replacing the ones before."""
     found: dict[str, tuple[Any, str]] = {}
     for field, keys in HEADER_KEYWORDS.items():
         present = [(k, header[k]) for k in keys if k in header and header[k] is not None and not isinstance(header[k], fits.card.Undefined)]
+        for key, value in present:
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise InputError(f"{str(path)!r}: the FITS header's {key} = {value!r} is not a number ({field}); correct it or give the value "
+                                 "(`sensor=`, --sensor-value).")
         values = {float(v) for _, v in present}
         if len(values) > 1:
-            raise InputError(f"the FITS header gives {field} {len(values)} ways: {', '.join(f'{k} = {v}' for k, v in present)}; "
+            raise InputError(f"{str(path)!r}: the FITS header gives {field} {len(values)} ways: {', '.join(f'{k} = {v}' for k, v in present)}; "
                              "make them agree or give the value (`sensor=`, --sensor-value).")
         if present:
             key, value = present[0]
@@ -358,7 +362,7 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         found_unit = _fits_unit(header, wanted, p)
         meta["notes"] += notes
         meta["header"] = {k: v for k, v in header.items() if k not in ("COMMENT", "HISTORY", "")}
-        meta["sensor_found"] = _header_sensor(header, raw)
+        meta["sensor_found"] = _header_sensor(header, raw, p)
         if "DATE-OBS" in header:
             meta["date_obs"] = _iso_time(header["DATE-OBS"], p)
         if "SATURATE" in header:
@@ -383,7 +387,8 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
     if sidecar is not None and sidecar.get("sensor") is not None:
         in_header = {k for k, (_, source) in meta["sensor_found"].items() if source.startswith("header")}  # the file outranks its sidecar
         found = {**meta["sensor_found"], **{k: (v, "spacefit sidecar") for k, v in sidecar["sensor"].items() if k not in in_header}}
-        meta["sensor_found"] = {k: (v, source + (" (simulated with an illustrative default)" if k in sidecar.get("sensor_defaults", ()) else ""))
+        illustrative = set(sidecar.get("sensor_defaults", ()))
+        meta["sensor_found"] = {k: (v, source + (" (simulated with an illustrative default)" if k in illustrative else ""))
                                 for k, (v, source) in found.items()}
     values = np.asarray(raw, dtype=float)
     full_scale = float(np.iinfo(raw.dtype).max) if raw.dtype.kind in "ui" else None
@@ -491,7 +496,8 @@ def sensor_of(image: ObservedImage, sensor: Sensor | Mapping[str, Any] | None = 
                          "sensor_defaults='illustrative' (--sensor-defaults illustrative).")
     optics = "aperture_diameter_m" in fields and "wavelength_m" in fields
     rules = {"full_well_electrons": (None, "rule: none given (the saturation level or the ADC's range saturates)"),
-             "diffraction": (optics, f"rule: {'on, the aperture and wavelength given' if optics else 'off, no aperture and wavelength given'}")}
+             "diffraction": (optics, "rule: " + ("on, the aperture and wavelength given" if optics else
+                                                 "off, no aperture and wavelength given"))}
     for name, (value, source) in rules.items():
         if name not in fields:
             fields[name], sources[name] = value, source

@@ -165,6 +165,7 @@ def fit_to_folder(
     sensor_values: Mapping[str, Any] | None = None,
     sensor_defaults: str | None = None,
     row_order: str | None = None,
+    flat: str | Path | None = None,
     unit: str | None = None,
     response: str | None = None,
     quiet: bool = False,
@@ -198,6 +199,7 @@ def fit_to_folder(
         sensor_values, sensor_defaults, row_order: sensor fields replacing the file's and the
             sensor file's, ``"illustrative"`` to fill missing sensor values with the illustrative
             defaults, and a FITS row order (:meth:`~spacefit.fitting.problem.Observation.from_file`).
+        flat: a flat-field image (FITS, PNG, TIFF) of the DN references' detector, for all of them.
         unit, response: ``"radiance"`` / ``"DN"`` to require one, and ``"linear"`` / ``"srgb"`` for
             PNG and TIFF (:func:`~spacefit.imageio.read_image`).
         quiet: no progress display or messages on stderr.
@@ -215,7 +217,7 @@ def fit_to_folder(
     from spacefit.imageio import format_sensor_sources
 
     prepare_output(out_dir, "fit", overwrite=overwrite, resume=resume,
-                   inputs=(*references, *scenes, *masks, *([sensor] if sensor is not None else [])))
+                   inputs=(*references, *scenes, *masks, *(p for p in (sensor, flat) if p is not None)))
     for what, given in (("scene", scenes), ("mask", masks)):
         if len(given) not in ((0, 1, len(references)) if what == "mask" else (1, len(references))):
             raise InputError(f"give one {what} for all references or one per reference; "
@@ -226,7 +228,7 @@ def fit_to_folder(
     loaded = [load_scene(path, scene_overrides) for path in scenes]
     observations = [Observation.from_file(path, loaded[i % len(loaded)], sensor=sensor_values, sensor_file=sensor, unit=unit,
                                           response=response, mask=masks[i % len(masks)] if masks else None, sigma=sigma,
-                                          sensor_defaults=sensor_defaults, row_order=row_order)
+                                          sensor_defaults=sensor_defaults, row_order=row_order, flat=flat)
                     for i, path in enumerate(references)]
     for path, obs in zip(references, observations):  # what each file said, and the source of every sensor value
         said = "\n".join([*obs.notes, *([f"{path}: " + format_sensor_sources(obs.sensor, obs.sensor_sources)] if obs.sensor_sources else [])])
@@ -252,6 +254,7 @@ def fit_to_folder(
         "sensors": [None if obs.sensor is None else obs.sensor.to_dict() for obs in observations],
         "sensor_sources": [obs.sensor_sources for obs in observations],
         "notes": [list(obs.notes) for obs in observations],
+        "flat": None if flat is None else str(flat),
         "unit": unit,
         "response": response,
         "options": _recorded(options),

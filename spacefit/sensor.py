@@ -25,6 +25,7 @@ numbers (DN) in this order:
    "Introduction to Fourier Optics", 3rd ed., eq. 6-32), which a pixel grid samples only below its
    Nyquist frequency (half a cycle per px): an Airy disc far smaller than a pixel changes nothing.
    Taken as the same across the field (shift-invariant).
+   A flat-field map (the detector's relative response, ``flat=``) multiplies the signal after it.
 4. **Noise and digitising** (:func:`observe`): Poisson shot noise in electrons, the full well's clip,
    Gaussian read noise (electrons rms), ``DN = bias + gain * electrons``, rounding to the nearest
    integer and the ADC's range [0, 2^bits - 1].
@@ -384,10 +385,26 @@ def psf_rms_px(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> float:
     return max(widths)
 
 
-def electrons_fn(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> Callable[[Float[Array, "h w c"]], Float[Array, "h w c"]]:
+def check_flat(flat: Any, shape: tuple[int, ...], where: str = "`flat`") -> np.ndarray:
+    """A flat-field map checked against an image of ``shape`` (h, w, c): (h, w) or (h, w, c or 1),
+    finite and > 0; returned as (h, w, 1 or c) float64."""
+    f = np.asarray(flat, dtype=float)
+    f = f[..., None] if f.ndim == 2 else f
+    if f.ndim != 3 or f.shape[:2] != tuple(shape[:2]) or f.shape[2] not in (1, shape[2]):
+        raise InputError(f"{where} has shape {np.shape(flat)}; the image is {tuple(shape)}: give (height, width) or (height, width, channels).")
+    bad = int(np.count_nonzero(~(np.isfinite(f) & (f > 0))))
+    if bad:
+        raise InputError(f"{where} must be finite and > 0 (the detector's relative response); {bad} values are not.")
+    return f
+
+
+def electrons_fn(sensor: Sensor, intrinsics: Intrinsics, channels: int,
+                 flat: Float[np.ndarray, "h w c"] | None = None) -> Callable[[Float[Array, "h w c"]], Float[Array, "h w c"]]:
     """:func:`expected_electrons` as a JAX function of radiance, with the sensor's per-pixel factors
-    and PSF transfer computed once and no check of the values (a fit's model may dip below zero)."""
+    and PSF transfer computed once and no check of the values (a fit's model may dip below zero).
+    ``flat``: a flat-field map (checked, :func:`check_flat`) multiplying the signal after the PSF."""
     factor = electrons_per_radiance(sensor, intrinsics, channels)
+    response = 1.0 if flat is None else check_flat(flat, (intrinsics.height, intrinsics.width, channels))
     waves = sensor.wavelengths(channels)
     transfers = [psf_transfer(sensor, intrinsics, w) for w in waves]
     pad = max(psf_reach_px(sensor, intrinsics, w) for w in waves)
@@ -395,15 +412,16 @@ def electrons_fn(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> Calla
     def electrons(radiance: Float[Array, "h w c"]) -> Float[Array, "h w c"]:
         e = jnp.asarray(radiance) * factor
         if pad == 0:
-            return e
-        return fourier_filter(e, lambda fy, fx: jnp.concatenate([t(fy, fx) for t in transfers], axis=-1), pad)
+            return e * response
+        return fourier_filter(e, lambda fy, fx: jnp.concatenate([t(fy, fx) for t in transfers], axis=-1), pad) * response
 
     return electrons
 
 
-def dn_fn(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> Callable[[Float[Array, "h w c"]], Float[Array, "h w c"]]:
+def dn_fn(sensor: Sensor, intrinsics: Intrinsics, channels: int,
+          flat: Float[np.ndarray, "h w c"] | None = None) -> Callable[[Float[Array, "h w c"]], Float[Array, "h w c"]]:
     """:func:`expected_dn` as a JAX function of radiance, set up once (see :func:`electrons_fn`)."""
-    electrons = electrons_fn(sensor, intrinsics, channels)
+    electrons = electrons_fn(sensor, intrinsics, channels, flat)
     return lambda radiance: sensor.bias_dn + sensor.gain_dn_per_electron * electrons(radiance)
 
 
@@ -420,16 +438,19 @@ def expected_electrons(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsi
     return electrons_fn(sensor, intrinsics, np.shape(radiance)[2])(radiance)
 
 
-def expected_dn(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Intrinsics) -> Float[Array, "h w c"]:
+def expected_dn(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Intrinsics,
+                flat: Float[np.ndarray, "..."] | None = None) -> Float[Array, "h w c"]:
     """Noise-free mean DN, ``bias + gain * expected_electrons``: not rounded, not clipped (see :func:`saturated_mask`).
 
     Args:
         radiance: (height, width, channels) entrance-pupil radiance, W m^-2 sr^-1 (NumPy or JAX).
+        flat: a flat-field map, (height, width) or (height, width, channels), > 0: the detector's
+            relative response, multiplying the signal above the bias (None: uniform).
     Returns:
         (height, width, channels) float64 JAX array, DN.
     """
     _check_radiance(radiance, intrinsics)
-    return dn_fn(sensor, intrinsics, np.shape(radiance)[2])(radiance)
+    return dn_fn(sensor, intrinsics, np.shape(radiance)[2], flat)(radiance)
 
 
 def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Array, "..."]:

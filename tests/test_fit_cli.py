@@ -86,7 +86,7 @@ def test_cli_takes_a_sensor_file_a_response_and_a_mask(dn_case, tmp_path):
 @pytest.mark.parametrize(
     ("reference", "extra", "message"),
     [
-        ("bare.png", ["--response", "linear"], "holds DN (digital numbers), not radiance, and names no sensor"),
+        ("bare.png", ["--response", "linear"], "holds DN (digital numbers), and a fit of them needs 8 sensor value(s)"),
         ("bare.png", [], "of unknown response; say how its values encode light"),
         ("obs.fits", ["--sensor", "missing.json"], "sensor file 'missing.json' does not exist"),
         ("obs.fits", ["--sensor", "{case}/mask.png"], "must be .json or .toml, got '.png'"),

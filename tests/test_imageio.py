@@ -204,5 +204,8 @@ def test_foreign_header_is_mapped_field_by_field(tmp_path):
     assert found["read_noise_electrons"] == (4.0, "header READNOIS") and found["bias_dn"] == (30.0, "header PEDESTAL")
     assert found["bit_depth"] == (16, "header BITPIX")
     _write(tmp_path / "both.fits", IMAGE, ROWORDER="TOP-DOWN", RDNOISE=4.0, RON=5.0)
-    with pytest.raises(InputError, match="read_noise_electrons 2 ways: RDNOISE = 4.0, RON = 5.0"):
+    with pytest.raises(InputError, match="both.fits.: the FITS header gives read_noise_electrons 2 ways: RDNOISE = 4.0, RON = 5.0"):
         read_image(tmp_path / "both.fits")
+    _write(tmp_path / "text.fits", IMAGE, ROWORDER="TOP-DOWN", GAIN="high")
+    with pytest.raises(InputError, match="text.fits.: the FITS header's GAIN = 'high' is not a number"):
+        read_image(tmp_path / "text.fits")

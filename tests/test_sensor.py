@@ -243,7 +243,19 @@ def test_expected_dn_and_distortion_differentiate_in_jax():
     tangent = np.random.default_rng(1).uniform(0.0, 1.0, size=(10, 12, 3))
     _, jvp = jax.jvp(lambda r: expected_dn(r, sensor, intr), (radiance,), (tangent,))
     # linear in the radiance: the derivative along a tangent is the tangent's own DN less the bias
-    assert np.allclose(jvp, np.asarray(expected_dn(tangent, sensor, intr)) - sensor.bias_dn, rtol=1e-5)  # float32 renders
+    assert np.allclose(jvp, np.asarray(expected_dn(tangent, sensor, intr)) - sensor.bias_dn, rtol=1e-6)  # float32 round-off
     c = Distortion(k1=0.5)
     grad = jax.grad(lambda r: distort_image(r, intr, c).sum())(radiance)
     assert grad.shape == radiance.shape and np.isfinite(grad).all() and grad.sum() > 0
+
+
+def test_flat_field_multiplies_the_signal_above_the_bias():
+    intr = Intrinsics(1.0, 0.02, 6, 5)
+    radiance = np.random.default_rng(1).uniform(0.0, 2.0, (5, 6, 3))
+    flat = np.random.default_rng(2).uniform(0.8, 1.2, (5, 6))
+    sensor = Sensor(radiometric_scale_dn_per_w_m2_sr=100.0, bias_dn=20.0, **SHARP)
+    np.testing.assert_allclose(np.asarray(expected_dn(radiance, sensor, intr, flat)), 100.0 * radiance * flat[..., None] + 20.0, rtol=1e-6)
+    with pytest.raises(InputError, match="`flat` must be finite and > 0 .*; 1 values are not"):
+        expected_dn(radiance, sensor, intr, np.where(np.arange(30).reshape(5, 6) == 7, 0.0, flat))
+    with pytest.raises(InputError, match=r"`flat` has shape \(6, 5\); the image is \(5, 6, 3\)"):
+        expected_dn(radiance, sensor, intr, flat.T)

@@ -130,6 +130,16 @@ MUTANTS = (
     Mutant("fisher-times-s2", COVARIANCE, "np.clip(eigval, 0.0, None) / s2", "np.clip(eigval, 0.0, None) * s2", (UNCERTAINTY,)),
     Mutant("map-covariance-transposed", COVARIANCE, "out = T @ np.where(np.isfinite(cov), cov, 0.0) @ T.T",
            "out = T.T @ np.where(np.isfinite(cov), cov, 0.0) @ T", (UNCERTAINTY,)),
+    # observation files and the sensor as observers calibrate it (issue 18)
+    Mutant("fits-roworder-ignored", "spacefit/imageio.py", 'return stated, "header ROWORDER", notes',
+           'return "bottom-up", "header ROWORDER", notes', ("tests/test_imageio.py",)),
+    Mutant("header-rdnoise-dropped", "spacefit/imageio.py", '"read_noise_electrons": ("RDNOISE", "READNOIS", "RON"),',
+           '"read_noise_electrons": ("READNOIS", "RON"),', ("tests/test_imageio.py",)),
+    Mutant("vignetting-applied-when-off", "spacefit/sensor.py",
+           "return (not self.calibrated) if self.vignetting is None else self.vignetting", "return True", ("tests/test_sensor.py",)),
+    Mutant("psf-integrated-over-the-pixel-again", "spacefit/sensor.py", "sigma_px**2 * (fx**2 + fy**2))",
+           "sigma_px**2 * (fx**2 + fy**2)) * jnp.sinc(fx) * jnp.sinc(fy)",
+           ("tests/test_sensor.py", "tests/test_nuisance.py::test_blur_is_the_sensors_continuous_gaussian_and_keeps_the_light")),
     # back faces, closed meshes and folded wrinkles (issues 11 and 13)
     # one vocabulary, checked everywhere (issue 18 item 7)
     Mutant("set-values-unchecked", RENDERER, "scene = scene_with_values(self.current_scene, given)  # refused",

@@ -29,7 +29,7 @@ from spacefit.rendering.derivatives import render_chain
 from spacefit.rendering.renderer import PartImage
 from spacefit.scene.assembly import assemble
 from spacefit.scene.schema import FILTER_RADIUS_PX, Scene, check_scene
-from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, dn_fn, noise_variance_dn, psf_rms_px, saturated_mask
+from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, check_flat, dn_fn, noise_variance_dn, psf_rms_px, saturated_mask
 from spacefit.scene.parameters import GEOMETRY, G_of, observation_of, rms_of, scene_value, scene_with_values
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
@@ -54,6 +54,8 @@ class Observation:
     ``sensor_sources``: where each sensor value came from (field -> "header KEY", "sensor file",
     ...; :func:`~spacefit.imageio.sensor_of`), None for a sensor given whole.
     ``notes``: what a report should say about the file (e.g. a row order it did not state).
+    ``flat``: with a sensor, a flat-field map ((h, w) or (h, w, channels), > 0) multiplying the
+    expected signal above the bias (:func:`~spacefit.sensor.expected_dn`); None: uniform.
     :meth:`from_file` reads all of these from an image file.
     """
 
@@ -64,11 +66,14 @@ class Observation:
     mask: np.ndarray | None = None
     sensor_sources: Mapping[str, str] | None = None
     notes: tuple[str, ...] = ()
+    flat: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         check_scene(self.scene, "Observation.scene")
         if self.sensor is not None and not isinstance(self.sensor, Sensor):
             raise InputTypeError(f"`Observation.sensor` must be an sf.Sensor or None, got {quote(self.sensor)}.")
+        if self.flat is not None and self.sensor is None:
+            raise InputError("`Observation.flat` multiplies a sensor's expected DN: give the sensor too (or divide a radiance image by it).")
         if self.sensor is not None and self.sigma is not None:
             raise InputError("`Observation.sigma` must be None when `Observation.sensor` is given: the sensor predicts each pixel's noise.")
         ref = np.asarray(self.reference)
@@ -87,6 +92,7 @@ class Observation:
         cls, path: str | Path, scene: Scene, *, sensor: Sensor | Mapping[str, Any] | None = None, unit: str | None = None,
         response: str | None = None, mask: str | Path | np.ndarray | None = None, sigma: float | np.ndarray | None = None,
         sensor_file: str | Path | None = None, sensor_defaults: str | None = None, row_order: str | None = None,
+        flat: str | Path | np.ndarray | None = None,
     ) -> Observation:
         """The observation in an image file (EXR, FITS, PNG, TIFF; :func:`~spacefit.imageio.read_image`,
         which takes ``unit``, ``response``, ``mask``, ``sigma`` and ``row_order``), with its
@@ -97,7 +103,9 @@ class Observation:
         values (FITS header keywords, spacefit sidecar) replaced by those of the sensor file
         ``sensor_file`` (:func:`~spacefit.sensor.read_sensor_file`) and then of a mapping ``sensor``;
         a value the fit needs that none gives is refused unless ``sensor_defaults="illustrative"``.
-        The sources are kept in ``sensor_sources``. A one-channel image is fitted as grey (one
+        The sources are kept in ``sensor_sources``. ``flat``: a flat-field map of a DN image, an
+        array or an image file (FITS, or PNG / TIFF read as linear), multiplying the expected
+        signal above the bias. A one-channel image is fitted as grey (one
         residual per pixel, against the mean of the render's channels).
 
         Raises:
@@ -111,7 +119,7 @@ class Observation:
         image = read_image(path, unit=unit, response=response, mask=mask, sigma=sigma, row_order=row_order)
         notes = tuple(image.metadata["notes"])
         if image.unit == RADIANCE_UNIT:
-            if sensor is not None or sensor_file is not None:
+            if sensor is not None or sensor_file is not None or flat is not None:
                 raise InputError(f"{image.path!r} holds radiance ({RADIANCE_UNIT}); `sensor` describes the camera of a DN "
                                  "image: leave it out.")
             return cls(scene, image.data, sigma, mask=image.mask, notes=notes)
@@ -119,7 +127,10 @@ class Observation:
             raise InputError(f"{image.path!r} holds DN: its noise is its sensor's; leave `sigma` out.")
         from_file = read_sensor_file(sensor_file) if sensor_file is not None else None
         measured, sources = sensor_of(image, sensor, sensor_file=from_file, defaults=sensor_defaults)
-        return cls(scene, image.data, sensor=measured, mask=image.mask, sensor_sources=sources, notes=notes)
+        if isinstance(flat, (str, Path)):
+            flat = read_image(flat, unit="DN", response="linear", row_order=row_order).data
+        relative = None if flat is None else check_flat(flat, image.data.shape, f"the flat field of {image.path!r}")
+        return cls(scene, image.data, sensor=measured, mask=image.mask, sensor_sources=sources, notes=notes, flat=relative)
 
 
 def check_reference(obs: Observation, index: int) -> tuple[np.ndarray, np.ndarray]:
@@ -233,7 +244,7 @@ def _in_unit_of(obs: Observation, channels: int, intrinsics: Intrinsics) -> Call
     """A model radiance image (h, w, 3) as the observation sees it: its ``channels`` (a grey image
     sees the mean of the render's channels, which are equal: the scene is grey), in radiance or,
     with a sensor, in the sensor's expected DN."""
-    to_dn = (lambda image: image) if obs.sensor is None else dn_fn(obs.sensor, intrinsics, channels)
+    to_dn = (lambda image: image) if obs.sensor is None else dn_fn(obs.sensor, intrinsics, channels, obs.flat)
     if channels == 1:
         return lambda image: to_dn(jnp.mean(image, axis=-1, keepdims=True))
     return to_dn

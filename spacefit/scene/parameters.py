@@ -296,7 +296,7 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
     Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", WHOLE_LINE, "offset added to every pixel (fit only; default 0)",
               _constant(0.0), _not_a_scene_value, _IMAGE, scale=0.01),
     Parameter("image.blur_sigma_px", "px", Bounds(0.0, PSF_SIGMA_MAX_PX),
-              "sigma of a continuous Gaussian blur before the pixel (fit only; not free: no blur; default start 0.5)",
+              "sigma of a continuous Gaussian blur, before the pixel (fit only; no blur unless free; start 0.5)",
               _constant(PSF_SIGMA_START_PX), _not_a_scene_value, _IMAGE, scale=0.1),
     *(Parameter(f"image.shift_{axis}_px", "px", WHOLE_LINE,
                 f"sub-pixel shift of the image towards +{axis} ({where}), by a Fourier phase (fit only; default 0)",
