@@ -1,5 +1,7 @@
-"""Render the synthetic reference cases: every case of ``spacefit/synthetic/cases.toml`` that has a
-scene file of its own there (the package data :func:`spacefit.load_case` reads).
+"""Render the synthetic reference cases into data/synthetic/, from the package's case files.
+
+Every case of ``spacefit/synthetic/cases.toml`` that has a scene file of its own there (the package
+data :func:`spacefit.load_case` reads).
 
 For case NAME this writes the folder ``data/synthetic/NAME/`` (beside this script) all at once:
 

@@ -24,11 +24,12 @@ if TYPE_CHECKING:
     from spacefit.materials import Material
     from spacefit.scene.assembly import Assembly
 
-# Cycles' render threads, as spacefit's 2 render threads of the comparison.
+# Cycles' render threads: as many as spacefit renders with in the comparison.
 THREADS = 2
 # spacefit's render.filter -> Cycles' (pixel_filter_type, filter_width px); Cycles' Gaussian of width w has
 # standard deviation w / 4: the tent of radius 1 px has sqrt(1/6) px, Mitsuba's Gaussian 0.5 px.
 CYCLES_FILTERS = {"tent": ("GAUSSIAN", 4.0 * math.sqrt(1.0 / 6.0)), "gaussian": ("GAUSSIAN", 2.0), "box": ("BOX", 1.0)}
+
 
 def write_ply(path: Path, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None = None) -> None:
     """A binary little-endian triangle PLY: float32 x, y, z (and s, t for uv), int32 vertex indices."""
