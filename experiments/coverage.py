@@ -64,7 +64,7 @@ ONE_SIGMA = 0.6827
 NOISE_LEVELS = {"low": 20000.0, "high": 2000.0}  # peak electrons of the brightest glint
 PSF_WIDTHS_PX = (0.0, 1.0, 2.0)
 # The fit's PSF width (px): one name for the whole study.
-BLUR = "image.psf_sigma_px"
+BLUR = "image.blur_sigma_px"
 # The nuisances' truths in the exposures of ``--free nuisances`` (deg, px); fits start from the
 # scene's pose (0 deg), no shift and the PSF width's default start.
 NUISANCE_TRUTH = {"target.attitude_x_deg": 0.3, "target.attitude_z_deg": -0.2, "image.shift_x_px": 0.4,

@@ -99,5 +99,5 @@ def classify(
         return "unidentifiable"
     if not outside:
         return "success"
-    converged = result.success or result.status in (sf.Status.MISFIT, sf.Status.AT_BOUND)
+    converged = result.success or result.status in (Status.MISFIT, Status.AT_BOUND)
     return "wrong_minimum" if converged else "stalled"
