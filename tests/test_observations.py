@@ -287,7 +287,7 @@ def test_from_file_takes_a_flat_field_and_a_calibrated_header(sphere, tmp_path):
     fits.PrimaryHDU(flat, header=fits.Header([("ROWORDER", "TOP-DOWN")])).writeto(tmp_path / "flat.fits")
     obs = sf.Observation.from_file(tmp_path / "cal.fits", scene, flat=tmp_path / "flat.fits")
     assert np.array_equal(obs.flat[..., 0], flat) and obs.sensor_sources["bit_depth"] == "header BITPIX"
-    s = setup(obs, ["parts.sphere.kd"], None, "pixel", None, None, 1, 2, "prb", "fd", "rms")
+    s = setup(obs, ["parts.sphere.kd"])
     model = np.asarray(s.problem.renders_x(jnp.asarray(s.x0))[0])[..., 0]
     np.testing.assert_allclose(model, 50.0 + 400.0 * flat * np.asarray(sf.render(scene), float).mean(axis=-1), rtol=2e-4, atol=1e-3)
     write_exr(tmp_path / "r.exr", truth.astype(np.float32))
