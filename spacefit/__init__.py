@@ -24,6 +24,8 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "fit": ("spacefit.fitting.loop", "fit"),
     "LOSSES": ("spacefit.fitting.losses", "LOSSES"),
     "FitRender": ("spacefit.fitting.problem", "FitRender"),
+    "FitOptions": ("spacefit.fitting.loop", "FitOptions"),
+    "ObservationFiles": ("spacefit.fitting.observation_files", "ObservationFiles"),
     "Observation": ("spacefit.fitting.problem", "Observation"),
     "format_result": ("spacefit.fitting.report", "format_result"),
     "write_fit_report": ("spacefit.fitting.report", "write_fit_report"),
@@ -89,8 +91,8 @@ _EXPORTS: dict[str, tuple[str, str]] = {
 
 __all__ = [
     "PARAMETERS", "PRESETS", "LOSSES", "SOLVERS",
-    "Adam", "Case", "Conductor", "FitRender", "FitResult", "Identifiability", "InputError", "Jacobian", "Lambert", "Mirror",
-    "Observation", "Parameter", "PartImage", "Renderer", "Scene", "Status",
+    "Adam", "Case", "Conductor", "FitOptions", "FitRender", "FitResult", "Identifiability", "InputError", "Jacobian", "Lambert", "Mirror",
+    "Observation", "ObservationFiles", "Parameter", "PartImage", "Renderer", "Scene", "Status",
     "available_parameters", "case_names", "default_scene", "fit", "fit_to_folder", "format_result", "identifiability",
     "jacobian", "load_case", "load_scene", "parameter_table", "read_exr", "render", "render_function",
     "render_to_folder", "wm_rms", "wm_rms_slope", "write_exr", "write_fit_report",

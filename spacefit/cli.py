@@ -170,20 +170,22 @@ def _sensor_values(items: Sequence[str]) -> dict[str, object]:
 
 def _fit(args: argparse.Namespace) -> int:
     """Run ``spacefit fit``; exit code 0 when the fit succeeded, else the verdict's (:func:`exit_code`)."""
+    from spacefit.fitting.loop import FitOptions
+    from spacefit.fitting.observation_files import ObservationFiles
     from spacefit.fitting.problem import FitRender
     from spacefit.fitting.report import format_result
     from spacefit.pipeline import fit_to_folder
 
+    files = ObservationFiles(
+        args.references, args.scenes, overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, masks=args.masks,
+        sensor_file=args.sensor, sensor_values=_sensor_values(args.sensor_values) or None,
+        sensor_defaults=args.sensor_defaults, row_order=args.row_order, flat=args.flat, unit=args.unit, response=args.response,
+    )
     render = FitRender(**{k: v for k, v in (("spp", args.spp), ("spp_grad", args.spp_grad)) if v is not None})
     given = {"solver": args.solver, "loss": args.loss, "max_steps": args.max_steps, "stop": args.stop}
-    result = fit_to_folder(
-        args.references, args.scenes, [name.strip() for name in args.free.split(",")], args.out,
-        overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, masks=args.masks, sensor=args.sensor,
-        sensor_values=_sensor_values(args.sensor_values) or None, sensor_defaults=args.sensor_defaults, row_order=args.row_order,
-        flat=args.flat, unit=args.unit, response=args.response, quiet=args.quiet,
-        overwrite=args.overwrite, resume=args.resume, start=_start_values(args.start), render=render,
-        **{k: v for k, v in given.items() if v is not None},
-    )
+    options = FitOptions(start=_start_values(args.start) or None, render=render, **{k: v for k, v in given.items() if v is not None})
+    result = fit_to_folder(files, [name.strip() for name in args.free.split(",")], args.out, options,
+                           quiet=args.quiet, overwrite=args.overwrite, resume=args.resume)
     print(format_result(result))
     code = exit_code(result.status)
     if result.status.interrupted:

@@ -26,10 +26,10 @@ from spacefit.scene.assembly import Assembly, assemble, fold_notes
 from spacefit.scene.overrides import parse_override
 from spacefit.scene.parameters import scene_keys
 from spacefit.scene.schema import Scene
-from spacefit.scene.toml import load_scene
 
 if TYPE_CHECKING:
-    from spacefit.fitting.loop import FitResult
+    from spacefit.fitting.loop import FitOptions, FitResult
+    from spacefit.fitting.observation_files import ObservationFiles
 
 
 def _say(message: str, quiet: bool) -> None:
@@ -151,86 +151,39 @@ def export_part_stl(scene: Scene, part: str, path: str | Path) -> Path:
     return out
 
 
-def fit_to_folder(
-    references: Sequence[str | Path],
-    scenes: Sequence[str | Path],
-    free: Sequence[str],
-    out_dir: str | Path,
-    *,
-    overrides: Sequence[str] = (),
-    resolution: tuple[int, int] | None = None,
-    sigma: float | None = None,
-    masks: Sequence[str | Path] = (),
-    sensor: str | Path | None = None,
-    sensor_values: Mapping[str, Any] | None = None,
-    sensor_defaults: str | None = None,
-    row_order: str | None = None,
-    flat: str | Path | None = None,
-    unit: str | None = None,
-    response: str | None = None,
-    quiet: bool = False,
-    overwrite: bool = False,
-    resume: bool = False,
-    **options: Any,
-) -> FitResult:
+def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | Path, options: FitOptions | None = None, *,
+                  quiet: bool = False, overwrite: bool = False, resume: bool = False) -> FitResult:
     """Fit the ``free`` parameters to reference image files; write fit.json, fit.toml, uncertainty.json and the plots to ``out_dir``.
 
-    Every input is checked before rendering (the folder is checked writable first); on any error
-    nothing is left behind.
+    The folder is checked writable, then every file is read and checked before rendering; on any
+    error nothing is left behind.
 
     Args:
-        references: reference images, fitted jointly, read by :meth:`Observation.from_file
-            <spacefit.fitting.problem.Observation.from_file>`: radiance (EXR, FITS with a radiance
-            ``BUNIT``), or DN (FITS, 16-bit PNG / TIFF) fitted with their sensor's noise model.
-        scenes: scene TOML files: one for all references, or one per reference in order.
+        files: the reference and scene files and how to read them (:class:`~spacefit.fitting.observation_files.ObservationFiles`);
+            none of its ``overrides`` may fix a free parameter.
         free: parameter names (see :mod:`spacefit.scene.parameters`); their start values are the first
-            scene's unless ``start`` is given.
+            scene's unless ``options.start`` gives them.
         out_dir: output folder of the report (see :mod:`spacefit.fitting.report`).
-        overrides: ``key=value`` scene overrides applied to every scene; none may fix a free parameter.
-        resolution: (width, height) px replacing every scene's ``render.resolution``; the
-            references must have that size.
-        sigma: noise standard deviation of radiance references, W m^-2 sr^-1 (residuals are divided by it).
-        masks: mask images (FITS, PNG, TIFF; nonzero = use the pixel): one for all references, or
-            one per reference in order; saturated pixels are left out in any case.
-        sensor: a JSON or TOML file of :class:`~spacefit.sensor.Sensor` fields
-            (:func:`~spacefit.sensor.read_sensor_file`) for DN references: they replace the
-            fields of each file's own sensor (FITS header or sidecar), or describe the camera of a
-            file that names none.
-        sensor_values, sensor_defaults, row_order: sensor fields replacing the file's and the
-            sensor file's, ``"illustrative"`` to fill missing sensor values with the illustrative
-            defaults, and a FITS row order (:meth:`~spacefit.fitting.problem.Observation.from_file`).
-        flat: a flat-field image (FITS, PNG, TIFF) of the DN references' detector, for all of them.
-        unit, response: ``"radiance"`` / ``"DN"`` to require one, and ``"linear"`` / ``"srgb"`` for
-            PNG and TIFF (:func:`~spacefit.imageio.read_image`).
+        options: the settings of :func:`spacefit.fitting.fit` (:class:`~spacefit.fitting.loop.FitOptions`;
+            None: its defaults), recorded in fit.json's ``inputs.options``.
         quiet: no progress display or messages on stderr.
         overwrite: replace a previous fit report in ``out_dir``.
-        resume: continue the interrupted fit whose checkpoint is in ``out_dir`` (same inputs).
-        options: keyword arguments of :func:`spacefit.fitting.fit` (``solver``, ``loss``, ``start``,
-            ``render``, ``max_steps``, ``stop``, ...), recorded in fit.json's ``inputs.options``.
+        resume: continue the interrupted fit whose checkpoint is in ``out_dir`` (same files, free
+            parameters and options but the solver's: ``solver``, ``max_steps``, ``start``, ``stop``).
 
     Returns:
         The fit's result.
     """
-    from spacefit.fitting.loop import DEFAULT_MAX_STEPS, fit  # the fitting stack: only fits pay its 1.5 s import
-    from spacefit.fitting.problem import Observation
+    from spacefit.fitting.loop import FitOptions, fit  # the fitting stack: only fits pay its 1.5 s import
     from spacefit.fitting.report import write_fit_report
     from spacefit.imageio import format_sensor_sources
 
-    prepare_output(out_dir, "fit", overwrite=overwrite, resume=resume,
-                   inputs=(*references, *scenes, *masks, *(p for p in (sensor, flat) if p is not None)))
-    for what, given in (("scene", scenes), ("mask", masks)):
-        if len(given) not in ((0, 1, len(references)) if what == "mask" else (1, len(references))):
-            raise InputError(f"give one {what} for all references or one per reference; "
-                             f"got {len(given)} {what}s for {len(references)} references.")
-    _check_not_fixed(free, overrides)
+    options = FitOptions() if options is None else options
+    prepare_output(out_dir, "fit", overwrite=overwrite, resume=resume, inputs=files.files)
+    _check_not_fixed(free, files.overrides)
     t0 = time.perf_counter()
-    scene_overrides = [*overrides, *([f"render.resolution=[{resolution[0]}, {resolution[1]}]"] if resolution else [])]
-    loaded = [load_scene(path, scene_overrides) for path in scenes]
-    observations = [Observation.from_file(path, loaded[i % len(loaded)], sensor=sensor_values, sensor_file=sensor, unit=unit,
-                                          response=response, mask=masks[i % len(masks)] if masks else None, sigma=sigma,
-                                          sensor_defaults=sensor_defaults, row_order=row_order, flat=flat)
-                    for i, path in enumerate(references)]
-    for path, obs in zip(references, observations):  # what each file said, and the source of every sensor value
+    observations = files.load()
+    for path, obs in zip(files.references, observations):  # what each file said, and the source of every sensor value
         said = "\n".join([*obs.notes, *([f"{path}: " + format_sensor_sources(obs.sensor, obs.sensor_sources)] if obs.sensor_sources else [])])
         _say(said, quiet or not said)
     images = [obs.reference for obs in observations]
@@ -242,32 +195,16 @@ def fit_to_folder(
         if not quiet:
             display(step, total)
 
-    inputs = {
-        "references": [str(path) for path in references],
-        "scene_files": [str(path) for path in scenes],
-        "free": list(free),
-        "overrides": scene_overrides,
-        "scenes": [scene.to_dict() for scene in loaded],
-        "sigma": sigma,
-        "masks": [str(path) for path in masks],
-        "sensor_file": None if sensor is None else str(sensor),
-        "sensors": [None if obs.sensor is None else obs.sensor.to_dict() for obs in observations],
-        "sensor_sources": [obs.sensor_sources for obs in observations],
-        "notes": [list(obs.notes) for obs in observations],
-        "flat": None if flat is None else str(flat),
-        "unit": unit,
-        "response": response,
-        "options": _recorded(options),
-    }
+    inputs = {**files.record(observations), "free": list(free), "options": options.to_dict()}
     checkpoint = Checkpoint(Path(out_dir) / CHECKPOINT, inputs)
     if resume:
-        options = {**options, **checkpoint.resume(options.get("max_steps", DEFAULT_MAX_STEPS))}
+        options = dataclasses.replace(options, **checkpoint.resume(options.max_steps))
         _say(f"resuming from step {checkpoint.steps} of the checkpoint in {out_dir}", quiet)
 
     created = not Path(out_dir).exists()
     t0 = time.perf_counter()
     try:
-        result = fit(observations, free, progress=progress, on_step=checkpoint.update, **options)
+        result = fit(observations, free, progress=progress, on_step=checkpoint.update, **options.keywords())
         t_fit = time.perf_counter() - t0
         if not quiet and last[0] < last[1]:
             display(last[0], last[0])  # the solve stopped before its step limit: end the display there
@@ -287,18 +224,8 @@ def fit_to_folder(
     return result
 
 
-def _recorded(options: Mapping[str, Any]) -> dict[str, Any]:
-    """Fit options as fit.json records them: the render settings as a table, a solver object by its repr."""
-    out = dict(options)
-    if dataclasses.is_dataclass(out.get("render")):
-        out["render"] = dataclasses.asdict(out["render"])
-    if "solver" in out and not isinstance(out["solver"], str):
-        out["solver"] = repr(out["solver"])
-    return out
-
-
 CHECKPOINT = "checkpoint.json"
-# Options a resumed fit may change: how it solves, not what it fits.
+# FitOptions a resumed fit may change: how it solves, not what it fits.
 SOLVE_OPTIONS = ("solver", "max_steps", "start", "stop")
 
 

@@ -138,8 +138,8 @@ def test_cli_fit_that_does_not_converge_exits_3_with_its_report(case, tmp_path, 
 
 def test_fit_to_folder_returns_the_result(case, tmp_path):
     refs = [case / "a.exr", case / "b.exr"]
-    result = fit_to_folder(refs, [case / "a.toml", case / "b.toml"], ["parts.sphere.kd"], tmp_path / "run",
-                           max_steps=3, solver="gn", quiet=True)
+    result = fit_to_folder(sf.ObservationFiles(refs, [case / "a.toml", case / "b.toml"]), ["parts.sphere.kd"], tmp_path / "run",
+                           sf.FitOptions(max_steps=3, solver="gn"), quiet=True)
     assert isinstance(result, FitResult) and result.solver == "gn"
     assert abs(result.values["parts.sphere.kd"] - TRUE_KD) < 0.01
     assert len(result.renders) == 2 and result.renders[0].shape == (32, 32, 3)
@@ -180,7 +180,8 @@ def test_error_while_writing_the_report_leaves_nothing(case, tmp_path, monkeypat
 
     monkeypatch.setattr(report, "plot_convergence", broken)
     with pytest.raises(OSError, match="disk full"):
-        fit_to_folder([case / "a.exr"], [case / "a.toml"], ["parts.sphere.kd"], tmp_path / "run", max_steps=1, quiet=True)
+        fit_to_folder(sf.ObservationFiles([case / "a.exr"], [case / "a.toml"]), ["parts.sphere.kd"], tmp_path / "run",
+                      sf.FitOptions(max_steps=1), quiet=True)
     assert not (tmp_path / "run").exists()
 
 

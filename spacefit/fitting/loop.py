@@ -153,18 +153,58 @@ class FitResult:
         return d
 
 
+@dataclass(frozen=True)
+class FitOptions:
+    """The settings of :func:`fit` as one value (:func:`~spacefit.pipeline.fit_to_folder` takes it);
+    the home of ``fit``'s defaults. ``solver``, ``max_steps`` and ``stop`` are checked on
+    construction, the rest by ``fit``'s set-up against the observations.
+
+    Attributes:
+        solver, loss, start, render, max_steps, stop, wrinkle_coordinates: :func:`fit`'s arguments of
+            those names.
+    """
+
+    solver: str | Solver = "lm"
+    loss: str = "pixel"
+    start: Mapping[str, float] | None = None
+    render: FitRender = FitRender()
+    max_steps: int = DEFAULT_MAX_STEPS
+    stop: str = "noise"
+    wrinkle_coordinates: str = "rms"
+
+    def __post_init__(self) -> None:
+        _checked_solver(self.solver, self.max_steps, self.stop)
+
+    def keywords(self) -> dict[str, Any]:
+        """The settings as :func:`fit`'s keyword arguments."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready: the render settings as a table, a solver object by its repr (fit.json's ``inputs.options``)."""
+        return {**self.keywords(), "render": dataclasses.asdict(self.render),
+                "solver": self.solver if isinstance(self.solver, str) else repr(self.solver)}
+
+
+def _checked_solver(solver: str | Solver, max_steps: int, stop: str) -> Solver:
+    """The solver object of ``solver``, after checking it, ``max_steps`` and ``stop``."""
+    engine = make_solver(solver)
+    check_count("max_steps", max_steps)
+    check_choice("stop", stop, STOP_RULES)
+    return engine
+
+
 @float64
 def fit(
     observations: Observation | Sequence[Observation],
     free: Sequence[str],
     *,
-    solver: str | Solver = "lm",
-    loss: str = "pixel",
-    start: Mapping[str, float] | None = None,
-    render: FitRender = FitRender(),
-    max_steps: int = DEFAULT_MAX_STEPS,
-    stop: str = "noise",
-    wrinkle_coordinates: str = "rms",
+    solver: str | Solver = FitOptions.solver,
+    loss: str = FitOptions.loss,
+    start: Mapping[str, float] | None = FitOptions.start,
+    render: FitRender = FitOptions.render,
+    max_steps: int = FitOptions.max_steps,
+    stop: str = FitOptions.stop,
+    wrinkle_coordinates: str = FitOptions.wrinkle_coordinates,
     progress: ProgressCallback | None = None,
     on_step: Callable[[dict[str, Any]], None] | None = None,
 ) -> FitResult:
@@ -204,9 +244,7 @@ def fit(
     Raises:
         InputError: for any bad input, before rendering.
     """
-    engine = make_solver(solver)
-    check_count("max_steps", max_steps)
-    check_choice("stop", stop, STOP_RULES)
+    engine = _checked_solver(solver, max_steps, stop)
     s = setup(observations, free, start=start, loss=loss, render=render, wrinkle_coordinates=wrinkle_coordinates)
     fp, problem = s.solver_params, s.problem
 
