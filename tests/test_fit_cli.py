@@ -238,3 +238,63 @@ def test_unwritable_output_folder(case, capsys):
     # /proc refuses new files even to root, unlike permission bits
     assert main(_args(case, Path("/proc/spacefit-test/fit"))) == 2
     assert "not writable" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(
+    ("given", "message"),
+    [
+        ({"references": []}, "`references` must name at least one reference image"),
+        ({"scenes": ["a.toml", "b.toml"]}, "give one scene for all references or one per reference; got 2 scenes for 3 references"),
+        ({"masks": ["m.png", "m.png"]}, "got 2 masks for 3 references"),
+        ({"resolution": (32,)}, r"`resolution` must be \(width, height\) px"),
+        ({"sigma": 0.0}, r"`sigma` must be in \(0, inf\] W m\^-2 sr\^-1, got 0"),
+        ({"unit": "kelvin"}, "`unit` must be one of"),
+        ({"response": "gamma"}, "`response` must be one of 'linear', 'srgb'"),
+        ({"row_order": "sideways"}, "`row_order` must be one of"),
+        ({"sensor_defaults": "typical"}, "`sensor_defaults` must be one of"),
+    ],
+)
+def test_observation_files_refuse_bad_input_on_construction(given, message):
+    with pytest.raises(sf.InputError, match=message):
+        sf.ObservationFiles(**{"references": ["a.exr", "b.exr", "c.exr"], "scenes": ["a.toml"], **given})
+
+
+@pytest.mark.parametrize(
+    ("given", "message"),
+    [({"solver": "newton"}, "newton"), ({"max_steps": 0}, "`max_steps` must be an integer >= 1, got 0"),
+     ({"stop": "never"}, "`stop` must be one of 'noise', 'tolerance'")],
+)
+def test_fit_options_refuse_bad_input_on_construction(given, message):
+    with pytest.raises(sf.InputError, match=message):
+        sf.FitOptions(**given)
+
+
+def test_observation_files_load_and_record(case):
+    files = sf.ObservationFiles([case / "a.exr", case / "b.exr"], case / "a.toml", resolution=[32, 32])
+    assert files.scenes == (case / "a.toml",) and files.resolution == (32, 32) and files.masks == ()
+    observations = files.load()
+    assert [obs.scene.render.resolution for obs in observations] == [(32, 32), (32, 32)]
+    np.testing.assert_array_equal(observations[1].reference, read_exr(case / "b.exr"))
+    record = files.record(observations)
+    assert record["references"] == [str(case / "a.exr"), str(case / "b.exr")] and record["scene_files"] == [str(case / "a.toml")]
+    assert record["overrides"] == ["render.resolution=[32, 32]"] and record["scenes"] == [observations[0].scene.to_dict()]
+    assert record["sensors"] == [None, None] and record["sigma"] is None and record["masks"] == []
+
+
+def test_checkpoint_resumes_with_another_solver_and_refuses_another_loss(tmp_path):
+    """What a resume may change is how the fit solves (solver, steps, start, stop), not what it fits."""
+    from spacefit.pipeline import Checkpoint
+
+    def inputs(options: sf.FitOptions) -> dict:
+        return {"free": ["parts.sphere.kd"], "options": options.to_dict()}
+
+    first = Checkpoint(tmp_path / "checkpoint.json", inputs(sf.FitOptions(solver="adam", render=sf.FitRender(spp=2))))
+    first.update({"loss": 2.0, "values": {"parts.sphere.kd": 0.3}})
+    first.update({"loss": 1.0, "values": {"parts.sphere.kd": 0.4}})
+    first.update({"loss": 1.5, "values": {"parts.sphere.kd": 0.35}})
+    again = Checkpoint(tmp_path / "checkpoint.json", inputs(sf.FitOptions(solver="lm", max_steps=10, render=sf.FitRender(spp=2))))
+    # the file is written at the best step (the 2nd): the steps after it are run again
+    assert again.resume(10) == {"start": {"parts.sphere.kd": 0.4}, "max_steps": 8} and again.steps == 2
+    for other in (sf.FitOptions(loss="stats", render=sf.FitRender(spp=2)), sf.FitOptions(render=sf.FitRender(spp=4))):
+        with pytest.raises(sf.InputError, match="was made with other options"):
+            Checkpoint(tmp_path / "checkpoint.json", inputs(other)).resume(10)
