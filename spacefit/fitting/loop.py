@@ -161,7 +161,8 @@ class FitOptions:
 
     Attributes:
         solver, loss, start, render, max_steps, stop, wrinkle_coordinates: :func:`fit`'s arguments of
-            those names.
+            those names; by default ``"lm"``, ``"pixel"``, the first scene's values, the scene's spp
+            (``FitRender()``), 50 steps, ``"noise"`` and ``"rms"``.
     """
 
     solver: str | Solver = "lm"
@@ -240,6 +241,8 @@ def fit(
     the current step, at once if repeated) stops the solve and returns the best point evaluated so
     far with status :attr:`Status.INTERRUPTED` (:attr:`Status.TERMINATED` for SIGTERM), no
     standard errors and no renders.
+
+    The defaults are :class:`FitOptions`'s, which holds these settings as one value.
 
     Raises:
         InputError: for any bad input, before rendering.
