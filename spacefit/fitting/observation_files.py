@@ -17,7 +17,8 @@ from spacefit.scene.toml import load_scene
 @dataclass(frozen=True)
 class ObservationFiles:
     """Reference image files and the scene files they were taken in, and how to read them; checked
-    on construction (the files themselves by :meth:`load`).
+    on construction (the files themselves by :meth:`load`). ``references``, ``scenes``, ``masks`` and
+    ``overrides`` are kept as tuples; one file (or override) may be given as itself.
 
     Attributes:
         references: reference images, fitted jointly, read by :meth:`Observation.from_file
