@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import spacefit as sf
-from spacefit.fitting.stopping import NOISE_FACTOR, NoiseFloor, loss_noise
+from spacefit.fitting.stopping import NOISE_FACTOR, ROUNDING, NoiseFloor, loss_noise
 
 # The panels case at 64 x 64 px (same field of view), 8 spp: a fit takes a few seconds.
 TINY = {"render.resolution": [64, 64], "camera.pixel_pitch_mm": 37.5, "render.spp": 8}
@@ -34,6 +34,14 @@ def test_noise_floor_accepts_only_improvements_and_stops_below_the_noise():
     assert floor.reached(4.0 + 0.5 * NOISE_FACTOR, accepted=False)  # rejected by less than the noise
     assert floor.record(3.9) and floor.predicted_decrease() == pytest.approx(0.1 * 0.1 / 6.0)
     assert floor.reached(3.9, accepted=True)
+
+
+def test_a_decrease_within_the_losss_rounding_is_no_step():
+    """Two evaluations of one float32 render sum differ in their last digits: that is no decrease."""
+    floor = NoiseFloor()
+    assert floor.record(151.1)
+    assert not floor.record(151.1 * (1.0 - 0.5 * ROUNDING)) and floor.best == 151.1 and not floor.decreases
+    assert floor.record(151.1 * (1.0 - 2.0 * ROUNDING))
 
 
 @pytest.fixture(scope="module")

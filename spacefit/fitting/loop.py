@@ -343,7 +343,8 @@ def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool) -> Status
 def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -> FitResult:
     """The :class:`FitResult` of a solve's outcome: values, errors, goodness of fit, verdict, images."""
     problem, status = s.problem, outcome.status
-    x = np.asarray(s.solver_params.to_physical(outcome.u), dtype=float)
+    # a solve that never lowered the loss returns its start, not a point its solver drifted to
+    x = np.asarray(s.solver_params.to_physical(outcome.u) if steps.moved else s.x0, dtype=float)
     n = len(x)
     x_user = np.asarray(s.to_user(jnp.asarray(x)), dtype=float)
     stderr, corr, loss_value, extras, renders, residuals, quality = np.full(n, np.nan), np.eye(n), math.nan, {}, [], [], None

@@ -28,6 +28,10 @@ import numpy as np
 # The solve stops when the expected decrease is below this fraction of the loss's noise: steps
 # that would move the parameters by less than sqrt(0.1) = 0.3 of their Monte Carlo scatter.
 NOISE_FACTOR = 0.1
+# A loss is a sum of float32 render values: two evaluations of one point, or of points a rounding
+# apart, differ in the last digits with the order of a parallel sum. A decrease smaller than this
+# fraction of the loss is no step (a solver that cannot move would otherwise "converge" by it).
+ROUNDING = 1e-6
 
 
 def loss_noise(r: np.ndarray, r_alt: np.ndarray) -> float:
@@ -57,8 +61,10 @@ class NoiseFloor:
     decreases: list[float] = field(default_factory=list)
 
     def record(self, loss: float) -> bool:
-        """Record a step's loss; True if the step is accepted (a finite loss below the best so far)."""
-        if not (math.isfinite(loss) and loss < self.best):
+        """Record a step's loss; True if the step is accepted (a finite loss below the best so far by
+        more than the loss's rounding, :data:`ROUNDING`)."""
+        below = self.best - ROUNDING * abs(self.best) if math.isfinite(self.best) else self.best
+        if not (math.isfinite(loss) and loss < below):
             return False
         if math.isfinite(self.best):
             self.decreases.append(self.best - loss)
