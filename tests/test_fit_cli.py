@@ -154,10 +154,13 @@ def test_fit_to_folder_returns_the_result(case, tmp_path):
     assert np.allclose(residual, result.residuals[1], equal_nan=True)
 
 
-def test_cli_fit_that_makes_no_progress_exits_4_and_says_so(case, tmp_path, capsys):
-    """The sun behind the sphere: kd changes no pixel, no step lowers the loss, the start is returned."""
+@pytest.mark.parametrize("reference, extra", [("a.exr", ["--set", "sun.direction=[0, 0, 1]"]), ("obs.fits", ["--max-steps", "1"])])
+def test_cli_fit_that_makes_no_progress_exits_4_and_says_so(dn_case, tmp_path, capsys, reference, extra):
+    """The sun behind the sphere (kd changes no pixel), or a fit stopped after evaluating its start:
+    no step lowers the loss, and the start is returned exactly (with a sensor too: no noise-bias
+    correction moves a fit that never moved)."""
     out = tmp_path / "run"
-    assert main(_args(case, out, "--spp", "2", "--set", "sun.direction=[0, 0, 1]")) == NO_PROGRESS
+    assert main(_args(dn_case, out, "--spp", "2", *extra, reference=reference)) == NO_PROGRESS
     report = json.loads((out / "fit.json").read_text())
     assert report["success"] is False and report["status"] == sf.Status.NO_PROGRESS.value
     assert report["values"] == report["start"]

@@ -177,6 +177,8 @@ MUTANTS = (
     # the fit's verdicts (spacefit/fitting/goodness.py, loop.py)
     Mutant("misfit-threshold-flipped", "spacefit/fitting/goodness.py", "bool(chi2_dof > limit)", "bool(chi2_dof < limit)",
            ("tests/test_goodness.py",)),
+    Mutant("no-progress-start-corrected", "spacefit/fitting/loop.py", "estimate(s, x, correct=steps.moved)", "estimate(s, x)",
+           ("tests/test_fit_cli.py",)),
     Mutant("rounding-decrease-accepted", "spacefit/fitting/stopping.py", "loss < below)", "loss < self.best)",
            ("tests/test_stopping.py",)),
     Mutant("no-progress-check-removed", "spacefit/fitting/loop.py", "    if not moved:\n        return Status.NO_PROGRESS\n", "",

@@ -353,7 +353,7 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         loss_value = steps.best_loss
         warnings = ["the fit was interrupted: the values are the best point evaluated so far, with no standard errors."]
     elif np.all(np.isfinite(x_user)):
-        x_user, cov, loss_value, extras = estimate(s, x)
+        x_user, cov, loss_value, extras = estimate(s, x, correct=steps.moved)
         stderr, corr = stderr_corr(cov)
         warnings = warnings_for(s.user, x_user, stderr, corr)
         renders = [np.asarray(img) for img in problem.renders_x(jnp.asarray(x))]

@@ -193,12 +193,13 @@ def warnings_for(params: FreeParameters, values: np.ndarray, stderr: np.ndarray,
     return out
 
 
-def estimate(s: Setup, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, float, dict[str, Any]]:
+def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray, np.ndarray, float, dict[str, Any]]:
     """User-facing values, their covariance, the loss and extras at solver values ``x``: the
     values are ``x`` moved by :func:`covariance`'s correction for the render noise's bias (where
-    it keeps every value in its range; extras ``noise_bias_correction``, solver coordinates)."""
+    ``correct`` and it keeps every value in its range; extras ``noise_bias_correction``, solver
+    coordinates). A fit that never moved passes ``correct=False``: its values are its start."""
     cov, loss_value, fisher, correction = covariance(s.problem, x)
-    if all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
+    if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
         x = x + correction
     else:
         correction = np.zeros(len(x))
