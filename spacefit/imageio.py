@@ -1,6 +1,6 @@
 """Observation files: simulated DN written as 16-bit PNG, TIFF or FITS; references read from EXR, FITS, PNG, TIFF.
 
-Writing (:func:`write_observation`) stores integer DN (from :func:`spacefit.sensor.observe`) and
+Writing (:func:`write_observation`) stores integer DN (from :func:`spacefit.fitting.formation.observe`) and
 every :class:`~spacefit.sensor.Sensor` value twice: in a JSON sidecar ``<file>.json`` and, for FITS,
 in the header (standard keys where they exist, ``HIERARCH SPACEFIT SENSOR <FIELD>`` for all).
 
@@ -43,16 +43,18 @@ import warnings
 from dataclasses import dataclass
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import colour
 import numpy as np
 import tifffile
 from astropy.io import fits
-from jaxtyping import Bool, Float
 
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, check_choice, negative_pixels
 from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, missing_for_measurement, used_fields
+
+if TYPE_CHECKING:
+    from jaxtyping import Bool, Float
 
 UNITS = {"DN": DN_UNIT, "radiance": RADIANCE_UNIT}
 RESPONSES = ("linear", "srgb")
@@ -121,7 +123,7 @@ def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata
     Args:
         path: ``.png``, ``.tif`` / ``.tiff`` or ``.fits`` / ``.fit`` / ``.fts``.
         dn: (height, width, channels) unsigned integers (1 or 3 channels for PNG) in the sensor's
-            ADC range, as :func:`spacefit.sensor.observe` returns.
+            ADC range, as :func:`spacefit.fitting.formation.observe` returns.
         sensor: the sensor that made them; all its values go to the sidecar and the FITS header.
         metadata: anything JSON can hold, added to the sidecar under ``metadata``.
     Returns:
@@ -137,7 +139,7 @@ def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata
     if kind == "png":
         if sensor.bit_depth > 16 or data.shape[2] not in (1, 3):
             raise InputError(f"{str(p)!r}: a PNG holds 1 or 3 channels of up to 16 bits; this is {data.shape[2]} channels of {sensor.bit_depth} bits: write TIFF or FITS.")
-        from spacefit.rendering.png import write_png  # Mitsuba's Bitmap: Pillow cannot write 16-bit colour
+        from spacefit.rendering.png import write_png  # deferred: Mitsuba (seconds to import), for its Bitmap: Pillow cannot write 16-bit colour
 
         write_png(p, data.astype(np.uint16))
     elif kind == "tiff":
@@ -214,7 +216,7 @@ def _header_sensor(header: fits.Header, data: np.ndarray, path: Path) -> dict[st
 
 def _wcs_row_order(header: fits.Header) -> str | None:
     """The row order a celestial WCS implies by its parity (see the module), or None without one."""
-    from astropy.wcs import WCS, FITSFixedWarning
+    from astropy.wcs import WCS, FITSFixedWarning  # deferred: astropy.wcs takes 0.7 s; only a FITS header with a WCS needs it
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FITSFixedWarning)
@@ -288,7 +290,7 @@ def _read_tiff(path: Path) -> np.ndarray:
 
 def _read_png(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     """PNG values and, for grey-alpha or RGBA files, the alpha channel."""
-    from spacefit.rendering.png import read_png  # Mitsuba's Bitmap: Pillow reduces 16-bit colour to 8 bits
+    from spacefit.rendering.png import read_png  # deferred: Mitsuba (seconds to import), for its Bitmap: Pillow reduces 16-bit colour to 8 bits
 
     data = read_png(path)
     if data.shape[2] in (2, 4):
@@ -354,7 +356,7 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
     if kind == "exr":
         if wanted == "DN":
             raise InputError(f"{str(p)!r}: an EXR holds radiance (W m^-2 sr^-1), not DN; read it with unit='radiance'.")
-        from spacefit.rendering.exr import read_exr  # imports Mitsuba, only needed for EXR
+        from spacefit.rendering.exr import read_exr  # deferred: it imports Mitsuba (seconds), only needed for EXR
 
         raw, found_unit = read_exr(p), RADIANCE_UNIT
     elif kind == "fits":
@@ -412,7 +414,7 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
 
 def _iso_time(value: Any, path: Path) -> str:
     """A FITS ``DATE-OBS`` as an ISO time (astropy Time, UTC unless it says otherwise)."""
-    from astropy.time import Time
+    from astropy.time import Time  # deferred: astropy.time takes 0.2 s; only a FITS DATE-OBS needs it
 
     try:
         return Time(str(value).strip()).isot

@@ -1,4 +1,4 @@
-"""The camera after the radiance render: optics' blur, photo-electrons, electronics, noise, digitising.
+"""The camera after the radiance render, described: optics' blur, photo-electrons, electronics, noise, digitising.
 
 A render is entrance-pupil radiance L (W m^-2 sr^-1, per channel). The sensor turns it into digital
 numbers (DN) in this order:
@@ -20,20 +20,23 @@ numbers (DN) in this order:
    ``psf_sigma_px`` for everything else (aberrations, jitter, charge diffusion): the optical
    convention, a PSF on the focal plane before the pixel integrates it. The render is already
    integrated over each pixel (its pixel filter), so the PSF is applied as its continuous transfer
-   function on the pixel grid (:func:`fourier_filter`): ``exp(-2 pi^2 sigma^2 f^2)`` for the
+   function on the pixel grid (:func:`~spacefit.fitting.formation.fourier_filter`): ``exp(-2 pi^2 sigma^2 f^2)`` for the
    Gaussian and, for the Airy pattern, the diffraction-limited MTF of a circular pupil (Goodman,
    "Introduction to Fourier Optics", 3rd ed., eq. 6-32), which a pixel grid samples only below its
    Nyquist frequency (half a cycle per px): an Airy disc far smaller than a pixel changes nothing.
    Taken as the same across the field (shift-invariant).
    A flat-field map (the detector's relative response, ``flat=``) multiplies the signal after it.
-4. **Noise and digitising** (:func:`observe`): Poisson shot noise in electrons, the full well's clip,
+4. **Noise and digitising** (:func:`~spacefit.fitting.formation.observe`): Poisson shot noise in electrons, the full well's clip,
    Gaussian read noise (electrons rms), ``DN = bias + gain * electrons``, rounding to the nearest
    integer and the ADC's range [0, 2^bits - 1].
 
-:func:`expected_dn` is steps 1 to 3 in DN: the noise-free mean, linear in the radiance and written
-in JAX so that a fit can differentiate through it; :func:`noise_variance_dn` is the
-Poisson-Gaussian variance of step 4 (Janesick 2007, "Photon Transfer", ch. 2), and
-:func:`saturated_mask` marks the pixels where the linear model does not hold.
+This module is NumPy only (reading a FITS file needs no JAX): the :class:`Sensor`, its units, the
+per-pixel factors of steps 1 and 2, the Airy pattern and its transfer function, the PSF's reach and
+width, the flat field's check, quantising and :func:`saturated_mask`, which marks the pixels where
+the linear model does not hold. The image formation itself is in JAX, in
+:mod:`spacefit.fitting.formation`: ``expected_dn`` (steps 1 to 3 in DN, the noise-free mean, linear
+in the radiance, which a fit differentiates), ``noise_variance_dn`` (the Poisson-Gaussian variance of
+step 4, Janesick 2007, "Photon Transfer", ch. 2) and ``observe`` (a simulated exposure).
 """
 
 from __future__ import annotations
@@ -42,19 +45,19 @@ import dataclasses
 import json
 import math
 import tomllib
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import jax
-import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float
 from scipy import constants, optimize, special
 
 from spacefit.errors import InputError, InputTypeError, check_choice, check_range, quote
 from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
+
+if TYPE_CHECKING:
+    from jaxtyping import Bool, Float
 
 RADIANCE_UNIT = "W m^-2 sr^-1"
 """The unit of rendered images and radiance references."""
@@ -254,18 +257,6 @@ def read_sensor_file(path: str | Path) -> dict[str, Any]:
     return dict(fields)
 
 
-def _check_radiance(radiance: Any, intrinsics: Intrinsics) -> None:
-    shape = np.shape(radiance)
-    if len(shape) != 3 or shape[:2] != (intrinsics.height, intrinsics.width):
-        raise InputError(f"`radiance` must be (height, width, channels) = ({intrinsics.height}, {intrinsics.width}, c) for these intrinsics, got shape {shape}.")
-    if isinstance(radiance, jax.core.Tracer):
-        return  # values are unknown while JAX traces; they were checked where they came from
-    values = np.asarray(radiance)
-    bad = int(np.count_nonzero(~np.isfinite(values))) + int(np.count_nonzero(values < 0))
-    if bad:
-        raise InputError(f"`radiance` must be finite and >= 0 W m^-2 sr^-1; {bad} values are negative, NaN or infinite.")
-
-
 def pixel_etendue(sensor: Sensor, intrinsics: Intrinsics) -> Float[np.ndarray, "h w"]:
     """Etendue ``A cos(theta) Omega`` (m^2 sr) of each pixel through the aperture.
 
@@ -330,44 +321,16 @@ def airy_transfer(rho: Float[np.ndarray, "..."]) -> Float[np.ndarray, "..."]:
     return 2.0 / np.pi * (np.arccos(r) - r * np.sqrt(1.0 - r**2))
 
 
-def gaussian_transfer(sigma_px: Float[Array, ""], fy: Float[Array, "..."], fx: Float[Array, "..."]) -> Float[Array, "..."]:
-    """The Fourier transform of a continuous 2-D Gaussian of ``sigma_px`` at frequencies (cycles
-    per px) fy, fx: ``exp(-2 pi^2 sigma^2 (fx^2 + fy^2))``. JAX, differentiable in sigma."""
-    return jnp.exp(-2.0 * jnp.pi**2 * sigma_px**2 * (fx**2 + fy**2))
-
-
-def fourier_filter(image: Float[Array, "h w c"], transfer: Callable[[np.ndarray, np.ndarray], Array], pad: int) -> Float[Array, "h w c"]:
-    """``image`` multiplied in Fourier space by ``transfer(fy, fx)`` (frequencies in cycles per px,
-    shaped (H, 1, 1) and (1, W, 1); the result broadcasts against (H, W, channels)), after
-    ``pad`` px of black sky on every side so that nothing wraps round: a convolution with a kernel
-    that reaches ``pad`` px at most, no light entering from outside. The fit's blur and shift
-    (:mod:`spacefit.fitting.nuisance`) and the sensor's PSF share it."""
-    h, w = image.shape[:2]
-    padded = jnp.pad(image, ((pad, pad), (pad, pad), (0, 0)))
-    fy = np.fft.fftfreq(padded.shape[0])[:, None, None]  # NumPy: known while JAX traces, for NumPy transfers too
-    fx = np.fft.fftfreq(padded.shape[1])[None, :, None]
-    filtered = jnp.real(jnp.fft.ifft2(jnp.fft.fft2(padded, axes=(0, 1)) * transfer(fy, fx), axes=(0, 1)))
-    return filtered[pad : pad + h, pad : pad + w]
+def diffraction_cutoff_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> float:
+    """The circular pupil's cut-off frequency D / lambda in cycles per px at one wavelength: where
+    :func:`airy_transfer` reaches 0."""
+    return 1.0 / (np.pi * _airy_px(sensor, intrinsics, wavelength_m))
 
 
 def psf_reach_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> int:
     """How far (px) the PSF reaches: 5 sigma of the Gaussian plus the radius holding 99 % of the Airy pattern's energy."""
     airy = _airy_radius(PSF_ENERGY) * _airy_px(sensor, intrinsics, wavelength_m) if sensor.diffraction else 0.0
     return math.ceil(GAUSSIAN_RADIUS_SIGMA * sensor.psf_sigma_px + airy)
-
-
-def psf_transfer(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> Callable[[np.ndarray, np.ndarray], Array]:
-    """The PSF's transfer function ``(fy, fx) -> T`` (cycles per px) at one wavelength: the
-    continuous Gaussian's times, with diffraction, the circular pupil's MTF (:func:`airy_transfer`)."""
-    cutoff = 1.0 / (np.pi * _airy_px(sensor, intrinsics, wavelength_m))  # D / lambda in cycles per px
-
-    def transfer(fy: np.ndarray, fx: np.ndarray) -> Array:
-        gauss = gaussian_transfer(sensor.psf_sigma_px, fy, fx)
-        if not sensor.diffraction:
-            return gauss
-        return gauss * airy_transfer(np.hypot(fx, fy) / cutoff)
-
-    return transfer
 
 
 def psf_rms_px(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> float:
@@ -398,72 +361,6 @@ def check_flat(flat: Any, shape: tuple[int, ...], where: str = "`flat`") -> np.n
     return f
 
 
-def electrons_fn(sensor: Sensor, intrinsics: Intrinsics, channels: int,
-                 flat: Float[np.ndarray, "h w c"] | None = None) -> Callable[[Float[Array, "h w c"]], Float[Array, "h w c"]]:
-    """:func:`expected_electrons` as a JAX function of radiance, with the sensor's per-pixel factors
-    and PSF transfer computed once and no check of the values (a fit's model may dip below zero).
-    ``flat``: a flat-field map (checked, :func:`check_flat`) multiplying the signal after the PSF."""
-    factor = electrons_per_radiance(sensor, intrinsics, channels)
-    response = 1.0 if flat is None else check_flat(flat, (intrinsics.height, intrinsics.width, channels))
-    waves = sensor.wavelengths(channels)
-    transfers = [psf_transfer(sensor, intrinsics, w) for w in waves]
-    pad = max(psf_reach_px(sensor, intrinsics, w) for w in waves)
-
-    def electrons(radiance: Float[Array, "h w c"]) -> Float[Array, "h w c"]:
-        e = jnp.asarray(radiance) * factor
-        if pad == 0:
-            return e * response
-        return fourier_filter(e, lambda fy, fx: jnp.concatenate([t(fy, fx) for t in transfers], axis=-1), pad) * response
-
-    return electrons
-
-
-def dn_fn(sensor: Sensor, intrinsics: Intrinsics, channels: int,
-          flat: Float[np.ndarray, "h w c"] | None = None) -> Callable[[Float[Array, "h w c"]], Float[Array, "h w c"]]:
-    """:func:`expected_dn` as a JAX function of radiance, set up once (see :func:`electrons_fn`)."""
-    electrons = electrons_fn(sensor, intrinsics, channels, flat)
-    return lambda radiance: sensor.bias_dn + sensor.gain_dn_per_electron * electrons(radiance)
-
-
-def expected_electrons(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Intrinsics) -> Float[Array, "h w c"]:
-    """Mean photo-electrons per pixel (steps 1 to 3 of the module): collected, converted, blurred.
-
-    Args:
-        radiance: (height, width, channels) entrance-pupil radiance, W m^-2 sr^-1, >= 0; NumPy or
-            JAX (linear in it; light outside the image is not blurred in).
-    Returns:
-        (height, width, channels) float64 JAX array of electrons. Not clipped at the full well.
-    """
-    _check_radiance(radiance, intrinsics)
-    return electrons_fn(sensor, intrinsics, np.shape(radiance)[2])(radiance)
-
-
-def expected_dn(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Intrinsics,
-                flat: Float[np.ndarray, "..."] | None = None) -> Float[Array, "h w c"]:
-    """Noise-free mean DN, ``bias + gain * expected_electrons``: not rounded, not clipped (see :func:`saturated_mask`).
-
-    Args:
-        radiance: (height, width, channels) entrance-pupil radiance, W m^-2 sr^-1 (NumPy or JAX).
-        flat: a flat-field map, (height, width) or (height, width, channels), > 0: the detector's
-            relative response, multiplying the signal above the bias (None: uniform).
-    Returns:
-        (height, width, channels) float64 JAX array, DN.
-    """
-    _check_radiance(radiance, intrinsics)
-    return dn_fn(sensor, intrinsics, np.shape(radiance)[2], flat)(radiance)
-
-
-def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Array, "..."]:
-    """Predicted variance (DN^2) of an observed DN about its mean ``expected`` (any shape, DN).
-
-    ``gain^2 (electrons + read_noise^2) + 1/12``: Poisson shot noise (variance = mean electrons,
-    ``(expected - bias) / gain``), Gaussian read noise and the rounding to integers (uniform, 1/12).
-    Meaningless where :func:`saturated_mask` holds.
-    """
-    g = sensor.gain_dn_per_electron
-    return g * jnp.maximum(jnp.asarray(expected) - sensor.bias_dn, 0.0) + (g * sensor.read_noise_electrons) ** 2 + 1.0 / 12.0
-
-
 def quantise(dn: Float[np.ndarray, "..."], sensor: Sensor) -> np.ndarray:
     """Round DN to the nearest integer (halves to even) and clip to the ADC's [0, 2^bits - 1].
 
@@ -472,26 +369,6 @@ def quantise(dn: Float[np.ndarray, "..."], sensor: Sensor) -> np.ndarray:
     """
     dtype = np.uint16 if sensor.bit_depth <= 16 else np.uint32
     return np.clip(np.rint(np.asarray(dn, dtype=float)), 0, sensor.adc_max_dn).astype(dtype)
-
-
-def observe(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: Intrinsics, seed: int) -> np.ndarray:
-    """One simulated exposure: DN with shot and read noise, the full well, rounding and the ADC's range.
-
-    Args:
-        radiance: (height, width, channels) entrance-pupil radiance, W m^-2 sr^-1.
-        seed: seed of the noise (NumPy's default generator); the same seed gives the same image.
-    Returns:
-        (height, width, channels) uint16 (bit_depth <= 16) or uint32 DN.
-    """
-    mean = np.maximum(np.asarray(expected_electrons(radiance, sensor, intrinsics)), 0.0)  # FFT round-off leaves -1e-12 in black pixels
-    rng = np.random.default_rng(seed)
-    saturating = sensor.full_well_electrons if sensor.full_well_electrons is not None else (sensor.adc_max_dn - sensor.bias_dn) / sensor.gain_dn_per_electron
-    # A mean of 4 saturation levels saturates with certainty; the cap keeps Poisson's argument finite.
-    electrons = rng.poisson(np.minimum(mean, 4.0 * saturating + 1e3)).astype(float)
-    if sensor.full_well_electrons is not None:
-        electrons = np.minimum(electrons, sensor.full_well_electrons)
-    electrons += rng.normal(0.0, sensor.read_noise_electrons, size=electrons.shape)
-    return quantise(sensor.bias_dn + sensor.gain_dn_per_electron * electrons, sensor)
 
 
 def saturated_mask(dn: Float[np.ndarray, "..."], sensor: Sensor) -> Bool[np.ndarray, "..."]:

@@ -8,11 +8,12 @@ import tifffile
 from astropy.io import fits
 
 from spacefit.errors import InputError
+from spacefit.fitting.formation import observe
 from spacefit.geometry.frames import Intrinsics
 from spacefit.imageio import RowOrderWarning, format_sensor_sources, read_image, sensor_of, sidecar_path, write_observation
 from spacefit.rendering.exr import write_exr
 from spacefit.rendering.png import write_png
-from spacefit.sensor import Sensor, observe
+from spacefit.sensor import Sensor
 
 SENSOR = Sensor(exposure_time_s=2e-3, gain_dn_per_electron=0.5, bias_dn=50.0, bit_depth=12, full_well_electrons=None, wavelength_m=(6e-7, 5.5e-7, 4.5e-7), psf_sigma_px=0.7)
 

@@ -9,12 +9,13 @@ import numpy as np
 import pytest
 
 import spacefit as sf
+from spacefit.fitting.formation import expected_dn
 from spacefit.fitting.nuisance import blur, shift
 from spacefit.fitting.problem import setup
 from spacefit.geometry.frames import Intrinsics
 from spacefit.precision import float64
 from spacefit.scene.parameters import ATTITUDE, IMAGE, NUISANCES, POSITION, ROLL, fd_step, observation_name, scene_value, scene_with_values
-from spacefit.sensor import Sensor, expected_dn
+from spacefit.sensor import Sensor
 
 # The panels case at 48 x 48 px (same field of view), 4 spp: renders take milliseconds.
 TINY = {"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50.0, "render.spp": 4, "render.seed": 1}

@@ -1,5 +1,6 @@
 """The parameter registry as data: every entry's getter and setter agree with the scene file, the
-group tuples come from the entries, values are range-checked by name, the registry imports no JAX,
+group tuples come from the entries, values are range-checked by name, the registry and the light
+modules (sensor, image files, scene files, renderer) import no JAX,
 and the package's module-level imports have no circle."""
 
 from __future__ import annotations
@@ -27,6 +28,17 @@ def test_the_registry_imports_neither_jax_nor_mitsuba():
             "p.scene_with_values(s, {'sun.elevation_deg': 10.0, 'target.attitude_z_deg': 1.0, 'parts.panels.alpha': 0.2})\n"
             "p.parameter_table()\n"
             "print(sorted(m for m in ('jax', 'jaxtyping', 'mitsuba', 'drjit', 'optimistix') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
+                         env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "[]"
+
+
+@pytest.mark.parametrize("module", ["spacefit.sensor", "spacefit.imageio", "spacefit.scene.toml", "spacefit.rendering.renderer"])
+def test_the_light_modules_import_no_jax(module):
+    """Reading a sensor file or a FITS image, loading a scene and rendering load no JAX: only the
+    fitting seam (spacefit.fitting, the image formation included) and the rendering bridge do."""
+    code = f"import sys, {module}\nprint(sorted(m for m in sys.modules if m.split('.')[0] in ('jax', 'jaxtyping')))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
     assert out.returncode == 0, out.stderr

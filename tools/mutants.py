@@ -137,7 +137,7 @@ MUTANTS = (
            '"read_noise_electrons": ("READNOIS", "RON"),', ("tests/test_imageio.py",)),
     Mutant("vignetting-applied-when-off", "spacefit/sensor.py",
            "return (not self.calibrated) if self.vignetting is None else self.vignetting", "return True", ("tests/test_sensor.py",)),
-    Mutant("psf-integrated-over-the-pixel-again", "spacefit/sensor.py", "sigma_px**2 * (fx**2 + fy**2))",
+    Mutant("psf-integrated-over-the-pixel-again", "spacefit/fitting/formation.py", "sigma_px**2 * (fx**2 + fy**2))",
            "sigma_px**2 * (fx**2 + fy**2)) * jnp.sinc(fx) * jnp.sinc(fy)",
            ("tests/test_sensor.py", "tests/test_nuisance.py::test_blur_is_the_sensors_continuous_gaussian_and_keeps_the_light")),
     # back faces, closed meshes and folded wrinkles (issues 11 and 13)

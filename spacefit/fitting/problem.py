@@ -21,6 +21,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_choice, check_count, negative_pixels, quote
+from spacefit.fitting.formation import dn_fn, noise_variance_dn
 from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.nuisance import image_model as image_model_of
 from spacefit.fitting.params import FreeParameters, free_parameters
@@ -29,7 +30,7 @@ from spacefit.rendering.derivatives import render_chain
 from spacefit.rendering.renderer import PartImage
 from spacefit.scene.assembly import assemble
 from spacefit.scene.schema import FILTER_RADIUS_PX, Scene, check_scene
-from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, check_flat, dn_fn, noise_variance_dn, psf_rms_px, saturated_mask
+from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, check_flat, psf_rms_px, read_sensor_file, saturated_mask
 from spacefit.scene.parameters import GEOMETRY, G_of, observation_of, rms_of, scene_value, scene_with_values
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
@@ -44,8 +45,8 @@ class Observation:
     ``sigma``: the reference's noise standard deviation (scalar or per pixel), or None.
     ``sensor``: the camera that measured it, if known: the reference is then in DN (as
     :func:`~spacefit.imageio.read_image` gives it), the model is the sensor's
-    :func:`~spacefit.sensor.expected_dn` of the render, each pixel is weighted by its predicted
-    Poisson-Gaussian noise (:func:`~spacefit.sensor.noise_variance_dn` at the model's DN, held fixed in derivatives),
+    :func:`~spacefit.fitting.formation.expected_dn` of the render, each pixel is weighted by its predicted
+    Poisson-Gaussian noise (:func:`~spacefit.fitting.formation.noise_variance_dn` at the model's DN, held fixed in derivatives),
     saturated pixels are left out, and the standard errors are the noise model's (J^T W J)^-1
     instead of the sandwich. ``sigma`` must then be None.
     ``mask``: which values to fit, (h, w) or (h, w, channels) bool, True = use (None: all). The
@@ -55,7 +56,7 @@ class Observation:
     ...; :func:`~spacefit.imageio.sensor_of`), None for a sensor given whole.
     ``notes``: what a report should say about the file (e.g. a row order it did not state).
     ``flat``: with a sensor, a flat-field map ((h, w) or (h, w, channels), > 0) multiplying the
-    expected signal above the bias (:func:`~spacefit.sensor.expected_dn`); None: uniform.
+    expected signal above the bias (:func:`~spacefit.fitting.formation.expected_dn`); None: uniform.
     :meth:`from_file` reads all of these from an image file.
     """
 
@@ -113,8 +114,7 @@ class Observation:
                 a ``sensor`` for radiance or a ``sigma`` for DN, and every refusal of ``read_image``,
                 naming the file.
         """
-        from spacefit.imageio import read_image, sensor_of  # FITS and TIFF readers: only files need them
-        from spacefit.sensor import read_sensor_file
+        from spacefit.imageio import read_image, sensor_of  # deferred: FITS and TIFF readers (astropy, tifffile): only files need them
 
         image = read_image(path, unit=unit, response=response, mask=mask, sigma=sigma, row_order=row_order)
         notes = tuple(image.metadata["notes"])

@@ -8,7 +8,7 @@ coefficients apply as they are. An ideal (pinhole) point (x, y) is seen at
     y_d = y (1 + k1 r^2 + k2 r^4 + k3 r^6) + p1 (r^2 + 2 y^2) + 2 p2 x y,     r^2 = x^2 + y^2.
 
 The renderer is a pinhole camera; distortion is applied *after* the render by resampling its
-radiance image (:func:`distort_image`). Radiance is unchanged along a ray, so resampling it is
+radiance image (:func:`spacefit.fitting.formation.distort_image`, in JAX; this module is NumPy). Radiance is unchanged along a ray, so resampling it is
 right; the pixels' solid angles (:func:`~spacefit.geometry.frames.pixel_solid_angles`) stay the
 pinhole's, which is off by the distortion's local area change (about 1 + 4 k1 r^2 for the radial term).
 
@@ -20,13 +20,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import jax.numpy as jnp
+from typing import TYPE_CHECKING
+
 import numpy as np
-from jax.scipy.ndimage import map_coordinates
-from jaxtyping import Array, Float
 
 from spacefit.errors import check_finite
-from spacefit.geometry.frames import Intrinsics
+
+if TYPE_CHECKING:
+    from jaxtyping import Float
 
 UNDISTORT_TOLERANCE = 1e-12
 """Newton's iteration stops when the distorted point is reproduced within this (normalised units)."""
@@ -93,28 +94,3 @@ def _newton(x: np.ndarray, y: np.ndarray, target: np.ndarray, coefficients: Dist
         x = x - (dyy * ex - dxy * ey) / det
         y = y - (dxx * ey - dxy * ex) / det
     return x, y
-
-
-def distort_image(image: Float[Array, "h w c"], intrinsics: Intrinsics, coefficients: Distortion) -> Float[Array, "h w c"]:
-    """Resample a rendered pinhole image into the pixels of the distorted camera (bilinear).
-
-    Each output pixel's centre is undistorted to the pinhole image and the radiance there is
-    interpolated bilinearly from the four nearest pixel centres; points outside the image (or where
-    the distortion has no inverse) read 0, black space. Linear in ``image`` (NumPy or JAX), so a
-    fit can differentiate through it.
-
-    Returns:
-        (height, width, channels) float JAX array.
-    """
-    f_px = intrinsics.focal_px
-    u0, v0 = intrinsics.principal_point
-    v, u = np.mgrid[0 : intrinsics.height, 0 : intrinsics.width] + 0.5
-    ideal = undistort(np.stack([(u - u0) / f_px, (v - v0) / f_px], axis=-1), coefficients)
-    ideal = np.nan_to_num(ideal, nan=-1e6)  # no inverse: far outside the image, so it reads 0
-    rows = ideal[..., 1] * f_px + v0 - 0.5  # array index of the pixel whose centre is at v
-    cols = ideal[..., 0] * f_px + u0 - 0.5
-    img = jnp.asarray(image)
-    return jnp.stack(
-        [map_coordinates(img[..., c], [rows, cols], order=1, mode="constant", cval=0.0) for c in range(img.shape[-1])],
-        axis=-1,
-    )

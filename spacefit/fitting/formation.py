@@ -1,0 +1,192 @@
+"""The image a sensor forms from a radiance render, in JAX: the noise-free mean a fit differentiates,
+its noise variance, and a simulated exposure.
+
+The sensor's description, its units and the NumPy parts of the model (the etendue, the electrons
+per radiance, the Airy pattern and its MTF, the PSF's reach and width, quantising, saturation) are
+in :mod:`spacefit.sensor`, whose docstring gives the model's steps; here they are put together:
+
+- :func:`fourier_filter` applies a transfer function on the pixel grid (the sensor's PSF,
+  :func:`psf_transfer`, and the fit's blur and shift, :mod:`spacefit.fitting.nuisance`);
+- :func:`expected_dn` (steps 1 to 3 in DN, linear in the radiance) and :func:`noise_variance_dn`
+  (the Poisson-Gaussian variance of step 4, Janesick 2007, "Photon Transfer", ch. 2), with
+  :func:`dn_fn` setting the model up once for a fit;
+- :func:`observe`: one simulated exposure through :func:`expected_electrons` (step 4's noise, the
+  full well and the ADC);
+- :func:`distort_image`: a pinhole render resampled into a distorted camera's pixels
+  (:mod:`spacefit.geometry.distortion` describes the lens).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jax.scipy.ndimage import map_coordinates
+from jaxtyping import Array, Float
+
+from spacefit.errors import InputError
+from spacefit.geometry.distortion import Distortion, undistort
+from spacefit.geometry.frames import Intrinsics
+from spacefit.sensor import (
+    Sensor, airy_transfer, check_flat, diffraction_cutoff_px, electrons_per_radiance, psf_reach_px, quantise,
+)
+
+
+def _check_radiance(radiance: Any, intrinsics: Intrinsics) -> None:
+    shape = np.shape(radiance)
+    if len(shape) != 3 or shape[:2] != (intrinsics.height, intrinsics.width):
+        raise InputError(f"`radiance` must be (height, width, channels) = ({intrinsics.height}, {intrinsics.width}, c) for these intrinsics, got shape {shape}.")
+    if isinstance(radiance, jax.core.Tracer):
+        return  # values are unknown while JAX traces; they were checked where they came from
+    values = np.asarray(radiance)
+    bad = int(np.count_nonzero(~np.isfinite(values))) + int(np.count_nonzero(values < 0))
+    if bad:
+        raise InputError(f"`radiance` must be finite and >= 0 W m^-2 sr^-1; {bad} values are negative, NaN or infinite.")
+
+
+def gaussian_transfer(sigma_px: Float[Array, ""], fy: Float[Array, "..."], fx: Float[Array, "..."]) -> Float[Array, "..."]:
+    """The Fourier transform of a continuous 2-D Gaussian of ``sigma_px`` at frequencies (cycles
+    per px) fy, fx: ``exp(-2 pi^2 sigma^2 (fx^2 + fy^2))``. JAX, differentiable in sigma."""
+    return jnp.exp(-2.0 * jnp.pi**2 * sigma_px**2 * (fx**2 + fy**2))
+
+
+def fourier_filter(image: Float[Array, "h w c"], transfer: Callable[[np.ndarray, np.ndarray], Array], pad: int) -> Float[Array, "h w c"]:
+    """``image`` multiplied in Fourier space by ``transfer(fy, fx)`` (frequencies in cycles per px,
+    shaped (H, 1, 1) and (1, W, 1); the result broadcasts against (H, W, channels)), after
+    ``pad`` px of black sky on every side so that nothing wraps round: a convolution with a kernel
+    that reaches ``pad`` px at most, no light entering from outside. The fit's blur and shift
+    (:mod:`spacefit.fitting.nuisance`) and the sensor's PSF share it."""
+    h, w = image.shape[:2]
+    padded = jnp.pad(image, ((pad, pad), (pad, pad), (0, 0)))
+    fy = np.fft.fftfreq(padded.shape[0])[:, None, None]  # NumPy: known while JAX traces, for NumPy transfers too
+    fx = np.fft.fftfreq(padded.shape[1])[None, :, None]
+    filtered = jnp.real(jnp.fft.ifft2(jnp.fft.fft2(padded, axes=(0, 1)) * transfer(fy, fx), axes=(0, 1)))
+    return filtered[pad : pad + h, pad : pad + w]
+
+
+def psf_transfer(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> Callable[[np.ndarray, np.ndarray], Array]:
+    """The PSF's transfer function ``(fy, fx) -> T`` (cycles per px) at one wavelength: the
+    continuous Gaussian's times, with diffraction, the circular pupil's MTF (:func:`~spacefit.sensor.airy_transfer`)."""
+    cutoff = diffraction_cutoff_px(sensor, intrinsics, wavelength_m)  # D / lambda in cycles per px
+
+    def transfer(fy: np.ndarray, fx: np.ndarray) -> Array:
+        gauss = gaussian_transfer(sensor.psf_sigma_px, fy, fx)
+        if not sensor.diffraction:
+            return gauss
+        return gauss * airy_transfer(np.hypot(fx, fy) / cutoff)
+
+    return transfer
+
+
+def electrons_fn(sensor: Sensor, intrinsics: Intrinsics, channels: int,
+                 flat: Float[np.ndarray, "h w c"] | None = None) -> Callable[[Float[Array, "h w c"]], Float[Array, "h w c"]]:
+    """:func:`expected_electrons` as a JAX function of radiance, with the sensor's per-pixel factors
+    and PSF transfer computed once and no check of the values (a fit's model may dip below zero).
+    ``flat``: a flat-field map (checked, :func:`~spacefit.sensor.check_flat`) multiplying the signal after the PSF."""
+    factor = electrons_per_radiance(sensor, intrinsics, channels)
+    response = 1.0 if flat is None else check_flat(flat, (intrinsics.height, intrinsics.width, channels))
+    waves = sensor.wavelengths(channels)
+    transfers = [psf_transfer(sensor, intrinsics, w) for w in waves]
+    pad = max(psf_reach_px(sensor, intrinsics, w) for w in waves)
+
+    def electrons(radiance: Float[Array, "h w c"]) -> Float[Array, "h w c"]:
+        e = jnp.asarray(radiance) * factor
+        if pad == 0:
+            return e * response
+        return fourier_filter(e, lambda fy, fx: jnp.concatenate([t(fy, fx) for t in transfers], axis=-1), pad) * response
+
+    return electrons
+
+
+def dn_fn(sensor: Sensor, intrinsics: Intrinsics, channels: int,
+          flat: Float[np.ndarray, "h w c"] | None = None) -> Callable[[Float[Array, "h w c"]], Float[Array, "h w c"]]:
+    """:func:`expected_dn` as a JAX function of radiance, set up once (see :func:`electrons_fn`)."""
+    electrons = electrons_fn(sensor, intrinsics, channels, flat)
+    return lambda radiance: sensor.bias_dn + sensor.gain_dn_per_electron * electrons(radiance)
+
+
+def expected_electrons(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Intrinsics) -> Float[Array, "h w c"]:
+    """Mean photo-electrons per pixel (steps 1 to 3 of :mod:`spacefit.sensor`): collected, converted, blurred.
+
+    Args:
+        radiance: (height, width, channels) entrance-pupil radiance, W m^-2 sr^-1, >= 0; NumPy or
+            JAX (linear in it; light outside the image is not blurred in).
+    Returns:
+        (height, width, channels) float64 JAX array of electrons. Not clipped at the full well.
+    """
+    _check_radiance(radiance, intrinsics)
+    return electrons_fn(sensor, intrinsics, np.shape(radiance)[2])(radiance)
+
+
+def expected_dn(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Intrinsics,
+                flat: Float[np.ndarray, "..."] | None = None) -> Float[Array, "h w c"]:
+    """Noise-free mean DN, ``bias + gain * expected_electrons``: not rounded, not clipped (see :func:`~spacefit.sensor.saturated_mask`).
+
+    Args:
+        radiance: (height, width, channels) entrance-pupil radiance, W m^-2 sr^-1 (NumPy or JAX).
+        flat: a flat-field map, (height, width) or (height, width, channels), > 0: the detector's
+            relative response, multiplying the signal above the bias (None: uniform).
+    Returns:
+        (height, width, channels) float64 JAX array, DN.
+    """
+    _check_radiance(radiance, intrinsics)
+    return dn_fn(sensor, intrinsics, np.shape(radiance)[2], flat)(radiance)
+
+
+def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Array, "..."]:
+    """Predicted variance (DN^2) of an observed DN about its mean ``expected`` (any shape, DN).
+
+    ``gain^2 (electrons + read_noise^2) + 1/12``: Poisson shot noise (variance = mean electrons,
+    ``(expected - bias) / gain``), Gaussian read noise and the rounding to integers (uniform, 1/12).
+    Meaningless where :func:`~spacefit.sensor.saturated_mask` holds.
+    """
+    g = sensor.gain_dn_per_electron
+    return g * jnp.maximum(jnp.asarray(expected) - sensor.bias_dn, 0.0) + (g * sensor.read_noise_electrons) ** 2 + 1.0 / 12.0
+
+
+def observe(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: Intrinsics, seed: int) -> np.ndarray:
+    """One simulated exposure: DN with shot and read noise, the full well, rounding and the ADC's range.
+
+    Args:
+        radiance: (height, width, channels) entrance-pupil radiance, W m^-2 sr^-1.
+        seed: seed of the noise (NumPy's default generator); the same seed gives the same image.
+    Returns:
+        (height, width, channels) uint16 (bit_depth <= 16) or uint32 DN.
+    """
+    mean = np.maximum(np.asarray(expected_electrons(radiance, sensor, intrinsics)), 0.0)  # FFT round-off leaves -1e-12 in black pixels
+    rng = np.random.default_rng(seed)
+    saturating = sensor.full_well_electrons if sensor.full_well_electrons is not None else (sensor.adc_max_dn - sensor.bias_dn) / sensor.gain_dn_per_electron
+    # A mean of 4 saturation levels saturates with certainty; the cap keeps Poisson's argument finite.
+    electrons = rng.poisson(np.minimum(mean, 4.0 * saturating + 1e3)).astype(float)
+    if sensor.full_well_electrons is not None:
+        electrons = np.minimum(electrons, sensor.full_well_electrons)
+    electrons += rng.normal(0.0, sensor.read_noise_electrons, size=electrons.shape)
+    return quantise(sensor.bias_dn + sensor.gain_dn_per_electron * electrons, sensor)
+
+
+def distort_image(image: Float[Array, "h w c"], intrinsics: Intrinsics, coefficients: Distortion) -> Float[Array, "h w c"]:
+    """Resample a rendered pinhole image into the pixels of the distorted camera (bilinear).
+
+    Each output pixel's centre is undistorted to the pinhole image and the radiance there is
+    interpolated bilinearly from the four nearest pixel centres; points outside the image (or where
+    the distortion has no inverse) read 0, black space. Linear in ``image`` (NumPy or JAX), so a
+    fit can differentiate through it.
+
+    Returns:
+        (height, width, channels) float JAX array.
+    """
+    f_px = intrinsics.focal_px
+    u0, v0 = intrinsics.principal_point
+    v, u = np.mgrid[0 : intrinsics.height, 0 : intrinsics.width] + 0.5
+    ideal = undistort(np.stack([(u - u0) / f_px, (v - v0) / f_px], axis=-1), coefficients)
+    ideal = np.nan_to_num(ideal, nan=-1e6)  # no inverse: far outside the image, so it reads 0
+    rows = ideal[..., 1] * f_px + v0 - 0.5  # array index of the pixel whose centre is at v
+    cols = ideal[..., 0] * f_px + u0 - 0.5
+    img = jnp.asarray(image)
+    return jnp.stack(
+        [map_coordinates(img[..., c], [rows, cols], order=1, mode="constant", cval=0.0) for c in range(img.shape[-1])],
+        axis=-1,
+    )
