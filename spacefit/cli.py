@@ -8,12 +8,14 @@ import argparse
 import signal
 import sys
 import time
+import tomllib
 from pathlib import Path
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from spacefit.errors import InputError, check_range, shorten
 from spacefit.interrupts import Terminated
+from spacefit.output import write_text
 from spacefit.scene.parameters import PARAMETERS
 
 if TYPE_CHECKING:
@@ -129,7 +131,7 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
 
 def _sweep(args: argparse.Namespace) -> int:
     """Run ``spacefit sweep``; on Ctrl-C say where the finished points are."""
-    from spacefit.studies.sweep import read_sweep_file, sweep
+    from spacefit.studies.sweep import read_sweep_file, sweep  # deferred: the studies' modules (0.2 s), which render never needs
 
     scene, axes, options = read_sweep_file(args.sweep, args.overrides)
     try:
@@ -154,8 +156,6 @@ def _start_values(items: Sequence[str]) -> dict[str, float]:
 
 def _sensor_values(items: Sequence[str]) -> dict[str, object]:
     """``--sensor-value FIELD=VALUE`` arguments as sensor field -> value (a TOML value; ``null``: None)."""
-    import tomllib
-
     out: dict[str, object] = {}
     for text in items:
         name, sep, value = text.partition("=")
@@ -170,6 +170,7 @@ def _sensor_values(items: Sequence[str]) -> dict[str, object]:
 
 def _fit(args: argparse.Namespace) -> int:
     """Run ``spacefit fit``; exit code 0 when the fit succeeded, else the verdict's (:func:`exit_code`)."""
+    # deferred: the fitting stack imports JAX and optimistix (1.5 s), which render never needs
     from spacefit.fitting.loop import FitOptions
     from spacefit.fitting.observation_files import ObservationFiles
     from spacefit.fitting.problem import FitRender
@@ -200,7 +201,7 @@ def _fit(args: argparse.Namespace) -> int:
 def exit_code(status: Status) -> int:
     """The exit code of a fit that ended with ``status``: 0 for a success, else NO_PROGRESS, MISFIT,
     AT_BOUND, INTERRUPTED, TERMINATED, or NOT_CONVERGED for the solver's other endings."""
-    from spacefit.fitting.solvers import Status
+    from spacefit.fitting.solvers import Status  # deferred: it imports JAX (0.6 s), which render never needs
 
     if status.success:
         return 0
@@ -213,8 +214,6 @@ def _terminate(signum: int, frame: object) -> None:
 
 
 def _write_scene(args: argparse.Namespace, text: str) -> None:
-    from spacefit.output import write_text
-
     out = Path(args.out)
     if args.scene and out.exists() and out.resolve() == Path(args.scene).resolve():
         raise InputError(f"`--out` {args.out!r} is the input scene; spacefit never writes over its input.")
@@ -232,6 +231,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         t0 = time.perf_counter()
+        # deferred: Mitsuba and the scene stack, timed as the "imports" stage of --timings (and not loaded by --help)
         from spacefit.pipeline import export_part_stl, render_to_folder
         from spacefit.scene.toml import load_scene
 

@@ -174,7 +174,8 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     Returns:
         The fit's result.
     """
-    from spacefit.fitting.loop import FitOptions, fit  # the fitting stack: only fits pay its 1.5 s import
+    # deferred: the fitting stack (JAX, optimistix: 1.5 s) and the image files' readers (astropy), which renders never need
+    from spacefit.fitting.loop import FitOptions, fit
     from spacefit.fitting.report import write_fit_report
     from spacefit.imageio import format_sensor_sources
 

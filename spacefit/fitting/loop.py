@@ -27,7 +27,7 @@ from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
-from spacefit.rendering.renderer import PartImage
+from spacefit.rendering.renderer import PartImage, mitsuba_scene_dict
 from spacefit.scene.schema import Scene
 from spacefit.scene.parameters import is_nuisance, parameter, scene_with_values
 from spacefit.sensor import DN_UNIT
@@ -108,8 +108,6 @@ class FitResult:
         """
         if self.scene is None:
             raise InputError("this fit has no fitted scene: its values are not finite.")
-        from spacefit.rendering.renderer import mitsuba_scene_dict
-
         return mitsuba_scene_dict(self.scene)
 
     def uncertainty(self) -> dict[str, Any]:

@@ -21,6 +21,8 @@ from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.backend import dr, mi, select_variant
 from spacefit.scene.assembly import Assembly, assemble
+from spacefit.scene.overrides import as_parameters
+from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
 from spacefit.scene.schema import Scene, check_scene
 
 # Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.
@@ -295,10 +297,7 @@ class Renderer:
         Parameters that move vertices (D, G, rms height, the pose) may move them out of the window: render
         those with ``crop=False``, or build a new Renderer.
         """
-        # here: values imports JAX (0.6 s), which a plain render never needs
-        from spacefit.rendering.values import scene_values_fn
-        from spacefit.scene.overrides import as_parameters
-        from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
+        from spacefit.rendering.values import scene_values_fn  # deferred: it imports JAX (0.6 s), which a plain render never needs
 
         given = as_parameters(self.current_scene, values)
         scene = scene_with_values(self.current_scene, given)  # refused as load_scene refuses it, before anything is set

@@ -17,26 +17,18 @@ import dataclasses
 import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from types import ModuleType
 from typing import Any
 
 import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_direction, check_vector, closest, quote
 from spacefit.materials import MODELS, make_material, with_material_values
+from spacefit.scene.parameters import PARAMETERS, VERTICAL_SUN, is_image, scene_keys, scene_with_values, sun_angles_deg
 from spacefit.scene.schema import SECTIONS, PartSettings, Scene, unknown_part
 
 Overrides = Mapping[str, Any] | Sequence[str] | str
 # The keys of a part table besides its material's own values.
 PART_KEYS = ("material", "file", "alpha")
-
-
-def _table() -> ModuleType:
-    """The parameter table, imported when a name needs it: it imports JAX (0.6 s), which reading
-    and rendering a scene by its file's keys does not need."""
-    from spacefit.scene import parameters
-
-    return parameters
 
 
 def parse_override(text: str) -> tuple[list[str], Any]:
@@ -102,7 +94,7 @@ def section_keys(section: str) -> list[str]:
     """The last components of the names valid in a section: its scene-file fields and the
     parameter names under it (``sun``: ``irradiance_w_m2``, ``direction``, ``elevation_deg``, ...)."""
     fields = [f.name for f in dataclasses.fields(SECTIONS[section])]
-    names = [p.split(".", 1)[1] for p in _table().PARAMETERS if p.startswith(f"{section}.")]
+    names = [p.split(".", 1)[1] for p in PARAMETERS if p.startswith(f"{section}.")]
     return list(dict.fromkeys([*fields, *names]))
 
 
@@ -122,7 +114,7 @@ def unknown_key(path: Sequence[str], parts: Sequence[str]) -> InputError:
         return f" Did you mean `{'.'.join([*path[:depth], close, *path[depth + 1:]])}`?" if close else ""
 
     sections = [*SECTIONS, "parts"]
-    if path[0] == "image" and key in _table().PARAMETERS:
+    if path[0] == "image" and key in PARAMETERS:
         return InputError(f"`{key}` is a fit-only nuisance, applied to the render by a fit; a scene has no such value.")
     if path[0] not in sections:
         return InputError(f"unknown scene key `{key}`: `{path[0]}` is not a section (sections: {', '.join(sections)})."
@@ -172,7 +164,7 @@ def with_values(scene: Scene, values: Mapping[str, Any]) -> Scene:
             parts.setdefault(path[1], {})[path[2]] = value
         elif is_file_key(path):
             sections.setdefault(path[0], {})[path[1]] = value
-        elif key in _table().PARAMETERS and not _table().is_image(key):
+        elif key in PARAMETERS and not is_image(key):
             parameters[key] = value
         else:
             raise unknown_key(path, list(scene.parts))
@@ -192,7 +184,7 @@ def with_values(scene: Scene, values: Mapping[str, Any]) -> Scene:
     if parts:
         changed["parts"] = new_parts
     out = dataclasses.replace(scene, **changed) if changed else scene
-    return _table().scene_with_values(out, parameters) if parameters else out
+    return scene_with_values(out, parameters) if parameters else out
 
 
 def as_parameters(scene: Scene, values: Mapping[str, Any]) -> dict[str, Any]:
@@ -205,19 +197,18 @@ def as_parameters(scene: Scene, values: Mapping[str, Any]) -> dict[str, Any]:
             what a :class:`~spacefit.rendering.renderer.Renderer` assembled, so build a new one from
             ``scene.with_values(...)``), or an unknown name (suggesting the closest).
     """
-    table = _table()
     out: dict[str, Any] = {}
     for path, value in override_items(values):
         key = ".".join(path)
-        forms = [n for n in table.PARAMETERS if "P" not in n.split(".") and not table.is_image(n) and key in table.scene_keys(n) - {n}]
+        forms = [n for n in PARAMETERS if "P" not in n.split(".") and not is_image(n) and key in scene_keys(n) - {n}]
         if path[0] == "parts" and len(path) == 3 and path[1] not in scene.parts:
             raise unknown_part(key, list(scene.parts))
-        if key in table.PARAMETERS or (path[0] == "parts" and len(path) == 3 and f"parts.P.{path[2]}" in table.PARAMETERS):
+        if key in PARAMETERS or (path[0] == "parts" and len(path) == 3 and f"parts.P.{path[2]}" in PARAMETERS):
             out[key] = value
         elif key == "sun.direction":
             direction = check_direction(key, value)
-            out["sun.elevation_deg"], azimuth = table.sun_angles_deg(direction)
-            if np.hypot(direction[0], direction[1]) >= table.VERTICAL_SUN:
+            out["sun.elevation_deg"], azimuth = sun_angles_deg(direction)
+            if np.hypot(direction[0], direction[1]) >= VERTICAL_SUN:
                 out["sun.azimuth_deg"] = azimuth
         elif forms:
             vector = check_vector(key, value)
