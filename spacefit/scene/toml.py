@@ -1,12 +1,5 @@
-"""Reading scene files: TOML text to a checked :class:`~spacefit.scene.schema.Scene`.
-
-Defaults are the thesis's Table 4-2. Units are in the key names: metres (``_m``), millimetres for
-the optics as the thesis gives them (``_mm``), degrees at this user-facing edge only (``_deg``),
-irradiance in W m^-2. The sun's ``direction`` is the direction the light travels.
-
-The thesis's "light radiance 5 W m^-2 sr^-1" for its distant light is, in pbrt's convention, the
-irradiance on a surface facing the light: ``sun.irradiance_w_m2 = 5``. ``"physical"`` selects the
-total solar irradiance at 1 au, 1361 W m^-2 (Kopp & Lean 2011).
+"""Reading scene files: TOML text to a checked :class:`~spacefit.scene.schema.Scene` (whose module
+docstring gives the defaults, the units and the sun's conventions).
 
 A part's ``material`` names a preset (:data:`spacefit.materials.PRESETS`, the other keys of its
 table replacing the preset's values) or a model (``"conductor"``, ``"mirror"``, ``"lambert"``, with
