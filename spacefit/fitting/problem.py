@@ -26,7 +26,7 @@ from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.nuisance import image_model as image_model_of
 from spacefit.fitting.params import FreeParameters, free_parameters
 from spacefit.geometry.frames import Intrinsics
-from spacefit.rendering.derivatives import render_chain
+from spacefit.rendering.derivatives import check_seeds, render_chain
 from spacefit.rendering.renderer import PartImage
 from spacefit.scene.assembly import assemble
 from spacefit.scene.schema import FILTER_RADIUS_PX, Scene, check_scene
@@ -318,8 +318,7 @@ class FitRender:
         check_count("spp_grad", self.spp_grad)
         check_choice("integrator", self.integrator, INTEGRATORS)
         check_choice("geometry_jacobian", self.geometry_jacobian, ("fd", "ad"))
-        if self.seed == self.seed_grad:
-            raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
+        check_seeds([(self.seed, self.seed_grad)])
 
 
 def setup(
