@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import argparse
+import errno
 import signal
 import sys
 import time
@@ -222,6 +223,20 @@ def _write_scene(args: argparse.Namespace, text: str) -> None:
     write_text(out, text)
 
 
+# What a write error means, in words.
+WRITE_ERRORS = {errno.EFBIG: "past the file-size limit, ulimit -f", errno.ENOSPC: "the disk is full",
+                errno.EDQUOT: "past the disk quota"}
+
+
+def file_system_error(err: OSError) -> str:
+    """An OSError in one line: the file and the cause, in words."""
+    if err.errno is None or err.strerror is None:
+        return str(err)
+    where = f" on {err.filename!r}" if err.filename else ""
+    hint = f" ({WRITE_ERRORS[err.errno]})" if err.errno in WRITE_ERRORS else ""
+    return f"file system error{where}: {err.strerror}{hint}."
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code: 0, 1 for a file system error, 2 for bad input, for a
     fit 3 not converged, 4 no progress, 5 misfit, 6 a parameter at a bound (:func:`exit_code`), 130 for
@@ -229,6 +244,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = _parser(argv[0] if argv else None).parse_args(argv)
     previous = signal.signal(signal.SIGTERM, _terminate)
+    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past `ulimit -f` fails (EFBIG) rather than killing the process
     try:
         t0 = time.perf_counter()
         # deferred: Mitsuba and the scene stack, timed as the "imports" stage of --timings (and not loaded by --help)
@@ -254,7 +270,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"spacefit: error: {shorten(str(err), 2000)}", file=sys.stderr)
         return 2
     except OSError as err:
-        print(f"spacefit: error: {err}", file=sys.stderr)
+        print(f"spacefit: error: {file_system_error(err)}", file=sys.stderr)
         return 1
     except Terminated:
         print("spacefit: terminated; nothing half-written was left behind", file=sys.stderr)

@@ -25,6 +25,7 @@ import numpy as np
 from PIL import Image
 
 from spacefit.errors import InputError
+from spacefit.locks import is_lock_file
 
 PREVIEW_PERCENTILE = 99.5
 PACKAGES = ("spacefit", "mitsuba", "drjit", "jax", "numpy", "trimesh", "colour-science", "optimistix")
@@ -59,7 +60,12 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
 
 def write_png(path: str | Path, rgb8: np.ndarray) -> None:
     """Write an (h, w, 3) uint8 image as PNG."""
-    Image.fromarray(rgb8).save(path, format="PNG")
+    try:
+        Image.fromarray(rgb8).save(path, format="PNG")
+    except OSError as err:
+        if err.errno and not err.filename:  # Pillow names no file
+            raise OSError(err.errno, err.strerror, str(path)) from None
+        raise
 
 
 def versions() -> dict[str, str]:
@@ -110,22 +116,29 @@ def _alive(pid: int) -> bool:
     return True
 
 
-def clean_stale_stages(folder: Path) -> list[Path]:
-    """Remove the staging folders in ``folder`` left by spacefit processes that no longer run (a
-    SIGKILL leaves them); return them. A stage of a running process is left alone."""
+def clean_stale_stages(folder: Path, of: str = "") -> list[Path]:
+    """Remove the staging folders in ``folder`` (those whose names end in ``of``) left by spacefit
+    processes that no longer run (a SIGKILL leaves them), with a warning naming each; return them. A
+    stage of a running process is left alone."""
     removed = []
     for stage in folder.glob(f"{STAGE_PREFIX}*") if folder.is_dir() else ():
         pid = stage.name[len(STAGE_PREFIX):].split("-", 1)[0]
-        if pid.isdigit() and not _alive(int(pid)):
+        if stage.name.endswith(of) and pid.isdigit() and not _alive(int(pid)):
             shutil.rmtree(stage, ignore_errors=True)
+            warnings.warn(f"removed {str(stage)!r}, a staging folder left by an interrupted spacefit run.", stacklevel=3)
             removed.append(stage)
     return removed
+
+
+def _entries(out: Path) -> set[str]:
+    """The names in an output folder but staging folders and locks."""
+    return {p.name for p in out.iterdir() if not p.name.startswith(STAGE_PREFIX) and not is_lock_file(p.name)}
 
 
 def _is_result(out: Path, command: str) -> bool:
     """Whether ``out`` holds a previous spacefit ``command`` result: only its files, its marker readable."""
     names, marker = RESULT_FILES[command]
-    entries = {p.name for p in out.iterdir() if not p.name.startswith(STAGE_PREFIX)}
+    entries = _entries(out)
     if not entries <= names:
         return False
     if marker not in entries:
@@ -157,14 +170,14 @@ def prepare_output(out_dir: str | Path, command: str, *, overwrite: bool = False
                              "choose another `--out`.")
     if not out.exists():
         return out
-    for stage in clean_stale_stages(out):
-        warnings.warn(f"removed {str(stage)!r}, a staging folder left by an interrupted spacefit run.", stacklevel=2)
-    entries = sorted(p.name for p in out.iterdir())
-    if not entries:
+    clean_stale_stages(out)
+    if not _entries(out):
         return out
     if not _is_result(out, command):
-        raise InputError(f"output folder {str(out)!r} holds files spacefit did not write ({', '.join(entries[:8])}"
-                         f"{', ...' if len(entries) > 8 else ''}); choose a new or empty folder.")
+        foreign = sorted(_entries(out) - names)
+        held = (f"files spacefit did not write ({', '.join(foreign[:8])}{', ...' if len(foreign) > 8 else ''})"
+                if foreign else f"part of a spacefit {command} result without a readable {RESULT_FILES[command][1]}")
+        raise InputError(f"output folder {str(out)!r} holds {held}; choose a new or empty folder.")
     if not (overwrite or resume):
         raise InputError(f"output folder {str(out)!r} holds a previous spacefit {command} result; pass --overwrite "
                          "(overwrite=True) to replace it, or choose a new folder.")
@@ -187,11 +200,14 @@ def staged_output(out_dir: str | Path) -> Iterator[Path]:
         yield stage
         for item in stage.iterdir():
             os.replace(item, out / item.name)
-    except BaseException:
+    except BaseException as err:
         shutil.rmtree(stage, ignore_errors=True)
         if created:
             with contextlib.suppress(OSError):
                 out.rmdir()  # only if empty
+        if isinstance(err, OSError) and err.errno and not (err.filename and Path(err.filename).parent != stage):
+            # name the file of ``out_dir`` that failed (not its staged copy), or the folder when no file is named
+            raise type(err)(err.errno, err.strerror, str(out / Path(err.filename).name if err.filename else out)) from None
         raise
     shutil.rmtree(stage, ignore_errors=True)
 

@@ -18,6 +18,7 @@ import numpy as np
 from spacefit.errors import InputError, check_choice
 from spacefit.geometry.mesh import export_stl
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
+from spacefit.locks import holding_lock
 from spacefit.output import prepare_output, staged_output, versions, write_json, write_render
 from spacefit.progress import Progress
 from spacefit.rendering.exr import write_exr
@@ -37,12 +38,14 @@ def _say(message: str, quiet: bool) -> None:
         print(message, file=sys.stderr, flush=True)
 
 
+@holding_lock("out_dir")
 def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, overwrite: bool = False,
                      inputs: tuple[str | Path, ...] = (), timings_s: Mapping[str, float] = {},
                      show_timings: bool = False) -> tuple[np.ndarray, dict[str, Any]]:
     """Render ``scene`` and write radiance.exr, preview.png, scene.toml and render.json to ``out_dir``.
 
-    Every input is checked and the folder is checked (:func:`~spacefit.output.prepare_output`: new,
+    It runs holding the folder's lock (:mod:`spacefit.locks`: one writer per folder). Every input is
+    checked and the folder is checked (:func:`~spacefit.output.prepare_output`: new,
     empty, or a previous render replaced only with ``overwrite``; none of the ``inputs`` files
     written over) before rendering; on any error or interruption nothing is left behind. A
     non-finite image is refused, naming the cause; an all-black one is written with a warning that
@@ -151,12 +154,14 @@ def export_part_stl(scene: Scene, part: str, path: str | Path) -> Path:
     return out
 
 
+@holding_lock("out_dir")
 def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | Path, options: FitOptions | None = None, *,
                   quiet: bool = False, overwrite: bool = False, resume: bool = False) -> FitResult:
     """Fit the ``free`` parameters to reference image files; write fit.json, fit.toml, uncertainty.json and the plots to ``out_dir``.
 
-    The folder is checked writable, then every file is read and checked before rendering; on any
-    error nothing is left behind.
+    It runs holding the folder's lock (:mod:`spacefit.locks`: one writer per folder). The folder is
+    checked writable, then every file is read and checked before rendering; on any error nothing is
+    left behind.
 
     Args:
         files: the reference and scene files and how to read them (:class:`~spacefit.fitting.observation_files.ObservationFiles`);

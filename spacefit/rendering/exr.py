@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+import os
 from pathlib import Path
 
 import numpy as np
@@ -13,7 +15,12 @@ from spacefit.rendering.backend import mi
 def write_exr(path: str | Path, image: np.ndarray) -> None:
     """Write a (height, width, 3) float radiance image as a 32-bit float RGB OpenEXR file."""
     bitmap = mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB)
-    bitmap.write(str(path))
+    try:
+        bitmap.write(str(path))
+    except RuntimeError as err:  # Mitsuba's for a failed write: "...: File too large" (a file-size limit), a full disk
+        cause = str(err).rsplit(": ", 1)[-1]
+        code = next((e for e in errno.errorcode if os.strerror(e) == cause), errno.EIO)
+        raise OSError(code, cause, str(path)) from None
 
 
 def read_exr(path: str | Path) -> np.ndarray:

@@ -12,11 +12,12 @@ that Ctrl-C stops soon and a restart loses little. Only this process writes the 
 from __future__ import annotations
 
 import logging
+import socket
 from collections.abc import Callable, Iterator
 
 import numpy as np
 
-from spacefit.errors import InputError
+from spacefit.errors import InputError, InputTypeError, quote
 from spacefit.studies import worker
 from spacefit.studies.worker import Task
 
@@ -29,6 +30,40 @@ def render_on_worker(task: Task) -> tuple[dict[str, np.ndarray], str, int]:
 
     result = worker.run_task(task)
     return result, get_worker().address, worker.render_count()
+
+
+# dask.distributed's schemes for a scheduler's address (an address without one is tcp://).
+SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+# How long a check waits for a scheduler to accept a connection (s).
+PROBE_TIMEOUT_S = 5.0
+
+
+def check_scheduler(address: object) -> None:
+    """Refuse a ``scheduler`` address before anything is made: not ``SCHEME://HOST:PORT`` with a scheme
+    of :data:`SCHEDULER_SCHEMES`, or (for the schemes over TCP) nothing accepting connections there
+    within :data:`PROBE_TIMEOUT_S`. None (no scheduler) passes.
+
+    Raises:
+        InputError: naming the address and what is wrong with it.
+    """
+    if address is None:
+        return
+    if not isinstance(address, str):
+        raise InputTypeError(f"`scheduler` must be an address such as 'tcp://host:8786', got {quote(address)}.")
+    scheme, sep, rest = address.strip().partition("://")
+    if not sep:
+        scheme, rest = "tcp", address.strip()
+    if scheme not in SCHEDULER_SCHEMES:
+        raise InputError(f"`scheduler` {address!r} has the scheme {scheme!r}; use one of "
+                         f"{', '.join(s + '://' for s in SCHEDULER_SCHEMES)} (e.g. tcp://host:8786).")
+    host, _, port = rest.rstrip("/").rpartition(":")
+    if not host or not port.isdigit():
+        raise InputError(f"`scheduler` {address!r} must be SCHEME://HOST:PORT, e.g. tcp://host:8786.")
+    if scheme != "ucx":
+        try:
+            socket.create_connection((host.strip("[]"), int(port)), timeout=PROBE_TIMEOUT_S).close()
+        except OSError as err:
+            raise InputError(f"`scheduler` {address!r}: no dask scheduler answered ({err.strerror or err}).") from None
 
 
 def connect(workers: int | None, scheduler: str | None) -> tuple[object, Callable[[], None]]:

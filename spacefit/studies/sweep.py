@@ -20,6 +20,7 @@ the missing ones. A store of other arguments is refused, never mixed.
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import math
@@ -36,12 +37,13 @@ import numpy as np
 from spacefit import __version__
 from spacefit.errors import InputError, InputTypeError, check_count, quote
 from spacefit.interrupts import deferred_interrupts
-from spacefit.output import STAGE_PREFIX, check_writable
+from spacefit.locks import hold_lock
+from spacefit.output import STAGE_PREFIX, check_writable, clean_stale_stages
 from spacefit.progress import progress_bar
 from spacefit.scene.schema import Scene, check_scene
 from spacefit.scene.toml import load_scene, read_scene_dict
 from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, available, check_names, parameter, scene_with_values
-from spacefit.studies.cluster import run_on_dask
+from spacefit.studies.cluster import check_scheduler, run_on_dask
 from spacefit.studies.sensitivity import SUMMARY_VARIABLES, normalisation
 from spacefit.studies import worker
 from spacefit.studies.worker import Task, regions
@@ -253,7 +255,8 @@ def open_store(store: str | Path | None, spec: str, make: Callable[[], Any], ove
     # the empty store is made beside its place and moved there whole: a kill leaves no half store
     check_writable(target)
     target.parent.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}-", dir=target.parent))
+    clean_stale_stages(target.parent, of=f"-{target.name}")  # this store's, left by a kill while it was made
+    stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}-", suffix=f"-{target.name}", dir=target.parent))
     try:
         make().to_zarr(str(stage / "store"), compute=False, mode="w", zarr_format=STORE_FORMAT)
         if target.exists():
@@ -332,6 +335,7 @@ def sweep(
     check_count("workers", workers)
     if workers is not None and scheduler is not None:
         raise InputError("give `workers` (a local cluster) or `scheduler` (an address), not both.")
+    check_scheduler(scheduler)
     derivatives = tuple(derivatives)
     if derivatives:
         check_names(scene, list(derivatives), "derivatives")
@@ -341,17 +345,18 @@ def sweep(
     seeds = parsed_seeds(scene, parsed)
     attrs = {"spacefit_version": __version__, "scene_toml": scene.to_toml(), "seeds": seeds,
              "spacefit_sweep": spec, "description": "spacefit sweep: radiance of each region at each point"}
-    group = open_store(store, spec, lambda: template(scene, parsed, images=images, derivatives=derivatives, attrs=attrs),
-                       overwrite)
-    task_of = tasks(scene, parsed, images=images, derivatives=derivatives, derivative_seeds=derivative_seeds)
-    names = in_place_names(scene)
-    # points that load another scene vary slowest, so that a scene is loaded once per value
-    order = sorted(range(len(parsed)), key=lambda a: all(k in names or k in RENDER_ARGUMENTS for k in parsed[a].values))
-    todo = pending(np.asarray(group["done"][...]), order)
-    total = math.prod(a.size for a in parsed)
-    run_points(todo, task_of, group, total=total, workers=workers, scheduler=scheduler,
-               max_renders_per_worker=max_renders_per_worker, quiet=quiet)
-    return xr.open_zarr(group.store if store is None else str(store), zarr_format=STORE_FORMAT)
+    with contextlib.nullcontext() if store is None else hold_lock(store, "`store`"):  # one writer per store
+        group = open_store(store, spec, lambda: template(scene, parsed, images=images, derivatives=derivatives, attrs=attrs),
+                           overwrite)
+        task_of = tasks(scene, parsed, images=images, derivatives=derivatives, derivative_seeds=derivative_seeds)
+        names = in_place_names(scene)
+        # points that load another scene vary slowest, so that a scene is loaded once per value
+        order = sorted(range(len(parsed)), key=lambda a: all(k in names or k in RENDER_ARGUMENTS for k in parsed[a].values))
+        todo = pending(np.asarray(group["done"][...]), order)
+        total = math.prod(a.size for a in parsed)
+        run_points(todo, task_of, group, total=total, workers=workers, scheduler=scheduler,
+                   max_renders_per_worker=max_renders_per_worker, quiet=quiet)
+        return xr.open_zarr(group.store if store is None else str(store), zarr_format=STORE_FORMAT)
 
 
 SWEEP_FILE_OPTIONS = ("images", "derivatives", "derivative_seeds", "max_renders_per_worker")
