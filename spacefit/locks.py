@@ -30,7 +30,7 @@ from typing import Any, TypeVar
 
 import psutil
 
-from spacefit.errors import InputError, shorten
+from spacefit.errors import InputError, InputTypeError, quote, shorten
 
 LOCK_SUFFIX = ".spacefit-lock"
 # Two processes' start times as psutil reads them differ by more than this: the same PID, another process.
@@ -142,9 +142,11 @@ def hold_lock(folder: str | Path, name: str = "`--out`") -> Iterator[Path]:
     ``name`` is the folder's argument as messages name it.
 
     Raises:
-        InputError: ``folder`` is blank, a file, or in use by another process (named: PID, host,
+        InputError: ``folder`` is not a path, blank, a file, or in use by another process (named: PID, host,
             start time and command), or its lock's folder is not writable.
     """
+    if not isinstance(folder, (str, os.PathLike)):
+        raise InputTypeError(f"{name} must be a folder's path, got {quote(folder)}.")
     if not str(folder).strip():
         raise InputError(f"{name} must name a folder, got an empty string.")
     target = Path(folder)

@@ -187,6 +187,11 @@ MUTANTS = (
            ("tests/test_goodness.py",)),
     Mutant("dof-miscounted", "spacefit/fitting/goodness.py", "dof = max(values - n_free, 1)", "dof = max(values, 1)",
            ("tests/test_goodness.py",)),
+    # locks: a dead holder's lock must be broken, a live one's never
+    Mutant("dead-lock-holder-runs", "spacefit/locks.py", "except psutil.NoSuchProcess:\n            return False",
+           "except psutil.NoSuchProcess:\n            return True", ("tests/test_locks.py",)),
+    Mutant("reused-pid-holds-the-lock", "spacefit/locks.py", "\n                    and abs(process.create_time() - self.started) < START_TOLERANCE_S)",
+           ")", ("tests/test_locks.py",)),
 )
 
 

@@ -310,7 +310,8 @@ def sweep(
         scene: the scene every point starts from.
         axes: the swept values (module docstring): key -> list, or axis name -> {key: list} (zipped).
         store: a Zarr folder written point by point (None: in memory). An existing store of the
-            same sweep is completed, not recomputed.
+            same sweep is completed, not recomputed. It is locked while the sweep runs
+            (:mod:`spacefit.locks`): a store another process writes is refused, naming it.
         images: store each point's radiance image (W m^-2 sr^-1) too.
         derivatives: registered parameters whose derivatives of each region's mean radiance to
             store at every point, with their Monte Carlo standard errors (:func:`sf.sensitivity`).
