@@ -141,6 +141,10 @@ def _sweep(args: argparse.Namespace) -> int:
     except KeyboardInterrupt as stop:
         print(f"spacefit: interrupted; every finished point is in {args.out} (rerun the same command to finish)", file=sys.stderr)
         return TERMINATED if isinstance(stop, Terminated) else INTERRUPTED
+    except OSError as err:
+        if err.errno and not err.filename:  # Zarr names no file: the store is where it failed
+            raise OSError(err.errno, err.strerror, args.out) from None
+        raise
     return 0
 
 

@@ -3,10 +3,10 @@ runs on another host; what a refused or killed run leaves (nothing), and write e
 
 from __future__ import annotations
 
+import errno
 import json
 import os
 import re
-import resource
 import signal
 import socket
 import subprocess
@@ -22,7 +22,7 @@ from helpers import small_scene, write_sphere_obj
 import spacefit as sf
 from spacefit.cli import INTERRUPTED, main
 from spacefit.locks import hold_lock, lock_file
-from spacefit.output import STAGE_PREFIX, prepare_output
+from spacefit.output import STAGE_PREFIX, prepare_output, staged_output
 
 HOLD = "import sys, time\nfrom spacefit.locks import hold_lock\nwith hold_lock(sys.argv[1]):\n    print('held', flush=True)\n    time.sleep(600)\n"
 
@@ -177,9 +177,10 @@ def test_overwrite_refusal_names_only_the_foreign_files(tmp_path, capsys):
         prepare_output(out, "fit", overwrite=True)
 
 
-def _file_size_limit(limit: int) -> None:
-    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
-    resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+# spacefit's command line under a file-size limit of 150 kB (`ulimit -f`), with SIGXFSZ's default action (killing the
+# process): spacefit's main ignores it, so that the write fails instead
+LIMITED = ("import resource, runpy\nresource.setrlimit(resource.RLIMIT_FSIZE, (150_000, 150_000))\n"
+           "runpy.run_module('spacefit.cli', run_name='__main__')\n")
 
 
 def test_a_write_past_the_file_size_limit_is_one_line_and_leaves_nothing(tmp_path):
@@ -188,9 +189,31 @@ def test_a_write_past_the_file_size_limit_is_one_line_and_leaves_nothing(tmp_pat
                         render={"resolution": [512, 512], "spp": 1})
     (tmp_path / "scene.toml").write_text(scene.to_toml())
     out = tmp_path / "out"
-    run = subprocess.run([sys.executable, "-m", "spacefit.cli", "render", str(tmp_path / "scene.toml"), "--out", str(out), "--quiet"],
-                         capture_output=True, text=True, preexec_fn=lambda: _file_size_limit(150_000), timeout=300)
+    run = subprocess.run([sys.executable, "-c", LIMITED, "render", str(tmp_path / "scene.toml"), "--out", str(out), "--quiet"],
+                         capture_output=True, text=True, timeout=300)
     assert run.returncode == 1, run.stderr
     assert run.stderr.splitlines() == [f"spacefit: error: file system error on '{out / 'radiance.exr'}': File too large "
                                        "(past the file-size limit, ulimit -f)."]
     assert listing(tmp_path) == ["scene.toml", "sphere.obj"]
+    # a sweep's store: the point whose image chunk failed is not done, and a rerun finishes it
+    (tmp_path / "sweep.toml").write_text('scene = "scene.toml"\nimages = true\n[axes]\n"parts.sphere.kd" = [0.3, 0.5]\n')
+    arguments = ["sweep", str(tmp_path / "sweep.toml"), "--out", str(tmp_path / "s.zarr"), "--quiet"]
+    run = subprocess.run([sys.executable, "-c", LIMITED, *arguments], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 1 and run.stderr.splitlines() == [
+        f"spacefit: error: file system error on '{tmp_path / 's.zarr'}': File too large (past the file-size limit, ulimit -f)."]
+    assert subprocess.run([sys.executable, "-m", "spacefit.cli", *arguments], capture_output=True, text=True, timeout=300).returncode == 0
+    assert bool(xr.open_zarr(tmp_path / "s.zarr").done.all())
+
+
+@pytest.mark.parametrize(("error", "named"), [
+    (lambda stage: OSError(errno.EFBIG, "File too large", str(stage / "residuals.fits")), "residuals.fits"),
+    (lambda stage: OSError(errno.ENOSPC, "No space left on device"), ""),  # a writer that names no file: the folder
+])
+def test_a_write_error_names_the_output_file_not_its_stage(tmp_path, error, named):
+    out = tmp_path / "out"
+    with pytest.raises(OSError) as raised:
+        with staged_output(out) as stage:
+            (stage / "fit.json").write_text("{}")
+            raise error(stage)
+    assert raised.value.filename == str(out / named if named else out) and raised.value.errno == error(out).errno
+    assert listing(tmp_path) == []
