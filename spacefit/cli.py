@@ -248,7 +248,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     args = _parser(argv[0] if argv else None).parse_args(argv)
     previous = signal.signal(signal.SIGTERM, _terminate)
-    signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past `ulimit -f` fails (EFBIG) rather than killing the process
     try:
         t0 = time.perf_counter()
         # deferred: Mitsuba and the scene stack, timed as the "imports" stage of --timings (and not loaded by --help)

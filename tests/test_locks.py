@@ -177,8 +177,7 @@ def test_overwrite_refusal_names_only_the_foreign_files(tmp_path, capsys):
         prepare_output(out, "fit", overwrite=True)
 
 
-# spacefit's command line under a file-size limit of 150 kB (`ulimit -f`), with SIGXFSZ's default action (killing the
-# process): spacefit's main ignores it, so that the write fails instead
+# spacefit's command line under a file-size limit of 150 kB (`ulimit -f`); Python ignores SIGXFSZ, so a write past it fails
 LIMITED = ("import resource, runpy\nresource.setrlimit(resource.RLIMIT_FSIZE, (150_000, 150_000))\n"
            "runpy.run_module('spacefit.cli', run_name='__main__')\n")
 

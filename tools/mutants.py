@@ -192,8 +192,6 @@ MUTANTS = (
            "except psutil.NoSuchProcess:\n            return True", ("tests/test_locks.py",)),
     Mutant("reused-pid-holds-the-lock", "spacefit/locks.py", "\n                    and abs(process.create_time() - self.started) < START_TOLERANCE_S)",
            ")", ("tests/test_locks.py",)),
-    Mutant("file-size-limit-kills", "spacefit/cli.py", "signal.signal(signal.SIGXFSZ, signal.SIG_IGN)", "None",
-           ("tests/test_locks.py",)),
 )
 
 
