@@ -4,7 +4,8 @@ The lock of a folder or store ``NAME`` is the file ``.NAME.spacefit-lock`` besid
 the same file whether the folder exists yet or not, and kept when ``--overwrite`` replaces a store
 whole (the parent must be writable; a store is made there in any case). It holds the holder's PID,
 host, command line and start time, and the holder keeps an exclusive ``flock`` on it, which the
-system lets go however the process ends. A second writer is refused at once, naming the holder. A
+system lets go however the process ends (on a file system without locks, the record alone
+decides). A second writer is refused at once, naming the holder. A
 lock left by a killed process (SIGKILL) of this host, whose PID no longer runs (or runs another
 program: its start time differs), is broken by the next writer with a warning naming the dead
 process; one of another host is never broken (this host cannot tell whether it runs): the message
@@ -14,6 +15,7 @@ names its host and PID and the file to remove once it has stopped.
 from __future__ import annotations
 
 import contextlib
+import errno
 import fcntl
 import functools
 import inspect
@@ -36,6 +38,8 @@ LOCK_SUFFIX = ".spacefit-lock"
 # Two processes' start times as psutil reads them differ by more than this: the same PID, another process.
 START_TOLERANCE_S = 1.0
 F = TypeVar("F", bound=Callable[..., Any])
+# flock's errors on a file system that has no locks.
+NO_LOCKS = (errno.ENOLCK, errno.EOPNOTSUPP, errno.ENOTSUP)
 
 
 @dataclass(frozen=True)
@@ -112,6 +116,11 @@ def _take(path: Path, what: str) -> int:
             os.close(fd)
             raise InputError(f"{what} is in use by {holder.describe() if holder else 'another spacefit process'}; "
                              "wait for it to end or stop it, or choose another folder.") from None
+        except OSError as err:
+            if err.errno not in NO_LOCKS:
+                os.close(fd)
+                raise
+            # a file system without locks (some network mounts): the record alone decides, below
         if _is_file_at(fd, path):
             break
         os.close(fd)  # its holder removed it as we opened it: take the new one

@@ -91,6 +91,31 @@ def test_a_lock_of_a_live_process_is_never_broken_even_unlocked(tmp_path):
             pass
 
 
+def test_without_file_system_locks_the_record_alone_decides(tmp_path, monkeypatch):
+    """flock failing with ENOLCK (a network mount without locks): a live holder is still refused, a dead one broken."""
+    import fcntl
+
+    out = tmp_path / "out"
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(out)], stdout=subprocess.PIPE, text=True)
+    assert holder.stdout.readline() == "held\n"
+
+    def no_locks(fd: int, operation: int) -> None:
+        raise OSError(errno.ENOLCK, "No locks available")
+
+    monkeypatch.setattr(fcntl, "flock", no_locks)
+    try:
+        with pytest.raises(sf.InputError, match=rf"in use by spacefit process {holder.pid} .*did not lock"):
+            with hold_lock(out):
+                pass
+    finally:
+        holder.kill()
+        holder.wait()
+    with pytest.warns(UserWarning, match=rf"process {holder.pid} .* no longer runs"):
+        with hold_lock(out):
+            pass
+    assert listing(tmp_path) == []
+
+
 def test_the_lock_is_released_on_errors_and_interruptions(tmp_path):
     for error in (ValueError, KeyboardInterrupt):
         with pytest.raises(error):
