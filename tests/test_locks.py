@@ -62,6 +62,22 @@ def test_a_held_lock_refuses_a_second_writer_naming_it_and_a_killed_holder_is_br
     assert not lock_file(out).exists() and listing(tmp_path) == []  # released: nothing left
 
 
+def test_a_render_into_a_folder_in_use_is_refused_and_changes_nothing(tmp_path, capsys):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "render.json").write_text(json.dumps({"versions": {"spacefit": "0.1.0"}}))  # a previous render
+    holder = subprocess.Popen([sys.executable, "-c", HOLD, str(out)], stdout=subprocess.PIPE, text=True)
+    try:
+        assert holder.stdout.readline() == "held\n"
+        assert main(["render", "--out", str(out), "--overwrite", "--quiet"]) == 2
+    finally:
+        holder.kill()
+        holder.wait()
+    err = capsys.readouterr().err
+    assert err.startswith(f"spacefit: error: `--out` '{out}' is in use by spacefit process {holder.pid}") and len(err.splitlines()) == 1
+    assert listing(out) == ["render.json"]
+
+
 def test_a_stale_lock_of_this_host_is_broken_and_one_of_another_host_is_kept(tmp_path):
     store = tmp_path / "store.zarr"
     stale = write_lock(store)
