@@ -150,7 +150,11 @@ def _start_values(items: Sequence[str]) -> dict[str, float]:
         name, sep, value = text.partition("=")
         if not sep or not name.strip():
             raise InputError(f"`--start` takes NAME=VALUE, got {text!r}.")
-        out[name.strip()] = check_range(f"--start {name.strip()}", value.strip())
+        try:
+            number = float(value)
+        except ValueError:
+            raise InputError(f"`--start {name.strip()}` must be a number, got {value.strip()!r}.") from None
+        out[name.strip()] = check_range(f"--start {name.strip()}", number)
     return out
 
 

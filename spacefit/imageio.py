@@ -540,7 +540,7 @@ def sensor_of(image: ObservedImage, sensor: Sensor | Mapping[str, Any] | None = 
     if isinstance(sensor, Sensor):
         return sensor, {name: "option/argument" for name in used_fields(sensor)}
     if sensor is not None:
-        check_fields(sensor, "the sensor values (`sensor=`, --sensor-value)")
+        check_fields(sensor, "the sensor values of --sensor-value (Python: sensor=)")
     if defaults is not None:
         check_choice("sensor_defaults", defaults, SENSOR_DEFAULTS)
     layers: list[tuple[Mapping[str, Any], str]] = []
