@@ -33,6 +33,14 @@ Saturated values are masked: at or above the FITS ``SATURATE`` keyword, else the
 ``saturation_dn``, else the integer type's full scale (2^bits - 1); float DN without either has no
 saturation mask. Pixels a user mask or a PNG's alpha leaves out are not checked and read as 0.
 :func:`sensor_of` gives the sensor of a DN image.
+
+What is refused, naming the file (:class:`~spacefit.errors.InputError`): an image of other than 1
+(grey) or 3 (RGB) channels, a FITS cube's planes (NAXIS3) included; alpha is read as a mask (0
+leaves the pixel out, any other value keeps it as it is) in PNG and in TIFF with an unassociated
+alpha (ExtraSamples = 2), and refused elsewhere (an RGBA EXR, a TIFF's unmarked fourth sample); a
+FITS file shorter than its headers say (truncated); a sidecar that is not a JSON object, or whose
+sensor values are not numbers (``"2.0"``) or not true / false; a mask with values other than 0 and 1
+(or the integer type's full scale), NaN included, or one that leaves out every pixel.
 """
 
 from __future__ import annotations
@@ -356,7 +364,8 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         path: ``.exr``, ``.fits`` / ``.fit`` / ``.fts``, ``.png``, ``.tif`` / ``.tiff``.
         unit: ``"radiance"`` or ``"DN"`` to require one; None takes the file's.
         response: for PNG and TIFF, ``"linear"`` or ``"srgb"``; not needed for spacefit's own files.
-        mask: a mask image (FITS, PNG, TIFF) or (height, width) array; nonzero = use the pixel.
+        mask: a mask image (FITS, PNG, TIFF) or (height, width) array: 0 leaves the pixel out, 1 (or
+            the integer type's full scale, 255 in an 8-bit PNG; True) uses it; other values are refused.
             Pixels it (or a PNG's alpha) leaves out may hold anything, NaN included: they read as 0.
         sigma: the noise standard deviation of a radiance image (W m^-2 sr^-1, scalar or per
             pixel): its values may then dip below 0 by up to :data:`NEGATIVE_SIGMAS` sigma.
@@ -366,8 +375,9 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         the data, unit, metadata and usable-pixel mask (see :class:`ObservedImage`).
     Raises:
         InputError: missing file, unknown format, a display image asked for as radiance, PNG / TIFF
-            without a response, NaN or infinity (any unit), negative radiance, a mask of another
-            size; each naming the file and the number of pixels.
+            without a response, NaN or infinity (any unit), negative radiance, other than 1 or 3
+            channels, a truncated FITS, a malformed sidecar, a mask of another size, not binary or
+            empty; each naming the file and the number of pixels or values.
     """
     wanted = UNITS[check_choice("unit", unit, UNITS)] if unit is not None else None
     if response is not None:
