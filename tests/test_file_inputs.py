@@ -5,7 +5,6 @@ before any work, with nothing written in --out."""
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import numpy as np
@@ -94,6 +93,15 @@ def test_tiff_samples_an_unmarked_fourth_is_refused_an_unassociated_alpha_is_a_m
     tifffile.imwrite(tmp_path / "alpha.tif", rgba, photometric="rgb", extrasamples=["unassalpha"])
     image = read_image(tmp_path / "alpha.tif", response="linear")
     assert image.data.shape == (4, 5, 3) and not image.mask[0, 0].any() and image.mask[1:].all()
+
+
+def test_an_rgba_exr_is_refused_its_alpha_not_guessed(tmp_path):
+    from spacefit.rendering.backend import mi  # an RGBA EXR as other renderers write it
+
+    mi.Bitmap(np.ones((4, 5, 4), np.float32), pixel_format=mi.Bitmap.PixelFormat.RGBA).write(str(tmp_path / "rgba.exr"))
+    with pytest.raises(sf.InputError, match=r"rgba.exr': EXR image of 4 channels \(shape \(4, 5, 4\), channels last\); an image "
+                                            r"holds 1 channel \(grey\) or 3 \(RGB\); an alpha channel is read as a mask only in PNG"):
+        read_image(tmp_path / "rgba.exr")
 
 
 def test_a_truncated_fits_is_refused_with_the_bytes_it_lacks(case, tmp_path, capsys):
