@@ -148,6 +148,9 @@ def test_booleans_are_true_or_false_in_every_key_language(case, tmp_path, capsys
     (tmp_path / "sweep.toml").write_text('images = "false"\n[axes]\n"sun.elevation_deg" = [10, 20]\n')
     _refused(["sweep", str(tmp_path / "sweep.toml"), "--out", str(tmp_path / "s.zarr")], tmp_path / "s.zarr", capsys,
              "sweep.toml': images` must be true or false, got 'false'")
+    (tmp_path / "one.toml").write_text('derivatives = "parts.legs.kd"\n[axes]\n"sun.elevation_deg" = [10, 20]\n')
+    with pytest.raises(sf.InputError, match="one.toml': `derivatives` must be a list of parameter names, got 'parts.legs.kd'"):
+        read_sweep_file(tmp_path / "one.toml")
     with pytest.raises(sf.InputError, match="`images` must be true or false, got 'false'"):
         sf.sweep(sf.default_scene(), {"sun.elevation_deg": [10]}, images="false")
     (tmp_path / "scene.toml").write_text('[wrinkles]\nenabled = "false"\n')

@@ -375,6 +375,8 @@ def read_sweep_file(path: str | Path, overrides: Sequence[str] = ()) -> tuple[Sc
         check_choice(f"sweep file {str(path)!r}: key", key, ("scene", "axes", *SWEEP_FILE_OPTIONS))
     if "images" in data:
         check_flag(f"sweep file {str(path)!r}: images", data["images"])
+    if not isinstance(data.get("derivatives", []), list):
+        raise InputTypeError(f"sweep file {str(path)!r}: `derivatives` must be a list of parameter names, got {quote(data['derivatives'])}.")
     if "axes" not in data:
         raise InputError(f"sweep file {str(path)!r} has no [axes] table of swept scene keys.")
     scene_file = data.get("scene")
