@@ -265,7 +265,7 @@ def _row_order(header: fits.Header, row_order: str | None, path: Path) -> tuple[
     return "bottom-up", "FITS standard (no ROWORDER, no WCS)", [note]
 
 
-def _image_hdu(hdus: fits.HDUList, path: Path) -> fits.hdu.base.ExtensionHDU | fits.PrimaryHDU:
+def _image_hdu(hdus: fits.HDUList, path: Path) -> fits.PrimaryHDU | fits.ImageHDU | fits.CompImageHDU:
     """The first HDU with an image of 2 or more axes, after checking that the file holds every byte
     its headers promise up to it (a truncated copy would fail inside astropy)."""
     size = path.stat().st_size
@@ -342,8 +342,10 @@ def _user_mask(mask: str | Path | np.ndarray, shape: tuple[int, ...]) -> np.ndar
         values = _read_fits(p)[0] if kind == "fits" else _read_tiff(p)[0] if kind == "tiff" else _read_png(p)[0]
     else:
         values = np.asarray(mask)
-    values = values if values.ndim == 3 else values[..., None]
-    if values.ndim != 3 or values.shape[:2] != shape[:2]:
+    values = values[..., None] if values.ndim == 2 else values
+    if values.ndim != 3:
+        raise InputError(f"{where} must be (height, width) or (height, width, channels), got shape {values.shape}.")
+    if values.shape[:2] != shape[:2]:
         raise InputError(f"{where} is {values.shape[1]} x {values.shape[0]} px, the image {shape[1]} x {shape[0]} px.")
     use = [1, np.iinfo(values.dtype).max] if values.dtype.kind in "ui" else [1]
     bad = ~np.isin(values, [0, *use]) if values.dtype != bool else np.zeros(values.shape, bool)
@@ -433,9 +435,9 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         meta["sensor_found"] = {k: (v, source + (" (simulated with an illustrative default)" if k in illustrative else ""))
                                 for k, (v, source) in found.items()}
     if raw.shape[2] not in CHANNELS:  # a FITS cube is refused where it is read, naming its axes
-        alpha_rule = "; an alpha channel is read as a mask only in PNG and in TIFF (unassociated alpha)" if kind != "png" else ""
         raise InputError(f"{str(p)!r}: {kind.upper()} image of {raw.shape[2]} channels (shape {raw.shape}, channels last); "
-                         f"an image holds 1 channel (grey) or 3 (RGB){alpha_rule}.")
+                         "an image holds 1 channel (grey) or 3 (RGB); an alpha channel is read as a mask only in PNG and in TIFF "
+                         "(unassociated alpha).")
     values = np.asarray(raw, dtype=float)
     full_scale = float(np.iinfo(raw.dtype).max) if raw.dtype.kind in "ui" else None
     if meta["saturation_dn"] is None:
