@@ -98,7 +98,7 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     f.add_argument("--sigma", type=float, metavar="S",
                    help="noise standard deviation of radiance references, W m^-2 sr^-1 (residuals are divided by it)")
     f.add_argument("--mask", dest="masks", action="append", default=[], metavar="MASK",
-                   help="mask image (FITS, PNG, TIFF; nonzero = use the pixel): one for all references, or one per "
+                   help="mask image (FITS, PNG, TIFF; 0 = leave the pixel out, 1 or full scale = use it): one for all references, or one per "
                         "reference in order (repeatable); saturated pixels are left out in any case")
     f.add_argument("--sensor", metavar="SENSOR.json|.toml",
                    help="sf.Sensor fields (JSON or TOML) of the camera of DN references: they replace those of a "
@@ -155,7 +155,11 @@ def _start_values(items: Sequence[str]) -> dict[str, float]:
         name, sep, value = text.partition("=")
         if not sep or not name.strip():
             raise InputError(f"`--start` takes NAME=VALUE, got {text!r}.")
-        out[name.strip()] = check_range(f"--start {name.strip()}", value.strip())
+        try:
+            number = float(value)
+        except ValueError:
+            raise InputError(f"`--start {name.strip()}` must be a number, got {value.strip()!r}.") from None
+        out[name.strip()] = check_range(f"--start {name.strip()}", number)
     return out
 
 

@@ -88,6 +88,8 @@ def check_range(
     """
     if isinstance(value, (bool, np.bool_)):
         raise InputTypeError(f"`{name}` must be a number, got the boolean {value!r}.")
+    if isinstance(value, (str, bytes)):  # float("2.0") would pass: a quoted number in a file is a mistake to name
+        raise InputTypeError(f"`{name}` must be a number, not a string: got {quote(value)}.")
     try:
         x = float(value)  # type: ignore[arg-type]  (numpy and JAX scalars convert too)
     except (TypeError, ValueError):
@@ -107,6 +109,14 @@ def check_count(name: str, value: object, lo: int = 1) -> None:
     """Raise :class:`InputError` unless ``value`` is an integer >= ``lo`` (None passes: the default)."""
     if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo):
         raise InputError(f"`{name}` must be an integer >= {lo}, got {value!r}.")
+
+
+def check_flag(name: str, value: object) -> bool:
+    """Check that ``value`` is a boolean (Python's or numpy's; TOML's true / false) and return it:
+    no string, number or None stands for one (``"false"`` would be true)."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise InputTypeError(f"`{name}` must be true or false, got {quote(value)}.")
+    return bool(value)
 
 
 def check_vector(name: str, value: Sequence[float], size: int = 3) -> np.ndarray:

@@ -33,6 +33,14 @@ Saturated values are masked: at or above the FITS ``SATURATE`` keyword, else the
 ``saturation_dn``, else the integer type's full scale (2^bits - 1); float DN without either has no
 saturation mask. Pixels a user mask or a PNG's alpha leaves out are not checked and read as 0.
 :func:`sensor_of` gives the sensor of a DN image.
+
+What is refused, naming the file (:class:`~spacefit.errors.InputError`): an image of other than 1
+(grey) or 3 (RGB) channels, a FITS cube's planes (NAXIS3) included; alpha is read as a mask (0
+leaves the pixel out, any other value keeps it as it is) in PNG and in TIFF with an unassociated
+alpha (ExtraSamples = 2), and refused elsewhere (an RGBA EXR, a TIFF's unmarked fourth sample); a
+FITS file shorter than its headers say (truncated); a sidecar that is not a JSON object, or whose
+sensor values are not numbers (``"2.0"``) or not true / false; a mask with values other than 0 and 1
+(or the integer type's full scale), NaN included, or one that leaves out every pixel.
 """
 
 from __future__ import annotations
@@ -50,8 +58,8 @@ import numpy as np
 import tifffile
 from astropy.io import fits
 
-from spacefit.errors import NEGATIVE_SIGMAS, InputError, check_choice, negative_pixels
-from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, missing_for_measurement, used_fields
+from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_choice, check_range, negative_pixels, quote
+from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, check_fields, missing_for_measurement, used_fields
 
 if TYPE_CHECKING:
     from jaxtyping import Bool, Float
@@ -63,6 +71,8 @@ WRITABLE = (".fits", ".fit", ".fts", ".png", ".tif", ".tiff")
 FITS_RADIANCE_UNIT = "W m-2 sr-1"
 FITS_SENSOR_KEY = "SPACEFIT SENSOR"
 ROW_ORDERS = ("top-down", "bottom-up")
+CHANNELS = (1, 3)
+"""The channels an image may hold: grey or RGB (a PNG's or TIFF's alpha besides, read as a mask)."""
 SENSOR_DEFAULTS = ("illustrative",)
 HEADER_KEYWORDS = {
     "exposure_time_s": ("EXPTIME", "EXPOSURE"),
@@ -188,7 +198,7 @@ def _sensor_from_header(header: fits.Header) -> dict[str, Any] | None:
             out["wavelength_m"] = [v for _, v in indexed]
         elif field.name in found:
             out[field.name] = found[field.name]
-    return out
+    return {**{k: v for k, v in found.items() if not k.startswith("wavelength_m ")}, **out}  # unknown keys kept: refused by name
 
 
 def _header_sensor(header: fits.Header, data: np.ndarray, path: Path) -> dict[str, tuple[Any, str]]:
@@ -210,7 +220,8 @@ def _header_sensor(header: fits.Header, data: np.ndarray, path: Path) -> dict[st
             found[field] = (1.0 / float(value) if field == "gain_dn_per_electron" else float(value), f"header {key}")
     if data.dtype.kind in "ui":
         found["bit_depth"] = (8 * data.dtype.itemsize, "header BITPIX")
-    found.update({k: (v, f"header {FITS_SENSOR_KEY} {k}") for k, v in (_sensor_from_header(header) or {}).items()})
+    own = check_fields(_sensor_from_header(header) or {}, f"{str(path)!r}: the FITS header's HIERARCH {FITS_SENSOR_KEY} cards")
+    found.update({k: (v, f"header {FITS_SENSOR_KEY} {k}") for k, v in own.items()})
     return found
 
 
@@ -254,38 +265,57 @@ def _row_order(header: fits.Header, row_order: str | None, path: Path) -> tuple[
     return "bottom-up", "FITS standard (no ROWORDER, no WCS)", [note]
 
 
+def _image_hdu(hdus: fits.HDUList, path: Path) -> fits.PrimaryHDU | fits.ImageHDU | fits.CompImageHDU:
+    """The first HDU with an image of 2 or more axes, after checking that the file holds every byte
+    its headers promise up to it (a truncated copy would fail inside astropy)."""
+    size = path.stat().st_size
+    for index, hdu in enumerate(hdus):
+        expected = hdu.fileinfo()["datLoc"] + hdu.size
+        if expected > size:
+            raise InputError(f"{str(path)!r} is truncated: the header of HDU {index} promises data up to byte {expected}, "
+                             f"the file holds {size} bytes.")
+        if hdu.data is not None and hdu.data.ndim >= 2:
+            return hdu
+    raise InputError(f"{str(path)!r} holds no image (no HDU with 2 or 3 axes).")
+
+
 def _read_fits(path: Path, row_order: str | None = None) -> tuple[np.ndarray, fits.Header, tuple[str, str, list[str]]]:
     try:
-        with fits.open(path) as hdus:
-            hdu = next((h for h in hdus if h.data is not None and h.data.ndim >= 2), None)
-            if hdu is None:
-                raise InputError(f"{str(path)!r} holds no image (no HDU with 2 or 3 axes).")
-            data, header = np.array(hdu.data), hdu.header.copy()
-    except OSError as err:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", "File may have been truncated")  # refused below, in words
+            with fits.open(path) as hdus:
+                hdu = _image_hdu(hdus, path)
+                data, header = np.array(hdu.data), hdu.header.copy()
+    except (OSError, TypeError, ValueError) as err:  # astropy raises TypeError or ValueError for a damaged data unit
         raise InputError(f"{str(path)!r} could not be read as FITS: {err}") from None
     if data.ndim == 2:
         data = data[None]
     if data.ndim != 3:
         raise InputError(f"{str(path)!r}: a FITS image must have 2 or 3 axes (x, y, channel), it has {data.ndim}.")
+    if data.shape[0] not in CHANNELS:
+        raise InputError(f"{str(path)!r}: a FITS cube of {data.shape[0]} planes (NAXIS3 = {data.shape[0]}; numpy shape "
+                         f"{data.shape}, planes first); an image holds 1 plane (grey) or 3 (RGB): write one of them per file.")
     order = _row_order(header, row_order, path)
     planes = np.moveaxis(data, 0, -1)
     return (planes[::-1] if order[0] == "bottom-up" else planes), header, order
 
 
-def _read_tiff(path: Path) -> np.ndarray:
+def _read_tiff(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
+    """TIFF values and, when its last sample is an unassociated alpha (ExtraSamples = 2, as PNG's), the alpha channel."""
     try:
         with tifffile.TiffFile(path) as tif:
             series = tif.series[0]
             data, axes = series.asarray(), series.axes
+            alpha = tifffile.EXTRASAMPLE.UNASSALPHA in tuple(tif.pages[0].extrasamples or ())
     except (OSError, tifffile.TiffFileError) as err:
         raise InputError(f"{str(path)!r} could not be read as TIFF: {err}") from None
     if data.ndim == 2:
-        return data[..., None]
-    if axes == "SYX":
-        return np.moveaxis(data, 0, -1)
-    if axes == "YXS":
-        return data
-    raise InputError(f"{str(path)!r}: a TIFF must hold one image (axes YX, YXS or SYX), it has axes {axes}.")
+        data = data[..., None]
+    elif axes == "SYX":
+        data = np.moveaxis(data, 0, -1)
+    elif axes != "YXS":
+        raise InputError(f"{str(path)!r}: a TIFF must hold one image (axes YX, YXS or SYX), it has axes {axes}.")
+    return (data[..., :-1], data[..., -1]) if alpha and data.shape[2] in (2, 4) else (data, None)
 
 
 def _read_png(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
@@ -299,19 +329,33 @@ def _read_png(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
 
 
 def _user_mask(mask: str | Path | np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
-    """A (height, width) bool from a mask image or array: nonzero (in any channel) = use."""
+    """A (height, width) bool from a mask image or array of 0 (leave the pixel out) and 1 or the
+    integer type's full scale (use it), in any channel; NaN, other values, and a mask that leaves
+    out every pixel are refused (NaN would otherwise read as "use")."""
+    where = "`mask`"
     if isinstance(mask, (str, Path)):
         p = Path(mask)
+        where = f"mask file {str(p)!r}"
         if not p.is_file():
-            raise InputError(f"mask file {str(p)!r} does not exist.")
+            raise InputError(f"{where} does not exist.")
         kind = _format(p, (".fits", ".fit", ".fts", ".png", ".tif", ".tiff"))
-        values = _read_fits(p)[0] if kind == "fits" else _read_tiff(p) if kind == "tiff" else _read_png(p)[0]
+        values = _read_fits(p)[0] if kind == "fits" else _read_tiff(p)[0] if kind == "tiff" else _read_png(p)[0]
     else:
         values = np.asarray(mask)
-    values = values if values.ndim == 3 else values[..., None]
+    values = values[..., None] if values.ndim == 2 else values
+    if values.ndim != 3:
+        raise InputError(f"{where} must be (height, width) or (height, width, channels), got shape {values.shape}.")
     if values.shape[:2] != shape[:2]:
-        raise InputError(f"`mask` is {values.shape[1]} x {values.shape[0]} px, the image {shape[1]} x {shape[0]} px.")
-    return np.any(values != 0, axis=-1)
+        raise InputError(f"{where} is {values.shape[1]} x {values.shape[0]} px, the image {shape[1]} x {shape[0]} px.")
+    use = [1, np.iinfo(values.dtype).max] if values.dtype.kind in "ui" else [1]
+    bad = ~np.isin(values, [0, *use]) if values.dtype != bool else np.zeros(values.shape, bool)
+    if bad.any():
+        raise InputError(f"{where}: {int(np.count_nonzero(bad))} values are neither 0 (leave the pixel out) nor "
+                         f"{' or '.join(map(str, use))} (use it), e.g. {quote(values[bad][0].item())}; a mask is binary.")
+    included = np.any(values != 0, axis=-1)
+    if not included.any():
+        raise InputError(f"{where} leaves out all {included.size} pixels: nothing would be fitted.")
+    return included
 
 
 def read_image(path: str | Path, *, unit: str | None = None, response: str | None = None, mask: str | Path | np.ndarray | None = None,
@@ -322,7 +366,8 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         path: ``.exr``, ``.fits`` / ``.fit`` / ``.fts``, ``.png``, ``.tif`` / ``.tiff``.
         unit: ``"radiance"`` or ``"DN"`` to require one; None takes the file's.
         response: for PNG and TIFF, ``"linear"`` or ``"srgb"``; not needed for spacefit's own files.
-        mask: a mask image (FITS, PNG, TIFF) or (height, width) array; nonzero = use the pixel.
+        mask: a mask image (FITS, PNG, TIFF) or (height, width) array: 0 leaves the pixel out, 1 (or
+            the integer type's full scale, 255 in an 8-bit PNG; True) uses it; other values are refused.
             Pixels it (or a PNG's alpha) leaves out may hold anything, NaN included: they read as 0.
         sigma: the noise standard deviation of a radiance image (W m^-2 sr^-1, scalar or per
             pixel): its values may then dip below 0 by up to :data:`NEGATIVE_SIGMAS` sigma.
@@ -332,8 +377,9 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         the data, unit, metadata and usable-pixel mask (see :class:`ObservedImage`).
     Raises:
         InputError: missing file, unknown format, a display image asked for as radiance, PNG / TIFF
-            without a response, NaN or infinity (any unit), negative radiance, a mask of another
-            size; each naming the file and the number of pixels.
+            without a response, NaN or infinity (any unit), negative radiance, other than 1 or 3
+            channels, a truncated FITS, a malformed sidecar, a mask of another size, not binary or
+            empty; each naming the file and the number of pixels or values.
     """
     wanted = UNITS[check_choice("unit", unit, UNITS)] if unit is not None else None
     if response is not None:
@@ -344,8 +390,7 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
     if not p.is_file():
         raise InputError(f"image file {str(p)!r} does not exist.")
     kind = _format(p, tuple(FORMATS))
-    side = sidecar_path(p)
-    sidecar = json.loads(side.read_text()) if side.is_file() else None
+    sidecar = _read_sidecar(sidecar_path(p))
     meta: dict[str, Any] = {"format": kind, "response": "linear", "saturation_dn": None, "notes": [], "sensor_found": {}}
     if sidecar is not None:
         meta["sidecar"] = sidecar
@@ -370,10 +415,7 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         if "SATURATE" in header:
             meta["saturation_dn"] = float(header["SATURATE"])
     else:
-        if kind == "tiff":
-            raw = _read_tiff(p)
-        else:
-            raw, alpha = _read_png(p)
+        raw, alpha = _read_tiff(p) if kind == "tiff" else _read_png(p)
         bits = 8 * raw.dtype.itemsize if raw.dtype.kind in "ui" else None
         what = f"an {bits}-bit {kind.upper()}" if bits else f"a floating-point {kind.upper()}"
         if wanted == RADIANCE_UNIT:
@@ -392,6 +434,10 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         illustrative = set(sidecar.get("sensor_defaults", ()))
         meta["sensor_found"] = {k: (v, source + (" (simulated with an illustrative default)" if k in illustrative else ""))
                                 for k, (v, source) in found.items()}
+    if raw.shape[2] not in CHANNELS:  # a FITS cube is refused where it is read, naming its axes
+        raise InputError(f"{str(p)!r}: {kind.upper()} image of {raw.shape[2]} channels (shape {raw.shape}, channels last); "
+                         "an image holds 1 channel (grey) or 3 (RGB); an alpha channel is read as a mask only in PNG and in TIFF "
+                         "(unassociated alpha).")
     values = np.asarray(raw, dtype=float)
     full_scale = float(np.iinfo(raw.dtype).max) if raw.dtype.kind in "ui" else None
     if meta["saturation_dn"] is None:
@@ -410,6 +456,33 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         scale = full_scale or 1.0
         values = np.asarray(colour.cctf_decoding(values / scale, function="sRGB")) * scale
     return ObservedImage(values, found_unit, usable, meta, str(p))
+
+
+def _read_sidecar(path: Path) -> dict[str, Any] | None:
+    """An observation's JSON sidecar (None if there is none), checked: a JSON object whose
+    ``sensor`` is a table of :class:`Sensor` fields (numbers, not strings), ``response`` one of
+    :data:`RESPONSES`, ``saturation_dn`` a number or null and ``sensor_defaults`` a list of field names."""
+    if not path.is_file():
+        return None
+    where = f"sidecar {str(path)!r}"
+    try:
+        content = json.loads(path.read_text())
+    except (ValueError, UnicodeDecodeError) as err:  # json.JSONDecodeError is a ValueError
+        raise InputError(f"{where} is not valid JSON: {err}") from None
+    if not isinstance(content, dict):
+        raise InputTypeError(f"{where} must hold a JSON object (unit, response, saturation_dn, sensor, ...), got {quote(content)}.")
+    if content.get("sensor") is not None:
+        check_fields(content["sensor"], f"{where}, its sensor")
+    if "response" in content:
+        check_choice(f"{where}: response", content["response"], RESPONSES)
+    if content.get("saturation_dn") is not None:
+        check_range(f"{where}: saturation_dn", content["saturation_dn"], 0.0, unit="DN")
+    defaults = content.get("sensor_defaults", [])
+    if not isinstance(defaults, list):
+        raise InputTypeError(f"{where}: sensor_defaults must be a list of sensor field names, got {quote(defaults)}.")
+    for name in defaults:
+        check_choice(f"{where}: sensor_defaults", name, [f.name for f in dataclasses.fields(Sensor)])
+    return content
 
 
 def _iso_time(value: Any, path: Path) -> str:
@@ -478,6 +551,8 @@ def sensor_of(image: ObservedImage, sensor: Sensor | Mapping[str, Any] | None = 
     """
     if isinstance(sensor, Sensor):
         return sensor, {name: "option/argument" for name in used_fields(sensor)}
+    if sensor is not None:
+        check_fields(sensor, "the sensor values of --sensor-value (Python: sensor=)")
     if defaults is not None:
         check_choice("sensor_defaults", defaults, SENSOR_DEFAULTS)
     layers: list[tuple[Mapping[str, Any], str]] = []

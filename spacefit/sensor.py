@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy import constants, optimize, special
 
-from spacefit.errors import InputError, InputTypeError, check_choice, check_range, quote
+from spacefit.errors import InputError, InputTypeError, check_choice, check_flag, check_range, quote
 from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
 
 if TYPE_CHECKING:
@@ -132,9 +132,9 @@ class Sensor:
         check_range("Sensor.bias_dn", self.bias_dn, 0.0, self.adc_max_dn, hi_open=True, unit="DN")
         if self.full_well_electrons is not None:
             check("full_well_electrons", 0.0, lo_open=True, unit="electrons")
-        for flag in ("diffraction", "vignetting"):
-            if not isinstance(getattr(self, flag), bool) and (flag == "diffraction" or getattr(self, flag) is not None):
-                raise InputError(f"`Sensor.{flag}` must be true or false, got {getattr(self, flag)!r}.")
+        check_flag("Sensor.diffraction", self.diffraction)
+        if self.vignetting is not None:
+            check_flag("Sensor.vignetting", self.vignetting)
         if self.radiometric_scale_dn_per_w_m2_sr is not None:
             check("radiometric_scale_dn_per_w_m2_sr", 0.0, lo_open=True, unit="DN per W m^-2 sr^-1")
         if self.saturation_level_dn is not None:
@@ -195,12 +195,36 @@ class Sensor:
     def from_dict(cls, fields: Mapping[str, Any], where: str = "sensor") -> Sensor:
         """A sensor from some or all of its fields (the others take their defaults), checked;
         ``where`` names the source in messages (a file, an argument)."""
-        if not isinstance(fields, Mapping):
-            raise InputTypeError(f"{where} must be a table of sf.Sensor's fields, got {quote(fields)}.")
-        names = [f.name for f in dataclasses.fields(cls)]
-        for key in fields:
-            check_choice(f"{where}: field", key, names)
-        return cls(**fields)
+        check_fields(fields, where)
+        try:
+            return cls(**fields)
+        except InputError as err:
+            raise type(err)(f"{where}: {err}") from None
+
+
+def check_fields(fields: Any, where: str) -> dict[str, Any]:
+    """``fields`` as a table of :class:`Sensor` fields, checked by name (the closest suggested) and
+    by type: numbers, not strings (``gain_dn_per_electron = "2.0"`` is refused); ``diffraction`` and
+    ``vignetting`` true or false; None (JSON ``null``) only where a field may be None. ``where``
+    names the source (a file, an option) in messages; the ranges are :class:`Sensor`'s."""
+    if not isinstance(fields, Mapping):
+        raise InputTypeError(f"{where} must be a table of sf.Sensor's fields, got {quote(fields)}.")
+    kinds = {f.name: str(f.type) for f in dataclasses.fields(Sensor)}
+    for key, value in fields.items():
+        kind = kinds[check_choice(f"{where}: field", key, kinds)]
+        try:
+            if value is None and "None" in kind:
+                continue
+            if kind.startswith("bool"):
+                check_flag(key, value)
+            elif kind.startswith("tuple"):  # wavelength_m: one number or one per channel
+                for i, v in enumerate(value if isinstance(value, (list, tuple, np.ndarray)) else [value]):
+                    check_range(f"{key}[{i}]", v)
+            else:
+                check_range(key, value)
+        except InputError as err:
+            raise type(err)(f"{where}: {err}") from None
+    return dict(fields)
 
 
 SCALE_FIELD = "radiometric_scale_dn_per_w_m2_sr"

@@ -93,7 +93,7 @@ def test_cli_takes_a_sensor_file_a_response_and_a_mask(dn_case, tmp_path):
         ("obs.fits", ["--sensor", "{case}/bad_sensor.json"], "Did you mean 'bit_depth'?"),
         ("obs.fits", ["--mask", "missing.png"], "mask file 'missing.png' does not exist"),
         ("obs.fits", ["--mask", "{case}/mask.png", "--mask", "{case}/mask.png"], "got 2 masks for 1 references"),
-        ("obs.fits", ["--mask", "{case}/small_mask.png"], "`mask` is 8 x 8 px, the image 32 x 32 px"),
+        ("obs.fits", ["--mask", "{case}/small_mask.png"], "small_mask.png' is 8 x 8 px, the image 32 x 32 px"),
         ("obs.fits", ["--unit", "radiance"], "BUNIT = 'adu' is DN, but W m^-2 sr^-1 was asked for"),
         ("obs.fits", ["--sigma", "0.01"], "holds DN: its noise is its sensor's; leave `sigma` out"),
         ("a.exr", ["--sensor", "{case}/sensor.json"], "`sensor` describes the camera of a DN image"),

@@ -29,7 +29,7 @@ class ObservationFiles:
         resolution: (width, height) px replacing every scene's ``render.resolution``; the
             references must have that size.
         sigma: noise standard deviation of radiance references, W m^-2 sr^-1 (residuals are divided by it).
-        masks: mask images (FITS, PNG, TIFF; nonzero = use the pixel): none, one for all
+        masks: mask images (FITS, PNG, TIFF; 0 = leave the pixel out, 1 or full scale = use it): none, one for all
             references, or one per reference in order; saturated pixels are left out in any case.
         sensor_file: a JSON or TOML file of :class:`~spacefit.sensor.Sensor` fields
             (:func:`~spacefit.sensor.read_sensor_file`) for DN references: they replace the

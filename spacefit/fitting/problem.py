@@ -141,19 +141,26 @@ def check_reference(obs: Observation, index: int) -> tuple[np.ndarray, np.ndarra
     w, h = obs.scene.render.resolution
     if ref.ndim == 2:
         ref = ref[..., None]
-    if ref.ndim != 3 or ref.shape[:2] != (h, w) or ref.shape[-1] == 2:
+    if ref.ndim != 3 or ref.shape[:2] != (h, w) or ref.shape[-1] not in (1, 3):
         raise InputError(
             f"reference {index} has shape {ref.shape}, but its scene renders (height, width) = ({h}, {w}) with 1 (grey) "
             "or 3 (RGB) channels; render the reference at the scene's resolution or set `render.resolution`."
         )
     used = np.ones(ref.shape, dtype=bool) if obs.mask is None else _mask(obs.mask, ref.shape, index)
-    ref, used = ref[..., :3], used[..., :3]
     nonfinite = int(np.any(~np.isfinite(ref) & used, axis=-1).sum())
     if nonfinite:
         raise InputError(f"reference {index} holds NaN or infinite pixels ({nonfinite}); leave them out with its mask "
                          "(`Observation.mask` False there).")
-    below = negative_pixels(ref, obs.sigma, used)
-    if below:
+    if obs.sensor is not None:  # DN: bias + gain * electrons, rounded; read noise the only way below the bias
+        s = obs.sensor
+        read_dn, floor = s.read_noise_electrons * s.gain_dn_per_electron, s.bias_dn - 0.5
+        below = negative_pixels(ref - np.float32(floor), read_dn, used)
+        if below:
+            raise InputError(f"reference {index} holds {below} pixels below {floor - NEGATIVE_SIGMAS * read_dn:g} DN: its "
+                             f"sensor's bias ({s.bias_dn:g} DN) less half a DN and {NEGATIVE_SIGMAS:g} sigma of read noise "
+                             f"({read_dn:g} DN), which its DN never reach; give the sensor's bias_dn, read_noise_electrons and "
+                             "gain_dn_per_electron (a bias-subtracted image has bias_dn = 0), or mask the pixels.")
+    elif below := negative_pixels(ref, obs.sigma, used):
         noise = "" if obs.sigma is None else f" by more than {NEGATIVE_SIGMAS:g} of its stated sigma"
         raise InputError(f"reference {index} holds {below} pixels with negative values{noise}: radiance is never negative; give "
                          "the image's noise sigma, or fit the DN it was measured in with its sensor.")

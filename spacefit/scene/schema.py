@@ -26,7 +26,7 @@ from typing import Any, ClassVar
 import numpy as np
 import tomli_w
 
-from spacefit.errors import InputError, InputTypeError, check_choice, closest, check_direction, check_range, check_vector, quote
+from spacefit.errors import InputError, InputTypeError, check_choice, closest, check_direction, check_flag, check_range, check_vector, quote
 from spacefit.geometry.wm import check_wm_params
 from spacefit.materials import MODELS, PRESETS, Material, material_table
 
@@ -364,9 +364,7 @@ _NUMBER = (int, float, np.integer, np.floating)
 def _coerce(name: str, value: Any, default: Any) -> Any:
     """Convert a TOML or Python value to the type of the field's default (numbers, vectors, strings)."""
     if isinstance(default, bool):
-        if not isinstance(value, bool):
-            raise InputTypeError(f"`{name}` must be true or false, got {quote(value)}.")
-        return value
+        return check_flag(name, value)
     if isinstance(default, int):
         return int(value) if isinstance(value, np.integer) else value  # range and integrality: each section's check
     if isinstance(default, float):

@@ -35,7 +35,7 @@ from typing import Any
 import numpy as np
 
 from spacefit import __version__
-from spacefit.errors import InputError, InputTypeError, check_count, quote
+from spacefit.errors import InputError, InputTypeError, check_choice, check_count, check_flag, check_range, closest, quote
 from spacefit.interrupts import deferred_interrupts
 from spacefit.locks import hold_lock
 from spacefit.output import STAGE_PREFIX, check_writable, clean_stale_stages
@@ -84,18 +84,24 @@ def _suffix_unit(key: str) -> str:
 def _values(key: str, spec: Any) -> list[Any]:
     """A key's list of values from a list or a ``linspace`` / ``arange`` table."""
     if isinstance(spec, Mapping):
-        if set(spec) == {"linspace"} and len(spec["linspace"]) == 3:
+        rule = next(iter(spec)) if len(spec) == 1 else None
+        if rule == "linspace" and isinstance(spec[rule], list) and len(spec[rule]) == 3:
             start, stop, num = spec["linspace"]
             check_count(f"axes[{key!r}].linspace num", num)
-            return np.linspace(float(start), float(stop), int(num)).tolist()
-        if set(spec) == {"arange"} and len(spec["arange"]) == 3:
-            start, stop, step = (float(v) for v in spec["arange"])
-            if not step or not math.isfinite(step) or (stop - start) / step <= 0:
+            return np.linspace(check_range(f"axes[{key!r}].linspace start", start),
+                               check_range(f"axes[{key!r}].linspace stop", stop), int(num)).tolist()
+        if rule == "arange" and isinstance(spec[rule], list) and len(spec[rule]) == 3:
+            bounds = [check_range(f"axes[{key!r}].arange", v) for v in spec["arange"]]
+            start, stop, step = bounds
+            if not step or (stop - start) / step <= 0:
                 raise InputError(f"`axes[{key!r}].arange` = {spec['arange']} gives no values; use [start, stop, step] "
                                  "with a step towards stop.")
-            return np.arange(start, stop, step).tolist()
+            whole = all(isinstance(v, int) and not isinstance(v, bool) for v in spec["arange"])  # integers stay integers (render.seed)
+            return np.arange(*(spec["arange"] if whole else bounds)).tolist()
+        close = [c for c in (closest(str(k), ("linspace", "arange")) for k in spec) if c]
+        hint = f" Did you mean {{{close[0]} = [start, stop, ...]}}?" if close else ""
         raise InputError(f"`axes[{key!r}]` must be a list of values, {{linspace = [start, stop, num]}} or "
-                         f"{{arange = [start, stop, step]}}, got {quote(dict(spec))}.")
+                         f"{{arange = [start, stop, step]}}, got {quote(dict(spec))}.{hint}")
     if isinstance(spec, (str, bytes)) or not isinstance(spec, Sequence | np.ndarray) or len(spec) == 0:
         raise InputError(f"`axes[{key!r}]` must be a non-empty list of values, got {quote(spec)}.")
     return [np.asarray(v).tolist() for v in spec]
@@ -107,7 +113,7 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
         raise InputTypeError(f"`axes` must be a non-empty mapping of scene keys to lists of values, got {quote(axes)}.")
     parsed = []
     for name, spec in axes.items():
-        zipped = isinstance(spec, Mapping) and not ({"linspace"} == set(spec) or {"arange"} == set(spec))
+        zipped = isinstance(spec, Mapping) and any("." in str(k) for k in spec)  # scene keys have dots; linspace, arange none
         values = {k: _values(k, v) for k, v in spec.items()} if zipped else {name: _values(name, spec)}
         if len({len(v) for v in values.values()}) > 1:
             raise InputError(f"the zipped keys of axis {name!r} must have lists of equal length, got "
@@ -341,7 +347,7 @@ def sweep(
     if derivatives:
         check_names(scene, list(derivatives), "derivatives")
     parsed = parse_axes(scene, axes)
-    options = {"images": bool(images), "derivatives": list(derivatives), "derivative_seeds": derivative_seeds}
+    options = {"images": check_flag("images", images), "derivatives": list(derivatives), "derivative_seeds": derivative_seeds}
     spec = _canonical(scene, parsed, options)
     seeds = parsed_seeds(scene, parsed)
     attrs = {"spacefit_version": __version__, "scene_toml": scene.to_toml(), "seeds": seeds,
@@ -371,10 +377,12 @@ def read_sweep_file(path: str | Path, overrides: Sequence[str] = ()) -> tuple[Sc
     Returns ``(scene, axes, options)``: ``sf.sweep(scene, axes, store=..., **options)`` runs it.
     """
     data = read_scene_dict(path)  # the same checks and messages as a scene file's
-    unknown = set(data) - {"scene", "axes", *SWEEP_FILE_OPTIONS}
-    if unknown:
-        raise InputError(f"sweep file {str(path)!r}: unknown keys {sorted(unknown)}; valid: scene, axes, "
-                         f"{', '.join(SWEEP_FILE_OPTIONS)}.")
+    for key in data:
+        check_choice(f"sweep file {str(path)!r}: key", key, ("scene", "axes", *SWEEP_FILE_OPTIONS))
+    if "images" in data:
+        check_flag(f"sweep file {str(path)!r}: images", data["images"])
+    if not isinstance(data.get("derivatives", []), list):
+        raise InputTypeError(f"sweep file {str(path)!r}: `derivatives` must be a list of parameter names, got {quote(data['derivatives'])}.")
     if "axes" not in data:
         raise InputError(f"sweep file {str(path)!r} has no [axes] table of swept scene keys.")
     scene_file = data.get("scene")
