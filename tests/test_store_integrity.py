@@ -10,7 +10,6 @@ import shutil
 import tracemalloc
 from pathlib import Path
 
-import numpy as np
 import pytest
 import xarray as xr
 from helpers import small_scene, write_sphere_obj
@@ -195,6 +194,9 @@ def test_a_sweep_of_a_billion_points_is_refused_before_allocating(tmp_path, monk
     assert main(["sweep", str(tmp_path / "sweep.toml"), "--out", str(store), "--quiet"]) == 2
     err = capsys.readouterr().err
     assert len(err.splitlines()) == 1 and "2,000,000 points is more than 1,000,000" in err and "store at most 38.1 GiB" in err
+    (tmp_path / "sweep.toml").write_text('scene = "scene.toml"\n[axes]\n"sun.elevation_deg" = {linspace = [10, 80, 1000000000]}\n')
+    assert main(["sweep", str(tmp_path / "sweep.toml"), "--out", str(store), "--quiet", "--large"]) == 2
+    assert "of memory for its index alone and this machine has 1.0 GiB available" in capsys.readouterr().err
     assert not store.exists()
 
 

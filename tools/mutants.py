@@ -179,6 +179,8 @@ MUTANTS = (
     # stores that cannot lie (issue 20): a done point is trusted only when its data match its checksum
     Mutant("done-without-checksum-check", "spacefit/studies/sweep.py",
            "point_checksum([v[local] for v, _ in data]) == stored[local]", "True", ("tests/test_store_integrity.py",)),
+    Mutant("sweep-marks-done-after-a-mesh-edit", "spacefit/studies/sweep.py",
+           "if watch is not None and (edited := watch.check()):", "if False:", ("tests/test_store_integrity.py",)),
     # the fit's verdicts (spacefit/fitting/goodness.py, loop.py)
     Mutant("misfit-threshold-flipped", "spacefit/fitting/goodness.py", "bool(chi2_dof > limit)", "bool(chi2_dof < limit)",
            ("tests/test_goodness.py",)),

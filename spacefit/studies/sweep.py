@@ -526,17 +526,20 @@ def estimate(scene: Scene, axes: AxesSpec, *, images: bool, derivatives: tuple[s
 
 
 def check_estimate(found: Estimate, store: str | Path | None, *, allow_large: bool) -> None:
-    """Refuse a sweep whose index would not fit in the memory available; and unless ``allow_large``,
-    one of more than :data:`MAX_POINTS` points or whose store may not fit on its disk."""
+    """Refuse a sweep whose index (and store, when ``store`` is None: in memory) would not fit in the
+    memory available; and unless ``allow_large``, one of more than :data:`MAX_POINTS` points or whose
+    new store may not fit on its disk."""
     from spacefit.rendering.renderer import available_memory_bytes  # deferred: Mitsuba (the sweep renders anyway)
 
     if found.points > MAX_POINTS and not allow_large:
         raise InputError(f"a sweep of {found.points:,} points is more than {MAX_POINTS:,} (a file per point and "
                          f"variable; {found.sizes}); split it, or pass allow_large=True (--large) to run it.")
     memory = available_memory_bytes()
-    if found.index_bytes > memory:
-        raise InputError(f"a sweep of {found.points:,} points needs about {_size(found.index_bytes)} of memory for its "
-                         f"index alone and this machine has {_size(memory)} available; split it into smaller sweeps.")
+    needs = found.index_bytes + (sum(found.store_bytes.values()) if store is None else 0)  # a store in memory
+    if needs > memory:
+        what = "its index alone" if store is not None else "its index and its store (in memory: give `store` a folder)"
+        raise InputError(f"a sweep of {found.points:,} points needs about {_size(needs)} of memory for {what} and this "
+                         f"machine has {_size(memory)} available; split it into smaller sweeps.")
     if allow_large:
         return
     if store is not None and not Path(store).exists():  # a new store (one to finish holds its points already)
@@ -617,8 +620,9 @@ def sweep(
     def make() -> Any:
         return template(scene, parsed, images=images, derivatives=derivatives, attrs=attrs)
 
+    reopened = store is not None and Path(store).exists() and not overwrite  # else open_store makes a new one
     group = open_store(store, spec, make, overwrite)
-    if store is not None:
+    if reopened:
         repair(group, Path(store), make)
     task_of = tasks(scene, parsed, images=images, derivatives=derivatives, derivative_seeds=derivative_seeds)
     names = in_place_names(scene)
