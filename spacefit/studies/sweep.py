@@ -37,7 +37,7 @@ from typing import Any
 import numpy as np
 
 from spacefit import __version__
-from spacefit.digests import Watch, digests, mesh_files
+from spacefit.digests import Watch, mesh_files
 from spacefit.errors import InputError, InputTypeError, check_count, quote
 from spacefit.interrupts import deferred_interrupts
 from spacefit.output import STAGE_PREFIX, check_writable
@@ -139,12 +139,13 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
     return parsed
 
 
-def _canonical(scene: Scene, axes: list[Axis], options: Mapping[str, Any]) -> str:
+def _canonical(scene: Scene, axes: list[Axis], options: Mapping[str, Any], mesh_sha256: Mapping[str, str]) -> str:
     """The arguments that decide a store's contents, as JSON: a rerun must match them (numbers
     compared as floats, so that ``[30, 60]`` and ``[30.0, 60.0]`` are the same sweep), and so must
-    the contents of the mesh files the scene reads (an edited mesh at the same path is another sweep)."""
+    the contents of the mesh files the scene reads (``mesh_sha256``: path -> SHA-256; an edited mesh
+    at the same path is another sweep)."""
     axes_json = [[a.name, {k: _floats(v) for k, v in a.values.items()}] for a in axes]
-    return json.dumps({"scene": scene.to_toml(), "axes": axes_json, "mesh_files": digests(mesh_files(scene)), **options},
+    return json.dumps({"scene": scene.to_toml(), "axes": axes_json, "mesh_files": dict(mesh_sha256), **options},
                       sort_keys=True)
 
 
@@ -362,10 +363,11 @@ class StoreReport:
         return "\n".join(lines)
 
 
-def check_points(group: Any, root: Path | None) -> StoreReport:
-    """Read back every done point of a store in batches and compare its checksum; a missing chunk,
-    an undecodable one or a missing variable fails the points it holds, never raises."""
-    present = set(group.array_keys()) if root is None else {p.parent.name for p in root.glob("*/.zarray")}
+def check_points(group: Any, root: Path) -> StoreReport:
+    """Read back every done point of the store in folder ``root`` (``group``, opened without its
+    consolidated metadata) in batches and compare its checksum; a missing chunk, an undecodable one
+    or a missing variable fails the points it holds, never raises."""
+    present = {p.parent.name for p in root.glob("*/.zarray")}
     names = list(group[CHECKSUM].attrs.get("variables", ())) if CHECKSUM in present else []
     missing = tuple(n for n in ["done", CHECKSUM, *names] if n not in present)
     shape = tuple(group["done"].shape if "done" in present else group.attrs.get("sweep_shape", ()))
@@ -612,7 +614,7 @@ def sweep(
         print(found, file=sys.stderr, flush=True)
     watch = Watch(mesh_files(scene))
     options = {"images": bool(images), "derivatives": list(derivatives), "derivative_seeds": derivative_seeds}
-    spec = _canonical(scene, parsed, options)
+    spec = _canonical(scene, parsed, options, watch.recorded)
     seeds = parsed_seeds(scene, parsed)
     attrs = {"spacefit_version": __version__, "scene_toml": scene.to_toml(), "seeds": seeds,
              "sweep_shape": [a.size for a in parsed],
