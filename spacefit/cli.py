@@ -127,7 +127,7 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
                                                        "with --verify, the store to check")
     s.add_argument("--out", metavar="STORE", help="Zarr store folder (new, or this sweep's to finish it)")
     s.add_argument("--verify", action="store_true",
-                   help=f"check the store SWEEP.toml names without rendering: read back every done point and compare "
+                   help=f"check a store (given in place of SWEEP.toml: spacefit sweep STORE --verify) without rendering: read back every done point and compare "
                         f"its checksum; exit 0 when every point is done and verified, {DAMAGED} when a point failed or a "
                         f"variable is missing (rerun the sweep to recompute them), {UNFINISHED} when points are left to compute")
     s.add_argument("--large", action="store_true", help="run a sweep of more than a million points, or whose store may "
@@ -135,7 +135,7 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     s.add_argument("--overwrite", action="store_true", help="replace a store that holds another sweep")
     s.add_argument("--workers", type=int, metavar="N", help="run on a local dask cluster of N worker processes")
     s.add_argument("--scheduler", metavar="ADDRESS", help="run on the dask scheduler at ADDRESS (tcp://host:8786)")
-    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--quiet", action="store_true", help="no size estimate and no progress bar")
     return p
 
 

@@ -231,3 +231,17 @@ def test_a_reference_edited_before_resume_is_refused_by_name(tmp_path, monkeypat
     assert main([*args, "--resume"]) == 2
     err = capsys.readouterr().err
     assert "was made with other contents of" in err and "ref.exr" in err and "SHA-256" in err and "scene.toml" not in err
+
+
+def test_a_store_written_before_checksums_is_recomputed_once(finished, tmp_path, monkeypatch):
+    """An older spacefit's store: no `checksum` variable, in the files or in the consolidated metadata."""
+    import zarr
+
+    store, copy = finished
+    shutil.rmtree(store / "checksum")
+    zarr.consolidate_metadata(str(store), zarr_format=2)
+    calls = counting(monkeypatch)
+    with pytest.warns(UserWarning, match="checksum were missing and are recreated; the 6 done points are recomputed"):
+        sf.sweep(sphere_scene(tmp_path), AXES, store=store, quiet=True)
+    assert len(calls) == 6
+    same_store(store, copy)

@@ -441,16 +441,17 @@ def verify_store(store: str | Path) -> StoreReport:
     return check_points(group, path)
 
 
-def repair(group: Any, root: Path, make: Callable[[], Any]) -> None:
+def repair(group: Any, root: Path, make: Callable[[], Any]) -> Any:
     """Verify the done points of a reopened store; recreate missing variables, clear the ``done``
-    flag of the points that failed (so that they are computed again) and say how many."""
+    flag of the points that failed (so that they are computed again) and say how many. Returns the
+    group to write to: ``group``, or the store opened again when variables were recreated."""
     import zarr  # here: only a sweep's store needs Zarr (slow to import)
 
     plain = zarr.open_group(str(root), mode="r", zarr_format=STORE_FORMAT, use_consolidated=False)
     report = check_points(plain, root)
     if report.missing_variables:
-        full = make()
-        full[list(report.missing_variables)].to_zarr(str(root), mode="a", compute=False, zarr_format=STORE_FORMAT)
+        make()[list(report.missing_variables)].to_zarr(str(root), mode="a", compute=False, zarr_format=STORE_FORMAT)
+        group = zarr.open_group(str(root), mode="r+", zarr_format=STORE_FORMAT)  # its metadata now lists them
     for index in report.failed:
         group["done"][index] = False
     gone = ", ".join(report.missing_variables)
@@ -463,6 +464,7 @@ def repair(group: Any, root: Path, make: Callable[[], Any]) -> None:
                 "damaged) and are recomputed")
     if report.damaged:
         warnings.warn(f"store {str(root)!r}: {said}", stacklevel=3)
+    return group
 
 
 def axis_lengths(axes: AxesSpec) -> list[int]:
@@ -625,7 +627,7 @@ def sweep(
     reopened = store is not None and Path(store).exists() and not overwrite  # else open_store makes a new one
     group = open_store(store, spec, make, overwrite)
     if reopened:
-        repair(group, Path(store), make)
+        group = repair(group, Path(store), make)
     task_of = tasks(scene, parsed, images=images, derivatives=derivatives, derivative_seeds=derivative_seeds)
     names = in_place_names(scene)
     # points that load another scene vary slowest, so that a scene is loaded once per value
