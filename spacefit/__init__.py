@@ -81,6 +81,8 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "LightCurve": ("spacefit.studies.lightcurve", "LightCurve"),
     "light_curve": ("spacefit.studies.lightcurve", "light_curve"),
     "read_sweep_file": ("spacefit.studies.sweep", "read_sweep_file"),
+    "verify_store": ("spacefit.studies.sweep", "verify_store"),
+    "StoreReport": ("spacefit.studies.sweep", "StoreReport"),
     "expected_dn": ("spacefit.fitting.formation", "expected_dn"),
     "noise_variance_dn": ("spacefit.fitting.formation", "noise_variance_dn"),
     "observe": ("spacefit.fitting.formation", "observe"),
@@ -99,7 +101,7 @@ __all__ = [
     "Distortion", "Intrinsics", "ObservedImage", "Sensor", "distort_image", "expected_dn", "noise_variance_dn", "observe",
     "pixel_solid_angles", "read_image", "read_sensor_file", "saturated_mask", "write_observation", "sensor_of", "format_sensor_sources",
     "MLI_SLOPE_RANGE",
-    "read_sweep_file", "sweep", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
+    "read_sweep_file", "sweep", "verify_store", "StoreReport", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
     "plot_comparison", "plot_convergence",
     "RenderSettings", "CameraSettings", "SunSettings", "TargetSettings", "WrinkleSettings", "PartSettings",
 ]

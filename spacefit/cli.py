@@ -1,6 +1,6 @@
 """Command line: ``spacefit render|scene|export-stl [SCENE.toml] --out PATH [--set key=value ...]`` and
 ``spacefit fit REFERENCE ... --scene SCENE.toml --free NAME[,NAME...] --out DIR [--mask M] [--sensor S]``,
-``spacefit sweep SWEEP.toml --out STORE``."""
+``spacefit sweep SWEEP.toml --out STORE``, ``spacefit sweep STORE --verify``."""
 
 from __future__ import annotations
 
@@ -29,6 +29,9 @@ MISFIT = 5  # the residuals exceed the noise: the model or its nuisances miss so
 AT_BOUND = 6  # a parameter ended at a bound of its range
 INTERRUPTED = 130  # 128 + SIGINT, as shells report Ctrl-C
 TERMINATED = 143  # 128 + SIGTERM
+# Exit codes of `spacefit sweep STORE --verify` that is not a success.
+DAMAGED = 7  # a done point failed its checksum, or a variable is missing: rerun the sweep to recompute them
+UNFINISHED = 8  # every done point verifies, but some points are not done yet
 
 
 def _free_help(command: str | None) -> str:
@@ -121,23 +124,36 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     s = sub.add_parser("sweep", parents=[overrides], help="render a sweep of scene values into a resumable Zarr store",
                        description="Render a scene at every point of a sweep file's axes into a Zarr store, point by "
                                    "point; rerun the same command to finish an interrupted sweep. --set applies to the scene.")
-    s.add_argument("sweep", metavar="SWEEP.toml", help="sweep file: scene, [axes], options (README, Sweeps)")
-    s.add_argument("--out", required=True, metavar="STORE", help="Zarr store folder (new, or this sweep's to finish it)")
+    s.add_argument("sweep", metavar="SWEEP.toml", help="sweep file: scene, [axes], options (README, Sweeps); "
+                                                       "with --verify, the store to check")
+    s.add_argument("--out", metavar="STORE", help="Zarr store folder (new, or this sweep's to finish it)")
+    s.add_argument("--verify", action="store_true",
+                   help=f"check a store (given in place of SWEEP.toml: spacefit sweep STORE --verify) without rendering: read back every done point and compare "
+                        f"its checksum; exit 0 when every point is done and verified, {DAMAGED} when a point failed or a "
+                        f"variable is missing (rerun the sweep to recompute them), {UNFINISHED} when points are left to compute")
+    s.add_argument("--large", action="store_true", help="run a sweep of more than a million points, or whose store may "
+                                                       "not fit on its disk (its size is printed first)")
     s.add_argument("--overwrite", action="store_true", help="replace a store that holds another sweep")
     s.add_argument("--workers", type=int, metavar="N", help="run on a local dask cluster of N worker processes")
     s.add_argument("--scheduler", metavar="ADDRESS", help="run on the dask scheduler at ADDRESS (tcp://host:8786)")
-    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--quiet", action="store_true", help="no size estimate and no progress bar")
     return p
 
 
 def _sweep(args: argparse.Namespace) -> int:
     """Run ``spacefit sweep``; on Ctrl-C say where the finished points are."""
-    from spacefit.studies.sweep import read_sweep_file, sweep  # deferred: the studies' modules (0.2 s), which render never needs
+    from spacefit.studies.sweep import read_sweep_file, sweep, verify_store  # deferred: the studies' modules (0.2 s), which render never needs
 
+    if args.verify:
+        report = verify_store(args.sweep)
+        print(report)
+        return DAMAGED if report.damaged else UNFINISHED if report.missing else 0
+    if args.out is None:
+        raise InputError("`--out` STORE is required to run a sweep (or pass --verify to check the store SWEEP.toml names).")
     scene, axes, options = read_sweep_file(args.sweep, args.overrides)
     try:
         sweep(scene, axes, store=args.out, overwrite=args.overwrite, workers=args.workers, scheduler=args.scheduler,
-              quiet=args.quiet, **options)
+              allow_large=args.large, quiet=args.quiet, **options)
     except KeyboardInterrupt as stop:
         print(f"spacefit: interrupted; every finished point is in {args.out} (rerun the same command to finish)", file=sys.stderr)
         return TERMINATED if isinstance(stop, Terminated) else INTERRUPTED
@@ -247,7 +263,8 @@ def file_system_error(err: OSError) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code: 0, 1 for a file system error, 2 for bad input, for a
-    fit 3 not converged, 4 no progress, 5 misfit, 6 a parameter at a bound (:func:`exit_code`), 130 for
+    fit 3 not converged, 4 no progress, 5 misfit, 6 a parameter at a bound (:func:`exit_code`), for
+    ``sweep --verify`` 7 a damaged store and 8 an unfinished one, 130 for
     Ctrl-C and 143 for SIGTERM (one line, no traceback)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     args = _parser(argv[0] if argv else None).parse_args(argv)

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from spacefit.digests import digests, mesh_files
 from spacefit.errors import InputError, check_choice
 from spacefit.geometry.mesh import export_stl
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
@@ -202,7 +203,8 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
             display(step, total)
 
     inputs = {**files.record(observations), "free": list(free), "options": options.to_dict()}
-    checkpoint = Checkpoint(Path(out_dir) / CHECKPOINT, inputs)
+    read = [*files.files, *(path for obs in observations for path in mesh_files(obs.scene))]
+    checkpoint = Checkpoint(Path(out_dir) / CHECKPOINT, inputs, read)
     if resume:
         options = dataclasses.replace(options, **checkpoint.resume(options.max_steps))
         _say(f"resuming from step {checkpoint.steps} of the checkpoint in {out_dir}", quiet)
@@ -242,10 +244,13 @@ def _problem_of(value: Any, key: str) -> Any:
 
 class Checkpoint:
     """The best point of a fit so far, written atomically into its output folder after every step
-    that improves it, so that an interrupted (even killed) fit can be resumed (``--resume``)."""
+    that improves it, so that an interrupted (even killed) fit can be resumed (``--resume``). It
+    records the SHA-256 of every file the fit read (``files``: references, scenes, masks, sensor
+    file, flat field, meshes), hashed when it is made: a resume compares them by content."""
 
-    def __init__(self, path: Path, inputs: dict[str, Any]) -> None:
+    def __init__(self, path: Path, inputs: dict[str, Any], files: Sequence[str | Path] = ()) -> None:
         self.path, self.inputs = path, json.loads(json.dumps(inputs, default=str))
+        self.digests = digests(files)
         self.best: dict[str, Any] | None = None
         self.steps = 0
 
@@ -255,27 +260,33 @@ class Checkpoint:
         if np.isfinite(entry["loss"]) and (self.best is None or entry["loss"] < self.best["loss"]):
             self.best = {"loss": float(entry["loss"]), "values": dict(entry["values"])}
             with staged_output(self.path.parent) as stage:
-                write_json(stage / self.path.name, {"inputs": self.inputs, "best": self.best, "steps": self.steps,
-                                                    "versions": versions()})
+                write_json(stage / self.path.name, {"inputs": self.inputs, "files_sha256": self.digests, "best": self.best,
+                                                    "steps": self.steps, "versions": versions()})
 
     def resume(self, max_steps: int) -> dict[str, Any]:
         """The fit options that continue from the checkpoint: its best values as the start, and the
         steps left of ``max_steps``.
 
         Raises:
-            InputError: without a checkpoint, or for one made with other inputs (naming them).
+            InputError: without a checkpoint, or for one made with other inputs (naming them) or
+                files whose contents have changed since (naming the files).
         """
         if not self.path.is_file():
             raise InputError(f"there is no checkpoint {str(self.path)!r} to resume from; run without --resume.")
         try:
             saved = json.loads(self.path.read_text())
             best, steps, inputs = saved["best"], int(saved["steps"]), saved["inputs"]
+            recorded = dict(saved.get("files_sha256", {}))
         except (OSError, ValueError, KeyError, TypeError) as err:
             raise InputError(f"checkpoint {str(self.path)!r} is unreadable ({err}); run without --resume.") from None
         differ = sorted(k for k in set(inputs) | set(self.inputs) if _problem_of(inputs.get(k), k) != _problem_of(self.inputs.get(k), k))
         if differ:
             raise InputError(f"checkpoint {str(self.path)!r} was made with other {', '.join(differ)}; resume with the "
                              "same references, scenes, free parameters and options, or run without --resume.")
+        edited = [path for path, digest in recorded.items() if path in self.digests and self.digests[path] != digest]
+        if edited:
+            raise InputError(f"checkpoint {str(self.path)!r} was made with other contents of {', '.join(map(repr, edited))} "
+                             "(SHA-256 differs: edited since); resume with the files as they were, or run without --resume.")
         self.best, self.steps = best, steps
         return {"start": best["values"], "max_steps": max(max_steps - steps, 1)}
 

@@ -181,9 +181,14 @@ MUTANTS = (
     Mutant("light-curve-first-seed-only", "spacefit/studies/lightcurve.py", "mean, se = mean_and_error(samples) if",
            "mean, se = (samples[0], mean_and_error(samples)[1]) if", ("tests/test_lightcurve.py",)),
     Mutant("sweep-done-before-data", "spacefit/studies/sweep.py",
-           '    for name, value in result.items():\n        group[name][index] = value\n    group["done"][index] = True\n',
-           '    group["done"][index] = True\n    for name, value in result.items():\n        group[name][index] = value\n',
+           '    for name in names:\n        group[name][index] = result[name]\n',
+           '    group["done"][index] = True\n    for name in names:\n        group[name][index] = result[name]\n',
            (PLUMBING,)),
+    # stores that cannot lie (issue 20): a done point is trusted only when its data match its checksum
+    Mutant("done-without-checksum-check", "spacefit/studies/sweep.py",
+           "point_checksum([v[local] for v, _ in data]) == stored[local]", "True", ("tests/test_store_integrity.py",)),
+    Mutant("sweep-marks-done-after-a-mesh-edit", "spacefit/studies/sweep.py",
+           "if watch is not None and (edited := watch.check()):", "if False:", ("tests/test_store_integrity.py",)),
     # the fit's verdicts (spacefit/fitting/goodness.py, loop.py)
     Mutant("misfit-threshold-flipped", "spacefit/fitting/goodness.py", "bool(chi2_dof > limit)", "bool(chi2_dof < limit)",
            ("tests/test_goodness.py",)),

@@ -22,11 +22,14 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
+import itertools
 import json
 import math
 import os
 import shutil
+import sys
 import tempfile
+import warnings
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -35,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from spacefit import __version__
+from spacefit.digests import Watch, mesh_files
 from spacefit.errors import InputError, InputTypeError, check_choice, check_count, check_flag, check_range, closest, quote
 from spacefit.interrupts import deferred_interrupts
 from spacefit.locks import hold_lock
@@ -52,6 +56,14 @@ RENDER_ARGUMENTS = ("render.seed", "render.spp")
 # Scene keys a sweep cannot vary: they fix the shape of the store's images and part lists.
 FIXED_KEYS = ("render.resolution", "target.mesh")
 SUFFIX_UNITS = {"_m": "m", "_mm": "mm", "_deg": "deg", "_w_m2": "W m^-2", "_px": "px"}
+CHECKSUM = "checksum"  # the variable of each point's checksum (one chunk per point)
+VERIFY_BATCH_BYTES = 64 << 20  # a store is verified in reads of about this many bytes
+# A sweep of more points is refused unless allow_large: a store holds a file per point and variable.
+MAX_POINTS = 1_000_000
+FILE_BLOCK_BYTES = 4096  # a chunk file takes at least a file-system block
+# The index of points to compute, per point: the done flag, np.nonzero's int64 per axis, and a
+# tuple in a list (sorted copy included): 72 bytes, plus 36 per axis (an int and its pointer).
+INDEX_BYTES_PER_POINT, INDEX_BYTES_PER_POINT_AXIS = 73, 44
 STORE_FORMAT = 2  # Zarr format 2: readable by every Zarr library (format 3 has no string type yet)
 AxesSpec = Mapping[str, Any]
 
@@ -135,19 +147,14 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
     return parsed
 
 
-def _canonical(scene: Scene, axes: list[Axis], options: Mapping[str, Any]) -> str:
+def _canonical(scene: Scene, axes: list[Axis], options: Mapping[str, Any], mesh_sha256: Mapping[str, str]) -> str:
     """The arguments that decide a store's contents, as JSON: a rerun must match them (numbers
     compared as floats, so that ``[30, 60]`` and ``[30.0, 60.0]`` are the same sweep), and so must
-    the contents of the mesh files the scene reads (an edited mesh at the same path is another sweep)."""
+    the contents of the mesh files the scene reads (``mesh_sha256``: path -> SHA-256; an edited mesh
+    at the same path is another sweep)."""
     axes_json = [[a.name, {k: _floats(v) for k, v in a.values.items()}] for a in axes]
-    return json.dumps({"scene": scene.to_toml(), "axes": axes_json, "mesh_files": _mesh_digests(scene), **options},
+    return json.dumps({"scene": scene.to_toml(), "axes": axes_json, "mesh_files": dict(mesh_sha256), **options},
                       sort_keys=True)
-
-
-def _mesh_digests(scene: Scene) -> dict[str, str]:
-    """SHA-256 of each mesh file the scene reads (none for the built-in lander)."""
-    paths = [p for p in (scene.target.mesh, *(part.file for part in scene.parts.values())) if p not in ("", "builtin")]
-    return {p: hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in dict.fromkeys(paths)}
 
 
 def _floats(value: Any) -> Any:
@@ -200,6 +207,24 @@ def _coords(axes: list[Axis]) -> dict[str, Any]:
     return coords
 
 
+def point_variables(scene: Scene, *, images: bool, derivatives: tuple[str, ...]) -> dict[str, tuple[Any, ...]]:
+    """The variables of each point: name -> (extra dimensions, their sizes, dtype, fill, unit, description)."""
+    n = len(regions(scene))
+    out: dict[str, tuple[Any, ...]] = {
+        "mean_radiance": (("region",), (n,), np.float64, np.nan, "W m^-2 sr^-1",
+                          "mean over the pixels whose centre sees the region of the RGB mean radiance"),
+        "pixels": (("region",), (n,), np.int32, -1, "1", "pixels whose centre sees the region"),
+        "irradiance": (("region",), (n,), np.float64, np.nan, "W m^-2",
+                       "sum of radiance times pixel solid angle over the region's pixels (target: the whole image), at the pinhole"),
+    }
+    if images:
+        w, h = scene.render.resolution
+        out["radiance"] = (("y", "x", "channel"), (h, w, 3), np.float32, np.nan, "W m^-2 sr^-1", "the rendered image")
+    for name, (dtype, fill, unit, doc) in (SUMMARY_VARIABLES.items() if derivatives else ()):
+        out[name] = (("parameter", "region"), (len(derivatives), n), dtype, fill, unit, doc)
+    return out
+
+
 def template(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple[str, ...], attrs: Mapping[str, Any]) -> Any:
     """The store's empty Dataset (dask arrays, never computed): dimensions, coordinates, chunks of one point."""
     import dask.array as da  # here: dask and xarray take a second to import; only a sweep's store needs them
@@ -208,26 +233,18 @@ def template(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple
     dims = tuple(a.name for a in axes)
     shape = tuple(a.size for a in axes)
     one = (1,) * len(dims)
-    names = regions(scene)
+    layout = point_variables(scene, images=images, derivatives=derivatives)
     variables: dict[str, Any] = {}
-
-    def add(name: str, extra: tuple[str, ...], size: tuple[int, ...], dtype: Any, fill: Any, unit: str, doc: str) -> None:
+    for name, (extra, size, dtype, fill, unit, doc) in layout.items():
         data = da.full(shape + size, fill, dtype=dtype, chunks=one + size)
         variables[name] = (dims + extra, data, {"units": unit, "description": doc})
-
-    add("mean_radiance", ("region",), (len(names),), np.float64, np.nan, "W m^-2 sr^-1",
-        "mean over the pixels whose centre sees the region of the RGB mean radiance")
-    add("pixels", ("region",), (len(names),), np.int32, -1, "1", "pixels whose centre sees the region")
-    add("irradiance", ("region",), (len(names),), np.float64, np.nan, "W m^-2",
-        "sum of radiance times pixel solid angle over the region's pixels (target: the whole image), at the pinhole")
-    if images:
-        w, h = scene.render.resolution
-        add("radiance", ("y", "x", "channel"), (h, w, 3), np.float32, np.nan, "W m^-2 sr^-1", "the rendered image")
-    if derivatives:
-        for name, (dtype, fill, unit, doc) in SUMMARY_VARIABLES.items():
-            add(name, ("parameter", "region"), (len(derivatives), len(names)), dtype, fill, unit, doc)
-    variables["done"] = (dims, da.zeros(shape, dtype=bool, chunks=one), {"description": "the point is written"})
-    coords = {**_coords(axes), "region": np.array(names, dtype=object)}
+    variables[CHECKSUM] = (dims, da.zeros(shape, dtype=np.uint64, chunks=one), {
+        "description": f"BLAKE2b (8 bytes, little-endian) of the point's bytes of {', '.join(sorted(layout))} in this "
+                       "order (C order, the stored dtypes), written after them and before done; 0: none",
+        "variables": sorted(layout)})
+    variables["done"] = (dims, da.zeros(shape, dtype=bool, chunks=one),
+                         {"description": "the point is written, durably, and its checksum with it"})
+    coords = {**_coords(axes), "region": np.array(regions(scene), dtype=object)}
     if images:
         coords["channel"] = np.array(["R", "G", "B"], dtype=object)
     if derivatives:
@@ -289,11 +306,262 @@ def pending(done: np.ndarray, order: Sequence[int]) -> list[tuple[int, ...]]:
     return sorted(todo, key=lambda idx: tuple(idx[a] for a in order))
 
 
-def write_point(group: Any, index: tuple[int, ...], result: Mapping[str, np.ndarray]) -> None:
-    """Write one point's variables, then its ``done`` flag (each a chunk of its own, written atomically)."""
-    for name, value in result.items():
-        group[name][index] = value
+def point_checksum(values: Sequence[np.ndarray]) -> np.uint64:
+    """The checksum of one point: BLAKE2b (8 bytes) of its variables' bytes, in the order given."""
+    digest = hashlib.blake2b(digest_size=8)
+    for value in values:
+        digest.update(np.ascontiguousarray(value).tobytes())
+    return np.uint64(int.from_bytes(digest.digest(), "little"))
+
+
+def write_point(group: Any, index: tuple[int, ...], result: Mapping[str, np.ndarray], root: Path | None = None) -> None:
+    """Write one point's variables, then the checksum of their bytes as read back from the store,
+    flush them to the disk (``root``: the store's folder), then its ``done`` flag. Each is a chunk of
+    its own, which Zarr writes whole to a temporary file and renames."""
+    names = sorted(result)
+    for name in names:
+        group[name][index] = result[name]
+    group[CHECKSUM][index] = point_checksum([np.asarray(group[name][index]) for name in names])
+    if root is not None:
+        _flush(root, index, {**{name: np.ndim(result[name]) for name in names}, CHECKSUM: 0})
     group["done"][index] = True
+
+
+def _flush(root: Path, index: tuple[int, ...], extra_dims: Mapping[str, int]) -> None:
+    """fsync the chunk files of the point ``index`` of each variable (with its number of dimensions
+    beyond the axes) and their folders, so that a crash of the machine cannot undo them."""
+    for name, extra in extra_dims.items():
+        _fsync(root / name / ".".join(map(str, index + (0,) * extra)))  # Zarr 2's chunk key, "." separated
+        _fsync(root / name)
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+@dataclass(frozen=True)
+class StoreReport:
+    """What :func:`verify_store` found: counts of points, the done points whose data failed their
+    checksum (or whose flag is unreadable), and the variables missing from the store."""
+
+    points: int
+    done: int
+    verified: int
+    failed: tuple[tuple[int, ...], ...]
+    missing_variables: tuple[str, ...]
+
+    @property
+    def missing(self) -> int:
+        """Points not done (never computed, or failed)."""
+        return self.points - self.verified
+
+    @property
+    def damaged(self) -> bool:
+        """Some done point failed its checksum, or a variable is missing."""
+        return bool(self.failed or self.missing_variables)
+
+    def __str__(self) -> str:
+        lines = [f"{self.points:,} points: {self.done:,} done, {self.verified:,} verified, {len(self.failed):,} failed "
+                 f"their checksum, {self.missing:,} to compute"]
+        if self.missing_variables:
+            lines.append(f"missing variables: {', '.join(self.missing_variables)}")
+        return "\n".join(lines)
+
+
+def check_points(group: Any, root: Path) -> StoreReport:
+    """Read back every done point of the store in folder ``root`` (``group``, opened without its
+    consolidated metadata) in batches and compare its checksum; a missing chunk, an undecodable one
+    or a missing variable fails the points it holds, never raises."""
+    present = {p.parent.name for p in root.glob("*/.zarray")}
+    names = list(group[CHECKSUM].attrs.get("variables", ())) if CHECKSUM in present else []
+    missing = tuple(n for n in ["done", CHECKSUM, *names] if n not in present)
+    shape = tuple(group["done"].shape if "done" in present else group.attrs.get("sweep_shape", ()))
+    points, done_count, failed, verified = math.prod(shape) if shape else 0, 0, [], 0
+    point_bytes = sum(math.prod(group[n].shape[len(shape):]) * group[n].dtype.itemsize for n in names if n in present)
+    for slab in _slabs(shape, point_bytes + 9):
+        done, unreadable = _read(group["done"], slab) if "done" in present else (None, None)
+        if done is None or not (done.any() or unreadable.any()):
+            continue
+        done = done & ~unreadable
+        done_count += int(done.sum() + unreadable.sum())
+        bad = unreadable.copy()
+        if missing:
+            bad |= done
+        else:
+            stored, bad_sum = _read(group[CHECKSUM], slab)
+            data = [_read(group[n], slab) for n in names]
+            for local in zip(*np.nonzero(done)):
+                ok = not bad_sum[local] and not any(b[local] for _, b in data)
+                bad[local] = not (ok and stored[local] != 0 and point_checksum([v[local] for v, _ in data]) == stored[local])
+        verified += int((done & ~bad).sum())
+        start = tuple(s.start for s in slab)
+        failed += [tuple(int(a + b) for a, b in zip(start, local)) for local in zip(*np.nonzero(bad))]
+    return StoreReport(points, done_count, verified, tuple(failed), missing)
+
+
+def _slabs(shape: tuple[int, ...], point_bytes: int) -> Iterator[tuple[slice, ...]]:
+    """Blocks of the grid of points (C order) of at most VERIFY_BATCH_BYTES each (one point at least)."""
+    budget, block = max(1, VERIFY_BATCH_BYTES // max(point_bytes, 1)), []
+    for n in reversed(shape):
+        take = max(1, min(n, budget))
+        block.insert(0, take)
+        budget = max(1, budget // take)
+    for start in itertools.product(*(range(0, n, b) for n, b in zip(shape, block))):
+        yield tuple(slice(a, min(a + b, n)) for a, b, n in zip(start, block, shape))
+
+
+def _read(array: Any, slab: tuple[slice, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The values of ``array`` over ``slab`` and which points' chunks could not be read (those read as
+    zeros): one read for the slab, point by point only where it fails."""
+    shape = tuple(s.stop - s.start for s in slab)
+    try:
+        return np.asarray(array[slab]), np.zeros(shape, dtype=bool)
+    except Exception:  # noqa: BLE001  (a damaged chunk raises whatever its codec raises)
+        values = np.zeros(shape + tuple(array.shape[len(slab):]), dtype=array.dtype)
+        unreadable = np.zeros(shape, dtype=bool)
+        for local in np.ndindex(shape):
+            try:
+                values[local] = array[tuple(s.start + i for s, i in zip(slab, local))]
+            except Exception:  # noqa: BLE001
+                unreadable[local] = True
+        return values, unreadable
+
+
+def verify_store(store: str | Path) -> StoreReport:
+    """Check a sweep store without rendering: read back every done point and compare its checksum.
+
+    Returns:
+        A :class:`StoreReport`: counts of points done, verified, failed and to compute; ``damaged``
+        when a done point failed or a variable is missing (a rerun of the sweep recomputes them).
+
+    Raises:
+        InputError: ``store`` is not a spacefit sweep store.
+    """
+    import zarr  # here: only a sweep's store needs Zarr (slow to import)
+
+    path = Path(store)
+    if _stored_spec(path) is None:
+        raise InputError(f"`store` {str(store)!r} is not a spacefit sweep store (no folder with a sweep's attributes).")
+    group = zarr.open_group(str(path), mode="r", zarr_format=STORE_FORMAT, use_consolidated=False)
+    return check_points(group, path)
+
+
+def repair(group: Any, root: Path, make: Callable[[], Any]) -> Any:
+    """Verify the done points of a reopened store; recreate missing variables, clear the ``done``
+    flag of the points that failed (so that they are computed again) and say how many. Returns the
+    group to write to: ``group``, or the store opened again when variables were recreated."""
+    import zarr  # here: only a sweep's store needs Zarr (slow to import)
+
+    plain = zarr.open_group(str(root), mode="r", zarr_format=STORE_FORMAT, use_consolidated=False)
+    report = check_points(plain, root)
+    if report.missing_variables:
+        make()[list(report.missing_variables)].to_zarr(str(root), mode="a", compute=False, zarr_format=STORE_FORMAT)
+        group = zarr.open_group(str(root), mode="r+", zarr_format=STORE_FORMAT)  # its metadata now lists them
+    for index in report.failed:
+        group["done"][index] = False
+    gone = ", ".join(report.missing_variables)
+    if "done" in report.missing_variables:
+        said = f"the variable(s) {gone} were missing and are recreated; every point is computed again"
+    elif report.missing_variables:
+        said = f"the variable(s) {gone} were missing and are recreated; the {report.done:,} done points are recomputed"
+    else:
+        said = (f"{len(report.failed):,} of {report.done:,} done points failed their checksum (data chunk missing or "
+                "damaged) and are recomputed")
+    if report.damaged:
+        warnings.warn(f"store {str(root)!r}: {said}", stacklevel=3)
+    return group
+
+
+def axis_lengths(axes: AxesSpec) -> list[int]:
+    """The number of points along each axis, from the specification alone (no list of values built);
+    0 for an axis that :func:`parse_axes` will refuse."""
+    if not isinstance(axes, Mapping):
+        return [0]
+
+    def length(spec: Any) -> int:
+        if isinstance(spec, Mapping) and set(spec) == {"linspace"} and isinstance(spec["linspace"], Sequence):
+            num = spec["linspace"][2] if len(spec["linspace"]) == 3 else 0
+            return num if isinstance(num, int) and not isinstance(num, bool) and num > 0 else 0
+        if isinstance(spec, Mapping) and set(spec) == {"arange"} and isinstance(spec["arange"], Sequence):
+            try:
+                start, stop, step = (float(v) for v in spec["arange"])
+                return max(0, math.ceil((stop - start) / step))
+            except (TypeError, ValueError, ZeroDivisionError, OverflowError):
+                return 0
+        if isinstance(spec, Mapping):  # a zipped axis: its keys' lengths are checked equal later
+            return max((length(v) for v in spec.values()), default=0)
+        return len(spec) if isinstance(spec, Sequence | np.ndarray) and not isinstance(spec, str | bytes) else 0
+
+    return [length(spec) for spec in axes.values()]
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """A sweep's size, known before anything is allocated: its points, the store's bytes on disk per
+    variable (at most: uncompressed, and a file-system block per chunk at least) and the memory of
+    its index of points to compute."""
+
+    points: int
+    store_bytes: dict[str, int]
+    index_bytes: int
+
+    @property
+    def sizes(self) -> str:
+        """The store's and the index's sizes, in words."""
+        per = ", ".join(f"{name} {_size(b)}" for name, b in self.store_bytes.items())
+        return f"store at most {_size(sum(self.store_bytes.values()))} ({per}); index {_size(self.index_bytes)} in memory"
+
+    def __str__(self) -> str:
+        return f"sweep of {self.points:,} points: {self.sizes}; time left: the progress bar's, from the renders measured"
+
+
+def _size(n: float) -> str:
+    for unit in ("B", "KiB", "MiB", "GiB", "TiB"):
+        if n < 1024 or unit == "TiB":
+            return f"{n:.0f} {unit}" if unit == "B" else f"{n:.1f} {unit}"
+        n /= 1024
+    return ""
+
+
+def estimate(scene: Scene, axes: AxesSpec, *, images: bool, derivatives: tuple[str, ...]) -> Estimate:
+    """The size of a sweep (:class:`Estimate`) from its axes' lengths and the scene (nothing allocated)."""
+    lengths = axis_lengths(axes)
+    points = math.prod(lengths)
+    layout = point_variables(scene, images=images, derivatives=derivatives)
+    chunk = {name: math.prod(size) * np.dtype(dtype).itemsize for name, (_, size, dtype, *_) in layout.items()}
+    chunk |= {CHECKSUM: 8, "done": 1}
+    store = {name: points * max(FILE_BLOCK_BYTES, b) for name, b in chunk.items()}
+    return Estimate(points, store, points * (1 + INDEX_BYTES_PER_POINT_AXIS * len(lengths) + INDEX_BYTES_PER_POINT))
+
+
+def check_estimate(found: Estimate, store: str | Path | None, *, allow_large: bool) -> None:
+    """Refuse a sweep whose index (and store, when ``store`` is None: in memory) would not fit in the
+    memory available; and unless ``allow_large``, one of more than :data:`MAX_POINTS` points or whose
+    new store may not fit on its disk."""
+    from spacefit.rendering.renderer import available_memory_bytes  # deferred: Mitsuba (the sweep renders anyway)
+
+    if found.points > MAX_POINTS and not allow_large:
+        raise InputError(f"a sweep of {found.points:,} points is more than {MAX_POINTS:,} (a file per point and "
+                         f"variable; {found.sizes}); split it, or pass allow_large=True (--large) to run it.")
+    memory = available_memory_bytes()
+    needs = found.index_bytes + (sum(found.store_bytes.values()) if store is None else 0)  # a store in memory
+    if needs > memory:
+        what = "its index alone" if store is not None else "its index and its store (in memory: give `store` a folder)"
+        raise InputError(f"a sweep of {found.points:,} points needs about {_size(needs)} of memory for {what} and this "
+                         f"machine has {_size(memory)} available; split it into smaller sweeps.")
+    if allow_large:
+        return
+    if store is not None and not Path(store).exists():  # a new store (one to finish holds its points already)
+        parent = next(p for p in Path(store).absolute().parents if p.exists())
+        free = shutil.disk_usage(parent).free
+        if sum(found.store_bytes.values()) > free:
+            raise InputError(f"the store of this sweep may need up to {_size(sum(found.store_bytes.values()))} and "
+                             f"{str(parent)!r} has {_size(free)} free ({found.sizes}); free some space, choose another "
+                             "disk, or pass allow_large=True (--large) to run it (compression may make it fit).")
 
 
 def sweep(
@@ -308,6 +576,7 @@ def sweep(
     workers: int | None = None,
     scheduler: str | None = None,
     max_renders_per_worker: int = 500,
+    allow_large: bool = False,
     quiet: bool = False,
 ) -> Any:
     """Render ``scene`` at every point of ``axes`` and return the results as a labelled xarray Dataset.
@@ -326,13 +595,18 @@ def sweep(
         workers: run on a local dask.distributed cluster of this many worker processes.
         scheduler: run on the dask.distributed scheduler at this address (``tcp://host:8786``).
         max_renders_per_worker: restart a dask worker after this many renders (Mitsuba leaks).
-        quiet: no progress bar.
+        allow_large: run a sweep of more than :data:`MAX_POINTS` points, or whose store may not fit
+            on its disk (:func:`check_estimate`; the size is printed first unless ``quiet``).
+        quiet: no size estimate, no progress bar.
 
     Returns:
         The Dataset, read back from the store (lazily: arrays load when used).
 
     Ctrl-C (or SIGTERM) stops after the point being rendered; every finished point stays in the
-    store and KeyboardInterrupt is raised.
+    store and KeyboardInterrupt is raised. A reopened store's done points are read back and their
+    checksums compared first: those that fail are computed again (a warning says how many). The
+    mesh files are checked before each point is marked done and hashed again at the end: a changed
+    one raises InputError naming it, the points rendered after the change not marked done.
     """
     import xarray as xr  # here: only a sweep's store needs xarray (slow to import)
 
@@ -346,15 +620,27 @@ def sweep(
     derivatives = tuple(derivatives)
     if derivatives:
         check_names(scene, list(derivatives), "derivatives")
+    images = check_flag("images", images)
+    found = estimate(scene, axes, images=images, derivatives=derivatives)
+    check_estimate(found, store, allow_large=allow_large)
     parsed = parse_axes(scene, axes)
-    options = {"images": check_flag("images", images), "derivatives": list(derivatives), "derivative_seeds": derivative_seeds}
-    spec = _canonical(scene, parsed, options)
+    if not quiet:
+        print(found, file=sys.stderr, flush=True)
+    watch = Watch(mesh_files(scene))
+    options = {"images": images, "derivatives": list(derivatives), "derivative_seeds": derivative_seeds}
+    spec = _canonical(scene, parsed, options, watch.recorded)
     seeds = parsed_seeds(scene, parsed)
     attrs = {"spacefit_version": __version__, "scene_toml": scene.to_toml(), "seeds": seeds,
+             "sweep_shape": [a.size for a in parsed],
              "spacefit_sweep": spec, "description": "spacefit sweep: radiance of each region at each point"}
+    def make() -> Any:
+        return template(scene, parsed, images=images, derivatives=derivatives, attrs=attrs)
+
     with contextlib.nullcontext() if store is None else hold_lock(store, "`store`"):  # one writer per store
-        group = open_store(store, spec, lambda: template(scene, parsed, images=images, derivatives=derivatives, attrs=attrs),
-                           overwrite)
+        reopened = store is not None and Path(store).exists() and not overwrite  # else open_store makes a new one
+        group = open_store(store, spec, make, overwrite)
+        if reopened:
+            group = repair(group, Path(store), make)
         task_of = tasks(scene, parsed, images=images, derivatives=derivatives, derivative_seeds=derivative_seeds)
         names = in_place_names(scene)
         # points that load another scene vary slowest, so that a scene is loaded once per value
@@ -362,7 +648,8 @@ def sweep(
         todo = pending(np.asarray(group["done"][...]), order)
         total = math.prod(a.size for a in parsed)
         run_points(todo, task_of, group, total=total, workers=workers, scheduler=scheduler,
-                   max_renders_per_worker=max_renders_per_worker, quiet=quiet)
+                   max_renders_per_worker=max_renders_per_worker, quiet=quiet, watch=watch,
+                   root=None if store is None else Path(store))
         return xr.open_zarr(group.store if store is None else str(store), zarr_format=STORE_FORMAT)
 
 
@@ -399,9 +686,12 @@ def parsed_seeds(scene: Scene, axes: list[Axis]) -> list[int]:
 
 
 def run_points(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]], Task], group: Any, *, total: int,
-               workers: int | None, scheduler: str | None, max_renders_per_worker: int, quiet: bool) -> None:
-    """Render the points ``todo`` in-process or on dask, writing each to ``group`` as it finishes."""
+               workers: int | None, scheduler: str | None, max_renders_per_worker: int, quiet: bool,
+               watch: Watch | None = None, root: Path | None = None) -> None:
+    """Render the points ``todo`` in-process or on dask, writing each to ``group`` as it finishes;
+    with a ``watch`` of the input files, a point is marked done only while they are unchanged."""
     bar = progress_bar(total, "sweep", initial=total - len(todo), quiet=quiet)
+    written: list[tuple[int, ...]] = []
     try:
         with deferred_interrupts() as interrupts:
             results: Iterator[tuple[tuple[int, ...], dict[str, np.ndarray]]]
@@ -411,8 +701,20 @@ def run_points(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]],
                 results = run_on_dask(todo, task_of, workers=workers, scheduler=scheduler,
                                       max_renders_per_worker=max_renders_per_worker)
             for index, result in results:
-                write_point(group, index, result)
+                if watch is not None and (edited := watch.check()):
+                    raise _changed(edited, "the point rendered after the change is not marked done")
+                write_point(group, index, result, root)
+                written.append(index)
                 bar.update()
                 interrupts.check()
+            if watch is not None and (edited := watch.final()):
+                for index in written:
+                    group["done"][index] = False
+                raise _changed(edited, f"the {len(written):,} points rendered in this run are not marked done")
     finally:
         bar.close()
+
+
+def _changed(paths: Sequence[str], kept: str) -> InputError:
+    return InputError(f"the input file(s) {', '.join(map(repr, paths))} changed while the sweep ran (SHA-256 not the "
+                      f"start's); {kept}. Restore them and rerun to finish this store, or start a new store.")

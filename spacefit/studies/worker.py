@@ -5,16 +5,20 @@ A point's scene-file values (camera, resolution, sun direction, mesh...) select 
 registered parameters (materials, sun angles, pose, wrinkles) are set in place on it
 (:meth:`~spacefit.rendering.renderer.Renderer.set_values`), about 25x faster than loading the scene
 again. The process keeps one loaded scene at a time: Mitsuba leaks memory on every load
-(mitsuba3#1890), and a sweep visits its points grouped by scene values.
+(mitsuba3#1890), and a sweep visits its points grouped by scene values. It is loaded again when
+its mesh files' status (inode, size, modification time) is not what it was before the last load.
 """
 
 from __future__ import annotations
 
+import functools
 import tomllib
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
+from spacefit.digests import mesh_files, status
 from spacefit.geometry.frames import pixel_solid_angles
 from spacefit.scene.parameters import scene_with_values
 from spacefit.scene.schema import Scene
@@ -49,13 +53,14 @@ class Task:
 class _Loaded:
     """The process's loaded scene: (scene TOML, crop) -> renderer, its pixels' solid angles, part image."""
 
-    key: tuple[str, bool] | None = None
+    key: tuple[Any, ...] | None = None
     renderer = None
     solid_angles: np.ndarray | None = None
     part_image = None
     renders = 0
 
 
+@functools.lru_cache(maxsize=4)
 def scene_of(toml: str) -> Scene:
     """The scene a task's TOML text describes (mesh paths in it are absolute)."""
     return scene_from_dict(tomllib.loads(toml))
@@ -84,10 +89,11 @@ def loaded(task: Task) -> type[_Loaded]:
     """The process's renderer for the task's scene, loaded if the scene changed."""
     from spacefit.rendering.renderer import Renderer  # here: Mitsuba takes seconds to import; a sweep's planning never renders
 
-    key = (task.scene_toml, task.crop)
+    scene = scene_of(task.scene_toml)
+    key = (task.scene_toml, task.crop, status(mesh_files(scene)))
     if _Loaded.key != key:
         _Loaded.key, _Loaded.renderer = None, None  # drop the old scene before loading the new one
-        renderer = Renderer(scene_of(task.scene_toml), crop=task.crop)
+        renderer = Renderer(scene, crop=task.crop)
         _Loaded.key, _Loaded.renderer = key, renderer
         _Loaded.solid_angles = pixel_solid_angles(renderer.assembly.intrinsics)
         _Loaded.part_image = renderer.part_image()
