@@ -5,6 +5,7 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
 import sys
 import time
@@ -14,7 +15,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from spacefit.errors import InputError, check_range, shorten
-from spacefit.interrupts import Terminated
+from spacefit.interrupts import Terminated, abandoned, deferred_interrupts
 from spacefit.output import write_text
 from spacefit.scene.parameters import PARAMETERS
 
@@ -213,6 +214,16 @@ def _terminate(signum: int, frame: object) -> None:
     raise Terminated()
 
 
+def _ended(code: int) -> int:
+    """``code``, or the process ended at once with it while an interrupted render still runs in the
+    background (:func:`~spacefit.interrupts.abandoned`): Python's exit would wait for it, then abort."""
+    if abandoned():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
 def _write_scene(args: argparse.Namespace, text: str) -> None:
     out = Path(args.out)
     if args.scene and out.exists() and out.resolve() == Path(args.scene).resolve():
@@ -231,9 +242,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         t0 = time.perf_counter()
-        # deferred: Mitsuba and the scene stack, timed as the "imports" stage of --timings (and not loaded by --help)
-        from spacefit.pipeline import export_part_stl, render_to_folder
-        from spacefit.scene.toml import load_scene
+        # deferred: Mitsuba and the scene stack, timed as the "imports" stage of --timings (and not loaded by --help);
+        # a signal waits for their end (about 1 s): one inside an import leaves Mitsuba half-loaded, and the exit aborts
+        with deferred_interrupts() as interrupts:
+            from spacefit.pipeline import export_part_stl, render_to_folder
+            from spacefit.scene.toml import load_scene
+        interrupts.check()
 
         imports_s = time.perf_counter() - t0
 
@@ -258,10 +272,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except Terminated:
         print("spacefit: terminated; nothing half-written was left behind", file=sys.stderr)
-        return TERMINATED
+        return _ended(TERMINATED)
     except KeyboardInterrupt:
         print("spacefit: interrupted; nothing half-written was left behind", file=sys.stderr)
-        return INTERRUPTED
+        return _ended(INTERRUPTED)
     finally:
         signal.signal(signal.SIGTERM, previous)
     return 0

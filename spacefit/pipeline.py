@@ -8,6 +8,7 @@ import json
 import math
 import warnings
 import sys
+import threading
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -18,6 +19,7 @@ import numpy as np
 from spacefit.errors import InputError, check_choice
 from spacefit.geometry.mesh import export_stl
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
+from spacefit.interrupts import run_interruptibly
 from spacefit.output import prepare_output, staged_output, versions, write_json, write_render
 from spacefit.progress import Progress
 from spacefit.rendering.exr import write_exr
@@ -44,7 +46,9 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
 
     Every input is checked and the folder is checked (:func:`~spacefit.output.prepare_output`: new,
     empty, or a previous render replaced only with ``overwrite``; none of the ``inputs`` files
-    written over) before rendering; on any error or interruption nothing is left behind. A
+    written over) before rendering; on any error or interruption nothing is left behind. Ctrl-C or
+    SIGTERM during the render raises KeyboardInterrupt within about 0.1 s; the render goes on in the
+    background to the end of its pass (:func:`~spacefit.interrupts.run_interruptibly`). A
     non-finite image is refused, naming the cause; an all-black one is written with a warning that
     says why. Returns the radiance image (W m^-2 sr^-1) and the sidecar dict.
 
@@ -54,20 +58,10 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     """
     prepare_output(out_dir, "render", overwrite=overwrite, inputs=inputs)
     timings = dict(timings_s)
+    # Ctrl-C / SIGTERM stop at once: Mitsuba's work runs in a thread the interruption abandons (a render has no step to keep)
+    assembly, renderer, radiance, parts, kernels = run_interruptibly(lambda stop: _render(scene, timings, stop, quiet))
+    t_render = timings["render"]
     t0 = time.perf_counter()
-    assembly = assemble(scene)
-    timings["assemble"] = time.perf_counter() - t0
-    _say(f"scene: {assembly.triangle_count():,} triangles, assembled in {timings['assemble']:.2f} s", quiet)
-    t0 = time.perf_counter()
-    renderer = Renderer(assembly)
-    timings["load"] = time.perf_counter() - t0
-    r = scene.render
-    t0 = time.perf_counter()
-    with kernel_log() as kernels:
-        radiance = renderer.render(progress=None if quiet else Progress(f"render {r.resolution[0]}x{r.resolution[1]} @ {r.spp} spp"))
-    timings["render"] = t_render = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    parts = renderer.part_image()
     check_image(radiance, scene)
     notes = dark_image_notes(radiance, parts, assembly)
     for note in notes:
@@ -76,7 +70,7 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     sidecar = {
         "warnings": notes,
         "scene": scene.to_dict(),
-        "seed": r.seed,
+        "seed": scene.render.seed,
         "variant": renderer.variant,
         "units": {"radiance": "W m^-2 sr^-1 per RGB channel", "lengths": "m"},
         "triangles": {name: len(assembly.faces(name)) for name in assembly.parts},
@@ -89,7 +83,7 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
         "kernels": kernels,
         "versions": versions(),
     }
-    timings["part_ids"] = time.perf_counter() - t0
+    timings["part_ids"] += time.perf_counter() - t0
     sidecar["timings_s"] = timings
     t0 = time.perf_counter()
     write_render(out_dir, radiance, scene.to_toml(), sidecar, write_exr)
@@ -97,6 +91,36 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
         print(timings_table({**timings, "write": time.perf_counter() - t0}, assembly.cache, kernels), file=sys.stderr)
     _say(f"wrote {Path(out_dir) / 'radiance.exr'} (max {radiance.max():.4g} W m^-2 sr^-1) in {t_render:.2f} s", quiet)
     return radiance, sidecar
+
+
+def _render(scene: Scene, timings: dict[str, float], stop: threading.Event,
+            quiet: bool) -> tuple[Assembly, Renderer, np.ndarray, PartImage, dict[str, float]]:
+    """The Mitsuba work of :func:`render_to_folder`: assemble, load and render ``scene``, find the parts
+    seen, each stage's wall time added to ``timings``; ends after the current pass once ``stop`` is set."""
+    t0 = time.perf_counter()
+    assembly = assemble(scene)
+    timings["assemble"] = time.perf_counter() - t0
+    _say(f"scene: {assembly.triangle_count():,} triangles, assembled in {timings['assemble']:.2f} s", quiet)
+    t0 = time.perf_counter()
+    renderer = Renderer(assembly)
+    timings["load"] = time.perf_counter() - t0
+    r = scene.render
+    display = None if quiet else Progress(f"render {r.resolution[0]}x{r.resolution[1]} @ {r.spp} spp")
+
+    def progress(done: int, total: int) -> None:
+        if stop.is_set():  # abandoned after Ctrl-C: end after this pass
+            raise KeyboardInterrupt
+        if display is not None:
+            display(done, total)
+
+    t0 = time.perf_counter()
+    with kernel_log() as kernels:  # in this thread: Dr.Jit's flags are per thread
+        radiance = renderer.render(progress=progress)
+    timings["render"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    parts = renderer.part_image()
+    timings["part_ids"] = time.perf_counter() - t0
+    return assembly, renderer, radiance, parts, kernels
 
 
 def timings_table(timings: Mapping[str, float], cache: Mapping[str, str], kernels: Mapping[str, float]) -> str:
