@@ -224,12 +224,14 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     checkpoint = Checkpoint(Path(out_dir) / CHECKPOINT, inputs)
     if resume:
         options = dataclasses.replace(options, **checkpoint.resume(options.max_steps))
-        _say(f"resuming from step {checkpoint.steps} of the checkpoint in {out_dir}", quiet)
+        _say(f"the solve in {out_dir} had ended at step {checkpoint.ended['steps']}; writing its report" if checkpoint.ended
+             else f"resuming from step {checkpoint.steps} of the checkpoint in {out_dir}", quiet)
 
     created = not Path(out_dir).exists()
     t0 = time.perf_counter()
     try:
-        result = fit(observations, free, progress=progress, on_step=checkpoint.update, **options.keywords())
+        result = fit(observations, free, progress=progress, on_step=checkpoint.update, on_end=checkpoint.end,
+                     ended=checkpoint.ended, **options.keywords())
         t_fit = time.perf_counter() - t0
         if not quiet and last[0] < last[1]:
             display(last[0], last[0])  # the solve stopped before its step limit: end the display there
@@ -267,19 +269,29 @@ class Checkpoint:
         self.path, self.inputs = path, json.loads(json.dumps(inputs, default=str))
         self.best: dict[str, Any] | None = None
         self.steps = 0
+        self.ended: dict[str, Any] | None = None  # the record of a solve that ended (``fit``'s ``on_end``)
 
     def update(self, entry: dict[str, Any]) -> None:
         """Record one step's history entry; write the file when the step is the best so far."""
         self.steps += 1
         if np.isfinite(entry["loss"]) and (self.best is None or entry["loss"] < self.best["loss"]):
             self.best = {"loss": float(entry["loss"]), "values": dict(entry["values"])}
-            with staged_output(self.path.parent) as stage:
-                write_json(stage / self.path.name, {"inputs": self.inputs, "best": self.best, "steps": self.steps,
-                                                    "versions": versions()})
+            self._write()
+
+    def end(self, record: dict[str, Any]) -> None:
+        """Record that the solve has ended (``fit``'s ``on_end``): a fit killed after it resumes to the same report."""
+        self.ended = record
+        self._write()
+
+    def _write(self) -> None:
+        with staged_output(self.path.parent) as stage:
+            write_json(stage / self.path.name, {"inputs": self.inputs, "best": self.best, "steps": self.steps,
+                                                "versions": versions(), **({"ended": self.ended} if self.ended else {})})
 
     def resume(self, max_steps: int) -> dict[str, Any]:
         """The fit options that continue from the checkpoint: its best values as the start, and the
-        steps left of ``max_steps``.
+        steps left of ``max_steps``; for a solve that had ended (:attr:`ended`, passed to ``fit``), its
+        end values, so that the report is the one the ended fit would have written.
 
         Raises:
             InputError: without a checkpoint, or for one made with other inputs (naming them).
@@ -295,7 +307,9 @@ class Checkpoint:
         if differ:
             raise InputError(f"checkpoint {str(self.path)!r} was made with other {', '.join(differ)}; resume with the "
                              "same references, scenes, free parameters and options, or run without --resume.")
-        self.best, self.steps = best, steps
+        self.best, self.steps, self.ended = best, steps, saved.get("ended")
+        if self.ended is not None:  # the solve had ended: its ending is reported again, not solved again
+            return {"start": self.ended["values"]}
         return {"start": best["values"], "max_steps": max(max_steps - steps, 1)}
 
     def remove(self) -> None:

@@ -4,15 +4,19 @@ the uninterrupted fit reported; dask worker deaths are retried within a budget, 
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
+from helpers import small_scene, write_sphere_obj
 
-from spacefit.cli import INTERRUPTED, TERMINATED
+import spacefit as sf
+from spacefit.cli import INTERRUPTED, TERMINATED, main
 
 # Seconds from the signal to the process's end that the test allows on a loaded machine (measured:
 # 0.02 to 0.05 s on an idle one, README "What spacefit refuses, and what it keeps").
@@ -39,3 +43,52 @@ def test_a_long_render_stops_within_the_bound(tmp_path, sig, code, word):
     assert err.strip().splitlines()[-1] == f"spacefit: {word}; nothing half-written was left behind"
     assert "Traceback" not in err
     assert not out.exists() or not any(out.iterdir())
+
+
+class Killed(BaseException):
+    """Stands for SIGKILL: no clean-up runs (not an Exception, not a KeyboardInterrupt)."""
+
+
+@pytest.fixture(scope="module")
+def fit_case(tmp_path_factory) -> Path:
+    """A Lambert sphere: a reference at kd 0.5 and a scene starting at kd 0.2 (Levenberg-Marquardt converges in a few steps)."""
+    d = tmp_path_factory.mktemp("fitcase")
+    mesh = write_sphere_obj(d / "sphere.obj", subdivisions=2)
+    truth = small_scene(mesh, {"material": "white_paint", "kd": 0.5}, camera={"pixel_pitch_mm": 0.5},
+                        render={"resolution": [32, 32], "spp": 8, "seed": 7})
+    sf.write_exr(d / "ref.exr", sf.render(truth))
+    start = small_scene(mesh, {"material": "white_paint", "kd": 0.2}, camera={"pixel_pitch_mm": 0.5},
+                        render={"resolution": [32, 32], "spp": 8})
+    (d / "scene.toml").write_text(start.to_toml())
+    return d
+
+
+@pytest.mark.parametrize("max_steps", [pytest.param("50", marks=pytest.mark.slow), "3"])
+def test_a_fit_killed_after_its_solve_resumes_to_the_same_report(fit_case, tmp_path, monkeypatch, capsys, max_steps):
+    """Killed after its last step (here: while writing its report), the resumed fit reports what the
+    uninterrupted one did: status, steps, values, exit code (converged; the step limit at 3 steps)."""
+    def args(out: Path, *extra: str) -> list[str]:
+        return ["fit", str(fit_case / "ref.exr"), "--scene", str(fit_case / "scene.toml"), "--free", "parts.sphere.kd",
+                "--out", str(out), "--max-steps", max_steps, "--quiet", *extra]
+
+    whole = main(args(tmp_path / "whole"))
+    expected = json.loads((tmp_path / "whole" / "fit.json").read_text())
+
+    def kill(*_: object, **__: object) -> None:
+        raise Killed
+
+    with monkeypatch.context() as m:
+        m.setattr("spacefit.fitting.report.write_fit_report", kill)
+        with pytest.raises(Killed):
+            main(args(tmp_path / "killed"))
+    checkpoint = json.loads((tmp_path / "killed" / "checkpoint.json").read_text())
+    assert checkpoint["ended"]["steps"] == expected["steps"]
+    capsys.readouterr()
+    assert main(args(tmp_path / "killed", "--resume")) == whole
+    got = json.loads((tmp_path / "killed" / "fit.json").read_text())
+    assert (got["status"], got["steps"], got["success"]) == (expected["status"], expected["steps"], expected["success"])
+    # two runs of the same fit agree to about 1e-10 (float32 renders summed in parallel), not to the bit
+    assert got["values"] == pytest.approx(expected["values"], rel=1e-8)
+    assert got["stderr"] == pytest.approx(expected["stderr"], rel=1e-6)
+    assert [h["loss"] for h in got["history"]] == pytest.approx([h["loss"] for h in expected["history"]], rel=1e-6)
+    assert not (tmp_path / "killed" / "checkpoint.json").exists()
