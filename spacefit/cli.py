@@ -131,13 +131,17 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    """Run ``spacefit sweep``; on Ctrl-C say where the finished points are."""
+    """Run ``spacefit sweep``; on Ctrl-C say where the finished points are; a dask sweep that cannot go on exits 1."""
+    from spacefit.studies.cluster import ClusterError
     from spacefit.studies.sweep import read_sweep_file, sweep  # deferred: the studies' modules (0.2 s), which render never needs
 
     scene, axes, options = read_sweep_file(args.sweep, args.overrides)
     try:
         sweep(scene, axes, store=args.out, overwrite=args.overwrite, workers=args.workers, scheduler=args.scheduler,
               quiet=args.quiet, **options)
+    except ClusterError as err:
+        print(f"spacefit: error: {err}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt as stop:
         print(f"spacefit: interrupted; every finished point is in {args.out} (rerun the same command to finish)", file=sys.stderr)
         return TERMINATED if isinstance(stop, Terminated) else INTERRUPTED

@@ -12,11 +12,13 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 from helpers import small_scene, write_sphere_obj
 
 import spacefit as sf
 from spacefit.cli import INTERRUPTED, TERMINATED, main
+from spacefit.studies.cluster import ClusterError, run_on_dask
 
 # Seconds from the signal to the process's end that the test allows on a loaded machine (measured:
 # 0.02 to 0.05 s on an idle one, README "What spacefit refuses, and what it keeps").
@@ -92,3 +94,33 @@ def test_a_fit_killed_after_its_solve_resumes_to_the_same_report(fit_case, tmp_p
     assert got["stderr"] == pytest.approx(expected["stderr"], rel=1e-6)
     assert [h["loss"] for h in got["history"]] == pytest.approx([h["loss"] for h in expected["history"]], rel=1e-6)
     assert not (tmp_path / "killed" / "checkpoint.json").exists()
+
+
+def render_or_die(task: tuple[int, str]) -> tuple[dict[str, np.ndarray], str, int]:
+    """A dask task standing for a render (``run_on_dask``'s ``render``) of ``(value, marker file)``: its
+    worker dies (exit 1) for value -2 every time, for -1 once (while the marker file is missing)."""
+    from distributed import get_worker
+
+    value, marker = task
+    if value == -2 or (value == -1 and not Path(marker).exists()):
+        Path(marker).touch()
+        os._exit(1)
+    return {"value": np.array(value)}, get_worker().address, 1
+
+
+def test_a_point_whose_worker_dies_is_retried_then_named(tmp_path):
+    """One worker: point (1,) kills it once and is rendered again; point (2,) kills it every time and
+    ends the run naming it after 3 deaths; the points finished are given back, none lost with it."""
+    values = {(0,): 0, (1,): -1, (2,): -2, (3,): 3}
+    got = {}
+    with pytest.raises(ClusterError, match=r"point \(2,\) died 3 times.*memory limit"):
+        for index, result in run_on_dask(list(values), lambda i: (values[i], str(tmp_path / f"{i[0]}")), workers=1,
+                                         scheduler=None, max_renders_per_worker=100, render=render_or_die):
+            got[index] = int(result["value"])
+    assert got in ({(0,): 0, (1,): -1}, {(0,): 0, (1,): -1, (3,): 3})  # (3,) only if it finished before (2,)'s last death
+
+
+def test_a_sweep_with_no_progress_stops_saying_so():
+    with pytest.raises(ClusterError, match=r"no point of the sweep finished in 2 s \(`stall_s`\)"):
+        list(run_on_dask([(0,)], lambda index: 60, workers=1, scheduler=None, max_renders_per_worker=100,
+                         stall_s=2.0, render=time.sleep))

@@ -34,14 +34,14 @@ from typing import Any
 import numpy as np
 
 from spacefit import __version__
-from spacefit.errors import InputError, InputTypeError, check_count, quote
+from spacefit.errors import InputError, InputTypeError, check_count, check_range, quote
 from spacefit.interrupts import deferred_interrupts
 from spacefit.output import STAGE_PREFIX, check_writable
 from spacefit.progress import progress_bar
 from spacefit.scene.schema import Scene, check_scene
 from spacefit.scene.toml import load_scene, read_scene_dict
 from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, available, check_names, parameter, scene_with_values
-from spacefit.studies.cluster import run_on_dask
+from spacefit.studies.cluster import STALL_S, run_on_dask
 from spacefit.studies.sensitivity import SUMMARY_VARIABLES, normalisation
 from spacefit.studies import worker
 from spacefit.studies.worker import Task, regions
@@ -299,6 +299,7 @@ def sweep(
     workers: int | None = None,
     scheduler: str | None = None,
     max_renders_per_worker: int = 500,
+    stall_s: float = STALL_S,
     quiet: bool = False,
 ) -> Any:
     """Render ``scene`` at every point of ``axes`` and return the results as a labelled xarray Dataset.
@@ -316,6 +317,8 @@ def sweep(
         workers: run on a local dask.distributed cluster of this many worker processes.
         scheduler: run on the dask.distributed scheduler at this address (``tcp://host:8786``).
         max_renders_per_worker: restart a dask worker after this many renders (Mitsuba leaks).
+        stall_s: on dask, stop with :class:`~spacefit.studies.cluster.ClusterError` when no point
+            finishes for this long (s); a point whose worker dies is retried twice, then named the same way.
         quiet: no progress bar.
 
     Returns:
@@ -329,6 +332,7 @@ def sweep(
     check_scene(scene)
     check_count("derivative_seeds", derivative_seeds, 2)
     check_count("max_renders_per_worker", max_renders_per_worker)
+    stall_s = check_range("stall_s", stall_s, 0.0, lo_open=True, unit="s")
     check_count("workers", workers)
     if workers is not None and scheduler is not None:
         raise InputError("give `workers` (a local cluster) or `scheduler` (an address), not both.")
@@ -350,17 +354,17 @@ def sweep(
     todo = pending(np.asarray(group["done"][...]), order)
     total = math.prod(a.size for a in parsed)
     run_points(todo, task_of, group, total=total, workers=workers, scheduler=scheduler,
-               max_renders_per_worker=max_renders_per_worker, quiet=quiet)
+               max_renders_per_worker=max_renders_per_worker, stall_s=stall_s, quiet=quiet)
     return xr.open_zarr(group.store if store is None else str(store), zarr_format=STORE_FORMAT)
 
 
-SWEEP_FILE_OPTIONS = ("images", "derivatives", "derivative_seeds", "max_renders_per_worker")
+SWEEP_FILE_OPTIONS = ("images", "derivatives", "derivative_seeds", "max_renders_per_worker", "stall_s")
 
 
 def read_sweep_file(path: str | Path, overrides: Sequence[str] = ()) -> tuple[Scene, dict[str, Any], dict[str, Any]]:
     """Read a sweep TOML file: ``scene`` (a scene file, relative to the sweep file; default: the
     thesis's scene, with ``overrides`` as ``--set`` gives them), an ``[axes]`` table as :func:`sweep`
-    takes it, and options (``images``, ``derivatives``, ``derivative_seeds``, ``max_renders_per_worker``).
+    takes it, and options (``images``, ``derivatives``, ``derivative_seeds``, ``max_renders_per_worker``, ``stall_s``).
 
     Returns ``(scene, axes, options)``: ``sf.sweep(scene, axes, store=..., **options)`` runs it.
     """
@@ -385,7 +389,7 @@ def parsed_seeds(scene: Scene, axes: list[Axis]) -> list[int]:
 
 
 def run_points(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]], Task], group: Any, *, total: int,
-               workers: int | None, scheduler: str | None, max_renders_per_worker: int, quiet: bool) -> None:
+               workers: int | None, scheduler: str | None, max_renders_per_worker: int, stall_s: float, quiet: bool) -> None:
     """Render the points ``todo`` in-process or on dask, writing each to ``group`` as it finishes."""
     bar = progress_bar(total, "sweep", initial=total - len(todo), quiet=quiet)
     try:
@@ -395,7 +399,7 @@ def run_points(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]],
                 results = ((index, worker.run_task(task_of(index))) for index in todo)
             else:
                 results = run_on_dask(todo, task_of, workers=workers, scheduler=scheduler,
-                                      max_renders_per_worker=max_renders_per_worker)
+                                      max_renders_per_worker=max_renders_per_worker, stall_s=stall_s)
             for index, result in results:
                 write_point(group, index, result)
                 bar.update()
