@@ -61,23 +61,22 @@ def deferred_interrupts() -> Iterator[Deferred]:
             signal.signal(s, handler)
 
 
-# How often the waiting thread of :func:`run_interruptibly` takes SIGINT back from Mitsuba (s).
+# How often the waiting thread of :func:`run_interruptibly` wakes (s): a bound on its reaction to a signal.
 POLL_S = 0.05
 _abandoned: list[threading.Event] = []  # the ends of work left running by an interruption
 
 
 def run_interruptibly(work: Callable[[threading.Event], T]) -> T:
     """``work(stop)``'s result, computed in a thread of its own while this (the main) thread waits,
-    so that Ctrl-C and SIGTERM stop the caller within :data:`POLL_S` (plus the time Python takes to
-    run the handler) instead of at the end of a render.
+    so that Ctrl-C and SIGTERM stop the caller within :data:`POLL_S` instead of after the render.
 
-    Mitsuba takes SIGINT for itself during every ``mi.render`` call and only "winds down", which a
-    wavefront render ignores: it runs to its end and the Ctrl-C is lost. The waiting thread puts the
-    caller's SIGINT handler back every :data:`POLL_S`; a signal landing before that, in the first
-    moments of a render call, goes to Mitsuba and is lost (a second Ctrl-C is taken). On a signal,
-    KeyboardInterrupt (:class:`Terminated` for SIGTERM, as the caller's handler raises it) is raised
-    here at once, ``stop`` is set for ``work`` to end at its next check, and the thread is left to
-    finish in the background (:func:`abandoned`). Outside the main thread, ``work`` runs in place.
+    In the main thread, a signal's KeyboardInterrupt surfaces only when Mitsuba's render call
+    returns (a pass, seconds to minutes), and then inside Mitsuba's Python code, as a RuntimeError
+    with a traceback (Mitsuba's own SIGINT handler only "winds down", which a wavefront render
+    ignores, then hands the signal on). Here it is raised in the waiting thread at once:
+    KeyboardInterrupt (:class:`Terminated` for SIGTERM, as the caller's handler raises it);
+    ``stop`` is set for ``work`` to end at its next check, and the thread is left to finish in the
+    background (:func:`abandoned`). Outside the main thread, ``work`` runs in place.
     """
     stop = threading.Event()
     if threading.current_thread() is not threading.main_thread():
@@ -93,13 +92,10 @@ def run_interruptibly(work: Callable[[threading.Event], T]) -> T:
         finally:
             finished.set()
 
-    handler = signal.getsignal(signal.SIGINT)
     threading.Thread(target=target, name="spacefit-work", daemon=True).start()
     try:
-        while not finished.is_set():
-            if handler is not None:
-                signal.signal(signal.SIGINT, handler)
-            finished.wait(POLL_S)
+        while not finished.wait(POLL_S):
+            pass
     except BaseException:
         stop.set()
         _abandoned.append(finished)

@@ -23,7 +23,7 @@ from spacefit.interrupts import run_interruptibly
 from spacefit.output import prepare_output, staged_output, versions, write_json, write_render
 from spacefit.progress import Progress
 from spacefit.rendering.exr import write_exr
-from spacefit.rendering.renderer import PartImage, Renderer, kernel_log
+from spacefit.rendering.renderer import PartImage, Renderer, errors_only, kernel_log
 from spacefit.scene.assembly import Assembly, assemble, fold_notes
 from spacefit.scene.overrides import parse_override
 from spacefit.scene.parameters import scene_keys
@@ -114,7 +114,7 @@ def _render(scene: Scene, timings: dict[str, float], stop: threading.Event,
             display(done, total)
 
     t0 = time.perf_counter()
-    with kernel_log() as kernels:  # in this thread: Dr.Jit's flags are per thread
+    with kernel_log() as kernels, errors_only():  # in this thread: Dr.Jit's flags are per thread
         radiance = renderer.render(progress=progress)
     timings["render"] = time.perf_counter() - t0
     t0 = time.perf_counter()

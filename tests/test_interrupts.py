@@ -32,9 +32,9 @@ def test_a_long_render_stops_within_the_bound(tmp_path, sig, code, word):
     out = tmp_path / "out"
     p = subprocess.Popen([sys.executable, "-m", "spacefit.cli", "render", "--out", str(out), "--set", "render.spp=20000"],
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    first = p.stderr.readline()  # "scene: ... assembled": the render starts now
+    first = p.stderr.readline()  # "scene: ... assembled": the scene loads, then the passes (about 1 s each) begin
     assert first.startswith("scene:"), first + p.communicate()[1]
-    time.sleep(1.5)
+    time.sleep(4.0)  # inside a pass, where Mitsuba holds SIGINT
     assert p.poll() is None, "the render ended before the signal: make it longer"
     t0 = time.monotonic()
     p.send_signal(sig)
@@ -43,7 +43,7 @@ def test_a_long_render_stops_within_the_bound(tmp_path, sig, code, word):
     assert p.returncode == code, err
     assert elapsed < RENDER_STOP_BOUND_S, f"{elapsed:.1f} s"
     assert err.strip().splitlines()[-1] == f"spacefit: {word}; nothing half-written was left behind"
-    assert "Traceback" not in err
+    assert "Traceback" not in err and "winding down" not in err  # Mitsuba's own warning is not printed
     assert not out.exists() or not any(out.iterdir())
 
 

@@ -51,6 +51,9 @@ COUNTED = (LOSS, WRONG, CRASH)
 # Cases whose fixes are on other branches of issue 20 (verify: checksums; locks: one writer, EFBIG).
 EXPECTED_TO_FAIL = {"damaged-store": "verify", "concurrent": "locks", "file-size-limit": "locks"}
 EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143}
+# SIGTERM in Python's start-up, before the command line sets its handler: the default action (the
+# process ends by the signal, before any work; a shell reports 143 too).
+BEFORE_START = {signal.SIGTERM: (-signal.SIGTERM,)}
 RENDER_FILES = {"preview.png", "radiance.exr", "render.json", "scene.toml"}
 SIGNAL_OF = {"kill": signal.SIGKILL, "int": signal.SIGINT, "term": signal.SIGTERM}
 SCENE = {"render.resolution": "[96, 96]", "render.spp": "24", "camera.pixel_pitch_mm": "14"}
@@ -75,7 +78,7 @@ class Run:
         env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
         self.t0 = time.monotonic()
         self.p = subprocess.Popen([sys.executable, "-m", "spacefit.cli", *args], stdout=subprocess.DEVNULL,
-                                  stderr=subprocess.PIPE, text=True, env=env, preexec_fn=prepare)
+                                  stderr=subprocess.PIPE, text=True, env=env, cwd=ROOT, preexec_fn=prepare)
 
     def finish(self, timeout: float = 600) -> tuple[int, str]:
         _, err = self.p.communicate(timeout=timeout)
@@ -179,7 +182,7 @@ class Soak:
         store.parent.mkdir()
         at = self.moment(self.sweep_s * 1.1)
         code, err = Run(self.sweep_args(store)).after(at, sig)
-        why = crashed(code, err, {0, EXIT.get(sig, -sig)})
+        why = crashed(code, err, {0, EXIT.get(sig, -sig), *BEFORE_START.get(sig, ())})
         if why:
             return Outcome(case, CRASH, f"at {at:.1f} s: {why}")
         loss = self.kept(case, store)
@@ -289,7 +292,7 @@ class Soak:
         out = self.fresh(case)
         at = self.moment(5.0)
         first, err = Run(self.render_args(out)).after(at, sig)
-        why = crashed(first, err, {0, EXIT.get(sig, -sig)})
+        why = crashed(first, err, {0, EXIT.get(sig, -sig), *BEFORE_START.get(sig, ())})
         if why:
             return Outcome(case, CRASH, f"at {at:.1f} s: {why}")
         bad = self.render_result(case, out, f"at {at:.1f} s: ")
@@ -312,7 +315,7 @@ class Soak:
 
     def fit_args(self, out: Path, *extra: str) -> list[str]:
         case = self.work / "fitcase"
-        return ["fit", str(case / "ref.exr"), "--scene", str(case / "scene.toml"), "--free", "parts.body.kd",
+        return ["fit", str(case / "ref.exr"), "--scene", str(case / "scene.toml"), "--free", "parts.body.alpha_x",
                 "--out", str(out), "--quiet", "--max-steps", "12", *extra]
 
     def fit_kill(self) -> Outcome:
@@ -338,10 +341,10 @@ class Soak:
         return Outcome(case, OK if same else WRONG, detail)
 
     def make_fit_case(self) -> None:
-        """A reference image of the default scene's body at kd 0.35 and a scene starting at its default."""
+        """A reference image of the default scene with its body's roughness alpha_x at 0.3 and a scene starting at its default."""
         case = self.work / "fitcase"
         case.mkdir()
-        code, err = Run(["render", "--out", str(case / "truth"), "--quiet", *self.sets, "--set", "parts.body.kd=0.35"]).finish()
+        code, err = Run(["render", "--out", str(case / "truth"), "--quiet", *self.sets, "--set", "parts.body.alpha_x=0.3"]).finish()
         assert code == 0, err
         shutil.copy(case / "truth" / "radiance.exr", case / "ref.exr")
         code, err = Run(["scene", "--out", str(case / "scene.toml"), *self.sets]).finish()
