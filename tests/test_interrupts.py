@@ -124,3 +124,22 @@ def test_a_sweep_with_no_progress_stops_saying_so():
     with pytest.raises(ClusterError, match=r"no point of the sweep finished in 2 s \(`stall_s`\)"):
         list(run_on_dask([(0,)], lambda index: 60, workers=1, scheduler=None, max_renders_per_worker=100,
                          stall_s=2.0, render=time.sleep))
+
+
+def test_a_stalled_dask_sweep_exits_1_with_one_line_and_keeps_its_store(tmp_path, capsys):
+    sweep_file = tmp_path / "sweep.toml"
+    sweep_file.write_text('stall_s = 0.001\n[axes]\n"sun.elevation_deg" = [30, 60]\n')
+    store = tmp_path / "s.zarr"
+    code = main(["sweep", str(sweep_file), "--out", str(store), "--workers", "1", "--quiet",
+                 "--set", "render.resolution=[32, 32]", "--set", "render.spp=4"])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 1, err
+    assert err[-1].startswith("spacefit: error: no point of the sweep finished in 0.001 s (`stall_s`)")
+    assert "Traceback" not in "\n".join(err)
+    assert store.is_dir()  # the store stays for the rerun
+
+
+def test_stall_s_is_checked_before_any_work(tmp_path):
+    with pytest.raises(sf.InputError, match="stall_s"):
+        sf.sweep(sf.default_scene(), {"sun.elevation_deg": [10]}, store=tmp_path / "s.zarr", stall_s=0)
+    assert not (tmp_path / "s.zarr").exists()
