@@ -234,20 +234,27 @@ class Soak:
         store = self.fresh(case) / "s.zarr"
         store.parent.mkdir()
         run = Run(self.sweep_args(store, "--workers", "2"))
-        at, killed = time.monotonic() + self.rng.uniform(2.0, 6.0), 0  # the cluster starts in 2 to 4 s
+        at, killed = None, 0  # a random moment of the first 0.5 s after the first point is written
         while run.p.poll() is None and not killed:
-            time.sleep(0.2)
-            if time.monotonic() < at:
+            time.sleep(0.05)
+            # the worker processes: spawned by the nannies, which run in the sweep's process
+            try:
+                workers = [c for c in psutil.Process(run.p.pid).children(recursive=True)
+                           if "spawn_main" in " ".join(c.cmdline())]
+            except psutil.Error:
                 continue
-            # the worker processes: children of the nannies, which are children of the sweep
-            workers = [g for c in psutil.Process(run.p.pid).children() for g in c.children()]
-            if workers:
+            started = (store / "done").is_dir() and any(p.name[0].isdigit() for p in (store / "done").iterdir())
+            if workers and started and at is None:
+                at = time.monotonic() + self.rng.uniform(0.0, 0.5)
+            if workers and at is not None and time.monotonic() >= at:
                 self.rng.choice(workers).kill()
                 killed = 1
         code, err = run.finish()
-        why = crashed(code, err, {0})
+        why = crashed(code, err, {0, 1})
         if why:
             return Outcome(case, CRASH, why)
+        if code == 1:  # the cluster did not start (one line): the rerun, in-process, must finish the store
+            return self.finish_sweep(case, store, err.strip().splitlines()[-1][:100] + "; ")
         final = read_store(store)
         bad = ["unreadable"] if final is None else differing(final, self.reference, only_done=False)
         if bad:

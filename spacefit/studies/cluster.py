@@ -89,7 +89,11 @@ def run_on_dask(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]]
     # A local cluster's scheduler is made here: it reports each death at once (the budget is ``retries``)
     # and gives a worker only the task it runs, so that a death loses that point only, not one queued behind it.
     with dask.config.set({"distributed.scheduler.allowed-failures": 0, "distributed.scheduler.worker-saturation": 1.0}):
-        client, close = connect(workers, scheduler)
+        try:
+            client, close = connect(workers, scheduler)
+        except RuntimeError as err:  # a worker process died while its nanny started it
+            raise ClusterError(f"the local dask cluster did not start ({err}); nothing was rendered, rerun the same "
+                               "command.") from None
     try:
         n = max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
         queue = iter(todo)
