@@ -6,7 +6,7 @@ PYTEST_ARGS ?=
 # Test processes (pytest-xdist): one per core; tests sharing a module's fixtures stay in one process.
 JOBS ?= 2
 
-.PHONY: setup render test bench sweeps synthetic mutants peers
+.PHONY: setup render test bench sweeps synthetic mutants peers soak
 
 setup:
 	@tools/setup.sh
@@ -20,6 +20,12 @@ test: setup
 # Plant each named one-line bug of tools/mutants.py and check that its tests catch it (minutes; not in CI).
 mutants: setup
 	.venv/bin/python tools/mutants.py $(MUTANTS)
+
+# Hostile cases over many runs (kill -9, signals, damaged stores, concurrent writers, worker deaths, full disk,
+# file-size limits), time-boxed; prints the counts of data loss, wrong results and crashes (not in CI).
+SOAK_ARGS ?= --minutes 10
+soak: setup
+	.venv/bin/python tools/soak.py $(SOAK_ARGS)
 
 bench: setup
 	.venv/bin/python experiments/bench_all.py

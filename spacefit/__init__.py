@@ -87,6 +87,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "noise_variance_dn": ("spacefit.fitting.formation", "noise_variance_dn"),
     "observe": ("spacefit.fitting.formation", "observe"),
     "saturated_mask": ("spacefit.sensor", "saturated_mask"),
+    "ClusterError": ("spacefit.studies.cluster", "ClusterError"),
     "plot_comparison": ("spacefit.fitting.plots", "plot_comparison"),
     "plot_convergence": ("spacefit.fitting.plots", "plot_convergence"),
 }
@@ -101,7 +102,7 @@ __all__ = [
     "Distortion", "Intrinsics", "ObservedImage", "Sensor", "distort_image", "expected_dn", "noise_variance_dn", "observe",
     "pixel_solid_angles", "read_image", "read_sensor_file", "saturated_mask", "write_observation", "sensor_of", "format_sensor_sources",
     "MLI_SLOPE_RANGE",
-    "read_sweep_file", "sweep", "verify_store", "StoreReport", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
+    "read_sweep_file", "sweep", "verify_store", "StoreReport", "ClusterError", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
     "plot_comparison", "plot_convergence",
     "RenderSettings", "CameraSettings", "SunSettings", "TargetSettings", "WrinkleSettings", "PartSettings",
 ]

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import os
 import signal
 import sys
 import time
@@ -15,7 +16,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from spacefit.errors import InputError, check_range, shorten
-from spacefit.interrupts import Terminated
+from spacefit.interrupts import Terminated, abandoned, deferred_interrupts
 from spacefit.output import write_text
 from spacefit.scene.parameters import PARAMETERS
 
@@ -141,7 +142,8 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    """Run ``spacefit sweep``; on Ctrl-C say where the finished points are."""
+    """Run ``spacefit sweep``; on Ctrl-C say where the finished points are; a dask sweep that cannot go on exits 1."""
+    from spacefit.studies.cluster import ClusterError
     from spacefit.studies.sweep import read_sweep_file, sweep, verify_store  # deferred: the studies' modules (0.2 s), which render never needs
 
     if args.verify:
@@ -154,6 +156,9 @@ def _sweep(args: argparse.Namespace) -> int:
     try:
         sweep(scene, axes, store=args.out, overwrite=args.overwrite, workers=args.workers, scheduler=args.scheduler,
               allow_large=args.large, quiet=args.quiet, **options)
+    except ClusterError as err:
+        print(f"spacefit: error: {err}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt as stop:
         print(f"spacefit: interrupted; every finished point is in {args.out} (rerun the same command to finish)", file=sys.stderr)
         return TERMINATED if isinstance(stop, Terminated) else INTERRUPTED
@@ -238,6 +243,16 @@ def _terminate(signum: int, frame: object) -> None:
     raise Terminated()
 
 
+def _ended(code: int) -> int:
+    """``code``, or the process ended at once with it while an interrupted render still runs in the
+    background (:func:`~spacefit.interrupts.abandoned`): Python's exit would wait for it, then abort."""
+    if abandoned():
+        sys.stdout.flush()
+        sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
 def _write_scene(args: argparse.Namespace, text: str) -> None:
     out = Path(args.out)
     if args.scene and out.exists() and out.resolve() == Path(args.scene).resolve():
@@ -271,9 +286,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
         t0 = time.perf_counter()
-        # deferred: Mitsuba and the scene stack, timed as the "imports" stage of --timings (and not loaded by --help)
-        from spacefit.pipeline import export_part_stl, render_to_folder
-        from spacefit.scene.toml import load_scene
+        # deferred: Mitsuba and the scene stack, timed as the "imports" stage of --timings (and not loaded by --help);
+        # a signal waits for their end (about 1 s): one inside an import leaves Mitsuba half-loaded, and the exit aborts
+        with deferred_interrupts() as interrupts:
+            from spacefit.pipeline import export_part_stl, render_to_folder
+            from spacefit.scene.toml import load_scene
+        interrupts.check()
 
         imports_s = time.perf_counter() - t0
 
@@ -298,10 +316,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 1
     except Terminated:
         print("spacefit: terminated; nothing half-written was left behind", file=sys.stderr)
-        return TERMINATED
+        return _ended(TERMINATED)
     except KeyboardInterrupt:
         print("spacefit: interrupted; nothing half-written was left behind", file=sys.stderr)
-        return INTERRUPTED
+        return _ended(INTERRUPTED)
     finally:
         signal.signal(signal.SIGTERM, previous)
     return 0

@@ -8,6 +8,7 @@ import json
 import math
 import warnings
 import sys
+import threading
 import time
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -19,11 +20,12 @@ from spacefit.digests import digests, mesh_files
 from spacefit.errors import InputError, check_choice
 from spacefit.geometry.mesh import export_stl
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
+from spacefit.interrupts import run_interruptibly
 from spacefit.locks import holding_lock
 from spacefit.output import prepare_output, staged_output, versions, write_json, write_render
 from spacefit.progress import Progress
 from spacefit.rendering.exr import write_exr
-from spacefit.rendering.renderer import PartImage, Renderer, kernel_log
+from spacefit.rendering.renderer import PartImage, Renderer, errors_only, kernel_log
 from spacefit.scene.assembly import Assembly, assemble, fold_notes
 from spacefit.scene.overrides import parse_override
 from spacefit.scene.parameters import scene_keys
@@ -48,7 +50,9 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     It runs holding the folder's lock (:mod:`spacefit.locks`: one writer per folder). Every input is
     checked and the folder is checked (:func:`~spacefit.output.prepare_output`: new,
     empty, or a previous render replaced only with ``overwrite``; none of the ``inputs`` files
-    written over) before rendering; on any error or interruption nothing is left behind. A
+    written over) before rendering; on any error or interruption nothing is left behind. Ctrl-C or
+    SIGTERM during the render raises KeyboardInterrupt within about 0.1 s; the render goes on in the
+    background to the end of its pass (:func:`~spacefit.interrupts.run_interruptibly`). A
     non-finite image is refused, naming the cause; an all-black one is written with a warning that
     says why. Returns the radiance image (W m^-2 sr^-1) and the sidecar dict.
 
@@ -58,20 +62,10 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     """
     prepare_output(out_dir, "render", overwrite=overwrite, inputs=inputs)
     timings = dict(timings_s)
+    # Ctrl-C / SIGTERM stop at once: Mitsuba's work runs in a thread the interruption abandons (a render has no step to keep)
+    assembly, renderer, radiance, parts, kernels = run_interruptibly(lambda stop: _render(scene, timings, stop, quiet))
+    t_render = timings["render"]
     t0 = time.perf_counter()
-    assembly = assemble(scene)
-    timings["assemble"] = time.perf_counter() - t0
-    _say(f"scene: {assembly.triangle_count():,} triangles, assembled in {timings['assemble']:.2f} s", quiet)
-    t0 = time.perf_counter()
-    renderer = Renderer(assembly)
-    timings["load"] = time.perf_counter() - t0
-    r = scene.render
-    t0 = time.perf_counter()
-    with kernel_log() as kernels:
-        radiance = renderer.render(progress=None if quiet else Progress(f"render {r.resolution[0]}x{r.resolution[1]} @ {r.spp} spp"))
-    timings["render"] = t_render = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    parts = renderer.part_image()
     check_image(radiance, scene)
     notes = dark_image_notes(radiance, parts, assembly)
     for note in notes:
@@ -80,7 +74,7 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     sidecar = {
         "warnings": notes,
         "scene": scene.to_dict(),
-        "seed": r.seed,
+        "seed": scene.render.seed,
         "variant": renderer.variant,
         "units": {"radiance": "W m^-2 sr^-1 per RGB channel", "lengths": "m"},
         "triangles": {name: len(assembly.faces(name)) for name in assembly.parts},
@@ -93,7 +87,7 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
         "kernels": kernels,
         "versions": versions(),
     }
-    timings["part_ids"] = time.perf_counter() - t0
+    timings["part_ids"] += time.perf_counter() - t0
     sidecar["timings_s"] = timings
     t0 = time.perf_counter()
     write_render(out_dir, radiance, scene.to_toml(), sidecar, write_exr)
@@ -101,6 +95,36 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
         print(timings_table({**timings, "write": time.perf_counter() - t0}, assembly.cache, kernels), file=sys.stderr)
     _say(f"wrote {Path(out_dir) / 'radiance.exr'} (max {radiance.max():.4g} W m^-2 sr^-1) in {t_render:.2f} s", quiet)
     return radiance, sidecar
+
+
+def _render(scene: Scene, timings: dict[str, float], stop: threading.Event,
+            quiet: bool) -> tuple[Assembly, Renderer, np.ndarray, PartImage, dict[str, float]]:
+    """The Mitsuba work of :func:`render_to_folder`: assemble, load and render ``scene``, find the parts
+    seen, each stage's wall time added to ``timings``; ends after the current pass once ``stop`` is set."""
+    t0 = time.perf_counter()
+    assembly = assemble(scene)
+    timings["assemble"] = time.perf_counter() - t0
+    _say(f"scene: {assembly.triangle_count():,} triangles, assembled in {timings['assemble']:.2f} s", quiet)
+    t0 = time.perf_counter()
+    renderer = Renderer(assembly)
+    timings["load"] = time.perf_counter() - t0
+    r = scene.render
+    display = None if quiet else Progress(f"render {r.resolution[0]}x{r.resolution[1]} @ {r.spp} spp")
+
+    def progress(done: int, total: int) -> None:
+        if stop.is_set():  # abandoned after Ctrl-C: end after this pass
+            raise KeyboardInterrupt
+        if display is not None:
+            display(done, total)
+
+    t0 = time.perf_counter()
+    with kernel_log() as kernels, errors_only():  # in this thread: Dr.Jit's flags are per thread
+        radiance = renderer.render(progress=progress)
+    timings["render"] = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    parts = renderer.part_image()
+    timings["part_ids"] = time.perf_counter() - t0
+    return assembly, renderer, radiance, parts, kernels
 
 
 def timings_table(timings: Mapping[str, float], cache: Mapping[str, str], kernels: Mapping[str, float]) -> str:
@@ -207,12 +231,14 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     checkpoint = Checkpoint(Path(out_dir) / CHECKPOINT, inputs, read)
     if resume:
         options = dataclasses.replace(options, **checkpoint.resume(options.max_steps))
-        _say(f"resuming from step {checkpoint.steps} of the checkpoint in {out_dir}", quiet)
+        _say(f"the solve in {out_dir} had ended at step {checkpoint.ended['steps']}; writing its report" if checkpoint.ended
+             else f"resuming from step {checkpoint.steps} of the checkpoint in {out_dir}", quiet)
 
     created = not Path(out_dir).exists()
     t0 = time.perf_counter()
     try:
-        result = fit(observations, free, progress=progress, on_step=checkpoint.update, **options.keywords())
+        result = fit(observations, free, progress=progress, on_step=checkpoint.update, on_end=checkpoint.end,
+                     ended=checkpoint.ended, **options.keywords())
         t_fit = time.perf_counter() - t0
         if not quiet and last[0] < last[1]:
             display(last[0], last[0])  # the solve stopped before its step limit: end the display there
@@ -253,19 +279,30 @@ class Checkpoint:
         self.digests = digests(files)
         self.best: dict[str, Any] | None = None
         self.steps = 0
+        self.ended: dict[str, Any] | None = None  # the record of a solve that ended (``fit``'s ``on_end``)
 
     def update(self, entry: dict[str, Any]) -> None:
         """Record one step's history entry; write the file when the step is the best so far."""
         self.steps += 1
         if np.isfinite(entry["loss"]) and (self.best is None or entry["loss"] < self.best["loss"]):
             self.best = {"loss": float(entry["loss"]), "values": dict(entry["values"])}
-            with staged_output(self.path.parent) as stage:
-                write_json(stage / self.path.name, {"inputs": self.inputs, "files_sha256": self.digests, "best": self.best,
-                                                    "steps": self.steps, "versions": versions()})
+            self._write()
+
+    def end(self, record: dict[str, Any]) -> None:
+        """Record that the solve has ended (``fit``'s ``on_end``): a fit killed after it resumes to the same report."""
+        self.ended = record
+        self._write()
+
+    def _write(self) -> None:
+        with staged_output(self.path.parent) as stage:
+            write_json(stage / self.path.name, {"inputs": self.inputs, "files_sha256": self.digests, "best": self.best,
+                                                "steps": self.steps, "versions": versions(),
+                                                **({"ended": self.ended} if self.ended else {})})
 
     def resume(self, max_steps: int) -> dict[str, Any]:
         """The fit options that continue from the checkpoint: its best values as the start, and the
-        steps left of ``max_steps``.
+        steps left of ``max_steps``; for a solve that had ended (:attr:`ended`, passed to ``fit``), its
+        end values, so that the report is the one the ended fit would have written.
 
         Raises:
             InputError: without a checkpoint, or for one made with other inputs (naming them) or
@@ -287,7 +324,9 @@ class Checkpoint:
         if edited:
             raise InputError(f"checkpoint {str(self.path)!r} was made with other contents of {', '.join(map(repr, edited))} "
                              "(SHA-256 differs: edited since); resume with the files as they were, or run without --resume.")
-        self.best, self.steps = best, steps
+        self.best, self.steps, self.ended = best, steps, saved.get("ended")
+        if self.ended is not None:  # the solve had ended: its ending is reported again, not solved again
+            return {"start": self.ended["values"]}
         return {"start": best["values"], "max_steps": max(max_steps - steps, 1)}
 
     def remove(self) -> None:

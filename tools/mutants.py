@@ -205,6 +205,14 @@ MUTANTS = (
            "except psutil.NoSuchProcess:\n            return True", ("tests/test_locks.py",)),
     Mutant("reused-pid-holds-the-lock", "spacefit/locks.py", "\n                    and abs(process.create_time() - self.started) < START_TOLERANCE_S)",
            ")", ("tests/test_locks.py",)),
+    # interruptions as promised (issue 20): Ctrl-C during a render, worker deaths, a resumed fit that had ended
+    Mutant("render-in-the-main-thread", "spacefit/interrupts.py",
+           "    if threading.current_thread() is not threading.main_thread():\n        return work(stop)\n    box",
+           "    if True:\n        return work(stop)\n    box", ("tests/test_interrupts.py::test_a_long_render_stops_within_the_bound",)),
+    Mutant("worker-deaths-not-retried", "spacefit/studies/cluster.py", "if lost >= retries:", "if lost >= 0:",
+           ("tests/test_interrupts.py::test_a_point_whose_worker_dies_is_retried_then_named",)),
+    Mutant("ended-fit-solved-again", "spacefit/fitting/loop.py", "    if ended is not None:\n", "    if False:\n",
+           ("tests/test_interrupts.py::test_a_fit_killed_after_its_solve_resumes_to_the_same_report",)),
 )
 
 

@@ -206,6 +206,8 @@ def fit(
     wrinkle_coordinates: str = FitOptions.wrinkle_coordinates,
     progress: ProgressCallback | None = None,
     on_step: Callable[[dict[str, Any]], None] | None = None,
+    on_end: Callable[[dict[str, Any]], None] | None = None,
+    ended: Mapping[str, Any] | None = None,
 ) -> FitResult:
     """Fit free scene parameters so that renders match reference images.
 
@@ -231,6 +233,11 @@ def fit(
         progress: called with (step, max_steps) after each step.
         on_step: called with each step's history entry (step, loss, values, time_s), e.g. to
             checkpoint the best point so far.
+        on_end: called once the solve has ended (not when interrupted), before the errors and renders
+            are computed, with the record that ``ended`` takes: its status, steps, end values and history.
+        ended: such a record, of a solve that ended before its process was killed: the solve is not
+            run again; ``start`` must be the record's values. The result is the one the ended fit
+            would have given: same status, steps, values and verdict.
 
     The result's :attr:`~FitResult.status` is a verdict (:class:`Status`): no step that lowered
     the loss (:attr:`Status.NO_PROGRESS`), a parameter at a bound (:attr:`Status.AT_BOUND`) and
@@ -255,12 +262,16 @@ def fit(
 
     steps = _Steps(s, stop == "noise" and is_least_squares(engine), max_steps, progress, on_step)
     u = jnp.asarray(fp.to_unconstrained(jnp.asarray(s.x0)))
+    if ended is not None:
+        return _result(s, steps.ended(ended, u), steps, solver_name(engine), loss)
     try:
         with deferred_interrupts() as interrupts:
             outcome = steps.run(drive(engine, residual_u, u, max_steps, problem.loss_u_reverse), interrupts)
     except KeyboardInterrupt as signal:
         best = steps.best_u if steps.best_u is not None else u
         outcome = Outcome(Status.TERMINATED if isinstance(signal, Terminated) else Status.INTERRUPTED, best, len(steps.history))
+    if on_end is not None and not outcome.status.interrupted:
+        on_end(steps.ending(outcome))
     return _result(s, outcome, steps, solver_name(engine), loss)
 
 
@@ -275,6 +286,7 @@ class _Steps:
         self.floor = NoiseFloor()
         self.best_u: np.ndarray | None = None
         self.best_loss = math.nan
+        self.reported_again = False  # the record of an ended solve (:meth:`ended`), not a solve
         self.t0 = time.perf_counter()
 
     def run(self, driver: Generator[Step, None, Outcome], interrupts: Any) -> Outcome:
@@ -317,6 +329,19 @@ class _Steps:
             self.on_step(self.history[-1])
         return Status.NOISE_FLOOR if self.noise_stop and self.floor.reached(step.loss, accepted) else None
 
+    def ending(self, outcome: Outcome) -> dict[str, Any]:
+        """The record of an ended solve that :meth:`ended` (``fit(ended=...)``) takes: status, steps,
+        history and the values the result reports (the start where no step lowered the loss)."""
+        x = self.s.solver_params.to_physical(jnp.asarray(outcome.u)) if self.moved else jnp.asarray(self.s.x0)
+        values = dict(zip(self.s.user.names, np.asarray(self.s.to_user(x)).tolist()))
+        return {"status": outcome.status.value, "steps": outcome.steps, "values": values, "history": self.history}
+
+    def ended(self, record: Mapping[str, Any], u: jax.Array) -> Outcome:
+        """The outcome of the ended solve ``record`` (:meth:`ending`), whose end point is ``u``; its history becomes this one."""
+        self.history = [dict(entry) for entry in record["history"]]
+        self.best_u, self.reported_again = u, True
+        return Outcome(Status(record["status"]), u, int(record["steps"]))
+
     @property
     def moved(self) -> bool:
         """Whether a step after the first (which evaluates the start) lowered the loss."""
@@ -341,8 +366,9 @@ def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool) -> Status
 def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -> FitResult:
     """The :class:`FitResult` of a solve's outcome: values, errors, goodness of fit, verdict, images."""
     problem, status = s.problem, outcome.status
-    # a solve that never lowered the loss returns its start, not a point its solver drifted to
-    x = np.asarray(s.solver_params.to_physical(outcome.u) if steps.moved else s.x0, dtype=float)
+    # a solve that never lowered the loss returns its start, not a point its solver drifted to; an ended
+    # solve reported again (``fit(ended=...)``) its start, which is its end (not rounded through ``u``)
+    x = np.asarray(s.solver_params.to_physical(outcome.u) if steps.moved and not steps.reported_again else s.x0, dtype=float)
     n = len(x)
     x_user = np.asarray(s.to_user(jnp.asarray(x)), dtype=float)
     stderr, corr, loss_value, extras, renders, residuals, quality = np.full(n, np.nan), np.eye(n), math.nan, {}, [], [], None

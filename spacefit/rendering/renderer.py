@@ -203,6 +203,21 @@ def render_threads(deterministic: bool) -> Iterator[None]:
 
 
 @contextmanager
+def errors_only() -> Iterator[None]:
+    """Mitsuba logs only errors inside the block. Its SIGINT handler logs "Received interrupt signal,
+    winding down.." as a warning, though a wavefront render does not wind down: the signal is the
+    caller's to report (:func:`spacefit.interrupts.run_interruptibly`). The logger is one for all
+    threads, so the block's own warnings are dropped too: keep it to the render call."""
+    logger = mi.logger()
+    level = logger.log_level()
+    logger.set_log_level(mi.LogLevel.Error)
+    try:
+        yield
+    finally:
+        logger.set_log_level(level)
+
+
+@contextmanager
 def kernel_log() -> Iterator[dict[str, float]]:
     """Count the Dr.Jit kernels launched inside the block; the yielded dict is filled on exit.
 

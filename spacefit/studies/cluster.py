@@ -6,14 +6,18 @@ between tasks, as the in-process sweep does, and gives the same numbers for the 
 (renders are deterministic). Mitsuba leaks memory and has crashed over thousands of renders in one
 process, so a worker is restarted by its nanny after ``max_renders_per_worker`` renders; a task
 running there then is sent to another worker. At most two tasks per worker are in flight, so
-that Ctrl-C stops soon and a restart loses little. Only this process writes the store.
+that Ctrl-C stops soon and a restart loses little. Only this process writes the store. A point
+whose worker dies (a crash, a memory limit) is retried :data:`RETRIES_PER_POINT` times, then the
+sweep stops naming it; a sweep where no point finishes for ``stall_s`` stops too (:class:`ClusterError`).
 """
 
 from __future__ import annotations
 
+import itertools
 import logging
 import socket
 from collections.abc import Callable, Iterator
+from typing import Any
 
 import numpy as np
 
@@ -22,6 +26,10 @@ from spacefit.studies import worker
 from spacefit.studies.worker import Task
 
 IN_FLIGHT_PER_WORKER = 2
+# Times a point is sent again after the worker rendering it died, before the sweep stops naming it.
+RETRIES_PER_POINT = 2
+# Seconds a sweep on dask waits for any point to finish before it stops, saying so (`stall_s`).
+STALL_S = 600.0
 
 
 def render_on_worker(task: Task) -> tuple[dict[str, np.ndarray], str, int]:
@@ -88,33 +96,81 @@ def connect(workers: int | None, scheduler: str | None) -> tuple[object, Callabl
     return client, close
 
 
-def run_on_dask(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]], Task], *, workers: int | None,
-                scheduler: str | None, max_renders_per_worker: int) -> Iterator[tuple[tuple[int, ...], dict[str, np.ndarray]]]:
-    """Yield ``(index, result)`` for every point of ``todo`` as dask workers finish them."""
-    from distributed import as_completed  # here: only a cluster needs dask.distributed (seconds to import)
+class ClusterError(RuntimeError):
+    """A sweep on dask that cannot go on, in one line (the CLI exits 1): a point whose worker died
+    more than its retry budget allows, naming the point and the likely cause, or no point finished
+    for the stated time. Every point finished before it is in the store."""
 
-    client, close = connect(workers, scheduler)
+
+def run_on_dask(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]], Task], *, workers: int | None,
+                scheduler: str | None, max_renders_per_worker: int, stall_s: float = STALL_S,
+                retries: int = RETRIES_PER_POINT, render: Callable[[Any], Any] = render_on_worker,
+                ) -> Iterator[tuple[tuple[int, ...], dict[str, np.ndarray]]]:
+    """Yield ``(index, result)`` for every point of ``todo`` as dask workers finish them.
+
+    A point whose worker dies while rendering it (a crash, or its nanny killing it past its memory
+    limit) is sent again, at most ``retries`` times; on a local cluster the scheduler reports every
+    death at once (``allowed-failures`` 0), so the budget is this one (a running scheduler's own
+    ``allowed-failures`` multiplies it).
+
+    Raises:
+        ClusterError: a point lost ``retries + 1`` times (naming it and its worker's memory limit), or
+            no point finished for ``stall_s`` seconds.
+    """
+    import dask  # here: only a cluster needs dask.distributed (seconds to import)
+    from distributed import wait
+    from distributed.scheduler import KilledWorker
+
+    # A local cluster's scheduler is made here: it reports each death at once (the budget is ``retries``)
+    # and gives a worker only the task it runs, so that a death loses that point only, not one queued behind it.
+    with dask.config.set({"distributed.scheduler.allowed-failures": 0, "distributed.scheduler.worker-saturation": 1.0}):
+        try:
+            client, close = connect(workers, scheduler)
+        except RuntimeError as err:  # a worker process died while its nanny started it
+            raise ClusterError(f"the local dask cluster did not start ({err}); nothing was rendered, rerun the same "
+                               "command.") from None
     try:
         n = max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
         queue = iter(todo)
-        index_of = {}
+        pending: dict[Any, tuple[tuple[int, ...], int]] = {}  # future -> (point, times its worker died)
 
-        def submit() -> object | None:
-            index = next(queue, None)
-            if index is None:
-                return None
-            future = client.submit(render_on_worker, task_of(index), pure=False)
-            index_of[future.key] = index
-            return future
+        def submit(index: tuple[int, ...], lost: int = 0) -> None:
+            pending[client.submit(render, task_of(index), pure=False)] = (index, lost)
 
-        running = as_completed([f for f in (submit() for _ in range(IN_FLIGHT_PER_WORKER * n)) if f is not None])
-        for future in running:
-            result, address, renders = future.result()
-            yield index_of.pop(future.key), result
-            if renders >= max_renders_per_worker:
-                client.restart_workers([address])
-            following = submit()
-            if following is not None:
-                running.add(following)
+        for index in itertools.islice(queue, IN_FLIGHT_PER_WORKER * n):
+            submit(index)
+        while pending:
+            try:
+                done, _ = wait(list(pending), timeout=stall_s, return_when="FIRST_COMPLETED")
+            except TimeoutError:
+                raise ClusterError(f"no point of the sweep finished in {stall_s:g} s (`stall_s`): the dask workers are "
+                                   "stuck or gone; every finished point is in the store (rerun the same command to "
+                                   "finish, or raise `stall_s` for renders that long).") from None
+            for future in done:
+                index, lost = pending.pop(future)
+                try:
+                    result, address, renders = future.result()
+                except KilledWorker as err:
+                    if lost >= retries:
+                        raise ClusterError(_lost(index, task_of(index), lost + 1, err)) from None
+                    submit(index, lost + 1)
+                    continue
+                yield index, result
+                if renders >= max_renders_per_worker:
+                    client.restart_workers([address])
+                following = next(queue, None)
+                if following is not None:
+                    submit(following)
     finally:
         close()
+
+
+def _lost(index: tuple[int, ...], task: Any, times: int, err: Exception) -> str:
+    """Why a point could not be rendered on dask: its worker died ``times`` times, in words."""
+    where = ", ".join(f"{k} = {v:g}" for k, v in task.in_place) if isinstance(task, Task) else ""
+    worker = getattr(err, "last_worker", None)
+    limit = getattr(worker, "memory_limit", 0)
+    memory = f"a worker's memory limit is {limit / 2**30:.1f} GiB" if limit else "the workers have no memory limit"
+    return (f"the dask worker rendering point {index}{f' ({where})' if where else ''} died {times} times: a crash in "
+            f"the render, or its nanny's memory limit ({memory}; the nanny's log says which). Every finished point is "
+            "in the store; rerun the same command with fewer workers, a smaller render, or without this point.")

@@ -47,7 +47,7 @@ from spacefit.progress import progress_bar
 from spacefit.scene.schema import Scene, check_scene
 from spacefit.scene.toml import load_scene, read_scene_dict
 from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, available, check_names, parameter, scene_with_values
-from spacefit.studies.cluster import check_scheduler, run_on_dask
+from spacefit.studies.cluster import STALL_S, check_scheduler, run_on_dask
 from spacefit.studies.sensitivity import SUMMARY_VARIABLES, normalisation
 from spacefit.studies import worker
 from spacefit.studies.worker import Task, regions
@@ -577,6 +577,7 @@ def sweep(
     scheduler: str | None = None,
     max_renders_per_worker: int = 500,
     allow_large: bool = False,
+    stall_s: float = STALL_S,
     quiet: bool = False,
 ) -> Any:
     """Render ``scene`` at every point of ``axes`` and return the results as a labelled xarray Dataset.
@@ -597,6 +598,8 @@ def sweep(
         max_renders_per_worker: restart a dask worker after this many renders (Mitsuba leaks).
         allow_large: run a sweep of more than :data:`MAX_POINTS` points, or whose store may not fit
             on its disk (:func:`check_estimate`; the size is printed first unless ``quiet``).
+        stall_s: on dask, stop with :class:`~spacefit.studies.cluster.ClusterError` when no point
+            finishes for this long (s); a point whose worker dies is retried twice, then named the same way.
         quiet: no size estimate, no progress bar.
 
     Returns:
@@ -613,6 +616,7 @@ def sweep(
     check_scene(scene)
     check_count("derivative_seeds", derivative_seeds, 2)
     check_count("max_renders_per_worker", max_renders_per_worker)
+    stall_s = check_range("stall_s", stall_s, 0.0, lo_open=True, unit="s")
     check_count("workers", workers)
     if workers is not None and scheduler is not None:
         raise InputError("give `workers` (a local cluster) or `scheduler` (an address), not both.")
@@ -648,18 +652,18 @@ def sweep(
         todo = pending(np.asarray(group["done"][...]), order)
         total = math.prod(a.size for a in parsed)
         run_points(todo, task_of, group, total=total, workers=workers, scheduler=scheduler,
-                   max_renders_per_worker=max_renders_per_worker, quiet=quiet, watch=watch,
+                   max_renders_per_worker=max_renders_per_worker, stall_s=stall_s, quiet=quiet, watch=watch,
                    root=None if store is None else Path(store))
         return xr.open_zarr(group.store if store is None else str(store), zarr_format=STORE_FORMAT)
 
 
-SWEEP_FILE_OPTIONS = ("images", "derivatives", "derivative_seeds", "max_renders_per_worker")
+SWEEP_FILE_OPTIONS = ("images", "derivatives", "derivative_seeds", "max_renders_per_worker", "stall_s")
 
 
 def read_sweep_file(path: str | Path, overrides: Sequence[str] = ()) -> tuple[Scene, dict[str, Any], dict[str, Any]]:
     """Read a sweep TOML file: ``scene`` (a scene file, relative to the sweep file; default: the
     thesis's scene, with ``overrides`` as ``--set`` gives them), an ``[axes]`` table as :func:`sweep`
-    takes it, and options (``images``, ``derivatives``, ``derivative_seeds``, ``max_renders_per_worker``).
+    takes it, and options (``images``, ``derivatives``, ``derivative_seeds``, ``max_renders_per_worker``, ``stall_s``).
 
     Returns ``(scene, axes, options)``: ``sf.sweep(scene, axes, store=..., **options)`` runs it.
     """
@@ -686,7 +690,7 @@ def parsed_seeds(scene: Scene, axes: list[Axis]) -> list[int]:
 
 
 def run_points(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]], Task], group: Any, *, total: int,
-               workers: int | None, scheduler: str | None, max_renders_per_worker: int, quiet: bool,
+               workers: int | None, scheduler: str | None, max_renders_per_worker: int, stall_s: float, quiet: bool,
                watch: Watch | None = None, root: Path | None = None) -> None:
     """Render the points ``todo`` in-process or on dask, writing each to ``group`` as it finishes;
     with a ``watch`` of the input files, a point is marked done only while they are unchanged."""
@@ -699,7 +703,7 @@ def run_points(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]],
                 results = ((index, worker.run_task(task_of(index))) for index in todo)
             else:
                 results = run_on_dask(todo, task_of, workers=workers, scheduler=scheduler,
-                                      max_renders_per_worker=max_renders_per_worker)
+                                      max_renders_per_worker=max_renders_per_worker, stall_s=stall_s)
             for index, result in results:
                 if watch is not None and (edited := watch.check()):
                     raise _changed(edited, "the point rendered after the change is not marked done")
