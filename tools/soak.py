@@ -16,9 +16,7 @@ uninterrupted reference run of the same command:
 Each case ends as: ok; **data loss** (a point marked done, or a result folder, whose data are not
 the reference's, or a finished result gone); **wrong result** (the final store or result differs from
 the reference, or the rerun did not finish it); **crash** (a traceback, or an exit code the README
-does not promise); skipped (with its reason). Cases marked expected-to-fail (damaged stores, concurrent
-writers and file-size limits: their fixes are on other branches of issue 20) are counted apart
-while they fail, and flagged when they pass. The exit status is 1 when a data loss, wrong result or
+does not promise); skipped (with its reason). The exit status is 1 when a data loss, wrong result or
 crash was counted, else 0.
 
 Usage: python tools/soak.py [--runs N | --minutes M] [--quick] [--seed S] [--work DIR]
@@ -48,8 +46,6 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 OK, LOSS, WRONG, CRASH, SKIPPED = "ok", "data loss", "wrong result", "crash", "skipped"
 COUNTED = (LOSS, WRONG, CRASH)
-# Cases whose fixes are on other branches of issue 20 (verify: checksums; locks: one writer, EFBIG).
-EXPECTED_TO_FAIL = {"damaged-store": "verify", "concurrent": "locks", "file-size-limit": "locks"}
 EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143}
 # SIGTERM in Python's start-up, before the command line sets its handler: the default action (the
 # process ends by the signal, before any work; a shell reports 143 too).
@@ -424,19 +420,11 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def report(outcomes: list[Outcome], seconds: float) -> int:
-    """Print the counts; 1 if a data loss, wrong result or crash was counted outside the expected failures."""
-    expected = [o for o in outcomes if o.case in EXPECTED_TO_FAIL and o.kind in COUNTED]
-    counted = Counter(o.kind for o in outcomes if o not in expected)
-    passing = sorted({o.case for o in outcomes if o.case in EXPECTED_TO_FAIL} - {o.case for o in expected})
+    """Print the counts; 1 if a data loss, wrong result or crash was counted."""
+    counted = Counter(o.kind for o in outcomes)
     print(f"soak: {len(outcomes)} cases in {seconds / 60:.1f} min on {platform.node()} ({os.cpu_count()} cores), "
           f"{time.strftime('%Y-%m-%d')}: data loss {counted[LOSS]}, wrong results {counted[WRONG]}, crashes {counted[CRASH]}; "
           f"skipped {counted[SKIPPED]}")
-    if expected:
-        by_case = Counter(o.case for o in expected)
-        print("expected failures (fixed on other branches): " +
-              ", ".join(f"{case} {n} ({EXPECTED_TO_FAIL[case]})" for case, n in sorted(by_case.items())))
-    if passing:
-        print(f"expected to fail but passed: {', '.join(passing)} (remove from EXPECTED_TO_FAIL once its branch is in)")
     return 1 if any(counted[k] for k in COUNTED) else 0
 
 
