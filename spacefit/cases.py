@@ -99,5 +99,5 @@ def load_case(name: str) -> Case:
     with as_file(CASES_DIR / f"{entry.get('scene', name)}.toml") as path:
         scene = load_scene(path, entry.get("values", {}))
     free = tuple(entry["free"])
-    check_names(scene, list(free))
+    check_names(scene, free)
     return Case(name, scene, free, {k: float(v) for k, v in entry["start"].items()}, dict(entry.get("fit", {})))

@@ -103,20 +103,53 @@ def check_range(
     return x
 
 
-def check_count(name: str, value: object, lo: int = 1) -> None:
-    """Raise :class:`InputError` unless ``value`` is an integer >= ``lo`` (None passes: the default)."""
-    if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo):
-        raise InputError(f"`{name}` must be an integer >= {lo}, got {value!r}.")
+def check_count(name: str, value: object, lo: int = 1, hi: int | None = None, why: str = "", optional: bool = True) -> None:
+    """Raise :class:`InputError` unless ``value`` is an integer in [``lo``, ``hi``] (None passes where
+    ``optional``: the default); ``why`` says where the upper limit comes from."""
+    if value is None and optional:
+        return
+    allowed = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise InputTypeError(f"`{name}` must be an integer {allowed}, got {quote(value)}.")
+    if value < lo or (hi is not None and value > hi):
+        raise InputError(f"`{name}` must be an integer {allowed}{f' ({why})' if why else ''}, got {value!r}.")
 
 
-def check_vector(name: str, value: Sequence[float], size: int = 3) -> np.ndarray:
-    """Check that ``value`` is a finite vector of ``size`` numbers and return it as float64."""
+def check_name_list(name: str, value: object) -> tuple[str, ...]:
+    """Check that ``value`` is a list (any sequence but a string) of strings and return it as a tuple."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
+        raise InputTypeError(f"`{name}` must be a list of names, got {quote(value)}.")
+    for i, item in enumerate(value):
+        if not isinstance(item, str):
+            raise InputTypeError(f"`{name}[{i}]` must be a name (a string), got {quote(item)}.")
+    return tuple(value)
+
+
+# The array kinds (NumPy dtype.kind) an array argument may hold, by what messages call them.
+ARRAY_KINDS = {"real numbers": "iuf", "booleans": "b"}
+
+
+def check_array(name: str, value: object, holds: str = "real numbers") -> np.ndarray:
+    """``value`` as a NumPy array of ``holds`` (a key of :data:`ARRAY_KINDS`), refusing ragged nested
+    lists, strings, objects and complex numbers."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError, RecursionError, OverflowError):
+        raise InputTypeError(f"`{name}` must be an array of {holds}, got {quote(value)}.") from None
+    if arr.dtype.kind not in ARRAY_KINDS[holds]:
+        raise InputTypeError(f"`{name}` must be an array of {holds}, got dtype {arr.dtype}: {quote(value)}.")
+    return arr
+
+
+def check_vector(name: str, value: Sequence[float], size: int | None = 3) -> np.ndarray:
+    """Check that ``value`` is a finite vector of ``size`` numbers (None: one or more) and return it as float64."""
+    count = "a list of numbers" if size is None else f"{size} numbers"
     try:
         arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError, RecursionError):
-        raise InputTypeError(f"`{name}` must be {size} numbers, got {quote(value)}.") from None
-    if arr.shape != (size,):
-        raise InputError(f"`{name}` must be {size} numbers, got {quote(value)}.")
+    except (TypeError, ValueError, RecursionError, OverflowError):
+        raise InputTypeError(f"`{name}` must be {count}, got {quote(value)}.") from None
+    if arr.ndim != 1 or arr.shape[0] != (size or max(arr.shape[0], 1)):
+        raise InputError(f"`{name}` must be {count}, got {quote(value)}.")
     check_finite(name, arr)
     return arr
 

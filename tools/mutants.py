@@ -187,6 +187,12 @@ MUTANTS = (
            ("tests/test_goodness.py",)),
     Mutant("dof-miscounted", "spacefit/fitting/goodness.py", "dof = max(values - n_free, 1)", "dof = max(values, 1)",
            ("tests/test_goodness.py",)),
+    # every error in the user's terms (issue 20): the camera's derived quantities, the far clip, the fit's seeds
+    Mutant("field-of-view-unchecked", "spacefit/scene/schema.py", "        if fov > MAX_FOV_DEG:", "        if fov > 180.0:",
+           ("tests/test_reliability.py",)),
+    Mutant("mitsuba-default-far-clip", RENDERER, '        "far_clip": FAR_CLIP_M,\n', "", ("tests/test_reliability.py",)),
+    Mutant("negative-fit-seed-passes", "spacefit/rendering/derivatives.py",
+           "check_count(name, value, 0, MAX_SEED,", "check_count(name, value, -(2**40), MAX_SEED,", ("tests/test_reliability.py",)),
 )
 
 

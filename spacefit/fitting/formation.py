@@ -27,7 +27,7 @@ import numpy as np
 from jax.scipy.ndimage import map_coordinates
 from jaxtyping import Array, Float
 
-from spacefit.errors import InputError
+from spacefit.errors import InputError, InputTypeError, check_array, check_count, quote
 from spacefit.geometry.distortion import Distortion, undistort
 from spacefit.geometry.frames import Intrinsics
 from spacefit.sensor import (
@@ -35,8 +35,12 @@ from spacefit.sensor import (
 )
 
 
-def _check_radiance(radiance: Any, intrinsics: Intrinsics) -> None:
-    shape = np.shape(radiance)
+def _check_radiance(radiance: Any, sensor: Sensor, intrinsics: Intrinsics) -> None:
+    if not isinstance(sensor, Sensor):
+        raise InputTypeError(f"`sensor` must be an sf.Sensor, got {quote(sensor)}.")
+    if not isinstance(intrinsics, Intrinsics):
+        raise InputTypeError(f"`intrinsics` must be an sf.Intrinsics, got {quote(intrinsics)}.")
+    shape = np.shape(radiance) if isinstance(radiance, jax.core.Tracer) else check_array("radiance", radiance).shape
     if len(shape) != 3 or shape[:2] != (intrinsics.height, intrinsics.width):
         raise InputError(f"`radiance` must be (height, width, channels) = ({intrinsics.height}, {intrinsics.width}, c) for these intrinsics, got shape {shape}.")
     if isinstance(radiance, jax.core.Tracer):
@@ -117,7 +121,7 @@ def expected_electrons(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsi
     Returns:
         (height, width, channels) float64 JAX array of electrons. Not clipped at the full well.
     """
-    _check_radiance(radiance, intrinsics)
+    _check_radiance(radiance, sensor, intrinsics)
     return electrons_fn(sensor, intrinsics, np.shape(radiance)[2])(radiance)
 
 
@@ -132,7 +136,7 @@ def expected_dn(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Int
     Returns:
         (height, width, channels) float64 JAX array, DN.
     """
-    _check_radiance(radiance, intrinsics)
+    _check_radiance(radiance, sensor, intrinsics)
     return dn_fn(sensor, intrinsics, np.shape(radiance)[2], flat)(radiance)
 
 
@@ -156,6 +160,7 @@ def observe(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: In
     Returns:
         (height, width, channels) uint16 (bit_depth <= 16) or uint32 DN.
     """
+    check_count("seed", seed, 0, optional=False)
     mean = np.maximum(np.asarray(expected_electrons(radiance, sensor, intrinsics)), 0.0)  # FFT round-off leaves -1e-12 in black pixels
     rng = np.random.default_rng(seed)
     saturating = sensor.full_well_electrons if sensor.full_well_electrons is not None else (sensor.adc_max_dn - sensor.bias_dn) / sensor.gain_dn_per_electron

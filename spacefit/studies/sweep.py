@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from spacefit import __version__
-from spacefit.errors import InputError, InputTypeError, check_count, quote
+from spacefit.errors import InputError, InputTypeError, check_count, check_name_list, check_vector, quote
 from spacefit.interrupts import deferred_interrupts
 from spacefit.output import STAGE_PREFIX, check_writable
 from spacefit.progress import progress_bar
@@ -82,6 +82,8 @@ def _suffix_unit(key: str) -> str:
 def _values(key: str, spec: Any) -> list[Any]:
     """A key's list of values from a list or a ``linspace`` / ``arange`` table."""
     if isinstance(spec, Mapping):
+        for kind in set(spec) & {"linspace", "arange"}:  # [start, stop, num or step]
+            check_vector(f"axes[{key!r}].{kind}", spec[kind])
         if set(spec) == {"linspace"} and len(spec["linspace"]) == 3:
             start, stop, num = spec["linspace"]
             check_count(f"axes[{key!r}].linspace num", num)
@@ -107,6 +109,8 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
     for name, spec in axes.items():
         zipped = isinstance(spec, Mapping) and not ({"linspace"} == set(spec) or {"arange"} == set(spec))
         values = {k: _values(k, v) for k, v in spec.items()} if zipped else {name: _values(name, spec)}
+        if not values:
+            raise InputError(f"axis {name!r} zips no keys: give it a table of scene keys and their lists of values.")
         if len({len(v) for v in values.values()}) > 1:
             raise InputError(f"the zipped keys of axis {name!r} must have lists of equal length, got "
                              f"{ {k: len(v) for k, v in values.items()} }.")
@@ -327,14 +331,14 @@ def sweep(
     import xarray as xr  # here: only a sweep's store needs xarray (slow to import)
 
     check_scene(scene)
-    check_count("derivative_seeds", derivative_seeds, 2)
-    check_count("max_renders_per_worker", max_renders_per_worker)
+    check_count("derivative_seeds", derivative_seeds, 2, optional=False)
+    check_count("max_renders_per_worker", max_renders_per_worker, optional=False)
     check_count("workers", workers)
     if workers is not None and scheduler is not None:
         raise InputError("give `workers` (a local cluster) or `scheduler` (an address), not both.")
-    derivatives = tuple(derivatives)
+    derivatives = check_name_list("derivatives", derivatives)
     if derivatives:
-        check_names(scene, list(derivatives), "derivatives")
+        check_names(scene, derivatives, "derivatives")
     parsed = parse_axes(scene, axes)
     options = {"images": bool(images), "derivatives": list(derivatives), "derivative_seeds": derivative_seeds}
     spec = _canonical(scene, parsed, options)
