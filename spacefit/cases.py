@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, check_choice
+from spacefit.errors import InputError, check_choice, check_range
 from spacefit.scene.schema import Scene
 from spacefit.scene.toml import load_scene
 from spacefit.scene.parameters import check_names, scene_value
@@ -68,6 +68,7 @@ class Case:
         ``noise_percent`` % if given, and the noise's sigma (None without noise)."""
         from spacefit.rendering.renderer import render  # here: Mitsuba takes seconds to import; reading a case never renders
 
+        check_range("noise_percent", noise_percent, 0.0, 100.0, unit="%")
         image = render(self.truth_scene)
         if not noise_percent:
             return image, None

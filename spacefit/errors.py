@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 
@@ -58,8 +60,11 @@ def inside(where: str) -> Iterator[None]:
 
 
 def check_finite(name: str, value: object) -> None:
-    """Raise :class:`InputError` if ``value`` (scalar or array) holds NaN or infinity."""
-    arr = np.asarray(value, dtype=float)
+    """Raise :class:`InputError` if ``value`` (scalar or array) holds NaN or infinity, or is not numbers."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError, RecursionError, OverflowError):
+        raise InputTypeError(f"`{name}` must be a number or numbers, got {quote(value)}.") from None
     if not np.all(np.isfinite(arr)):
         raise InputError(f"`{name}` must be finite, got {quote(value)}.")
 
@@ -125,19 +130,33 @@ def check_name_list(name: str, value: object) -> tuple[str, ...]:
     return tuple(value)
 
 
-# The array kinds (NumPy dtype.kind) an array argument may hold, by what messages call them.
-ARRAY_KINDS = {"real numbers": "iuf", "booleans": "b"}
+def check_path(name: str, value: object) -> Path:
+    """Check that ``value`` is a file or folder path (a non-empty string or ``os.PathLike``) and return it as a Path."""
+    if not isinstance(value, (str, os.PathLike)) or not str(value).strip():
+        raise InputTypeError(f"`{name}` must be a path (a non-empty string or pathlib.Path), got {quote(value)}.")
+    return Path(value)
 
 
-def check_array(name: str, value: object, holds: str = "real numbers") -> np.ndarray:
-    """``value`` as a NumPy array of ``holds`` (a key of :data:`ARRAY_KINDS`), refusing ragged nested
+def check_type(name: str, value: object, cls: type | tuple[type, ...], what: str) -> None:
+    """Raise :class:`InputTypeError` unless ``value`` is an instance of ``cls``; ``what`` names it (``"an sf.Sensor"``)."""
+    if not isinstance(value, cls):
+        raise InputTypeError(f"`{name}` must be {what}, got {quote(value)}.")
+
+
+# The arrays an argument may be: what messages call them -> the NumPy dtype kinds they hold.
+ARRAY_KINDS = {"an array of real numbers": "iuf", "a bool array": "b"}
+
+
+def check_array(name: str, value: object, kind: str = "an array of real numbers") -> np.ndarray:
+    """``value`` as a NumPy array of ``kind`` (a key of :data:`ARRAY_KINDS`), refusing ragged nested
     lists, strings, objects and complex numbers."""
     try:
         arr = np.asarray(value)
     except (TypeError, ValueError, RecursionError, OverflowError):
-        raise InputTypeError(f"`{name}` must be an array of {holds}, got {quote(value)}.") from None
-    if arr.dtype.kind not in ARRAY_KINDS[holds]:
-        raise InputTypeError(f"`{name}` must be an array of {holds}, got dtype {arr.dtype}: {quote(value)}.")
+        raise InputTypeError(f"`{name}` must be {kind}, got {quote(value)}.") from None
+    if arr.dtype.kind not in ARRAY_KINDS[kind]:
+        shown = "" if isinstance(value, np.ndarray) else f": {quote(value)}"
+        raise InputTypeError(f"`{name}` must be {kind}, got dtype {arr.dtype}{shown}.")
     return arr
 
 

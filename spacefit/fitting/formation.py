@@ -27,7 +27,7 @@ import numpy as np
 from jax.scipy.ndimage import map_coordinates
 from jaxtyping import Array, Float
 
-from spacefit.errors import InputError, InputTypeError, check_array, check_count, quote
+from spacefit.errors import InputError, check_array, check_count, check_type
 from spacefit.geometry.distortion import Distortion, undistort
 from spacefit.geometry.frames import Intrinsics
 from spacefit.sensor import (
@@ -35,14 +35,17 @@ from spacefit.sensor import (
 )
 
 
-def _check_radiance(radiance: Any, sensor: Sensor, intrinsics: Intrinsics) -> None:
-    if not isinstance(sensor, Sensor):
-        raise InputTypeError(f"`sensor` must be an sf.Sensor, got {quote(sensor)}.")
-    if not isinstance(intrinsics, Intrinsics):
-        raise InputTypeError(f"`intrinsics` must be an sf.Intrinsics, got {quote(intrinsics)}.")
-    shape = np.shape(radiance) if isinstance(radiance, jax.core.Tracer) else check_array("radiance", radiance).shape
+def _check_image(image: Any, intrinsics: Intrinsics, name: str = "image") -> None:
+    """Check an image's type and shape, (height, width, channels), against ``intrinsics``."""
+    check_type("intrinsics", intrinsics, Intrinsics, "an sf.Intrinsics")
+    shape = np.shape(image) if isinstance(image, jax.Array) else check_array(name, image).shape
     if len(shape) != 3 or shape[:2] != (intrinsics.height, intrinsics.width):
-        raise InputError(f"`radiance` must be (height, width, channels) = ({intrinsics.height}, {intrinsics.width}, c) for these intrinsics, got shape {shape}.")
+        raise InputError(f"`{name}` must be (height, width, channels) = ({intrinsics.height}, {intrinsics.width}, c) for these intrinsics, got shape {shape}.")
+
+
+def _check_radiance(radiance: Any, sensor: Sensor, intrinsics: Intrinsics) -> None:
+    check_type("sensor", sensor, Sensor, "an sf.Sensor")
+    _check_image(radiance, intrinsics, "radiance")
     if isinstance(radiance, jax.core.Tracer):
         return  # values are unknown while JAX traces; they were checked where they came from
     values = np.asarray(radiance)
@@ -147,6 +150,9 @@ def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Ar
     ``(expected - bias) / gain``), Gaussian read noise and the rounding to integers (uniform, 1/12).
     Meaningless where :func:`~spacefit.sensor.saturated_mask` holds.
     """
+    check_type("sensor", sensor, Sensor, "an sf.Sensor")
+    if not isinstance(expected, jax.Array):
+        check_array("expected", expected)
     g = sensor.gain_dn_per_electron
     return g * jnp.maximum(jnp.asarray(expected) - sensor.bias_dn, 0.0) + (g * sensor.read_noise_electrons) ** 2 + 1.0 / 12.0
 
@@ -183,6 +189,8 @@ def distort_image(image: Float[Array, "h w c"], intrinsics: Intrinsics, coeffici
     Returns:
         (height, width, channels) float JAX array.
     """
+    check_type("coefficients", coefficients, Distortion, "an sf.Distortion")
+    _check_image(image, intrinsics)
     f_px = intrinsics.focal_px
     u0, v0 = intrinsics.principal_point
     v, u = np.mgrid[0 : intrinsics.height, 0 : intrinsics.width] + 0.5

@@ -81,7 +81,7 @@ class Observation:
         if self.sigma is not None:
             _check_sigma(check_array("Observation.sigma", self.sigma), ref.shape)
         if self.mask is not None:
-            mask = check_array("Observation.mask", self.mask, "booleans")
+            mask = check_array("Observation.mask", self.mask, "a bool array")
             if not mask.any():
                 raise InputError(f"`Observation.mask` is False everywhere ({mask.size} values): it leaves nothing to fit.")
 
@@ -146,13 +146,12 @@ def check_reference(obs: Observation, index: int) -> tuple[np.ndarray, np.ndarra
     w, h = obs.scene.render.resolution
     if ref.ndim == 2:
         ref = ref[..., None]
-    if ref.ndim != 3 or ref.shape[:2] != (h, w) or ref.shape[-1] == 2:
+    if ref.ndim != 3 or ref.shape[:2] != (h, w) or ref.shape[-1] not in (1, 3):
         raise InputError(
             f"reference {index} has shape {ref.shape}, but its scene renders (height, width) = ({h}, {w}) with 1 (grey) "
             "or 3 (RGB) channels; render the reference at the scene's resolution or set `render.resolution`."
         )
     used = np.ones(ref.shape, dtype=bool) if obs.mask is None else _mask(obs.mask, ref.shape, index)
-    ref, used = ref[..., :3], used[..., :3]
     nonfinite = int(np.any(~np.isfinite(ref) & used, axis=-1).sum())
     if nonfinite:
         raise InputError(f"reference {index} holds NaN or infinite pixels ({nonfinite}); leave them out with its mask "

@@ -56,8 +56,8 @@ def override_items(overrides: Overrides) -> list[tuple[list[str], Any]]:
     else:
         if isinstance(overrides, str):
             overrides = [overrides]
-        if not all(isinstance(text, str) for text in overrides):
-            raise InputError(f"scene overrides must be a mapping of key -> value or 'key=value' strings, got {overrides!r}.")
+        if not isinstance(overrides, Sequence) or not all(isinstance(text, str) for text in overrides):
+            raise InputTypeError(f"scene overrides must be a mapping of key -> value or 'key=value' strings, got {quote(overrides)}.")
         items = [parse_override(text) for text in overrides]
     return [leaf for path, value in items for leaf in _leaves(path, value)]
 

@@ -46,7 +46,7 @@ from spacefit.geometry.wm import wm_G_from_rms, wm_rms
 from spacefit.materials import Conductor, Lambert, Material, Mirror
 from spacefit.materials.models import MIN_ALPHA
 
-from spacefit.scene.schema import Scene, WrinkleSettings, unknown_part
+from spacefit.scene.schema import Scene, WrinkleSettings, check_scene, unknown_part
 
 # A scene's value of parameter ``name`` (its full name, ``parts.panels.kd``).
 Getter = Callable[["Scene", str], float]
@@ -391,7 +391,7 @@ def _materials(scene: Scene) -> dict[str, Material]:
 
 def available(scene: Scene) -> list[str]:
     """Every parameter name that can be freed (or swept) in ``scene``, in registry order."""
-    materials = _materials(scene)
+    materials = _materials(check_scene(scene))
     names = []
     for p in PARAMETERS.values():
         if p.pattern.startswith("parts."):
