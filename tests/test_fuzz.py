@@ -108,11 +108,11 @@ def scene_values(data: st.DataObject, keys: dict[str, Any]) -> dict[Any, Any]:
 
 
 def check_scene_values(plate: dict[str, Any], data: st.DataObject) -> None:
+    """Scene.with_values with random keys and values: refused, or the scene renders."""
     values = scene_values(data, plate["keys"])
     scene = outcome(lambda: plate["scene"].with_values(values))
     if scene is not None:
         renders(scene)
-
 
 
 def check_camera(plate: dict[str, Any], data: st.DataObject) -> None:
@@ -176,6 +176,7 @@ def fit_arguments(data: st.DataObject, plate: dict[str, Any]) -> tuple[Any, dict
 
 
 def check_fit(plate: dict[str, Any], data: st.DataObject) -> None:
+    """sf.fit with some arguments random: refused, or finite fitted values."""
     observations, kwargs = fit_arguments(data, plate)
     free = kwargs.pop("free")
     result = outcome(lambda: sf.fit(observations, free, **kwargs))
@@ -274,6 +275,7 @@ def assert_clean(code: int, err: str, allowed: tuple[int, ...]) -> None:
 
 
 def check_command_line_render(plate: dict[str, Any], data: st.DataObject) -> None:
+    """`spacefit render --set KEY=VALUE` with random keys and TOML text: exit 0 with the image, or 2 and nothing written."""
     names = sorted(plate["keys"])
     sets = data.draw(st.lists(st.tuples(st.one_of(st.sampled_from(names), st.text(max_size=10)), TOML_TEXT), min_size=1, max_size=3))
     out = Path(tempfile.mkdtemp(dir=plate["dir"])) / "out"
@@ -290,6 +292,7 @@ FIT_OPTIONS = ["--spp", "--spp-grad", "--max-steps", "--solver", "--loss", "--st
 
 
 def check_command_line_fit(plate: dict[str, Any], data: st.DataObject) -> None:
+    """`spacefit fit` with random option values: a fit's exit code, a file error (1), or 2 in one line."""
     options = data.draw(st.lists(st.tuples(st.sampled_from(FIT_OPTIONS), TOML_TEXT), min_size=1, max_size=3))
     out = Path(tempfile.mkdtemp(dir=plate["dir"])) / "out"
     args = ["fit", str(plate["ref"]), "--scene", str(plate["toml"]), "--out", str(out), "--quiet", "--max-steps", "1",

@@ -135,6 +135,18 @@ def test_a_render_too_big_for_the_memory_is_refused_before_it_starts(plate_toml,
     assert listing(tmp_path) == []
 
 
+def test_a_fit_render_too_big_for_the_memory_is_refused_before_jax(plate_toml, monkeypatch):
+    """A fit's renders are one wavefront (not split into passes): its samples count, naming `spp`
+    (`fit --spp 1e8` failed inside JAX; 1e8 is now past render.spp's range, and this is within it)."""
+    import spacefit.rendering.renderer as renderer
+
+    monkeypatch.setattr(renderer, "available_memory_bytes", lambda: 1 << 28)
+    scene = sf.load_scene(plate_toml)
+    with pytest.raises(sf.InputError, match=r"16 x 16 px render at 65536 spp needs about 1\.0 GiB .* or `spp`"):
+        sf.jacobian(scene, ["parts.plate.kd"], spp=65536)
+    assert sf.jacobian(scene, ["parts.plate.kd"], spp=4).image.shape == (16, 16, 3)
+
+
 def test_strict_json_writes_non_finite_numbers_as_null(tmp_path):
     write_json(tmp_path / "a.json", {"x": float("nan"), "y": [1.0, float("inf")], "z": np.float32(2.5)})
     data = json.loads((tmp_path / "a.json").read_text(), parse_constant=lambda c: pytest.fail(f"bare {c}"))
