@@ -213,6 +213,10 @@ def _scene_from(data: dict, folder: Path) -> sf.Scene:
         (lambda: sf.default_scene().with_values({"camera.focal_length_mm": 1e-200}), ValueError,
          "`camera.focal_length_mm`, `camera.pixel_pitch_mm` and `render.resolution` give a horizontal field of view of 180 deg"),
         (lambda: sf.default_scene().with_values({"camera.focal_length_mm": 1e9}), ValueError, "gives pixels of 4e-09 rad; at least 1e-06"),
+        (lambda: sf.Renderer(sf.default_scene()).render(seed=-1), ValueError, r"`seed` must be an integer in \[0, 2147483647\]"),
+        (lambda: sf.jacobian(sf.default_scene(), ["parts.legs.kd"], at={"parts.legs.kd": "x"}), TypeError, "`parts.legs.kd` must be a number"),
+        (lambda: sf.write_exr("image.png", np.ones((4, 4, 3))), ValueError, r"`path` must end in \.exr"),
+        (lambda: sf.read_image(None), TypeError, "`path` must be a path"),
     ],
 )
 def test_api_mistakes_raise_input_errors(call, error, message):
@@ -252,6 +256,15 @@ def test_a_far_camera_is_not_clipped_and_a_near_one_is_refused(tmp_path):
     assert images[1].mean() > 0 and np.allclose(images[0], images[1], rtol=1e-3)
     with pytest.raises(sf.InputError, match="near clipping plane at 0.01 m"):
         sf.render(scene.with_values({"camera.position_m": [0.0, 0.0, 0.005]}))
+
+
+def test_a_huge_or_tiny_up_vector_renders_as_a_unit_one(tmp_path):
+    """`camera.up` = [0, 1e300, 0] passed the checks and made Mitsuba refuse a scaled camera (found by tests/test_fuzz.py)."""
+    scene = small_scene(write_plate_obj(tmp_path / "plate.obj"), {"material": "white_paint", "kd": 0.5},
+                        render={"resolution": [8, 8], "spp": 1})
+    image = sf.render(scene)
+    for up in ([0.0, 1e300, 0.0], [0.0, 1e-300, 0.0]):
+        assert np.array_equal(sf.render(scene.with_values({"camera.up": up})), image)
 
 
 def test_numpy_and_jax_scalars_are_numbers():

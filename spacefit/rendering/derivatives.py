@@ -22,14 +22,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from spacefit.errors import InputError, check_count
+from spacefit.errors import InputError, check_count, check_type
 from spacefit.precision import float64
 from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import Renderer, check_memory
 from spacefit.rendering.values import SceneValuesFn, scene_values_fn
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.schema import MAX_SEED, MAX_SPP, Scene, check_scene
-from spacefit.scene.parameters import MOVES_VERTICES, check_names, fd_step, scene_value
+from spacefit.scene.parameters import MOVES_VERTICES, check_names, fd_step, scene_value, scene_with_values
 
 
 ImageFn = Callable[[Float[Array, " n"]], Float[Array, "h w 3"]]
@@ -178,11 +178,14 @@ def jacobians(
     seeds give Monte Carlo errors), and the renderer; ``progress()`` is called after each."""
     names = check_names(check_scene(scene), free)
     check_seeds(seeds)
-    function, renderer = render_functions(scene, names, spp=spp, spp_grad=spp_grad)
+    if at is not None:
+        check_type("at", at, Mapping, "a mapping of parameter names to values")
     at = dict(at or {})
     unknown = set(at) - set(names)
     if unknown:
         raise InputError(f"`at` names {sorted(unknown)}, which are not in `free` {list(names)}.")
+    scene_with_values(scene, at)  # each value refused as the scene would refuse it
+    function, renderer = render_functions(scene, names, spp=spp, spp_grad=spp_grad)
     x = np.array([at.get(n, scene_value(scene, n)) for n in names], dtype=float)
     out = []
     for seed, seed_grad in seeds:

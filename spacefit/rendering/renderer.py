@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spacefit.errors import InputError
+from spacefit.errors import InputError, check_array, check_count
 from spacefit.geometry.frames import project
 from spacefit.materials import Conductor, Lambert, Material, Mirror
 from spacefit.precision import float64
@@ -23,7 +23,7 @@ from spacefit.rendering.backend import dr, mi, select_variant
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.overrides import as_parameters
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
-from spacefit.scene.schema import FAR_CLIP_M, NEAR_CLIP_M, Scene, check_scene
+from spacefit.scene.schema import FAR_CLIP_M, MAX_SEED, MAX_SPP, NEAR_CLIP_M, Scene, check_scene
 
 # Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.
 MAX_SAMPLES_PER_PASS = 1 << 24
@@ -249,7 +249,10 @@ class PartImage:
         RGB mean over those pixels, W m^-2 sr^-1; NaN for a part out of view); and the whole
         ``target``. Edge pixels count for the part at their centre. ``used``: (height, width) bool,
         the pixels to count (default: all)."""
-        grey = np.asarray(radiance, dtype=float)[..., :3].mean(axis=-1)
+        image = check_array("radiance", radiance)
+        if image.shape[:2] != self.ids.shape or image.ndim != 3:
+            raise InputError(f"`radiance` must be (height, width, channels) with (height, width) = {self.ids.shape}, got shape {image.shape}.")
+        grey = image[..., :3].astype(float).mean(axis=-1)
         counted = np.ones(self.ids.shape, dtype=bool) if used is None else np.asarray(used, dtype=bool)
         rows = {}
         for label, mask in [*((name, self.ids == i) for i, name in enumerate(self.names)), ("target", self.ids >= 0)]:
@@ -348,6 +351,8 @@ class Renderer:
     def render(self, spp: int | None = None, seed: int | None = None, progress: ProgressCallback | None = None) -> np.ndarray:
         """Radiance (W m^-2 sr^-1) as a float32 (height, width, 3) array; same seed, same image."""
         r = self.assembly.scene.render
+        check_count("spp", spp, 1, MAX_SPP, "as `render.spp`")
+        check_count("seed", seed, 0, MAX_SEED, "as `render.seed`")
         spp = r.spp if spp is None else spp
         seed = r.seed if seed is None else seed
         passes = pass_seeds(seed, spp, self.window[2] * self.window[3])

@@ -165,7 +165,7 @@ def _load_parts(scene: Scene, cache: dict[str, str]) -> dict[str, PartMesh]:
 def _camera(scene: Scene) -> tuple[CameraFrame, Intrinsics]:
     c, r = scene.camera, scene.render
     if c.look_at_m:
-        frame = CameraFrame.look_at(np.array(c.position_m), np.array(c.look_at_m), np.array(c.up))
+        frame = CameraFrame.look_at(np.array(c.position_m), np.array(c.look_at_m), check_direction("camera.up", c.up))  # unit: [0, 1e300, 0] overflowed
     else:
         frame = CameraFrame.from_attitude(np.array(c.position_m), np.array(deg2rad(c.attitude_deg)))
     frame = frame.rolled(math.radians(c.roll_deg))
