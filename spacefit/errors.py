@@ -134,6 +134,8 @@ def check_path(name: str, value: object) -> Path:
     """Check that ``value`` is a file or folder path (a non-empty string or ``os.PathLike``) and return it as a Path."""
     if not isinstance(value, (str, os.PathLike)) or not str(value).strip():
         raise InputTypeError(f"`{name}` must be a path (a non-empty string or pathlib.Path), got {quote(value)}.")
+    if "\0" in str(value):
+        raise InputError(f"`{name}` must not hold a NUL character (no file system allows one), got {quote(value)}.")
     return Path(value)
 
 

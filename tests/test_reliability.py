@@ -217,6 +217,9 @@ def _scene_from(data: dict, folder: Path) -> sf.Scene:
         (lambda: sf.jacobian(sf.default_scene(), ["parts.legs.kd"], at={"parts.legs.kd": "x"}), TypeError, "`parts.legs.kd` must be a number"),
         (lambda: sf.write_exr("image.png", np.ones((4, 4, 3))), ValueError, r"`path` must end in \.exr"),
         (lambda: sf.read_image(None), TypeError, "`path` must be a path"),
+        # found by tests/test_fuzz.py
+        (lambda: sf.default_scene().with_values({"parts.legs.file": "a\0"}), ValueError, "`parts.legs.file` must not hold a NUL"),
+        (lambda: sf.default_scene().with_values({"camera.attitude_deg": {}}), ValueError, r"`camera.attitude_deg` = \{\} sets nothing"),
     ],
 )
 def test_api_mistakes_raise_input_errors(call, error, message):

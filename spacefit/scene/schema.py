@@ -26,7 +26,7 @@ from typing import Any, ClassVar
 import numpy as np
 import tomli_w
 
-from spacefit.errors import InputError, InputTypeError, check_choice, closest, check_direction, check_range, check_vector, quote
+from spacefit.errors import InputError, InputTypeError, check_choice, check_path, closest, check_direction, check_range, check_vector, quote
 from spacefit.geometry.wm import check_wm_params
 from spacefit.materials import MODELS, PRESETS, Material, material_table
 
@@ -268,6 +268,8 @@ class PartSettings:
                                  f"scene file names a preset), got {quote(self.material)}.")
         if not isinstance(self.file, str):
             raise InputTypeError(f"`file` must be a path string, got {quote(self.file)}.")
+        if self.file:
+            check_path("file", self.file)
 
 
 # The built-in lander's parts and their presets (thesis Table 4-2).
