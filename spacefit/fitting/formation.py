@@ -140,7 +140,16 @@ def expected_dn(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Int
         (height, width, channels) float64 JAX array, DN.
     """
     _check_radiance(radiance, sensor, intrinsics)
-    return dn_fn(sensor, intrinsics, np.shape(radiance)[2], flat)(radiance)
+    return _finite(dn_fn(sensor, intrinsics, np.shape(radiance)[2], flat)(radiance), radiance)
+
+
+def _finite(expected: Array, radiance: Any) -> Array:
+    """``expected`` (electrons or DN of ``radiance``), refused where the sensor model overflowed (radiance
+    near float32's largest value; a render never comes near it). Values being traced pass unchecked."""
+    if not isinstance(expected, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(expected))):
+        raise InputError(f"`radiance` up to {float(np.max(radiance)):.3g} W m^-2 sr^-1 overflows the sensor model; "
+                         "renders never come near it: check the image's unit.")
+    return expected
 
 
 def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Array, "..."]:
@@ -167,7 +176,7 @@ def observe(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: In
         (height, width, channels) uint16 (bit_depth <= 16) or uint32 DN.
     """
     check_count("seed", seed, 0, optional=False)
-    mean = np.maximum(np.asarray(expected_electrons(radiance, sensor, intrinsics)), 0.0)  # FFT round-off leaves -1e-12 in black pixels
+    mean = np.maximum(np.asarray(_finite(expected_electrons(radiance, sensor, intrinsics), radiance)), 0.0)  # FFT round-off leaves -1e-12 in black pixels
     rng = np.random.default_rng(seed)
     saturating = sensor.full_well_electrons if sensor.full_well_electrons is not None else (sensor.adc_max_dn - sensor.bias_dn) / sensor.gain_dn_per_electron
     # A mean of 4 saturation levels saturates with certainty; the cap keeps Poisson's argument finite.
