@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, check_choice
+from spacefit.errors import InputError, check_choice, check_range
 from spacefit.scene.schema import Scene
 from spacefit.scene.toml import load_scene
 from spacefit.scene.parameters import check_names, scene_value
@@ -68,6 +68,7 @@ class Case:
         ``noise_percent`` % if given, and the noise's sigma (None without noise)."""
         from spacefit.rendering.renderer import render  # here: Mitsuba takes seconds to import; reading a case never renders
 
+        check_range("noise_percent", noise_percent, 0.0, 100.0, unit="%")
         image = render(self.truth_scene)
         if not noise_percent:
             return image, None
@@ -99,5 +100,5 @@ def load_case(name: str) -> Case:
     with as_file(CASES_DIR / f"{entry.get('scene', name)}.toml") as path:
         scene = load_scene(path, entry.get("values", {}))
     free = tuple(entry["free"])
-    check_names(scene, list(free))
+    check_names(scene, free)
     return Case(name, scene, free, {k: float(v) for k, v in entry["start"].items()}, dict(entry.get("fit", {})))

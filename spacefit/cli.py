@@ -309,7 +309,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         else:
             print(export_part_stl(scene, args.part, args.out))
     except InputError as err:
-        print(f"spacefit: error: {shorten(str(err), 2000)}", file=sys.stderr)
+        # one line, whatever the message quotes (a key typed with a newline in it, say)
+        print(f"spacefit: error: {shorten(str(err), 2000)}".replace("\n", "\\n"), file=sys.stderr)
         return 2
     except OSError as err:
         print(f"spacefit: error: {file_system_error(err)}", file=sys.stderr)

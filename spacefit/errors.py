@@ -8,8 +8,10 @@ from __future__ import annotations
 
 import difflib
 import math
+import os
 from collections.abc import Iterable, Iterator, Sequence
 from contextlib import contextmanager
+from pathlib import Path
 
 import numpy as np
 
@@ -58,8 +60,11 @@ def inside(where: str) -> Iterator[None]:
 
 
 def check_finite(name: str, value: object) -> None:
-    """Raise :class:`InputError` if ``value`` (scalar or array) holds NaN or infinity."""
-    arr = np.asarray(value, dtype=float)
+    """Raise :class:`InputError` if ``value`` (scalar or array) holds NaN or infinity, or is not numbers."""
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError, RecursionError, OverflowError):
+        raise InputTypeError(f"`{name}` must be a number or numbers, got {quote(value)}.") from None
     if not np.all(np.isfinite(arr)):
         raise InputError(f"`{name}` must be finite, got {quote(value)}.")
 
@@ -105,10 +110,16 @@ def check_range(
     return x
 
 
-def check_count(name: str, value: object, lo: int = 1) -> None:
-    """Raise :class:`InputError` unless ``value`` is an integer >= ``lo`` (None passes: the default)."""
-    if value is not None and (isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < lo):
-        raise InputError(f"`{name}` must be an integer >= {lo}, got {value!r}.")
+def check_count(name: str, value: object, lo: int = 1, hi: int | None = None, why: str = "", optional: bool = True) -> None:
+    """Raise :class:`InputError` unless ``value`` is an integer in [``lo``, ``hi``] (None passes where
+    ``optional``: the default); ``why`` says where the upper limit comes from."""
+    if value is None and optional:
+        return
+    allowed = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise InputTypeError(f"`{name}` must be an integer {allowed}, got {quote(value)}.")
+    if value < lo or (hi is not None and value > hi):
+        raise InputError(f"`{name}` must be an integer {allowed}{f' ({why})' if why else ''}, got {value!r}.")
 
 
 def check_flag(name: str, value: object) -> bool:
@@ -119,14 +130,57 @@ def check_flag(name: str, value: object) -> bool:
     return bool(value)
 
 
-def check_vector(name: str, value: Sequence[float], size: int = 3) -> np.ndarray:
-    """Check that ``value`` is a finite vector of ``size`` numbers and return it as float64."""
+def check_name_list(name: str, value: object) -> tuple[str, ...]:
+    """Check that ``value`` is a list (any sequence but a string) of strings and return it as a tuple."""
+    if isinstance(value, (str, bytes)) or not isinstance(value, (Sequence, np.ndarray)):
+        raise InputTypeError(f"`{name}` must be a list of names, got {quote(value)}.")
+    for i, item in enumerate(value):
+        if not isinstance(item, str):
+            raise InputTypeError(f"`{name}[{i}]` must be a name (a string), got {quote(item)}.")
+    return tuple(value)
+
+
+def check_path(name: str, value: object) -> Path:
+    """Check that ``value`` is a file or folder path (a non-empty string or ``os.PathLike``) and return it as a Path."""
+    if not isinstance(value, (str, os.PathLike)) or not str(value).strip():
+        raise InputTypeError(f"`{name}` must be a path (a non-empty string or pathlib.Path), got {quote(value)}.")
+    if "\0" in str(value):
+        raise InputError(f"`{name}` must not hold a NUL character (no file system allows one), got {quote(value)}.")
+    return Path(value)
+
+
+def check_type(name: str, value: object, cls: type | tuple[type, ...], what: str) -> None:
+    """Raise :class:`InputTypeError` unless ``value`` is an instance of ``cls``; ``what`` names it (``"an sf.Sensor"``)."""
+    if not isinstance(value, cls):
+        raise InputTypeError(f"`{name}` must be {what}, got {quote(value)}.")
+
+
+# The arrays an argument may be: what messages call them -> the NumPy dtype kinds they hold.
+ARRAY_KINDS = {"an array of real numbers": "iuf", "a bool array": "b"}
+
+
+def check_array(name: str, value: object, kind: str = "an array of real numbers") -> np.ndarray:
+    """``value`` as a NumPy array of ``kind`` (a key of :data:`ARRAY_KINDS`), refusing ragged nested
+    lists, strings, objects and complex numbers."""
+    try:
+        arr = np.asarray(value)
+    except (TypeError, ValueError, RecursionError, OverflowError):
+        raise InputTypeError(f"`{name}` must be {kind}, got {quote(value)}.") from None
+    if arr.dtype.kind not in ARRAY_KINDS[kind]:
+        shown = "" if isinstance(value, np.ndarray) else f": {quote(value)}"
+        raise InputTypeError(f"`{name}` must be {kind}, got dtype {arr.dtype}{shown}.")
+    return arr
+
+
+def check_vector(name: str, value: Sequence[float], size: int | None = 3) -> np.ndarray:
+    """Check that ``value`` is a finite vector of ``size`` numbers (None: one or more) and return it as float64."""
+    count = "a list of numbers" if size is None else f"{size} numbers"
     try:
         arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError, RecursionError):
-        raise InputTypeError(f"`{name}` must be {size} numbers, got {quote(value)}.") from None
-    if arr.shape != (size,):
-        raise InputError(f"`{name}` must be {size} numbers, got {quote(value)}.")
+    except (TypeError, ValueError, RecursionError, OverflowError):
+        raise InputTypeError(f"`{name}` must be {count}, got {quote(value)}.") from None
+    if arr.ndim != 1 or arr.shape[0] != (size or max(arr.shape[0], 1)):
+        raise InputError(f"`{name}` must be {count}, got {quote(value)}.")
     check_finite(name, arr)
     return arr
 

@@ -58,7 +58,7 @@ import numpy as np
 import tifffile
 from astropy.io import fits
 
-from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_choice, check_range, negative_pixels, quote
+from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_array, check_choice, check_path, check_range, check_type, negative_pixels, quote
 from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, check_fields, missing_for_measurement, used_fields
 
 if TYPE_CHECKING:
@@ -141,7 +141,7 @@ def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata
     """
     p = Path(path)
     kind = _format(p, WRITABLE)
-    data = np.asarray(dn)
+    data = check_array("dn", dn)
     if data.ndim != 3 or data.dtype.kind != "u":
         raise InputError(f"`dn` must be (height, width, channels) unsigned integers, got {data.dtype} of shape {data.shape}.")
     if data.size and int(data.max()) > sensor.adc_max_dn:
@@ -386,7 +386,7 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         check_choice("response", response, RESPONSES)
     if row_order is not None:
         check_choice("row_order", row_order, ROW_ORDERS)
-    p = Path(path)
+    p = check_path("path", path)
     if not p.is_file():
         raise InputError(f"image file {str(p)!r} does not exist.")
     kind = _format(p, tuple(FORMATS))
@@ -549,6 +549,7 @@ def sensor_of(image: ObservedImage, sensor: Sensor | Mapping[str, Any] | None = 
         InputError: a value a fit needs (:func:`~spacefit.sensor.missing_for_measurement`) that no
             source gives, naming each and the three ways to give it.
     """
+    check_type("image", image, ObservedImage, "an sf.ObservedImage (what sf.read_image returns)")
     if isinstance(sensor, Sensor):
         return sensor, {name: "option/argument" for name in used_fields(sensor)}
     if sensor is not None:

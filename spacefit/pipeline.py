@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spacefit.digests import digests, mesh_files
-from spacefit.errors import InputError, check_choice
+from spacefit.errors import InputError, check_choice, check_path, check_type
 from spacefit.geometry.mesh import export_stl
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
 from spacefit.interrupts import run_interruptibly
@@ -29,7 +29,7 @@ from spacefit.rendering.renderer import PartImage, Renderer, errors_only, kernel
 from spacefit.scene.assembly import Assembly, assemble, fold_notes
 from spacefit.scene.overrides import parse_override
 from spacefit.scene.parameters import scene_keys
-from spacefit.scene.schema import Scene
+from spacefit.scene.schema import Scene, check_scene
 
 if TYPE_CHECKING:
     from spacefit.fitting.loop import FitOptions, FitResult
@@ -60,7 +60,8 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     ones (``timings_s``, e.g. the CLI's imports); ``show_timings`` prints them as a table on stderr,
     with the writing of the folder (which render.json cannot hold).
     """
-    prepare_output(out_dir, "render", overwrite=overwrite, inputs=inputs)
+    check_scene(scene)
+    prepare_output(check_path("out_dir", out_dir), "render", overwrite=overwrite, inputs=inputs)
     timings = dict(timings_s)
     # Ctrl-C / SIGTERM stop at once: Mitsuba's work runs in a thread the interruption abandons (a render has no step to keep)
     assembly, renderer, radiance, parts, kernels = run_interruptibly(lambda stop: _render(scene, timings, stop, quiet))
@@ -206,11 +207,14 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     """
     # deferred: the fitting stack (JAX, optimistix: 1.5 s) and the image files' readers (astropy), which renders never need
     from spacefit.fitting.loop import FitOptions, fit
+    from spacefit.fitting.observation_files import ObservationFiles
     from spacefit.fitting.report import write_fit_report
     from spacefit.imageio import format_sensor_sources
 
     options = FitOptions() if options is None else options
-    prepare_output(out_dir, "fit", overwrite=overwrite, resume=resume, inputs=files.files)
+    check_type("files", files, ObservationFiles, "an sf.ObservationFiles(references, scenes, ...)")
+    check_type("options", options, FitOptions, "an sf.FitOptions or None")
+    prepare_output(check_path("out_dir", out_dir), "fit", overwrite=overwrite, resume=resume, inputs=files.files)
     _check_not_fixed(free, files.overrides)
     t0 = time.perf_counter()
     observations = files.load()

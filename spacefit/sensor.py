@@ -53,7 +53,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 from scipy import constants, optimize, special
 
-from spacefit.errors import InputError, InputTypeError, check_choice, check_flag, check_range, quote
+from spacefit.errors import InputError, InputTypeError, check_array, check_choice, check_flag, check_path, check_range, check_type, quote
 from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
 
 if TYPE_CHECKING:
@@ -266,7 +266,7 @@ def read_sensor_file(path: str | Path) -> dict[str, Any]:
     refused, naming the file): a table of fields, or a file whose ``sensor`` table holds them (a
     spacefit sidecar ``obs.fits.json``). TOML has no null: a sensor without a full well
     (``full_well_electrons = null``) is written as JSON."""
-    p = Path(path)
+    p = check_path("path", path)
     if not p.is_file():
         raise InputError(f"sensor file {str(p)!r} does not exist.")
     suffix = p.suffix.lower()
@@ -375,7 +375,7 @@ def psf_rms_px(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> float:
 def check_flat(flat: Any, shape: tuple[int, ...], where: str = "`flat`") -> np.ndarray:
     """A flat-field map checked against an image of ``shape`` (h, w, c): (h, w) or (h, w, c or 1),
     finite and > 0; returned as (h, w, 1 or c) float64."""
-    f = np.asarray(flat, dtype=float)
+    f = check_array(where.strip("`"), flat).astype(float)
     f = f[..., None] if f.ndim == 2 else f
     if f.ndim != 3 or f.shape[:2] != tuple(shape[:2]) or f.shape[2] not in (1, shape[2]):
         raise InputError(f"{where} has shape {np.shape(flat)}; the image is {tuple(shape)}: give (height, width) or (height, width, channels).")
@@ -397,4 +397,5 @@ def quantise(dn: Float[np.ndarray, "..."], sensor: Sensor) -> np.ndarray:
 
 def saturated_mask(dn: Float[np.ndarray, "..."], sensor: Sensor) -> Bool[np.ndarray, "..."]:
     """True where a DN (observed or expected, any shape) is at or above ``sensor.saturation_dn``."""
-    return np.asarray(dn) >= sensor.saturation_dn
+    check_type("sensor", sensor, Sensor, "an sf.Sensor")
+    return check_array("dn", dn) >= sensor.saturation_dn

@@ -135,6 +135,18 @@ def test_a_render_too_big_for_the_memory_is_refused_before_it_starts(plate_toml,
     assert listing(tmp_path) == []
 
 
+def test_a_fit_render_too_big_for_the_memory_is_refused_before_jax(plate_toml, monkeypatch):
+    """A fit's renders are one wavefront (not split into passes): its samples count, naming `spp`
+    (`fit --spp 1e8` failed inside JAX; 1e8 is now past render.spp's range, and this is within it)."""
+    import spacefit.rendering.renderer as renderer
+
+    monkeypatch.setattr(renderer, "available_memory_bytes", lambda: 1 << 28)
+    scene = sf.load_scene(plate_toml)
+    with pytest.raises(sf.InputError, match=r"16 x 16 px render at 65536 spp needs about 1\.0 GiB .* or `spp`"):
+        sf.jacobian(scene, ["parts.plate.kd"], spp=65536)
+    assert sf.jacobian(scene, ["parts.plate.kd"], spp=4).image.shape == (16, 16, 3)
+
+
 def test_strict_json_writes_non_finite_numbers_as_null(tmp_path):
     write_json(tmp_path / "a.json", {"x": float("nan"), "y": [1.0, float("inf")], "z": np.float32(2.5)})
     data = json.loads((tmp_path / "a.json").read_text(), parse_constant=lambda c: pytest.fail(f"bare {c}"))
@@ -182,12 +194,80 @@ def _scene_from(data: dict, folder: Path) -> sf.Scene:
         (lambda: sf.fit(sf.Observation(sf.default_scene(), -np.ones((600, 600, 3))), ["parts.legs.kd"]), ValueError,
          "360000 pixels with negative"),
         (lambda: sf.jacobian(sf.default_scene(), ["parts.legs.kd"], spp=1.5), ValueError, "spp"),
+        # issue 20: each raised something other than sf.InputError
+        (lambda: sf.fit(None, ["parts.legs.kd"]), TypeError, "`observations` must be an sf.Observation"),
+        (lambda: sf.fit(_observation(), "parts.legs.kd"), TypeError, "`free` must be a list of names"),
+        (lambda: sf.fit(_observation(), ["parts.legs.kd"], start=[0.3]), TypeError, "`start` must be a mapping"),
+        (lambda: sf.fit(_observation(), ["parts.legs.kd"], start={"parts.legs.kd": "a"}), TypeError, "`parts.legs.kd` must be a number"),
+        (lambda: sf.FitRender(seed=-1), ValueError, r"`seed` must be an integer in \[0, 2147483647\].*32-bit"),
+        (lambda: sf.FitRender(spp=10**8), ValueError, r"`spp` must be an integer in \[1, 65536\]"),
+        (lambda: sf.Observation(sf.default_scene(), np.ones((600, 600, 3)), sigma=np.ones((3, 5))), ValueError,
+         r"`Observation.sigma` has shape \(3, 5\)"),
+        (lambda: sf.Observation(sf.default_scene(), [[1.0, 2.0], [3.0]]), TypeError, "`Observation.reference` must be an array"),
+        (lambda: sf.observe(np.ones((4, 4, 3)), sf.Sensor(), sf.Intrinsics(0.05, 5e-5, 4, 4), -1), ValueError,
+         "`seed` must be an integer >= 0, got -1"),
+        (lambda: sf.Intrinsics(0.05, -5e-5, 4, 4), ValueError, "`Intrinsics.pixel_pitch`"),
+        (lambda: sf.sensitivity(sf.default_scene(), ["parts.legs.kd"], seeds=None), TypeError, "`seeds` must be an integer"),
+        (lambda: sf.light_curve(sf.default_scene(), phase_deg="x"), TypeError, "`phase_deg` must be a list of numbers"),
+        # derived quantities that passed the checks and failed inside Mitsuba
+        (lambda: sf.default_scene().with_values({"camera.focal_length_mm": 1e-200}), ValueError,
+         "`camera.focal_length_mm`, `camera.pixel_pitch_mm` and `render.resolution` give a horizontal field of view of 180 deg"),
+        (lambda: sf.default_scene().with_values({"camera.focal_length_mm": 1e9}), ValueError, "gives pixels of 4e-09 rad; at least 1e-06"),
+        (lambda: sf.Renderer(sf.default_scene()).render(seed=-1), ValueError, r"`seed` must be an integer in \[0, 2147483647\]"),
+        (lambda: sf.jacobian(sf.default_scene(), ["parts.legs.kd"], at={"parts.legs.kd": "x"}), TypeError, "`parts.legs.kd` must be a number"),
+        (lambda: sf.write_exr("image.png", np.ones((4, 4, 3))), ValueError, r"`path` must end in \.exr"),
+        (lambda: sf.read_image(None), TypeError, "`path` must be a path"),
+        # found by tests/test_fuzz.py
+        (lambda: sf.default_scene().with_values({"parts.legs.file": "a\0"}), ValueError, "`parts.legs.file` must not hold a NUL"),
+        (lambda: sf.default_scene().with_values({"camera.attitude_deg": {}}), ValueError, r"`camera.attitude_deg` = \{\} sets nothing"),
     ],
 )
 def test_api_mistakes_raise_input_errors(call, error, message):
     with pytest.raises(sf.InputError, match=message) as info:
         call()
     assert isinstance(info.value, error)
+
+
+def _observation() -> sf.Observation:
+    return sf.Observation(sf.default_scene(), np.ones((600, 600, 3)))
+
+
+def test_a_wide_camera_renders_or_is_refused_naming_its_keys(tmp_path):
+    """A field of view up to MAX_FOV_DEG renders; past it the keys that make it are named, before Mitsuba."""
+    from spacefit.scene.schema import MAX_FOV_DEG
+
+    scene = small_scene(write_plate_obj(tmp_path / "plate.obj"), {"material": "white_paint", "kd": 0.5},
+                        render={"resolution": [16, 16], "spp": 1}, camera={"position_m": [0.0, 0.0, 0.2]})
+    half_width_mm = 8 * scene.camera.pixel_pitch_mm
+    focal = {fov: half_width_mm / np.tan(np.radians(fov) / 2) for fov in (170.0, MAX_FOV_DEG - 0.01, MAX_FOV_DEG + 0.01)}
+    for fov in (170.0, MAX_FOV_DEG - 0.01):
+        image = sf.render(scene.with_values({"camera.focal_length_mm": focal[fov]}))
+        assert np.all(np.isfinite(image)) and image.max() > 0
+    with pytest.raises(sf.InputError, match=r"`camera.focal_length_mm`.*horizontal field of view of 179.01 deg.*at most 179 deg"):
+        scene.with_values({"camera.focal_length_mm": focal[MAX_FOV_DEG + 0.01]})
+    with pytest.raises(sf.InputError, match=r"vertical field of view"):
+        scene.with_values({"camera.focal_length_mm": focal[170.0], "render.resolution": [16, 320]})
+
+
+def test_a_far_camera_is_not_clipped_and_a_near_one_is_refused(tmp_path):
+    """Mitsuba's default far clip (1e4 m) rendered a target seen from 20 km black; the same view at 2 km and
+    20 km (focal length scaled with the distance) gives the same image. Nearer than the near clip is refused."""
+    scene = small_scene(write_plate_obj(tmp_path / "plate.obj"), {"material": "white_paint", "kd": 0.5},
+                        render={"resolution": [8, 8], "spp": 4}, camera={"look_at_m": [], "pixel_pitch_mm": 0.5})
+    images = [sf.render(scene.with_values({"camera.position_m": [0.0, 0.0, z], "camera.focal_length_mm": 5.0 * z}))
+              for z in (2e3, 2e4)]
+    assert images[1].mean() > 0 and np.allclose(images[0], images[1], rtol=1e-3)
+    with pytest.raises(sf.InputError, match="near clipping plane at 0.01 m"):
+        sf.render(scene.with_values({"camera.position_m": [0.0, 0.0, 0.005]}))
+
+
+def test_a_huge_or_tiny_up_vector_renders_as_a_unit_one(tmp_path):
+    """`camera.up` = [0, 1e300, 0] passed the checks and made Mitsuba refuse a scaled camera (found by tests/test_fuzz.py)."""
+    scene = small_scene(write_plate_obj(tmp_path / "plate.obj"), {"material": "white_paint", "kd": 0.5},
+                        render={"resolution": [8, 8], "spp": 1})
+    image = sf.render(scene)
+    for up in ([0.0, 1e300, 0.0], [0.0, 1e-300, 0.0]):
+        assert np.array_equal(sf.render(scene.with_values({"camera.up": up})), image)
 
 
 def test_numpy_and_jax_scalars_are_numbers():

@@ -213,6 +213,12 @@ MUTANTS = (
            ("tests/test_interrupts.py::test_a_point_whose_worker_dies_is_retried_then_named",)),
     Mutant("ended-fit-solved-again", "spacefit/fitting/loop.py", "    if ended is not None:\n", "    if False:\n",
            ("tests/test_interrupts.py::test_a_fit_killed_after_its_solve_resumes_to_the_same_report",)),
+    # every error in the user's terms (issue 20): the camera's derived quantities, the far clip, the fit's seeds
+    Mutant("field-of-view-unchecked", "spacefit/scene/schema.py", "        if fov > MAX_FOV_DEG:", "        if fov > 180.0:",
+           ("tests/test_reliability.py",)),
+    Mutant("mitsuba-default-far-clip", RENDERER, '        "far_clip": FAR_CLIP_M,\n', "", ("tests/test_reliability.py",)),
+    Mutant("negative-fit-seed-passes", "spacefit/rendering/derivatives.py",
+           "check_count(name, value, 0, MAX_SEED,", "check_count(name, value, -(2**40), MAX_SEED,", ("tests/test_reliability.py",)),
 )
 
 

@@ -27,7 +27,7 @@ import numpy as np
 from jax.scipy.ndimage import map_coordinates
 from jaxtyping import Array, Float
 
-from spacefit.errors import InputError
+from spacefit.errors import InputError, check_array, check_count, check_type
 from spacefit.geometry.distortion import Distortion, undistort
 from spacefit.geometry.frames import Intrinsics
 from spacefit.sensor import (
@@ -35,10 +35,17 @@ from spacefit.sensor import (
 )
 
 
-def _check_radiance(radiance: Any, intrinsics: Intrinsics) -> None:
-    shape = np.shape(radiance)
+def _check_image(image: Any, intrinsics: Intrinsics, name: str = "image") -> None:
+    """Check an image's type and shape, (height, width, channels), against ``intrinsics``."""
+    check_type("intrinsics", intrinsics, Intrinsics, "an sf.Intrinsics")
+    shape = np.shape(image) if isinstance(image, jax.Array) else check_array(name, image).shape
     if len(shape) != 3 or shape[:2] != (intrinsics.height, intrinsics.width):
-        raise InputError(f"`radiance` must be (height, width, channels) = ({intrinsics.height}, {intrinsics.width}, c) for these intrinsics, got shape {shape}.")
+        raise InputError(f"`{name}` must be (height, width, channels) = ({intrinsics.height}, {intrinsics.width}, c) for these intrinsics, got shape {shape}.")
+
+
+def _check_radiance(radiance: Any, sensor: Sensor, intrinsics: Intrinsics) -> None:
+    check_type("sensor", sensor, Sensor, "an sf.Sensor")
+    _check_image(radiance, intrinsics, "radiance")
     if isinstance(radiance, jax.core.Tracer):
         return  # values are unknown while JAX traces; they were checked where they came from
     values = np.asarray(radiance)
@@ -117,7 +124,7 @@ def expected_electrons(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsi
     Returns:
         (height, width, channels) float64 JAX array of electrons. Not clipped at the full well.
     """
-    _check_radiance(radiance, intrinsics)
+    _check_radiance(radiance, sensor, intrinsics)
     return electrons_fn(sensor, intrinsics, np.shape(radiance)[2])(radiance)
 
 
@@ -132,8 +139,17 @@ def expected_dn(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Int
     Returns:
         (height, width, channels) float64 JAX array, DN.
     """
-    _check_radiance(radiance, intrinsics)
-    return dn_fn(sensor, intrinsics, np.shape(radiance)[2], flat)(radiance)
+    _check_radiance(radiance, sensor, intrinsics)
+    return _finite(dn_fn(sensor, intrinsics, np.shape(radiance)[2], flat)(radiance), radiance)
+
+
+def _finite(expected: Array, radiance: Any) -> Array:
+    """``expected`` (electrons or DN of ``radiance``), refused where the sensor model overflowed (radiance
+    near float32's largest value; a render never comes near it). Values being traced pass unchecked."""
+    if not isinstance(expected, jax.core.Tracer) and not bool(jnp.all(jnp.isfinite(expected))):
+        raise InputError(f"`radiance` up to {float(np.max(radiance)):.3g} W m^-2 sr^-1 overflows the sensor model; "
+                         "renders never come near it: check the image's unit.")
+    return expected
 
 
 def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Array, "..."]:
@@ -143,6 +159,9 @@ def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Ar
     ``(expected - bias) / gain``), Gaussian read noise and the rounding to integers (uniform, 1/12).
     Meaningless where :func:`~spacefit.sensor.saturated_mask` holds.
     """
+    check_type("sensor", sensor, Sensor, "an sf.Sensor")
+    if not isinstance(expected, jax.Array):
+        check_array("expected", expected)
     g = sensor.gain_dn_per_electron
     return g * jnp.maximum(jnp.asarray(expected) - sensor.bias_dn, 0.0) + (g * sensor.read_noise_electrons) ** 2 + 1.0 / 12.0
 
@@ -156,7 +175,8 @@ def observe(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: In
     Returns:
         (height, width, channels) uint16 (bit_depth <= 16) or uint32 DN.
     """
-    mean = np.maximum(np.asarray(expected_electrons(radiance, sensor, intrinsics)), 0.0)  # FFT round-off leaves -1e-12 in black pixels
+    check_count("seed", seed, 0, optional=False)
+    mean = np.maximum(np.asarray(_finite(expected_electrons(radiance, sensor, intrinsics), radiance)), 0.0)  # FFT round-off leaves -1e-12 in black pixels
     rng = np.random.default_rng(seed)
     saturating = sensor.full_well_electrons if sensor.full_well_electrons is not None else (sensor.adc_max_dn - sensor.bias_dn) / sensor.gain_dn_per_electron
     # A mean of 4 saturation levels saturates with certainty; the cap keeps Poisson's argument finite.
@@ -178,6 +198,8 @@ def distort_image(image: Float[Array, "h w c"], intrinsics: Intrinsics, coeffici
     Returns:
         (height, width, channels) float JAX array.
     """
+    check_type("coefficients", coefficients, Distortion, "an sf.Distortion")
+    _check_image(image, intrinsics)
     f_px = intrinsics.focal_px
     u0, v0 = intrinsics.principal_point
     v, u = np.mgrid[0 : intrinsics.height, 0 : intrinsics.width] + 0.5

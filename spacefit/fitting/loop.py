@@ -187,7 +187,7 @@ class FitOptions:
 def _checked_solver(solver: str | Solver, max_steps: int, stop: str) -> Solver:
     """The solver object of ``solver``, after checking it, ``max_steps`` and ``stop``."""
     engine = make_solver(solver)
-    check_count("max_steps", max_steps)
+    check_count("max_steps", max_steps, optional=False)
     check_choice("stop", stop, STOP_RULES)
     return engine
 

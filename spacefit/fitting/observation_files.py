@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from spacefit.errors import InputError, check_choice, check_range
+from spacefit.errors import InputError, check_choice, check_name_list, check_path, check_range, check_type
 from spacefit.fitting.problem import Observation
 from spacefit.imageio import RESPONSES, ROW_ORDERS, SENSOR_DEFAULTS, UNITS
 from spacefit.scene.toml import load_scene
@@ -60,7 +60,11 @@ class ObservationFiles:
     def __post_init__(self) -> None:
         for name in ("references", "scenes", "masks", "overrides"):  # one file (or override) may be given as itself
             given = getattr(self, name)
-            object.__setattr__(self, name, (given,) if isinstance(given, (str, Path)) else tuple(given))
+            items = (given,) if isinstance(given, (str, Path)) else check_name_list(name, given) if name == "overrides" else given
+            check_type(name, items, Sequence, "a path or a list of paths")
+            for i, path in enumerate(items if name != "overrides" else ()):
+                check_path(f"{name}[{i}]", path)
+            object.__setattr__(self, name, tuple(items))
         n = len(self.references)
         if not n:
             raise InputError("`references` must name at least one reference image.")
@@ -69,7 +73,7 @@ class ObservationFiles:
                 raise InputError(f"give one {what} for all references or one per reference; "
                                  f"got {len(given)} {what}s for {n} references.")
         if self.resolution is not None:  # its range is the scene's `render.resolution`'s, checked by `load`
-            if len(self.resolution) != 2:
+            if not isinstance(self.resolution, Sequence) or len(self.resolution) != 2:
                 raise InputError(f"`resolution` must be (width, height) px, got {self.resolution!r}.")
             object.__setattr__(self, "resolution", tuple(self.resolution))
         if self.sigma is not None:

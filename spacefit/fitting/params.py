@@ -98,7 +98,6 @@ def free_parameters(scene: Scene, names: Sequence[str], observations: int = 1) -
         InputError: for an unknown or repeated name, or two that set one value (the message lists
             the valid ones).
     """
-    names = tuple(names)
-    check_names(scene, names, image=True, observations=observations)
+    names = check_names(scene, names, image=True, observations=observations)
     steps = np.array([fd_step(scene, n) for n in names])
     return FreeParameters(names, tuple(bijection(n) for n in names), steps)

@@ -20,13 +20,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_choice, check_count, negative_pixels, quote
+from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_array, check_choice, negative_pixels, quote
 from spacefit.fitting.formation import dn_fn, noise_variance_dn
 from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.nuisance import image_model as image_model_of
 from spacefit.fitting.params import FreeParameters, free_parameters
 from spacefit.geometry.frames import Intrinsics
-from spacefit.rendering.derivatives import check_seeds, render_chain
+from spacefit.rendering.derivatives import check_seeds, check_spp, render_chain
 from spacefit.rendering.renderer import PartImage
 from spacefit.scene.assembly import assemble
 from spacefit.scene.schema import FILTER_RADIUS_PX, Scene, check_scene
@@ -77,14 +77,11 @@ class Observation:
             raise InputError("`Observation.flat` multiplies a sensor's expected DN: give the sensor too (or divide a radiance image by it).")
         if self.sensor is not None and self.sigma is not None:
             raise InputError("`Observation.sigma` must be None when `Observation.sensor` is given: the sensor predicts each pixel's noise.")
-        ref = np.asarray(self.reference)
-        if not (np.issubdtype(ref.dtype, np.floating) or np.issubdtype(ref.dtype, np.integer)):
-            raise InputTypeError(f"`Observation.reference` must be a real-valued radiance image, got dtype {ref.dtype} "
-                                 "(a complex image's imaginary part is not radiance).")
+        ref = check_array("Observation.reference", self.reference)
+        if self.sigma is not None:
+            _check_sigma(check_array("Observation.sigma", self.sigma), ref.shape)
         if self.mask is not None:
-            mask = np.asarray(self.mask)
-            if mask.dtype != bool:
-                raise InputTypeError(f"`Observation.mask` must be a bool array (True = fit the value), got dtype {mask.dtype}.")
+            mask = check_array("Observation.mask", self.mask, "a bool array")
             if not mask.any():
                 raise InputError(f"`Observation.mask` is False everywhere ({mask.size} values): it leaves nothing to fit.")
 
@@ -131,6 +128,14 @@ class Observation:
             flat = read_image(flat, unit="DN", response="linear", row_order=row_order).data
         relative = None if flat is None else check_flat(flat, image.data.shape, f"the flat field of {image.path!r}")
         return cls(scene, image.data, sensor=measured, mask=image.mask, sensor_sources=sources, notes=notes, flat=relative)
+
+
+def _check_sigma(sigma: np.ndarray, shape: tuple[int, ...]) -> None:
+    """Refuse a noise sigma whose shape is neither a scalar's nor that of the reference (``shape``)
+    or of its pixels; its values are checked with the residuals (:func:`~spacefit.fitting.losses.residual_fn`)."""
+    if sigma.ndim and sigma.shape not in (shape, shape[:2]):
+        raise InputError(f"`Observation.sigma` has shape {sigma.shape}; its reference is {shape}: give one number, "
+                         f"(height, width) = {shape[:2]} or {shape}.")
 
 
 def check_reference(obs: Observation, index: int) -> tuple[np.ndarray, np.ndarray]:
@@ -321,8 +326,7 @@ class FitRender:
     geometry_jacobian: str = "fd"
 
     def __post_init__(self) -> None:
-        check_count("spp", self.spp)
-        check_count("spp_grad", self.spp_grad)
+        check_spp(self.spp, self.spp_grad)
         check_choice("integrator", self.integrator, INTEGRATORS)
         check_choice("geometry_jacobian", self.geometry_jacobian, ("fd", "ad"))
         check_seeds([(self.seed, self.seed_grad)])
@@ -337,6 +341,8 @@ def setup(
     Raises:
         InputError: for any bad input.
     """
+    if not isinstance(observations, (Observation, Sequence)):
+        raise InputTypeError(f"`observations` must be an sf.Observation(scene, reference) or a list of them, got {quote(observations)}.")
     observations = [observations] if isinstance(observations, Observation) else list(observations)
     if not observations:
         raise InputError("`observations` must hold at least one reference image.")
@@ -350,6 +356,8 @@ def setup(
     given = observations[0].scene
     observations = [dataclasses.replace(o, scene=fit_scene(o.scene, user.names)) for o in observations]
     scene = observations[0].scene
+    if start is not None and not isinstance(start, Mapping):
+        raise InputTypeError(f"`start` must be a mapping of free parameter names to values, got {quote(start)}.")
     start = dict(start or {})
     for name in start:
         check_choice("start", name, user.names)

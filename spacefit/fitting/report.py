@@ -28,6 +28,7 @@ from matplotlib.figure import Figure
 
 from astropy.io import fits
 
+from spacefit.errors import check_type
 from spacefit.fitting.loop import FitResult
 from spacefit.fitting.solvers import Status
 from spacefit.fitting.plots import plot_comparison, plot_convergence, plot_residuals
@@ -92,6 +93,7 @@ def write_residuals(path: Path, result: FitResult) -> None:
 def format_result(result: FitResult) -> str:
     """The verdict (first line), the goodness of fit, the fitted values with standard errors (marked
     where they are not valid: a misfit's are too small), chi^2 per part, and the warnings, as lines of text."""
+    check_type("result", result, FitResult, "an sf.FitResult (what sf.fit returns)")
     derived = [name for name in result.extras if f"{name}.stderr" in result.extras]  # e.g. wrinkles.rms_m
     width = max(len(name) for name in (*result.names, *derived))
     lines = [f"{result.status} ({result.solver} on the {result.loss_name} loss, {result.steps} steps, "

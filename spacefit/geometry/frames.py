@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from spacefit.errors import InputError
+from spacefit.errors import InputError, check_count, check_range, check_type, check_vector
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need
     from jaxtyping import Float
@@ -128,6 +128,13 @@ class Intrinsics:
     height: int
     principal_offset: tuple[float, float] = (0.0, 0.0)
 
+    def __post_init__(self) -> None:
+        check_range("Intrinsics.focal_length", self.focal_length, 0.0, lo_open=True, unit="m")
+        check_range("Intrinsics.pixel_pitch", self.pixel_pitch, 0.0, lo_open=True, unit="m")
+        check_count("Intrinsics.width", self.width, optional=False)
+        check_count("Intrinsics.height", self.height, optional=False)
+        object.__setattr__(self, "principal_offset", tuple(map(float, check_vector("Intrinsics.principal_offset", self.principal_offset, 2))))
+
     @property
     def focal_px(self) -> float:
         """Focal length in pixels."""
@@ -177,6 +184,7 @@ def pixel_solid_angles(intrinsics: Intrinsics) -> Float[np.ndarray, "h w"]:
     Returns:
         (height, width) solid angles in sr, row v, column u (pixel (u, v) covers [u, u + 1) x [v, v + 1)).
     """
+    check_type("intrinsics", intrinsics, Intrinsics, "an sf.Intrinsics")
     f, p = intrinsics.focal_length, intrinsics.pixel_pitch
     u0, v0 = intrinsics.principal_point
     x = (np.arange(intrinsics.width + 1) - u0) * p

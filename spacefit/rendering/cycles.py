@@ -69,6 +69,7 @@ def export_view(assembly: Assembly, folder: Path) -> dict[str, object]:
     """Write each part's PLY (world coordinates, m; the float32 vertices Mitsuba gets) and ``scene.json``
     (camera, sun, render settings with spacefit's window, materials) to ``folder``; returns the JSON's content."""
     from spacefit.rendering.renderer import target_window  # deferred: Blender's Python, which imports this module, has no Mitsuba
+    from spacefit.scene.schema import FAR_CLIP_M, NEAR_CLIP_M
 
     folder.mkdir(parents=True, exist_ok=True)
     s, cam, intr = assembly.scene, assembly.camera, assembly.intrinsics
@@ -84,7 +85,7 @@ def export_view(assembly: Assembly, folder: Path) -> dict[str, object]:
                    "window": list(target_window(assembly, assembly.scene_vertices))},
         "camera": {"position_m": cam.position.tolist(), "right": cam.right.tolist(), "up": cam.up.tolist(),
                    "forward": cam.forward.tolist(), "focal_px": intr.focal_px,
-                   "principal_offset_px": list(intr.principal_offset), "clip_m": [0.01, 1e5]},
+                   "principal_offset_px": list(intr.principal_offset), "clip_m": [NEAR_CLIP_M, FAR_CLIP_M]},
         "sun": {"direction": assembly.sun_direction.tolist(), "irradiance_w_m2": s.sun.irradiance_w_m2},
         "parts": parts,
     }

@@ -22,14 +22,14 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from spacefit.errors import InputError, check_count
+from spacefit.errors import InputError, check_count, check_type
 from spacefit.precision import float64
 from spacefit.rendering.bridge import DrJitScene, render_params, render_values
-from spacefit.rendering.renderer import Renderer
+from spacefit.rendering.renderer import Renderer, check_memory
 from spacefit.rendering.values import SceneValuesFn, scene_values_fn
 from spacefit.scene.assembly import Assembly, assemble
-from spacefit.scene.schema import Scene, check_scene
-from spacefit.scene.parameters import MOVES_VERTICES, check_names, fd_step, scene_value
+from spacefit.scene.schema import MAX_SEED, MAX_SPP, Scene, check_scene
+from spacefit.scene.parameters import MOVES_VERTICES, check_names, fd_step, scene_value, scene_with_values
 
 
 ImageFn = Callable[[Float[Array, " n"]], Float[Array, "h w 3"]]
@@ -85,12 +85,13 @@ def render_chain(
     parameter moves vertices (D, G, the pose), which the window would not hold. The names are not
     checked here: the callers check them against their own vocabulary first.
     """
-    check_count("spp", spp)
-    check_count("spp_grad", spp_grad)
+    check_spp(spp, spp_grad)
     assembly = scene if isinstance(scene, Assembly) else assemble(check_scene(scene))
     names = tuple(names)
     renderer = Renderer(assembly, crop=not any(n in MOVES_VERTICES for n in names))
     spp = spp or assembly.scene.render.spp
+    intr, window = assembly.intrinsics, renderer.window
+    check_memory(intr.width, intr.height, window[2] * window[3], max(spp, spp_grad or spp), split=False)
     steps = np.array([fd_step(assembly.scene, n) for n in names], dtype=float) if fd_steps is None else np.asarray(fd_steps, float)
     return RenderChain(names, renderer, DrJitScene(renderer, spp, spp_grad or spp, integrator), scene_values_fn(assembly, names),
                        steps)
@@ -110,8 +111,19 @@ def render_function(
     return render_functions(scene, free, spp=spp, spp_grad=spp_grad)[0](seed, seed_grad)
 
 
+def check_spp(spp: int | None, spp_grad: int | None) -> None:
+    """Raise :class:`InputError` unless the samples per pixel of a chain's primal and derivative
+    renders are None (the scene's) or in [1, :data:`~spacefit.scene.schema.MAX_SPP`], ``render.spp``'s range."""
+    for name, value in (("spp", spp), ("spp_grad", spp_grad)):
+        check_count(name, value, 1, MAX_SPP, "as `render.spp`")
+
+
 def check_seeds(seeds: Sequence[tuple[int, int]]) -> None:
-    """Raise :class:`InputError` for a pair whose primal and derivative seeds are equal."""
+    """Raise :class:`InputError` for a seed outside [0, :data:`~spacefit.scene.schema.MAX_SEED`] or a
+    pair whose primal and derivative seeds are equal."""
+    for seed, seed_grad in seeds:
+        for name, value in (("seed", seed), ("seed_grad", seed_grad)):
+            check_count(name, value, 0, MAX_SEED, "Mitsuba's seeds are 32-bit, and a fit adds offsets", optional=False)
     if any(seed == seed_grad for seed, seed_grad in seeds):
         raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
 
@@ -121,7 +133,7 @@ def render_functions(
 ) -> tuple[Callable[[int, int], Callable[[Float[Array, " n"]], Float[Array, "h w 3"]]], Renderer]:
     """:func:`render_function` for any seeds on one loaded scene: ``(seed, seed_grad) -> image function``,
     and the renderer (its part image, say)."""
-    check_names(check_scene(scene), list(free))
+    check_names(check_scene(scene), free)
     chain = render_chain(scene, free, spp=spp, spp_grad=spp_grad)
 
     def function(seed: int, seed_grad: int) -> ImageFn:
@@ -164,13 +176,16 @@ def jacobians(
 ) -> tuple[list[Jacobian], Renderer]:
     """:func:`jacobian` for each ``(seed, seed_grad)`` pair of ``seeds`` on one loaded scene (independent
     seeds give Monte Carlo errors), and the renderer; ``progress()`` is called after each."""
-    names = tuple(free)
+    names = check_names(check_scene(scene), free)
     check_seeds(seeds)
-    function, renderer = render_functions(scene, names, spp=spp, spp_grad=spp_grad)
+    if at is not None:
+        check_type("at", at, Mapping, "a mapping of parameter names to values")
     at = dict(at or {})
     unknown = set(at) - set(names)
     if unknown:
         raise InputError(f"`at` names {sorted(unknown)}, which are not in `free` {list(names)}.")
+    scene_with_values(scene, at)  # each value refused as the scene would refuse it
+    function, renderer = render_functions(scene, names, spp=spp, spp_grad=spp_grad)
     x = np.array([at.get(n, scene_value(scene, n)) for n in names], dtype=float)
     out = []
     for seed, seed_grad in seeds:

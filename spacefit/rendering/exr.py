@@ -8,12 +8,18 @@ from pathlib import Path
 
 import numpy as np
 
-from spacefit.errors import InputError
+from spacefit.errors import InputError, check_array, check_path
 from spacefit.rendering.backend import mi
 
 
 def write_exr(path: str | Path, image: np.ndarray) -> None:
     """Write a (height, width, 3) float radiance image as a 32-bit float RGB OpenEXR file."""
+    path = check_path("path", path)
+    if path.suffix.lower() != ".exr":
+        raise InputError(f"`path` must end in .exr, got {str(path)!r}.")
+    image = check_array("image", image)
+    if image.ndim != 3 or image.shape[2] != 3 or not image.size:
+        raise InputError(f"`image` must be (height, width, 3) RGB, got shape {image.shape}.")
     bitmap = mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB)
     try:
         bitmap.write(str(path))
@@ -25,7 +31,7 @@ def write_exr(path: str | Path, image: np.ndarray) -> None:
 
 def read_exr(path: str | Path) -> np.ndarray:
     """Read an OpenEXR file as a (height, width, channels) float32 array."""
-    p = Path(path)
+    p = check_path("path", path)
     if not p.is_file():
         raise InputError(f"image file {str(p)!r} does not exist.")
     try:

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spacefit.errors import InputError
+from spacefit.errors import InputError, check_array, check_count
 from spacefit.geometry.frames import project
 from spacefit.materials import Conductor, Lambert, Material, Mirror
 from spacefit.precision import float64
@@ -23,7 +23,7 @@ from spacefit.rendering.backend import dr, mi, select_variant
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.overrides import as_parameters
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
-from spacefit.scene.schema import Scene, check_scene
+from spacefit.scene.schema import FAR_CLIP_M, MAX_SEED, MAX_SPP, NEAR_CLIP_M, Scene, check_scene
 
 # Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.
 MAX_SAMPLES_PER_PASS = 1 << 24
@@ -35,6 +35,8 @@ CROP_MARGIN_PX = 2
 BYTES_PER_PIXEL = 80
 # Bytes per sample in flight in the wavefront (about 1 GB at MAX_SAMPLES_PER_PASS, measured).
 BYTES_PER_SAMPLE = 64
+# Samples one Dr.Jit wavefront can hold: its arrays are indexed with 32-bit integers.
+MAX_WAVEFRONT = 2**32 - 1
 
 
 def available_memory_bytes() -> int:
@@ -49,17 +51,23 @@ def available_memory_bytes() -> int:
     return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
 
 
-def check_memory(width: int, height: int, window_pixels: int, spp: int) -> int:
+def check_memory(width: int, height: int, window_pixels: int, spp: int, split: bool = True) -> int:
     """Estimate a render's peak memory (bytes) and refuse one that would not fit in the machine's.
 
-    Samples are traced in passes of at most :data:`MAX_SAMPLES_PER_PASS`, so the wavefront is bounded;
-    the film is not split, so its size is what can exceed the memory.
+    Samples are traced in passes of at most :data:`MAX_SAMPLES_PER_PASS` (``split``), so the wavefront is
+    bounded and the film's size is what can exceed the memory. A fit's renders (``split`` False) trace
+    all ``window_pixels * spp`` samples at once: at most :data:`MAX_WAVEFRONT` (Dr.Jit's 32-bit indices),
+    and their memory counts too (at :data:`BYTES_PER_SAMPLE`, a primal render's: an AD render needs more).
     """
-    estimate = BYTES_PER_PIXEL * width * height + BYTES_PER_SAMPLE * min(window_pixels * spp, MAX_SAMPLES_PER_PASS)
+    samples = window_pixels * spp
+    if not split and samples > MAX_WAVEFRONT:
+        raise InputError(f"`spp` = {spp} on the {window_pixels} px a fit renders is {samples:.3g} samples in one wavefront; "
+                         f"Dr.Jit traces at most {MAX_WAVEFRONT:.3g} (32-bit indices): lower `spp` or `render.resolution`.")
+    estimate = BYTES_PER_PIXEL * width * height + BYTES_PER_SAMPLE * (min(samples, MAX_SAMPLES_PER_PASS) if split else samples)
     limit = available_memory_bytes()
     if estimate > limit:
-        raise InputError(f"a {width} x {height} px render needs about {estimate / 2**30:.1f} GiB and this machine has "
-                         f"{limit / 2**30:.1f} GiB available; lower `render.resolution`.")
+        raise InputError(f"a {width} x {height} px render at {spp} spp needs about {estimate / 2**30:.1f} GiB and this machine has "
+                         f"{limit / 2**30:.1f} GiB available; lower `render.resolution`{'' if split else ' or `spp`'}.")
     return estimate
 
 
@@ -135,6 +143,8 @@ def scene_dict(assembly: Assembly, vertices: Mapping[str, np.ndarray], window: t
         "type": "perspective",
         "fov": math.degrees(intr.fov_x),
         "fov_axis": "x",
+        "near_clip": NEAR_CLIP_M,
+        "far_clip": FAR_CLIP_M,
         "principal_point_offset_x": -intr.principal_offset[0] / intr.width,
         "principal_point_offset_y": -intr.principal_offset[1] / intr.height,
         "to_world": mi.ScalarTransform4f(cam.mitsuba_to_world()),
@@ -254,7 +264,10 @@ class PartImage:
         RGB mean over those pixels, W m^-2 sr^-1; NaN for a part out of view); and the whole
         ``target``. Edge pixels count for the part at their centre. ``used``: (height, width) bool,
         the pixels to count (default: all)."""
-        grey = np.asarray(radiance, dtype=float)[..., :3].mean(axis=-1)
+        image = check_array("radiance", radiance)
+        if image.shape[:2] != self.ids.shape or image.ndim != 3:
+            raise InputError(f"`radiance` must be (height, width, channels) with (height, width) = {self.ids.shape}, got shape {image.shape}.")
+        grey = image[..., :3].astype(float).mean(axis=-1)
         counted = np.ones(self.ids.shape, dtype=bool) if used is None else np.asarray(used, dtype=bool)
         rows = {}
         for label, mask in [*((name, self.ids == i) for i, name in enumerate(self.names)), ("target", self.ids >= 0)]:
@@ -353,6 +366,8 @@ class Renderer:
     def render(self, spp: int | None = None, seed: int | None = None, progress: ProgressCallback | None = None) -> np.ndarray:
         """Radiance (W m^-2 sr^-1) as a float32 (height, width, 3) array; same seed, same image."""
         r = self.assembly.scene.render
+        check_count("spp", spp, 1, MAX_SPP, "as `render.spp`")
+        check_count("seed", seed, 0, MAX_SEED, "as `render.seed`")
         spp = r.spp if spp is None else spp
         seed = r.seed if seed is None else seed
         passes = pass_seeds(seed, spp, self.window[2] * self.window[3])

@@ -29,7 +29,7 @@ from spacefit.geometry.mesh import PartMesh, load_grouped, load_part
 from spacefit.geometry.wm import wm_n_max, wm_phases
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION, Refinement, displace, fold_fraction, refine
 from spacefit.materials import Material
-from spacefit.scene.schema import Scene, WrinkleSettings, check_scene, deg2rad
+from spacefit.scene.schema import NEAR_CLIP_M, Scene, WrinkleSettings, check_scene, deg2rad
 from spacefit.scene.lod import LodChoice, choose_model
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need
@@ -165,7 +165,7 @@ def _load_parts(scene: Scene, cache: dict[str, str]) -> dict[str, PartMesh]:
 def _camera(scene: Scene) -> tuple[CameraFrame, Intrinsics]:
     c, r = scene.camera, scene.render
     if c.look_at_m:
-        frame = CameraFrame.look_at(np.array(c.position_m), np.array(c.look_at_m), np.array(c.up))
+        frame = CameraFrame.look_at(np.array(c.position_m), np.array(c.look_at_m), check_direction("camera.up", c.up))  # unit: [0, 1e300, 0] overflowed
     else:
         frame = CameraFrame.from_attitude(np.array(c.position_m), np.array(deg2rad(c.attitude_deg)))
     frame = frame.rolled(math.radians(c.roll_deg))
@@ -186,7 +186,8 @@ def winding_number(point: Float[np.ndarray, "3"], vertices: Float[np.ndarray, "n
 
 
 def check_view(parts: Mapping[str, PartMesh], camera: CameraFrame, intrinsics: Intrinsics) -> None:
-    """Reject a camera inside a part, looking away from the target, or seeing none of it.
+    """Reject a camera inside a part, looking away from the target, nearer to it than the near
+    clipping plane (:data:`~spacefit.scene.schema.NEAR_CLIP_M`), or seeing none of it.
 
     ``parts`` hold world-frame vertices (m). A camera inside a part's bounding box counts as inside
     unless the part is closed and its winding number says outside. The field-of-view test is
@@ -205,6 +206,10 @@ def check_view(parts: Mapping[str, PartMesh], camera: CameraFrame, intrinsics: I
     uv, depth = project(vertices, camera, intrinsics)
     if not np.any(depth > 0):
         raise InputError("the camera looks away from the target: the whole target is behind it.")
+    nearest = float(depth[depth > 0].min())
+    if nearest < NEAR_CLIP_M:
+        raise InputError(f"the target comes {nearest:.3g} m in front of the camera (`camera.position_m`), nearer than its "
+                         f"near clipping plane at {NEAR_CLIP_M:g} m, which would cut it away: move the camera back.")
     if np.all(depth > 0):
         lo, hi = uv.min(axis=0), uv.max(axis=0)
         if hi[0] < 0 or hi[1] < 0 or lo[0] > intrinsics.width or lo[1] > intrinsics.height:

@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, InputTypeError, check_direction, check_vector, closest, quote
+from spacefit.errors import InputError, InputTypeError, check_direction, check_path, check_vector, closest, quote
 from spacefit.materials import MODELS, make_material, with_material_values
 from spacefit.scene.parameters import PARAMETERS, VERTICAL_SUN, is_image, scene_keys, scene_with_values, sun_angles_deg
 from spacefit.scene.schema import SECTIONS, PartSettings, Scene, unknown_part
@@ -56,13 +56,15 @@ def override_items(overrides: Overrides) -> list[tuple[list[str], Any]]:
     else:
         if isinstance(overrides, str):
             overrides = [overrides]
-        if not all(isinstance(text, str) for text in overrides):
-            raise InputError(f"scene overrides must be a mapping of key -> value or 'key=value' strings, got {overrides!r}.")
+        if not isinstance(overrides, Sequence) or not all(isinstance(text, str) for text in overrides):
+            raise InputTypeError(f"scene overrides must be a mapping of key -> value or 'key=value' strings, got {quote(overrides)}.")
         items = [parse_override(text) for text in overrides]
     return [leaf for path, value in items for leaf in _leaves(path, value)]
 
 
 def _leaves(path: list[str], value: Any) -> list[tuple[list[str], Any]]:
+    if isinstance(value, Mapping) and not value:
+        raise InputError(f"`{'.'.join(path)}` = {{}} sets nothing: give a value, or a table of keys and values.")
     if isinstance(value, Mapping):
         return [leaf for key, v in value.items() for leaf in _leaves([*path, str(key)], v)]
     return [(path, value)]
@@ -175,7 +177,7 @@ def with_values(scene: Scene, values: Mapping[str, Any]) -> Scene:
         file = table.pop("file", old.file if old is not None else "")
         if not isinstance(file, str):
             raise InputTypeError(f"`parts.{name}.file` must be a path string, got {quote(file)}.")
-        file = str(Path(file).resolve()) if file and not Path(file).is_absolute() else file
+        file = str(Path(file).resolve()) if file and not check_path(f"parts.{name}.file", file).is_absolute() else file
         if "material" in table:
             material = make_material(table.pop("material"), table, where=f"parts.{name}")
         else:

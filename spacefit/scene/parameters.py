@@ -34,19 +34,19 @@ determined coordinates (:func:`rms_of`, :func:`G_of` are the one place the two a
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from types import ModuleType
 from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, check_choice, check_range
+from spacefit.errors import InputError, check_choice, check_name_list, check_range
 from spacefit.geometry.wm import wm_G_from_rms, wm_rms
 from spacefit.materials import Conductor, Lambert, Material, Mirror
 from spacefit.materials.models import MIN_ALPHA
 
-from spacefit.scene.schema import Scene, WrinkleSettings, unknown_part
+from spacefit.scene.schema import Scene, WrinkleSettings, check_scene, unknown_part
 
 # A scene's value of parameter ``name`` (its full name, ``parts.panels.kd``).
 Getter = Callable[["Scene", str], float]
@@ -391,7 +391,7 @@ def _materials(scene: Scene) -> dict[str, Material]:
 
 def available(scene: Scene) -> list[str]:
     """Every parameter name that can be freed (or swept) in ``scene``, in registry order."""
-    materials = _materials(scene)
+    materials = _materials(check_scene(scene))
     names = []
     for p in PARAMETERS.values():
         if p.pattern.startswith("parts."):
@@ -413,18 +413,18 @@ def _check_observation(argument: str, name: str, observations: int) -> None:
 
 
 def check_names(
-    scene: Scene, names: list[str] | tuple[str, ...], argument: str = "free", image: bool = False, observations: int = 1,
-) -> None:
-    """Raise :class:`InputError` for an unknown or repeated name, or two names that set the same value;
+    scene: Scene, names: Sequence[str], argument: str = "free", image: bool = False, observations: int = 1,
+) -> tuple[str, ...]:
+    """Return ``names`` as a tuple; raise :class:`InputError` for anything but a list of names, an
+    unknown or repeated name, or two names that set the same value;
     ``image``: whether the names are a fit's (the fit-only :data:`IMAGE` nuisances and the
     per-observation forms are valid); ``observations``: how many observations a fit has (the range
     of a per-observation name's index, ``image.scale@k``)."""
+    names = check_name_list(argument, names)
     valid = [n for n in available(scene) if image or n not in IMAGE]
     if not names:
         raise InputError(f"`{argument}` must name at least one parameter; valid: {', '.join(valid)}.")
     for name in names:
-        if not isinstance(name, str):
-            check_choice(argument, name, valid)
         forms = [n for n in valid if name not in valid and n not in IMAGE and name in scene_keys(n)]
         if OBSERVATION_MARK in name and image:
             _check_observation(argument, name, observations)
@@ -448,6 +448,7 @@ def check_names(
             if (a < b and base_a != base_b and (k_a is None or k_b is None or k_a == k_b) and scene_keys(a) & scene_keys(b)
                     and not any({base_a, base_b} <= set(g) for g in JOINT)):
                 raise InputError(f"`{a}` and `{b}` set the same scene value; free one of them.")
+    return names
 
 
 def scene_value(scene: Scene, name: str) -> float:

@@ -26,7 +26,8 @@ from typing import Any, ClassVar
 import numpy as np
 import tomli_w
 
-from spacefit.errors import InputError, InputTypeError, check_choice, closest, check_direction, check_flag, check_range, check_vector, quote
+from spacefit.errors import (InputError, InputTypeError, check_choice, check_direction, check_flag, check_path, check_range, check_vector,
+                             closest, quote)
 from spacefit.geometry.wm import check_wm_params
 from spacefit.materials import MODELS, PRESETS, Material, material_table
 
@@ -48,6 +49,26 @@ MAX_IRRADIANCE_W_M2 = 1e20
 # coarser than 1 cm and a metre-sized target is no longer resolved; the observer of a far target is
 # rendered near and rescaled (light curves), or seen with a long focal length.
 MAX_COORDINATE_M = 1e5
+# The camera's clipping distances (m): the near one is Mitsuba's default; the far one passes every
+# distance within MAX_COORDINATE_M on each axis (Mitsuba's default, 1e4 m, rendered a target seen
+# from 20 km with a long lens black).
+NEAR_CLIP_M = 0.01
+FAR_CLIP_M = 4.0 * MAX_COORDINATE_M
+# Samples per pixel of one render: 65536 at 600 x 600 px is 2.4e10 samples, hours on a CPU; a fit's
+# renders are not split into passes, so there the product with the pixels is bounded too
+# (:func:`spacefit.rendering.renderer.check_memory`).
+MAX_SPP = 1 << 16
+# Seeds are Mitsuba's (uint32): a fit adds offsets to its seeds, so they stay below 2^31.
+MAX_SEED = 2**31 - 1
+# Mitsuba's perspective camera takes a horizontal field of view in [0, 180] deg (180, or a focal
+# length of 1e-200 mm, raises inside it); a pinhole's image grows as tan(fov / 2), and near 180 deg
+# float32 rays lose the pixels at the edge. The vertical field of view is held to the same bound.
+MAX_FOV_DEG = 179.0
+# The smallest angle (rad) a pixel may subtend, pixel pitch over focal length: Mitsuba's ray
+# directions are float32 (relative precision 6e-8), so narrower pixels get rays that repeat: a
+# sphere's limb seen from 11 km rendered blocks of 2 to 3 equal pixels at 3e-7 rad and of about 10
+# at 1e-7 rad, none at 1e-6 rad (about 16 float32 steps per pixel).
+MIN_PIXEL_ANGLE_RAD = 1e-6
 
 
 class Section:
@@ -100,9 +121,9 @@ class RenderSettings(Section):
         """Check this section's values (:class:`Section`)."""
         for i, axis in enumerate(("width", "height")):
             _check_int(f"render.resolution ({axis})", self.resolution[i], 1, 16384)
-        _check_int("render.spp", self.spp, 1, 1 << 16)
+        _check_int("render.spp", self.spp, 1, MAX_SPP)
         _check_int("render.depth", self.depth, 1, 64)
-        _check_int("render.seed", self.seed, 0, 2**31 - 1)
+        _check_int("render.seed", self.seed, 0, MAX_SEED)
         check_choice("render.variant", self.variant, VARIANTS)
         check_choice("render.filter", self.filter, FILTERS)
         check_choice("render.sampler", self.sampler, SAMPLERS)
@@ -229,7 +250,7 @@ class WrinkleSettings(Section):
     def check(self) -> None:
         """Check this section's values (:class:`Section`)."""
         check_wm_params(self.D, self.G, self.gamma, self.M, self.L, self.Ls)
-        _check_int("wrinkles.seed", self.seed, 0, 2**31 - 1)
+        _check_int("wrinkles.seed", self.seed, 0, MAX_SEED)
         check_range("wrinkles.spacing_m", self.spacing_m, 0.0, lo_open=True, unit="m")
         check_choice("wrinkles.model", self.model, WRINKLE_MODELS)
         check_range("wrinkles.lod_footprint", self.lod_footprint, 0.0, lo_open=True)
@@ -248,6 +269,8 @@ class PartSettings:
                                  f"scene file names a preset), got {quote(self.material)}.")
         if not isinstance(self.file, str):
             raise InputTypeError(f"`file` must be a path string, got {quote(self.file)}.")
+        if self.file:
+            check_path("file", self.file)
 
 
 # The built-in lander's parts and their presets (thesis Table 4-2).
@@ -283,6 +306,7 @@ class Scene:
         if self.wrinkles.enabled:
             for name in self.wrinkles.parts:
                 check_choice("wrinkles.parts", name, self.parts)
+        check_optics(self.camera, self.render)
 
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (TOML-ready): every value, defaults included; each material in full."""
@@ -333,6 +357,24 @@ def unknown_part(key: str, parts: Sequence[str]) -> InputError:
     close = closest(path[1], parts)
     hint = f" Did you mean `{'.'.join(['parts', close, *path[2:]])}`?" if close else ""
     return InputError(f"unknown scene key `{key}`: `{path[1]}` is not a part of the scene (parts: {', '.join(parts)}).{hint}")
+
+
+def check_optics(camera: CameraSettings, render: RenderSettings) -> None:
+    """Check what the camera's values make together: the field of view along each image axis,
+    ``2 atan(size * pitch / (2 focal length))``, at most :data:`MAX_FOV_DEG`, and the angle of one
+    pixel, ``pitch / focal length``, at least :data:`MIN_PIXEL_ANGLE_RAD`."""
+    keys = "`camera.focal_length_mm`, `camera.pixel_pitch_mm` and `render.resolution`"
+    ratio = camera.pixel_pitch_mm / camera.focal_length_mm  # may over- or underflow: inf and 0 are refused below
+    for axis, size in zip(("horizontal", "vertical"), render.resolution):
+        fov = math.degrees(2.0 * math.atan(0.5 * size * ratio))
+        if fov > MAX_FOV_DEG:
+            raise InputError(f"{keys} give a {axis} field of view of {fov:.6g} deg ({size} px of {camera.pixel_pitch_mm:g} mm "
+                             f"behind a {camera.focal_length_mm:g} mm lens); a pinhole camera renders at most {MAX_FOV_DEG:g} deg: "
+                             "lengthen the focal length or use fewer or smaller pixels.")
+    if not ratio >= MIN_PIXEL_ANGLE_RAD:
+        raise InputError(f"`camera.pixel_pitch_mm` / `camera.focal_length_mm` = {camera.pixel_pitch_mm:g} / "
+                         f"{camera.focal_length_mm:g} gives pixels of {ratio:.3g} rad; at least {MIN_PIXEL_ANGLE_RAD:g} rad "
+                         "(float32 rays resolve no finer): shorten the focal length, or render nearer and rescale.")
 
 
 def check_position(name: str, value: Sequence[float]) -> None:

@@ -16,7 +16,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from spacefit.errors import InputError, InputTypeError, quote
+from spacefit.errors import InputError, InputTypeError, check_path, quote
 from spacefit.materials import make_material
 from spacefit.scene.overrides import Overrides, apply_overrides, section_keys, unknown_key, with_values
 from spacefit.scene.schema import DEFAULT_PRESETS, SECTIONS, PartSettings, Scene, TargetSettings
@@ -76,7 +76,7 @@ def _parts(data: Mapping[str, Any], builtin: bool, base: Path) -> dict[str, Part
         file = table.pop("file", "")
         if not isinstance(file, str):
             raise InputTypeError(f"`parts.{name}.file` must be a path string, got {quote(file)}.")
-        if file and not Path(file).is_absolute():
+        if file and not check_path(f"parts.{name}.file", file).is_absolute():
             file = str((base / file).resolve())
         parts[name] = PartSettings(make_material(table.pop("material"), table, where=f"parts.{name}"), file)
     return parts

@@ -59,6 +59,7 @@ SEED_AXIS = "render.seed"
 def direction(scene: Scene, value: Sequence[float], name: str) -> np.ndarray:
     """A unit world vector from a world vector (3 numbers) or (elevation, azimuth) in degrees in the
     target's frame (2 numbers)."""
+    value = check_vector(name, value, None)
     if len(value) == 2:
         el, az = check_vector(name, value, 2)
         check_range(f"{name} elevation", el, -90.0, 90.0, unit="deg")
@@ -67,7 +68,7 @@ def direction(scene: Scene, value: Sequence[float], name: str) -> np.ndarray:
         return attitude_matrix(np.array(deg2rad(scene.target.attitude_deg))) @ local
     if len(value) != 3:
         raise InputError(f"`{name}` must be a world vector (3 numbers) or (elevation_deg, azimuth_deg) in the target's "
-                         f"frame (2 numbers), got {list(value)}.")
+                         f"frame (2 numbers), got {value.tolist()}.")
     return check_direction(name, value)
 
 
@@ -247,21 +248,22 @@ def light_curve(
                                                                                  lo_open=True, unit="m")
     key = f"target.attitude_{axis}_deg"
     if phase_deg is not None:
-        x = np.asarray(phase_deg, dtype=float)
+        x = check_vector("phase_deg", phase_deg, None)
         for a in x:
             check_range("phase_deg", a, 0.0, 180.0, hi_open=True, unit="deg")
         against, axes = "phase_angle_deg", {"phase_angle_deg": phase_plane_sun(scene, x)}
     elif attitude_deg is not None:
-        x = np.asarray(attitude_deg, dtype=float)
+        x = check_vector("attitude_deg", attitude_deg, None)
         against, axes = key, {key: x.tolist()}
     else:
         check_range("spin_rate_deg_s", spin_rate_deg_s if spin_rate_deg_s is not None else math.nan, unit="deg s^-1")
-        x = np.asarray(times_s, dtype=float)
+        x = check_vector("times_s", times_s, None)
         start = scene.target.attitude_deg["xyz".index(axis)]
         against, axes = "time_s", {"time_s": {key: (start + spin_rate_deg_s * x).tolist()}}
     if seeds is not None:
+        check_vector("seeds", seeds, None)
         for s in seeds:
-            check_count("seeds", s, 0)
+            check_count("seeds", s, 0, optional=False)
         axes[SEED_AXIS] = list(seeds)
     ds = sweep(scene, axes, store=store, quiet=quiet, workers=workers, scheduler=scheduler)
     if against in ds.dims:

@@ -196,9 +196,8 @@ def sensitivity(
     from spacefit.rendering.derivatives import jacobians
 
     check_scene(scene)
-    check_count("seeds", seeds, 2)
-    names = tuple(names)
-    check_names(scene, list(names), "names")
+    check_count("seeds", seeds, 2, optional=False)
+    names = check_names(scene, names, "names")
     if at:
         scene = scene.with_values(at)
     scene = fit_scene(scene, names)  # as the fit: wrinkles rendered as geometry, where D and G act

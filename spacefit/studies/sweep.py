@@ -39,7 +39,7 @@ import numpy as np
 
 from spacefit import __version__
 from spacefit.digests import Watch, mesh_files
-from spacefit.errors import InputError, InputTypeError, check_choice, check_count, check_flag, check_range, closest, quote
+from spacefit.errors import InputError, InputTypeError, check_choice, check_count, check_flag, check_name_list, check_range, closest, quote
 from spacefit.interrupts import deferred_interrupts
 from spacefit.locks import hold_lock
 from spacefit.output import STAGE_PREFIX, check_writable, clean_stale_stages
@@ -127,6 +127,8 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
     for name, spec in axes.items():
         zipped = isinstance(spec, Mapping) and any("." in str(k) for k in spec)  # scene keys have dots; linspace, arange none
         values = {k: _values(k, v) for k, v in spec.items()} if zipped else {name: _values(name, spec)}
+        if not values:
+            raise InputError(f"axis {name!r} zips no keys: give it a table of scene keys and their lists of values.")
         if len({len(v) for v in values.values()}) > 1:
             raise InputError(f"the zipped keys of axis {name!r} must have lists of equal length, got "
                              f"{ {k: len(v) for k, v in values.items()} }.")
@@ -614,16 +616,16 @@ def sweep(
     import xarray as xr  # here: only a sweep's store needs xarray (slow to import)
 
     check_scene(scene)
-    check_count("derivative_seeds", derivative_seeds, 2)
-    check_count("max_renders_per_worker", max_renders_per_worker)
+    check_count("derivative_seeds", derivative_seeds, 2, optional=False)
+    check_count("max_renders_per_worker", max_renders_per_worker, optional=False)
     stall_s = check_range("stall_s", stall_s, 0.0, lo_open=True, unit="s")
     check_count("workers", workers)
     if workers is not None and scheduler is not None:
         raise InputError("give `workers` (a local cluster) or `scheduler` (an address), not both.")
     check_scheduler(scheduler)
-    derivatives = tuple(derivatives)
+    derivatives = check_name_list("derivatives", derivatives)
     if derivatives:
-        check_names(scene, list(derivatives), "derivatives")
+        check_names(scene, derivatives, "derivatives")
     images = check_flag("images", images)
     found = estimate(scene, axes, images=images, derivatives=derivatives)
     check_estimate(found, store, allow_large=allow_large)
