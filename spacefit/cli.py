@@ -15,10 +15,14 @@ from pathlib import Path
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from spacefit.errors import InputError, check_range, shorten
 from spacefit.interrupts import Terminated, abandoned, deferred_interrupts
-from spacefit.output import write_text
-from spacefit.scene.parameters import PARAMETERS
+
+# A Ctrl-C or SIGTERM while the modules below load (0.2 s, seconds under load) waits for their end and
+# is answered by main like any other (130 / 143, one line): Python's default would print a traceback.
+with deferred_interrupts() as _STARTUP:
+    from spacefit.errors import InputError, check_range, shorten
+    from spacefit.output import write_text
+    from spacefit.scene.parameters import PARAMETERS
 
 if TYPE_CHECKING:
     from spacefit.fitting.solvers import Status
@@ -285,6 +289,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = _parser(argv[0] if argv else None).parse_args(argv)
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
+        _STARTUP.check()
         t0 = time.perf_counter()
         # deferred: Mitsuba and the scene stack, timed as the "imports" stage of --timings (and not loaded by --help);
         # a signal waits for their end (about 1 s): one inside an import leaves Mitsuba half-loaded, and the exit aborts

@@ -266,7 +266,8 @@ class Soak:
             return Outcome(case, SKIPPED, f"no tmpfs ({mounted.stderr.strip()[:100]}): needs root")
         try:
             store = disk / "s.zarr"
-            code, err = Run(self.sweep_args(store)).finish()
+            # --large: past the size check (which refuses a store larger than the free space), into the full disk
+            code, err = Run([*self.sweep_args(store), "--large"]).finish()
             why = crashed(code, err, {0, 1})
             if why:
                 return Outcome(case, CRASH, why)
