@@ -48,6 +48,14 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "write_observation": ("spacefit.imageio", "write_observation"),
     "Conductor": ("spacefit.materials", "Conductor"),
     "Lambert": ("spacefit.materials", "Lambert"),
+    "DiffuseConductor": ("spacefit.materials", "DiffuseConductor"),
+    "BRDFTable": ("spacefit.fitting.brdf_table", "BRDFTable"),
+    "BRDF_MODELS": ("spacefit.fitting.brdf_table", "BRDF_MODELS"),
+    "read_brdf_table": ("spacefit.fitting.brdf_table", "read_brdf_table"),
+    "fit_brdf_table": ("spacefit.fitting.brdf_table", "fit_brdf_table"),
+    "fitted_material": ("spacefit.fitting.brdf_table", "fitted_material"),
+    "compare_brdf_models": ("spacefit.fitting.brdf_table", "compare_brdf_models"),
+    "TableFit": ("spacefit.fitting.tabular", "TableFit"),
     "Mirror": ("spacefit.materials", "Mirror"),
     "PRESETS": ("spacefit.materials", "PRESETS"),
     "fit_to_folder": ("spacefit.pipeline", "fit_to_folder"),
@@ -101,6 +109,8 @@ __all__ = [
     "MLI_SLOPE_RANGE",
     "read_sweep_file", "sweep", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
     "plot_comparison", "plot_convergence",
+    "DiffuseConductor", "BRDFTable", "BRDF_MODELS", "read_brdf_table", "fit_brdf_table", "fitted_material", "compare_brdf_models",
+    "TableFit",
     "RenderSettings", "CameraSettings", "SunSettings", "TargetSettings", "WrinkleSettings", "PartSettings",
 ]
 
