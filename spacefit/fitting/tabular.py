@@ -16,6 +16,7 @@ difference is the render noise the goodness of fit allows for.
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -81,7 +82,10 @@ class TableFit:
 
     def report(self) -> str:
         """The verdict, the goodness of fit, each parameter with its standard error, the warnings."""
-        lines = [str(self.status), self.goodness.line()]
+        g = self.goodness
+        spread = (f"goodness of fit (errors unknown, no verdict): residual RMS {math.sqrt(np.mean(self.residuals**2)):.4g} over "
+                  f"{g.dof} dof; the standard errors are scaled by it")
+        lines = [str(self.status), g.line() if g.noise_known or np.isfinite(g.spread) else spread]
         lines += [f"  {n:>10s} = {v:.6g} +- {s:.2g}" for n, v, s in zip(self.names, self.values, self.stderr)]
         lines += [f"  {n:>10s} = {v:.6g} (fixed)" for n, v in self.fixed.items()]
         return "\n".join(lines + [f"  warning: {w}" for w in self.warnings()])

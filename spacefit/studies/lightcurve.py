@@ -12,7 +12,10 @@ irradiance at the target (``sun.irradiance_w_m2``) and m_sun the sun's apparent 
 band at the same distance from the sun: the target and the observer are taken at the same
 heliocentric distance (1 au for a target near the Earth or the Moon). The V band's m_sun is -26.74
 (Cox 2000, Allen's Astrophysical Quantities, 4th ed., section 14.7; Willmer 2018, ApJS 236, 47
-gives -26.76).
+gives -26.76). ``AB532`` is lumos-sat's AB magnitude at 532 nm (Fankhauser, Askari & Tyson 2023, AJ
+166:59; the band the Starlink observations are compared in): the irradiance read as a flux density
+E lambda / c against 3631 Jy, lambda = 532 nm, c = 3e8 m s^-1, with the sun's irradiance 1360 W m^-2,
+so m_sun = -2.5 log10(1360 lambda / (c 3631e-26)) = -27.056.
 
 Directions towards the sun and the observer are given as world vectors (3 numbers, from the target
 towards them) or as (elevation, azimuth) in degrees in the target's frame: elevation above its x-y
@@ -50,7 +53,7 @@ from spacefit.studies.sensitivity import mean_and_error
 from spacefit.studies.sweep import sweep
 
 # The sun's apparent magnitude by band (module docstring gives the source).
-SUN_MAGNITUDES = {"V": -26.74}
+SUN_MAGNITUDES = {"V": -26.74, "AB532": -2.5 * math.log10(1360.0 * 532e-9 / (3.0e8 * 3631e-26))}
 # d m / d ln E: the magnitude's error per relative error of the irradiance.
 MAGNITUDE_PER_LN = 2.5 / math.log(10.0)
 SEED_AXIS = "render.seed"
