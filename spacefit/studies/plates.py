@@ -34,6 +34,7 @@ from spacefit.fitting.tabular import TableFit, fit_table
 from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material
 from spacefit.materials.brdf import brdf, brdf_value
 from spacefit.materials.registry import with_material_values
+from spacefit.precision import float64
 from spacefit.studies.observing import LN_PER_MAGNITUDE, LightCurveObservations, irradiance_of, magnitude_of
 
 
@@ -88,6 +89,7 @@ def _plate_brdf(plate: Plate, wi: jax.Array, wo: jax.Array, values: Mapping[str,
                       alpha_y=fields["alpha_y"], distribution=plate.material.distribution)
 
 
+@float64
 def plates_irradiance(plates: Sequence[Plate], sun: np.ndarray, observer: np.ndarray, range_m: np.ndarray,
                       sun_irradiance_w_m2: float, values: Mapping[str, Mapping[str, jax.Array]] | None = None) -> jax.Array:
     """Irradiance at the observer (W m^-2) of the plates lit by the sun (module docstring); ``sun``,
@@ -102,6 +104,7 @@ def plates_irradiance(plates: Sequence[Plate], sun: np.ndarray, observer: np.nda
     return sun_irradiance_w_m2 * total / jnp.asarray(range_m) ** 2
 
 
+@float64
 def predict_magnitudes(plates: Sequence[Plate], observations: LightCurveObservations, sun_irradiance_w_m2: float = 1360.0) -> np.ndarray:
     """The plates' magnitudes in the observations' band at their geometry (inf in the Earth's shadow or unlit)."""
     e = np.asarray(plates_irradiance(plates, observations.sun, observations.observer, observations.range_m, sun_irradiance_w_m2))
