@@ -15,7 +15,9 @@ shadow and the split).
     observed magnitudes (scipy least squares in magnitudes, as the paper's analysis), scored on
     the held-out third.
 Sun only (no Earthshine) unless ``--earthshine`` (lumos-sat's Earth mesh, a Lambertian Earth of
-albedo 0.3, 51 x 51 panels). Writes ``experiments/results/starlink/lumos.json``.
+albedo 0.3, 51 x 51 panels). Writes ``experiments/results/starlink/lumos.json`` and
+``lumos_lambert.csv``: lumos-sat's AB magnitude of each observation with both surfaces Lambertian
+(albedo 0.5), sun only, which tests/test_observed_lightcurves.py holds spacefit's flat plates to.
 """
 
 from __future__ import annotations
@@ -75,6 +77,18 @@ def main() -> None:
     g = list(csv.DictReader((RESULTS / "geometry.csv").read_text().splitlines()))
     geometry = {"sun_alt": np.array([float(r["sun_altitude_deg"]) for r in g]), "sun_az": np.array([float(r["sun_azimuth_deg"]) for r in g]),
                 "held_out": np.array([r["held_out"] == "1" for r in g])}
+    lambert = lumos.brdf.library.LAMBERTIAN(0.5)
+    surfaces = [lumos.geometry.Surface(3.64, np.array([0, 0, -1]), lambert), lumos.geometry.Surface(22.68, np.array([0, 1, 0]), lambert)]
+    with open(RESULTS / "lumos_lambert.csv", "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["# lumos-sat 1.0.9: AB magnitude of the Pomenis observations, chassis and array Lambertian (0.5), sun only"])
+        w.writerow(["row", "ab_magnitude"])
+        for i in range(len(rows)):
+            intensity = lumos.calculator.get_intensity_observer_frame(
+                surfaces, obs["height_m"][i], obs["altitude"][i], obs["azimuth"][i], geometry["sun_alt"][i], geometry["sun_az"][i],
+                include_earthshine=False)
+            if intensity > 0:
+                w.writerow([i, f"{float(lumos.conversions.intensity_to_ab_mag(intensity, clip=False)):.6f}"])
     held = np.flatnonzero(geometry["held_out"])
     train = np.flatnonzero(~geometry["held_out"])
     everything = np.arange(len(rows))

@@ -120,3 +120,20 @@ def test_seeds_for_a_precision_scale_as_one_over_sqrt_seeds(sphere):
     assert lc.seeds_for(worst / 10) == 300
     with pytest.raises(sf.InputError, match="precision_mag"):
         lc.seeds_for(0.0)
+
+
+def test_convergence_in_pixels_and_samples_is_checked(tmp_path):
+    """A 2 m plate 15 px across at 16 x 16 px: doubling the pixels or quadrupling the samples changes
+    its light curve by under 1 %; at 4 x 4 px the film cuts the plate and doubling the pixels
+    changes it fourfold: not converged."""
+    from helpers import write_plate_obj
+
+    from spacefit.studies.lightcurve import light_curve_convergence
+
+    scene = small_scene(write_plate_obj(tmp_path / "plate.obj"), {"material": "lambert", "kd": 0.5},
+                        render={"spp": 4, "resolution": [16, 16], "filter": "box"},
+                        camera={"position_m": [0.0, 0.0, 1000.0], "focal_length_mm": 3000.0, "pixel_pitch_mm": 0.4})
+    good = light_curve_convergence(scene, phase_deg=[0.0, 60.0], quiet=True)
+    assert good.converged and good.pixels_change < 0.01 and good.samples_change < 0.01, good.line()
+    cut = light_curve_convergence(scene.with_values({"render.resolution": [4, 4]}), phase_deg=[0.0, 60.0], quiet=True)
+    assert not cut.converged and cut.pixels_change == pytest.approx(3.0, rel=0.05) and "NOT converged" in cut.line()

@@ -23,10 +23,16 @@ DATA = Path(__file__).resolve().parents[1] / "data" / "starlink-v1p5"
 MOUNT_LEMMON = Site(32.4434, -110.7881, 2791.0)
 
 
-def test_pomenis_observations_and_their_geometry():
+@pytest.fixture(scope="module")
+def pomenis() -> LightCurveObservations:
+    """The Starlink observations, read once (astropy's sun for 1,173 times takes seconds)."""
+    return read_light_curve(DATA / "pomenis_observations.csv", site=MOUNT_LEMMON)
+
+
+def test_pomenis_observations_and_their_geometry(pomenis):
     """1,173 magnitudes; one satellite in the Earth's shadow (the Pomenis point every published model
     clips); the nadir-sun frame puts the sun in its y-z plane on the +y side and the observer below."""
-    obs = read_light_curve(DATA / "pomenis_observations.csv", site=MOUNT_LEMMON)
+    obs = pomenis
     assert len(obs) == 1173 and obs.band == "AB532" and obs.magnitude_sigma is None
     assert int(obs.in_shadow.sum()) == 1
     np.testing.assert_allclose(np.linalg.norm(obs.sun, axis=1), 1.0)
@@ -151,3 +157,18 @@ def test_a_simulated_two_plate_light_curve_is_fitted_back_within_its_errors():
     assert fit.stderr[0] < 0.01 and np.isfinite(magnitude_of(np.array([1e-12]), "AB532", 1360.0)).all()
     with pytest.raises(InputError, match="`free` must be one of"):
         fit_plates(start, data, ["panel.kd"])
+
+
+def test_two_lambert_plates_agree_with_lumos_sat(pomenis):
+    """lumos-sat's calculator (``experiments/starlink_lumos.py`` wrote its magnitudes) and spacefit's
+    flat plates give the same light curve of the two-plate satellite, Lambertian (0.5), at every
+    lit Pomenis observation: within 1 % (0.011 mag). This holds the geometry (site, sun, frame,
+    ranges), the shadow and the AB conversion to the peer's."""
+    rows = [line.split(",") for line in (Path(__file__).resolve().parents[1] / "experiments" / "results" / "starlink" /
+                                          "lumos_lambert.csv").read_text().splitlines()[2:]]
+    index, peer = np.array([int(r[0]) for r in rows]), np.array([float(r[1]) for r in rows])
+    obs = pomenis
+    plates = [Plate("chassis", 3.64, (0, 0, -1), Lambert(0.5)), Plate("array", 22.68, (0, 1, 0), Lambert(0.5))]
+    ours = predict_magnitudes(plates, obs)
+    assert np.isfinite(ours).sum() == len(index) == 1172 and np.all(np.isfinite(ours[index]))
+    np.testing.assert_allclose(ours[index], peer, atol=2.5 * math.log10(1.01))

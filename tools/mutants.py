@@ -187,6 +187,11 @@ MUTANTS = (
            ("tests/test_goodness.py",)),
     Mutant("dof-miscounted", "spacefit/fitting/goodness.py", "dof = max(values - n_free, 1)", "dof = max(values, 1)",
            ("tests/test_goodness.py",)),
+    # BRDF tables and light curves as observations (issue 22)
+    Mutant("smith-g1-without-alpha", "spacefit/materials/brdf.py", "xy = (alpha_x * v[..., 0]) ** 2 + (alpha_y * v[..., 1]) ** 2",
+           "xy = v[..., 0] ** 2 + v[..., 1] ** 2", ("tests/test_brdf_tables.py",)),
+    Mutant("shadow-on-the-sun-side", "spacefit/studies/observing.py", "return (along < 0) & (across < EARTH_RADIUS_M)",
+           "return across < EARTH_RADIUS_M", ("tests/test_observed_lightcurves.py",)),
 )
 
 

@@ -71,7 +71,7 @@ class TableFit:
     def warnings(self) -> list[str]:
         """Pairs of parameters correlated beyond :data:`~spacefit.fitting.uncertainty.CORRELATION_WARN` (not
         separately determined) and parameters the data leave undetermined."""
-        out = [f"{n} is not determined by these data (infinite error)" for n, s in zip(self.names, self.stderr) if not np.isfinite(s)]
+        out = [f"{n} is not determined by these data (infinite error)" for n, s in zip(self.names, self.stderr) if np.isinf(s)]
         with np.errstate(invalid="ignore", divide="ignore"):
             corr = self.covariance / np.outer(self.stderr, self.stderr)
         for i in range(len(self.names)):

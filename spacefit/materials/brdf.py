@@ -29,14 +29,20 @@ def _channels(value: object) -> Array:
     return jnp.asarray(value if isinstance(value, (tuple, list)) else (value,), dtype=float)
 
 
+def _safe_sqrt(x: Array) -> Array:
+    """sqrt(max(x, 0)) (Mitsuba's ``safe_sqrt``) with a zero derivative where x <= 0, not NaN."""
+    positive = x > 0
+    return jnp.where(positive, jnp.sqrt(jnp.where(positive, x, 1.0)), 0.0)
+
+
 def fresnel_conductor(cos_i: Array, eta: Array, k: Array) -> Array:
     """Unpolarised reflectance of a conductor of complex index eta + i k at cos_i (Mitsuba's
     ``fresnel_conductor``, the exact form for an absorbing medium)."""
     c2 = cos_i**2
     s2 = 1.0 - c2
     t1 = eta**2 - k**2 - s2
-    a2pb2 = jnp.sqrt(jnp.maximum(t1**2 + 4.0 * k**2 * eta**2, 0.0))
-    a = jnp.sqrt(jnp.maximum(0.5 * (a2pb2 + t1), 0.0))
+    a2pb2 = _safe_sqrt(t1**2 + 4.0 * k**2 * eta**2)
+    a = _safe_sqrt(0.5 * (a2pb2 + t1))
     term1 = a2pb2 + c2
     term2 = 2.0 * cos_i * a
     r_s = (term1 - term2) / (term1 + term2)

@@ -291,3 +291,52 @@ def light_curve(
     phase = np.broadcast_to(phase_angles_deg(scene, ds), x.shape).copy()
     return LightCurve(against, x, e_obs, magnitude, phase, band, float(sun_magnitude), rendered_range, observer_range,
                       e_sun, ds, e_se, magnitude_se, len(samples))
+
+
+@dataclass(frozen=True)
+class Convergence:
+    """Whether a light curve's integrated irradiance has converged in pixels and in samples.
+
+    Attributes:
+        pixels_change: the largest relative change of a point's irradiance from the scene's
+            resolution to twice it (each axis), at the scene's spp.
+        samples_change: the same from the scene's spp to four times it, at the scene's resolution.
+        tolerance: the relative change allowed.
+        irradiance_w_m2: the light curve at the scene's settings.
+    """
+
+    pixels_change: float
+    samples_change: float
+    tolerance: float
+    irradiance_w_m2: np.ndarray
+
+    @property
+    def converged(self) -> bool:
+        """Both changes within the tolerance: more pixels or samples would not change the light curve."""
+        return self.pixels_change <= self.tolerance and self.samples_change <= self.tolerance
+
+    def line(self) -> str:
+        """One line of words."""
+        verdict = "converged" if self.converged else "NOT converged: raise render.resolution or render.spp"
+        return (f"light curve {verdict}: x2 pixels changes it by {self.pixels_change:.2%}, x4 samples by "
+                f"{self.samples_change:.2%} (tolerance {self.tolerance:.2%})")
+
+
+def light_curve_convergence(scene: Scene, *, tolerance: float = 0.01, **kwargs: Any) -> Convergence:
+    """Render the light curve (:func:`light_curve`, its keyword arguments) at the scene's resolution and
+    spp, at twice the resolution and at four times the spp, and compare: a point target needs few
+    pixels, and this says whether the scene's are enough (the irradiance of the points that are lit
+    at the scene's settings; a dark point's change is not relative)."""
+    check_range("tolerance", tolerance, 0.0, lo_open=True)
+    base = light_curve(scene, **kwargs)
+    width, height = scene.render.resolution
+    finer = scene.with_values({"render.resolution": [2 * width, 2 * height]})
+    more = scene.with_values({"render.spp": 4 * scene.render.spp})
+    lit = base.irradiance_w_m2 > 0
+
+    def change(other: LightCurve) -> float:
+        if not lit.any():
+            return 0.0
+        return float(np.max(np.abs(other.irradiance_w_m2[lit] / base.irradiance_w_m2[lit] - 1.0)))
+
+    return Convergence(change(light_curve(finer, **kwargs)), change(light_curve(more, **kwargs)), tolerance, base.irradiance_w_m2)
