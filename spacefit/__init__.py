@@ -64,6 +64,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "fit_plates": ("spacefit.studies.plates", "fit_plates"),
     "fitted_plates": ("spacefit.studies.plates", "fitted_plates"),
     "light_curve_convergence": ("spacefit.studies.lightcurve", "light_curve_convergence"),
+    "fit_light_curve": ("spacefit.studies.lightcurve", "fit_light_curve"),
     "Mirror": ("spacefit.materials", "Mirror"),
     "PRESETS": ("spacefit.materials", "PRESETS"),
     "fit_to_folder": ("spacefit.pipeline", "fit_to_folder"),
@@ -119,7 +120,7 @@ __all__ = [
     "plot_comparison", "plot_convergence",
     "DiffuseConductor", "BRDFTable", "BRDF_MODELS", "read_brdf_table", "fit_brdf_table", "fitted_material", "compare_brdf_models",
     "TableFit", "Site", "LightCurveObservations", "read_light_curve", "Plate", "predict_magnitudes", "fit_plates", "fitted_plates",
-    "light_curve_convergence",
+    "light_curve_convergence", "fit_light_curve",
     "RenderSettings", "CameraSettings", "SunSettings", "TargetSettings", "WrinkleSettings", "PartSettings",
 ]
 

@@ -137,3 +137,24 @@ def test_convergence_in_pixels_and_samples_is_checked(tmp_path):
     assert good.converged and good.pixels_change < 0.01 and good.samples_change < 0.01, good.line()
     cut = light_curve_convergence(scene.with_values({"render.resolution": [4, 4]}), phase_deg=[0.0, 60.0], quiet=True)
     assert not cut.converged and cut.pixels_change == pytest.approx(3.0, rel=0.05) and "NOT converged" in cut.line()
+
+
+@pytest.mark.slow
+def test_a_rendered_light_curve_of_the_lander_is_fitted_for_kd_within_its_error():
+    """The lander with a white body (kd 0.5) turned through five attitudes, magnitudes rendered at
+    64 spp with 0.01 mag noise: fitted from kd 0.3 at 8 spp, kd comes back within 3 standard errors
+    (measured: 0.4973 +- 0.0031) and chi^2 is within its expected range (about 30 s)."""
+    from spacefit.studies.lightcurve import fit_light_curve
+
+    base = sf.load_case("panels").truth_scene.with_values({"render.resolution": [24, 24], "camera.pixel_pitch_mm": 100.0,
+                                                          "render.spp": 8, "parts.body.material": "white_paint",
+                                                          "parts.body.kd": 0.5})
+    angles = [0.0, 72.0, 144.0, 216.0, 288.0]
+    truth = sf.light_curve(base.with_values({"render.spp": 64}), attitude_deg=angles, quiet=True)
+    magnitude = truth.magnitude + 0.01 * np.random.default_rng(0).standard_normal(len(angles))
+    fit = fit_light_curve(base.with_values({"parts.body.kd": 0.3}), ["parts.body.kd"],
+                          [{"target.attitude_z_deg": a} for a in angles], magnitude, 0.01)
+    assert fit.success and not fit.goodness.misfit, fit.report()
+    assert abs(fit.value("parts.body.kd") - 0.5) < 3 * fit.stderr[0] and fit.stderr[0] < 0.02
+    with pytest.raises(sf.InputError, match="every point must set the same values"):
+        fit_light_curve(base, ["parts.body.kd"], [{"target.attitude_z_deg": 0.0}, {"sun.elevation_deg": 10.0}], [1.0, 2.0], 0.01)
