@@ -20,7 +20,10 @@ Scores, residual = observed - predicted (mag), over the observations with a fini
 observation: sun altitude / azimuth at the site, in shadow, held out) that ``starlink_lumos.py``,
 the peer lumos-sat computed the same way, reads.
 
-Run: ``PYTHONPATH=. .venv/bin/python experiments/starlink.py`` (about 2 min on 2 busy cores).
+With ``--render-check N`` the two-part satellite is also rendered as a mesh (:func:`write_satellite_obj`)
+with the lab materials at N observations and compared with the flat plates.
+
+Run: ``PYTHONPATH=. .venv/bin/python experiments/starlink.py --render-check 10`` (about 5 min on 2 busy cores).
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from __future__ import annotations
 import argparse
 import csv
 import json
+import tempfile
 import time
 from pathlib import Path
 
@@ -60,9 +64,59 @@ def plates(chassis, array) -> list[Plate]:
     return [Plate("chassis", 3.64, (0.0, 0.0, -1.0), chassis), Plate("array", 22.68, (0.0, 1.0, 0.0), array)]
 
 
+def write_satellite_obj(path: Path) -> Path:
+    """The two-part satellite mesh: the chassis underside, a 3.64 m^2 square at x = -15 m facing -z,
+    and the solar array, a 2.52 m x 9 m (22.68 m^2) rectangle facing +y at x = +15 m, where it
+    neither shadows the chassis from a sun in the y-z plane nor often hides it."""
+    c, w, h = 3.64**0.5 / 2, 2.52 / 2, 9.0 / 2
+    path.write_text("o chassis\n"
+                    f"v {-15 - c} {-c} 0\nv {-15 - c} {c} 0\nv {-15 + c} {c} 0\nv {-15 + c} {-c} 0\nf 1 2 3\nf 1 3 4\n"
+                    "o array\n"
+                    f"v {15 - w} 0 {-h}\nv {15 + w} 0 {-h}\nv {15 + w} 0 {h}\nv {15 - w} 0 {h}\nf 5 6 7\nf 5 7 8\n")
+    return path
+
+
+def render_check(materials: dict, obs, rows: np.ndarray, folder: Path) -> dict:
+    """Render the two-part mesh (``sf.light_curve``, 512 x 512 px of 2.5e-5 rad, 16 spp, box filter,
+    2 km away) at observations ``rows`` and compare its irradiance with the flat-plate model's; and
+    check at the first whether the irradiance has converged in pixels and samples
+    (``sf.light_curve_convergence``)."""
+    import spacefit as sf
+    from spacefit.materials import material_table
+    from spacefit.scene.toml import scene_from_dict
+    from spacefit.studies.plates import plates_irradiance
+
+    mesh = write_satellite_obj(folder / "starlink_v1p5.obj")
+    scene = scene_from_dict({
+        "render": {"resolution": [512, 512], "spp": 16, "depth": 1, "seed": 1, "filter": "box"},
+        "camera": {"position_m": [0.0, 0.0, -2000.0], "look_at_m": [0.0, 0.0, 0.0], "focal_length_mm": 2000.0,
+                   "pixel_pitch_mm": 0.05},
+        "sun": {"irradiance_w_m2": SUN_IRRADIANCE, "direction": [0.0, 0.0, -1.0]},
+        "target": {"attitude_deg": [0.0, 0.0, 0.0], "position_m": [0.0, 0.0, 0.0], "mesh": str(mesh)},
+        "wrinkles": {"enabled": False},
+        "parts": {"chassis": material_table(materials["chassis"]), "array": material_table(materials["solar_array"])},
+    })
+    rendered, model = [], []
+    for i in rows:
+        lc = sf.light_curve(scene, attitude_deg=[0.0], sun=obs.sun[i].tolist(), observer=obs.observer[i].tolist(),
+                            observer_range_m=float(obs.range_m[i]), quiet=True)
+        rendered.append(float(lc.irradiance_w_m2[0]))
+        model.append(float(plates_irradiance(plates(materials["chassis"], materials["solar_array"]), obs.sun[i:i + 1],
+                                             obs.observer[i:i + 1], obs.range_m[i:i + 1], SUN_IRRADIANCE)[0]))
+    ratio = np.array(rendered) / np.array(model)
+    first = rows[0]
+    convergence = sf.light_curve_convergence(scene, tolerance=0.02, attitude_deg=[0.0], sun=obs.sun[first].tolist(),
+                                             observer=obs.observer[first].tolist(), quiet=True)
+    print(convergence.line())
+    return {"rows": rows.tolist(), "rendered_w_m2": rendered, "plates_w_m2": model, "max_relative_difference": float(np.max(np.abs(ratio - 1))),
+            "rms_relative_difference": float(np.sqrt(np.mean((ratio - 1) ** 2))), "convergence": convergence.line()}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--out", type=Path, default=ROOT / "experiments" / "results" / "starlink")
+    parser.add_argument("--render-check", type=int, default=0, metavar="N",
+                        help="render the two-part mesh at N observations with the lab materials and compare with the plates")
     args = parser.parse_args()
     t0 = time.time()
     out: dict = {"date_utc": time.strftime("%Y-%m-%d %H:%M", time.gmtime())}
@@ -90,6 +144,12 @@ def main() -> None:
     predicted_fit = predict_magnitudes(fitted_plates(satellite, fit), obs, SUN_IRRADIANCE)
     out["fitted"] = {"fit": fit.to_dict(), "held_out": scores(obs.magnitude[held_out], predicted_fit[held_out]),
                      "in_sample": scores(obs.magnitude[~held_out], predicted_fit[~held_out])}
+    if args.render_check:
+        with tempfile.TemporaryDirectory() as folder:
+            rows = np.flatnonzero(~obs.in_shadow)[:: max(1, len(obs) // args.render_check)][: args.render_check]
+            out["render_check"] = render_check(lab, obs, rows, Path(folder))
+        print(f"rendered two-part mesh against the plates at {len(rows)} observations: max relative difference "
+              f"{out['render_check']['max_relative_difference']:.2%}")
     out["wall_s"] = time.time() - t0
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "starlink.json").write_text(json.dumps(out, indent=1))
