@@ -22,7 +22,7 @@ from __future__ import annotations
 import jax.numpy as jnp
 from jaxtyping import Array
 
-from spacefit.materials.models import Conductor, DiffuseConductor, Lambert, Material, Mirror
+from spacefit.materials.models import DiffuseConductor, Lambert, Material, Mirror
 
 
 def _channels(value: object) -> Array:

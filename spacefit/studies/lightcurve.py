@@ -40,7 +40,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -51,6 +51,9 @@ from spacefit.scene.parameters import scene_value, sun_angles_deg, sun_direction
 from spacefit.scene.schema import Scene, check_scene, deg2rad
 from spacefit.studies.sensitivity import mean_and_error
 from spacefit.studies.sweep import sweep
+
+if TYPE_CHECKING:  # the fit imports JAX; a forward light curve does not
+    from spacefit.fitting.tabular import TableFit
 
 # The sun's apparent magnitude by band (module docstring gives the source).
 SUN_MAGNITUDES = {"V": -26.74, "AB532": -2.5 * math.log10(1360.0 * 532e-9 / (3.0e8 * 3631e-26))}
@@ -354,7 +357,7 @@ def fit_light_curve(
     observer_range_m: float | None = None,
     seed: int = 1,
     max_steps: int = 50,
-) -> Any:
+) -> "TableFit":
     """Fit the registered parameters ``free`` of a rendered target (materials, attitude angles, ...)
     to an observed light curve: ``magnitude`` (with ``magnitude_sigma``, mag, or None: unknown) at
     ``points``, each the scene values of one observation's geometry (``{"target.attitude_z_deg":
@@ -362,8 +365,8 @@ def fit_light_curve(
     its image's sum of radiance x pixel solid angle (:func:`spacefit.rendering.derivatives.render_function`,
     differentiable), rescaled to ``observer_range_m``; the fit, its errors and goodness are
     :func:`spacefit.fitting.tabular.fit_table`'s on ln E, the render noise measured by a second set
-    of renders with independent seeds. Starts from the scene's values. Returns a
-    :class:`~spacefit.fitting.tabular.TableFit`."""
+    of renders with independent seeds (the errors are the noise model's and do not yet include
+    the fit's own render noise). Starts from the scene's values."""
     import jax.numpy as jnp  # here: a light curve's forward renders need no JAX
 
     from spacefit.fitting.params import bijection
