@@ -67,6 +67,8 @@ the held-out third."""),
 for name, result in (("spacefit", ours), ("lumos-sat (Phong)", peer)):
     for key, label in (("lab", "lab tables"), ("fitted", "fitted to observations")):
         for part, s in result[key].items():
+            if "pearson_r" not in s:
+                continue
             print(f"{name + ', ' + label:>34s} {part:>10s} {s['pearson_r']:6.3f} {s['rms_mag']:6.3f} {s['median_mag']:+7.3f} "
                   f"{s['bias_mag']:+7.3f}")
 print(json.dumps(ours["fitted"]["fit"]["values"], indent=1), json.dumps(ours["fitted"]["fit"]["stderr"], indent=1))"""),
