@@ -56,6 +56,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "fitted_material": ("spacefit.fitting.brdf_table", "fitted_material"),
     "compare_brdf_models": ("spacefit.fitting.brdf_table", "compare_brdf_models"),
     "TableFit": ("spacefit.fitting.tabular", "TableFit"),
+    "write_table_fit": ("spacefit.fitting.tabular", "write_table_fit"),
     "Site": ("spacefit.studies.observing", "Site"),
     "LightCurveObservations": ("spacefit.studies.observing", "LightCurveObservations"),
     "read_light_curve": ("spacefit.studies.observing", "read_light_curve"),
@@ -119,7 +120,7 @@ __all__ = [
     "read_sweep_file", "sweep", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
     "plot_comparison", "plot_convergence",
     "DiffuseConductor", "BRDFTable", "BRDF_MODELS", "read_brdf_table", "fit_brdf_table", "fitted_material", "compare_brdf_models",
-    "TableFit", "Site", "LightCurveObservations", "read_light_curve", "Plate", "predict_magnitudes", "fit_plates", "fitted_plates",
+    "TableFit", "write_table_fit", "Site", "LightCurveObservations", "read_light_curve", "Plate", "predict_magnitudes", "fit_plates", "fitted_plates",
     "light_curve_convergence", "fit_light_curve",
     "RenderSettings", "CameraSettings", "SunSettings", "TargetSettings", "WrinkleSettings", "PartSettings",
 ]

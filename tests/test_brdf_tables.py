@@ -3,6 +3,7 @@ table formats, a GGX table fitted back within 1 %, and the choice of the smalles
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 from spacefit.errors import InputError
 from spacefit.fitting.brdf_table import (compare_brdf_models, fit_brdf_table, fitted_material, read_brdf_table,
                                          simulate_brdf_table)
+from spacefit.fitting.tabular import write_table_fit
 from spacefit.materials import Conductor, DiffuseConductor, Lambert
 from spacefit.materials.brdf import brdf, fresnel_conductor
 from spacefit.materials.registry import GOLD_ETA, GOLD_K
@@ -88,7 +90,7 @@ def test_general_format_and_its_errors(tmp_path):
             read_brdf_table(bad)
 
 
-def test_a_ggx_table_is_fitted_back_and_chosen():
+def test_a_ggx_table_is_fitted_back_and_chosen(tmp_path):
     """A GGX conductor's table with 0.5 % noise: alpha, eta, k back within 1 % and their errors; the
     comparison refuses Lambert (a misfit) and chooses GGX, the smallest model within the errors."""
     truth = Conductor(1.8, 2.5, 0.12, 0.12)
@@ -102,6 +104,11 @@ def test_a_ggx_table_is_fitted_back_and_chosen():
     assert fitted_material("ggx", fit) == Conductor(fit.value("eta"), fit.value("k"), fit.value("alpha"), fit.value("alpha"))
     assert comparison.fits["lambert"].goodness.misfit and comparison.chosen == "ggx"
     assert list(comparison.fits) == ["lambert", "ggx"] and "<- smallest within the errors" in comparison.table().splitlines()[2]
+    folder = write_table_fit(tmp_path / "fit", fit, inputs={"table": table.source})
+    assert sorted(p.name for p in folder.iterdir()) == ["fit.json", "report.txt"]
+    saved = json.loads((folder / "fit.json").read_text())
+    assert saved["values"]["alpha"] == pytest.approx(fit.value("alpha")) and saved["status"] == "CONVERGED"
+    assert (folder / "report.txt").read_text().startswith("converged\ngoodness of fit: chi^2/dof")
 
 
 def test_fit_arguments_are_checked():

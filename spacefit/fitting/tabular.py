@@ -17,8 +17,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import jax
@@ -189,6 +190,18 @@ def _fit(predict: Predict, data: np.ndarray, sigma: np.ndarray | None, names: tu
     at_bound = any(b.at_bound(float(v)) for b, v in zip(bounds, x))
     status = verdict(outcome.status, best_loss < loss0, at_bound, fit_goodness.misfit)
     return TableFit(names, x, np.sqrt(np.diag(cov)), cov, status, fit_goodness, r, outcome.steps)
+
+
+def write_table_fit(out_dir: str | Path, fit: TableFit, *, inputs: Mapping[str, Any] | None = None) -> Path:
+    """Write ``fit.json`` (:meth:`TableFit.to_dict`, the package versions and, if given, the
+    ``inputs``) and ``report.txt`` (:meth:`TableFit.report`) into ``out_dir`` all at once (on an
+    error nothing is left behind), as an image fit's folder has them."""
+    from spacefit.output import staged_output, versions, write_json
+
+    with staged_output(out_dir) as stage:
+        write_json(stage / "fit.json", {**fit.to_dict(), "versions": versions(), **({"inputs": dict(inputs)} if inputs else {})})
+        (stage / "report.txt").write_text(fit.report() + "\n", encoding="utf-8")
+    return Path(out_dir)
 
 
 def smallest_adequate(fits: Sequence[TableFit]) -> int | None:
