@@ -6,7 +6,9 @@ Levenberg-Marquardt by default) step the unconstrained coordinates of each param
 values spanning decades (a BRDF's specular peak over its diffuse floor, magnitudes' irradiances),
 ln(model / data) / sigma_rel (``log=True``, sigma_rel the relative error). With the errors known
 the covariance is the noise model's own (J^T J)^-1 and the goodness of fit
-(:func:`spacefit.fitting.goodness.goodness`) gives its chi^2 verdict; without, the errors are
+(:func:`spacefit.fitting.goodness.goodness`) gives its chi^2 verdict (a rendered model's own Monte
+Carlo noise, measured per value from two seeds, (r - r_alt)^2 / 2, is added through the sandwich
+B J^T diag(.) J B, B = (J^T J)^-1, as in the image fits); without, the errors are
 scaled by the residuals' mean square s^2 (J^T J)^-1 and no verdict is given. The verdicts on the
 solve (no progress, at a bound, misfit) are :func:`spacefit.fitting.loop.verdict`'s. A model that is
 rendered (Monte Carlo) passes ``predict_alt``, the same model with an independent seed, whose
@@ -183,6 +185,11 @@ def _fit(predict: Predict, data: np.ndarray, sigma: np.ndarray | None, names: tu
     eigval, eigvec = np.linalg.eigh(info)
     tiny = eigval <= 1e-12 * max(float(np.abs(eigval).max()), 1e-300)
     cov = s2 * (eigvec[:, ~tiny] / eigval[~tiny]) @ eigvec[:, ~tiny].T
+    if noise_known and predict_alt is not None:
+        # the model's own Monte Carlo noise, one draw per value (r - r_alt) / sqrt(2), through the
+        # sandwich: the data's noise alone would make a rendered model's errors too small
+        d2 = 0.5 * (r - r_alt) ** 2
+        cov = cov + cov @ ((J * d2[:, None]).T @ J) @ cov
     if tiny.any():
         touched = np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)
         cov[touched, :] = np.inf

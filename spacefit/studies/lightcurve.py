@@ -365,8 +365,7 @@ def fit_light_curve(
     its image's sum of radiance x pixel solid angle (:func:`spacefit.rendering.derivatives.render_function`,
     differentiable), rescaled to ``observer_range_m``; the fit, its errors and goodness are
     :func:`spacefit.fitting.tabular.fit_table`'s on ln E, the render noise measured by a second set
-    of renders with independent seeds (the errors are the noise model's and do not yet include
-    the fit's own render noise). Starts from the scene's values."""
+    of renders with independent seeds (which the errors include). Starts from the scene's values."""
     import jax.numpy as jnp  # here: a light curve's forward renders need no JAX
 
     from spacefit.fitting.params import bijection
