@@ -120,3 +120,41 @@ def test_seeds_for_a_precision_scale_as_one_over_sqrt_seeds(sphere):
     assert lc.seeds_for(worst / 10) == 300
     with pytest.raises(sf.InputError, match="precision_mag"):
         lc.seeds_for(0.0)
+
+
+def test_convergence_in_pixels_and_samples_is_checked(tmp_path):
+    """A 2 m plate 15 px across at 16 x 16 px: doubling the pixels or quadrupling the samples changes
+    its light curve by under 1 %; at 4 x 4 px the film cuts the plate and doubling the pixels
+    changes it fourfold: not converged."""
+    from helpers import write_plate_obj
+
+    from spacefit.studies.lightcurve import light_curve_convergence
+
+    scene = small_scene(write_plate_obj(tmp_path / "plate.obj"), {"material": "lambert", "kd": 0.5},
+                        render={"spp": 4, "resolution": [16, 16], "filter": "box"},
+                        camera={"position_m": [0.0, 0.0, 1000.0], "focal_length_mm": 3000.0, "pixel_pitch_mm": 0.4})
+    good = light_curve_convergence(scene, phase_deg=[0.0, 60.0], quiet=True)
+    assert good.converged and good.pixels_change < 0.01 and good.samples_change < 0.01, good.line()
+    cut = light_curve_convergence(scene.with_values({"render.resolution": [4, 4]}), phase_deg=[0.0, 60.0], quiet=True)
+    assert not cut.converged and cut.pixels_change == pytest.approx(3.0, rel=0.05) and "NOT converged" in cut.line()
+
+
+@pytest.mark.slow
+def test_a_rendered_light_curve_of_the_lander_is_fitted_for_kd_within_its_error():
+    """The lander with a white body (kd 0.5) turned through five attitudes, magnitudes rendered at
+    64 spp with 0.01 mag noise: fitted from kd 0.3 at 8 spp, kd comes back within 3 standard errors
+    (measured: 0.4973 +- 0.0058, the render noise included) and chi^2 is within its expected range (about 30 s)."""
+    from spacefit.studies.lightcurve import fit_light_curve
+
+    base = sf.load_case("panels").truth_scene.with_values({"render.resolution": [24, 24], "camera.pixel_pitch_mm": 100.0,
+                                                          "render.spp": 8, "parts.body.material": "white_paint",
+                                                          "parts.body.kd": 0.5})
+    angles = [0.0, 72.0, 144.0, 216.0, 288.0]
+    truth = sf.light_curve(base.with_values({"render.spp": 64}), attitude_deg=angles, quiet=True)
+    magnitude = truth.magnitude + 0.01 * np.random.default_rng(0).standard_normal(len(angles))
+    fit = fit_light_curve(base.with_values({"parts.body.kd": 0.3}), ["parts.body.kd"],
+                          [{"target.attitude_z_deg": a} for a in angles], magnitude, 0.01)
+    assert fit.success and not fit.goodness.misfit, fit.report()
+    assert abs(fit.value("parts.body.kd") - 0.5) < 3 * fit.stderr[0] and fit.stderr[0] < 0.02
+    with pytest.raises(sf.InputError, match="every point must set the same values"):
+        fit_light_curve(base, ["parts.body.kd"], [{"target.attitude_z_deg": 0.0}, {"sun.elevation_deg": 10.0}], [1.0, 2.0], 0.01)

@@ -219,6 +219,11 @@ MUTANTS = (
     Mutant("mitsuba-default-far-clip", RENDERER, '        "far_clip": FAR_CLIP_M,\n', "", ("tests/test_reliability.py",)),
     Mutant("negative-fit-seed-passes", "spacefit/rendering/derivatives.py",
            "check_count(name, value, 0, MAX_SEED,", "check_count(name, value, -(2**40), MAX_SEED,", ("tests/test_reliability.py",)),
+    # BRDF tables and light curves as observations (issue 22)
+    Mutant("smith-g1-without-alpha", "spacefit/materials/brdf.py", "xy = (alpha_x * v[..., 0]) ** 2 + (alpha_y * v[..., 1]) ** 2",
+           "xy = v[..., 0] ** 2 + v[..., 1] ** 2", ("tests/test_brdf_tables.py",)),
+    Mutant("shadow-on-the-sun-side", "spacefit/studies/observing.py", "return (along < 0) & (across < EARTH_RADIUS_M)",
+           "return across < EARTH_RADIUS_M", ("tests/test_observed_lightcurves.py",)),
 )
 
 

@@ -1,6 +1,7 @@
 """Materials of the lander's parts: value objects and the registry of named presets."""
 
 from spacefit.materials.models import Conductor as Conductor
+from spacefit.materials.models import DiffuseConductor as DiffuseConductor
 from spacefit.materials.models import Lambert as Lambert
 from spacefit.materials.models import Material as Material
 from spacefit.materials.models import Mirror as Mirror

@@ -81,4 +81,23 @@ class Lambert:
         object.__setattr__(self, "kd", _check_spectrum("kd", self.kd, 0.0, 1.0, False))
 
 
-Material = Union[Conductor, Mirror, Lambert]
+@dataclass(frozen=True)
+class DiffuseConductor:
+    """A rough conductor plus a diffuse term: f_r = kd / pi + the :class:`Conductor`'s BRDF (the sum a
+    measured table of a painted or coated surface often needs: a specular peak over a diffuse floor).
+    The renderer draws it as Mitsuba's ``blendbsdf`` of the two, each doubled, at weight 0.5.
+    Image fits cannot free its parameters (only its light-curve and BRDF-table fits do)."""
+
+    kd: Spectrum
+    eta: Spectrum
+    k: Spectrum
+    alpha_x: float
+    alpha_y: float
+    distribution: str = "ggx"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "kd", _check_spectrum("kd", self.kd, 0.0, 1.0, False))
+        Conductor.__post_init__(self)  # type: ignore[arg-type]
+
+
+Material = Union[Conductor, Mirror, Lambert, DiffuseConductor]

@@ -6,7 +6,7 @@ import dataclasses
 from collections.abc import Mapping
 
 from spacefit.errors import InputError, check_choice, closest, inside
-from spacefit.materials.models import Conductor, Lambert, Material, Mirror
+from spacefit.materials.models import Conductor, DiffuseConductor, Lambert, Material, Mirror
 
 # pbrt-v3's Metal material, which the thesis used for the MLI, defaults to roughness 0.01 remapped
 # by RoughnessToAlpha to a Trowbridge-Reitz alpha of 0.14; a true mirror is never lit directly by a
@@ -30,7 +30,8 @@ PRESETS: Mapping[str, Material] = {
 
 
 # The models by the name a scene file gives them when it states every value (``material = "conductor"``).
-MODELS: Mapping[str, type] = {"conductor": Conductor, "mirror": Mirror, "lambert": Lambert}
+MODELS: Mapping[str, type] = {"conductor": Conductor, "mirror": Mirror, "lambert": Lambert,
+                              "diffuse_conductor": DiffuseConductor}
 
 
 def make_material(name: str, overrides: Mapping[str, object] | None = None, *, where: str = "material") -> Material:
@@ -64,7 +65,7 @@ def with_material_values(material: Material | type, values: Mapping[str, object]
     all of them); ``alpha`` sets both roughnesses of a conductor. Errors name ``where.key``."""
     model = material if isinstance(material, type) else type(material)
     values = dict(values)
-    if "alpha" in values and model is Conductor:
+    if "alpha" in values and model in (Conductor, DiffuseConductor):
         # shorthand for an isotropic roughness
         if {"alpha_x", "alpha_y"} & set(values):
             raise InputError(f"`{where}.alpha` sets alpha_x and alpha_y; do not give them as well.")
@@ -72,7 +73,7 @@ def with_material_values(material: Material | type, values: Mapping[str, object]
     fields = [f.name for f in dataclasses.fields(model)]
     for key in values:
         if key not in fields:
-            close = closest(key, [*fields, *(["alpha"] if model is Conductor else [])])
+            close = closest(key, [*fields, *(["alpha"] if model in (Conductor, DiffuseConductor) else [])])
             hint = f" Did you mean `{where}.{close}`?" if close else ""
             raise InputError(f"unknown scene key `{where}.{key}`: a {model.__name__} has {', '.join(fields)}; a part "
                              f"has `material` and `file` too.{hint}")

@@ -16,7 +16,7 @@ import numpy as np
 
 from spacefit.errors import InputError, check_array, check_count
 from spacefit.geometry.frames import project
-from spacefit.materials import Conductor, Lambert, Material, Mirror
+from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material, Mirror
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.backend import dr, mi, select_variant
@@ -96,6 +96,13 @@ def _one_sided(material: Material) -> dict:
             "eta": _spectrum(material.eta),
             "k": _spectrum(material.k),
         }
+    if isinstance(material, DiffuseConductor):
+        # kd / pi + the conductor as 0.5 (2 kd / pi) + 0.5 (2 x the conductor): Mitsuba's blend is a mean
+        kd = material.kd if isinstance(material.kd, tuple) else (material.kd,) * 3
+        specular = _one_sided(Conductor(material.eta, material.k, material.alpha_x, material.alpha_y, material.distribution))
+        return {"type": "blendbsdf", "weight": 0.5,
+                "diffuse": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [2.0 * v for v in kd]}},
+                "specular": {**specular, "specular_reflectance": 2.0}}
     if isinstance(material, Mirror):
         return {"type": "conductor", "eta": _spectrum(material.eta), "k": _spectrum(material.k)}
     if isinstance(material, Lambert):

@@ -12,7 +12,10 @@ irradiance at the target (``sun.irradiance_w_m2``) and m_sun the sun's apparent 
 band at the same distance from the sun: the target and the observer are taken at the same
 heliocentric distance (1 au for a target near the Earth or the Moon). The V band's m_sun is -26.74
 (Cox 2000, Allen's Astrophysical Quantities, 4th ed., section 14.7; Willmer 2018, ApJS 236, 47
-gives -26.76).
+gives -26.76). ``AB532`` is lumos-sat's AB magnitude at 532 nm (Fankhauser, Askari & Tyson 2023, AJ
+166:59; the band the Starlink observations are compared in): the irradiance read as a flux density
+E lambda / c against 3631 Jy, lambda = 532 nm, c = 3e8 m s^-1, with the sun's irradiance 1360 W m^-2,
+so m_sun = -2.5 log10(1360 lambda / (c 3631e-26)) = -27.056.
 
 Directions towards the sun and the observer are given as world vectors (3 numbers, from the target
 towards them) or as (elevation, azimuth) in degrees in the target's frame: elevation above its x-y
@@ -34,10 +37,10 @@ requested magnitude precision needs.
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -49,8 +52,11 @@ from spacefit.scene.schema import Scene, check_scene, deg2rad
 from spacefit.studies.sensitivity import mean_and_error
 from spacefit.studies.sweep import sweep
 
+if TYPE_CHECKING:  # the fit imports JAX; a forward light curve does not
+    from spacefit.fitting.tabular import TableFit
+
 # The sun's apparent magnitude by band (module docstring gives the source).
-SUN_MAGNITUDES = {"V": -26.74}
+SUN_MAGNITUDES = {"V": -26.74, "AB532": -2.5 * math.log10(1360.0 * 532e-9 / (3.0e8 * 3631e-26))}
 # d m / d ln E: the magnitude's error per relative error of the irradiance.
 MAGNITUDE_PER_LN = 2.5 / math.log(10.0)
 SEED_AXIS = "render.seed"
@@ -290,3 +296,109 @@ def light_curve(
     phase = np.broadcast_to(phase_angles_deg(scene, ds), x.shape).copy()
     return LightCurve(against, x, e_obs, magnitude, phase, band, float(sun_magnitude), rendered_range, observer_range,
                       e_sun, ds, e_se, magnitude_se, len(samples))
+
+
+@dataclass(frozen=True)
+class Convergence:
+    """Whether a light curve's integrated irradiance has converged in pixels and in samples.
+
+    Attributes:
+        pixels_change: the largest relative change of a point's irradiance from the scene's
+            resolution to twice it (each axis), at the scene's spp.
+        samples_change: the same from the scene's spp to four times it, at the scene's resolution.
+        tolerance: the relative change allowed.
+        irradiance_w_m2: the light curve at the scene's settings.
+    """
+
+    pixels_change: float
+    samples_change: float
+    tolerance: float
+    irradiance_w_m2: np.ndarray
+
+    @property
+    def converged(self) -> bool:
+        """Both changes within the tolerance: more pixels or samples would not change the light curve."""
+        return self.pixels_change <= self.tolerance and self.samples_change <= self.tolerance
+
+    def line(self) -> str:
+        """One line of words."""
+        verdict = "converged" if self.converged else "NOT converged: raise render.resolution or render.spp"
+        return (f"light curve {verdict}: x2 pixels changes it by {self.pixels_change:.2%}, x4 samples by "
+                f"{self.samples_change:.2%} (tolerance {self.tolerance:.2%})")
+
+
+def light_curve_convergence(scene: Scene, *, tolerance: float = 0.01, **kwargs: Any) -> Convergence:
+    """Render the light curve (:func:`light_curve`, its keyword arguments) at the scene's resolution and
+    spp, at twice the resolution and at four times the spp, and compare: a point target needs few
+    pixels, and this says whether the scene's are enough (the irradiance of the points that are lit
+    at the scene's settings; a dark point's change is not relative)."""
+    check_range("tolerance", tolerance, 0.0, lo_open=True)
+    base = light_curve(scene, **kwargs)
+    width, height = scene.render.resolution
+    finer = scene.with_values({"render.resolution": [2 * width, 2 * height]})
+    more = scene.with_values({"render.spp": 4 * scene.render.spp})
+    lit = base.irradiance_w_m2 > 0
+
+    def change(other: LightCurve) -> float:
+        if not lit.any():
+            return 0.0
+        return float(np.max(np.abs(other.irradiance_w_m2[lit] / base.irradiance_w_m2[lit] - 1.0)))
+
+    return Convergence(change(light_curve(finer, **kwargs)), change(light_curve(more, **kwargs)), tolerance, base.irradiance_w_m2)
+
+
+def fit_light_curve(
+    scene: Scene,
+    free: Sequence[str],
+    points: Sequence[dict[str, Any]],
+    magnitude: Sequence[float],
+    magnitude_sigma: Sequence[float] | float | None,
+    *,
+    band: str = "V",
+    sun_magnitude: float | None = None,
+    observer_range_m: float | None = None,
+    seed: int = 1,
+    max_steps: int = 50,
+) -> "TableFit":
+    """Fit the registered parameters ``free`` of a rendered target (materials, attitude angles, ...)
+    to an observed light curve: ``magnitude`` (with ``magnitude_sigma``, mag, or None: unknown) at
+    ``points``, each the scene values of one observation's geometry (``{"target.attitude_z_deg":
+    30.0}``, ``{"sun.elevation_deg": ..., "sun.azimuth_deg": ...}``). Each point's irradiance is
+    its image's sum of radiance x pixel solid angle (:func:`spacefit.rendering.derivatives.render_function`,
+    differentiable), rescaled to ``observer_range_m``; the fit, its errors and goodness are
+    :func:`spacefit.fitting.tabular.fit_table`'s on ln E, the render noise measured by a second set
+    of renders with independent seeds (which the errors include). Starts from the scene's values."""
+    import jax.numpy as jnp  # here: a light curve's forward renders need no JAX
+
+    from spacefit.fitting.params import bijection
+    from spacefit.fitting.tabular import fit_table
+    from spacefit.geometry.frames import pixel_solid_angles
+    from spacefit.rendering.derivatives import render_function
+
+    check_scene(scene)
+    if sun_magnitude is None:
+        sun_magnitude = SUN_MAGNITUDES[check_choice("band", band, SUN_MAGNITUDES)]
+    magnitude = np.asarray(magnitude, dtype=float)
+    if len(points) != len(magnitude):
+        raise InputError(f"`points` and `magnitude` must be as long: {len(points)} points, {len(magnitude)} magnitudes.")
+    geometry = sorted({key for p in points for key in p})
+    if any(set(p) != set(geometry) for p in points):
+        raise InputError(f"every point must set the same values, {geometry}; got {[sorted(p) for p in points]}.")
+    at = jnp.asarray([[float(p[key]) for key in geometry] for p in points])
+    rendered_range = float(np.linalg.norm(np.array(scene.camera.position_m) - np.array(scene.target.position_m)))
+    observer_range = rendered_range if observer_range_m is None else check_range("observer_range_m", observer_range_m, 0.0,
+                                                                                 lo_open=True, unit="m")
+    scale = (rendered_range / observer_range) ** 2
+    omega = jnp.asarray(pixel_solid_angles(assemble(scene).intrinsics))
+
+    def irradiance(seed_primal: int) -> Callable[[Any], Any]:
+        # one loaded scene; each point's geometry enters as fixed values of registered parameters
+        image = render_function(scene, [*free, *geometry], seed=seed_primal, seed_grad=seed_primal + 1)
+        return lambda x: scale * jnp.stack([jnp.sum(jnp.mean(image(jnp.concatenate([x, g.astype(x.dtype)])), axis=-1) * omega)
+                                            for g in at])
+
+    data = scene.sun.irradiance_w_m2 * 10.0 ** (-0.4 * (magnitude - sun_magnitude))
+    sigma = None if magnitude_sigma is None else MAGNITUDE_PER_LN ** -1 * np.broadcast_to(np.asarray(magnitude_sigma, float), data.shape)
+    start = [scene_value(scene, n) for n in free]
+    return fit_table(irradiance(seed), data, sigma, list(free), [bijection(n) for n in free], start, log=True,
+                     predict_alt=irradiance(seed + 1000), max_steps=max_steps)

@@ -1,0 +1,288 @@
+"""Measured BRDF tables (goniometer data) as observations: reading them, fitting spacefit's material
+models to them with errors and a chi^2 verdict, and choosing the smallest model that fits.
+
+Two file formats, both text with ``#`` comment lines, angles in degrees (radians inside), the BRDF
+in sr^-1:
+
+* the general format, a CSV file whose header names its columns: ``theta_i_deg, phi_i_deg,
+  theta_o_deg, phi_o_deg, brdf_sr`` and optionally ``sigma_sr`` (each value's standard error).
+  theta is the zenith angle from the surface normal (0 to 90), phi the azimuth in the surface's
+  plane from its x axis (the tangent along which a conductor's ``alpha_x`` lies) towards y; ``_i``
+  is the direction towards the light, ``_o`` towards the detector.
+* the Scatterworks / lumos-sat format of the Starlink tables (Fankhauser, Askari & Tyson 2023, AJ
+  166:59): five unnamed columns ``phi_i theta_i phi_o theta_o brdf`` with phi the zenith and theta
+  the azimuth of the same two directions; a negative zenith is the direction on the far side of the
+  normal (azimuth + 180 deg), as lumos-sat reads it (its ``spherical_to_unit``).
+
+A direction (zenith z, azimuth a) is the unit vector (sin z cos a, sin z sin a, cos z) in the
+surface's frame. Rows at or beyond grazing (|zenith| >= 90 deg, where the BRDF is undefined) are
+dropped on reading, as are values at or below ``floor`` (an instrument's noise floor).
+
+The models (:data:`BRDF_MODELS`, smallest first) are spacefit's materials with grey values:
+``lambert`` (kd), the rough conductors ``ggx`` / ``beckmann`` (eta, k, alpha) and their anisotropic
+forms (alpha_x, alpha_y), and each conductor plus a diffuse term (``lambert+ggx``: a
+:class:`~spacefit.materials.DiffuseConductor`). They are evaluated by
+:func:`spacefit.materials.brdf.brdf_value`, Mitsuba's own evaluation. The fit compares logarithms
+(the values span the specular peak to the diffuse floor, five decades): the residual is
+ln(model / data) / sigma_rel, sigma_rel = sigma / value, or the ``relative_error`` given for a table
+without errors; with neither, the errors are scaled by the residuals and no verdict is given.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from spacefit.errors import InputError, check_choice, check_range
+from spacefit.fitting.params import Bijection
+from spacefit.fitting.tabular import TableFit, fit_table, smallest_adequate
+from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material
+from spacefit.materials.brdf import brdf_value
+from spacefit.materials.models import MIN_ALPHA
+
+GENERAL_COLUMNS = ("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "brdf_sr")
+# The parameters' ranges in a fit (the materials' own, open).
+PARAMETER_BOUNDS = {"kd": Bijection(0.0, 1.0), "eta": Bijection(0.0, 100.0), "k": Bijection(0.0, 100.0),
+                    "alpha": Bijection(MIN_ALPHA, 1.0), "alpha_x": Bijection(MIN_ALPHA, 1.0), "alpha_y": Bijection(MIN_ALPHA, 1.0)}
+DEFAULT_START = {"kd": 0.1, "eta": 1.5, "k": 1.0, "alpha": 0.1, "alpha_x": 0.1, "alpha_y": 0.1}
+
+
+@dataclass(frozen=True)
+class BRDFTable:
+    """Measured BRDF values.
+
+    Attributes:
+        wi, wo: (n, 3) unit directions towards the light and the detector in the surface's frame.
+        value: (n,) the BRDF, sr^-1.
+        sigma: (n,) its standard errors, sr^-1, or None (not stated).
+        source: where it came from (a path), for messages.
+    """
+
+    wi: np.ndarray
+    wo: np.ndarray
+    value: np.ndarray
+    sigma: np.ndarray | None
+    source: str
+
+    def __len__(self) -> int:
+        return len(self.value)
+
+
+def unit_vectors(zenith_deg: np.ndarray, azimuth_deg: np.ndarray) -> np.ndarray:
+    """(n, 3) unit vectors of zenith and azimuth angles (deg; a negative zenith is on the far side)."""
+    z, a = np.radians(zenith_deg), np.radians(azimuth_deg)
+    return np.stack([np.sin(z) * np.cos(a), np.sin(z) * np.sin(a), np.cos(z)], axis=-1)
+
+
+def read_brdf_table(path: str | Path, *, floor: float = 0.0) -> BRDFTable:
+    """Read a BRDF table in the general format or the Starlink (lumos-sat) format (module docstring),
+    dropping grazing rows and values at or below ``floor`` (sr^-1).
+
+    Raises:
+        InputError: an unreadable row, missing columns, a negative BRDF or error, nothing left.
+        OSError: the file cannot be read.
+    """
+    check_range("floor", floor, 0.0, unit="sr^-1")
+    path = Path(path)
+    rows = [line for line in path.read_text(encoding="utf-8").splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    if not rows:
+        raise InputError(f"BRDF table {path}: no data rows.")
+    header = [h.strip() for h in rows[0].split(",")]
+    if all(_is_number(h) for h in rows[0].replace(",", " ").split()):
+        numbers = _numbers(path, rows, 5)
+        wi, wo = unit_vectors(numbers[:, 0], numbers[:, 1]), unit_vectors(numbers[:, 2], numbers[:, 3])
+        zenith = np.abs(numbers[:, [0, 2]])
+        value, sigma = numbers[:, 4], None
+    else:
+        missing = [c for c in GENERAL_COLUMNS if c not in header]
+        if missing:
+            raise InputError(f"BRDF table {path}: the header {header} lacks {missing}; the general format's columns are "
+                             f"{', '.join(GENERAL_COLUMNS)} (and optionally sigma_sr).")
+        table = list(csv.DictReader(rows))
+        names = [*GENERAL_COLUMNS, *(["sigma_sr"] if "sigma_sr" in header else [])]
+        numbers = _numbers(path, [",".join(r[c] or "" for c in names) for r in table], len(names))
+        wi, wo = unit_vectors(numbers[:, 0], numbers[:, 1]), unit_vectors(numbers[:, 2], numbers[:, 3])
+        zenith = numbers[:, [0, 2]]
+        if np.any((zenith < 0) | (zenith > 90)):
+            raise InputError(f"BRDF table {path}: theta_i_deg and theta_o_deg must lie in [0, 90] deg (zenith from the normal).")
+        value = numbers[:, 4]
+        sigma = numbers[:, 5] if len(names) == 6 else None
+        if sigma is not None and np.any(sigma <= 0):
+            raise InputError(f"BRDF table {path}: sigma_sr must be positive, row {int(np.argmax(sigma <= 0)) + 1} has {sigma[sigma <= 0][0]:g}.")
+    if np.any(value < 0):
+        raise InputError(f"BRDF table {path}: a BRDF is never negative, row {int(np.argmax(value < 0)) + 1} has {value[value < 0][0]:g} sr^-1.")
+    keep = np.all(zenith < 90.0, axis=1) & (value > floor)
+    if not keep.any():
+        raise InputError(f"BRDF table {path}: no value above the floor {floor:g} sr^-1 away from grazing.")
+    return BRDFTable(wi[keep], wo[keep], value[keep], None if sigma is None else sigma[keep], str(path))
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _numbers(path: Path, rows: Sequence[str], columns: int) -> np.ndarray:
+    out = []
+    for i, row in enumerate(rows):
+        fields = row.replace(",", " ").split()
+        if len(fields) != columns or not all(_is_number(f) for f in fields):
+            raise InputError(f"BRDF table {path}: data row {i + 1} must hold {columns} numbers, got {row.strip()!r}.")
+        out.append([float(f) for f in fields])
+    values = np.array(out, dtype=float)
+    if not np.all(np.isfinite(values)):
+        raise InputError(f"BRDF table {path}: every value must be finite.")
+    return values
+
+
+@dataclass(frozen=True)
+class BRDFModel:
+    """A material model to fit: ``diffuse`` term, microfacet ``distribution`` (or None), isotropic or not."""
+
+    name: str
+    diffuse: bool
+    distribution: str | None
+    anisotropic: bool = False
+
+    @property
+    def parameters(self) -> tuple[str, ...]:
+        """The model's parameters, in order."""
+        specular = () if self.distribution is None else ("eta", "k", *(("alpha_x", "alpha_y") if self.anisotropic else ("alpha",)))
+        return (*(("kd",) if self.diffuse else ()), *specular)
+
+    def values(self, p: dict[str, jax.Array]) -> dict[str, jax.Array]:
+        """Keyword arguments of :func:`~spacefit.materials.brdf.brdf_value` for the parameter values ``p`` (by name)."""
+        out: dict[str, jax.Array] = {"kd": p["kd"]} if self.diffuse else {}
+        if self.distribution is not None:
+            ax = p["alpha_x"] if self.anisotropic else p["alpha"]
+            ay = p["alpha_y"] if self.anisotropic else p["alpha"]
+            out.update(eta=p["eta"], k=p["k"], alpha_x=ax, alpha_y=ay, distribution=self.distribution)
+        return out
+
+    def evaluate(self, p: dict[str, jax.Array], wi: jax.Array, wo: jax.Array) -> jax.Array:
+        """The BRDF (sr^-1) at parameter values ``p`` (by name) for local directions ``wi``, ``wo`` (n, 3)."""
+        return brdf_value(wi, wo, **self.values(p))
+
+    def material(self, p: dict[str, float]) -> Material:
+        """The spacefit material of these parameter values (by name): what the renderer draws."""
+        v = {k: float(val) for k, val in self.values(p).items() if k != "distribution"}
+        if self.distribution is None:
+            return Lambert(v["kd"])
+        conductor = (v["eta"], v["k"], v["alpha_x"], v["alpha_y"], self.distribution)
+        return DiffuseConductor(v["kd"], *conductor) if self.diffuse else Conductor(*conductor)
+
+
+def _models() -> dict[str, BRDFModel]:
+    out = {"lambert": BRDFModel("lambert", True, None)}
+    for aniso in (False, True):
+        for diffuse in (False, True):
+            for dist in ("ggx", "beckmann"):
+                name = f"{'lambert+' if diffuse else ''}{dist}{'_aniso' if aniso else ''}"
+                out[name] = BRDFModel(name, diffuse, dist, aniso)
+    return out
+
+
+# The models by name, smallest (fewest parameters) first.
+BRDF_MODELS: dict[str, BRDFModel] = dict(sorted(_models().items(), key=lambda item: len(item[1].parameters)))
+
+
+def fit_brdf_table(table: BRDFTable, model: str = "lambert+ggx", *, relative_error: float | None = None,
+                   start: dict[str, float] | None = None, fixed: dict[str, float] | None = None,
+                   max_steps: int = 200) -> TableFit:
+    """Fit the material model ``model`` (:data:`BRDF_MODELS`) to a measured table (module docstring):
+    ln(model / data) against each value's relative error, the table's own (``sigma``) or
+    ``relative_error`` (a fraction); with neither the errors are scaled by the residuals. ``fixed``
+    holds parameters at given values (``{"k": 0.0}``: a dielectric's Fresnel factor, for a coated
+    surface whose eta and k the table cannot separate); the fit's ``fixed`` records them."""
+    check_choice("model", model, BRDF_MODELS)
+    m = BRDF_MODELS[model]
+    if relative_error is not None:
+        check_range("relative_error", relative_error, 0.0, lo_open=True)
+    if table.sigma is not None and relative_error is not None:
+        raise InputError(f"BRDF table {table.source} states its errors (sigma_sr); do not give `relative_error` as well.")
+    fixed = dict(fixed or {})
+    for key, value in {**(start or {}), **fixed}.items():
+        check_choice("start" if key in (start or {}) else "fixed", key, m.parameters)
+        check_range(key, value, PARAMETER_BOUNDS[key].lo, PARAMETER_BOUNDS[key].hi)
+    start = {**DEFAULT_START, **(start or {})}
+    free = [p for p in m.parameters if p not in fixed]
+    sigma = table.sigma / table.value if table.sigma is not None else relative_error
+    wi, wo = jnp.asarray(table.wi), jnp.asarray(table.wo)
+
+    def predict(x: jax.Array) -> jax.Array:
+        return m.evaluate({**fixed, **dict(zip(free, x))}, wi, wo)
+
+    result = fit_table(predict, table.value, sigma, free, [PARAMETER_BOUNDS[p] for p in free], [start[p] for p in free],
+                       log=True, max_steps=max_steps)
+    return dataclasses.replace(result, fixed=fixed)
+
+
+def fitted_material(model: str, fit: TableFit) -> Material:
+    """The material of a :func:`fit_brdf_table` fit of ``model``: its estimates and fixed values."""
+    return BRDF_MODELS[model].material({**fit.fixed, **dict(zip(fit.names, fit.values))})
+
+
+@dataclass(frozen=True)
+class ModelComparison:
+    """Fits of several models to one table, smallest first, and the smallest that fits within the errors."""
+
+    fits: dict[str, TableFit]
+    chosen: str | None
+
+    def table(self) -> str:
+        """One line per model: its parameters' count, chi^2 / dof against the misfit limit, its verdict."""
+        lines = [f"{'model':>24s} {'params':>6s} {'chi2/dof':>10s} {'limit':>7s}  verdict"]
+        for name, f in self.fits.items():
+            g = f.goodness
+            chi2 = f"{g.chi2_dof:10.4g} {g.limit:7.4g}" if g.noise_known else f"{'unknown':>10s} {'':7s}"
+            mark = "  <- smallest within the errors" if name == self.chosen else ""
+            lines.append(f"{name:>24s} {len(f.names):6d} {chi2}  {f.status.name.lower()}{mark}")
+        if self.chosen is None:
+            lines.append("no model fits within the errors" if any(f.goodness.noise_known for f in self.fits.values())
+                         else "errors unknown: give `relative_error` to choose a model")
+        return "\n".join(lines)
+
+
+def compare_brdf_models(table: BRDFTable, models: Sequence[str] = ("lambert", "ggx", "lambert+ggx", "lambert+beckmann",
+                                                                  "lambert+ggx_aniso"), *,
+                        relative_error: float | None = None, fixed: dict[str, float] | None = None) -> ModelComparison:
+    """Fit each of ``models`` (ordered by their number of parameters; ``fixed`` values held in those that
+    have them) and choose the smallest that is no misfit (:func:`spacefit.fitting.tabular.smallest_adequate`)."""
+    for name in models:
+        check_choice("models", name, BRDF_MODELS)
+    ordered = sorted(models, key=lambda n: len(BRDF_MODELS[n].parameters))
+    fits = {name: fit_brdf_table(table, name, relative_error=relative_error,
+                                 fixed={k: v for k, v in (fixed or {}).items() if k in BRDF_MODELS[name].parameters})
+            for name in ordered}
+    chosen = smallest_adequate(list(fits.values()))
+    return ModelComparison(fits, None if chosen is None else ordered[chosen])
+
+
+def simulate_brdf_table(material: Material, zenith_i_deg: Sequence[float], zenith_o_deg: Sequence[float],
+                        azimuth_o_deg: Sequence[float] = (0.0,), *, relative_error: float = 0.0, seed: int = 0) -> BRDFTable:
+    """A table of ``material``'s BRDF at every combination of incident zenith (azimuth 180 deg) and
+    outgoing zenith and azimuth, with multiplicative Gaussian noise of ``relative_error`` (stated
+    as each value's sigma when positive)."""
+    from spacefit.materials.brdf import brdf
+
+    check_range("relative_error", relative_error, 0.0, 1.0)
+    zi, zo, ao = np.meshgrid(np.asarray(zenith_i_deg, float), np.asarray(zenith_o_deg, float), np.asarray(azimuth_o_deg, float),
+                             indexing="ij")
+    wi = unit_vectors(zi.ravel(), np.full(zi.size, 180.0))
+    wo = unit_vectors(zo.ravel(), ao.ravel())
+    value = np.asarray(jax.jit(lambda a, b: brdf(material, a, b))(wi, wo), dtype=float)
+    value *= np.exp(relative_error * np.random.default_rng(seed).standard_normal(value.size))
+    keep = value > 0
+    sigma = relative_error * value[keep] if relative_error > 0 else None
+    return BRDFTable(wi[keep], wo[keep], value[keep], sigma, f"simulated {type(material).__name__}")
+

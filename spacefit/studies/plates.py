@@ -1,0 +1,158 @@
+"""The light curve of a target made of flat plates, and fits of the plates' materials to observed magnitudes.
+
+Each plate (:class:`Plate`) has an area, a normal and a tangent in the target's frame, and a
+spacefit material. The irradiance at an observer at distance d is
+
+    E = E_sun / d^2 sum_k A_k f_k(wi, wo) |n_k . wi| |n_k . wo|,
+
+f_k the plate's BRDF (:func:`spacefit.materials.brdf.brdf_value`, Mitsuba's evaluation, both sides
+alike as the renderer's ``twosided``, 0 where sun and observer are on opposite sides), wi and wo the
+directions towards the sun and the observer: the renderer's integrated irradiance of the same
+plates for a point target (no plate shadowing or lighting another, one bounce; the test renders
+the two-plate satellite and compares). A target in the Earth's shadow is dark.
+
+:func:`fit_plates` fits named values of the plates' materials (``"array.kd"``, ``"chassis.alpha"``
+for both roughnesses) to observed magnitudes with :func:`spacefit.fitting.tabular.fit_table`: the
+residual is the magnitude's, (m_model - m_obs) / sigma_m, as ln(E_model / E_obs) / (0.4 ln 10
+sigma_m); without stated errors the errors are scaled by the residuals. Observations in the
+Earth's shadow are left out.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from spacefit.errors import InputError, check_choice, check_range, check_vector
+from spacefit.fitting.brdf_table import PARAMETER_BOUNDS
+from spacefit.fitting.tabular import TableFit, fit_table
+from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material
+from spacefit.materials.brdf import brdf, brdf_value
+from spacefit.materials.registry import with_material_values
+from spacefit.precision import float64
+from spacefit.studies.observing import LN_PER_MAGNITUDE, LightCurveObservations, irradiance_of, magnitude_of
+
+
+@dataclass(frozen=True)
+class Plate:
+    """A flat plate: ``area_m2``, unit ``normal`` and ``tangent`` (the direction of a conductor's
+    ``alpha_x``; made normal to ``normal``) in the target's frame, and its material."""
+
+    name: str
+    area_m2: float
+    normal: tuple[float, float, float]
+    material: Material
+    tangent: tuple[float, float, float] = (1.0, 0.0, 0.0)
+
+    def __post_init__(self) -> None:
+        check_range(f"{self.name}.area_m2", self.area_m2, 0.0, lo_open=True, unit="m^2")
+        n = check_vector(f"{self.name}.normal", self.normal)
+        if np.linalg.norm(n) == 0:
+            raise InputError(f"`{self.name}.normal` must not be (0, 0, 0).")
+        n = n / np.linalg.norm(n)
+        t = check_vector(f"{self.name}.tangent", self.tangent)
+        t = t - np.dot(t, n) * n
+        if np.linalg.norm(t) < 1e-6:
+            raise InputError(f"`{self.name}.tangent` must not be parallel to its normal {tuple(n)}.")
+        object.__setattr__(self, "normal", tuple(n.tolist()))
+        object.__setattr__(self, "tangent", tuple((t / np.linalg.norm(t)).tolist()))
+
+    def frame(self) -> np.ndarray:
+        """(3, 3) rows: tangent, bitangent, normal (the plate's local frame in the target's)."""
+        n, t = np.array(self.normal), np.array(self.tangent)
+        return np.stack([t, np.cross(n, t), n])
+
+
+def _grey(plate: Plate, name: str) -> float:
+    value = getattr(plate.material, name)
+    if isinstance(value, tuple):
+        raise InputError(f"`{plate.name}.{name}` is an RGB value {value}; a light-curve fit varies grey values only.")
+    return float(value)
+
+
+FIELDS = {Lambert: ("kd",), Conductor: ("eta", "k", "alpha_x", "alpha_y"), DiffuseConductor: ("kd", "eta", "k", "alpha_x", "alpha_y")}
+
+
+def _plate_brdf(plate: Plate, wi: jax.Array, wo: jax.Array, values: Mapping[str, jax.Array]) -> jax.Array:
+    """The plate's BRDF with some of its material's values replaced (by field name; JAX-traceable)."""
+    if not values:
+        return brdf(plate.material, wi, wo)
+    fields = {f: values[f] if f in values else _grey(plate, f) for f in FIELDS[type(plate.material)]}
+    if isinstance(plate.material, Lambert):
+        return brdf_value(wi, wo, kd=fields["kd"])
+    return brdf_value(wi, wo, kd=fields.get("kd"), eta=fields["eta"], k=fields["k"], alpha_x=fields["alpha_x"],
+                      alpha_y=fields["alpha_y"], distribution=plate.material.distribution)
+
+
+@float64
+def plates_irradiance(plates: Sequence[Plate], sun: np.ndarray, observer: np.ndarray, range_m: np.ndarray,
+                      sun_irradiance_w_m2: float, values: Mapping[str, Mapping[str, jax.Array]] | None = None) -> jax.Array:
+    """Irradiance at the observer (W m^-2) of the plates lit by the sun (module docstring); ``sun``,
+    ``observer`` (n, 3) unit directions from the target in its frame, ``range_m`` (n,). ``values``:
+    per plate name, material values replacing the plate's own (a fit's)."""
+    total = jnp.zeros(len(range_m))
+    for plate in plates:
+        frame = jnp.asarray(plate.frame())
+        wi, wo = jnp.asarray(sun) @ frame.T, jnp.asarray(observer) @ frame.T
+        f = _plate_brdf(plate, wi, wo, (values or {}).get(plate.name, {}))
+        total = total + plate.area_m2 * f * jnp.abs(wi[:, 2]) * jnp.abs(wo[:, 2])
+    return sun_irradiance_w_m2 * total / jnp.asarray(range_m) ** 2
+
+
+@float64
+def predict_magnitudes(plates: Sequence[Plate], observations: LightCurveObservations, sun_irradiance_w_m2: float = 1360.0) -> np.ndarray:
+    """The plates' magnitudes in the observations' band at their geometry (inf in the Earth's shadow or unlit)."""
+    e = np.asarray(plates_irradiance(plates, observations.sun, observations.observer, observations.range_m, sun_irradiance_w_m2))
+    return magnitude_of(np.where(observations.in_shadow, 0.0, e), observations.band, sun_irradiance_w_m2)
+
+
+def _split(name: str, plates: Sequence[Plate]) -> tuple[str, str]:
+    plate, _, field = name.partition(".")
+    check_choice("free", plate, [p.name for p in plates])
+    material = next(p for p in plates if p.name == plate).material
+    check_choice(f"free ({plate})", field, (*FIELDS[type(material)], *(("alpha",) if "alpha_x" in FIELDS[type(material)] else ())))
+    return plate, field
+
+
+def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, free: Sequence[str], *,
+               sun_irradiance_w_m2: float = 1360.0, max_steps: int = 200) -> TableFit:
+    """Fit the plates' material values ``free`` (``"plate.field"``; ``alpha`` sets both roughnesses)
+    to the observed magnitudes outside the Earth's shadow (module docstring), from the plates' values."""
+    names = list(free)
+    if not names:
+        raise InputError("`free` names no value to fit (e.g. ['array.kd', 'chassis.alpha']).")
+    split = [_split(n, plates) for n in names]
+    lit = ~observations.in_shadow
+    obs = observations.subset(lit)
+    plate_of = {p.name: p for p in plates}
+    start = [_grey(plate_of[p], "alpha_x" if f == "alpha" else f) for p, f in split]
+    data = irradiance_of(obs.magnitude, obs.band, sun_irradiance_w_m2)
+    sigma = None if obs.magnitude_sigma is None else LN_PER_MAGNITUDE * obs.magnitude_sigma
+
+    def predict(x: jax.Array) -> jax.Array:
+        values: dict[str, dict[str, jax.Array]] = {}
+        for (plate, field), v in zip(split, x):
+            for f in (("alpha_x", "alpha_y") if field == "alpha" else (field,)):
+                values.setdefault(plate, {})[f] = v
+        return plates_irradiance(plates, obs.sun, obs.observer, obs.range_m, sun_irradiance_w_m2, values)
+
+    bounds = [PARAMETER_BOUNDS[f] for _, f in split]
+    return fit_table(predict, data, sigma, names, bounds, start, log=True, max_steps=max_steps)
+
+
+def fitted_plates(plates: Sequence[Plate], fit: TableFit) -> list[Plate]:
+    """The plates with a :func:`fit_plates` fit's values in their materials."""
+    out = []
+    for plate in plates:
+        values = {}
+        for name, v in zip(fit.names, fit.values):
+            p, _, field = name.partition(".")
+            if p == plate.name:
+                values[field] = float(v)
+        out.append(dataclasses.replace(plate, material=with_material_values(plate.material, values, where=plate.name)) if values else plate)
+    return out
