@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from spacefit.digests import digests, mesh_files
+from spacefit.digests import changed, digests, mesh_files
 from spacefit.errors import InputError, check_choice, check_path, check_type
 from spacefit.geometry.mesh import export_stl
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
@@ -243,6 +243,10 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     try:
         result = fit(observations, free, progress=progress, on_step=checkpoint.update, on_end=checkpoint.end,
                      ended=checkpoint.ended, **options.keywords())
+        edited = changed(checkpoint.digests)  # the files read at the start, read again: a result of files that changed is none
+        if edited:
+            raise InputError(f"{', '.join(map(repr, edited))} changed while the fit ran (SHA-256 differs from the start's); "
+                             "nothing was written: run the fit again on the files as they are now.")
         t_fit = time.perf_counter() - t0
         if not quiet and last[0] < last[1]:
             display(last[0], last[0])  # the solve stopped before its step limit: end the display there

@@ -245,3 +245,27 @@ def test_a_store_written_before_checksums_is_recomputed_once(finished, tmp_path,
         sf.sweep(sphere_scene(tmp_path), AXES, store=store, quiet=True)
     assert len(calls) == 6
     same_store(store, copy)
+
+
+def test_a_reference_edited_while_the_fit_runs_is_refused_with_nothing_written(tmp_path, monkeypatch, capsys):
+    from spacefit.fitting import loop
+
+    mesh = write_sphere_obj(tmp_path / "sphere.obj", subdivisions=2)
+    scene = small_scene(mesh, {"material": "white_paint", "kd": 0.2}, render={"resolution": [16, 16], "spp": 2})
+    (tmp_path / "scene.toml").write_text(scene.to_toml())
+    reference = tmp_path / "ref.exr"
+    sf.write_exr(reference, sf.render(scene.with_values({"parts.sphere.kd": 0.5})))
+    solve = loop.fit
+
+    def edited_while_solving(*args, **kwargs):
+        result = solve(*args, **kwargs)
+        sf.write_exr(reference, sf.read_exr(reference) * 1.01)  # the same path, other contents, before the report
+        return result
+
+    monkeypatch.setattr(loop, "fit", edited_while_solving)
+    out = tmp_path / "fit"
+    assert main(["fit", str(reference), "--scene", str(tmp_path / "scene.toml"), "--free", "parts.sphere.kd", "--out", str(out),
+                 "--solver", "adam", "--max-steps", "2", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "ref.exr" in err and "changed while the fit ran" in err
+    assert not out.exists()
