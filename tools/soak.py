@@ -47,9 +47,11 @@ ROOT = Path(__file__).resolve().parents[1]
 OK, LOSS, WRONG, CRASH, SKIPPED = "ok", "data loss", "wrong result", "crash", "skipped"
 COUNTED = (LOSS, WRONG, CRASH)
 EXIT = {signal.SIGINT: 130, signal.SIGTERM: 143}
-# SIGTERM in Python's start-up, before the command line sets its handler: the default action (the
-# process ends by the signal, before any work; a shell reports 143 too).
-BEFORE_START = {signal.SIGTERM: (-signal.SIGTERM,)}
+# A signal outside spacefit's handlers: in Python's start-up, before the first module sets them, or in
+# the interpreter's exit after the work is done and written (Python restores the default handlers
+# there): the default action, the process ends by the signal, silently (a shell reports 130 / 143
+# as for the handled exit). A traceback is a crash in any case.
+BY_THE_SIGNAL = {signal.SIGTERM: (-signal.SIGTERM,), signal.SIGINT: (-signal.SIGINT,)}
 RENDER_FILES = {"preview.png", "radiance.exr", "render.json", "scene.toml"}
 SIGNAL_OF = {"kill": signal.SIGKILL, "int": signal.SIGINT, "term": signal.SIGTERM}
 SCENE = {"render.resolution": "[96, 96]", "render.spp": "24", "camera.pixel_pitch_mm": "14"}
@@ -178,7 +180,7 @@ class Soak:
         store.parent.mkdir()
         at = self.moment(self.sweep_s * 1.1)
         code, err = Run(self.sweep_args(store)).after(at, sig)
-        why = crashed(code, err, {0, EXIT.get(sig, -sig), *BEFORE_START.get(sig, ())})
+        why = crashed(code, err, {0, EXIT.get(sig, -sig), *BY_THE_SIGNAL.get(sig, ())})
         if why:
             return Outcome(case, CRASH, f"at {at:.1f} s: {why}")
         loss = self.kept(case, store)
@@ -298,7 +300,7 @@ class Soak:
         out = self.fresh(case)
         at = self.moment(5.0)
         first, err = Run(self.render_args(out)).after(at, sig)
-        why = crashed(first, err, {0, EXIT.get(sig, -sig), *BEFORE_START.get(sig, ())})
+        why = crashed(first, err, {0, EXIT.get(sig, -sig), *BY_THE_SIGNAL.get(sig, ())})
         if why:
             return Outcome(case, CRASH, f"at {at:.1f} s: {why}")
         bad = self.render_result(case, out, f"at {at:.1f} s: ")
