@@ -45,6 +45,21 @@ def small_scene(mesh: Path, material: dict[str, Any], **sections: dict[str, Any]
     return scene_from_dict(data)
 
 
+def write_sphere_fit_case(folder: Path, subdivisions: int, size: int, spp: int) -> Path:
+    """A Lambert sphere fit in ``folder``: ``ref.exr`` rendered at kd 0.5 (seed 7) and ``scene.toml``
+    starting at kd 0.2, ``size`` x ``size`` px at ``spp`` (Levenberg-Marquardt converges in a few steps)."""
+    import spacefit as sf
+
+    mesh = write_sphere_obj(folder / "sphere.obj", subdivisions=subdivisions)
+    truth = small_scene(mesh, {"material": "white_paint", "kd": 0.5}, camera={"pixel_pitch_mm": 0.5},
+                        render={"resolution": [size, size], "spp": spp, "seed": 7})
+    sf.write_exr(folder / "ref.exr", sf.render(truth))
+    start = small_scene(mesh, {"material": "white_paint", "kd": 0.2}, camera={"pixel_pitch_mm": 0.5},
+                        render={"resolution": [size, size], "spp": spp})
+    (folder / "scene.toml").write_text(start.to_toml())
+    return folder
+
+
 def pixel_directions(scene: Scene) -> np.ndarray:
     """World directions from the camera through each pixel centre, (h, w, 3), unit length."""
     from spacefit.scene.assembly import assemble

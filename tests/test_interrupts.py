@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import small_scene, write_sphere_obj
+from helpers import write_sphere_fit_case
 
 import spacefit as sf
 from spacefit.cli import INTERRUPTED, TERMINATED, main
@@ -54,15 +54,7 @@ class Killed(BaseException):
 @pytest.fixture(scope="module")
 def fit_case(tmp_path_factory) -> Path:
     """A Lambert sphere: a reference at kd 0.5 and a scene starting at kd 0.2 (Levenberg-Marquardt converges in a few steps)."""
-    d = tmp_path_factory.mktemp("fitcase")
-    mesh = write_sphere_obj(d / "sphere.obj", subdivisions=2)
-    truth = small_scene(mesh, {"material": "white_paint", "kd": 0.5}, camera={"pixel_pitch_mm": 0.5},
-                        render={"resolution": [32, 32], "spp": 8, "seed": 7})
-    sf.write_exr(d / "ref.exr", sf.render(truth))
-    start = small_scene(mesh, {"material": "white_paint", "kd": 0.2}, camera={"pixel_pitch_mm": 0.5},
-                        render={"resolution": [32, 32], "spp": 8})
-    (d / "scene.toml").write_text(start.to_toml())
-    return d
+    return write_sphere_fit_case(tmp_path_factory.mktemp("fitcase"), subdivisions=2, size=32, spp=8)
 
 
 @pytest.mark.parametrize("max_steps", [pytest.param("50", marks=pytest.mark.slow), "3"])

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from helpers import small_scene, write_plate_obj, write_sphere_obj
+from helpers import small_scene, write_plate_obj, write_sphere_fit_case
 
 import spacefit as sf
 from spacefit.cli import INTERRUPTED, TERMINATED, main
@@ -302,15 +302,7 @@ def spacefit_process(args: list[str]) -> subprocess.Popen:
 @pytest.fixture(scope="module")
 def fit_case(tmp_path_factory) -> Path:
     """A Lambert sphere: a reference at kd 0.5 and a scene starting at kd 0.2, slow enough to interrupt."""
-    d = tmp_path_factory.mktemp("fitcase")
-    mesh = write_sphere_obj(d / "sphere.obj", subdivisions=3)
-    truth = small_scene(mesh, {"material": "white_paint", "kd": 0.5}, camera={"pixel_pitch_mm": 0.5},
-                        render={"resolution": [48, 48], "spp": 16, "seed": 7})
-    sf.write_exr(d / "ref.exr", sf.render(truth))
-    start = small_scene(mesh, {"material": "white_paint", "kd": 0.2}, camera={"pixel_pitch_mm": 0.5},
-                        render={"resolution": [48, 48], "spp": 16})
-    (d / "scene.toml").write_text(start.to_toml())
-    return d
+    return write_sphere_fit_case(tmp_path_factory.mktemp("fitcase"), subdivisions=3, size=48, spp=16)
 
 
 def fit_args(case: Path, out: Path, *extra: str) -> list[str]:
