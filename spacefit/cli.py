@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import importlib
 import os
 import signal
 import sys
@@ -147,8 +148,9 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
 
 def _sweep(args: argparse.Namespace) -> int:
     """Run ``spacefit sweep``; on Ctrl-C say where the finished points are; a dask sweep that cannot go on exits 1."""
+    _load("spacefit.studies.sweep", "xarray", "zarr", "dask.array")  # deferred: the studies' modules and the store's (1 s), which render never needs
     from spacefit.studies.cluster import ClusterError
-    from spacefit.studies.sweep import read_sweep_file, sweep, verify_store  # deferred: the studies' modules (0.2 s), which render never needs
+    from spacefit.studies.sweep import read_sweep_file, sweep, verify_store
 
     if args.verify:
         report = verify_store(args.sweep)
@@ -205,6 +207,7 @@ def _sensor_values(items: Sequence[str]) -> dict[str, object]:
 def _fit(args: argparse.Namespace) -> int:
     """Run ``spacefit fit``; exit code 0 when the fit succeeded, else the verdict's (:func:`exit_code`)."""
     # deferred: the fitting stack imports JAX and optimistix (1.5 s), which render never needs
+    _load("spacefit.fitting.loop", "spacefit.fitting.observation_files", "spacefit.fitting.problem", "spacefit.fitting.report")
     from spacefit.fitting.loop import FitOptions
     from spacefit.fitting.observation_files import ObservationFiles
     from spacefit.fitting.problem import FitRender
@@ -241,6 +244,15 @@ def exit_code(status: Status) -> int:
         return 0
     return {Status.NO_PROGRESS: NO_PROGRESS, Status.MISFIT: MISFIT, Status.AT_BOUND: AT_BOUND,
             Status.INTERRUPTED: INTERRUPTED, Status.TERMINATED: TERMINATED}.get(status, NOT_CONVERGED)
+
+
+def _load(*modules: str) -> None:
+    """Import ``modules`` with Ctrl-C and SIGTERM waiting for the end (then raised as KeyboardInterrupt /
+    Terminated): a signal inside an extension module's import surfaces as an ImportError traceback."""
+    with deferred_interrupts() as interrupts:
+        for name in modules:
+            importlib.import_module(name)
+    interrupts.check()
 
 
 def _terminate(signum: int, frame: object) -> None:
@@ -293,10 +305,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         t0 = time.perf_counter()
         # deferred: Mitsuba and the scene stack, timed as the "imports" stage of --timings (and not loaded by --help);
         # a signal waits for their end (about 1 s): one inside an import leaves Mitsuba half-loaded, and the exit aborts
-        with deferred_interrupts() as interrupts:
-            from spacefit.pipeline import export_part_stl, render_to_folder
-            from spacefit.scene.toml import load_scene
-        interrupts.check()
+        _load("spacefit.pipeline", "spacefit.scene.toml")
+        from spacefit.pipeline import export_part_stl, render_to_folder
+        from spacefit.scene.toml import load_scene
 
         imports_s = time.perf_counter() - t0
 
