@@ -152,6 +152,8 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
     names = list(check_name_list("free", free))
     split = [_split(n, plates) for n in names]
     lit = ~observations.in_shadow
+    if not lit.any():
+        raise InputError(f"every observation of {observations.source} is in the Earth's shadow: there is nothing to fit.")
     obs = observations.subset(lit)
     plate_of = {p.name: p for p in plates}
     start = [_grey(plate_of[p], "alpha_x" if f == "alpha" else f) for p, f in split]
