@@ -149,6 +149,24 @@ def check_path(name: str, value: object) -> Path:
     return Path(value)
 
 
+def read_text_rows(name: str, value: object, what: str) -> list[str]:
+    """The lines of the text file ``value`` (argument ``name``, a ``what`` such as ``"BRDF table"``) that
+    are neither blank nor ``#`` comments; a file that is not UTF-8 text is refused.
+
+    Raises:
+        InputError: not a path, or not text.
+        OSError: the file cannot be read.
+    """
+    path = check_path(name, value)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as err:
+        raise InputError(f"{what} {str(path)!r} is not a text file (UTF-8): byte {err.start} is {err.object[err.start:err.start + 1]!r}.") from None
+    if "\0" in text:
+        raise InputError(f"{what} {str(path)!r} is not a text file: it holds NUL characters.")
+    return [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+
+
 def check_type(name: str, value: object, cls: type | tuple[type, ...], what: str) -> None:
     """Raise :class:`InputTypeError` unless ``value`` is an instance of ``cls``; ``what`` names it (``"an sf.Sensor"``)."""
     if not isinstance(value, cls):

@@ -109,6 +109,14 @@ def test_a_ggx_table_is_fitted_back_and_chosen(tmp_path):
     saved = json.loads((folder / "fit.json").read_text())
     assert saved["values"]["alpha"] == pytest.approx(fit.value("alpha")) and saved["status"] == "CONVERGED"
     assert (folder / "report.txt").read_text().startswith("converged\ngoodness of fit: chi^2/dof")
+    with pytest.raises(InputError, match="previous spacefit table-fit result; pass --overwrite"):
+        write_table_fit(folder, fit)
+    assert write_table_fit(folder, fit, overwrite=True) == folder
+    (tmp_path / "mine").mkdir()
+    (tmp_path / "mine" / "notes.txt").write_text("kept")
+    with pytest.raises(InputError, match=r"files spacefit did not write \(notes.txt\)"):
+        write_table_fit(tmp_path / "mine", fit, overwrite=True)
+    assert [p.name for p in (tmp_path / "mine").iterdir()] == ["notes.txt"]
 
 
 def test_fit_arguments_are_checked():

@@ -304,8 +304,223 @@ def check_command_line_fit(plate: dict[str, Any], data: st.DataObject) -> None:
     assert_clean(code, err, (0, 1, 2, 3, 4, 5, 6))
 
 
+
+# Cells of a measured table: numbers in and out of range, non-numbers, non-finite and empty ones.
+CELLS = st.one_of(st.sampled_from(["0", "10", "45", "89.9", "90", "95", "-10", "-95", "180", "400", "0.1", "1e-3", "-0.5", "0",
+                                   "nan", "inf", "-inf", "abc", "", "1e999", "1,5", '"3"', "2020-01-01T00:00:00"]),
+                  st.floats(-200, 200).map(repr), st.text(max_size=4))
+BRDF_HEADERS = ["theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,brdf_sr", "theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,brdf_sr,sigma_sr",
+                "theta_i_deg,phi_i_deg,brdf_sr", "a,b,c,d,e", "", None]  # None: the Starlink format's unnamed columns
+TIMES = st.sampled_from(["2020-03-01T04:00:00", "2020-03-01 04:10:00", "2020-03-01", "yesterday", "", "5", "nan", "2020-13-45T99:00:00",
+                         "1000000-01-01T00:00:00", "J2000", "2020-03-01T04:00:00Z", "1850-01-01T00:00:00"])
+LIGHT_CURVE_HEADERS = ["time_utc,magnitude,sun_x,sun_y,sun_z,observer_x,observer_y,observer_z,range_m",
+                       "time_utc,magnitude,magnitude_sigma,altitude_deg,azimuth_deg,height_m",
+                       "observation_time,satellite_height,satellite_altitude,satellite_azimuth,ab_magnitude",
+                       "time_utc,magnitude", "magnitude,range_m", ""]
+GARBAGE = st.one_of(st.binary(max_size=40), st.sampled_from([b"", b"\n\n", b"# only a comment\n", b"\xff\xfe\x00x", b"\x00" * 8]))
+
+
+# Plausible cells of each column (the general formats' names; the Starlink BRDF format's by position).
+PLAUSIBLE = {"brdf": ["0.1", "0.5", "2"], "sigma": ["0.01", "0.1"], "time": ["2020-03-01T04:00:00", "2020-03-01T04:10:00"],
+             "magnitude": ["5", "6.5"], "sun": ["0.2", "1", "-0.5"], "observer": ["0.3", "1", "-0.5"], "range": ["5e5", "1e6"],
+             "altitude": ["30", "60", "-10"], "azimuth": ["0", "120"], "height": ["550", "5.5e5"], "deg": ["0", "10", "45", "80"]}
+
+
+def column_cells(column: str) -> st.SearchStrategy:
+    """Cells of a column: plausible nine times in ten (by the first key of :data:`PLAUSIBLE` its name holds), else random."""
+    plausible = next((v for k, v in PLAUSIBLE.items() if k in column), PLAUSIBLE["deg"])
+    return st.one_of(*[st.sampled_from(plausible)] * 9, st.one_of(CELLS, TIMES))
+
+
+def table_text(data: st.DataObject, header: str | None, columns: list[str]) -> bytes:
+    """A text table: ``header`` (None: none) and up to 4 rows of cells of ``columns`` (sometimes one too few or too
+    many), separated as CSV or by spaces."""
+    width = data.draw(st.sampled_from([len(columns)] * 8 + [len(columns) - 1, len(columns) + 1]))
+    cells = st.tuples(*[column_cells((columns + ["deg"])[min(i, len(columns))]) for i in range(width)]).map(list)
+    rows = data.draw(st.lists(cells, min_size=1, max_size=4))
+    sep = "," if header is not None else data.draw(st.sampled_from([" ", ",", "\t"]))
+    lines = ([header] if header is not None else []) + [sep.join(r) for r in rows]
+    return ("\n".join(lines) + "\n").encode()
+
+
+def table_path(plate: dict[str, Any], data: st.DataObject, make: Callable[[], bytes]) -> Any:
+    """A file of ``make()``'s bytes or of garbage, or a value that is not a path."""
+    kind = data.draw(st.sampled_from(["table"] * 6 + ["garbage", "junk"]))
+    if kind == "junk":
+        return data.draw(st.one_of(st.none(), st.integers(), st.just(""), st.lists(st.text(max_size=3), max_size=2)))
+    path = Path(tempfile.mkdtemp(dir=plate["dir"])) / "table.csv"
+    path.write_bytes(make() if kind == "table" else data.draw(GARBAGE))
+    return path
+
+
+@pytest.fixture(scope="module")
+def brdf_table(tmp_path_factory) -> dict[str, Any]:
+    """A small measured BRDF table with errors, and a fit of a Lambert model to it."""
+    from spacefit.fitting.brdf_table import simulate_brdf_table
+
+    table = simulate_brdf_table(sf.Lambert(0.4), [10.0, 40.0], [0.0, 30.0, 60.0], relative_error=0.05)
+    return {"table": table, "fit": sf.fit_brdf_table(table, "lambert", max_steps=5)}
+
+
+def check_read_brdf_table(plate: dict[str, Any], data: st.DataObject) -> None:
+    """sf.read_brdf_table of garbage files and paths: refused, or rows with unit directions above the
+    surface, finite BRDF values above the floor and positive errors."""
+    header = data.draw(st.sampled_from(BRDF_HEADERS))
+    columns = header.split(",") if header else ["deg", "deg", "deg", "deg", "brdf"]
+    path = table_path(plate, data, lambda: table_text(data, header, columns))
+    floor = data.draw(st.sampled_from([0.0, 0.0, 0.0, 1e-3, -1.0, None, "0.1", math.nan]))
+    table = outcome(lambda: sf.read_brdf_table(path, floor=floor))
+    event("read" if table is not None else "refused")
+    if table is not None:
+        assert len(table) > 0 and np.all(np.isfinite(table.value)) and np.all(table.value > floor)
+        for w in (table.wi, table.wo):
+            assert w.shape == (len(table), 3)
+            np.testing.assert_allclose(np.linalg.norm(w, axis=1), 1.0)
+        assert table.sigma is None or np.all(table.sigma > 0)
+
+
+def check_fit_brdf_table(plate: dict[str, Any], data: st.DataObject, brdf_table: dict[str, Any]) -> None:
+    """sf.fit_brdf_table, sf.compare_brdf_models, sf.fitted_material and sf.write_table_fit with
+    some arguments random: refused, or finite values and a material."""
+    table, fit = brdf_table["table"], brdf_table["fit"]
+    call = data.draw(st.sampled_from(["fit", "compare", "material", "write"]))
+    if call == "fit":
+        valid = {"table": table, "model": "lambert", "relative_error": None, "start": {"kd": 0.3}, "fixed": None, "max_steps": 2}
+        odd = {"model": st.one_of(JUNK, st.sampled_from(["ggx", "lambert+ggx_aniso", "phong"])),
+               "start": st.one_of(JUNK, st.dictionaries(st.sampled_from(["kd", "alpha", "k"]), JUNK, max_size=2)),
+               "fixed": st.one_of(JUNK, st.dictionaries(st.sampled_from(["kd", "eta", "k"]), JUNK, max_size=2)),
+               "relative_error": st.one_of(JUNK, st.sampled_from([0.05, 0.0, -1.0]))}
+        bad = data.draw(st.lists(st.sampled_from(sorted(valid)), min_size=1, max_size=3, unique=True))
+        args = {k: (data.draw(odd.get(k, JUNK)) if k in bad else v) for k, v in valid.items()}
+        result = outcome(lambda: sf.fit_brdf_table(**args))
+        assert result is None or np.all(np.isfinite(result.values))
+    elif call == "compare":
+        models = data.draw(st.one_of(JUNK, st.lists(st.sampled_from(["lambert", "ggx", "phong"]), max_size=2)))
+        fixed = data.draw(st.one_of(st.none(), JUNK))
+        relative_error = data.draw(st.one_of(st.none(), JUNK))
+        result = outcome(lambda: sf.compare_brdf_models(table, models, relative_error=relative_error, fixed=fixed))
+        assert result is None or set(result.fits) <= set(sf.BRDF_MODELS)
+    elif call == "material":
+        model = data.draw(st.one_of(JUNK, st.sampled_from(sorted(sf.BRDF_MODELS))))
+        result = outcome(lambda: sf.fitted_material(model, data.draw(st.one_of(st.just(fit), JUNK))))
+        assert result is None or isinstance(result, sf.Lambert)
+    else:
+        folder = Path(tempfile.mkdtemp(dir=plate["dir"]))
+        if data.draw(st.booleans()):
+            (folder / "notes.txt").write_text("mine")
+        before = sorted(p.name for p in folder.iterdir())
+        out = data.draw(st.one_of(st.just(folder), st.just(folder / "new"), JUNK))
+        inputs = data.draw(st.one_of(st.none(), st.just({"table": "t.csv"}), JUNK))
+        result = outcome(lambda: sf.write_table_fit(out, data.draw(st.one_of(st.just(fit), JUNK)), inputs=inputs))
+        if result is None:
+            assert sorted(p.name for p in folder.iterdir()) == before
+        else:
+            assert sorted(p.name for p in Path(result).iterdir()) == ["fit.json", "report.txt"]
+
+
+def check_read_light_curve(plate: dict[str, Any], data: st.DataObject) -> None:
+    """sf.read_light_curve of garbage files, sites and bands: refused, or finite magnitudes and unit directions."""
+    header = data.draw(st.sampled_from(LIGHT_CURVE_HEADERS))
+    path = table_path(plate, data, lambda: table_text(data, header, header.split(",")))
+    site = data.draw(st.sampled_from([sf.Site(32.4, -110.8, 2791.0)] * 4 + [None, "Tucson", (32.4, -110.8)]))
+    band = data.draw(st.sampled_from(["V"] * 4 + ["AB532", None, "Q", 5]))
+    obs = outcome(lambda: sf.read_light_curve(path, site=site, band=band))
+    event("read" if obs is not None else "refused")
+    if obs is not None:
+        n = len(obs)
+        assert n > 0 and np.all(np.isfinite(obs.magnitude)) and np.all(obs.range_m > 0)
+        for w in (obs.sun, obs.observer):
+            assert w.shape == (n, 3)
+            np.testing.assert_allclose(np.linalg.norm(w, axis=1), 1.0)
+
+
+def two_plates() -> list[Any]:
+    return [sf.Plate("body", 2.0, (0.0, 0.0, -1.0), sf.Lambert(0.3)), sf.Plate("array", 4.0, (0.0, 1.0, 0.0), sf.Conductor(1.5, 0.0, 0.2, 0.2))]
+
+
+def check_plates(plate: dict[str, Any], data: st.DataObject) -> None:
+    """sf.Site, sf.Plate, sf.predict_magnitudes, sf.fit_plates and sf.fitted_plates with random arguments."""
+    from spacefit.studies.observing import LightCurveObservations
+
+    n = 6
+    angle = np.linspace(0.2, 1.2, n)
+    sun = np.stack([np.zeros(n), np.sin(angle), np.cos(angle)], axis=1)
+    obs = LightCurveObservations(np.full(n, 5.0), np.full(n, 0.1), "V", sun, np.tile([0.0, 0.6, 0.8], (n, 1)), np.full(n, 1e6),
+                                 np.zeros(n, bool), None, "fuzz")
+    call = data.draw(st.sampled_from(["site", "plate", "predict", "fit", "fitted"]))
+    if call == "site":
+        args = data.draw(st.tuples(st.one_of(st.floats(-200, 200), JUNK), st.one_of(st.floats(-400, 400), JUNK),
+                                   st.one_of(st.floats(-1e3, 2e4), JUNK)))
+        site = outcome(lambda: sf.Site(*args))
+        assert site is None or (abs(site.latitude_deg) <= 90 and abs(site.longitude_deg) <= 360)
+    elif call == "plate":
+        args = [data.draw(st.one_of(st.just(v), JUNK)) for v in ("p", 1.0, (0.0, 0.0, 1.0), sf.Lambert(0.5), (1.0, 0.0, 0.0))]
+        made = outcome(lambda: sf.Plate(*args))
+        if made is not None:
+            e = outcome(lambda: sf.predict_magnitudes([made], obs))
+            assert e is None or not np.any(np.isnan(e))
+    else:
+        plates = data.draw(st.one_of(st.just(two_plates()), JUNK, st.lists(st.one_of(st.just(two_plates()[0]), JUNK), max_size=2)))
+        observations = data.draw(st.one_of(st.just(obs), JUNK))
+        if call == "predict":
+            magnitudes = outcome(lambda: sf.predict_magnitudes(plates, observations, data.draw(st.one_of(st.just(1360.0), JUNK))))
+            assert magnitudes is None or not np.any(np.isnan(magnitudes))
+        else:
+            free = data.draw(st.one_of(st.just(["body.kd"]), st.lists(st.sampled_from(["body.kd", "array.alpha", "array.kd", "x.kd"]),
+                                                                       max_size=2), JUNK))
+            fit = outcome(lambda: sf.fit_plates(plates, observations, free, max_steps=data.draw(st.one_of(st.just(2), JUNK))))
+            if call == "fitted" and fit is not None:
+                fitted = outcome(lambda: sf.fitted_plates(data.draw(st.one_of(st.just(plates), JUNK)), fit))
+                assert fitted is None or len(fitted) == len(plates)
+
+
+def check_fit_light_curve(plate: dict[str, Any], data: st.DataObject) -> None:
+    """sf.fit_light_curve and sf.light_curve_convergence with some arguments random (at least one)."""
+    scene = plate["scene"]
+    if data.draw(st.booleans()):
+        valid = {"scene": scene, "tolerance": 0.01, "phase_deg": [10.0, 40.0]}
+        bad = data.draw(st.lists(st.sampled_from(sorted(valid)), min_size=1, max_size=2, unique=True))
+        args = {k: (data.draw(JUNK) if k in bad else v) for k, v in valid.items()}
+        result = outcome(lambda: sf.light_curve_convergence(args.pop("scene"), quiet=True, **args))
+        assert result is None or np.all(np.isfinite(result.irradiance_w_m2))
+        return
+    valid = {"scene": scene, "free": ["parts.plate.kd"], "points": [{"target.attitude_z_deg": a} for a in (0.0, 20.0, 40.0)],
+             "magnitude": [5.0, 5.1, 5.2], "magnitude_sigma": 0.1, "band": "V", "sun_magnitude": None, "observer_range_m": None,
+             "seed": 1, "max_steps": 1}
+    odd = {"points": st.one_of(JUNK, st.lists(st.dictionaries(st.sampled_from(["target.attitude_z_deg", "nope"]), JUNK,
+                                                               max_size=2), max_size=3)),
+           "magnitude": st.one_of(JUNK, st.lists(st.floats(), min_size=3, max_size=3)),
+           "magnitude_sigma": st.one_of(JUNK, st.lists(st.floats(-1, 1), max_size=4))}
+    bad = data.draw(st.lists(st.sampled_from(sorted(valid)), min_size=1, max_size=3, unique=True))
+    args = {k: (data.draw(odd.get(k, JUNK)) if k in bad else v) for k, v in valid.items()}
+    result = outcome(lambda: sf.fit_light_curve(**args))
+    assert result is None or np.all(np.isfinite(result.values))
+
+
+def check_new_constructors(plate: dict[str, Any], data: st.DataObject) -> None:
+    """sf.DiffuseConductor, sf.BRDFTable and sf.LightCurveObservations built from random values: refused or usable."""
+    cls = data.draw(st.sampled_from([sf.DiffuseConductor, sf.BRDFTable, sf.LightCurveObservations]))
+    good = {sf.DiffuseConductor: (0.2, 1.5, 1.0, 0.1, 0.2, "ggx"),
+            sf.BRDFTable: (np.array([[0.0, 0.0, 1.0]] * 3), np.array([[0.6, 0.0, 0.8]] * 3), np.ones(3), None, "x"),
+            sf.LightCurveObservations: (np.ones(2), None, "V", np.array([[0.0, 0.0, 1.0]] * 2), np.array([[0.0, 0.6, 0.8]] * 2),
+                                        np.ones(2), np.zeros(2, bool), None, "x")}[cls]
+    bad = data.draw(st.lists(st.integers(0, len(good) - 1), min_size=1, max_size=2, unique=True))
+    args = [data.draw(st.one_of(ARRAYS, JUNK)) if i in bad else v for i, v in enumerate(good)]
+    made = outcome(lambda: cls(*args))
+    if made is not None and cls is sf.DiffuseConductor:
+        result = outcome(lambda: sf.predict_magnitudes([sf.Plate("p", 1.0, (0.0, 0.0, 1.0), made)], sf.LightCurveObservations(*good)))
+        assert result is None or not np.any(np.isnan(result))
+    elif made is not None and cls is sf.BRDFTable:
+        fit = outcome(lambda: sf.fit_brdf_table(made, "lambert", relative_error=0.1, max_steps=2))
+        assert fit is None or np.all(np.isfinite(fit.values))
+    elif made is not None:
+        result = outcome(lambda: sf.predict_magnitudes(two_plates(), made))
+        assert result is None or not np.any(np.isnan(result))
+
+
 CHECKS = [check_scene_values, check_camera, check_constructors, check_fit, check_observation, check_sensor, check_studies,
-          check_command_line_render, check_command_line_fit]
+          check_command_line_render, check_command_line_fit, check_read_brdf_table, check_read_light_curve, check_plates,
+          check_fit_light_curve, check_new_constructors]
 
 
 @pytest.mark.parametrize("check", CHECKS, ids=[c.__name__.removeprefix("check_") for c in CHECKS])
@@ -313,6 +528,12 @@ CHECKS = [check_scene_values, check_camera, check_constructors, check_fit, check
 @given(data=st.data())
 def test_fuzz(plate, check, data):
     check(plate, data)
+
+
+@settings(FAST, max_examples=30)
+@given(data=st.data())
+def test_fuzz_brdf_table_fits(plate, brdf_table, data):
+    check_fit_brdf_table(plate, data, brdf_table)
 
 
 @pytest.mark.slow

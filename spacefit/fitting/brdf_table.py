@@ -40,7 +40,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import InputError, check_choice, check_range
+from spacefit.errors import InputError, check_array, check_choice, check_count, check_name_list, check_range, check_type, quote, read_text_rows
 from spacefit.fitting.params import Bijection
 from spacefit.fitting.tabular import TableFit, fit_table, smallest_adequate
 from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material
@@ -71,6 +71,27 @@ class BRDFTable:
     sigma: np.ndarray | None
     source: str
 
+    def __post_init__(self) -> None:
+        check_type("source", self.source, str, "a string")
+        value = check_array("value", self.value).astype(float)
+        if value.ndim != 1 or not np.all(np.isfinite(value)) or np.any(value < 0):
+            raise InputError(f"`value` must be a vector of finite BRDF values >= 0 sr^-1, got {quote(self.value)}.")
+        for name in ("wi", "wo"):
+            w = check_array(name, getattr(self, name)).astype(float)
+            if w.shape != (len(value), 3) or not np.all(np.isfinite(w)):
+                raise InputError(f"`{name}` must be ({len(value)}, 3) finite directions (one per value), got shape {w.shape}.")
+            with np.errstate(over="ignore"):
+                norm = np.linalg.norm(w, axis=1)
+            if not np.allclose(norm, 1.0, atol=1e-6):
+                raise InputError(f"`{name}` must hold unit vectors, got lengths {quote(np.linalg.norm(w, axis=1))}.")
+            object.__setattr__(self, name, w)
+        object.__setattr__(self, "value", value)
+        if self.sigma is not None:
+            sigma = check_array("sigma", self.sigma).astype(float)
+            if sigma.shape != value.shape or not np.all(np.isfinite(sigma) & (sigma > 0)):
+                raise InputError(f"`sigma` must be None or {len(value)} positive finite errors (sr^-1), got {quote(self.sigma)}.")
+            object.__setattr__(self, "sigma", sigma)
+
     def __len__(self) -> int:
         return len(self.value)
 
@@ -90,8 +111,8 @@ def read_brdf_table(path: str | Path, *, floor: float = 0.0) -> BRDFTable:
         OSError: the file cannot be read.
     """
     check_range("floor", floor, 0.0, unit="sr^-1")
+    rows = read_text_rows("path", path, "BRDF table")
     path = Path(path)
-    rows = [line for line in path.read_text(encoding="utf-8").splitlines() if line.strip() and not line.lstrip().startswith("#")]
     if not rows:
         raise InputError(f"BRDF table {path}: no data rows.")
     header = [h.strip() for h in rows[0].split(",")]
@@ -133,6 +154,8 @@ def _is_number(text: str) -> bool:
 
 
 def _numbers(path: Path, rows: Sequence[str], columns: int) -> np.ndarray:
+    if not rows:
+        raise InputError(f"BRDF table {path}: no data rows.")
     out = []
     for i, row in enumerate(rows):
         fields = row.replace(",", " ").split()
@@ -204,7 +227,11 @@ def fit_brdf_table(table: BRDFTable, model: str = "lambert+ggx", *, relative_err
     ``relative_error`` (a fraction); with neither the errors are scaled by the residuals. ``fixed``
     holds parameters at given values (``{"k": 0.0}``: a dielectric's Fresnel factor, for a coated
     surface whose eta and k the table cannot separate); the fit's ``fixed`` records them."""
+    check_type("table", table, BRDFTable, "an sf.BRDFTable (sf.read_brdf_table)")
     check_choice("model", model, BRDF_MODELS)
+    check_count("max_steps", max_steps, optional=False)
+    for name, given in (("start", start), ("fixed", fixed)):
+        check_type(name, given, (dict, type(None)), "a dict of parameter values by name, or None")
     m = BRDF_MODELS[model]
     if relative_error is not None:
         check_range("relative_error", relative_error, 0.0, lo_open=True)
@@ -229,6 +256,11 @@ def fit_brdf_table(table: BRDFTable, model: str = "lambert+ggx", *, relative_err
 
 def fitted_material(model: str, fit: TableFit) -> Material:
     """The material of a :func:`fit_brdf_table` fit of ``model``: its estimates and fixed values."""
+    check_choice("model", model, BRDF_MODELS)
+    check_type("fit", fit, TableFit, "an sf.TableFit (of sf.fit_brdf_table)")
+    if sorted([*fit.names, *fit.fixed]) != sorted(BRDF_MODELS[model].parameters):
+        raise InputError(f"`fit` is not a fit of the model {model!r}: it has {sorted([*fit.names, *fit.fixed])}, "
+                         f"the model {list(BRDF_MODELS[model].parameters)}.")
     return BRDF_MODELS[model].material({**fit.fixed, **dict(zip(fit.names, fit.values))})
 
 
@@ -258,8 +290,10 @@ def compare_brdf_models(table: BRDFTable, models: Sequence[str] = ("lambert", "g
                         relative_error: float | None = None, fixed: dict[str, float] | None = None) -> ModelComparison:
     """Fit each of ``models`` (ordered by their number of parameters; ``fixed`` values held in those that
     have them) and choose the smallest that is no misfit (:func:`spacefit.fitting.tabular.smallest_adequate`)."""
-    for name in models:
+    check_type("table", table, BRDFTable, "an sf.BRDFTable (sf.read_brdf_table)")
+    for name in check_name_list("models", models):
         check_choice("models", name, BRDF_MODELS)
+    check_type("fixed", fixed, (dict, type(None)), "a dict of parameter values by name, or None")
     ordered = sorted(models, key=lambda n: len(BRDF_MODELS[n].parameters))
     fits = {name: fit_brdf_table(table, name, relative_error=relative_error,
                                  fixed={k: v for k, v in (fixed or {}).items() if k in BRDF_MODELS[name].parameters})

@@ -18,6 +18,7 @@ difference is the render noise the goodness of fit allows for.
 from __future__ import annotations
 
 import dataclasses
+import json
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -28,12 +29,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import InputError, check_count
+from spacefit.errors import InputError, InputTypeError, check_count, check_flag, check_name_list, check_path, check_type, quote
 from spacefit.fitting.goodness import Goodness, goodness
 from spacefit.fitting.loop import verdict
 from spacefit.fitting.params import Bijection
 from spacefit.fitting.solvers import Solver, Status, drive, make_solver
 from spacefit.fitting.uncertainty import CORRELATION_WARN
+from spacefit.locks import holding_lock
 from spacefit.precision import float64
 
 Predict = Callable[[jax.Array], jax.Array]
@@ -126,6 +128,8 @@ def fit_table(
     """
     data = np.asarray(data, dtype=float)
     check_count("max_steps", max_steps)
+    if not names:
+        raise InputError("no parameter is left to fit: `free` names none (e.g. ['array.kd']), or every one is `fixed`.")
     if data.ndim != 1 or data.size <= len(names):
         raise InputError(f"`data` must be a vector of more values than the {len(names)} free parameters, got shape {data.shape}.")
     if log and not np.all(data > 0):
@@ -199,12 +203,23 @@ def _fit(predict: Predict, data: np.ndarray, sigma: np.ndarray | None, names: tu
     return TableFit(names, x, np.sqrt(np.diag(cov)), cov, status, fit_goodness, r, outcome.steps)
 
 
-def write_table_fit(out_dir: str | Path, fit: TableFit, *, inputs: Mapping[str, Any] | None = None) -> Path:
+@holding_lock("out_dir")
+def write_table_fit(out_dir: str | Path, fit: TableFit, *, inputs: Mapping[str, Any] | None = None, overwrite: bool = False) -> Path:
     """Write ``fit.json`` (:meth:`TableFit.to_dict`, the package versions and, if given, the
-    ``inputs``) and ``report.txt`` (:meth:`TableFit.report`) into ``out_dir`` all at once (on an
-    error nothing is left behind), as an image fit's folder has them."""
-    from spacefit.output import staged_output, versions, write_json
+    ``inputs``: names and JSON values) and ``report.txt`` (:meth:`TableFit.report`) into ``out_dir``
+    all at once (on an error nothing is left behind), as an image fit's folder has them. The folder
+    must be new or empty, or hold an earlier table fit and ``overwrite`` be given
+    (:func:`~spacefit.output.prepare_output`); it is written holding its lock (:mod:`spacefit.locks`)."""
+    from spacefit.output import prepare_output, staged_output, versions, write_json
 
+    check_type("fit", fit, TableFit, "an sf.TableFit")
+    check_type("inputs", inputs, (Mapping, type(None)), "a dict of names and JSON values, or None")
+    check_name_list("inputs", list(inputs or {}))
+    try:
+        json.dumps(dict(inputs or {}), allow_nan=False)
+    except (TypeError, ValueError, RecursionError) as err:
+        raise InputTypeError(f"`inputs` must hold JSON values (strings, finite numbers, lists, dicts): {err}; got {quote(inputs)}.") from None
+    prepare_output(check_path("out_dir", out_dir), "table-fit", overwrite=check_flag("overwrite", overwrite))
     with staged_output(out_dir) as stage:
         write_json(stage / "fit.json", {**fit.to_dict(), "versions": versions(), **({"inputs": dict(inputs)} if inputs else {})})
         (stage / "report.txt").write_text(fit.report() + "\n", encoding="utf-8")

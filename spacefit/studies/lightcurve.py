@@ -37,14 +37,15 @@ requested magnitude precision needs.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from spacefit.errors import InputError, check_choice, check_count, check_direction, check_range, check_vector
+from spacefit.errors import (InputError, check_array, check_choice, check_count, check_direction, check_name_list, check_range,
+                             check_type, check_vector, quote)
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.scene.assembly import assemble
 from spacefit.scene.parameters import scene_value, sun_angles_deg, sun_direction
@@ -332,6 +333,7 @@ def light_curve_convergence(scene: Scene, *, tolerance: float = 0.01, **kwargs: 
     spp, at twice the resolution and at four times the spp, and compare: a point target needs few
     pixels, and this says whether the scene's are enough (the irradiance of the points that are lit
     at the scene's settings; a dark point's change is not relative)."""
+    check_scene(scene)
     check_range("tolerance", tolerance, 0.0, lo_open=True)
     base = light_curve(scene, **kwargs)
     width, height = scene.render.resolution
@@ -376,11 +378,25 @@ def fit_light_curve(
     from spacefit.rendering.derivatives import render_function
 
     check_scene(scene)
-    if sun_magnitude is None:
-        sun_magnitude = SUN_MAGNITUDES[check_choice("band", band, SUN_MAGNITUDES)]
-    magnitude = np.asarray(magnitude, dtype=float)
+    free = list(check_name_list("free", free))
+    band_magnitude = SUN_MAGNITUDES[check_choice("band", band, SUN_MAGNITUDES)]
+    sun_magnitude = band_magnitude if sun_magnitude is None else check_range("sun_magnitude", sun_magnitude)
+    check_count("seed", seed, 0, optional=False)
+    check_count("max_steps", max_steps, optional=False)
+    magnitude = check_vector("magnitude", magnitude, None)
+    if isinstance(points, (str, bytes, Mapping)) or not isinstance(points, Sequence):
+        raise InputError(f"`points` must be a list of dicts of scene values, got {quote(points)}.")
     if len(points) != len(magnitude):
         raise InputError(f"`points` and `magnitude` must be as long: {len(points)} points, {len(magnitude)} magnitudes.")
+    for i, p in enumerate(points):
+        check_type(f"points[{i}]", p, Mapping, "a dict of scene values")
+        for key, value in p.items():
+            check_type(f"points[{i}] key", key, str, "a scene key (a string)")
+            check_range(f"points[{i}].{key}", value)
+    if magnitude_sigma is not None:
+        sigma_given = check_array("magnitude_sigma", magnitude_sigma)
+        magnitude_sigma = check_vector("magnitude_sigma", np.broadcast_to(sigma_given, magnitude.shape) if sigma_given.ndim == 0
+                                       else sigma_given, len(magnitude))
     geometry = sorted({key for p in points for key in p})
     if any(set(p) != set(geometry) for p in points):
         raise InputError(f"every point must set the same values, {geometry}; got {[sorted(p) for p in points]}.")

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from spacefit.errors import InputError, check_choice, check_range
+from spacefit.errors import InputError, check_array, check_choice, check_range, check_type, quote, read_text_rows
 from spacefit.studies.lightcurve import SUN_MAGNITUDES
 
 # The Earth's (equatorial) radius, m, as lumos-sat takes it (a sphere).
@@ -46,6 +46,8 @@ EARTH_RADIUS_M = 6378.0e3
 POMENIS_COLUMNS = ("observation_time", "satellite_height", "satellite_altitude", "satellite_azimuth", "ab_magnitude")
 TARGET_FRAME_COLUMNS = ("sun_x", "sun_y", "sun_z", "observer_x", "observer_y", "observer_z", "range_m")
 SITE_COLUMNS = ("altitude_deg", "azimuth_deg", "height_m")
+# The greatest height above the Earth a light curve may give (m): the Moon's distance, twice.
+MAX_HEIGHT_M = 8e8
 
 
 @dataclass(frozen=True)
@@ -86,6 +88,33 @@ class LightCurveObservations:
     time_utc: np.ndarray | None
     source: str
 
+    def __post_init__(self) -> None:
+        check_type("source", self.source, str, "a string")
+        check_choice("band", self.band, SUN_MAGNITUDES)
+        magnitude = _finite("magnitude", self.magnitude, 1)
+        n = len(magnitude)
+        fields = {"magnitude": magnitude, "range_m": _finite("range_m", self.range_m, 1, n)}
+        if np.any(fields["range_m"] <= 0):
+            raise InputError(f"`range_m` must be positive, got {quote(self.range_m)}.")
+        if self.magnitude_sigma is not None:
+            fields["magnitude_sigma"] = _finite("magnitude_sigma", self.magnitude_sigma, 1, n)
+            if np.any(fields["magnitude_sigma"] <= 0):
+                raise InputError(f"`magnitude_sigma` must be None or positive, got {quote(self.magnitude_sigma)}.")
+        for name in ("sun", "observer"):
+            v = _finite(name, getattr(self, name), 2, n)
+            scaled = v / np.maximum(np.abs(v).max(axis=-1, keepdims=True), 1e-300)
+            norm = np.linalg.norm(scaled, axis=-1, keepdims=True)
+            if v.shape[1:] != (3,) or np.any(norm == 0):
+                raise InputError(f"`{name}` must be ({n}, 3) directions, none (0, 0, 0), got {quote(getattr(self, name))}.")
+            fields[name] = scaled / norm
+        shadow = check_array("in_shadow", self.in_shadow, "a bool array")
+        if shadow.shape != (n,):
+            raise InputError(f"`in_shadow` must be {n} booleans, got shape {shadow.shape}.")
+        if self.time_utc is not None and np.shape(self.time_utc) != (n,):
+            raise InputError(f"`time_utc` must be None or {n} times, got {quote(self.time_utc)}.")
+        for name, value in fields.items():
+            object.__setattr__(self, name, value)
+
     def __len__(self) -> int:
         return len(self.magnitude)
 
@@ -96,6 +125,15 @@ class LightCurveObservations:
                                       self.range_m[rows], self.in_shadow[rows], pick(self.time_utc), self.source)
 
 
+def _finite(name: str, value: object, ndim: int, n: int | None = None) -> np.ndarray:
+    """``value`` as a finite float array of ``ndim`` dimensions (the first of length ``n`` if given, else at least 1)."""
+    arr = check_array(name, value).astype(float)
+    if arr.ndim != ndim or len(arr) != (n if n is not None else max(len(arr), 1)) or not np.all(np.isfinite(arr)):
+        count = f"{n}" if n is not None else "one or more"
+        raise InputError(f"`{name}` must be {count} finite values{' (rows)' if ndim > 1 else ''}, got {quote(value)}.")
+    return arr
+
+
 def sun_directions_enu(times_utc: Sequence[str], site: Site) -> np.ndarray:
     """(n, 3) unit vectors towards the sun in the site's east-north-up frame, by astropy, offline."""
     from astropy import units as u
@@ -104,13 +142,26 @@ def sun_directions_enu(times_utc: Sequence[str], site: Site) -> np.ndarray:
     from astropy.utils import iers
 
     iers.conf.auto_download = False
+    iso = [str(t).strip().replace(" ", "T", 1) for t in times_utc]  # 2020-03-01T04:00:00 or 2020-03-01 04:00:00
     try:
-        times = Time(list(times_utc), scale="utc")
-    except ValueError as err:
-        raise InputError(f"`time_utc` must be ISO 8601 times (UTC): {err}") from None
+        times = Time(iso, format="isot", scale="utc")
+    except ValueError:
+        bad = next(t for t, text in zip(times_utc, iso) if not _is_time(text, Time))
+        raise InputError(f"`time_utc` must be ISO 8601 times (UTC, 2020-03-01T04:00:00), got {quote(str(bad))}.") from None
     location = EarthLocation(lat=site.latitude_deg * u.deg, lon=site.longitude_deg * u.deg, height=site.height_m * u.m)
-    altaz = get_sun(times).transform_to(AltAz(obstime=times, location=location))
+    # past the bundled tables, or with their predictions old: the module docstring's 0.01 deg, with astropy's warning
+    with iers.conf.set_temp("iers_degraded_accuracy", "warn"), iers.conf.set_temp("auto_max_age", None):
+        altaz = get_sun(times).transform_to(AltAz(obstime=times, location=location))
     return altaz_to_enu(np.asarray(altaz.alt.deg), np.asarray(altaz.az.deg))
+
+
+def _is_time(text: str, time_class: type) -> bool:
+    """Whether astropy's ``time_class`` reads ``text`` as an ISO 8601 time."""
+    try:
+        time_class([text], format="isot", scale="utc")
+    except ValueError:
+        return False
+    return True
 
 
 def altaz_to_enu(altitude_deg: np.ndarray, azimuth_deg: np.ndarray) -> np.ndarray:
@@ -156,8 +207,11 @@ def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | 
         InputError: missing columns, unreadable values, a missing site or band.
         OSError: the file cannot be read.
     """
+    lines = read_text_rows("path", path, "light curve")
     path = Path(path)
-    lines = [line for line in path.read_text(encoding="utf-8").splitlines() if line.strip() and not line.lstrip().startswith("#")]
+    check_type("site", site, (Site, type(None)), "an sf.Site or None")
+    if band is not None:
+        check_choice("band", band, SUN_MAGNITUDES)
     rows = list(csv.DictReader(lines))
     if not rows:
         raise InputError(f"light curve {path}: no data rows.")
@@ -179,8 +233,6 @@ def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | 
         times = np.array([r["time_utc"] for r in rows])
         magnitude = _columns(path, rows, ("magnitude",))[:, 0]
         sigma = _columns(path, rows, ("magnitude_sigma",))[:, 0] if "magnitude_sigma" in header else None
-        if sigma is not None and np.any(sigma <= 0):
-            raise InputError(f"light curve {path}: magnitude_sigma must be positive.")
         if all(c in header for c in TARGET_FRAME_COLUMNS):
             numbers = _columns(path, rows, TARGET_FRAME_COLUMNS)
             geometry = ("frame", numbers[:, 0:3], numbers[:, 3:6], numbers[:, 6])
@@ -191,17 +243,15 @@ def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | 
             raise InputError(f"light curve {path}: the header {header} has no geometry: give {', '.join(TARGET_FRAME_COLUMNS)} "
                              f"(the target's frame) or {', '.join(SITE_COLUMNS)} (seen from a `site`).")
     if geometry[0] == "frame":
-        sun, observer, range_m = (_unit(path, geometry[1], "sun"), _unit(path, geometry[2], "observer"), geometry[3])
-        if np.any(range_m <= 0):
-            raise InputError(f"light curve {path}: range_m must be positive.")
+        sun, observer, range_m = geometry[1:]
         in_shadow = np.zeros(len(rows), dtype=bool)
     else:
         if site is None:
             raise InputError(f"light curve {path} gives the target's altitude and azimuth: give the observer's `site` "
                              f"(sf.Site(latitude_deg, longitude_deg, height_m)).")
         altitude, azimuth, height = geometry[1], geometry[2], geometry[3]
-        if np.any((altitude < -90) | (altitude > 90)) or np.any(height <= 0):
-            raise InputError(f"light curve {path}: altitudes must lie in [-90, 90] deg and heights be positive.")
+        if np.any((altitude < -90) | (altitude > 90)) or np.any((height <= 0) | (height > MAX_HEIGHT_M)):
+            raise InputError(f"light curve {path}: altitudes must lie in [-90, 90] deg and heights in (0, {MAX_HEIGHT_M:g}] m.")
         sun_enu = sun_directions_enu(times, site)
         position, range_m = target_positions(altitude, azimuth, height)
         frame = nadir_sun_frame(position, sun_enu)
@@ -209,7 +259,10 @@ def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | 
         sun = np.einsum("nij,nj->ni", frame, sun_enu)
         observer = np.einsum("nij,nj->ni", frame, towards_observer)
         in_shadow = in_earth_shadow(position, sun_enu)
-    return LightCurveObservations(magnitude, sigma, band, sun, observer, range_m, in_shadow, times, str(path))
+    try:
+        return LightCurveObservations(magnitude, sigma, band, sun, observer, range_m, in_shadow, times, str(path))
+    except InputError as err:
+        raise type(err)(f"light curve {path}: {err}") from None
 
 
 def _columns(path: Path, rows: list[dict[str, str]], names: Sequence[str]) -> np.ndarray:
@@ -223,13 +276,6 @@ def _columns(path: Path, rows: list[dict[str, str]], names: Sequence[str]) -> np
     if not np.all(np.isfinite(out)):
         raise InputError(f"light curve {path}: every value of {', '.join(names)} must be finite.")
     return out
-
-
-def _unit(path: Path, v: np.ndarray, name: str) -> np.ndarray:
-    norm = np.linalg.norm(v, axis=-1, keepdims=True)
-    if np.any(norm == 0):
-        raise InputError(f"light curve {path}: a {name} direction is (0, 0, 0).")
-    return v / norm
 
 
 def magnitude_of(irradiance_w_m2: np.ndarray, band: str, sun_irradiance_w_m2: float) -> np.ndarray:

@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import InputError, check_choice, check_range, check_vector
+from spacefit.errors import InputError, check_choice, check_count, check_name_list, check_range, check_type, check_vector, quote
 from spacefit.fitting.brdf_table import PARAMETER_BOUNDS
 from spacefit.fitting.tabular import TableFit, fit_table
 from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material
@@ -50,6 +50,9 @@ class Plate:
     tangent: tuple[float, float, float] = (1.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
+        check_type("name", self.name, str, "a string")
+        check_type(f"{self.name}.material", self.material, tuple(FIELDS), "an sf.Lambert, sf.Conductor or sf.DiffuseConductor "
+                   "(a Mirror's BRDF is a delta function: never lit towards an observer by a point sun)")
         check_range(f"{self.name}.area_m2", self.area_m2, 0.0, lo_open=True, unit="m^2")
         n = check_vector(f"{self.name}.normal", self.normal)
         if np.linalg.norm(n) == 0:
@@ -107,8 +110,27 @@ def plates_irradiance(plates: Sequence[Plate], sun: np.ndarray, observer: np.nda
 @float64
 def predict_magnitudes(plates: Sequence[Plate], observations: LightCurveObservations, sun_irradiance_w_m2: float = 1360.0) -> np.ndarray:
     """The plates' magnitudes in the observations' band at their geometry (inf in the Earth's shadow or unlit)."""
+    plates = _check_plates(plates)
+    _check_observations(observations)
+    check_range("sun_irradiance_w_m2", sun_irradiance_w_m2, 0.0, lo_open=True, unit="W m^-2")
     e = np.asarray(plates_irradiance(plates, observations.sun, observations.observer, observations.range_m, sun_irradiance_w_m2))
     return magnitude_of(np.where(observations.in_shadow, 0.0, e), observations.band, sun_irradiance_w_m2)
+
+
+def _check_plates(plates: object) -> list[Plate]:
+    """``plates`` as a list: one or more :class:`Plate` of distinct names."""
+    if isinstance(plates, (str, bytes)) or not isinstance(plates, Sequence) or not plates:
+        raise InputError(f"`plates` must be a list of one or more sf.Plate, got {quote(plates)}.")
+    for i, p in enumerate(plates):
+        check_type(f"plates[{i}]", p, Plate, "an sf.Plate")
+    names = [p.name for p in plates]
+    if len(set(names)) != len(names):
+        raise InputError(f"`plates` must have distinct names, got {names}.")
+    return list(plates)
+
+
+def _check_observations(observations: object) -> None:
+    check_type("observations", observations, LightCurveObservations, "an sf.LightCurveObservations (sf.read_light_curve)")
 
 
 def _split(name: str, plates: Sequence[Plate]) -> tuple[str, str]:
@@ -123,11 +145,15 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
                sun_irradiance_w_m2: float = 1360.0, max_steps: int = 200) -> TableFit:
     """Fit the plates' material values ``free`` (``"plate.field"``; ``alpha`` sets both roughnesses)
     to the observed magnitudes outside the Earth's shadow (module docstring), from the plates' values."""
-    names = list(free)
-    if not names:
-        raise InputError("`free` names no value to fit (e.g. ['array.kd', 'chassis.alpha']).")
+    plates = _check_plates(plates)
+    _check_observations(observations)
+    check_range("sun_irradiance_w_m2", sun_irradiance_w_m2, 0.0, lo_open=True, unit="W m^-2")
+    check_count("max_steps", max_steps, optional=False)
+    names = list(check_name_list("free", free))
     split = [_split(n, plates) for n in names]
     lit = ~observations.in_shadow
+    if not lit.any():
+        raise InputError(f"every observation of {observations.source} is in the Earth's shadow: there is nothing to fit.")
     obs = observations.subset(lit)
     plate_of = {p.name: p for p in plates}
     start = [_grey(plate_of[p], "alpha_x" if f == "alpha" else f) for p, f in split]
@@ -147,6 +173,10 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
 
 def fitted_plates(plates: Sequence[Plate], fit: TableFit) -> list[Plate]:
     """The plates with a :func:`fit_plates` fit's values in their materials."""
+    plates = _check_plates(plates)
+    check_type("fit", fit, TableFit, "an sf.TableFit (of sf.fit_plates)")
+    for name in fit.names:
+        _split(name, plates)
     out = []
     for plate in plates:
         values = {}
