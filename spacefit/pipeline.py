@@ -152,7 +152,7 @@ def export_part_stl(scene: Scene, part: str, path: str | Path) -> Path:
 
 
 def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | Path, options: FitOptions | None = None, *,
-                  quiet: bool = False, overwrite: bool = False, resume: bool = False) -> FitResult:
+                  quiet: bool = False, overwrite: bool = False, resume: bool = False, cluster: Any = None) -> FitResult:
     """Fit the ``free`` parameters to reference image files; write fit.json, fit.toml, uncertainty.json and the plots to ``out_dir``.
 
     The folder is checked writable, then every file is read and checked before rendering; on any
@@ -170,6 +170,8 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
         overwrite: replace a previous fit report in ``out_dir``.
         resume: continue the interrupted fit whose checkpoint is in ``out_dir`` (same files, free
             parameters and options but the solver's: ``solver``, ``max_steps``, ``start``, ``stop``).
+        cluster: where the renders run (:func:`~spacefit.fitting.loop.fit`'s ``cluster``: None, this
+            process; N local dask workers; a scheduler address; a dask Client).
 
     Returns:
         The fit's result.
@@ -205,7 +207,7 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     created = not Path(out_dir).exists()
     t0 = time.perf_counter()
     try:
-        result = fit(observations, free, progress=progress, on_step=checkpoint.update, **options.keywords())
+        result = fit(observations, free, progress=progress, on_step=checkpoint.update, cluster=cluster, **options.keywords())
         t_fit = time.perf_counter() - t0
         if not quiet and last[0] < last[1]:
             display(last[0], last[0])  # the solve stopped before its step limit: end the display there
