@@ -103,6 +103,7 @@ def main() -> None:
             row["same_as_first"] = bool(np.array_equal(J, reference))
             rows.append(row)
             print(row, flush=True)
+            write_csv(args.out / "scaling.csv", rows)  # so far, should a later run be stopped
     for row in rows:  # parallel efficiency against one worker process: T1 / (w T_w)
         one = next((r["step_s"] for r in rows if r["frames"] == row["frames"] and r["workers"] == 1), None)
         row["speedup"] = round(one / row["step_s"], 2) if one and row["workers"] else ""

@@ -164,7 +164,8 @@ def _on_worker(fn: Callable[..., Any], spec: FrameSpec, key: str, *args: Any) ->
     """Run ``fn`` for one frame on a dask worker: its result and the worker's address."""
     from distributed import get_worker  # here: only a worker runs it
 
-    return fn(spec, key, *args), get_worker().address
+    with render_threads(spec.scene.render.deterministic):  # once per task, not per render (see InProcess.map)
+        return fn(spec, key, *args), get_worker().address
 
 
 class OnDask:
