@@ -17,6 +17,12 @@ __version__ = "0.1.0"
 # Public name -> (module, name in that module).
 _EXPORTS: dict[str, tuple[str, str]] = {
     "Case": ("spacefit.cases", "Case"),
+    "Pass": ("spacefit.fitting.passes", "Pass"),
+    "Frame": ("spacefit.fitting.passes", "Frame"),
+    "frame_table": ("spacefit.fitting.passes", "frame_table"),
+    "plot_frames": ("spacefit.fitting.passes", "plot_frames"),
+    "arc_pass": ("spacefit.fitting.passes", "arc_pass"),
+    "simulate_pass": ("spacefit.fitting.passes", "simulate_pass"),
     "case_names": ("spacefit.cases", "case_names"),
     "load_case": ("spacefit.cases", "load_case"),
     "InputError": ("spacefit.errors", "InputError"),
@@ -120,6 +126,7 @@ __all__ = [
     "Distortion", "Intrinsics", "ObservedImage", "Sensor", "distort_image", "expected_dn", "noise_variance_dn", "observe",
     "pixel_solid_angles", "read_image", "read_sensor_file", "saturated_mask", "write_observation", "sensor_of", "format_sensor_sources",
     "MLI_SLOPE_RANGE",
+    "Pass", "Frame", "frame_table", "plot_frames", "arc_pass", "simulate_pass",
     "read_sweep_file", "sweep", "verify_store", "StoreReport", "ClusterError", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
     "plot_comparison", "plot_convergence",
     "DiffuseConductor", "BRDFTable", "BRDF_MODELS", "read_brdf_table", "fit_brdf_table", "fitted_material", "compare_brdf_models",

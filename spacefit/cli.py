@@ -83,9 +83,16 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
                                    f"{NO_PROGRESS} no progress (no step lowered the loss), {MISFIT} misfit (chi^2/dof "
                                    f"beyond its expected range: the model misses something), {AT_BOUND} a parameter at a "
                                    f"bound, {INTERRUPTED} Ctrl-C, {TERMINATED} SIGTERM; the report is written for 0 and 3 to 6.")
-    f.add_argument("references", nargs="+", metavar="REFERENCE",
+    f.add_argument("references", nargs="*", metavar="REFERENCE",
                    help="reference images fitted jointly: .exr radiance (W m^-2 sr^-1); .fits radiance (BUNIT "
                         "'W m-2 sr-1') or DN; .png / .tif DN (give --response unless spacefit wrote them)")
+    f.add_argument("--pass", dest="frames", metavar="FRAMES.csv|.ecsv|.fits",
+                   help="fit a pass: a frame table (file, time, each frame's sun, camera, target attitude, sensor values; "
+                        "README, Fitting a pass) in place of REFERENCE; --scene is the pass's one scene")
+    f.add_argument("--per-frame", metavar="NAME[,NAME...]",
+                   help="with --pass: parameters each frame has its own of, e.g. target.attitude_x_deg,image.scale")
+    f.add_argument("--workers", type=int, metavar="N", help="render on a local dask cluster of N worker processes")
+    f.add_argument("--scheduler", metavar="ADDRESS", help="render on the dask scheduler at ADDRESS (tcp://host:8786)")
     f.add_argument("--scene", dest="scenes", action="append", required=True, metavar="SCENE.toml",
                    help="scene of the references: one for all, or one per reference in order (repeatable)")
     f.add_argument("--free", required=True, metavar="NAME[,NAME...]", help=_free_help(command))
@@ -214,16 +221,33 @@ def _fit(args: argparse.Namespace) -> int:
     from spacefit.fitting.report import format_result
     from spacefit.pipeline import fit_to_folder
 
-    files = ObservationFiles(
-        args.references, args.scenes, overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, masks=args.masks,
-        sensor_file=args.sensor, sensor_values=_sensor_values(args.sensor_values) or None,
-        sensor_defaults=args.sensor_defaults, row_order=args.row_order, flat=args.flat, unit=args.unit, response=args.response,
-    )
+    reading = dict(overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, masks=args.masks,
+                   sensor_file=args.sensor, sensor_values=_sensor_values(args.sensor_values) or None,
+                   sensor_defaults=args.sensor_defaults, row_order=args.row_order, flat=args.flat, unit=args.unit,
+                   response=args.response)
+    free = [name.strip() for name in args.free.split(",")]
+    if (args.frames is None) == (not args.references):
+        raise InputError("give the reference images or `--pass FRAMES` (a frame table), one of the two.")
+    if args.frames is not None:
+        from spacefit.fitting.passes import Pass  # deferred: astropy's tables
+
+        if len(args.scenes) != 1:
+            raise InputError(f"`--pass` takes one `--scene`, the pass's (each frame's values are in its table); got {len(args.scenes)}.")
+        frames = Pass.read(args.frames)
+        files = frames.observation_files(args.scenes[0], **{k: v for k, v in reading.items() if k != "masks" or v})
+        free += frames.per_frame([name.strip() for name in args.per_frame.split(",")]) if args.per_frame else []
+    else:
+        if args.per_frame:
+            raise InputError("`--per-frame` goes with `--pass` (for references, free `NAME@k` by index).")
+        files = ObservationFiles(args.references, args.scenes, **reading)
+    if args.workers is not None and args.scheduler is not None:
+        raise InputError("give `--workers` or `--scheduler`, not both.")
     render = FitRender(**{k: v for k, v in (("spp", args.spp), ("spp_grad", args.spp_grad)) if v is not None})
     given = {"solver": args.solver, "loss": args.loss, "max_steps": args.max_steps, "stop": args.stop}
     options = FitOptions(start=_start_values(args.start) or None, render=render, **{k: v for k, v in given.items() if v is not None})
-    result = fit_to_folder(files, [name.strip() for name in args.free.split(",")], args.out, options,
-                           quiet=args.quiet, overwrite=args.overwrite, resume=args.resume)
+    cluster = args.workers if args.workers is not None else args.scheduler
+    result = fit_to_folder(files, free, args.out, options, quiet=args.quiet, overwrite=args.overwrite, resume=args.resume,
+                           cluster=cluster)
     print(format_result(result))
     code = exit_code(result.status)
     if result.status.interrupted:

@@ -102,7 +102,7 @@ STAGE_PREFIX = ".spacefit-stage-"
 RESULT_FILES = {
     "render": ({"radiance.exr", "preview.png", "scene.toml", "render.json"}, "render.json"),
     "fit": ({"fit.json", "fit.toml", "uncertainty.json", "comparison.png", "convergence.png", "residuals.fits", "residuals.png",
-             "checkpoint.json"}, "fit.json"),
+             "checkpoint.json", "frames.csv", "frames.png"}, "fit.json"),
     "table-fit": ({"fit.json", "report.txt"}, "fit.json"),
 }
 

@@ -182,7 +182,7 @@ def export_part_stl(scene: Scene, part: str, path: str | Path) -> Path:
 
 @holding_lock("out_dir")
 def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | Path, options: FitOptions | None = None, *,
-                  quiet: bool = False, overwrite: bool = False, resume: bool = False) -> FitResult:
+                  quiet: bool = False, overwrite: bool = False, resume: bool = False, cluster: Any = None) -> FitResult:
     """Fit the ``free`` parameters to reference image files; write fit.json, fit.toml, uncertainty.json and the plots to ``out_dir``.
 
     It runs holding the folder's lock (:mod:`spacefit.locks`: one writer per folder). The folder is
@@ -201,6 +201,8 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
         overwrite: replace a previous fit report in ``out_dir``.
         resume: continue the interrupted fit whose checkpoint is in ``out_dir`` (same files, free
             parameters and options but the solver's: ``solver``, ``max_steps``, ``start``, ``stop``).
+        cluster: where the renders run (:func:`~spacefit.fitting.loop.fit`'s ``cluster``: None, this
+            process; N local dask workers; a scheduler address; a dask Client).
 
     Returns:
         The fit's result.
@@ -242,7 +244,7 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     t0 = time.perf_counter()
     try:
         result = fit(observations, free, progress=progress, on_step=checkpoint.update, on_end=checkpoint.end,
-                     ended=checkpoint.ended, **options.keywords())
+                     ended=checkpoint.ended, cluster=cluster, **options.keywords())
         edited = changed(checkpoint.digests)  # the files read at the start, read again: a result of files that changed is none
         if edited:
             raise InputError(f"{', '.join(map(repr, edited))} changed while the fit ran (SHA-256 differs from the start's); "

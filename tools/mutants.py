@@ -100,6 +100,13 @@ MUTANTS = (
            "{k: t[..., j] for k, t in tangents.items()}, seed_grad))", "{k: t[..., j] for k, t in tangents.items()}, seed))",
            (CONVENTIONS,)),
     Mutant("backward-with-primal-seed", BRIDGE, "scene.backward(v, c, seed_grad)", "scene.backward(v, c, seed)", (CONVENTIONS,)),
+    # a pass: each frame's scene from its table row, each frame's Jacobian on its own rows
+    Mutant("frame-vector-components-reversed", "spacefit/fitting/passes.py",
+           "[_plain(cols[parts[c]][i]) for c in COMPONENTS]", "[_plain(cols[parts[c]][i]) for c in reversed(COMPONENTS)]",
+           ("tests/test_pass.py::test_each_frames_scene_equals_one_built_by_hand",)),
+    Mutant("frame-jacobian-on-another-frame", "spacefit/fitting/frames.py",
+           "for J, idx in zip(Js, indices))", "for J, idx in zip(Js, indices[::-1]))",
+           ("tests/test_nuisance.py::test_per_observation_pose_columns_match_finite_differences_and_act_on_their_own_observation",)),
     Mutant("logistic-inverse-width", "spacefit/fitting/params.py", "p = (x - self.lo) / (self.hi - self.lo)\n        return jnp.log(p)",
            "p = (x - self.lo) / self.hi\n        return jnp.log(p)", (PROPERTIES,)),
     Mutant("sun-to-world-towards-the-sun", "spacefit/scene/parameters.py", 'return -xp.stack([xp.cos(el) * xp.cos(az)',

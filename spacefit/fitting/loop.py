@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_count
+from spacefit.fitting.frames import Cluster, executor_of
 from spacefit.fitting.goodness import Goodness, goodness, part_chi2
 from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, setup
 from spacefit.fitting.solvers import Outcome, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name
@@ -29,7 +30,7 @@ from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.renderer import PartImage, mitsuba_scene_dict
 from spacefit.scene.schema import Scene
-from spacefit.scene.parameters import is_nuisance, parameter, scene_with_values
+from spacefit.scene.parameters import is_nuisance, observation_of, parameter, scene_with_values
 from spacefit.sensor import DN_UNIT
 
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
@@ -76,6 +77,8 @@ class FitResult:
         goodness: the goodness of fit at the result (:class:`~spacefit.fitting.goodness.Goodness`);
             None where there is no finite result (interrupted, non-finite).
         residuals: per observation, reference - model image in ``units`` (NaN where not fitted).
+        observation_goodness: per observation, the goodness of fit of its own residuals (the
+            pixel loss), counting as free the shared parameters and its own (``name@k``).
     """
 
     names: tuple[str, ...]
@@ -99,6 +102,7 @@ class FitResult:
     units: list[str] = field(default_factory=list)
     goodness: Goodness | None = None
     residuals: list[np.ndarray] = field(default_factory=list)
+    observation_goodness: list[Goodness] = field(default_factory=list)
 
     def mitsuba_scene_dict(self) -> dict[str, Any]:
         """The fitted scene as a Mitsuba scene dictionary (``mi.load_dict`` loads it).
@@ -145,6 +149,7 @@ class FitResult:
         d.pop("residuals")
         d.pop("scene")
         d["goodness"] = None if self.goodness is None else self.goodness.to_dict()
+        d["observation_goodness"] = [q.to_dict() for q in self.observation_goodness]
         d["nuisances"] = list(self.nuisances)
         d["correlation"] = np.asarray(self.correlation).tolist()
         d["status"] = self.status.value
@@ -208,6 +213,7 @@ def fit(
     on_step: Callable[[dict[str, Any]], None] | None = None,
     on_end: Callable[[dict[str, Any]], None] | None = None,
     ended: Mapping[str, Any] | None = None,
+    cluster: Cluster | None = None,
 ) -> FitResult:
     """Fit free scene parameters so that renders match reference images.
 
@@ -238,6 +244,10 @@ def fit(
         ended: such a record, of a solve that ended before its process was killed: the solve is not
             run again; ``start`` must be the record's values. The result is the one the ended fit
             would have given: same status, steps, values and verdict.
+        cluster: where the observations' renders and Jacobian columns run, as one batch per step
+            (:mod:`spacefit.fitting.frames`): None, in this process, observation by observation; an
+            int N, a new local dask cluster of N worker processes; a scheduler address; a
+            ``distributed.Client``. The values are the same bit for bit.
 
     The result's :attr:`~FitResult.status` is a verdict (:class:`Status`): no step that lowered
     the loss (:attr:`Status.NO_PROGRESS`), a parameter at a bound (:attr:`Status.AT_BOUND`) and
@@ -253,7 +263,19 @@ def fit(
         InputError: for any bad input, before rendering.
     """
     engine = _checked_solver(solver, max_steps, stop)
-    s = setup(observations, free, start=start, loss=loss, render=render, wrinkle_coordinates=wrinkle_coordinates)
+    executor = executor_of(cluster)
+    try:
+        s = setup(observations, free, start=start, loss=loss, render=render, wrinkle_coordinates=wrinkle_coordinates,
+                  executor=executor)
+        return _solve(s, engine, max_steps, stop, loss, progress, on_step, on_end, ended)
+    finally:
+        executor.close()
+
+
+def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progress: ProgressCallback | None,
+           on_step: Callable[[dict[str, Any]], None] | None, on_end: Callable[[dict[str, Any]], None] | None,
+           ended: Mapping[str, Any] | None) -> FitResult:
+    """Run the solver on a set-up problem (or report the ended solve ``ended`` again) and make its result."""
     fp, problem = s.solver_params, s.problem
 
     def residual_u(u: jax.Array) -> jax.Array:
@@ -372,6 +394,7 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
     n = len(x)
     x_user = np.asarray(s.to_user(jnp.asarray(x)), dtype=float)
     stderr, corr, loss_value, extras, renders, residuals, quality = np.full(n, np.nan), np.eye(n), math.nan, {}, [], [], None
+    own_quality: list[Goodness] = []
     per_part: list[dict[str, dict[str, float]]] = [{} for _ in problem.references]
     if status.interrupted:
         loss_value = steps.best_loss
@@ -388,6 +411,7 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         quality = goodness(r, r_alt, n, s.noise_given, shapes)
         if shapes:
             per_part = _per_part(r, r_alt, problem, quality)
+            own_quality = _per_observation(r, r_alt, s)
         at_bound = any(b.at_bound(float(v)) for b, v in zip(s.user.bijections, x_user))
         status = verdict(status, steps.moved, at_bound, quality.misfit and loss == "pixel")
         if not math.isfinite(loss_value):
@@ -408,8 +432,20 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         start=dict(zip(s.user.names, s.x0_user.tolist())), extras=extras,
         parts=[_part_rows(*row) for row in zip(problem.part_images, problem.references, renders, problem.units, problem.used, per_part)],
         scene=scene_with_values(s.scene, values, observation=0) if np.all(np.isfinite(x_user)) else None,
-        units=list(problem.units), goodness=quality, residuals=residuals,
+        units=list(problem.units), goodness=quality, residuals=residuals, observation_goodness=own_quality,
     )
+
+
+def _per_observation(r: np.ndarray, r_alt: np.ndarray, s: Setup) -> list[Goodness]:
+    """Per observation, the goodness of fit of its own residuals (pixel loss), with the shared free
+    parameters and its own (``name@k``) counted as free."""
+    out, offset = [], 0
+    for k, ref in enumerate(s.problem.references):
+        rows = slice(offset, offset + ref.size)
+        offset = rows.stop
+        n_k = sum(1 for name in s.user.names if observation_of(name)[1] in (None, k))
+        out.append(goodness(r[rows], r_alt[rows], n_k, s.noise_given, [ref.shape]))
+    return out
 
 
 def _per_part(r: np.ndarray, r_alt: np.ndarray, problem: Problem, quality: Goodness) -> list[dict[str, dict[str, float]]]:

@@ -11,6 +11,7 @@ from typing import Any
 from spacefit.errors import InputError, check_choice, check_name_list, check_path, check_range, check_type
 from spacefit.fitting.problem import Observation
 from spacefit.imageio import RESPONSES, ROW_ORDERS, SENSOR_DEFAULTS, UNITS
+from spacefit.scene.schema import Scene
 from spacefit.scene.toml import load_scene
 
 
@@ -41,6 +42,10 @@ class ObservationFiles:
         flat: a flat-field image (FITS, PNG, TIFF) of the DN references' detector, for all of them.
         unit: ``"radiance"`` / ``"DN"`` to require one (:func:`~spacefit.imageio.read_image`).
         response: ``"linear"`` / ``"srgb"`` for PNG and TIFF.
+        values: per reference, scene values (by name, as ``overrides``) set on its scene after
+            ``overrides``: a pass's frames (:class:`~spacefit.fitting.passes.Pass`); none, or one per reference.
+        frame_sensor_values: per reference, sensor fields replacing ``sensor_values``' (none, or one per reference).
+        times: per reference, its time (ISO 8601 UTC, or seconds), recorded; none, or one per reference.
     """
 
     references: Sequence[str | Path]
@@ -56,9 +61,12 @@ class ObservationFiles:
     flat: str | Path | None = None
     unit: str | None = None
     response: str | None = None
+    values: Sequence[Mapping[str, Any]] = ()
+    frame_sensor_values: Sequence[Mapping[str, Any]] = ()
+    times: Sequence[str] = ()
 
     def __post_init__(self) -> None:
-        for name in ("references", "scenes", "masks", "overrides"):  # one file (or override) may be given as itself
+        for name in ("references", "scenes", "masks", "overrides", "values", "frame_sensor_values", "times"):  # one file (or override) may be given as itself
             given = getattr(self, name)
             items = (given,) if isinstance(given, (str, Path)) else check_name_list(name, given) if name == "overrides" else given
             check_type(name, items, Sequence, "a path or a list of paths")
@@ -72,6 +80,9 @@ class ObservationFiles:
             if len(given) not in counts:
                 raise InputError(f"give one {what} for all references or one per reference; "
                                  f"got {len(given)} {what}s for {n} references.")
+        for what, given in (("values", self.values), ("frame_sensor_values", self.frame_sensor_values), ("times", self.times)):
+            if len(given) not in (0, n):
+                raise InputError(f"`{what}` must give one entry per reference or none; got {len(given)} for {n} references.")
         if self.resolution is not None:  # its range is the scene's `render.resolution`'s, checked by `load`
             if not isinstance(self.resolution, Sequence) or len(self.resolution) != 2:
                 raise InputError(f"`resolution` must be (width, height) px, got {self.resolution!r}.")
@@ -103,11 +114,26 @@ class ObservationFiles:
                 :meth:`Observation.from_file <spacefit.fitting.problem.Observation.from_file>`).
         """
         loaded = [load_scene(path, self.scene_overrides) for path in self.scenes]
-        return [Observation.from_file(path, loaded[i % len(loaded)], sensor=self.sensor_values, sensor_file=self.sensor_file,
+        return [Observation.from_file(path, self._scene(loaded[i % len(loaded)], i), sensor=self._sensor_values(i),
+                                      sensor_file=self.sensor_file,
                                       unit=self.unit, response=self.response,
                                       mask=self.masks[i % len(self.masks)] if self.masks else None, sigma=self.sigma,
                                       sensor_defaults=self.sensor_defaults, row_order=self.row_order, flat=self.flat)
                 for i, path in enumerate(self.references)]
+
+    def _scene(self, scene: Scene, i: int) -> Scene:
+        """Reference i's scene: ``scene`` with its own ``values`` (the frame named in a refusal)."""
+        if not self.values or not self.values[i]:
+            return scene
+        try:
+            return scene.with_values(dict(self.values[i]))
+        except InputError as err:
+            raise type(err)(f"reference {i} ({Path(self.references[i]).name}): {err}") from None
+
+    def _sensor_values(self, i: int) -> Mapping[str, Any] | None:
+        """Reference i's sensor values: ``sensor_values`` with its own ``frame_sensor_values``."""
+        own = self.frame_sensor_values[i] if self.frame_sensor_values else {}
+        return {**(self.sensor_values or {}), **own} or self.sensor_values
 
     def record(self, observations: Sequence[Observation]) -> dict[str, Any]:
         """What fit.json's ``inputs`` record of these files, given the observations :meth:`load` read."""
@@ -115,7 +141,10 @@ class ObservationFiles:
             "references": [str(path) for path in self.references],
             "scene_files": [str(path) for path in self.scenes],
             "overrides": self.scene_overrides,
-            "scenes": [obs.scene.to_dict() for obs in observations[:len(self.scenes)]],
+            "scenes": [obs.scene.to_dict() for obs in observations[:max(len(self.scenes), len(self.values))]],
+            "values": [dict(v) for v in self.values],
+            "frame_sensor_values": [dict(v) for v in self.frame_sensor_values],
+            "times": list(self.times),
             "sigma": self.sigma,
             "masks": [str(path) for path in self.masks],
             "sensor_file": None if self.sensor_file is None else str(self.sensor_file),

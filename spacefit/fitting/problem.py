@@ -22,11 +22,12 @@ import numpy as np
 
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_array, check_choice, negative_pixels, quote
 from spacefit.fitting.formation import dn_fn, noise_variance_dn
+from spacefit.fitting.frames import Executor, FrameSpec, InProcess, batched_renders, frame_part_image
 from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.nuisance import image_model as image_model_of
 from spacefit.fitting.params import FreeParameters, free_parameters
 from spacefit.geometry.frames import Intrinsics
-from spacefit.rendering.derivatives import check_seeds, check_spp, render_chain
+from spacefit.rendering.derivatives import check_seeds, check_spp
 from spacefit.rendering.renderer import PartImage
 from spacefit.scene.assembly import assemble
 from spacefit.scene.schema import FILTER_RADIUS_PX, Scene, check_scene
@@ -203,12 +204,13 @@ class Problem:
 
 def _problem(
     observations: Sequence[Observation], free: FreeParameters, loss: str, spp: int | None, spp_grad: int | None,
-    seed: int, seed_grad: int, integrator: str,
+    seed: int, seed_grad: int, integrator: str, executor: Executor | None = None,
 ) -> Problem:
-    renders_x, renders_alt, renders_v, residuals, part_images, references, spread = [], [], [], [], [], [], []
-    to_units, units, used_pixels = [], [], []
+    residuals, references, spread, to_units, units, used_pixels, specs, shapes = [], [], [], [], [], [], [], []
     # the image nuisances act on the render in JAX; each renderer sees the other parameters, an
-    # observation's own pose (``target.attitude_z_deg@k``) in place of the shared one
+    # observation's own pose (``target.attitude_z_deg@k``) in place of the shared one; every
+    # observation's render of a step runs in one batch (spacefit.fitting.frames)
+    executor = InProcess() if executor is None else executor
     image_model = image_model_of(free.names)
     rendered = [free.rendered(k) for k in range(len(observations))]
     for i, obs in enumerate(observations):
@@ -216,38 +218,38 @@ def _problem(
         ref, used = check_reference(obs, i)
         scene = obs.scene
         assembly = assemble(scene)
-        chain = render_chain(assembly, rendered_names, spp=spp, spp_grad=spp_grad, integrator=integrator, fd_steps=steps)
-        renders_x.append(chain.forward(seed, seed_grad))
-        alt = INDEPENDENT_SEED_OFFSET
-        renders_alt.append(chain.forward(seed + alt, seed_grad + alt))
-        renders_v.append(chain.reverse(seed, seed_grad))
+        specs.append(FrameSpec(scene, tuple(rendered_names), tuple(float(v) for v in steps), spp, spp_grad, integrator))
+        shapes.append((assembly.intrinsics.height, assembly.intrinsics.width, 3))
         if obs.sensor is not None:
             used = used & ~saturated_mask(ref, obs.sensor)  # a saturated value says only "at least this bright"
         residuals.append(_residual(obs, ref, used, loss))
         to_units.append(_in_unit_of(obs, ref.shape[-1], assembly.intrinsics))
         units.append(RADIANCE_UNIT if obs.sensor is None else DN_UNIT)
-        part_images.append(chain.renderer.part_image())
         references.append(ref)
         used_pixels.append(np.all(used, axis=-1))
         blur = 0.0 if obs.sensor is None else psf_rms_px(obs.sensor, assembly.intrinsics, ref.shape[-1])
         spread.append((FILTER_RADIUS_PX[scene.render.filter], blur))
+    indices = [r[1] for r in rendered]
+    images_x = batched_renders(executor, specs, indices, shapes, seed, seed_grad)
+    alt = INDEPENDENT_SEED_OFFSET
+    images_alt = batched_renders(executor, specs, indices, shapes, seed + alt, seed_grad + alt)
+    part_images = executor.map(frame_part_image, specs)
 
-    def modelled(render: Callable[[jax.Array], jax.Array], k: int) -> Callable[[jax.Array], jax.Array]:
-        return lambda x: to_units[k](image_model(render(x[rendered[k][1]]), x, k))
+    def modelled(images: Callable[[jax.Array], Sequence[jax.Array]]) -> Callable[[jax.Array], list[jax.Array]]:
+        return lambda x: [to_units[k](image_model(image, x, k)) for k, image in enumerate(images(x))]
 
-    def stack(renders: list[Callable[[jax.Array], jax.Array]]) -> Callable[[jax.Array], jax.Array]:
-        return lambda x: jnp.concatenate([res(modelled(render, k)(x)) for k, (res, render) in enumerate(zip(residuals, renders))])
+    def stack(images: Callable[[jax.Array], Sequence[jax.Array]]) -> Callable[[jax.Array], jax.Array]:
+        return lambda x: jnp.concatenate([res(model) for res, model in zip(residuals, modelled(images)(x))])
 
     reverse = None
-    if not np.any(free.fd_steps > 0):
+    if not np.any(free.fd_steps > 0) and isinstance(executor, InProcess):  # one Dr.Jit backward pass per observation
+        renders_v = [executor.chain(spec).reverse(seed, seed_grad) for spec in specs]
 
         def reverse(u: jax.Array) -> jax.Array:
-            x = free.to_physical(u)
-            r = jnp.concatenate([res(to_units[k](image_model(render(x[rendered[k][1]]), x, k)))
-                                 for k, (res, render) in enumerate(zip(residuals, renders_v))])
-            return 0.5 * jnp.sum(r**2)
+            images = lambda x: [render(x[indices[k]]) for k, render in enumerate(renders_v)]  # noqa: E731
+            return 0.5 * jnp.sum(stack(images)(free.to_physical(u)) ** 2)
 
-    return Problem(free, stack(renders_x), stack(renders_alt), reverse, lambda x: [modelled(render, k)(x) for k, render in enumerate(renders_x)],
+    return Problem(free, stack(images_x), stack(images_alt), reverse, modelled(images_x),
                    part_images, references, all(o.sensor is not None for o in observations), tuple(spread), tuple(units),
                    tuple(used_pixels))
 
@@ -334,9 +336,11 @@ class FitRender:
 
 def setup(
     observations: Observation | Sequence[Observation], free: Sequence[str], *, start: Mapping[str, float] | None = None,
-    loss: str = "pixel", render: FitRender = FitRender(), wrinkle_coordinates: str = "rms",
+    loss: str = "pixel", render: FitRender = FitRender(), wrinkle_coordinates: str = "rms", executor: Executor | None = None,
 ) -> Setup:
-    """Check every input and build the problem; nothing is rendered here.
+    """Check every input and build the problem; nothing is rendered here. ``executor``: where the
+    observations' renders run, as one batch per step (:mod:`spacefit.fitting.frames`; None: each
+    observation's own render functions in this process).
 
     Raises:
         InputError: for any bad input.
@@ -389,6 +393,6 @@ def setup(
         wrinkles = np.array([n in GEOMETRY for n in solver_params.names])
         solver_params = dataclasses.replace(solver_params, fd_steps=np.where(wrinkles, 0.0, solver_params.fd_steps))
     problem = _problem(observations, solver_params, loss, render.spp, render.spp_grad, render.seed, render.seed_grad,
-                       render.integrator)
+                       render.integrator, executor)
     noise_given = all(o.sensor is not None or o.sigma is not None for o in observations)
     return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index, given, noise_given)

@@ -7,6 +7,8 @@
   correlation matrix (strict JSON: a non-finite error is null);
 * ``comparison.png``, ``convergence.png``: :func:`~spacefit.fitting.plots.plot_comparison` and
   :func:`~spacefit.fitting.plots.plot_convergence`, saved through matplotlib's Agg canvas;
+* ``frames.csv``, ``frames.png`` (a pass, whose ``inputs`` give each observation's time): per frame its
+  time, goodness of fit and own parameters, and their plot against time (:mod:`spacefit.fitting.passes`);
 * ``residuals.fits``: :attr:`FitResult.residuals`, reference - model, one image extension per
   observation (``EXTNAME`` ``OBS<k>``, (channels, height, width) float32 in the unit ``BUNIT`` of the
   observation, NaN where not fitted; rows stored top row first, ``ROWORDER = 'TOP-DOWN'``), and
@@ -31,6 +33,7 @@ from astropy.io import fits
 from spacefit.errors import check_type
 from spacefit.fitting.loop import FitResult
 from spacefit.fitting.solvers import Status
+from spacefit.fitting.passes import frame_table, plot_frames, write_frame_table
 from spacefit.fitting.plots import plot_comparison, plot_convergence, plot_residuals
 from spacefit.output import staged_output, versions, write_json
 from spacefit.sensor import DN_UNIT
@@ -75,6 +78,10 @@ def write_fit_report(
         _save(plot_convergence(result), stage / "convergence.png")
         write_residuals(stage / "residuals.fits", result)
         _save(plot_residuals(result), stage / "residuals.png")
+        if inputs is not None and inputs.get("times"):  # a pass: its frames against time
+            rows = frame_table(result, files=inputs["references"], times=inputs["times"])
+            write_frame_table(stage / "frames.csv", rows)
+            _save(plot_frames(rows), stage / "frames.png")
     return Path(out_dir)
 
 

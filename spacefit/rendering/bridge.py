@@ -98,19 +98,21 @@ class DrJitScene:
         for key, t in tangent.items():
             if _differentiable(self.params[key]):
                 dr.set_grad(self.params[key], to_value(self.params[key], t))
-        image = self._render_ad(seed_grad)
-        dr.forward_to(image)
-        out = self.renderer.to_film(np.asarray(dr.grad(image), dtype=np.float32))
+        with render_threads(self.renderer.assembly.scene.render.deterministic):  # a fixed order of the film's sums
+            image = self._render_ad(seed_grad)
+            dr.forward_to(image)
+            out = self.renderer.to_film(np.asarray(dr.grad(image), dtype=np.float32))
         self._set(values, grad=False)
         return out
 
     def backward(self, values: Mapping[str, np.ndarray], cotangent: np.ndarray, seed_grad: int) -> dict[str, np.ndarray]:
         """Gradient of sum(cotangent * image) with respect to every key of ``values``, one backward pass."""
         self._set(values, grad=True)
-        image = self._render_ad(seed_grad)
-        dr.backward_from(image * mi.TensorXf(self.renderer.to_window(np.asarray(cotangent, dtype=np.float32))))
-        grads = {key: _flat_grad(self.params[key]) if _differentiable(self.params[key]) else np.zeros(np.size(values[key]), np.float32)
-                 for key in values}
+        with render_threads(self.renderer.assembly.scene.render.deterministic):
+            image = self._render_ad(seed_grad)
+            dr.backward_from(image * mi.TensorXf(self.renderer.to_window(np.asarray(cotangent, dtype=np.float32))))
+            grads = {key: _flat_grad(self.params[key]) if _differentiable(self.params[key]) else np.zeros(np.size(values[key]), np.float32)
+                     for key in values}
         self._set(values, grad=False)
         return grads
 

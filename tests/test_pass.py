@@ -1,0 +1,280 @@
+"""A pass: frame tables (CSV, ECSV, FITS, Python columns), each frame's scene equal to one built by
+hand, per-frame pose Jacobian columns against finite differences, and the joint fit of a simulated
+pass with per-frame attitude errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from astropy.table import Table
+
+import spacefit as sf
+from spacefit.fitting.frames import FrameSpec, InProcess, frame_jacobian
+from spacefit.scene.assembly import assemble
+
+# The panels case at 32 x 32 px (75 mm pixels: the 128 px field of view).
+BASE = {"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0}
+TRUTH = {"parts.panels.alpha_x": 0.15, "parts.panels.alpha_y": 0.03, "parts.legs.kd": 0.5}
+START = {"parts.panels.alpha_x": 0.12, "parts.panels.alpha_y": 0.036, "parts.legs.kd": 0.42}
+
+
+def base_scene() -> sf.Scene:
+    return sf.load_scene("spacefit/synthetic/panels.toml", BASE)
+
+
+def pass_geometry(n: int) -> list[dict[str, object]]:
+    """n frames of an observer sweeping 6 to 22 deg from the zenith round the target, the sun
+    sinking from 80 deg elevation: each frame's scene values."""
+    frames = []
+    for k, theta in enumerate(np.linspace(6.0, 22.0, n)):
+        phi = np.radians(40.0 + 50.0 * k / max(n - 1, 1))
+        t = np.radians(theta)
+        position = [25.0 * np.sin(t) * np.cos(phi), 25.0 * np.sin(t) * np.sin(phi), 25.0 * np.cos(t)]
+        frames.append({"camera.position_m": [round(float(v), 6) for v in position], "sun.elevation_deg": 80.0 - 10.0 * k / max(n - 1, 1),
+                       "sun.azimuth_deg": 200.0})
+    return frames
+
+
+def columns(frames: list[dict[str, object]], folder: str = "") -> dict[str, list[object]]:
+    """Frame table columns of ``frames``: files f<k>.exr, ISO times 10 s apart, the camera by components."""
+    out: dict[str, list[object]] = {"file": [f"{folder}f{k}.exr" for k in range(len(frames))],
+                                    "time": [f"2026-11-25T12:00:{10 * k:02d}.5" for k in range(len(frames))]}
+    for c, axis in enumerate("xyz"):
+        out[f"camera.position_m.{axis}"] = [f["camera.position_m"][c] for f in frames]
+    for key in ("sun.elevation_deg", "sun.azimuth_deg"):
+        out[key] = [f[key] for f in frames]
+    out["target.attitude_x_deg"] = [0.0] * len(frames)
+    out["sensor.exposure_time_s"] = [1e-6 * (k + 1) for k in range(len(frames))]
+    return out
+
+
+def test_frame_tables_from_csv_ecsv_fits_and_lists_agree(tmp_path):
+    frames = pass_geometry(3)
+    cols = columns(frames)
+    from_lists = sf.Pass.from_columns(cols, base_dir=tmp_path)
+    Table(cols).write(tmp_path / "frames.csv")
+    # ECSV and FITS hold the camera position as one column of 3 numbers per frame
+    whole = {k: v for k, v in cols.items() if not k.startswith("camera.position_m.")}
+    whole["camera.position_m"] = np.array([f["camera.position_m"] for f in frames])
+    Table(whole).write(tmp_path / "frames.ecsv")
+    Table(whole).write(tmp_path / "frames.fits")
+    for name in ("frames.csv", "frames.ecsv", "frames.fits"):
+        read = sf.Pass.read(tmp_path / name)
+        assert len(read) == 3
+        for a, b in zip(read.frames, from_lists.frames):
+            assert a.file == tmp_path / b.file.name and a.time == b.time and a.sensor == b.sensor
+            assert a.values.keys() == b.values.keys() and a.values["camera.position_m"] == pytest.approx(b.values["camera.position_m"], abs=1e-12)
+            assert a.values["sun.elevation_deg"] == b.values["sun.elevation_deg"]
+    assert from_lists.times_s == pytest.approx([0.0, 10.0, 20.0], abs=1e-9)
+    assert from_lists.frames[2].sensor == {"exposure_time_s": 3e-6}
+    seconds = sf.Pass.from_columns({**cols, "time": [100.0, 101.5, 103.0]})
+    assert seconds.times_s.tolist() == [0.0, 1.5, 3.0]
+
+
+def test_each_frames_scene_equals_one_built_by_hand(tmp_path):
+    frames = pass_geometry(3)
+    cols = columns(frames)
+    cols["target.attitude_x_deg"] = [0.2, -0.1, 0.0]
+    p = sf.Pass.from_columns(cols, base_dir=tmp_path)
+    scenes = p.scenes(base_scene())
+    for k, frame in enumerate(frames):
+        x, y, z = map(float, frame["camera.position_m"])
+        el, az = np.radians(frame["sun.elevation_deg"]), np.radians(200.0)
+        toward_sun = [float(v) for v in (np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el))]
+        by_hand = sf.load_scene("spacefit/synthetic/panels.toml", [
+            "render.resolution=[32, 32]", "camera.pixel_pitch_mm=75.0", f"camera.position_m=[{x!r}, {y!r}, {z!r}]",
+            f"sun.direction=[{-toward_sun[0]!r}, {-toward_sun[1]!r}, {-toward_sun[2]!r}]",
+            f"target.attitude_deg=[{cols['target.attitude_x_deg'][k]!r}, 0.0, 0.0]"])
+        ours, theirs = assemble(scenes[k]), assemble(by_hand)
+        for axis in ("position", "right", "up", "forward"):  # the camera's frame, and the target's pose
+            assert np.allclose(getattr(ours.camera, axis), getattr(theirs.camera, axis), rtol=0, atol=1e-12)
+        assert np.allclose(ours.to_world, theirs.to_world, rtol=0, atol=1e-12)
+        assert np.allclose(scenes[k].sun.direction, by_hand.sun.direction, rtol=0, atol=1e-12)
+        assert scenes[k].target == by_hand.target and scenes[k].camera == by_hand.camera
+        assert ours.intrinsics == theirs.intrinsics
+
+
+def test_a_camera_posed_by_attitude_leaves_look_at():
+    cols = {"file": ["a.exr"], "time": [0.0], "camera.position_m": [[0.0, 0.0, 25.0]], "camera.attitude_deg": [[0.0, 0.0, 10.0]]}
+    scene = sf.Pass.from_columns(cols).scenes(base_scene())[0]
+    assert scene.camera.look_at_m == () and scene.camera.attitude_deg == (0.0, 0.0, 10.0)
+
+
+@pytest.mark.parametrize(("change", "message"), [
+    ({"time": None}, "no `time` column"),
+    ({"camera.position_m.z": None}, "needs all three components"),
+    ({"time": ["2026-11-25T12:00:00", "noon", "2026-11-25T12:00:20"]}, "frame 1: `time` must be an ISO 8601"),
+    ({"sun.elevation_deg": [80.0, 95.0, 70.0]}, "frame 1 (f1.exr): `sun.elevation_deg` must be in [-90, 90]"),
+    ({"sun.elevaton_deg": [1.0, 2.0, 3.0]}, "sun.elevation_deg"),
+    ({"file": ["f0.exr"]}, "one value per frame"),
+])
+def test_bad_frame_tables_are_refused_naming_the_column(change, message):
+    cols = columns(pass_geometry(3))
+    for key, value in change.items():
+        if value is None:
+            cols.pop(key)
+        else:
+            cols[key] = value
+    with pytest.raises(sf.InputError) as err:
+        sf.Pass.from_columns(cols).scenes(base_scene())
+    assert message in str(err.value)
+
+
+def test_per_frame_names_and_their_refusal():
+    p = sf.Pass.from_columns(columns(pass_geometry(2)))
+    assert p.per_frame(["target.attitude_x_deg", "image.scale"]) == [
+        "target.attitude_x_deg@0", "target.attitude_x_deg@1", "image.scale@0", "image.scale@1"]
+    with pytest.raises(sf.InputError, match="parts.legs.kd"):
+        p.per_frame(["parts.legs.kd"])
+
+
+def test_a_frames_pose_jacobian_column_matches_central_differences():
+    """Frame 2's own attitude column, as the fit's batch computes it, against central differences of
+    renders of that frame's scene with the attitude set in the scene file (1024 spp, common seed)."""
+    scene = sf.Pass.from_columns(columns(pass_geometry(3))).scenes(base_scene())[2]
+    spec = FrameSpec(scene, ("parts.legs.kd", "target.attitude_x_deg"), (0.0, 0.5), 256, 256, "prb")
+    _, J = InProcess().map(frame_jacobian, [spec], [np.array([0.5, 0.0])], [1], [2])[0]
+    h = 0.5
+    up, down = (sf.render(scene.with_values({"target.attitude_x_deg": s * h, "render.spp": 1024, "render.seed": 11}))
+                for s in (1, -1))
+    fd = ((up - down) / (2 * h)).ravel()
+    col = J[..., 1].ravel()
+    assert np.dot(col, fd) / (np.linalg.norm(col) * np.linalg.norm(fd)) > 0.98
+    assert np.linalg.norm(col) == pytest.approx(np.linalg.norm(fd), rel=0.1)
+
+
+@pytest.fixture(scope="module")
+def small_pass(tmp_path_factory):
+    """Three frames at 24 x 24 px (radiance at 64 spp) whose target is turned 0.2, -0.25 and 0.1 deg
+    about x off the table's attitude; a fit of the legs' albedo and each frame's attitude, in this process."""
+    folder = tmp_path_factory.mktemp("pass") / "frames"
+    base = sf.load_scene("spacefit/synthetic/panels.toml", {"render.resolution": [24, 24], "camera.pixel_pitch_mm": 100.0})
+    errors = [{"target.attitude_x_deg": e} for e in (0.2, -0.25, 0.1)]
+    frames = sf.simulate_pass(base, sf.arc_pass(3), folder, errors=errors, spp=64)
+    obs = [sf.Observation.from_file(f.file, s) for f, s in zip(frames.frames, frames.scenes(base))]
+    free = ["parts.legs.kd", *frames.per_frame(["target.attitude_x_deg"])]
+    options = {"start": {"parts.legs.kd": 0.4}, "render": sf.FitRender(spp=8), "max_steps": 6}
+    return obs, free, options, sf.fit(obs, free, **options), folder
+
+
+def test_a_reduced_pass_recovers_each_frames_attitude(small_pass):
+    """The three-frame pass at 24 x 24 px, 8 spp: each frame's attitude within 0.05 deg, the legs'
+    albedo within 3 of its standard errors, and a goodness of fit per frame."""
+    _, _, _, result, _ = small_pass
+    for k, error in enumerate((0.2, -0.25, 0.1)):
+        assert abs(result.values[f"target.attitude_x_deg@{k}"] - error) < 0.05, k
+    assert abs(result.values["parts.legs.kd"] - 0.5) < 3 * result.stderr["parts.legs.kd"]
+    assert result.status.success and len(result.observation_goodness) == 3
+    rows = sf.frame_table(result, sf.Pass.read(small_pass[4] / "frames.csv"))
+    assert [r["time_s"] for r in rows] == [0.0, 10.0, 20.0]
+    assert [r["target.attitude_x_deg"] for r in rows] == [result.values[f"target.attitude_x_deg@{k}"] for k in range(3)]
+
+
+@pytest.fixture(scope="module")
+def client():
+    from spacefit.studies.cluster import connect
+
+    client, close = connect(2, None)
+    yield client
+    close()
+
+
+def same_fit(a: sf.FitResult, b: sf.FitResult) -> None:
+    assert a.values == b.values and a.stderr == b.stderr and a.status is b.status
+    assert [h["loss"] for h in a.history] == [h["loss"] for h in b.history]
+
+
+@pytest.mark.slow
+def test_a_pass_fits_the_same_on_dask_as_in_process(small_pass, client):
+    obs, free, options, in_process, _ = small_pass
+    same_fit(sf.fit(obs, free, cluster=client, **options), in_process)
+
+
+@pytest.mark.slow
+def test_a_worker_killed_mid_fit_changes_nothing(small_pass, client):
+    import os
+    import signal
+    import threading
+
+    obs, free, options, in_process, _ = small_pass
+    pids = client.run(os.getpid)
+    killed = []
+
+    def kill_one_soon(entry: dict) -> None:
+        if entry["step"] == 1:  # during the next step's renders
+            threading.Timer(0.2, lambda: (os.kill(next(iter(pids.values())), signal.SIGKILL), killed.append(1))).start()
+
+    result = sf.fit(obs, free, cluster=client, on_step=kill_one_soon, **options)
+    assert killed
+    assert set(client.run(os.getpid).values()) != set(pids.values())  # the nanny started a new worker
+    same_fit(result, in_process)
+
+
+def test_spacefit_fit_pass_writes_the_frames_table_and_plot(small_pass, tmp_path, capsys):
+    from spacefit.cli import main
+
+    folder = small_pass[4]
+    scene = tmp_path / "scene.toml"
+    scene.write_text(sf.load_scene("spacefit/synthetic/panels.toml", {"render.resolution": [24, 24], "camera.pixel_pitch_mm": 100.0}).to_toml())
+    out = tmp_path / "fit"
+    code = main(["fit", "--pass", str(folder / "frames.csv"), "--scene", str(scene), "--free", "parts.legs.kd",
+                 "--per-frame", "target.attitude_x_deg", "--start", "parts.legs.kd=0.4", "--spp", "4", "--max-steps", "2",
+                 "--out", str(out), "--quiet"])
+    assert code in (0, 3)  # converged, or not after two steps: the report is written either way
+    assert {"frames.csv", "frames.png", "fit.json"} <= {p.name for p in out.iterdir()}
+    rows = (out / "frames.csv").read_text().splitlines()
+    assert len(rows) == 4 and "target.attitude_x_deg" in rows[0] and "chi2_dof" in rows[0] and "time_s" in rows[0]
+    assert rows[2].split(",")[3] == "10.0"  # frame 1, 10 s after the first
+
+
+@pytest.mark.parametrize(("args", "message"), [
+    (["a.exr", "--pass", "frames.csv"], "one of the two"),
+    (["a.exr", "--per-frame", "target.attitude_x_deg"], "`--per-frame` goes with `--pass`"),
+    (["--pass", "frames.txt"], "extension must be one of"),
+])
+def test_bad_pass_arguments_exit_2_before_anything_is_written(tmp_path, capsys, args, message):
+    from spacefit.cli import main
+
+    code = main(["fit", *args, "--scene", "spacefit/synthetic/panels.toml", "--free", "parts.legs.kd", "--out", str(tmp_path / "out")])
+    assert code == 2 and message in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+# A calibrated camera: 500 DN per W m^-2 sr^-1, 0.5 DN per electron (1000 electrons per W m^-2 sr^-1).
+PASS_SENSOR = sf.Sensor(radiometric_scale_dn_per_w_m2_sr=500.0, gain_dn_per_electron=0.5, bias_dn=100.0, read_noise_electrons=5.0,
+                        bit_depth=16, full_well_electrons=None, diffraction=False, psf_sigma_px=0.0)
+
+
+@pytest.mark.slow
+def test_a_six_frame_pass_with_attitude_errors_recovers_materials_and_each_attitude(tmp_path):
+    """Six frames (32 x 32 px) of an observer crossing the panels' glint, observed through a sensor
+    (references at 1024 spp), each frame's target turned by up to 0.3 deg about x off its table's
+    attitude; the materials from 20 % off and each frame's attitude fitted at 32 spp."""
+    base = base_scene()
+    errors = [{"target.attitude_x_deg": float(a)} for a in np.random.default_rng(3).uniform(-0.3, 0.3, 6)]
+    frames = sf.simulate_pass(base, sf.arc_pass(6), tmp_path / "pass", errors=errors, sensor=PASS_SENSOR, spp=1024)
+    obs = [sf.Observation.from_file(f.file, s) for f, s in zip(frames.frames, frames.scenes(base))]
+    free = [*TRUTH, *frames.per_frame(["target.attitude_x_deg"])]
+    result = sf.fit(obs, free, start=START, render=sf.FitRender(spp=32), max_steps=20)
+    for name, tolerance in (("parts.panels.alpha_x", 0.05), ("parts.panels.alpha_y", 0.05), ("parts.legs.kd", 0.03)):
+        assert result.values[name] == pytest.approx(TRUTH[name], rel=tolerance), name
+    for k, error in enumerate(errors):
+        assert abs(result.values[f"target.attitude_x_deg@{k}"] - error["target.attitude_x_deg"]) < 0.05, k
+    assert len(result.observation_goodness) == 6 and all(q.noise_known for q in result.observation_goodness)
+
+
+@pytest.mark.parametrize(("cluster", "message"), [
+    (0, "`cluster` must be an integer >= 1"), (True, "`cluster` must be None, a number"), (1.5, "`cluster` must be None, a number"),
+])
+def test_a_bad_cluster_is_refused_before_anything_runs(cluster, message):
+    with pytest.raises(sf.InputError) as err:
+        sf.fit([], ["parts.legs.kd"], cluster=cluster)
+    assert message in str(err.value)
+
+
+def test_observation_files_take_one_frame_entry_per_reference():
+    with pytest.raises(sf.InputError, match="`times` must give one entry per reference"):
+        sf.ObservationFiles(["a.exr", "b.exr"], ["s.toml"], times=["0"])
+    files = sf.Pass.from_columns(columns(pass_geometry(2))).observation_files("s.toml", sensor_values={"bias_dn": 90.0})
+    assert files.times == ("2026-11-25T12:00:00.5", "2026-11-25T12:00:10.5")
+    assert files._sensor_values(1) == {"bias_dn": 90.0, "exposure_time_s": 2e-6}  # the frame's own value added to the option's
