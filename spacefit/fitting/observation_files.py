@@ -66,13 +66,20 @@ class ObservationFiles:
     times: Sequence[str] = ()
 
     def __post_init__(self) -> None:
-        for name in ("references", "scenes", "masks", "overrides", "values", "frame_sensor_values", "times"):  # one file (or override) may be given as itself
+        for name in ("references", "scenes", "masks", "overrides"):  # one file (or override) may be given as itself
             given = getattr(self, name)
             items = (given,) if isinstance(given, (str, Path)) else check_name_list(name, given) if name == "overrides" else given
             check_type(name, items, Sequence, "a path or a list of paths")
             for i, path in enumerate(items if name != "overrides" else ()):
                 check_path(f"{name}[{i}]", path)
             object.__setattr__(self, name, tuple(items))
+        for name, kind, what in (("values", Mapping, "a table of scene values"), ("frame_sensor_values", Mapping, "a table of sensor fields"),
+                                 ("times", str, "a time (ISO 8601 text)")):  # one entry per reference
+            given = getattr(self, name)
+            check_type(name, given, Sequence, f"a list with one entry per reference, each {what}")
+            for i, entry in enumerate(given):
+                check_type(f"{name}[{i}]", entry, kind, what)
+            object.__setattr__(self, name, tuple(given))
         n = len(self.references)
         if not n:
             raise InputError("`references` must name at least one reference image.")
