@@ -83,8 +83,9 @@ MUTANTS = (
     Mutant("fresnel-k-dropped", RENDERER, '"k": _spectrum(material.k),', '"k": 0.0,', (PHYSICS, PROPERTIES)),
     Mutant("kd-over-pi-twice", RENDERER, '"value": list(kd)}', '"value": [v / math.pi for v in kd]}', (PHYSICS,)),
     Mutant("path-depth-off-by-one", RENDERER, "max_depth = s.render.depth + 1", "max_depth = s.render.depth", (PHYSICS,)),
-    Mutant("default-distribution-beckmann", "spacefit/materials/models.py", 'distribution: str = "ggx"',
-           'distribution: str = "beckmann"', (PHYSICS, PROPERTIES)),
+    Mutant("default-distribution-beckmann", "spacefit/materials/models.py",
+           'distribution: str = "ggx"\n\n    def __post_init__(self) -> None:\n        object.__setattr__(self, "eta"',
+           'distribution: str = "beckmann"\n\n    def __post_init__(self) -> None:\n        object.__setattr__(self, "eta"', (PHYSICS, PROPERTIES)),
     # W-M height field (thesis eq. 2-1)
     Mutant("wm-G-exponent-sign", WM, "scale = L * (G / L) ** (D - 2.0)", "scale = L * (G / L) ** (2.0 - D)",
            ("tests/test_wm.py", PROPERTIES)),
