@@ -207,14 +207,19 @@ def test_the_estimate_is_printed_per_variable(tmp_path, capsys):
             "checksum 24.0 KiB, done 24.0 KiB); index") in err
 
 
+def kd_fit_files(folder: Path) -> Path:
+    """A Lambert sphere's reference ``ref.exr`` (kd 0.5) and ``scene.toml`` (kd 0.2, 16 x 16 px) in ``folder``."""
+    mesh = write_sphere_obj(folder / "sphere.obj", subdivisions=2)
+    scene = small_scene(mesh, {"material": "white_paint", "kd": 0.2}, render={"resolution": [16, 16], "spp": 2})
+    (folder / "scene.toml").write_text(scene.to_toml())
+    sf.write_exr(folder / "ref.exr", sf.render(scene.with_values({"parts.sphere.kd": 0.5})))
+    return folder / "ref.exr"
+
+
 def test_a_reference_edited_before_resume_is_refused_by_name(tmp_path, monkeypatch, capsys):
     from spacefit.pipeline import Checkpoint
 
-    mesh = write_sphere_obj(tmp_path / "sphere.obj", subdivisions=2)
-    scene = small_scene(mesh, {"material": "white_paint", "kd": 0.2}, render={"resolution": [16, 16], "spp": 2})
-    (tmp_path / "scene.toml").write_text(scene.to_toml())
-    reference = tmp_path / "ref.exr"
-    sf.write_exr(reference, sf.render(scene.with_values({"parts.sphere.kd": 0.5})))
+    reference = kd_fit_files(tmp_path)
     args = ["fit", str(reference), "--scene", str(tmp_path / "scene.toml"), "--free", "parts.sphere.kd", "--out",
             str(tmp_path / "fit"), "--solver", "adam", "--max-steps", "2", "--quiet"]
     monkeypatch.setattr(Checkpoint, "remove", lambda self: None)  # keep it, as an interrupted fit does
@@ -250,11 +255,7 @@ def test_a_store_written_before_checksums_is_recomputed_once(finished, tmp_path,
 def test_a_reference_edited_while_the_fit_runs_is_refused_with_nothing_written(tmp_path, monkeypatch, capsys):
     from spacefit.fitting import loop
 
-    mesh = write_sphere_obj(tmp_path / "sphere.obj", subdivisions=2)
-    scene = small_scene(mesh, {"material": "white_paint", "kd": 0.2}, render={"resolution": [16, 16], "spp": 2})
-    (tmp_path / "scene.toml").write_text(scene.to_toml())
-    reference = tmp_path / "ref.exr"
-    sf.write_exr(reference, sf.render(scene.with_values({"parts.sphere.kd": 0.5})))
+    reference = kd_fit_files(tmp_path)
     solve = loop.fit
 
     def edited_while_solving(*args, **kwargs):
