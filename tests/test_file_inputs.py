@@ -18,7 +18,7 @@ from spacefit.cli import main
 from spacefit.fitting.problem import check_reference
 from spacefit.imageio import read_image, sensor_of, sidecar_path
 from spacefit.sensor import read_sensor_file
-from spacefit.studies.sweep import parse_axes, read_sweep_file
+from spacefit.studies.sweep import axis_lengths, parse_axes, read_sweep_file
 
 # A calibrated camera as an observatory's FITS header gives it (GAIN in electrons per DN).
 CARDS = {"TELESCOP": "ground test", "OBJECT": "lander mock-up", "BUNIT": "adu", "ROWORDER": "TOP-DOWN", "RADSCALE": 4.0e4,
@@ -206,6 +206,20 @@ def test_arange_of_integers_gives_integers():
     assert axes[1].values == {"sun.elevation_deg": [10.0, 12.5, 15.0, 17.5]}
     with pytest.raises(sf.InputError, match=r"`axes\['render.spp'\].arange` must be a number, not a string: got '4'"):
         parse_axes(sf.default_scene(), {"render.spp": {"arange": [1, "4", 1]}})
+
+
+def test_linspace_of_integers_gives_integers_where_every_value_is_whole():
+    axes = parse_axes(sf.default_scene(), {"render.spp": {"linspace": [4, 16, 4]},
+                                           "sun.elevation_deg": {"linspace": [10, 20, 3]}})
+    assert axes[0].values == {"render.spp": [4, 8, 12, 16]} and all(isinstance(v, int) for v in axes[0].values["render.spp"])
+    assert axes[1].values == {"sun.elevation_deg": [10, 15, 20]}
+    with pytest.raises(sf.InputError, match=r"render.spp"):
+        parse_axes(sf.default_scene(), {"render.spp": {"linspace": [4, 17, 3]}})  # 10.5 is no whole count
+
+
+def test_an_axis_table_without_scene_keys_counts_no_points():
+    assert axis_lengths({"a": {"linspace": [0, 1, 5]}, "b": {"sun.elevation_deg": [1, 2], "sun.azimuth_deg": [3, 4]},
+                         "c": {"linspace ": [0, 1, 5]}}) == [5, 2, 0]
 
 
 def test_typos_get_the_closest_name_in_every_key_language(case, tmp_path, capsys):

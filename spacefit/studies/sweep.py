@@ -100,8 +100,12 @@ def _values(key: str, spec: Any) -> list[Any]:
         if rule == "linspace" and isinstance(spec[rule], list) and len(spec[rule]) == 3:
             start, stop, num = spec["linspace"]
             check_count(f"axes[{key!r}].linspace num", num)
-            return np.linspace(check_range(f"axes[{key!r}].linspace start", start),
-                               check_range(f"axes[{key!r}].linspace stop", stop), int(num)).tolist()
+            values = np.linspace(check_range(f"axes[{key!r}].linspace start", start),
+                                 check_range(f"axes[{key!r}].linspace stop", stop), int(num))
+            whole = all(isinstance(v, int) and not isinstance(v, bool) for v in (start, stop))
+            if whole and np.all(values == np.round(values)):  # integers stay integers (render.spp)
+                return values.astype(int).tolist()
+            return values.tolist()
         if rule == "arange" and isinstance(spec[rule], list) and len(spec[rule]) == 3:
             bounds = [check_range(f"axes[{key!r}].arange", v) for v in spec["arange"]]
             start, stop, step = bounds
@@ -119,14 +123,19 @@ def _values(key: str, spec: Any) -> list[Any]:
     return [np.asarray(v).tolist() for v in spec]
 
 
+def _zipped(spec: Any) -> bool:
+    """Whether an axis zips several scene keys: a table whose keys are scene keys (they have dots;
+    ``linspace`` and ``arange`` have none)."""
+    return isinstance(spec, Mapping) and any("." in str(k) for k in spec)
+
+
 def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
     """Check a sweep's axes against the scene (every key and value) and return them in order."""
     if not isinstance(axes, Mapping) or not axes:
         raise InputTypeError(f"`axes` must be a non-empty mapping of scene keys to lists of values, got {quote(axes)}.")
     parsed = []
     for name, spec in axes.items():
-        zipped = isinstance(spec, Mapping) and any("." in str(k) for k in spec)  # scene keys have dots; linspace, arange none
-        values = {k: _values(k, v) for k, v in spec.items()} if zipped else {name: _values(name, spec)}
+        values = {k: _values(k, v) for k, v in spec.items()} if _zipped(spec) else {name: _values(name, spec)}
         if not values:
             raise InputError(f"axis {name!r} zips no keys: give it a table of scene keys and their lists of values.")
         if len({len(v) for v in values.values()}) > 1:
@@ -494,8 +503,10 @@ def axis_lengths(axes: AxesSpec) -> list[int]:
                 return max(0, math.ceil((stop - start) / step))
             except (TypeError, ValueError, ZeroDivisionError, OverflowError):
                 return 0
-        if isinstance(spec, Mapping):  # a zipped axis: its keys' lengths are checked equal later
+        if _zipped(spec):  # its keys' lengths are checked equal later
             return max((length(v) for v in spec.values()), default=0)
+        if isinstance(spec, Mapping):
+            return 0
         return len(spec) if isinstance(spec, Sequence | np.ndarray) and not isinstance(spec, str | bytes) else 0
 
     return [length(spec) for spec in axes.values()]
