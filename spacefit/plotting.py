@@ -1,9 +1,10 @@
 """What the figures share: axis labels in words with units, the crop to the target, their axes.
 
-Every figure function takes ``ax=`` (a matplotlib Axes to draw into) or, where it draws several
-axes, ``fig=`` (a matplotlib Figure or SubFigure), and returns the axes it drew. Without one it
-makes a Figure of its own without pyplot, so the global backend (a notebook's) is left alone:
-``ax.figure.savefig(path)`` saves it. Images are cropped to the target by default (its bounding box
+Every figure function takes ``ax=`` (the matplotlib Axes to draw into: one per panel, in the
+user's own layout) or ``fig=`` (a matplotlib Figure or SubFigure to lay its panels out in), and
+returns the array of axes it drew (:func:`panels`). Without either it makes a Figure of its own
+without pyplot, so the global backend (a notebook's) is left alone: ``axes[0].figure.savefig(path)``
+saves it. A figure-wide title is drawn only on a figure the function lays out. Images are cropped to the target by default (its bounding box
 and a margin, :func:`target_box`), their axes keeping the film's pixel coordinates; ``crop=False``
 shows the whole film. Labels come from the parameter registry (each parameter's words,
 :func:`spacefit.scene.parameters.label`, and unit) and :data:`spacefit.display.QUANTITIES` for what
@@ -13,7 +14,7 @@ is not a parameter. matplotlib is imported with this module, which only the figu
 from __future__ import annotations
 
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -22,7 +23,7 @@ from matplotlib.figure import Figure, SubFigure
 from matplotlib.image import AxesImage
 
 from spacefit.display import describe
-from spacefit.errors import check_type
+from spacefit.errors import InputError, check_type
 # The crop's margin on each side: a fraction of the target's box, and at least this many pixels.
 TARGET_MARGIN = 0.15
 MIN_MARGIN_PX = 2
@@ -93,12 +94,21 @@ def show_image(ax: Axes, image: np.ndarray, box: tuple[int, int, int, int], **kw
     return ax.imshow(cropped(image, box), extent=(x0 - 0.5, x1 - 0.5, y1 - 0.5, y0 - 0.5), **kwargs)
 
 
-def new_axes(ax: Axes | None, figsize: tuple[float, float]) -> Axes:
-    """``ax``, checked, or the axes of a new Figure of ``figsize`` (inches) made without pyplot."""
+def panels(ax: Axes | Sequence[Axes] | None, fig: Figure | SubFigure | None, count: int, figsize: tuple[float, float],
+           make: Callable[[Figure | SubFigure], Any]) -> np.ndarray:
+    """The ``count`` axes a figure function draws, flat: ``ax`` (one Axes, or a sequence or array of
+    ``count``: the user's layout), checked; else ``make(figure)``'s, on ``fig`` or on a new Figure
+    of ``figsize`` (inches) made without pyplot."""
     if ax is None:
-        return Figure(figsize=figsize, layout="constrained").add_subplot()
-    check_type("ax", ax, Axes, "a matplotlib Axes")
-    return ax
+        return np.asarray(make(new_figure(fig, figsize)), dtype=object).ravel()
+    if fig is not None:
+        raise InputError("give `ax` (the axes to draw into) or `fig` (a figure to lay them out in), not both.")
+    axes = np.asarray([ax] if isinstance(ax, Axes) else list(np.ravel(np.asarray(ax, dtype=object))), dtype=object)
+    for one in axes:
+        check_type("ax", one, Axes, f"a matplotlib Axes, or {count} of them (one per panel)")
+    if len(axes) != count:
+        raise InputError(f"`ax` must be {count} matplotlib Axes here (one per panel), got {len(axes)}.")
+    return axes
 
 
 def new_figure(fig: Figure | SubFigure | None, figsize: tuple[float, float]) -> Figure | SubFigure:

@@ -67,33 +67,49 @@ def frame_rows() -> list[dict[str, float]]:
             for k in range(3)]
 
 
-# Each figure function, drawing into the figure given: name -> (call with fig=..., how many axes).
+# Each figure function: name -> (call with keyword arguments, how many axes it draws).
 FIGURES = {
-    "plot_comparison": (lambda fig: sf.plot_comparison(fit_result(), [film()], fig=fig), 3),
-    "plot_residuals": (lambda fig: plot_residuals(fit_result(), fig=fig), 1),
-    "plot_convergence": (lambda fig: sf.plot_convergence(fit_result(), fig=fig), 3),
-    "plot_frames": (lambda fig: sf.plot_frames(frame_rows(), fig=fig), 2),
-    "Sensitivity.figure": (lambda fig: sensitivity().figure(fig=fig), 4),
-    "LightCurve.figure": (lambda fig: light_curve().figure(fig=fig), 2),
+    "plot_comparison": (lambda **kw: sf.plot_comparison(fit_result(), [film()], **kw), 3),
+    "plot_residuals": (lambda **kw: plot_residuals(fit_result(), **kw), 1),
+    "plot_convergence": (lambda **kw: sf.plot_convergence(fit_result(), **kw), 3),
+    "plot_frames": (lambda **kw: sf.plot_frames(frame_rows(), **kw), 2),
+    "Sensitivity.figure": (lambda **kw: sensitivity().figure(**kw), 4),
+    "LightCurve.figure": (lambda **kw: light_curve().figure(**kw), 2),
 }
 
 
 @pytest.mark.parametrize("name", FIGURES)
-def test_every_figure_draws_into_the_figure_given_and_returns_its_axes(name):
+def test_every_figure_draws_into_the_axes_given_and_returns_them(name):
     draw, count = FIGURES[name]
-    outer = Figure()
-    left, right = outer.subfigures(1, 2)
-    axes = np.asarray(draw(right)).ravel()
-    assert len(axes) == count and all(isinstance(ax, Axes) and ax.figure is right for ax in axes)
-    assert not left.axes  # nothing drawn outside it
-    own = np.asarray(draw(None)).ravel()  # without one: a Figure of its own, made without pyplot
-    assert isinstance(own[0].figure, Figure) and own[0].figure is not outer
+    fig = Figure()
+    mine = fig.subplots(1, count + 1)  # the user's own layout, one more panel than it needs
+    axes = draw(ax=mine[1:])
+    assert np.size(axes) == count and all(a is b for a, b in zip(np.ravel(axes), mine[1:]))
+    assert all(a.has_data() or a.get_title() for a in mine[1:]) and not mine[0].has_data()  # drawn there, nowhere else
+    assert len(fig.axes) >= count + 1
+    if count == 1:
+        one = Figure().add_subplot()
+        assert np.ravel(draw(ax=one))[0] is one  # a single Axes is taken as is
+    with pytest.raises(sf.InputError, match=f"`ax` must be {count} matplotlib Axes"):
+        draw(ax=list(mine))
+    with pytest.raises(sf.InputError, match="`ax`"):
+        draw(ax=["left", "right"][:count] * count)
+    with pytest.raises(sf.InputError, match="not both"):
+        draw(ax=mine[1:], fig=fig)
 
 
 @pytest.mark.parametrize("name", FIGURES)
-def test_a_figure_argument_that_is_not_a_figure_names_it(name):
+def test_every_figure_lays_out_its_panels_in_the_figure_given(name):
+    draw, count = FIGURES[name]
+    outer = Figure()
+    left, right = outer.subfigures(1, 2)
+    axes = np.asarray(draw(fig=right)).ravel()
+    assert len(axes) == count and all(isinstance(ax, Axes) and ax.figure is right for ax in axes)
+    assert not left.axes  # nothing drawn outside it
+    own = np.asarray(draw()).ravel()  # without either: a Figure of its own, made without pyplot
+    assert isinstance(own[0].figure, Figure) and own[0].figure is not outer
     with pytest.raises(sf.InputError, match="`fig` must be a matplotlib Figure"):
-        FIGURES[name][0]("figure.png")
+        draw(fig="figure.png")
 
 
 def test_images_are_cropped_to_the_target_unless_asked_for_the_whole_film():

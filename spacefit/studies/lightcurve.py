@@ -189,14 +189,14 @@ class LightCurve:
 
         return light_curve_html(self)
 
-    def figure(self, *, fig: Any = None) -> Any:
+    def figure(self, *, ax: Any = None, fig: Any = None) -> Any:
         """Irradiance and magnitude (brighter up) against the swept quantity, with one-sigma Monte
-        Carlo error bars when more than one seed was run (asymmetric in magnitude), into ``fig`` (a
-        matplotlib Figure or SubFigure; default: a new one). Returns the array of the two axes."""
-        from spacefit.plotting import axis_label, new_figure  # here: only a figure needs matplotlib (optional; slow to import)
+        Carlo error bars when more than one seed was run (asymmetric in magnitude), into ``ax`` (two
+        Axes) or ``fig`` (a matplotlib Figure or SubFigure; default: a new one). Returns the array of
+        the two axes."""
+        from spacefit.plotting import axis_label, panels  # here: only a figure needs matplotlib (optional; slow to import)
 
-        fig = new_figure(fig, (9.0, 3.6))
-        left, right = fig.subplots(1, 2)
+        left, right = panels(ax, fig, 2, (9.0, 3.6), lambda f: f.subplots(1, 2))
         known = self.seeds > 1
         bright, faint = self.magnitude_interval()
         faint = np.where(np.isfinite(faint), faint, np.nanmax(np.where(np.isfinite(faint), faint, self.magnitude)) + 1.0)
@@ -210,8 +210,9 @@ class LightCurve:
         for ax in (left, right):
             ax.set_xlabel(axis_label(self.against))
         errors = f"1-sigma Monte Carlo errors of {self.seeds} seeds" if known else "one seed: Monte Carlo error unknown"
-        fig.suptitle(f"observer at {self.observer_range_m:.4g} m (rendered at {self.rendered_range_m:.4g} m, inverse square); "
-                     f"{errors}", fontsize=9)
+        if ax is None:
+            left.figure.suptitle(f"observer at {self.observer_range_m:.4g} m (rendered at {self.rendered_range_m:.4g} m, "
+                                 f"inverse square); {errors}", fontsize=9)
         return np.array([left, right], dtype=object)
 
 

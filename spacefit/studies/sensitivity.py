@@ -177,40 +177,42 @@ class Sensitivity:
                 out[name] = (abs(self.at[name]) / 10.0, "a tenth of its value")
         return out
 
-    def figure(self, *, fig: Any = None, crop: bool = True, steps: Mapping[str, float] | None = None) -> Any:
+    def figure(self, *, ax: Any = None, fig: Any = None, crop: bool = True, steps: Mapping[str, float] | None = None) -> Any:
         """Each derivative image (unresolved pixels grey), cropped to the target and a margin unless
         ``crop=False``; and each region's change of mean radiance for a step of each parameter
         (:meth:`chart_steps`, ``steps``: name -> step in its unit), relative to the region's mean
         radiance, with its confidence interval (unresolved bars hatched; an exact zero is 0).
-        ``fig``: a matplotlib Figure or SubFigure to draw into (default: a new one).
+        ``ax``: the axes to draw into (one per parameter, then the chart's); or ``fig``: a matplotlib
+        Figure or SubFigure to lay them out in (default: a new one).
 
         Returns:
             the array of axes drawn: the derivative images' in ``names`` order, then the chart's.
         """
-        from spacefit.plotting import cropped, image_box, new_figure, show_image, unit_label
+        from spacefit.plotting import cropped, image_box, panels, show_image, unit_label
 
         chart = self.chart_steps(steps)
         n = len(self.names)
         columns = min(n, 3)
         rows = math.ceil(n / columns)
-        fig = new_figure(fig, (4.2 * columns, 3.4 * rows + 3.6))
-        grid = fig.add_gridspec(rows + 1, columns)
+
+        def layout(f: Any) -> list[Any]:
+            grid = f.add_gridspec(rows + 1, columns)
+            return [*(f.add_subplot(grid[i // columns, i % columns]) for i in range(n)), f.add_subplot(grid[rows, :])]
+
+        axes = panels(ax, fig, n + 1, (4.2 * columns, 3.4 * rows + 3.6), layout)
         grey = self.derivative.mean(axis=-1)
         box = image_box([self.image, *np.abs(grey)], crop)
-        axes = []
-        for i, name in enumerate(self.names):
+        for i, (name, image_ax) in enumerate(zip(self.names, axes)):
             shown = cropped(np.where(self.resolved_pixels(name), grey[i], np.nan), box)
             limit = float(np.nanmax(np.abs(shown))) if np.isfinite(shown).any() else 0.0
-            ax = fig.add_subplot(grid[i // columns, i % columns])
-            show_image(ax, np.zeros_like(grey[i]), box, cmap="Greys", vmin=-1, vmax=4)  # grey under unresolved pixels
-            im = show_image(ax, np.where(self.resolved_pixels(name), grey[i], np.nan), box, cmap="RdBu_r",
+            show_image(image_ax, np.zeros_like(grey[i]), box, cmap="Greys", vmin=-1, vmax=4)  # grey under unresolved pixels
+            im = show_image(image_ax, np.where(self.resolved_pixels(name), grey[i], np.nan), box, cmap="RdBu_r",
                             vmin=-(limit or 1.0), vmax=limit or 1.0)
-            fig.colorbar(im, ax=ax, shrink=0.8, label=unit_label(per_unit(RADIANCE_UNIT, self.units[name])))
-            ax.set_title(f"d radiance / d {label(name)}", fontsize=9)
-            ax.set_xticks([])
-            ax.set_yticks([])
-            axes.append(ax)
-        ax = fig.add_subplot(grid[rows, :])
+            image_ax.figure.colorbar(im, ax=image_ax, shrink=0.8, label=unit_label(per_unit(RADIANCE_UNIT, self.units[name])))
+            image_ax.set_title(f"d radiance / d {label(name)}", fontsize=9)
+            image_ax.set_xticks([])
+            image_ax.set_yticks([])
+        bars = axes[-1]
         width = 0.8 / n
         x = np.arange(len(self.regions))
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -221,17 +223,16 @@ class Sensitivity:
             shown = np.where(self.exact_zero[i], 0.0, relative[i] * step)
             clear = self.resolved[i] | self.exact_zero[i]
             for j in range(len(self.regions)):
-                ax.bar(x[j] + i * width, shown[j], width, yerr=self.t * relative_se[i, j] * step, color=f"C{i}",
-                       hatch="" if clear[j] else "//", alpha=1.0 if clear[j] else 0.4,
-                       label=f"{label(name)}: step {step:.3g} {unit_label(self.units[name])} ({how})".replace("  ", " ")
-                       if j == 0 else None)
-        ax.axhline(0.0, color="k", lw=0.5)
-        ax.set_xticks(x + width * (n - 1) / 2, self.regions)
-        ax.set_ylabel("change of mean radiance per step (%)")
-        ax.set_title(f"{CONFIDENCE:.0%} intervals; hatched: unresolved", fontsize=9)
-        ax.legend(fontsize=7)
-        axes.append(ax)
-        return np.array(axes, dtype=object)
+                bars.bar(x[j] + i * width, shown[j], width, yerr=self.t * relative_se[i, j] * step, color=f"C{i}",
+                         hatch="" if clear[j] else "//", alpha=1.0 if clear[j] else 0.4,
+                         label=f"{label(name)}: step {step:.3g} {unit_label(self.units[name])} ({how})".replace("  ", " ")
+                         if j == 0 else None)
+        bars.axhline(0.0, color="k", lw=0.5)
+        bars.set_xticks(x + width * (n - 1) / 2, self.regions)
+        bars.set_ylabel("change of mean radiance per step (%)")
+        bars.set_title(f"{CONFIDENCE:.0%} intervals; hatched: unresolved", fontsize=9)
+        bars.legend(fontsize=7)
+        return axes
 
     def to_dataset(self) -> Any:
         """The sensitivity as a labelled xarray Dataset (dimensions parameter, region, y, x, channel)."""
