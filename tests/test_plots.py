@@ -86,7 +86,7 @@ def test_every_figure_draws_into_the_axes_given_and_returns_them(name):
     axes = draw(ax=mine[1:])
     assert np.size(axes) == count and all(a is b for a, b in zip(np.ravel(axes), mine[1:]))
     assert all(a.has_data() or a.get_title() for a in mine[1:]) and not mine[0].has_data()  # drawn there, nowhere else
-    assert len(fig.axes) >= count + 1
+    assert len(fig.axes) >= count + 1 and fig._suptitle is None  # the user's figure keeps its own title
     if count == 1:
         one = Figure().add_subplot()
         assert np.ravel(draw(ax=one))[0] is one  # a single Axes is taken as is

@@ -207,8 +207,8 @@ class LightCurve:
                        fmt="o-", capsize=2)
         right.invert_yaxis()  # brighter up
         right.set_ylabel(f"apparent {self.band} magnitude (mag; m$_{{sun}}$ = {self.sun_magnitude:.4g})")
-        for ax in (left, right):
-            ax.set_xlabel(axis_label(self.against))
+        for panel in (left, right):
+            panel.set_xlabel(axis_label(self.against))
         errors = f"1-sigma Monte Carlo errors of {self.seeds} seeds" if known else "one seed: Monte Carlo error unknown"
         if ax is None:
             left.figure.suptitle(f"observer at {self.observer_range_m:.4g} m (rendered at {self.rendered_range_m:.4g} m, "

@@ -145,8 +145,8 @@ class Sensitivity:
     def table(self) -> str:
         """The regions' derivatives and normalised sensitivities as text, each with its standard error
         (:meth:`rows`)."""
-        lines = [f"{'parameter':28s} {'region':10s} {'dL/dp':>22s} {'unit':26s} {'normalised':>24s}"]
-        lines += [f"{r['parameter']:28s} {r['region']:10s} {r['dL/dp']:>22s} {r['unit']:26s} {r['normalised']:>24s}"
+        lines = [f"{'parameter':28s} {'region':10s} {'dL/dp':>22s}  {'unit':26s} {'normalised':>24s}"]
+        lines += [f"{r['parameter']:28s} {r['region']:10s} {r['dL/dp']:>22s}  {r['unit']:26s} {r['normalised']:>24s}"
                   + (f"  {r['note']}" if r["note"] else "") for r in self.rows()]
         return "\n".join(lines)
 
