@@ -12,6 +12,7 @@ import html
 from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING, Any
 
+from spacefit.errors import InputError
 from spacefit.scene.parameters import label, parameter
 
 if TYPE_CHECKING:
@@ -81,13 +82,23 @@ def fit_html(result: FitResult) -> str:
     rows = [(name, label(name), f"{result.values[name]:.6g}", f"{result.stderr[name]:.3g}", unit_text(parameter(name).unit),
              f"{result.start[name]:.6g}" if name in result.start else "", "nuisance" if name in result.nuisances else "")
             for name in result.names]
-    rows += [(name, "derived", f"{result.extras[name]:.6g}", f"{result.extras[f'{name}.stderr']:.3g}",
-              unit_text(parameter(name).unit), "", "derived")
-             for name in result.extras if f"{name}.stderr" in result.extras]
+    for name in (n for n in result.extras if f"{n}.stderr" in result.extras):
+        words, unit = _known(name)
+        rows.append((name, words, f"{result.extras[name]:.6g}", f"{result.extras[f'{name}.stderr']:.3g}", unit, "", "derived"))
     text = "".join(f"<p>{html.escape(line)}</p>" for line in lines)
     warnings = "".join(f"<li>{html.escape(w)}</li>" for w in result.warnings)
     return (text + html_table(("parameter", "what", "value", "standard error", "unit", "start", "kind"), rows)
             + (f"<p>warnings:</p><ul>{warnings}</ul>" if warnings else ""))
+
+
+def _known(name: str) -> tuple[str, str]:
+    """A derived quantity's words and unit where the registry has it (``wrinkles.rms_m``), else none:
+    a repr never raises."""
+    try:
+        words, unit = describe(name)
+    except InputError:
+        return "", ""
+    return words, unit_text(unit)
 
 
 def sensitivity_html(s: Sensitivity) -> str:

@@ -213,8 +213,13 @@ def test_rich_reprs_in_jupyter():
     assert len(repr(scene)) < 200 and repr(scene).startswith("Scene(128x128 px") and "legs (lambert)" in repr(scene)
     page = scene._repr_html_()
     assert page.count("<table>") == 1 and "focal_length_mm" in page and "parts" in page
-    fit = fit_result()._repr_html_()
+    result = fit_result()
+    result.extras.update({"wrinkles.rms_m": 2e-5, "wrinkles.rms_m.stderr": 1e-6, "other": 1.0, "other.stderr": 0.5})
+    fit = result._repr_html_()
     assert "<table>" in fit and "albedo kd of body" in fit and "0.45" in fit and "deg" in fit and "converged" in fit
+    derived = "<td style='text-align:left'>" + "</td><td style='text-align:left'>".join(
+        ["wrinkles.rms_m", "rms height", "2e-05", "1e-06", "m", "", "derived"]) + "</td>"
+    assert derived in fit and ">other<" in fit  # a derived value the registry lacks is shown without words or unit
     sens = sensitivity()._repr_html_()
     assert "UNRESOLVED (noise)" in sens and "W m^-2 sr^-1 per deg" in sens and sens.count("<tr>") == 1 + 9
     lc = light_curve(1)._repr_html_()
