@@ -78,11 +78,11 @@ def validation_rows(view: str, renderer: Renderer, spacefit_ref: np.ndarray, cyc
     """Per part (pixels whose centre sees it) and for the whole target: both renderers' mean radiance and their ratio."""
     parts = renderer.part_image()
     ours, theirs = parts.table(spacefit_ref), parts.table(cycles_ref)
-    return [{"view": view, "part": name, "pixels": ours[name]["pixels"],
-             "spacefit_mean": round(ours[name]["mean_radiance_w_m2_sr"], 6),
-             "cycles_mean": round(theirs[name]["mean_radiance_w_m2_sr"], 6),
-             "cycles_over_spacefit": round(theirs[name]["mean_radiance_w_m2_sr"] / ours[name]["mean_radiance_w_m2_sr"], 5)}
-            for name in ours]
+    return [{"view": view, "part": name, "pixels": int(ours.pixels.sel(region=name)),
+             "spacefit_mean": round(float(ours.mean_radiance.sel(region=name)), 6),
+             "cycles_mean": round(float(theirs.mean_radiance.sel(region=name)), 6),
+             "cycles_over_spacefit": round(float(theirs.mean_radiance.sel(region=name) / ours.mean_radiance.sel(region=name)), 5)}
+            for name in ours.region.values.tolist()]
 
 
 def run_view(view: str, extra: list[str], full: bool) -> tuple[list[dict], list[dict], list[dict]]:

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 import pytest
+import xarray as xr
 from helpers import small_scene, write_plate_obj
 
 import spacefit as sf
@@ -102,9 +103,16 @@ def test_part_image_and_table_match_the_parts_lit_pixels(tmp_path):
     assert not np.any(lit & ~near_target)
     table = parts.table(radiance)
     grey = radiance.mean(axis=-1)
-    assert table["legs"]["pixels"] == int((parts.ids == 2).sum())
-    assert table["legs"]["mean_radiance_w_m2_sr"] == pytest.approx(float(grey[parts.ids == 2].mean()))
-    assert table["target"]["pixels"] == int((parts.ids >= 0).sum())
+    assert isinstance(table, xr.Dataset) and list(table.region.values) == ["body", "panels", "legs", "target"]
+    assert int(table.pixels.sel(region="legs")) == int((parts.ids == 2).sum())
+    assert float(table.mean_radiance.sel(region="legs")) == pytest.approx(float(grey[parts.ids == 2].mean()))
+    assert int(table.pixels.sel(region="target")) == int((parts.ids >= 0).sum())
+    assert table.mean_radiance.attrs["units"] == "W m^-2 sr^-1" and "units" not in table.pixels.attrs  # no stray "1"
+    # counting only some pixels: a NaN outside them (a masked reference) stays out of the means
+    used = parts.ids != 2
+    masked = parts.table(np.where(used[..., None], radiance, np.nan), used)
+    assert int(masked.pixels.sel(region="legs")) == 0 and np.isnan(float(masked.mean_radiance.sel(region="legs")))
+    assert float(masked.mean_radiance.sel(region="body")) == pytest.approx(float(table.mean_radiance.sel(region="body")))
 
 
 def test_set_values_in_place_equals_a_reloaded_scene():

@@ -100,14 +100,14 @@ def test_seeds_average_with_their_standard_error(sphere):
     assert ds.irradiance_observer_se.attrs["units"] == "W m^-2" and ds.magnitude.attrs["units"] == "mag"
     rows = both.table().splitlines()
     assert "mean of 2 seeds" in rows[1] and len(rows) == 4 and "+-" in rows[2] and "unknown" not in both.table()
-    assert len(both.figure().axes[1].containers) == 1  # the magnitudes' error bars
+    assert len(both.figure()[1].containers) == 1  # the magnitudes' error bars
 
 
 def test_one_seed_says_its_error_is_unknown(sphere):
     lc = sf.light_curve(sphere, attitude_deg=[0.0, 30.0], quiet=True)
     assert lc.seeds == 1 and np.all(np.isnan(lc.irradiance_se_w_m2)) and np.all(np.isnan(lc.magnitude_se))
     assert "error is unknown" in lc.table() and lc.table().count("+- unknown") == 4
-    assert "unknown" in lc.figure()._suptitle.get_text()
+    assert "unknown" in lc.figure()[0].figure._suptitle.get_text()
     with pytest.raises(sf.InputError, match="one seed"):
         lc.seeds_for(0.01)
 

@@ -232,8 +232,8 @@ def test_the_fits_model_image_is_in_the_references_unit(sphere, sensor):
         assert not sf.saturated_mask(reference, sensor).any() and result.renders[0].max() > 100 * truth.max()
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # the masked NaN is shown as 0, with no warning
-        figure = sf.plot_comparison(result, [observation.reference])
-    assert unit.split()[0] in figure.axes[0].get_title()
+        axes = sf.plot_comparison(result, [observation.reference])
+    assert unit.split()[0] in axes[0, 0].get_title()
 
 
 def test_a_grey_observation_counts_each_pixel_once(sphere):

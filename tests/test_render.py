@@ -51,6 +51,10 @@ def test_cli_render_writes_the_folder_and_rerenders_identically(tmp_path):
     sidecar = json.loads((out / "render.json").read_text())
     assert sidecar["seed"] == 0 and sidecar["scene"]["render"]["resolution"] == [64, 64]
     assert sidecar["versions"]["mitsuba"] and sidecar["triangles"]["body"] > 12
+    table = sidecar["parts"]["table"]  # each part, then the whole target: pixels and mean radiance
+    assert set(table) == {"body", "panels", "legs", "target"} and table["target"]["pixels"] == sum(
+        table[p]["pixels"] for p in ("body", "panels", "legs")) > 0
+    assert table["target"]["mean_radiance_w_m2_sr"] > 0
     again = tmp_path / "again"
     assert main(["render", str(out / "scene.toml"), "--out", str(again), "--quiet"]) == 0
     assert np.array_equal(read_exr(again / "radiance.exr"), image)

@@ -137,7 +137,7 @@ def part_chi2(r: np.ndarray, r_alt: np.ndarray, parts: PartImage, used: np.ndarr
     render noise per value). ``r``, ``r_alt``: the observation's (h, w, c) residuals."""
     counted = ((r != 0) | (r_alt != 0)) & used[..., None]
     out = {}
-    for label, mask in [*((name, parts.ids == i) for i, name in enumerate(parts.names)), ("target", parts.ids >= 0)]:
+    for label, mask in zip(parts.regions, parts.masks()):
         values = counted & mask[..., None]
         out[label] = float(np.mean(r[values] ** 2)) / noise if values.any() and noise > 0 else math.nan
     return out

@@ -104,6 +104,11 @@ class FitResult:
     residuals: list[np.ndarray] = field(default_factory=list)
     observation_goodness: list[Goodness] = field(default_factory=list)
 
+    def _repr_html_(self) -> str:
+        from spacefit.display import fit_html
+
+        return fit_html(self)
+
     def mitsuba_scene_dict(self) -> dict[str, Any]:
         """The fitted scene as a Mitsuba scene dictionary (``mi.load_dict`` loads it).
 
@@ -471,8 +476,7 @@ def _part_rows(parts: PartImage, reference: np.ndarray, render: np.ndarray, unit
     """Per part: its fitted pixels (``used``), the mean of the reference and of the fit's render there, in ``unit``,
     and ``spread``'s value (chi^2 per value, or mean r^2 over the render noise's; absent for the losses that
     are not per pixel)."""
-    ref, fitted = parts.table(reference, used), parts.table(render, used)
+    (pixels, ref), (_, fitted) = parts.means(reference, used), parts.means(render, used)
     suffix = "dn" if unit == DN_UNIT else "w_m2_sr"
-    return {name: {"pixels": row["pixels"], f"reference_mean_{suffix}": row["mean_radiance_w_m2_sr"],
-                   f"fit_mean_{suffix}": fitted[name]["mean_radiance_w_m2_sr"], **spread.get(name, {})}
-            for name, row in ref.items()}
+    return {name: {"pixels": int(n), f"reference_mean_{suffix}": float(r), f"fit_mean_{suffix}": float(f), **spread.get(name, {})}
+            for name, n, r, f in zip(parts.regions, pixels, ref, fitted)}

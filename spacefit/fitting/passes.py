@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_count, quote
-from spacefit.scene.parameters import PER_OBSERVATION, observation_name, observation_of, parameter
+from spacefit.scene.parameters import PER_OBSERVATION, observation_name, observation_of
 from spacefit.scene.schema import Scene
 
 # Scene-file keys that hold 3 numbers, given as one column of 3 or as KEY.x, KEY.y, KEY.z.
@@ -308,26 +308,26 @@ def write_frame_table(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> No
         writer.writerows(rows)
 
 
-def plot_frames(rows: Sequence[Mapping[str, Any]]) -> Any:
+def plot_frames(rows: Sequence[Mapping[str, Any]], *, ax: Any = None, fig: Any = None) -> Any:
     """The per-frame parameters of :func:`frame_table`'s rows against time (one panel each, 1-sigma
-    error bars) and each frame's chi^2 / dof: a matplotlib Figure."""
-    from matplotlib.figure import Figure  # deferred: plotting (0.5 s)
+    error bars) and each frame's chi^2 / dof, into ``ax`` (one Axes per panel) or ``fig`` (a
+    matplotlib Figure or SubFigure; default a new one): the array of axes drawn (:mod:`spacefit.plotting`)."""
+    from spacefit.plotting import axis_label, panels  # deferred: plotting (0.5 s)
 
     own = [k for k in dict.fromkeys(key for row in rows for key in row) if f"{k}.stderr" in rows[0]]
-    panels = [*own, "chi2_dof"]
-    fig = Figure(figsize=(6.0, 1.6 * len(panels) + 0.6), constrained_layout=True)
-    axes = fig.subplots(len(panels), 1, sharex=True, squeeze=False)[:, 0]
+    names = [*own, "chi2_dof"]
+    axes = panels(ax, fig, len(names), (6.0, 1.6 * len(names) + 0.6), lambda f: f.subplots(len(names), 1, sharex=True, squeeze=False))
     t = np.array([r["time_s"] for r in rows], dtype=float)
-    t = np.arange(len(rows), dtype=float) if not np.all(np.isfinite(t)) else t
-    for ax, name in zip(axes, panels):
+    known = np.all(np.isfinite(t))
+    t = t if known else np.arange(len(rows), dtype=float)
+    for panel, name in zip(axes, names):
         y = np.array([r.get(name, np.nan) for r in rows], dtype=float)
         err = np.array([r.get(f"{name}.stderr", np.nan) for r in rows], dtype=float)
-        ax.errorbar(t, y, yerr=np.where(np.isfinite(err), err, 0.0), fmt="o", ms=3, capsize=2)
-        unit = parameter(name).unit if name != "chi2_dof" else ""
-        ax.set_ylabel(name + (f"\n[{unit}]" if unit else ""), fontsize=7)
-        ax.grid(alpha=0.3)
-    axes[-1].set_xlabel("time since the first frame [s]")
-    return fig
+        panel.errorbar(t, y, yerr=np.where(np.isfinite(err), err, 0.0), fmt="o", ms=3, capsize=2)
+        panel.set_ylabel(axis_label(name) if name != "chi2_dof" else "chi$^2$ / dof", fontsize=7)
+        panel.grid(alpha=0.3)
+    axes[-1].set_xlabel("time since the first frame (s)" if known else "frame")
+    return axes
 
 
 def arc_pass(n: int, *, range_m: float = 25.0, zenith_deg: tuple[float, float] = (4.0, 16.0),

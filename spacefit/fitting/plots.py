@@ -1,91 +1,111 @@
 """A fit's plots, public as ``sf.plot_comparison`` and ``sf.plot_convergence``.
 
-Each returns a matplotlib :class:`~matplotlib.figure.Figure` made without pyplot, so the global
-backend (a notebook's) is left alone: show it in a notebook by evaluating it, or save it with
-``fig.savefig(path)``. matplotlib is imported with this module, which ``import spacefit`` loads
-only on first use of these names.
+Each takes ``ax=`` (the axes to draw into, one per panel) or ``fig=`` (a matplotlib Figure or
+SubFigure to lay them out in) and returns the axes it drew (:mod:`spacefit.plotting`: without
+either it makes a Figure without pyplot, saved with ``axes.flat[0].figure.savefig(path)``). Images are cropped to the target and a margin unless
+``crop=False``. matplotlib is imported with this module, which ``import spacefit`` loads only on
+first use of these names.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 from matplotlib import colormaps
-from matplotlib.figure import Figure
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure, SubFigure
 from matplotlib.ticker import MaxNLocator
 
+from spacefit.errors import check_choice, check_range
 from spacefit.fitting.loop import FitResult
 from spacefit.output import PREVIEW_PERCENTILE, preview_scale, to_srgb8
-from spacefit.sensor import DN_UNIT, RADIANCE_UNIT
-
-# The image units as axis labels.
-PLOT_UNITS = {RADIANCE_UNIT: "W m$^{-2}$ sr$^{-1}$", DN_UNIT: "DN"}
+from spacefit.plotting import axis_label, cropped, image_box, panels, show_image, unit_label
+from spacefit.sensor import RADIANCE_UNIT
 
 
-def plot_comparison(result: FitResult, references: Sequence[np.ndarray]) -> Figure:
+def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: Axes | Sequence[Axes] | None = None,
+                    fig: Figure | SubFigure | None = None, crop: bool = True) -> np.ndarray:
     """Reference | fit | residual fit - reference, one row per observation.
 
     Args:
         result: the fit's outcome (its renders; missing where the solve failed).
         references: the reference images (h, w, 3), in observation order, each in the unit of the
             fit's model image (``result.units``: radiance, or DN for an observation with a sensor).
+        ax: the axes to draw into, 3 per observation (row by row); or ``fig``: the matplotlib Figure
+            or SubFigure to lay them out in (default: a new one).
+        crop: show the target and a margin (found in the fit's render, else the reference); False:
+            the whole film.
     Returns:
-        a matplotlib Figure (not attached to pyplot): the fit at the reference's sRGB exposure, the
+        the (observations, 3) array of axes drawn: the fit at the reference's sRGB exposure, the
         residual's RGB mean in that unit on a diverging colour map centred at 0.
     """
     n = len(references)
-    fig = Figure(figsize=(10.5, 3.2 * n), layout="constrained")
-    axes = fig.subplots(n, 3, squeeze=False)
+    axes = panels(ax, fig, 3 * n, (10.5, 3.2 * n), lambda f: f.subplots(n, 3, squeeze=False)).reshape(n, 3)
     for i, (row, reference) in enumerate(zip(axes, references)):
         ref = _rgb(reference)
-        unit = PLOT_UNITS[result.units[i] if i < len(result.units) else RADIANCE_UNIT]
-        scale = preview_scale(ref)
-        row[0].imshow(to_srgb8(ref, scale))
+        unit = unit_label(_unit(result, i))
+        box = image_box([result.renders[i] if i < len(result.renders) else ref], crop)
+        scale = preview_scale(cropped(ref, box))
+        show_image(row[0], to_srgb8(ref, scale), box)
         row[0].set_title(f"reference {i} (white = {1 / scale:.3g} {unit})", fontsize=9)
         if i < len(result.renders):
             render = _rgb(result.renders[i])
-            row[1].imshow(to_srgb8(render, scale))
+            show_image(row[1], to_srgb8(render, scale), box)
             row[1].set_title(f"fit {i} (same exposure)", fontsize=9)
             residual = (render - ref).mean(axis=-1)
-            limit = float(np.percentile(np.abs(residual), PREVIEW_PERCENTILE)) or float(np.abs(residual).max()) or 1.0
-            image = row[2].imshow(residual, cmap="RdBu_r", vmin=-limit, vmax=limit)
+            image = show_image(row[2], residual, box, cmap="RdBu_r", **_centred(cropped(residual, box)))
             row[2].set_title(f"fit - reference {i}", fontsize=9)
-            fig.colorbar(image, ax=row[2], extend="both", label=unit)
+            row[2].figure.colorbar(image, ax=row[2], extend="both", label=f"fit - reference ({unit})")
         else:
-            for ax in row[1:]:
-                ax.text(0.5, 0.5, "no render: the solve failed", ha="center", va="center", transform=ax.transAxes)
-        for ax in row:
-            ax.set_xticks([])
-            ax.set_yticks([])
-    fig.suptitle(f"{result.solver}, {result.loss_name} loss: {result.status}", fontsize=10)
-    return fig
+            for panel in row[1:]:
+                panel.text(0.5, 0.5, "no render: the solve failed", ha="center", va="center", transform=panel.transAxes)
+        for panel in row:
+            panel.set_xticks([])
+            panel.set_yticks([])
+    if ax is None:
+        axes[0, 0].figure.suptitle(f"{result.solver}, {result.loss_name} loss: {result.status}", fontsize=10)
+    return axes
 
 
-def plot_residuals(result: FitResult) -> Figure:
+def plot_residuals(result: FitResult, *, ax: Axes | Sequence[Axes] | None = None, fig: Figure | SubFigure | None = None,
+                   crop: bool = True) -> np.ndarray:
     """Each observation's residual, reference - model (:attr:`FitResult.residuals`), the channels'
-    mean in the observation's unit on a diverging colour map centred at 0 (grey where not fitted).
+    mean in the observation's unit on a diverging colour map centred at 0 (grey where not fitted),
+    cropped to the target (found in the fit's render) and a margin unless ``crop=False``; into
+    ``ax`` (one per observation) or ``fig``.
 
     Returns:
-        a matplotlib Figure (not attached to pyplot); one that says so where the fit has no residuals.
+        the array of axes drawn (one per observation; one that says so where the fit has no residuals).
     """
     n = max(len(result.residuals), 1)
-    fig = Figure(figsize=(4.0 * n, 3.6), layout="constrained")
-    axes = fig.subplots(1, n, squeeze=False)[0]
-    for k, (ax, residual) in enumerate(zip(axes, result.residuals)):
+    axes = panels(ax, fig, n, (4.0 * n, 3.6), lambda f: f.subplots(1, n, squeeze=False))
+    cmap = colormaps["RdBu_r"].with_extremes(bad="0.6")
+    for k, (panel, residual) in enumerate(zip(axes, result.residuals)):
         mean = np.asarray(residual, dtype=float).mean(axis=-1)
-        limit = float(np.nanpercentile(np.abs(mean), PREVIEW_PERCENTILE)) if np.isfinite(mean).any() else 0.0
-        limit = limit or float(np.nanmax(np.abs(mean), initial=0.0)) or 1.0
-        cmap = colormaps["RdBu_r"].with_extremes(bad="0.6")
-        image = ax.imshow(np.ma.masked_invalid(mean), cmap=cmap, vmin=-limit, vmax=limit)
-        ax.set_title(f"reference - fit, observation {k}", fontsize=9)
-        fig.colorbar(image, ax=ax, extend="both", label=PLOT_UNITS[result.units[k] if k < len(result.units) else RADIANCE_UNIT])
-        ax.set_xticks([])
-        ax.set_yticks([])
+        box = image_box([result.renders[k] if k < len(result.renders) else mean], crop)
+        image = show_image(panel, np.ma.masked_invalid(mean), box, cmap=cmap, **_centred(cropped(mean, box)))
+        panel.set_title(f"reference - fit, observation {k}", fontsize=9)
+        panel.figure.colorbar(image, ax=panel, extend="both", label=f"reference - fit ({unit_label(_unit(result, k))})")
+        panel.set_xticks([])
+        panel.set_yticks([])
     if not result.residuals:
         axes[0].text(0.5, 0.5, "no residuals: the fit has no render", ha="center", va="center", transform=axes[0].transAxes)
-    fig.suptitle(f"{result.status}", fontsize=9)
-    return fig
+    if ax is None:
+        axes[0].figure.suptitle(f"{result.status}", fontsize=9)
+    return axes
+
+
+def _unit(result: FitResult, k: int) -> str:
+    return result.units[k] if k < len(result.units) else RADIANCE_UNIT
+
+
+def _centred(values: np.ndarray) -> dict[str, float]:
+    """vmin and vmax of a diverging colour map centred at 0 over the finite ``values``."""
+    finite = np.abs(values[np.isfinite(values)])
+    limit = float(np.percentile(finite, PREVIEW_PERCENTILE)) if finite.size else 0.0
+    limit = limit or float(finite.max(initial=0.0)) or 1.0
+    return {"vmin": -limit, "vmax": limit}
 
 
 def _rgb(image: np.ndarray) -> np.ndarray:
@@ -96,16 +116,30 @@ def _rgb(image: np.ndarray) -> np.ndarray:
     return np.repeat(image, 3, axis=-1) if image.shape[-1] == 1 else image[..., :3]
 
 
-def plot_convergence(result: FitResult) -> Figure:
+def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = None, ax: Axes | Sequence[Axes] | None = None,
+                     fig: Figure | SubFigure | None = None) -> np.ndarray:
     """The loss per step (log axis; accepted steps joined, rejected trials as crosses, the loss's
-    Monte Carlo noise as a band above the best loss) and each parameter per step divided by its
-    fitted value.
+    Monte Carlo noise as a band above the best loss) and, one panel each, every parameter's value
+    per step in its unit, with the fitted value's one-standard-error band and, where ``truths``
+    gives it (parameter name -> value, in the parameter's unit), the true value as a dashed line;
+    into ``ax`` (the loss's, then one per parameter) or ``fig``.
 
     Returns:
-        a matplotlib Figure (not attached to pyplot).
+        the array of axes drawn: the loss's, then one per parameter in ``result.names`` order.
     """
-    fig = Figure(figsize=(10.0, 3.6), layout="constrained")
-    ax_loss, ax_values = fig.subplots(1, 2)
+    truths = dict(truths or {})
+    for name, value in truths.items():
+        check_choice("truths", name, result.names)
+        check_range(f"truths[{name!r}]", value)
+    n = len(result.names)
+
+    def layout(f: Figure | SubFigure) -> list[Axes]:
+        grid = f.add_gridspec(max(n, 1), 2)
+        loss = f.add_subplot(grid[:, 0])
+        return [loss, *(f.add_subplot(grid[i, 1], sharex=loss) for i in range(n))]
+
+    axes = panels(ax, fig, n + 1, (10.0, max(3.6, 1.4 * n)), layout)
+    ax_loss = axes[0]
     history = result.history
     steps = np.array([h["step"] for h in history])
     losses = np.array([h["loss"] for h in history], dtype=float)
@@ -118,19 +152,22 @@ def plot_convergence(result: FitResult) -> Figure:
         best = np.minimum.accumulate(np.where(np.isfinite(losses), losses, np.inf))
         ax_loss.fill_between(steps, best, best + noise, color="0.6", alpha=0.4, step="post", label="Monte Carlo noise")
     ax_loss.set_xlabel("step")
-    ax_loss.set_ylabel("loss 0.5 sum r$^2$")
+    ax_loss.set_ylabel("loss, 0.5 sum of squared residuals")
     ax_loss.set_title(f"{result.solver}, {result.loss_name} loss: {result.status.name.lower()}", fontsize=9)
     ax_loss.legend(fontsize=8)
-    for name in result.names:
-        final = result.values[name]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = np.array([h["values"][name] for h in history]) / final
-        ax_values.plot(steps, ratio, "o-", ms=3, label=f"{name} (fit {final:.4g})")
-    ax_values.axhline(1.0, color="0.5", lw=0.8)
-    ax_values.set_xlabel("step")
-    ax_values.set_ylabel("value / fitted value")
-    ax_values.legend(fontsize=8)
-    for ax in (ax_loss, ax_values):
-        ax.xaxis.set_major_locator(MaxNLocator(integer=True))
-        ax.grid(alpha=0.3)
-    return fig
+    for i, (name, panel) in enumerate(zip(result.names, axes[1:])):
+        final, stderr = result.values[name], result.stderr[name]
+        panel.plot(steps, [h["values"][name] for h in history], "o-", ms=3, color=f"C{i}")
+        if np.isfinite(stderr):
+            panel.axhspan(final - stderr, final + stderr, color=f"C{i}", alpha=0.2, label="fit +- 1 standard error")
+        panel.axhline(final, color=f"C{i}", lw=0.8)
+        if name in truths:
+            panel.axhline(truths[name], color="k", ls="--", lw=1.0, label="truth")
+        panel.set_ylabel(axis_label(name), fontsize=7)
+        if name in truths or np.isfinite(stderr):
+            panel.legend(fontsize=6, loc="best")
+    axes[-1].set_xlabel("step")
+    for panel in axes:
+        panel.xaxis.set_major_locator(MaxNLocator(integer=True))
+        panel.grid(alpha=0.3)
+    return axes

@@ -26,7 +26,6 @@ from typing import Any
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
-from matplotlib.figure import Figure
 
 from astropy.io import fits
 
@@ -126,6 +125,8 @@ def format_result(result: FitResult) -> str:
     return "\n".join(lines)
 
 
-def _save(fig: Figure, path: Path) -> None:
+def _save(axes: np.ndarray, path: Path) -> None:
+    """Save the figure of a figure function's axes."""
+    fig = axes.flat[0].figure
     FigureCanvasAgg(fig)
     fig.savefig(path, dpi=110)

@@ -11,6 +11,7 @@ import os
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -266,22 +267,42 @@ class PartImage:
     ids: np.ndarray
     names: tuple[str, ...]
 
-    def table(self, radiance: np.ndarray, used: np.ndarray | None = None) -> dict[str, dict[str, float]]:
-        """Per part: ``pixels`` (count whose centre sees it) and ``mean_radiance_w_m2_sr`` (mean of the
-        RGB mean over those pixels, W m^-2 sr^-1; NaN for a part out of view); and the whole
-        ``target``. Edge pixels count for the part at their centre. ``used``: (height, width) bool,
-        the pixels to count (default: all)."""
-        image = check_array("radiance", radiance)
+    @property
+    def regions(self) -> tuple[str, ...]:
+        """The parts, then ``target``: all of them together."""
+        return (*self.names, "target")
+
+    def masks(self) -> np.ndarray:
+        """(regions, height, width) bool: the pixels whose centre sees each of :attr:`regions`."""
+        return np.stack([*(self.ids == i for i in range(len(self.names))), self.ids >= 0])
+
+    def means(self, image: np.ndarray, used: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Per region (:attr:`regions`): the pixels counted, whose centre sees it (int), and the
+        mean of ``image``'s RGB mean over them (in its unit; NaN for a region out of view). Edge
+        pixels count for the part at their centre. ``used``: (height, width) bool, the pixels to
+        count (default: all)."""
+        image = check_array("image", image)
         if image.shape[:2] != self.ids.shape or image.ndim != 3:
-            raise InputError(f"`radiance` must be (height, width, channels) with (height, width) = {self.ids.shape}, got shape {image.shape}.")
+            raise InputError(f"`image` must be (height, width, channels) with (height, width) = {self.ids.shape}, got shape {image.shape}.")
         grey = image[..., :3].astype(float).mean(axis=-1)
-        counted = np.ones(self.ids.shape, dtype=bool) if used is None else np.asarray(used, dtype=bool)
-        rows = {}
-        for label, mask in [*((name, self.ids == i) for i, name in enumerate(self.names)), ("target", self.ids >= 0)]:
-            mask = mask & counted
-            n = int(mask.sum())
-            rows[label] = {"pixels": n, "mean_radiance_w_m2_sr": float(grey[mask].mean()) if n else math.nan}
-        return rows
+        masks = self.masks() & (True if used is None else np.asarray(used, dtype=bool))
+        pixels = masks.sum(axis=(1, 2))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            means = np.where(pixels > 0, np.where(masks, grey, 0.0).sum(axis=(1, 2)) / pixels, math.nan)
+        return pixels, means
+
+    def table(self, radiance: np.ndarray, used: np.ndarray | None = None) -> Any:
+        """Per region (each part, then the whole ``target``): ``pixels`` and ``mean_radiance`` (W m^-2 sr^-1)
+        of :meth:`means`, as an xarray Dataset with dimension ``region``, each variable with its units
+        (``table(r).to_dataframe()`` is a pandas table of it)."""
+        import xarray as xr  # here: only a table needs xarray (slow to import)
+
+        pixels, means = self.means(radiance, used)
+        return xr.Dataset(
+            {"pixels": ("region", pixels, {"description": "pixels whose centre sees the region"}),
+             "mean_radiance": ("region", means, {"units": "W m^-2 sr^-1",
+                                                  "description": "mean of the RGB mean over those pixels (NaN: out of view)"})},
+            coords={"region": list(self.regions)})
 
 
 class Renderer:

@@ -128,6 +128,7 @@ class Parameter:
         scale: the size of a change that matters, in its unit, for a parameter whose value may be
             near 0 (angles, shifts): a standard error is judged against the larger of it and the
             value ("poorly determined", :mod:`spacefit.fitting.uncertainty`); 0: against the value.
+        label: what it is in a few words, for axes and tables (:func:`label`; without the part or unit).
     """
 
     pattern: str
@@ -143,6 +144,7 @@ class Parameter:
     bsdf_fields: tuple[str, ...] = ()
     scene_fields: tuple[str, ...] = ()
     scale: float = 0.0
+    label: str = ""
 
     @property
     def field(self) -> str:
@@ -222,7 +224,8 @@ def _set_rms(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, 
     return {"wrinkles.G": float(G_of(w, values.get("wrinkles.D", w.D), values[name]))}
 
 
-def _sun_angles(names: tuple[str, str], docs: tuple[str, str], bounds: tuple[Bounds, Bounds]) -> tuple[Parameter, ...]:
+def _sun_angles(names: tuple[str, str], docs: tuple[str, str], bounds: tuple[Bounds, Bounds],
+                labels: tuple[str, str]) -> tuple[Parameter, ...]:
     """The sun's elevation and azimuth: both set ``sun.direction``."""
 
     def get(scene: Scene, name: str) -> float:
@@ -233,14 +236,16 @@ def _sun_angles(names: tuple[str, str], docs: tuple[str, str], bounds: tuple[Bou
         return {"sun.direction": sun_direction(*angles).tolist()}
 
     return tuple(Parameter(n, "deg", b, doc, get, set_, frozenset({"sun-angles", "joint"}), fd_step=0.5,
-                           scene_fields=("direction",), scale=0.1) for n, doc, b in zip(names, docs, bounds))
+                           scene_fields=("direction",), scale=0.1, label=label)
+                 for n, doc, b, label in zip(names, docs, bounds, labels))
 
 
 def _components(
-    key: str, unit: str, group: str, docs: Mapping[str, str], fd_step: float, scale: float,
+    key: str, unit: str, group: str, docs: Mapping[str, str], fd_step: float, scale: float, label: str,
 ) -> tuple[Parameter, ...]:
     """The x, y, z components of the scene vector ``key`` (``target.attitude_deg``), each a
-    per-observation nuisance that moves every vertex: ``target.attitude_x_deg``."""
+    per-observation nuisance that moves every vertex: ``target.attitude_x_deg``; ``label`` is each
+    one's with ``{axis}`` for its axis."""
     head, unit_suffix = key.rsplit("_", 1)
     names = tuple(f"{head}_{axis}_{unit_suffix}" for axis in "xyz")
     section, field = key.split(".")
@@ -253,7 +258,7 @@ def _components(
 
     groups = frozenset({group, "joint", "moves-vertices", "nuisance", "per-observation"})
     return tuple(Parameter(n, unit, WHOLE_LINE, docs[axis], get, set_, groups, fd_step=fd_step, scene_fields=(field,),
-                           scale=scale)
+                           scale=scale, label=label.format(axis=axis))
                  for n, axis in zip(names, "xyz"))
 
 
@@ -262,45 +267,47 @@ _WRINKLES = frozenset({"wrinkles", "moves-vertices"})
 _IMAGE = frozenset({"image", "nuisance", "per-observation"})
 PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
     Parameter("wrinkles.D", "1", Bounds(2.0, 3.0), "W-M fractal dimension (eq. 2-1): vertex positions of every wrinkled part",
-              _scene_field, _own_key, _WRINKLES, fd_step=0.02),
+              _scene_field, _own_key, _WRINKLES, fd_step=0.02, label="fractal dimension D"),
     Parameter("wrinkles.G", "m", POSITIVE, "W-M height scale (eq. 2-1): vertex positions of every wrinkled part",
-              _scene_field, _own_key, _WRINKLES, fd_step=0.01, relative_step=True),
+              _scene_field, _own_key, _WRINKLES, fd_step=0.01, relative_step=True, label="height scale G"),
     Parameter("wrinkles.rms_m", "m", POSITIVE, "rms height of the wrinkles: sets G at the current D",
-              _get_rms, _set_rms, _WRINKLES, fd_step=0.03, relative_step=True, scene_fields=("G",)),
+              _get_rms, _set_rms, _WRINKLES, fd_step=0.03, relative_step=True, scene_fields=("G",), label="rms height"),
     Parameter("parts.P.alpha_x", "1", ROUGHNESS, "GGX roughness along the part's tangent axis", _material_value, _own_key,
-              materials=(Conductor,), bsdf_fields=("alpha_u",)),
+              materials=(Conductor,), bsdf_fields=("alpha_u",), label="roughness alpha_x"),
     Parameter("parts.P.alpha_y", "1", ROUGHNESS, "GGX roughness across the part's tangent axis", _material_value, _own_key,
-              materials=(Conductor,), bsdf_fields=("alpha_v",)),
+              materials=(Conductor,), bsdf_fields=("alpha_v",), label="roughness alpha_y"),
     Parameter("parts.P.alpha", "1", ROUGHNESS, "both roughnesses, tied (isotropic)", _material_value, _own_key,
-              materials=(Conductor,), bsdf_fields=("alpha_u", "alpha_v"), scene_fields=("alpha_x", "alpha_y")),
+              materials=(Conductor,), bsdf_fields=("alpha_u", "alpha_v"), scene_fields=("alpha_x", "alpha_y"), label="roughness alpha"),
     Parameter("parts.P.eta", "1", POSITIVE, "real part of the conductor's refractive index (grey)", _material_value, _own_key,
-              materials=_CONDUCTORS, bsdf_fields=("eta",)),
+              materials=_CONDUCTORS, bsdf_fields=("eta",), label="refractive index eta"),
     Parameter("parts.P.k", "1", POSITIVE, "imaginary part of the conductor's refractive index (grey)", _material_value, _own_key,
-              materials=_CONDUCTORS, bsdf_fields=("k",)),
+              materials=_CONDUCTORS, bsdf_fields=("k",), label="extinction coefficient k"),
     Parameter("parts.P.kd", "1", UNIT, "Lambert albedo (grey)", _material_value, _own_key,
-              materials=(Lambert,), bsdf_fields=("reflectance",)),
-    Parameter("sun.irradiance_w_m2", "W m^-2", POSITIVE, "the sun's irradiance on a surface facing it", _scene_field, _own_key),
+              materials=(Lambert,), bsdf_fields=("reflectance",), label="albedo kd"),
+    Parameter("sun.irradiance_w_m2", "W m^-2", POSITIVE, "the sun's irradiance on a surface facing it", _scene_field, _own_key,
+              label="sun's irradiance"),
     *_sun_angles(("sun.elevation_deg", "sun.azimuth_deg"),
                  ("elevation of the direction towards the sun above world xy", "azimuth of the direction towards the sun, world +x to +y (reads 0 at the zenith, the default sun)"),
-                 (Bounds(-90.0, 90.0), WHOLE_LINE)),
+                 (Bounds(-90.0, 90.0), WHOLE_LINE), ("sun elevation", "sun azimuth")),
     *_components("target.attitude_deg", "deg", "attitude",
                  {axis: f"the target's attitude angle {angle} (about object {axis}, thesis 3.2): every vertex"
-                  for axis, angle in zip("xyz", ("alpha", "beta", "gamma"))}, fd_step=0.5, scale=0.1),
+                  for axis, angle in zip("xyz", ("alpha", "beta", "gamma"))}, fd_step=0.5, scale=0.1,
+                 label="target attitude about {axis}"),
     *_components("target.position_m", "m", "position", {axis: f"the target's world {axis} position: every vertex" for axis in "xyz"},
-                 fd_step=0.02, scale=0.01),
+                 fd_step=0.02, scale=0.01, label="target position {axis}"),
     Parameter("camera.roll_deg", "deg", WHOLE_LINE,
               "the camera's turn about its optical axis (image up towards image right), either camera mode", _scene_field, _own_key,
-              frozenset({"roll", "moves-vertices", "nuisance", "per-observation"}), fd_step=0.5, scale=0.1),
+              frozenset({"roll", "moves-vertices", "nuisance", "per-observation"}), fd_step=0.5, scale=0.1, label="camera roll"),
     Parameter("image.scale", "1", POSITIVE, "exposure scale: the render times it (fit only, after the render; default 1)",
-              _constant(1.0), _not_a_scene_value, _IMAGE),
+              _constant(1.0), _not_a_scene_value, _IMAGE, label="exposure scale"),
     Parameter("image.offset_w_m2_sr", "W m^-2 sr^-1", WHOLE_LINE, "offset added to every pixel (fit only; default 0)",
-              _constant(0.0), _not_a_scene_value, _IMAGE, scale=0.01),
+              _constant(0.0), _not_a_scene_value, _IMAGE, scale=0.01, label="image offset"),
     Parameter("image.blur_sigma_px", "px", Bounds(0.0, PSF_SIGMA_MAX_PX),
               "sigma of a continuous Gaussian blur, before the pixel (fit only; no blur unless free; start 0.5)",
-              _constant(PSF_SIGMA_START_PX), _not_a_scene_value, _IMAGE, scale=0.1),
+              _constant(PSF_SIGMA_START_PX), _not_a_scene_value, _IMAGE, scale=0.1, label="blur sigma"),
     *(Parameter(f"image.shift_{axis}_px", "px", WHOLE_LINE,
                 f"sub-pixel shift of the image towards +{axis} ({where}), by a Fourier phase (fit only; default 0)",
-                _constant(0.0), _not_a_scene_value, _IMAGE, scale=0.1)
+                _constant(0.0), _not_a_scene_value, _IMAGE, scale=0.1, label=f"image shift {axis}")
       for axis, where in (("x", "columns, rightwards"), ("y", "rows, downwards"))),
 )}
 
@@ -357,6 +364,15 @@ def parameter(name: str) -> Parameter:
     if pattern not in PARAMETERS:
         check_choice("parameter", name, PARAMETERS)
     return PARAMETERS[pattern]
+
+
+def label(name: str) -> str:
+    """A parameter's name in words, without its unit, for axes and tables: ``parts.panels.kd`` ->
+    "albedo kd of panels", ``image.scale@1`` -> "exposure scale, observation 1"."""
+    base, k = observation_of(name)
+    section, *rest = base.split(".")
+    words = f"{parameter(name).label} of {rest[0]}" if section == "parts" and len(rest) == 2 else parameter(name).label
+    return words if k is None else f"{words}, observation {k}"
 
 
 def check_value(name: str, value: float, argument: str | None = None) -> float:

@@ -308,6 +308,17 @@ class Scene:
                 check_choice("wrinkles.parts", name, self.parts)
         check_optics(self.camera, self.render)
 
+    def __repr__(self) -> str:
+        """One short line (:func:`spacefit.display.scene_repr`); ``to_toml()`` gives every value."""
+        from spacefit.display import scene_repr
+
+        return scene_repr(self)
+
+    def _repr_html_(self) -> str:
+        from spacefit.display import scene_html
+
+        return scene_html(self)
+
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (TOML-ready): every value, defaults included; each material in full."""
         out: dict[str, Any] = {name: {k: _plain(v) for k, v in dataclasses.asdict(getattr(self, name)).items()}

@@ -184,13 +184,19 @@ class LightCurve:
             lines.append(f"{self.x[i]:18.6g} {self.phase_angle_deg[i]:11.3f} {e_text:>28s} {m_text:>28s}")
         return "\n".join(lines)
 
-    def figure(self) -> Any:
-        """A matplotlib Figure: magnitude (brighter up) and irradiance against the swept quantity, with
-        one-sigma Monte Carlo error bars when more than one seed was run (asymmetric in magnitude)."""
-        from matplotlib.figure import Figure  # here: only a figure needs matplotlib (optional; slow to import)
+    def _repr_html_(self) -> str:
+        from spacefit.display import light_curve_html
 
-        fig = Figure(figsize=(9.0, 3.6), layout="constrained")
-        left, right = fig.subplots(1, 2)
+        return light_curve_html(self)
+
+    def figure(self, *, ax: Any = None, fig: Any = None) -> Any:
+        """Irradiance and magnitude (brighter up) against the swept quantity, with one-sigma Monte
+        Carlo error bars when more than one seed was run (asymmetric in magnitude), into ``ax`` (two
+        Axes) or ``fig`` (a matplotlib Figure or SubFigure; default: a new one). Returns the array of
+        the two axes."""
+        from spacefit.plotting import axis_label, panels  # here: only a figure needs matplotlib (optional; slow to import)
+
+        left, right = panels(ax, fig, 2, (9.0, 3.6), lambda f: f.subplots(1, 2))
         known = self.seeds > 1
         bright, faint = self.magnitude_interval()
         faint = np.where(np.isfinite(faint), faint, np.nanmax(np.where(np.isfinite(faint), faint, self.magnitude)) + 1.0)
@@ -200,13 +206,14 @@ class LightCurve:
         right.errorbar(self.x, self.magnitude, yerr=np.stack([self.magnitude - bright, faint - self.magnitude]) if known else None,
                        fmt="o-", capsize=2)
         right.invert_yaxis()  # brighter up
-        right.set_ylabel(f"apparent {self.band} magnitude (m_sun = {self.sun_magnitude:g})")
-        for ax in (left, right):
-            ax.set_xlabel(self.against)
+        right.set_ylabel(f"apparent {self.band} magnitude (mag; m$_{{sun}}$ = {self.sun_magnitude:.4g})")
+        for panel in (left, right):
+            panel.set_xlabel(axis_label(self.against))
         errors = f"1-sigma Monte Carlo errors of {self.seeds} seeds" if known else "one seed: Monte Carlo error unknown"
-        fig.suptitle(f"observer at {self.observer_range_m:.4g} m (rendered at {self.rendered_range_m:.4g} m, inverse square); "
-                     f"{errors}", fontsize=9)
-        return fig
+        if ax is None:
+            left.figure.suptitle(f"observer at {self.observer_range_m:.4g} m (rendered at {self.rendered_range_m:.4g} m, "
+                                 f"inverse square); {errors}", fontsize=9)
+        return np.array([left, right], dtype=object)
 
 
 def light_curve(

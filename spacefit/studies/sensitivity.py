@@ -23,12 +23,13 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.errors import check_count
+from spacefit.errors import check_choice, check_count, check_range
 from spacefit.progress import progress_bar
-from spacefit.scene.parameters import check_names, parameter
+from spacefit.scene.parameters import check_names, label, parameter
 from spacefit.scene.schema import Scene, check_scene
 
 TARGET = "target"  # the region of every part together, beside the parts
+RADIANCE_UNIT = "W m^-2 sr^-1"  # spacefit.sensor's (which imports SciPy: slow)
 CONFIDENCE = 0.95  # two-sided: a derivative is resolved when this interval excludes zero
 # The sweep's per-point variables of a sensitivity: name -> (dtype, fill, unit, description).
 SUMMARY_VARIABLES: dict[str, tuple[Any, Any, str, str]] = {
@@ -49,6 +50,12 @@ def normalisation(name: str, value: float) -> tuple[float, str]:
     if p.unit == "deg":
         return 180.0 / math.pi, "rad^-1"
     return 1.0, f"{p.unit}^-1"
+
+
+def per_unit(unit: str, parameter_unit: str) -> str:
+    """The unit of a derivative of a ``unit`` quantity by a ``parameter_unit`` one (``unit`` alone
+    for a dimensionless parameter, "1")."""
+    return unit if parameter_unit == "1" else f"{unit} per {parameter_unit}"
 
 
 def mean_and_error(samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -108,53 +115,124 @@ class Sensitivity:
         i = self.names.index(name)
         return np.abs(self.derivative[i].mean(axis=-1)) > self.t * self.derivative_se[i].mean(axis=-1)
 
-    def table(self) -> str:
-        """The regions' derivatives and normalised sensitivities as text, each with its standard error;
-        an unresolved one is marked ``UNRESOLVED``, one without a finite error ``NOT FINITE``."""
-        lines = [f"{'parameter':28s} {'region':10s} {'dL/dp (W m^-2 sr^-1 per unit)':>34s} {'normalised':>26s}"]
+    @property
+    def exact_zero(self) -> np.ndarray:
+        """(n, regions) where a region's derivative is exactly zero in every seed (no pixel of it
+        depends on the parameter: another part's material, say): zero, not noise."""
+        return (self.d_mean_radiance == 0.0) & (self.d_mean_radiance_se == 0.0)
+
+    def rows(self) -> list[dict[str, str]]:
+        """The table's rows as text cells: ``parameter``, ``region``, ``dL/dp`` (with its standard error),
+        its ``unit``, ``normalised`` (with its error and unit, none where it is dimensionless) and a
+        ``note``: ``UNRESOLVED (noise)`` where the confidence interval holds zero, ``NOT FINITE``
+        without a finite error; an exact zero (:attr:`exact_zero`) is ``0`` with no note."""
+        out = []
         for i, name in enumerate(self.names):
+            unit = per_unit(RADIANCE_UNIT, self.units[name])
             for j, region in enumerate(self.regions):
-                finite = np.isfinite(self.d_mean_radiance_se[i, j])
-                flag = "" if self.resolved[i, j] else "  UNRESOLVED (noise)" if finite else "  NOT FINITE (no pixels, or NaN renders)"
-                d = f"{self.d_mean_radiance[i, j]:+.4g} +- {self.d_mean_radiance_se[i, j]:.2g}"
-                s = f"{self.sensitivity[i, j]:+.4g} +- {self.sensitivity_se[i, j]:.2g} {self.normalised_units[name]}"
-                lines.append(f"{name:28s} {region:10s} {d:>34s} {s:>26s}{flag}")
+                d, d_se = self.d_mean_radiance[i, j], self.d_mean_radiance_se[i, j]
+                if self.exact_zero[i, j]:
+                    out.append({"parameter": name, "region": region, "dL/dp": "0", "unit": unit, "normalised": "0", "note": ""})
+                    continue
+                finite = np.isfinite(d_se)
+                note = "" if self.resolved[i, j] else "UNRESOLVED (noise)" if finite else "NOT FINITE (no pixels, or NaN renders)"
+                normalised_unit = "" if self.normalised_units[name] == "1" else f" {self.normalised_units[name]}"
+                out.append({"parameter": name, "region": region, "dL/dp": f"{d:+.4g} +- {d_se:.2g}", "unit": unit,
+                            "normalised": f"{self.sensitivity[i, j]:+.4g} +- {self.sensitivity_se[i, j]:.2g}{normalised_unit}",
+                            "note": note})
+        return out
+
+    def table(self) -> str:
+        """The regions' derivatives and normalised sensitivities as text, each with its standard error
+        (:meth:`rows`)."""
+        lines = [f"{'parameter':28s} {'region':10s} {'dL/dp':>22s}  {'unit':26s} {'normalised':>24s}"]
+        lines += [f"{r['parameter']:28s} {r['region']:10s} {r['dL/dp']:>22s}  {r['unit']:26s} {r['normalised']:>24s}"
+                  + (f"  {r['note']}" if r["note"] else "") for r in self.rows()]
         return "\n".join(lines)
 
-    def figure(self) -> Any:
-        """A matplotlib Figure: each derivative image (unresolved pixels grey), and the regions'
-        normalised sensitivities with their confidence intervals (unresolved bars hatched)."""
-        from matplotlib.figure import Figure  # here: only a figure needs matplotlib (optional; slow to import)
+    def _repr_html_(self) -> str:
+        from spacefit.display import sensitivity_html
 
+        return sensitivity_html(self)
+
+    def chart_steps(self, steps: Mapping[str, float] | None = None) -> dict[str, tuple[float, str]]:
+        """Each parameter's step in the chart of :meth:`figure`, and how it was chosen: ``steps``'s
+        where it gives one (in the parameter's unit), else a tenth of the parameter's valid range
+        where that is finite (D: 0.1), else its size of a change that matters (``Parameter.scale``:
+        0.1 deg for an attitude angle), else a tenth of its value (the sun's irradiance)."""
+        steps = dict(steps or {})
+        for name, step in steps.items():
+            check_choice("steps", name, self.names)
+            check_range(f"steps[{name!r}]", step, 0.0, lo_open=True, unit=self.units[name])
+        out = {}
+        for name in self.names:
+            p = parameter(name)
+            if name in steps:
+                out[name] = (float(steps[name]), "as given")
+            elif math.isfinite(p.bounds.hi - p.bounds.lo):
+                out[name] = ((p.bounds.hi - p.bounds.lo) / 10.0, f"a tenth of its range {p.bounds.describe()}")
+            elif p.scale > 0:
+                out[name] = (p.scale, "a change that matters")
+            else:
+                out[name] = (abs(self.at[name]) / 10.0, "a tenth of its value")
+        return out
+
+    def figure(self, *, ax: Any = None, fig: Any = None, crop: bool = True, steps: Mapping[str, float] | None = None) -> Any:
+        """Each derivative image (unresolved pixels grey), cropped to the target and a margin unless
+        ``crop=False``; and each region's change of mean radiance for a step of each parameter
+        (:meth:`chart_steps`, ``steps``: name -> step in its unit), relative to the region's mean
+        radiance, with its confidence interval (unresolved bars hatched; an exact zero is 0).
+        ``ax``: the axes to draw into (one per parameter, then the chart's); or ``fig``: a matplotlib
+        Figure or SubFigure to lay them out in (default: a new one).
+
+        Returns:
+            the array of axes drawn: the derivative images' in ``names`` order, then the chart's.
+        """
+        from spacefit.plotting import cropped, image_box, panels, show_image, unit_label
+
+        chart = self.chart_steps(steps)
         n = len(self.names)
         columns = min(n, 3)
         rows = math.ceil(n / columns)
-        fig = Figure(figsize=(4.2 * columns, 3.4 * rows + 3.6), layout="constrained")
-        grid = fig.add_gridspec(rows + 1, columns)
-        for i, name in enumerate(self.names):
-            d = self.derivative[i].mean(axis=-1)
-            shown = np.where(self.resolved_pixels(name), d, np.nan)
-            limit = float(np.nanmax(np.abs(shown))) if np.isfinite(shown).any() else 1.0
-            ax = fig.add_subplot(grid[i // columns, i % columns])
-            ax.imshow(np.zeros_like(d), cmap="Greys", vmin=-1, vmax=4)  # grey under unresolved pixels
-            im = ax.imshow(shown, cmap="RdBu_r", vmin=-limit, vmax=limit)
-            fig.colorbar(im, ax=ax, shrink=0.8, label=f"W m$^{{-2}}$ sr$^{{-1}}$ per {self.units[name]}")
-            ax.set_title(f"d radiance / d {name}", fontsize=9)
-            ax.axis("off")
-        ax = fig.add_subplot(grid[rows, :])
+
+        def layout(f: Any) -> list[Any]:
+            grid = f.add_gridspec(rows + 1, columns)
+            return [*(f.add_subplot(grid[i // columns, i % columns]) for i in range(n)), f.add_subplot(grid[rows, :])]
+
+        axes = panels(ax, fig, n + 1, (4.2 * columns, 3.4 * rows + 3.6), layout)
+        grey = self.derivative.mean(axis=-1)
+        box = image_box([self.image, *np.abs(grey)], crop)
+        for i, (name, image_ax) in enumerate(zip(self.names, axes)):
+            shown = cropped(np.where(self.resolved_pixels(name), grey[i], np.nan), box)
+            limit = float(np.nanmax(np.abs(shown))) if np.isfinite(shown).any() else 0.0
+            show_image(image_ax, np.zeros_like(grey[i]), box, cmap="Greys", vmin=-1, vmax=4)  # grey under unresolved pixels
+            im = show_image(image_ax, np.where(self.resolved_pixels(name), grey[i], np.nan), box, cmap="RdBu_r",
+                            vmin=-(limit or 1.0), vmax=limit or 1.0)
+            image_ax.figure.colorbar(im, ax=image_ax, shrink=0.8, label=unit_label(per_unit(RADIANCE_UNIT, self.units[name])))
+            image_ax.set_title(f"d radiance / d {label(name)}", fontsize=9)
+            image_ax.set_xticks([])
+            image_ax.set_yticks([])
+        bars = axes[-1]
         width = 0.8 / n
         x = np.arange(len(self.regions))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            relative = 100.0 * self.d_mean_radiance / self.mean_radiance
+            relative_se = 100.0 * self.d_mean_radiance_se / np.abs(self.mean_radiance)
         for i, name in enumerate(self.names):
+            step, how = chart[name]
+            shown = np.where(self.exact_zero[i], 0.0, relative[i] * step)
+            clear = self.resolved[i] | self.exact_zero[i]
             for j in range(len(self.regions)):
-                ax.bar(x[j] + i * width, self.sensitivity[i, j], width, yerr=self.t * self.sensitivity_se[i, j],
-                       color=f"C{i}", hatch="" if self.resolved[i, j] else "//", alpha=1.0 if self.resolved[i, j] else 0.4,
-                       label=f"{name} [{self.normalised_units[name]}]" if j == 0 else None)
-        ax.axhline(0.0, color="k", lw=0.5)
-        ax.set_xticks(x + width * (n - 1) / 2, self.regions)
-        ax.set_ylabel("normalised sensitivity of mean radiance")
-        ax.set_title(f"{CONFIDENCE:.0%} intervals; hatched: unresolved", fontsize=9)
-        ax.legend(fontsize=7)
-        return fig
+                bars.bar(x[j] + i * width, shown[j], width, yerr=self.t * relative_se[i, j] * step, color=f"C{i}",
+                         hatch="" if clear[j] else "//", alpha=1.0 if clear[j] else 0.4,
+                         label=f"{label(name)}: step {step:.3g} {unit_label(self.units[name])} ({how})".replace("  ", " ")
+                         if j == 0 else None)
+        bars.axhline(0.0, color="k", lw=0.5)
+        bars.set_xticks(x + width * (n - 1) / 2, self.regions)
+        bars.set_ylabel("change of mean radiance per step (%)")
+        bars.set_title(f"{CONFIDENCE:.0%} intervals; hatched: unresolved", fontsize=9)
+        bars.legend(fontsize=7)
+        return axes
 
     def to_dataset(self) -> Any:
         """The sensitivity as a labelled xarray Dataset (dimensions parameter, region, y, x, channel)."""
@@ -209,8 +287,7 @@ def sensitivity(
     finally:
         bar.close()
     part_image = renderer.part_image()
-    regions = (*part_image.names, TARGET)
-    masks = [part_image.ids == i for i in range(len(part_image.names))] + [part_image.ids >= 0]
+    regions, masks = part_image.regions, part_image.masks()
     images = np.stack([r.image for r in results]).astype(float)
     columns = np.stack([[r.columns[n] for n in names] for r in results]).astype(float)  # (seeds, n, h, w, 3)
 

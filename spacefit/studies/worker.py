@@ -76,13 +76,12 @@ def summaries(radiance: np.ndarray, part_image: object, solid_angles: np.ndarray
     none), ``pixels`` and ``irradiance`` (W m^-2: the sum of radiance times pixel solid angle over
     its pixels, at the camera's pinhole; for the target, over the whole image, edges included).
     Radiance is the mean of the RGB channels (the sun's irradiance is the same in each)."""
-    table = part_image.table(radiance)
+    pixels, means = part_image.means(radiance)
+    order = [part_image.regions.index(n) for n in names]
     grey = np.asarray(radiance, dtype=float).mean(axis=-1) * solid_angles
     ids = part_image.ids
     irradiance = [grey.sum() if n == TARGET else grey[ids == part_image.names.index(n)].sum() for n in names]
-    return {"mean_radiance": np.array([table[n]["mean_radiance_w_m2_sr"] for n in names]),
-            "pixels": np.array([table[n]["pixels"] for n in names], dtype=np.int32),
-            "irradiance": np.array(irradiance)}
+    return {"mean_radiance": means[order], "pixels": pixels[order].astype(np.int32), "irradiance": np.array(irradiance)}
 
 
 def loaded(task: Task) -> type[_Loaded]:

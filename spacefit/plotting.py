@@ -1,0 +1,119 @@
+"""What the figures share: axis labels in words with units, the crop to the target, their axes.
+
+Every figure function takes ``ax=`` (the matplotlib Axes to draw into: one per panel, in the
+user's own layout) or ``fig=`` (a matplotlib Figure or SubFigure to lay its panels out in), and
+returns the array of axes it drew (:func:`panels`). Without either it makes a Figure of its own
+without pyplot, so the global backend (a notebook's) is left alone: ``axes[0].figure.savefig(path)``
+saves it. A figure-wide title is drawn only on a figure the function lays out. Images are cropped to the target by default (its bounding box
+and a margin, :func:`target_box`), their axes keeping the film's pixel coordinates; ``crop=False``
+shows the whole film. Labels come from the parameter registry (each parameter's words,
+:func:`spacefit.scene.parameters.label`, and unit) and :data:`spacefit.display.QUANTITIES` for what
+is not a parameter. matplotlib is imported with this module, which only the figure functions load.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.figure import Figure, SubFigure
+from matplotlib.image import AxesImage
+
+from spacefit.display import describe
+from spacefit.errors import InputError, check_type
+# The crop's margin on each side: a fraction of the target's box, and at least this many pixels.
+TARGET_MARGIN = 0.15
+MIN_MARGIN_PX = 2
+# A pixel shows the target where it differs from the background by more than this fraction of the
+# image's largest difference (a sensor's Airy rings and bias are below it, the lit target above).
+TARGET_THRESHOLD = 0.01
+
+
+def unit_label(unit: str) -> str:
+    """A unit as axis text, powers as superscripts (``W m^-2 sr^-1`` -> ``W m$^{-2}$ sr$^{-1}$``); ""
+    for a dimensionless one ("1")."""
+    return "" if unit in ("1", "") else re.sub(r"\^(-?\d+)", r"$^{\1}$", unit)
+
+
+def with_unit(words: str, unit: str) -> str:
+    """``words (unit)``, or the words alone for a dimensionless quantity."""
+    text = unit_label(unit)
+    return f"{words} ({text})" if text else words
+
+
+def axis_label(name: str) -> str:
+    """``name`` (a parameter, or a quantity of :data:`spacefit.display.QUANTITIES`) in words with its
+    unit: "albedo kd of panels", "target attitude about z (deg)", "solar phase angle (deg)"."""
+    return with_unit(*describe(name))
+
+
+def target_box(images: Sequence[np.ndarray], margin: float = TARGET_MARGIN) -> tuple[int, int, int, int]:
+    """(x0, y0, x1, y1), the half-open pixel bounds of what differs from the background in any of
+    ``images`` ((h, w) or (h, w, channels), all as large), with ``margin`` of the box (at least
+    :data:`MIN_MARGIN_PX`) on each side, within the film. An image's background is the median of its
+    border; a pixel differs where its channels' mean is over :data:`TARGET_THRESHOLD` of the
+    image's largest difference away (values that are not finite are background). The whole film
+    where no pixel differs."""
+    height, width = np.shape(images[0])[:2]
+    seen = np.zeros((height, width), dtype=bool)
+    for image in images:
+        grey = np.asarray(image, dtype=float)
+        grey = np.nan_to_num(grey.mean(axis=-1) if grey.ndim == 3 else grey, nan=0.0, posinf=0.0, neginf=0.0)
+        border = np.concatenate([grey[0], grey[-1], grey[:, 0], grey[:, -1]])
+        away = np.abs(grey - np.median(border))
+        if away.max() > 0:
+            seen |= away > TARGET_THRESHOLD * away.max()
+    if not seen.any():
+        return 0, 0, width, height
+    rows, columns = np.flatnonzero(seen.any(axis=1)), np.flatnonzero(seen.any(axis=0))
+    y0, y1, x0, x1 = rows[0], rows[-1] + 1, columns[0], columns[-1] + 1
+    pad = max(MIN_MARGIN_PX, round(margin * max(x1 - x0, y1 - y0)))
+    return max(x0 - pad, 0), max(y0 - pad, 0), min(x1 + pad, width), min(y1 + pad, height)
+
+
+def image_box(images: Sequence[np.ndarray], crop: bool) -> tuple[int, int, int, int]:
+    """:func:`target_box` of ``images`` where ``crop``, else the whole film."""
+    check_type("crop", crop, bool, "True (the target and a margin) or False (the whole film)")
+    height, width = np.shape(images[0])[:2]
+    return target_box(images) if crop else (0, 0, width, height)
+
+
+def cropped(image: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
+    """The part of ``image`` inside ``box`` (:func:`target_box`)."""
+    x0, y0, x1, y1 = box
+    return np.asarray(image)[y0:y1, x0:x1]
+
+
+def show_image(ax: Axes, image: np.ndarray, box: tuple[int, int, int, int], **kwargs: Any) -> AxesImage:
+    """``ax.imshow`` of ``image``'s part inside ``box``, placed at the film's pixel coordinates
+    (pixel centres at whole numbers, y down)."""
+    x0, y0, x1, y1 = box
+    return ax.imshow(cropped(image, box), extent=(x0 - 0.5, x1 - 0.5, y1 - 0.5, y0 - 0.5), **kwargs)
+
+
+def panels(ax: Axes | Sequence[Axes] | None, fig: Figure | SubFigure | None, count: int, figsize: tuple[float, float],
+           make: Callable[[Figure | SubFigure], Any]) -> np.ndarray:
+    """The ``count`` axes a figure function draws, flat: ``ax`` (one Axes, or a sequence or array of
+    ``count``: the user's layout), checked; else ``make(figure)``'s, on ``fig`` or on a new Figure
+    of ``figsize`` (inches) made without pyplot."""
+    if ax is None:
+        return np.asarray(make(new_figure(fig, figsize)), dtype=object).ravel()
+    if fig is not None:
+        raise InputError("give `ax` (the axes to draw into) or `fig` (a figure to lay them out in), not both.")
+    axes = np.asarray([ax] if isinstance(ax, Axes) else list(np.ravel(np.asarray(ax, dtype=object))), dtype=object)
+    for one in axes:
+        check_type("ax", one, Axes, f"a matplotlib Axes, or {count} of them (one per panel)")
+    if len(axes) != count:
+        raise InputError(f"`ax` must be {count} matplotlib Axes here (one per panel), got {len(axes)}.")
+    return axes
+
+
+def new_figure(fig: Figure | SubFigure | None, figsize: tuple[float, float]) -> Figure | SubFigure:
+    """``fig``, checked, or a new Figure of ``figsize`` (inches) made without pyplot."""
+    if fig is None:
+        return Figure(figsize=figsize, layout="constrained")
+    check_type("fig", fig, (Figure, SubFigure), "a matplotlib Figure or SubFigure (fig.subfigures() makes one)")
+    return fig
