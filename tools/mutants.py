@@ -50,6 +50,9 @@ class Mutant:
 
 
 MUTANTS = (
+    # no global state left behind: Mitsuba's variant is the caller's again after spacefit renders
+    Mutant("variant-left-at-spacefits", "spacefit/rendering/backend.py", "mi.set_variant(_caller_variant)", "pass",
+           ("tests/test_api.py::test_spacefit_gives_the_callers_mitsuba_variant_back",)),
     # camera and frames (thesis section 3.2)
     Mutant("euler-order", FRAMES, "return r1 @ r2 @ r3", "return r3 @ r2 @ r1", (CONVENTIONS,)),
     Mutant("r1-turns-the-other-way", FRAMES, "xp.stack([zero, xp.cos(a), xp.sin(a)]), xp.stack([zero, -xp.sin(a), xp.cos(a)])",
