@@ -14,7 +14,8 @@ import importlib
 
 __version__ = "0.1.0"
 
-# Public name -> (module, name in that module).
+# Public name -> (module, name in that module). Editors and type checkers see these names through the
+# stub __init__.pyi that tools/api_stub.py writes from _EXPORTS and __all__: rerun it after changing either.
 _EXPORTS: dict[str, tuple[str, str]] = {
     "Case": ("spacefit.cases", "Case"),
     "Pass": ("spacefit.fitting.passes", "Pass"),
