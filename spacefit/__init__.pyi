@@ -78,6 +78,7 @@ from spacefit.scene.schema import WrinkleSettings as WrinkleSettings
 from spacefit.scene.toml import default_scene as default_scene
 from spacefit.scene.toml import load_scene as load_scene
 from spacefit.sensor import Sensor as Sensor
+from spacefit.sensor import choose_exposure as choose_exposure
 from spacefit.sensor import read_sensor_file as read_sensor_file
 from spacefit.sensor import saturated_mask as saturated_mask
 from spacefit.studies.cluster import ClusterError as ClusterError
@@ -107,11 +108,11 @@ __all__ = [
     'Status', 'available_parameters', 'case_names', 'default_scene', 'fit', 'fit_to_folder', 'format_result', 'identifiability', 'jacobian',
     'load_case', 'load_scene', 'parameter_table', 'read_exr', 'render', 'render_function', 'render_to_folder', 'wm_rms', 'wm_rms_slope',
     'write_exr', 'write_fit_report', 'Distortion', 'Intrinsics', 'ObservedImage', 'Sensor', 'distort_image', 'expected_dn',
-    'noise_variance_dn', 'observe', 'pixel_solid_angles', 'read_image', 'read_sensor_file', 'saturated_mask', 'write_observation',
-    'sensor_of', 'format_sensor_sources', 'MLI_SLOPE_RANGE', 'Pass', 'Frame', 'frame_table', 'plot_frames', 'arc_pass', 'simulate_pass',
-    'read_sweep_file', 'sweep', 'verify_store', 'StoreReport', 'ClusterError', 'Sensitivity', 'sensitivity', 'LightCurve', 'light_curve',
-    'plot_comparison', 'plot_convergence', 'DiffuseConductor', 'BRDFTable', 'BRDF_MODELS', 'read_brdf_table', 'fit_brdf_table',
-    'fitted_material', 'compare_brdf_models', 'TableFit', 'write_table_fit', 'Site', 'LightCurveObservations', 'read_light_curve', 'Plate',
-    'predict_magnitudes', 'fit_plates', 'fitted_plates', 'light_curve_convergence', 'fit_light_curve', 'RenderSettings', 'CameraSettings',
-    'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings',
+    'noise_variance_dn', 'observe', 'pixel_solid_angles', 'read_image', 'read_sensor_file', 'saturated_mask', 'choose_exposure',
+    'write_observation', 'sensor_of', 'format_sensor_sources', 'MLI_SLOPE_RANGE', 'Pass', 'Frame', 'frame_table', 'plot_frames', 'arc_pass',
+    'simulate_pass', 'read_sweep_file', 'sweep', 'verify_store', 'StoreReport', 'ClusterError', 'Sensitivity', 'sensitivity', 'LightCurve',
+    'light_curve', 'plot_comparison', 'plot_convergence', 'DiffuseConductor', 'BRDFTable', 'BRDF_MODELS', 'read_brdf_table',
+    'fit_brdf_table', 'fitted_material', 'compare_brdf_models', 'TableFit', 'write_table_fit', 'Site', 'LightCurveObservations',
+    'read_light_curve', 'Plate', 'predict_magnitudes', 'fit_plates', 'fitted_plates', 'light_curve_convergence', 'fit_light_curve',
+    'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings',
 ]

@@ -60,7 +60,7 @@ def test_spacefit_gives_the_callers_mitsuba_variant_back(tmp_path):
             assert renderer.part_image().names == ("plate",)
             assert mi.variant() == variant
             f = sf.render_function(scene, ["parts.plate.kd"])
-            assert float(jax.grad(lambda x: f(x).sum())(jnp.array([0.5]))[0]) > 0
+            assert float(jax.grad(lambda x, f=f: f(x).sum())(jnp.array([0.5]))[0]) > 0
             assert mi.variant() == variant
             assert mi.load_dict({"type": "diffuse"}).variant_name() == variant
     finally:
