@@ -14,7 +14,8 @@ import importlib
 
 __version__ = "0.1.0"
 
-# Public name -> (module, name in that module).
+# Public name -> (module, name in that module). Editors and type checkers see these names through the
+# stub __init__.pyi that tools/api_stub.py writes from _EXPORTS and __all__: rerun it after changing either.
 _EXPORTS: dict[str, tuple[str, str]] = {
     "Case": ("spacefit.cases", "Case"),
     "Pass": ("spacefit.fitting.passes", "Pass"),
@@ -111,6 +112,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "noise_variance_dn": ("spacefit.fitting.formation", "noise_variance_dn"),
     "observe": ("spacefit.fitting.formation", "observe"),
     "saturated_mask": ("spacefit.sensor", "saturated_mask"),
+    "choose_exposure": ("spacefit.sensor", "choose_exposure"),
     "ClusterError": ("spacefit.studies.cluster", "ClusterError"),
     "plot_comparison": ("spacefit.fitting.plots", "plot_comparison"),
     "plot_convergence": ("spacefit.fitting.plots", "plot_convergence"),
@@ -124,7 +126,7 @@ __all__ = [
     "jacobian", "load_case", "load_scene", "parameter_table", "read_exr", "render", "render_function",
     "render_to_folder", "wm_rms", "wm_rms_slope", "write_exr", "write_fit_report",
     "Distortion", "Intrinsics", "ObservedImage", "Sensor", "distort_image", "expected_dn", "noise_variance_dn", "observe",
-    "pixel_solid_angles", "read_image", "read_sensor_file", "saturated_mask", "write_observation", "sensor_of", "format_sensor_sources",
+    "pixel_solid_angles", "read_image", "read_sensor_file", "saturated_mask", "choose_exposure", "write_observation", "sensor_of", "format_sensor_sources",
     "MLI_SLOPE_RANGE",
     "Pass", "Frame", "frame_table", "plot_frames", "arc_pass", "simulate_pass",
     "read_sweep_file", "sweep", "verify_store", "StoreReport", "ClusterError", "Sensitivity", "sensitivity", "LightCurve", "light_curve",

@@ -45,6 +45,7 @@ import dataclasses
 import json
 import math
 import tomllib
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -71,6 +72,8 @@ GAUSSIAN_RADIUS_SIGMA = 5.0
 """The Gaussian kernel reaches out to this many sigma (2.9e-7 of its energy lies beyond, per axis)."""
 SATURATION_MARGIN_READ_SIGMA = 3.0
 """A pixel within this many read-noise sigmas of the full well's DN counts as saturated."""
+SATURATED_WARNING_FRACTION = 1e-3
+""":func:`~spacefit.fitting.formation.observe` warns when more than this fraction of the target's pixels saturate."""
 
 
 @dataclass(frozen=True)
@@ -399,3 +402,61 @@ def saturated_mask(dn: Float[np.ndarray, "..."], sensor: Sensor) -> Bool[np.ndar
     """True where a DN (observed or expected, any shape) is at or above ``sensor.saturation_dn``."""
     check_type("sensor", sensor, Sensor, "an sf.Sensor")
     return check_array("dn", dn) >= sensor.saturation_dn
+
+
+def target_pixels(radiance: Float[np.ndarray, "h w c"], target: Bool[np.ndarray, "h w"] | None = None) -> Bool[np.ndarray, "h w"]:
+    """The target's pixels: ``target`` when given (checked against the image), else those of
+    ``radiance`` brighter than 0 in any channel (the target against black space)."""
+    radiance = check_array("radiance", radiance)
+    if target is None:
+        return np.asarray(radiance.max(axis=-1) > 0.0)
+    mask = np.asarray(target)
+    if mask.dtype != bool or mask.shape != radiance.shape[:2]:
+        raise InputError(f"`target` must be a boolean (height, width) = {radiance.shape[:2]} mask, got {mask.dtype} {mask.shape}.")
+    return mask
+
+
+def choose_exposure(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: Intrinsics, fraction: float = 0.8,
+                    percentile: float = 99.9, target: Bool[np.ndarray, "h w"] | None = None) -> Sensor:
+    """``sensor`` with the exposure time that puts the ``percentile``-th percentile of the target's
+    pixels at ``fraction`` of full scale: noise-free DN (:func:`~spacefit.fitting.formation.expected_dn`,
+    its brightest channel) ``= bias + fraction (saturation_dn - bias)``, with
+    :attr:`Sensor.saturation_dn` the full well's or the ADC's limit. The DN above the bias is linear
+    in the exposure time, so one evaluation at the sensor's own time gives it.
+
+    Args:
+        radiance: a render of the scene, (height, width, channels) W m^-2 sr^-1.
+        fraction: of full scale, in (0, 1]; the default leaves 20 % for noise and brighter glints.
+        percentile: in (0, 100]; at the default 99.9 at most 0.1 % of the target's pixels saturate
+            (:data:`SATURATED_WARNING_FRACTION`).
+        target: the target's pixels (boolean, height x width); None: those brighter than 0.
+    """
+    from spacefit.fitting.formation import expected_dn  # deferred: JAX (the rest of this module is NumPy)
+
+    check_type("sensor", sensor, Sensor, "an sf.Sensor")
+    if sensor.calibrated:
+        raise InputError(f"`sensor` is calibrated (`radiometric_scale_dn_per_w_m2_sr` = {sensor.radiometric_scale_dn_per_w_m2_sr:g}): "
+                         "its DN per radiance is fixed and its exposure time is not used; scale the radiance or the scale instead.")
+    check_range("fraction", fraction, 0.0, 1.0, lo_open=True)
+    check_range("percentile", percentile, 0.0, 100.0, lo_open=True)
+    mask = target_pixels(radiance, target)
+    if not mask.any():
+        raise InputError("`radiance` has no target pixels (none brighter than 0, or `target` is all false): nothing to expose for.")
+    signal = (np.asarray(expected_dn(radiance, sensor, intrinsics)) - sensor.bias_dn).max(axis=-1)[mask]
+    level = float(np.percentile(signal, percentile))
+    if not level > 0.0:
+        raise InputError(f"the target's {percentile:g}th percentile of radiance is 0: too few of its pixels are lit to expose for.")
+    time_s = sensor.exposure_time_s * fraction * (sensor.saturation_dn - sensor.bias_dn) / level
+    return dataclasses.replace(sensor, exposure_time_s=time_s)
+
+
+def warn_if_saturated(dn: np.ndarray, radiance: Float[np.ndarray, "h w c"], sensor: Sensor) -> None:
+    """Warn when more than :data:`SATURATED_WARNING_FRACTION` of the target's pixels (:func:`target_pixels`)
+    saturate in an observation ``dn`` of ``radiance``: a fit leaves them out, and their mean is clipped."""
+    mask = target_pixels(radiance)
+    saturated = int(np.count_nonzero(saturated_mask(dn, sensor).any(axis=-1) & mask))
+    if saturated > SATURATED_WARNING_FRACTION * np.count_nonzero(mask):
+        warnings.warn(f"{saturated} of the target's {np.count_nonzero(mask)} pixels ({100 * saturated / np.count_nonzero(mask):.3g} %, "
+                      f"more than {100 * SATURATED_WARNING_FRACTION:g} %) saturate at {sensor.saturation_dn:g} DN: their DN is clipped. "
+                      "Shorten `Sensor.exposure_time_s`; sf.choose_exposure(radiance, sensor, intrinsics) picks one.",
+                      UserWarning, stacklevel=3)

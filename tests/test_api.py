@@ -43,6 +43,31 @@ def test_import_leaves_jax_x64_as_it_was():
     assert out.stdout.strip() == "False"
 
 
+def test_spacefit_gives_the_callers_mitsuba_variant_back(tmp_path):
+    """Mitsuba has one global variant: after sf.render, a Renderer's methods and a render function's
+    value and gradient, the caller's own variant is set again, and the caller's Mitsuba code runs in it."""
+    import mitsuba as mi
+
+    scene = plate_scene(tmp_path, 0.5)
+    before = mi.variant()
+    try:
+        for variant in ("scalar_rgb", "llvm_ad_rgb"):
+            mi.set_variant(variant)
+            image = sf.render(scene)
+            assert mi.variant() == variant
+            renderer = sf.Renderer(scene)
+            renderer.set_values({"parts.plate.kd": 0.25})
+            assert renderer.render() == pytest.approx(image / 2, rel=1e-5, abs=1e-7)
+            assert renderer.part_image().names == ("plate",)
+            assert mi.variant() == variant
+            f = sf.render_function(scene, ["parts.plate.kd"])
+            assert float(jax.grad(lambda x, f=f: f(x).sum())(jnp.array([0.5]))[0]) > 0
+            assert mi.variant() == variant
+            assert mi.load_dict({"type": "diffuse"}).variant_name() == variant
+    finally:
+        mi.set_variant(before or "llvm_ad_rgb")
+
+
 def plate_scene(tmp_path: Path, kd: float) -> sf.Scene:
     return small_scene(write_plate_obj(tmp_path / "plate.obj"), {"material": "white_paint", "kd": kd}, render={"spp": 8})
 

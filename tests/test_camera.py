@@ -87,3 +87,57 @@ def test_point_projects_to_expected_pixel(tmp_path, camera, pixel):
     w = img[v, u]
     centroid = np.array([np.sum((u + 0.5) * w), np.sum((v + 0.5) * w)]) / w.sum()
     assert np.allclose(centroid, pixel, atol=0.25)
+
+
+def test_a_field_of_view_sets_the_pitch_and_a_new_resolution_keeps_the_field(tmp_path):
+    """``camera.fov_deg`` sets the pixel pitch; a resolution change then keeps the field, and the
+    target covers the same fraction of the image (without it the pitch is kept and the field narrows)."""
+    from spacefit.rendering.renderer import Renderer
+
+    sphere = write_sphere_obj(tmp_path / "sphere.obj", radius=0.8, subdivisions=3)
+    base = small_scene(sphere, {"material": "white_paint", "kd": 1.0}, render={"resolution": [48, 48]}, camera={"pixel_pitch_mm": 0.25})
+    fov = float(np.degrees(Intrinsics.from_scene(base).fov_x))
+    by_field = base.with_values({"camera.fov_deg": fov})
+    assert by_field.camera.pixel_pitch_mm == pytest.approx(0.25, rel=1e-12)
+    pitch_kept, field_kept = (s.with_values({"render.resolution": [96, 96]}) for s in (base, by_field))
+    assert field_kept.camera.pixel_pitch_mm == pytest.approx(0.125, rel=1e-12) and pitch_kept.camera.pixel_pitch_mm == 0.25
+    assert np.degrees(Intrinsics.from_scene(field_kept).fov_x) == pytest.approx(fov, rel=1e-12)
+
+    def covered(scene) -> float:
+        """The fraction of the image's pixels whose centre ray hits the sphere."""
+        return float((Renderer(scene).part_image().ids >= 0).mean())
+
+    small = covered(base)
+    assert 0.2 < small < 0.5
+    assert covered(field_kept) == pytest.approx(small, rel=0.03)
+    assert covered(pitch_kept) == pytest.approx(small / 4, rel=0.05)  # the pitch kept: a field twice as wide each way
+    text = by_field.to_toml()
+    assert "pixel_pitch_mm" not in text and load_scene_text(tmp_path, text) == by_field
+
+
+def load_scene_text(tmp_path, text: str):
+    from spacefit.scene.toml import load_scene
+
+    (tmp_path / "scene.toml").write_text(text)
+    return load_scene(tmp_path / "scene.toml")
+
+
+def test_a_pitch_given_with_a_field_of_view_is_refused(tmp_path):
+    from spacefit.errors import InputError
+    from spacefit.scene.toml import load_scene
+
+    scene = load_case("panels").scene()
+    with pytest.raises(InputError, match=r"`camera.pixel_pitch_mm` = 0.01 was given while `camera.fov_deg` = 10 sets"):
+        scene.with_values({"camera.fov_deg": 10.0, "camera.pixel_pitch_mm": 0.01})
+    with pytest.raises(InputError, match=r"`camera.fov_deg` must be in \[0, 179\] deg, got 200"):
+        scene.with_values({"camera.fov_deg": 200.0})
+    (tmp_path / "both.toml").write_text("[camera]\nfov_deg = 10.0\npixel_pitch_mm = 4.0\n")
+    with pytest.raises(InputError, match="give one of them"):
+        load_scene(tmp_path / "both.toml")
+    assert scene.with_values({"camera.fov_deg": 10.0}).with_values({"camera.fov_deg": 0.0, "camera.pixel_pitch_mm": 0.01}).camera.pixel_pitch_mm == 0.01
+
+
+def test_intrinsics_from_a_scene_are_its_camera_in_metres():
+    scene = load_case("panels").scene().with_values({"camera.principal_offset_px": [2.0, -1.0]})
+    intr = Intrinsics.from_scene(scene)
+    assert intr == Intrinsics(7.0, 18.75e-3, 128, 128, (2.0, -1.0)) == assemble(scene).intrinsics

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from scipy import constants, integrate, special
@@ -10,7 +12,7 @@ from spacefit.errors import InputError
 from spacefit.fitting.formation import distort_image, expected_dn, expected_electrons, noise_variance_dn, observe
 from spacefit.geometry.distortion import Distortion, distort, undistort
 from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
-from spacefit.sensor import Sensor, airy_psf, airy_transfer, psf_rms_px, quantise, saturated_mask
+from spacefit.sensor import Sensor, airy_psf, airy_transfer, choose_exposure, psf_rms_px, quantise, saturated_mask
 
 THESIS = Intrinsics(7.0, 4e-3, 601, 601)  # Table 4-2's optics; odd size puts a pixel centre on the axis
 SHARP = dict(diffraction=False, psf_sigma_px=0.0)
@@ -148,11 +150,13 @@ def test_quantisation_and_saturation():
     assert q.dtype == np.uint16 and q.tolist() == [0, 1, 2, 4, 0, 255, 255]
     assert quantise(np.array([70000.2]), Sensor(bit_depth=20, bias_dn=0.0)).dtype == np.uint32
     intr = Intrinsics(7.0, 4e-3, 16, 16)
-    bright = observe(np.full((16, 16, 3), 1e6), s8, intr, seed=0)
+    with pytest.warns(UserWarning, match="256 of the target's 256 pixels"):
+        bright = observe(np.full((16, 16, 3), 1e6), s8, intr, seed=0)
     assert np.all(bright == 255) and np.all(saturated_mask(bright, s8))
     # a full well below the ADC's range: saturated pixels read the well's DN plus read noise
     well = Sensor(full_well_electrons=1000.0, gain_dn_per_electron=1.0, read_noise_electrons=2.0, bias_dn=100.0, **SHARP)
-    img = observe(np.full((16, 16, 3), 1e3), well, intr, seed=0)
+    with pytest.warns(UserWarning, match="saturate at 1094 DN"):
+        img = observe(np.full((16, 16, 3), 1e3), well, intr, seed=0)
     assert abs(img.astype(float).mean() - 1100.0) < 1.0 and np.all(saturated_mask(img, well))
     dim = observe(np.full((16, 16, 3), 1e-6), well, intr, seed=0)
     assert not saturated_mask(dim, well).any()
@@ -249,3 +253,46 @@ def test_flat_field_multiplies_the_signal_above_the_bias():
         expected_dn(radiance, sensor, intr, np.where(np.arange(30).reshape(5, 6) == 7, 0.0, flat))
     with pytest.raises(InputError, match=r"`flat` has shape \(6, 5\); the image is \(5, 6, 3\)"):
         expected_dn(radiance, sensor, intr, flat.T)
+
+
+def test_the_chosen_exposure_puts_the_targets_percentile_at_its_fraction_and_saturation_warns():
+    """sf.choose_exposure on a render: the target's 99.9th percentile lands at 80 % of full scale
+    (within 2 %, noise-free and in one noisy observation) and sf.observe stays quiet; 1.5x that
+    exposure saturates more than 0.1 % of the target's pixels, and sf.observe says so."""
+    import warnings
+
+    from spacefit.cases import load_case
+    from spacefit.rendering.exr import read_exr
+
+    radiance = read_exr(Path(__file__).resolve().parents[1] / "data/synthetic/panels/reference.exr")
+    intr = Intrinsics.from_scene(load_case("panels").scene())
+    for sensor in (Sensor(psf_sigma_px=0.7), Sensor(bit_depth=16, full_well_electrons=None, gain_dn_per_electron=1.0)):
+        chosen = choose_exposure(radiance, sensor, intr)
+        target = radiance.max(axis=-1) > 0
+        full = chosen.saturation_dn - chosen.bias_dn
+        expected = (np.asarray(expected_dn(radiance, chosen, intr)) - chosen.bias_dn).max(axis=-1)[target]
+        assert np.percentile(expected, 99.9) == pytest.approx(0.8 * full, rel=1e-6)
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            dn = observe(radiance, chosen, intr, seed=3).astype(float)
+        assert np.percentile((dn - chosen.bias_dn).max(axis=-1)[target], 99.9) == pytest.approx(0.8 * full, rel=0.02)
+        longer = Sensor(**{**chosen.to_dict(), "exposure_time_s": 1.5 * chosen.exposure_time_s})
+        with pytest.warns(UserWarning, match=r"pixels \([0-9.]+ %, more than 0.1 %\) saturate"):
+            observe(radiance, longer, intr, seed=3)
+    half = choose_exposure(radiance, Sensor(), intr, fraction=0.5, percentile=50.0)
+    assert np.median((np.asarray(expected_dn(radiance, half, intr)) - half.bias_dn).max(axis=-1)[radiance.max(axis=-1) > 0]) == \
+        pytest.approx(0.5 * (half.saturation_dn - half.bias_dn), rel=1e-6)
+
+
+@pytest.mark.parametrize(("kwargs", "words"), [
+    ({"fraction": 0.0}, "`fraction` must be in (0, 1]"),
+    ({"percentile": 101.0}, "`percentile` must be in (0, 100]"),
+    ({"target": np.zeros((4, 4), bool)}, "no target pixels"),
+    ({"target": np.ones((3, 4), bool)}, "`target` must be a boolean (height, width) = (4, 4)"),
+    ({"sensor": Sensor(radiometric_scale_dn_per_w_m2_sr=100.0)}, "`sensor` is calibrated"),
+])
+def test_choose_exposure_refuses_bad_input(kwargs, words):
+    args = {"radiance": np.ones((4, 4, 3)), "sensor": Sensor(), "intrinsics": Intrinsics(7.0, 4e-3, 4, 4), **kwargs}
+    with pytest.raises(InputError) as err:
+        choose_exposure(**args)
+    assert words in str(err.value)

@@ -50,6 +50,14 @@ class Mutant:
 
 
 MUTANTS = (
+    # no global state left behind: Mitsuba's variant is the caller's again after spacefit renders
+    Mutant("variant-left-at-spacefits", "spacefit/rendering/backend.py", "mi.set_variant(_caller_variant)", "pass",
+           ("tests/test_api.py::test_spacefit_gives_the_callers_mitsuba_variant_back",)),
+    # a camera set the way a user thinks: the field kept across resolutions, an exposure at its fraction of full scale
+    Mutant("fov-pitch-ignores-the-resolution", "spacefit/scene/schema.py", "math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]",
+           "math.tan(math.radians(camera.fov_deg) / 2.0) / 48", ("tests/test_camera.py",)),
+    Mutant("exposure-counts-the-bias-as-signal", "spacefit/sensor.py", "fraction * (sensor.saturation_dn - sensor.bias_dn) / level",
+           "fraction * sensor.saturation_dn / level", ("tests/test_sensor.py",)),
     # camera and frames (thesis section 3.2)
     Mutant("euler-order", FRAMES, "return r1 @ r2 @ r3", "return r3 @ r2 @ r1", (CONVENTIONS,)),
     Mutant("r1-turns-the-other-way", FRAMES, "xp.stack([zero, xp.cos(a), xp.sin(a)]), xp.stack([zero, -xp.sin(a), xp.cos(a)])",

@@ -31,7 +31,7 @@ from spacefit.errors import InputError, check_array, check_count, check_type
 from spacefit.geometry.distortion import Distortion, undistort
 from spacefit.geometry.frames import Intrinsics
 from spacefit.sensor import (
-    Sensor, airy_transfer, check_flat, diffraction_cutoff_px, electrons_per_radiance, psf_reach_px, quantise,
+    Sensor, airy_transfer, check_flat, diffraction_cutoff_px, electrons_per_radiance, psf_reach_px, quantise, warn_if_saturated,
 )
 
 
@@ -168,6 +168,9 @@ def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Ar
 
 def observe(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: Intrinsics, seed: int) -> np.ndarray:
     """One simulated exposure: DN with shot and read noise, the full well, rounding and the ADC's range.
+    Warns (``UserWarning``) when more than :data:`~spacefit.sensor.SATURATED_WARNING_FRACTION` of the
+    target's pixels (those with radiance > 0) saturate; :func:`~spacefit.sensor.choose_exposure` picks
+    an exposure that leaves them unsaturated.
 
     Args:
         radiance: (height, width, channels) entrance-pupil radiance, W m^-2 sr^-1.
@@ -184,7 +187,9 @@ def observe(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: In
     if sensor.full_well_electrons is not None:
         electrons = np.minimum(electrons, sensor.full_well_electrons)
     electrons += rng.normal(0.0, sensor.read_noise_electrons, size=electrons.shape)
-    return quantise(sensor.bias_dn + sensor.gain_dn_per_electron * electrons, sensor)
+    dn = quantise(sensor.bias_dn + sensor.gain_dn_per_electron * electrons, sensor)
+    warn_if_saturated(dn, radiance, sensor)
+    return dn
 
 
 def distort_image(image: Float[Array, "h w c"], intrinsics: Intrinsics, coefficients: Distortion) -> Float[Array, "h w c"]:

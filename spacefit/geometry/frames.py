@@ -36,6 +36,8 @@ from spacefit.errors import InputError, check_count, check_range, check_type, ch
 if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need
     from jaxtyping import Float
 
+    from spacefit.scene.schema import Scene
+
 
 def attitude_matrix(angles: Float[np.ndarray, "3"], xp: ModuleType = np) -> Float[np.ndarray, "3 3"]:
     """Rotation ``R1(alpha) R2(beta) R3(gamma)`` of thesis section 3.2 from angles in radians.
@@ -134,6 +136,16 @@ class Intrinsics:
         check_count("Intrinsics.width", self.width, optional=False)
         check_count("Intrinsics.height", self.height, optional=False)
         object.__setattr__(self, "principal_offset", tuple(map(float, check_vector("Intrinsics.principal_offset", self.principal_offset, 2))))
+
+    @classmethod
+    def from_scene(cls, scene: Scene) -> Intrinsics:
+        """The intrinsics of a scene's camera, in metres: ``camera.focal_length_mm`` and
+        ``camera.pixel_pitch_mm`` (set by ``camera.fov_deg`` where it is given), ``render.resolution``
+        and ``camera.principal_offset_px``; what :func:`spacefit.observe` and a sensor take."""
+        from spacefit.scene.schema import check_scene  # deferred: the scene's schema sits above the geometry
+
+        c, r = check_scene(scene).camera, scene.render
+        return cls(c.focal_length_mm * 1e-3, c.pixel_pitch_mm * 1e-3, r.resolution[0], r.resolution[1], c.principal_offset_px)
 
     @property
     def focal_px(self) -> float:

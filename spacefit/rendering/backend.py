@@ -1,5 +1,9 @@
 """Dr.Jit / Mitsuba start-up: the system libLLVM and the variant (llvm_ad_rgb or cuda_ad_rgb).
 
+Mitsuba has one global variant. spacefit selects its own only around its Mitsuba calls
+(:func:`variant_scope`) and gives the caller's back after, so a user's own Mitsuba code keeps its
+variant. Mitsuba (3.9) has no call back to no variant: a process that never set one finds spacefit's.
+
 Dr.Jit's LLVM backend loads the system's libLLVM at run time. Debian 12's default libLLVM 15 aborts
 at the first render ("LLVM ERROR: Cannot select: ... fminimum"), and so did 16 here; 19 works.
 Unless the user has set ``DRJIT_LIBLLVM_PATH``, the newest libLLVM >= ``MIN_LLVM_MAJOR`` found is used. This module must be
@@ -8,9 +12,14 @@ imported before ``drjit``; the rendering package does so.
 
 from __future__ import annotations
 
+import functools
 import glob
 import os
 import re
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import ParamSpec, TypeVar
 
 MIN_LLVM_MAJOR = 19
 LLVM_GLOBS = ("/usr/lib/x86_64-linux-gnu/libLLVM*.so*", "/usr/lib/aarch64-linux-gnu/libLLVM*.so*", "/usr/lib/llvm-*/lib/libLLVM*.so*")
@@ -56,8 +65,9 @@ def llvm_problem() -> str | None:
     return None
 
 
-def select_variant(requested: str = "auto") -> str:
-    """Set and return the Mitsuba variant: cuda_ad_rgb when a CUDA GPU is usable, else llvm_ad_rgb."""
+def resolve_variant(requested: str = "auto") -> str:
+    """The Mitsuba variant spacefit renders with: cuda_ad_rgb when a CUDA GPU is usable, else
+    llvm_ad_rgb, or ``requested`` when it is usable here (else :class:`InputError`). Sets nothing."""
     if requested == "auto":
         requested = "cuda_ad_rgb" if dr.has_backend(dr.JitBackend.CUDA) else "llvm_ad_rgb"
     if requested.startswith("llvm") and (problem := llvm_problem()):
@@ -67,6 +77,48 @@ def select_variant(requested: str = "auto") -> str:
                          "use 'auto' or 'llvm_ad_rgb'.")
     if requested not in mi.variants():
         raise InputError(f"`render.variant` {requested!r} is not built into this Mitsuba; it has {mi.variants()}.")
-    if mi.variant() != requested:
-        mi.set_variant(requested)
     return requested
+
+
+_scope_lock = threading.Lock()
+_scope_depth = 0  # variant scopes open now, in any thread
+_caller_variant: str | None = None  # the variant before the outermost scope opened
+
+
+@contextmanager
+def variant_scope(requested: str = "auto") -> Iterator[str]:
+    """Set spacefit's Mitsuba variant (:func:`resolve_variant`) for the calls inside, yielding it,
+    and give the caller's back when the outermost scope ends (nested scopes, and scopes open in
+    several threads at once, switch nothing on the way out). A caller who keeps another variant pays
+    a switch each way per outermost scope (0.25 s a pair on 2 cores, Mitsuba reloads its AD
+    integrators); a caller with spacefit's variant, or none, pays nothing."""
+    global _scope_depth, _caller_variant
+    with _scope_lock:
+        if _scope_depth == 0:
+            _caller_variant = mi.variant()
+        _scope_depth += 1
+    try:
+        variant = resolve_variant(requested)
+        if mi.variant() != variant:
+            mi.set_variant(variant)
+        yield variant
+    finally:
+        with _scope_lock:
+            _scope_depth -= 1
+            if _scope_depth == 0 and _caller_variant is not None and mi.variant() != _caller_variant:
+                mi.set_variant(_caller_variant)
+
+
+P = ParamSpec("P")
+R = TypeVar("R")
+
+
+def in_variant(method: Callable[P, R]) -> Callable[P, R]:
+    """Run a method of an object with a ``variant`` attribute inside :func:`variant_scope` of that variant."""
+
+    @functools.wraps(method)
+    def scoped(*args: P.args, **kwargs: P.kwargs) -> R:
+        with variant_scope(args[0].variant):  # type: ignore[attr-defined]
+            return method(*args, **kwargs)
+
+    return scoped

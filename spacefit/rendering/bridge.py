@@ -32,7 +32,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from spacefit.rendering.backend import dr, mi
+from spacefit.rendering.backend import dr, in_variant, mi
 from spacefit.rendering.renderer import Renderer, to_value, render_threads
 
 SceneValues = Mapping[str, Array]
@@ -64,6 +64,12 @@ class DrJitScene:
     spp_grad: int
     integrator: str = "prb"
 
+    @property
+    def variant(self) -> str:
+        """The Mitsuba variant of the loaded scene, set around each of the methods below."""
+        return self.renderer.variant
+
+    @in_variant
     def __post_init__(self) -> None:
         depth = self.renderer.assembly.scene.render.depth + 1
         props = {"type": self.integrator, "max_depth": depth, "rr_depth": depth + 1}
@@ -85,6 +91,7 @@ class DrJitScene:
         return mi.render(self.renderer.scene, self.params, integrator=self._integrator, seed=seed_grad + 1,
                          seed_grad=seed_grad, spp=self.spp_grad)
 
+    @in_variant
     def primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """Radiance image (h, w, 3) float32 at ``values``; bitwise reproducible if the scene is deterministic."""
         self._set(values, grad=False)
@@ -92,6 +99,7 @@ class DrJitScene:
             image = mi.render(self.renderer.scene, integrator=self._integrator, seed=seed, spp=self.spp)
             return self.renderer.to_film(np.asarray(image, dtype=np.float32))
 
+    @in_variant
     def forward(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
         """Directional derivative of the image along ``tangent`` (same keys as ``values``), one render."""
         self._set(values, grad=True)
@@ -105,6 +113,7 @@ class DrJitScene:
         self._set(values, grad=False)
         return out
 
+    @in_variant
     def backward(self, values: Mapping[str, np.ndarray], cotangent: np.ndarray, seed_grad: int) -> dict[str, np.ndarray]:
         """Gradient of sum(cotangent * image) with respect to every key of ``values``, one backward pass."""
         self._set(values, grad=True)

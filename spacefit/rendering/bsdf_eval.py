@@ -11,14 +11,14 @@ from __future__ import annotations
 import numpy as np
 
 from spacefit.materials import Material
-from spacefit.rendering.backend import mi, select_variant
+from spacefit.rendering.backend import mi, variant_scope
 from spacefit.rendering.renderer import bsdf_dict
 
 
+@variant_scope("auto")
 def mitsuba_brdf(material: Material, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
     """f_r (sr^-1) of ``material`` by Mitsuba for local unit directions ``wi`` (towards the light) and
     ``wo`` (towards the observer), arrays (n, 3), with cos(theta_o) != 0."""
-    select_variant("auto")
     wi, wo = np.atleast_2d(np.asarray(wi, dtype=float)), np.atleast_2d(np.asarray(wo, dtype=float))
     bsdf = mi.load_dict(bsdf_dict(material))
     si = mi.SurfaceInteraction3f()

@@ -20,7 +20,7 @@ from spacefit.geometry.frames import project
 from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material, Mirror
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
-from spacefit.rendering.backend import dr, mi, select_variant
+from spacefit.rendering.backend import dr, in_variant, mi, resolve_variant, variant_scope
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.overrides import as_parameters
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
@@ -184,12 +184,14 @@ def scene_dict(assembly: Assembly, vertices: Mapping[str, np.ndarray], window: t
 
 
 def mitsuba_scene_dict(scene: Scene) -> dict:
-    """The Mitsuba scene dictionary of ``scene`` (``mi.load_dict`` loads it; the whole film): the
-    integrator, camera, film and sun as dictionaries, each part an ``mi.Mesh`` with its BSDF."""
+    """The Mitsuba scene dictionary of ``scene`` (the whole film): the integrator, camera, film and
+    sun as dictionaries, each part an ``mi.Mesh`` with its BSDF. The meshes belong to the variant the
+    scene renders with (``llvm_ad_rgb``, ``cuda_ad_rgb`` on a GPU): load the dictionary in it,
+    ``with mi.variant_context("llvm_ad_rgb"): mi.load_dict(d)``."""
     assembly = assemble(check_scene(scene))
-    select_variant(scene.render.variant)
     intr = assembly.intrinsics
-    return scene_dict(assembly, assembly.scene_vertices, (0, 0, intr.width, intr.height))
+    with variant_scope(scene.render.variant):
+        return scene_dict(assembly, assembly.scene_vertices, (0, 0, intr.width, intr.height))
 
 
 def pass_seeds(seed: int, spp: int, pixels: int) -> list[tuple[int, int]]:
@@ -316,7 +318,7 @@ class Renderer:
 
     def __init__(self, scene: Scene | Assembly, variant: str | None = None, crop: bool = True) -> None:
         assembly = scene if isinstance(scene, Assembly) else assemble(check_scene(scene))
-        self.variant = select_variant(variant or assembly.scene.render.variant)
+        self.variant = resolve_variant(variant or assembly.scene.render.variant)
         self.assembly = assembly
         self.current_scene = assembly.scene
         intr = assembly.intrinsics
@@ -324,8 +326,9 @@ class Renderer:
         self.window = target_window(assembly, vertices) if crop else (0, 0, intr.width, intr.height)
         r = assembly.scene.render
         self.memory_bytes = check_memory(intr.width, intr.height, self.window[2] * self.window[3], r.spp)
-        self.scene = mi.load_dict(scene_dict(assembly, vertices, self.window))
-        self.params = mi.traverse(self.scene)
+        with variant_scope(self.variant):
+            self.scene = mi.load_dict(scene_dict(assembly, vertices, self.window))
+            self.params = mi.traverse(self.scene)
 
     def to_film(self, window_image: np.ndarray) -> np.ndarray:
         """The whole film (height, width, ...) from an image of the rendered window, black outside it."""
@@ -340,6 +343,7 @@ class Renderer:
         x0, y0, w, h = self.window
         return np.ascontiguousarray(film_image[y0:y0 + h, x0:x0 + w])
 
+    @in_variant
     @float64  # the pose and the W-M heights in float64, rounded to float32 only where Mitsuba takes them
     def set_values(self, values: Mapping[str, float]) -> None:
         """Set values by name in the loaded scene, without reloading it: parameter names
@@ -373,6 +377,7 @@ class Renderer:
         self.params.update()
         self.current_scene = scene
 
+    @in_variant
     def part_image(self) -> PartImage:
         """The part seen through each pixel's centre (one camera ray per pixel, no sampling)."""
         intr = self.assembly.intrinsics
@@ -391,6 +396,7 @@ class Renderer:
         film[y0:y0 + h, x0:x0 + w] = np.asarray(ids, dtype=np.int16).reshape(h, w)
         return PartImage(film, names)
 
+    @in_variant
     def render(self, spp: int | None = None, seed: int | None = None, progress: ProgressCallback | None = None) -> np.ndarray:
         """Radiance (W m^-2 sr^-1) as a float32 (height, width, 3) array; same seed, same image."""
         r = self.assembly.scene.render
@@ -411,8 +417,10 @@ class Renderer:
 
 
 def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray:
-    """Render a scene's radiance image (W m^-2 sr^-1, (height, width, 3) float32)."""
-    return Renderer(scene).render(progress=progress)
+    """Render a scene's radiance image (W m^-2 sr^-1, (height, width, 3) float32). Mitsuba's
+    variant is the caller's again after (:func:`~spacefit.rendering.backend.variant_scope`)."""
+    with variant_scope(check_scene(scene).render.variant):
+        return Renderer(scene).render(progress=progress)
 
 
 def to_value(template: object, value: np.ndarray) -> object:

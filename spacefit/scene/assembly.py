@@ -163,14 +163,13 @@ def _load_parts(scene: Scene, cache: dict[str, str]) -> dict[str, PartMesh]:
 
 
 def _camera(scene: Scene) -> tuple[CameraFrame, Intrinsics]:
-    c, r = scene.camera, scene.render
+    c = scene.camera
     if c.look_at_m:
         frame = CameraFrame.look_at(np.array(c.position_m), np.array(c.look_at_m), check_direction("camera.up", c.up))  # unit: [0, 1e300, 0] overflowed
     else:
         frame = CameraFrame.from_attitude(np.array(c.position_m), np.array(deg2rad(c.attitude_deg)))
     frame = frame.rolled(math.radians(c.roll_deg))
-    intr = Intrinsics(c.focal_length_mm * 1e-3, c.pixel_pitch_mm * 1e-3, r.resolution[0], r.resolution[1], c.principal_offset_px)
-    return frame, intr
+    return frame, Intrinsics.from_scene(scene)
 
 
 def winding_number(point: Float[np.ndarray, "3"], vertices: Float[np.ndarray, "n 3"], faces: np.ndarray) -> float:

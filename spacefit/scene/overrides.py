@@ -24,7 +24,7 @@ import numpy as np
 from spacefit.errors import InputError, InputTypeError, check_direction, check_path, check_vector, closest, quote
 from spacefit.materials import MODELS, make_material, with_material_values
 from spacefit.scene.parameters import PARAMETERS, VERTICAL_SUN, is_image, scene_keys, scene_with_values, sun_angles_deg
-from spacefit.scene.schema import SECTIONS, PartSettings, Scene, unknown_part
+from spacefit.scene.schema import SECTIONS, PartSettings, Scene, check_pitch_with_fov, unknown_part
 
 Overrides = Mapping[str, Any] | Sequence[str] | str
 # The keys of a part table besides its material's own values.
@@ -186,6 +186,8 @@ def with_values(scene: Scene, values: Mapping[str, Any]) -> Scene:
     if parts:
         changed["parts"] = new_parts
     out = dataclasses.replace(scene, **changed) if changed else scene
+    if "pixel_pitch_mm" in sections.get("camera", {}):
+        check_pitch_with_fov(out, sections["camera"]["pixel_pitch_mm"])
     return scene_with_values(out, parameters) if parameters else out
 
 

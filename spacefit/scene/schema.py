@@ -144,10 +144,18 @@ class CameraSettings(Section):
     When ``look_at_m`` holds 3 numbers it replaces ``attitude_deg``, with ``up`` as image up.
     ``roll_deg`` then turns the camera about its optical axis, in either mode (right-handed about the
     viewing direction: image up turns towards image right, the scene turns anticlockwise in the image).
+
+    The field of view is set one of two ways. ``fov_deg`` = 0 (the default): by the pixel pitch, and
+    a change of ``render.resolution`` alone keeps the pitch, so fewer pixels see a narrower field.
+    ``fov_deg`` > 0: the horizontal field of view of the whole film, and the pixel pitch follows,
+    ``pixel_pitch_mm = 2 focal_length_mm tan(fov_deg / 2) / width`` (:class:`Scene` sets it), so a
+    change of resolution keeps the field and scales the pixels; ``pixel_pitch_mm`` is then not
+    given (a scene file may repeat the derived value, as ``to_toml`` writes it).
     """
 
     focal_length_mm: float = 7000.0
     pixel_pitch_mm: float = 4.0
+    fov_deg: float = 0.0
     principal_offset_px: tuple[float, float] = (0.0, 0.0)
     position_m: Vec3 = (0.0, 0.0, 70.0)
     attitude_deg: Vec3 = (0.0, 0.0, 0.0)
@@ -161,6 +169,7 @@ class CameraSettings(Section):
         """Check this section's values (:class:`Section`)."""
         check_range("camera.focal_length_mm", self.focal_length_mm, 0.0, lo_open=True, unit="mm")
         check_range("camera.pixel_pitch_mm", self.pixel_pitch_mm, 0.0, lo_open=True, unit="mm")
+        check_range("camera.fov_deg", self.fov_deg, 0.0, MAX_FOV_DEG, unit="deg")
         check_vector("camera.principal_offset_px", self.principal_offset_px, 2)
         check_position("camera.position_m", self.position_m)
         check_vector("camera.attitude_deg", self.attitude_deg)
@@ -306,6 +315,8 @@ class Scene:
         if self.wrinkles.enabled:
             for name in self.wrinkles.parts:
                 check_choice("wrinkles.parts", name, self.parts)
+        if self.camera.fov_deg > 0.0:
+            object.__setattr__(self, "camera", dataclasses.replace(self.camera, pixel_pitch_mm=fov_pitch_mm(self.camera, self.render)))
         check_optics(self.camera, self.render)
 
     def __repr__(self) -> str:
@@ -320,9 +331,12 @@ class Scene:
         return scene_html(self)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain nested dict (TOML-ready): every value, defaults included; each material in full."""
+        """Plain nested dict (TOML-ready): every value, defaults included, of the camera's field the
+        one that sets it (``camera.fov_deg`` when > 0, else ``camera.pixel_pitch_mm``); each material in full."""
         out: dict[str, Any] = {name: {k: _plain(v) for k, v in dataclasses.asdict(getattr(self, name)).items()}
                                for name in SECTIONS}
+        # One of the two sets the field: the pitch follows from a field of view and the resolution.
+        del out["camera"]["pixel_pitch_mm" if self.camera.fov_deg > 0.0 else "fov_deg"]
         out["parts"] = {name: {**material_table(p.material), **({"file": p.file} if p.file else {})}
                         for name, p in self.parts.items()}
         return out
@@ -368,6 +382,21 @@ def unknown_part(key: str, parts: Sequence[str]) -> InputError:
     close = closest(path[1], parts)
     hint = f" Did you mean `{'.'.join(['parts', close, *path[2:]])}`?" if close else ""
     return InputError(f"unknown scene key `{key}`: `{path[1]}` is not a part of the scene (parts: {', '.join(parts)}).{hint}")
+
+
+def fov_pitch_mm(camera: CameraSettings, render: RenderSettings) -> float:
+    """The pixel pitch (mm) that gives ``camera.fov_deg`` across ``render.resolution``'s width."""
+    return 2.0 * camera.focal_length_mm * math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]
+
+
+def check_pitch_with_fov(scene: Scene, pitch_mm: Any) -> None:
+    """Raise :class:`InputError` if ``camera.pixel_pitch_mm`` was given (as ``pitch_mm``) while
+    ``camera.fov_deg`` sets the field of view, and with it the pitch."""
+    camera = scene.camera
+    if camera.fov_deg > 0.0:
+        raise InputError(f"`camera.pixel_pitch_mm` = {quote(pitch_mm)} was given while `camera.fov_deg` = {camera.fov_deg:g} sets "
+                         f"the field of view, which makes the pitch {camera.pixel_pitch_mm:.6g} mm at {scene.render.resolution[0]} px: "
+                         "give one of them (`camera.fov_deg` = 0 leaves the field to the pixel pitch).")
 
 
 def check_optics(camera: CameraSettings, render: RenderSettings) -> None:

@@ -19,7 +19,7 @@ from typing import Any
 from spacefit.errors import InputError, InputTypeError, check_path, quote
 from spacefit.materials import make_material
 from spacefit.scene.overrides import Overrides, apply_overrides, section_keys, unknown_key, with_values
-from spacefit.scene.schema import DEFAULT_PRESETS, SECTIONS, PartSettings, Scene, TargetSettings
+from spacefit.scene.schema import DEFAULT_PRESETS, SECTIONS, PartSettings, Scene, TargetSettings, check_pitch_with_fov
 
 
 def read_scene_dict(path: str | Path) -> dict[str, Any]:
@@ -109,6 +109,8 @@ def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scen
     if not builtin and not user_parts:
         raise InputError("`parts` must list the parts of the mesh file `target.mesh`, each with a `material`.")
     scene = Scene(**sections, parts=_parts(user_parts, builtin, base))
+    if "pixel_pitch_mm" in data.get("camera", {}):
+        check_pitch_with_fov(scene, data["camera"]["pixel_pitch_mm"])
     return with_values(scene, later) if later else scene
 
 
