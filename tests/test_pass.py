@@ -4,12 +4,14 @@ pass with per-frame attitude errors."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from astropy.table import Table
 
 import spacefit as sf
-from spacefit.fitting.frames import FrameSpec, InProcess, Loaded, frame_jacobian, frame_part_image, frame_primal
+from spacefit.fitting.frames import FrameSpec, InProcess, Loaded, frame_jacobian, frame_part_image, frame_primal, share_views
 from spacefit.scene.assembly import assemble
 
 # The panels case at 32 x 32 px (75 mm pixels: the 128 px field of view).
@@ -147,7 +149,7 @@ def tiny_frames(n: int, spp: int = 2) -> list[FrameSpec]:
     """n frames of the arc at 12 x 12 px, each frame's attitude about x free."""
     base = sf.load_scene("spacefit/synthetic/panels.toml", {"render.resolution": [12, 12], "camera.pixel_pitch_mm": 200.0})
     scenes = sf.Pass.from_columns({"file": ["f.exr"] * n, "time": list(range(n)), **columns_of(sf.arc_pass(n))}).scenes(base)
-    return [FrameSpec(s, ("parts.legs.kd", "target.attitude_x_deg"), (0.0, 0.5), spp, spp, "prb") for s in scenes]
+    return [FrameSpec(s, ("parts.legs.kd", "target.attitude_x_deg"), (0.0, 0.5), spp, spp, "prb", shared_view=True) for s in scenes]
 
 
 def columns_of(frames: list[dict[str, object]]) -> dict[str, list[object]]:
@@ -168,6 +170,9 @@ def test_the_frames_of_a_pass_share_one_loaded_scene_and_render_as_on_their_own(
     assert np.array_equal(together[1][0], image) and np.array_equal(together[1][1], J)
     assert np.array_equal(together[0][0], again[0]) and np.array_equal(together[0][1], again[1])
     assert not np.array_equal(together[0][0], together[1][0])  # the frames do differ
+    assert [s.shared_view for s in share_views([dataclasses.replace(s, shared_view=False) for s in specs])] == [True, True]
+    plain = dataclasses.replace(specs[0], shared_view=False)
+    assert share_views([plain, plain]) == [plain, plain]  # observations of one scene keep their own, cropped
     for spec in specs[::-1]:
         assert np.array_equal(frame_part_image(spec, spec.key, shared).ids, frame_part_image(spec, spec.key, Loaded()).ids)
 

@@ -16,6 +16,7 @@ lost worker's frames are recomputed).
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import logging
 from collections import OrderedDict
@@ -49,6 +50,9 @@ class FrameSpec:
         names: the registered parameters its renderer sees, in the order of its values.
         fd_steps: each one's central-difference step (0: a forward-mode AD column).
         spp, spp_grad, integrator: as :func:`~spacefit.rendering.derivatives.render_chain` takes them.
+        shared_view: the frame sets its camera and sun on a loaded scene it shares with frames of
+            other views, rendered whole (:func:`share_views`); else it has a loaded scene of its
+            own, which renders only the window round the target unless vertices move.
     """
 
     scene: Scene
@@ -57,17 +61,26 @@ class FrameSpec:
     spp: int | None
     spp_grad: int | None
     integrator: str
+    shared_view: bool = False
 
     @cached_property
     def key(self) -> str:
-        """A digest of everything that selects the loaded scene: equal specs share one."""
-        text = repr((self.scene.to_toml(), self.names, self.fd_steps, self.spp, self.spp_grad, self.integrator))
+        """A digest of everything that selects the frame's chain: equal specs share one."""
+        text = repr((self.scene.to_toml(), self.names, self.fd_steps, self.spp, self.spp_grad, self.integrator, self.shared_view))
         return hashlib.sha256(text.encode()).hexdigest()
+
+
+def share_views(specs: Sequence[FrameSpec]) -> list[FrameSpec]:
+    """The specs of one fit's frames, set to share a loaded scene (:attr:`FrameSpec.shared_view`)
+    when their scenes differ (a pass's views); the frames of one scene keep their own, cropped."""
+    if len({spec.scene.to_toml() for spec in specs}) < 2:
+        return list(specs)
+    return [dataclasses.replace(spec, shared_view=True) for spec in specs]
 
 
 # The loaded scenes a process keeps at most (each 10 to 20 MiB at 32 x 32 px, besides a process's
 # 420 MiB of JAX and Mitsuba); past it the least recently used one is dropped with its frames.
-MAX_SCENES = 4
+MAX_SCENES = 8
 # The values every frame sets on the loaded scene it shares: its camera (the whole camera frame
 # through the roll) and its sun; its target's pose too when a pose parameter is free.
 VIEW = (ROLL, *SUN_ANGLES)
@@ -107,8 +120,8 @@ class Loaded:
     compiled image functions by (key, kind, seeds): a process (a dask worker) keeps them between a
     fit's steps.
 
-    The frames of a pass differ in camera, sun and target pose only, so they share one loaded scene
-    and set their own values on it at each render. Dr.Jit traces every loaded scene's plugins in
+    The frames of a pass (:attr:`FrameSpec.shared_view`) differ in camera, sun and target pose
+    only, so they share one loaded scene and set their own values on it at each render. Dr.Jit traces every loaded scene's plugins in
     each render (its calls cover every instance alive: mitsuba3#1700), so a process holding a loaded
     scene per frame paid per render for all of them: 0.25 s per frame and step with one frame held,
     1.4 s with eight (16 x 16 px). At most ``max_scenes`` are kept, the least recently used dropped.
@@ -126,15 +139,18 @@ class Loaded:
             self.stages.move_to_end(self.chains[key][0])
             return self.chains[key][1]
         assembly = assemble(spec.scene)
-        stage = _stage(spec, assembly)
+        stage = _stage(spec, assembly) if spec.shared_view else key
         if stage not in self.stages:
             while len(self.stages) >= self.max_scenes:
                 self._drop(next(iter(self.stages)))
-            self.stages[stage] = render_chain(assembly, (*spec.names, *(n for n in VIEW if n not in spec.names)),
-                                              spp=spec.spp, spp_grad=spec.spp_grad, integrator=spec.integrator, crop=False)
+            names = (*spec.names, *(n for n in VIEW if n not in spec.names)) if spec.shared_view else spec.names
+            self.stages[stage] = render_chain(assembly, names, spp=spec.spp, spp_grad=spec.spp_grad, integrator=spec.integrator,
+                                              fd_steps=None if spec.shared_view else np.asarray(spec.fd_steps, dtype=float),
+                                              crop=False if spec.shared_view else None)
         self.stages.move_to_end(stage)
-        self.chains[key] = (stage, _on_stage(spec, assembly, self.stages[stage]))
-        return self.chains[key][1]
+        chain = _on_stage(spec, assembly, self.stages[stage]) if spec.shared_view else self.stages[stage]
+        self.chains[key] = (stage, chain)
+        return chain
 
     def _drop(self, stage: str) -> None:
         """Forget a loaded scene, its frames' chains and their compiled functions."""
