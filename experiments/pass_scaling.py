@@ -47,13 +47,13 @@ def _columns(frames: list[dict[str, object]]) -> dict[str, list[object]]:
     return {key: [f[key] for f in frames] for key in frames[0]}
 
 
-def worker_memory(executor: object) -> tuple[float, int]:
-    """The mean resident memory of the workers (MiB) and the frames' scenes each holds (the most)."""
+def worker_memory(executor: object) -> tuple[float, int, int]:
+    """The mean resident memory of the workers (MiB), and the loaded scenes and frames each holds (the most)."""
     if isinstance(executor, InProcess):
-        return psutil.Process().memory_info().rss / 2**20, len(executor.loaded.chains)
+        return psutil.Process().memory_info().rss / 2**20, len(executor.loaded.stages), len(executor.loaded.chains)
     rss = executor.client.run(lambda: psutil.Process().memory_info().rss)
-    held = executor.client.run(loaded_count)
-    return float(np.mean(list(rss.values()))) / 2**20, max(held.values())
+    held = list(executor.client.run(loaded_count).values())
+    return float(np.mean(list(rss.values()))) / 2**20, max(h[0] for h in held), max(h[1] for h in held)
 
 
 @float64
@@ -73,11 +73,11 @@ def measure(n: int, workers: int, size: int, spp: int, repeats: int) -> tuple[di
             r, J = step(x)
             J.block_until_ready()
             times.append(time.perf_counter() - t0)
-        mem, held = worker_memory(executor)
+        mem, scenes, held = worker_memory(executor)
     finally:
         executor.close()
     row = {"frames": n, "workers": workers, "load_s": round(t_load, 2), "first_step_s": round(times[0], 2),
-           "step_s": round(float(np.median(times[1:])), 3), "memory_per_worker_mib": round(mem, 0), "scenes_per_worker": held,
+           "step_s": round(float(np.median(times[1:])), 3), "memory_per_worker_mib": round(mem, 0), "scenes_per_worker": scenes, "frames_per_worker": held,
            "load_average_1min": round(os.getloadavg()[0], 2)}
     return row, np.asarray(J)
 

@@ -4,12 +4,14 @@ pass with per-frame attitude errors."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from astropy.table import Table
 
 import spacefit as sf
-from spacefit.fitting.frames import FrameSpec, InProcess, frame_jacobian
+from spacefit.fitting.frames import FrameSpec, InProcess, Loaded, frame_jacobian, frame_part_image, frame_primal, share_views
 from spacefit.scene.assembly import assemble
 
 # The panels case at 32 x 32 px (75 mm pixels: the 128 px field of view).
@@ -143,6 +145,56 @@ def test_a_frames_pose_jacobian_column_matches_central_differences():
     assert np.linalg.norm(col) == pytest.approx(np.linalg.norm(fd), rel=0.1)
 
 
+def tiny_frames(n: int, spp: int = 2) -> list[FrameSpec]:
+    """n frames of the arc at 12 x 12 px, each frame's attitude about x free."""
+    base = sf.load_scene("spacefit/synthetic/panels.toml", {"render.resolution": [12, 12], "camera.pixel_pitch_mm": 200.0})
+    scenes = sf.Pass.from_columns({"file": ["f.exr"] * n, "time": list(range(n)), **columns_of(sf.arc_pass(n))}).scenes(base)
+    return [FrameSpec(s, ("parts.legs.kd", "target.attitude_x_deg"), (0.0, 0.5), spp, spp, "prb", shared_view=True) for s in scenes]
+
+
+def columns_of(frames: list[dict[str, object]]) -> dict[str, list[object]]:
+    return {key: [f[key] for f in frames] for key in frames[0]}
+
+
+def test_the_frames_of_a_pass_share_one_loaded_scene_and_render_as_on_their_own():
+    """Two frames (own camera, sun and attitude) on one loaded scene: each frame's image, Jacobian and part
+    image equal bit for bit those of the frame loaded alone, whatever frame rendered before."""
+    specs = tiny_frames(2)
+    x = np.array([0.5, 0.1])
+    shared = Loaded()
+    together = [frame_jacobian(s, s.key, x, 3, 4, shared) for s in specs]
+    assert len(shared.stages) == 1 and len(shared.chains) == 2
+    again = frame_jacobian(specs[0], specs[0].key, x, 3, 4, shared)  # after frame 1 set its own values
+    alone = Loaded()
+    image, J = frame_jacobian(specs[1], specs[1].key, x, 3, 4, alone)
+    assert np.array_equal(together[1][0], image) and np.array_equal(together[1][1], J)
+    assert np.array_equal(together[0][0], again[0]) and np.array_equal(together[0][1], again[1])
+    assert not np.array_equal(together[0][0], together[1][0])  # the frames do differ
+    assert [s.shared_view for s in share_views([dataclasses.replace(s, shared_view=False) for s in specs])] == [True, True]
+    plain = dataclasses.replace(specs[0], shared_view=False)
+    assert share_views([plain, plain]) == [plain, plain]  # observations of one scene keep their own, cropped
+    for spec in specs[::-1]:
+        assert np.array_equal(frame_part_image(spec, spec.key, shared).ids, frame_part_image(spec, spec.key, Loaded()).ids)
+
+
+def test_a_process_keeps_at_most_max_scenes_loaded_dropping_the_least_recently_used():
+    """Frames rendered at 1, 2 and 3 spp need three loaded scenes; with room for two, the least recently
+    used one goes with its frames and compiled functions, and comes back (the same image) when asked again."""
+    a, b, c = (tiny_frames(1, spp)[0] for spp in (1, 2, 3))
+    loaded = Loaded(max_scenes=2)
+    x = np.array([0.5, 0.0])
+    first = frame_primal(a, a.key, x, 3, loaded)
+    frame_primal(b, b.key, x, 3, loaded)
+    frame_primal(a, a.key, x, 3, loaded)  # a is now the most recently used: b goes next
+    frame_primal(c, c.key, x, 3, loaded)
+    assert len(loaded.stages) == 2 and set(loaded.chains) == {a.key, c.key}
+    assert {name[0] for name in loaded.compiled} == {a.key, c.key}
+    frame_primal(b, b.key, x, 3, loaded)
+    assert set(loaded.chains) == {b.key, c.key}
+    assert np.array_equal(frame_primal(a, a.key, x, 3, loaded), first)
+    assert set(loaded.chains) == {a.key, b.key}
+
+
 @pytest.fixture(scope="module")
 def small_pass(tmp_path_factory):
     """Three frames at 24 x 24 px (radiance at 64 spp) whose target is turned 0.2, -0.25 and 0.1 deg
@@ -225,6 +277,48 @@ def test_spacefit_fit_pass_writes_the_frames_table_and_plot(small_pass, tmp_path
     rows = (out / "frames.csv").read_text().splitlines()
     assert len(rows) == 4 and "target.attitude_x_deg" in rows[0] and "chi2_dof" in rows[0] and "time_s" in rows[0]
     assert rows[2].split(",")[3] == "10.0"  # frame 1, 10 s after the first
+
+
+@pytest.mark.slow
+def test_a_pass_fit_interrupted_and_resumed_ends_as_the_uninterrupted_one(small_pass, tmp_path, monkeypatch):
+    """`spacefit fit --pass` stopped by Ctrl-C after its second step (exit 130, the checkpoint kept), then
+    run with --resume: the legs' albedo and each frame's attitude of the uninterrupted fit (within a
+    hundredth of their standard errors: the solver restarts from the best point) and the frame table.
+    The verdict may differ: measured, the uninterrupted fit converged after 3 steps, the resumed one
+    ran its 6 steps left at the same point (exit 3, the step limit)."""
+    import json
+    import os
+    import signal
+
+    from spacefit.cli import main
+    from spacefit.pipeline import Checkpoint
+
+    scene = tmp_path / "scene.toml"
+    scene.write_text(sf.load_scene("spacefit/synthetic/panels.toml", {"render.resolution": [24, 24], "camera.pixel_pitch_mm": 100.0}).to_toml())
+
+    def args(out: str, *extra: str) -> list[str]:
+        return ["fit", "--pass", str(small_pass[4] / "frames.csv"), "--scene", str(scene), "--free", "parts.legs.kd",
+                "--per-frame", "target.attitude_x_deg", "--start", "parts.legs.kd=0.4", "--spp", "4", "--max-steps", "8",
+                "--out", str(tmp_path / out), "--quiet", *extra]
+
+    whole = main(args("whole"))
+    update = Checkpoint.update
+
+    def stop_after_two(self: Checkpoint, entry: dict) -> None:
+        update(self, entry)
+        if self.steps == 2:
+            os.kill(os.getpid(), signal.SIGINT)  # taken at the end of the step, as a Ctrl-C is
+
+    with monkeypatch.context() as m:
+        m.setattr(Checkpoint, "update", stop_after_two)
+        assert main(args("stopped")) == 130
+    assert (tmp_path / "stopped" / "checkpoint.json").exists()
+    assert whole == 0 and main(args("stopped", "--resume")) in (0, 3)
+    assert not (tmp_path / "stopped" / "checkpoint.json").exists()
+    expected, got = (json.loads((tmp_path / out / "fit.json").read_text()) for out in ("whole", "stopped"))
+    for name, value in expected["values"].items():
+        assert abs(got["values"][name] - value) < 0.01 * expected["stderr"][name], name
+    assert len((tmp_path / "stopped" / "frames.csv").read_text().splitlines()) == 4
 
 
 @pytest.mark.parametrize(("args", "message"), [

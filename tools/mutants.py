@@ -116,6 +116,13 @@ MUTANTS = (
     Mutant("frame-jacobian-on-another-frame", "spacefit/fitting/frames.py",
            "for J, idx in zip(Js, indices))", "for J, idx in zip(Js, indices[::-1]))",
            ("tests/test_nuisance.py::test_per_observation_pose_columns_match_finite_differences_and_act_on_their_own_observation",)),
+    # a pass's frames share a process's loaded scene: each sets its own camera and sun; the loaded scenes are bounded
+    Mutant("frame-on-shared-scene-keeps-the-last-view", "spacefit/fitting/frames.py",
+           "extra = [n for n in VIEW if n not in spec.names]", "extra = []",
+           ("tests/test_pass.py::test_the_frames_of_a_pass_share_one_loaded_scene_and_render_as_on_their_own",)),
+    Mutant("loaded-scenes-one-past-the-bound", "spacefit/fitting/frames.py",
+           "while len(self.stages) >= self.max_scenes:", "while len(self.stages) > self.max_scenes:",
+           ("tests/test_pass.py::test_a_process_keeps_at_most_max_scenes_loaded_dropping_the_least_recently_used",)),
     Mutant("logistic-inverse-width", "spacefit/fitting/params.py", "p = (x - self.lo) / (self.hi - self.lo)\n        return jnp.log(p)",
            "p = (x - self.lo) / self.hi\n        return jnp.log(p)", (PROPERTIES,)),
     Mutant("sun-to-world-towards-the-sun", "spacefit/scene/parameters.py", 'return -xp.stack([xp.cos(el) * xp.cos(az)',

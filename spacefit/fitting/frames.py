@@ -8,18 +8,20 @@ frames one after another in this process (:class:`InProcess`) or at once on dask
 (:class:`OnDask`). Both run :func:`frame_primal` / :func:`frame_jacobian` on the same inputs, so a
 fit gives the same values bit for bit either way (renders are deterministic for a seed).
 
-A process keeps each frame's loaded scene (:class:`Loaded`, keyed by :attr:`FrameSpec.key`)
-between steps; on dask each frame goes back to the worker that loaded it (a soft placement: if
+A process keeps the frames' loaded scene (:class:`Loaded`: one for all the frames of a pass, which
+set their own camera, sun and pose on it) between steps; on dask each frame goes back to the worker that loaded it (a soft placement: if
 that worker is lost, the scheduler runs the frame elsewhere, which loads its scene once; only the
 lost worker's frames are recomputed).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
-from functools import cached_property
 import logging
+from collections import OrderedDict
 from collections.abc import Callable, Sequence
+from functools import cached_property
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -30,8 +32,13 @@ import numpy as np
 from spacefit.errors import InputError, InputTypeError, check_count, quote
 from spacefit.precision import float64
 from spacefit.rendering.derivatives import RenderChain, render_chain
-from spacefit.rendering.renderer import PartImage, render_threads
+from spacefit.rendering.renderer import PartImage, render_threads, to_value
+from spacefit.rendering.values import scene_values_fn
+from spacefit.scene.assembly import Assembly, assemble
+from spacefit.scene.parameters import ATTITUDE, POSITION, ROLL, SUN_ANGLES, scene_value
 from spacefit.scene.schema import Scene
+
+POSE = (*ATTITUDE, *POSITION)
 
 
 @dataclass(frozen=True)
@@ -43,6 +50,9 @@ class FrameSpec:
         names: the registered parameters its renderer sees, in the order of its values.
         fd_steps: each one's central-difference step (0: a forward-mode AD column).
         spp, spp_grad, integrator: as :func:`~spacefit.rendering.derivatives.render_chain` takes them.
+        shared_view: the frame sets its camera and sun on a loaded scene it shares with frames of
+            other views, rendered whole (:func:`share_views`); else it has a loaded scene of its
+            own, which renders only the window round the target unless vertices move.
     """
 
     scene: Scene
@@ -51,35 +61,111 @@ class FrameSpec:
     spp: int | None
     spp_grad: int | None
     integrator: str
+    shared_view: bool = False
 
     @cached_property
     def key(self) -> str:
-        """A digest of everything that selects the loaded scene: equal specs share one."""
-        text = repr((self.scene.to_toml(), self.names, self.fd_steps, self.spp, self.spp_grad, self.integrator))
+        """A digest of everything that selects the frame's chain: equal specs share one."""
+        text = repr((self.scene.to_toml(), self.names, self.fd_steps, self.spp, self.spp_grad, self.integrator, self.shared_view))
         return hashlib.sha256(text.encode()).hexdigest()
+
+
+def share_views(specs: Sequence[FrameSpec]) -> list[FrameSpec]:
+    """The specs of one fit's frames, set to share a loaded scene (:attr:`FrameSpec.shared_view`)
+    when their scenes differ (a pass's views); the frames of one scene keep their own, cropped."""
+    if len({spec.scene.to_toml() for spec in specs}) < 2:
+        return list(specs)
+    return [dataclasses.replace(spec, shared_view=True) for spec in specs]
+
+
+# The loaded scenes a process keeps at most (each 10 to 20 MiB at 32 x 32 px, besides a process's
+# 420 MiB of JAX and Mitsuba); past it the least recently used one is dropped with its frames.
+MAX_SCENES = 8
+# The values every frame sets on the loaded scene it shares: its camera (the whole camera frame
+# through the roll) and its sun; its target's pose too when a pose parameter is free.
+VIEW = (ROLL, *SUN_ANGLES)
+# Scene-file keys of those values (a stage's key leaves them out).
+VIEW_KEYS = {"camera": ("position_m", "attitude_deg", "look_at_m", "up", "roll_deg"), "sun": ("direction",)}
+POSE_KEYS = {"target": ("attitude_deg", "position_m")}
+
+
+def _stage(spec: FrameSpec, assembly: Assembly) -> str:
+    """A digest of what frames sharing one loaded scene have in common: the scene but its camera
+    pose, sun direction and (a pose parameter free) target pose, the meshes as loaded, the
+    materials, the free names and how they are rendered."""
+    text = spec.scene.to_dict()
+    for section, keys in (*VIEW_KEYS.items(), *(POSE_KEYS.items() if set(spec.names) & set(POSE) else ())):
+        text[section] = {k: v for k, v in text.get(section, {}).items() if k not in keys}
+    meshes = {name: hashlib.sha256(np.ascontiguousarray(assembly.faces(name)).tobytes()).hexdigest() for name in assembly.parts}
+    return hashlib.sha256(repr((sorted(text.items()), meshes, sorted(assembly.materials.items()), spec.names, spec.spp,
+                                spec.spp_grad, spec.integrator)).encode()).hexdigest()
+
+
+def _on_stage(spec: FrameSpec, assembly: Assembly, stage: RenderChain) -> RenderChain:
+    """The frame's chain on a loaded scene it shares: every render sets the frame's camera and sun
+    (and its pose, when free) with the free values."""
+    extra = [n for n in VIEW if n not in spec.names]
+    values = scene_values_fn(assembly, (*spec.names, *extra))
+    fixed = np.array([scene_value(spec.scene, n) for n in extra])
+
+    def values_of(x: jax.Array) -> dict[str, jax.Array]:
+        return values(jnp.concatenate([jnp.asarray(x), jnp.asarray(fixed, dtype=jnp.result_type(x))]))
+
+    return RenderChain(spec.names, stage.renderer, stage.drjit, values_of, np.asarray(spec.fd_steps, dtype=float))
 
 
 @dataclass
 class Loaded:
-    """Loaded scenes by :attr:`FrameSpec.key`, and their compiled image functions by (key, kind,
-    seeds): a process (a dask worker) keeps them between a fit's steps."""
+    """Loaded scenes (stages) and each frame's chain on one, by :attr:`FrameSpec.key`, and their
+    compiled image functions by (key, kind, seeds): a process (a dask worker) keeps them between a
+    fit's steps.
 
-    chains: dict[str, RenderChain] = field(default_factory=dict)
+    The frames of a pass (:attr:`FrameSpec.shared_view`) differ in camera, sun and target pose
+    only, so they share one loaded scene and set their own values on it at each render. Dr.Jit traces every loaded scene's plugins in
+    each render (its calls cover every instance alive: mitsuba3#1700), so a process holding a loaded
+    scene per frame paid per render for all of them: 0.25 s per frame and step with one frame held,
+    1.4 s with eight (16 x 16 px). At most ``max_scenes`` are kept, the least recently used dropped.
+    """
+
+    max_scenes: int = MAX_SCENES
+    stages: OrderedDict[str, RenderChain] = field(default_factory=OrderedDict)
+    chains: dict[str, tuple[str, RenderChain]] = field(default_factory=dict)
     compiled: dict[tuple[str, str, int, int], Callable[[jax.Array], Any]] = field(default_factory=dict)
 
     def chain(self, spec: FrameSpec, key: str) -> RenderChain:
-        """The frame's loaded scene, loaded on first use."""
-        if key not in self.chains:
-            self.chains[key] = render_chain(spec.scene, spec.names, spp=spec.spp, spp_grad=spec.spp_grad,
-                                            integrator=spec.integrator, fd_steps=np.asarray(spec.fd_steps, dtype=float))
-        return self.chains[key]
+        """The frame's chain on its loaded scene, loaded on first use (dropping the least recently used past
+        :attr:`max_scenes`)."""
+        if key in self.chains and self.chains[key][0] in self.stages:
+            self.stages.move_to_end(self.chains[key][0])
+            return self.chains[key][1]
+        assembly = assemble(spec.scene)
+        stage = _stage(spec, assembly) if spec.shared_view else key
+        if stage not in self.stages:
+            while len(self.stages) >= self.max_scenes:
+                self._drop(next(iter(self.stages)))
+            names = (*spec.names, *(n for n in VIEW if n not in spec.names)) if spec.shared_view else spec.names
+            self.stages[stage] = render_chain(assembly, names, spp=spec.spp, spp_grad=spec.spp_grad, integrator=spec.integrator,
+                                              fd_steps=None if spec.shared_view else np.asarray(spec.fd_steps, dtype=float),
+                                              crop=False if spec.shared_view else None)
+        self.stages.move_to_end(stage)
+        chain = _on_stage(spec, assembly, self.stages[stage]) if spec.shared_view else self.stages[stage]
+        self.chains[key] = (stage, chain)
+        return chain
+
+    def _drop(self, stage: str) -> None:
+        """Forget a loaded scene, its frames' chains and their compiled functions."""
+        del self.stages[stage]
+        gone = {key for key, (s, _) in self.chains.items() if s == stage}
+        self.chains = {key: v for key, v in self.chains.items() if key not in gone}
+        self.compiled = {name: fn for name, fn in self.compiled.items() if name[0] not in gone}
 
     def function(self, spec: FrameSpec, key: str, kind: str, seed: int, seed_grad: int) -> Callable[[jax.Array], Any]:
         """The frame's image (``kind`` "primal") or its Jacobian and image ("jacobian") as a function
-        of its values, jitted once per scene and seeds (a new closure each step would compile each step)."""
+        of its values, jitted once per frame and seeds (a new closure each step would compile each step)."""
         name = (key, kind, seed, seed_grad)
+        chain = self.chain(spec, key)
         if name not in self.compiled:
-            image = self.chain(spec, key).forward(seed, seed_grad)
+            image = chain.forward(seed, seed_grad)
 
             def twice(y: jax.Array) -> tuple[jax.Array, jax.Array]:
                 out = image(y)
@@ -93,14 +179,21 @@ class Loaded:
 _LOADED = Loaded()
 
 
-def loaded_count() -> int:
-    """How many frames' scenes this process (a worker) holds."""
-    return len(_LOADED.chains)
+def loaded_count() -> tuple[int, int]:
+    """How many loaded scenes and frames this process (a worker) holds."""
+    return len(_LOADED.stages), len(_LOADED.chains)
 
 
+@float64
 def frame_part_image(spec: FrameSpec, key: str, loaded: Loaded | None = None) -> PartImage:
-    """Which part each pixel of the frame sees (loading its scene)."""
-    return (loaded or _LOADED).chain(spec, key).renderer.part_image()
+    """Which part each pixel of the frame sees at its scene's values (loading its scene)."""
+    chain = (loaded or _LOADED).chain(spec, key)
+    x = jnp.asarray([scene_value(spec.scene, n) for n in spec.names], dtype=jnp.float64)
+    params = chain.renderer.params
+    for name, value in chain.values_of(x).items():
+        params[name] = to_value(params[name], np.asarray(value))
+    params.update()
+    return chain.renderer.part_image()
 
 
 @float64

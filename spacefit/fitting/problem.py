@@ -22,7 +22,7 @@ import numpy as np
 
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_array, check_choice, negative_pixels, quote
 from spacefit.fitting.formation import dn_fn, noise_variance_dn
-from spacefit.fitting.frames import Executor, FrameSpec, InProcess, batched_renders, frame_part_image
+from spacefit.fitting.frames import Executor, FrameSpec, InProcess, batched_renders, frame_part_image, share_views
 from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.nuisance import image_model as image_model_of
 from spacefit.fitting.params import FreeParameters, free_parameters
@@ -229,6 +229,7 @@ def _problem(
         used_pixels.append(np.all(used, axis=-1))
         blur = 0.0 if obs.sensor is None else psf_rms_px(obs.sensor, assembly.intrinsics, ref.shape[-1])
         spread.append((FILTER_RADIUS_PX[scene.render.filter], blur))
+    specs = share_views(specs)  # a pass's frames share a loaded scene
     indices = [r[1] for r in rendered]
     images_x = batched_renders(executor, specs, indices, shapes, seed, seed_grad)
     alt = INDEPENDENT_SEED_OFFSET

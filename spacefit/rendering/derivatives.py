@@ -74,7 +74,7 @@ class RenderChain:
 
 def render_chain(
     scene: Scene | Assembly, names: Sequence[str], *, spp: int | None = None, spp_grad: int | None = None,
-    integrator: str = "prb", fd_steps: Float[np.ndarray, " n"] | None = None,
+    integrator: str = "prb", fd_steps: Float[np.ndarray, " n"] | None = None, crop: bool | None = None,
 ) -> RenderChain:
     """Load ``scene`` (or its assembly) once and chain it to JAX for the parameters ``names``.
 
@@ -82,13 +82,14 @@ def render_chain(
     scene's, and ``spp``); ``integrator``: Mitsuba's AD integrator (``prb``, ``direct_projective``,
     ``prb_projective``); ``fd_steps``: each parameter's finite-difference step, 0 for an AD column
     (default: the registry's). Only the film window around the target is rendered unless a
-    parameter moves vertices (D, G, the pose), which the window would not hold. The names are not
-    checked here: the callers check them against their own vocabulary first.
+    parameter moves vertices (D, G, the pose), which the window would not hold, or ``crop`` is
+    False (the whole film, for a scene whose camera will move). The names are not checked here:
+    the callers check them against their own vocabulary first.
     """
     check_spp(spp, spp_grad)
     assembly = scene if isinstance(scene, Assembly) else assemble(check_scene(scene))
     names = tuple(names)
-    renderer = Renderer(assembly, crop=not any(n in MOVES_VERTICES for n in names))
+    renderer = Renderer(assembly, crop=not any(n in MOVES_VERTICES for n in names) if crop is None else crop)
     spp = spp or assembly.scene.render.spp
     intr, window = assembly.intrinsics, renderer.window
     check_memory(intr.width, intr.height, window[2] * window[3], max(spp, spp_grad or spp), split=False)

@@ -1,0 +1,84 @@
+"""Why the six-frame pass fitted with each frame's attitude about x and z (``pass.ipynb``) ends with
+the verdict ``misfit``: the misfit rule (:mod:`spacefit.fitting.goodness`) evaluated at the TRUE
+values (materials and every frame's two angles), per frame, at the fit's 32 spp and at 128 spp; and
+chi^2 per value at 32 spp with the noise sigma at the model's own DN (as the fit takes it), at the
+reference's, and at a 1024-spp model's, against the render noise v measured with the last.
+
+    python experiments/pass_misfit.py            # 6 frames at 32 x 32 px, references at 1024 spp (a few minutes)
+
+Prints the figures with the machine's load average.
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+
+import jax.numpy as jnp
+import numpy as np
+
+import spacefit as sf
+from spacefit.fitting.formation import noise_variance_dn
+from spacefit.fitting.goodness import goodness
+from spacefit.fitting.problem import setup
+from spacefit.precision import float64
+
+TRUTH = {"parts.panels.alpha_x": 0.15, "parts.panels.alpha_y": 0.03, "parts.legs.kd": 0.5}
+SENSOR = sf.Sensor(radiometric_scale_dn_per_w_m2_sr=500.0, gain_dn_per_electron=0.5, bias_dn=100.0, read_noise_electrons=5.0,
+                   bit_depth=16, full_well_electrons=None, diffraction=False, psf_sigma_px=0.0)
+FRAMES = 6
+
+
+@float64
+def main() -> None:
+    print(f"load average {os.getloadavg()} at {time.strftime('%Y-%m-%d %H:%M:%S', time.gmtime())} UTC")
+    base = sf.load_scene("spacefit/synthetic/panels.toml", {"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0})
+    errors = [{"target.attitude_x_deg": float(a), "target.attitude_z_deg": float(b)}
+              for a, b in np.random.default_rng(3).uniform(-0.3, 0.3, (FRAMES, 2))]  # pass.ipynb's
+    frames = sf.simulate_pass(base, sf.arc_pass(FRAMES), Path(tempfile.mkdtemp()) / "pass", errors=errors, sensor=SENSOR, spp=1024)
+    obs = [sf.Observation.from_file(f.file, s) for f, s in zip(frames.frames, frames.scenes(base))]
+    free = [*TRUTH, *frames.per_frame(["target.attitude_x_deg", "target.attitude_z_deg"])]
+    truth = {**TRUTH, **{f"{name}@{k}": e[name] for k, e in enumerate(errors) for name in e}}
+
+    def at_truth(render: sf.FitRender) -> tuple[object, list[np.ndarray], list[np.ndarray]]:
+        s = setup(obs, free, start=truth, render=render)
+        x = jnp.asarray(s.x0)
+        models = [np.asarray(m, dtype=float) for m in s.problem.renders_x(x)]
+        return s, models, [np.asarray(r, dtype=float) for r in s.problem.references]
+
+    for spp in (32, 128):
+        s, _, _ = at_truth(sf.FitRender(spp=spp))
+        x = jnp.asarray(s.x0)
+        r, r_alt = np.asarray(s.problem.residual_x(x)), np.asarray(s.problem.residual_x_independent(x))
+        g = goodness(r, r_alt, len(free), True)
+        print(f"{spp} spp, at the truth: chi^2/dof {g.chi2_dof:.3f}, v {g.render_noise:.3f}, expected {1 + g.render_noise:.3f}, "
+              f"limit {g.limit:.3f}: {'MISFIT' if g.misfit else 'within the expected range'}")
+        n = r.size // FRAMES
+        for k in range(FRAMES):
+            gk = goodness(r[k * n:(k + 1) * n], r_alt[k * n:(k + 1) * n], 0, True)
+            print(f"  frame {k}: chi^2/dof {gk.chi2_dof:.3f}, v {gk.render_noise:.3f}, above 1 + v by {gk.chi2_dof - 1 - gk.render_noise:+.3f}")
+
+    _, m32, refs = at_truth(sf.FitRender(spp=32))
+    _, m32_alt, _ = at_truth(sf.FitRender(spp=32, seed=77))
+    _, m1024, _ = at_truth(sf.FitRender(spp=1024, seed=5))
+
+    def variance(dn: np.ndarray) -> np.ndarray:
+        return np.asarray(noise_variance_dn(jnp.asarray(dn), SENSOR), dtype=float)
+
+    def mean(values: list[np.ndarray]) -> float:
+        return float(np.mean(np.concatenate([v.ravel() for v in values])))
+
+    ks = range(FRAMES)
+    print("32 spp at the truth, chi^2 per value (every pixel):")
+    print(f"  sigma at the model's DN (the fit's)  {mean([(refs[k] - m32[k]) ** 2 / variance(m32[k]) for k in ks]):.3f}")
+    print(f"  sigma at the reference's DN          {mean([(refs[k] - m32[k]) ** 2 / variance(refs[k]) for k in ks]):.3f}")
+    print(f"  sigma at a 1024-spp model's DN       {mean([(refs[k] - m32[k]) ** 2 / variance(m1024[k]) for k in ks]):.3f}")
+    print(f"  render noise v with that sigma       {mean([(m32[k] - m32_alt[k]) ** 2 / 2 / variance(m1024[k]) for k in ks]):.3f}")
+    print(f"  a 1024-spp model against the reference {mean([(refs[k] - m1024[k]) ** 2 / variance(m1024[k]) for k in ks]):.3f}")
+    print(f"load average {os.getloadavg()} at the end")
+
+
+if __name__ == "__main__":
+    main()
