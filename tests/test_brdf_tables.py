@@ -162,6 +162,10 @@ def test_a_tabulated_brdf_gives_its_table_back_and_extends_it_by_harvey_offsets(
         TabulatedBRDF.from_table(simulate_brdf_table(Lambert(0.5), [30.0], [10.0]))
     with pytest.raises(InputError, match="`scale`"):
         TabulatedBRDF.from_table(table, scale=0.0)
+    with pytest.raises(InputError, match="`offset\\[0\\]` and `log_value\\[0\\]`"):
+        TabulatedBRDF(tab.incidence_rad[:1], (np.array([0.2, 0.1]),), (np.zeros(2),), "made")
+    with pytest.raises(InputError, match="`incidence_rad` must be increasing"):
+        TabulatedBRDF(tab.incidence_rad[::-1], tab.offset, tab.log_value, "made")
 
 
 def jax_x64():

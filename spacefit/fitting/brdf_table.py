@@ -356,7 +356,24 @@ class TabulatedBRDF:
     scale: float = 1.0
 
     def __post_init__(self) -> None:
+        check_type("source", self.source, str, "a string")
         check_range("scale", self.scale, 0.0, lo_open=True)
+        grid = check_array("incidence_rad", self.incidence_rad).astype(float)
+        if grid.ndim != 1 or not len(grid) or np.any(~np.isfinite(grid)) or np.any(np.diff(grid) <= 0) or grid[0] < 0 or grid[-1] >= np.pi / 2:
+            raise InputError(f"`incidence_rad` must be increasing zeniths in [0, pi/2) rad, got {quote(self.incidence_rad)}.")
+        lines = []
+        for name in ("offset", "log_value"):
+            value = getattr(self, name)
+            if not isinstance(value, (tuple, list)) or len(value) != len(grid):
+                raise InputError(f"`{name}` must hold one array per incidence ({len(grid)}), got {quote(value)}.")
+            lines.append([check_array(f"{name}[{k}]", v).astype(float) for k, v in enumerate(value)])
+        for k, (x, y) in enumerate(zip(*lines)):
+            if x.ndim != 1 or x.shape != y.shape or len(x) < 2 or not np.all(np.isfinite(x) & np.isfinite(y)) or np.any(np.diff(x) <= 0):
+                raise InputError(f"`offset[{k}]` and `log_value[{k}]` must be two or more finite values each, the offsets "
+                                 f"increasing, got {quote(x)} and {quote(y)}.")
+        object.__setattr__(self, "incidence_rad", grid)
+        object.__setattr__(self, "offset", tuple(lines[0]))
+        object.__setattr__(self, "log_value", tuple(lines[1]))
 
     @classmethod
     @float64
