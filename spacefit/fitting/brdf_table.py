@@ -339,7 +339,10 @@ class TabulatedBRDF:
     held at the end values beyond both; ``scale`` multiplies it (1: the table's values). Both
     sides of the plate alike, 0 where sun and observer are on opposite sides, as the materials'
     BRDFs (:func:`spacefit.materials.brdf.brdf_value`). Isotropic: the plate's tangent does not
-    matter. Not a renderer material: it serves the flat-plate light curves only.
+    matter. Not a renderer material: it serves the flat-plate light curves only. ln f is piecewise
+    linear in the angles: a fit of directions through it (an attitude) sees one segment's slope at a
+    time and may stop at a kink (a simulated 6 deg turn about z with a tabulated array came back 7.1
+    +- 0.05 deg; with a GGX array, 5.7 +- 0.3); its ``scale`` enters linearly and fits cleanly.
 
     Attributes:
         incidence_rad: (K,) the measured incident zeniths, increasing.
