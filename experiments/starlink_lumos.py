@@ -7,17 +7,23 @@ allow): ``python3 -m venv .venv-lumos && .venv-lumos/bin/pip install lumos-sat``
 ``geometry.csv`` gives each observation's sun altitude and azimuth, by astropy offline, the Earth's
 shadow and the split).
 
-(a) lab tables: lumos-sat's Phong model (Kd, Ks, n) fitted to each table by lumos-sat's own
-    ``brdf.tools.fit`` (log space, values above the 1e-4 sr^-1 floor). The paper's lab model is a
-    Binomial fit whose coefficients are not published with the package; Phong is the model the
-    package documents for fits.
+(a) lab tables, three ways: the paper's own lab model, a Binomial fit (Greynolds) to each table
+    whose coefficients the package does not ship but the paper's repository does
+    (``analysis/satellite_models/starlink_v1p5.py`` of Forrest-Fankhauser/satellite-optical-brightness,
+    copied below; that file takes the areas as 3.65 and 22 m^2, here 3.64 and 22.68 as the data's
+    description); lumos-sat's Phong model (Kd, Ks, n) fitted to each table by lumos-sat's own
+    ``brdf.tools.fit`` (log space, values above the 1e-4 sr^-1 floor); and the tables used as they
+    are, interpolated as ``sf.TabulatedBRDF`` does (:func:`tabulated`, written here again in numpy
+    from its definition, on lumos-sat's own reading of the files).
 (b) observations: the two surfaces' Phong parameters fitted to the training two thirds of the
     observed magnitudes (scipy least squares in magnitudes, as the paper's analysis), scored on
     the held-out third.
 Sun only (no Earthshine) unless ``--earthshine`` (lumos-sat's Earth mesh, a Lambertian Earth of
 albedo 0.3, 51 x 51 panels). Writes ``experiments/results/starlink/lumos.json`` and
 ``lumos_lambert.csv``: lumos-sat's AB magnitude of each observation with both surfaces Lambertian
-(albedo 0.5), sun only, which tests/test_observed_lightcurves.py holds spacefit's flat plates to.
+(albedo 0.5), sun only, and ``lumos_tabulated.csv``: the chassis alone and the array alone, each
+with its tabulated lab BRDF, sun only, which tests/test_observed_lightcurves.py holds spacefit's
+flat plates to.
 """
 
 from __future__ import annotations
@@ -49,11 +55,59 @@ def scores(observed: np.ndarray, predicted: np.ndarray) -> dict:
             "rms_mag": float(np.sqrt(np.mean(r**2))), "median_mag": float(np.median(r)), "bias_mag": float(np.mean(r))}
 
 
-def magnitudes(params, obs, geometry, rows, earthshine: bool) -> np.ndarray:
-    """lumos-sat's AB magnitudes of the two Phong surfaces at observations ``rows`` (inf where dark)."""
-    kd_c, ks_c, n_c, kd_a, ks_a, n_a = params
-    surfaces = [lumos.geometry.Surface(3.64, np.array([0, 0, -1]), lumos.brdf.library.PHONG(kd_c, ks_c, n_c)),
-                lumos.geometry.Surface(22.68, np.array([0, 1, 0]), lumos.brdf.library.PHONG(kd_a, ks_a, n_a))]
+CHASSIS, ARRAY = (3.64, np.array([0, 0, -1])), (22.68, np.array([0, 1, 0]))
+# The paper's lab model: Binomial fits to the two tables (its repository's analysis/satellite_models/starlink_v1p5.py).
+BINOMIAL_CHASSIS = lumos.brdf.library.BINOMIAL(np.array([[3.34, -98.085]]), np.array(
+    [[-999.999, 867.538, 1000., 1000., -731.248, 618.552, -294.054, 269.248, -144.853, 75.196]]), d=3.0, l1=-5)
+BINOMIAL_ARRAY = lumos.brdf.library.BINOMIAL(np.array([[0.534, -20.409]]), np.array(
+    [[-527.765, 1000., -676.579, 430.596, -175.806, 57.879]]), d=3.0, l1=-3)
+
+
+def signed_offset(i, n, o):
+    """Harvey's signed offset of ``o`` from the specular direction of ``i`` about the normal ``n``, in
+    direction cosines (sf.TabulatedBRDF's definition): beta = o's projection onto the surface,
+    beta_0 = the mirror direction's, |beta - beta_0| signed by (beta - beta_0) . beta_0."""
+    i, o = np.asarray(i, float), np.asarray(o, float)
+    n = np.asarray(n, float).reshape((3,) + (1,) * (i.ndim - 1))
+    beta = o - np.sum(o * n, axis=0) * n
+    beta0 = -(i - np.sum(i * n, axis=0) * n)
+    delta = beta - beta0
+    d = np.sqrt(np.sum(delta**2, axis=0))
+    return np.where(np.sum(delta * beta0, axis=0) < 0, -d, d)
+
+
+def tabulated(path: Path):
+    """A lumos-sat BRDF function of a measured in-plane table used as it is (sf.TabulatedBRDF's
+    definition): ln f linear in the signed offset at each measured incidence, linear in the incident
+    zenith between incidences, held at the end values beyond; rows at or beyond grazing and values
+    <= 0 dropped (as sf.read_brdf_table)."""
+    zi, ai, zo, ao, f = lumos.brdf.tools.read_brdf(str(path))
+    keep = (np.abs(zi) < 90) & (np.abs(zo) < 90) & (f > 0)
+    i = np.array(lumos.conversions.spherical_to_unit(np.radians(zi[keep]), np.radians(ai[keep])))
+    o = np.array(lumos.conversions.spherical_to_unit(np.radians(zo[keep]), np.radians(ao[keep])))
+    u, theta, log_f = signed_offset(i, (0, 0, 1), o), np.round(np.arccos(i[2]), 9), np.log(f[keep])
+    grid = np.unique(theta)
+    lines = []
+    for t in grid:
+        x, where = np.unique(u[theta == t], return_inverse=True)
+        lines.append((x, np.bincount(where, log_f[theta == t]) / np.bincount(where)))
+
+    def brdf(incident, normal, outgoing):
+        i, o = np.array(incident, float), np.array(outgoing, float)
+        i, o = np.broadcast_arrays(i.reshape(3, -1), o.reshape(3, -1))
+        n = np.asarray(normal, float)
+        cos_i, cos_o = n @ i, n @ o
+        t = np.arccos(np.clip(cos_i, -1, 1))
+        u = signed_offset(i, n, o)
+        value = sum(np.interp(t, grid, np.eye(len(grid))[k]) * np.interp(u, x, y) for k, (x, y) in enumerate(lines))
+        out = np.where((cos_i > 0) & (cos_o > 0), np.exp(value), 0.0)
+        return out.reshape(np.shape(incident[0])) if np.ndim(incident[0]) else out.reshape(np.shape(outgoing[0]))
+
+    return brdf
+
+
+def magnitudes_of(surfaces, obs, geometry, rows, earthshine: bool) -> np.ndarray:
+    """lumos-sat's AB magnitudes of ``surfaces`` at observations ``rows`` (inf where dark)."""
     out = np.full(len(rows), np.inf)
     for j, i in enumerate(rows):
         intensity = lumos.calculator.get_intensity_observer_frame(
@@ -62,6 +116,14 @@ def magnitudes(params, obs, geometry, rows, earthshine: bool) -> np.ndarray:
         if intensity > 0:
             out[j] = lumos.conversions.intensity_to_ab_mag(intensity, clip=False)
     return out
+
+
+def magnitudes(params, obs, geometry, rows, earthshine: bool) -> np.ndarray:
+    """lumos-sat's AB magnitudes of the two Phong surfaces at observations ``rows`` (inf where dark)."""
+    kd_c, ks_c, n_c, kd_a, ks_a, n_a = params
+    surfaces = [lumos.geometry.Surface(*CHASSIS, lumos.brdf.library.PHONG(kd_c, ks_c, n_c)),
+                lumos.geometry.Surface(*ARRAY, lumos.brdf.library.PHONG(kd_a, ks_a, n_a))]
+    return magnitudes_of(surfaces, obs, geometry, rows, earthshine)
 
 
 def main() -> None:
@@ -89,6 +151,17 @@ def main() -> None:
                 include_earthshine=False)
             if intensity > 0:
                 w.writerow([i, f"{float(lumos.conversions.intensity_to_ab_mag(intensity, clip=False)):.6f}"])
+    tables = {"chassis": tabulated(DATA / "chassis_brdf.csv"), "array": tabulated(DATA / "solar_array_brdf.csv")}
+    if not args.earthshine:
+        alone = {name: magnitudes_of([lumos.geometry.Surface(*plate, tables[name])], obs, geometry, np.arange(len(rows)), False)
+                 for name, plate in (("chassis", CHASSIS), ("array", ARRAY))}
+        with open(RESULTS / "lumos_tabulated.csv", "w", newline="") as f:
+            w = csv.writer(f)
+            w.writerow(["# lumos-sat 1.0.9: AB magnitude of one plate with its tabulated lab BRDF (sf.TabulatedBRDF's definition), "
+                        "sun only, at the Pomenis observations (inf: dark); .venv-lumos/bin/python experiments/starlink_lumos.py"])
+            w.writerow(["row", "chassis_ab_magnitude", "array_ab_magnitude"])
+            for i in range(len(rows)):
+                w.writerow([i, f"{alone['chassis'][i]:.6f}", f"{alone['array'][i]:.6f}"])
     held = np.flatnonzero(geometry["held_out"])
     train = np.flatnonzero(~geometry["held_out"])
     everything = np.arange(len(rows))
@@ -100,6 +173,10 @@ def main() -> None:
     out: dict = {"earthshine": args.earthshine, "lab_phong": lab}
     predicted = magnitudes(lab, obs, geometry, everything, args.earthshine)
     out["lab"] = {"all": scores(obs["magnitude"], predicted), "held_out": scores(obs["magnitude"][held], predicted[held])}
+    for name, chassis, array in (("lab_binomial", BINOMIAL_CHASSIS, BINOMIAL_ARRAY), ("lab_tabulated", tables["chassis"], tables["array"])):
+        predicted = magnitudes_of([lumos.geometry.Surface(*CHASSIS, chassis), lumos.geometry.Surface(*ARRAY, array)], obs, geometry,
+                                  everything, args.earthshine)
+        out[name] = {"all": scores(obs["magnitude"], predicted), "held_out": scores(obs["magnitude"][held], predicted[held])}
 
     def residual(p):
         m = magnitudes(p, obs, geometry, train, False)
@@ -111,9 +188,9 @@ def main() -> None:
     out["fitted"] = {"held_out": scores(obs["magnitude"][held], fitted[held]), "in_sample": scores(obs["magnitude"][train], fitted[train])}
     name = "lumos_earthshine.json" if args.earthshine else "lumos.json"
     (RESULTS / name).write_text(json.dumps(out, indent=1))
-    for key in ("lab", "fitted"):
+    for key in ("lab", "lab_binomial", "lab_tabulated", "fitted"):
         for part, s in out[key].items():
-            print(f"lumos {key:>7s} {part:>9s}: n {s['n']}, R {s['pearson_r']:.3f}, RMS {s['rms_mag']:.3f}, "
+            print(f"lumos {key:>13s} {part:>9s}: n {s['n']}, R {s['pearson_r']:.3f}, RMS {s['rms_mag']:.3f}, "
                   f"median {s['median_mag']:+.3f}, bias {s['bias_mag']:+.3f}")
 
 

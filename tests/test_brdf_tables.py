@@ -127,3 +127,54 @@ def test_fit_arguments_are_checked():
         fit_brdf_table(table, "lambert", fixed={"k": 0.0})
     with pytest.raises(InputError, match="`relative_error`"):
         fit_brdf_table(table, "lambert", relative_error=-0.1)
+
+
+def test_a_tabulated_brdf_gives_its_table_back_and_extends_it_by_harvey_offsets():
+    """sf.TabulatedBRDF of the chassis's table: its own values at its own rows (the interpolation
+    passes through them), the same value at a direction mirrored across the plane of incidence
+    (isotropic), the value of the measured row at the same signed offset u = |beta - beta_0| out of
+    the plane, a table's factor, and a refusal of tables it cannot read in-plane."""
+    from spacefit.fitting.brdf_table import TabulatedBRDF, signed_offset, unit_vectors
+
+    table = read_brdf_table(DATA / "chassis_brdf.csv")
+    tab = TabulatedBRDF.from_table(table)
+    assert len(tab.incidence_rad) == 4 and [len(x) for x in tab.offset] == [179] * 4
+    with jax_x64():
+        evaluate = jax_jit(lambda wi, wo, scale: tab.evaluate(wi, wo, scale))
+        np.testing.assert_allclose(np.asarray(evaluate(table.wi, table.wo, 1.0)), table.value, rtol=1e-6)
+        wi = unit_vectors(np.array([41.4]), np.array([180.0]))
+        wo = unit_vectors(np.array([30.0]), np.array([50.0]))
+        u = float(np.asarray(signed_offset(wi, wo))[0])
+        # the in-plane outgoing direction of the same offset: sin(zo) - sin(41.4 deg) = u
+        zo = np.degrees(np.arcsin(u + np.sin(np.radians(41.4))))
+        inplane = unit_vectors(np.array([zo]), np.array([0.0]))
+        mirrored = wo * np.array([1.0, -1.0, 1.0])
+        f = np.asarray(evaluate(np.tile(wi, (5, 1)), np.concatenate([wo, inplane, mirrored, wo, -wo]), np.array([1, 1, 1, 2, 1.0])))
+        off, on = f[0], f[1]
+        assert off == pytest.approx(on, rel=1e-9) and off > 0
+        assert f[2] == pytest.approx(off, rel=1e-12)  # mirrored across the plane of incidence
+        assert f[3] == pytest.approx(2 * off, rel=1e-12)  # the table's factor
+        assert f[4] == 0.0  # opposite sides
+    out_of_plane = simulate_brdf_table(Lambert(0.5), [30.0], [10.0, 40.0], [0.0, 90.0])
+    with pytest.raises(InputError, match="plane of incidence"):
+        TabulatedBRDF.from_table(out_of_plane)
+    with pytest.raises(InputError, match="two or more"):
+        TabulatedBRDF.from_table(simulate_brdf_table(Lambert(0.5), [30.0], [10.0]))
+    with pytest.raises(InputError, match="`scale`"):
+        TabulatedBRDF.from_table(table, scale=0.0)
+    with pytest.raises(InputError, match="`offset\\[0\\]` and `log_value\\[0\\]`"):
+        TabulatedBRDF(tab.incidence_rad[:1], (np.array([0.2, 0.1]),), (np.zeros(2),), "made")
+    with pytest.raises(InputError, match="`incidence_rad` must be increasing"):
+        TabulatedBRDF(tab.incidence_rad[::-1], tab.offset, tab.log_value, "made")
+
+
+def jax_x64():
+    import jax
+
+    return jax.enable_x64(True)
+
+
+def jax_jit(fn):
+    import jax
+
+    return jax.jit(fn)

@@ -466,9 +466,10 @@ def check_plates(plate: dict[str, Any], data: st.DataObject) -> None:
             magnitudes = outcome(lambda: sf.predict_magnitudes(plates, observations, data.draw(st.one_of(st.just(1360.0), JUNK))))
             assert magnitudes is None or not np.any(np.isnan(magnitudes))
         else:
-            free = data.draw(st.one_of(st.just(["body.kd"]), st.lists(st.sampled_from(["body.kd", "array.alpha", "array.kd", "x.kd"]),
+            free = data.draw(st.one_of(st.just(["body.kd"]), st.lists(st.sampled_from(["body.kd", "array.alpha", "array.kd", "x.kd", "target.attitude_z_deg"]),
                                                                        max_size=2), JUNK))
-            fit = outcome(lambda: sf.fit_plates(plates, observations, free, max_steps=data.draw(st.one_of(st.just(2), JUNK))))
+            bounds = data.draw(st.one_of(st.none(), st.just({"body.kd": (0.1, 0.5)}), JUNK))
+            fit = outcome(lambda: sf.fit_plates(plates, observations, free, bounds=bounds, max_steps=data.draw(st.one_of(st.just(2), JUNK))))
             if call == "fitted" and fit is not None:
                 fitted = outcome(lambda: sf.fitted_plates(data.draw(st.one_of(st.just(plates), JUNK)), fit))
                 assert fitted is None or len(fitted) == len(plates)

@@ -188,3 +188,61 @@ def test_two_lambert_plates_agree_with_lumos_sat(pomenis):
     ours = predict_magnitudes(plates, obs)
     assert np.isfinite(ours).sum() == len(index) == 1172 and np.all(np.isfinite(ours[index]))
     np.testing.assert_allclose(ours[index], peer, atol=2.5 * math.log10(1.01))
+
+
+def test_a_plate_with_a_tabulated_brdf_agrees_with_lumos_sat(pomenis):
+    """Issue 22 item 5: a flat plate with a tabulated (lab) BRDF against lumos-sat's calculator for
+    the same plate: the chassis alone and the array alone, each with its measured table used as it
+    is (sf.TabulatedBRDF; lumos-sat given a BRDF function of the same definition,
+    ``experiments/starlink_lumos.py`` wrote its magnitudes), within 1 % at every lit Pomenis geometry."""
+    from spacefit.fitting.brdf_table import TabulatedBRDF, read_brdf_table
+
+    rows = [line.split(",") for line in (Path(__file__).resolve().parents[1] / "experiments" / "results" / "starlink" /
+                                          "lumos_tabulated.csv").read_text().splitlines()[2:]]
+    peer = {"chassis": np.array([float(r[1]) for r in rows]), "array": np.array([float(r[2]) for r in rows])}
+    for name, normal, area, table in (("chassis", (0, 0, -1), 3.64, "chassis"), ("array", (0, 1, 0), 22.68, "solar_array")):
+        plate = Plate(name, area, normal, TabulatedBRDF.from_table(read_brdf_table(DATA / f"{table}_brdf.csv")))
+        ours = predict_magnitudes([plate], pomenis)
+        lit = np.isfinite(peer[name])
+        assert lit.sum() > 300 and np.array_equal(np.isfinite(ours), lit), name
+        np.testing.assert_allclose(ours[lit], peer[name][lit], atol=2.5 * math.log10(1.01), err_msg=name)
+
+
+@pytest.mark.slow
+def test_fit_plates_frees_the_attitude_and_a_tables_scale():
+    """A simulated light curve (0.02 mag noise) of a tabulated chassis (its lab table scaled by 1.8)
+    and a GGX array, the target turned 6 deg about z: fit_plates gives back the angle and the
+    scale within 3 standard errors; fitted_plates turns the normals by the fitted angle and scales
+    the table; a start outside the bounds given is refused, and so is a plate named ``target``."""
+    from spacefit.fitting.brdf_table import TabulatedBRDF, read_brdf_table
+    from spacefit.geometry.frames import attitude_matrix
+
+    rng = np.random.default_rng(3)
+    n = 40
+    elev = np.radians(rng.uniform(5, 40, n))
+    sun = np.stack([np.zeros(n), np.cos(elev), -np.sin(elev)], 1)
+    obs = rng.normal(size=(n, 3)) * [0.5, 0.5, 0.3] - [0.0, 0.0, 1.0]
+    obs /= np.linalg.norm(obs, axis=1, keepdims=True)
+    table = read_brdf_table(DATA / "chassis_brdf.csv")
+    plates = [Plate("chassis", 3.64, (0, 0, -1), TabulatedBRDF.from_table(table)), Plate("array", 22.68, (0, 1, 0), Conductor(1.5, 0.0, 0.2, 0.2))]
+    turn = attitude_matrix(np.radians([0.0, 0.0, 6.0]))
+    truth = [Plate("chassis", 3.64, (0, 0, -1), TabulatedBRDF.from_table(table, 1.8)),
+             Plate("array", 22.68, tuple(turn @ np.array([0.0, 1.0, 0.0])), plates[1].material)]
+    exact = LightCurveObservations(np.zeros(n), None, "AB532", sun, obs, np.full(n, 6e5), np.zeros(n, bool), None, "simulated")
+    m = predict_magnitudes(truth, exact) + 0.02 * rng.standard_normal(n)
+    data = LightCurveObservations(m, np.full(n, 0.02), "AB532", sun, obs, np.full(n, 6e5), np.zeros(n, bool), None, "simulated")
+    free = ["target.attitude_z_deg", "chassis.scale"]
+    fit = fit_plates(plates, data, free)
+    assert fit.success and not fit.goodness.misfit, fit.report()
+    for name, true in zip(free, (6.0, 1.8)):
+        assert abs(fit.value(name) - true) < 3 * fit.stderr[fit.names.index(name)], fit.report()
+    assert fit.stderr[0] < 1.0 and fit.stderr[1] < 0.1
+    turned = sf.fitted_plates(plates, fit)
+    np.testing.assert_allclose(turned[1].normal, truth[1].normal, atol=3 * math.radians(fit.stderr[0]))
+    assert turned[0].normal == (0.0, 0.0, -1.0) and turned[0].material.scale == pytest.approx(fit.value("chassis.scale"))
+    with pytest.raises(InputError, match="starts at 1, outside its bounds"):
+        fit_plates(plates, data, ["chassis.scale"], bounds={"chassis.scale": (1.5, 3.0)})
+    with pytest.raises(InputError, match="`bounds` must be one of"):
+        fit_plates(plates, data, ["chassis.scale"], bounds={"array.eta": (1.0, 2.0)})
+    with pytest.raises(InputError, match="must not have a plate named 'target'"):
+        fit_plates([Plate("target", 1.0, (0, 0, 1), Lambert(0.3))], data, ["target.kd"])

@@ -261,6 +261,10 @@ MUTANTS = (
            'check_path("out_dir", out_dir)', ("tests/test_brdf_tables.py",)),
     Mutant("light-curve-sun-directions-not-normalised", "spacefit/studies/observing.py", "fields[name] = scaled / norm",
            "fields[name] = v", ("tests/test_observed_lightcurves.py",)),
+    Mutant("tabulated-offset-unsigned", "spacefit/fitting/brdf_table.py", "return jnp.where(jnp.sum(delta * beta0, axis=-1) < 0, -d, d)",
+           "return d", ("tests/test_brdf_tables.py",)),
+    Mutant("tabulated-incidences-reversed", "spacefit/fitting/brdf_table.py", "jnp.interp(theta, grid, jnp.eye(len(grid))[k])",
+           "jnp.interp(theta, grid, jnp.eye(len(grid))[-1 - k])", ("tests/test_observed_lightcurves.py",)),
 )
 
 
