@@ -41,6 +41,7 @@ REFERENCE_SEED = 7
 from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.rendering.backend import dr  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
+from spacefit.scene.schema import takes_sample_count  # noqa: E402
 from spacefit.scene.toml import load_scene  # noqa: E402
 from spacefit.studies.costs import pareto_front  # noqa: E402
 
@@ -127,10 +128,12 @@ METHODS = {
     "window, stratified": (False, "stratified"),
     "window, multijitter": (False, "multijitter"),
     "window, ldsampler": (False, "ldsampler"),
+    "window, orthogonal": (False, "orthogonal"),
 }
 VIEWS = {"default (70 m)": [], "close (25 m)": ["camera.position_m=[0, 0, 25]"]}
-# spp swept per method (ldsampler rounds to powers of 2) and errors at which times are compared
-METHOD_SPP = {"reduced": [4, 16], "full": [4, 8, 16, 32, 64]}
+# spp swept per method, each method at the counts its sampler takes (schema.takes_sample_count: the
+# squares are valid for all but ldsampler, 4^k, and orthogonal, prime^2), and errors at which times are compared
+METHOD_SPP = {"reduced": [4, 9, 16], "full": [4, 9, 16, 25, 36, 49, 64]}
 TARGET_ERRORS = (0.4, 0.3, 0.2)
 
 
@@ -161,13 +164,15 @@ def run_methods(out: Path, full: bool) -> list[dict[str, object]]:
     for view, extra in VIEWS.items():
         base = ["render.deterministic=false", *extra]
         reference = view_reference(extra, reference_spp)
-        # render.spp 16 is valid for every sampler; each render passes its own spp
-        renderers = {name: Renderer(assemble(load_scene(None, [*base, "render.spp=16", f'render.sampler="{sampler}"'])),
+        # render.spp 4 is valid for every sampler; each render passes its own spp
+        renderers = {name: Renderer(assemble(load_scene(None, [*base, "render.spp=4", f'render.sampler="{sampler}"'])),
                                     crop=not film)
                      for name, (film, sampler) in METHODS.items()}
         view_rows = []
         for spp in spps:
             for name, renderer in renderers.items():
+                if not takes_sample_count(METHODS[name][1], spp):
+                    continue
                 time_s, image = timed(renderer, spp)
                 sampler = renderer.scene.sensors()[0].sampler()
                 view_rows.append({"view": view, "method": name, "spp": spp, "samples_per_pixel": sampler.sample_count(),
