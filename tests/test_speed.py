@@ -17,9 +17,7 @@ from spacefit import cli
 from spacefit.geometry import cache
 from spacefit.output import srgb_encode
 from spacefit.scene import assembly as assembly_module
-from spacefit.rendering.renderer import pass_seeds
 from spacefit.scene.assembly import assemble
-from spacefit.scene.schema import split_sample_count
 
 # A wrinkled default scene small enough to refine in well under a second, rendered as geometry (at
 # 37.5 cm per pixel "auto" would take the default wrinkles' effective roughness and refine nothing).
@@ -154,29 +152,6 @@ def test_srgb_encoding_equals_colour_science():
     colour = pytest.importorskip("colour")
     x = np.concatenate([np.linspace(0.0, 0.01, 101), np.linspace(0.0, 1.0, 1001)])
     np.testing.assert_allclose(srgb_encode(x), colour.cctf_encoding(x, function="sRGB"), rtol=0, atol=1e-12)
-
-
-def test_samplers_keep_one_image_per_seed_and_refuse_counts_they_would_round():
-    """The policy: stratified, ldsampler and orthogonal refuse a count they would round (at load and at
-    each render); multijitter, the default, renders one as passes of counts it takes, exactly the samples asked."""
-    scene = sf.load_scene(None, SMALL)
-    assert scene.render.sampler == "multijitter"
-    renderer = sf.Renderer(scene)
-    a, b, c = renderer.render(seed=3), renderer.render(seed=3), renderer.render(seed=4)
-    assert np.array_equal(a, b) and not np.array_equal(a, c)
-    assert renderer.scene.sensors()[0].sampler().sample_count() == scene.render.spp
-    for spp, counts in ((32, (30, 2)), (20, (20,)), (5, (4, 1)), (128, (121, 6, 1))):
-        assert split_sample_count("multijitter", spp) == counts
-        passes = pass_seeds(7, spp, 100, "multijitter")
-        assert [p[1] for p in passes] == list(counts) and passes[0][0] == 7 and len({p[0] for p in passes}) == len(passes)
-    assert split_sample_count("independent", 32) == (32,)
-    for sampler, spp in (("stratified", 20), ("ldsampler", 32), ("ldsampler", 36), ("orthogonal", 16), ("nope", 16)):
-        with pytest.raises(sf.InputError, match="render.s"):
-            sf.load_scene(None, {"render.sampler": sampler, "render.spp": spp})
-    with pytest.raises(sf.InputError, match=r"`spp` = 16 must be the square of a prime .*nearest: 9 or 25"):
-        sf.Renderer(sf.load_scene(None, {**SMALL, "render.sampler": "orthogonal"})).render(spp=16)
-    for sampler, spp in (("ldsampler", 64), ("orthogonal", 49), ("stratified", 36), ("multijitter", 7)):
-        sf.load_scene(None, {"render.sampler": sampler, "render.spp": spp})
 
 
 def test_a_refinement_held_in_memory_says_so(monkeypatch, tmp_path):
