@@ -8,6 +8,10 @@ missing bounces as well as the noise. Wall time is the median of a few renders a
 (compiling) render, with ``render.deterministic=false`` (all render threads; the CSV's ``threads``
 column). Writes ``forward.csv`` and ``forward_pareto.png`` to ``--out``.
 
+``--mask`` times spacefit's render, which traces only the pixels whose samples can reach the target's
+silhouette (:attr:`Renderer.traced`), against Mitsuba's own loop over the window's box, in turn, in both
+views (``mask_pairs.csv``); ``--mask-loop WAY VIEW`` renders one way 20 times, for a whole-process timer.
+
 ``--methods`` compares ways of spending a render's time at 600 px, depth 2, in the default view
 (70 m, the target 5 % of the film) and a close one (25 m): plain Mitsuba (the whole film, the
 ``independent`` sampler) against spacefit's window around the target with each sampler of
@@ -16,7 +20,7 @@ reaches each target error; writes ``methods.csv``, ``equal_error.csv`` and ``met
 renders plain Mitsuba and spacefit at spp of equal error (:data:`PAIR_SPP`) in turn and writes the
 time ratios within each pair to ``equal_error_pairs.csv``.
 
-Run: ``.venv/bin/python experiments/forward_pareto.py [--full] [--methods] [--out experiments/results/forward]``.
+Run: ``.venv/bin/python experiments/forward_pareto.py [--full] [--methods | --mask] [--out experiments/results/forward]``.
 """
 
 from __future__ import annotations
@@ -41,6 +45,7 @@ REFERENCE_SEED = 7
 from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.rendering.backend import dr  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
+from spacefit.scene.schema import takes_sample_count  # noqa: E402
 from spacefit.scene.toml import load_scene  # noqa: E402
 from spacefit.studies.costs import pareto_front  # noqa: E402
 
@@ -127,10 +132,12 @@ METHODS = {
     "window, stratified": (False, "stratified"),
     "window, multijitter": (False, "multijitter"),
     "window, ldsampler": (False, "ldsampler"),
+    "window, orthogonal": (False, "orthogonal"),
 }
 VIEWS = {"default (70 m)": [], "close (25 m)": ["camera.position_m=[0, 0, 25]"]}
-# spp swept per method (ldsampler rounds to powers of 2) and errors at which times are compared
-METHOD_SPP = {"reduced": [4, 16], "full": [4, 8, 16, 32, 64]}
+# spp swept per method, each method at the counts its sampler takes (schema.takes_sample_count: the
+# squares are valid for all but ldsampler, 4^k, and orthogonal, prime^2), and errors at which times are compared
+METHOD_SPP = {"reduced": [4, 9, 16], "full": [4, 9, 16, 25, 36, 49, 64]}
 TARGET_ERRORS = (0.4, 0.3, 0.2)
 
 
@@ -161,13 +168,15 @@ def run_methods(out: Path, full: bool) -> list[dict[str, object]]:
     for view, extra in VIEWS.items():
         base = ["render.deterministic=false", *extra]
         reference = view_reference(extra, reference_spp)
-        # render.spp 16 is valid for every sampler; each render passes its own spp
-        renderers = {name: Renderer(assemble(load_scene(None, [*base, "render.spp=16", f'render.sampler="{sampler}"'])),
+        # render.spp 4 is valid for every sampler; each render passes its own spp
+        renderers = {name: Renderer(assemble(load_scene(None, [*base, "render.spp=4", f'render.sampler="{sampler}"'])),
                                     crop=not film)
                      for name, (film, sampler) in METHODS.items()}
         view_rows = []
         for spp in spps:
             for name, renderer in renderers.items():
+                if not takes_sample_count(METHODS[name][1], spp):
+                    continue
                 time_s, image = timed(renderer, spp)
                 sampler = renderer.scene.sensors()[0].sampler()
                 view_rows.append({"view": view, "method": name, "spp": spp, "samples_per_pixel": sampler.sample_count(),
@@ -220,6 +229,59 @@ def run_pairs(repeats: int = PAIR_REPEATS, reference_spp: int = 1024) -> list[di
     return rows
 
 
+# spp of the mask's pairs, and renders per process of --mask-loop (about 5 s of rendering at 2 threads)
+MASK_SPP = (16, 64)
+MASK_LOOP_RENDERS = 20
+
+
+def window_render(renderer: Renderer, spp: int, seed: int) -> np.ndarray:
+    """The render spacefit did before its mask: Mitsuba's own loop over the whole film window (its box)."""
+    from spacefit.rendering.backend import mi
+
+    return renderer.to_film(np.asarray(mi.render(renderer.scene, seed=seed, spp=spp), dtype=np.float32))
+
+
+def run_mask_pairs(repeats: int = PAIR_REPEATS, reference_spp: int = 1024) -> list[dict[str, object]]:
+    """spacefit's render (the silhouette's mask, :attr:`Renderer.traced`) against Mitsuba's own loop over the
+    window, the same scene, sampler (the default) and spp, rendered in turn ``repeats`` times per view and spp:
+    both unbiased, so their errors agree and the time ratio is the one at equal error."""
+    rows = []
+    for view, extra in VIEWS.items():
+        reference = view_reference(extra, reference_spp)
+        renderer = Renderer(assemble(load_scene(None, ["render.deterministic=false", *extra])))
+        for spp in MASK_SPP:
+            renderer.render(spp=spp, seed=0), window_render(renderer, spp, 0)  # compile
+            runs: dict[str, list[tuple[float, float]]] = {"mask": [], "window": []}
+            for seed in range(1, repeats + 1):
+                for name in runs:
+                    t0 = time.perf_counter()
+                    image = renderer.render(spp=spp, seed=seed) if name == "mask" else window_render(renderer, spp, seed)
+                    runs[name].append((time.perf_counter() - t0, relative_rmse(image, reference)))
+            ratios = [a[0] / b[0] for a, b in zip(runs["mask"], runs["window"])]
+            rows.append({"view": view, "spp": spp, "sampler": renderer.assembly.scene.render.sampler,
+                         "traced_share_of_window": round(float(renderer.traced.mean()), 4),
+                         "mask_s": round(statistics.median(t for t, _ in runs["mask"]), 4),
+                         "window_s": round(statistics.median(t for t, _ in runs["window"]), 4),
+                         "ratio_median": round(statistics.median(ratios), 3), "ratio_min": round(min(ratios), 3),
+                         "ratio_max": round(max(ratios), 3),
+                         "mask_rel_rmse": round(statistics.mean(e for _, e in runs["mask"]), 4),
+                         "window_rel_rmse": round(statistics.mean(e for _, e in runs["window"]), 4)})
+            print(rows[-1], flush=True)
+    return rows
+
+
+def mask_loop(way: str, view: str, spp: int = MASK_SPP[1]) -> None:
+    """``MASK_LOOP_RENDERS`` renders of ``view`` the ``way`` given (``mask``: spacefit's; ``window``: Mitsuba's
+    loop over the window), for a whole-process timer run in turn (A B A B) on both ways; prints its own time."""
+    renderer = Renderer(assemble(load_scene(None, ["render.deterministic=false", *VIEWS[view]])))
+    render = renderer.render if way == "mask" else lambda spp, seed: window_render(renderer, spp, seed)
+    render(spp=spp, seed=0)
+    t0 = time.perf_counter()
+    for seed in range(1, MASK_LOOP_RENDERS + 1):
+        render(spp=spp, seed=seed)
+    print(f"{way}, {view}, {spp} spp: {(time.perf_counter() - t0) / MASK_LOOP_RENDERS:.4f} s per render")
+
+
 def plot_methods(path: Path, rows: list[dict[str, object]], reference_spp: int) -> None:
     """Error against time per method, one panel per view."""
     fig, axes = plt.subplots(1, len(VIEWS), figsize=(11, 4.5))
@@ -248,7 +310,15 @@ def main() -> None:
     p.add_argument("--out", default="experiments/results/forward")
     p.add_argument("--full", action="store_true", help="150/300/600 px, spp 1-64, depths 1-5, reference 1024 spp")
     p.add_argument("--methods", action="store_true", help="compare samplers and the window with plain Mitsuba instead")
+    p.add_argument("--mask", action="store_true", help="time the silhouette's mask against the window's box, in turn")
+    p.add_argument("--mask-loop", nargs=2, metavar=("WAY", "VIEW"), help="render one view 20 times, WAY mask or window")
     args = p.parse_args()
+    if args.mask_loop:
+        return mask_loop(*args.mask_loop)
+    if args.mask:
+        rows = run_mask_pairs() if args.full else run_mask_pairs(repeats=3, reference_spp=256)
+        write_csv(Path(args.out) / "mask_pairs.csv", rows)
+        return
     if args.methods:
         for row in run_methods(Path(args.out), args.full):
             print(row)

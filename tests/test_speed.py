@@ -154,18 +154,6 @@ def test_srgb_encoding_equals_colour_science():
     np.testing.assert_allclose(srgb_encode(x), colour.cctf_encoding(x, function="sRGB"), rtol=0, atol=1e-12)
 
 
-def test_samplers_keep_one_image_per_seed_and_refuse_counts_they_would_round():
-    scene = sf.load_scene(None, {**SMALL, "render.sampler": "multijitter"})
-    renderer = sf.Renderer(scene)
-    a, b, c = renderer.render(seed=3), renderer.render(seed=3), renderer.render(seed=4)
-    assert np.array_equal(a, b) and not np.array_equal(a, c)
-    assert renderer.scene.sensors()[0].sampler().sample_count() == scene.render.spp
-    for sampler, spp in (("stratified", 20), ("ldsampler", 32), ("ldsampler", 36), ("nope", 16)):
-        with pytest.raises(sf.InputError, match="render.s"):
-            sf.load_scene(None, {"render.sampler": sampler, "render.spp": spp})
-    sf.load_scene(None, {"render.sampler": "ldsampler", "render.spp": 64})
-
-
 def test_a_refinement_held_in_memory_says_so(monkeypatch, tmp_path):
     scene = _fresh(monkeypatch, tmp_path)
     assert assemble(scene).cache["body.refinement"] == "miss"

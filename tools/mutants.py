@@ -265,6 +265,13 @@ MUTANTS = (
            "return d", ("tests/test_brdf_tables.py",)),
     Mutant("tabulated-incidences-reversed", "spacefit/fitting/brdf_table.py", "jnp.interp(theta, grid, jnp.eye(len(grid))[k])",
            "jnp.interp(theta, grid, jnp.eye(len(grid))[-1 - k])", ("tests/test_observed_lightcurves.py",)),
+    # the traced mask (issue 23): conservative rasterisation, and the second dilation the tent's weights need
+    Mutant("silhouette-tests-pixel-centres-only", "spacefit/rendering/silhouette.py",
+           "<= 0.5 * (abs(nx) + abs(ny)) + EPS_PX", "<= EPS_PX", ("tests/test_silhouette.py",)),
+    Mutant("mask-dilated-once", "spacefit/rendering/silhouette.py", "return dilate(lit, reach), lit", "return lit, lit",
+           ("tests/test_silhouette.py",)),
+    Mutant("multijitter-rounds-silently", "spacefit/scene/schema.py", "    if sampler == \"multijitter\":\n        return spp % root == 0\n",
+           "", ("tests/test_sampler.py",)),
 )
 
 

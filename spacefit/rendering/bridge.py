@@ -33,7 +33,8 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.rendering.backend import dr, in_variant, mi
-from spacefit.rendering.renderer import Renderer, to_value, render_threads
+from spacefit.rendering.renderer import Renderer, pass_seed, render_threads, to_value
+from spacefit.scene.schema import split_sample_count
 
 SceneValues = Mapping[str, Array]
 
@@ -86,17 +87,24 @@ class DrJitScene:
                 dr.enable_grad(self.params[key])
         self.params.update()
 
+    def _passes(self, spp: int, seed: int) -> list[tuple[int, int, float]]:
+        """(seed, spp, weight) of each pass of a render: the counts the sampler takes (``multijitter``
+        splits one it would round, :func:`~spacefit.scene.schema.split_sample_count`), weighted by their share."""
+        counts = split_sample_count(self.renderer.assembly.scene.render.sampler, spp)
+        return [(pass_seed(seed, i), count, count / spp) for i, count in enumerate(counts)]
+
     def _render_ad(self, seed_grad: int) -> object:
         # The derivative render's own primal is not used: its seed only has to differ from seed_grad.
-        return mi.render(self.renderer.scene, self.params, integrator=self._integrator, seed=seed_grad + 1,
-                         seed_grad=seed_grad, spp=self.spp_grad)
+        return sum(mi.render(self.renderer.scene, self.params, integrator=self._integrator, seed=seed + 1, seed_grad=seed, spp=count) * weight
+                   for seed, count, weight in self._passes(self.spp_grad, seed_grad))
 
     @in_variant
     def primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """Radiance image (h, w, 3) float32 at ``values``; bitwise reproducible if the scene is deterministic."""
         self._set(values, grad=False)
         with render_threads(self.renderer.assembly.scene.render.deterministic):
-            image = mi.render(self.renderer.scene, integrator=self._integrator, seed=seed, spp=self.spp)
+            image = sum(mi.render(self.renderer.scene, integrator=self._integrator, seed=seed_i, spp=count) * weight
+                        for seed_i, count, weight in self._passes(self.spp, seed))
             return self.renderer.to_film(np.asarray(image, dtype=np.float32))
 
     @in_variant

@@ -28,7 +28,7 @@ from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import Renderer, check_memory
 from spacefit.rendering.values import SceneValuesFn, scene_values_fn
 from spacefit.scene.assembly import Assembly, assemble
-from spacefit.scene.schema import MAX_SEED, MAX_SPP, Scene, check_scene
+from spacefit.scene.schema import MAX_SEED, MAX_SPP, Scene, check_sample_count, check_scene
 from spacefit.scene.parameters import MOVES_VERTICES, check_names, fd_step, scene_value, scene_with_values
 
 
@@ -91,6 +91,8 @@ def render_chain(
     names = tuple(names)
     renderer = Renderer(assembly, crop=not any(n in MOVES_VERTICES for n in names) if crop is None else crop)
     spp = spp or assembly.scene.render.spp
+    for name, count in (("spp", spp), ("spp_grad", spp_grad or spp)):
+        check_sample_count(name, count, assembly.scene.render.sampler)
     intr, window = assembly.intrinsics, renderer.window
     check_memory(intr.width, intr.height, window[2] * window[3], max(spp, spp_grad or spp), split=False)
     steps = np.array([fd_step(assembly.scene, n) for n in names], dtype=float) if fd_steps is None else np.asarray(fd_steps, float)

@@ -24,7 +24,9 @@ from spacefit.rendering.backend import dr, in_variant, mi, resolve_variant, vari
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.overrides import as_parameters
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
-from spacefit.scene.schema import FAR_CLIP_M, MAX_SEED, MAX_SPP, NEAR_CLIP_M, Scene, check_scene
+from spacefit.rendering.silhouette import traced_pixels
+from spacefit.scene.schema import (FAR_CLIP_M, FILTER_RADIUS_PX, MAX_SEED, MAX_SPP, NEAR_CLIP_M, Scene, check_sample_count, check_scene,
+                                   split_sample_count)
 
 # Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.
 MAX_SAMPLES_PER_PASS = 1 << 24
@@ -141,6 +143,21 @@ def target_window(assembly: Assembly, vertices: Mapping[str, np.ndarray]) -> tup
     return int(lo[0]), int(lo[1]), int(hi[0] - lo[0]), int(hi[1] - lo[1])
 
 
+def target_mask(assembly: Assembly, vertices: Mapping[str, np.ndarray], window: tuple[int, int, int, int]) -> np.ndarray:
+    """(height, width) bool over the film ``window``: the pixels a render traces, those whose samples
+    can reach a pixel the target lights (:func:`spacefit.rendering.silhouette.traced_pixels`: its
+    projected triangles, world ``vertices`` per part, m, dilated twice by the filter's reach). The whole
+    window when a vertex lies behind the camera."""
+    x0, y0, w, h = window
+    triangles = []
+    for name, points in vertices.items():
+        uv, depth = project(points, assembly.camera, assembly.intrinsics)
+        if not np.all(depth > 0):
+            return np.ones((h, w), dtype=bool)
+        triangles.append(uv[assembly.faces(name)] - [x0, y0])
+    return traced_pixels(np.concatenate(triangles), w, h, FILTER_RADIUS_PX[assembly.scene.render.filter])[0]
+
+
 def scene_dict(assembly: Assembly, vertices: Mapping[str, np.ndarray], window: tuple[int, int, int, int]) -> dict:
     """The Mitsuba scene dictionary: path tracer, pinhole camera, tent-filtered film rendering the
     pixel ``window`` (x0, y0, width, height) of the image, sun, and the parts at world ``vertices`` (m)."""
@@ -156,7 +173,7 @@ def scene_dict(assembly: Assembly, vertices: Mapping[str, np.ndarray], window: t
         "principal_point_offset_x": -intr.principal_offset[0] / intr.width,
         "principal_point_offset_y": -intr.principal_offset[1] / intr.height,
         "to_world": mi.ScalarTransform4f(cam.mitsuba_to_world()),
-        "sampler": {"type": s.render.sampler, "sample_count": s.render.spp},
+        "sampler": {"type": s.render.sampler, "sample_count": split_sample_count(s.render.sampler, s.render.spp)[0]},
         "film": {
             "type": "hdrfilm",
             "width": intr.width,
@@ -194,12 +211,22 @@ def mitsuba_scene_dict(scene: Scene) -> dict:
         return scene_dict(assembly, assembly.scene_vertices, (0, 0, intr.width, intr.height))
 
 
-def pass_seeds(seed: int, spp: int, pixels: int) -> list[tuple[int, int]]:
-    """Split ``spp`` into passes of at most :data:`MAX_SAMPLES_PER_PASS` samples: (seed, spp) each."""
-    per_pass = max(1, MAX_SAMPLES_PER_PASS // max(pixels, 1))
-    n = math.ceil(spp / per_pass)
-    counts = [spp // n + (i < spp % n) for i in range(n)]
-    return [((seed + i * 0x9E3779B1) % (1 << 32), c) for i, c in enumerate(counts)]
+def pass_seed(seed: int, i: int) -> int:
+    """The seed of pass ``i`` of a render seeded ``seed`` (pass 0 keeps it)."""
+    return (seed + i * 0x9E3779B1) % (1 << 32)
+
+
+def pass_seeds(seed: int, spp: int, pixels: int, sampler: str = "independent") -> list[tuple[int, int, int, int]]:
+    """Split a render of ``pixels`` pixels at ``spp`` into passes: the counts the sampler takes
+    (:func:`~spacefit.scene.schema.split_sample_count`), each over pixel ranges of at most
+    :data:`MAX_SAMPLES_PER_PASS` samples (one pixel at least), a pixel's samples of one count in one
+    pass so that a stratifying sampler keeps its pattern: (seed, spp, first pixel, pixels) each."""
+    passes = []
+    for count in split_sample_count(sampler, spp):
+        n = max(1, math.ceil(pixels / max(1, MAX_SAMPLES_PER_PASS // count)))
+        sizes = [pixels // n + (i < pixels % n) for i in range(n)]
+        passes += [(count, int(start), size) for start, size in zip(np.cumsum([0, *sizes[:-1]]), sizes)]
+    return [(pass_seed(seed, i), count, start, size) for i, (count, start, size) in enumerate(passes)]
 
 
 @contextmanager
@@ -310,9 +337,10 @@ class PartImage:
 class Renderer:
     """A scene loaded into Mitsuba once; renders deterministic radiance images (h, w, 3).
 
-    Only the film window around the target is rendered (:func:`target_window`), the rest of the
-    image is black; ``crop=False`` renders the whole film, for vertices that will move (the
-    window is fixed when the scene is loaded). Load once and render many times: reloading scenes
+    Only the pixels whose samples can reach the target's silhouette are traced (:func:`target_mask`,
+    within the film window around it, :func:`target_window`), the rest of the image is black;
+    ``crop=False`` traces the whole film, for vertices that will move (the window and the mask are
+    fixed when the scene is loaded). :attr:`traced` is the mask over the window. Load once and render many times: reloading scenes
     leaks memory in Mitsuba (mitsuba3#1890); change values in place with :meth:`set_values`.
     """
 
@@ -324,9 +352,11 @@ class Renderer:
         intr = assembly.intrinsics
         vertices = assembly.scene_vertices
         self.window = target_window(assembly, vertices) if crop else (0, 0, intr.width, intr.height)
+        self.traced = target_mask(assembly, vertices, self.window) if crop else np.ones(self.window[:1:-1], dtype=bool)
         r = assembly.scene.render
-        self.memory_bytes = check_memory(intr.width, intr.height, self.window[2] * self.window[3], r.spp)
+        self.memory_bytes = check_memory(intr.width, intr.height, int(self.traced.sum()), r.spp)
         with variant_scope(self.variant):
+            self._pixels = mi.UInt32(np.flatnonzero(self.traced).astype(np.uint32))
             self.scene = mi.load_dict(scene_dict(assembly, vertices, self.window))
             self.params = mi.traverse(self.scene)
 
@@ -404,16 +434,42 @@ class Renderer:
         check_count("seed", seed, 0, MAX_SEED, "as `render.seed`")
         spp = r.spp if spp is None else spp
         seed = r.seed if seed is None else seed
-        passes = pass_seeds(seed, spp, self.window[2] * self.window[3])
-        total = None
+        check_sample_count("spp", spp, r.sampler)
+        passes = pass_seeds(seed, spp, len(self._pixels), r.sampler)
+        film = self.scene.sensors()[0].film()
+        film.prepare([])
+        block = film.create_block()
+        block.set_offset(film.crop_offset())
         with render_threads(r.deterministic):
-            for i, (pass_seed, count) in enumerate(passes):
-                img = mi.render(self.scene, seed=pass_seed, spp=count) * (count / spp)
-                total = img if total is None else total + img
-                dr.eval(total)
+            # every sample weighs alike in the film's filter-weighted mean, whichever pass traced it
+            for i, (seed_i, spp_i, start, count) in enumerate(passes):
+                self._trace(block, seed_i, spp_i, start, count)
                 if progress is not None:
                     progress(i + 1, len(passes))
-        return self.to_film(np.array(total, dtype=np.float32))
+            film.put_block(block)
+            image = np.array(film.develop(), dtype=np.float32)
+        return self.to_film(image)
+
+    def _trace(self, block: "mi.ImageBlock", seed: int, spp: int, start: int, count: int) -> None:
+        """Trace ``spp`` samples in each of the traced pixels ``start`` to ``start + count`` and splat them
+        into ``block``, as Mitsuba's own render loop does over a whole window (sample positions
+        uniform in each pixel, or stratified by the sampler; the film's filter weights them)."""
+        sensor = self.scene.sensors()[0]
+        film, sampler = sensor.film(), sensor.sampler().clone()
+        sampler.set_sample_count(spp)
+        sampler.set_samples_per_wavefront(spp)
+        sampler.seed(seed, count * spp)
+        # sample k of the wavefront belongs to traced pixel k // spp, as in Mitsuba's loop (the samplers stratify by it)
+        index = dr.gather(mi.UInt32, self._pixels, start + dr.arange(mi.UInt32, count * spp) // spp)
+        width = self.window[2]
+        offset = mi.ScalarVector2f(film.crop_offset())
+        position = mi.Vector2f(mi.Float(index % width), mi.Float(index // width)) + offset + sampler.next_2d()
+        ray, weight = sensor.sample_ray_differential(sensor.shutter_open(), 0.0, (position - offset) / mi.ScalarVector2f(film.crop_size()),
+                                                     mi.Point2f(0.5))
+        radiance, _, _ = self.scene.integrator().sample(self.scene, sampler, ray)
+        rgb = radiance * weight
+        block.put(position, [rgb.x, rgb.y, rgb.z, mi.Float(1.0)])
+        dr.eval(block.tensor())
 
 
 def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray:

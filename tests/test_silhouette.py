@@ -1,0 +1,96 @@
+"""The traced mask (the target's projected silhouette, dilated by the pixel filter's reach): it never drops a
+pixel that a whole-film render lights, and rendering only it changes no pixel's expected value."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import spacefit as sf
+from spacefit.rendering.silhouette import filter_reach_px, silhouette, traced_pixels
+
+# 96 px at the default field of view; coarse wrinkles for speed.
+SMALL = {"render.resolution": [96, 96], "camera.pixel_pitch_mm": 25.0, "wrinkles.spacing_m": 0.1,
+         "render.deterministic": False}
+# (camera position m, target attitude deg): the default view, a close one cut by the film's edge, oblique poses.
+POSES = [
+    ([0.0, 0.0, 70.0], [0.0, 0.0, 0.0]),
+    ([0.0, 0.0, 12.0], [0.0, 0.0, 0.0]),
+    ([0.0, 0.0, 30.0], [35.0, -20.0, 60.0]),
+    ([0.0, 0.0, 20.0], [-70.0, 10.0, 150.0]),
+    ([0.0, 0.0, 40.0], [90.0, 0.0, 0.0]),
+]
+
+
+def film_mask(renderer: sf.Renderer) -> np.ndarray:
+    """The traced mask over the whole film."""
+    x0, y0, w, h = renderer.window
+    intr = renderer.assembly.intrinsics
+    film = np.zeros((intr.height, intr.width), dtype=bool)
+    film[y0:y0 + h, x0:x0 + w] = renderer.traced
+    return film
+
+
+@pytest.mark.parametrize("pixel_filter", ["box", "tent"])
+@pytest.mark.parametrize(("position", "attitude"), POSES)
+def test_mask_never_drops_a_pixel_a_whole_film_render_lights(position, attitude, pixel_filter):
+    """With the box filter the mask is the silhouette itself (no reach), so every lit pixel tests its conservativeness;
+    with the tent each lit pixel's whole filter support must be traced too (its weights need those samples)."""
+    scene = sf.load_scene(None, {**SMALL, "camera.position_m": position, "target.attitude_deg": attitude,
+                                 "render.filter": pixel_filter})
+    whole = sf.Renderer(scene, crop=False).render(spp=64, seed=1)
+    renderer = sf.Renderer(scene)
+    traced = film_mask(renderer)
+    lit = whole.max(axis=-1) > 0
+    assert lit.sum() > 20
+    reach = filter_reach_px(1.0 if pixel_filter == "tent" else 0.5)
+    # every pixel within the filter's reach of a lit one
+    support = np.zeros_like(lit)
+    ys, xs = np.nonzero(lit)
+    for dy in range(-reach, reach + 1):
+        for dx in range(-reach, reach + 1):
+            y, x = np.clip(ys + dy, 0, lit.shape[0] - 1), np.clip(xs + dx, 0, lit.shape[1] - 1)
+            support[y, x] = True
+    assert not np.any(support & ~traced), f"{int((support & ~traced).sum())} px dropped"
+    assert traced.mean() < 0.9  # a mask, not the film
+
+
+def test_masked_render_has_the_whole_film_render_s_expectation():
+    """Pixel by pixel (the silhouette's rim included, where the tent weights samples of untraced-looking
+    neighbours): the mean of masked renders over seeds against whole-film renders, in standard errors."""
+    scene = sf.load_scene(None, {**SMALL, "camera.position_m": [0.0, 0.0, 25.0]})
+    masked, whole = sf.Renderer(scene), sf.Renderer(scene, crop=False)
+    a = np.stack([masked.render(spp=16, seed=s).mean(axis=-1) for s in range(1, 17)])
+    b = np.stack([whole.render(spp=16, seed=s).mean(axis=-1) for s in range(101, 117)])
+    lit = (a.max(axis=0) > 0) | (b.max(axis=0) > 0)
+    se = np.sqrt((a.var(axis=0, ddof=1) + b.var(axis=0, ddof=1)) / len(a))[lit]
+    z = (a.mean(axis=0) - b.mean(axis=0))[lit] / np.maximum(se, 1e-12)
+    rim = ~silhouette_of(masked)[lit]
+    assert lit.sum() > 300 and rim.sum() > 50
+    for part in (z, z[rim]):
+        assert abs(part.mean()) < 4 / np.sqrt(part.size) + 0.05
+        assert 0.7 < part.std() < 1.4
+
+
+def silhouette_of(renderer: sf.Renderer) -> np.ndarray:
+    """The film's pixels inside the projected silhouette (no reach)."""
+    from spacefit.geometry.frames import project
+
+    a = renderer.assembly
+    tris = []
+    for name, points in a.scene_vertices.items():
+        uv, _ = project(points, a.camera, a.intrinsics)
+        tris.append(uv[a.faces(name)])
+    return silhouette(np.concatenate(tris), a.intrinsics.width, a.intrinsics.height)
+
+
+def test_conservative_rasterisation_of_a_triangle():
+    """A triangle within a 3 x 3 px box marks its box; a larger one the pixel squares it touches, and no more."""
+    small = silhouette(np.array([[[0.2, 0.2], [2.5, 0.2], [0.2, 2.5]]]), 4, 4)
+    assert small[:3, :3].all() and not small[3].any() and not small[:, 3].any()
+    big = np.array([[[0.5, 0.5], [40.5, 0.5], [0.5, 40.5]]])
+    inside = silhouette(big, 48, 48)
+    # the hypotenuse x + y = 41 touches pixel square (x, 10) while its nearest corner has x + 10 <= 41
+    assert inside[10, 31] and not inside[10, 32] and inside[0, 40] and not inside[0, 41]
+    traced, lit = traced_pixels(big, 48, 48, 1.0)
+    assert lit[0, 41] and not lit[0, 42] and traced[0, 42] and not traced[0, 43]
