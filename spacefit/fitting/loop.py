@@ -335,7 +335,7 @@ class _Steps:
         """Record one step; :attr:`Status.NOISE_FLOOR` or :attr:`Status.NO_BETTER_POINT` when the solve
         should stop there (:mod:`spacefit.fitting.stopping`)."""
         s, problem = self.s, self.s.problem
-        x_solver = s.solver_params.to_physical(jnp.asarray(step.u))
+        x_solver = s.solver_params.to_physical(jnp.asarray(step.u, dtype=jnp.float64))  # the solve's precision (fit is float64)
         # the same point evaluated again is no step, whatever the rounding of its loss (a solver that
         # cannot move re-evaluates its point, and the sum's rounding differs between compiled steps)
         same = self.best_u is not None and np.array_equal(step.u, self.best_u)
