@@ -1,7 +1,9 @@
-"""Every speed figure in one run (``make bench``): the main job's wall time cold and warm, forward
-renders at equal error against plain Mitsuba, the fits' solve times and accuracy, peak memory, and
-Dr.Jit kernel compilations over a long fit, and where a CUDA GPU is usable, the default forward
-render and the panels fit on it against the CPU.
+"""Every speed figure in one run (``make bench``): the main job's wall time cold and warm, a notebook's
+first render (a fresh process: what it waits for), forward renders at equal error against plain
+Mitsuba, the fit of an observation of a sensor (issue 23: 8 parameters at 128 x 128, 32 spp), the
+fits' solve times and accuracy, peak memory, and Dr.Jit kernel compilations over a long fit, and
+where a CUDA GPU is usable, the default forward render and the panels fit on it against the CPU
+(elsewhere it says so). Each section prints the machine's load average (1 min) as it starts.
 
 Each figure comes from a child process, so that its wall time includes the start-up a user pays and
 its peak memory (``ru_maxrss`` from ``os.wait4``; tracemalloc cannot see Dr.Jit's allocations) is
@@ -68,6 +70,30 @@ print(f"forward {statistics.median(times):.5f}")
 row = run(sf.load_case("panels").with_values({"render.variant": variant}), "lm", 40)
 print(f"fit {row['wall_s']:.3f} {max(abs(e) for e in row['errors'].values()):.5f}")
 """
+# A notebook's first render: a fresh process imports spacefit and renders the default scene; each
+# stage timed (imports, Mitsuba's variant, the scene's assembly and load, the render), the Dr.Jit
+# kernels compiled (0 when its disk cache ~/.drjit holds them) and the heavy modules it imported.
+FIRST_RENDER = """
+import sys, time
+t0 = time.perf_counter()
+import spacefit as sf
+t1 = time.perf_counter()
+from spacefit.rendering.backend import select_variant
+from spacefit.rendering.renderer import Renderer, kernel_log
+t2 = time.perf_counter()
+scene = sf.load_scene(None)
+select_variant(scene.render.variant)
+t3 = time.perf_counter()
+renderer = Renderer(scene)
+t4 = time.perf_counter()
+with kernel_log() as k:
+    renderer.render()
+t5 = time.perf_counter()
+heavy = [m for m in ("jax", "xarray", "dask", "matplotlib", "scipy", "trimesh", "optimistix") if m in sys.modules]
+print(f"import spacefit {t1 - t0:.2f} s, import Dr.Jit and Mitsuba {t2 - t1:.2f} s, Mitsuba's variant {t3 - t2:.2f} s, "
+      f"assemble and load {t4 - t3:.2f} s, render {t5 - t4:.2f} s ({k['launched']} kernels, {k['compiled']} compiled, "
+      f"{k['compile_s']:.2f} s); in all {t5 - t0:.2f} s; heavy modules imported: {heavy or 'none'}")
+"""
 CUDA_PROBE = "from spacefit.rendering.backend import dr; print(dr.has_backend(dr.JitBackend.CUDA))"
 
 
@@ -87,7 +113,7 @@ def child(args: list[str], env: dict[str, str] | None = None) -> tuple[float, fl
 
 def main_job(repeats: int) -> None:
     """``spacefit render`` of the default scene: cold (empty mesh cache) once, then warm."""
-    print("\n## spacefit render, default scene (wall s, whole process; peak MiB)")
+    print(f"\n## spacefit render, default scene (wall s, whole process; peak MiB; {load()})")
     with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
         env = {"SPACEFIT_CACHE_DIR": cache, "PYTHONPATH": str(ROOT)}
         render = [sys.executable, "-m", "spacefit.cli", "render", "--quiet", "--overwrite", "--timings", "--out", out]
@@ -99,12 +125,26 @@ def main_job(repeats: int) -> None:
               f"{runs[-1][1]:.0f} MiB\n{runs[-1][2].strip()}")
 
 
+def load() -> str:
+    """The machine's load average over the last minute, for each section's heading."""
+    return f"load {os.getloadavg()[0]:.1f}"
+
+
+def first_render(repeats: int) -> None:
+    """A notebook's first render (:data:`FIRST_RENDER`), each in a fresh process, mesh cache warm."""
+    print(f"\n## a notebook's first render, default scene (fresh process; {load()})")
+    runs = [child([sys.executable, "-c", FIRST_RENDER], {"PYTHONPATH": str(ROOT)}) for _ in range(repeats)]
+    walls = sorted(r[0] for r in runs)
+    print(f"whole process: median {statistics.median(walls):.2f} s (min {walls[0]:.2f}, max {walls[-1]:.2f}, {repeats} runs)\n"
+          f"{runs[-1][2].strip()}")
+
+
 def gpu_against_cpu() -> None:
     """The default forward render and the panels fit with ``cuda_ad_rgb`` against ``llvm_ad_rgb`` on 2
     threads, where a CUDA GPU is usable (each variant in its own process)."""
     env = {"PYTHONPATH": str(ROOT)}
     if child([sys.executable, "-c", CUDA_PROBE], env)[2].strip() != "True":
-        print("\n## GPU: no CUDA GPU usable here; cuda_ad_rgb not measured")
+        print(f"\n## GPU: no CUDA GPU usable here; cuda_ad_rgb not measured ({load()})")
         return
     print("\n## GPU (cuda_ad_rgb) against the CPU (llvm_ad_rgb, 2 threads)")
     runs = {}
@@ -126,17 +166,21 @@ def main() -> None:
     args = p.parse_args()
     print(f"machine: {machine()}, load average {os.getloadavg()[0]:.1f}")
     main_job(args.repeats)
+    first_render(args.repeats)
+    wall, peak, text = child([sys.executable, str(HERE / "bench_fit.py"), "--observed"], {"PYTHONPATH": str(ROOT)})
+    print(f"\n## the fit of an observation (bench_fit.py --observed; {wall:.0f} s whole process with its truth's "
+          f"render, peak {peak:.0f} MiB; {load()})\n{text.strip()}")
     with tempfile.TemporaryDirectory() as out:
         forward = [sys.executable, str(HERE / "forward_pareto.py"), "--methods", "--out", out, *(["--full"] if args.full else [])]
         wall, peak, text = child(forward)
-        print(f"\n## forward renders at equal error (600 px, depth 2; {wall:.0f} s, {peak:.0f} MiB)")
+        print(f"\n## forward renders at equal error (600 px, depth 2; {wall:.0f} s, {peak:.0f} MiB; {load()} at the end)")
         # interpolations the sweep's spp cannot bracket are NaN: left out
         print("\n".join(line[line.index("{"):] for line in text.splitlines() if "{'view'" in line and "nan" not in line))
     wall, peak, text = child([sys.executable, str(HERE / "bench_fit.py")])
-    print(f"\n## fits (bench_fit.py; {wall:.0f} s whole process, peak {peak:.0f} MiB)\n{text.strip()}")
+    print(f"\n## fits (bench_fit.py; {wall:.0f} s whole process, peak {peak:.0f} MiB; {load()} at the end)\n{text.strip()}")
     wall, peak, text = child([sys.executable, "-c", LONG_FIT.replace("STEPS", str(args.long_fit_steps))],
                              {"PYTHONPATH": str(ROOT)})
-    print(f"\n## a long fit: peak memory and Dr.Jit kernels ({wall:.0f} s, peak {peak:.0f} MiB)\n{text.strip()}")
+    print(f"\n## a long fit: peak memory and Dr.Jit kernels ({wall:.0f} s, peak {peak:.0f} MiB; {load()} at the end)\n{text.strip()}")
     gpu_against_cpu()
 
 

@@ -76,13 +76,17 @@ def test_part_chi2_is_the_mean_square_of_each_parts_values():
         (sf.Status.CONVERGED, False, True, True, sf.Status.NO_PROGRESS),
         (sf.Status.MAX_STEPS, True, True, True, sf.Status.AT_BOUND),
         (sf.Status.NOISE_FLOOR, True, False, True, sf.Status.MISFIT),
+        # stopped because no trial step lowered the loss: a success only with the residuals at the noise
+        (sf.Status.NO_BETTER_POINT, True, False, True, sf.Status.MISFIT),
+        (sf.Status.NO_BETTER_POINT, True, False, False, sf.Status.NO_BETTER_POINT),
+        (sf.Status.NO_BETTER_POINT, True, True, False, sf.Status.AT_BOUND),
         (sf.Status.NONFINITE, False, True, True, sf.Status.NONFINITE),
     ],
 )
 def test_verdicts_and_their_precedence(solver_status, moved, at_bound, misfit, expected):
     status = verdict(solver_status, moved, at_bound, misfit)
     assert status is expected
-    assert status.success == (expected in (sf.Status.CONVERGED, sf.Status.NOISE_FLOOR))
+    assert status.success == (expected in (sf.Status.CONVERGED, sf.Status.NOISE_FLOOR, sf.Status.NO_BETTER_POINT))
 
 
 # The panels case at 32 x 32 px (same field of view), 4 spp (the truth at 64), observed by a sensor (the noise known).

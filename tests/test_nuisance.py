@@ -87,12 +87,15 @@ def columns():
 
 @pytest.mark.parametrize("name", IMAGE)
 def test_image_nuisance_columns_match_finite_differences(columns, name):
+    """The gain, offset, PSF width and shift act on the rendered image: their columns are the
+    image model's own derivative (no render), equal to central differences of the post-processing
+    of the same render (the renders are the same for both points: common random numbers)."""
     free, s, x, J = columns
     j = free.index(name)
     h = 1e-4 * max(1.0, abs(float(x[j])))
     e = jnp.zeros(len(x)).at[j].set(h)
     fd = float64(lambda: (np.asarray(s.problem.residual_x(x + e)) - np.asarray(s.problem.residual_x(x - e))) / (2 * h))()
-    assert cosine(J[:, j], fd) >= 0.99
+    assert cosine(J[:, j], fd) >= 0.999
     np.testing.assert_allclose(np.linalg.norm(J[:, j]), np.linalg.norm(fd), rtol=1e-2)
 
 

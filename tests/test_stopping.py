@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import spacefit as sf
-from spacefit.fitting.stopping import NOISE_FACTOR, ROUNDING, NoiseFloor, loss_noise
+from spacefit.fitting.stopping import NOISE_FACTOR, REJECTED_PATIENCE, ROUNDING, NoiseFloor, loss_noise
 
 # The panels case at 64 x 64 px (same field of view), 8 spp: a fit takes a few seconds.
 TINY = {"render.resolution": [64, 64], "camera.pixel_pitch_mm": 37.5, "render.spp": 8}
@@ -96,3 +96,32 @@ def test_public_plots_draw_the_fit(tiny_fits, tmp_path):
     assert comparison.shape == (1, 3)
     comparison[0, 0].figure.savefig(tmp_path / "comparison.png")
     assert (tmp_path / "convergence.png").stat().st_size > 0 and (tmp_path / "comparison.png").stat().st_size > 0
+
+
+def test_successive_rejected_steps_within_the_noise_stop_the_solve():
+    """The measured tail of a 128 x 128 fit: rejected by about 3 in loss, against a noise of 0.03."""
+    floor = NoiseFloor()
+    assert floor.record(26672.6) and floor.record(26607.3)
+    floor.set_noise(0.034)
+    assert not floor.reached(26610.47, accepted=floor.record(26610.47)) and not floor.no_better_point()  # one rejection: go on
+    assert not floor.record(26610.49) and floor.no_better_point()  # its successor changed the loss by less than the noise
+    assert floor.record(26600.0) and not floor.no_better_point()  # an accepted step starts the count again
+
+
+def test_consecutive_rejections_below_the_relative_tolerance_stop_the_solve():
+    floor = NoiseFloor()
+    assert floor.record(10.0) and floor.record(5.0)
+    floor.set_noise(1e-6)
+    for k, loss in enumerate([5.004, 5.001, 5.003]):
+        assert not floor.record(loss)
+        assert floor.no_better_point() == (k == REJECTED_PATIENCE - 1), k  # each within REJECTED_RTOL of 5.0
+    floor = NoiseFloor()
+    assert floor.record(10.0) and floor.record(5.0)
+    floor.set_noise(1e-6)
+    for loss in [5.004, 5.001, 5.3]:  # the last rejected by 6 % of the loss: a real overshoot
+        assert not floor.record(loss)
+    assert not floor.no_better_point()
+    fresh = NoiseFloor()
+    assert fresh.record(10.0) and not fresh.record(11.0) and not fresh.record(11.0)
+    fresh.set_noise(1.0)
+    assert not fresh.no_better_point()  # nothing accepted after the start: no stop, the verdict says no progress

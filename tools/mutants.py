@@ -109,6 +109,11 @@ MUTANTS = (
            "{k: t[..., j] for k, t in tangents.items()}, seed_grad))", "{k: t[..., j] for k, t in tangents.items()}, seed))",
            (CONVENTIONS,)),
     Mutant("backward-with-primal-seed", BRIDGE, "scene.backward(v, c, seed_grad)", "scene.backward(v, c, seed)", (CONVENTIONS,)),
+    Mutant("primal-kept-whatever-the-seed", BRIDGE, "return seed, digest.digest()", "return 0, digest.digest()",
+           ("tests/test_stopping.py::test_history_flags_match_the_loss_sequence",)),
+    Mutant("no-better-point-after-any-two-rejections", "spacefit/fitting/stopping.py",
+           "abs(last[-1] - last[-2]) < self.noise", "abs(last[-1] - last[-2]) >= 0.0",
+           ("tests/test_stopping.py::test_consecutive_rejections_below_the_relative_tolerance_stop_the_solve",)),
     # a pass: each frame's scene from its table row, each frame's Jacobian on its own rows
     Mutant("frame-vector-components-reversed", "spacefit/fitting/passes.py",
            "[_plain(cols[parts[c]][i]) for c in COMPONENTS]", "[_plain(cols[parts[c]][i]) for c in reversed(COMPONENTS)]",

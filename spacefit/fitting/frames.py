@@ -31,6 +31,7 @@ import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_count, quote
 from spacefit.precision import float64
+from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
 from spacefit.rendering.renderer import PartImage, render_threads, to_value
 from spacefit.rendering.values import scene_values_fn
@@ -116,9 +117,9 @@ def _on_stage(spec: FrameSpec, assembly: Assembly, stage: RenderChain) -> Render
 
 @dataclass
 class Loaded:
-    """Loaded scenes (stages) and each frame's chain on one, by :attr:`FrameSpec.key`, and their
-    compiled image functions by (key, kind, seeds): a process (a dask worker) keeps them between a
-    fit's steps.
+    """Loaded scenes (stages) and each frame's chain on one, by :attr:`FrameSpec.key`, their
+    compiled image functions by (key, kind), and each frame's last image and Jacobian: a process (a
+    dask worker) keeps them between a fit's steps.
 
     The frames of a pass (:attr:`FrameSpec.shared_view`) differ in camera, sun and target pose
     only, so they share one loaded scene and set their own values on it at each render. Dr.Jit traces every loaded scene's plugins in
@@ -130,7 +131,8 @@ class Loaded:
     max_scenes: int = MAX_SCENES
     stages: OrderedDict[str, RenderChain] = field(default_factory=OrderedDict)
     chains: dict[str, tuple[str, RenderChain]] = field(default_factory=dict)
-    compiled: dict[tuple[str, str, int, int], Callable[[jax.Array], Any]] = field(default_factory=dict)
+    compiled: dict[tuple[str, str], Callable[[jax.Array, jax.Array], Any]] = field(default_factory=dict)
+    jacobians: dict[str, tuple[bytes, tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
 
     def chain(self, spec: FrameSpec, key: str) -> RenderChain:
         """The frame's chain on its loaded scene, loaded on first use (dropping the least recently used past
@@ -158,17 +160,20 @@ class Loaded:
         gone = {key for key, (s, _) in self.chains.items() if s == stage}
         self.chains = {key: v for key, v in self.chains.items() if key not in gone}
         self.compiled = {name: fn for name, fn in self.compiled.items() if name[0] not in gone}
+        self.jacobians = {key: v for key, v in self.jacobians.items() if key not in gone}
 
-    def function(self, spec: FrameSpec, key: str, kind: str, seed: int, seed_grad: int) -> Callable[[jax.Array], Any]:
+    def function(self, spec: FrameSpec, key: str, kind: str) -> Callable[[jax.Array, jax.Array], Any]:
         """The frame's image (``kind`` "primal") or its Jacobian and image ("jacobian") as a function
-        of its values, jitted once per frame and seeds (a new closure each step would compile each step)."""
-        name = (key, kind, seed, seed_grad)
-        chain = self.chain(spec, key)
+        of its values and seeds (:func:`~spacefit.rendering.bridge.seeds_array`), jitted once per
+        frame (a new closure each step would compile each step; the seeds an operand, one program for
+        every seed)."""
+        name = (key, kind)
+        chain = self.chain(spec, key)  # loads it, or marks its scene as recently used
         if name not in self.compiled:
-            image = chain.forward(seed, seed_grad)
+            image = chain.seeded()
 
-            def twice(y: jax.Array) -> tuple[jax.Array, jax.Array]:
-                out = image(y)
+            def twice(y: jax.Array, seeds: jax.Array) -> tuple[jax.Array, jax.Array]:
+                out = image(y, seeds)
                 return out, out
 
             self.compiled[name] = jax.jit(image if kind == "primal" else jax.jacfwd(twice, has_aux=True))
@@ -199,8 +204,9 @@ def frame_part_image(spec: FrameSpec, key: str, loaded: Loaded | None = None) ->
 @float64
 def frame_primal(spec: FrameSpec, key: str, x: np.ndarray, seed: int, loaded: Loaded | None = None) -> np.ndarray:
     """The frame's radiance image (h, w, 3) float32 at its values ``x`` for ``seed``."""
-    image = (loaded or _LOADED).function(spec, key, "primal", seed, seed + 1)  # a primal render uses no derivative seed
-    return np.asarray(image(jnp.asarray(x, dtype=jnp.float64)), dtype=np.float32)
+    image = (loaded or _LOADED).function(spec, key, "primal")
+    # a primal render uses no derivative seed
+    return np.asarray(image(jnp.asarray(x, dtype=jnp.float64), seeds_array(seed, seed + 1)), dtype=np.float32)
 
 
 @float64
@@ -211,8 +217,15 @@ def frame_jacobian(spec: FrameSpec, key: str, x: np.ndarray, seed: int, seed_gra
     if not spec.names:  # the frame's renderer sees no free value (its image nuisances act in JAX): no column
         img = frame_primal(spec, key, x, seed, loaded)
         return img, np.zeros((*img.shape, 0), np.float32)
-    J, img = (loaded or _LOADED).function(spec, key, "jacobian", seed, seed_grad)(jnp.asarray(x, dtype=jnp.float64))
-    return np.asarray(img, dtype=np.float32), np.asarray(J, dtype=np.float32)
+    loaded = loaded or _LOADED
+    point = np.asarray([seed, seed_grad], dtype=np.float64).tobytes() + np.asarray(x, dtype=np.float64).tobytes()
+    last = loaded.jacobians.get(key)
+    if last is not None and last[0] == point:  # a solver's last linearisation, asked again by the standard errors
+        return last[1]
+    J, img = loaded.function(spec, key, "jacobian")(jnp.asarray(x, dtype=jnp.float64), seeds_array(seed, seed_grad))
+    out = np.asarray(img, dtype=np.float32), np.asarray(J, dtype=np.float32)
+    loaded.jacobians[key] = (point, out)
+    return out
 
 
 class Executor(Protocol):
@@ -337,30 +350,33 @@ def executor_of(cluster: Cluster | None) -> Executor:
 
 
 def batched_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Sequence[np.ndarray],
-                    shapes: Sequence[tuple[int, int, int]], seed: int, seed_grad: int) -> Callable[[jax.Array], tuple[jax.Array, ...]]:
-    """Every frame's image as one JAX function of the fit's free values x: frame k renders
-    ``x[indices[k]]``. Its derivative is each frame's materialised Jacobian times the tangent, as
+                    shapes: Sequence[tuple[int, int, int]]) -> Callable[[jax.Array, jax.Array], tuple[jax.Array, ...]]:
+    """Every frame's image as one JAX function of the fit's free values x and the seeds
+    (:func:`~spacefit.rendering.bridge.seeds_array`; an operand, so that one compiled program serves
+    the fit's seeds and the independent ones): frame k renders ``x[indices[k]]``. Its derivative is
+    each frame's materialised Jacobian times the tangent, as
     :func:`~spacefit.rendering.bridge.render_params`'s, with all frames' Jacobians in one batch."""
     images = tuple(jax.ShapeDtypeStruct(shape, jnp.float32) for shape in shapes)
     columns = tuple(jax.ShapeDtypeStruct((*shape, len(idx)), jnp.float32) for shape, idx in zip(shapes, indices))
 
-    def primal_cb(x: np.ndarray) -> tuple[np.ndarray, ...]:
+    def primal_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[np.ndarray, ...]:
         x = np.asarray(x)  # JAX may hand a callback its own array type
-        return tuple(executor.map(frame_primal, specs, [x[idx] for idx in indices], [seed] * len(specs)))
+        return tuple(executor.map(frame_primal, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs)))
 
-    def jacobian_cb(x: np.ndarray) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
+    def jacobian_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
         x = np.asarray(x)
-        out = executor.map(frame_jacobian, specs, [x[idx] for idx in indices], [seed] * len(specs), [seed_grad] * len(specs))
+        out = executor.map(frame_jacobian, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs),
+                           [int(seeds[1])] * len(specs))
         return tuple(img for img, _ in out), tuple(J for _, J in out)
 
     @jax.custom_jvp
-    def render(x: jax.Array) -> tuple[jax.Array, ...]:
-        return jax.pure_callback(primal_cb, images, x, vmap_method="sequential")
+    def render(x: jax.Array, seeds: jax.Array) -> tuple[jax.Array, ...]:
+        return jax.pure_callback(primal_cb, images, x, seeds, vmap_method="sequential")
 
     @render.defjvp
-    def render_jvp(primals: tuple[jax.Array], tangents: tuple[jax.Array]) -> tuple[Any, Any]:
-        (x,), (t,) = primals, tangents
-        imgs, Js = jax.pure_callback(jacobian_cb, (images, columns), x, vmap_method="sequential")
+    def render_jvp(primals: tuple[jax.Array, jax.Array], tangents: tuple[jax.Array, jax.Array]) -> tuple[Any, Any]:
+        (x, seeds), (t, _) = primals, tangents
+        imgs, Js = jax.pure_callback(jacobian_cb, (images, columns), x, seeds, vmap_method="sequential")
         return imgs, tuple(J @ t[idx].astype(jnp.float32) for J, idx in zip(Js, indices))
 
     return render

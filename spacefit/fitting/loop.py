@@ -236,7 +236,8 @@ def fit(
         max_steps: solver step limit.
         stop: ``"noise"``: least-squares solvers stop as well when the expected decrease of the loss
             is below its Monte Carlo noise (:attr:`Status.NOISE_FLOOR`, :mod:`spacefit.fitting.stopping`;
-            one more primal render per accepted step), BFGS and Adam on their tolerances;
+            one more primal render per accepted step) or when their trial steps keep finding no lower
+            loss (:attr:`Status.NO_BETTER_POINT`), BFGS and Adam on their tolerances;
             ``"tolerance"``: every solver only on its tolerances.
         wrinkle_coordinates: with D and G both free, ``"rms"`` solves in (D, rms height), the
             better-determined coordinates, and reports D and G with their covariance mapped by
@@ -332,12 +333,14 @@ class _Steps:
             if status is not None:
                 driver.close()
                 # the step that reached the noise floor may be a rejected trial: the best point is the result
-                return Outcome(status, jnp.asarray(self.best_u) if status is Status.NOISE_FLOOR else step.iterate, k)
+                stopped_here = status in (Status.NOISE_FLOOR, Status.NO_BETTER_POINT)
+                return Outcome(status, jnp.asarray(self.best_u) if stopped_here else step.iterate, k)
 
     def record(self, k: int, step: Step) -> Status | None:
-        """Record one step; :attr:`Status.NOISE_FLOOR` when the solve should stop there."""
+        """Record one step; :attr:`Status.NOISE_FLOOR` or :attr:`Status.NO_BETTER_POINT` when the solve
+        should stop there (:mod:`spacefit.fitting.stopping`)."""
         s, problem = self.s, self.s.problem
-        x_solver = s.solver_params.to_physical(jnp.asarray(step.u))
+        x_solver = s.solver_params.to_physical(jnp.asarray(step.u, dtype=jnp.float64))  # the solve's precision (fit is float64)
         # the same point evaluated again is no step, whatever the rounding of its loss (a solver that
         # cannot move re-evaluates its point, and the sum's rounding differs between compiled steps)
         same = self.best_u is not None and np.array_equal(step.u, self.best_u)
@@ -354,7 +357,11 @@ class _Steps:
             self.progress(k, self.max_steps)
         if self.on_step is not None:
             self.on_step(self.history[-1])
-        return Status.NOISE_FLOOR if self.noise_stop and self.floor.reached(step.loss, accepted) else None
+        if not self.noise_stop:
+            return None
+        if self.floor.reached(step.loss, accepted):
+            return Status.NOISE_FLOOR
+        return Status.NO_BETTER_POINT if self.floor.no_better_point() else None
 
     def ending(self, outcome: Outcome) -> dict[str, Any]:
         """The record of an ended solve that :meth:`ended` (``fit(ended=...)``) takes: status, steps,
@@ -379,7 +386,7 @@ def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool) -> Status
     """The fit's status from the solver's: a solve that ended without failing is
     :attr:`Status.NO_PROGRESS` if no step lowered the loss, else :attr:`Status.AT_BOUND` if a
     parameter ended at a bound, else :attr:`Status.MISFIT` if the residuals exceed the noise."""
-    if status not in (Status.CONVERGED, Status.NOISE_FLOOR, Status.MAX_STEPS):
+    if status not in (Status.CONVERGED, Status.NOISE_FLOOR, Status.NO_BETTER_POINT, Status.MAX_STEPS):
         return status
     if not moved:
         return Status.NO_PROGRESS

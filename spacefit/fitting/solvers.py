@@ -41,11 +41,15 @@ class Status(enum.Enum):
     verdicts on a solve that ended without a failure, in this order of precedence:
     :attr:`NO_PROGRESS` (no step lowered the loss: the start is returned), :attr:`AT_BOUND` (a
     parameter ended at a bound of its range) and :attr:`MISFIT` (the residuals exceed the noise,
-    :mod:`spacefit.fitting.goodness`). Only :attr:`CONVERGED` and :attr:`NOISE_FLOOR` are a success.
+    :mod:`spacefit.fitting.goodness`). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
+    :attr:`NO_BETTER_POINT` (:mod:`spacefit.fitting.stopping`) are a success, and only where the
+    verdicts leave them: a solve stopped there whose residuals exceed the noise is a :attr:`MISFIT`.
     """
 
     CONVERGED = "converged"
     NOISE_FLOOR = "converged: the expected decrease of the loss is below its Monte Carlo noise"
+    NO_BETTER_POINT = ("converged: the solver's trial steps found no lower loss (successive rejected steps within the "
+                       "loss's Monte Carlo noise of each other, or within a relative 1e-3 of the best)")
     MAX_STEPS = "stopped: maximum number of steps reached"
     NO_PROGRESS = "failed: no step lowered the loss; the values are the start"
     AT_BOUND = "failed: a parameter is at a bound of its range; neither it nor its error is an estimate"
@@ -59,7 +63,7 @@ class Status(enum.Enum):
     @property
     def success(self) -> bool:
         """Whether the fit converged to an estimate that its data do not contradict."""
-        return self in (Status.CONVERGED, Status.NOISE_FLOOR)
+        return self in (Status.CONVERGED, Status.NOISE_FLOOR, Status.NO_BETTER_POINT)
 
     @property
     def interrupted(self) -> bool:

@@ -24,6 +24,7 @@ callback runs: callbacks never raise.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 
@@ -79,6 +80,15 @@ class DrJitScene:
         intr = self.renderer.assembly.intrinsics
         self.shape = (intr.height, intr.width, 3)
         mi.set_log_level(mi.LogLevel.Error)  # projective integrators warn about film borders per call
+        self._last: tuple[tuple[int, bytes], np.ndarray] | None = None  # the last primal image, by seed and values
+
+    @staticmethod
+    def _key(values: Mapping[str, np.ndarray], seed: int) -> tuple[int, bytes]:
+        digest = hashlib.blake2b(digest_size=16)
+        for name in sorted(values):
+            digest.update(name.encode())
+            digest.update(np.ascontiguousarray(values[name], dtype=np.float32).tobytes())
+        return seed, digest.digest()
 
     def _set(self, values: Mapping[str, np.ndarray], grad: bool) -> None:
         for key, value in values.items():
@@ -100,7 +110,16 @@ class DrJitScene:
 
     @in_variant
     def primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
-        """Radiance image (h, w, 3) float32 at ``values``; bitwise reproducible if the scene is deterministic."""
+        """Radiance image (h, w, 3) float32 at ``values``; bitwise reproducible if the scene is deterministic.
+        The last one is kept: a solver's step renders a point and then linearises at it, whose
+        Jacobian (:func:`render_params`) starts from that same image (one render of about ten per step)."""
+        key = self._key(values, seed)
+        if self._last is None or self._last[0] != key:
+            self._last = (key, self.render_primal(values, seed))
+        return self._last[1].copy()
+
+    def render_primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
+        """:meth:`primal` rendered, not kept (a finite difference's renders are used once)."""
         self._set(values, grad=False)
         with render_threads(self.renderer.assembly.scene.render.deterministic):
             image = sum(mi.render(self.renderer.scene, integrator=self._integrator, seed=seed_i, spp=count) * weight
@@ -164,6 +183,11 @@ def render_values(scene: DrJitScene, seed: int, seed_grad: int) -> Callable[[Sce
     return call
 
 
+def seeds_array(seed: int, seed_grad: int) -> Array:
+    """A (seed, seed_grad) pair as the operand :func:`seeded_render_params` takes (uint32: Mitsuba's seeds)."""
+    return jnp.asarray([seed, seed_grad], dtype=jnp.uint32)
+
+
 def render_params(
     scene: DrJitScene,
     values_of: Callable[[Array], dict[str, Array]],
@@ -171,49 +195,64 @@ def render_params(
     seed: int,
     seed_grad: int,
 ) -> Callable[[Float[Array, " n"]], Float[Array, "h w 3"]]:
-    """The image as a JAX function of free parameters ``x`` (n,), with a materialised Jacobian.
+    """The image as a JAX function of free parameters ``x`` (n,), with a materialised Jacobian:
+    :func:`seeded_render_params` at the seeds ``seed`` (primal and finite differences) and
+    ``seed_grad`` (forward-mode renders)."""
+    render = seeded_render_params(scene, values_of, fd_steps)
+    seeds = seeds_array(seed, seed_grad)
+    return lambda x: render(x, seeds)
+
+
+def seeded_render_params(
+    scene: DrJitScene,
+    values_of: Callable[[Array], dict[str, Array]],
+    fd_steps: Float[np.ndarray, " n"],
+) -> Callable[[Float[Array, " n"], Array], Float[Array, "h w 3"]]:
+    """The image as a JAX function of free parameters ``x`` (n,) and the seeds (:func:`seeds_array`),
+    with a materialised Jacobian. The seeds are an operand, not a constant, so that one compiled
+    program serves every seed (a fit's own and the independent ones of its standard errors).
 
     Args:
         scene: the Dr.Jit side.
         values_of: JAX function x -> scene values (traverse key -> array).
         fd_steps: (n,) step of a central finite difference for each parameter, or 0 to take the
             column from a Dr.Jit forward-mode render (the integrator's derivative).
-        seed, seed_grad: primal / finite-difference seed and forward-mode seed.
     """
     steps = np.asarray(fd_steps, dtype=float)
     n = len(steps)
     image = jax.ShapeDtypeStruct(scene.shape, jnp.float32)
     jac = jax.ShapeDtypeStruct((*scene.shape, n), jnp.float32)
 
-    def primal_cb(values: dict[str, np.ndarray]) -> np.ndarray:
-        return scene.primal(values, seed)
+    def primal_cb(values: dict[str, np.ndarray], seeds: np.ndarray) -> np.ndarray:
+        return scene.primal(values, int(seeds[0]))
 
     fd = [j for j in range(n) if steps[j] > 0]
 
-    def jacobian_cb(values, tangents, plus, minus) -> tuple[np.ndarray, np.ndarray]:
+    def jacobian_cb(values, tangents, plus, minus, seeds) -> tuple[np.ndarray, np.ndarray]:
+        seed, seed_grad = int(seeds[0]), int(seeds[1])
         img = scene.primal(values, seed)
         cols = []
         for j in range(n):
             if j in plus:
-                up, down = scene.primal(plus[j], seed), scene.primal(minus[j], seed)
+                up, down = scene.render_primal(plus[j], seed), scene.render_primal(minus[j], seed)
                 cols.append((up - down) / (2.0 * steps[j]))
             else:
                 cols.append(scene.forward(values, {k: t[..., j] for k, t in tangents.items()}, seed_grad))
         return img, np.stack(cols, axis=-1).astype(np.float32)
 
     @jax.custom_jvp
-    def render(x: Array) -> Array:
-        return jax.pure_callback(primal_cb, image, _flat(values_of(x)), vmap_method="sequential")
+    def render(x: Array, seeds: Array) -> Array:
+        return jax.pure_callback(primal_cb, image, _flat(values_of(x)), seeds, vmap_method="sequential")
 
     @render.defjvp
-    def render_jvp(primals: tuple[Array], tangents: tuple[Array]) -> tuple[Array, Array]:
-        (x,), (t,) = primals, tangents
+    def render_jvp(primals: tuple[Array, Array], tangents: tuple[Array, Array]) -> tuple[Array, Array]:
+        (x, seeds), (t, _) = primals, tangents
         values = _flat(values_of(x))
         tangent_cols = {k: jnp.reshape(v, (-1, n)).astype(jnp.float32) for k, v in jax.jacfwd(values_of)(x).items()}
         eye = jnp.eye(n, dtype=x.dtype) * jnp.asarray(steps, dtype=x.dtype)
         plus = {j: _flat(values_of(x + eye[j])) for j in fd}
         minus = {j: _flat(values_of(x - eye[j])) for j in fd}
-        img, J = jax.pure_callback(jacobian_cb, (image, jac), values, tangent_cols, plus, minus, vmap_method="sequential")
+        img, J = jax.pure_callback(jacobian_cb, (image, jac), values, tangent_cols, plus, minus, seeds, vmap_method="sequential")
         return img, J @ t.astype(jnp.float32)
 
     return render
