@@ -103,8 +103,7 @@ def _front_picture() -> None:
 
     target = Path(__file__).parent / "_generated" / "lander.png"
     target.parent.mkdir(exist_ok=True)
-    scene = spacefit.load_scene(None, {"render.resolution": [240, 240], "camera.pixel_pitch_mm": 3.5, "render.spp": 16,
-                                        "sun.direction": [-0.35, -0.6, -0.72]})
+    scene = spacefit.load_scene(None, {"render.resolution": [240, 240], "camera.pixel_pitch_mm": 3.5, "render.spp": 16})
     with tempfile.TemporaryDirectory() as tmp:
         spacefit.render_to_folder(scene, Path(tmp) / "render", quiet=True)
         shutil.copyfile(Path(tmp) / "render" / "preview.png", target)
