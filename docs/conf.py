@@ -96,6 +96,13 @@ def setup(app) -> None:
     app.connect("autodoc-process-docstring", _constant_docstring)
 
 
+def _parameter_table() -> None:
+    """The free parameters' table (guide/fitting.md includes it), written from the registry itself."""
+    target = Path(__file__).parent / "_generated" / "parameters.md"
+    target.parent.mkdir(exist_ok=True)
+    target.write_text(spacefit.parameter_table() + "\n")
+
+
 def _front_picture() -> None:
     """The front page's picture: the default scene rendered now, small (its preview.png)."""
     import shutil
@@ -109,4 +116,5 @@ def _front_picture() -> None:
         shutil.copyfile(Path(tmp) / "render" / "preview.png", target)
 
 
+_parameter_table()
 _front_picture()

@@ -105,6 +105,14 @@ def test_link_checker_finds_a_broken_link(tmp_path):
     assert internal_link_errors(tmp_path) == ["a.html: b.html (no file)", "a.html: #gone (no anchor)"]
 
 
+def test_parameter_table_is_the_registry(site):
+    """The user guide's table of free parameters is written from ``sf.PARAMETERS`` at build time: every entry is on
+    the page with its unit."""
+    page = (site / "guide" / "fitting.html").read_text()
+    for parameter in sf.PARAMETERS.values():
+        assert f"<code class=\"docutils literal notranslate\"><span class=\"pre\">{parameter.pattern}</span></code>" in page, parameter.pattern
+
+
 def test_api_reference_documents_every_public_name(site):
     """Every name of ``sf.__all__`` has its page in the API reference, made from its docstring."""
     api = (site / "api.html").read_text()
@@ -179,9 +187,9 @@ def test_front_page_in_a_browser_shows_the_render_and_the_navigation(site, tmp_p
 
 
 def markdown_python_blocks() -> list[tuple[str, str]]:
-    """Every ```python block of the docs' Markdown pages, as (where, code)."""
+    """Every ```python block of the README and the docs' Markdown pages, as (where, code)."""
     blocks = []
-    for path in sorted(DOCS.rglob("*.md")):
+    for path in [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]:
         if "_build" in path.parts:
             continue
         for i, code in enumerate(re.findall(r"```python\n(.*?)```", path.read_text(), flags=re.DOTALL)):

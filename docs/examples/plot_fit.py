@@ -16,4 +16,4 @@ result = sf.fit(sf.Observation(scene, reference), ["parts.legs.kd", "parts.panel
 print(sf.format_result(result))
 
 sf.plot_convergence(result)
-sf.plot_comparison(result)
+sf.plot_comparison(result, [reference])
