@@ -58,6 +58,33 @@ napoleon_google_docstring = True  # the docstrings' "Args:", "Returns:", "Attrib
 napoleon_numpy_docstring = False
 napoleon_use_ivar = True
 
+
+
+class FigureScraper:
+    """sphinx-gallery's scraper for the figures spacefit returns: its plot functions make ``matplotlib.figure.Figure``
+    objects outside pyplot (no global state), which the matplotlib scraper cannot see; this one saves every Figure
+    the example's variables hold, once."""
+
+    def __init__(self) -> None:
+        self.seen: set[int] = set()
+
+    def __repr__(self) -> str:  # sphinx-gallery keys its cache by the scrapers' reprs
+        return "spacefit.FigureScraper"
+
+    def __call__(self, block, block_vars, gallery_conf) -> str:
+        from matplotlib.figure import Figure
+        from sphinx_gallery.scrapers import figure_rst
+
+        paths = []
+        for value in list(block_vars["example_globals"].values()):
+            if isinstance(value, Figure) and id(value) not in self.seen:
+                self.seen.add(id(value))
+                path = next(block_vars["image_path_iterator"])
+                value.savefig(path, dpi=80)
+                paths.append(path)
+        return figure_rst(paths, gallery_conf["src_dir"])
+
+
 sphinx_gallery_conf = {
     "examples_dirs": "examples",
     "gallery_dirs": "gallery",
@@ -67,7 +94,7 @@ sphinx_gallery_conf = {
     "remove_config_comments": True,
     "within_subsection_order": "FileNameSortKey",
     "matplotlib_animations": False,
-    "image_scrapers": ("matplotlib",),
+    "image_scrapers": ("matplotlib", FigureScraper()),
     "reset_modules": ("matplotlib",),
 }
 

@@ -219,9 +219,13 @@ def test_gallery_example_runs(script, tmp_path, monkeypatch):
 
     code = script.read_text()
     assert "from spacefit." not in code and "import spacefit." not in code
+    from matplotlib.figure import Figure
+
     monkeypatch.chdir(tmp_path)
-    exec(compile(code, str(script), "exec"), {"__name__": "__main__"})
-    assert plt.get_fignums(), f"{script.name} made no figure"
+    variables = {"__name__": "__main__"}
+    exec(compile(code, str(script), "exec"), variables)
+    made = plt.get_fignums() or [v for v in variables.values() if isinstance(v, Figure)]
+    assert made, f"{script.name} made no figure"
     plt.close("all")
 
 
