@@ -1,7 +1,7 @@
 """The documentation site (docs/, ``make docs``): it builds with warnings as errors, its internal links
 resolve, its front page opens in a real headless browser showing the rendered picture and the
-navigation, and every code example in it runs (the Markdown pages' Python blocks and the gallery's
-scripts; the notebooks run in ``make docs`` and in the slow test below)."""
+navigation, and the notebooks use public names only (they run in ``make docs`` and in the slow test
+below; the pages' Python blocks and the gallery's scripts run in tests/test_docs_examples.py)."""
 
 from __future__ import annotations
 
@@ -186,49 +186,6 @@ def test_front_page_in_a_browser_shows_the_render_and_the_navigation(site, tmp_p
     assert "API reference" in dom and 'href="api.html"' in dom
 
 
-def markdown_python_blocks() -> list[tuple[str, str]]:
-    """Every ```python block of the README and the docs' Markdown pages, as (where, code)."""
-    blocks = []
-    for path in [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]:
-        if "_build" in path.parts:
-            continue
-        for i, code in enumerate(re.findall(r"```python\n(.*?)```", path.read_text(), flags=re.DOTALL)):
-            blocks.append((f"{path.relative_to(ROOT)} python block {i}", code))
-    return blocks
-
-
-@pytest.mark.parametrize("where,code", markdown_python_blocks(), ids=[w for w, _ in markdown_python_blocks()])
-def test_docs_python_block_runs(where, code, tmp_path, monkeypatch):
-    """Every Python block of the docs runs as written (from the repository root), so the docs cannot rot; they use
-    ``sf.`` names only."""
-    monkeypatch.chdir(ROOT)
-    assert "sf." in code and "from spacefit." not in code and "import spacefit." not in code, where
-    exec(compile(code, where, "exec"), {"__name__": "docs", "OUT": tmp_path})
-
-
-GALLERY = sorted((DOCS / "examples").glob("plot_*.py"))
-
-
-@pytest.mark.parametrize("script", GALLERY, ids=[p.name for p in GALLERY])
-def test_gallery_example_runs(script, tmp_path, monkeypatch):
-    """The gallery's scripts run (``make docs`` runs them again and shows their figures), with ``sf.`` names only."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    code = script.read_text()
-    assert "from spacefit." not in code and "import spacefit." not in code
-    from matplotlib.figure import Figure
-
-    monkeypatch.chdir(tmp_path)
-    variables = {"__name__": "__main__"}
-    exec(compile(code, str(script), "exec"), variables)
-    made = plt.get_fignums() or [v for v in variables.values() if isinstance(v, Figure)]
-    assert made, f"{script.name} made no figure"
-    plt.close("all")
-
-
 NOTEBOOKS = sorted((ROOT / "experiments").glob("*.ipynb"))
 
 
@@ -248,4 +205,4 @@ def test_full_build_runs_the_gallery_and_the_notebooks(tmp_path):
     """``make docs``'s full build: the gallery's scripts and the notebooks run, with no warning and no error."""
     done = sphinx(tmp_path, fast=False)
     assert done.returncode == 0, f"{done.stdout[-3000:]}\n{done.stderr[-6000:]}"
-    assert len(list((tmp_path / "html" / "_images").glob("sphx_glr_plot_*.png"))) >= len(GALLERY)
+    assert len(list((tmp_path / "html" / "_images").glob("sphx_glr_plot_*.png"))) >= len(list((DOCS / "examples").glob("plot_*.py")))
