@@ -1,4 +1,4 @@
-# The README's two commands: `make render` (the main job) and `make test`.
+# The README's two commands: `make render` (the main job) and `make test`; `make docs` builds the documentation.
 # Both set up .venv and check the system libLLVM first (tools/setup.sh).
 OUT ?= out/default
 SCENE ?=
@@ -6,7 +6,7 @@ PYTEST_ARGS ?=
 # Test processes (pytest-xdist): one per core; tests sharing a module's fixtures stay in one process.
 JOBS ?= 2
 
-.PHONY: setup render test bench sweeps synthetic mutants peers soak
+.PHONY: setup render test docs bench sweeps synthetic mutants peers soak
 
 setup:
 	@tools/setup.sh
@@ -16,6 +16,10 @@ render: setup
 
 test: setup
 	.venv/bin/python -m pytest -q -n $(JOBS) --dist loadscope $(PYTEST_ARGS)
+
+# The documentation site, docs/_build/html: warnings are errors; the gallery and the notebooks run in the build.
+docs: setup
+	.venv/bin/python -m sphinx -b html -W --keep-going docs docs/_build/html
 
 # Plant each named one-line bug of tools/mutants.py and check that its tests catch it (minutes; not in CI).
 mutants: setup

@@ -1,6 +1,7 @@
 """Build and execute ``experiments/pass.ipynb``: a simulated pass with per-frame attitude errors,
 observed through a sensor, fitted on a local dask cluster; per-frame nuisances, residuals and the
-materials with their errors. Executing it here stores its outputs, so it reads without a kernel.
+materials with their errors, small (it runs in ``make docs``). Executing it here stores its outputs, so
+it reads without a kernel.
 Run: ``.venv/bin/python experiments/make_pass_notebook.py`` (needs the ``notebook`` extra).
 """
 
@@ -17,7 +18,7 @@ CELLS: list[tuple[str, str]] = [
     ("md", """# Fitting a pass
 
 A telescope follows a target through a pass: each frame has its own time, sun, observer and a
-slightly wrong target attitude. Here six frames of the panels case are simulated through a sensor
+slightly wrong target attitude. Here four frames of the panels case are simulated through a sensor
 (DN with shot and read noise), each with the target turned by up to 0.3 deg about x and z off the
 attitude its frame table states; the three materials are fitted jointly with each frame's two
 attitude angles, on a local dask cluster. Radiance in W m^-2 sr^-1, angles in degrees."""),
@@ -36,13 +37,13 @@ truth = {"parts.panels.alpha_x": 0.15, "parts.panels.alpha_y": 0.03, "parts.legs
 sensor = sf.Sensor(radiometric_scale_dn_per_w_m2_sr=500.0, gain_dn_per_electron=0.5, bias_dn=100.0, read_noise_electrons=5.0,
                    bit_depth=16, full_well_electrons=None, diffraction=False, psf_sigma_px=0.0)
 errors = [{"target.attitude_x_deg": float(a), "target.attitude_z_deg": float(b)}
-          for a, b in np.random.default_rng(3).uniform(-0.3, 0.3, (6, 2))]
+          for a, b in np.random.default_rng(3).uniform(-0.3, 0.3, (4, 2))]
 folder = Path(tempfile.mkdtemp()) / "pass"
-frames = sf.simulate_pass(base, sf.arc_pass(6), folder, errors=errors, sensor=sensor, spp=1024)
+frames = sf.simulate_pass(base, sf.arc_pass(4), folder, errors=errors, sensor=sensor, spp=1024)
 Table.read(folder / "frames.csv")"""),
     ("md", """The frames as the sensor saw them (DN), the observer crossing the panels' glint half-way:"""),
     ("code", """obs = [sf.Observation.from_file(f.file, s) for f, s in zip(frames.frames, frames.scenes(base))]
-fig, axes = plt.subplots(1, 6, figsize=(12, 2.3))
+fig, axes = plt.subplots(1, 4, figsize=(8, 2.3))
 for ax, o, f in zip(axes, obs, frames.frames):
     ax.imshow(o.reference[..., 0], cmap="gray")
     ax.set_title(f"t = {f.time_s:.0f} s", fontsize=8)
@@ -52,7 +53,7 @@ renders and Jacobian columns on a local cluster of two dask workers (`cluster=2`
 the same bit for bit in this process)."""),
     ("code", """free = [*truth, *frames.per_frame(["target.attitude_x_deg", "target.attitude_z_deg"])]
 start = {"parts.panels.alpha_x": 0.12, "parts.panels.alpha_y": 0.036, "parts.legs.kd": 0.42}
-result = sf.fit(obs, free, start=start, render=sf.FitRender(spp=32), max_steps=20, cluster=2)
+result = sf.fit(obs, free, start=start, render=sf.FitRender(spp=32), max_steps=12, cluster=2)
 print(sf.format_result(result).split("\\n  nuisance")[0])"""),
     ("md", """The materials against the truth, with their standard errors:"""),
     ("code", """for name, value in truth.items():
@@ -73,7 +74,7 @@ axes[2].set(xlabel="time [s]", ylabel="chi^2 / dof of the frame (incl. render no
 fig.tight_layout()
 Table(rows)"""),
     ("md", """Per-frame residuals, reference - model (DN):"""),
-    ("code", """fig, axes = plt.subplots(1, 6, figsize=(12, 2.3))
+    ("code", """fig, axes = plt.subplots(1, 4, figsize=(8, 2.3))
 limit = max(np.nanmax(np.abs(r)) for r in result.residuals)
 for ax, r, f in zip(axes, result.residuals, frames.frames):
     ax.imshow(r[..., 0], cmap="RdBu", vmin=-limit, vmax=limit)

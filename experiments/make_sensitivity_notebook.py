@@ -21,8 +21,8 @@ import numpy as np
 
 import spacefit as sf
 
-# the thesis's scene (Table 4-2) at 96 x 96 px, the lander filling a third of the frame, the sun off the axis
-scene = sf.load_scene(None, {"render.resolution": [96, 96], "camera.pixel_pitch_mm": 8, "render.spp": 8,
+# the thesis's scene (Table 4-2) at 64 x 64 px, the lander filling a third of the frame, the sun off the axis
+scene = sf.load_scene(None, {"render.resolution": [64, 64], "camera.pixel_pitch_mm": 12, "render.spp": 8,
                              "sun.direction": [-0.35, -0.6, -0.72]})
 radiance = sf.render(scene)
 plt.figure(figsize=(4, 4))
@@ -47,7 +47,7 @@ and D, per radian for the angles, with 95 % intervals (hatched: unresolved).""")
 
 The sun's elevation and the panels' roughness on a grid, set in place on the loaded scene (no reload).
 The Dataset is labelled: its dimensions are the swept keys, its coordinates carry their units."""),
-    ("code", """ds = sf.sweep(scene, {"sun.elevation_deg": np.linspace(20, 85, 8).tolist(), "parts.panels.alpha_x": [0.05, 0.1, 0.2]})
+    ("code", """ds = sf.sweep(scene, {"sun.elevation_deg": np.linspace(20, 85, 6).tolist(), "parts.panels.alpha_x": [0.05, 0.1, 0.2]})
 print(ds.mean_radiance.dims, ds["sun.elevation_deg"].attrs["units"], ds.mean_radiance.attrs["units"])
 fig, axes = plt.subplots(1, 3, figsize=(12, 3.2), sharex=True, constrained_layout=True)
 for ax, region in zip(axes, ["body", "legs", "target"]):
@@ -64,12 +64,12 @@ The irradiance at the observer is the image's radiance times each pixel's solid 
 rendered at the scene's 70 m and rescaled to the Moon's distance (3.844e8 m) by the inverse square
 law. Magnitudes are in V with the sun's -26.74 (Cox 2000), target and observer at the same distance
 from the sun. Against the solar phase angle (the sun turns away from the observer):"""),
-    ("code", """phase = sf.light_curve(scene, phase_deg=np.arange(0, 151, 10), observer_range_m=3.844e8, quiet=True)
+    ("code", """phase = sf.light_curve(scene, phase_deg=np.arange(0, 151, 15), observer_range_m=3.844e8, quiet=True)
 print("V magnitudes:", np.round(phase.magnitude, 2))
 phase.figure()"""),
     ("md", """And under a spin of 6 deg/s about the target's z axis for a minute, with the sun given as an
 elevation and azimuth in the target's own frame:"""),
-    ("code", """spin = sf.light_curve(scene, times_s=np.linspace(0, 60, 31), spin_rate_deg_s=6.0, axis="z", sun=(45.0, -120.0),
+    ("code", """spin = sf.light_curve(scene, times_s=np.linspace(0, 60, 16), spin_rate_deg_s=6.0, axis="z", sun=(45.0, -120.0),
                       observer_range_m=3.844e8, quiet=True)
 print(f"phase angle {spin.phase_angle_deg[0]:.1f} deg, magnitude {spin.magnitude.min():.2f} to {spin.magnitude.max():.2f}")
 spin.figure()"""),

@@ -26,9 +26,19 @@ if ! have_llvm; then
     fi
 fi
 
-if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c "import spacefit, pytest, xdist, hypothesis, xarray, zarr, dask.distributed, tqdm" 2>/dev/null; then
+# The docs test opens the built pages in a headless browser: Debian's chromium.
+if ! command -v chromium >/dev/null && ! command -v chromium-browser >/dev/null; then
+    if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
+        echo "setup: installing chromium (the docs test opens the built pages in it)" >&2
+        apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium >/dev/null
+    else
+        echo "setup: the docs test needs chromium: sudo apt-get update && sudo apt-get install -y chromium" >&2
+    fi
+fi
+
+if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c "import spacefit, pytest, xdist, hypothesis, xarray, zarr, dask.distributed, tqdm, sphinx, myst_nb, sphinx_gallery, pydata_sphinx_theme, sphinxarg" 2>/dev/null; then
     echo "setup: creating .venv and installing spacefit (a few minutes the first time)" >&2
     python3 -m venv .venv
     .venv/bin/python -m pip install -q --upgrade pip
-    .venv/bin/python -m pip install -q -e ".[dev]"
+    .venv/bin/python -m pip install -q -e ".[dev,docs]"
 fi

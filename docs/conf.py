@@ -1,0 +1,147 @@
+"""Sphinx configuration of spacefit's documentation (``make docs``; warnings are errors there).
+
+Sphinx with the PyData theme, MyST-NB and sphinx-gallery: the generator xarray, astropy and NumPy use,
+so the API reference is made from the docstrings, notebooks and the gallery's scripts run at build
+time and make their own figures. ``SPACEFIT_DOCS_FAST=1`` skips running the gallery and the
+notebooks (the docs test's fast build); a full ``make docs`` runs them all.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+FAST = os.environ.get("SPACEFIT_DOCS_FAST") == "1"
+
+import spacefit  # noqa: E402
+
+project = "spacefit"
+author = "spacefit authors"
+copyright = "spacefit authors, BSD-3-Clause"
+release = version = "0.1.0"
+
+extensions = [
+    "myst_nb",
+    "sphinx.ext.autodoc",
+    "sphinx.ext.autosummary",
+    "sphinx.ext.napoleon",
+    "sphinx.ext.mathjax",
+    "sphinxarg.ext",
+    "sphinx_gallery.gen_gallery",
+]
+source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
+exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "gallery/*.ipynb", "gallery/*.py", "gallery/*.zip",
+                    "gallery/*.md5", "gallery/*.json", "examples/*", "jupyter_execute"]
+suppress_warnings = ["config.cache"]  # sphinx-gallery's conf holds functions, which Sphinx cannot pickle
+
+# MyST: headings get anchors so pages can link to sections
+myst_heading_anchors = 3
+myst_enable_extensions = ["colon_fence"]
+
+# MyST-NB: the notebooks under notebooks/ run at every build, in their own folder (outputs are not stored)
+nb_execution_mode = "off" if FAST else "force"
+nb_execution_timeout = 600
+nb_execution_raise_on_error = True
+nb_execution_show_tb = True
+nb_merge_streams = True
+
+# API reference from the docstrings of the public names (``sf.__all__``)
+autosummary_generate = True
+autodoc_default_options = {"members": True, "undoc-members": False, "member-order": "bysource"}
+autodoc_typehints = "description"
+autodoc_typehints_format = "short"
+add_module_names = False
+napoleon_google_docstring = True  # the docstrings' "Args:", "Returns:", "Attributes:"
+napoleon_numpy_docstring = False
+napoleon_use_ivar = True
+
+
+
+class FigureScraper:
+    """sphinx-gallery's scraper for the figures spacefit returns: its plot functions make ``matplotlib.figure.Figure``
+    objects outside pyplot (no global state), which the matplotlib scraper cannot see; this one saves every Figure
+    the example's variables hold, once."""
+
+    def __init__(self) -> None:
+        self.seen: set[int] = set()
+
+    def __repr__(self) -> str:  # sphinx-gallery keys its cache by the scrapers' reprs
+        return "spacefit.FigureScraper"
+
+    def __call__(self, block, block_vars, gallery_conf) -> str:
+        from matplotlib.figure import Figure
+        from sphinx_gallery.scrapers import figure_rst
+
+        paths = []
+        for value in list(block_vars["example_globals"].values()):
+            if isinstance(value, Figure) and id(value) not in self.seen:
+                self.seen.add(id(value))
+                path = next(block_vars["image_path_iterator"])
+                value.savefig(path, dpi=80)
+                paths.append(path)
+        return figure_rst(paths, gallery_conf["src_dir"])
+
+
+sphinx_gallery_conf = {
+    "examples_dirs": "examples",
+    "gallery_dirs": "gallery",
+    "filename_pattern": r"/plot_",
+    "plot_gallery": "False" if FAST else "True",
+    "download_all_examples": False,
+    "remove_config_comments": True,
+    "within_subsection_order": "FileNameSortKey",
+    "matplotlib_animations": False,
+    "image_scrapers": ("matplotlib", FigureScraper()),
+    "reset_modules": ("matplotlib",),
+}
+
+html_theme = "pydata_sphinx_theme"
+html_title = "spacefit"
+html_static_path: list[str] = []
+html_theme_options = {
+    "navigation_with_keys": False,
+    "show_toc_level": 2,
+    "header_links_before_dropdown": 4,
+    "secondary_sidebar_items": ["page-toc"],
+}
+html_sidebars = {"index": [], "getting-started": []}
+html_show_sourcelink = False
+
+
+def _constant_docstring(app, what, name, obj, options, lines) -> None:
+    """A public constant (a dict or tuple such as ``sf.PARAMETERS``) would show its type's docstring:
+    say what it holds instead."""
+    if isinstance(obj, (dict, tuple, list, frozenset)) and lines and lines[0].startswith(("dict(", "Built-in", "tuple(", "list(")):
+        lines[:] = [f"A {type(obj).__name__} of {len(obj)} entries: " + ", ".join(f"``{k}``" for k in list(obj)[:12])
+                    + (", ..." if len(obj) > 12 else "") + "."]
+
+
+def setup(app) -> None:
+    app.connect("autodoc-process-docstring", _constant_docstring)
+
+
+def _parameter_table() -> None:
+    """The free parameters' table (guide/fitting.md includes it), written from the registry itself."""
+    target = Path(__file__).parent / "_generated" / "parameters.md"
+    target.parent.mkdir(exist_ok=True)
+    target.write_text(spacefit.parameter_table() + "\n")
+
+
+def _front_picture() -> None:
+    """The front page's picture: the default scene rendered now, small (its preview.png)."""
+    import shutil
+    import tempfile
+
+    target = Path(__file__).parent / "_generated" / "lander.png"
+    target.parent.mkdir(exist_ok=True)
+    scene = spacefit.load_scene(None, {"render.resolution": [240, 240], "camera.pixel_pitch_mm": 3.5, "render.spp": 16})
+    with tempfile.TemporaryDirectory() as tmp:
+        spacefit.render_to_folder(scene, Path(tmp) / "render", quiet=True)
+        shutil.copyfile(Path(tmp) / "render" / "preview.png", target)
+
+
+_parameter_table()
+_front_picture()

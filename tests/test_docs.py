@@ -1,0 +1,208 @@
+"""The documentation site (docs/, ``make docs``): it builds with warnings as errors, its internal links
+resolve, its front page opens in a real headless browser showing the rendered picture and the
+navigation, and the notebooks use public names only (they run in ``make docs`` and in the slow test
+below; the pages' Python blocks and the gallery's scripts run in tests/test_docs_examples.py)."""
+
+from __future__ import annotations
+
+import functools
+import os
+import re
+import shutil
+import subprocess
+import sys
+from html.parser import HTMLParser
+from pathlib import Path
+from urllib.parse import unquote, urlsplit
+
+import numpy as np
+import pytest
+from PIL import Image
+
+import spacefit as sf
+
+ROOT = Path(__file__).resolve().parents[1]
+DOCS = ROOT / "docs"
+CHROMIUM_MISSING = ("the docs test opens the built pages in Debian's chromium, which is not installed: "
+                    "run `sudo apt-get update && sudo apt-get install -y chromium` (tools/setup.sh does it as root)")
+
+
+def sphinx(out: Path, *, fast: bool, builder: str = "html") -> subprocess.CompletedProcess:
+    """``make docs``'s command into ``out`` with this Python and this checkout; ``fast`` leaves the gallery and the
+    notebooks unrun (their code runs in the tests below)."""
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
+           "SPACEFIT_DOCS_FAST": "1" if fast else "0", "MPLBACKEND": "Agg"}
+    return subprocess.run([sys.executable, "-m", "sphinx", "-b", builder, "-W", "--keep-going", "-q", "-d", str(out / "doctrees"),
+                           str(DOCS), str(out / builder)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=1200)
+
+
+@pytest.fixture(scope="module")
+def site(tmp_path_factory) -> Path:
+    """The site built once for this module (fast build: pages, API and CLI references, the front picture)."""
+    pytest.importorskip("sphinx", reason="the docs extra: pip install -e '.[docs]' (tools/setup.sh installs it)")
+    out = tmp_path_factory.mktemp("docs")
+    done = sphinx(out, fast=True)
+    assert done.returncode == 0, f"the docs build failed or warned:\n{done.stdout[-3000:]}\n{done.stderr[-6000:]}"
+    return out / "html"
+
+
+class _Links(HTMLParser):
+    """A page's ids and its links (href and src)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.ids: set[str] = set()
+        self.links: list[str] = []
+
+    def handle_starttag(self, tag, attrs) -> None:
+        values = dict(attrs)
+        if values.get("id"):
+            self.ids.add(values["id"])
+        for key in ("href", "src"):
+            if values.get(key) is not None and not (tag == "link" and values.get("rel") == "preconnect"):
+                self.links.append(values[key])
+
+
+@functools.cache
+def _parse(path: Path) -> _Links:
+    parser = _Links()
+    parser.feed(path.read_text(encoding="utf-8"))
+    return parser
+
+
+def internal_link_errors(html: Path) -> list[str]:
+    """Every internal link of every page that names a missing file or a missing anchor, as 'page: link'."""
+    errors = []
+    for page in sorted(html.rglob("*.html")):
+        if page.relative_to(html).parts[0] in ("_static", "_sources"):  # the theme's templates, the pages' sources
+            continue
+        for link in _parse(page).links:
+            parts = urlsplit(link)
+            if parts.scheme or parts.netloc or link.startswith(("mailto:", "javascript:", "data:")):
+                continue
+            target = (page.parent / unquote(parts.path)).resolve() if parts.path else page
+            if target.is_dir():
+                target = target / "index.html"
+            if not target.exists():
+                errors.append(f"{page.relative_to(html)}: {link} (no file)")
+            elif parts.fragment and target.suffix == ".html" and unquote(parts.fragment) not in _parse(target).ids:
+                errors.append(f"{page.relative_to(html)}: {link} (no anchor)")
+    return errors
+
+
+def test_site_builds_without_warnings_and_its_internal_links_resolve(site):
+    pages = {p.relative_to(site).as_posix() for p in site.rglob("*.html")}
+    for page in ["index.html", "getting-started.html", "guide/fitting.html", "guide/dask.html", "conventions.html", "api.html",
+                 "cli.html", "validation.html", "performance.html", "gallery/index.html", "notebooks/walkthrough.html"]:
+        assert page in pages, page
+    assert internal_link_errors(site) == []
+
+
+def test_link_checker_finds_a_broken_link(tmp_path):
+    """The check above can fail: a page with a link to a missing page and one to a missing anchor."""
+    (tmp_path / "a.html").write_text('<p id="here"><a href="b.html">b</a> <a href="a.html#here">ok</a> <a href="#gone">x</a>'
+                                     '<a href="https://example.org/x">out</a></p>')
+    assert internal_link_errors(tmp_path) == ["a.html: b.html (no file)", "a.html: #gone (no anchor)"]
+
+
+def test_parameter_table_is_the_registry(site):
+    """The user guide's table of free parameters is written from ``sf.PARAMETERS`` at build time: every entry is on
+    the page with its unit."""
+    page = (site / "guide" / "fitting.html").read_text()
+    for parameter in sf.PARAMETERS.values():
+        assert f"<code class=\"docutils literal notranslate\"><span class=\"pre\">{parameter.pattern}</span></code>" in page, parameter.pattern
+
+
+def test_api_reference_documents_every_public_name(site):
+    """Every name of ``sf.__all__`` has its page in the API reference, made from its docstring."""
+    api = (site / "api.html").read_text()
+    for name in sf.__all__:
+        assert (site / "generated" / f"spacefit.{name}.html").exists(), name
+        assert f"generated/spacefit.{name}.html" in api, name
+    fit = (site / "generated" / "spacefit.fit.html").read_text()
+    assert "noise floor" in fit.lower() or "Monte Carlo noise" in fit
+
+
+def test_cli_reference_is_the_parser(site):
+    """The command-line page is generated from the parser: every sub-command and option is on it."""
+    from spacefit.cli import _parser
+
+    page = (site / "cli.html").read_text()
+    commands = next(a for a in _parser()._actions if a.dest == "command").choices
+    assert set(commands) >= {"render", "fit", "sweep"}
+    for name, sub in commands.items():
+        assert f'id="spacefit-{name}"' in page, name
+        for action in sub._actions:
+            if action.dest == "help":  # sphinx-argparse leaves out every --help
+                continue
+            for option in action.option_strings:
+                assert option in page, f"{name} {option}"
+
+
+def chromium() -> str:
+    path = shutil.which("chromium") or shutil.which("chromium-browser")
+    if path is None:
+        pytest.fail(CHROMIUM_MISSING)
+    return path
+
+
+def browse(page: Path, *args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--window-size=1280,1100",
+                           *args, page.as_uri()], capture_output=True, text=True, timeout=120)
+
+
+def dark_box(pixels: np.ndarray) -> tuple[int, int, int, int]:
+    """The bounding box (top, bottom, left, right) of the rendered picture on the white page: the columns with many
+    near-black pixels, then the rows mostly black across those columns (black space around the target)."""
+    dark = pixels.max(axis=-1) < 12
+    cols = np.flatnonzero(dark.sum(axis=0) > 150)
+    assert cols.size, "no dark picture on the page"
+    left, right = int(cols[0]), int(cols[-1]) + 1
+    rows = np.flatnonzero(dark[:, left:right].mean(axis=1) > 0.5)
+    return int(rows[0]), int(rows[-1]) + 1, left, right
+
+
+def test_front_page_in_a_browser_shows_the_render_and_the_navigation(site, tmp_path):
+    """Chromium opens the built index page: its screenshot holds the rendered picture (the same image as the
+    build's render, by correlation) and the DOM after scripts ran has the navigation to the guide's pages."""
+    shot = tmp_path / "index.png"
+    done = browse(site / "index.html", f"--screenshot={shot}")
+    assert shot.exists(), done.stderr[-2000:]
+    pixels = np.asarray(Image.open(shot).convert("RGB"), dtype=float)
+    top, bottom, left, right = dark_box(pixels)
+    assert 250 <= bottom - top <= 420 and 250 <= right - left <= 420, (top, bottom, left, right)
+    shown = pixels[top:bottom, left:right].mean(axis=-1)
+    rendered = np.asarray(Image.open(site / "_images" / "lander.png").convert("L").resize((right - left, bottom - top)), dtype=float)
+    lit = shown > 40
+    assert 0.02 < lit.mean() < 0.6, "the picture shows no target"
+    assert np.corrcoef(shown.ravel(), rendered.ravel())[0, 1] > 0.9
+    header = pixels[:top].mean(axis=-1)
+    assert (header < 128).mean() > 0.002, "no text above the picture"
+
+    dom = browse(site / "index.html", "--dump-dom").stdout
+    nav = dom.split('class="bd-header', 1)[1].split("</nav>", 1)[0]
+    for label, page in [("Getting started", "getting-started.html"), ("Rendering and scenes", "guide/render.html")]:
+        assert re.search(rf'href="{re.escape(page)}"[^>]*>\s*{re.escape(label)}', nav), label
+    assert "API reference" in dom and 'href="api.html"' in dom
+
+
+NOTEBOOKS = sorted((ROOT / "experiments").glob("*.ipynb"))
+
+
+@pytest.mark.parametrize("notebook", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
+def test_notebook_uses_public_names_and_no_stored_pictures(notebook):
+    """The shipped notebooks teach the public API: ``sf.`` names only, every figure computed (no stored PNG shown)."""
+    import nbformat
+
+    code = "\n".join(c.source for c in nbformat.read(notebook, as_version=4).cells if c.cell_type == "code")
+    assert "import spacefit as sf" in code
+    assert not re.search(r"from spacefit[.\w]* import|import spacefit\.", code), notebook.name
+    assert "IPython.display import Image" not in code and ".png" not in code, notebook.name
+
+
+@pytest.mark.slow
+def test_full_build_runs_the_gallery_and_the_notebooks(tmp_path):
+    """``make docs``'s full build: the gallery's scripts and the notebooks run, with no warning and no error."""
+    done = sphinx(tmp_path, fast=False)
+    assert done.returncode == 0, f"{done.stdout[-3000:]}\n{done.stderr[-6000:]}"
+    assert len(list((tmp_path / "html" / "_images").glob("sphx_glr_plot_*.png"))) >= len(list((DOCS / "examples").glob("plot_*.py")))
