@@ -42,7 +42,7 @@ print(sens.table())"""),
     ("md", """The derivative images (pixels whose derivative is not resolved are grey) and the normalised
 sensitivities of each part's mean radiance, relative change per relative change for the materials
 and D, per radian for the angles, with 95 % intervals (hatched: unresolved)."""),
-    ("code", """sens.figure()"""),
+    ("code", """sens.figure()[0].figure"""),
     ("md", """## 2. A sweep
 
 The sun's elevation and the panels' roughness on a grid, set in place on the loaded scene (no reload).
@@ -66,13 +66,13 @@ law. Magnitudes are in V with the sun's -26.74 (Cox 2000), target and observer a
 from the sun. Against the solar phase angle (the sun turns away from the observer):"""),
     ("code", """phase = sf.light_curve(scene, phase_deg=np.arange(0, 151, 15), observer_range_m=3.844e8, quiet=True)
 print("V magnitudes:", np.round(phase.magnitude, 2))
-phase.figure()"""),
+phase.figure()[0].figure"""),
     ("md", """And under a spin of 6 deg/s about the target's z axis for a minute, with the sun given as an
 elevation and azimuth in the target's own frame:"""),
     ("code", """spin = sf.light_curve(scene, times_s=np.linspace(0, 60, 16), spin_rate_deg_s=6.0, axis="z", sun=(45.0, -120.0),
                       observer_range_m=3.844e8, quiet=True)
 print(f"phase angle {spin.phase_angle_deg[0]:.1f} deg, magnitude {spin.magnitude.min():.2f} to {spin.magnitude.max():.2f}")
-spin.figure()"""),
+spin.figure()[0].figure"""),
 ]
 
 

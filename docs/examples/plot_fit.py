@@ -15,6 +15,6 @@ result = sf.fit(sf.Observation(scene, reference), ["parts.legs.kd", "parts.panel
                 start={"parts.legs.kd": 0.3, "parts.panels.alpha_x": 0.1})
 print(sf.format_result(result))
 
-# spacefit's figures are matplotlib Figures made outside pyplot: kept in variables, the gallery shows them
+# spacefit's plot functions return their axes (pass ax= or fig= to draw into your own layout)
 convergence = sf.plot_convergence(result)
 comparison = sf.plot_comparison(result, [reference])
