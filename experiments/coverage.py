@@ -50,7 +50,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 import spacefit as sf  # noqa: E402
-from spacefit.fitting.nuisance import split  # noqa: E402
+from spacefit.fitting.nuisance import image_model  # noqa: E402
 from spacefit.fitting.problem import setup  # noqa: E402
 from spacefit.fitting.uncertainty import covariance  # noqa: E402
 from spacefit.precision import float64  # noqa: E402
@@ -95,7 +95,7 @@ def truth_image(case: sf.Case, truth_spp: int, nuisances: bool) -> np.ndarray:
     pose = {n: v for n, v in NUISANCE_TRUTH.items() if n.startswith("target.")}
     render = np.asarray(sf.render(scene_with_values(scene, pose)), dtype=float)
     image = [n for n in NUISANCE_TRUTH if n not in pose]
-    _, model = split(image)
+    model = image_model(image)
     return np.maximum(np.asarray(model(jnp.asarray(render), jnp.asarray([NUISANCE_TRUTH[n] for n in image]), 0), dtype=float), 0.0)
 
 
