@@ -44,11 +44,14 @@ def test_import_leaves_jax_x64_as_it_was():
 
 def test_spacefit_gives_the_callers_mitsuba_variant_back(tmp_path):
     """Mitsuba has one global variant: after sf.render, a Renderer's methods and a render function's
-    value and gradient, the caller's own variant is set again, and the caller's Mitsuba code runs in it."""
+    value and gradient, the caller's own variant is set again, and the caller's Mitsuba code runs in it;
+    Mitsuba's log level is the caller's too."""
     import mitsuba as mi
 
     scene = plate_scene(tmp_path, 0.5)
     before = mi.variant()
+    log_level = mi.logger().log_level()
+    assert log_level != mi.LogLevel.Error
     try:
         for variant in ("scalar_rgb", "llvm_ad_rgb"):
             mi.set_variant(variant)
@@ -63,6 +66,7 @@ def test_spacefit_gives_the_callers_mitsuba_variant_back(tmp_path):
             assert float(jax.grad(lambda x, f=f: f(x).sum())(jnp.array([0.5]))[0]) > 0
             assert mi.variant() == variant
             assert mi.load_dict({"type": "diffuse"}).variant_name() == variant
+            assert mi.logger().log_level() == log_level  # nor Mitsuba's log level
     finally:
         mi.set_variant(before or "llvm_ad_rgb")
 

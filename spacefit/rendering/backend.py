@@ -90,8 +90,8 @@ def variant_scope(requested: str = "auto") -> Iterator[str]:
     """Set spacefit's Mitsuba variant (:func:`resolve_variant`) for the calls inside, yielding it,
     and give the caller's back when the outermost scope ends (nested scopes, and scopes open in
     several threads at once, switch nothing on the way out). A caller who keeps another variant pays
-    a switch each way per outermost scope (0.25 s a pair on 2 cores, Mitsuba reloads its AD
-    integrators); a caller with spacefit's variant, or none, pays nothing."""
+    a switch each way per outermost scope (about 0.1 s of CPU a pair: Mitsuba reloads its AD
+    integrators, README "Python API"); a caller with spacefit's variant, or none, pays nothing."""
     global _scope_depth, _caller_variant
     with _scope_lock:
         if _scope_depth == 0:

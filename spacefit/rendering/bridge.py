@@ -33,7 +33,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.rendering.backend import dr, in_variant, mi
-from spacefit.rendering.renderer import Renderer, to_value, render_threads
+from spacefit.rendering.renderer import Renderer, errors_only, to_value, render_threads
 
 SceneValues = Mapping[str, Array]
 
@@ -77,7 +77,6 @@ class DrJitScene:
         self.params = self.renderer.params
         intr = self.renderer.assembly.intrinsics
         self.shape = (intr.height, intr.width, 3)
-        mi.set_log_level(mi.LogLevel.Error)  # projective integrators warn about film borders per call
 
     def _set(self, values: Mapping[str, np.ndarray], grad: bool) -> None:
         for key, value in values.items():
@@ -91,11 +90,12 @@ class DrJitScene:
         return mi.render(self.renderer.scene, self.params, integrator=self._integrator, seed=seed_grad + 1,
                          seed_grad=seed_grad, spp=self.spp_grad)
 
+    # Each render logs errors only (errors_only): projective integrators warn about film borders per call.
     @in_variant
     def primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """Radiance image (h, w, 3) float32 at ``values``; bitwise reproducible if the scene is deterministic."""
         self._set(values, grad=False)
-        with render_threads(self.renderer.assembly.scene.render.deterministic):
+        with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():
             image = mi.render(self.renderer.scene, integrator=self._integrator, seed=seed, spp=self.spp)
             return self.renderer.to_film(np.asarray(image, dtype=np.float32))
 
@@ -106,7 +106,7 @@ class DrJitScene:
         for key, t in tangent.items():
             if _differentiable(self.params[key]):
                 dr.set_grad(self.params[key], to_value(self.params[key], t))
-        with render_threads(self.renderer.assembly.scene.render.deterministic):  # a fixed order of the film's sums
+        with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():  # a fixed order of the film's sums
             image = self._render_ad(seed_grad)
             dr.forward_to(image)
             out = self.renderer.to_film(np.asarray(dr.grad(image), dtype=np.float32))
@@ -117,7 +117,7 @@ class DrJitScene:
     def backward(self, values: Mapping[str, np.ndarray], cotangent: np.ndarray, seed_grad: int) -> dict[str, np.ndarray]:
         """Gradient of sum(cotangent * image) with respect to every key of ``values``, one backward pass."""
         self._set(values, grad=True)
-        with render_threads(self.renderer.assembly.scene.render.deterministic):
+        with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():
             image = self._render_ad(seed_grad)
             dr.backward_from(image * mi.TensorXf(self.renderer.to_window(np.asarray(cotangent, dtype=np.float32))))
             grads = {key: _flat_grad(self.params[key]) if _differentiable(self.params[key]) else np.zeros(np.size(values[key]), np.float32)
