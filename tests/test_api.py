@@ -71,6 +71,46 @@ def test_spacefit_gives_the_callers_mitsuba_variant_back(tmp_path):
         mi.set_variant(before or "llvm_ad_rgb")
 
 
+def test_variant_scopes_nest_and_overlap_across_threads(monkeypatch):
+    """A nested scope of another variant gives its outer scope's back; a scope ending while another
+    thread's is open switches nothing; the last one gives the caller's back, also after an error."""
+    import threading
+
+    import spacefit.rendering.backend as backend
+
+    mi = backend.mi
+    before = mi.variant()
+    monkeypatch.setattr(backend, "resolve_variant", lambda requested: requested)  # any built variant, no GPU needed
+    try:
+        mi.set_variant("scalar_rgb")
+        with backend.variant_scope("llvm_ad_rgb"):
+            with backend.variant_scope("llvm_ad_mono"):
+                assert mi.variant() == "llvm_ad_mono"
+            assert mi.variant() == "llvm_ad_rgb"
+        assert mi.variant() == "scalar_rgb"
+        with pytest.raises(KeyError), backend.variant_scope("llvm_ad_rgb"):
+            raise KeyError("inside")
+        assert mi.variant() == "scalar_rgb"
+        entered, release, seen = threading.Event(), threading.Event(), []
+
+        def worker() -> None:
+            with backend.variant_scope("llvm_ad_rgb"):
+                entered.set()
+                release.wait(60)
+                seen.append(mi.variant())
+
+        thread = threading.Thread(target=worker)
+        with backend.variant_scope("llvm_ad_rgb"):
+            thread.start()
+            assert entered.wait(60)
+        assert mi.variant() == "llvm_ad_rgb"  # the worker's scope is open: nothing switched
+        release.set()
+        thread.join()
+        assert seen == ["llvm_ad_rgb"] and mi.variant() == "scalar_rgb"
+    finally:
+        mi.set_variant(before or "llvm_ad_rgb")
+
+
 def plate_scene(tmp_path: Path, kd: float) -> sf.Scene:
     return small_scene(write_plate_obj(tmp_path / "plate.obj"), {"material": "white_paint", "kd": kd}, render={"spp": 8})
 
