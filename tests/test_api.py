@@ -48,11 +48,14 @@ def test_import_leaves_jax_x64_as_it_was():
 
 def test_spacefit_gives_the_callers_mitsuba_variant_back(tmp_path):
     """Mitsuba has one global variant: after sf.render, a Renderer's methods and a render function's
-    value and gradient, the caller's own variant is set again, and the caller's Mitsuba code runs in it."""
+    value and gradient, the caller's own variant is set again, and the caller's Mitsuba code runs in it;
+    Mitsuba's log level is the caller's too."""
     import mitsuba as mi
 
     scene = plate_scene(tmp_path, 0.5)
     before = mi.variant()
+    log_level = mi.logger().log_level()
+    assert log_level != mi.LogLevel.Error
     try:
         for variant in ("scalar_rgb", "llvm_ad_rgb"):
             mi.set_variant(variant)
@@ -67,6 +70,47 @@ def test_spacefit_gives_the_callers_mitsuba_variant_back(tmp_path):
             assert float(jax.grad(lambda x, f=f: f(x).sum())(jnp.array([0.5]))[0]) > 0
             assert mi.variant() == variant
             assert mi.load_dict({"type": "diffuse"}).variant_name() == variant
+            assert mi.logger().log_level() == log_level  # nor Mitsuba's log level
+    finally:
+        mi.set_variant(before or "llvm_ad_rgb")
+
+
+def test_variant_scopes_nest_and_overlap_across_threads(monkeypatch):
+    """A nested scope of another variant gives its outer scope's back; a scope ending while another
+    thread's is open switches nothing; the last one gives the caller's back, also after an error."""
+    import threading
+
+    import spacefit.rendering.backend as backend
+
+    mi = backend.mi
+    before = mi.variant()
+    monkeypatch.setattr(backend, "resolve_variant", lambda requested: requested)  # any built variant, no GPU needed
+    try:
+        mi.set_variant("scalar_rgb")
+        with backend.variant_scope("llvm_ad_rgb"):
+            with backend.variant_scope("llvm_ad_mono"):
+                assert mi.variant() == "llvm_ad_mono"
+            assert mi.variant() == "llvm_ad_rgb"
+        assert mi.variant() == "scalar_rgb"
+        with pytest.raises(KeyError), backend.variant_scope("llvm_ad_rgb"):
+            raise KeyError("inside")
+        assert mi.variant() == "scalar_rgb"
+        entered, release, seen = threading.Event(), threading.Event(), []
+
+        def worker() -> None:
+            with backend.variant_scope("llvm_ad_rgb"):
+                entered.set()
+                release.wait(60)
+                seen.append(mi.variant())
+
+        thread = threading.Thread(target=worker)
+        with backend.variant_scope("llvm_ad_rgb"):
+            thread.start()
+            assert entered.wait(60)
+        assert mi.variant() == "llvm_ad_rgb"  # the worker's scope is open: nothing switched
+        release.set()
+        thread.join()
+        assert seen == ["llvm_ad_rgb"] and mi.variant() == "scalar_rgb"
     finally:
         mi.set_variant(before or "llvm_ad_rgb")
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from helpers import small_scene, write_sphere_obj
 
-from spacefit.cases import load_case
+from spacefit.cases import CASES_DIR, load_case
 from spacefit.geometry.frames import CameraFrame, Intrinsics, attitude_matrix, project
 from spacefit.rendering.renderer import render
 from spacefit.scene.assembly import assemble
@@ -122,7 +122,9 @@ def load_scene_text(tmp_path, text: str):
     return load_scene(tmp_path / "scene.toml")
 
 
-def test_a_pitch_given_with_a_field_of_view_is_refused(tmp_path):
+def test_a_pitch_given_with_a_field_of_view_is_refused_and_one_set_later_replaces_the_other(tmp_path):
+    """One table (a scene file's [camera], one with_values call, one set of overrides) gives the pitch
+    or the field of view; one set later (with_values, --set over a file) replaces the other."""
     from spacefit.errors import InputError
     from spacefit.scene.toml import load_scene
 
@@ -134,10 +136,20 @@ def test_a_pitch_given_with_a_field_of_view_is_refused(tmp_path):
     (tmp_path / "both.toml").write_text("[camera]\nfov_deg = 10.0\npixel_pitch_mm = 4.0\n")
     with pytest.raises(InputError, match="give one of them"):
         load_scene(tmp_path / "both.toml")
-    assert scene.with_values({"camera.fov_deg": 10.0}).with_values({"camera.fov_deg": 0.0, "camera.pixel_pitch_mm": 0.01}).camera.pixel_pitch_mm == 0.01
+    by_field = scene.with_values({"camera.fov_deg": 10.0})
+    assert by_field.camera.pixel_pitch_mm == pytest.approx(2 * 7000.0 * np.tan(np.radians(5.0)) / 128, rel=1e-12)
+    assert by_field.with_values({"camera.pixel_pitch_mm": 0.01}).camera == scene.with_values({"camera.pixel_pitch_mm": 0.01}).camera
+    panels = CASES_DIR / "panels.toml"  # its [camera] gives the pitch
+    assert load_scene(panels, {"camera.fov_deg": 10.0}).camera == by_field.camera
+    with pytest.raises(InputError, match="give one of them"):
+        load_scene(panels, {"camera.fov_deg": 10.0, "camera.pixel_pitch_mm": 0.01})
+    (tmp_path / "field.toml").write_text("[camera]\nfov_deg = 10.0\n")
+    assert load_scene(tmp_path / "field.toml", {"camera.pixel_pitch_mm": 0.01}).camera.fov_deg == 0.0
 
 
 def test_intrinsics_from_a_scene_are_its_camera_in_metres():
     scene = load_case("panels").scene().with_values({"camera.principal_offset_px": [2.0, -1.0]})
     intr = Intrinsics.from_scene(scene)
     assert intr == Intrinsics(7.0, 18.75e-3, 128, 128, (2.0, -1.0)) == assemble(scene).intrinsics
+    with pytest.raises(TypeError, match="`scene` must be a spacefit Scene"):  # InputTypeError: an InputError and a TypeError
+        Intrinsics.from_scene("scene.toml")

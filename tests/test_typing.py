@@ -1,6 +1,6 @@
 """Names an editor can see: the type stub spacefit/__init__.pyi re-exports every public name from its
 home module (tools/api_stub.py writes it from ``_EXPORTS``), the package ships it with a PEP 561
-``py.typed`` marker, and mypy finds no error in the README's examples but does in a misuse."""
+``py.typed`` marker, and mypy finds no error in the README's and the docs' examples but does in a misuse."""
 
 from __future__ import annotations
 
@@ -46,10 +46,11 @@ def test_the_stub_and_the_marker_are_package_data():
 
 
 def test_mypy_passes_the_readme_examples_and_catches_a_misuse(tmp_path):
-    """One mypy run (a cold cache: about 8 s of CPU) over each Python block of the README as a user
-    script, and a misuse: a path for a scene, a misspelt name, a float image width."""
-    blocks = re.findall(r"```python\n(.*?)```", (ROOT / "README.md").read_text(), flags=re.DOTALL)
-    assert len(blocks) >= 5
+    """One mypy run (a cold cache: about 8 s of CPU) over each Python block of the README and the docs'
+    pages as a user script, and a misuse: a path for a scene, a misspelt name, a float image width."""
+    pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+    blocks = [b for page in pages for b in re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.DOTALL)]
+    assert len(blocks) >= 1
     for i, block in enumerate(blocks):
         (tmp_path / f"readme_{i}.py").write_text(f'from pathlib import Path\nOUT = Path("out")\n{block}')
     (tmp_path / "misuse.py").write_text(MISUSE)

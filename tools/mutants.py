@@ -51,7 +51,7 @@ class Mutant:
 
 MUTANTS = (
     # no global state left behind: Mitsuba's variant is the caller's again after spacefit renders
-    Mutant("variant-left-at-spacefits", "spacefit/rendering/backend.py", "mi.set_variant(_caller_variant)", "pass",
+    Mutant("variant-left-at-spacefits", "spacefit/rendering/backend.py", "back = _caller_variant", "back = None",
            ("tests/test_api.py::test_spacefit_gives_the_callers_mitsuba_variant_back",)),
     # a camera set the way a user thinks: the field kept across resolutions, an exposure at its fraction of full scale
     Mutant("fov-pitch-ignores-the-resolution", "spacefit/scene/schema.py", "math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]",

@@ -34,7 +34,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.rendering.backend import dr, in_variant, mi
-from spacefit.rendering.renderer import Renderer, pass_seed, render_threads, to_value
+from spacefit.rendering.renderer import Renderer, errors_only, pass_seed, render_threads, to_value
 from spacefit.scene.schema import split_sample_count
 
 SceneValues = Mapping[str, Array]
@@ -79,7 +79,6 @@ class DrJitScene:
         self.params = self.renderer.params
         intr = self.renderer.assembly.intrinsics
         self.shape = (intr.height, intr.width, 3)
-        mi.set_log_level(mi.LogLevel.Error)  # projective integrators warn about film borders per call
         self._last: tuple[tuple[int, bytes], np.ndarray] | None = None  # the last primal image, by seed and values
 
     @staticmethod
@@ -108,6 +107,7 @@ class DrJitScene:
         return sum(mi.render(self.renderer.scene, self.params, integrator=self._integrator, seed=seed + 1, seed_grad=seed, spp=count) * weight
                    for seed, count, weight in self._passes(self.spp_grad, seed_grad))
 
+    # Each render logs errors only (errors_only): projective integrators warn about film borders per call.
     @in_variant
     def primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """Radiance image (h, w, 3) float32 at ``values``; bitwise reproducible if the scene is deterministic.
@@ -118,10 +118,11 @@ class DrJitScene:
             self._last = (key, self.render_primal(values, seed))
         return self._last[1].copy()
 
+    @in_variant
     def render_primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """:meth:`primal` rendered, not kept (a finite difference's renders are used once)."""
         self._set(values, grad=False)
-        with render_threads(self.renderer.assembly.scene.render.deterministic):
+        with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():
             image = sum(mi.render(self.renderer.scene, integrator=self._integrator, seed=seed_i, spp=count) * weight
                         for seed_i, count, weight in self._passes(self.spp, seed))
             return self.renderer.to_film(np.asarray(image, dtype=np.float32))
@@ -133,7 +134,7 @@ class DrJitScene:
         for key, t in tangent.items():
             if _differentiable(self.params[key]):
                 dr.set_grad(self.params[key], to_value(self.params[key], t))
-        with render_threads(self.renderer.assembly.scene.render.deterministic):  # a fixed order of the film's sums
+        with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():  # a fixed order of the film's sums
             image = self._render_ad(seed_grad)
             dr.forward_to(image)
             out = self.renderer.to_film(np.asarray(dr.grad(image), dtype=np.float32))
@@ -144,7 +145,7 @@ class DrJitScene:
     def backward(self, values: Mapping[str, np.ndarray], cotangent: np.ndarray, seed_grad: int) -> dict[str, np.ndarray]:
         """Gradient of sum(cotangent * image) with respect to every key of ``values``, one backward pass."""
         self._set(values, grad=True)
-        with render_threads(self.renderer.assembly.scene.render.deterministic):
+        with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():
             image = self._render_ad(seed_grad)
             dr.backward_from(image * mi.TensorXf(self.renderer.to_window(np.asarray(cotangent, dtype=np.float32))))
             grads = {key: _flat_grad(self.params[key]) if _differentiable(self.params[key]) else np.zeros(np.size(values[key]), np.float32)

@@ -82,13 +82,18 @@ def _plain_value(value: Any) -> Any:
 def apply_overrides(data: dict[str, Any], overrides: Overrides) -> dict[str, Any]:
     """Return a deep copy of scene-file ``data`` (nested dicts) with overrides applied."""
     out = copy.deepcopy(data)
-    for path, value in override_items(overrides):
+    items = override_items(overrides)
+    for path, value in items:
         node = out
         for k in path[:-1]:
             node = node.setdefault(k, {})
             if not isinstance(node, dict):
                 raise InputError(f"scene key {'.'.join(path)!r}: {k!r} is not a table.")
         node[path[-1]] = value
+    given = {".".join(path) for path, _ in items}
+    for key, other in (("camera.fov_deg", "camera.pixel_pitch_mm"), ("camera.pixel_pitch_mm", "camera.fov_deg")):
+        if key in given and other not in given and isinstance(out.get("camera"), dict):
+            out["camera"].pop(other.split(".")[1], None)  # the field set again the other way replaces the file's
     return out
 
 
@@ -170,6 +175,8 @@ def with_values(scene: Scene, values: Mapping[str, Any]) -> Scene:
             parameters[key] = value
         else:
             raise unknown_key(path, list(scene.parts))
+    if "pixel_pitch_mm" in sections.get("camera", {}):
+        sections["camera"].setdefault("fov_deg", 0.0)  # a pitch given alone sets the field, in place of a field of view
     changed: dict[str, Any] = {name: dataclasses.replace(getattr(scene, name), **kw) for name, kw in sections.items()}
     new_parts = dict(scene.parts)
     for name, table in parts.items():

@@ -189,8 +189,9 @@ class CameraSettings(Section):
     a change of ``render.resolution`` alone keeps the pitch, so fewer pixels see a narrower field.
     ``fov_deg`` > 0: the horizontal field of view of the whole film, and the pixel pitch follows,
     ``pixel_pitch_mm = 2 focal_length_mm tan(fov_deg / 2) / width`` (:class:`Scene` sets it), so a
-    change of resolution keeps the field and scales the pixels; ``pixel_pitch_mm`` is then not
-    given (a scene file may repeat the derived value, as ``to_toml`` writes it).
+    change of resolution keeps the field and scales the pixels. A scene file's ``[camera]`` (or one
+    ``with_values`` call) gives one of the two; setting one later (``with_values``, ``--set``)
+    replaces the other, and ``to_toml`` writes the one that sets the field.
     """
 
     focal_length_mm: float = 7000.0

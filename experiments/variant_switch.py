@@ -1,0 +1,20 @@
+"""What Mitsuba's variant switch costs a caller who keeps another variant: ``renders`` small renders
+(sf.Renderer.render) with the caller's variant set to ``variant`` before each (README, "Python API").
+
+Usage: python experiments/variant_switch.py VARIANT [RENDERS]; time it with farm-bench against llvm_ad_rgb
+(no switch), e.g. farm-bench --vs "python experiments/variant_switch.py llvm_ad_rgb" -- python experiments/variant_switch.py scalar_rgb
+"""
+
+from __future__ import annotations
+
+import sys
+
+import spacefit as sf
+from spacefit.rendering.backend import mi  # the user's `import mitsuba`, after spacefit has pointed Dr.Jit at a libLLVM
+
+variant, renders = sys.argv[1], int(sys.argv[2]) if len(sys.argv) > 2 else 10
+renderer = sf.Renderer(sf.load_case("panels").scene().with_values({"render.resolution": [32, 32], "render.spp": 1}))
+for _ in range(renders):
+    mi.set_variant(variant)
+    renderer.render()
+assert mi.variant() == variant
