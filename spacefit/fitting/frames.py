@@ -261,6 +261,10 @@ def _on_worker(fn: Callable[..., Any], spec: FrameSpec, key: str, *args: Any) ->
         return fn(spec, key, *args), get_worker().address
 
 
+# How long a step waits for a worker when the cluster has none (s).
+WAIT_FOR_WORKERS_S = 120.0
+
+
 class OnDask:
     """Every frame as one dask task, all at once; each frame goes back to the worker that holds its
     loaded scene (``allow_other_workers``: a lost worker's frames run elsewhere)."""
@@ -274,8 +278,12 @@ class OnDask:
     def _placement(self, keys: Sequence[str]) -> list[str]:
         """Each frame's worker: its home if alive, else the live worker with the fewest frames."""
         alive = list(self.client.scheduler_info(n_workers=-1)["workers"])
-        if not alive:
-            raise InputError("the dask cluster has no workers.")
+        if not alive:  # a lost worker's nanny may be starting it again
+            try:
+                self.client.wait_for_workers(1, timeout=WAIT_FOR_WORKERS_S)
+            except TimeoutError:
+                raise InputError(f"the dask cluster has had no workers for {WAIT_FOR_WORKERS_S:g} s.") from None
+            alive = list(self.client.scheduler_info(n_workers=-1)["workers"])
         load = {w: 0 for w in alive}
         for key in keys:
             if self.home.get(key) in load:
