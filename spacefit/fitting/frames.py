@@ -78,8 +78,9 @@ def share_views(specs: Sequence[FrameSpec]) -> list[FrameSpec]:
     return [dataclasses.replace(spec, shared_view=True) for spec in specs]
 
 
-# The loaded scenes a process keeps at most (each 10 to 20 MiB at 32 x 32 px, besides a process's
-# 420 MiB of JAX and Mitsuba); past it the least recently used one is dropped with its frames.
+# The loaded scenes a process keeps at most (a pass needs one; measured at 32 x 32 px, a worker is
+# about 510 MiB with one, and 8 MiB more per frame it holds); past it the least recently used one
+# is dropped with its frames.
 MAX_SCENES = 8
 # The values every frame sets on the loaded scene it shares: its camera (the whole camera frame
 # through the roll) and its sun; its target's pose too when a pose parameter is free.
@@ -121,10 +122,11 @@ class Loaded:
     fit's steps.
 
     The frames of a pass (:attr:`FrameSpec.shared_view`) differ in camera, sun and target pose
-    only, so they share one loaded scene and set their own values on it at each render. Dr.Jit traces every loaded scene's plugins in
-    each render (its calls cover every instance alive: mitsuba3#1700), so a process holding a loaded
-    scene per frame paid per render for all of them: 0.25 s per frame and step with one frame held,
-    1.4 s with eight (16 x 16 px). At most ``max_scenes`` are kept, the least recently used dropped.
+    only, so they share one loaded scene and set their own values on it at each render. Dr.Jit
+    traces every loaded scene's plugins in each render (its calls cover every instance alive:
+    mitsuba3#1700), so a process holding a loaded scene per frame paid per render for all of them:
+    0.25 s per frame and step with one frame held, 1.4 s with eight (16 x 16 px). At most
+    ``max_scenes`` are kept, the least recently used dropped.
     """
 
     max_scenes: int = MAX_SCENES
