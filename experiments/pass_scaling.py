@@ -1,7 +1,7 @@
 """Time per fit step of a pass against dask workers: the batch of every frame's render and Jacobian
 columns (what one Levenberg-Marquardt step evaluates), in this process and on local clusters of 1
-to N single-threaded worker processes; parallel efficiency, memory per worker, and whether every
-worker count gives the same numbers as this process.
+to N single-threaded worker processes; parallel efficiency, memory per worker (and the loaded scenes
+and frames each holds), and whether every worker count gives the same numbers as this process.
 
     python experiments/pass_scaling.py --out experiments/results/pass_scaling            # 24 and 100 frames, 0 to 4 workers
     python experiments/pass_scaling.py --frames 4 --workers 0 2 --size 16 --out /tmp/x  # a quick check

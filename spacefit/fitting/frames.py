@@ -79,8 +79,9 @@ def share_views(specs: Sequence[FrameSpec]) -> list[FrameSpec]:
     return [dataclasses.replace(spec, shared_view=True) for spec in specs]
 
 
-# The loaded scenes a process keeps at most (each 10 to 20 MiB at 32 x 32 px, besides a process's
-# 420 MiB of JAX and Mitsuba); past it the least recently used one is dropped with its frames.
+# The loaded scenes a process keeps at most (a pass needs one; measured at 32 x 32 px, a worker is
+# about 510 MiB with one, and 8 MiB more per frame it holds); past it the least recently used one
+# is dropped with its frames.
 MAX_SCENES = 8
 # The values every frame sets on the loaded scene it shares: its camera (the whole camera frame
 # through the roll) and its sun; its target's pose too when a pose parameter is free.
@@ -122,10 +123,11 @@ class Loaded:
     dask worker) keeps them between a fit's steps.
 
     The frames of a pass (:attr:`FrameSpec.shared_view`) differ in camera, sun and target pose
-    only, so they share one loaded scene and set their own values on it at each render. Dr.Jit traces every loaded scene's plugins in
-    each render (its calls cover every instance alive: mitsuba3#1700), so a process holding a loaded
-    scene per frame paid per render for all of them: 0.25 s per frame and step with one frame held,
-    1.4 s with eight (16 x 16 px). At most ``max_scenes`` are kept, the least recently used dropped.
+    only, so they share one loaded scene and set their own values on it at each render. Dr.Jit
+    traces every loaded scene's plugins in each render (its calls cover every instance alive:
+    mitsuba3#1700), so a process holding a loaded scene per frame paid per render for all of them:
+    0.25 s per frame and step with one frame held, 1.4 s with eight (16 x 16 px). At most
+    ``max_scenes`` are kept, the least recently used dropped.
     """
 
     max_scenes: int = MAX_SCENES
@@ -274,6 +276,10 @@ def _on_worker(fn: Callable[..., Any], spec: FrameSpec, key: str, *args: Any) ->
         return fn(spec, key, *args), get_worker().address
 
 
+# How long a step waits for a worker when the cluster has none (s).
+WAIT_FOR_WORKERS_S = 120.0
+
+
 class OnDask:
     """Every frame as one dask task, all at once; each frame goes back to the worker that holds its
     loaded scene (``allow_other_workers``: a lost worker's frames run elsewhere)."""
@@ -287,8 +293,12 @@ class OnDask:
     def _placement(self, keys: Sequence[str]) -> list[str]:
         """Each frame's worker: its home if alive, else the live worker with the fewest frames."""
         alive = list(self.client.scheduler_info(n_workers=-1)["workers"])
-        if not alive:
-            raise InputError("the dask cluster has no workers.")
+        if not alive:  # a lost worker's nanny may be starting it again
+            try:
+                self.client.wait_for_workers(1, timeout=WAIT_FOR_WORKERS_S)
+            except TimeoutError:
+                raise InputError(f"the dask cluster has had no workers for {WAIT_FOR_WORKERS_S:g} s.") from None
+            alive = list(self.client.scheduler_info(n_workers=-1)["workers"])
         load = {w: 0 for w in alive}
         for key in keys:
             if self.home.get(key) in load:
