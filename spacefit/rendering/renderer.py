@@ -33,8 +33,9 @@ MAX_SAMPLES_PER_PASS = 1 << 24
 # radius (1 px) and one for rounding.
 CROP_MARGIN_PX = 2
 # Bytes a render holds per film pixel: Mitsuba's film (RGB, alpha, weight in float32), the image and
-# its copies in NumPy (float32 RGB), the part IDs and the preview's tone map (done in row blocks).
-BYTES_PER_PIXEL = 80
+# its copies in NumPy (float32 RGB), the traced pixels' indices (int64, then uint32), the part IDs and
+# the preview's tone map (done in row blocks).
+BYTES_PER_PIXEL = 92
 # Bytes per sample in flight in the wavefront (about 1 GB at MAX_SAMPLES_PER_PASS, measured).
 BYTES_PER_SAMPLE = 64
 # Samples one Dr.Jit wavefront can hold: its arrays are indexed with 32-bit integers.
@@ -329,9 +330,9 @@ class Renderer:
         intr = assembly.intrinsics
         vertices = assembly.scene_vertices
         self.window = target_window(assembly, vertices) if crop else (0, 0, intr.width, intr.height)
-        self.traced = target_mask(assembly, vertices, self.window) if crop else np.ones(self.window[:1:-1], dtype=bool)
         r = assembly.scene.render
-        self.memory_bytes = check_memory(intr.width, intr.height, int(self.traced.sum()), r.spp)
+        self.memory_bytes = check_memory(intr.width, intr.height, self.window[2] * self.window[3], r.spp)  # the mask traces fewer
+        self.traced = target_mask(assembly, vertices, self.window) if crop else np.ones(self.window[:1:-1], dtype=bool)
         self._pixels = mi.UInt32(np.flatnonzero(self.traced).astype(np.uint32))
         self.scene = mi.load_dict(scene_dict(assembly, vertices, self.window))
         self.params = mi.traverse(self.scene)
