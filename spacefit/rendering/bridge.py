@@ -95,10 +95,7 @@ class DrJitScene:
     def primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """Radiance image (h, w, 3) float32 at ``values``; bitwise reproducible if the scene is deterministic."""
         self._set(values, grad=False)
-        with render_threads(self.renderer.assembly.scene.render.deterministic):
-            image = sum(mi.render(self.renderer.scene, integrator=self._integrator, seed=seed_i, spp=count) * weight
-                        for seed_i, count, weight in self._passes(self.spp, seed))
-            return self.renderer.to_film(np.asarray(image, dtype=np.float32))
+        return self.renderer.radiance(self.spp, seed)  # the scene's path tracer: a seed gives the image Renderer.render gives
 
     def forward(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
         """Directional derivative of the image along ``tangent`` (same keys as ``values``), one render."""

@@ -409,6 +409,12 @@ class Renderer:
         spp = r.spp if spp is None else spp
         seed = r.seed if seed is None else seed
         check_sample_count("spp", spp, r.sampler)
+        return self.radiance(spp, seed, progress)
+
+    def radiance(self, spp: int, seed: int, progress: ProgressCallback | None = None) -> np.ndarray:
+        """:meth:`render` of checked arguments (the fit's primal renders take this, so that a seed gives
+        the image :meth:`render` gives): float32 (height, width, 3), W m^-2 sr^-1."""
+        r = self.assembly.scene.render
         passes = pass_seeds(seed, spp, len(self._pixels), r.sampler)
         film = self.scene.sensors()[0].film()
         film.prepare([])
