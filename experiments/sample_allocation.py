@@ -10,7 +10,7 @@ the rest in proportion to the spread of each pixel's first-pass samples (rendere
 time); its error follows from the true sigma_i, with no further render
 (:func:`spacefit.studies.costs.allocation_gains`).
 
-For each view of ``forward_pareto.VIEWS`` (600 px, depth 2, spacefit's window, ``multijitter``),
+For each view of ``forward_pareto.VIEWS`` (600 px, depth 2, spacefit's mask, the default sampler ``multijitter``),
 sigma_i is measured from ``--seeds`` renders at ``--spp`` (all channels of a pixel share its
 samples, so sigma_i^2 is the mean of its channels' variances). It assumes a pixel's variance falls
 as 1 / n (true for independent samples; stratified ones do better in smooth pixels, so the bound
@@ -51,8 +51,8 @@ def main() -> None:
     rows = []
     for view, extra in VIEWS.items():
         base = ["render.deterministic=false", *extra]
-        lit = Renderer(assemble(load_scene(None, base))).render(spp=args.reference_spp, seed=REFERENCE_SEED).max(axis=-1) > 0
-        renderer = Renderer(assemble(load_scene(None, [*base, 'render.sampler="multijitter"'])))
+        renderer = Renderer(assemble(load_scene(None, base)))  # the default sampler, multijitter
+        lit = renderer.render(spp=args.reference_spp, seed=REFERENCE_SEED).max(axis=-1) > 0
         images = np.stack([renderer.render(spp=args.spp, seed=seed) for seed in range(1, args.seeds + 1)])
         # the first pass's samples one at a time: their spread is each pixel's per-sample sigma
         pilot = np.stack([renderer.render(spp=1, seed=seed)

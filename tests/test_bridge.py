@@ -47,6 +47,7 @@ def test_bijection_round_trip(name):
 @pytest.fixture(scope="module")
 def case():
     scene = load_scene(None, CASE)
+    assert scene.render.sampler == "multijitter"  # the default sampler's derivatives are what these tests check
     free = free_parameters(scene, NAMES)
     chain = render_chain(scene, NAMES, spp=1024, spp_grad=1024)
     assert chain.renderer.window[2:] == (32, 32)  # D, G and the pose move vertices: the whole film

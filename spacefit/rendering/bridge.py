@@ -122,10 +122,7 @@ class DrJitScene:
     def render_primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """:meth:`primal` rendered, not kept (a finite difference's renders are used once)."""
         self._set(values, grad=False)
-        with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():
-            image = sum(mi.render(self.renderer.scene, integrator=self._integrator, seed=seed_i, spp=count) * weight
-                        for seed_i, count, weight in self._passes(self.spp, seed))
-            return self.renderer.to_film(np.asarray(image, dtype=np.float32))
+        return self.renderer.radiance(self.spp, seed)  # the scene's path tracer: a seed gives the image Renderer.render gives
 
     @in_variant
     def forward(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:

@@ -34,8 +34,9 @@ MAX_SAMPLES_PER_PASS = 1 << 24
 # radius (1 px) and one for rounding.
 CROP_MARGIN_PX = 2
 # Bytes a render holds per film pixel: Mitsuba's film (RGB, alpha, weight in float32), the image and
-# its copies in NumPy (float32 RGB), the part IDs and the preview's tone map (done in row blocks).
-BYTES_PER_PIXEL = 80
+# its copies in NumPy (float32 RGB), the traced pixels' indices (int64, then uint32), the part IDs and
+# the preview's tone map (done in row blocks).
+BYTES_PER_PIXEL = 92
 # Bytes per sample in flight in the wavefront (about 1 GB at MAX_SAMPLES_PER_PASS, measured).
 BYTES_PER_SAMPLE = 64
 # Samples one Dr.Jit wavefront can hold: its arrays are indexed with 32-bit integers.
@@ -352,9 +353,9 @@ class Renderer:
         intr = assembly.intrinsics
         vertices = assembly.scene_vertices
         self.window = target_window(assembly, vertices) if crop else (0, 0, intr.width, intr.height)
-        self.traced = target_mask(assembly, vertices, self.window) if crop else np.ones(self.window[:1:-1], dtype=bool)
         r = assembly.scene.render
-        self.memory_bytes = check_memory(intr.width, intr.height, int(self.traced.sum()), r.spp)
+        self.memory_bytes = check_memory(intr.width, intr.height, self.window[2] * self.window[3], r.spp)  # the mask traces fewer
+        self.traced = target_mask(assembly, vertices, self.window) if crop else np.ones(self.window[:1:-1], dtype=bool)
         with variant_scope(self.variant):
             self._pixels = mi.UInt32(np.flatnonzero(self.traced).astype(np.uint32))
             self.scene = mi.load_dict(scene_dict(assembly, vertices, self.window))
@@ -435,6 +436,13 @@ class Renderer:
         spp = r.spp if spp is None else spp
         seed = r.seed if seed is None else seed
         check_sample_count("spp", spp, r.sampler)
+        return self.radiance(spp, seed, progress)
+
+    @in_variant
+    def radiance(self, spp: int, seed: int, progress: ProgressCallback | None = None) -> np.ndarray:
+        """:meth:`render` of checked arguments (the fit's primal renders take this, so that a seed gives
+        the image :meth:`render` gives): float32 (height, width, 3), W m^-2 sr^-1."""
+        r = self.assembly.scene.render
         passes = pass_seeds(seed, spp, len(self._pixels), r.sampler)
         film = self.scene.sensors()[0].film()
         film.prepare([])

@@ -148,8 +148,10 @@ class RenderSettings(Section):
     jittered grid; at equal samples it gave the lowest error of the five in both views of
     ``experiments/forward_pareto.py --methods`` (0.12 against ``independent``'s 0.27 at 16 spp in the
     default view: ``independent`` needs about 5x the samples), tied with ``orthogonal``, which takes fewer
-    counts. Each is unbiased and one seed gives one image. A count of samples a sampler would round
-    (:data:`SAMPLE_COUNTS`) is refused, here and at each render, never rounded silently.
+    counts. Each is unbiased and one seed gives one image. A count of samples that ``stratified``,
+    ``ldsampler`` or ``orthogonal`` would round (:data:`SAMPLE_COUNTS`) is refused, here and at each
+    render; ``multijitter`` renders one it would round as passes of counts it takes
+    (:func:`split_sample_count`). None is rounded silently.
     """
 
     resolution: tuple[int, int] = (600, 600)
