@@ -107,8 +107,8 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     f.add_argument("--spp-grad", type=int, metavar="N", help="samples per pixel of derivative renders (default: --spp)")
     f.add_argument("--max-steps", type=int, metavar="N", help="solver step limit (default 50)")
     f.add_argument("--stop", metavar="noise|tolerance",
-                   help="stop also when a step would gain less than the loss's Monte Carlo noise (noise, default), "
-                        "or on the solver's tolerances alone")
+                   help="stop also when a step would gain less than the loss's Monte Carlo noise or the trial steps "
+                        "find no lower loss (noise, default), or on the solver's tolerances alone")
     f.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
                    help="start value of a free parameter (default: the first scene's value; repeatable)")
     f.add_argument("--sigma", type=float, metavar="S",

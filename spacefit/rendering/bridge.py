@@ -111,8 +111,8 @@ class DrJitScene:
     @in_variant
     def primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """Radiance image (h, w, 3) float32 at ``values``; bitwise reproducible if the scene is deterministic.
-        The last one is kept: a solver's step renders a point and then linearises at it, whose
-        Jacobian (:func:`render_params`) starts from that same image (one render of about ten per step)."""
+        The last one is kept: a Jacobian (:func:`render_params`) renders its point's image first, and the
+        residuals asked next at that point and seed (a fit's standard errors) are that image."""
         key = self._key(values, seed)
         if self._last is None or self._last[0] != key:
             self._last = (key, self.render_primal(values, seed))
