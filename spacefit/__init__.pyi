@@ -6,6 +6,7 @@ from spacefit.cases import load_case as load_case
 from spacefit.errors import InputError as InputError
 from spacefit.fitting.brdf_table import BRDFTable as BRDFTable
 from spacefit.fitting.brdf_table import BRDF_MODELS as BRDF_MODELS
+from spacefit.fitting.brdf_table import TabulatedBRDF as TabulatedBRDF
 from spacefit.fitting.brdf_table import compare_brdf_models as compare_brdf_models
 from spacefit.fitting.brdf_table import fit_brdf_table as fit_brdf_table
 from spacefit.fitting.brdf_table import fitted_material as fitted_material
@@ -112,7 +113,7 @@ __all__ = [
     'write_observation', 'sensor_of', 'format_sensor_sources', 'MLI_SLOPE_RANGE', 'Pass', 'Frame', 'frame_table', 'plot_frames', 'arc_pass',
     'simulate_pass', 'read_sweep_file', 'sweep', 'verify_store', 'StoreReport', 'ClusterError', 'Sensitivity', 'sensitivity', 'LightCurve',
     'light_curve', 'plot_comparison', 'plot_convergence', 'DiffuseConductor', 'BRDFTable', 'BRDF_MODELS', 'read_brdf_table',
-    'fit_brdf_table', 'fitted_material', 'compare_brdf_models', 'TableFit', 'write_table_fit', 'Site', 'LightCurveObservations',
-    'read_light_curve', 'Plate', 'predict_magnitudes', 'fit_plates', 'fitted_plates', 'light_curve_convergence', 'fit_light_curve',
-    'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings',
+    'fit_brdf_table', 'fitted_material', 'compare_brdf_models', 'TabulatedBRDF', 'TableFit', 'write_table_fit', 'Site',
+    'LightCurveObservations', 'read_light_curve', 'Plate', 'predict_magnitudes', 'fit_plates', 'fitted_plates', 'light_curve_convergence',
+    'fit_light_curve', 'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings',
 ]
