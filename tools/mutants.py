@@ -237,6 +237,10 @@ MUTANTS = (
            'check_path("out_dir", out_dir)', ("tests/test_brdf_tables.py",)),
     Mutant("light-curve-sun-directions-not-normalised", "spacefit/studies/observing.py", "fields[name] = scaled / norm",
            "fields[name] = v", ("tests/test_observed_lightcurves.py",)),
+    # the documentation site: the front page shows the render; a page's link to another resolves
+    Mutant("docs-front-picture-a-thumbnail", "docs/index.md", ":width: 320px", ":width: 32px", ("tests/test_docs.py",)),
+    Mutant("docs-link-to-a-missing-page", "docs/getting-started.md", "([](guide/render.md))", "([](guide/rendering.md))",
+           ("tests/test_docs.py",)),
 )
 
 
