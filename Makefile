@@ -17,9 +17,10 @@ render: setup
 test: setup
 	.venv/bin/python -m pytest -q -n $(JOBS) --dist loadscope $(PYTEST_ARGS)
 
-# The documentation site, docs/_build/html: warnings are errors; the gallery and the notebooks run in the build.
+# The documentation site, docs/_build/html: warnings are errors; the gallery and the notebooks run in the build
+# (the notebooks in parallel, one process a core).
 docs: setup
-	.venv/bin/python -m sphinx -b html -W --keep-going docs docs/_build/html
+	.venv/bin/python -m sphinx -b html -W --keep-going -j auto docs docs/_build/html
 
 # Plant each named one-line bug of tools/mutants.py and check that its tests catch it (minutes; not in CI).
 mutants: setup

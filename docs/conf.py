@@ -14,9 +14,11 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).parent / "_ext"))
 FAST = os.environ.get("SPACEFIT_DOCS_FAST") == "1"
 
 import spacefit  # noqa: E402
+from gallery_figures import FigureScraper  # noqa: E402
 
 project = "spacefit"
 author = "spacefit authors"
@@ -34,7 +36,7 @@ extensions = [
 ]
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "gallery/*.ipynb", "gallery/*.py", "gallery/*.zip",
-                    "gallery/*.md5", "gallery/*.json", "examples/*", "jupyter_execute"]
+                    "gallery/*.md5", "gallery/*.json", "examples/*", "jupyter_execute", "_generated/*", "_ext/*"]
 suppress_warnings = ["config.cache"]  # sphinx-gallery's conf holds functions, which Sphinx cannot pickle
 
 # MyST: headings get anchors so pages can link to sections
@@ -58,36 +60,6 @@ napoleon_google_docstring = True  # the docstrings' "Args:", "Returns:", "Attrib
 napoleon_numpy_docstring = False
 napoleon_use_ivar = True
 
-
-
-class FigureScraper:
-    """sphinx-gallery's scraper for the figures spacefit returns: its plot functions make ``matplotlib.figure.Figure``
-    objects outside pyplot (no global state) and return their axes, which the matplotlib scraper cannot see; this one
-    saves the Figure of every Figure, Axes or array of Axes the example's variables hold, once."""
-
-    def __init__(self) -> None:
-        self.seen: set[int] = set()
-
-    def __repr__(self) -> str:  # sphinx-gallery keys its cache by the scrapers' reprs
-        return "spacefit.FigureScraper"
-
-    def __call__(self, block, block_vars, gallery_conf) -> str:
-        import numpy as np
-        from matplotlib.artist import Artist
-        from matplotlib.figure import Figure
-        from sphinx_gallery.scrapers import figure_rst
-
-        paths = []
-        for value in list(block_vars["example_globals"].values()):
-            if isinstance(value, (list, tuple, np.ndarray)) and len(value) and isinstance(np.ravel(np.asarray(value, dtype=object))[0], Artist):
-                value = np.ravel(np.asarray(value, dtype=object))[0]  # the axes a plot function returns
-            figure = value.figure if isinstance(value, Artist) and not isinstance(value, Figure) else value
-            if isinstance(figure, Figure) and id(figure) not in self.seen:
-                self.seen.add(id(figure))
-                path = next(block_vars["image_path_iterator"])
-                figure.savefig(path, dpi=80)
-                paths.append(path)
-        return figure_rst(paths, gallery_conf["src_dir"])
 
 
 sphinx_gallery_conf = {

@@ -31,8 +31,7 @@ from astropy.table import Table
 
 import spacefit as sf
 
-ROOT = Path.cwd().parent if Path.cwd().name == "experiments" else Path.cwd()
-base = sf.load_scene(ROOT / "spacefit/synthetic/panels.toml", {"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0})
+base = sf.load_case("panels").truth_scene.with_values({"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0})
 truth = {"parts.panels.alpha_x": 0.15, "parts.panels.alpha_y": 0.03, "parts.legs.kd": 0.5}
 sensor = sf.Sensor(radiometric_scale_dn_per_w_m2_sr=500.0, gain_dn_per_electron=0.5, bias_dn=100.0, read_noise_electrons=5.0,
                    bit_depth=16, full_well_electrons=None, diffraction=False, psf_sigma_px=0.0)

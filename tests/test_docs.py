@@ -32,7 +32,8 @@ def sphinx(out: Path, *, fast: bool, builder: str = "html") -> subprocess.Comple
     notebooks unrun (their code runs in the tests below)."""
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]),
            "SPACEFIT_DOCS_FAST": "1" if fast else "0", "MPLBACKEND": "Agg"}
-    return subprocess.run([sys.executable, "-m", "sphinx", "-b", builder, "-W", "--keep-going", "-q", "-d", str(out / "doctrees"),
+    jobs = [] if fast else ["-j", "auto"]  # as make docs: the notebooks in parallel
+    return subprocess.run([sys.executable, "-m", "sphinx", "-b", builder, "-W", "--keep-going", "-q", *jobs, "-d", str(out / "doctrees"),
                            str(DOCS), str(out / builder)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=1200)
 
 

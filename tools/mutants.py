@@ -277,6 +277,10 @@ MUTANTS = (
            ("tests/test_silhouette.py",)),
     Mutant("multijitter-rounds-silently", "spacefit/scene/schema.py", "    if sampler == \"multijitter\":\n        return spp % root == 0\n",
            "", ("tests/test_sampler.py",)),
+    # the documentation site: the front page shows the render; a page's link to another resolves
+    Mutant("docs-front-picture-a-thumbnail", "docs/index.md", ":width: 320px", ":width: 32px", ("tests/test_docs.py",)),
+    Mutant("docs-link-to-a-missing-page", "docs/getting-started.md", "([](guide/render.md))", "([](guide/rendering.md))",
+           ("tests/test_docs.py",)),
 )
 
 

@@ -1,0 +1,30 @@
+"""sphinx-gallery's scraper for the figures spacefit returns (a module of its own: Sphinx pickles the configuration)."""
+
+from __future__ import annotations
+
+
+class FigureScraper:
+    """sphinx-gallery's scraper for the figures spacefit returns: its plot functions make ``matplotlib.figure.Figure``
+    objects outside pyplot (no global state) and return their axes, which the matplotlib scraper cannot see; this one
+    saves the Figure of every Figure, Axes or array of Axes the example's variables hold, once."""
+
+    def __repr__(self) -> str:  # sphinx-gallery keys its cache by the scrapers' reprs
+        return "spacefit.FigureScraper"
+
+    def __call__(self, block, block_vars, gallery_conf) -> str:
+        import numpy as np
+        from matplotlib.artist import Artist
+        from matplotlib.figure import Figure
+        from sphinx_gallery.scrapers import figure_rst
+
+        paths = []
+        for value in list(block_vars["example_globals"].values()):
+            if isinstance(value, (list, tuple, np.ndarray)) and len(value) and isinstance(np.ravel(np.asarray(value, dtype=object))[0], Artist):
+                value = np.ravel(np.asarray(value, dtype=object))[0]  # the axes a plot function returns
+            figure = value.figure if isinstance(value, Artist) and not isinstance(value, Figure) else value
+            if isinstance(figure, Figure) and not getattr(figure, "_shown_in_gallery", False):
+                figure._shown_in_gallery = True
+                path = next(block_vars["image_path_iterator"])
+                figure.savefig(path, dpi=80)
+                paths.append(path)
+        return figure_rst(paths, gallery_conf["src_dir"])
