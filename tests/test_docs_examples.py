@@ -45,11 +45,12 @@ def test_gallery_example_runs(script, tmp_path, monkeypatch):
 
     code = script.read_text()
     assert "from spacefit." not in code and "import spacefit." not in code
-    from matplotlib.figure import Figure
+    monkeypatch.syspath_prepend(str(DOCS / "_ext"))
+    from gallery_figures import figures_in
 
     monkeypatch.chdir(tmp_path)
     variables = {"__name__": "__main__"}
     exec(compile(code, str(script), "exec"), variables)
-    made = plt.get_fignums() or [v for v in variables.values() if isinstance(v, Figure)]
+    made = plt.get_fignums() or figures_in(variables)
     assert made, f"{script.name} made no figure"
     plt.close("all")
