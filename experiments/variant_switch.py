@@ -1,5 +1,5 @@
 """What Mitsuba's variant switch costs a caller who keeps another variant: ``renders`` small renders
-(sf.Renderer.render) with the caller's variant set to ``variant`` before each (README, "Python API").
+(sf.Renderer.render) with the caller's variant set to ``variant`` before each (docs/api.md).
 
 Usage: python experiments/variant_switch.py VARIANT [RENDERS]; time it with farm-bench against llvm_ad_rgb
 (no switch), e.g. farm-bench --vs "python experiments/variant_switch.py llvm_ad_rgb" -- python experiments/variant_switch.py scalar_rgb

@@ -7,7 +7,7 @@ nuisance, image-space, one per observation, set jointly with others), its finite
 (or 0 for forward-mode AD), the scene-file fields it replaces and, for materials, the Mitsuba BSDF
 fields it sets. The group tuples (:data:`GEOMETRY`, :data:`ATTITUDE`, :data:`NUISANCES`, ...) are
 derived from the entries, so a new parameter is added in one place. The CLI's help, the error
-messages and the README's table (:func:`parameter_table`) are generated from it. The module is
+messages and the documentation's table (:func:`parameter_table`) are generated from it. The module is
 plain Python and NumPy: the solver's coordinates on these ranges (bijections, in JAX) are the
 fitting code's, :mod:`spacefit.fitting.params`.
 
@@ -480,7 +480,7 @@ def fd_step(scene: Scene, name: str) -> float:
 
 
 def parameter_table() -> str:
-    """The registry as a Markdown table (the README's list of free parameters is this text)."""
+    """The registry as a Markdown table (the documentation's list of free parameters is this text, written at build time)."""
     rows = ["| name | unit | valid range | Jacobian column | sets |", "|---|---|---|---|---|"]
     for p in PARAMETERS.values():
         column = "forward-mode AD" if not p.fd_step else (
