@@ -59,7 +59,8 @@ import tifffile
 from astropy.io import fits
 
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_array, check_choice, check_path, check_range, check_type, negative_pixels, quote
-from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, check_fields, missing_for_measurement, used_fields
+from spacefit.sensor import Sensor, check_fields, missing_for_measurement, used_fields
+from spacefit.units import DN_UNIT, RADIANCE_UNIT
 
 if TYPE_CHECKING:
     from jaxtyping import Bool, Float

@@ -60,10 +60,6 @@ from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
 if TYPE_CHECKING:
     from jaxtyping import Bool, Float
 
-RADIANCE_UNIT = "W m^-2 sr^-1"
-"""The unit of rendered images and radiance references."""
-DN_UNIT = "DN"
-"""The unit of a sensor's digital numbers (ADC counts)."""
 AIRY_FIRST_ZERO = 3.8317059702075125
 """First zero of the Bessel function J1: the Airy pattern's first dark ring is at x = pi D theta / lambda = 3.8317, theta = 1.21967 lambda / D."""
 PSF_ENERGY = 0.99

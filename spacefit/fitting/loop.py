@@ -31,7 +31,7 @@ from spacefit.progress import ProgressCallback
 from spacefit.rendering.renderer import PartImage, mitsuba_scene_dict
 from spacefit.scene.schema import Scene
 from spacefit.scene.parameters import is_nuisance, observation_of, parameter, scene_with_values
-from spacefit.sensor import DN_UNIT
+from spacefit.units import DN_UNIT
 
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
 # region may try (and reject) a single non-finite point.

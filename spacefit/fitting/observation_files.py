@@ -13,6 +13,7 @@ from spacefit.fitting.problem import Observation
 from spacefit.imageio import RESPONSES, ROW_ORDERS, SENSOR_DEFAULTS, UNITS
 from spacefit.scene.schema import Scene
 from spacefit.scene.toml import load_scene
+from spacefit.units import RADIANCE_UNIT
 
 
 @dataclass(frozen=True)
@@ -95,7 +96,7 @@ class ObservationFiles:
                 raise InputError(f"`resolution` must be (width, height) px, got {self.resolution!r}.")
             object.__setattr__(self, "resolution", tuple(self.resolution))
         if self.sigma is not None:
-            check_range("sigma", self.sigma, 0.0, lo_open=True, unit="W m^-2 sr^-1")
+            check_range("sigma", self.sigma, 0.0, lo_open=True, unit=RADIANCE_UNIT)
         for name, value, choices in (("sensor_defaults", self.sensor_defaults, SENSOR_DEFAULTS),
                                      ("row_order", self.row_order, ROW_ORDERS), ("unit", self.unit, UNITS),
                                      ("response", self.response, RESPONSES)):

@@ -21,7 +21,7 @@ from spacefit.errors import check_choice, check_range
 from spacefit.fitting.loop import FitResult
 from spacefit.output import PREVIEW_PERCENTILE, preview_scale, to_srgb8
 from spacefit.plotting import axis_label, cropped, image_box, panels, show_image, unit_label
-from spacefit.sensor import RADIANCE_UNIT
+from spacefit.units import RADIANCE_UNIT
 
 
 def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: Axes | Sequence[Axes] | None = None,

@@ -32,7 +32,8 @@ from spacefit.rendering.derivatives import check_seeds, check_spp
 from spacefit.rendering.renderer import PartImage
 from spacefit.scene.assembly import assemble
 from spacefit.scene.schema import FILTER_RADIUS_PX, Scene, check_scene
-from spacefit.sensor import DN_UNIT, RADIANCE_UNIT, Sensor, check_flat, psf_rms_px, read_sensor_file, saturated_mask
+from spacefit.sensor import Sensor, check_flat, psf_rms_px, read_sensor_file, saturated_mask
+from spacefit.units import DN_UNIT, RADIANCE_UNIT
 from spacefit.scene.parameters import GEOMETRY, G_of, observation_of, rms_of, scene_value, scene_with_values
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")

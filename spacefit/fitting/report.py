@@ -35,7 +35,7 @@ from spacefit.fitting.solvers import Status
 from spacefit.fitting.passes import frame_table, plot_frames, write_frame_table
 from spacefit.fitting.plots import plot_comparison, plot_convergence, plot_residuals
 from spacefit.output import staged_output, versions, write_json
-from spacefit.sensor import DN_UNIT
+from spacefit.units import DN_UNIT
 
 # The residual images' units as FITS BUNIT.
 FITS_UNITS = {DN_UNIT: "adu"}

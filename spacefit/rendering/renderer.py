@@ -27,6 +27,7 @@ from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, 
 from spacefit.rendering.silhouette import traced_pixels
 from spacefit.scene.schema import (FAR_CLIP_M, FILTER_RADIUS_PX, MAX_SEED, MAX_SPP, NEAR_CLIP_M, Scene, check_sample_count, check_scene,
                                    split_sample_count)
+from spacefit.units import RADIANCE_UNIT
 
 # Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.
 MAX_SAMPLES_PER_PASS = 1 << 24
@@ -330,7 +331,7 @@ class PartImage:
         pixels, means = self.means(radiance, used)
         return xr.Dataset(
             {"pixels": ("region", pixels, {"description": "pixels whose centre sees the region"}),
-             "mean_radiance": ("region", means, {"units": "W m^-2 sr^-1",
+             "mean_radiance": ("region", means, {"units": RADIANCE_UNIT,
                                                   "description": "mean of the RGB mean over those pixels (NaN: out of view)"})},
             coords={"region": list(self.regions)})
 

@@ -27,9 +27,9 @@ from spacefit.errors import check_choice, check_count, check_range
 from spacefit.progress import progress_bar
 from spacefit.scene.parameters import check_names, label, parameter
 from spacefit.scene.schema import Scene, check_scene
+from spacefit.units import RADIANCE_UNIT
 
 TARGET = "target"  # the region of every part together, beside the parts
-RADIANCE_UNIT = "W m^-2 sr^-1"  # spacefit.sensor's (which imports SciPy: slow)
 CONFIDENCE = 0.95  # two-sided: a derivative is resolved when this interval excludes zero
 # The sweep's per-point variables of a sensitivity: name -> (dtype, fill, unit, description).
 SUMMARY_VARIABLES: dict[str, tuple[Any, Any, str, str]] = {
@@ -240,10 +240,10 @@ class Sensitivity:
 
         per_unit = "W m^-2 sr^-1 per parameter_unit"
         return xr.Dataset(
-            {"image": (("y", "x", "channel"), self.image, {"units": "W m^-2 sr^-1"}),
+            {"image": (("y", "x", "channel"), self.image, {"units": RADIANCE_UNIT}),
              "derivative": (("parameter", "y", "x", "channel"), self.derivative, {"units": per_unit}),
              "derivative_se": (("parameter", "y", "x", "channel"), self.derivative_se, {"units": per_unit}),
-             "mean_radiance": (("region",), self.mean_radiance, {"units": "W m^-2 sr^-1"}),
+             "mean_radiance": (("region",), self.mean_radiance, {"units": RADIANCE_UNIT}),
              "pixels": (("region",), self.pixels),
              **{k: (("parameter", "region"), v, {"units": SUMMARY_VARIABLES[k][2], "description": SUMMARY_VARIABLES[k][3]})
                 for k, v in point_summaries(self).items()}},

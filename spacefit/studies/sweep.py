@@ -51,6 +51,7 @@ from spacefit.studies.cluster import STALL_S, check_scheduler, run_on_dask
 from spacefit.studies.sensitivity import SUMMARY_VARIABLES, normalisation
 from spacefit.studies import worker
 from spacefit.studies.worker import Task, regions
+from spacefit.units import RADIANCE_UNIT
 
 RENDER_ARGUMENTS = ("render.seed", "render.spp")
 # Scene keys a sweep cannot vary: they fix the shape of the store's images and part lists.
@@ -222,7 +223,7 @@ def point_variables(scene: Scene, *, images: bool, derivatives: tuple[str, ...])
     """The variables of each point: name -> (extra dimensions, their sizes, dtype, fill, unit, description)."""
     n = len(regions(scene))
     out: dict[str, tuple[Any, ...]] = {
-        "mean_radiance": (("region",), (n,), np.float64, np.nan, "W m^-2 sr^-1",
+        "mean_radiance": (("region",), (n,), np.float64, np.nan, RADIANCE_UNIT,
                           "mean over the pixels whose centre sees the region of the RGB mean radiance"),
         "pixels": (("region",), (n,), np.int32, -1, "1", "pixels whose centre sees the region"),
         "irradiance": (("region",), (n,), np.float64, np.nan, "W m^-2",
@@ -230,7 +231,7 @@ def point_variables(scene: Scene, *, images: bool, derivatives: tuple[str, ...])
     }
     if images:
         w, h = scene.render.resolution
-        out["radiance"] = (("y", "x", "channel"), (h, w, 3), np.float32, np.nan, "W m^-2 sr^-1", "the rendered image")
+        out["radiance"] = (("y", "x", "channel"), (h, w, 3), np.float32, np.nan, RADIANCE_UNIT, "the rendered image")
     for name, (dtype, fill, unit, doc) in (SUMMARY_VARIABLES.items() if derivatives else ()):
         out[name] = (("parameter", "region"), (len(derivatives), n), dtype, fill, unit, doc)
     return out
