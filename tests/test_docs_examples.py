@@ -45,11 +45,14 @@ def test_gallery_example_runs(script, tmp_path, monkeypatch):
 
     code = script.read_text()
     assert "from spacefit." not in code and "import spacefit." not in code
+    import numpy as np
+    from matplotlib.axes import Axes
     from matplotlib.figure import Figure
 
     monkeypatch.chdir(tmp_path)
     variables = {"__name__": "__main__"}
     exec(compile(code, str(script), "exec"), variables)
-    made = plt.get_fignums() or [v for v in variables.values() if isinstance(v, Figure)]
+    drawn = [np.ravel(np.asarray(v, dtype=object))[0] if isinstance(v, np.ndarray) and v.size else v for v in variables.values()]
+    made = plt.get_fignums() or [v for v in drawn if isinstance(v, Figure | Axes)]  # the plot functions return their axes
     assert made, f"{script.name} made no figure"
     plt.close("all")
