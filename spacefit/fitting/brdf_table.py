@@ -330,10 +330,10 @@ class TabulatedBRDF:
     A goniometer's table in the plane of incidence gives, at each incident zenith theta_i, the BRDF
     along one line of outgoing directions. Off that plane it is extended the way the published
     Starlink model extends it (Fankhauser, Askari & Tyson 2023: lumos-sat's ``BINOMIAL`` and ``ABG``
-    models depend on the outgoing direction through D = |beta - beta_0| alone), by Harvey's
+    models depend on the outgoing direction through ``D = |beta - beta_0|`` alone), by Harvey's
     shift-invariance in direction cosines (Harvey 1976): beta = the outgoing direction projected
     onto the surface, beta_0 = the specular direction's, and the BRDF a function of theta_i and the
-    signed offset u = sign((beta - beta_0) . beta_0) |beta - beta_0| (positive away from the normal
+    signed offset ``u = sign((beta - beta_0) . beta_0) |beta - beta_0|`` (positive away from the normal
     beyond the specular direction, negative towards backscatter). ln f is interpolated linearly in
     u between the measured offsets of each incidence and linearly in theta_i between incidences,
     held at the end values beyond both; ``scale`` multiplies it (1: the table's values). Both
