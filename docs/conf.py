@@ -3,7 +3,7 @@
 Sphinx with the PyData theme, MyST-NB and sphinx-gallery: the generator xarray, astropy and NumPy use,
 so the API reference is made from the docstrings, notebooks and the gallery's scripts run at build
 time and make their own figures. ``SPACEFIT_DOCS_FAST=1`` skips running the gallery and the
-notebooks (the docs test's fast build); a full ``make docs`` runs them all.
+notebooks (a quick build while editing text); ``make docs`` and the docs test run them all.
 """
 
 from __future__ import annotations
