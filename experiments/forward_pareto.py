@@ -218,15 +218,19 @@ def run_pairs(repeats: int = PAIR_REPEATS, reference_spp: int = 1024) -> list[di
                 t0 = time.perf_counter()
                 image = renderer.render(spp=spp, seed=seed)
                 runs[name].append((time.perf_counter() - t0, relative_rmse(image, reference)))
-        ratios = [b[0] / a[0] for a, b in zip(runs["plain"], runs["spacefit"])]
         rows.append({"view": view, "plain_spp": PAIR_SPP[0], "spacefit_spp": PAIR_SPP[1],
-                     "plain_s": round(statistics.median(t for t, _ in runs["plain"]), 4),
-                     "spacefit_s": round(statistics.median(t for t, _ in runs["spacefit"]), 4),
-                     "ratio_median": round(statistics.median(ratios), 3), "ratio_min": round(min(ratios), 3),
-                     "ratio_max": round(max(ratios), 3),
-                     "plain_rel_rmse": round(statistics.mean(e for _, e in runs["plain"]), 4),
-                     "spacefit_rel_rmse": round(statistics.mean(e for _, e in runs["spacefit"]), 4)})
+                     **pair_columns(runs, "spacefit", "plain")})
     return rows
+
+
+def pair_columns(runs: dict[str, list[tuple[float, float]]], numerator: str, denominator: str) -> dict[str, float]:
+    """A table row's columns for two renders timed in turn (``runs``: name -> (seconds, rel RMSE) per
+    pair): each one's median time, the time ratio ``numerator / denominator`` pair by pair (median,
+    min, max) and each one's mean error."""
+    ratios = [n[0] / d[0] for n, d in zip(runs[numerator], runs[denominator])]
+    return {**{f"{name}_s": round(statistics.median(t for t, _ in runs[name]), 4) for name in runs},
+            "ratio_median": round(statistics.median(ratios), 3), "ratio_min": round(min(ratios), 3), "ratio_max": round(max(ratios), 3),
+            **{f"{name}_rel_rmse": round(statistics.mean(e for _, e in runs[name]), 4) for name in runs}}
 
 
 # spp of the mask's pairs, and renders per process of --mask-loop (about 5 s of rendering at 2 threads)
@@ -257,15 +261,8 @@ def run_mask_pairs(repeats: int = PAIR_REPEATS, reference_spp: int = 1024) -> li
                     t0 = time.perf_counter()
                     image = renderer.render(spp=spp, seed=seed) if name == "mask" else window_render(renderer, spp, seed)
                     runs[name].append((time.perf_counter() - t0, relative_rmse(image, reference)))
-            ratios = [a[0] / b[0] for a, b in zip(runs["mask"], runs["window"])]
             rows.append({"view": view, "spp": spp, "sampler": renderer.assembly.scene.render.sampler,
-                         "traced_share_of_window": round(float(renderer.traced.mean()), 4),
-                         "mask_s": round(statistics.median(t for t, _ in runs["mask"]), 4),
-                         "window_s": round(statistics.median(t for t, _ in runs["window"]), 4),
-                         "ratio_median": round(statistics.median(ratios), 3), "ratio_min": round(min(ratios), 3),
-                         "ratio_max": round(max(ratios), 3),
-                         "mask_rel_rmse": round(statistics.mean(e for _, e in runs["mask"]), 4),
-                         "window_rel_rmse": round(statistics.mean(e for _, e in runs["window"]), 4)})
+                         "traced_share_of_window": round(float(renderer.traced.mean()), 4), **pair_columns(runs, "mask", "window")})
             print(rows[-1], flush=True)
     return rows
 
