@@ -28,12 +28,12 @@ CHROMIUM_MISSING = ("the docs test opens the built pages in Debian's chromium, w
                     "run `sudo apt-get update && sudo apt-get install -y chromium` (tools/setup.sh does it as root)")
 
 
-def sphinx(out: Path, builder: str = "html") -> subprocess.CompletedProcess:
+def sphinx(out: Path) -> subprocess.CompletedProcess:
     """``make docs``'s command into ``out`` with this Python and this checkout: the gallery and the notebooks run."""
     env = {**{k: v for k, v in os.environ.items() if k != "MPLBACKEND"},  # the notebooks' kernels draw inline, as in make docs
            "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")]), "SPACEFIT_DOCS_FAST": "0"}
-    return subprocess.run([sys.executable, "-m", "sphinx", "-b", builder, "-W", "--keep-going", "-q", "-j", "auto", "-d", str(out / "doctrees"),
-                           str(DOCS), str(out / builder)], cwd=ROOT, env=env, capture_output=True, text=True, timeout=1200)
+    return subprocess.run([sys.executable, "-m", "sphinx", "-b", "html", "-W", "--keep-going", "-q", "-j", "auto", "-d", str(out / "doctrees"),
+                           str(DOCS), str(out / "html")], cwd=ROOT, env=env, capture_output=True, text=True, timeout=1200)
 
 
 @pytest.fixture(scope="module")

@@ -12,8 +12,8 @@ def figures_in(namespace: dict) -> list:
 
     found = []
     for value in list(namespace.values()):
-        if isinstance(value, (list, tuple, np.ndarray)) and len(value) and isinstance(np.ravel(np.asarray(value, dtype=object))[0], Artist):
-            value = np.ravel(np.asarray(value, dtype=object))[0]
+        if isinstance(value, (list, tuple, np.ndarray)) and len(value):
+            value = np.ravel(np.asarray(value, dtype=object))[0]  # an array of axes: its first one's figure
         figure = value.figure if isinstance(value, Artist) and not isinstance(value, Figure) else value
         if isinstance(figure, Figure) and all(figure is not f for f in found):
             found.append(figure)
