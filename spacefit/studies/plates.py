@@ -50,7 +50,7 @@ class Plate:
     name: str
     area_m2: float
     normal: tuple[float, float, float]
-    material: Material
+    material: Material | TabulatedBRDF
     tangent: tuple[float, float, float] = (1.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
