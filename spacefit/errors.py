@@ -209,12 +209,18 @@ def check_direction(name: str, value: Sequence[float]) -> np.ndarray:
     It is scaled by its largest component first, so tiny or huge vectors (``[0, 0, -1e-200]``) do
     not under- or overflow on the way to unit length.
     """
-    v = check_vector(name, value)
-    peak = np.abs(v).max()
-    if not peak > 0:
+    v = unit_rows(check_vector(name, value))
+    if not np.all(np.isfinite(v)):
         raise InputError(f"`{name}` must not be the zero vector.")
-    v = v / peak
-    return v / np.linalg.norm(v)
+    return v
+
+
+def unit_rows(v: np.ndarray) -> np.ndarray:
+    """The vectors along the last axis of finite ``v`` at unit length, each scaled by its largest
+    component first (no under- or overflow on the way); a zero vector gives NaN."""
+    with np.errstate(invalid="ignore", divide="ignore"):
+        scaled = v / np.abs(v).max(axis=-1, keepdims=True)
+        return scaled / np.linalg.norm(scaled, axis=-1, keepdims=True)
 
 
 def closest(word: str, valid: Iterable[str]) -> str | None:

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
-from spacefit.errors import InputError, check_array, check_choice, check_range, check_type, quote, read_text_rows
+from spacefit.errors import InputError, check_array, check_choice, check_range, check_type, quote, read_text_rows, unit_rows
 from spacefit.studies.lightcurve import SUN_MAGNITUDES
 
 # The Earth's (equatorial) radius, m, as lumos-sat takes it (a sphere).
@@ -102,11 +102,10 @@ class LightCurveObservations:
                 raise InputError(f"`magnitude_sigma` must be None or positive, got {quote(self.magnitude_sigma)}.")
         for name in ("sun", "observer"):
             v = _finite(name, getattr(self, name), 2, n)
-            scaled = v / np.maximum(np.abs(v).max(axis=-1, keepdims=True), 1e-300)
-            norm = np.linalg.norm(scaled, axis=-1, keepdims=True)
-            if v.shape[1:] != (3,) or np.any(norm == 0):
+            unit = unit_rows(v)
+            if v.shape[1:] != (3,) or not np.all(np.isfinite(unit)):
                 raise InputError(f"`{name}` must be ({n}, 3) directions, none (0, 0, 0), got {quote(getattr(self, name))}.")
-            fields[name] = scaled / norm
+            fields[name] = unit
         shadow = check_array("in_shadow", self.in_shadow, "a bool array")
         if shadow.shape != (n,):
             raise InputError(f"`in_shadow` must be {n} booleans, got shape {shadow.shape}.")
