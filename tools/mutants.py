@@ -53,6 +53,9 @@ MUTANTS = (
     # no global state left behind: Mitsuba's variant is the caller's again after spacefit renders
     Mutant("variant-left-at-spacefits", "spacefit/rendering/backend.py", "back = _caller_variant", "back = None",
            ("tests/test_api.py::test_spacefit_gives_the_callers_mitsuba_variant_back",)),
+    # a render's fixed cost: the system libLLVM searched once per process, not per render
+    Mutant("libllvm-searched-per-render", "spacefit/rendering/backend.py", "@functools.cache  # the file system's search",
+           "# the file system's search", ("tests/test_api.py::test_a_render_asks_the_file_system_nothing",)),
     # a camera set the way a user thinks: the field kept across resolutions, an exposure at its fraction of full scale
     Mutant("fov-pitch-ignores-the-resolution", "spacefit/scene/schema.py", "math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]",
            "math.tan(math.radians(camera.fov_deg) / 2.0) / 48", ("tests/test_camera.py",)),
