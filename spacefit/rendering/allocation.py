@@ -23,7 +23,11 @@ def neighbourhood_mean(values: np.ndarray, reach: int) -> np.ndarray:
     h, w = values.shape
     padded = np.pad(values, reach)
     side = 2 * reach + 1
-    return sum(padded[dy:dy + h, dx:dx + w] for dy in range(side) for dx in range(side)) / side**2
+    total = np.zeros((h, w))
+    for dy in range(side):
+        for dx in range(side):
+            total += padded[dy:dy + h, dx:dx + w]
+    return total / side**2
 
 
 def allocate_slots(sigma: np.ndarray, slots: int) -> np.ndarray:

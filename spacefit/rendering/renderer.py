@@ -506,7 +506,7 @@ class Renderer:
         block = self._block()
         for i, (seed_i, spp_i, start, count) in enumerate(passes):
             grey = self._trace(block, seed_i, spp_i, self._pixel_index[start:start + count], spread=spread is not None)
-            if spread is not None:
+            if spread is not None and grey is not None:
                 spread[self._pixel_index[start:start + count]] = grey.reshape(count, spp_i).std(axis=1, ddof=1)
             if progress is not None:
                 progress(i + 1, total)
