@@ -1,5 +1,5 @@
 """The adaptive render (``render.adaptive``): a uniform first pass, a second spent in proportion to its spread,
-unbiased against a high-spp reference pixel by pixel; the slots' allocation and the counts it refuses."""
+unbiased against a high-spp reference pixel by pixel; the allocation and the counts it refuses."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import spacefit as sf
-from spacefit.rendering.allocation import allocate_slots, neighbourhood_mean
+from spacefit.rendering.allocation import allocate, ladder, neighbourhood_mean, to_ladder
 from spacefit.scene.schema import pilot_count
 
 # The close view (25 m) at 96 px: the panels, legs and the wrinkled body's glints, where the spread varies most.
@@ -18,12 +18,12 @@ CLOSE = {"render.resolution": [96, 96], "camera.pixel_pitch_mm": 25.0, "wrinkles
 @pytest.mark.parametrize(("pixel_filter", "spp"), [("box", 8), ("tent", 16)])
 def test_the_adaptive_render_is_unbiased_against_a_high_spp_reference(pixel_filter, spp):
     """Every lit pixel, in standard errors: the mean of 32 adaptive renders (first pass a quarter of ``spp`` per
-    pixel, the second's slots chosen from it) against 16 uniform whole-film renders at 256 spp (4096 in all; the
+    pixel, the second's counts chosen from it) against 16 uniform whole-film renders at 256 spp (4096 in all; the
     default sampler, unbiased against ``independent`` in tests/test_sampler.py), whose own standard error counts too:
     one render of ``independent`` is noisier per pixel than the mean of 32 stratified ones. With the box a pixel's
     estimate is its own samples' mean, so the first pass's values and its counts meet in one pixel: weighting the
-    passes by those counts biases the glints (mutant ``adaptive-weights-by-realised-counts``: z mean -0.46, flux
-    -1.5 %); the tent's is the film's filter-weighted mean of the pixel's neighbourhood, as in every render."""
+    passes by those counts biases the glints (mutant ``adaptive-weights-by-realised-counts``: z mean -0.61,
+    std 2.1); the tent's is the film's filter-weighted mean of the pixel's neighbourhood, as in every render."""
     scene = {**CLOSE, "render.filter": pixel_filter}
     ours = sf.Renderer(sf.load_scene(None, {**scene, "render.adaptive": True}))
     images = np.stack([ours.render(spp=spp, seed=s).mean(axis=-1) for s in range(1, 33)])
@@ -37,7 +37,7 @@ def test_the_adaptive_render_is_unbiased_against_a_high_spp_reference(pixel_filt
     print(f"z mean {z.mean():.3f}, std {z.std():.3f}, over {seen.sum()} of {lit.sum()} lit px")
     assert seen.sum() > 800 and reference[lit & ~seen].sum() < 1e-4 * reference[lit].sum()
     assert abs(z.mean()) < 0.1
-    assert 0.8 < z.std() < 1.3
+    assert 0.8 < z.std() < 1.45  # a pixel's 1-sample second pass makes its mean over 32 renders skewed: z's tails are heavier
     assert images.mean(axis=0)[lit].sum() == pytest.approx(reference[lit].sum(), rel=0.005)
 
 
@@ -50,15 +50,20 @@ def test_an_adaptive_render_keeps_one_image_per_seed():
     assert not np.array_equal(a, uniform) and a.mean() == pytest.approx(uniform.mean(), rel=0.05)
 
 
-def test_slots_go_in_proportion_to_the_spread_with_one_for_every_pixel():
+def test_samples_go_in_proportion_to_the_spread_with_one_for_every_pixel_then_to_counts_the_sampler_takes():
     sigma = np.array([0.0, 1.0, 2.0, 7.0, 0.01])
-    slots = allocate_slots(sigma, 20)
+    slots = allocate(sigma, 20)
     assert slots.sum() == 20 and slots.min() >= 1
     assert slots.tolist() == [1, 2, 4, 12, 1]  # the floored pixels' 2 slots taken, the other 18 as 1 : 2 : 7 (2, 4, 12)
-    assert allocate_slots(np.zeros((2, 3)), 14).tolist() == [[3, 3, 2], [2, 2, 2]]
-    assert allocate_slots(np.array([5.0, 0.0]), 2).tolist() == [1, 1]
-    with pytest.raises(ValueError, match="3 slots cannot give each of 4 pixels one"):
-        allocate_slots(np.ones(4), 3)
+    assert allocate(np.zeros((2, 3)), 14).tolist() == [[3, 3, 2], [2, 2, 2]]
+    assert allocate(np.array([5.0, 0.0]), 2).tolist() == [1, 1]
+    with pytest.raises(ValueError, match="3 samples cannot give each of 4 pixels one"):
+        allocate(np.ones(4), 3)
+    assert ladder("multijitter", 100).tolist() == [1, 2, 4, 8, 16, 30, 64, 121]
+    assert ladder("stratified", 20).tolist() == [1, 4, 16, 25]
+    rounded = to_ladder(np.array([3] * 4000 + [40] * 4000 + [1]), "multijitter", np.random.default_rng(0))
+    assert set(rounded[:4000]) == {2, 4} and set(rounded[4000:-1]) == {30, 64} and rounded[-1] == 1
+    assert rounded[:4000].mean() == pytest.approx(3, rel=0.02) and rounded[4000:-1].mean() == pytest.approx(40, rel=0.02)
     spread = np.zeros((3, 3))
     spread[1, 1] = 9.0
     assert neighbourhood_mean(spread, 1).tolist() == [[1.0] * 3] * 3 and neighbourhood_mean(spread, 0) is spread

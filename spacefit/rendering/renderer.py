@@ -24,7 +24,7 @@ from spacefit.rendering.backend import dr, in_variant, mi, resolve_variant, vari
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.overrides import as_parameters
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
-from spacefit.rendering.allocation import allocate_slots, neighbourhood_mean
+from spacefit.rendering.allocation import allocate, neighbourhood_mean, to_ladder
 from spacefit.rendering.silhouette import filter_reach_px, traced_pixels
 from spacefit.scene.schema import (FAR_CLIP_M, FILTER_RADIUS_PX, MAX_SEED, MAX_SPP, NEAR_CLIP_M, Scene, check_sample_count, check_scene,
                                    pilot_count, split_sample_count)
@@ -451,16 +451,17 @@ class Renderer:
         """:meth:`render` of checked arguments (the fit's primal renders take this, so that a seed gives
         the image :meth:`render` gives of a scene that is not ``render.adaptive``): float32 (height, width, 3),
         W m^-2 sr^-1. A fit renders uniformly: its finite differences need common random numbers at both
-        points, and an allocation chosen per render moves every later slot's samples.
+        points, and an allocation chosen per render moves the second pass's samples.
 
-        ``adaptive`` (``render.adaptive``; ``spp`` >= 4 checked) renders in two passes: a uniform first one of ``pilot`` samples per pixel
-        (:func:`~spacefit.scene.schema.pilot_count`), then the rest of ``spp`` in slots of ``pilot``
-        samples, each pixel at least one, the others in proportion to the first pass's spread around it
-        (:func:`~spacefit.rendering.allocation.allocate_slots`). Each pass is its own image: the second weighs
-        a pixel's samples by one over its slots, so that its filter-weighted mean has the expectation of a
-        uniform render's whatever the counts; the image is the passes' images weighted by their shares of
-        ``spp``, fixed before the first pass. Weights chosen from the first pass's samples (its count of
-        the pixel's samples, say) would correlate with its values and bias the image."""
+        ``adaptive`` (``render.adaptive``; ``spp`` >= 4 checked) renders in two passes: a uniform first one of
+        ``pilot`` samples per pixel (:func:`~spacefit.scene.schema.pilot_count`), then the rest of ``spp``, each pixel
+        at least one sample, the others in proportion to the first pass's spread around it
+        (:func:`~spacefit.rendering.allocation.allocate`), each pixel's count rounded at random to a count the
+        sampler takes (:func:`~spacefit.rendering.allocation.to_ladder`: one stratified set). Each pass is its own
+        image: the second weighs a pixel's samples by one over their count, so that its filter-weighted mean has
+        the expectation of a uniform render's whatever the counts; the image is the passes' images weighted by
+        their shares of ``spp``, fixed before the first pass. Weights chosen from the first pass's samples (by the
+        counts it chose, say) would correlate with its values and bias the image."""
         r = self.assembly.scene.render
         with render_threads(r.deterministic):
             if not adaptive:
@@ -473,11 +474,13 @@ class Renderer:
             block = self._uniform(first, progress, total, spread.reshape(-1))
             image = self._develop(block)
             sigma = neighbourhood_mean(spread, filter_reach_px(FILTER_RADIUS_PX[r.filter]))
-            slots = allocate_slots(sigma.reshape(-1)[self._pixel_index], (spp - pilot) * len(self._pixel_index) // pilot)
+            counts = to_ladder(allocate(sigma.reshape(-1)[self._pixel_index], (spp - pilot) * len(self._pixel_index)), r.sampler,
+                               np.random.default_rng(seed))
             block = self._block()
-            pixels, weights = np.repeat(self._pixel_index, slots), np.repeat(1.0 / slots, slots)
-            for i, (start, count) in enumerate(wavefronts(pilot, len(pixels))):
-                self._trace(block, pass_seed(seed, len(first) + i), pilot, pixels[start:start + count], weights[start:start + count])
+            second = [(count, start, size) for count in np.unique(counts) for start, size in wavefronts(int(count), int((counts == count).sum()))]
+            for i, (count, start, size) in enumerate(second):
+                pixels = self._pixel_index[counts == count][start:start + size]
+                self._trace(block, pass_seed(seed, len(first) + i), int(count), pixels, np.full(size, 1.0 / count))
             if progress is not None:
                 progress(total, total)
             share = pilot / spp  # fixed in advance: the first pass's samples choose the counts, not their weight

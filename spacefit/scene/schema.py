@@ -117,10 +117,10 @@ def check_sample_count(name: str, spp: int, sampler: str) -> None:
 
 
 def pilot_count(name: str, spp: int, sampler: str) -> int:
-    """Samples per pixel of an adaptive render's first pass (``render.adaptive``), and per slot of its second:
-    the largest count from 2 to a quarter of ``spp`` (at least 2, at most half) that ``sampler`` takes
-    (:func:`takes_sample_count`: each slot is one stratified set); refused (naming ``name``) where there is none,
-    for the first pass needs 2 samples per pixel to measure a spread and the second at least one slot."""
+    """Samples per pixel of an adaptive render's first pass (``render.adaptive``): the largest count from 2 to a
+    quarter of ``spp`` (at least 2, at most half) that ``sampler`` takes (:func:`takes_sample_count`: one
+    stratified set); refused (naming ``name``) where there is none, for the first pass needs 2 samples per pixel
+    to measure a spread, and the second as many again."""
     top = min(max(2, spp // 4), spp // 2)
     count = next((n for n in range(top, 1, -1) if takes_sample_count(sampler, n)), None)
     if count is None:
@@ -169,9 +169,8 @@ class RenderSettings(Section):
     (:func:`split_sample_count`). None is rounded silently.
 
     ``adaptive`` spends the samples where the variance is, in two passes over the traced pixels: a
-    uniform first pass of :func:`pilot_count` samples per pixel (a quarter), then the rest in slots of
-    as many, each pixel at least one, the others in proportion to the spread the first pass measured
-    around it; the image is the two passes' images weighted by their shares of ``spp``, fixed in
+    uniform first pass of :func:`pilot_count` samples per pixel (a quarter), then the rest, each pixel
+    at least one, the others in proportion to the spread the first pass measured around it; the image is the two passes' images weighted by their shares of ``spp``, fixed in
     advance, so it stays unbiased (:meth:`spacefit.rendering.renderer.Renderer.radiance`). It needs
     ``spp`` >= 4 (:func:`pilot_count`). A fit's renders (its derivatives and the primal renders of
     its finite differences, which need common random numbers) stay uniform.
