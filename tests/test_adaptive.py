@@ -20,10 +20,13 @@ def test_the_adaptive_render_is_unbiased_against_a_high_spp_reference(pixel_filt
     """Every lit pixel, in standard errors: the mean of 32 adaptive renders (first pass a quarter of ``spp`` per
     pixel, the second's counts chosen from it) against 16 uniform whole-film renders at 256 spp (4096 in all; the
     default sampler, unbiased against ``independent`` in tests/test_sampler.py), whose own standard error counts too:
-    one render of ``independent`` is noisier per pixel than the mean of 32 stratified ones. With the box a pixel's
-    estimate is its own samples' mean, so the first pass's values and its counts meet in one pixel: weighting the
-    passes by those counts biases the glints (mutant ``adaptive-weights-by-realised-counts``: z mean -0.61,
-    std 2.1); the tent's is the film's filter-weighted mean of the pixel's neighbourhood, as in every render."""
+    one render of ``independent`` is noisier per pixel than the mean of 32 stratified ones. A glinting pixel's mean
+    over 32 renders is skewed (its z's tails are heavy: the uniform render's own z has mean -0.2 and spread 1.8 here
+    with the box), so the sharp test is the lit pixels' total, in its standard error over the renders. With the box a
+    pixel's estimate is its own samples' mean, so the first pass's values and its counts meet in one pixel: weighting
+    the passes by those counts biases the glints (mutant ``adaptive-weights-by-realised-counts``: total -2.2 %, -29
+    standard errors, against -0.06 %, -0.55 here); the tent's is the film's filter-weighted mean of the pixel's
+    neighbourhood, as in every render."""
     scene = {**CLOSE, "render.filter": pixel_filter}
     ours = sf.Renderer(sf.load_scene(None, {**scene, "render.adaptive": True}))
     images = np.stack([ours.render(spp=spp, seed=s).mean(axis=-1) for s in range(1, 33)])
@@ -34,11 +37,14 @@ def test_the_adaptive_render_is_unbiased_against_a_high_spp_reference(pixel_filt
     seen = lit & (images.max(axis=0) > 0)  # a rim pixel no render reached has no spread to compare with
     se = np.sqrt(images.var(axis=0, ddof=1) / len(images) + references.var(axis=0, ddof=1) / len(references))[seen]
     z = (images.mean(axis=0) - reference)[seen] / np.maximum(se, 1e-12)
-    print(f"z mean {z.mean():.3f}, std {z.std():.3f}, over {seen.sum()} of {lit.sum()} lit px")
+    ours_total, reference_total = images[:, lit].sum(axis=1), references[:, lit].sum(axis=1)
+    z_total = (ours_total.mean() - reference_total.mean()) / np.sqrt(ours_total.var(ddof=1) / len(ours_total)
+                                                                      + reference_total.var(ddof=1) / len(reference_total))
+    print(f"z mean {z.mean():.3f}, std {z.std():.3f}, over {seen.sum()} of {lit.sum()} lit px; total {z_total:.2f} standard errors")
     assert seen.sum() > 800 and reference[lit & ~seen].sum() < 1e-4 * reference[lit].sum()
-    assert abs(z.mean()) < 0.1
-    assert 0.8 < z.std() < 1.45  # a pixel's 1-sample second pass makes its mean over 32 renders skewed: z's tails are heavier
-    assert images.mean(axis=0)[lit].sum() == pytest.approx(reference[lit].sum(), rel=0.005)
+    assert abs(z_total) < 3
+    assert abs(z.mean()) < 0.15
+    assert 0.8 < z.std() < 1.6
 
 
 def test_an_adaptive_render_keeps_one_image_per_seed():
