@@ -505,7 +505,7 @@ class Renderer:
                  spread: np.ndarray | None = None) -> "mi.ImageBlock":
         """A block of the ``passes`` (:func:`pass_seeds`) over the traced pixels; every sample weighs alike in
         the film's filter-weighted mean, whichever pass traced it. ``spread``: the window's pixels, flat, given
-        the spread of each traced pixel's samples of the first pass (the others are set by :meth:`radiance`)."""
+        the spread of each traced pixel's samples of the first pass (the untraced ones keep theirs)."""
         block = self._block()
         for i, (seed_i, spp_i, start, count) in enumerate(passes):
             grey = self._trace(block, seed_i, spp_i, self._pixel_index[start:start + count], spread=spread is not None)
