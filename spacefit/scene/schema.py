@@ -116,15 +116,20 @@ def check_sample_count(name: str, spp: int, sampler: str) -> None:
                          f"{f' (nearest: {near})' if near else ''}; 'independent' takes any count.")
 
 
+# Share of an adaptive render's samples spent on its uniform first pass (``render.adaptive``).
+PILOT_FRACTION = 0.25
+
+
 def pilot_count(name: str, spp: int, sampler: str) -> int:
     """Samples per pixel of an adaptive render's first pass (``render.adaptive``): the largest count from 2 to a
     quarter of ``spp`` (at least 2, at most half) that ``sampler`` takes (:func:`takes_sample_count`: one
     stratified set); refused (naming ``name``) where there is none, for the first pass needs 2 samples per pixel
     to measure a spread, and the second as many again."""
-    top = min(max(2, spp // 4), spp // 2)
+    top = min(max(2, int(PILOT_FRACTION * spp)), spp // 2)
     count = next((n for n in range(top, 1, -1) if takes_sample_count(sampler, n)), None)
     if count is None:
-        least = next(s for s in range(4, MAX_SPP) if any(takes_sample_count(sampler, n) for n in range(2, min(max(2, s // 4), s // 2) + 1)))
+        least = next(s for s in range(4, MAX_SPP)
+                     if any(takes_sample_count(sampler, n) for n in range(2, min(max(2, int(PILOT_FRACTION * s)), s // 2) + 1)))
         raise InputError(f"`{name}` = {spp} is too few for render.adaptive = true with render.sampler = {sampler!r}: its first pass needs "
                          f"at least 2 samples per pixel that the sampler takes and its second as many again; use {least} or more, "
                          "or render.adaptive = false.")
