@@ -14,8 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-# Share of the samples a two-pass sampler spends on its uniform first pass.
-PILOT_FRACTION = 0.25
+from spacefit.scene.schema import PILOT_FRACTION  # the built two-pass render's (render.adaptive)
 
 
 def pareto_front(points: list[tuple[float, float]]) -> list[int]:
