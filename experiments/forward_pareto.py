@@ -12,14 +12,6 @@ column). Writes ``forward.csv`` and ``forward_pareto.png`` to ``--out``.
 silhouette (:attr:`Renderer.traced`), against Mitsuba's own loop over the window's box, in turn, in both
 views (``mask_pairs.csv``); ``--mask-loop WAY VIEW`` renders one way 20 times, for a whole-process timer.
 
-``--adaptive`` times the adaptive render (``render.adaptive``: a uniform quarter of the samples, then the rest
-in proportion to its per-pixel spread) against the default (uniform) render, both on the mask with the default
-sampler, at 600 px, depth 2, in both views: in each of ``--rounds`` rounds both sweep :data:`ADAPTIVE_SPP` in turn
-(the median time and the mean error of 3 renders each), and each round's time at equal error is interpolated
-(log-log) at :data:`ADAPTIVE_TARGETS`; writes ``adaptive.csv`` (the renders) and ``adaptive_equal_error.csv`` (the
-ratios per round, then their median and range). ``--mask-loop adaptive VIEW --spp N`` renders it for a
-whole-process timer.
-
 ``--methods`` compares ways of spending a render's time at 600 px, depth 2, in the default view
 (70 m, the target 5 % of the film) and a close one (25 m): plain Mitsuba (the whole film, the
 ``independent`` sampler) against spacefit's window around the target with each sampler of
@@ -28,7 +20,7 @@ reaches each target error; writes ``methods.csv``, ``equal_error.csv`` and ``met
 renders plain Mitsuba and spacefit at spp of equal error (:data:`PAIR_SPP`) in turn and writes the
 time ratios within each pair to ``equal_error_pairs.csv``.
 
-Run: ``.venv/bin/python experiments/forward_pareto.py [--full] [--methods | --mask | --adaptive] [--out experiments/results/forward]``.
+Run: ``.venv/bin/python experiments/forward_pareto.py [--full] [--methods | --mask] [--out experiments/results/forward]``.
 """
 
 from __future__ import annotations
@@ -277,69 +269,14 @@ def run_mask_pairs(repeats: int = PAIR_REPEATS, reference_spp: int = 1024) -> li
 
 def mask_loop(way: str, view: str, spp: int = MASK_SPP[1]) -> None:
     """``MASK_LOOP_RENDERS`` renders of ``view`` the ``way`` given (``mask``: spacefit's; ``window``: Mitsuba's
-    loop over the window; ``adaptive``: spacefit's with ``render.adaptive``), for a whole-process timer run in turn
-    (A B A B) on two ways; prints its own time."""
-    extra = ["render.adaptive=true"] if way == "adaptive" else []
-    renderer = Renderer(assemble(load_scene(None, ["render.deterministic=false", *VIEWS[view], *extra])))
-    render = (lambda spp, seed: window_render(renderer, spp, seed)) if way == "window" else renderer.render
+    loop over the window), for a whole-process timer run in turn (A B A B) on both ways; prints its own time."""
+    renderer = Renderer(assemble(load_scene(None, ["render.deterministic=false", *VIEWS[view]])))
+    render = renderer.render if way == "mask" else lambda spp, seed: window_render(renderer, spp, seed)
     render(spp=spp, seed=0)
     t0 = time.perf_counter()
     for seed in range(1, MASK_LOOP_RENDERS + 1):
         render(spp=spp, seed=seed)
     print(f"{way}, {view}, {spp} spp: {(time.perf_counter() - t0) / MASK_LOOP_RENDERS:.4f} s per render")
-
-
-# spp swept by both renders of --adaptive, and the errors (rel RMSE) at which their times are compared per view
-ADAPTIVE_SPP = {"reduced": [8, 16, 32], "full": [8, 16, 32, 64, 128]}
-ADAPTIVE_TARGETS = {"full": {"default (70 m)": (0.15, 0.1, 0.06), "close (25 m)": (0.1, 0.06, 0.04)},
-                    "reduced": {"default (70 m)": (0.25, 0.2), "close (25 m)": (0.2, 0.15)}}
-ADAPTIVE_RENDERS = 3
-
-
-def run_adaptive(out: Path, full: bool, rounds: int) -> list[dict[str, object]]:
-    """The adaptive render against the uniform one (both spacefit's, the mask, the default sampler) in both VIEWS:
-    ``rounds`` rounds, each sweeping ADAPTIVE_SPP with the two in turn at each spp, so that the load's drift falls on
-    both alike; each round's time ratio at equal error is interpolated from its own sweep. Writes adaptive.csv and
-    adaptive_equal_error.csv; returns the summary rows."""
-    size = "full" if full else "reduced"
-    widths = [] if full else ["render.resolution=[150, 150]", "camera.pixel_pitch_mm=16.0"]
-    reference_spp = 1024 if full else 256
-    rows, ratios, summary = [], [], []
-    for view, extra in VIEWS.items():
-        base = ["render.deterministic=false", *extra, *widths]
-        reference = Renderer(assemble(load_scene(None, base))).render(spp=reference_spp, seed=REFERENCE_SEED)
-        renderers = {way: Renderer(assemble(load_scene(None, [*base, *flag])))
-                     for way, flag in (("uniform", []), ("adaptive", ["render.adaptive=true"]))}
-        for spp in ADAPTIVE_SPP[size]:
-            for renderer in renderers.values():
-                renderer.render(spp=spp, seed=0)  # compile
-        for k in range(rounds):
-            round_rows = []
-            for spp in ADAPTIVE_SPP[size]:
-                for way in (renderers if k % 2 == 0 else reversed(renderers)):
-                    times, errors = [], []
-                    for seed in range(1 + ADAPTIVE_RENDERS * k, 1 + ADAPTIVE_RENDERS * (k + 1)):
-                        t0 = time.perf_counter()
-                        image = renderers[way].render(spp=spp, seed=seed)
-                        times.append(time.perf_counter() - t0)
-                        errors.append(relative_rmse(image, reference))
-                    round_rows.append({"view": view, "round": k, "way": way, "spp": spp, "time_s": round(statistics.median(times), 5),
-                                       "rel_rmse": round(statistics.mean(errors), 5), "threads": dr.thread_count()})
-            rows += round_rows
-            for target in ADAPTIVE_TARGETS[size][view]:
-                t = {way: time_at_error([r for r in round_rows if r["way"] == way], target) for way in renderers}
-                ratios.append({"view": view, "round": k, "rel_rmse": target, "uniform_s": round(t["uniform"], 5),
-                               "adaptive_s": round(t["adaptive"], 5), "ratio": round(t["adaptive"] / t["uniform"], 3)})
-            print(ratios[-len(ADAPTIVE_TARGETS[size][view]):], flush=True)
-        for target in ADAPTIVE_TARGETS[size][view]:
-            r = [row["ratio"] for row in ratios if row["view"] == view and row["rel_rmse"] == target and np.isfinite(row["ratio"])]
-            summary.append({"view": view, "round": "all", "rel_rmse": target, "uniform_s": "", "adaptive_s": "",
-                            "ratio": round(statistics.median(r), 3) if r else float("nan"),
-                            "ratio_min": min(r, default=float("nan")), "ratio_max": max(r, default=float("nan")), "rounds": len(r)})
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "adaptive.csv", rows)
-    write_csv(out / "adaptive_equal_error.csv", [{**row, "ratio_min": "", "ratio_max": "", "rounds": ""} for row in ratios] + summary)
-    return summary
 
 
 def plot_methods(path: Path, rows: list[dict[str, object]], reference_spp: int) -> None:
@@ -371,17 +308,10 @@ def main() -> None:
     p.add_argument("--full", action="store_true", help="150/300/600 px, spp 1-64, depths 1-5, reference 1024 spp")
     p.add_argument("--methods", action="store_true", help="compare samplers and the window with plain Mitsuba instead")
     p.add_argument("--mask", action="store_true", help="time the silhouette's mask against the window's box, in turn")
-    p.add_argument("--mask-loop", nargs=2, metavar=("WAY", "VIEW"), help="render one view 20 times, WAY mask, window or adaptive")
-    p.add_argument("--spp", type=int, default=MASK_SPP[1], help="the spp of --mask-loop")
-    p.add_argument("--adaptive", action="store_true", help="time the adaptive render against the uniform one at equal error")
-    p.add_argument("--rounds", type=int, default=5, help="rounds of --adaptive")
+    p.add_argument("--mask-loop", nargs=2, metavar=("WAY", "VIEW"), help="render one view 20 times, WAY mask or window")
     args = p.parse_args()
     if args.mask_loop:
-        return mask_loop(*args.mask_loop, spp=args.spp)
-    if args.adaptive:
-        for row in run_adaptive(Path(args.out), args.full, args.rounds):
-            print(row)
-        return
+        return mask_loop(*args.mask_loop)
     if args.mask:
         rows = run_mask_pairs() if args.full else run_mask_pairs(repeats=3, reference_spp=256)
         write_csv(Path(args.out) / "mask_pairs.csv", rows)

@@ -15,9 +15,7 @@ sigma_i is measured from ``--seeds`` renders at ``--spp`` (all channels of a pix
 samples, so sigma_i^2 is the mean of its channels' variances). It assumes a pixel's variance falls
 as 1 / n (true for independent samples; stratified ones do better in smooth pixels, so the bound
 is if anything generous to adaptive sampling) and that every sample costs the same. Writes
-``sample_allocation.csv`` to ``--out``. The two-pass render itself is built (``render.adaptive``) and
-measured at equal error by ``forward_pareto.py --adaptive``: with ``multijitter`` it does worse than this bound
-and is slower than the uniform render.
+``sample_allocation.csv`` to ``--out``.
 
 Run: ``.venv/bin/python experiments/sample_allocation.py [--seeds 16] [--spp 16]``.
 """

@@ -4,7 +4,6 @@ results; and the Pareto front in closed form."""
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from scripts import read_csv, run_script
 
 from spacefit.studies.costs import pareto_front
@@ -29,21 +28,6 @@ def test_forward_study_shape(tmp_path):
     assert front and all(rows[a]["time_s"] <= rows[b]["time_s"] and rows[a]["rel_rmse"] > rows[b]["rel_rmse"]
                          for a, b in zip(front, front[1:]))
     assert f"{len(rows)} configurations" in out and len(out.splitlines()) == len(front) + 1  # the front, printed
-
-
-@pytest.mark.slow
-def test_adaptive_study_shape(tmp_path):
-    """forward_pareto --adaptive at its reduced size (150 px, spp 8 to 32, one round): both renders at each spp and
-    view, and per view and target error one round's ratio and the summary of the rounds."""
-    run_script("forward_pareto", "--adaptive", "--rounds", "1", "--out", str(tmp_path))
-    rows = read_csv(tmp_path / "adaptive.csv")
-    views = ("default (70 m)", "close (25 m)")
-    assert sorted((r["view"], r["way"], int(r["spp"])) for r in rows) == sorted(
-        (v, w, s) for v in views for w in ("uniform", "adaptive") for s in (8, 16, 32))
-    assert all(float(r["time_s"]) > 0 and 0 < float(r["rel_rmse"]) < 1 for r in rows)
-    ratios = read_csv(tmp_path / "adaptive_equal_error.csv")
-    assert [(r["view"], r["round"]) for r in ratios] == [(v, k) for v in views for k in ("0", "0")] + [(v, "all") for v in views for _ in "ab"]
-    assert all(float(r["ratio"]) > 0 for r in ratios if r["ratio"] != "nan")
 
 
 def test_fit_cost_study_shape(tmp_path):

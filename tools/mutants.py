@@ -280,10 +280,6 @@ MUTANTS = (
            ("tests/test_silhouette.py",)),
     Mutant("multijitter-rounds-silently", "spacefit/scene/schema.py", "    if sampler == \"multijitter\":\n        return spp % root == 0\n",
            "", ("tests/test_sampler.py",)),
-    # the adaptive render (issue 23): the passes weighted by shares fixed in advance, not by counts the first pass chose
-    Mutant("adaptive-weights-by-realised-counts", RENDERER, "share = pilot / spp  # fixed in advance",
-           "share = np.bincount(self._pixel_index, pilot / (pilot + counts), self.traced.size).reshape(*self.traced.shape, 1)  #",
-           ("tests/test_adaptive.py::test_the_adaptive_render_is_unbiased_against_a_high_spp_reference[box-8]",)),
     # the documentation site: the front page shows the render; a page's link to another resolves
     Mutant("docs-front-picture-a-thumbnail", "docs/index.md", ":width: 320px", ":width: 32px", ("tests/test_docs.py",)),
     Mutant("docs-link-to-a-missing-page", "docs/getting-started.md", "([](guide/render.md))", "([](guide/rendering.md))",

@@ -24,10 +24,9 @@ from spacefit.rendering.backend import dr, in_variant, mi, resolve_variant, vari
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.overrides import as_parameters
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
-from spacefit.rendering.allocation import allocate, neighbourhood_mean, to_ladder
-from spacefit.rendering.silhouette import filter_reach_px, traced_pixels
+from spacefit.rendering.silhouette import traced_pixels
 from spacefit.scene.schema import (FAR_CLIP_M, FILTER_RADIUS_PX, MAX_SEED, MAX_SPP, NEAR_CLIP_M, Scene, check_sample_count, check_scene,
-                                   pilot_count, split_sample_count)
+                                   split_sample_count)
 from spacefit.units import RADIANCE_UNIT
 
 # Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.
@@ -219,20 +218,16 @@ def pass_seed(seed: int, i: int) -> int:
     return (seed + i * 0x9E3779B1) % (1 << 32)
 
 
-def wavefronts(spp: int, sets: int) -> list[tuple[int, int]]:
-    """(first, count) of ``sets`` sets of ``spp`` samples (a pixel's, one stratified pattern each) split into
-    wavefronts of at most :data:`MAX_SAMPLES_PER_PASS` samples (one set at least), of sizes within one set."""
-    n = max(1, math.ceil(sets / max(1, MAX_SAMPLES_PER_PASS // spp)))
-    sizes = [sets // n + (i < sets % n) for i in range(n)]
-    return [(int(start), size) for start, size in zip(np.cumsum([0, *sizes[:-1]]), sizes)]
-
-
 def pass_seeds(seed: int, spp: int, pixels: int, sampler: str = "independent") -> list[tuple[int, int, int, int]]:
     """Split a render of ``pixels`` pixels at ``spp`` into passes: the counts the sampler takes
     (:func:`~spacefit.scene.schema.split_sample_count`), each over pixel ranges of at most
-    :data:`MAX_SAMPLES_PER_PASS` samples (:func:`wavefronts`), a pixel's samples of one count in one
+    :data:`MAX_SAMPLES_PER_PASS` samples (one pixel at least), a pixel's samples of one count in one
     pass so that a stratifying sampler keeps its pattern: (seed, spp, first pixel, pixels) each."""
-    passes = [(count, start, size) for count in split_sample_count(sampler, spp) for start, size in wavefronts(count, pixels)]
+    passes = []
+    for count in split_sample_count(sampler, spp):
+        n = max(1, math.ceil(pixels / max(1, MAX_SAMPLES_PER_PASS // count)))
+        sizes = [pixels // n + (i < pixels % n) for i in range(n)]
+        passes += [(count, int(start), size) for start, size in zip(np.cumsum([0, *sizes[:-1]]), sizes)]
     return [(pass_seed(seed, i), count, start, size) for i, (count, start, size) in enumerate(passes)]
 
 
@@ -363,7 +358,7 @@ class Renderer:
         self.memory_bytes = check_memory(intr.width, intr.height, self.window[2] * self.window[3], r.spp)  # the mask traces fewer
         self.traced = target_mask(assembly, vertices, self.window) if crop else np.ones(self.window[:1:-1], dtype=bool)
         with variant_scope(self.variant):
-            self._pixel_index = np.flatnonzero(self.traced)
+            self._pixels = mi.UInt32(np.flatnonzero(self.traced).astype(np.uint32))
             self.scene = mi.load_dict(scene_dict(assembly, vertices, self.window))
             self.params = mi.traverse(self.scene)
 
@@ -442,93 +437,39 @@ class Renderer:
         spp = r.spp if spp is None else spp
         seed = r.seed if seed is None else seed
         check_sample_count("spp", spp, r.sampler)
-        if r.adaptive:
-            pilot_count("spp", spp, r.sampler)
-        return self.radiance(spp, seed, progress, r.adaptive)
+        return self.radiance(spp, seed, progress)
 
     @in_variant
-    def radiance(self, spp: int, seed: int, progress: ProgressCallback | None = None, adaptive: bool = False) -> np.ndarray:
+    def radiance(self, spp: int, seed: int, progress: ProgressCallback | None = None) -> np.ndarray:
         """:meth:`render` of checked arguments (the fit's primal renders take this, so that a seed gives
-        the image :meth:`render` gives of a scene that is not ``render.adaptive``): float32 (height, width, 3),
-        W m^-2 sr^-1. A fit renders uniformly: its finite differences need common random numbers at both
-        points, and an allocation chosen per render moves the second pass's samples.
-
-        ``adaptive`` (``render.adaptive``; ``spp`` >= 4 checked) renders in two passes: a uniform first one of
-        ``pilot`` samples per pixel (:func:`~spacefit.scene.schema.pilot_count`), then the rest of ``spp``, each pixel
-        at least one sample, the others in proportion to the first pass's spread around it
-        (:func:`~spacefit.rendering.allocation.allocate`), each pixel's count rounded at random to a count the
-        sampler takes (:func:`~spacefit.rendering.allocation.to_ladder`: one stratified set). Each pass is its own
-        image: the second weighs a pixel's samples by one over their count, so that its filter-weighted mean has
-        the expectation of a uniform render's whatever the counts; the image is the passes' images weighted by
-        their shares of ``spp``, fixed before the first pass. Weights chosen from the first pass's samples (by the
-        counts it chose, say) would correlate with its values and bias the image."""
+        the image :meth:`render` gives): float32 (height, width, 3), W m^-2 sr^-1."""
         r = self.assembly.scene.render
-        with render_threads(r.deterministic):
-            if not adaptive:
-                passes = pass_seeds(seed, spp, len(self._pixel_index), r.sampler)
-                return self.to_film(self._develop(self._uniform(passes, progress, len(passes))))
-            pilot = pilot_count("spp", spp, r.sampler)
-            first = pass_seeds(seed, pilot, len(self._pixel_index), r.sampler)
-            total = len(first) + 1
-            spread = np.zeros(self.traced.shape)
-            block = self._uniform(first, progress, total, spread.reshape(-1))
-            image = self._develop(block)
-            sigma = neighbourhood_mean(spread, filter_reach_px(FILTER_RADIUS_PX[r.filter]))
-            counts = to_ladder(allocate(sigma.reshape(-1)[self._pixel_index], (spp - pilot) * len(self._pixel_index)), r.sampler,
-                               np.random.default_rng(seed))
-            block = self._block()
-            second = [(count, start, size) for count in np.unique(counts) for start, size in wavefronts(int(count), int((counts == count).sum()))]
-            for i, (count, start, size) in enumerate(second):
-                pixels = self._pixel_index[counts == count][start:start + size]
-                self._trace(block, pass_seed(seed, len(first) + i), int(count), pixels, np.full(size, 1.0 / count))
-            if progress is not None:
-                progress(total, total)
-            share = pilot / spp  # fixed in advance: the first pass's samples choose the counts, not their weight
-            return self.to_film(share * image + (1.0 - share) * self._develop(block))
-
-    def _block(self) -> "mi.ImageBlock":
-        """An empty block of the film's window."""
+        passes = pass_seeds(seed, spp, len(self._pixels), r.sampler)
         film = self.scene.sensors()[0].film()
         film.prepare([])
         block = film.create_block()
         block.set_offset(film.crop_offset())
-        return block
+        with render_threads(r.deterministic):
+            # every sample weighs alike in the film's filter-weighted mean, whichever pass traced it
+            for i, (seed_i, spp_i, start, count) in enumerate(passes):
+                self._trace(block, seed_i, spp_i, start, count)
+                if progress is not None:
+                    progress(i + 1, len(passes))
+            film.put_block(block)
+            image = np.array(film.develop(), dtype=np.float32)
+        return self.to_film(image)
 
-    def _develop(self, block: "mi.ImageBlock") -> np.ndarray:
-        """The window's image (h, w, 3) of the samples in ``block``: their filter-weighted mean per pixel."""
-        film = self.scene.sensors()[0].film()
-        film.prepare([])
-        film.put_block(block)
-        return np.array(film.develop(), dtype=np.float32)
-
-    def _uniform(self, passes: list[tuple[int, int, int, int]], progress: ProgressCallback | None, total: int,
-                 spread: np.ndarray | None = None) -> "mi.ImageBlock":
-        """A block of the ``passes`` (:func:`pass_seeds`) over the traced pixels; every sample weighs alike in
-        the film's filter-weighted mean, whichever pass traced it. ``spread``: the window's pixels, flat, given
-        the spread of each traced pixel's samples of the first pass (the untraced ones keep theirs)."""
-        block = self._block()
-        for i, (seed_i, spp_i, start, count) in enumerate(passes):
-            grey = self._trace(block, seed_i, spp_i, self._pixel_index[start:start + count], spread=spread is not None)
-            if spread is not None and grey is not None:
-                spread[self._pixel_index[start:start + count]] = grey.reshape(count, spp_i).std(axis=1, ddof=1)
-            if progress is not None:
-                progress(i + 1, total)
-        return block
-
-    def _trace(self, block: "mi.ImageBlock", seed: int, spp: int, pixels: np.ndarray, weights: np.ndarray | None = None,
-               spread: bool = False) -> np.ndarray | None:
-        """Trace ``spp`` samples in each of ``pixels`` (indices into the window, flat; a pixel may repeat, each
-        time another stratified set) and splat them into ``block``, as Mitsuba's own render loop does over a whole
-        window (sample positions uniform in each pixel, or stratified by the sampler; the film's filter weights
-        them), each set's samples weighted by ``weights`` (default 1). With ``spread``, the samples' radiance (RGB mean)."""
+    def _trace(self, block: "mi.ImageBlock", seed: int, spp: int, start: int, count: int) -> None:
+        """Trace ``spp`` samples in each of the traced pixels ``start`` to ``start + count`` and splat them
+        into ``block``, as Mitsuba's own render loop does over a whole window (sample positions
+        uniform in each pixel, or stratified by the sampler; the film's filter weights them)."""
         sensor = self.scene.sensors()[0]
         film, sampler = sensor.film(), sensor.sampler().clone()
         sampler.set_sample_count(spp)
         sampler.set_samples_per_wavefront(spp)
-        sampler.seed(seed, len(pixels) * spp)
-        # sample k of the wavefront belongs to set k // spp, as in Mitsuba's loop (the samplers stratify by it)
-        which = dr.arange(mi.UInt32, len(pixels) * spp) // spp
-        index = dr.gather(mi.UInt32, mi.UInt32(pixels.astype(np.uint32)), which)
+        sampler.seed(seed, count * spp)
+        # sample k of the wavefront belongs to traced pixel k // spp, as in Mitsuba's loop (the samplers stratify by it)
+        index = dr.gather(mi.UInt32, self._pixels, start + dr.arange(mi.UInt32, count * spp) // spp)
         width = self.window[2]
         offset = mi.ScalarVector2f(film.crop_offset())
         position = mi.Vector2f(mi.Float(index % width), mi.Float(index // width)) + offset + sampler.next_2d()
@@ -536,14 +477,8 @@ class Renderer:
                                                      mi.Point2f(0.5))
         radiance, _, _ = self.scene.integrator().sample(self.scene, sampler, ray)
         rgb = radiance * weight
-        if weights is None:
-            block.put(position, [rgb.x, rgb.y, rgb.z, mi.Float(1.0)])
-        else:
-            w = dr.gather(mi.Float, mi.Float(weights.astype(np.float32)), which)
-            block.put(position, [rgb.x * w, rgb.y * w, rgb.z * w, w])
-        grey = (rgb.x + rgb.y + rgb.z) / 3.0
-        dr.eval(block.tensor(), grey) if spread else dr.eval(block.tensor())  # one kernel: the radiance is not traced twice
-        return np.asarray(grey, dtype=np.float64) if spread else None
+        block.put(position, [rgb.x, rgb.y, rgb.z, mi.Float(1.0)])
+        dr.eval(block.tensor())
 
 
 def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray:

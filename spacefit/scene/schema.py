@@ -116,26 +116,6 @@ def check_sample_count(name: str, spp: int, sampler: str) -> None:
                          f"{f' (nearest: {near})' if near else ''}; 'independent' takes any count.")
 
 
-# Share of an adaptive render's samples spent on its uniform first pass (``render.adaptive``).
-PILOT_FRACTION = 0.25
-
-
-def pilot_count(name: str, spp: int, sampler: str) -> int:
-    """Samples per pixel of an adaptive render's first pass (``render.adaptive``): the largest count from 2 to a
-    quarter of ``spp`` (at least 2, at most half) that ``sampler`` takes (:func:`takes_sample_count`: one
-    stratified set); refused (naming ``name``) where there is none, for the first pass needs 2 samples per pixel
-    to measure a spread, and the second as many again."""
-    top = min(max(2, int(PILOT_FRACTION * spp)), spp // 2)
-    count = next((n for n in range(top, 1, -1) if takes_sample_count(sampler, n)), None)
-    if count is None:
-        least = next(s for s in range(4, MAX_SPP)
-                     if any(takes_sample_count(sampler, n) for n in range(2, min(max(2, int(PILOT_FRACTION * s)), s // 2) + 1)))
-        raise InputError(f"`{name}` = {spp} is too few for render.adaptive = true with render.sampler = {sampler!r}: its first pass needs "
-                         f"at least 2 samples per pixel that the sampler takes and its second as many again; use {least} or more, "
-                         "or render.adaptive = false.")
-    return count
-
-
 class Section:
     """A scene-file section: coerced to its fields' types and checked on construction."""
 
@@ -172,16 +152,6 @@ class RenderSettings(Section):
     ``ldsampler`` or ``orthogonal`` would round (:data:`SAMPLE_COUNTS`) is refused, here and at each
     render; ``multijitter`` renders one it would round as passes of counts it takes
     (:func:`split_sample_count`). None is rounded silently.
-
-    ``adaptive`` spends the samples where the variance is, in two passes over the traced pixels: a
-    uniform first pass of :func:`pilot_count` samples per pixel (a quarter), then the rest, each pixel
-    at least one, the others in proportion to the spread the first pass measured around it; the image
-    is the two passes' images weighted by their shares of ``spp``, fixed in advance, so it stays
-    unbiased (:meth:`spacefit.rendering.renderer.Renderer.radiance`). Measured, it is slower at equal
-    error than the uniform render (1.2 to 3.4x in both views of ``experiments/forward_pareto.py
-    --adaptive``): off by default. It needs ``spp`` >= 4 (:func:`pilot_count`). A fit's renders (its
-    derivatives and the primal renders of its finite differences, which need common random numbers)
-    stay uniform.
     """
 
     resolution: tuple[int, int] = (600, 600)
@@ -192,7 +162,6 @@ class RenderSettings(Section):
     filter: str = "tent"
     deterministic: bool = True
     sampler: str = "multijitter"
-    adaptive: bool = False
 
     SECTION: ClassVar[str] = "render"
 
@@ -207,8 +176,6 @@ class RenderSettings(Section):
         check_choice("render.filter", self.filter, FILTERS)
         check_choice("render.sampler", self.sampler, SAMPLERS)
         check_sample_count("render.spp", self.spp, self.sampler)
-        if self.adaptive:
-            pilot_count("render.spp", self.spp, self.sampler)
 
 
 @dataclass(frozen=True)

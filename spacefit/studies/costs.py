@@ -14,7 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from spacefit.scene.schema import PILOT_FRACTION  # the built two-pass render's (render.adaptive)
+# Share of the samples a two-pass sampler spends on its uniform first pass.
+PILOT_FRACTION = 0.25
 
 
 def pareto_front(points: list[tuple[float, float]]) -> list[int]:
