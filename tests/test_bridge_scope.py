@@ -98,6 +98,14 @@ def test_a_vertex_column_is_rendered_again_when_a_sample_held_its_branch(case):
     assert grads_left(scene) == []
 
 
+def test_a_tangent_that_moves_nothing_gives_a_zero_column_without_a_render(case, monkeypatch):
+    scene, values, _ = case
+    monkeypatch.setattr(scene, "_render_ad", lambda seed_grad: pytest.fail("rendered"))
+    out = scene.forward(values, {k: np.zeros_like(v) for k, v in values.items()}, 5)
+    np.testing.assert_array_equal(out, np.zeros(scene.shape, np.float32))
+    assert grads_left(scene) == []
+
+
 def test_other_render_errors_are_not_repeated_and_leave_the_values_detached(case, monkeypatch):
     """A render that raises something else is not tried again; forward and backward leave no value
     attached to the AD graph behind them (main left every value attached)."""

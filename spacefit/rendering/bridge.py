@@ -153,6 +153,8 @@ class DrJitScene:
         values (the same seed, so the same image). The values are detached again after an error too.
         """
         moved = [key for key, t in tangent.items() if np.any(np.asarray(t) != 0) and _differentiable(self.params[key])]
+        if not moved:  # nothing the render differentiates moves (Dr.Jit would refuse an image attached to nothing)
+            return np.zeros(self.shape, np.float32)
         attempt = 1
         while True:
             try:
