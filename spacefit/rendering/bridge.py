@@ -25,7 +25,7 @@ callback runs: callbacks never raise.
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
 
 import jax
@@ -48,6 +48,21 @@ def _differentiable(value: object) -> bool:
 
 def _flat_grad(value: object) -> np.ndarray:
     return np.asarray(dr.grad(value), dtype=np.float32).ravel()
+
+
+# Dr.Jit's refusal to forward-propagate across an edge made before the current isolation scope, and how
+# many times a forward-mode render is tried when it meets it (:meth:`DrJitScene.forward`).
+OUTSIDE_SCOPE = "outside of the current dr.isolate_grad() scope"
+FORWARD_ATTEMPTS = 2
+
+
+def _outside_scope(err: BaseException | None) -> bool:
+    """Whether ``err``, or an exception it was raised from (PRB's loop wraps it), is that refusal."""
+    while err is not None:
+        if OUTSIDE_SCOPE in str(err):
+            return True
+        err = err.__cause__ or err.__context__
+    return False
 
 
 @dataclass
@@ -89,10 +104,11 @@ class DrJitScene:
             digest.update(np.ascontiguousarray(values[name], dtype=np.float32).tobytes())
         return seed, digest.digest()
 
-    def _set(self, values: Mapping[str, np.ndarray], grad: bool) -> None:
+    def _set(self, values: Mapping[str, np.ndarray], grad: Collection[str] = ()) -> None:
+        """Set scene values by traverse key: those named in ``grad`` attached to Dr.Jit's AD graph, the others detached."""
         for key, value in values.items():
             self.params[key] = to_value(self.params[key], value)
-            if grad and _differentiable(self.params[key]):
+            if key in grad and _differentiable(self.params[key]):
                 dr.enable_grad(self.params[key])
         self.params.update()
 
@@ -121,34 +137,59 @@ class DrJitScene:
     @in_variant
     def render_primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """:meth:`primal` rendered, not kept (a finite difference's renders are used once)."""
-        self._set(values, grad=False)
+        self._set(values)
         return self.renderer.radiance(self.spp, seed)  # the scene's path tracer: a seed gives the image Renderer.render gives
 
     @in_variant
     def forward(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
-        """Directional derivative of the image along ``tangent`` (same keys as ``values``), one render."""
-        self._set(values, grad=True)
-        for key, t in tangent.items():
-            if _differentiable(self.params[key]):
+        """Directional derivative of the image along ``tangent`` (same keys as ``values``), one render.
+
+        Only the values the tangent moves are attached to the AD graph: a material's column leaves the
+        meshes detached. Dr.Jit's forward mode follows every AD edge out of an attached value and
+        refuses one to a variable made before its isolation scope; a stack-sampling profiler (dask's
+        worker profiler, every 10 ms) that holds a frame of PRB's first trace of a symbolic branch as
+        it returns keeps such variables alive (made from the vertex positions there). A column that
+        moves vertices must attach them: its render is tried again on that refusal, from freshly set
+        values (the same seed, so the same image). The values are detached again after an error too.
+        """
+        moved = [key for key, t in tangent.items() if np.any(np.asarray(t) != 0) and _differentiable(self.params[key])]
+        if not moved:  # nothing the render differentiates moves (Dr.Jit would refuse an image attached to nothing)
+            return np.zeros(self.shape, np.float32)
+        attempt = 1
+        while True:
+            try:
+                return self._forward_once(values, {key: tangent[key] for key in moved}, seed_grad)
+            except RuntimeError as err:
+                if attempt == FORWARD_ATTEMPTS or not _outside_scope(err):
+                    raise
+                attempt += 1
+
+    def _forward_once(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
+        """One forward-mode render of :meth:`forward`, with AD on the keys of ``tangent`` only."""
+        self._set(values, grad=tangent)
+        try:
+            for key, t in tangent.items():
                 dr.set_grad(self.params[key], to_value(self.params[key], t))
-        with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():  # a fixed order of the film's sums
-            image = self._render_ad(seed_grad)
-            dr.forward_to(image)
-            out = self.renderer.to_film(np.asarray(dr.grad(image), dtype=np.float32))
-        self._set(values, grad=False)
-        return out
+            with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():  # a fixed order of the film's sums
+                image = self._render_ad(seed_grad)
+                dr.forward_to(image)
+                return self.renderer.to_film(np.asarray(dr.grad(image), dtype=np.float32))
+        finally:
+            self._set(values)
 
     @in_variant
     def backward(self, values: Mapping[str, np.ndarray], cotangent: np.ndarray, seed_grad: int) -> dict[str, np.ndarray]:
-        """Gradient of sum(cotangent * image) with respect to every key of ``values``, one backward pass."""
-        self._set(values, grad=True)
-        with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():
-            image = self._render_ad(seed_grad)
-            dr.backward_from(image * mi.TensorXf(self.renderer.to_window(np.asarray(cotangent, dtype=np.float32))))
-            grads = {key: _flat_grad(self.params[key]) if _differentiable(self.params[key]) else np.zeros(np.size(values[key]), np.float32)
-                     for key in values}
-        self._set(values, grad=False)
-        return grads
+        """Gradient of sum(cotangent * image) with respect to every key of ``values``, one backward pass
+        (the values detached again after it, and after an error)."""
+        self._set(values, grad=values)
+        try:
+            with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():
+                image = self._render_ad(seed_grad)
+                dr.backward_from(image * mi.TensorXf(self.renderer.to_window(np.asarray(cotangent, dtype=np.float32))))
+                return {key: _flat_grad(self.params[key]) if _differentiable(self.params[key]) else np.zeros(np.size(values[key]), np.float32)
+                        for key in values}
+        finally:
+            self._set(values)
 
 
 def _flat(values: Mapping[str, Array]) -> dict[str, Array]:
