@@ -134,6 +134,27 @@ def test_a_cached_render_imports_neither_jax_nor_the_fitting_or_plotting_stacks(
     assert run[1].stdout.strip() == "[]", run[1].stdout
 
 
+# Modules `spacefit render` must not import once the mesh cache holds its meshes: the fitting, plotting, table,
+# store and cluster stacks and the mesh builders (each a tenth of a second to seconds of start-up).
+NOT_FOR_A_RENDER = ("jax", "jaxtyping", "optimistix", "equinox", "matplotlib", "colour", "trimesh", "scipy", "xarray",
+                    "pandas", "astropy", "dask", "distributed", "zarr")
+
+
+def test_the_render_command_s_process_imports_none_of_the_stacks_it_does_not_need(tmp_path):
+    """`spacefit render` as a process (cli.main, as the console script runs it), second run: its modules at exit."""
+    overrides = [arg for key, value in SMALL.items() for arg in ("--set", f"{key}={json.dumps(value)}")]
+    script = (
+        "import sys, spacefit.cli\n"
+        f"code = spacefit.cli.main(['render', '--out', {str(tmp_path / 'out')!r}, '--overwrite', '--quiet', *{overrides!r}])\n"
+        f"print(code, sorted(m for m in {NOT_FOR_A_RENDER!r} if m in sys.modules))\n"
+    )
+    env = {"SPACEFIT_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    runs = [subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+            for _ in range(2)]
+    assert runs[0].stdout.startswith("0 ") and "jax" in runs[0].stdout  # the first run builds the meshes
+    assert runs[1].stdout.strip() == "0 []", runs[1].stdout + runs[1].stderr
+
+
 def test_render_reports_where_the_time_went(monkeypatch, tmp_path, capsys):
     monkeypatch.setenv(cache.ENV, str(tmp_path / "cache"))
     overrides = [arg for key, value in SMALL.items() for arg in ("--set", f"{key}={json.dumps(value)}")]
