@@ -155,6 +155,21 @@ def test_the_render_command_s_process_imports_none_of_the_stacks_it_does_not_nee
     assert runs[1].stdout.strip() == "0 []", runs[1].stdout + runs[1].stderr
 
 
+def test_the_render_program_ends_at_once_with_its_folder_written_and_its_messages_out(tmp_path):
+    """Run as the program, a render skips Python's shutdown (os._exit): its exit status, its messages (through pipes)
+    and its four files are all there, and no lock or stage is left."""
+    overrides = [arg for key, value in SMALL.items() for arg in ("--set", f"{key}={json.dumps(value)}")]
+    env = {"SPACEFIT_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    out = tmp_path / "out"
+    run = subprocess.run([sys.executable, "-m", "spacefit.cli", "render", "--out", str(out), "--timings", *overrides],
+                         env=env, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert "total" in run.stderr and f"wrote {out / 'radiance.exr'}" in run.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["preview.png", "radiance.exr", "render.json", "scene.toml"]
+    assert json.loads((out / "render.json").read_text())["scene"]["render"]["resolution"] == [64, 64]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache", "out"]  # the lock beside the folder is gone
+
+
 def test_render_reports_where_the_time_went(monkeypatch, tmp_path, capsys):
     monkeypatch.setenv(cache.ENV, str(tmp_path / "cache"))
     overrides = [arg for key, value in SMALL.items() for arg in ("--set", f"{key}={json.dumps(value)}")]

@@ -25,8 +25,9 @@ MIN_LLVM_MAJOR = 19
 LLVM_GLOBS = ("/usr/lib/x86_64-linux-gnu/libLLVM*.so*", "/usr/lib/aarch64-linux-gnu/libLLVM*.so*", "/usr/lib/llvm-*/lib/libLLVM*.so*")
 
 
+@functools.cache  # globbing costs 2 ms, and every variant scope asks (resolve_variant)
 def find_libllvm() -> tuple[str | None, int]:
-    """Path and major version of the newest system libLLVM (None, 0 when there is none)."""
+    """Path and major version of the newest system libLLVM (None, 0 when there is none), looked up once a process."""
     best: tuple[str | None, int] = (None, 0)
     for pattern in LLVM_GLOBS:
         for path in glob.glob(pattern):
