@@ -10,6 +10,7 @@ import functools
 import math
 import os
 from collections.abc import Iterator, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any
@@ -358,10 +359,13 @@ class Renderer:
         self.window = target_window(assembly, vertices) if crop else (0, 0, intr.width, intr.height)
         r = assembly.scene.render
         self.memory_bytes = check_memory(intr.width, intr.height, self.window[2] * self.window[3], r.spp)  # the mask traces fewer
-        self.traced = target_mask(assembly, vertices, self.window) if crop else np.ones(self.window[:1:-1], dtype=bool)
         with variant_scope(self.variant):
+            objects = scene_dict(assembly, vertices, self.window)
+            with ThreadPoolExecutor(1, thread_name_prefix="spacefit-mask") as pool:  # NumPy, while Mitsuba builds its BVH (no GIL)
+                traced = pool.submit(target_mask, assembly, vertices, self.window) if crop else None
+                self.scene = mi.load_dict(objects)
+            self.traced = traced.result() if traced is not None else np.ones(self.window[:1:-1], dtype=bool)
             self._pixels = mi.UInt32(np.flatnonzero(self.traced).astype(np.uint32))
-            self.scene = mi.load_dict(scene_dict(assembly, vertices, self.window))
             self.params = mi.traverse(self.scene)
 
     def to_film(self, window_image: np.ndarray) -> np.ndarray:
