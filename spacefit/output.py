@@ -19,7 +19,6 @@ import warnings
 from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
@@ -28,6 +27,7 @@ from PIL import Image
 
 from spacefit.errors import InputError
 from spacefit.locks import is_lock_file
+from spacefit.versions import package_version
 
 PREVIEW_PERCENTILE = 99.5
 PACKAGES = ("spacefit", "mitsuba", "drjit", "jax", "numpy", "trimesh", "colour-science", "optimistix")
@@ -73,13 +73,7 @@ def write_png(path: str | Path, rgb8: np.ndarray) -> None:
 
 def versions() -> dict[str, str]:
     """Versions of Python and the packages that decide a render's pixels."""
-    out = {"python": platform.python_version()}
-    for name in PACKAGES:
-        try:
-            out[name] = metadata.version(name)
-        except metadata.PackageNotFoundError:
-            out[name] = "not installed"
-    return out
+    return {"python": platform.python_version(), **{name: package_version(name) or "not installed" for name in PACKAGES}}
 
 
 def check_writable(out_dir: str | Path) -> Path:

@@ -184,6 +184,18 @@ def test_render_reports_where_the_time_went(monkeypatch, tmp_path, capsys):
     assert sidecar["kernels"]["launched"] >= 1
 
 
+def test_package_versions_read_from_the_header_equal_importlib_metadata_s():
+    """The sidecar's versions and the mesh cache's keys: every installed distribution's, and None for none."""
+    from importlib import metadata
+
+    from spacefit.versions import package_version
+
+    names = {dist.metadata["Name"] for dist in metadata.distributions()}
+    assert len(names) > 20
+    assert {name: package_version(name) for name in names} == {name: metadata.version(name) for name in names}
+    assert package_version("no-such-distribution-spacefit-test") is None
+
+
 def test_srgb_encoding_equals_colour_science():
     colour = pytest.importorskip("colour")
     x = np.concatenate([np.linspace(0.0, 0.01, 101), np.linspace(0.0, 1.0, 1001)])
