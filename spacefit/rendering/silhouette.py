@@ -64,9 +64,9 @@ def silhouette(triangles: np.ndarray, width: int, height: int) -> np.ndarray:
     """(height, width) bool: the pixels whose square [x, x + 1) x [y, y + 1) (px, u right, v down) a
     projected triangle may overlap, conservatively (never misses one). ``triangles``: (n, 3, 2) px."""
     mask = np.zeros((height, width), dtype=bool)
-    corners = np.ascontiguousarray(triangles.swapaxes(0, 1))  # NumPy reduces a short inner axis slowly (5x, 0.1 M triangles)
-    lo = np.floor(corners.min(axis=0) - EPS_PX).astype(np.int64)
-    hi = np.floor(corners.max(axis=0) + EPS_PX).astype(np.int64)
+    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]  # not min(axis=1): NumPy reduces a short axis 4x slower
+    lo = np.floor(np.minimum(np.minimum(a, b), c) - EPS_PX).astype(np.int64)
+    hi = np.floor(np.maximum(np.maximum(a, b), c) + EPS_PX).astype(np.int64)
     size = hi - lo
     visible = (hi[:, 0] >= 0) & (hi[:, 1] >= 0) & (lo[:, 0] < width) & (lo[:, 1] < height)
     small = visible & (size[:, 0] < SMALL_BOX_PX) & (size[:, 1] < SMALL_BOX_PX)
