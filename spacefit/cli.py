@@ -287,8 +287,9 @@ def _ended(code: int, program: bool = False) -> int:
     """``code``, or the process ended at once with it: while an interrupted render still runs in the
     background (:func:`~spacefit.interrupts.abandoned`: Python's exit would wait for it, then abort), or
     after a render run as the program (``program``), its folder written and its lock released: Python's
-    shutdown would free every module and Mitsuba's objects one by one (0.07 s) with nothing left to do."""
-    if program or abandoned():
+    shutdown would free every module and Mitsuba's objects one by one (0.07 s) with nothing left to do,
+    unless a profiler or tracer (cProfile, coverage) runs, which writes its report at the exit."""
+    if (program and sys.getprofile() is None and sys.gettrace() is None) or abandoned():
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code)

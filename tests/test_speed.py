@@ -168,6 +168,11 @@ def test_the_render_program_ends_at_once_with_its_folder_written_and_its_message
     assert sorted(p.name for p in out.iterdir()) == ["preview.png", "radiance.exr", "render.json", "scene.toml"]
     assert json.loads((out / "render.json").read_text())["scene"]["render"]["resolution"] == [64, 64]
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cache", "out"]  # the lock beside the folder is gone
+    # under a profiler the process exits as Python does, and the profiler writes its report
+    profile = tmp_path / "render.prof"
+    run = subprocess.run([sys.executable, "-m", "cProfile", "-o", str(profile), "-m", "spacefit.cli", "render", "--out",
+                          str(out), "--overwrite", "--quiet", *overrides], env=env, capture_output=True, text=True)
+    assert run.returncode == 0 and profile.stat().st_size > 0, run.stderr
 
 
 def test_render_reports_where_the_time_went(monkeypatch, tmp_path, capsys):
