@@ -78,17 +78,17 @@ import sys, time
 t0 = time.perf_counter()
 import spacefit as sf
 t1 = time.perf_counter()
-from spacefit.rendering.backend import select_variant
+from spacefit.rendering.backend import variant_scope
 from spacefit.rendering.renderer import Renderer, kernel_log
 t2 = time.perf_counter()
 scene = sf.load_scene(None)
-select_variant(scene.render.variant)
-t3 = time.perf_counter()
-renderer = Renderer(scene)
-t4 = time.perf_counter()
-with kernel_log() as k:
-    renderer.render()
-t5 = time.perf_counter()
+with variant_scope(scene.render.variant):
+    t3 = time.perf_counter()
+    renderer = Renderer(scene)
+    t4 = time.perf_counter()
+    with kernel_log() as k:
+        renderer.render()
+    t5 = time.perf_counter()
 heavy = [m for m in ("jax", "xarray", "dask", "matplotlib", "scipy", "trimesh", "optimistix") if m in sys.modules]
 print(f"import spacefit {t1 - t0:.2f} s, import Dr.Jit and Mitsuba {t2 - t1:.2f} s, Mitsuba's variant {t3 - t2:.2f} s, "
       f"assemble and load {t4 - t3:.2f} s, render {t5 - t4:.2f} s ({k['launched']} kernels, {k['compiled']} compiled, "
@@ -111,18 +111,30 @@ def child(args: list[str], env: dict[str, str] | None = None) -> tuple[float, fl
     return wall, usage.ru_maxrss / 1024, out
 
 
+# The main job's floor: Python with Dr.Jit and Mitsuba's LLVM variant, nothing else.
+FLOOR = "import drjit, mitsuba; mitsuba.set_variant('llvm_ad_rgb')"
+
+
 def main_job(repeats: int) -> None:
-    """``spacefit render`` of the default scene: cold (empty mesh cache) once, then warm."""
+    """``spacefit render`` of the default scene: cold (empty mesh cache) once, then warm, each warm run in
+    turn with the floor (:data:`FLOOR`); the stages its ``--timings`` table does not hold (Python's start-up,
+    NumPy and the command line's modules, the exit) are the whole process's wall time less the table's total."""
     print(f"\n## spacefit render, default scene (wall s, whole process; peak MiB; {load()})")
     with tempfile.TemporaryDirectory() as cache, tempfile.TemporaryDirectory() as out:
         env = {"SPACEFIT_CACHE_DIR": cache, "PYTHONPATH": str(ROOT)}
         render = [sys.executable, "-m", "spacefit.cli", "render", "--quiet", "--overwrite", "--timings", "--out", out]
         wall, peak, text = child(render, env)
         print(f"cold (mesh cache empty): {wall:.2f} s, {peak:.0f} MiB\n{text.strip()}")
-        runs = [child(render, env) for _ in range(repeats)]
+        runs, floors = [], []
+        for _ in range(repeats):
+            runs.append(child(render, env))
+            floors.append(child([sys.executable, "-c", FLOOR])[0])
         walls = sorted(r[0] for r in runs)
+        outside = sorted(w - float(out.split("total", 1)[1].split()[0]) for w, _, out in runs)
         print(f"warm: median {statistics.median(walls):.2f} s (min {walls[0]:.2f}, max {walls[-1]:.2f}, {repeats} runs), "
-              f"{runs[-1][1]:.0f} MiB\n{runs[-1][2].strip()}")
+              f"{runs[-1][1]:.0f} MiB; outside the stages below (start-up, NumPy and the CLI's modules, exit): median "
+              f"{statistics.median(outside):.2f} s; the floor (Python, Dr.Jit, Mitsuba's variant): median "
+              f"{statistics.median(floors):.2f} s (min {min(floors):.2f})\n{runs[-1][2].strip()}")
 
 
 def load() -> str:

@@ -128,6 +128,67 @@ def test_error_inside_writing_removes_partial_output(tmp_path, monkeypatch):
     assert not out.exists()
 
 
+def test_a_failed_preview_leaves_nothing_though_the_exr_was_written_meanwhile(tmp_path, monkeypatch):
+    """The EXR is written in a thread while the preview is encoded: an error in the preview waits for it, then
+    removes the whole stage, and names the file."""
+    import errno
+
+    import spacefit.output as output
+
+    def full(path, rgb8):
+        raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
+
+    monkeypatch.setattr(output, "write_png", full)
+    out = tmp_path / "run"
+    assert main(["render", "--out", str(out), "--quiet"] + [a for s in SMALL for a in ("--set", s)]) == 1
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+
+
+def test_the_preview_encodes_every_pixel_as_the_whole_image_formula_does():
+    """preview.png's tone map computes only the lit values (a target in black space): it must equal the formula
+    applied to every value (clip, sRGB, round), for dark, negative, over-exposed and NaN-free images of any scale."""
+    from spacefit.output import preview_scale, srgb_encode, to_srgb8
+
+    rng = np.random.default_rng(3)
+    for shape in [(64, 64, 3), (300, 7, 3), (1, 1, 3), (520, 3, 4)]:
+        image = (rng.random(shape) * 3.0).astype(np.float32)
+        image[rng.random(shape) < 0.6] = 0.0
+        image[rng.random(shape) < 0.05] *= -1.0
+        for scale in (preview_scale(image), 0.25, 40.0, -1.5):
+            whole = np.round(srgb_encode(np.clip(image * scale, 0.0, 1.0)) * 255.0).astype(np.uint8)
+            np.testing.assert_array_equal(to_srgb8(image, scale), whole)
+        peak = image.max(axis=-1)
+        lit = peak[peak > 0]
+        assert preview_scale(image) == (1.0 / float(np.percentile(lit, 99.5)) if lit.size else 1.0)
+    assert preview_scale(np.zeros((4, 4, 3), np.float32)) == 1.0
+
+
+def test_the_render_folder_holds_what_the_writers_write_one_by_one(tmp_path):
+    """write_render (the EXR in a thread, the preview's lit values only) against the plain writers called in turn
+    on the whole-image tone map: the same four files, byte for byte."""
+    from spacefit.output import PREVIEW_PERCENTILE, srgb_encode, write_json, write_png, write_render
+    from spacefit.rendering.exr import write_exr
+
+    rng = np.random.default_rng(8)
+    radiance = (rng.random((40, 56, 3)) * 5.0).astype(np.float32)
+    radiance[rng.random((40, 56)) < 0.8] = 0.0
+    sidecar = {"seed": 3, "versions": {"spacefit": "test"}}
+    write_render(tmp_path / "folder", radiance, "[render]\nspp = 4\n", sidecar, write_exr)
+    peak = radiance.max(axis=-1)
+    scale = 1.0 / float(np.percentile(peak[peak > 0], PREVIEW_PERCENTILE))
+    plain = tmp_path / "plain"
+    plain.mkdir()
+    write_exr(plain / "radiance.exr", radiance)
+    write_png(plain / "preview.png", np.round(srgb_encode(np.clip(radiance * scale, 0.0, 1.0)) * 255.0).astype(np.uint8))
+    (plain / "scene.toml").write_text("[render]\nspp = 4\n")
+    write_json(plain / "render.json", {**sidecar, "preview": {"scale_sr_m2_per_W": scale, "percentile": PREVIEW_PERCENTILE,
+                                                             "encoding": "sRGB IEC 61966-2-1"}})
+    names = ["preview.png", "radiance.exr", "render.json", "scene.toml"]
+    assert sorted(os.listdir(tmp_path / "folder")) == names
+    for name in names:
+        assert (tmp_path / "folder" / name).read_bytes() == (plain / name).read_bytes(), name
+
+
 def test_nan_override_is_rejected():
     with pytest.raises(InputError, match="finite"):
         load_scene(None, ["target.position_m=[0, nan, 0]"])

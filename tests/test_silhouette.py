@@ -94,3 +94,18 @@ def test_conservative_rasterisation_of_a_triangle():
     assert inside[10, 31] and not inside[10, 32] and inside[0, 40] and not inside[0, 41]
     traced, lit = traced_pixels(big, 48, 48, 1.0)
     assert lit[0, 41] and not lit[0, 42] and traced[0, 42] and not traced[0, 43]
+
+
+def test_small_triangles_mark_their_boxes_clipped_to_the_film():
+    """Triangles within 3 x 3 px mark their whole pixel box, clipped where it crosses the film's edges (some
+    lie wholly outside): the union of the boxes, marked one by one."""
+    rng = np.random.default_rng(5)
+    width, height = 23, 17
+    corner = rng.uniform([-4.0, -4.0], [width + 2.0, height + 2.0], size=(400, 1, 2))
+    triangles = corner + rng.uniform(0.0, 1.9, size=(400, 3, 2))
+    expected = np.zeros((height, width), dtype=bool)
+    for tri in triangles:
+        (x0, y0), (x1, y1) = np.floor(tri.min(axis=0) - 1e-3).astype(int), np.floor(tri.max(axis=0) + 1e-3).astype(int)
+        expected[max(y0, 0):max(y1 + 1, 0), max(x0, 0):max(x1 + 1, 0)] = True
+    assert 0 < expected.sum() < expected.size
+    np.testing.assert_array_equal(silhouette(triangles, width, height), expected)

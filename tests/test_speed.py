@@ -134,6 +134,47 @@ def test_a_cached_render_imports_neither_jax_nor_the_fitting_or_plotting_stacks(
     assert run[1].stdout.strip() == "[]", run[1].stdout
 
 
+# Modules `spacefit render` must not import once the mesh cache holds its meshes: the fitting, plotting, table,
+# store and cluster stacks and the mesh builders (each a tenth of a second to seconds of start-up).
+NOT_FOR_A_RENDER = ("jax", "jaxtyping", "optimistix", "equinox", "matplotlib", "colour", "trimesh", "scipy", "xarray",
+                    "pandas", "astropy", "dask", "distributed", "zarr")
+
+
+def test_the_render_command_s_process_imports_none_of_the_stacks_it_does_not_need(tmp_path):
+    """`spacefit render` as a process (cli.main, as the console script runs it), second run: its modules at exit."""
+    overrides = [arg for key, value in SMALL.items() for arg in ("--set", f"{key}={json.dumps(value)}")]
+    script = (
+        "import sys, spacefit.cli\n"
+        f"code = spacefit.cli.main(['render', '--out', {str(tmp_path / 'out')!r}, '--overwrite', '--quiet', *{overrides!r}])\n"
+        f"print(code, sorted(m for m in {NOT_FOR_A_RENDER!r} if m in sys.modules))\n"
+    )
+    env = {"SPACEFIT_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    runs = [subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+            for _ in range(2)]
+    assert runs[0].stdout.startswith("0 ") and "jax" in runs[0].stdout  # the first run builds the meshes
+    assert runs[1].stdout.strip() == "0 []", runs[1].stdout + runs[1].stderr
+
+
+def test_the_render_program_ends_at_once_with_its_folder_written_and_its_messages_out(tmp_path):
+    """Run as the program, a render skips Python's shutdown (os._exit): its exit status, its messages (through pipes)
+    and its four files are all there, and no lock or stage is left."""
+    overrides = [arg for key, value in SMALL.items() for arg in ("--set", f"{key}={json.dumps(value)}")]
+    env = {"SPACEFIT_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    out = tmp_path / "out"
+    run = subprocess.run([sys.executable, "-m", "spacefit.cli", "render", "--out", str(out), "--timings", *overrides],
+                         env=env, capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    assert "total" in run.stderr and f"wrote {out / 'radiance.exr'}" in run.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["preview.png", "radiance.exr", "render.json", "scene.toml"]
+    assert json.loads((out / "render.json").read_text())["scene"]["render"]["resolution"] == [64, 64]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cache", "out"]  # the lock beside the folder is gone
+    # under a profiler the process exits as Python does, and the profiler writes its report
+    profile = tmp_path / "render.prof"
+    run = subprocess.run([sys.executable, "-m", "cProfile", "-o", str(profile), "-m", "spacefit.cli", "render", "--out",
+                          str(out), "--overwrite", "--quiet", *overrides], env=env, capture_output=True, text=True)
+    assert run.returncode == 0 and profile.stat().st_size > 0, run.stderr
+
+
 def test_render_reports_where_the_time_went(monkeypatch, tmp_path, capsys):
     monkeypatch.setenv(cache.ENV, str(tmp_path / "cache"))
     overrides = [arg for key, value in SMALL.items() for arg in ("--set", f"{key}={json.dumps(value)}")]
@@ -146,6 +187,18 @@ def test_render_reports_where_the_time_went(monkeypatch, tmp_path, capsys):
     assert set(sidecar["timings_s"]) == {"imports", "assemble", "load", "render", "part_ids"}
     assert set(sidecar["mesh_cache"]) == {"lander", "body.refinement", "body.displaced"}
     assert sidecar["kernels"]["launched"] >= 1
+
+
+def test_package_versions_read_from_the_header_equal_importlib_metadata_s():
+    """The sidecar's versions and the mesh cache's keys: every installed distribution's, and None for none."""
+    from importlib import metadata
+
+    from spacefit.versions import package_version
+
+    names = {dist.metadata["Name"] for dist in metadata.distributions()}
+    assert len(names) > 20
+    assert {name: package_version(name) for name in names} == {name: metadata.version(name) for name in names}
+    assert package_version("no-such-distribution-spacefit-test") is None
 
 
 def test_srgb_encoding_equals_colour_science():

@@ -286,6 +286,11 @@ MUTANTS = (
            "<= 0.5 * (abs(nx) + abs(ny)) + EPS_PX", "<= EPS_PX", ("tests/test_silhouette.py",)),
     Mutant("mask-dilated-once", "spacefit/rendering/silhouette.py", "return dilate(lit, reach), lit", "return lit, lit",
            ("tests/test_silhouette.py",)),
+    # the main job's shortcuts (issue 23): the preview encodes only the lit values, the small boxes are clipped to the film
+    Mutant("preview-drops-the-dimmest-lit-values", "spacefit/output.py", "lit = rows > 0", "lit = rows > 1e-3",
+           ("tests/test_render.py::test_the_preview_encodes_every_pixel_as_the_whole_image_formula_does",)),
+    Mutant("mask-boxes-unclipped-right", "spacefit/rendering/silhouette.py", "np.minimum(x1, w - 1) + 1", "x1 + 1",
+           ("tests/test_silhouette.py::test_small_triangles_mark_their_boxes_clipped_to_the_film",)),
     Mutant("multijitter-rounds-silently", "spacefit/scene/schema.py", "    if sampler == \"multijitter\":\n        return spp % root == 0\n",
            "", ("tests/test_sampler.py",)),
     # the documentation site: the front page shows the render; a page's link to another resolves

@@ -21,13 +21,13 @@ import os
 import tempfile
 import zipfile
 from collections.abc import Callable, Iterable, Mapping
-from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from spacefit import __version__
+from spacefit.versions import package_version
 
 ENV = "SPACEFIT_CACHE_DIR"
 DISABLED = "off"
@@ -58,10 +58,7 @@ def _code_identity() -> str:
     """The spacefit version, :data:`FORMAT`, the versions of :data:`PACKAGES` and the SHA-256 of :data:`SOURCES`."""
     h = hashlib.sha256(f"{__version__}|{FORMAT}".encode())
     for name in PACKAGES:
-        try:
-            h.update(f"|{name} {metadata.version(name)}".encode())
-        except metadata.PackageNotFoundError:
-            h.update(f"|{name} none".encode())
+        h.update(f"|{name} {package_version(name) or 'none'}".encode())
     here = Path(__file__).parent
     for name in SOURCES:
         h.update((here / name).read_bytes())
