@@ -1,8 +1,9 @@
 """What Mitsuba's variant switch costs a caller who keeps another variant: ``renders`` small renders
 (sf.Renderer.render) with the caller's variant set to ``variant`` before each (docs/api.md).
 
-Usage: python experiments/variant_switch.py VARIANT [RENDERS]; time it with farm-bench against llvm_ad_rgb
-(no switch), e.g. farm-bench --vs "python experiments/variant_switch.py llvm_ad_rgb" -- python experiments/variant_switch.py scalar_rgb
+Usage: python experiments/variant_switch.py VARIANT [RENDERS]; time it as a whole process against llvm_ad_rgb
+(no switch), runs in turn, e.g. ``/usr/bin/time -v python experiments/variant_switch.py scalar_rgb`` then the same
+with ``llvm_ad_rgb``, and compare the CPU time (user + system).
 """
 
 from __future__ import annotations
