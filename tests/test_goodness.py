@@ -43,6 +43,15 @@ def test_chi2_of_a_correct_model_is_one_plus_its_render_noise_and_no_misfit():
     assert not g.misfit and "within the expected range" in g.line()
 
 
+def test_with_the_noise_known_every_fitted_value_counts_a_zero_residual_too():
+    """A sensor's integer sky DN equal to the model's bias gives r = 0: a value, not a masked one."""
+    r, noise = residuals(zeros=500)
+    fitted = np.ones(r.size, dtype=bool)
+    fitted[-100:] = False  # masked out
+    assert goodness(r, noise, n_free=3, noise_known=True, fitted=fitted).values == N + 400
+    assert goodness(r, noise, n_free=3, noise_known=False, fitted=fitted).values == N  # no noise: black sky is nothing
+
+
 def test_a_model_error_beyond_the_margin_is_a_misfit():
     # a shared error of 0.45 sigma adds 0.2 to chi^2 / dof: twice the floor
     g = goodness(*residuals(misfit=0.45), n_free=3, noise_known=True)

@@ -240,6 +240,8 @@ MUTANTS = (
     # the verdict render (issue 21): judged at more samples than the fit's, the references' own render noise counted
     Mutant("verdict-on-the-fits-samples", "spacefit/fitting/loop.py", "k = verdict_factor(2.0 * goodness(r, noise, 0, True).render_noise, max(problem.spp))",
            "k = 1", ("tests/test_goodness.py",)),
+    Mutant("zero-residuals-left-out", "spacefit/fitting/goodness.py", "counted |= np.ravel(np.asarray(fitted, dtype=bool))",
+           "counted = counted", ("tests/test_goodness.py",)),
     Mutant("reference-render-noise-ignored", "spacefit/fitting/loop.py", "ratios = [spp / ref if ref else 0.0", "ratios = [0.0",
            ("tests/test_goodness.py",)),
     # a resumed fit goes on with its stop rule's record (the checkpoint's history)

@@ -497,8 +497,10 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
     ratios = [spp / ref if ref else 0.0 for spp, ref in zip(verdict_spp, problem.reference_spp)]
     pixels = loss == "pixel"
     ratio = np.repeat(ratios, [ref.size for ref in problem.references]) if pixels else float(np.mean(ratios))
+    fitted = np.concatenate([np.broadcast_to(used[..., None], ref.shape).ravel() for ref, used in zip(problem.references, problem.used)])
     quality = goodness(r, noise, len(s.x0), s.noise_given, [ref.shape for ref in problem.references] if pixels else [],
-                       reference_ratio=ratio, samples_factor=judged, verdict_spp=verdict_spp, reference_spp=problem.reference_spp)
+                       fitted=fitted if pixels else None, reference_ratio=ratio, samples_factor=judged, verdict_spp=verdict_spp,
+                       reference_spp=problem.reference_spp)
     return quality, r, noise, [np.asarray(m) for m in renders[0]]
 
 
@@ -521,8 +523,9 @@ def per_observation(r: np.ndarray, noise: np.ndarray, s: Setup, factor: int) -> 
         offset = rows.stop
         n_k = sum(1 for name in s.user.names if observation_of(name)[1] in (None, k))
         spp, reference = factor * problem.spp[k], problem.reference_spp[k]
-        out.append(goodness(r[rows], noise[rows], n_k, s.noise_given, [ref.shape], reference_ratio=spp / reference if reference else 0.0,
-                            samples_factor=factor, verdict_spp=[spp], reference_spp=[reference]))
+        out.append(goodness(r[rows], noise[rows], n_k, s.noise_given, [ref.shape], fitted=np.broadcast_to(problem.used[k][..., None], ref.shape),
+                            reference_ratio=spp / reference if reference else 0.0, samples_factor=factor, verdict_spp=[spp],
+                            reference_spp=[reference]))
     return out
 
 
@@ -534,7 +537,7 @@ def _per_part(r: np.ndarray, noise: np.ndarray, problem: Problem, quality: Goodn
         rows = slice(offset, offset + ref.size)
         offset = rows.stop
         values = part_chi2(r[rows].reshape(ref.shape), noise[rows].reshape(ref.shape), parts, used,
-                           1.0 if quality.noise_known else quality.render_noise)
+                           1.0 if quality.noise_known else quality.render_noise, quality.noise_known)
         out.append({name: {key: value} for name, value in values.items()})
     return out
 
