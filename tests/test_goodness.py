@@ -11,6 +11,7 @@ from astropy.io import fits
 from helpers import small_scene, write_sphere_obj
 
 import spacefit as sf
+from spacefit.fitting.formation import expected_dn
 from spacefit.fitting.goodness import MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
 from spacefit.fitting.loop import verdict
 from spacefit.fitting.problem import setup
@@ -195,6 +196,30 @@ def test_a_file_without_the_render_keyword_is_a_real_observation(tmp_path):
         sf.read_image(tmp_path / "bad.fits")
     real = goodness(*residuals(), n_free=3, noise_known=True, reference_spp=[None])
     assert real.reference_noise == 0 and "references taken as real observations" in real.line()
+
+
+def test_the_render_samples_travel_in_a_png_sidecar_and_a_bad_count_is_refused_before_writing(tmp_path):
+    dn = np.full((4, 4, 1), 400, dtype=np.uint16)
+    sf.write_observation(tmp_path / "o.png", dn, SENSOR, render_spp=32)
+    assert sf.read_image(tmp_path / "o.png").metadata["render_spp"] == 32
+    with pytest.raises(sf.InputError, match="`render_spp` must be an integer >= 1, got 0"):
+        sf.write_observation(tmp_path / "bad.fits", dn, SENSOR, render_spp=0)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.png", "o.png.json"]
+    with pytest.raises(sf.InputError, match="render_spp"):
+        sf.Observation(sf.load_case("panels").scene(), dn.astype(float), sensor=SENSOR, render_spp=0)
+
+
+def test_the_models_dn_is_the_observations_mean_never_below_the_bias():
+    """A glint next to black sky: the PSF's ringing dips below zero electrons, which observe's Poisson
+    mean does not; the fit's model takes 0 there too (else a correct fit is judged a misfit)."""
+    radiance = np.zeros((32, 32, 1))
+    radiance[10:20, 10:20] = 5.0
+    intrinsics = assemble(sf.load_case("panels").with_values(TINY).scene()).intrinsics
+    model = np.asarray(expected_dn(radiance, SENSOR, intrinsics))
+    assert model.min() == SENSOR.bias_dn and model.max() > 1e4
+    simulated = np.mean([sf.observe(radiance, SENSOR, intrinsics, seed=k).astype(float) for k in range(50)], axis=0)
+    dark = model < SENSOR.bias_dn + 1  # the sky and the ringing round the glint
+    assert abs(float(np.mean((simulated - model)[dark]))) < 0.05
 
 
 def test_a_simulated_references_render_noise_raises_the_expectation():

@@ -242,6 +242,8 @@ MUTANTS = (
            "k = 1", ("tests/test_goodness.py",)),
     Mutant("zero-residuals-left-out", "spacefit/fitting/goodness.py", "counted |= np.ravel(np.asarray(fitted, dtype=bool))",
            "counted = counted", ("tests/test_goodness.py",)),
+    Mutant("model-dips-below-the-bias", "spacefit/fitting/formation.py", "jnp.maximum(electrons(radiance), 0.0)", "electrons(radiance)",
+           ("tests/test_goodness.py",)),
     Mutant("reference-render-noise-ignored", "spacefit/fitting/loop.py", "ratios = [spp / ref if ref else 0.0", "ratios = [0.0",
            ("tests/test_goodness.py",)),
     # a resumed fit goes on with its stop rule's record (the checkpoint's history)
