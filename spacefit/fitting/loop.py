@@ -435,7 +435,8 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
     x = np.asarray(s.solver_params.to_physical(outcome.u) if steps.moved and not steps.reported_again else s.x0, dtype=float)
     n = len(x)
     x_user = np.asarray(s.to_user(jnp.asarray(x)), dtype=float)
-    stderr, corr, loss_value, extras, renders, residuals, quality = np.full(n, np.nan), np.eye(n), math.nan, {}, [], [], None
+    stderr, corr, loss_value, extras, residuals, quality = np.full(n, np.nan), np.eye(n), math.nan, {}, [], None
+    renders: list[np.ndarray] = []
     own_quality: list[Goodness] = []
     per_part: list[dict[str, dict[str, float]]] = [{} for _ in problem.references]
     if status.interrupted:
@@ -491,7 +492,7 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
         judged = 2 * k
     else:
         judged = 1
-        r, r_alt = (np.asarray(problem.residual_of(m), dtype=float) for m in renders)
+        r, r_alt = (np.asarray(problem.residual_of(m), dtype=np.float64) for m in renders)
         noise = (r - r_alt) / math.sqrt(2.0)
     verdict_spp = [judged * spp for spp in problem.spp]
     ratios = [spp / ref if ref else 0.0 for spp, ref in zip(verdict_spp, problem.reference_spp)]

@@ -203,21 +203,21 @@ class Problem:
     renders_x: Callable[[jax.Array], list[jax.Array]]  # each observation's model image in its reference's unit
     part_images: list[PartImage]  # which part each pixel of each observation sees
     references: list[np.ndarray]  # the checked references, (h, w, 3) or (h, w, 1) float32, 0 where not used
+    # (x, j) -> each observation's model image at the j-th seeds (0 the fit's, 1 the independent ones, more
+    # further independent ones: the goodness of fit's verdict render, spacefit.fitting.goodness) ...
+    models_seeded: Callable[[jax.Array, int], list[jax.Array]]
+    # ... the stacked residuals of given model images (the noise sigma taken at them) ...
+    residual_of: Callable[[list[jax.Array]], jax.Array]
+    # ... and factor -> the same problem rendered with factor times the samples per pixel (the verdict render)
+    resampled: Callable[[int], Problem]
     noise_known: bool = False  # every residual is divided by its predicted noise (a sensor per observation)
     # per observation, how far (px) its render noise spreads before the residuals: the pixel
     # filter's radius and the rms width of the sensor's PSF (0 without a sensor)
     noise_spread_px: tuple[tuple[float, float], ...] = ()
     units: tuple[str, ...] = ()  # per observation, the unit of its reference and model image (radiance or DN)
     used: tuple[np.ndarray, ...] = ()  # per observation, (h, w) bool: the pixels fitted in every channel
-    # (x, j) -> each observation's model image at the j-th seeds (0 the fit's, 1 the independent ones, more
-    # further independent ones: the goodness of fit's verdict render, spacefit.fitting.goodness) ...
-    models_seeded: Callable[[jax.Array, int], list[jax.Array]] | None = None
-    # ... and the stacked residuals of given model images (the noise sigma taken at them)
-    residual_of: Callable[[list[jax.Array]], jax.Array] | None = None
     spp: tuple[int, ...] = ()  # per observation, the samples per pixel of its primal renders
     reference_spp: tuple[int | None, ...] = ()  # per observation, its reference's (Observation.render_spp)
-    # factor -> the same problem rendered with factor times the samples per pixel (the verdict render)
-    resampled: Callable[[int], Problem] | None = None
 
 
 def _problem(
@@ -283,9 +283,9 @@ def _problem(
         return _problem(finer, free, loss, None, None, seed, seed_grad, integrator, executor)
 
     return Problem(free, lambda x: models_residuals(x, main)[1], lambda x: models_residuals(x, independent)[1], reverse,
-                   lambda x: models_residuals(x, main)[0],
-                   part_images, references, all(o.sensor is not None for o in observations), tuple(spread), tuple(units),
-                   tuple(used_pixels), models_seeded, residual_of, spps, tuple(o.render_spp for o in observations), resampled)
+                   lambda x: models_residuals(x, main)[0], part_images, references, models_seeded, residual_of, resampled,
+                   all(o.sensor is not None for o in observations), tuple(spread), tuple(units), tuple(used_pixels), spps,
+                   tuple(o.render_spp for o in observations))
 
 
 def _in_unit_of(obs: Observation, channels: int, intrinsics: Intrinsics) -> Callable[[jax.Array], jax.Array]:
