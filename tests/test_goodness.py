@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from types import SimpleNamespace
 
 import jax.numpy as jnp
 import numpy as np
@@ -13,7 +14,7 @@ from helpers import small_scene, write_sphere_obj
 import spacefit as sf
 from spacefit.fitting.formation import expected_dn
 from spacefit.fitting.goodness import MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
-from spacefit.fitting.loop import verdict
+from spacefit.fitting.loop import _affordable, verdict
 from spacefit.fitting.problem import setup
 from spacefit.scene.schema import MAX_SPP
 from spacefit.rendering.renderer import PartImage
@@ -220,6 +221,13 @@ def test_the_models_dn_is_the_observations_mean_never_below_the_bias():
     simulated = np.mean([sf.observe(radiance, SENSOR, intrinsics, seed=k).astype(float) for k in range(50)], axis=0)
     dark = model < SENSOR.bias_dn + 1  # the sky and the ringing round the glint
     assert abs(float(np.mean((simulated - model)[dark]))) < 0.05
+
+
+def test_a_verdict_render_the_machine_cannot_hold_takes_fewer_samples(monkeypatch):
+    """The fit's result must not be lost to its verdict: a render the memory cannot hold is not asked for."""
+    monkeypatch.setattr("spacefit.rendering.renderer.available_memory_bytes", lambda: 2**30)  # 1 GiB
+    film = SimpleNamespace(references=[np.zeros((256, 256, 3))], spp=(64,))  # 4.2e6 samples, 0.26 GiB at 64 bytes each
+    assert _affordable(film, 2) and not _affordable(film, 4)
 
 
 def test_a_simulated_references_render_noise_raises_the_expectation():

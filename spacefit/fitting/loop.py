@@ -28,7 +28,7 @@ from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
-from spacefit.rendering.renderer import PartImage, mitsuba_scene_dict
+from spacefit.rendering.renderer import PartImage, check_memory, mitsuba_scene_dict
 from spacefit.scene.schema import Scene
 from spacefit.scene.parameters import is_nuisance, observation_of, parameter, scene_with_values
 from spacefit.units import DN_UNIT
@@ -486,6 +486,8 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
     if s.noise_given:
         r, noise = _mean_and_noise(problem, renders)
         k = verdict_factor(2.0 * goodness(r, noise, 0, True).render_noise, max(problem.spp))
+        while k > 1 and not _affordable(problem, k):
+            k //= 2
         if k > 1:
             finer = problem.resampled(k)
             r, noise = _mean_and_noise(finer, [finer.models_seeded(x, 0), finer.models_seeded(x, 1)])
@@ -503,6 +505,18 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
                        fitted=fitted if pixels else None, reference_ratio=ratio, samples_factor=judged, verdict_spp=verdict_spp,
                        reference_spp=problem.reference_spp)
     return quality, r, noise, [np.asarray(m) for m in renders[0]]
+
+
+def _affordable(problem: Problem, factor: int) -> bool:
+    """Whether every observation's whole film rendered at ``factor`` times its samples per pixel in one
+    wavefront (a fit's render) fits this machine (:func:`~spacefit.rendering.renderer.check_memory`):
+    a verdict render takes fewer samples rather than lose the fit's result."""
+    try:
+        for ref, spp in zip(problem.references, problem.spp):
+            check_memory(ref.shape[1], ref.shape[0], ref.shape[0] * ref.shape[1], factor * spp, split=False)
+    except InputError:
+        return False
+    return True
 
 
 def _mean_and_noise(problem: Problem, renders: list[list[jax.Array]]) -> tuple[np.ndarray, np.ndarray]:
