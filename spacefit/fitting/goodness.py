@@ -29,10 +29,10 @@ measured from their difference, and the spread counts the measured variance of t
 (an upper bound for a stratified sampler, whose noise falls faster than 1 / spp); one that does not
 is taken as a real observation (no render noise), and the goodness line says which. Two renders
 at k times the fit's samples, not the mean of 2k at the fit's: measured on the panels case at 32 x
-32 px (a sensor of v 3.5 at 8 spp, the truth), the mean of 16 renders at 8 spp put chi^2 / dof 0.10
-above its expectation (3 spreads), two renders at 64 spp 0.07 below it (2 spreads); each such
-render's own Monte Carlo error is long-tailed, and its scatter of several tenths between seeds at 16
-spp shrinks to a few hundredths at 64. Figures of the pass: docs/guide/pass.md and
+32 px at the truth (a calibrated sensor, v 3.5 at 8 spp; 2026-11-25, load average 7 to 8), the mean
+of 16 renders at 8 spp put chi^2 / dof 0.10 above its expectation (3 spreads), two renders at 128
+spp 0.004 above it; a render's Monte Carlo error at few samples is long-tailed (its mean square
+scattered by several tenths between seeds at 16 spp, a few hundredths at 64). Figures of the pass: docs/guide/pass.md and
 ``experiments/pass_misfit.py``.
 
 A misfit means the model or its nuisances miss something (a pose, a blur, a shift, a material):
