@@ -1,10 +1,12 @@
-"""Why the six-frame pass fitted with each frame's attitude about x and z (``pass.ipynb``) ends with
-the verdict ``misfit``: the misfit rule (:mod:`spacefit.fitting.goodness`) evaluated at the TRUE
-values (materials and every frame's two angles), per frame, at the fit's 32 spp and at 128 spp; and
-chi^2 per value at 32 spp with the noise sigma at the model's own DN (as the fit takes it), at the
-reference's, and at a 1024-spp model's, against the render noise v measured with the last.
+"""Why the six-frame pass fitted with each frame's attitude about x and z (``pass.ipynb``) ended with
+the verdict ``misfit`` under the old rule, and what the verdict render (:mod:`spacefit.fitting.goodness`)
+gives: at the TRUE values (materials and every frame's two angles), per frame, at 8, 32 and 128 spp,
+the old rule (the fit's own render, the noise sigma at its DN, the references taken as real) and the
+verdict (the mean of k renders, sigma at that mean, the references' 1024-spp render noise counted);
+and chi^2 per value at 32 spp with the noise sigma at the model's own DN, at the reference's, and at
+a 1024-spp model's, against the render noise v measured with the last.
 
-    python experiments/pass_misfit.py            # 6 frames at 32 x 32 px, references at 1024 spp (a few minutes)
+    python experiments/pass_misfit.py            # 6 frames at 32 x 32 px, references at 1024 spp (some minutes)
 
 Prints the figures with the machine's load average.
 """
@@ -22,6 +24,7 @@ import numpy as np
 import spacefit as sf
 from spacefit.fitting.formation import noise_variance_dn
 from spacefit.fitting.goodness import goodness
+from spacefit.fitting.loop import judged_goodness, per_observation
 from spacefit.fitting.problem import setup
 from spacefit.precision import float64
 
@@ -48,17 +51,19 @@ def main() -> None:
         models = [np.asarray(m, dtype=float) for m in s.problem.renders_x(x)]
         return s, models, [np.asarray(r, dtype=float) for r in s.problem.references]
 
-    for spp in (32, 128):
+    for spp in (8, 32, 128):
         s, _, _ = at_truth(sf.FitRender(spp=spp))
         x = jnp.asarray(s.x0)
         r, r_alt = np.asarray(s.problem.residual_x(x)), np.asarray(s.problem.residual_x_independent(x))
-        g = goodness(r, r_alt, len(free), True)
-        print(f"{spp} spp, at the truth: chi^2/dof {g.chi2_dof:.3f}, v {g.render_noise:.3f}, expected {1 + g.render_noise:.3f}, "
-              f"limit {g.limit:.3f}: {'MISFIT' if g.misfit else 'within the expected range'}")
-        n = r.size // FRAMES
-        for k in range(FRAMES):
-            gk = goodness(r[k * n:(k + 1) * n], r_alt[k * n:(k + 1) * n], 0, True)
-            print(f"  frame {k}: chi^2/dof {gk.chi2_dof:.3f}, v {gk.render_noise:.3f}, above 1 + v by {gk.chi2_dof - 1 - gk.render_noise:+.3f}")
+        old = goodness(r, (r - r_alt) / np.sqrt(2.0), len(free), True)
+        print(f"{spp} spp, at the truth, the old rule: chi^2/dof {old.chi2_dof:.3f}, v {old.render_noise:.3f}, limit {old.limit:.3f}: "
+              f"{'MISFIT' if old.misfit else 'within the expected range'}")
+        t0 = time.perf_counter()
+        new, r, noise, _ = judged_goodness(s, x, "pixel")
+        print(f"  the verdict ({time.perf_counter() - t0:.1f} s): {new.line()}")
+        for k, gk in enumerate(per_observation(r, noise, s, new.samples_factor)):
+            print(f"  frame {k}: chi^2/dof {gk.chi2_dof:.3f}, v {gk.render_noise:.3f}, v_ref {gk.reference_noise:.3f}, above its "
+                  f"expectation by {gk.chi2_dof - 1 - gk.render_noise - gk.reference_noise:+.3f}, limit {gk.limit:.3f}")
 
     _, m32, refs = at_truth(sf.FitRender(spp=32))
     _, m32_alt, _ = at_truth(sf.FitRender(spp=32, seed=77))

@@ -16,8 +16,10 @@ mask). What each format holds:
   ``RDNOISE`` / ``READNOIS`` / ``RON`` (electrons rms), ``BIAS`` / ``PEDESTAL`` (the DN offset added
   to every pixel), ``SATURATE`` (DN), ``RADSCALE`` (DN per W m^-2 sr^-1, a calibrated camera),
   ``PSFSIGMA`` (px, the continuous Gaussian PSF's sigma), the bits of integer data (``BITPIX``),
-  spacefit's ``HIERARCH SPACEFIT SENSOR <field>`` for every field, and ``DATE-OBS`` (kept as an
-  ISO time in ``metadata["date_obs"]``).
+  spacefit's ``HIERARCH SPACEFIT SENSOR <field>`` for every field, ``DATE-OBS`` (kept as an
+  ISO time in ``metadata["date_obs"]``) and ``RENDSPP`` (:data:`RENDER_SPP_KEY`: a simulated
+  observation's samples per pixel, whose Monte Carlo noise the goodness of fit expects; kept in
+  ``metadata["render_spp"]``; a file without it, from another writer, is a real observation).
 * Row order. spacefit's arrays run top-down. A FITS file's rows are read in the order it states,
   first found of: the ``row_order`` argument; ``ROWORDER = 'TOP-DOWN'`` or ``'BOTTOM-UP'``; a
   celestial WCS's parity (the sky seen from inside, north up and east left as sky images show it,
@@ -58,7 +60,7 @@ import numpy as np
 import tifffile
 from astropy.io import fits
 
-from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_array, check_choice, check_path, check_range, check_type, negative_pixels, quote
+from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_array, check_choice, check_count, check_path, check_range, check_type, negative_pixels, quote
 from spacefit.sensor import Sensor, check_fields, missing_for_measurement, used_fields
 from spacefit.units import DN_UNIT, RADIANCE_UNIT
 
@@ -75,6 +77,9 @@ ROW_ORDERS = ("top-down", "bottom-up")
 CHANNELS = (1, 3)
 """The channels an image may hold: grey or RGB (a PNG's or TIFF's alpha besides, read as a mask)."""
 SENSOR_DEFAULTS = ("illustrative",)
+RENDER_SPP_KEY = "RENDSPP"
+"""The FITS keyword (and, as ``render_spp``, the sidecar key) of a simulated observation's samples per
+pixel: its render's Monte Carlo noise, which the goodness of fit counts (:mod:`spacefit.fitting.goodness`)."""
 HEADER_KEYWORDS = {
     "exposure_time_s": ("EXPTIME", "EXPOSURE"),
     "gain_dn_per_electron": ("GAIN", "EGAIN"),  # electrons per DN in the header: inverted
@@ -128,7 +133,8 @@ def _format(path: Path, allowed: tuple[str, ...]) -> str:
     return FORMATS[suffix]
 
 
-def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata: dict[str, Any] | None = None) -> Path:
+def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata: dict[str, Any] | None = None, *,
+                      render_spp: int | None = None) -> Path:
     """Write integer DN as 16-bit PNG, TIFF or FITS (by the extension) with its JSON sidecar.
 
     Args:
@@ -137,11 +143,14 @@ def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata
             ADC range, as :func:`spacefit.fitting.formation.observe` returns.
         sensor: the sensor that made them; all its values go to the sidecar and the FITS header.
         metadata: anything JSON can hold, added to the sidecar under ``metadata``.
+        render_spp: the samples per pixel of the render the DN were simulated from (FITS
+            :data:`RENDER_SPP_KEY`, sidecar ``render_spp``); None: not a simulation.
     Returns:
         the sidecar's path.
     """
     p = Path(path)
     kind = _format(p, WRITABLE)
+    check_count("render_spp", render_spp)
     data = check_array("dn", dn)
     if data.ndim != 3 or data.dtype.kind != "u":
         raise InputError(f"`dn` must be (height, width, channels) unsigned integers, got {data.dtype} of shape {data.shape}.")
@@ -157,11 +166,15 @@ def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata
         tifffile.imwrite(p, data if data.shape[2] > 1 else data[..., 0], photometric="rgb" if data.shape[2] == 3 else "minisblack")
     else:
         planes = np.moveaxis(data[::-1], -1, 0)  # FITS rows run bottom-up; channels are NAXIS3
-        fits.PrimaryHDU(np.ascontiguousarray(planes if data.shape[2] > 1 else planes[0]), header=_fits_header(sensor)).writeto(p, overwrite=True)
+        header = _fits_header(sensor)
+        if render_spp is not None:
+            header[RENDER_SPP_KEY] = (render_spp, "samples per pixel of the simulated render")
+        fits.PrimaryHDU(np.ascontiguousarray(planes if data.shape[2] > 1 else planes[0]), header=header).writeto(p, overwrite=True)
     side = sidecar_path(p)
     defaults = [f.name for f in dataclasses.fields(Sensor) if getattr(sensor, f.name) == f.default]
     content = {"unit": "DN", "response": "linear", "saturation_dn": sensor.saturation_dn, "sensor": sensor.to_dict(),
-               "sensor_defaults": defaults, "metadata": metadata or {}}
+               "sensor_defaults": defaults, "metadata": metadata or {},
+               **({} if render_spp is None else {"render_spp": render_spp})}
     side.write_text(json.dumps(content, indent=2))
     return side
 
@@ -392,10 +405,12 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         raise InputError(f"image file {str(p)!r} does not exist.")
     kind = _format(p, tuple(FORMATS))
     sidecar = _read_sidecar(sidecar_path(p))
-    meta: dict[str, Any] = {"format": kind, "response": "linear", "saturation_dn": None, "notes": [], "sensor_found": {}}
+    meta: dict[str, Any] = {"format": kind, "response": "linear", "saturation_dn": None, "notes": [], "sensor_found": {},
+                            "render_spp": None}
     if sidecar is not None:
         meta["sidecar"] = sidecar
         meta["saturation_dn"] = sidecar.get("saturation_dn")
+        meta["render_spp"] = sidecar.get("render_spp")
     alpha = None
     if kind in ("exr", "fits") and response not in (None, "linear"):
         raise InputError(f"{str(p)!r}: `response` applies to PNG and TIFF; {kind.upper()} data are linear.")
@@ -415,6 +430,9 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
             meta["date_obs"] = _iso_time(header["DATE-OBS"], p)
         if "SATURATE" in header:
             meta["saturation_dn"] = float(header["SATURATE"])
+        if RENDER_SPP_KEY in header:  # the file outranks its sidecar
+            meta["render_spp"] = header[RENDER_SPP_KEY]
+            check_count(f"{str(p)!r}: the FITS header's {RENDER_SPP_KEY}", meta["render_spp"])
     else:
         raw, alpha = _read_tiff(p) if kind == "tiff" else _read_png(p)
         bits = 8 * raw.dtype.itemsize if raw.dtype.kind in "ui" else None
@@ -478,6 +496,7 @@ def _read_sidecar(path: Path) -> dict[str, Any] | None:
         check_choice(f"{where}: response", content["response"], RESPONSES)
     if content.get("saturation_dn") is not None:
         check_range(f"{where}: saturation_dn", content["saturation_dn"], 0.0, unit="DN")
+    check_count(f"{where}: render_spp", content.get("render_spp"))
     defaults = content.get("sensor_defaults", [])
     if not isinstance(defaults, list):
         raise InputTypeError(f"{where}: sensor_defaults must be a list of sensor field names, got {quote(defaults)}.")

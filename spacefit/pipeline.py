@@ -246,7 +246,7 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     t0 = time.perf_counter()
     try:
         result = fit(observations, free, progress=progress, on_step=checkpoint.update, on_end=checkpoint.end,
-                     ended=checkpoint.ended, cluster=cluster, **options.keywords())
+                     ended=checkpoint.ended, history=checkpoint.history if resume else (), cluster=cluster, **options.keywords())
         edited = changed(checkpoint.digests)  # the files read at the start, read again: a result of files that changed is none
         if edited:
             raise InputError(f"{', '.join(map(repr, edited))} changed while the fit ran (SHA-256 differs from the start's); "
@@ -281,23 +281,27 @@ def _problem_of(value: Any, key: str) -> Any:
 
 
 class Checkpoint:
-    """The best point of a fit so far, written atomically into its output folder after every step
-    that improves it, so that an interrupted (even killed) fit can be resumed (``--resume``). It
-    records the SHA-256 of every file the fit read (``files``: references, scenes, masks, sensor
-    file, flat field, meshes), hashed when it is made: a resume compares them by content."""
+    """The best point of a fit so far and its steps' history, written atomically into its output
+    folder after every step, so that an interrupted (even killed) fit can be resumed (``--resume``)
+    and end as the uninterrupted one would (``fit``'s ``history``). It records the SHA-256 of every
+    file the fit read (``files``: references, scenes, masks, sensor file, flat field, meshes),
+    hashed when it is made: a resume compares them by content."""
 
     def __init__(self, path: Path, inputs: dict[str, Any], files: Sequence[str | Path] = ()) -> None:
         self.path, self.inputs = path, json.loads(json.dumps(inputs, default=str))
         self.digests = digests(files)
         self.best: dict[str, Any] | None = None
         self.steps = 0
+        self.history: list[dict[str, Any]] = []  # every step's entry (``fit``'s ``on_step``)
         self.ended: dict[str, Any] | None = None  # the record of a solve that ended (``fit``'s ``on_end``)
 
     def update(self, entry: dict[str, Any]) -> None:
-        """Record one step's history entry; write the file when the step is the best so far."""
+        """Record one step's history entry (the best point when it is the best so far) and write the file."""
         self.steps += 1
+        self.history.append(dict(entry))
         if np.isfinite(entry["loss"]) and (self.best is None or entry["loss"] < self.best["loss"]):
             self.best = {"loss": float(entry["loss"]), "values": dict(entry["values"])}
+        if self.best is not None:
             self._write()
 
     def end(self, record: dict[str, Any]) -> None:
@@ -308,12 +312,12 @@ class Checkpoint:
     def _write(self) -> None:
         with staged_output(self.path.parent) as stage:
             write_json(stage / self.path.name, {"inputs": self.inputs, "files_sha256": self.digests, "best": self.best,
-                                                "steps": self.steps, "versions": versions(),
+                                                "steps": self.steps, "history": self.history, "versions": versions(),
                                                 **({"ended": self.ended} if self.ended else {})})
 
     def resume(self, max_steps: int) -> dict[str, Any]:
         """The fit options that continue from the checkpoint: its best values as the start, and the
-        steps left of ``max_steps``; for a solve that had ended (:attr:`ended`, passed to ``fit``), its
+        steps left of ``max_steps`` (:attr:`history` holds the steps made); for a solve that had ended (:attr:`ended`, passed to ``fit``), its
         end values, so that the report is the one the ended fit would have written.
 
         Raises:
@@ -336,7 +340,7 @@ class Checkpoint:
         if edited:
             raise InputError(f"checkpoint {str(self.path)!r} was made with other contents of {', '.join(map(repr, edited))} "
                              "(SHA-256 differs: edited since); resume with the files as they were, or run without --resume.")
-        self.best, self.steps, self.ended = best, steps, saved.get("ended")
+        self.best, self.steps, self.ended, self.history = best, steps, saved.get("ended"), list(saved.get("history", []))
         if self.ended is not None:  # the solve had ended: its ending is reported again, not solved again
             return {"start": self.ended["values"]}
         return {"start": best["values"], "max_steps": max(max_steps - steps, 1)}

@@ -296,8 +296,9 @@ def test_checkpoint_resumes_with_another_solver_and_refuses_another_loss(tmp_pat
     first.update({"loss": 1.0, "values": {"parts.sphere.kd": 0.4}})
     first.update({"loss": 1.5, "values": {"parts.sphere.kd": 0.35}})
     again = Checkpoint(tmp_path / "checkpoint.json", inputs(sf.FitOptions(solver="lm", max_steps=10, render=sf.FitRender(spp=2))))
-    # the file is written at the best step (the 2nd): the steps after it are run again
-    assert again.resume(10) == {"start": {"parts.sphere.kd": 0.4}, "max_steps": 8} and again.steps == 2
+    # the file is written at every step, with the history: the resumed solve goes on after the 3rd from the best point
+    assert again.resume(10) == {"start": {"parts.sphere.kd": 0.4}, "max_steps": 7} and again.steps == 3
+    assert [h["loss"] for h in again.history] == [2.0, 1.0, 1.5]
     for other in (sf.FitOptions(loss="stats", render=sf.FitRender(spp=2)), sf.FitOptions(render=sf.FitRender(spp=4))):
         with pytest.raises(sf.InputError, match="was made with other options"):
             Checkpoint(tmp_path / "checkpoint.json", inputs(other)).resume(10)

@@ -2,13 +2,21 @@
 
 from __future__ import annotations
 
+import json
+from types import SimpleNamespace
+
+import jax.numpy as jnp
 import numpy as np
 import pytest
+from astropy.io import fits
 from helpers import small_scene, write_sphere_obj
 
 import spacefit as sf
-from spacefit.fitting.goodness import MISFIT_FLOOR, MISFIT_SIGMAS, goodness, part_chi2
-from spacefit.fitting.loop import verdict
+from spacefit.fitting.formation import expected_dn
+from spacefit.fitting.goodness import MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
+from spacefit.fitting.loop import _affordable, verdict
+from spacefit.fitting.problem import setup
+from spacefit.scene.schema import MAX_SPP
 from spacefit.rendering.renderer import PartImage
 from spacefit.scene.assembly import assemble
 
@@ -17,22 +25,33 @@ RENDER_SIGMA = 0.5  # the fit's own render noise, in units of the observation's 
 
 
 def residuals(misfit: float = 0.0, zeros: int = 0, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
-    """Residuals of one point rendered with two seeds: the observation's unit noise (shared), each
-    render's own noise (independent), a model error ``misfit`` (shared), and ``zeros`` values left out."""
+    """Residuals of one point rendered with two seeds, as the first render's and a draw of its render
+    noise: the observation's unit noise (shared), each render's own noise (independent), a model error
+    ``misfit`` (shared), and ``zeros`` values left out."""
     rng = np.random.default_rng(seed)
     shared = rng.normal(0.0, 1.0, N) + misfit
-    r, r_alt = (shared + rng.normal(0.0, RENDER_SIGMA, N) for _ in range(2))
-    return np.concatenate([r, np.zeros(zeros)]), np.concatenate([r_alt, np.zeros(zeros)])
+    r, r_alt = (np.concatenate([shared + rng.normal(0.0, RENDER_SIGMA, N), np.zeros(zeros)]) for _ in range(2))
+    return r, (r - r_alt) / np.sqrt(2.0)
 
 
 def test_chi2_of_a_correct_model_is_one_plus_its_render_noise_and_no_misfit():
     g = goodness(*residuals(zeros=500), n_free=3, noise_known=True)
     assert g.values == N and g.dof == N - 3  # the values left out count for nothing
-    assert g.expected_spread == pytest.approx(np.sqrt(2.0 / (N - 3)))
+    # normal render noise: the squares' variance 2 v^2, chi^2's spread and the measured v's error
+    assert g.expected_spread == pytest.approx(np.sqrt((2.0 + 4.0 * g.render_noise + 4.0 * g.render_noise**2) / (N - 3)), rel=0.03)
     assert g.render_noise == pytest.approx(RENDER_SIGMA**2, rel=0.03)
     assert g.chi2_dof == pytest.approx(1.0 + RENDER_SIGMA**2, abs=4 * g.expected_spread)
     assert g.limit == pytest.approx(1.0 + g.render_noise + max(MISFIT_SIGMAS * g.expected_spread, MISFIT_FLOOR))
     assert not g.misfit and "within the expected range" in g.line()
+
+
+def test_with_the_noise_known_every_fitted_value_counts_a_zero_residual_too():
+    """A sensor's integer sky DN equal to the model's bias gives r = 0: a value, not a masked one."""
+    r, noise = residuals(zeros=500)
+    fitted = np.ones(r.size, dtype=bool)
+    fitted[-100:] = False  # masked out
+    assert goodness(r, noise, n_free=3, noise_known=True, fitted=fitted).values == N + 400
+    assert goodness(r, noise, n_free=3, noise_known=False, fitted=fitted).values == N  # no noise: black sky is nothing
 
 
 def test_a_model_error_beyond_the_margin_is_a_misfit():
@@ -53,7 +72,7 @@ def test_without_a_known_noise_the_spread_and_correlation_are_reported_against_t
     for structure, correlated in ((0.0, False), (3.0, True)):
         r = (white + structure * smooth).ravel()
         r_alt = (white + structure * smooth + rng.normal(0.0, 1.0, shape)).ravel()
-        g = goodness(r, r_alt, n_free=1, noise_known=False, shapes=[shape])
+        g = goodness(r, (r - r_alt) / np.sqrt(2.0), n_free=1, noise_known=False, shapes=[shape])
         assert np.isnan(g.chi2_dof) and not g.misfit and "no verdict" in g.line()
         assert g.spread == pytest.approx((1.0 + structure**2) / 0.5, rel=0.15)
         assert abs(g.render_correlation) < 0.1
@@ -64,7 +83,7 @@ def test_part_chi2_is_the_mean_square_of_each_parts_values():
     parts = PartImage(np.array([[0, 0], [1, -1]], dtype=np.int16), ("a", "b"))
     r = np.array([[1.0, 3.0], [2.0, 5.0]])[..., None]
     used = np.array([[True, False], [True, True]])
-    rows = part_chi2(r, r, parts, used, noise=1.0)
+    rows = part_chi2(r, r, parts, used, scale=1.0)
     assert rows == {"a": 1.0, "b": 4.0, "target": 2.5}
 
 
@@ -89,41 +108,70 @@ def test_verdicts_and_their_precedence(solver_status, moved, at_bound, misfit, e
     assert status.success == (expected in (sf.Status.CONVERGED, sf.Status.NOISE_FLOOR, sf.Status.NO_BETTER_POINT))
 
 
-# The panels case at 32 x 32 px (same field of view), 4 spp (the truth at 64), observed by a sensor (the noise known).
-TINY = {"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0, "render.spp": 4}
-SENSOR = sf.Sensor(exposure_time_s=1e-8, psf_sigma_px=1.0, full_well_electrons=None, bit_depth=16)
+# The panels case at 32 x 32 px (same field of view), fitted at 16 spp, observed by a bright calibrated
+# sensor (its noise below the fit's render noise: v about 0.9), the references rendered at 1024 spp.
+FIT_SPP = 16
+TINY = {"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0, "render.spp": FIT_SPP}
+SENSOR = sf.Sensor(radiometric_scale_dn_per_w_m2_sr=10000.0, gain_dn_per_electron=0.5, bias_dn=100.0, read_noise_electrons=5.0,
+                   bit_depth=16, full_well_electrons=None, diffraction=False, psf_sigma_px=1.0)
+REFERENCE_SPP = 1024
 
 
 @pytest.fixture(scope="module")
-def sensor_fits():
+def sensor_fits(tmp_path_factory):
     """Materials-only fits of the observation of the truth, and of the target turned 1 deg (a pose the
-    model does not have)."""
+    model does not have), each observation a FITS file that says its render's samples (RENDSPP)."""
     case = sf.load_case("panels").with_values(TINY)
     intrinsics = assemble(case.scene()).intrinsics
-    out = {}
+    folder = tmp_path_factory.mktemp("observations")
+    out, observations = {}, {}
     for turn in (0.0, 1.0):
-        truth = np.asarray(sf.render(case.truth_scene.with_values({"render.spp": 64, "target.attitude_deg": [turn, 0.0, 0.0]})))
-        dn = sf.observe(truth, SENSOR, intrinsics, seed=3).astype(float)
-        out[turn] = sf.fit(sf.Observation(case.scene(), dn, sensor=SENSOR), list(case.free), start=case.start, max_steps=15)
-    return case, out
+        truth = case.truth_scene.with_values({"render.spp": REFERENCE_SPP, "target.attitude_deg": [turn, 0.0, 0.0]})
+        path = folder / f"turned{turn:g}.fits"
+        sf.write_observation(path, sf.observe(np.asarray(sf.render(truth)), SENSOR, intrinsics, seed=3), SENSOR, render_spp=REFERENCE_SPP)
+        observations[turn] = sf.Observation.from_file(path, case.scene())
+        out[turn] = sf.fit(observations[turn], list(case.free), start=case.start, max_steps=15)
+    return case, out, observations
 
 
-def test_a_correct_model_is_within_the_expected_range(sensor_fits):
-    _, fits = sensor_fits
-    result = fits[0.0]
+def old_rule(obs, result) -> tuple[float, float]:
+    """chi^2 / dof and its limit by the rule before the verdict render: the fit's own render, the noise
+    sigma at its DN, the reference taken as real, the spread sqrt(2 / dof)."""
+    s = setup(obs, list(result.names), start=result.values)
+    x = jnp.asarray(s.x0)
+    r, r_alt = np.asarray(s.problem.residual_x(x)), np.asarray(s.problem.residual_x_independent(x))
+    g = goodness(r, (r - r_alt) / np.sqrt(2.0), len(x), True)
+    return g.chi2_dof, 1.0 + g.render_noise + max(MISFIT_SIGMAS * np.sqrt(2.0 / g.dof), MISFIT_FLOOR)
+
+
+def test_a_correct_model_at_few_samples_is_within_the_expected_range(sensor_fits):
+    _, results, observations = sensor_fits
+    result = results[0.0]
     g = result.goodness
+    chi2_dof, limit = old_rule(observations[0.0], result)
+    assert chi2_dof > limit  # the old rule: the fit's own render condemns the correct model
     assert g.noise_known and g.dof == g.values - 3 and not g.misfit
-    assert abs(g.chi2_dof - (1.0 + g.render_noise)) < 5 * g.expected_spread, g
+    assert g.samples_factor >= 8 and g.verdict_spp == (FIT_SPP * g.samples_factor,) and g.render_noise < 2 * VERDICT_RENDER_NOISE
+    assert abs(g.chi2_dof - (1.0 + g.render_noise + g.reference_noise)) < 5 * g.expected_spread, g
     assert result.success and sf.format_result(result).startswith("converged")
     assert result.uncertainty()["stderr_valid"] and not result.stderr_note
     target = result.parts[0]["target"]["chi2_per_value"]
-    assert abs(target - (1.0 + g.render_noise)) < 0.5, result.parts
+    assert abs(target - (1.0 + g.render_noise + g.reference_noise)) < 0.5, result.parts
+
+
+def test_the_reference_render_noise_is_read_from_the_file_and_counted(sensor_fits):
+    _, results, _ = sensor_fits
+    g = results[0.0].goodness
+    assert g.reference_spp == (REFERENCE_SPP,)
+    assert g.reference_noise == pytest.approx(g.render_noise * g.verdict_spp[0] / REFERENCE_SPP) and g.reference_noise > 0
+    assert f"references rendered at {REFERENCE_SPP} spp" in g.line() and f"render noise at {g.verdict_spp[0]} spp" in g.line()
+    assert json.loads(json.dumps(results[0.0].to_dict()["goodness"]))["verdict_spp"] == [FIT_SPP * g.samples_factor]
 
 
 def test_a_missing_nuisance_is_a_misfit_and_says_so_first(sensor_fits):
     """The target turned 1 deg, only the materials free: the solver converges, the verdict is a misfit."""
-    case, fits = sensor_fits
-    result = fits[1.0]
+    case, results, _ = sensor_fits
+    result = results[1.0]
     assert result.status is sf.Status.MISFIT and not result.success
     assert result.goodness.chi2_dof > 1.5 * result.goodness.limit, result.goodness
     assert sf.format_result(result).splitlines()[0].startswith("misfit:")
@@ -132,6 +180,69 @@ def test_a_missing_nuisance_is_a_misfit_and_says_so_first(sensor_fits):
     assert data["stderr_valid"] is False and data["stderr_note"].startswith("misfit")
     # the misfit's errors are too small indeed: some value lies more than 3 of them off the truth
     assert max(abs(result.values[n] - v) / result.stderr[n] for n, v in case.truth.items()) > 3.0
+
+
+def test_a_file_without_the_render_keyword_is_a_real_observation(tmp_path):
+    """A FITS file of another writer (no RENDSPP) has no render noise; spacefit's says its own; a bad one is refused."""
+    dn = np.full((32, 32), 400, dtype=np.uint16)
+    fits.PrimaryHDU(dn, header=fits.Header({"BUNIT": "adu", "ROWORDER": "TOP-DOWN"})).writeto(tmp_path / "other.fits")
+    scene = sf.load_case("panels").with_values(TINY).scene()
+    other = sf.Observation.from_file(tmp_path / "other.fits", scene, sensor=SENSOR)
+    assert other.render_spp is None
+    assert setup(other, ["parts.panels.alpha_x"]).problem.reference_spp == (None,)
+    sf.write_observation(tmp_path / "ours.fits", dn[..., None], SENSOR, render_spp=64)
+    assert sf.Observation.from_file(tmp_path / "ours.fits", scene).render_spp == 64
+    fits.PrimaryHDU(dn, header=fits.Header({"BUNIT": "adu", "ROWORDER": "TOP-DOWN", "RENDSPP": 0})).writeto(tmp_path / "bad.fits")
+    with pytest.raises(sf.InputError, match="RENDSPP"):
+        sf.read_image(tmp_path / "bad.fits")
+    real = goodness(*residuals(), n_free=3, noise_known=True, reference_spp=[None])
+    assert real.reference_noise == 0 and "references taken as real observations" in real.line()
+
+
+def test_the_render_samples_travel_in_a_png_sidecar_and_a_bad_count_is_refused_before_writing(tmp_path):
+    dn = np.full((4, 4, 1), 400, dtype=np.uint16)
+    sf.write_observation(tmp_path / "o.png", dn, SENSOR, render_spp=32)
+    assert sf.read_image(tmp_path / "o.png").metadata["render_spp"] == 32
+    with pytest.raises(sf.InputError, match="`render_spp` must be an integer >= 1, got 0"):
+        sf.write_observation(tmp_path / "bad.fits", dn, SENSOR, render_spp=0)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.png", "o.png.json"]
+    with pytest.raises(sf.InputError, match="render_spp"):
+        sf.Observation(sf.load_case("panels").scene(), dn.astype(float), sensor=SENSOR, render_spp=0)
+
+
+def test_the_models_dn_is_the_observations_mean_never_below_the_bias():
+    """A glint next to black sky: the PSF's ringing dips below zero electrons, which observe's Poisson
+    mean does not; the fit's model takes 0 there too (else a correct fit is judged a misfit)."""
+    radiance = np.zeros((32, 32, 1))
+    radiance[10:20, 10:20] = 5.0
+    intrinsics = assemble(sf.load_case("panels").with_values(TINY).scene()).intrinsics
+    model = np.asarray(expected_dn(radiance, SENSOR, intrinsics))
+    assert model.min() == SENSOR.bias_dn and model.max() > 1e4
+    simulated = np.mean([sf.observe(radiance, SENSOR, intrinsics, seed=k).astype(float) for k in range(50)], axis=0)
+    dark = model < SENSOR.bias_dn + 1  # the sky and the ringing round the glint
+    assert abs(float(np.mean((simulated - model)[dark]))) < 0.05
+
+
+def test_a_verdict_render_the_machine_cannot_hold_takes_fewer_samples(monkeypatch):
+    """The fit's result must not be lost to its verdict: a render the memory cannot hold is not asked for."""
+    monkeypatch.setattr("spacefit.rendering.renderer.available_memory_bytes", lambda: 2**30)  # 1 GiB
+    film = SimpleNamespace(references=[np.zeros((256, 256, 3))], spp=(64,))  # 4.2e6 samples, 0.26 GiB at 64 bytes each
+    assert _affordable(film, 2) and not _affordable(film, 4)
+
+
+def test_a_simulated_references_render_noise_raises_the_expectation():
+    r, noise = residuals()
+    real = goodness(r, noise, n_free=3, noise_known=True)
+    rendered = goodness(r, noise, n_free=3, noise_known=True, reference_ratio=0.5, reference_spp=[64])
+    assert rendered.reference_noise == pytest.approx(0.5 * real.render_noise)
+    assert rendered.limit - real.limit == pytest.approx(rendered.reference_noise) and "references rendered at 64 spp" in rendered.line()
+
+
+@pytest.mark.parametrize(("v", "spp", "k"), [(0.2, 8, 1), (0.3, 8, 2), (2.9, 32, 16), (100.0, 8, MAX_VERDICT_FACTOR),
+                                             (100.0, MAX_SPP // 4, 4), (float("nan"), 8, 1)])
+def test_the_verdict_render_takes_enough_samples_for_its_noise_to_be_small(v, spp, k):
+    assert verdict_factor(v, spp) == k
+    assert v / (2 * k) <= VERDICT_RENDER_NOISE or k == min(MAX_VERDICT_FACTOR, MAX_SPP // spp) or np.isnan(v)
 
 
 def test_a_fit_where_every_step_is_rejected_makes_no_progress(tmp_path):

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import spacefit as sf
-from spacefit.fitting.formation import expected_dn
+from spacefit.fitting.formation import expected_electrons
 from spacefit.fitting.nuisance import blur, shift
 from spacefit.fitting.problem import setup
 from spacefit.geometry.frames import Intrinsics
@@ -36,7 +36,7 @@ def test_blur_is_the_sensors_continuous_gaussian_and_keeps_the_light():
     image[15, 15, 0] = 1.0
     out = np.asarray(blur(jnp.asarray(image), 1.3))[..., 0]
     sensor = Sensor(psf_sigma_px=1.3, diffraction=False, radiometric_scale_dn_per_w_m2_sr=1.0, gain_dn_per_electron=1.0, bias_dn=0.0)
-    np.testing.assert_allclose(out, np.asarray(expected_dn(image, sensor, Intrinsics(0.1, 1e-5, 31, 31)))[..., 0], atol=1e-6)
+    np.testing.assert_allclose(out, np.asarray(expected_electrons(image, sensor, Intrinsics(0.1, 1e-5, 31, 31)))[..., 0], atol=1e-6)
     assert out.sum() == pytest.approx(1.0, abs=1e-5)
     row = out.sum(axis=0)
     assert row @ (np.arange(31) - 15.0) ** 2 == pytest.approx(1.3**2, rel=1e-3)  # float32; +1/12 if integrated again

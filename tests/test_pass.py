@@ -282,10 +282,10 @@ def test_spacefit_fit_pass_writes_the_frames_table_and_plot(small_pass, tmp_path
 @pytest.mark.slow
 def test_a_pass_fit_interrupted_and_resumed_ends_as_the_uninterrupted_one(small_pass, tmp_path, monkeypatch):
     """`spacefit fit --pass` stopped by Ctrl-C after its second step (exit 130, the checkpoint kept), then
-    run with --resume: the legs' albedo and each frame's attitude of the uninterrupted fit (within a
-    hundredth of their standard errors: the solver restarts from the best point) and the frame table.
-    The verdict may differ: measured, the uninterrupted fit converged after 3 steps, the resumed one
-    ran its 6 steps left at the same point (exit 3, the step limit)."""
+    run with --resume: the uninterrupted fit's status and exit code (the checkpoint's history keeps the
+    stop rule's record), its legs' albedo and each frame's attitude (within 0.3 of their standard
+    errors, the noise-floor rule's resolution: the solver restarts from the best point) and the frame
+    table. Before the history was kept, the resumed fit ran its 6 steps left (exit 3, the step limit)."""
     import json
     import os
     import signal
@@ -313,11 +313,12 @@ def test_a_pass_fit_interrupted_and_resumed_ends_as_the_uninterrupted_one(small_
         m.setattr(Checkpoint, "update", stop_after_two)
         assert main(args("stopped")) == 130
     assert (tmp_path / "stopped" / "checkpoint.json").exists()
-    assert whole == 0 and main(args("stopped", "--resume")) in (0, 3)
+    assert main(args("stopped", "--resume")) == whole == 0
     assert not (tmp_path / "stopped" / "checkpoint.json").exists()
     expected, got = (json.loads((tmp_path / out / "fit.json").read_text()) for out in ("whole", "stopped"))
+    assert got["status"] == expected["status"]
     for name, value in expected["values"].items():
-        assert abs(got["values"][name] - value) < 0.01 * expected["stderr"][name], name
+        assert abs(got["values"][name] - value) < 0.3 * expected["stderr"][name], name
     assert len((tmp_path / "stopped" / "frames.csv").read_text().splitlines()) == 4
 
 

@@ -1,29 +1,50 @@
 """Goodness of fit: whether a fit's residuals are the noise they should be, and the misfit verdict.
 
 With the noise known (every observation has a sensor, or a ``sigma``: each residual is divided by
-its noise), the residuals at a correct model are unit normal plus the fit's own Monte Carlo render
-noise, so chi^2 = sum r^2 over the dof = (values fitted) - (free parameters) degrees of freedom has
-the expectation 1 + v per value, v = mean (r - r_alt)^2 / 2 the render noise's variance measured
-from two independent seeds, and the spread sqrt(2 / dof). A fit is a *misfit* when
+its noise), the residuals at a correct model are unit normal plus two Monte Carlo noises: the
+model's own render noise v (variance per value, in units of the noise squared) and, for a
+simulated reference, the reference's v_ref. chi^2 = sum r^2 over the dof = (values fitted) - (free
+parameters) degrees of freedom has the expectation 1 + v + v_ref per value and, with normal noises,
+the spread sqrt((2 (1 + v_ref)^2 + 4 v (1 + v_ref) + 4 v^2) / dof). A fit is a *misfit* when
 
-    chi^2 / dof > 1 + v + max(:data:`MISFIT_SIGMAS` sqrt(2 / dof), :data:`MISFIT_FLOOR`):
+    chi^2 / dof > 1 + v + v_ref + max(:data:`MISFIT_SIGMAS` x spread, :data:`MISFIT_FLOOR`):
 
 more than 5 standard deviations of chi^2 / dof above its expectation (a false alarm rate below
 1e-6 for a correct model), and at least 10 % more variance than the noise model predicts (a noise
 sigma wrong by 5 %, which a sensor's stated gain and read noise easily are, must not condemn the
-model; with tens of thousands of pixels the 5-sigma margin alone would). A misfit means the model
-or its nuisances miss something (a pose, a blur, a shift, a material): the error bars, which
-assume a correct model, are then too small. Measured on the panels case at 32 x 32 px with a
-sensor, 16 spp: the correct model gives chi^2 / dof 1.077 with v = 0.060 (limit 1.188); the target
-turned 1 deg with the materials alone free gives 2.41 (limit 1.20), alpha_y 0.060 +- 0.0017
-against a truth of 0.03.
+model; with tens of thousands of pixels the 5-sigma margin alone would).
 
-Without a known noise the residuals' scale is unknown: the report gives their mean square against
-the render noise's (a reference rendered like the fit, with another seed, gives 2) and their
-correlation between neighbouring pixels against the render noise's (a structured misfit
-correlates its residuals over many pixels; render noise only over the pixel filter's reach), and
-no verdict. Values whose residual is 0 in both renders (masked out, or black sky in a noiseless
-reference) count for nothing.
+The verdict is not taken on the fit's own render. A render at few samples per pixel whose noise
+is comparable to the sensor's biases the test, each way small when v is small: the noise sigma,
+taken at the model's noisy DN, is low where the render is (Jensen); v measured with those sigmas
+is low too; a simulated reference has render noise of its own; and a path tracer's noise has long
+tails, so that chi^2 / dof scatters far more than sqrt(2 / dof) says. So the model at the fitted
+point is rendered again (primal renders, no Jacobian) twice, with independent seeds, at
+:func:`verdict_factor` k times the fit's samples per pixel, k the smallest power of 2 (1: the fit's
+own two renders) that brings the mean's v to :data:`VERDICT_RENDER_NOISE`, at most
+:data:`MAX_VERDICT_FACTOR`; the mean of the two is judged, its noise sigma taken at it, its v
+measured from their difference, and the spread counts the measured variance of the noise's squares
+(2 v^2 for normal noise). A reference that says what it was rendered with
+(``Observation.render_spp``, a FITS ``RENDSPP`` card) adds v_ref = v x (judged spp) / (reference spp)
+(an upper bound for a stratified sampler, whose noise falls faster than 1 / spp); one that does not
+is taken as a real observation (no render noise), and the goodness line says which. Two renders
+at k times the fit's samples, not the mean of 2k at the fit's: measured on the panels case at 32 x
+32 px at the truth (a calibrated sensor, v 3.5 at 8 spp; 2026-11-25, load average 7 to 8), the mean
+of 16 renders at 8 spp put chi^2 / dof 0.10 above its expectation (3 spreads), two renders at 128
+spp 0.004 above it; a render's Monte Carlo error at few samples is long-tailed (its mean square
+scattered by several tenths between seeds at 16 spp, a few hundredths at 64). Figures of the pass: docs/guide/pass.md and
+``experiments/pass_misfit.py``.
+
+A misfit means the model or its nuisances miss something (a pose, a blur, a shift, a material):
+the error bars, which assume a correct model, are then too small.
+
+Without a known noise the residuals' scale is unknown: the fit's own render is judged (k = 1), the
+report gives its residuals' mean square against the render noise's (a reference rendered like the
+fit, with another seed, gives 2) and their correlation between neighbouring pixels against the
+render noise's (a structured misfit correlates its residuals over many pixels; render noise only
+over the pixel filter's reach), and no verdict. Values masked out count for nothing, and without a
+known noise neither do those whose residual and render noise are both 0 (black sky in a noiseless
+reference).
 """
 
 from __future__ import annotations
@@ -36,11 +57,30 @@ from typing import Any
 import numpy as np
 
 from spacefit.rendering.renderer import PartImage
+from spacefit.scene.schema import MAX_SPP
 
-# A misfit is chi^2 / dof this many standard deviations sqrt(2 / dof) above its expectation ...
+# A misfit is chi^2 / dof this many of its standard deviations (Goodness.expected_spread) above its expectation ...
 MISFIT_SIGMAS = 5.0
 # ... and at least this much above it (a 5 % error of the noise sigma is no misfit).
 MISFIT_FLOOR = 0.1
+# The verdict's model is rendered with enough samples to bring its render noise (per value, in
+# units of the noise squared) to this or below (at 0.25, long-tailed render noise still put a correct
+# model's chi^2 / dof 0.17 above its expectation: panels, 32 x 32 px, 32 spp) ...
+VERDICT_RENDER_NOISE = 0.1
+# ... but with at most this many times the fit's samples.
+MAX_VERDICT_FACTOR = 16
+
+
+def verdict_factor(render_noise: float, spp: int = 1) -> int:
+    """How many times the fit's samples per pixel ``spp`` each of the verdict's two renders takes: the
+    smallest power of 2 that brings ``render_noise`` (the fit's v; the judged model, the mean of the
+    two, has v / (2 k)) to :data:`VERDICT_RENDER_NOISE`, at most :data:`MAX_VERDICT_FACTOR` and
+    :data:`~spacefit.scene.schema.MAX_SPP` / ``spp`` (1 where v is not finite)."""
+    k = 1
+    while (2 * k <= min(MAX_VERDICT_FACTOR, MAX_SPP // spp) and math.isfinite(render_noise)
+           and render_noise / (2 * k) > VERDICT_RENDER_NOISE):
+        k *= 2
+    return k
 
 
 @dataclass(frozen=True)
@@ -49,12 +89,13 @@ class Goodness:
 
     Attributes:
         noise_known: every residual is divided by its noise (sensor or sigma): chi^2 applies.
-        values: the residual values that count (non-zero in either of two renders with independent seeds).
+        values: the residual values that count (a residual or a render noise not 0).
         dof: degrees of freedom, ``values`` less the free parameters (at least 1).
         chi2_dof: chi^2 / dof (NaN without a known noise).
-        expected_spread: the standard deviation of chi^2 / dof for a correct model, sqrt(2 / dof).
-        render_noise: the fit's own Monte Carlo noise, the mean (r - r_alt)^2 / 2 per value (in
-            units of the noise squared when it is known, else the residuals' unit squared).
+        expected_spread: the standard deviation of chi^2 / dof for a correct model, with the
+            error of the measured ``render_noise`` (the module's formula, the squares' variance measured).
+        render_noise: the judged model's own Monte Carlo noise v, per value (in units of the noise
+            squared when it is known, else the residuals' unit squared).
         limit: chi^2 / dof above which the fit is a misfit (NaN without a known noise).
         misfit: chi^2 / dof > limit.
         spread: mean r^2 / ``render_noise``, the residuals' spread against the render noise (NaN
@@ -62,6 +103,12 @@ class Goodness:
         correlation, render_correlation: the correlation of neighbouring pixels' residuals
             (horizontal and vertical pairs, the channels' mean) and of the render noise's (NaN
             where the residuals are not pixels).
+        samples_factor: the judged model's samples per pixel over the fit's (1: the fit's own render).
+        verdict_spp: per observation, the judged model's samples per pixel (empty: not recorded).
+        reference_noise: the references' own render noise v_ref, per value, in ``render_noise``'s unit
+            (0: real observations).
+        reference_spp: per observation, the samples per pixel its reference was rendered with
+            (None: a real observation, no render noise; empty: not recorded).
     """
 
     noise_known: bool
@@ -75,41 +122,83 @@ class Goodness:
     spread: float
     correlation: float
     render_correlation: float
+    samples_factor: int = 1
+    verdict_spp: tuple[int, ...] = ()
+    reference_noise: float = 0.0
+    reference_spp: tuple[int | None, ...] = ()
 
     def line(self) -> str:
         """One line of words: chi^2 / dof against its expected range, or the residuals against the render noise."""
         if self.noise_known:
             verdict = "a MISFIT" if self.misfit else "within the expected range"
+            spp = "/".join(str(s) for s in dict.fromkeys(self.verdict_spp))
+            judged = f"{spp} spp, " if spp else ""
             return (f"goodness of fit: chi^2/dof = {self.chi2_dof:.3f} over {self.dof} dof, expected 1 + {self.render_noise:.3f} "
-                    f"(render noise) +- {self.expected_spread:.3f}, misfit above {self.limit:.3f}: {verdict}")
+                    f"(render noise at {judged}{self.samples_factor} x the fit's samples) + {self.reference_noise:.3f} "
+                    f"({self._references()}) +- {self.expected_spread:.3f}, misfit above {self.limit:.3f}: {verdict}")
         return (f"goodness of fit (noise unknown, no verdict): mean r^2 = {self.spread:.3g} x the render noise's; neighbour "
                 f"correlation {self.correlation:+.2f} (render noise {self.render_correlation:+.2f}) over {self.values} values")
+
+    def _references(self) -> str:
+        """What the references' render noise assumed, in words."""
+        rendered = [s for s in self.reference_spp if s is not None]
+        real = len(self.reference_spp) - len(rendered)
+        if not rendered:
+            return "references taken as real observations: no render noise"
+        words = f"references rendered at {'/'.join(str(s) for s in dict.fromkeys(rendered))} spp"
+        return words + (f", {real} taken as real" if real else "")
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the fields, with the misfit rule's constants."""
         return {**{k: getattr(self, k) for k in self.__dataclass_fields__}, "misfit_sigmas": MISFIT_SIGMAS,
-                "misfit_floor": MISFIT_FLOOR}
+                "misfit_floor": MISFIT_FLOOR, "verdict_render_noise": VERDICT_RENDER_NOISE,
+                "max_verdict_factor": MAX_VERDICT_FACTOR}
 
 
-def goodness(r: np.ndarray, r_alt: np.ndarray, n_free: int, noise_known: bool,
-             shapes: Sequence[tuple[int, ...]] = ()) -> Goodness:
-    """The goodness of fit of residuals ``r`` and ``r_alt`` (the same point rendered with independent
-    seeds) with ``n_free`` free parameters; ``shapes``: each observation's (h, w, c) where the
-    residuals are its pixels in order (the pixel loss), for the neighbour correlation."""
-    r, r_alt = np.ravel(np.asarray(r, dtype=float)), np.ravel(np.asarray(r_alt, dtype=float))
-    counted = (r != 0) | (r_alt != 0)
+def goodness(r: np.ndarray, noise: np.ndarray, n_free: int, noise_known: bool, shapes: Sequence[tuple[int, ...]] = (), *,
+             fitted: np.ndarray | None = None, reference_ratio: float | np.ndarray = 0.0, samples_factor: int = 1,
+             verdict_spp: Sequence[int] = (), reference_spp: Sequence[int | None] = ()) -> Goodness:
+    """The goodness of fit of residuals ``r`` with ``n_free`` free parameters.
+
+    Args:
+        r: the judged model's residuals.
+        noise: a draw of their render noise, the same shape (e.g. (r_1 - r_2) / sqrt(2) of renders
+            with two seeds, for r = r_1).
+        n_free: the free parameters.
+        noise_known: ``r`` is in units of the noise: chi^2 and the verdict apply.
+        shapes: each observation's (h, w, c) where the residuals are its pixels in order (the pixel
+            loss), for the neighbour correlation.
+        fitted: per value, whether it was fitted (not masked out): with the noise known such a value
+            counts even where its residual and render noise are 0 (an integer DN equal to the model's,
+            as a sensor's sky at its bias often is; left out, they raised a pass's chi^2 / dof by 0.13).
+        reference_ratio: per value (or one for all), the reference's render noise over the judged
+            model's, the model's samples per pixel over the reference's (0: a real observation).
+        samples_factor, verdict_spp, reference_spp: recorded as :class:`Goodness` holds them.
+    """
+    r, noise = np.ravel(np.asarray(r, dtype=float)), np.ravel(np.asarray(noise, dtype=float))
+    counted = (r != 0) | (noise != 0)
+    if noise_known and fitted is not None:
+        counted |= np.ravel(np.asarray(fitted, dtype=bool))
     values = int(counted.sum())
     dof = max(values - n_free, 1)
-    render_noise = float(np.mean(0.5 * (r - r_alt)[counted] ** 2)) if values else math.nan
-    spread_sd = math.sqrt(2.0 / dof)
+    render_noise = float(np.mean(noise[counted] ** 2)) if values else math.nan
+    ratio = np.broadcast_to(np.ravel(np.asarray(reference_ratio, dtype=float)), r.shape)
+    reference_noise = float(np.mean((noise**2 * ratio)[counted])) if values else 0.0
+    expected = 1.0 + render_noise + reference_noise
+    # chi^2 / dof's spread, and the error of the render noise measured with it: render noise is not
+    # normal (a path tracer's has long tails), its squares' variance is measured, not 2 v^2
+    quartic = float(np.var(noise[counted] ** 2)) if values else 0.0
+    base = 1.0 + reference_noise
+    spread_sd = math.sqrt((2.0 * base**2 + 4.0 * render_noise * base + 2.0 * quartic) / dof)
     if noise_known:
         chi2_dof = float(np.sum(r[counted] ** 2)) / dof
-        limit = 1.0 + render_noise + max(MISFIT_SIGMAS * spread_sd, MISFIT_FLOOR)
+        limit = expected + max(MISFIT_SIGMAS * spread_sd, MISFIT_FLOOR)
     else:
         chi2_dof = limit = math.nan
     spread = float(np.mean(r[counted] ** 2)) / render_noise if render_noise > 0 else math.nan
     return Goodness(noise_known, values, dof, chi2_dof, spread_sd, render_noise, limit, bool(chi2_dof > limit), spread,
-                    _neighbours(r, shapes), _neighbours(r - r_alt, shapes))
+                    _neighbours(r, shapes), _neighbours(noise, shapes), samples_factor, tuple(int(s) for s in verdict_spp),
+                    reference_noise, tuple(None if s is None else int(s) for s in reference_spp))
 
 
 def _neighbours(d: np.ndarray, shapes: Sequence[tuple[int, ...]]) -> float:
@@ -131,13 +220,16 @@ def _neighbours(d: np.ndarray, shapes: Sequence[tuple[int, ...]]) -> float:
     return float(np.corrcoef(a, b)[0, 1])
 
 
-def part_chi2(r: np.ndarray, r_alt: np.ndarray, parts: PartImage, used: np.ndarray, noise: float) -> dict[str, float]:
+def part_chi2(r: np.ndarray, noise: np.ndarray, parts: PartImage, used: np.ndarray, scale: float,
+              noise_known: bool = False) -> dict[str, float]:
     """Per part of one observation (and the whole ``target``): the mean r^2 of its counted values
-    (chi^2 per value with the noise known), divided by ``noise`` (1 with the noise known, else the
-    render noise per value). ``r``, ``r_alt``: the observation's (h, w, c) residuals."""
-    counted = ((r != 0) | (r_alt != 0)) & used[..., None]
+    (chi^2 per value with the noise known), divided by ``scale`` (1 with the noise known, else the
+    render noise per value). ``r``, ``noise``: the observation's (h, w, c) residuals and a draw of
+    their render noise (:func:`goodness`); ``used``: its fitted pixels, every value of which counts
+    with the noise known."""
+    counted = (((r != 0) | (noise != 0)) | noise_known) & used[..., None]
     out = {}
     for label, mask in zip(parts.regions, parts.masks()):
         values = counted & mask[..., None]
-        out[label] = float(np.mean(r[values] ** 2)) / noise if values.any() and noise > 0 else math.nan
+        out[label] = float(np.mean(r[values] ** 2)) / scale if values.any() and scale > 0 else math.nan
     return out

@@ -20,7 +20,7 @@ import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_count
 from spacefit.fitting.frames import Cluster, executor_of
-from spacefit.fitting.goodness import Goodness, goodness, part_chi2
+from spacefit.fitting.goodness import Goodness, goodness, part_chi2, verdict_factor
 from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, setup
 from spacefit.fitting.solvers import Outcome, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name
 from spacefit.fitting.stopping import NoiseFloor, loss_noise
@@ -28,7 +28,7 @@ from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
-from spacefit.rendering.renderer import PartImage, mitsuba_scene_dict
+from spacefit.rendering.renderer import PartImage, check_memory, mitsuba_scene_dict
 from spacefit.scene.schema import Scene
 from spacefit.scene.parameters import is_nuisance, observation_of, parameter, scene_with_values
 from spacefit.units import DN_UNIT
@@ -219,6 +219,7 @@ def fit(
     on_end: Callable[[dict[str, Any]], None] | None = None,
     ended: Mapping[str, Any] | None = None,
     cluster: Cluster | None = None,
+    history: Sequence[Mapping[str, Any]] = (),
 ) -> FitResult:
     """Fit free scene parameters so that renders match reference images.
 
@@ -250,6 +251,10 @@ def fit(
         ended: such a record, of a solve that ended before its process was killed: the solve is not
             run again; ``start`` must be the record's values. The result is the one the ended fit
             would have given: same status, steps, values and verdict.
+        history: the history of an interrupted solve (its steps' entries, as ``on_step`` had them), whose
+            best point is ``start``: the solve goes on from there, its steps counted after them, and
+            what the stop rule (:mod:`spacefit.fitting.stopping`) and the verdict know of them kept, so
+            that it ends as the uninterrupted one would (``--resume``).
         cluster: where the observations' renders and Jacobian columns run, as one batch per step
             (:mod:`spacefit.fitting.frames`): None, in this process, observation by observation; an
             int N, a new local dask cluster of N worker processes; a scheduler address; a
@@ -273,15 +278,16 @@ def fit(
     try:
         s = setup(observations, free, start=start, loss=loss, render=render, wrinkle_coordinates=wrinkle_coordinates,
                   executor=executor)
-        return _solve(s, engine, max_steps, stop, loss, progress, on_step, on_end, ended)
+        return _solve(s, engine, max_steps, stop, loss, progress, on_step, on_end, ended, history)
     finally:
         executor.close()
 
 
 def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progress: ProgressCallback | None,
            on_step: Callable[[dict[str, Any]], None] | None, on_end: Callable[[dict[str, Any]], None] | None,
-           ended: Mapping[str, Any] | None) -> FitResult:
-    """Run the solver on a set-up problem (or report the ended solve ``ended`` again) and make its result."""
+           ended: Mapping[str, Any] | None, history: Sequence[Mapping[str, Any]]) -> FitResult:
+    """Run the solver on a set-up problem (or report the ended solve ``ended`` again; or go on with
+    the interrupted one of ``history``) and make its result."""
     fp, problem = s.solver_params, s.problem
 
     def residual_u(u: jax.Array) -> jax.Array:
@@ -292,6 +298,8 @@ def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progr
     u = jnp.asarray(fp.to_unconstrained(jnp.asarray(s.x0)))
     if ended is not None:
         return _result(s, steps.ended(ended, u), steps, solver_name(engine), loss)
+    if history:
+        steps.resumed(history, u)
     try:
         with deferred_interrupts() as interrupts:
             outcome = steps.run(drive(engine, residual_u, u, max_steps, problem.loss_u_reverse), interrupts)
@@ -315,11 +323,12 @@ class _Steps:
         self.best_u: np.ndarray | None = None
         self.best_loss = math.nan
         self.reported_again = False  # the record of an ended solve (:meth:`ended`), not a solve
+        self.restarted = False  # an interrupted solve goes on (:meth:`resumed`): its first step evaluates its best point again
         self.t0 = time.perf_counter()
 
     def run(self, driver: Generator[Step, None, Outcome], interrupts: Any) -> Outcome:
         """Record the driver's steps until it ends or a stop of this record's own."""
-        k = 0
+        k = len(self.history)
         while True:
             try:
                 step = next(driver)
@@ -357,11 +366,27 @@ class _Steps:
             self.progress(k, self.max_steps)
         if self.on_step is not None:
             self.on_step(self.history[-1])
-        if not self.noise_stop:
+        if not self.noise_stop or self.restarted:
+            self.restarted = False  # the best point evaluated again is no step of the interrupted solve's
             return None
         if self.floor.reached(step.loss, accepted):
             return Status.NOISE_FLOOR
         return Status.NO_BETTER_POINT if self.floor.no_better_point() else None
+
+    def resumed(self, history: Sequence[Mapping[str, Any]], u: jax.Array) -> None:
+        """Go on with the interrupted solve whose steps were ``history`` and whose best point is ``u``:
+        its entries begin this history, and the stop rule's record is theirs again (each loss recorded
+        as the solve recorded it, the evaluations of the best point again left out)."""
+        self.history = [{**entry, "loss": _number(entry["loss"]), "loss_noise": _number(entry["loss_noise"])} for entry in history]
+        best = None
+        for entry in self.history:
+            if best is None or entry["values"] != best:
+                self.floor.record(entry["loss"])
+            if entry["accepted"] or best is None:
+                best = entry["values"]
+        self.floor.set_noise(self.history[-1]["loss_noise"])
+        self.best_u, self.best_loss, self.restarted = np.asarray(u), self.floor.best, True
+        self.max_steps += len(self.history)
 
     def ending(self, outcome: Outcome) -> dict[str, Any]:
         """The record of an ended solve that :meth:`ended` (``fit(ended=...)``) takes: status, steps,
@@ -380,6 +405,11 @@ class _Steps:
     def moved(self) -> bool:
         """Whether a step after the first (which evaluates the start) lowered the loss."""
         return any(h["accepted"] for h in self.history[1:])
+
+
+def _number(value: float | None) -> float:
+    """A number of a history read back from JSON, where NaN is null."""
+    return math.nan if value is None else float(value)
 
 
 def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool) -> Status:
@@ -405,7 +435,8 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
     x = np.asarray(s.solver_params.to_physical(outcome.u) if steps.moved and not steps.reported_again else s.x0, dtype=float)
     n = len(x)
     x_user = np.asarray(s.to_user(jnp.asarray(x)), dtype=float)
-    stderr, corr, loss_value, extras, renders, residuals, quality = np.full(n, np.nan), np.eye(n), math.nan, {}, [], [], None
+    stderr, corr, loss_value, extras, residuals, quality = np.full(n, np.nan), np.eye(n), math.nan, {}, [], None
+    renders: list[np.ndarray] = []
     own_quality: list[Goodness] = []
     per_part: list[dict[str, dict[str, float]]] = [{} for _ in problem.references]
     if status.interrupted:
@@ -415,15 +446,11 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         x_user, cov, loss_value, extras = estimate(s, x, correct=steps.moved)
         stderr, corr = stderr_corr(cov)
         warnings = warnings_for(s.user, x_user, stderr, corr)
-        renders = [np.asarray(img) for img in problem.renders_x(jnp.asarray(x))]
+        quality, r, noise, renders = judged_goodness(s, jnp.asarray(x), loss)
         residuals = [np.where(used[..., None], ref - render, np.nan) for ref, render, used in zip(problem.references, renders, problem.used)]
-        r = np.asarray(problem.residual_x(jnp.asarray(x)), dtype=float)
-        r_alt = np.asarray(problem.residual_x_independent(jnp.asarray(x)), dtype=float)
-        shapes = [ref.shape for ref in problem.references] if loss == "pixel" else []
-        quality = goodness(r, r_alt, n, s.noise_given, shapes)
-        if shapes:
-            per_part = _per_part(r, r_alt, problem, quality)
-            own_quality = _per_observation(r, r_alt, s)
+        if loss == "pixel":
+            per_part = _per_part(r, noise, problem, quality)
+            own_quality = per_observation(r, noise, s, quality.samples_factor)
         at_bound = any(b.at_bound(float(v)) for b, v in zip(s.user.bijections, x_user))
         status = verdict(status, steps.moved, at_bound, quality.misfit and loss == "pixel")
         if not math.isfinite(loss_value):
@@ -448,27 +475,84 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
     )
 
 
-def _per_observation(r: np.ndarray, r_alt: np.ndarray, s: Setup) -> list[Goodness]:
+def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.ndarray, np.ndarray, list[np.ndarray]]:
+    """The goodness of fit at ``x`` (:mod:`~spacefit.fitting.goodness`), the residuals it judged and a
+    draw of their render noise, and each observation's model image at the fit's seeds. With the noise
+    known the judged model is the mean of two renders with independent seeds at :func:`verdict_factor`
+    times the fit's samples per pixel (the fit's own two where that is 1; primal renders only), the
+    noise sigma taken at it; else the fit's own render."""
+    problem = s.problem
+    renders = [problem.models_seeded(x, 0), problem.models_seeded(x, 1)]
+    if s.noise_given:
+        r, noise = _mean_and_noise(problem, renders)
+        k = verdict_factor(2.0 * goodness(r, noise, 0, True).render_noise, max(problem.spp))
+        while k > 1 and not _affordable(problem, k):
+            k //= 2
+        if k > 1:
+            finer = problem.resampled(k)
+            r, noise = _mean_and_noise(finer, [finer.models_seeded(x, 0), finer.models_seeded(x, 1)])
+        judged = 2 * k
+    else:
+        judged = 1
+        r, r_alt = (np.asarray(problem.residual_of(m), dtype=np.float64) for m in renders)
+        noise = (r - r_alt) / math.sqrt(2.0)
+    verdict_spp = [judged * spp for spp in problem.spp]
+    ratios = [spp / ref if ref else 0.0 for spp, ref in zip(verdict_spp, problem.reference_spp)]
+    pixels = loss == "pixel"
+    ratio = np.repeat(ratios, [ref.size for ref in problem.references]) if pixels else float(np.mean(ratios))
+    fitted = np.concatenate([np.broadcast_to(used[..., None], ref.shape).ravel() for ref, used in zip(problem.references, problem.used)])
+    quality = goodness(r, noise, len(s.x0), s.noise_given, [ref.shape for ref in problem.references] if pixels else [],
+                       fitted=fitted if pixels else None, reference_ratio=ratio, samples_factor=judged, verdict_spp=verdict_spp,
+                       reference_spp=problem.reference_spp)
+    return quality, r, noise, [np.asarray(m) for m in renders[0]]
+
+
+def _affordable(problem: Problem, factor: int) -> bool:
+    """Whether every observation's whole film rendered at ``factor`` times its samples per pixel in one
+    wavefront (a fit's render) fits this machine (:func:`~spacefit.rendering.renderer.check_memory`):
+    a verdict render takes fewer samples rather than lose the fit's result."""
+    try:
+        for ref, spp in zip(problem.references, problem.spp):
+            check_memory(ref.shape[1], ref.shape[0], ref.shape[0] * ref.shape[1], factor * spp, split=False)
+    except InputError:
+        return False
+    return True
+
+
+def _mean_and_noise(problem: Problem, renders: list[list[jax.Array]]) -> tuple[np.ndarray, np.ndarray]:
+    """The residuals of the mean of two renders (each a list of model images), the noise sigma taken
+    at that mean, and a draw of their render noise: half the two renders' difference, weighted as the
+    residuals are (their derivative along it)."""
+    mean = [(a + b) / 2 for a, b in zip(*renders)]
+    half = [(a - b) / 2 for a, b in zip(*renders)]
+    r, noise = jax.jvp(problem.residual_of, (mean,), (half,))
+    return np.asarray(r, dtype=float), np.asarray(noise, dtype=float)
+
+
+def per_observation(r: np.ndarray, noise: np.ndarray, s: Setup, factor: int) -> list[Goodness]:
     """Per observation, the goodness of fit of its own residuals (pixel loss), with the shared free
-    parameters and its own (``name@k``) counted as free."""
-    out, offset = [], 0
-    for k, ref in enumerate(s.problem.references):
+    parameters and its own (``name@k``) counted as free; ``factor``: the judged model's samples over the fit's."""
+    out, offset, problem = [], 0, s.problem
+    for k, ref in enumerate(problem.references):
         rows = slice(offset, offset + ref.size)
         offset = rows.stop
         n_k = sum(1 for name in s.user.names if observation_of(name)[1] in (None, k))
-        out.append(goodness(r[rows], r_alt[rows], n_k, s.noise_given, [ref.shape]))
+        spp, reference = factor * problem.spp[k], problem.reference_spp[k]
+        out.append(goodness(r[rows], noise[rows], n_k, s.noise_given, [ref.shape], fitted=np.broadcast_to(problem.used[k][..., None], ref.shape),
+                            reference_ratio=spp / reference if reference else 0.0, samples_factor=factor, verdict_spp=[spp],
+                            reference_spp=[reference]))
     return out
 
 
-def _per_part(r: np.ndarray, r_alt: np.ndarray, problem: Problem, quality: Goodness) -> list[dict[str, dict[str, float]]]:
+def _per_part(r: np.ndarray, noise: np.ndarray, problem: Problem, quality: Goodness) -> list[dict[str, dict[str, float]]]:
     """Per observation, per part: ``chi2_per_value`` (noise known) or ``r2_over_render_noise``."""
     key = "chi2_per_value" if quality.noise_known else "r2_over_render_noise"
     out, offset = [], 0
     for parts, ref, used in zip(problem.part_images, problem.references, problem.used):
         rows = slice(offset, offset + ref.size)
         offset = rows.stop
-        values = part_chi2(r[rows].reshape(ref.shape), r_alt[rows].reshape(ref.shape), parts, used,
-                           1.0 if quality.noise_known else quality.render_noise)
+        values = part_chi2(r[rows].reshape(ref.shape), noise[rows].reshape(ref.shape), parts, used,
+                           1.0 if quality.noise_known else quality.render_noise, quality.noise_known)
         out.append({name: {key: value} for name, value in values.items()})
     return out
 

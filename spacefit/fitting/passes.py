@@ -357,7 +357,7 @@ def simulate_pass(scene: Scene, frames: Sequence[Mapping[str, Any]], out_dir: st
     """Simulate a pass and write it: per frame k an observation ``frame<k>.fits`` (DN through
     ``sensor``'s model, :func:`~spacefit.fitting.formation.observe`, the sensor in its header and
     sidecar) or, without a sensor, ``frame<k>.exr`` (radiance), rendered at ``spp`` from ``scene``
-    with ``frames[k]``'s values, ``truth`` (every frame) and ``errors[k]`` (the frame's own
+    with ``frames[k]``'s values (a FITS file's ``RENDSPP`` card says ``spp``), ``truth`` (every frame) and ``errors[k]`` (the frame's own
     departures from its nominal values, e.g. ``{"target.attitude_x_deg": 0.2}``, added to the
     nominal); and ``frames.csv``, the frame table of the nominal values (without the errors), times
     ``interval_s`` apart. Returns the pass read back from that table.
@@ -391,7 +391,7 @@ def simulate_pass(scene: Scene, frames: Sequence[Mapping[str, Any]], out_dir: st
             write_exr(out / name, radiance)
         else:
             name = f"frame{k}.fits"
-            write_observation(out / name, observe(radiance, sensor, assemble(s).intrinsics, seed=seed + k), sensor)
+            write_observation(out / name, observe(radiance, sensor, assemble(s).intrinsics, seed=seed + k), sensor, render_spp=spp)
         columns["file"].append(name)
         columns["time"].append(k * interval_s)
     keys = list(dict.fromkeys(key for f in frames for key in f))

@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_array, check_choice, negative_pixels, quote
+from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_array, check_choice, check_count, negative_pixels, quote
 from spacefit.fitting.formation import dn_fn, noise_variance_dn
 from spacefit.fitting.frames import Executor, FrameSpec, InProcess, batched_renders, frame_part_image, share_views
 from spacefit.fitting.losses import residual_fn
@@ -60,7 +60,11 @@ class Observation:
     ``notes``: what a report should say about the file (e.g. a row order it did not state).
     ``flat``: with a sensor, a flat-field map ((h, w) or (h, w, channels), > 0) multiplying the
     expected signal above the bias (:func:`~spacefit.fitting.formation.expected_dn`); None: uniform.
-    :meth:`from_file` reads all of these from an image file.
+    ``render_spp``: the samples per pixel a simulated reference was rendered with, whose Monte Carlo
+    noise the goodness of fit then expects (:mod:`~spacefit.fitting.goodness`); None: a real
+    observation, without render noise.
+    :meth:`from_file` reads all of these from an image file (``render_spp`` from a FITS ``RENDSPP``
+    card or a spacefit sidecar).
     """
 
     scene: Scene
@@ -71,9 +75,11 @@ class Observation:
     sensor_sources: Mapping[str, str] | None = None
     notes: tuple[str, ...] = ()
     flat: np.ndarray | None = None
+    render_spp: int | None = None
 
     def __post_init__(self) -> None:
         check_scene(self.scene, "Observation.scene")
+        check_count("Observation.render_spp", self.render_spp)
         if self.sensor is not None and not isinstance(self.sensor, Sensor):
             raise InputTypeError(f"`Observation.sensor` must be an sf.Sensor or None, got {quote(self.sensor)}.")
         if self.flat is not None and self.sensor is None:
@@ -117,12 +123,12 @@ class Observation:
         from spacefit.imageio import read_image, sensor_of  # deferred: FITS and TIFF readers (astropy, tifffile): only files need them
 
         image = read_image(path, unit=unit, response=response, mask=mask, sigma=sigma, row_order=row_order)
-        notes = tuple(image.metadata["notes"])
+        notes, render_spp = tuple(image.metadata["notes"]), image.metadata.get("render_spp")
         if image.unit == RADIANCE_UNIT:
             if sensor is not None or sensor_file is not None or flat is not None:
                 raise InputError(f"{image.path!r} holds radiance ({RADIANCE_UNIT}); `sensor` describes the camera of a DN "
                                  "image: leave it out.")
-            return cls(scene, image.data, sigma, mask=image.mask, notes=notes)
+            return cls(scene, image.data, sigma, mask=image.mask, notes=notes, render_spp=render_spp)
         if sigma is not None:
             raise InputError(f"{image.path!r} holds DN: its noise is its sensor's; leave `sigma` out.")
         from_file = read_sensor_file(sensor_file) if sensor_file is not None else None
@@ -130,7 +136,8 @@ class Observation:
         if isinstance(flat, (str, Path)):
             flat = read_image(flat, unit="DN", response="linear", row_order=row_order).data
         relative = None if flat is None else check_flat(flat, image.data.shape, f"the flat field of {image.path!r}")
-        return cls(scene, image.data, sensor=measured, mask=image.mask, sensor_sources=sources, notes=notes, flat=relative)
+        return cls(scene, image.data, sensor=measured, mask=image.mask, sensor_sources=sources, notes=notes, flat=relative,
+                   render_spp=render_spp)
 
 
 def _check_sigma(sigma: np.ndarray, shape: tuple[int, ...]) -> None:
@@ -196,12 +203,21 @@ class Problem:
     renders_x: Callable[[jax.Array], list[jax.Array]]  # each observation's model image in its reference's unit
     part_images: list[PartImage]  # which part each pixel of each observation sees
     references: list[np.ndarray]  # the checked references, (h, w, 3) or (h, w, 1) float32, 0 where not used
+    # (x, j) -> each observation's model image at the j-th seeds (0 the fit's, 1 the independent ones, more
+    # further independent ones: the goodness of fit's verdict render, spacefit.fitting.goodness) ...
+    models_seeded: Callable[[jax.Array, int], list[jax.Array]]
+    # ... the stacked residuals of given model images (the noise sigma taken at them) ...
+    residual_of: Callable[[list[jax.Array]], jax.Array]
+    # ... and factor -> the same problem rendered with factor times the samples per pixel (the verdict render)
+    resampled: Callable[[int], Problem]
     noise_known: bool = False  # every residual is divided by its predicted noise (a sensor per observation)
     # per observation, how far (px) its render noise spreads before the residuals: the pixel
     # filter's radius and the rms width of the sensor's PSF (0 without a sensor)
     noise_spread_px: tuple[tuple[float, float], ...] = ()
     units: tuple[str, ...] = ()  # per observation, the unit of its reference and model image (radiance or DN)
     used: tuple[np.ndarray, ...] = ()  # per observation, (h, w) bool: the pixels fitted in every channel
+    spp: tuple[int, ...] = ()  # per observation, the samples per pixel of its primal renders
+    reference_spp: tuple[int | None, ...] = ()  # per observation, its reference's (Observation.render_spp)
 
 
 def _problem(
@@ -256,10 +272,20 @@ def _problem(
             frames = lambda x: [render(x[indices[k]]) for k, render in enumerate(renders_v)]  # noqa: E731
             return 0.5 * jnp.sum(stack(frames)(free.to_physical(u))[1] ** 2)
 
+    def models_seeded(x: jax.Array, j: int) -> list[jax.Array]:
+        return models_residuals(x, seeds_array(seed + j * INDEPENDENT_SEED_OFFSET, seed_grad + j * INDEPENDENT_SEED_OFFSET))[0]
+
+    residual_of = jax.jit(lambda models: jnp.concatenate([res(model) for res, model in zip(residuals, models)]))
+    spps = tuple(spp or o.scene.render.spp for o in observations)
+
+    def resampled(factor: int) -> Problem:
+        finer = [dataclasses.replace(o, scene=o.scene.with_values({"render.spp": factor * n})) for o, n in zip(observations, spps)]
+        return _problem(finer, free, loss, None, None, seed, seed_grad, integrator, executor)
+
     return Problem(free, lambda x: models_residuals(x, main)[1], lambda x: models_residuals(x, independent)[1], reverse,
-                   lambda x: models_residuals(x, main)[0],
-                   part_images, references, all(o.sensor is not None for o in observations), tuple(spread), tuple(units),
-                   tuple(used_pixels))
+                   lambda x: models_residuals(x, main)[0], part_images, references, models_seeded, residual_of, resampled,
+                   all(o.sensor is not None for o in observations), tuple(spread), tuple(units), tuple(used_pixels), spps,
+                   tuple(o.render_spp for o in observations))
 
 
 def _in_unit_of(obs: Observation, channels: int, intrinsics: Intrinsics) -> Callable[[jax.Array], jax.Array]:

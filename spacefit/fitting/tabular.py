@@ -179,7 +179,7 @@ def _fit(predict: Predict, data: np.ndarray, sigma: np.ndarray | None, names: tu
     J = np.asarray(jax.jit(jax.jacfwd(residuals(predict)))(jnp.asarray(x)))
     noise_known = sigma is not None
     r_alt = np.asarray(residuals(predict_alt)(jnp.asarray(x))) if predict_alt is not None else r
-    fit_goodness = goodness(r, r_alt, len(x), noise_known)
+    fit_goodness = goodness(r, (r - r_alt) / np.sqrt(2.0), len(x), noise_known)
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J))):
         n = len(x)
         return TableFit(names, x, np.full(n, np.nan), np.full((n, n), np.nan), Status.NONFINITE, fit_goodness, r, outcome.steps)
