@@ -83,7 +83,7 @@ MUTANTS = (
     Mutant("v-runs-up", FRAMES, "v = v0 - intrinsics.focal_px", "v = v0 + intrinsics.focal_px", (CONVENTIONS,)),
     Mutant("fov-from-height", FRAMES, "np.arctan(self.width * self.pixel_pitch", "np.arctan(self.height * self.pixel_pitch",
            (CONVENTIONS,)),
-    Mutant("pixel-pitch-in-microns", "spacefit/scene/assembly.py", "c.pixel_pitch_mm * 1e-3", "c.pixel_pitch_mm * 1e-6",
+    Mutant("pixel-pitch-in-microns", "spacefit/geometry/frames.py", "c.pixel_pitch_mm * 1e-3", "c.pixel_pitch_mm * 1e-6",
            (CONVENTIONS,)),
     Mutant("mitsuba-principal-point-sign", RENDERER, '"principal_point_offset_x": -intr.principal_offset[0]',
            '"principal_point_offset_x": intr.principal_offset[0]', (CONVENTIONS,)),
