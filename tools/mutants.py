@@ -287,7 +287,7 @@ MUTANTS = (
     Mutant("table-fit-writes-into-a-foreign-folder", "spacefit/fitting/tabular.py",
            'prepare_output(check_path("out_dir", out_dir), "table-fit", overwrite=check_flag("overwrite", overwrite))',
            'check_path("out_dir", out_dir)', ("tests/test_brdf_tables.py",)),
-    Mutant("light-curve-sun-directions-not-normalised", "spacefit/studies/observing.py", "fields[name] = scaled / norm",
+    Mutant("light-curve-sun-directions-not-normalised", "spacefit/studies/observing.py", "fields[name] = unit",
            "fields[name] = v", ("tests/test_observed_lightcurves.py",)),
     Mutant("tabulated-offset-unsigned", "spacefit/fitting/brdf_table.py", "return jnp.where(jnp.sum(delta * beta0, axis=-1) < 0, -d, d)",
            "return d", ("tests/test_brdf_tables.py",)),
