@@ -8,8 +8,9 @@ frames one after another in this process (:class:`InProcess`) or at once on dask
 (:class:`OnDask`). Both run :func:`frame_primal` / :func:`frame_jacobian` on the same inputs, so a
 fit gives the same values bit for bit either way (renders are deterministic for a seed).
 
-A process keeps the frames' loaded scene (:class:`Loaded`: one for all the frames of a pass, which
-set their own camera, sun and pose on it) between steps; on dask each frame goes back to the worker that loaded it (a soft placement: if
+A process keeps the frames' loaded scene and its compiled functions (:class:`Loaded`: one for all
+the frames of a pass, which set their own camera, sun and pose on it, their view an operand)
+between steps; on dask each frame goes back to the worker that loaded it (a soft placement: if
 that worker is lost, the scheduler runs the frame elsewhere, which loads its scene once; only the
 lost worker's frames are recomputed).
 """
