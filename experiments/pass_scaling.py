@@ -8,8 +8,10 @@ and frames each holds), and whether every worker count gives the same numbers as
 
 Each frame is the panels case seen from its own point of an arc (:func:`spacefit.arc_pass`), with
 the three materials shared and its own target attitude about x free: per frame and step one primal
-render, two finite-difference renders and three forward-mode AD renders. The first step (each
-worker loading its frames' scenes) is timed apart from the following ones (scenes kept loaded).
+render, two finite-difference renders and three forward-mode AD renders. The first step (which
+compiles) is timed apart from the following ones (scenes kept loaded); in this process (``--workers
+0``) its JAX compilations (XLA programs and their trace, lowering and compile time) and Dr.Jit's
+kernels (new to the process, and their compile time) are counted too.
 Writes ``scaling.csv`` and ``scaling.png`` and prints the table with the machine's load average.
 """
 
@@ -31,6 +33,11 @@ import spacefit as sf
 from spacefit.fitting.frames import InProcess, executor_of, loaded_count
 from spacefit.fitting.problem import setup
 from spacefit.precision import float64
+from spacefit.rendering.renderer import kernel_log
+
+# JAX's events (jax.monitoring) of one compilation: trace, lowering, XLA compilation.
+COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/jaxpr_to_mlir_module_duration",
+                  "/jax/core/compile/backend_compile_duration")
 
 MATERIALS = ["parts.panels.alpha_x", "parts.panels.alpha_y", "parts.legs.kd"]
 
@@ -67,16 +74,32 @@ def measure(n: int, workers: int, size: int, spp: int, repeats: int) -> tuple[di
         t_load = time.perf_counter() - t0
         x = jnp.asarray(s.x0)
         step = jax.jit(lambda y: (s.problem.residual_x(y), jax.jacfwd(s.problem.residual_x)(y)))
-        times = []
-        for _ in range(repeats + 1):
+        compiles: list[tuple[str, float]] = []
+
+        def listen(event: str, seconds: float, **_: object) -> None:
+            if event in COMPILE_EVENTS:
+                compiles.append((event, seconds))
+
+        jax.monitoring.register_event_duration_secs_listener(listen)
+        try:
+            with kernel_log() as kernels:  # the renders of this process (--workers 0)
+                t0 = time.perf_counter()
+                J = step(x)[1].block_until_ready()
+                times = [time.perf_counter() - t0]
+        finally:
+            jax.monitoring.unregister_event_duration_listener(listen)
+        for k in range(repeats):  # each at its own point: a frame asked again at its last point reuses its Jacobian
             t0 = time.perf_counter()
-            r, J = step(x)
-            J.block_until_ready()
+            J = step(x * (1.0 + 1e-3 * (k + 1)))[1].block_until_ready()
             times.append(time.perf_counter() - t0)
         mem, scenes, held = worker_memory(executor)
     finally:
         executor.close()
     row = {"frames": n, "workers": workers, "load_s": round(t_load, 2), "first_step_s": round(times[0], 2),
+           "first_step_xla_programs": sum(e == COMPILE_EVENTS[-1] for e, _ in compiles),
+           "first_step_jax_compile_s": round(sum(secs for _, secs in compiles), 2),
+           "first_step_drjit_kernels_new": kernels["new"] if not workers else "",
+           "first_step_drjit_compile_s": round(kernels["compile_s"], 2) if not workers else "",
            "step_s": round(float(np.median(times[1:])), 3), "memory_per_worker_mib": round(mem, 0), "scenes_per_worker": scenes, "frames_per_worker": held,
            "load_average_1min": round(os.getloadavg()[0], 2)}
     return row, np.asarray(J)

@@ -6,12 +6,14 @@ from __future__ import annotations
 
 import dataclasses
 
+import jax
 import numpy as np
 import pytest
 from astropy.table import Table
 
 import spacefit as sf
 from spacefit.fitting.frames import FrameSpec, InProcess, Loaded, frame_jacobian, frame_part_image, frame_primal, share_views
+from spacefit.rendering.renderer import kernel_log
 from spacefit.scene.assembly import assemble
 
 # The panels case at 32 x 32 px (75 mm pixels: the 128 px field of view).
@@ -177,6 +179,41 @@ def test_the_frames_of_a_pass_share_one_loaded_scene_and_render_as_on_their_own(
         assert np.array_equal(frame_part_image(spec, spec.key, shared).ids, frame_part_image(spec, spec.key, Loaded()).ids)
 
 
+# JAX's event for one XLA compilation (jax.monitoring).
+XLA_COMPILE = "/jax/core/compile/backend_compile_duration"
+
+
+def test_the_frames_of_a_pass_compile_once_not_once_per_frame():
+    """Three frames of a pass on one loaded scene: the first compiles its JAX programs and Dr.Jit
+    kernels; the second and third (their own camera, sun and attitude: data, not code) compile
+    neither, and render as each would alone."""
+    specs = tiny_frames(3)
+    x = np.array([0.5, 0.1])
+    loaded = Loaded()
+    frame_jacobian(specs[0], specs[0].key, x, 3, 4, loaded)
+    frame_primal(specs[0], specs[0].key, x, 5, loaded)
+    compiled: list[str] = []
+
+    def listen(event: str, seconds: float, **_: object) -> None:
+        if event == XLA_COMPILE:
+            compiled.append(event)
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        with kernel_log() as kernels:
+            together = [(frame_jacobian(s, s.key, x, 3, 4, loaded), frame_primal(s, s.key, x, 5, loaded)) for s in specs[1:]]
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert compiled == []
+    assert kernels["launched"] > 0 and kernels["new"] == 0
+    assert len(loaded.compiled) == 2  # one primal and one Jacobian program for the three frames
+    (image, J), primal = together[1]
+    alone = Loaded()
+    assert np.array_equal(frame_jacobian(specs[2], specs[2].key, x, 3, 4, alone)[1], J)
+    assert np.array_equal(frame_primal(specs[2], specs[2].key, x, 5, alone), primal)
+    assert not np.array_equal(together[0][1], primal)  # the frames do differ
+
+
 def test_a_process_keeps_at_most_max_scenes_loaded_dropping_the_least_recently_used():
     """Frames rendered at 1, 2 and 3 spp need three loaded scenes; with room for two, the least recently
     used one goes with its frames and compiled functions, and comes back (the same image) when asked again."""
@@ -188,7 +225,7 @@ def test_a_process_keeps_at_most_max_scenes_loaded_dropping_the_least_recently_u
     frame_primal(a, a.key, x, 3, loaded)  # a is now the most recently used: b goes next
     frame_primal(c, c.key, x, 3, loaded)
     assert len(loaded.stages) == 2 and set(loaded.chains) == {a.key, c.key}
-    assert {name[0] for name in loaded.compiled} == {a.key, c.key}
+    assert {name[0] for name in loaded.compiled} == set(loaded.stages)
     frame_primal(b, b.key, x, 3, loaded)
     assert set(loaded.chains) == {b.key, c.key}
     assert np.array_equal(frame_primal(a, a.key, x, 3, loaded), first)

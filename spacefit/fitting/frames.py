@@ -8,8 +8,9 @@ frames one after another in this process (:class:`InProcess`) or at once on dask
 (:class:`OnDask`). Both run :func:`frame_primal` / :func:`frame_jacobian` on the same inputs, so a
 fit gives the same values bit for bit either way (renders are deterministic for a seed).
 
-A process keeps the frames' loaded scene (:class:`Loaded`: one for all the frames of a pass, which
-set their own camera, sun and pose on it) between steps; on dask each frame goes back to the worker that loaded it (a soft placement: if
+A process keeps the frames' loaded scene and its compiled functions (:class:`Loaded`: one for all
+the frames of a pass, which set their own camera, sun and pose on it, their view an operand)
+between steps; on dask each frame goes back to the worker that loaded it (a soft placement: if
 that worker is lost, the scheduler runs the frame elsewhere, which loads its scene once; only the
 lost worker's frames are recomputed).
 """
@@ -31,10 +32,10 @@ import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_count, quote
 from spacefit.precision import float64
-from spacefit.rendering.bridge import seeds_array
+from spacefit.rendering.bridge import seeded_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
 from spacefit.rendering.renderer import PartImage, render_threads, to_value
-from spacefit.rendering.values import scene_values_fn
+from spacefit.rendering.values import View, scene_view, view_values_fn
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.parameters import ATTITUDE, POSITION, ROLL, SUN_ANGLES, scene_value
 from spacefit.scene.schema import Scene
@@ -103,37 +104,46 @@ def _stage(spec: FrameSpec, assembly: Assembly) -> str:
                                 spec.spp_grad, spec.integrator)).encode()).hexdigest()
 
 
-def _on_stage(spec: FrameSpec, assembly: Assembly, stage: RenderChain) -> RenderChain:
-    """The frame's chain on a loaded scene it shares: every render sets the frame's camera and sun
-    (and its pose, when free) with the free values."""
-    extra = [n for n in VIEW if n not in spec.names]
-    values = scene_values_fn(assembly, (*spec.names, *extra))
-    fixed = np.array([scene_value(spec.scene, n) for n in extra])
+def _frame_values(assembly: Assembly, names: Sequence[str], shared_view: bool) -> Callable[[jax.Array, View], dict[str, jax.Array]]:
+    """A frame's scene values as a function of its free values (``names``) and its view
+    (:func:`~spacefit.rendering.values.scene_view`, an operand): on a loaded scene shared with other
+    views every render sets the frame's camera and sun (and its pose, when free)."""
+    extra = [n for n in VIEW if n not in names] if shared_view else []
+    values = view_values_fn(assembly, (*names, *extra))
 
-    def values_of(x: jax.Array) -> dict[str, jax.Array]:
-        return values(jnp.concatenate([jnp.asarray(x), jnp.asarray(fixed, dtype=jnp.result_type(x))]))
+    def values_of(x: jax.Array, view: View) -> dict[str, jax.Array]:
+        return values(jnp.concatenate([jnp.asarray(x), jnp.asarray([view[n] for n in extra], dtype=jnp.result_type(x))]), view)
 
-    return RenderChain(spec.names, stage.renderer, stage.drjit, values_of, np.asarray(spec.fd_steps, dtype=float))
+    return values_of
+
+
+@dataclass(frozen=True)
+class Stage:
+    """A loaded scene and its frames' scene values as a function of (free values, view)."""
+
+    chain: RenderChain
+    values: Callable[[jax.Array, View], dict[str, jax.Array]]
 
 
 @dataclass
 class Loaded:
-    """Loaded scenes (stages) and each frame's chain on one, by :attr:`FrameSpec.key`, their
-    compiled image functions by (key, kind), and each frame's last image and Jacobian: a process (a
-    dask worker) keeps them between a fit's steps.
+    """Loaded scenes (stages) and each frame's chain and view on one, by :attr:`FrameSpec.key`, the
+    compiled image functions of each stage's frames, and each frame's last image and Jacobian: a
+    process (a dask worker) keeps them between a fit's steps.
 
     The frames of a pass (:attr:`FrameSpec.shared_view`) differ in camera, sun and target pose
     only, so they share one loaded scene and set their own values on it at each render. Dr.Jit
     traces every loaded scene's plugins in each render (its calls cover every instance alive:
     mitsuba3#1700), so a process holding a loaded scene per frame paid per render for all of them:
-    0.25 s per frame and step with one frame held, 1.4 s with eight (16 x 16 px). At most
-    ``max_scenes`` are kept, the least recently used dropped.
+    0.25 s per frame and step with one frame held, 1.4 s with eight (16 x 16 px). They share its
+    compiled functions too, their views an operand: compiled per frame, the first step of a pass
+    cost seconds per frame. At most ``max_scenes`` are kept, the least recently used dropped.
     """
 
     max_scenes: int = MAX_SCENES
-    stages: OrderedDict[str, RenderChain] = field(default_factory=OrderedDict)
-    chains: dict[str, tuple[str, RenderChain]] = field(default_factory=dict)
-    compiled: dict[tuple[str, str], Callable[[jax.Array, jax.Array], Any]] = field(default_factory=dict)
+    stages: OrderedDict[str, Stage] = field(default_factory=OrderedDict)
+    chains: dict[str, tuple[str, RenderChain, View]] = field(default_factory=dict)
+    compiled: dict[tuple[str, tuple[float, ...], str], Callable[..., Any]] = field(default_factory=dict)
     jacobians: dict[str, tuple[bytes, tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
 
     def chain(self, spec: FrameSpec, key: str) -> RenderChain:
@@ -148,38 +158,43 @@ class Loaded:
             while len(self.stages) >= self.max_scenes:
                 self._drop(next(iter(self.stages)))
             names = (*spec.names, *(n for n in VIEW if n not in spec.names)) if spec.shared_view else spec.names
-            self.stages[stage] = render_chain(assembly, names, spp=spec.spp, spp_grad=spec.spp_grad, integrator=spec.integrator,
-                                              fd_steps=None if spec.shared_view else np.asarray(spec.fd_steps, dtype=float),
-                                              crop=False if spec.shared_view else None)
+            chain = render_chain(assembly, names, spp=spec.spp, spp_grad=spec.spp_grad, integrator=spec.integrator,
+                                 fd_steps=None if spec.shared_view else np.asarray(spec.fd_steps, dtype=float),
+                                 crop=False if spec.shared_view else None)
+            self.stages[stage] = Stage(chain, _frame_values(assembly, spec.names, spec.shared_view))
         self.stages.move_to_end(stage)
-        chain = _on_stage(spec, assembly, self.stages[stage]) if spec.shared_view else self.stages[stage]
-        self.chains[key] = (stage, chain)
+        on, view = self.stages[stage], scene_view(assembly)
+        chain = RenderChain(spec.names, on.chain.renderer, on.chain.drjit, lambda x: on.values(x, view),
+                            np.asarray(spec.fd_steps, dtype=float))
+        self.chains[key] = (stage, chain, view)
         return chain
 
     def _drop(self, stage: str) -> None:
         """Forget a loaded scene, its frames' chains and their compiled functions."""
         del self.stages[stage]
-        gone = {key for key, (s, _) in self.chains.items() if s == stage}
+        gone = {key for key, (s, *_) in self.chains.items() if s == stage}
         self.chains = {key: v for key, v in self.chains.items() if key not in gone}
-        self.compiled = {name: fn for name, fn in self.compiled.items() if name[0] not in gone}
+        self.compiled = {name: fn for name, fn in self.compiled.items() if name[0] != stage}
         self.jacobians = {key: v for key, v in self.jacobians.items() if key not in gone}
 
     def function(self, spec: FrameSpec, key: str, kind: str) -> Callable[[jax.Array, jax.Array], Any]:
         """The frame's image (``kind`` "primal") or its Jacobian and image ("jacobian") as a function
-        of its values and seeds (:func:`~spacefit.rendering.bridge.seeds_array`), jitted once per
-        frame (a new closure each step would compile each step; the seeds an operand, one program for
-        every seed)."""
-        name = (key, kind)
+        of its values and seeds (:func:`~spacefit.rendering.bridge.seeds_array`): one program jitted
+        per loaded scene, finite-difference steps and kind, the seeds and the frame's view its operands
+        (a new closure each step would compile each step, a closure per frame each frame)."""
         chain = self.chain(spec, key)  # loads it, or marks its scene as recently used
+        stage, _, view = self.chains[key]
+        name = (stage, spec.fd_steps, kind)
         if name not in self.compiled:
-            image = chain.seeded()
+            image = seeded_render_params(chain.drjit, self.stages[stage].values, spec.fd_steps)
 
-            def twice(y: jax.Array, seeds: jax.Array) -> tuple[jax.Array, jax.Array]:
-                out = image(y, seeds)
+            def twice(y: jax.Array, seeds: jax.Array, view: View) -> tuple[jax.Array, jax.Array]:
+                out = image(y, seeds, view)
                 return out, out
 
             self.compiled[name] = jax.jit(image if kind == "primal" else jax.jacfwd(twice, has_aux=True))
-        return self.compiled[name]
+        compiled = self.compiled[name]
+        return lambda x, seeds: compiled(x, seeds, view)
 
 
 # This process's loaded scenes: a dask worker keeps its frames' between tasks.
@@ -370,11 +385,11 @@ def batched_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Seq
     columns = tuple(jax.ShapeDtypeStruct((*shape, len(idx)), jnp.float32) for shape, idx in zip(shapes, indices))
 
     def primal_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[np.ndarray, ...]:
-        x = np.asarray(x)  # JAX may hand a callback its own array type
+        x, seeds = np.asarray(x), np.asarray(seeds)  # JAX may hand a callback its own arrays (each index of one compiles)
         return tuple(executor.map(frame_primal, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs)))
 
     def jacobian_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
-        x = np.asarray(x)
+        x, seeds = np.asarray(x), np.asarray(seeds)
         out = executor.map(frame_jacobian, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs),
                            [int(seeds[1])] * len(specs))
         return tuple(img for img, _ in out), tuple(J for _, J in out)

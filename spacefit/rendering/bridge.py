@@ -244,16 +244,18 @@ def render_params(
 
 def seeded_render_params(
     scene: DrJitScene,
-    values_of: Callable[[Array], dict[str, Array]],
+    values_of: Callable[..., dict[str, Array]],
     fd_steps: Float[np.ndarray, " n"],
-) -> Callable[[Float[Array, " n"], Array], Float[Array, "h w 3"]]:
-    """The image as a JAX function of free parameters ``x`` (n,) and the seeds (:func:`seeds_array`),
-    with a materialised Jacobian. The seeds are an operand, not a constant, so that one compiled
-    program serves every seed (a fit's own and the independent ones of its standard errors).
+) -> Callable[..., Float[Array, "h w 3"]]:
+    """The image as a JAX function ``(x, seeds, *view) -> image`` of free parameters ``x`` (n,), the
+    seeds (:func:`seeds_array`) and any further operands ``view`` of ``values_of`` (a pass's frame
+    geometry, :func:`~spacefit.rendering.values.scene_view`; not differentiated), with a materialised
+    Jacobian. The seeds and the view are operands, not constants, so that one compiled program
+    serves every seed (a fit's own and the independent ones of its standard errors) and every frame.
 
     Args:
         scene: the Dr.Jit side.
-        values_of: JAX function x -> scene values (traverse key -> array).
+        values_of: JAX function (x, *view) -> scene values (traverse key -> array).
         fd_steps: (n,) step of a central finite difference for each parameter, or 0 to take the
             column from a Dr.Jit forward-mode render (the integrator's derivative).
     """
@@ -262,13 +264,16 @@ def seeded_render_params(
     image = jax.ShapeDtypeStruct(scene.shape, jnp.float32)
     jac = jax.ShapeDtypeStruct((*scene.shape, n), jnp.float32)
 
+    # A callback may be handed JAX arrays: it indexes them as NumPy's (an index of a JAX array
+    # compiles an XLA program, per shape and per calling thread's settings).
     def primal_cb(values: dict[str, np.ndarray], seeds: np.ndarray) -> np.ndarray:
-        return scene.primal(values, int(seeds[0]))
+        return scene.primal(values, int(np.asarray(seeds)[0]))
 
     fd = [j for j in range(n) if steps[j] > 0]
 
     def jacobian_cb(values, tangents, plus, minus, seeds) -> tuple[np.ndarray, np.ndarray]:
-        seed, seed_grad = int(seeds[0]), int(seeds[1])
+        seed, seed_grad = (int(s) for s in np.asarray(seeds))
+        tangents = {k: np.asarray(t) for k, t in tangents.items()}
         img = scene.primal(values, seed)
         cols = []
         for j in range(n):
@@ -280,17 +285,21 @@ def seeded_render_params(
         return img, np.stack(cols, axis=-1).astype(np.float32)
 
     @jax.custom_jvp
-    def render(x: Array, seeds: Array) -> Array:
-        return jax.pure_callback(primal_cb, image, _flat(values_of(x)), seeds, vmap_method="sequential")
+    def render(x: Array, seeds: Array, *view: object) -> Array:
+        return jax.pure_callback(primal_cb, image, _flat(values_of(x, *view)), seeds, vmap_method="sequential")
 
     @render.defjvp
-    def render_jvp(primals: tuple[Array, Array], tangents: tuple[Array, Array]) -> tuple[Array, Array]:
-        (x, seeds), (t, _) = primals, tangents
-        values = _flat(values_of(x))
-        tangent_cols = {k: jnp.reshape(v, (-1, n)).astype(jnp.float32) for k, v in jax.jacfwd(values_of)(x).items()}
+    def render_jvp(primals: tuple[Array, ...], tangents: tuple[Array, ...]) -> tuple[Array, Array]:
+        (x, seeds, *view), t = primals, tangents[0]
+
+        def values_at(y: Array) -> dict[str, Array]:
+            return values_of(y, *view)
+
+        values = _flat(values_at(x))
+        tangent_cols = {k: jnp.reshape(v, (-1, n)).astype(jnp.float32) for k, v in jax.jacfwd(values_at)(x).items()}
         eye = jnp.eye(n, dtype=x.dtype) * jnp.asarray(steps, dtype=x.dtype)
-        plus = {j: _flat(values_of(x + eye[j])) for j in fd}
-        minus = {j: _flat(values_of(x - eye[j])) for j in fd}
+        plus = {j: _flat(values_at(x + eye[j])) for j in fd}
+        minus = {j: _flat(values_at(x - eye[j])) for j in fd}
         img, J = jax.pure_callback(jacobian_cb, (image, jac), values, tangent_cols, plus, minus, seeds, vmap_method="sequential")
         return img, J @ t.astype(jnp.float32)
 

@@ -24,7 +24,7 @@ from jaxtyping import Array, Float
 
 from spacefit.errors import InputError, check_count, check_type
 from spacefit.precision import float64
-from spacefit.rendering.bridge import DrJitScene, render_params, render_values, seeded_render_params
+from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import Renderer, check_memory
 from spacefit.rendering.values import SceneValuesFn, scene_values_fn
 from spacefit.scene.assembly import Assembly, assemble
@@ -59,11 +59,6 @@ class RenderChain:
         """The image with a materialised Jacobian (:func:`~spacefit.rendering.bridge.render_params`):
         ``jax.jacfwd``, ``jax.jvp``, ``jax.grad`` and optimistix least squares work on it."""
         return render_params(self.drjit, self.values_of, self.fd_steps, seed, seed_grad)
-
-    def seeded(self) -> Callable[[Float[Array, " n"], Array], Float[Array, "h w 3"]]:
-        """:meth:`forward` with the seeds an operand, ``(x, seeds_array(seed, seed_grad)) -> image``
-        (:func:`~spacefit.rendering.bridge.seeded_render_params`): one compiled program for every seed."""
-        return seeded_render_params(self.drjit, self.values_of, self.fd_steps)
 
     def reverse(self, seed: int, seed_grad: int) -> ImageFn:
         """The image differentiable in reverse mode, one Dr.Jit backward pass whatever the number of

@@ -272,18 +272,23 @@ def errors_only() -> Iterator[None]:
 def kernel_log() -> Iterator[dict[str, float]]:
     """Count the Dr.Jit kernels launched inside the block; the yielded dict is filled on exit.
 
-    Keys: ``launched`` (JIT kernels), ``compiled`` (found in neither Dr.Jit's in-memory cache nor
-    its on-disk one, ``~/.drjit``) and ``compile_s`` (wall time of code generation and compilation,
-    s). A kernel recompiled at every call of a loop shows as ``compiled`` growing with the calls.
+    Keys: ``launched`` (JIT kernels), ``new`` (not in Dr.Jit's in-memory cache: compiled, or read
+    from its on-disk one, ``~/.drjit``), ``compiled`` (in neither), all over the process's threads
+    (a JAX callback may render on one of XLA's), and ``compile_s`` (wall time of code generation
+    and compilation of this thread's kernels: Dr.Jit's kernel history is per thread, s). A kernel
+    recompiled at every call of a loop shows as ``new`` growing with the calls (``compiled`` too
+    while the disk cache lacks it).
     """
     stats: dict[str, float] = {}
     dr.kernel_history_clear()
+    launched, read, compiled = dr.detail.launch_stats()  # since the process started: launches, disk-cache reads, compilations
     with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
         try:
             yield stats
         finally:
             jit = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
-            stats.update(launched=len(jit), compiled=sum(not (k.get("cache_hit") or k.get("cache_disk")) for k in jit),
+            now = dr.detail.launch_stats()
+            stats.update(launched=now[0] - launched, new=now[1] - read + now[2] - compiled, compiled=now[2] - compiled,
                          compile_s=sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in jit) / 1e3)
 
 

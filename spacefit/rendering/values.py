@@ -10,12 +10,13 @@ light travels), the camera's roll the camera's frame ``'sensor.to_world'`` (whol
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import jax.numpy as jnp
 from jaxtyping import Array
 
 from spacefit.scene.assembly import Assembly
-from spacefit.geometry.frames import attitude_matrix
+from spacefit.geometry.frames import CameraFrame, attitude_matrix
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, ROLL, SUN_ANGLES, G_of, parameter, scene_value, sun_direction
 
 SceneValuesFn = Callable[[Array], dict[str, Array]]
@@ -30,32 +31,54 @@ def bsdf_key(part: str, field: str) -> str:
     return f"{part}.bsdf.brdf_0.{field}.value"
 
 
+# A scene's view: what its scene values depend on besides the free parameters and the shared
+# geometry: its camera's frame (as assembled, turned by the scene's roll) and roll, its sun's angles
+# and its target's pose, by parameter name. The frames of a pass differ in it only: their values
+# are one function of (x, view), the view an operand, compiled once for every frame.
+View = dict[str, Any]
+CAMERA = "camera"  # the view's camera frame: (position, right, up, forward) in the world (m, unit vectors)
+
+
+def scene_view(assembly: Assembly) -> View:
+    """The assembled scene's view (:data:`View`): its camera frame, roll (deg), sun angles (deg) and
+    target pose (deg, m)."""
+    cam = assembly.camera
+    return {CAMERA: (cam.position, cam.right, cam.up, cam.forward),
+            **{n: scene_value(assembly.scene, n) for n in (ROLL, *SUN_ANGLES, *ATTITUDE, *POSITION)}}
+
+
 def scene_values_fn(assembly: Assembly, names: Sequence[str]) -> SceneValuesFn:
     """JAX function: physical values (n,) of the parameters ``names`` -> the scene values they set."""
+    values, view = view_values_fn(assembly, names), scene_view(assembly)
+    return lambda x: values(x, view)
+
+
+def view_values_fn(assembly: Assembly, names: Sequence[str]) -> Callable[[Array, View], dict[str, Array]]:
+    """JAX function: physical values (n,) of the parameters ``names`` and a view (:func:`scene_view`
+    of this scene or of one differing in its view only) -> the scene values they set."""
     index = {name: i for i, name in enumerate(names)}
     scene = assembly.scene
     w = scene.wrinkles
     geometry = [n for n in GEOMETRY if n in index]
     pose = [n for n in (*ATTITUDE, *POSITION) if n in index]
     sun_angles = [n for n in SUN_ANGLES if n in index]
-    fixed = {n: scene_value(scene, n) for n in (*SUN_ANGLES, *ATTITUDE, *POSITION)}
 
-    def value(x: Array, name: str) -> Array:
-        return x[index[name]] if name in index else fixed[name]
+    def values_of(x: Array, view: View) -> dict[str, Array]:
+        def value(name: str) -> Array:
+            return x[index[name]] if name in index else view[name]
 
-    def values_of(x: Array) -> dict[str, Array]:
         out: dict[str, Array] = {}
         if sun_angles:
-            out["sun.to_world"] = sun_direction(*(value(x, n) for n in SUN_ANGLES), xp=jnp)
+            out["sun.to_world"] = sun_direction(*(value(n) for n in SUN_ANGLES), xp=jnp)
         if ROLL in index:  # the assembled camera is turned by the scene's roll already
-            out["sensor.to_world"] = assembly.camera.mitsuba_to_world(jnp.deg2rad(x[index[ROLL]] - scene.camera.roll_deg), jnp)
+            out["sensor.to_world"] = CameraFrame(*view[CAMERA]).mitsuba_to_world(jnp.deg2rad(x[index[ROLL]] - view[ROLL]), jnp)
         if geometry or pose:
             D = x[index["wrinkles.D"]] if "wrinkles.D" in index else w.D
             G = x[index["wrinkles.G"]] if "wrinkles.G" in index else w.G
             if "wrinkles.rms_m" in index:
                 G = G_of(w, D, x[index["wrinkles.rms_m"]])
-            rotation = attitude_matrix(jnp.deg2rad(jnp.stack([value(x, n) for n in ATTITUDE])), jnp)
-            position = jnp.stack([value(x, n) for n in POSITION])
+            rotation = attitude_matrix(jnp.deg2rad(jnp.stack([value(n) for n in ATTITUDE])), jnp)
+            position = jnp.stack([value(n) for n in POSITION])
             for part in assembly.parts if pose else assembly.refinements:
                 out[f"{part}.vertex_positions"] = jnp.ravel(assembly.object_vertices(part, D, G) @ rotation.T + position)
         for name, i in index.items():
