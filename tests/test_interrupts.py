@@ -36,15 +36,31 @@ def test_a_long_render_stops_within_the_bound(tmp_path, sig, code, word):
     assert first.startswith("scene:"), first + p.communicate()[1]
     time.sleep(4.0)  # inside a pass, where Mitsuba holds SIGINT
     assert p.poll() is None, "the render ended before the signal: make it longer"
+    state = signal_state(p.pid)
     t0 = time.monotonic()
     p.send_signal(sig)
     _, err = p.communicate(timeout=120)
     elapsed = time.monotonic() - t0
-    assert p.returncode == code, err
+    assert p.returncode == code, f"{err}\nthe process's signal masks when signalled: {state}"
     assert elapsed < RENDER_STOP_BOUND_S, f"{elapsed:.1f} s"
     assert err.strip().splitlines()[-1] == f"spacefit: {word}; nothing half-written was left behind"
     assert "Traceback" not in err and "winding down" not in err  # Mitsuba's own warning is not printed
     assert not out.exists() or not any(out.iterdir())
+
+
+def signal_state(pid: int) -> dict[str, str]:
+    """Each thread's blocked, ignored and caught signals (Linux /proc, hexadecimal masks): what a
+    failure message shows, since a signal the render once ignored left no other trace."""
+    state = {}
+    for status in sorted(Path(f"/proc/{pid}/task").glob("*/status")):
+        try:
+            lines = status.read_text().splitlines()
+        except OSError:  # the thread ended
+            continue
+        fields = dict(line.split(":", 1) for line in lines if ":" in line)
+        state[f"{fields['Name'].strip()} {status.parent.name}"] = " ".join(
+            f"{key}={fields[key].strip()}" for key in ("SigBlk", "SigIgn", "SigCgt") if key in fields)
+    return state
 
 
 class Killed(BaseException):
