@@ -49,6 +49,11 @@ def configure_llvm() -> None:
 configure_llvm()
 
 import drjit as dr  # noqa: E402  (after configure_llvm, which must run first)
+
+from spacefit.rendering import syntax_cache  # noqa: E402
+
+syntax_cache.install()  # before Mitsuba's AD integrators are first imported, at the first variant set
+
 import mitsuba as mi  # noqa: E402
 
 from spacefit.errors import InputError  # noqa: E402
