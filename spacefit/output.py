@@ -23,7 +23,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from PIL import Image
 
 from spacefit.errors import InputError
 from spacefit.locks import is_lock_file
@@ -59,16 +58,6 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
     taken from colour-science, whose import alone costs a render 1.5 s (a test holds them equal)."""
     linear = np.asarray(linear, dtype=float)
     return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.power(np.maximum(linear, 0.0031308), 1 / 2.4) - 0.055)
-
-
-def write_png(path: str | Path, rgb8: np.ndarray) -> None:
-    """Write an (h, w, 3) uint8 image as PNG."""
-    try:
-        Image.fromarray(rgb8).save(path, format="PNG")
-    except OSError as err:
-        if err.errno and not err.filename:  # Pillow names no file
-            raise OSError(err.errno, err.strerror, str(path)) from None
-        raise
 
 
 def versions() -> dict[str, str]:
@@ -255,9 +244,11 @@ def write_render(
     scene_toml: str,
     sidecar: dict[str, Any],
     write_exr: Callable[[Path, np.ndarray], None],
+    write_png: Callable[[Path, np.ndarray], None],
 ) -> Path:
-    """Write radiance.exr, preview.png, scene.toml and render.json into ``out_dir`` all at once. The EXR
-    is written in a thread meanwhile the others are (its writer and the PNG's encoder release the GIL)."""
+    """Write radiance.exr, preview.png, scene.toml and render.json into ``out_dir`` all at once, through
+    the given writers (the rendering package's, :mod:`spacefit.rendering.exr` and :mod:`spacefit.rendering.png`).
+    The EXR is written in a thread meanwhile the others are (Mitsuba's encoders release the GIL)."""
     scale = preview_scale(radiance)
     with staged_output(out_dir) as stage:
         with ThreadPoolExecutor(1, thread_name_prefix="spacefit-exr") as pool:  # waits for the EXR, even after an error

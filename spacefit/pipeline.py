@@ -25,6 +25,7 @@ from spacefit.locks import holding_lock
 from spacefit.output import prepare_output, staged_output, versions, write_json, write_render
 from spacefit.progress import Progress
 from spacefit.rendering.exr import write_exr
+from spacefit.rendering.png import write_png
 from spacefit.rendering.renderer import PartImage, Renderer, errors_only, kernel_log
 from spacefit.scene.assembly import Assembly, assemble, fold_notes
 from spacefit.scene.overrides import parse_override
@@ -93,7 +94,7 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     timings["part_ids"] += time.perf_counter() - t0
     sidecar["timings_s"] = timings
     t0 = time.perf_counter()
-    write_render(out_dir, radiance, scene.to_toml(), sidecar, write_exr)
+    write_render(out_dir, radiance, scene.to_toml(), sidecar, write_exr, write_png)
     if show_timings:
         print(timings_table({**timings, "write": time.perf_counter() - t0}, assembly.cache, kernels), file=sys.stderr)
     _say(f"wrote {Path(out_dir) / 'radiance.exr'} (max {radiance.max():.4g} W m^-2 sr^-1) in {t_render:.2f} s", quiet)

@@ -36,6 +36,26 @@ def test_same_seed_same_image_other_seed_other_noise(small_renderer):
     assert a.max() > 0.0
 
 
+def test_a_deterministic_render_is_the_render_wholly_on_one_thread_bit_for_bit(small_renderer, monkeypatch):
+    """It traces its samples on all of Dr.Jit's threads and adds them into the film on one, in their order: the
+    image of a render whose every kernel runs on one thread, over several passes and samplers."""
+    from spacefit.rendering import renderer
+    from spacefit.rendering.backend import dr
+
+    monkeypatch.setattr(renderer, "MAX_SAMPLES_PER_PASS", 64 * 16)  # several passes
+    threads = dr.thread_count()
+    dr.set_thread_count(max(threads, 2))
+    try:
+        for scene in (small_renderer, Renderer(assemble(load_scene(None, SMALL + ["render.sampler='independent'"])))):
+            spread = scene.render(seed=5, spp=16)
+            with renderer.render_threads(True):
+                assert dr.thread_count() == 1
+                whole = scene.render(seed=5, spp=16)
+            assert np.array_equal(spread, whole) and spread.max() > 0
+    finally:
+        dr.set_thread_count(threads)
+
+
 def test_parallel_renders_agree_to_float_rounding():
     fast = Renderer(assemble(load_scene(None, SMALL + ["render.deterministic=false"])))
     a, b = fast.render(seed=3), fast.render(seed=3)
@@ -133,12 +153,12 @@ def test_a_failed_preview_leaves_nothing_though_the_exr_was_written_meanwhile(tm
     removes the whole stage, and names the file."""
     import errno
 
-    import spacefit.output as output
+    import spacefit.pipeline as pipeline
 
     def full(path, rgb8):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
 
-    monkeypatch.setattr(output, "write_png", full)
+    monkeypatch.setattr(pipeline, "write_png", full)
     out = tmp_path / "run"
     assert main(["render", "--out", str(out), "--quiet"] + [a for s in SMALL for a in ("--set", s)]) == 1
     assert not out.exists() and list(tmp_path.iterdir()) == []
@@ -166,14 +186,15 @@ def test_the_preview_encodes_every_pixel_as_the_whole_image_formula_does():
 def test_the_render_folder_holds_what_the_writers_write_one_by_one(tmp_path):
     """write_render (the EXR in a thread, the preview's lit values only) against the plain writers called in turn
     on the whole-image tone map: the same four files, byte for byte."""
-    from spacefit.output import PREVIEW_PERCENTILE, srgb_encode, write_json, write_png, write_render
+    from spacefit.output import PREVIEW_PERCENTILE, srgb_encode, write_json, write_render
     from spacefit.rendering.exr import write_exr
+    from spacefit.rendering.png import write_png
 
     rng = np.random.default_rng(8)
     radiance = (rng.random((40, 56, 3)) * 5.0).astype(np.float32)
     radiance[rng.random((40, 56)) < 0.8] = 0.0
     sidecar = {"seed": 3, "versions": {"spacefit": "test"}}
-    write_render(tmp_path / "folder", radiance, "[render]\nspp = 4\n", sidecar, write_exr)
+    write_render(tmp_path / "folder", radiance, "[render]\nspp = 4\n", sidecar, write_exr, write_png)
     peak = radiance.max(axis=-1)
     scale = 1.0 / float(np.percentile(peak[peak > 0], PREVIEW_PERCENTILE))
     plain = tmp_path / "plain"

@@ -56,6 +56,13 @@ MUTANTS = (
     # a render's fixed cost: the system libLLVM searched once per process, not per render
     Mutant("libllvm-searched-per-render", "spacefit/rendering/backend.py", "@functools.cache  # the file system's search",
            "# the file system's search", ("tests/test_api.py::test_a_render_asks_the_file_system_nothing",)),
+    # Mitsuba's rewritten integrators read from the disk only while their source is the one rewritten
+    Mutant("syntax-cache-ignores-the-source", "spacefit/rendering/syntax_cache.py", "dr.__version__, source, f.__qualname__",
+           "dr.__version__, f.__qualname__", ("tests/test_syntax_cache.py::test_a_changed_source_is_rewritten_again",)),
+    # a deterministic render: its samples traced on all threads, added into the film on one in their order
+    Mutant("deterministic-splat-in-parallel", RENDERER, "        with render_threads(deterministic):\n            block.put",
+           "        with render_threads(False):\n            block.put",
+           ("tests/test_render.py::test_a_deterministic_render_is_the_render_wholly_on_one_thread_bit_for_bit",)),
     # a camera set the way a user thinks: the field kept across resolutions, an exposure at its fraction of full scale
     Mutant("fov-pitch-ignores-the-resolution", "spacefit/scene/schema.py", "math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]",
            "math.tan(math.radians(camera.fov_deg) / 2.0) / 48", ("tests/test_camera.py",)),
@@ -219,7 +226,8 @@ MUTANTS = (
            ("tests/test_plots.py",)),
     Mutant("figures-never-crop", "spacefit/plotting.py", "return target_box(images) if crop else", "return None or",
            ("tests/test_plots.py",)),
-    Mutant("part-means-count-masked-nan", RENDERER, "np.where(masks, grey, 0.0).sum(axis=(1, 2))", "(masks * grey).sum(axis=(1, 2))",
+    Mutant("part-means-count-masked-nan", RENDERER, "counted = self.ids >= 0 if used is None else (self.ids >= 0) & np.asarray(used, dtype=bool)",
+           "counted = self.ids >= 0",
            ("tests/test_api.py::test_part_image_and_table_match_the_parts_lit_pixels",)),
     Mutant("exact-zero-called-noise", SENSITIVITY, "return (self.d_mean_radiance == 0.0) & (self.d_mean_radiance_se == 0.0)",
            "return np.zeros_like(self.resolved)", ("tests/test_plots.py",)),
