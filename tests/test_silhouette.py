@@ -81,18 +81,23 @@ def silhouette_of(renderer: sf.Renderer) -> np.ndarray:
     for name, points in a.scene_vertices.items():
         uv, _ = project(points, a.camera, a.intrinsics)
         tris.append(uv[a.faces(name)])
-    return silhouette(np.concatenate(tris), a.intrinsics.width, a.intrinsics.height)
+    return silhouette(*mesh(np.concatenate(tris)), a.intrinsics.width, a.intrinsics.height)
+
+
+def mesh(triangles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Triangles (n, 3, 2) as a mesh: each corner a vertex of its own, (3n, 2), and faces (n, 3)."""
+    return triangles.reshape(-1, 2), np.arange(3 * len(triangles)).reshape(-1, 3)
 
 
 def test_conservative_rasterisation_of_a_triangle():
     """A triangle within a 3 x 3 px box marks its box; a larger one the pixel squares it touches, and no more."""
-    small = silhouette(np.array([[[0.2, 0.2], [2.5, 0.2], [0.2, 2.5]]]), 4, 4)
+    small = silhouette(*mesh(np.array([[[0.2, 0.2], [2.5, 0.2], [0.2, 2.5]]])), 4, 4)
     assert small[:3, :3].all() and not small[3].any() and not small[:, 3].any()
     big = np.array([[[0.5, 0.5], [40.5, 0.5], [0.5, 40.5]]])
-    inside = silhouette(big, 48, 48)
+    inside = silhouette(*mesh(big), 48, 48)
     # the hypotenuse x + y = 41 touches pixel square (x, 10) while its nearest corner has x + 10 <= 41
     assert inside[10, 31] and not inside[10, 32] and inside[0, 40] and not inside[0, 41]
-    traced, lit = traced_pixels(big, 48, 48, 1.0)
+    traced, lit = traced_pixels(*mesh(big), 48, 48, 1.0)
     assert lit[0, 41] and not lit[0, 42] and traced[0, 42] and not traced[0, 43]
 
 
@@ -108,4 +113,24 @@ def test_small_triangles_mark_their_boxes_clipped_to_the_film():
         (x0, y0), (x1, y1) = np.floor(tri.min(axis=0) - 1e-3).astype(int), np.floor(tri.max(axis=0) + 1e-3).astype(int)
         expected[max(y0, 0):max(y1 + 1, 0), max(x0, 0):max(x1 + 1, 0)] = True
     assert 0 < expected.sum() < expected.size
-    np.testing.assert_array_equal(silhouette(triangles, width, height), expected)
+    np.testing.assert_array_equal(silhouette(*mesh(triangles), width, height), expected)
+
+
+def test_large_triangles_mark_the_squares_they_touch_in_batches_as_one_by_one(monkeypatch):
+    """Triangles larger than the small boxes, some degenerate, some crossing the film's edges, tested in batches
+    of a few squares (one triangle alone when it has more): the squares a triangle's own test marks, and the
+    mesh's shared vertices give the triangles' own corners."""
+    from spacefit.rendering import silhouette as module
+
+    rng = np.random.default_rng(11)
+    width, height = 41, 29
+    corners = rng.uniform([-6.0, -6.0], [width + 2.0, height + 2.0], size=(30, 1, 2)) + rng.uniform(0.0, 9.0, size=(30, 3, 2))
+    corners[:5, 2] = corners[:5, 0] + 0.5 * (corners[:5, 1] - corners[:5, 0])  # degenerate: a segment
+    expected = np.zeros((height, width), dtype=bool)
+    for tri in corners:
+        expected |= silhouette(*mesh(tri[None]), width, height)
+    monkeypatch.setattr(module, "SQUARES_PER_BATCH", 50)
+    assert 0 < expected.sum() < expected.size
+    np.testing.assert_array_equal(silhouette(*mesh(corners), width, height), expected)
+    shared = np.unique(corners.reshape(-1, 2), axis=0, return_inverse=True)  # vertices shared between faces
+    np.testing.assert_array_equal(silhouette(shared[0], shared[1].reshape(-1, 3), width, height), expected)

@@ -306,7 +306,12 @@ MUTANTS = (
            "jnp.interp(theta, grid, jnp.eye(len(grid))[-1 - k])", ("tests/test_observed_lightcurves.py",)),
     # the traced mask (issue 23): conservative rasterisation, and the second dilation the tent's weights need
     Mutant("silhouette-tests-pixel-centres-only", "spacefit/rendering/silhouette.py",
-           "<= 0.5 * (abs(nx) + abs(ny)) + EPS_PX", "<= EPS_PX", ("tests/test_silhouette.py",)),
+           "slack = 0.5 * (np.abs(nx) + np.abs(ny)) + EPS_PX", "slack = EPS_PX", ("tests/test_silhouette.py",)),
+    # the large triangles' squares in batches: each square's offset within its own triangle's box
+    Mutant("mask-batch-offsets-from-the-first-batch", "spacefit/rendering/silhouette.py",
+           "np.repeat(ends[first:last] - squares[first:last] - (ends[first] - squares[first]), squares[first:last])",
+           "np.repeat(ends[first:last] - squares[first:last], squares[first:last])",
+           ("tests/test_silhouette.py::test_large_triangles_mark_the_squares_they_touch_in_batches_as_one_by_one",)),
     Mutant("mask-dilated-once", "spacefit/rendering/silhouette.py", "return dilate(lit, reach), lit", "return lit, lit",
            ("tests/test_silhouette.py",)),
     # the main job's shortcuts (issue 23): the preview encodes only the lit values, the small boxes are clipped to the film

@@ -50,36 +50,62 @@ def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     return a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
 
 
-def _covers(tri: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
-    """Whether each pixel square [x, x + 1) x [y, y + 1) may overlap triangle ``tri`` (3, 2): no edge's
-    outward half-plane holds the whole square (conservative: a corner pixel may pass)."""
-    cx, cy = x + 0.5, y + 0.5
-    area = _cross(tri[1] - tri[0], tri[2] - tri[0])
-    inside = np.ones(np.broadcast(x, y).shape, dtype=bool)
-    for i in range(3):
-        a, b = tri[i], tri[(i + 1) % 3]
-        nx, ny = (b[1] - a[1], a[0] - b[0]) if area > 0 else (a[1] - b[1], b[0] - a[0])  # outward normal
-        inside &= nx * (cx - a[0]) + ny * (cy - a[1]) <= 0.5 * (abs(nx) + abs(ny)) + EPS_PX * math.hypot(nx, ny)
-    return inside
+# Pixel squares tested at once for the triangles larger than SMALL_BOX_PX (bounds the temporaries: about
+# 100 bytes a square).
+SQUARES_PER_BATCH = 1 << 20
 
 
-def silhouette(triangles: np.ndarray, width: int, height: int) -> np.ndarray:
+def _mark_covered(mask: np.ndarray, tris: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> None:
+    """Set the pixels of ``mask`` whose square [x, x + 1) x [y, y + 1) may overlap a triangle of ``tris``
+    (n, 3, 2) px, within its pixel box [lo, hi] (n, 2), conservatively: no edge's outward half-plane
+    holds the whole square (a corner pixel may pass); a degenerate triangle marks its whole box. The
+    boxes' squares are tested together, in batches of about :data:`SQUARES_PER_BATCH`."""
+    h, w = mask.shape
+    x0, y0 = np.maximum(lo[:, 0], 0), np.maximum(lo[:, 1], 0)
+    bw, bh = np.minimum(hi[:, 0], w - 1) - x0 + 1, np.minimum(hi[:, 1], h - 1) - y0 + 1
+    area = _cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    # each edge's outward normal (a -> b turned by the winding) and its slack: half the square's extent
+    # along it, plus the rounding allowance
+    a, b = tris, np.roll(tris, -1, axis=1)
+    sign = np.where(area > 0, 1.0, -1.0)[:, None]
+    nx, ny = sign * (b[..., 1] - a[..., 1]), sign * (a[..., 0] - b[..., 0])
+    slack = 0.5 * (np.abs(nx) + np.abs(ny)) + EPS_PX * np.hypot(nx, ny)
+    degenerate = np.abs(area) < 1e-9
+    squares = bw * bh
+    ends = np.cumsum(squares)
+    first = 0
+    while first < len(tris):
+        last = max(first + 1, int(np.searchsorted(ends, ends[first] - squares[first] + SQUARES_PER_BATCH, side="right")))
+        k = np.repeat(np.arange(first, last), squares[first:last])
+        offset = np.arange(k.size) - np.repeat(ends[first:last] - squares[first:last] - (ends[first] - squares[first]), squares[first:last])
+        x, y = x0[k] + offset % bw[k], y0[k] + offset // bw[k]
+        covered = degenerate[k]
+        inside = np.ones(k.size, dtype=bool)
+        for e in range(3):
+            inside &= nx[k, e] * (x + 0.5 - a[k, e, 0]) + ny[k, e] * (y + 0.5 - a[k, e, 1]) <= slack[k, e]
+        covered |= inside
+        mask[y[covered], x[covered]] = True
+        first = last
+
+
+def silhouette(uv: np.ndarray, faces: np.ndarray, width: int, height: int) -> np.ndarray:
     """(height, width) bool: the pixels whose square [x, x + 1) x [y, y + 1) (px, u right, v down) a
-    projected triangle may overlap, conservatively (never misses one). ``triangles``: (n, 3, 2) px."""
+    projected triangle may overlap, conservatively (never misses one). ``uv``: (m, 2) the vertices'
+    projections, px; ``faces``: (n, 3) vertex indices."""
     mask = np.zeros((height, width), dtype=bool)
-    a, b, c = triangles[:, 0], triangles[:, 1], triangles[:, 2]  # not min(axis=1): NumPy reduces a short axis 4x slower
-    lo = np.floor(np.minimum(np.minimum(a, b), c) - EPS_PX).astype(np.int64)
-    hi = np.floor(np.maximum(np.maximum(a, b), c) + EPS_PX).astype(np.int64)
+    # each triangle's pixel box from its corners' pixels: floor is monotonic, so the box of the corners'
+    # floors is that of their extremes, and 3 gathers of integers cost less than one of the corners
+    lo_v, hi_v = np.floor(uv - EPS_PX).astype(np.int64), np.floor(uv + EPS_PX).astype(np.int64)
+    f0, f1, f2 = (np.ascontiguousarray(faces[:, i]) for i in range(3))
+    lo = np.minimum(np.minimum(np.take(lo_v, f0, axis=0), np.take(lo_v, f1, axis=0)), np.take(lo_v, f2, axis=0))
+    hi = np.maximum(np.maximum(np.take(hi_v, f0, axis=0), np.take(hi_v, f1, axis=0)), np.take(hi_v, f2, axis=0))
     size = hi - lo
     visible = (hi[:, 0] >= 0) & (hi[:, 1] >= 0) & (lo[:, 0] < width) & (lo[:, 1] < height)
     small = visible & (size[:, 0] < SMALL_BOX_PX) & (size[:, 1] < SMALL_BOX_PX)
     _mark(mask, lo[small, 0], lo[small, 1], hi[small, 0], hi[small, 1])
-    for i in np.flatnonzero(visible & ~small):
-        x0, y0 = np.maximum(lo[i], 0)
-        x1, y1 = np.minimum(hi[i], [width - 1, height - 1])
-        y, x = np.ogrid[y0:y1 + 1, x0:x1 + 1]
-        area = abs(_cross(triangles[i, 1] - triangles[i, 0], triangles[i, 2] - triangles[i, 0]))
-        mask[y0:y1 + 1, x0:x1 + 1] |= True if area < 1e-9 else _covers(triangles[i], x, y)
+    large = np.flatnonzero(visible & ~small)
+    if large.size:
+        _mark_covered(mask, np.take(uv, faces[large], axis=0), lo[large], hi[large])
     return mask
 
 
@@ -95,10 +121,10 @@ def dilate(mask: np.ndarray, reach: int) -> np.ndarray:
     return out
 
 
-def traced_pixels(triangles: np.ndarray, width: int, height: int, radius_px: float) -> tuple[np.ndarray, np.ndarray]:
-    """The pixels a render traces and those it may light, both (height, width) bool: the silhouette
-    (:func:`silhouette`) dilated by twice and by once the filter's reach (:func:`filter_reach_px`)."""
+def traced_pixels(uv: np.ndarray, faces: np.ndarray, width: int, height: int, radius_px: float) -> tuple[np.ndarray, np.ndarray]:
+    """The pixels a render traces and those it may light, both (height, width) bool: the silhouette of
+    the mesh (:func:`silhouette`) dilated by twice and by once the filter's reach (:func:`filter_reach_px`)."""
     reach = filter_reach_px(radius_px)
-    inside = silhouette(triangles, width, height)
+    inside = silhouette(uv, faces, width, height)
     lit = dilate(inside, reach)
     return dilate(lit, reach), lit
