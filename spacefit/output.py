@@ -242,19 +242,22 @@ def write_render(
     out_dir: str | Path,
     radiance: np.ndarray,
     scene_toml: str,
-    sidecar: dict[str, Any],
+    sidecar: Callable[[], dict[str, Any]],
     write_exr: Callable[[Path, np.ndarray], None],
     write_png: Callable[[Path, np.ndarray], None],
-) -> Path:
+) -> dict[str, Any]:
     """Write radiance.exr, preview.png, scene.toml and render.json into ``out_dir`` all at once, through
-    the given writers (the rendering package's, :mod:`spacefit.rendering.exr` and :mod:`spacefit.rendering.png`).
-    The EXR is written in a thread meanwhile the others are (Mitsuba's encoders release the GIL)."""
-    scale = preview_scale(radiance)
+    the given writers (the rendering package's, :mod:`spacefit.rendering.exr` and :mod:`spacefit.rendering.png`),
+    and return the sidecar written. The EXR is written in a thread from the start, meanwhile
+    ``sidecar()`` computes the sidecar and the others are written (Mitsuba's encoders release the GIL)."""
     with staged_output(out_dir) as stage:
         with ThreadPoolExecutor(1, thread_name_prefix="spacefit-exr") as pool:  # waits for the EXR, even after an error
             exr = pool.submit(write_exr, stage / "radiance.exr", radiance)
+            written = sidecar()
+            scale = preview_scale(radiance)
             write_png(stage / "preview.png", to_srgb8(radiance, scale))
             (stage / "scene.toml").write_text(scene_toml)
-            write_json(stage / "render.json", {**sidecar, "preview": {"scale_sr_m2_per_W": scale, "percentile": PREVIEW_PERCENTILE, "encoding": "sRGB IEC 61966-2-1"}})
+            written = {**written, "preview": {"scale_sr_m2_per_W": scale, "percentile": PREVIEW_PERCENTILE, "encoding": "sRGB IEC 61966-2-1"}}
+            write_json(stage / "render.json", written)
         exr.result()
-    return Path(out_dir)
+    return written

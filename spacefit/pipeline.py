@@ -65,46 +65,51 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     prepare_output(check_path("out_dir", out_dir), "render", overwrite=overwrite, inputs=inputs)
     timings = dict(timings_s)
     # Ctrl-C / SIGTERM stop at once: Mitsuba's work runs in a thread the interruption abandons (a render has no step to keep)
-    assembly, renderer, radiance, parts, kernels = run_interruptibly(lambda stop: _render(scene, timings, stop, quiet))
-    t_render = timings["render"]
-    t0 = time.perf_counter()
+    assembly, renderer, radiance, kernels = run_interruptibly(lambda stop: _render(scene, timings, stop, quiet))
     check_image(radiance, scene)
-    notes = dark_image_notes(radiance, parts, assembly)
-    for note in notes:
-        warnings.warn(note, stacklevel=2)
-    notes = notes + fold_notes(assembly.folds, scene.wrinkles)  # these were warned when the scene was assembled
-    sidecar = {
-        "warnings": notes,
-        "scene": scene.to_dict(),
-        "seed": scene.render.seed,
-        "variant": renderer.variant,
-        "units": {"radiance": "W m^-2 sr^-1 per RGB channel", "lengths": "m"},
-        "triangles": {name: len(assembly.faces(name)) for name in assembly.parts},
-        "parts": {"index": {name: i for i, name in enumerate(parts.names)},
-                  "table": {name: {"pixels": int(n), "mean_radiance_w_m2_sr": float(mean)}
-                            for name, n, mean in zip(parts.regions, *parts.means(radiance))},
-                  "note": "part index -1 is space; pixels count for the part their centre sees"},
-        "wrinkle_model": {name: dataclasses.asdict(choice) for name, choice in assembly.lod.items()},
-        "fold_fraction": {"parts": dict(assembly.folds), "warn_above": FOLD_WARN_FRACTION,
-                          "note": "fraction of a displaced part's faces turned more than 90 deg from the surface under them"},
-        "mesh_cache": dict(assembly.cache),
-        "kernels": kernels,
-        "versions": versions(),
-    }
-    timings["part_ids"] += time.perf_counter() - t0
-    sidecar["timings_s"] = timings
+
+    def sidecar() -> dict[str, Any]:
+        """The sidecar, computed while the EXR is written: the parts seen and their means, the notes."""
+        t0 = time.perf_counter()
+        parts = renderer.part_image()
+        notes = dark_image_notes(radiance, parts, assembly)
+        for note in notes:
+            warnings.warn(note, stacklevel=4)
+        notes = notes + fold_notes(assembly.folds, scene.wrinkles)  # these were warned when the scene was assembled
+        content = {
+            "warnings": notes,
+            "scene": scene.to_dict(),
+            "seed": scene.render.seed,
+            "variant": renderer.variant,
+            "units": {"radiance": "W m^-2 sr^-1 per RGB channel", "lengths": "m"},
+            "triangles": {name: len(assembly.faces(name)) for name in assembly.parts},
+            "parts": {"index": {name: i for i, name in enumerate(parts.names)},
+                      "table": {name: {"pixels": int(n), "mean_radiance_w_m2_sr": float(mean)}
+                                for name, n, mean in zip(parts.regions, *parts.means(radiance))},
+                      "note": "part index -1 is space; pixels count for the part their centre sees"},
+            "wrinkle_model": {name: dataclasses.asdict(choice) for name, choice in assembly.lod.items()},
+            "fold_fraction": {"parts": dict(assembly.folds), "warn_above": FOLD_WARN_FRACTION,
+                              "note": "fraction of a displaced part's faces turned more than 90 deg from the surface under them"},
+            "mesh_cache": dict(assembly.cache),
+            "kernels": kernels,
+            "versions": versions(),
+        }
+        timings["part_ids"] = time.perf_counter() - t0
+        return {**content, "timings_s": timings}
+
     t0 = time.perf_counter()
-    write_render(out_dir, radiance, scene.to_toml(), sidecar, write_exr, write_png)
+    written = write_render(out_dir, radiance, scene.to_toml(), sidecar, write_exr, write_png)
     if show_timings:
-        print(timings_table({**timings, "write": time.perf_counter() - t0}, assembly.cache, kernels), file=sys.stderr)
-    _say(f"wrote {Path(out_dir) / 'radiance.exr'} (max {radiance.max():.4g} W m^-2 sr^-1) in {t_render:.2f} s", quiet)
-    return radiance, sidecar
+        print(timings_table({**timings, "write": time.perf_counter() - t0 - timings["part_ids"]}, assembly.cache, kernels),
+              file=sys.stderr)
+    _say(f"wrote {Path(out_dir) / 'radiance.exr'} (max {radiance.max():.4g} W m^-2 sr^-1) in {timings['render']:.2f} s", quiet)
+    return radiance, written
 
 
 def _render(scene: Scene, timings: dict[str, float], stop: threading.Event,
-            quiet: bool) -> tuple[Assembly, Renderer, np.ndarray, PartImage, dict[str, float]]:
-    """The Mitsuba work of :func:`render_to_folder`: assemble, load and render ``scene``, find the parts
-    seen, each stage's wall time added to ``timings``; ends after the current pass once ``stop`` is set."""
+            quiet: bool) -> tuple[Assembly, Renderer, np.ndarray, dict[str, float]]:
+    """The Mitsuba work of :func:`render_to_folder`: assemble, load and render ``scene``, each stage's
+    wall time added to ``timings``; ends after the current pass once ``stop`` is set."""
     t0 = time.perf_counter()
     assembly = assemble(scene)
     timings["assemble"] = time.perf_counter() - t0
@@ -125,10 +130,7 @@ def _render(scene: Scene, timings: dict[str, float], stop: threading.Event,
     with kernel_log() as kernels, errors_only():  # in this thread: Dr.Jit's flags are per thread
         radiance = renderer.render(progress=progress)
     timings["render"] = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    parts = renderer.part_image()
-    timings["part_ids"] = time.perf_counter() - t0
-    return assembly, renderer, radiance, parts, kernels
+    return assembly, renderer, radiance, kernels
 
 
 def timings_table(timings: Mapping[str, float], cache: Mapping[str, str], kernels: Mapping[str, float]) -> str:

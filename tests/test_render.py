@@ -194,7 +194,7 @@ def test_the_render_folder_holds_what_the_writers_write_one_by_one(tmp_path):
     radiance = (rng.random((40, 56, 3)) * 5.0).astype(np.float32)
     radiance[rng.random((40, 56)) < 0.8] = 0.0
     sidecar = {"seed": 3, "versions": {"spacefit": "test"}}
-    write_render(tmp_path / "folder", radiance, "[render]\nspp = 4\n", sidecar, write_exr, write_png)
+    written = write_render(tmp_path / "folder", radiance, "[render]\nspp = 4\n", lambda: sidecar, write_exr, write_png)
     peak = radiance.max(axis=-1)
     scale = 1.0 / float(np.percentile(peak[peak > 0], PREVIEW_PERCENTILE))
     plain = tmp_path / "plain"
@@ -204,6 +204,7 @@ def test_the_render_folder_holds_what_the_writers_write_one_by_one(tmp_path):
     (plain / "scene.toml").write_text("[render]\nspp = 4\n")
     write_json(plain / "render.json", {**sidecar, "preview": {"scale_sr_m2_per_W": scale, "percentile": PREVIEW_PERCENTILE,
                                                              "encoding": "sRGB IEC 61966-2-1"}})
+    assert written == json.loads((plain / "render.json").read_text())
     names = ["preview.png", "radiance.exr", "render.json", "scene.toml"]
     assert sorted(os.listdir(tmp_path / "folder")) == names
     for name in names:

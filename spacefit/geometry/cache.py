@@ -72,7 +72,7 @@ def _digest(h: Any, parts: Iterable[object]) -> str:
         if isinstance(part, np.ndarray):
             array = np.ascontiguousarray(part)
             h.update(f"|array {array.dtype.str} {array.shape}|".encode())
-            h.update(array.tobytes())
+            h.update(array.reshape(-1).view(np.uint8))  # its bytes, as tobytes() gives them, without the copy
         else:
             h.update(f"|{type(part).__name__} {part!r}".encode())
     return h.hexdigest()
