@@ -111,8 +111,9 @@ def child(args: list[str], env: dict[str, str] | None = None) -> tuple[float, fl
     return wall, usage.ru_maxrss / 1024, out
 
 
-# The main job's floor: Python with Dr.Jit and Mitsuba's LLVM variant, nothing else.
-FLOOR = "import drjit, mitsuba; mitsuba.set_variant('llvm_ad_rgb')"
+# The main job's floor: Python with Dr.Jit and Mitsuba's LLVM variant set as spacefit sets it (its AD
+# integrators from the disk cache of their rewrites, spacefit.rendering.syntax_cache), nothing else.
+FLOOR = "import spacefit.rendering.backend as b; b.mi.set_variant('llvm_ad_rgb')"
 
 
 def main_job(repeats: int) -> None:
@@ -128,7 +129,7 @@ def main_job(repeats: int) -> None:
         runs, floors = [], []
         for _ in range(repeats):
             runs.append(child(render, env))
-            floors.append(child([sys.executable, "-c", FLOOR])[0])
+            floors.append(child([sys.executable, "-c", FLOOR], env)[0])
         walls = sorted(r[0] for r in runs)
         outside = sorted(w - float(out.split("total", 1)[1].split()[0]) for w, _, out in runs)
         print(f"warm: median {statistics.median(walls):.2f} s (min {walls[0]:.2f}, max {walls[-1]:.2f}, {repeats} runs), "
@@ -175,10 +176,13 @@ def main() -> None:
     p.add_argument("--full", action="store_true", help="the forward study at full size (1024 spp references, spp 4-64)")
     p.add_argument("--repeats", type=int, default=5, help="warm runs of the main job")
     p.add_argument("--long-fit-steps", type=int, default=500)
+    p.add_argument("--start-up", action="store_true", help="the main job and a notebook's first render only (a minute)")
     args = p.parse_args()
     print(f"machine: {machine()}, load average {os.getloadavg()[0]:.1f}")
     main_job(args.repeats)
     first_render(args.repeats)
+    if args.start_up:
+        return
     wall, peak, text = child([sys.executable, str(HERE / "bench_fit.py"), "--observed"], {"PYTHONPATH": str(ROOT)})
     print(f"\n## the fit of an observation (bench_fit.py --observed; {wall:.0f} s whole process with its truth's "
           f"render, peak {peak:.0f} MiB; {load()})\n{text.strip()}")
