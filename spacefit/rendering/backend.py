@@ -97,8 +97,8 @@ def variant_scope(requested: str = "auto") -> Iterator[str]:
     and give the caller's back when the outermost scope ends; scopes open in several threads at once
     switch nothing on the way out until the last one ends, and a nested scope of another variant
     gives its outer scope's back. A caller who keeps another variant pays a switch each way per
-    outermost scope (about 0.1 s of CPU a pair: Mitsuba reloads its AD integrators,
-    docs/api.md); a caller with spacefit's variant, or none, pays nothing."""
+    outermost scope (about 0.01 s of CPU a pair: Mitsuba reloads its AD integrators, from
+    :mod:`~spacefit.rendering.syntax_cache`, docs/api.md); a caller with spacefit's variant, or none, pays nothing."""
     global _scope_depth, _caller_variant
     with _scope_lock:
         entry = mi.variant()
