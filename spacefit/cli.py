@@ -11,7 +11,6 @@ import os
 import signal
 import sys
 import time
-import tomllib
 from pathlib import Path
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
@@ -23,6 +22,7 @@ from spacefit.interrupts import Terminated, abandoned, deferred_interrupts
 with deferred_interrupts() as _STARTUP:
     from spacefit.errors import InputError, check_range, shorten
     from spacefit.output import write_text
+    from spacefit.scene.overrides import toml_value
     from spacefit.scene.parameters import PARAMETERS
 
 if TYPE_CHECKING:
@@ -205,8 +205,8 @@ def _sensor_values(items: Sequence[str]) -> dict[str, object]:
         if not sep or not name.strip() or not value.strip():
             raise InputError(f"`--sensor-value` takes FIELD=VALUE, got {text!r}.")
         try:
-            out[name.strip()] = None if value.strip() == "null" else tomllib.loads(f"v = {value.strip()}")["v"]
-        except tomllib.TOMLDecodeError:
+            out[name.strip()] = None if value.strip() == "null" else toml_value(value)
+        except ValueError:
             raise InputError(f"`--sensor-value {text}`: {value.strip()!r} is not a number, true / false, null or [list].") from None
     return out
 

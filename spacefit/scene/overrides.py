@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import copy
 import dataclasses
-import tomllib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -31,14 +30,22 @@ Overrides = Mapping[str, Any] | Sequence[str] | str
 PART_KEYS = ("material", "file", "alpha")
 
 
+def toml_value(raw: str) -> Any:
+    """A value written as in a TOML file (``0.3``, ``true``, ``[1, 2]``, ``"text"``); ValueError (TOML's
+    decode error) when ``raw`` is not one."""
+    import tomllib  # here: only a value typed on the command line needs it (the default render reads no TOML)
+
+    return tomllib.loads(f"v = {raw.strip()}")["v"]
+
+
 def parse_override(text: str) -> tuple[list[str], Any]:
     """Parse ``a.b.c=value`` (value in TOML syntax; bare words are strings) into a key path and value."""
     key, sep, raw = text.partition("=")
     if not sep or not key.strip():
         raise InputError(f"override {text!r} must look like `section.key=value`.")
     try:
-        value = tomllib.loads(f"v = {raw.strip()}")["v"]
-    except tomllib.TOMLDecodeError:
+        value = toml_value(raw)
+    except ValueError:
         value = raw.strip()
     except RecursionError:
         raise InputError(f"the value of override `{key.strip()}` is nested too deep: {quote(raw)}.") from None

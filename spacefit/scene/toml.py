@@ -11,7 +11,6 @@ the file is read. A section may also give parameter names (``[sun] elevation_deg
 from __future__ import annotations
 
 import dataclasses
-import tomllib
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -31,6 +30,8 @@ def read_scene_dict(path: str | Path) -> dict[str, Any]:
         raise InputError(f"scene file {str(p)!r} is a folder; give the TOML file in it.")
     if not p.is_file():
         raise InputError(f"scene file {str(p)!r} does not exist.")
+    import tomllib  # here: a render of the default scene reads no TOML
+
     try:
         return tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a byte-order mark is not TOML
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as err:
