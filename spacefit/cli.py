@@ -15,7 +15,7 @@ from pathlib import Path
 from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
-from spacefit.interrupts import Terminated, abandoned, deferred_interrupts
+from spacefit.interrupts import Terminated, abandoned, caught, deferred_interrupts
 
 # A Ctrl-C or SIGTERM while the modules below load (0.2 s, seconds under load) waits for their end and
 # is answered by main like any other (130 / 143, one line): Python's default would print a traceback.
@@ -328,7 +328,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     program = argv is None
     argv = sys.argv[1:] if program else list(argv)
     args = _parser(argv[0] if argv else None).parse_args(argv)
-    previous = signal.signal(signal.SIGTERM, _terminate)
+    previous = {s: signal.signal(s, _terminate) for s in caught((signal.SIGTERM,))}  # an ignored SIGTERM stays ignored
     try:
         _STARTUP.check()
         t0 = time.perf_counter()
@@ -368,7 +368,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print("spacefit: interrupted; nothing half-written was left behind", file=sys.stderr)
         return _ended(INTERRUPTED)
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for s, handler in previous.items():
+            signal.signal(s, handler)
     return 0
 
 

@@ -44,16 +44,23 @@ class Deferred:
             raise KeyboardInterrupt
 
 
+def caught(signals: tuple[int, ...] = SIGNALS) -> tuple[int, ...]:
+    """The ``signals`` this process does not ignore. A process started with a signal ignored keeps it
+    ignored, as POSIX tools do: a shell starts a background job (``spacefit fit ... &``) with SIGINT
+    ignored, so that the terminal's Ctrl-C does not reach it."""
+    return tuple(s for s in signals if signal.getsignal(s) is not signal.SIG_IGN)
+
+
 @contextmanager
 def deferred_interrupts() -> Iterator[Deferred]:
     """Within the block, SIGINT and SIGTERM are recorded instead of raised (main thread only; in other
-    threads, where signal handlers cannot be set, they keep their behaviour); the caller's handlers
-    come back after."""
+    threads, where signal handlers cannot be set, they keep their behaviour; an ignored one stays
+    ignored, :func:`caught`); the caller's handlers come back after."""
     state = Deferred()
     if threading.current_thread() is not threading.main_thread():
         yield state
         return
-    previous = {s: signal.signal(s, state._handle) for s in SIGNALS}
+    previous = {s: signal.signal(s, state._handle) for s in caught()}
     try:
         yield state
     finally:

@@ -200,8 +200,13 @@ def staged_output(out_dir: str | Path) -> Iterator[Path]:
 
 
 def write_text(path: str | Path, text: str) -> Path:
-    """Write a text file all at once (staged, then moved into place)."""
+    """Write a text file all at once (staged, then moved into place). An existing ``path`` that is not a
+    regular file (a folder, a device such as /dev/null or /dev/stdout, a pipe) is refused: moving a file
+    into place would replace it."""
     out = Path(path)
+    if out.exists() and not out.is_file():
+        raise InputError(f"{str(out)!r} is not a regular file (a folder, a device or a pipe): spacefit writes a whole new "
+                         "file in place of a regular file only; choose a file name.")
     with staged_output(out.parent if str(out.parent) else ".") as stage:
         (stage / out.name).write_text(text)
     return out

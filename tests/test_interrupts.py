@@ -157,3 +157,29 @@ def test_stall_s_is_checked_before_any_work(tmp_path):
     with pytest.raises(sf.InputError, match="stall_s"):
         sf.sweep(sf.default_scene(), {"sun.elevation_deg": [10]}, store=tmp_path / "s.zarr", stall_s=0)
     assert not (tmp_path / "s.zarr").exists()
+
+
+def test_a_signal_the_process_ignores_stays_ignored_in_fits_sweeps_and_renders(tmp_path):
+    """A shell starts a background job (`spacefit fit ... &`) with SIGINT ignored: the steps' deferred
+    interruptions and the command line keep it ignored (before, a fit or a sweep then stopped at Ctrl-C in the
+    terminal, unlike a render); a signal at its default is still recorded and raised at the step's end."""
+    from spacefit.interrupts import caught, deferred_interrupts
+
+    caller = {s: signal.signal(s, signal.SIG_IGN if s == signal.SIGINT else signal.SIG_DFL)
+              for s in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        assert caught() == (signal.SIGTERM,)
+        with deferred_interrupts() as state:
+            assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+            os.kill(os.getpid(), signal.SIGINT)
+            state.check()  # ignored: nothing to raise
+            os.kill(os.getpid(), signal.SIGTERM)
+            with pytest.raises(KeyboardInterrupt):
+                state.check()
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
+        assert main(["scene", "--out", str(tmp_path / "scene.toml")]) == 0
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+    finally:
+        for s, handler in caller.items():
+            signal.signal(s, handler)

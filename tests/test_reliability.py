@@ -11,6 +11,7 @@ from __future__ import annotations
 import json
 import os
 import signal
+import stat
 import subprocess
 import sys
 import time
@@ -102,6 +103,21 @@ def test_the_input_scene_is_never_written_over(plate_toml, tmp_path, capsys):
     assert scene.read_bytes() == plate_toml.read_bytes() and listing(folder) == ["scene.toml"]
     assert main(["scene", str(scene), "--out", str(scene), "--overwrite"]) == 2
     assert scene.read_bytes() == plate_toml.read_bytes()
+
+
+def test_a_scene_written_over_a_pipe_or_a_folder_is_refused_and_leaves_it_as_it_was(tmp_path, capsys):
+    """`spacefit scene --out X --overwrite` moves a whole new file into place: over a device (run as root, it had
+    turned /dev/null into a regular file), a pipe or a folder that would replace it; they are refused instead."""
+    pipe, folder = tmp_path / "pipe", tmp_path / "folder"
+    os.mkfifo(pipe)
+    folder.mkdir()
+    (folder / "kept.txt").write_text("mine")
+    for target in (pipe, folder):
+        assert main(["scene", "--out", str(target), "--overwrite"]) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("spacefit: error: ") and "is not a regular file" in err and str(target) in err, err
+    assert stat.S_ISFIFO(os.stat(pipe).st_mode) and listing(folder) == ["kept.txt"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["folder", "pipe"]  # no stage left
 
 
 def test_a_previous_render_is_replaced_only_with_overwrite(plate_toml, tmp_path, capsys):

@@ -63,6 +63,11 @@ MUTANTS = (
     Mutant("deterministic-splat-in-parallel", RENDERER, "        with render_threads(deterministic):\n            block.put",
            "        with render_threads(False):\n            block.put",
            ("tests/test_render.py::test_a_deterministic_render_is_the_render_wholly_on_one_thread_bit_for_bit",)),
+    # a background job's ignored SIGINT stays ignored; a scene never replaces a device, a pipe or a folder
+    Mutant("ignored-signal-caught", "spacefit/interrupts.py", "if signal.getsignal(s) is not signal.SIG_IGN)", ")",
+           ("tests/test_interrupts.py::test_a_signal_the_process_ignores_stays_ignored_in_fits_sweeps_and_renders",)),
+    Mutant("scene-written-over-a-device", "spacefit/output.py", "if out.exists() and not out.is_file():", "if False:",
+           ("tests/test_reliability.py::test_a_scene_written_over_a_pipe_or_a_folder_is_refused_and_leaves_it_as_it_was",)),
     # a camera set the way a user thinks: the field kept across resolutions, an exposure at its fraction of full scale
     Mutant("fov-pitch-ignores-the-resolution", "spacefit/scene/schema.py", "math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]",
            "math.tan(math.radians(camera.fov_deg) / 2.0) / 48", ("tests/test_camera.py",)),
