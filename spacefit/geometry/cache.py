@@ -15,6 +15,7 @@ costs time, never a render: the arrays are built as if it were off.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import hashlib
 import os
@@ -22,7 +23,7 @@ import tempfile
 import zipfile
 from collections.abc import Callable, Iterable, Mapping
 from pathlib import Path
-from typing import Any
+from typing import IO, Any
 
 import numpy as np
 
@@ -101,21 +102,30 @@ def _read(path: Path, key: str) -> dict[str, np.ndarray] | None:
     return arrays
 
 
-def _write(folder: Path, path: Path, key: str, arrays: Mapping[str, np.ndarray]) -> None:
-    """Write an entry atomically (temporary file, then ``os.replace``); give up silently on OSError."""
+def write_atomically(path: Path, write: Callable[[IO[bytes]], object]) -> bool:
+    """Write the file ``path`` through ``write(file)`` atomically: a temporary file in its folder (made if
+    missing), then ``os.replace``, so that other processes see the whole file or none. False, with
+    nothing written and nothing left, on OSError (a cache that cannot be written costs time only)."""
     try:
-        folder.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".npz", dir=folder)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=path.suffix, dir=path.parent)
         try:
             with os.fdopen(fd, "wb") as f:
-                np.savez(f, __key__=np.array(key), __checksum__=np.array(_checksum(arrays)), **arrays)
+                write(f)
             os.replace(tmp, path)
         except BaseException:
             Path(tmp).unlink(missing_ok=True)
             raise
-        _prune(folder)
     except OSError:
-        pass
+        return False
+    return True
+
+
+def _write(folder: Path, path: Path, key: str, arrays: Mapping[str, np.ndarray]) -> None:
+    """Write an entry (:func:`write_atomically`), then prune the folder; give up silently on OSError."""
+    if write_atomically(path, lambda f: np.savez(f, __key__=np.array(key), __checksum__=np.array(_checksum(arrays)), **arrays)):
+        with contextlib.suppress(OSError):
+            _prune(folder)
 
 
 def _prune(folder: Path) -> None:

@@ -24,8 +24,6 @@ import functools
 import hashlib
 import importlib.util
 import marshal
-import os
-import tempfile
 import types
 from collections.abc import Callable
 from pathlib import Path
@@ -34,7 +32,7 @@ from typing import Any
 import drjit as dr
 import drjit.ast
 
-from spacefit.geometry.cache import cache_dir
+from spacefit.geometry.cache import cache_dir, write_atomically
 
 FOLDER = "syntax"
 # Modules whose rewritten functions are cached: Mitsuba's, which change only with its version.
@@ -73,22 +71,6 @@ def _read(path: Path, name: str) -> types.CodeType | None:
     return code if isinstance(code, types.CodeType) and code.co_name == name else None
 
 
-def _write(path: Path, code: types.CodeType) -> None:
-    """Store ``code`` at ``path`` atomically (temporary file, then ``os.replace``); give up silently on OSError."""
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=".tmp-", suffix=".code", dir=path.parent)
-        try:
-            with os.fdopen(fd, "wb") as out:
-                out.write(marshal.dumps(code))
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
-    except OSError:
-        pass
-
-
 def cached_syntax(f: Callable | None = None, *, recursive: bool = False, print_ast: bool = False,
                   print_code: bool = False) -> Any:
     """``drjit.syntax`` (same arguments, same function returned), the rewrite of a Mitsuba function read
@@ -103,7 +85,7 @@ def cached_syntax(f: Callable | None = None, *, recursive: bool = False, print_a
     code = _read(path, f.__name__)
     if code is None:
         rewritten = _dr_syntax(f, recursive=recursive)
-        _write(path, rewritten.__code__)
+        write_atomically(path, lambda f: f.write(marshal.dumps(rewritten.__code__)))
         return rewritten
     rewritten = types.FunctionType(code, f.__globals__)  # as Dr.Jit builds it from its compiled code
     rewritten.__defaults__ = f.__defaults__
