@@ -210,3 +210,22 @@ def test_foreign_header_is_mapped_field_by_field(tmp_path):
     _write(tmp_path / "text.fits", IMAGE, ROWORDER="TOP-DOWN", GAIN="high")
     with pytest.raises(InputError, match="text.fits.: the FITS header's GAIN = 'high' is not a number"):
         read_image(tmp_path / "text.fits")
+
+
+@pytest.mark.parametrize("suffix", ["png", "exr"])
+def test_an_image_written_past_the_file_size_limit_is_an_os_error_naming_the_file(tmp_path, suffix):
+    """Mitsuba reports a failed write as a RuntimeError; the writers raise the OSError of its cause, which the
+    command line reports in one line (a render's preview PNG, written through Mitsuba since Pillow went, too)."""
+    import errno
+    import resource
+
+    path = tmp_path / f"big.{suffix}"
+    noise = np.random.default_rng(0).random((200, 200, 3))
+    soft, hard = resource.getrlimit(resource.RLIMIT_FSIZE)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (4096, hard))  # Python ignores SIGXFSZ: the write fails with EFBIG
+    try:
+        with pytest.raises(OSError) as err:
+            write_png(path, (noise * 255).astype(np.uint8)) if suffix == "png" else write_exr(path, noise.astype(np.float32))
+    finally:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
+    assert err.value.errno == errno.EFBIG and err.value.filename == str(path), err.value

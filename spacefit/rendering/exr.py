@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import errno
-import os
 from pathlib import Path
 
 import numpy as np
 
 from spacefit.errors import InputError, check_array, check_path
 from spacefit.rendering.backend import mi
+from spacefit.rendering.bitmap import write_bitmap
 
 
 def write_exr(path: str | Path, image: np.ndarray) -> None:
@@ -20,13 +19,7 @@ def write_exr(path: str | Path, image: np.ndarray) -> None:
     image = check_array("image", image)
     if image.ndim != 3 or image.shape[2] != 3 or not image.size:
         raise InputError(f"`image` must be (height, width, 3) RGB, got shape {image.shape}.")
-    bitmap = mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB)
-    try:
-        bitmap.write(str(path))
-    except RuntimeError as err:  # Mitsuba's for a failed write: "...: File too large" (a file-size limit), a full disk
-        cause = str(err).rsplit(": ", 1)[-1]
-        code = next((e for e in errno.errorcode if os.strerror(e) == cause), errno.EIO)
-        raise OSError(code, cause, str(path)) from None
+    write_bitmap(mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB), path)
 
 
 def read_exr(path: str | Path) -> np.ndarray:

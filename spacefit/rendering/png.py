@@ -8,6 +8,7 @@ import numpy as np
 
 from spacefit.errors import InputError
 from spacefit.rendering.backend import mi
+from spacefit.rendering.bitmap import write_bitmap
 
 _FORMATS = {1: "Y", 2: "YA", 3: "RGB", 4: "RGBA"}
 
@@ -20,7 +21,7 @@ def write_png(path: str | Path, image: np.ndarray) -> None:
     if data.dtype not in (np.uint8, np.uint16) or data.ndim != 3 or data.shape[2] not in _FORMATS:
         raise InputError(f"a PNG holds uint8 or uint16 with 1 to 4 channels, got {data.dtype} of shape {np.shape(image)}.")
     fmt = getattr(mi.Bitmap.PixelFormat, _FORMATS[data.shape[2]])
-    mi.Bitmap(np.ascontiguousarray(data), pixel_format=fmt).write(str(path))
+    write_bitmap(mi.Bitmap(np.ascontiguousarray(data), pixel_format=fmt), path)
 
 
 def read_png(path: str | Path) -> np.ndarray:

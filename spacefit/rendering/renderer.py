@@ -480,7 +480,7 @@ class Renderer:
         The samples are traced on all of Dr.Jit's threads, each sample's value its own; only the
         splatting, where neighbours' samples add into the same pixels, runs on one thread when
         ``deterministic`` (:func:`render_threads`), in the samples' order: the image is the one a
-        render wholly on one thread gives, bit for bit, in 0.65x its time on 2 cores."""
+        render wholly on one thread gives, bit for bit, in 0.54 to 0.62x its time on 2 cores."""
         sensor = self.scene.sensors()[0]
         film, sampler = sensor.film(), sensor.sampler().clone()
         sampler.set_sample_count(spp)
