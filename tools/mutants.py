@@ -57,8 +57,8 @@ MUTANTS = (
     Mutant("libllvm-searched-per-render", "spacefit/rendering/backend.py", "@functools.cache  # the file system's search",
            "# the file system's search", ("tests/test_api.py::test_a_render_asks_the_file_system_nothing",)),
     # Mitsuba's rewritten integrators read from the disk only while their source is the one rewritten
-    Mutant("syntax-cache-ignores-the-source", "spacefit/rendering/syntax_cache.py", "dr.__version__, source, f.__qualname__",
-           "dr.__version__, f.__qualname__", ("tests/test_syntax_cache.py::test_a_changed_source_is_rewritten_again",)),
+    Mutant("syntax-cache-ignores-the-source", "spacefit/rendering/syntax_cache.py", "source, f.__qualname__, str(code.co_firstlineno)",
+           "f.__qualname__, str(code.co_firstlineno)", ("tests/test_syntax_cache.py::test_a_changed_source_is_rewritten_again",)),
     # a deterministic render: its samples traced on all threads, added into the film on one in their order
     Mutant("deterministic-splat-in-parallel", RENDERER, "        with render_threads(deterministic):\n            block.put",
            "        with render_threads(False):\n            block.put",

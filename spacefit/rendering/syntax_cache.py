@@ -7,9 +7,9 @@ first variant and of each switch, more than Embree takes to build the default sc
 rewrite is a function of the source file and of Dr.Jit alone, so :func:`cached_syntax` keeps the
 compiled code object (``marshal``) in the mesh cache's folder
 (:func:`spacefit.geometry.cache.cache_dir`, ``syntax/``), named by the SHA-256 of the Python
-bytecode's magic number, Dr.Jit's version, the source file's bytes, the function's qualified name and
-first line, and the decorator's ``recursive``: a changed file, Dr.Jit or Python never reads an old
-entry. A missing, damaged or unreadable entry is rewritten by Dr.Jit (and stored when it can be), so
+bytecode's magic number, Dr.Jit's version and the bytes of its rewriter (``drjit/ast.py``), the
+source file's bytes, the function's qualified name and first line, and the decorator's
+``recursive``: a changed file, Dr.Jit or Python never reads an old entry. A missing, damaged or unreadable entry is rewritten by Dr.Jit (and stored when it can be), so
 the cache costs time at worst, never a wrong function.
 
 Only functions of Mitsuba's modules are cached; any other function (a user's own ``@dr.syntax``),
@@ -57,8 +57,8 @@ def entry_path(f: types.FunctionType, recursive: bool) -> Path | None:
         source = _source_digest(code.co_filename)
     except OSError:
         return None
-    key = hashlib.sha256("|".join((importlib.util.MAGIC_NUMBER.hex(), dr.__version__, source, f.__qualname__,
-                                   str(code.co_firstlineno), str(recursive))).encode()).hexdigest()
+    key = hashlib.sha256("|".join((importlib.util.MAGIC_NUMBER.hex(), dr.__version__, _source_digest(drjit.ast.__file__),
+                                   source, f.__qualname__, str(code.co_firstlineno), str(recursive))).encode()).hexdigest()
     return folder / FOLDER / f"{key[:40]}.code"
 
 
