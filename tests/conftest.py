@@ -1,11 +1,18 @@
 """Shared fixtures: the synthetic cases (one source: spacefit/synthetic/, package data) and their references, rendered
-once per test session."""
+once per test session; Ctrl-C at its default in every test process."""
 
 from __future__ import annotations
 
 import functools
+import signal
 
 import spacefit as sf
+
+# The tests of Ctrl-C stand for a terminal's foreground job. A shell starts a background job (`nohup make test &`)
+# with SIGINT ignored, which every child inherits and spacefit keeps ignored, as POSIX tools do: at its default
+# here, the test processes and the commands they start take Ctrl-C (and an interrupted suite stops) as in a terminal.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @functools.cache

@@ -30,14 +30,9 @@ RENDER_STOP_BOUND_S = 5.0
 def test_a_long_render_stops_within_the_bound(tmp_path, sig, code, word):
     """The default scene at 20000 spp on one thread renders for about 20 s; the signal lands inside it."""
     out = tmp_path / "out"
-    # As a terminal's foreground job, whose Ctrl-C is at its default: a shell starts a background job (this
-    # suite under `nohup make test &`) with SIGINT ignored, which a child inherits and a render respects.
-    caller = signal.signal(signal.SIGINT, signal.default_int_handler)
-    try:
-        p = subprocess.Popen([sys.executable, "-m", "spacefit.cli", "render", "--out", str(out), "--set", "render.spp=20000"],
-                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
-    finally:
-        signal.signal(signal.SIGINT, caller)
+    # Ctrl-C at its default, as a terminal's foreground job (conftest.py)
+    p = subprocess.Popen([sys.executable, "-m", "spacefit.cli", "render", "--out", str(out), "--set", "render.spp=20000"],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env={**os.environ, "PYTHONUNBUFFERED": "1"})
     first = p.stderr.readline()  # "scene: ... assembled": the scene loads, then the passes (about 1 s each) begin
     assert first.startswith("scene:"), first + p.communicate()[1]
     time.sleep(4.0)  # inside a pass, where Mitsuba holds SIGINT
