@@ -55,7 +55,7 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     SIGTERM during the render raises KeyboardInterrupt within about 0.1 s; the render goes on in the
     background to the end of its pass (:func:`~spacefit.interrupts.run_interruptibly`). A
     non-finite image is refused, naming the cause; an all-black one is written with a warning that
-    says why. Returns the radiance image (W m^-2 sr^-1) and the sidecar dict.
+    says why. Returns the radiance image (W m^-2 sr^-1) and the sidecar dict as render.json holds it.
 
     The sidecar's ``timings_s`` holds the wall time (s) of each stage, after the caller's earlier
     ones (``timings_s``, e.g. the CLI's imports); ``show_timings`` prints them as a table on stderr,
