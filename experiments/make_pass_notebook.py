@@ -54,11 +54,10 @@ the same bit for bit in this process)."""),
 start = {"parts.panels.alpha_x": 0.12, "parts.panels.alpha_y": 0.036, "parts.legs.kd": 0.42}
 result = sf.fit(obs, free, start=start, render=sf.FitRender(spp=32), max_steps=12, cluster=2)
 print(sf.format_result(result).split("\\n  nuisance")[0])"""),
-    ("md", """The verdict printed above (`misfit`, chi^2/dof 5.51 against 4.06) is the rule's before the verdict render
-(this notebook ran on 2026-11-25, before it): it judged the fit's own 32-spp render (render noise 2.96 per value)
-and left out the sky's values whose DN equal the model's bias. Judged as fits are now (two renders at more samples,
-every fitted value counted, the references' 1024-spp noise), these frames at the true values give chi^2/dof 1.035
-against a limit of 1.127 (`experiments/pass_misfit.py`; docs/guide/pass.md).
+    ("md", """The goodness of fit above is judged on the mean of two new renders at the fitted values, at more samples
+than the fit's (k x, k a power of 2 up to 16, chosen so that their render noise adds at most a tenth to the expected
+chi^2/dof), every fitted value counted, and with the references' own render noise in the expected range (they were
+rendered at 1024 spp, which their FITS card `RENDSPP` records): docs/guide/pass.md.
 
 The materials against the truth, with their standard errors:"""),
     ("code", """for name, value in truth.items():
