@@ -8,7 +8,8 @@ Reading (:func:`read_image`) returns an :class:`ObservedImage`: float data, its 
 radiance), the metadata found, and the mask of usable pixels (not saturated, not transparent, in the user's
 mask). What each format holds:
 
-* EXR: radiance (W m^-2 sr^-1), as spacefit renders write it.
+* EXR: radiance (W m^-2 sr^-1), as spacefit renders write it; a ``RENDSPP`` attribute in its header
+  (:data:`RENDER_SPP_KEY`, which spacefit's simulated references carry) is read as in FITS.
 * FITS: radiance if ``BUNIT`` says ``W m-2 sr-1``, otherwise DN. Every keyword with a sensor
   meaning is read (:data:`HEADER_KEYWORDS`; the first of a field's aliases present counts, and
   aliases that disagree are refused): ``EXPTIME`` / ``EXPOSURE`` (s), ``GAIN`` / ``EGAIN``
@@ -78,8 +79,9 @@ CHANNELS = (1, 3)
 """The channels an image may hold: grey or RGB (a PNG's or TIFF's alpha besides, read as a mask)."""
 SENSOR_DEFAULTS = ("illustrative",)
 RENDER_SPP_KEY = "RENDSPP"
-"""The FITS keyword (and, as ``render_spp``, the sidecar key) of a simulated observation's samples per
-pixel: its render's Monte Carlo noise, which the goodness of fit counts (:mod:`spacefit.fitting.goodness`)."""
+"""The FITS keyword and EXR header attribute (and, as ``render_spp``, the sidecar key) of a simulated
+observation's samples per pixel: its render's Monte Carlo noise, which the goodness of fit counts
+(:mod:`spacefit.fitting.goodness`)."""
 HEADER_KEYWORDS = {
     "exposure_time_s": ("EXPTIME", "EXPOSURE"),
     "gain_dn_per_electron": ("GAIN", "EGAIN"),  # electrons per DN in the header: inverted
@@ -177,6 +179,14 @@ def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata
                **({} if render_spp is None else {"render_spp": render_spp})}
     side.write_text(json.dumps(content, indent=2))
     return side
+
+
+def _read_render_spp(meta: dict[str, Any], header: Mapping[str, Any], where: str) -> None:
+    """Take a file header's :data:`RENDER_SPP_KEY` into ``meta["render_spp"]`` (the file outranks its
+    sidecar), checked as a count (``where`` names it)."""
+    if RENDER_SPP_KEY in header:
+        meta["render_spp"] = header[RENDER_SPP_KEY]
+        check_count(where, meta["render_spp"])
 
 
 def _fits_header(sensor: Sensor) -> fits.Header:
@@ -417,9 +427,10 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
     if kind == "exr":
         if wanted == "DN":
             raise InputError(f"{str(p)!r}: an EXR holds radiance (W m^-2 sr^-1), not DN; read it with unit='radiance'.")
-        from spacefit.rendering.exr import read_exr  # deferred: it imports Mitsuba (seconds), only needed for EXR
+        from spacefit.rendering.exr import read_exr, read_exr_header  # deferred: it imports Mitsuba (seconds), only for EXR
 
         raw, found_unit = read_exr(p), RADIANCE_UNIT
+        _read_render_spp(meta, read_exr_header(p), f"{str(p)!r}: the EXR header's {RENDER_SPP_KEY}")
     elif kind == "fits":
         raw, header, (meta["row_order"], meta["row_order_source"], notes) = _read_fits(p, row_order)
         found_unit = _fits_unit(header, wanted, p)
@@ -430,9 +441,7 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
             meta["date_obs"] = _iso_time(header["DATE-OBS"], p)
         if "SATURATE" in header:
             meta["saturation_dn"] = float(header["SATURATE"])
-        if RENDER_SPP_KEY in header:  # the file outranks its sidecar
-            meta["render_spp"] = header[RENDER_SPP_KEY]
-            check_count(f"{str(p)!r}: the FITS header's {RENDER_SPP_KEY}", meta["render_spp"])
+        _read_render_spp(meta, header, f"{str(p)!r}: the FITS header's {RENDER_SPP_KEY}")
     else:
         raw, alpha = _read_tiff(p) if kind == "tiff" else _read_png(p)
         bits = 8 * raw.dtype.itemsize if raw.dtype.kind in "ui" else None

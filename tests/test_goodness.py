@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 from types import SimpleNamespace
 
 import jax.numpy as jnp
@@ -197,6 +198,23 @@ def test_a_file_without_the_render_keyword_is_a_real_observation(tmp_path):
         sf.read_image(tmp_path / "bad.fits")
     real = goodness(*residuals(), n_free=3, noise_known=True, reference_spp=[None])
     assert real.reference_noise == 0 and "references taken as real observations" in real.line()
+
+
+def test_an_exr_reference_says_its_render_samples_in_its_header(tmp_path):
+    """An EXR of spacefit's simulated references carries RENDSPP in its header (the committed synthetic references
+    too); an EXR of another writer (no such attribute) is a real observation; a bad count is refused naming the file."""
+    radiance = np.full((8, 8, 3), 0.25, dtype=np.float32)
+    sf.write_exr(tmp_path / "ours.exr", radiance, header={"RENDSPP": 64})
+    sf.write_exr(tmp_path / "other.exr", radiance)
+    sf.write_exr(tmp_path / "bad.exr", radiance, header={"RENDSPP": "many"})
+    scene = sf.load_case("panels").with_values({"render.resolution": [8, 8]}).scene()
+    assert sf.Observation.from_file(tmp_path / "ours.exr", scene).render_spp == 64
+    assert sf.read_image(tmp_path / "other.exr").metadata["render_spp"] is None
+    with pytest.raises(sf.InputError, match="bad.exr.*RENDSPP"):
+        sf.read_image(tmp_path / "bad.exr")
+    np.testing.assert_array_equal(sf.read_exr(tmp_path / "ours.exr"), radiance)
+    committed = Path(__file__).resolve().parents[1] / "data" / "synthetic" / "panels" / "reference_noise2.exr"
+    assert sf.read_image(committed, sigma=1.0).metadata["render_spp"] == sf.load_case("panels").truth_scene.render.spp
 
 
 def test_the_render_samples_travel_in_a_png_sidecar_and_a_bad_count_is_refused_before_writing(tmp_path):

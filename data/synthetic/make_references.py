@@ -5,7 +5,8 @@ data :func:`spacefit.load_case` reads).
 
 For case NAME this writes the folder ``data/synthetic/NAME/`` (beside this script) all at once:
 
-* ``reference.exr``: radiance (W m^-2 sr^-1), rendered with the scene's own seed (7);
+* ``reference.exr``: radiance (W m^-2 sr^-1), rendered with the scene's own seed (7); each EXR's
+  header says the render's samples per pixel (``RENDSPP``: the goodness of fit counts its noise);
 * ``preview.png``: 8-bit sRGB preview (99.5th percentile of lit pixels at white);
 * ``reference_noise2.exr``, ``reference_noise5.exr``: the reference plus Gaussian noise, independent
   per pixel and channel, of standard deviation 2 % / 5 % of the mean radiance of the lit pixels
@@ -28,9 +29,11 @@ from typing import Any
 import spacefit as sf
 from spacefit.cases import CASES_DIR, add_noise
 from spacefit.errors import check_choice
-from spacefit.output import preview_scale, staged_output, to_srgb8, versions, write_json, write_png
+from spacefit.imageio import RENDER_SPP_KEY
+from spacefit.output import preview_scale, staged_output, to_srgb8, versions, write_json
 from spacefit.progress import Progress
 from spacefit.rendering.exr import write_exr
+from spacefit.rendering.png import write_png
 
 HERE = Path(__file__).resolve().parent
 NOISE_PERCENT = (2, 5)
@@ -62,12 +65,13 @@ def make_case(name: str) -> dict[str, Any]:
         "versions": versions(),
     }
     with staged_output(HERE / name) as stage:
-        write_exr(stage / "reference.exr", radiance)
+        rendered = {RENDER_SPP_KEY: r.spp}  # the goodness of fit counts the references' own render noise
+        write_exr(stage / "reference.exr", radiance, header=rendered)
         write_png(stage / "preview.png", to_srgb8(radiance, preview_scale(radiance)))
         for percent in NOISE_PERCENT:
             noisy, sigma = add_noise(radiance, percent, r.seed)
             file = f"reference_noise{percent}.exr"
-            write_exr(stage / file, noisy)
+            write_exr(stage / file, noisy, header=rendered)
             truth["noise"][file] = {
                 "percent_of_mean_lit_radiance": percent, "sigma_w_m2_sr": sigma, "seed": [r.seed, percent]
             }

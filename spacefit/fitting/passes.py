@@ -357,7 +357,7 @@ def simulate_pass(scene: Scene, frames: Sequence[Mapping[str, Any]], out_dir: st
     """Simulate a pass and write it: per frame k an observation ``frame<k>.fits`` (DN through
     ``sensor``'s model, :func:`~spacefit.fitting.formation.observe`, the sensor in its header and
     sidecar) or, without a sensor, ``frame<k>.exr`` (radiance), rendered at ``spp`` from ``scene``
-    with ``frames[k]``'s values (a FITS file's ``RENDSPP`` card says ``spp``), ``truth`` (every frame) and ``errors[k]`` (the frame's own
+    with ``frames[k]``'s values (the FITS card or EXR attribute ``RENDSPP`` says ``spp``), ``truth`` (every frame) and ``errors[k]`` (the frame's own
     departures from its nominal values, e.g. ``{"target.attitude_x_deg": 0.2}``, added to the
     nominal); and ``frames.csv``, the frame table of the nominal values (without the errors), times
     ``interval_s`` apart. Returns the pass read back from that table.
@@ -368,7 +368,7 @@ def simulate_pass(scene: Scene, frames: Sequence[Mapping[str, Any]], out_dir: st
     from astropy.table import Table
 
     from spacefit.fitting.formation import observe
-    from spacefit.imageio import write_observation
+    from spacefit.imageio import RENDER_SPP_KEY, write_observation
     from spacefit.rendering.exr import write_exr
     from spacefit.rendering.renderer import render
     from spacefit.scene.assembly import assemble
@@ -388,7 +388,7 @@ def simulate_pass(scene: Scene, frames: Sequence[Mapping[str, Any]], out_dir: st
         radiance = render(s.with_values({"render.spp": spp, "render.seed": seed + k}))
         if sensor is None:
             name = f"frame{k}.exr"
-            write_exr(out / name, radiance)
+            write_exr(out / name, radiance, header={RENDER_SPP_KEY: spp})
         else:
             name = f"frame{k}.fits"
             write_observation(out / name, observe(radiance, sensor, assemble(s).intrinsics, seed=seed + k), sensor, render_spp=spp)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -11,23 +12,38 @@ from spacefit.rendering.backend import mi
 from spacefit.rendering.bitmap import write_bitmap
 
 
-def write_exr(path: str | Path, image: np.ndarray) -> None:
-    """Write a (height, width, 3) float radiance image as a 32-bit float RGB OpenEXR file."""
+def write_exr(path: str | Path, image: np.ndarray, header: Mapping[str, int | float | str] | None = None) -> None:
+    """Write a (height, width, 3) float radiance image as a 32-bit float RGB OpenEXR file, with
+    ``header``'s attributes in its header (a simulated reference's ``{"RENDSPP": spp}``, say)."""
     path = check_path("path", path)
     if path.suffix.lower() != ".exr":
         raise InputError(f"`path` must end in .exr, got {str(path)!r}.")
     image = check_array("image", image)
     if image.ndim != 3 or image.shape[2] != 3 or not image.size:
         raise InputError(f"`image` must be (height, width, 3) RGB, got shape {image.shape}.")
-    write_bitmap(mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB), path)
+    bitmap = mi.Bitmap(np.ascontiguousarray(image, dtype=np.float32), pixel_format=mi.Bitmap.PixelFormat.RGB)
+    for key, value in (header or {}).items():
+        bitmap.metadata()[key] = value
+    write_bitmap(bitmap, path)
 
 
 def read_exr(path: str | Path) -> np.ndarray:
     """Read an OpenEXR file as a (height, width, channels) float32 array."""
+    return np.array(_bitmap(path), dtype=np.float32)
+
+
+def read_exr_header(path: str | Path) -> dict[str, object]:
+    """The attributes of an OpenEXR file's header that Mitsuba reads: a writer's own (``RENDSPP``) and the
+    standard ones it knows (``pixelAspectRatio``, ...)."""
+    metadata = _bitmap(path).metadata()
+    return {key: metadata[key] for key in metadata.keys()}
+
+
+def _bitmap(path: str | Path) -> "mi.Bitmap":
     p = check_path("path", path)
     if not p.is_file():
         raise InputError(f"image file {str(p)!r} does not exist.")
     try:
-        return np.array(mi.Bitmap(str(p)), dtype=np.float32)
+        return mi.Bitmap(str(p))
     except Exception as err:  # Mitsuba raises RuntimeError subclasses for unreadable files
         raise InputError(f"image file {str(p)!r} could not be read as OpenEXR: {err}") from None
