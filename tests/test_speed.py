@@ -30,6 +30,7 @@ def _fresh(monkeypatch: pytest.MonkeyPatch, where: str | Path) -> sf.Scene:
     """Point the cache at ``where`` and forget the in-memory refinements, so the disk is consulted."""
     monkeypatch.setenv(cache.ENV, str(where))
     assembly_module._refinement.cache_clear()
+    assembly_module._refined_faces.cache_clear()
     return sf.load_scene(None, SMALL)
 
 
@@ -48,9 +49,10 @@ def test_cached_meshes_equal_a_fresh_refinement(monkeypatch, tmp_path):
     fresh = assemble(_fresh(monkeypatch, cache.DISABLED))
     assert set(fresh.cache.values()) == {"off"}
     first = assemble(_fresh(monkeypatch, tmp_path))
-    assert first.cache == {"lander": "miss", "body.refinement": "miss", "body.displaced": "miss"}
+    assert first.cache == {"lander": "miss", "body.refinement": "miss", "body.displaced": "miss", "body.faces": "miss"}
     second = assemble(_fresh(monkeypatch, tmp_path))
-    assert second.cache == {"lander": "hit", "body.refinement": "hit", "body.displaced": "hit"}
+    # displaced vertices and their triangles cached: the refinement itself is read only when asked for
+    assert second.cache == {"lander": "hit", "body.displaced": "hit", "body.faces": "hit"}
     _assert_same(fresh, first)
     _assert_same(fresh, second)
     for name, part in fresh.parts.items():
@@ -186,7 +188,7 @@ def test_render_reports_where_the_time_went(monkeypatch, tmp_path, capsys):
     assert "mesh cache: lander" in table and "kernels" in table
     sidecar = json.loads((tmp_path / "out" / "render.json").read_text())
     assert set(sidecar["timings_s"]) == {"imports", "assemble", "load", "render", "part_ids"}
-    assert set(sidecar["mesh_cache"]) == {"lander", "body.refinement", "body.displaced"}
+    assert set(sidecar["mesh_cache"]) == {"lander", "body.refinement", "body.displaced", "body.faces"}  # a first run
     assert sidecar["kernels"]["launched"] >= 1
 
 
@@ -208,7 +210,12 @@ def test_srgb_encoding_equals_colour_science():
     np.testing.assert_allclose(srgb_encode(x), colour.cctf_encoding(x, function="sRGB"), rtol=0, atol=1e-12)
 
 
-def test_a_refinement_held_in_memory_says_so(monkeypatch, tmp_path):
+def test_a_refinement_held_in_memory_says_so_and_one_not_needed_is_not_read(monkeypatch, tmp_path):
     scene = _fresh(monkeypatch, tmp_path)
     assert assemble(scene).cache["body.refinement"] == "miss"
-    assert assemble(scene).cache["body.refinement"] == "memory"
+    again = assemble(scene)
+    assert "body.refinement" not in again.cache and again.cache["body.faces"] == "memory"
+    assert "body" in again.refinements and list(again.refinements) == ["body"] and "body.refinement" not in again.cache
+    assert again.refinements["body"].faces.shape == again.faces("body").shape
+    assert again.cache["body.refinement"] == "memory"
+    np.testing.assert_array_equal(again.refinements["body"].faces, again.faces("body"))

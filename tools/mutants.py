@@ -68,6 +68,10 @@ MUTANTS = (
            ("tests/test_interrupts.py::test_a_signal_the_process_ignores_stays_ignored_in_fits_sweeps_and_renders",)),
     Mutant("scene-written-over-a-device", "spacefit/output.py", "if out.exists() and not out.is_file():", "if False:",
            ("tests/test_reliability.py::test_a_scene_written_over_a_pipe_or_a_folder_is_refused_and_leaves_it_as_it_was",)),
+    # a render of cached displaced vertices reads their triangles, not the whole refinement
+    Mutant("refinement-read-to-test-membership", "spacefit/scene/assembly.py", "        return name in self._sources\n",
+           "        return name in self._sources and self[name] is not None\n",
+           ("tests/test_speed.py::test_a_refinement_held_in_memory_says_so_and_one_not_needed_is_not_read",)),
     # a camera set the way a user thinks: the field kept across resolutions, an exposure at its fraction of full scale
     Mutant("fov-pitch-ignores-the-resolution", "spacefit/scene/schema.py", "math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]",
            "math.tan(math.radians(camera.fov_deg) / 2.0) / 48", ("tests/test_camera.py",)),
