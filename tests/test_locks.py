@@ -257,3 +257,19 @@ def test_a_write_error_names_the_output_file_not_its_stage(tmp_path, error, name
             raise error(stage)
     assert raised.value.filename == str(out / named if named else out) and raised.value.errno == error(out).errno
     assert listing(tmp_path) == []
+
+
+def test_this_process_as_a_holder_is_what_psutil_reads_of_it():
+    """A render records its start time and command line without importing psutil; another process reads them
+    back through psutil (Holder.runs), so the two must agree (within the start-time tolerance, here exactly)."""
+    import shlex
+
+    import psutil
+
+    from spacefit.errors import shorten
+    from spacefit.locks import START_TOLERANCE_S, this_process
+
+    me, process = this_process(), psutil.Process()
+    assert abs(me.started - process.create_time()) < START_TOLERANCE_S / 100
+    assert me.command == shorten(" ".join(shlex.join(process.cmdline()).split()), 300)
+    assert me.host == socket.gethostname() and me.pid == os.getpid() and me.runs()

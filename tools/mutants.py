@@ -72,6 +72,9 @@ MUTANTS = (
     Mutant("refinement-read-to-test-membership", "spacefit/scene/assembly.py", "        return name in self._sources\n",
            "        return name in self._sources and self[name] is not None\n",
            ("tests/test_speed.py::test_a_refinement_held_in_memory_says_so_and_one_not_needed_is_not_read",)),
+    # a lock's start time as psutil reads it, without psutil: in seconds, not clock ticks
+    Mutant("lock-start-time-in-ticks", "spacefit/locks.py", "return boot + ticks / os.sysconf(\"SC_CLK_TCK\")", "return boot + ticks",
+           ("tests/test_locks.py::test_this_process_as_a_holder_is_what_psutil_reads_of_it",)),
     # a camera set the way a user thinks: the field kept across resolutions, an exposure at its fraction of full scale
     Mutant("fov-pitch-ignores-the-resolution", "spacefit/scene/schema.py", "math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]",
            "math.tan(math.radians(camera.fov_deg) / 2.0) / 48", ("tests/test_camera.py",)),
