@@ -427,10 +427,10 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
     if kind == "exr":
         if wanted == "DN":
             raise InputError(f"{str(p)!r}: an EXR holds radiance (W m^-2 sr^-1), not DN; read it with unit='radiance'.")
-        from spacefit.rendering.exr import read_exr, read_exr_header  # deferred: it imports Mitsuba (seconds), only for EXR
+        from spacefit.rendering.exr import read_exr_with_header  # deferred: it imports Mitsuba (seconds), only for EXR
 
-        raw, found_unit = read_exr(p), RADIANCE_UNIT
-        _read_render_spp(meta, read_exr_header(p), f"{str(p)!r}: the EXR header's {RENDER_SPP_KEY}")
+        (raw, header), found_unit = read_exr_with_header(p), RADIANCE_UNIT
+        _read_render_spp(meta, header, f"{str(p)!r}: the EXR header's {RENDER_SPP_KEY}")
     elif kind == "fits":
         raw, header, (meta["row_order"], meta["row_order_source"], notes) = _read_fits(p, row_order)
         found_unit = _fits_unit(header, wanted, p)

@@ -29,21 +29,19 @@ def write_exr(path: str | Path, image: np.ndarray, header: Mapping[str, int | fl
 
 def read_exr(path: str | Path) -> np.ndarray:
     """Read an OpenEXR file as a (height, width, channels) float32 array."""
-    return np.array(_bitmap(path), dtype=np.float32)
+    return read_exr_with_header(path)[0]
 
 
-def read_exr_header(path: str | Path) -> dict[str, object]:
-    """The attributes of an OpenEXR file's header that Mitsuba reads: a writer's own (``RENDSPP``) and the
-    standard ones it knows (``pixelAspectRatio``, ...)."""
-    metadata = _bitmap(path).metadata()
-    return {key: metadata[key] for key in metadata.keys()}
-
-
-def _bitmap(path: str | Path) -> "mi.Bitmap":
+def read_exr_with_header(path: str | Path) -> tuple[np.ndarray, dict[str, object]]:
+    """Read an OpenEXR file once: its (height, width, channels) float32 array and the attributes of its
+    header that Mitsuba reads, a writer's own (``RENDSPP``) and the standard ones it knows
+    (``pixelAspectRatio``, ...)."""
     p = check_path("path", path)
     if not p.is_file():
         raise InputError(f"image file {str(p)!r} does not exist.")
     try:
-        return mi.Bitmap(str(p))
+        bitmap = mi.Bitmap(str(p))
     except Exception as err:  # Mitsuba raises RuntimeError subclasses for unreadable files
         raise InputError(f"image file {str(p)!r} could not be read as OpenEXR: {err}") from None
+    metadata = bitmap.metadata()
+    return np.array(bitmap, dtype=np.float32), {key: metadata[key] for key in metadata.keys()}
