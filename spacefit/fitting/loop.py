@@ -497,7 +497,7 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
         r, r_alt = (np.asarray(problem.residual_of(m), dtype=np.float64) for m in renders)
         noise = (r - r_alt) / math.sqrt(2.0)
     verdict_spp = [judged * spp for spp in problem.spp]
-    ratios = [spp / ref if ref else 0.0 for spp, ref in zip(verdict_spp, problem.reference_spp)]
+    ratios = [_reference_ratio(spp, ref) for spp, ref in zip(verdict_spp, problem.reference_spp)]
     pixels = loss == "pixel"
     ratio = np.repeat(ratios, [ref.size for ref in problem.references]) if pixels else float(np.mean(ratios))
     fitted = np.concatenate([np.broadcast_to(used[..., None], ref.shape).ravel() for ref, used in zip(problem.references, problem.used)])
@@ -505,6 +505,12 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
                        fitted=fitted if pixels else None, reference_ratio=ratio, samples_factor=judged, verdict_spp=verdict_spp,
                        reference_spp=problem.reference_spp)
     return quality, r, noise, [np.asarray(m) for m in renders[0]]
+
+
+def _reference_ratio(spp: int, reference_spp: int | None) -> float:
+    """A reference's render noise over the judged model's, per value: the model's samples per pixel
+    ``spp`` over the reference's (0 for a real observation, ``reference_spp`` None)."""
+    return spp / reference_spp if reference_spp else 0.0
 
 
 def _affordable(problem: Problem, factor: int) -> bool:
@@ -539,7 +545,7 @@ def per_observation(r: np.ndarray, noise: np.ndarray, s: Setup, factor: int) -> 
         n_k = sum(1 for name in s.user.names if observation_of(name)[1] in (None, k))
         spp, reference = factor * problem.spp[k], problem.reference_spp[k]
         out.append(goodness(r[rows], noise[rows], n_k, s.noise_given, [ref.shape], fitted=np.broadcast_to(problem.used[k][..., None], ref.shape),
-                            reference_ratio=spp / reference if reference else 0.0, samples_factor=factor, verdict_spp=[spp],
+                            reference_ratio=_reference_ratio(spp, reference), samples_factor=factor, verdict_spp=[spp],
                             reference_spp=[reference]))
     return out
 
