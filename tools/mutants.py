@@ -278,7 +278,7 @@ MUTANTS = (
            "counted = counted", ("tests/test_goodness.py",)),
     Mutant("model-dips-below-the-bias", "spacefit/fitting/formation.py", "jnp.maximum(electrons(radiance), 0.0)", "electrons(radiance)",
            ("tests/test_goodness.py",)),
-    Mutant("reference-render-noise-ignored", "spacefit/fitting/loop.py", "ratios = [spp / ref if ref else 0.0", "ratios = [0.0",
+    Mutant("reference-render-noise-ignored", "spacefit/fitting/loop.py", "return spp / reference_spp if reference_spp else 0.0", "return 0.0",
            ("tests/test_goodness.py",)),
     # a resumed fit goes on with its stop rule's record (the checkpoint's history)
     Mutant("resume-forgets-the-history", "spacefit/pipeline.py", "history=checkpoint.history if resume else ()", "history=()",
