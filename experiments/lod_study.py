@@ -39,7 +39,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 from spacefit.progress import Progress  # noqa: E402
 from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
-from spacefit.scene.schema import WrinkleSettings  # noqa: E402
+from spacefit.scene.sections import WrinkleSettings  # noqa: E402
 from spacefit.scene.toml import load_scene
 from spacefit.scene.lod import LOD_TOLERANCE  # noqa: E402
 

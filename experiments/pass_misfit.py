@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import spacefit as sf
-from spacefit.fitting.formation import noise_variance_dn
+from spacefit.formation import noise_variance_dn
 from spacefit.fitting.goodness import goodness
 from spacefit.fitting.loop import judged_goodness, per_observation
 from spacefit.fitting.problem import setup

@@ -21,6 +21,7 @@ from spacefit.interrupts import Terminated, abandoned, caught, deferred_interrup
 # is answered by main like any other (130 / 143, one line): Python's default would print a traceback.
 with deferred_interrupts() as _STARTUP:
     from spacefit.errors import InputError, check_range, shorten
+    from spacefit.executors import ClusterError, check_cluster
     from spacefit.output import write_text
     from spacefit.scene.overrides import toml_value
     from spacefit.scene.parameters import PARAMETERS
@@ -153,10 +154,18 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     return p
 
 
+def _cluster(args: argparse.Namespace) -> int | str | None:
+    """The ``cluster`` (:mod:`spacefit.executors`) of ``--workers N`` or ``--scheduler ADDRESS``."""
+    if args.workers is not None and args.scheduler is not None:
+        raise InputError("give `--workers` or `--scheduler`, not both.")
+    cluster, named = (args.workers, "workers") if args.workers is not None else (args.scheduler, "scheduler")
+    check_cluster(cluster, named)  # in the user's words, before anything is made
+    return cluster
+
+
 def _sweep(args: argparse.Namespace) -> int:
     """Run ``spacefit sweep``; on Ctrl-C say where the finished points are; a dask sweep that cannot go on exits 1."""
     _load("spacefit.studies.sweep", "xarray", "zarr", "dask.array")  # deferred: the studies' modules and the store's (1 s), which render never needs
-    from spacefit.studies.cluster import ClusterError
     from spacefit.studies.sweep import read_sweep_file, sweep, verify_store
 
     if args.verify:
@@ -167,8 +176,7 @@ def _sweep(args: argparse.Namespace) -> int:
         raise InputError("`--out` STORE is required to run a sweep (or pass --verify to check the store SWEEP.toml names).")
     scene, axes, options = read_sweep_file(args.sweep, args.overrides)
     try:
-        sweep(scene, axes, store=args.out, overwrite=args.overwrite, workers=args.workers, scheduler=args.scheduler,
-              allow_large=args.large, quiet=args.quiet, **options)
+        sweep(scene, axes, store=args.out, overwrite=args.overwrite, cluster=_cluster(args), allow_large=args.large, quiet=args.quiet, **options)
     except ClusterError as err:
         print(f"spacefit: error: {err}", file=sys.stderr)
         return 1
@@ -215,7 +223,7 @@ def _fit(args: argparse.Namespace) -> int:
     """Run ``spacefit fit``; exit code 0 when the fit succeeded, else the verdict's (:func:`exit_code`)."""
     # deferred: the fitting stack imports JAX and optimistix (1.5 s), which render never needs
     _load("spacefit.fitting.loop", "spacefit.fitting.observation_files", "spacefit.fitting.problem", "spacefit.fitting.report")
-    from spacefit.fitting.loop import FitOptions
+    from spacefit.fitting.loop import FitOptions  # here: JAX and optimistix, which render never needs
     from spacefit.fitting.observation_files import ObservationFiles
     from spacefit.fitting.problem import FitRender
     from spacefit.fitting.report import format_result
@@ -240,14 +248,11 @@ def _fit(args: argparse.Namespace) -> int:
         if args.per_frame:
             raise InputError("`--per-frame` goes with `--pass` (for references, free `NAME@k` by index).")
         files = ObservationFiles(args.references, args.scenes, **reading)
-    if args.workers is not None and args.scheduler is not None:
-        raise InputError("give `--workers` or `--scheduler`, not both.")
     render = FitRender(**{k: v for k, v in (("spp", args.spp), ("spp_grad", args.spp_grad)) if v is not None})
     given = {"solver": args.solver, "loss": args.loss, "max_steps": args.max_steps, "stop": args.stop}
     options = FitOptions(start=_start_values(args.start) or None, render=render, **{k: v for k, v in given.items() if v is not None})
-    cluster = args.workers if args.workers is not None else args.scheduler
     result = fit_to_folder(files, free, args.out, options, quiet=args.quiet, overwrite=args.overwrite, resume=args.resume,
-                           cluster=cluster)
+                           cluster=_cluster(args))
     print(format_result(result))
     code = exit_code(result.status)
     if result.status.interrupted:
@@ -335,7 +340,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         # deferred: Mitsuba and the scene stack, timed as the "imports" stage of --timings (and not loaded by --help);
         # a signal waits for their end (about 1 s): one inside an import leaves Mitsuba half-loaded, and the exit aborts
         _load("spacefit.pipeline", "spacefit.scene.toml")
-        from spacefit.pipeline import export_part_stl, render_to_folder
+        from spacefit.pipeline import export_part_stl, render_to_folder  # here: Mitsuba, not loaded by --help
         from spacefit.scene.toml import load_scene
 
         imports_s = time.perf_counter() - t0

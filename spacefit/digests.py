@@ -8,7 +8,6 @@ import os
 from collections.abc import Iterable, Mapping
 from pathlib import Path
 
-from spacefit.scene.schema import Scene
 
 CHUNK_BYTES = 1 << 20
 
@@ -33,12 +32,6 @@ def digests(paths: Iterable[str | Path]) -> dict[str, str]:
 def changed(recorded: Mapping[str, str]) -> list[str]:
     """The paths of ``recorded`` whose contents are not the recorded ones now (edited, replaced or deleted)."""
     return [path for path, digest in recorded.items() if file_digest(path) != digest]
-
-
-def mesh_files(scene: Scene) -> list[str]:
-    """The mesh files the scene reads (none for the built-in lander)."""
-    paths = (scene.target.mesh, *(part.file for part in scene.parts.values()))
-    return list(dict.fromkeys(str(p) for p in paths if p not in ("", "builtin")))
 
 
 def status(paths: Iterable[str]) -> tuple[tuple[str, tuple[int, int, int] | None], ...]:

@@ -3,23 +3,18 @@ cells as the text tables, every value with its unit and error, escaped.
 
 The classes' ``_repr_html_`` methods call these (:class:`~spacefit.scene.schema.Scene`,
 :class:`~spacefit.fitting.loop.FitResult`, :class:`~spacefit.studies.sensitivity.Sensitivity`,
-:class:`~spacefit.studies.lightcurve.LightCurve`); nothing here imports more than NumPy.
+:class:`~spacefit.studies.lightcurve.LightCurve`), which sit above it: each function reads its object by
+attribute (typed ``Any``) and imports none of them; nothing here imports more than the parameter registry.
 """
 
 from __future__ import annotations
 
 import html
 from collections.abc import Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from spacefit.errors import InputError
 from spacefit.scene.parameters import label, parameter
-
-if TYPE_CHECKING:
-    from spacefit.fitting.loop import FitResult
-    from spacefit.scene.schema import Scene
-    from spacefit.studies.lightcurve import LightCurve
-    from spacefit.studies.sensitivity import Sensitivity
 
 # A value's unit where it is dimensionless, in tables: none.
 DIMENSIONLESS = "1"
@@ -50,7 +45,7 @@ def _vector(v: Sequence[float]) -> str:
     return "(" + ", ".join(f"{x:g}" for x in v) + ")"
 
 
-def scene_repr(scene: Scene) -> str:
+def scene_repr(scene: Any) -> str:
     """One short line: the film, the camera, the sun, the parts and their materials, the wrinkles."""
     r, c = scene.render, scene.camera
     parts = ", ".join(f"{name} ({p.material.__class__.__name__.lower()})" for name, p in scene.parts.items())
@@ -60,7 +55,7 @@ def scene_repr(scene: Scene) -> str:
             f"sun {scene.sun.irradiance_w_m2:g} W m^-2; parts {parts}; {wrinkles})")
 
 
-def scene_html(scene: Scene) -> str:
+def scene_html(scene: Any) -> str:
     """The scene's repr line, then each section's values (``Scene.to_dict``) in a table."""
     rows = []
     for section, values in scene.to_dict().items():
@@ -70,7 +65,7 @@ def scene_html(scene: Scene) -> str:
     return f"<p>{html.escape(scene_repr(scene))}</p>" + html_table(("section", "key", "value"), rows)
 
 
-def fit_html(result: FitResult) -> str:
+def fit_html(result: Any) -> str:
     """The verdict, the goodness of fit, each fitted value with its standard error, unit and start,
     the derived values, and the warnings."""
     lines = [f"{result.status} ({result.solver} on the {result.loss_name} loss, {result.steps} steps, "
@@ -101,7 +96,7 @@ def _known(name: str) -> tuple[str, str]:
     return words, unit_text(unit)
 
 
-def sensitivity_html(s: Sensitivity) -> str:
+def sensitivity_html(s: Any) -> str:
     """The rows of :meth:`Sensitivity.rows` as a table, with the seeds and the confidence."""
     header = ("parameter", "region", "dL/dp", "unit", "normalised", "note")
     rows = [[r[h] for h in header] for r in s.rows()]
@@ -113,7 +108,7 @@ def _values(values: Mapping[str, float], units: Mapping[str, str]) -> str:
     return ", ".join(f"{name} = {v:.4g}{' ' + unit_text(units[name]) if unit_text(units[name]) else ''}" for name, v in values.items())
 
 
-def light_curve_html(lc: LightCurve) -> str:
+def light_curve_html(lc: Any) -> str:
     """Each point's swept value, phase angle, irradiance and magnitude with their errors ("unknown"
     with one seed)."""
     words, unit = describe(lc.against)

@@ -40,6 +40,10 @@ def shorten(text: str, limit: int = MAX_QUOTE) -> str:
     return f"{text[:half]} ... {text[-half:]}"
 
 
+# What a function that takes a scene expects, in an error's words.
+A_SCENE = "a spacefit Scene (sf.load_scene(path) reads a file, sf.default_scene() is Table 4-2)"
+
+
 def quote(value: object) -> str:
     """A value as messages show it: its repr, shortened."""
     try:

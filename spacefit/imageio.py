@@ -1,6 +1,6 @@
 """Observation files: simulated DN written as 16-bit PNG, TIFF or FITS; references read from EXR, FITS, PNG, TIFF.
 
-Writing (:func:`write_observation`) stores integer DN (from :func:`spacefit.fitting.formation.observe`) and
+Writing (:func:`write_observation`) stores integer DN (from :func:`spacefit.formation.observe`) and
 every :class:`~spacefit.sensor.Sensor` value twice: in a JSON sidecar ``<file>.json`` and, for FITS,
 in the header (standard keys where they exist, ``HIERARCH SPACEFIT SENSOR <FIELD>`` for all).
 
@@ -142,7 +142,7 @@ def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata
     Args:
         path: ``.png``, ``.tif`` / ``.tiff`` or ``.fits`` / ``.fit`` / ``.fts``.
         dn: (height, width, channels) unsigned integers (1 or 3 channels for PNG) in the sensor's
-            ADC range, as :func:`spacefit.fitting.formation.observe` returns.
+            ADC range, as :func:`spacefit.formation.observe` returns.
         sensor: the sensor that made them; all its values go to the sidecar and the FITS header.
         metadata: anything JSON can hold, added to the sidecar under ``metadata``.
         render_spp: the samples per pixel of the render the DN were simulated from (FITS

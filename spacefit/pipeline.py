@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from spacefit.digests import changed, digests, mesh_files
+from spacefit.digests import changed, digests
 from spacefit.errors import InputError, check_choice, check_path, check_type
 from spacefit.geometry.mesh import export_stl
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
@@ -30,7 +30,8 @@ from spacefit.rendering.renderer import PartImage, Renderer, errors_only, kernel
 from spacefit.scene.assembly import Assembly, assemble, fold_notes
 from spacefit.scene.overrides import parse_override
 from spacefit.scene.parameters import scene_keys
-from spacefit.scene.schema import Scene, check_scene
+from spacefit.scene.schema import Scene
+from spacefit.scene.sections import check_scene
 
 if TYPE_CHECKING:
     from spacefit.fitting.loop import FitOptions, FitResult
@@ -238,7 +239,7 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
             display(step, total)
 
     inputs = {**files.record(observations), "free": list(free), "options": options.to_dict()}
-    read = [*files.files, *(path for obs in observations for path in mesh_files(obs.scene))]
+    read = [*files.files, *(path for obs in observations for path in obs.scene.mesh_files())]
     checkpoint = Checkpoint(Path(out_dir) / CHECKPOINT, inputs, read)
     if resume:
         options = dataclasses.replace(options, **checkpoint.resume(options.max_steps))

@@ -20,13 +20,13 @@ numbers (DN) in this order:
    ``psf_sigma_px`` for everything else (aberrations, jitter, charge diffusion): the optical
    convention, a PSF on the focal plane before the pixel integrates it. The render is already
    integrated over each pixel (its pixel filter), so the PSF is applied as its continuous transfer
-   function on the pixel grid (:func:`~spacefit.fitting.formation.fourier_filter`): ``exp(-2 pi^2 sigma^2 f^2)`` for the
+   function on the pixel grid (:func:`~spacefit.formation.fourier_filter`): ``exp(-2 pi^2 sigma^2 f^2)`` for the
    Gaussian and, for the Airy pattern, the diffraction-limited MTF of a circular pupil (Goodman,
    "Introduction to Fourier Optics", 3rd ed., eq. 6-32), which a pixel grid samples only below its
    Nyquist frequency (half a cycle per px): an Airy disc far smaller than a pixel changes nothing.
    Taken as the same across the field (shift-invariant).
    A flat-field map (the detector's relative response, ``flat=``) multiplies the signal after it.
-4. **Noise and digitising** (:func:`~spacefit.fitting.formation.observe`): Poisson shot noise in electrons, the full well's clip,
+4. **Noise and digitising** (:func:`~spacefit.formation.observe`): Poisson shot noise in electrons, the full well's clip,
    Gaussian read noise (electrons rms), ``DN = bias + gain * electrons``, rounding to the nearest
    integer and the ADC's range [0, 2^bits - 1].
 
@@ -34,7 +34,7 @@ This module is NumPy only (reading a FITS file needs no JAX): the :class:`Sensor
 per-pixel factors of steps 1 and 2, the Airy pattern and its transfer function, the PSF's reach and
 width, the flat field's check, quantising and :func:`saturated_mask`, which marks the pixels where
 the linear model does not hold. The image formation itself is in JAX, in
-:mod:`spacefit.fitting.formation`: ``expected_dn`` (steps 1 to 3 in DN, the noise-free mean, linear
+:mod:`spacefit.formation`: ``expected_dn`` (steps 1 to 3 in DN, the noise-free mean, linear
 in the radiance, which a fit differentiates), ``noise_variance_dn`` (the Poisson-Gaussian variance of
 step 4, Janesick 2007, "Photon Transfer", ch. 2) and ``observe`` (a simulated exposure).
 """
@@ -69,7 +69,7 @@ GAUSSIAN_RADIUS_SIGMA = 5.0
 SATURATION_MARGIN_READ_SIGMA = 3.0
 """A pixel within this many read-noise sigmas of the full well's DN counts as saturated."""
 SATURATED_WARNING_FRACTION = 1e-3
-""":func:`~spacefit.fitting.formation.observe` warns when more than this fraction of the target's pixels saturate."""
+""":func:`~spacefit.formation.observe` warns when more than this fraction of the target's pixels saturate."""
 
 
 @dataclass(frozen=True)
@@ -410,40 +410,6 @@ def target_pixels(radiance: Float[np.ndarray, "h w c"], target: Bool[np.ndarray,
     if mask.dtype != bool or mask.shape != radiance.shape[:2]:
         raise InputError(f"`target` must be a boolean (height, width) = {radiance.shape[:2]} mask, got {mask.dtype} {mask.shape}.")
     return mask
-
-
-def choose_exposure(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: Intrinsics, fraction: float = 0.8,
-                    percentile: float = 99.9, target: Bool[np.ndarray, "h w"] | None = None) -> Sensor:
-    """``sensor`` with the exposure time that puts the ``percentile``-th percentile of the target's
-    pixels at ``fraction`` of full scale: noise-free DN (:func:`~spacefit.fitting.formation.expected_dn`,
-    its brightest channel) ``= bias + fraction (saturation_dn - bias)``, with
-    :attr:`Sensor.saturation_dn` the full well's or the ADC's limit. The DN above the bias is linear
-    in the exposure time, so one evaluation at the sensor's own time gives it.
-
-    Args:
-        radiance: a render of the scene, (height, width, channels) W m^-2 sr^-1.
-        fraction: of full scale, in (0, 1]; the default leaves 20 % for noise and brighter glints.
-        percentile: in (0, 100]; at the default 99.9 at most 0.1 % of the target's pixels saturate
-            (:data:`SATURATED_WARNING_FRACTION`).
-        target: the target's pixels (boolean, height x width); None: those brighter than 0.
-    """
-    from spacefit.fitting.formation import expected_dn  # deferred: JAX (the rest of this module is NumPy)
-
-    check_type("sensor", sensor, Sensor, "an sf.Sensor")
-    if sensor.calibrated:
-        raise InputError(f"`sensor` is calibrated (`radiometric_scale_dn_per_w_m2_sr` = {sensor.radiometric_scale_dn_per_w_m2_sr:g}): "
-                         "its DN per radiance is fixed and its exposure time is not used; scale the radiance or the scale instead.")
-    check_range("fraction", fraction, 0.0, 1.0, lo_open=True)
-    check_range("percentile", percentile, 0.0, 100.0, lo_open=True)
-    mask = target_pixels(radiance, target)
-    if not mask.any():
-        raise InputError("`radiance` has no target pixels (none brighter than 0, or `target` is all false): nothing to expose for.")
-    signal = (np.asarray(expected_dn(radiance, sensor, intrinsics)) - sensor.bias_dn).max(axis=-1)[mask]
-    level = float(np.percentile(signal, percentile))
-    if not level > 0.0:
-        raise InputError(f"the target's {percentile:g}th percentile of radiance is 0: too few of its pixels are lit to expose for.")
-    time_s = sensor.exposure_time_s * fraction * (sensor.saturation_dn - sensor.bias_dn) / level
-    return dataclasses.replace(sensor, exposure_time_s=time_s)
 
 
 def warn_if_saturated(dn: np.ndarray, radiance: Float[np.ndarray, "h w c"], sensor: Sensor) -> None:

@@ -91,7 +91,7 @@ def test_problem_spreads_render_noise_by_the_sensors_psf(tmp_path):
     """Each observation's render-noise spread is (its pixel filter's radius, its sensor's PSF rms width; 0 without one)."""
     from spacefit.fitting.problem import setup
     from spacefit.scene.assembly import assemble
-    from spacefit.scene.schema import FILTER_RADIUS_PX
+    from spacefit.scene.sections import FILTER_RADIUS_PX
     from spacefit.sensor import psf_rms_px
 
     # 1e-5 rad a pixel: the default sensor's diffraction spreads over several pixels

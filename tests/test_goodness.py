@@ -13,11 +13,11 @@ from astropy.io import fits
 from helpers import small_scene, write_sphere_obj
 
 import spacefit as sf
-from spacefit.fitting.formation import expected_dn
+from spacefit.formation import expected_dn
 from spacefit.fitting.goodness import MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
 from spacefit.fitting.loop import _affordable, verdict
 from spacefit.fitting.problem import setup
-from spacefit.scene.schema import MAX_SPP
+from spacefit.scene.sections import MAX_SPP
 from spacefit.rendering.renderer import PartImage
 from spacefit.scene.assembly import assemble
 

@@ -8,7 +8,7 @@ import tifffile
 from astropy.io import fits
 
 from spacefit.errors import InputError
-from spacefit.fitting.formation import observe
+from spacefit.formation import observe
 from spacefit.geometry.frames import Intrinsics
 from spacefit.imageio import RowOrderWarning, format_sensor_sources, read_image, sensor_of, sidecar_path, write_observation
 from spacefit.rendering.exr import write_exr

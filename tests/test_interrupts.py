@@ -18,7 +18,8 @@ from helpers import write_sphere_fit_case
 
 import spacefit as sf
 from spacefit.cli import INTERRUPTED, TERMINATED, main
-from spacefit.studies.cluster import ClusterError, run_on_dask
+from spacefit.executors import ClusterError
+from spacefit.studies.cluster import run_on_dask
 
 # Seconds from the signal to the process's end that the test allows on a loaded machine (measured:
 # 0.02 to 0.05 s on an idle one, README "What spacefit refuses, and what it keeps").
@@ -123,15 +124,15 @@ def test_a_point_whose_worker_dies_is_retried_then_named(tmp_path):
     values = {(0,): 0, (1,): -1, (2,): -2, (3,): 3}
     got = {}
     with pytest.raises(ClusterError, match=r"point \(2,\) died 3 times.*memory limit"):
-        for index, result in run_on_dask(list(values), lambda i: (values[i], str(tmp_path / f"{i[0]}")), workers=1,
-                                         scheduler=None, max_renders_per_worker=100, render=render_or_die):
+        for index, result in run_on_dask(list(values), lambda i: (values[i], str(tmp_path / f"{i[0]}")), cluster=1,
+                                         max_renders_per_worker=100, render=render_or_die):
             got[index] = int(result["value"])
     assert got in ({(0,): 0, (1,): -1}, {(0,): 0, (1,): -1, (3,): 3})  # (3,) only if it finished before (2,)'s last death
 
 
 def test_a_sweep_with_no_progress_stops_saying_so():
     with pytest.raises(ClusterError, match=r"no point of the sweep finished in 2 s \(`stall_s`\)"):
-        list(run_on_dask([(0,)], lambda index: 60, workers=1, scheduler=None, max_renders_per_worker=100,
+        list(run_on_dask([(0,)], lambda index: 60, cluster=1, max_renders_per_worker=100,
                          stall_s=2.0, render=time.sleep))
 
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import spacefit as sf
-from spacefit.fitting.formation import expected_electrons
+from spacefit.formation import expected_electrons
 from spacefit.fitting.nuisance import blur, shift
 from spacefit.fitting.problem import setup
 from spacefit.geometry.frames import Intrinsics

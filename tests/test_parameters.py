@@ -5,7 +5,6 @@ and the package's module-level imports have no circle."""
 
 from __future__ import annotations
 
-import ast
 import subprocess
 import sys
 from pathlib import Path
@@ -120,32 +119,3 @@ def test_check_value_names_the_argument_the_value_and_the_range(name, value, mat
         check_value("parts.P.kd", -0.1, "parts.legs.kd")
 
 
-def _module_imports(path: Path) -> set[str]:
-    """The spacefit modules a file imports at module level (not in functions, not for type checking)."""
-    tree = ast.parse(path.read_text())
-    out = set()
-    for node in tree.body:
-        if isinstance(node, ast.ImportFrom) and node.module and node.module.startswith("spacefit"):
-            out |= {node.module, *(f"{node.module}.{a.name}" for a in node.names)}
-        elif isinstance(node, ast.Import):
-            out |= {a.name for a in node.names if a.name.startswith("spacefit")}
-    return out
-
-
-def test_module_level_imports_have_no_circle():
-    modules = {".".join(p.relative_to(ROOT).with_suffix("").parts).removesuffix(".__init__"): p
-               for p in (ROOT / "spacefit").rglob("*.py")}
-    graph = {m: {i for i in _module_imports(p) if i in modules and i != m} for m, p in modules.items()}
-    state: dict[str, int] = {}
-
-    def visit(m: str, path: list[str]) -> None:
-        state[m] = 1
-        for n in graph[m]:
-            assert state.get(n) != 1, f"import circle: {' -> '.join([*path, m, n])}"
-            if n not in state:
-                visit(n, [*path, m])
-        state[m] = 2
-
-    for m in graph:
-        if m not in state:
-            visit(m, [])

@@ -12,7 +12,7 @@ import pytest
 from astropy.table import Table
 
 import spacefit as sf
-from spacefit.fitting.frames import FrameSpec, InProcess, Loaded, frame_jacobian, frame_part_image, frame_primal, share_views
+from spacefit.fitting.frames import FrameSpec, InProcess, Loaded, frame_jacobian, frame_part_image, frame_primal, run_frames, share_views
 from spacefit.rendering.renderer import kernel_log
 from spacefit.scene.assembly import assemble
 
@@ -137,7 +137,7 @@ def test_a_frames_pose_jacobian_column_matches_central_differences():
     renders of that frame's scene with the attitude set in the scene file (1024 spp, common seed)."""
     scene = sf.Pass.from_columns(columns(pass_geometry(3))).scenes(base_scene())[2]
     spec = FrameSpec(scene, ("parts.legs.kd", "target.attitude_x_deg"), (0.0, 0.5), 256, 256, "prb")
-    _, J = InProcess().map(frame_jacobian, [spec], [np.array([0.5, 0.0])], [1], [2])[0]
+    _, J = run_frames(InProcess(), frame_jacobian, [spec], [np.array([0.5, 0.0])], [1], [2])[0]
     h = 0.5
     up, down = (sf.render(scene.with_values({"target.attitude_x_deg": s * h, "render.spp": 1024, "render.seed": 11}))
                 for s in (1, -1))
@@ -261,9 +261,9 @@ def test_a_reduced_pass_recovers_each_frames_attitude(small_pass):
 
 @pytest.fixture(scope="module")
 def client():
-    from spacefit.studies.cluster import connect
+    from spacefit.executors import connect
 
-    client, close = connect(2, None)
+    client, close = connect(2)
     yield client
     close()
 

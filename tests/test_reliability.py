@@ -250,7 +250,7 @@ def _observation() -> sf.Observation:
 
 def test_a_wide_camera_renders_or_is_refused_naming_its_keys(tmp_path):
     """A field of view up to MAX_FOV_DEG renders; past it the keys that make it are named, before Mitsuba."""
-    from spacefit.scene.schema import MAX_FOV_DEG
+    from spacefit.scene.sections import MAX_FOV_DEG
 
     scene = small_scene(write_plate_obj(tmp_path / "plate.obj"), {"material": "white_paint", "kd": 0.5},
                         render={"resolution": [16, 16], "spp": 1}, camera={"position_m": [0.0, 0.0, 0.2]})

@@ -76,9 +76,9 @@ MUTANTS = (
     Mutant("lock-start-time-in-ticks", "spacefit/locks.py", "return boot + ticks / os.sysconf(\"SC_CLK_TCK\")", "return boot + ticks",
            ("tests/test_locks.py::test_this_process_as_a_holder_is_what_psutil_reads_of_it",)),
     # a camera set the way a user thinks: the field kept across resolutions, an exposure at its fraction of full scale
-    Mutant("fov-pitch-ignores-the-resolution", "spacefit/scene/schema.py", "math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]",
+    Mutant("fov-pitch-ignores-the-resolution", "spacefit/scene/sections.py", "math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]",
            "math.tan(math.radians(camera.fov_deg) / 2.0) / 48", ("tests/test_camera.py",)),
-    Mutant("exposure-counts-the-bias-as-signal", "spacefit/sensor.py", "fraction * (sensor.saturation_dn - sensor.bias_dn) / level",
+    Mutant("exposure-counts-the-bias-as-signal", "spacefit/formation.py", "fraction * (sensor.saturation_dn - sensor.bias_dn) / level",
            "fraction * sensor.saturation_dn / level", ("tests/test_sensor.py",)),
     # camera and frames (thesis section 3.2)
     Mutant("euler-order", FRAMES, "return r1 @ r2 @ r3", "return r3 @ r2 @ r1", (CONVENTIONS,)),
@@ -208,7 +208,7 @@ MUTANTS = (
            ("tests/test_file_inputs.py",)),
     Mutant("vignetting-applied-when-off", "spacefit/sensor.py",
            "return (not self.calibrated) if self.vignetting is None else self.vignetting", "return True", ("tests/test_sensor.py",)),
-    Mutant("psf-integrated-over-the-pixel-again", "spacefit/fitting/formation.py", "sigma_px**2 * (fx**2 + fy**2))",
+    Mutant("psf-integrated-over-the-pixel-again", "spacefit/formation.py", "sigma_px**2 * (fx**2 + fy**2))",
            "sigma_px**2 * (fx**2 + fy**2)) * jnp.sinc(fx) * jnp.sinc(fy)",
            ("tests/test_sensor.py", "tests/test_nuisance.py::test_blur_is_the_sensors_continuous_gaussian_and_keeps_the_light")),
     # back faces, closed meshes and folded wrinkles (issues 11 and 13)
@@ -218,7 +218,7 @@ MUTANTS = (
     Mutant("sun-elevation-resets-the-azimuth", "spacefit/scene/parameters.py",
            "angles = (values.get(n, get(scene, n)) for n in names)", "angles = (values.get(n, 0.0) for n in names)",
            ("tests/test_vocabulary.py",)),
-    Mutant("part-typo-without-suggestion", "spacefit/scene/schema.py", "close = closest(path[1], parts)", "close = None",
+    Mutant("part-typo-without-suggestion", "spacefit/scene/sections.py", "close = closest(path[1], parts)", "close = None",
            ("tests/test_vocabulary.py",)),
     Mutant("back-faces-one-sided", RENDERER, 'return {"type": "twosided", "bsdf": _one_sided(material)}',
            "return _one_sided(material)", ("tests/test_back_faces.py",)),
@@ -276,7 +276,7 @@ MUTANTS = (
            "k = 1", ("tests/test_goodness.py",)),
     Mutant("zero-residuals-left-out", "spacefit/fitting/goodness.py", "counted |= np.ravel(np.asarray(fitted, dtype=bool))",
            "counted = counted", ("tests/test_goodness.py",)),
-    Mutant("model-dips-below-the-bias", "spacefit/fitting/formation.py", "jnp.maximum(electrons(radiance), 0.0)", "electrons(radiance)",
+    Mutant("model-dips-below-the-bias", "spacefit/formation.py", "jnp.maximum(electrons(radiance), 0.0)", "electrons(radiance)",
            ("tests/test_goodness.py",)),
     Mutant("reference-render-noise-ignored", "spacefit/fitting/loop.py", "return spp / reference_spp if reference_spp else 0.0", "return 0.0",
            ("tests/test_goodness.py",)),
@@ -297,7 +297,7 @@ MUTANTS = (
     Mutant("ended-fit-solved-again", "spacefit/fitting/loop.py", "    if ended is not None:\n", "    if False:\n",
            ("tests/test_interrupts.py::test_a_fit_killed_after_its_solve_resumes_to_the_same_report",)),
     # every error in the user's terms (issue 20): the camera's derived quantities, the far clip, the fit's seeds
-    Mutant("field-of-view-unchecked", "spacefit/scene/schema.py", "        if fov > MAX_FOV_DEG:", "        if fov > 180.0:",
+    Mutant("field-of-view-unchecked", "spacefit/scene/sections.py", "        if fov > MAX_FOV_DEG:", "        if fov > 180.0:",
            ("tests/test_reliability.py",)),
     Mutant("mitsuba-default-far-clip", RENDERER, '        "far_clip": FAR_CLIP_M,\n', "", ("tests/test_reliability.py",)),
     Mutant("negative-fit-seed-passes", "spacefit/rendering/derivatives.py",
@@ -331,7 +331,7 @@ MUTANTS = (
            ("tests/test_render.py::test_the_preview_encodes_every_pixel_as_the_whole_image_formula_does",)),
     Mutant("mask-boxes-unclipped-right", "spacefit/rendering/silhouette.py", "np.minimum(x1, w - 1) + 1", "x1 + 1",
            ("tests/test_silhouette.py::test_small_triangles_mark_their_boxes_clipped_to_the_film",)),
-    Mutant("multijitter-rounds-silently", "spacefit/scene/schema.py", "    if sampler == \"multijitter\":\n        return spp % root == 0\n",
+    Mutant("multijitter-rounds-silently", "spacefit/scene/sections.py", "    if sampler == \"multijitter\":\n        return spp % root == 0\n",
            "", ("tests/test_sampler.py",)),
     # the documentation site: the front page shows the render; a page's link to another resolves
     Mutant("docs-front-picture-a-thumbnail", "docs/index.md", ":width: 320px", ":width: 32px", ("tests/test_docs.py",)),

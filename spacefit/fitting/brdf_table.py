@@ -44,7 +44,7 @@ from spacefit.errors import InputError, check_array, check_choice, check_count, 
 from spacefit.fitting.params import Bijection
 from spacefit.fitting.tabular import TableFit, fit_table, smallest_adequate
 from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material
-from spacefit.materials.brdf import brdf_value
+from spacefit.materials.brdf import brdf, brdf_value
 from spacefit.materials.models import MIN_ALPHA
 from spacefit.precision import float64
 
@@ -308,8 +308,6 @@ def simulate_brdf_table(material: Material, zenith_i_deg: Sequence[float], zenit
     """A table of ``material``'s BRDF at every combination of incident zenith (azimuth 180 deg) and
     outgoing zenith and azimuth, with multiplicative Gaussian noise of ``relative_error`` (stated
     as each value's sigma when positive)."""
-    from spacefit.materials.brdf import brdf
-
     check_range("relative_error", relative_error, 0.0, 1.0)
     zi, zo, ao = np.meshgrid(np.asarray(zenith_i_deg, float), np.asarray(zenith_o_deg, float), np.asarray(azimuth_o_deg, float),
                              indexing="ij")

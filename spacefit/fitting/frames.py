@@ -5,7 +5,7 @@ loaded scene. Here every frame's render (and, when the solver linearises, its im
 columns) of one fit step is one batch: :func:`batched_renders` is the JAX function "free values
 -> every frame's image" whose single callback hands the batch to an executor, which runs the
 frames one after another in this process (:class:`InProcess`) or at once on dask workers
-(:class:`OnDask`). Both run :func:`frame_primal` / :func:`frame_jacobian` on the same inputs, so a
+(:class:`spacefit.executors.OnDask`). Both run :func:`frame_primal` / :func:`frame_jacobian` on the same inputs, so a
 fit gives the same values bit for bit either way (renders are deterministic for a seed).
 
 A process keeps the frames' loaded scene and its compiled functions (:class:`Loaded`: one for all
@@ -18,19 +18,20 @@ lost worker's frames are recomputed).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
-import logging
 from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from functools import cached_property
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import InputError, InputTypeError, check_count, quote
+from spacefit import executors
+from spacefit.executors import Cluster, Executor, executor_of
 from spacefit.precision import float64
 from spacefit.rendering.bridge import seeded_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
@@ -245,19 +246,7 @@ def frame_jacobian(spec: FrameSpec, key: str, x: np.ndarray, seed: int, seed_gra
     return out
 
 
-class Executor(Protocol):
-    """Runs one function per frame and returns the results in frame order."""
-
-    def map(self, fn: Callable[..., Any], specs: Sequence[FrameSpec], *per_frame: Sequence[Any]) -> list[Any]:
-        """``[fn(spec_k, key_k, *args_k) for each frame k]``."""
-        ...
-
-    def close(self) -> None:
-        """Release what this executor opened."""
-        ...
-
-
-class InProcess:
+class InProcess(executors.InProcess):
     """Every frame in this process, one after another; the loaded scenes live as long as the executor."""
 
     def __init__(self) -> None:
@@ -267,111 +256,32 @@ class InProcess:
         """The frame's loaded scene."""
         return self.loaded.chain(spec, spec.key)
 
-    def map(self, fn: Callable[..., Any], specs: Sequence[FrameSpec], *per_frame: Sequence[Any]) -> list[Any]:
-        """``[fn(spec_k, key_k, *args_k)]`` in frame order. Deterministic scenes render on one thread
-        anyway: the batch sets that once (resizing Dr.Jit's pool for each render cost 40 % of a step)."""
-        keys = _keys(specs)
-        with render_threads(all(spec.scene.render.deterministic for spec in specs)):
-            return [fn(spec, keys[k], *(args[k] for args in per_frame), loaded=self.loaded) for k, spec in enumerate(specs)]
-
     def close(self) -> None:
         """Drop the loaded scenes."""
         self.loaded = Loaded()
 
 
-def _keys(specs: Sequence[FrameSpec]) -> list[str]:
-    return [spec.key for spec in specs]
+def frame_executor(cluster: Cluster | None) -> Executor:
+    """The executor of a fit's ``cluster`` (:func:`spacefit.executors.executor_of`): in this process, one
+    that keeps the frames' loaded scenes (:class:`InProcess`)."""
+    return InProcess() if cluster is None else executor_of(cluster)
 
 
-def _on_worker(fn: Callable[..., Any], spec: FrameSpec, key: str, *args: Any) -> tuple[Any, str]:
-    """Run ``fn`` for one frame on a dask worker: its result and the worker's address."""
-    from distributed import get_worker  # here: only a worker runs it
-
-    with render_threads(spec.scene.render.deterministic):  # once per task, not per render (see InProcess.map)
-        return fn(spec, key, *args), get_worker().address
-
-
-# How long a step waits for a worker when the cluster has none (s).
-WAIT_FOR_WORKERS_S = 120.0
-
-
-class OnDask:
-    """Every frame as one dask task, all at once; each frame goes back to the worker that holds its
-    loaded scene (``allow_other_workers``: a lost worker's frames run elsewhere)."""
-
-    def __init__(self, client: Any, close: Callable[[], None] | None = None) -> None:
-        self.client = client
-        self._close = close
-        self.home: dict[str, str] = {}  # frame key -> the worker that holds its scene
-        self.keys: list[str] = []
-
-    def _placement(self, keys: Sequence[str]) -> list[str]:
-        """Each frame's worker: its home if alive, else the live worker with the fewest frames."""
-        alive = list(self.client.scheduler_info(n_workers=-1)["workers"])
-        if not alive:  # a lost worker's nanny may be starting it again
-            try:
-                self.client.wait_for_workers(1, timeout=WAIT_FOR_WORKERS_S)
-            except TimeoutError:
-                raise InputError(f"the dask cluster has had no workers for {WAIT_FOR_WORKERS_S:g} s.") from None
-            alive = list(self.client.scheduler_info(n_workers=-1)["workers"])
-        load = {w: 0 for w in alive}
-        for key in keys:
-            if self.home.get(key) in load:
-                load[self.home[key]] += 1
-        out = []
-        for key in keys:
-            if self.home.get(key) not in load:
-                self.home[key] = min(alive, key=lambda w: load[w])
-                load[self.home[key]] += 1
-            out.append(self.home[key])
-        return out
-
-    def map(self, fn: Callable[..., Any], specs: Sequence[FrameSpec], *per_frame: Sequence[Any]) -> list[Any]:
-        """``[fn(spec_k, key_k, *args_k)]`` in frame order, on the workers."""
-        keys = _keys(specs)
-        places = self._placement(keys)
-        futures = [self.client.submit(_on_worker, fn, spec, keys[k], *(args[k] for args in per_frame), workers=[places[k]],
-                                      allow_other_workers=True, pure=False)
-                   for k, spec in enumerate(specs)]
-        out = []
-        for key, (result, address) in zip(keys, self.client.gather(futures)):
-            self.home[key] = address  # where its scene is loaded now
-            out.append(result)
-        return out
-
-    def close(self) -> None:
-        """Close the client and cluster this executor opened (not a client it was given)."""
-        if self._close is not None:
-            self._close()
+def run_frames(executor: Executor, fn: Callable[..., Any], specs: Sequence[FrameSpec], *per_frame: Sequence[Any]) -> list[Any]:
+    """``[fn(spec_k, key_k, *args_k) for each frame k]`` in frame order on ``executor``. Deterministic
+    scenes render on one thread anyway: in this process the batch sets that once (resizing Dr.Jit's
+    pool for each render cost 40 % of a step), on dask once per task."""
+    keys = [spec.key for spec in specs]
+    if isinstance(executor, InProcess):
+        with render_threads(all(spec.scene.render.deterministic for spec in specs)):
+            return executor.map(functools.partial(fn, loaded=executor.loaded), keys, specs, keys, *per_frame)
+    return executor.map(functools.partial(_threaded, fn), keys, specs, keys, *per_frame)
 
 
-Cluster = int | str | Any
-
-
-def executor_of(cluster: Cluster | None) -> Executor:
-    """The executor of ``fit``'s ``cluster`` argument: None, this process (:class:`InProcess`); an int N, a new local
-    dask cluster of N single-threaded worker processes; a string, the dask scheduler at that
-    address (``tcp://host:8786``); a ``distributed.Client``, its cluster (left open)."""
-    if cluster is None:
-        return InProcess()
-    if isinstance(cluster, bool):
-        raise InputTypeError(f"`cluster` must be None, a number of local workers, a scheduler address or a dask Client, got {cluster!r}.")
-    if isinstance(cluster, (int, np.integer)):
-        check_count("cluster", int(cluster))
-        from spacefit.studies.cluster import connect  # here: dask.distributed takes seconds to import
-
-        logging.getLogger("distributed").setLevel(logging.ERROR)
-        client, close = connect(int(cluster), None)
-        return OnDask(client, close)
-    if isinstance(cluster, str):
-        from spacefit.studies.cluster import connect
-
-        client, close = connect(None, cluster)
-        return OnDask(client, close)
-    if type(cluster).__name__ == "Client" and hasattr(cluster, "submit"):
-        return OnDask(cluster)
-    raise InputTypeError(f"`cluster` must be None, a number of local workers, a scheduler address or a dask Client, "
-                         f"got {quote(cluster)}.")
+def _threaded(fn: Callable[..., Any], spec: FrameSpec, key: str, *args: Any) -> Any:
+    """``fn`` for one frame on a dask worker, with the frame's render threads."""
+    with render_threads(spec.scene.render.deterministic):
+        return fn(spec, key, *args)
 
 
 def batched_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Sequence[np.ndarray],
@@ -386,11 +296,11 @@ def batched_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Seq
 
     def primal_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[np.ndarray, ...]:
         x, seeds = np.asarray(x), np.asarray(seeds)  # JAX may hand a callback its own arrays (each index of one compiles)
-        return tuple(executor.map(frame_primal, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs)))
+        return tuple(run_frames(executor, frame_primal, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs)))
 
     def jacobian_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
         x, seeds = np.asarray(x), np.asarray(seeds)
-        out = executor.map(frame_jacobian, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs),
+        out = run_frames(executor, frame_jacobian, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs),
                            [int(seeds[1])] * len(specs))
         return tuple(img for img, _ in out), tuple(J for _, J in out)
 

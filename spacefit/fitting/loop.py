@@ -18,8 +18,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from spacefit.display import fit_html
 from spacefit.errors import InputError, check_choice, check_count
-from spacefit.fitting.frames import Cluster, executor_of
+from spacefit.executors import Cluster
+from spacefit.fitting.frames import frame_executor
 from spacefit.fitting.goodness import Goodness, goodness, part_chi2, verdict_factor
 from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, setup
 from spacefit.fitting.solvers import Outcome, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name
@@ -105,8 +107,6 @@ class FitResult:
     observation_goodness: list[Goodness] = field(default_factory=list)
 
     def _repr_html_(self) -> str:
-        from spacefit.display import fit_html
-
         return fit_html(self)
 
     def mitsuba_scene_dict(self) -> dict[str, Any]:
@@ -274,7 +274,7 @@ def fit(
         InputError: for any bad input, before rendering.
     """
     engine = _checked_solver(solver, max_steps, stop)
-    executor = executor_of(cluster)
+    executor = frame_executor(cluster)
     try:
         s = setup(observations, free, start=start, loss=loss, render=render, wrinkle_coordinates=wrinkle_coordinates,
                   executor=executor)

@@ -6,7 +6,7 @@ the pixel integrates it; the render is already integrated over each pixel by its
 the blur is its transfer function ``exp(-2 pi^2 sigma^2 f^2)`` on the pixel grid, never a second
 integration over the pixel), ``shift`` a sub-pixel translation by a Fourier phase (px; +x
 rightwards along columns, +y downwards along rows); both in one Fourier transform
-(:func:`spacefit.fitting.formation.fourier_filter`, as the sensor's PSF), the image padded with black sky
+(:func:`spacefit.formation.fourier_filter`, as the sensor's PSF), the image padded with black sky
 first, so nothing wraps round. Each may be one observation's own (``image.blur_sigma_px@k``,
 :func:`~spacefit.scene.parameters.observation_name`). Only the free ones are applied; their
 Jacobian columns are JAX's own derivatives (no render). The pose nuisances move vertices and are
@@ -22,7 +22,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from spacefit.fitting.formation import fourier_filter, gaussian_transfer
+from spacefit.formation import fourier_filter, gaussian_transfer
 from spacefit.scene.parameters import IMAGE, PSF_SIGMA_MAX_PX, observation_name
 from spacefit.sensor import GAUSSIAN_RADIUS_SIGMA
 

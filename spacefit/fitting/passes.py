@@ -180,7 +180,7 @@ class Pass:
         :func:`~spacefit.pipeline.fit_to_folder`: one scene file for all, each frame's values,
         sensor values, mask and time; ``options``: the other ``ObservationFiles`` fields
         (``overrides``, ``resolution``, ``sensor_values``, ``sensor_defaults``...)."""
-        from spacefit.fitting.observation_files import ObservationFiles
+        from spacefit.fitting.observation_files import ObservationFiles  # here: it loads the fitting stack (JAX); reading a pass does not
 
         masks = [f.mask for f in self.frames]
         if any(m is not None for m in masks) and "masks" in options:
@@ -355,7 +355,7 @@ def simulate_pass(scene: Scene, frames: Sequence[Mapping[str, Any]], out_dir: st
                   truth: Mapping[str, Any] | None = None, errors: Sequence[Mapping[str, float]] = (),
                   sensor: Any = None, spp: int = 256, seed: int = 7, interval_s: float = 10.0) -> Pass:
     """Simulate a pass and write it: per frame k an observation ``frame<k>.fits`` (DN through
-    ``sensor``'s model, :func:`~spacefit.fitting.formation.observe`, the sensor in its header and
+    ``sensor``'s model, :func:`~spacefit.formation.observe`, the sensor in its header and
     sidecar) or, without a sensor, ``frame<k>.exr`` (radiance), rendered at ``spp`` from ``scene``
     with ``frames[k]``'s values (the FITS card or EXR attribute ``RENDSPP`` says ``spp``), ``truth`` (every frame) and ``errors[k]`` (the frame's own
     departures from its nominal values, e.g. ``{"target.attitude_x_deg": 0.2}``, added to the
@@ -365,9 +365,9 @@ def simulate_pass(scene: Scene, frames: Sequence[Mapping[str, Any]], out_dir: st
     Raises:
         InputError: a value refused by the scene, ``errors`` not one per frame, an existing ``out_dir``.
     """
+    # here: simulating renders (Mitsuba) and forms images (JAX); reading or plotting a pass needs neither
     from astropy.table import Table
-
-    from spacefit.fitting.formation import observe
+    from spacefit.formation import observe
     from spacefit.imageio import RENDER_SPP_KEY, write_observation
     from spacefit.rendering.exr import write_exr
     from spacefit.rendering.renderer import render

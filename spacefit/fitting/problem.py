@@ -21,8 +21,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_array, check_choice, check_count, negative_pixels, quote
-from spacefit.fitting.formation import dn_fn, noise_variance_dn
-from spacefit.fitting.frames import Executor, FrameSpec, InProcess, batched_renders, frame_part_image, share_views
+from spacefit.formation import dn_fn, noise_variance_dn
+from spacefit.executors import Executor
+from spacefit.fitting.frames import FrameSpec, InProcess, batched_renders, frame_part_image, run_frames, share_views
 from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.nuisance import image_model as image_model_of
 from spacefit.fitting.params import FreeParameters, free_parameters
@@ -31,7 +32,8 @@ from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.derivatives import check_seeds, check_spp
 from spacefit.rendering.renderer import PartImage
 from spacefit.scene.assembly import assemble
-from spacefit.scene.schema import FILTER_RADIUS_PX, Scene, check_scene
+from spacefit.scene.schema import Scene
+from spacefit.scene.sections import FILTER_RADIUS_PX, check_scene
 from spacefit.sensor import Sensor, check_flat, psf_rms_px, read_sensor_file, saturated_mask
 from spacefit.units import DN_UNIT, RADIANCE_UNIT
 from spacefit.scene.parameters import GEOMETRY, G_of, observation_of, rms_of, scene_value, scene_with_values
@@ -48,8 +50,8 @@ class Observation:
     ``sigma``: the reference's noise standard deviation (scalar or per pixel), or None.
     ``sensor``: the camera that measured it, if known: the reference is then in DN (as
     :func:`~spacefit.imageio.read_image` gives it), the model is the sensor's
-    :func:`~spacefit.fitting.formation.expected_dn` of the render, each pixel is weighted by its predicted
-    Poisson-Gaussian noise (:func:`~spacefit.fitting.formation.noise_variance_dn` at the model's DN, held fixed in derivatives),
+    :func:`~spacefit.formation.expected_dn` of the render, each pixel is weighted by its predicted
+    Poisson-Gaussian noise (:func:`~spacefit.formation.noise_variance_dn` at the model's DN, held fixed in derivatives),
     saturated pixels are left out, and the standard errors are the noise model's (J^T W J)^-1
     instead of the sandwich. ``sigma`` must then be None.
     ``mask``: which values to fit, (h, w) or (h, w, channels) bool, True = use (None: all). The
@@ -59,7 +61,7 @@ class Observation:
     ...; :func:`~spacefit.imageio.sensor_of`), None for a sensor given whole.
     ``notes``: what a report should say about the file (e.g. a row order it did not state).
     ``flat``: with a sensor, a flat-field map ((h, w) or (h, w, channels), > 0) multiplying the
-    expected signal above the bias (:func:`~spacefit.fitting.formation.expected_dn`); None: uniform.
+    expected signal above the bias (:func:`~spacefit.formation.expected_dn`); None: uniform.
     ``render_spp``: the samples per pixel a simulated reference was rendered with, whose Monte Carlo
     noise the goodness of fit then expects (:mod:`~spacefit.fitting.goodness`); None: a real
     observation, without render noise.
@@ -250,7 +252,7 @@ def _problem(
     specs = share_views(specs)  # a pass's frames share a loaded scene
     indices = [r[1] for r in rendered]
     images = batched_renders(executor, specs, indices, shapes)
-    part_images = executor.map(frame_part_image, specs)
+    part_images = run_frames(executor, frame_part_image, specs)
 
     def stack(images: Callable[[jax.Array], Sequence[jax.Array]]) -> Callable[[jax.Array], tuple[list[jax.Array], jax.Array]]:
         """x -> each observation's model image and the stacked residuals."""

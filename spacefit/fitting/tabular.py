@@ -36,6 +36,7 @@ from spacefit.fitting.params import Bijection
 from spacefit.fitting.solvers import Solver, Status, drive, make_solver
 from spacefit.fitting.uncertainty import CORRELATION_WARN
 from spacefit.locks import holding_lock
+from spacefit.output import prepare_output, staged_output, versions, write_json
 from spacefit.precision import float64
 
 Predict = Callable[[jax.Array], jax.Array]
@@ -210,8 +211,6 @@ def write_table_fit(out_dir: str | Path, fit: TableFit, *, inputs: Mapping[str, 
     all at once (on an error nothing is left behind), as an image fit's folder has them. The folder
     must be new or empty, or hold an earlier table fit and ``overwrite`` be given
     (:func:`~spacefit.output.prepare_output`); it is written holding its lock (:mod:`spacefit.locks`)."""
-    from spacefit.output import prepare_output, staged_output, versions, write_json
-
     check_type("fit", fit, TableFit, "an sf.TableFit")
     check_type("inputs", inputs, (Mapping, type(None)), "a dict of names and JSON values, or None")
     check_name_list("inputs", list(inputs or {}))

@@ -8,7 +8,7 @@ coefficients apply as they are. An ideal (pinhole) point (x, y) is seen at
     y_d = y (1 + k1 r^2 + k2 r^4 + k3 r^6) + p1 (r^2 + 2 y^2) + 2 p2 x y,     r^2 = x^2 + y^2.
 
 The renderer is a pinhole camera; distortion is applied *after* the render by resampling its
-radiance image (:func:`spacefit.fitting.formation.distort_image`, in JAX; this module, the lens's
+radiance image (:func:`spacefit.formation.distort_image`, in JAX; this module, the lens's
 description, is NumPy only). Radiance is unchanged along a ray, so resampling it is right; the
 pixels' solid angles (:func:`~spacefit.geometry.frames.pixel_solid_angles`) stay the pinhole's,
 which is off by the distortion's local area change (about 1 + 4 k1 r^2 for the radial term).

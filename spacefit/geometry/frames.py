@@ -27,16 +27,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from types import ModuleType
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from spacefit.errors import InputError, check_count, check_range, check_type, check_vector
+from spacefit.errors import A_SCENE, InputError, InputTypeError, check_count, check_range, check_type, check_vector, quote
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need
     from jaxtyping import Float
-
-    from spacefit.scene.schema import Scene
 
 
 def attitude_matrix(angles: Float[np.ndarray, "3"], xp: ModuleType = np) -> Float[np.ndarray, "3 3"]:
@@ -138,13 +136,17 @@ class Intrinsics:
         object.__setattr__(self, "principal_offset", tuple(map(float, check_vector("Intrinsics.principal_offset", self.principal_offset, 2))))
 
     @classmethod
-    def from_scene(cls, scene: Scene) -> Intrinsics:
-        """The intrinsics of a scene's camera, in metres: ``camera.focal_length_mm`` and
+    def from_scene(cls, scene: Any) -> Intrinsics:
+        """The intrinsics of a scene's camera (an ``sf.Scene``), in metres: ``camera.focal_length_mm`` and
         ``camera.pixel_pitch_mm`` (set by ``camera.fov_deg`` where it is given), ``render.resolution``
-        and ``camera.principal_offset_px``; what :func:`spacefit.observe` and a sensor take."""
-        from spacefit.scene.schema import check_scene  # deferred: the scene's schema sits above the geometry
+        and ``camera.principal_offset_px``; what :func:`spacefit.observe` and a sensor take.
 
-        c, r = check_scene(scene).camera, scene.render
+        Raises:
+            InputTypeError: ``scene`` has no camera and render settings (the geometry sits under the scene's schema,
+                so it reads them by name)."""
+        c, r = getattr(scene, "camera", None), getattr(scene, "render", None)
+        if not (hasattr(c, "focal_length_mm") and hasattr(r, "resolution")):
+            raise InputTypeError(f"`scene` must be {A_SCENE}, got {quote(scene)}.")
         return cls(c.focal_length_mm * 1e-3, c.pixel_pitch_mm * 1e-3, r.resolution[0], r.resolution[1], c.principal_offset_px)
 
     @property

@@ -28,7 +28,8 @@ from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import Renderer, check_memory
 from spacefit.rendering.values import SceneValuesFn, scene_values_fn
 from spacefit.scene.assembly import Assembly, assemble
-from spacefit.scene.schema import MAX_SEED, MAX_SPP, Scene, check_sample_count, check_scene
+from spacefit.scene.schema import Scene
+from spacefit.scene.sections import MAX_SEED, MAX_SPP, check_sample_count, check_scene
 from spacefit.scene.parameters import MOVES_VERTICES, check_names, fd_step, scene_value, scene_with_values
 
 

@@ -27,8 +27,8 @@ from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.overrides import as_parameters
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
 from spacefit.rendering.silhouette import traced_pixels
-from spacefit.scene.schema import (FAR_CLIP_M, FILTER_RADIUS_PX, MAX_SEED, MAX_SPP, NEAR_CLIP_M, Scene, check_sample_count, check_scene,
-                                   split_sample_count)
+from spacefit.scene.schema import Scene
+from spacefit.scene.sections import FAR_CLIP_M, FILTER_RADIUS_PX, MAX_SEED, MAX_SPP, NEAR_CLIP_M, check_sample_count, check_scene, split_sample_count
 from spacefit.units import RADIANCE_UNIT
 
 # Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.

@@ -31,7 +31,8 @@ from spacefit.geometry.mesh import PartMesh, load_grouped, load_part
 from spacefit.geometry.wm import wm_n_max, wm_phases
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION, Refinement, displace, fold_fraction, refine
 from spacefit.materials import Material
-from spacefit.scene.schema import NEAR_CLIP_M, Scene, WrinkleSettings, check_scene, deg2rad
+from spacefit.scene.schema import Scene
+from spacefit.scene.sections import NEAR_CLIP_M, WrinkleSettings, check_scene, deg2rad
 from spacefit.scene.lod import LodChoice, choose_model
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need

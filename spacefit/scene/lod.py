@@ -24,7 +24,7 @@ from spacefit.errors import InputError
 from spacefit.geometry.frames import CameraFrame, Intrinsics
 from spacefit.geometry.wm import wm_rms_slope
 from spacefit.materials import Conductor, Material, Mirror
-from spacefit.scene.schema import WrinkleSettings
+from spacefit.scene.sections import WrinkleSettings
 
 
 # The effective model's stated accuracy: relative RMSE against the displaced geometry over the lit

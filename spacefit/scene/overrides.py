@@ -23,7 +23,7 @@ import numpy as np
 from spacefit.errors import InputError, InputTypeError, check_direction, check_path, check_vector, closest, quote
 from spacefit.materials import MODELS, make_material, with_material_values
 from spacefit.scene.parameters import PARAMETERS, VERTICAL_SUN, is_image, scene_keys, scene_with_values, sun_angles_deg
-from spacefit.scene.schema import SECTIONS, PartSettings, Scene, check_pitch_with_fov, unknown_part
+from spacefit.scene.sections import SECTIONS, PartSettings, SceneLike, check_pitch_with_fov, unknown_part
 
 Overrides = Mapping[str, Any] | Sequence[str] | str
 # The keys of a part table besides its material's own values.
@@ -153,7 +153,7 @@ def is_file_key(path: Sequence[str]) -> bool:
             and path[1] in {f.name for f in dataclasses.fields(SECTIONS[path[0]])})
 
 
-def with_values(scene: Scene, values: Mapping[str, Any]) -> Scene:
+def with_values(scene: SceneLike, values: Mapping[str, Any]) -> SceneLike:
     """A checked copy of ``scene`` with values set by name: scene-file keys and parameter names
     (module docstring), a mapping of names to Python values.
 
@@ -205,7 +205,7 @@ def with_values(scene: Scene, values: Mapping[str, Any]) -> Scene:
     return scene_with_values(out, parameters) if parameters else out
 
 
-def as_parameters(scene: Scene, values: Mapping[str, Any]) -> dict[str, Any]:
+def as_parameters(scene: SceneLike, values: Mapping[str, Any]) -> dict[str, Any]:
     """``values`` by parameter name: the scene-file keys that parameters spell another way become
     them (``sun.direction`` the sun's angles, keeping the scene's azimuth for a vertical sun;
     ``target.attitude_deg`` / ``position_m`` their components); parameter names pass.

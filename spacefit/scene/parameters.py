@@ -46,13 +46,13 @@ from spacefit.geometry.wm import wm_G_from_rms, wm_rms
 from spacefit.materials import Conductor, Lambert, Material, Mirror
 from spacefit.materials.models import MIN_ALPHA
 
-from spacefit.scene.schema import Scene, WrinkleSettings, check_scene, unknown_part
+from spacefit.scene.sections import SceneLike, WrinkleSettings, check_scene, unknown_part
 
 # A scene's value of parameter ``name`` (its full name, ``parts.panels.kd``).
-Getter = Callable[["Scene", str], float]
+Getter = Callable[[SceneLike, str], float]
 # The scene-file keys (and their values) that set parameter ``name`` to ``values[name]``, given every
 # value being set (a joint scene value takes its siblings from them, or from the scene).
-Setter = Callable[["Scene", str, Mapping[str, float]], dict[str, Any]]
+Setter = Callable[[SceneLike, str, Mapping[str, float]], dict[str, Any]]
 
 # The groups a parameter may belong to.
 GROUPS = {
@@ -191,16 +191,16 @@ def sun_direction(elevation_deg: Any, azimuth_deg: Any, xp: ModuleType = np) -> 
 
 
 # Getters and setters shared by several entries.
-def _scene_field(scene: Scene, name: str) -> float:
+def _scene_field(scene: SceneLike, name: str) -> float:
     section, field = name.split(".")
     return getattr(getattr(scene, section), field)
 
 
-def _own_key(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, Any]:
+def _own_key(scene: SceneLike, name: str, values: Mapping[str, float]) -> dict[str, Any]:
     return {name: values[name]}
 
 
-def _material_value(scene: Scene, name: str) -> float:
+def _material_value(scene: SceneLike, name: str) -> float:
     _, part, field = name.split(".")
     m = scene.parts[part].material
     return m.alpha_x if field == "alpha" else getattr(m, field)
@@ -210,15 +210,15 @@ def _constant(value: float) -> Getter:
     return lambda scene, name: value
 
 
-def _not_a_scene_value(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, Any]:
+def _not_a_scene_value(scene: SceneLike, name: str, values: Mapping[str, float]) -> dict[str, Any]:
     return {}
 
 
-def _get_rms(scene: Scene, name: str) -> float:
+def _get_rms(scene: SceneLike, name: str) -> float:
     return rms_of(scene.wrinkles, scene.wrinkles.D, scene.wrinkles.G)
 
 
-def _set_rms(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, Any]:
+def _set_rms(scene: SceneLike, name: str, values: Mapping[str, float]) -> dict[str, Any]:
     """G at the scene's (or the given) D."""
     w = scene.wrinkles
     return {"wrinkles.G": float(G_of(w, values.get("wrinkles.D", w.D), values[name]))}
@@ -228,10 +228,10 @@ def _sun_angles(names: tuple[str, str], docs: tuple[str, str], bounds: tuple[Bou
                 labels: tuple[str, str]) -> tuple[Parameter, ...]:
     """The sun's elevation and azimuth: both set ``sun.direction``."""
 
-    def get(scene: Scene, name: str) -> float:
+    def get(scene: SceneLike, name: str) -> float:
         return sun_angles_deg(scene.sun.direction)[names.index(name)]
 
-    def set_(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, Any]:
+    def set_(scene: SceneLike, name: str, values: Mapping[str, float]) -> dict[str, Any]:
         angles = (values.get(n, get(scene, n)) for n in names)
         return {"sun.direction": sun_direction(*angles).tolist()}
 
@@ -250,10 +250,10 @@ def _components(
     names = tuple(f"{head}_{axis}_{unit_suffix}" for axis in "xyz")
     section, field = key.split(".")
 
-    def get(scene: Scene, name: str) -> float:
+    def get(scene: SceneLike, name: str) -> float:
         return getattr(getattr(scene, section), field)[names.index(name)]
 
-    def set_(scene: Scene, name: str, values: Mapping[str, float]) -> dict[str, Any]:
+    def set_(scene: SceneLike, name: str, values: Mapping[str, float]) -> dict[str, Any]:
         return {key: [values.get(n, get(scene, n)) for n in names]}
 
     groups = frozenset({group, "joint", "moves-vertices", "nuisance", "per-observation"})
@@ -401,11 +401,11 @@ def _joint() -> tuple[tuple[str, ...], ...]:
 JOINT = _joint()
 
 
-def _materials(scene: Scene) -> dict[str, Material]:
+def _materials(scene: SceneLike) -> dict[str, Material]:
     return {part: spec.material for part, spec in scene.parts.items()}
 
 
-def available(scene: Scene) -> list[str]:
+def available(scene: SceneLike) -> list[str]:
     """Every parameter name that can be freed (or swept) in ``scene``, in registry order."""
     materials = _materials(check_scene(scene))
     names = []
@@ -429,7 +429,7 @@ def _check_observation(argument: str, name: str, observations: int) -> None:
 
 
 def check_names(
-    scene: Scene, names: Sequence[str], argument: str = "free", image: bool = False, observations: int = 1,
+    scene: SceneLike, names: Sequence[str], argument: str = "free", image: bool = False, observations: int = 1,
 ) -> tuple[str, ...]:
     """Return ``names`` as a tuple; raise :class:`InputError` for anything but a list of names, an
     unknown or repeated name, or two names that set the same value;
@@ -467,13 +467,13 @@ def check_names(
     return names
 
 
-def scene_value(scene: Scene, name: str) -> float:
+def scene_value(scene: SceneLike, name: str) -> float:
     """The value of parameter ``name`` in the scene (its fixed value, or a fit's default start)."""
     name = observation_of(name)[0]
     return float(parameter(name).get(scene, name))
 
 
-def fd_step(scene: Scene, name: str) -> float:
+def fd_step(scene: SceneLike, name: str) -> float:
     """The central finite-difference step of ``name`` at the scene's value (0: forward-mode AD)."""
     p = parameter(name)
     return p.fd_step * (scene_value(scene, name) if p.relative_step else 1.0)
@@ -491,7 +491,7 @@ def parameter_table() -> str:
     return "\n".join(rows)
 
 
-def scene_with_values(scene: Scene, values: Mapping[str, float], observation: int | None = None) -> Scene:
+def scene_with_values(scene: SceneLike, values: Mapping[str, float], observation: int | None = None) -> SceneLike:
     """A validated copy of ``scene`` with registered parameters set by name (physical units; the
     inverse of :func:`scene_value`): the scene file that renders them. Each entry's setter gives
     the keys: the sun's angles become ``sun.direction``, the pose's components set

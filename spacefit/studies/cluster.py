@@ -1,4 +1,4 @@
-"""A sweep's renders on dask.distributed: a local cluster (``workers=N``) or a running scheduler.
+"""A sweep's renders on dask.distributed (its ``cluster``, :mod:`spacefit.executors`): a local cluster or a running scheduler.
 
 Each task is one whole render (:func:`spacefit.studies.worker.run_task`, 0.05 s to seconds), so the
 scheduler's overhead (about 1 ms a task) stays small. A worker process keeps its loaded scene
@@ -14,14 +14,12 @@ sweep stops naming it; a sweep where no point finishes for ``stall_s`` stops too
 from __future__ import annotations
 
 import itertools
-import logging
-import socket
 from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, InputTypeError, quote
+from spacefit.executors import Cluster, ClusterError, connect
 from spacefit.studies import worker
 from spacefit.studies.worker import Task
 
@@ -40,70 +38,8 @@ def render_on_worker(task: Task) -> tuple[dict[str, np.ndarray], str, int]:
     return result, get_worker().address, worker.render_count()
 
 
-# dask.distributed's schemes for a scheduler's address (an address without one is tcp://).
-SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
-# How long a check waits for a scheduler to accept a connection (s).
-PROBE_TIMEOUT_S = 5.0
-
-
-def check_scheduler(address: object) -> None:
-    """Refuse a ``scheduler`` address before anything is made: not ``SCHEME://HOST:PORT`` with a scheme
-    of :data:`SCHEDULER_SCHEMES`, or (for the schemes over TCP) nothing accepting connections there
-    within :data:`PROBE_TIMEOUT_S`. None (no scheduler) passes.
-
-    Raises:
-        InputError: naming the address and what is wrong with it.
-    """
-    if address is None:
-        return
-    if not isinstance(address, str):
-        raise InputTypeError(f"`scheduler` must be an address such as 'tcp://host:8786', got {quote(address)}.")
-    scheme, sep, rest = address.strip().partition("://")
-    if not sep:
-        scheme, rest = "tcp", address.strip()
-    if scheme not in SCHEDULER_SCHEMES:
-        raise InputError(f"`scheduler` {address!r} has the scheme {scheme!r}; use one of "
-                         f"{', '.join(s + '://' for s in SCHEDULER_SCHEMES)} (e.g. tcp://host:8786).")
-    host, _, port = rest.rstrip("/").rpartition(":")
-    if not host or not port.isdigit():
-        raise InputError(f"`scheduler` {address!r} must be SCHEME://HOST:PORT, e.g. tcp://host:8786.")
-    if scheme != "ucx":
-        try:
-            socket.create_connection((host.strip("[]"), int(port)), timeout=PROBE_TIMEOUT_S).close()
-        except OSError as err:
-            raise InputError(f"`scheduler` {address!r}: no dask scheduler answered ({err.strerror or err}).") from None
-
-
-def connect(workers: int | None, scheduler: str | None) -> tuple[object, Callable[[], None]]:
-    """A dask client, on a new local cluster of ``workers`` single-threaded processes or on the
-    scheduler at ``scheduler``, and the function that closes what this call opened."""
-    from distributed import Client, LocalCluster  # here: only a cluster needs dask.distributed (seconds to import)
-
-    if scheduler is not None:
-        try:
-            client = Client(scheduler, timeout="20s")
-        except (OSError, TimeoutError) as err:
-            raise InputError(f"`scheduler` {scheduler!r}: no dask scheduler answered ({err}).") from None
-        return client, client.close
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None,
-                           silence_logs=logging.ERROR)
-    client = Client(cluster)
-
-    def close() -> None:
-        client.close()
-        cluster.close()
-
-    return client, close
-
-
-class ClusterError(RuntimeError):
-    """A sweep on dask that cannot go on, in one line (the CLI exits 1): a point whose worker died
-    more than its retry budget allows, naming the point and the likely cause, or no point finished
-    for the stated time. Every point finished before it is in the store."""
-
-
-def run_on_dask(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]], Task], *, workers: int | None,
-                scheduler: str | None, max_renders_per_worker: int, stall_s: float = STALL_S,
+def run_on_dask(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]], Task], *, cluster: Cluster,
+                max_renders_per_worker: int, stall_s: float = STALL_S,
                 retries: int = RETRIES_PER_POINT, render: Callable[[Any], Any] = render_on_worker,
                 ) -> Iterator[tuple[tuple[int, ...], dict[str, np.ndarray]]]:
     """Yield ``(index, result)`` for every point of ``todo`` as dask workers finish them.
@@ -117,18 +53,16 @@ def run_on_dask(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]]
         ClusterError: a point lost ``retries + 1`` times (naming it and its worker's memory limit), or
             no point finished for ``stall_s`` seconds.
     """
-    import dask  # here: only a cluster needs dask.distributed (seconds to import)
-    from distributed import wait
+    from distributed import wait  # here: only a cluster needs dask.distributed (seconds to import)
     from distributed.scheduler import KilledWorker
 
     # A local cluster's scheduler is made here: it reports each death at once (the budget is ``retries``)
     # and gives a worker only the task it runs, so that a death loses that point only, not one queued behind it.
-    with dask.config.set({"distributed.scheduler.allowed-failures": 0, "distributed.scheduler.worker-saturation": 1.0}):
-        try:
-            client, close = connect(workers, scheduler)
-        except RuntimeError as err:  # a worker process died while its nanny started it
-            raise ClusterError(f"the local dask cluster did not start ({err}); nothing was rendered, rerun the same "
-                               "command.") from None
+    try:
+        client, close = connect(cluster, {"distributed.scheduler.allowed-failures": 0, "distributed.scheduler.worker-saturation": 1.0})
+    except RuntimeError as err:  # a worker process died while its nanny started it
+        raise ClusterError(f"the local dask cluster did not start ({err}); nothing was rendered, rerun the same "
+                           "command.") from None
     try:
         n = max(1, len(client.scheduler_info(n_workers=-1)["workers"]))
         queue = iter(todo)

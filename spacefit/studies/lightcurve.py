@@ -44,12 +44,15 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from spacefit.display import light_curve_html
 from spacefit.errors import (InputError, check_array, check_choice, check_count, check_direction, check_name_list, check_range,
                              check_type, check_vector, quote)
+from spacefit.executors import Cluster, cluster_of
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.scene.assembly import assemble
 from spacefit.scene.parameters import scene_value, sun_angles_deg, sun_direction
-from spacefit.scene.schema import Scene, check_scene, deg2rad
+from spacefit.scene.schema import Scene
+from spacefit.scene.sections import check_scene, deg2rad
 from spacefit.studies.sensitivity import mean_and_error
 from spacefit.studies.sweep import sweep
 
@@ -185,8 +188,6 @@ class LightCurve:
         return "\n".join(lines)
 
     def _repr_html_(self) -> str:
-        from spacefit.display import light_curve_html
-
         return light_curve_html(self)
 
     def figure(self, *, ax: Any = None, fig: Any = None) -> Any:
@@ -232,6 +233,7 @@ def light_curve(
     store: str | Path | None = None,
     seeds: Sequence[int] | None = None,
     quiet: bool = False,
+    cluster: Cluster | None = None,
     workers: int | None = None,
     scheduler: str | None = None,
 ) -> LightCurve:
@@ -242,8 +244,10 @@ def light_curve(
     scene's; ``observer_range_m``: the observer's distance (default: the rendered one). ``band`` and
     ``sun_magnitude`` (default: :data:`SUN_MAGNITUDES`) give the magnitudes. ``seeds`` averages
     renders of these seeds, two or more giving each point's Monte Carlo standard error (module
-    docstring). The rest is :func:`spacefit.studies.sweep.sweep`'s."""
+    docstring); ``cluster`` where its renders run (:mod:`spacefit.executors`; ``workers`` / ``scheduler``: its
+    deprecated spellings). The rest is :func:`spacefit.studies.sweep.sweep`'s."""
     check_scene(scene)
+    cluster = cluster_of(cluster, workers, scheduler)
     given = [n for n, v in (("phase_deg", phase_deg), ("attitude_deg", attitude_deg), ("times_s", times_s)) if v is not None]
     if len(given) != 1:
         raise InputError(f"give exactly one of `phase_deg`, `attitude_deg`, `times_s` (with `spin_rate_deg_s`); got {given or 'none'}.")
@@ -279,7 +283,7 @@ def light_curve(
         for s in seeds:
             check_count("seeds", s, 0, optional=False)
         axes[SEED_AXIS] = list(seeds)
-    ds = sweep(scene, axes, store=store, quiet=quiet, workers=workers, scheduler=scheduler)
+    ds = sweep(scene, axes, store=store, quiet=quiet, cluster=cluster)
     if against in ds.dims:
         ds = ds.assign_coords({against: (against, x, {"units": against.rsplit("_", 1)[1]})})
     irradiance = ds.irradiance.sel(region="target")

@@ -23,10 +23,12 @@ from typing import Any
 
 import numpy as np
 
+from spacefit.display import sensitivity_html
 from spacefit.errors import check_choice, check_count, check_range
 from spacefit.progress import progress_bar
 from spacefit.scene.parameters import check_names, label, parameter
-from spacefit.scene.schema import Scene, check_scene
+from spacefit.scene.schema import Scene
+from spacefit.scene.sections import check_scene
 from spacefit.units import RADIANCE_UNIT
 
 TARGET = "target"  # the region of every part together, beside the parts
@@ -151,8 +153,6 @@ class Sensitivity:
         return "\n".join(lines)
 
     def _repr_html_(self) -> str:
-        from spacefit.display import sensitivity_html
-
         return sensitivity_html(self)
 
     def chart_steps(self, steps: Mapping[str, float] | None = None) -> dict[str, tuple[float, str]]:
@@ -188,7 +188,7 @@ class Sensitivity:
         Returns:
             the array of axes drawn: the derivative images' in ``names`` order, then the chart's.
         """
-        from spacefit.plotting import cropped, image_box, panels, show_image, unit_label
+        from spacefit.plotting import cropped, image_box, panels, show_image, unit_label  # here: matplotlib (0.5 s), for a figure only
 
         chart = self.chart_steps(steps)
         n = len(self.names)

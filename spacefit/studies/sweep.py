@@ -38,16 +38,18 @@ from typing import Any
 import numpy as np
 
 from spacefit import __version__
-from spacefit.digests import Watch, mesh_files
+from spacefit.digests import Watch
 from spacefit.errors import InputError, InputTypeError, check_choice, check_count, check_flag, check_name_list, check_range, closest, quote
 from spacefit.interrupts import deferred_interrupts
 from spacefit.locks import hold_lock
 from spacefit.output import STAGE_PREFIX, check_writable, clean_stale_stages
 from spacefit.progress import progress_bar
-from spacefit.scene.schema import Scene, check_scene
+from spacefit.scene.schema import Scene
+from spacefit.scene.sections import check_scene
 from spacefit.scene.toml import load_scene, read_scene_dict
 from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, available, check_names, parameter, scene_with_values
-from spacefit.studies.cluster import STALL_S, check_scheduler, run_on_dask
+from spacefit.executors import Cluster, check_cluster, cluster_of
+from spacefit.studies.cluster import STALL_S, run_on_dask
 from spacefit.studies.sensitivity import SUMMARY_VARIABLES, normalisation
 from spacefit.studies import worker
 from spacefit.studies.worker import Task, regions
@@ -587,12 +589,13 @@ def sweep(
     derivatives: Sequence[str] = (),
     derivative_seeds: int = 4,
     overwrite: bool = False,
-    workers: int | None = None,
-    scheduler: str | None = None,
+    cluster: Cluster | None = None,
     max_renders_per_worker: int = 500,
     allow_large: bool = False,
     stall_s: float = STALL_S,
     quiet: bool = False,
+    workers: int | None = None,
+    scheduler: str | None = None,
 ) -> Any:
     """Render ``scene`` at every point of ``axes`` and return the results as a labelled xarray Dataset.
 
@@ -607,14 +610,16 @@ def sweep(
             store at every point, with their Monte Carlo standard errors (:func:`sf.sensitivity`).
         derivative_seeds: independent seeds of each derivative (>= 2).
         overwrite: replace a store that holds another sweep.
-        workers: run on a local dask.distributed cluster of this many worker processes.
-        scheduler: run on the dask.distributed scheduler at this address (``tcp://host:8786``).
+        cluster: where the points render (:mod:`spacefit.executors`): None, this process; an int N, a new
+            local dask.distributed cluster of N worker processes; a scheduler address (``tcp://host:8786``);
+            a ``distributed.Client`` (left open).
         max_renders_per_worker: restart a dask worker after this many renders (Mitsuba leaks).
         allow_large: run a sweep of more than :data:`MAX_POINTS` points, or whose store may not fit
             on its disk (:func:`check_estimate`; the size is printed first unless ``quiet``).
-        stall_s: on dask, stop with :class:`~spacefit.studies.cluster.ClusterError` when no point
+        stall_s: on dask, stop with :class:`~spacefit.executors.ClusterError` when no point
             finishes for this long (s); a point whose worker dies is retried twice, then named the same way.
         quiet: no size estimate, no progress bar.
+        workers, scheduler: deprecated spellings of ``cluster`` (an int, an address).
 
     Returns:
         The Dataset, read back from the store (lazily: arrays load when used).
@@ -631,10 +636,8 @@ def sweep(
     check_count("derivative_seeds", derivative_seeds, 2, optional=False)
     check_count("max_renders_per_worker", max_renders_per_worker, optional=False)
     stall_s = check_range("stall_s", stall_s, 0.0, lo_open=True, unit="s")
-    check_count("workers", workers)
-    if workers is not None and scheduler is not None:
-        raise InputError("give `workers` (a local cluster) or `scheduler` (an address), not both.")
-    check_scheduler(scheduler)
+    cluster = cluster_of(cluster, workers, scheduler)
+    check_cluster(cluster)
     derivatives = check_name_list("derivatives", derivatives)
     if derivatives:
         check_names(scene, derivatives, "derivatives")
@@ -644,7 +647,7 @@ def sweep(
     parsed = parse_axes(scene, axes)
     if not quiet:
         print(found, file=sys.stderr, flush=True)
-    watch = Watch(mesh_files(scene))
+    watch = Watch(scene.mesh_files())
     options = {"images": images, "derivatives": list(derivatives), "derivative_seeds": derivative_seeds}
     spec = _canonical(scene, parsed, options, watch.recorded)
     seeds = parsed_seeds(scene, parsed)
@@ -665,7 +668,7 @@ def sweep(
         order = sorted(range(len(parsed)), key=lambda a: all(k in names or k in RENDER_ARGUMENTS for k in parsed[a].values))
         todo = pending(np.asarray(group["done"][...]), order)
         total = math.prod(a.size for a in parsed)
-        run_points(todo, task_of, group, total=total, workers=workers, scheduler=scheduler,
+        run_points(todo, task_of, group, total=total, cluster=cluster,
                    max_renders_per_worker=max_renders_per_worker, stall_s=stall_s, quiet=quiet, watch=watch,
                    root=None if store is None else Path(store))
         return xr.open_zarr(group.store if store is None else str(store), zarr_format=STORE_FORMAT)
@@ -704,7 +707,7 @@ def parsed_seeds(scene: Scene, axes: list[Axis]) -> list[int]:
 
 
 def run_points(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]], Task], group: Any, *, total: int,
-               workers: int | None, scheduler: str | None, max_renders_per_worker: int, stall_s: float, quiet: bool,
+               cluster: Cluster | None, max_renders_per_worker: int, stall_s: float, quiet: bool,
                watch: Watch | None = None, root: Path | None = None) -> None:
     """Render the points ``todo`` in-process or on dask, writing each to ``group`` as it finishes;
     with a ``watch`` of the input files, a point is marked done only while they are unchanged."""
@@ -713,10 +716,10 @@ def run_points(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]],
     try:
         with deferred_interrupts() as interrupts:
             results: Iterator[tuple[tuple[int, ...], dict[str, np.ndarray]]]
-            if workers is None and scheduler is None:
+            if cluster is None:
                 results = ((index, worker.run_task(task_of(index))) for index in todo)
             else:
-                results = run_on_dask(todo, task_of, workers=workers, scheduler=scheduler,
+                results = run_on_dask(todo, task_of, cluster=cluster,
                                       max_renders_per_worker=max_renders_per_worker, stall_s=stall_s)
             for index, result in results:
                 if watch is not None and (edited := watch.check()):

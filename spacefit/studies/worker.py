@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.digests import mesh_files, status
+from spacefit.digests import status
 from spacefit.geometry.frames import pixel_solid_angles
 from spacefit.scene.parameters import scene_with_values
 from spacefit.scene.schema import Scene
@@ -89,7 +89,7 @@ def loaded(task: Task) -> type[_Loaded]:
     from spacefit.rendering.renderer import Renderer  # here: Mitsuba takes seconds to import; a sweep's planning never renders
 
     scene = scene_of(task.scene_toml)
-    key = (task.scene_toml, task.crop, status(mesh_files(scene)))
+    key = (task.scene_toml, task.crop, status(scene.mesh_files()))
     if _Loaded.key != key:
         _Loaded.key, _Loaded.renderer = None, None  # drop the old scene before loading the new one
         renderer = Renderer(scene, crop=task.crop)

@@ -18,6 +18,7 @@ in :mod:`spacefit.sensor`, whose docstring gives the model's steps; here they ar
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from typing import Any
 
@@ -25,13 +26,14 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.scipy.ndimage import map_coordinates
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
-from spacefit.errors import InputError, check_array, check_count, check_type
+from spacefit.errors import InputError, check_array, check_count, check_range, check_type
 from spacefit.geometry.distortion import Distortion, undistort
 from spacefit.geometry.frames import Intrinsics
 from spacefit.sensor import (
-    Sensor, airy_transfer, check_flat, diffraction_cutoff_px, electrons_per_radiance, psf_reach_px, quantise, warn_if_saturated,
+    Sensor, airy_transfer, check_flat, diffraction_cutoff_px, electrons_per_radiance, psf_reach_px, quantise, target_pixels,
+    warn_if_saturated,
 )
 
 
@@ -220,3 +222,35 @@ def distort_image(image: Float[Array, "h w c"], intrinsics: Intrinsics, coeffici
         [map_coordinates(img[..., c], [rows, cols], order=1, mode="constant", cval=0.0) for c in range(img.shape[-1])],
         axis=-1,
     )
+
+
+def choose_exposure(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: Intrinsics, fraction: float = 0.8,
+                    percentile: float = 99.9, target: Bool[np.ndarray, "h w"] | None = None) -> Sensor:
+    """``sensor`` with the exposure time that puts the ``percentile``-th percentile of the target's
+    pixels at ``fraction`` of full scale: noise-free DN (:func:`expected_dn`,
+    its brightest channel) ``= bias + fraction (saturation_dn - bias)``, with
+    :attr:`Sensor.saturation_dn` the full well's or the ADC's limit. The DN above the bias is linear
+    in the exposure time, so one evaluation at the sensor's own time gives it.
+
+    Args:
+        radiance: a render of the scene, (height, width, channels) W m^-2 sr^-1.
+        fraction: of full scale, in (0, 1]; the default leaves 20 % for noise and brighter glints.
+        percentile: in (0, 100]; at the default 99.9 at most 0.1 % of the target's pixels saturate
+            (:data:`SATURATED_WARNING_FRACTION`).
+        target: the target's pixels (boolean, height x width); None: those brighter than 0.
+    """
+    check_type("sensor", sensor, Sensor, "an sf.Sensor")
+    if sensor.calibrated:
+        raise InputError(f"`sensor` is calibrated (`radiometric_scale_dn_per_w_m2_sr` = {sensor.radiometric_scale_dn_per_w_m2_sr:g}): "
+                         "its DN per radiance is fixed and its exposure time is not used; scale the radiance or the scale instead.")
+    check_range("fraction", fraction, 0.0, 1.0, lo_open=True)
+    check_range("percentile", percentile, 0.0, 100.0, lo_open=True)
+    mask = target_pixels(radiance, target)
+    if not mask.any():
+        raise InputError("`radiance` has no target pixels (none brighter than 0, or `target` is all false): nothing to expose for.")
+    signal = (np.asarray(expected_dn(radiance, sensor, intrinsics)) - sensor.bias_dn).max(axis=-1)[mask]
+    level = float(np.percentile(signal, percentile))
+    if not level > 0.0:
+        raise InputError(f"the target's {percentile:g}th percentile of radiance is 0: too few of its pixels are lit to expose for.")
+    time_s = sensor.exposure_time_s * fraction * (sensor.saturation_dn - sensor.bias_dn) / level
+    return dataclasses.replace(sensor, exposure_time_s=time_s)

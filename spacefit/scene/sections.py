@@ -1,0 +1,464 @@
+"""The scene-file's sections: one frozen dataclass per section, each checked on construction.
+
+A section coerces what a TOML file or Python gives (lists to tuples, integers to floats where a
+number belongs) and checks every value before it exists, naming ``section.key``, the value and the
+allowed range (:func:`spacefit.errors.check_range`): ``RenderSettings(spp=-1)`` raises at once. A
+part's material is a :mod:`spacefit.materials` object from the start. The whole scene that joins
+them is :class:`spacefit.scene.schema.Scene`; what the layers below it read of a scene is
+:class:`SceneLike` (the parameter registry and the override language sit under the ``Scene`` class,
+whose ``with_values`` is theirs). Reading a file is :mod:`spacefit.scene.toml`; changing values by
+name is :mod:`spacefit.scene.overrides`.
+
+Defaults are the thesis's Table 4-2. Units are in the key names: metres (``_m``), millimetres for
+the optics as the thesis gives them (``_mm``), degrees at this user-facing edge only (``_deg``),
+irradiance in W m^-2. The sun's ``direction`` is the direction the light travels.
+
+The thesis's "light radiance 5 W m^-2 sr^-1" for its distant light is, in pbrt's convention, the
+irradiance on a surface facing the light: ``sun.irradiance_w_m2 = 5``. ``"physical"`` selects the
+total solar irradiance at 1 au, 1361 W m^-2 (Kopp & Lean 2011).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar, Protocol, runtime_checkable
+
+import numpy as np
+
+from spacefit.errors import (A_SCENE, InputError, InputTypeError, check_choice, check_direction, check_flag, check_path, check_range, check_vector,
+                             closest, quote)
+from spacefit.geometry.wm import check_wm_params
+from spacefit.materials import MODELS, PRESETS, Material
+
+SOLAR_IRRADIANCE_W_M2 = 1361.0
+# The differentiable variants: the bridge needs AD (scalar variants cannot render a Jacobian).
+VARIANTS = ("auto", "llvm_ad_rgb", "cuda_ad_rgb")
+# Mitsuba's pixel filters and how far (px) each spreads a sample: the tent's radius 1, the box's
+# half pixel, the Gaussian's 4 standard deviations of 0.5 px.
+FILTER_RADIUS_PX = {"tent": 1.0, "box": 0.5, "gaussian": 2.0}
+FILTERS = tuple(FILTER_RADIUS_PX)
+# Mitsuba samplers; "independent" draws every sample alone, the others stratify a pixel's samples.
+SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler", "orthogonal")
+# The counts each rounding sampler takes (Mitsuba rounds any other count up, with only a log line:
+# more samples, more time than asked); spacefit refuses the others. "independent" takes any count;
+# "multijitter" a grid of isqrt(spp) rows (20 = 4 x 5, not 32), and spacefit renders another count as
+# passes of counts it takes (:func:`split_sample_count`: 32 = 30 + 2), exactly the samples asked.
+SAMPLE_COUNTS = {"stratified": "a perfect square (1, 4, 9, 16, 25, ...)", "ldsampler": "a power of 4 (4, 16, 64, 256, ...)",
+                 "orthogonal": "the square of a prime (4, 9, 25, 49, 121, ...)"}
+WRINKLE_MODELS = ("auto", "geometry", "effective")
+Vec3 = tuple[float, float, float]
+# Radiance is float32 (at most 3.4e38) and a glint's BRDF can reach 1e6 or more: irradiances above
+# this overflow it (1e39 rendered inf / NaN). The physical sun at 1 au is 1361 W m^-2.
+MAX_IRRADIANCE_W_M2 = 1e20
+# Mitsuba traces in float32 (7 significant digits): beyond 100 km from the origin a position is
+# coarser than 1 cm and a metre-sized target is no longer resolved; the observer of a far target is
+# rendered near and rescaled (light curves), or seen with a long focal length.
+MAX_COORDINATE_M = 1e5
+# The camera's clipping distances (m): the near one is Mitsuba's default; the far one passes every
+# distance within MAX_COORDINATE_M on each axis (Mitsuba's default, 1e4 m, rendered a target seen
+# from 20 km with a long lens black).
+NEAR_CLIP_M = 0.01
+FAR_CLIP_M = 4.0 * MAX_COORDINATE_M
+# Samples per pixel of one render: 65536 at 600 x 600 px is 2.4e10 samples, hours on a CPU; a fit's
+# renders are not split into passes, so there the product with the pixels is bounded too
+# (:func:`spacefit.rendering.renderer.check_memory`).
+MAX_SPP = 1 << 16
+# Seeds are Mitsuba's (uint32): a fit adds offsets to its seeds, so they stay below 2^31.
+MAX_SEED = 2**31 - 1
+# Mitsuba's perspective camera takes a horizontal field of view in [0, 180] deg (180, or a focal
+# length of 1e-200 mm, raises inside it); a pinhole's image grows as tan(fov / 2), and near 180 deg
+# float32 rays lose the pixels at the edge. The vertical field of view is held to the same bound.
+MAX_FOV_DEG = 179.0
+# The smallest angle (rad) a pixel may subtend, pixel pitch over focal length: Mitsuba's ray
+# directions are float32 (relative precision 6e-8), so narrower pixels get rays that repeat: a
+# sphere's limb seen from 11 km rendered blocks of 2 to 3 equal pixels at 3e-7 rad and of about 10
+# at 1e-7 rad, none at 1e-6 rad (about 16 float32 steps per pixel).
+MIN_PIXEL_ANGLE_RAD = 1e-6
+
+
+def takes_sample_count(sampler: str, spp: int) -> bool:
+    """Whether Mitsuba's ``sampler`` renders exactly ``spp`` samples per pixel (:data:`SAMPLE_COUNTS`)."""
+    root = math.isqrt(spp)
+    square = root * root == spp
+    if sampler == "stratified":
+        return square
+    if sampler == "ldsampler":
+        return square and spp & (spp - 1) == 0 and spp > 1
+    if sampler == "multijitter":
+        return spp % root == 0
+    if sampler == "orthogonal":
+        return square and root > 1 and all(root % k for k in range(2, math.isqrt(root) + 1))
+    return True
+
+
+def split_sample_count(sampler: str, spp: int) -> tuple[int, ...]:
+    """``spp`` as counts that Mitsuba's ``sampler`` takes, largest first, each rendered as a pass of its own:
+    ``(spp,)`` where it takes ``spp`` (always for ``independent``; refused counts are refused before, by
+    :func:`check_sample_count`), else for ``multijitter`` the largest grid below and the rest split alike."""
+    counts = []
+    while spp:
+        count = next(n for n in range(spp, 0, -1) if takes_sample_count(sampler, n))
+        counts.append(count)
+        spp -= count
+    return tuple(counts)
+
+
+def check_sample_count(name: str, spp: int, sampler: str) -> None:
+    """Refuse a count of samples per pixel that ``sampler`` would round (the policy: refuse, never round
+    silently; ``multijitter`` splits it instead, :func:`split_sample_count`); ``name`` is the argument's,
+    e.g. ``render.spp``."""
+    if sampler in SAMPLE_COUNTS and not takes_sample_count(sampler, spp):
+        nearest = [n for n in range(max(1, spp // 2), 2 * spp + 2) if takes_sample_count(sampler, n)]
+        below, above = [n for n in nearest if n < spp], [n for n in nearest if n > spp]
+        near = " or ".join(str(n) for n in (below[-1:] + above[:1]))
+        raise InputError(f"`{name}` = {spp} must be {SAMPLE_COUNTS[sampler]} with render.sampler = {sampler!r}"
+                         f"{f' (nearest: {near})' if near else ''}; 'independent' takes any count.")
+
+
+class Section:
+    """A scene-file section: coerced to its fields' types and checked on construction."""
+
+    SECTION: ClassVar[str] = ""
+
+    def __post_init__(self) -> None:
+        for f in dataclasses.fields(self):  # type: ignore[arg-type]
+            default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
+            value = _coerce(f"{self.SECTION}.{f.name}", getattr(self, f.name), default)
+            object.__setattr__(self, f.name, value)
+        self.check()
+
+    def check(self) -> None:
+        """Check the coerced values (each section's own ranges)."""
+
+
+@dataclass(frozen=True)
+class RenderSettings(Section):
+    """Image size (width, height px), samples per pixel, thesis trace depth, seed, backend, filter.
+
+    ``depth`` is the thesis's (pbrt's) trace depth: the number of bounces after the camera ray's
+    first hit; Mitsuba's ``max_depth`` is ``depth + 1``. Depth 1 is direct sun light only.
+
+    ``deterministic`` makes a seed give a bitwise-identical image on the CPU: Mitsuba's film adds
+    float32 samples from parallel threads in a varying order (differences about 1e-7 relative), so
+    deterministic renders add them on one thread, in the samples' order (a render traces them on all
+    threads first, and takes about the time of ``false``; the derivative renders run wholly on one
+    thread, about 2x slower on 2 cores). On CUDA images agree to that rounding only.
+
+    ``sampler`` is Mitsuba's: ``multijitter`` (the default) stratifies each pixel's samples on a
+    jittered grid; at equal samples it gave the lowest error of the five in both views of
+    ``experiments/forward_pareto.py --methods`` (0.12 against ``independent``'s 0.27 at 16 spp in the
+    default view: ``independent`` needs about 5x the samples), tied with ``orthogonal``, which takes fewer
+    counts. Each is unbiased and one seed gives one image. A count of samples that ``stratified``,
+    ``ldsampler`` or ``orthogonal`` would round (:data:`SAMPLE_COUNTS`) is refused, here and at each
+    render; ``multijitter`` renders one it would round as passes of counts it takes
+    (:func:`split_sample_count`). None is rounded silently.
+    """
+
+    resolution: tuple[int, int] = (600, 600)
+    spp: int = 20
+    depth: int = 2
+    seed: int = 0
+    variant: str = "auto"
+    filter: str = "tent"
+    deterministic: bool = True
+    sampler: str = "multijitter"
+
+    SECTION: ClassVar[str] = "render"
+
+    def check(self) -> None:
+        """Check this section's values (:class:`Section`)."""
+        for i, axis in enumerate(("width", "height")):
+            _check_int(f"render.resolution ({axis})", self.resolution[i], 1, 16384)
+        _check_int("render.spp", self.spp, 1, MAX_SPP)
+        _check_int("render.depth", self.depth, 1, 64)
+        _check_int("render.seed", self.seed, 0, MAX_SEED)
+        check_choice("render.variant", self.variant, VARIANTS)
+        check_choice("render.filter", self.filter, FILTERS)
+        check_choice("render.sampler", self.sampler, SAMPLERS)
+        check_sample_count("render.spp", self.spp, self.sampler)
+
+
+@dataclass(frozen=True)
+class CameraSettings(Section):
+    """Pinhole camera: optics in mm as in Table 4-2, pose by attitude or by ``look_at_m``.
+
+    ``principal_offset_px`` moves the principal point from the image centre (u right, v down).
+    When ``look_at_m`` holds 3 numbers it replaces ``attitude_deg``, with ``up`` as image up.
+    ``roll_deg`` then turns the camera about its optical axis, in either mode (right-handed about the
+    viewing direction: image up turns towards image right, the scene turns anticlockwise in the image).
+
+    The field of view is set one of two ways. ``fov_deg`` = 0 (the default): by the pixel pitch, and
+    a change of ``render.resolution`` alone keeps the pitch, so fewer pixels see a narrower field.
+    ``fov_deg`` > 0: the horizontal field of view of the whole film, and the pixel pitch follows,
+    ``pixel_pitch_mm = 2 focal_length_mm tan(fov_deg / 2) / width`` (:class:`Scene` sets it), so a
+    change of resolution keeps the field and scales the pixels. A scene file's ``[camera]`` (or one
+    ``with_values`` call) gives one of the two; setting one later (``with_values``, ``--set``)
+    replaces the other, and ``to_toml`` writes the one that sets the field.
+    """
+
+    focal_length_mm: float = 7000.0
+    pixel_pitch_mm: float = 4.0
+    fov_deg: float = 0.0
+    principal_offset_px: tuple[float, float] = (0.0, 0.0)
+    position_m: Vec3 = (0.0, 0.0, 70.0)
+    attitude_deg: Vec3 = (0.0, 0.0, 0.0)
+    look_at_m: tuple[float, ...] = ()
+    up: Vec3 = (0.0, 1.0, 0.0)
+    roll_deg: float = 0.0
+
+    SECTION: ClassVar[str] = "camera"
+
+    def check(self) -> None:
+        """Check this section's values (:class:`Section`)."""
+        check_range("camera.focal_length_mm", self.focal_length_mm, 0.0, lo_open=True, unit="mm")
+        check_range("camera.pixel_pitch_mm", self.pixel_pitch_mm, 0.0, lo_open=True, unit="mm")
+        check_range("camera.fov_deg", self.fov_deg, 0.0, MAX_FOV_DEG, unit="deg")
+        check_vector("camera.principal_offset_px", self.principal_offset_px, 2)
+        check_position("camera.position_m", self.position_m)
+        check_vector("camera.attitude_deg", self.attitude_deg)
+        if len(self.look_at_m) not in (0, 3):
+            raise InputError(f"`camera.look_at_m` must be empty or 3 numbers, got {list(self.look_at_m)}.")
+        if self.look_at_m:
+            check_position("camera.look_at_m", self.look_at_m)
+        check_direction("camera.up", self.up)
+        check_range("camera.roll_deg", self.roll_deg, unit="deg")
+
+
+@dataclass(frozen=True)
+class SunSettings(Section):
+    """One distant sun: irradiance on a surface facing it (W m^-2) and direction of travel."""
+
+    irradiance_w_m2: float = 5.0
+    direction: Vec3 = (0.0, 0.0, -1.0)
+
+    SECTION: ClassVar[str] = "sun"
+
+    def __post_init__(self) -> None:
+        if isinstance(self.irradiance_w_m2, str) and self.irradiance_w_m2 == "physical":
+            object.__setattr__(self, "irradiance_w_m2", SOLAR_IRRADIANCE_W_M2)
+        super().__post_init__()
+
+    def check(self) -> None:
+        """Check this section's values (:class:`Section`)."""
+        check_range("sun.irradiance_w_m2", self.irradiance_w_m2, 0.0, MAX_IRRADIANCE_W_M2, lo_open=True, unit="W m^-2")
+        check_direction("sun.direction", self.direction)
+
+
+@dataclass(frozen=True)
+class TargetSettings(Section):
+    """Target pose and geometry source: ``"builtin"`` or a mesh file whose groups are the parts."""
+
+    position_m: Vec3 = (0.0, 0.0, 0.0)
+    attitude_deg: Vec3 = (90.0, 0.0, 0.0)
+    mesh: str = "builtin"
+
+    SECTION: ClassVar[str] = "target"
+
+    def check(self) -> None:
+        """Check this section's values (:class:`Section`)."""
+        check_position("target.position_m", self.position_m)
+        check_vector("target.attitude_deg", self.attitude_deg)
+
+
+@dataclass(frozen=True)
+class WrinkleSettings(Section):
+    """W-M wrinkles (thesis eq. 2-1, section 2.2) on the named parts; lengths in metres.
+
+    D, gamma, M, L and Ls are the thesis's values. Its G = 10 read in metres, like L and Ls, gives
+    an rms height of 0.27 m on a 1.4 m body and an rms slope of 37 (spikes like hair; the body
+    folds over itself), and no common unit for all lengths changes the slope. The default G is
+    1e-5 m, the thesis's "10" read as micrometres with L and Ls in metres: rms height 4.3 mm, rms
+    slope 0.59, inside :data:`spacefit.geometry.wrinkle.MLI_SLOPE_RANGE` (crumpled foil). The literal
+    reading is kept as the scene ``data/scenes/thesis-literal.toml`` (docs/guide/materials.md).
+
+    ``spacing_m`` is the refinement density: the distance between the sample points that carry
+    heights (the thesis's sampling grid inside each triangle).
+
+    ``model`` chooses how wrinkles are rendered: ``"geometry"`` displaces a refined mesh, the
+    thesis's way; ``"effective"`` keeps the flat mesh and widens the part's microfacet roughness by
+    the wrinkles' slopes (:func:`spacefit.scene.lod.effective_material`); ``"auto"`` (default)
+    takes the effective model, cheaper and far less noisy, where a pixel at the part spans at least
+    ``lod_footprint`` times the largest wrinkle (L) and the wrinkles are gentle enough for a
+    roughness, and the geometry otherwise. The default ``lod_footprint`` is where the level of
+    detail study measured the effective model within :data:`spacefit.scene.lod.LOD_TOLERANCE` of
+    the geometry (docs/guide/lod.md). Fits render the geometry for ``"auto"``.
+    """
+
+    enabled: bool = True
+    parts: tuple[str, ...] = ("body",)
+    D: float = 2.3
+    G: float = 1e-5
+    gamma: float = 1.5
+    M: int = 5
+    L: float = 0.1
+    Ls: float = 5e-3
+    seed: int = 0
+    spacing_m: float = 0.02
+    model: str = "auto"
+    lod_footprint: float = 3.0
+
+    SECTION: ClassVar[str] = "wrinkles"
+
+    def check(self) -> None:
+        """Check this section's values (:class:`Section`)."""
+        check_wm_params(self.D, self.G, self.gamma, self.M, self.L, self.Ls)
+        _check_int("wrinkles.seed", self.seed, 0, MAX_SEED)
+        check_range("wrinkles.spacing_m", self.spacing_m, 0.0, lo_open=True, unit="m")
+        check_choice("wrinkles.model", self.model, WRINKLE_MODELS)
+        check_range("wrinkles.lod_footprint", self.lod_footprint, 0.0, lo_open=True)
+
+
+@dataclass(frozen=True)
+class PartSettings:
+    """A part: its material (a :mod:`spacefit.materials` object) and, for a part of its own, a mesh file."""
+
+    material: Material
+    file: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.material, tuple(MODELS.values())):
+            raise InputTypeError(f"`material` must be a spacefit material (sf.materials.Conductor, Mirror, Lambert; a "
+                                 f"scene file names a preset), got {quote(self.material)}.")
+        if not isinstance(self.file, str):
+            raise InputTypeError(f"`file` must be a path string, got {quote(self.file)}.")
+        if self.file:
+            check_path("file", self.file)
+
+
+# The built-in lander's parts and their presets (thesis Table 4-2).
+DEFAULT_PRESETS = {"body": "mli_thesis", "panels": "panel_thesis", "legs": "white_paint"}
+
+
+def default_parts() -> dict[str, PartSettings]:
+    return {name: PartSettings(PRESETS[preset]) for name, preset in DEFAULT_PRESETS.items()}
+
+
+SECTIONS: Mapping[str, type[Section]] = {
+    "render": RenderSettings,
+    "camera": CameraSettings,
+    "sun": SunSettings,
+    "target": TargetSettings,
+    "wrinkles": WrinkleSettings,
+}
+
+
+@runtime_checkable
+class SceneLike(Protocol):
+    """A whole scene as the layers under :class:`spacefit.scene.schema.Scene` read it: its sections,
+    its parts, and a checked copy with values set by name (the ``Scene`` class is the one implementation)."""
+
+    render: RenderSettings
+    camera: CameraSettings
+    sun: SunSettings
+    target: TargetSettings
+    wrinkles: WrinkleSettings
+    parts: Mapping[str, PartSettings]
+
+    def with_values(self, values: Mapping[str, Any]) -> SceneLike:
+        """A checked copy with values replaced by name."""
+        ...
+
+
+def check_scene(scene: object, name: str = "scene") -> SceneLike:
+    """Raise :class:`InputTypeError` unless ``scene`` is a scene (:class:`spacefit.scene.schema.Scene`)."""
+    if not isinstance(scene, SceneLike):
+        raise InputTypeError(f"`{name}` must be {A_SCENE}, got {quote(scene)}.")
+    return scene
+
+
+def unknown_part(key: str, parts: Sequence[str]) -> InputError:
+    """The error for a name ``parts.P...`` whose part P the scene lacks, suggesting the closest part."""
+    path = key.split(".")
+    close = closest(path[1], parts)
+    hint = f" Did you mean `{'.'.join(['parts', close, *path[2:]])}`?" if close else ""
+    return InputError(f"unknown scene key `{key}`: `{path[1]}` is not a part of the scene (parts: {', '.join(parts)}).{hint}")
+
+
+def fov_pitch_mm(camera: CameraSettings, render: RenderSettings) -> float:
+    """The pixel pitch (mm) that gives ``camera.fov_deg`` across ``render.resolution``'s width."""
+    return 2.0 * camera.focal_length_mm * math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]
+
+
+def check_pitch_with_fov(scene: SceneLike, pitch_mm: Any) -> None:
+    """Raise :class:`InputError` if ``camera.pixel_pitch_mm`` was given (as ``pitch_mm``) while
+    ``camera.fov_deg`` sets the field of view, and with it the pitch."""
+    camera = scene.camera
+    if camera.fov_deg > 0.0:
+        raise InputError(f"`camera.pixel_pitch_mm` = {quote(pitch_mm)} was given while `camera.fov_deg` = {camera.fov_deg:g} sets "
+                         f"the field of view, which makes the pitch {camera.pixel_pitch_mm:.6g} mm at {scene.render.resolution[0]} px: "
+                         "give one of them (`camera.fov_deg` = 0 leaves the field to the pixel pitch).")
+
+
+def check_optics(camera: CameraSettings, render: RenderSettings) -> None:
+    """Check what the camera's values make together: the field of view along each image axis,
+    ``2 atan(size * pitch / (2 focal length))``, at most :data:`MAX_FOV_DEG`, and the angle of one
+    pixel, ``pitch / focal length``, at least :data:`MIN_PIXEL_ANGLE_RAD`."""
+    keys = "`camera.focal_length_mm`, `camera.pixel_pitch_mm` and `render.resolution`"
+    ratio = camera.pixel_pitch_mm / camera.focal_length_mm  # may over- or underflow: inf and 0 are refused below
+    for axis, size in zip(("horizontal", "vertical"), render.resolution):
+        fov = math.degrees(2.0 * math.atan(0.5 * size * ratio))
+        if fov > MAX_FOV_DEG:
+            raise InputError(f"{keys} give a {axis} field of view of {fov:.6g} deg ({size} px of {camera.pixel_pitch_mm:g} mm "
+                             f"behind a {camera.focal_length_mm:g} mm lens); a pinhole camera renders at most {MAX_FOV_DEG:g} deg: "
+                             "lengthen the focal length or use fewer or smaller pixels.")
+    if not ratio >= MIN_PIXEL_ANGLE_RAD:
+        raise InputError(f"`camera.pixel_pitch_mm` / `camera.focal_length_mm` = {camera.pixel_pitch_mm:g} / "
+                         f"{camera.focal_length_mm:g} gives pixels of {ratio:.3g} rad; at least {MIN_PIXEL_ANGLE_RAD:g} rad "
+                         "(float32 rays resolve no finer): shorten the focal length, or render nearer and rescale.")
+
+
+def check_position(name: str, value: Sequence[float]) -> None:
+    """Check a position (m): 3 finite numbers, each within :data:`MAX_COORDINATE_M` of the origin."""
+    v = check_vector(name, value)
+    if np.abs(v).max() > MAX_COORDINATE_M:
+        raise InputError(f"`{name}` must lie within {MAX_COORDINATE_M:g} m of the origin on each axis (float32 "
+                         f"tracing), got {quote(list(value))}; render far targets near and rescale, or lengthen the focal length.")
+
+
+def deg2rad(values: Sequence[float]) -> tuple[float, ...]:
+    """Degrees (user-facing) to radians (everything inside)."""
+    return tuple(math.radians(v) for v in values)
+
+
+def plain(value: Any) -> Any:
+    """A value as TOML writes it: tuples as lists."""
+    return list(value) if isinstance(value, tuple) else value
+
+
+def _check_int(name: str, value: Any, lo: int, hi: int) -> int:
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+        raise InputTypeError(f"`{name}` must be an integer in [{lo}, {hi}], got {quote(value)}.")
+    return int(check_range(name, value, lo, hi))
+
+
+_NUMBER = (int, float, np.integer, np.floating)
+
+
+def _coerce(name: str, value: Any, default: Any) -> Any:
+    """Convert a TOML or Python value to the type of the field's default (numbers, vectors, strings)."""
+    if isinstance(default, bool):
+        return check_flag(name, value)
+    if isinstance(default, int):
+        return int(value) if isinstance(value, np.integer) else value  # range and integrality: each section's check
+    if isinstance(default, float):
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, _NUMBER):
+            raise InputTypeError(f"`{name}` must be a number, got {quote(value)}.")
+        return float(value)
+    if isinstance(default, str):
+        if not isinstance(value, str):
+            raise InputTypeError(f"`{name}` must be a string, got {quote(value)}.")
+        return value
+    if isinstance(value, np.ndarray):
+        value = value.tolist()
+    if not isinstance(value, (list, tuple)):
+        raise InputTypeError(f"`{name}` must be a list, got {quote(value)}.")
+    if default and isinstance(default[0], str):
+        return tuple(str(v) for v in value)
+    if default and len(value) != len(default):
+        raise InputError(f"`{name}` must have {len(default)} entries, got {list(value)}.")
+    if not all(isinstance(v, _NUMBER) and not isinstance(v, (bool, np.bool_)) for v in value):
+        raise InputError(f"`{name}` must hold numbers, got {list(value)}.")
+    return tuple(v if isinstance(d, int) and not isinstance(d, bool) else float(v) for v, d in zip(value, default or value))
