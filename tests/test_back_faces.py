@@ -16,7 +16,7 @@ from helpers import small_scene, write_plate_obj
 
 import spacefit as sf
 from spacefit.rendering.renderer import Renderer
-from spacefit.rendering.values import bsdf_key
+from spacefit.rendering.materials import bsdf_key
 
 LITERAL = Path(__file__).resolve().parents[1] / "data" / "scenes" / "thesis-literal.toml"
 

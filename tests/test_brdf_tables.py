@@ -14,7 +14,8 @@ from spacefit.fitting.brdf_table import (compare_brdf_models, fit_brdf_table, fi
                                          simulate_brdf_table)
 from spacefit.fitting.tabular import write_table_fit
 from spacefit.materials import Conductor, DiffuseConductor, Lambert
-from spacefit.materials.brdf import brdf, fresnel_conductor
+from spacefit.materials.brdf import brdf
+from spacefit.materials.conductor import fresnel_conductor
 from spacefit.materials.registry import GOLD_ETA, GOLD_K
 from spacefit.rendering.bsdf_eval import mitsuba_brdf
 
