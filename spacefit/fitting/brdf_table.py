@@ -308,7 +308,7 @@ def simulate_brdf_table(material: Material, zenith_i_deg: Sequence[float], zenit
                              indexing="ij")
     wi = unit_vectors(zi.ravel(), np.full(zi.size, 180.0))
     wo = unit_vectors(zo.ravel(), ao.ravel())
-    value = np.asarray(jax.jit(material.evaluate)(wi, wo), dtype=float)
+    value = np.array(jax.jit(material.evaluate)(wi, wo), dtype=float)
     value *= np.exp(relative_error * np.random.default_rng(seed).standard_normal(value.size))
     keep = value > 0
     sigma = relative_error * value[keep] if relative_error > 0 else None

@@ -145,7 +145,7 @@ def oren_nayar_plugin() -> None:
     class OrenNayarBSDF(mi.BSDF):
         def __init__(self, props: Any) -> None:
             mi.BSDF.__init__(self, props)
-            self.reflectance = props["reflectance"]
+            self.reflectance = props.get_texture("reflectance")
             self.sigma = mi.Float(props["sigma"])
             flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
             self.m_components = [flags]
