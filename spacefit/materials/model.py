@@ -15,7 +15,6 @@ level-of-detail rule (:mod:`spacefit.scene.lod`). A model is added by
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, TYPE_CHECKING, Union
@@ -96,8 +95,8 @@ class MaterialModel:
     name: ClassVar[str] = ""
     # Its numeric values, in the order the model's dataclass fields are given.
     fields: ClassVar[tuple[Field, ...]] = ()
-    # Shorthands setting several fields to one value (``alpha`` -> alpha_x, alpha_y), with their
-    # own entry: (doc, label).
+    # Shorthands setting several fields to one value, each (its fields, doc, label): a conductor's
+    # ``alpha`` sets alpha_x and alpha_y (``parts.P.alpha``).
     ties: ClassVar[Mapping[str, tuple[tuple[str, ...], str, str]]] = {}
     # Whether the BRDF is a delta function (no finite value to evaluate).
     delta: ClassVar[bool] = False
@@ -114,8 +113,8 @@ class MaterialModel:
 
     def f_r(self, wi: Array, wo: Array, **values: Array) -> Array:
         """The BRDF (sr^-1) of one grey channel for front-side local unit directions (..., 3), the
-        fields' values given by name (JAX-traceable)."""
-        raise TypeError(f"a {type(self).__name__}'s BRDF is a delta function: it has no finite value to evaluate")
+        fields' values given by name (JAX-traceable). A model with a finite BRDF defines it."""
+        raise NotImplementedError(f"{type(self).__name__} defines no BRDF")
 
     def evaluate(self, wi: Array, wo: Array, values: Mapping[str, Array] | None = None) -> Array:
         """f_r (sr^-1) for local unit directions ``wi`` (towards the light) and ``wo`` (towards the
@@ -123,7 +122,7 @@ class MaterialModel:
         channels' mean (the renderer's light curve is the channels' mean radiance). ``values``
         replace fields by name with grey values (JAX-traceable: what a fit varies)."""
         if self.delta:
-            self.f_r(wi, wo)
+            raise TypeError(f"a {type(self).__name__}'s BRDF is a delta function: it has no finite value to evaluate")
         values = dict(values or {})
         own = {f.name: getattr(self, f.name) for f in self.fields if f.name not in values}
         channels = 3 if any(isinstance(v, tuple) for v in own.values()) else 1
@@ -135,11 +134,6 @@ class MaterialModel:
         """The level-of-detail rule: a flat part's material that renders this one's as wrinkled with
         rms slope ``slope_rms`` (per axis), or None where the model has none (:mod:`spacefit.scene.lod`)."""
         return None
-
-    def values(self) -> dict[str, Any]:
-        """Every dataclass field's value by name (fields and options)."""
-        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)}
-
 
 
 # A part's material: an instance of any registered model (:mod:`spacefit.materials.registry`).

@@ -61,7 +61,7 @@ def choose_model(
     footprint = distance * intrinsics.pixel_pitch / intrinsics.focal_length
     slope = float(wm_rms_slope(w.D, w.G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls))
     effective = effective_material(material, slope)
-    alpha = None if effective is None else float(getattr(effective, "alpha_x", "nan"))
+    alpha = getattr(effective, "alpha_x", None)  # a conductor's widened roughness; None for another model
     ratio = footprint / w.L
     if w.model == "geometry":
         model, reason = "geometry", "forced by wrinkles.model"
