@@ -55,8 +55,11 @@ from spacefit.imageio import write_observation as write_observation
 from spacefit.materials import Conductor as Conductor
 from spacefit.materials import DiffuseConductor as DiffuseConductor
 from spacefit.materials import Lambert as Lambert
+from spacefit.materials import MaterialModel as MaterialModel
 from spacefit.materials import Mirror as Mirror
+from spacefit.materials import OrenNayar as OrenNayar
 from spacefit.materials import PRESETS as PRESETS
+from spacefit.materials import register_material as register_material
 from spacefit.pipeline import fit_to_folder as fit_to_folder
 from spacefit.pipeline import render_to_folder as render_to_folder
 from spacefit.rendering.derivatives import Jacobian as Jacobian
@@ -112,8 +115,9 @@ __all__ = [
     'noise_variance_dn', 'observe', 'pixel_solid_angles', 'read_image', 'read_sensor_file', 'saturated_mask', 'choose_exposure',
     'write_observation', 'sensor_of', 'format_sensor_sources', 'MLI_SLOPE_RANGE', 'Pass', 'Frame', 'frame_table', 'plot_frames', 'arc_pass',
     'simulate_pass', 'read_sweep_file', 'sweep', 'verify_store', 'StoreReport', 'ClusterError', 'Sensitivity', 'sensitivity', 'LightCurve',
-    'light_curve', 'plot_comparison', 'plot_convergence', 'DiffuseConductor', 'BRDFTable', 'BRDF_MODELS', 'read_brdf_table',
-    'fit_brdf_table', 'fitted_material', 'compare_brdf_models', 'TabulatedBRDF', 'TableFit', 'write_table_fit', 'Site',
-    'LightCurveObservations', 'read_light_curve', 'Plate', 'predict_magnitudes', 'fit_plates', 'fitted_plates', 'light_curve_convergence',
-    'fit_light_curve', 'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings',
+    'light_curve', 'plot_comparison', 'plot_convergence', 'DiffuseConductor', 'OrenNayar', 'MaterialModel', 'register_material',
+    'BRDFTable', 'BRDF_MODELS', 'read_brdf_table', 'fit_brdf_table', 'fitted_material', 'compare_brdf_models', 'TabulatedBRDF', 'TableFit',
+    'write_table_fit', 'Site', 'LightCurveObservations', 'read_light_curve', 'Plate', 'predict_magnitudes', 'fit_plates', 'fitted_plates',
+    'light_curve_convergence', 'fit_light_curve', 'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings',
+    'PartSettings',
 ]

@@ -15,8 +15,9 @@ import pytest
 from helpers import small_scene, write_plate_obj
 
 import spacefit as sf
+from spacefit.rendering.materials import bsdf_key
 from spacefit.rendering.renderer import Renderer
-from spacefit.rendering.values import bsdf_key
+from spacefit.scene.parameters import scene_with_values
 
 LITERAL = Path(__file__).resolve().parents[1] / "data" / "scenes" / "thesis-literal.toml"
 
@@ -67,3 +68,24 @@ def test_literal_wrinkles_back_faces_in_view_are_lit():
           f"{pixels[back].mean():.4g}, front {pixels[valid & ~back].mean():.4g} W m^-2 sr^-1")
     assert back.sum() > 0.01 * valid.sum()
     assert pixels[back].mean() > 0.2 * pixels[valid & ~back].mean()
+
+
+@pytest.mark.parametrize(("material", "values"), [
+    ({"material": "conductor", "eta": 1.5, "k": 1.0, "alpha_x": 0.2, "alpha_y": 0.1}, {"parts.plate.eta": 2.5, "parts.plate.alpha": 0.3}),
+    ({"material": "diffuse_conductor", "kd": 0.2, "eta": 1.5, "k": 1.0, "alpha_x": 0.2, "alpha_y": 0.1},
+     {"parts.plate.kd": 0.4, "parts.plate.alpha_y": 0.3}),
+    ({"material": "lambert", "kd": 0.3}, {"parts.plate.kd": 0.6}),
+    ({"material": "oren_nayar", "kd": 0.3, "sigma": 0.2}, {"parts.plate.kd": 0.5, "parts.plate.sigma": 1.0}),
+], ids=["conductor", "diffuse_conductor", "lambert", "oren_nayar"])
+def test_values_set_by_key_render_as_the_scene_with_them(tmp_path, material, values):
+    """Each model's traverse keys and writes (spacefit/rendering/materials.py: a blend's halves doubled,
+    ``reflectance`` as RGB) set what its BSDF dictionary would: the same image as the scene loaded with
+    the values (same samples)."""
+    view = {"camera": {"position_m": [3.0, 1.0, 9.0], "look_at_m": [0.0, 0.0, 0.0]}, "sun": {"direction": [-0.3, 0.1, -1.0]}}
+    scene = small_scene(write_plate_obj(tmp_path / "plate.obj"), material, **view)
+    renderer = Renderer(scene)
+    before = renderer.render()
+    renderer.set_values(values)
+    after = renderer.render()
+    assert not np.allclose(after, before, rtol=0.01)
+    np.testing.assert_allclose(after, sf.render(scene_with_values(scene, values)), rtol=1e-5, atol=1e-7)

@@ -13,8 +13,9 @@ from spacefit.errors import InputError
 from spacefit.fitting.brdf_table import (compare_brdf_models, fit_brdf_table, fitted_material, read_brdf_table,
                                          simulate_brdf_table)
 from spacefit.fitting.tabular import write_table_fit
-from spacefit.materials import Conductor, DiffuseConductor, Lambert
-from spacefit.materials.brdf import brdf, fresnel_conductor
+from spacefit.materials import Conductor, DiffuseConductor, Lambert, OrenNayar
+from spacefit.materials.brdf import brdf
+from spacefit.materials.conductor import fresnel_conductor
 from spacefit.materials.registry import GOLD_ETA, GOLD_K
 from spacefit.rendering.bsdf_eval import mitsuba_brdf
 
@@ -36,7 +37,8 @@ def directions(n: int, seed: int) -> np.ndarray:
     Conductor(1.5, 3.0, 0.3, 0.1, "beckmann"),
     Conductor(0.18, 0.01, 0.14, 0.14),  # mli_thesis
     DiffuseConductor(0.1, 1.5, 0.0, 0.05, 0.07),
-], ids=["lambert", "ggx-aniso", "ggx-rgb", "beckmann-aniso", "mli", "diffuse+ggx"])
+    OrenNayar((0.2, 0.4, 0.6), 0.7),  # spacefit's own Mitsuba plugin (rendering/materials.py)
+], ids=["lambert", "ggx-aniso", "ggx-rgb", "beckmann-aniso", "mli", "diffuse+ggx", "oren-nayar"])
 def test_brdf_equals_mitsubas_eval(material):
     """Both sides of the surface (twosided), opposite sides 0. JAX in float32, as Mitsuba computes:
     1e-5 relative where the value is above 1e-6 of the peak (Beckmann's tails below 1e-14 sr^-1

@@ -27,6 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 COVARIANCE = "spacefit/fitting/uncertainty.py"
 FRAMES = "spacefit/geometry/frames.py"
 RENDERER = "spacefit/rendering/renderer.py"
+MITSUBA_MATERIALS = "spacefit/rendering/materials.py"
 BRIDGE = "spacefit/rendering/bridge.py"
 WM = "spacefit/geometry/wm.py"
 # A mutant whose tests run longer than this is counted as killed (the suite would hang on it).
@@ -107,15 +108,17 @@ MUTANTS = (
     Mutant("mitsuba-principal-point-sign", RENDERER, '"principal_point_offset_x": -intr.principal_offset[0]',
            '"principal_point_offset_x": intr.principal_offset[0]', (CONVENTIONS,)),
     # materials and the renderer's BSDFs (thesis section 2.3)
-    Mutant("alpha-u-v-swapped", RENDERER, '"alpha_u": material.alpha_x,\n            "alpha_v": material.alpha_y,',
-           '"alpha_u": material.alpha_y,\n            "alpha_v": material.alpha_x,', (PHYSICS,)),
-    Mutant("beckmann-for-ggx", RENDERER, '"distribution": material.distribution,', '"distribution": "beckmann",', (PHYSICS,)),
-    Mutant("fresnel-k-dropped", RENDERER, '"k": _spectrum(material.k),', '"k": 0.0,', (PHYSICS, PROPERTIES)),
-    Mutant("kd-over-pi-twice", RENDERER, '"value": list(kd)}', '"value": [v / math.pi for v in kd]}', (PHYSICS,)),
+    Mutant("alpha-u-v-swapped", MITSUBA_MATERIALS, '"alpha_u": m.alpha_x, "alpha_v": m.alpha_y,',
+           '"alpha_u": m.alpha_y, "alpha_v": m.alpha_x,', (PHYSICS,)),
+    Mutant("beckmann-for-ggx", MITSUBA_MATERIALS, '"distribution": m.distribution,', '"distribution": "beckmann",', (PHYSICS,)),
+    Mutant("fresnel-k-dropped", MITSUBA_MATERIALS, '"eta": _spectrum(m.eta), "k": _spectrum(m.k)}\n',
+           '"eta": _spectrum(m.eta), "k": 0.0}\n', (PHYSICS, PROPERTIES)),
+    Mutant("kd-over-pi-twice", MITSUBA_MATERIALS, '{"type": "diffuse", "reflectance": {"type": "rgb", "value": _rgb_list(m.kd)}}',
+           '{"type": "diffuse", "reflectance": {"type": "rgb", "value": [v / 3.141592653589793 for v in _rgb_list(m.kd)]}}', (PHYSICS,)),
     Mutant("path-depth-off-by-one", RENDERER, "max_depth = s.render.depth + 1", "max_depth = s.render.depth", (PHYSICS,)),
-    Mutant("default-distribution-beckmann", "spacefit/materials/models.py",
-           'distribution: str = "ggx"\n\n    def __post_init__(self) -> None:\n        object.__setattr__(self, "eta"',
-           'distribution: str = "beckmann"\n\n    def __post_init__(self) -> None:\n        object.__setattr__(self, "eta"', (PHYSICS, PROPERTIES)),
+    Mutant("default-distribution-beckmann", "spacefit/materials/conductor.py",
+           'distribution: str = "ggx"\n\n    def __post_init__(self) -> None:', 'distribution: str = "beckmann"\n\n    def __post_init__(self) -> None:',
+           (PHYSICS, PROPERTIES)),
     # W-M height field (thesis eq. 2-1)
     Mutant("wm-G-exponent-sign", WM, "scale = L * (G / L) ** (D - 2.0)", "scale = L * (G / L) ** (2.0 - D)",
            ("tests/test_wm.py", PROPERTIES)),
@@ -220,8 +223,8 @@ MUTANTS = (
            ("tests/test_vocabulary.py",)),
     Mutant("part-typo-without-suggestion", "spacefit/scene/sections.py", "close = closest(path[1], parts)", "close = None",
            ("tests/test_vocabulary.py",)),
-    Mutant("back-faces-one-sided", RENDERER, 'return {"type": "twosided", "bsdf": _one_sided(material)}',
-           "return _one_sided(material)", ("tests/test_back_faces.py",)),
+    Mutant("back-faces-one-sided", MITSUBA_MATERIALS, 'return {"type": "twosided", "bsdf": entry.bsdf(material)}',
+           "return entry.bsdf(material)", ("tests/test_back_faces.py",)),
     Mutant("closed-check-without-merging", "spacefit/geometry/mesh.py", "    closed.merge_vertices(merge_tex=True, merge_norm=True)\n",
            "", ("tests/test_mesh_io.py",)),
     Mutant("fold-against-own-base-face", "spacefit/geometry/wrinkle.py", "ref.normals[movable][nearest]) < 0.0",
@@ -303,8 +306,14 @@ MUTANTS = (
     Mutant("negative-fit-seed-passes", "spacefit/rendering/derivatives.py",
            "check_count(name, value, 0, MAX_SEED,", "check_count(name, value, -(2**40), MAX_SEED,", ("tests/test_reliability.py",)),
     # BRDF tables and light curves as observations (issue 22)
-    Mutant("smith-g1-without-alpha", "spacefit/materials/brdf.py", "xy = (alpha_x * v[..., 0]) ** 2 + (alpha_y * v[..., 1]) ** 2",
+    Mutant("smith-g1-without-alpha", "spacefit/materials/conductor.py", "xy = (alpha_x * v[..., 0]) ** 2 + (alpha_y * v[..., 1]) ** 2",
            "xy = v[..., 0] ** 2 + v[..., 1] ** 2", ("tests/test_brdf_tables.py",)),
+    # Oren-Nayar (issue 31): the JAX BRDF and spacefit's own Mitsuba plugin
+    Mutant("oren-nayar-b-without-its-cosine", "spacefit/materials/oren_nayar.py",
+           "return kd / jnp.pi * (a + b * azimuthal / jnp.maximum(wi[..., 2], wo[..., 2]))", "return kd / jnp.pi * (a + b * azimuthal)",
+           ("tests/test_oren_nayar.py",)),
+    Mutant("oren-nayar-plugin-a-of-sigma", MITSUBA_MATERIALS, "a = 1.0 - 0.5 * s2 / (s2 + 0.33)", "a = 1.0 - 0.5 * s2 / (s2 + 0.09)",
+           ("tests/test_oren_nayar.py", "tests/test_brdf_tables.py")),
     Mutant("shadow-on-the-sun-side", "spacefit/studies/observing.py", "return (along < 0) & (across < EARTH_RADIUS_M)",
            "return across < EARTH_RADIUS_M", ("tests/test_observed_lightcurves.py",)),
     Mutant("table-fit-writes-into-a-foreign-folder", "spacefit/fitting/tabular.py",

@@ -20,9 +20,11 @@ dropped on reading, as are values at or below ``floor`` (an instrument's noise f
 
 The models (:data:`BRDF_MODELS`, smallest first) are spacefit's materials with grey values:
 ``lambert`` (kd), the rough conductors ``ggx`` / ``beckmann`` (eta, k, alpha) and their anisotropic
-forms (alpha_x, alpha_y), and each conductor plus a diffuse term (``lambert+ggx``: a
-:class:`~spacefit.materials.DiffuseConductor`). They are evaluated by
-:func:`spacefit.materials.brdf.brdf_value`, Mitsuba's own evaluation. The fit compares logarithms
+forms (alpha_x, alpha_y), each conductor plus a diffuse term (``lambert+ggx``: a
+:class:`~spacefit.materials.DiffuseConductor`), and every other registered material model under its
+own name with all its fields (``oren_nayar``: kd, sigma). They are evaluated by the models' own
+BRDFs (:meth:`spacefit.materials.model.MaterialModel.evaluate`), Mitsuba's own evaluation; their
+bounds and starts are the models' fields'. The fit compares logarithms
 (the values span the specular peak to the diffuse floor, five decades): the residual is
 ln(model / data) / sigma_rel, sigma_rel = sigma / value, or the ``relative_error`` given for a table
 without errors; with neither, the errors are scaled by the residuals and no verdict is given.
@@ -32,7 +34,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,16 +45,14 @@ import numpy as np
 from spacefit.errors import InputError, check_array, check_choice, check_count, check_name_list, check_range, check_type, quote, read_text_rows
 from spacefit.fitting.params import Bijection
 from spacefit.fitting.tabular import TableFit, fit_table, smallest_adequate
-from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material
-from spacefit.materials.brdf import brdf, brdf_value
-from spacefit.materials.models import MIN_ALPHA
+from spacefit.materials import MODELS, Conductor, DiffuseConductor, Lambert, Material, MaterialModel
+from spacefit.materials.registry import Derived, shared_fields
 from spacefit.precision import float64
 
 GENERAL_COLUMNS = ("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "brdf_sr")
-# The parameters' ranges in a fit (the materials' own, open).
-PARAMETER_BOUNDS = {"kd": Bijection(0.0, 1.0), "eta": Bijection(0.0, 100.0), "k": Bijection(0.0, 100.0),
-                    "alpha": Bijection(MIN_ALPHA, 1.0), "alpha_x": Bijection(MIN_ALPHA, 1.0), "alpha_y": Bijection(MIN_ALPHA, 1.0)}
-DEFAULT_START = {"kd": 0.1, "eta": 1.5, "k": 1.0, "alpha": 0.1, "alpha_x": 0.1, "alpha_y": 0.1}
+# The parameters' ranges in a fit and their default starts: the registered models' fields' (open ranges).
+PARAMETER_BOUNDS: Mapping[str, Bijection] = Derived(lambda: {n: Bijection(f.lo, f.hi) for n, f in shared_fields(None).items()})
+DEFAULT_START: Mapping[str, float] = Derived(lambda: {n: f.start for n, f in shared_fields(None).items()})
 
 
 @dataclass(frozen=True)
@@ -171,53 +171,48 @@ def _numbers(path: Path, rows: Sequence[str], columns: int) -> np.ndarray:
 
 @dataclass(frozen=True)
 class BRDFModel:
-    """A material model to fit: ``diffuse`` term, microfacet ``distribution`` (or None), isotropic or not."""
+    """A material model to fit: the registered ``model`` with its ``options`` (a conductor's
+    ``distribution``), its free ``parameters`` its fields' names or ties (``alpha``), in order."""
 
     name: str
-    diffuse: bool
-    distribution: str | None
-    anisotropic: bool = False
+    model: type[MaterialModel]
+    parameters: tuple[str, ...]
+    options: tuple[tuple[str, object], ...] = ()
 
-    @property
-    def parameters(self) -> tuple[str, ...]:
-        """The model's parameters, in order."""
-        specular = () if self.distribution is None else ("eta", "k", *(("alpha_x", "alpha_y") if self.anisotropic else ("alpha",)))
-        return (*(("kd",) if self.diffuse else ()), *specular)
-
-    def values(self, p: dict[str, jax.Array]) -> dict[str, jax.Array]:
-        """Keyword arguments of :func:`~spacefit.materials.brdf.brdf_value` for the parameter values ``p`` (by name)."""
-        out: dict[str, jax.Array] = {"kd": p["kd"]} if self.diffuse else {}
-        if self.distribution is not None:
-            ax = p["alpha_x"] if self.anisotropic else p["alpha"]
-            ay = p["alpha_y"] if self.anisotropic else p["alpha"]
-            out.update(eta=p["eta"], k=p["k"], alpha_x=ax, alpha_y=ay, distribution=self.distribution)
+    def values(self, p: Mapping[str, jax.Array]) -> dict[str, jax.Array]:
+        """The model's field values of the parameter values ``p`` (by name; a tie sets its fields)."""
+        out: dict[str, jax.Array] = {}
+        for name in self.parameters:
+            out.update(dict.fromkeys(self.model.ties[name][0] if name in self.model.ties else (name,), p[name]))
         return out
 
-    def evaluate(self, p: dict[str, jax.Array], wi: jax.Array, wo: jax.Array) -> jax.Array:
+    def evaluate(self, p: Mapping[str, jax.Array], wi: jax.Array, wo: jax.Array) -> jax.Array:
         """The BRDF (sr^-1) at parameter values ``p`` (by name) for local directions ``wi``, ``wo`` (n, 3)."""
-        return brdf_value(wi, wo, **self.values(p))
+        template = self.model(**{f.name: f.start for f in self.model.fields}, **dict(self.options))
+        return template.evaluate(wi, wo, self.values(p))
 
-    def material(self, p: dict[str, float]) -> Material:
+    def material(self, p: Mapping[str, float]) -> Material:
         """The spacefit material of these parameter values (by name): what the renderer draws."""
-        v = {k: float(val) for k, val in self.values(p).items() if k != "distribution"}
-        if self.distribution is None:
-            return Lambert(v["kd"])
-        conductor = (v["eta"], v["k"], v["alpha_x"], v["alpha_y"], self.distribution)
-        return DiffuseConductor(v["kd"], *conductor) if self.diffuse else Conductor(*conductor)
+        return self.model(**{k: float(v) for k, v in self.values(p).items()}, **dict(self.options))
 
 
 def _models() -> dict[str, BRDFModel]:
-    out = {"lambert": BRDFModel("lambert", True, None)}
+    """The conductor families by their short names, then every other registered model that has a BRDF."""
+    out = {"lambert": BRDFModel("lambert", Lambert, ("kd",))}
     for aniso in (False, True):
         for diffuse in (False, True):
             for dist in ("ggx", "beckmann"):
                 name = f"{'lambert+' if diffuse else ''}{dist}{'_aniso' if aniso else ''}"
-                out[name] = BRDFModel(name, diffuse, dist, aniso)
-    return out
+                params = (*(("kd",) if diffuse else ()), "eta", "k", *(("alpha_x", "alpha_y") if aniso else ("alpha",)))
+                out[name] = BRDFModel(name, DiffuseConductor if diffuse else Conductor, params, (("distribution", dist),))
+    for m in MODELS.values():
+        if not m.delta and m not in (Lambert, Conductor, DiffuseConductor):
+            out[m.name] = BRDFModel(m.name, m, tuple(f.name for f in m.fields))
+    return dict(sorted(out.items(), key=lambda item: len(item[1].parameters)))
 
 
-# The models by name, smallest (fewest parameters) first.
-BRDF_MODELS: dict[str, BRDFModel] = dict(sorted(_models().items(), key=lambda item: len(item[1].parameters)))
+# The models by name, smallest (fewest parameters) first; a model registered later is among them.
+BRDF_MODELS: Mapping[str, BRDFModel] = Derived(_models)
 
 
 def fit_brdf_table(table: BRDFTable, model: str = "lambert+ggx", *, relative_error: float | None = None,
@@ -313,7 +308,7 @@ def simulate_brdf_table(material: Material, zenith_i_deg: Sequence[float], zenit
                              indexing="ij")
     wi = unit_vectors(zi.ravel(), np.full(zi.size, 180.0))
     wo = unit_vectors(zo.ravel(), ao.ravel())
-    value = np.asarray(jax.jit(lambda a, b: brdf(material, a, b))(wi, wo), dtype=float)
+    value = np.array(jax.jit(material.evaluate)(wi, wo), dtype=float)
     value *= np.exp(relative_error * np.random.default_rng(seed).standard_normal(value.size))
     keep = value > 0
     sigma = relative_error * value[keep] if relative_error > 0 else None
@@ -336,7 +331,7 @@ class TabulatedBRDF:
     u between the measured offsets of each incidence and linearly in theta_i between incidences,
     held at the end values beyond both; ``scale`` multiplies it (1: the table's values). Both
     sides of the plate alike, 0 where sun and observer are on opposite sides, as the materials'
-    BRDFs (:func:`spacefit.materials.brdf.brdf_value`). Isotropic: the plate's tangent does not
+    BRDFs (:func:`spacefit.materials.brdf.brdf`). Isotropic: the plate's tangent does not
     matter. Not a renderer material: it serves the flat-plate light curves only. ln f is piecewise
     linear in the angles: a fit of directions through it (an attitude) sees one segment's slope at a
     time and may stop at a kink (a simulated 6 deg turn about z with a tabulated array came back 7.1

@@ -1,12 +1,23 @@
-"""Named material presets and models, as a scene file names them; unknown names list the valid ones."""
+"""The material models by the name a scene file gives them, and the named presets; unknown names list the valid ones.
+
+A model (:class:`~spacefit.materials.model.MaterialModel`) is added by one call,
+:func:`register_material`, from any module (a test's own included); the parameter table
+(``parts.P.<field>``) and every place that asks for a model by name see it from then on.
+"""
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
+from typing import TypeVar
 
 from spacefit.errors import InputError, check_choice, closest, inside
-from spacefit.materials.models import Conductor, DiffuseConductor, Lambert, Material, Mirror
+from spacefit.materials.conductor import Conductor
+from spacefit.materials.diffuse_conductor import DiffuseConductor
+from spacefit.materials.lambert import Lambert
+from spacefit.materials.mirror import Mirror
+from spacefit.materials.model import Field, Material, MaterialModel
+from spacefit.materials.oren_nayar import OrenNayar
 
 # pbrt-v3's Metal material, which the thesis used for the MLI, defaults to roughness 0.01 remapped
 # by RoughnessToAlpha to a Trowbridge-Reitz alpha of 0.14; a true mirror is never lit directly by a
@@ -30,8 +41,77 @@ PRESETS: Mapping[str, Material] = {
 
 
 # The models by the name a scene file gives them when it states every value (``material = "conductor"``).
-MODELS: Mapping[str, type] = {"conductor": Conductor, "mirror": Mirror, "lambert": Lambert,
-                              "diffuse_conductor": DiffuseConductor}
+MODELS: dict[str, type[MaterialModel]] = {}
+V = TypeVar("V")
+
+
+class Derived(Mapping[str, V]):
+    """A read-only mapping computed from the registered models (by ``compute``), computed again after
+    a model is registered: the tables of other floors that derive from the models' fields
+    (``parts.P.<field>``, a BRDF-table fit's bounds) see a model registered later."""
+
+    def __init__(self, compute: Callable[[], dict[str, V]]) -> None:
+        self._compute = compute
+        self._models: tuple[type, ...] | None = None
+        self._table: dict[str, V] = {}
+
+    def _current(self) -> dict[str, V]:
+        if self._models != tuple(MODELS.values()):
+            self._table, self._models = self._compute(), tuple(MODELS.values())
+        return self._table
+
+    def __getitem__(self, key: str) -> V:
+        return self._current()[key]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._current())
+
+    def __len__(self) -> int:
+        return len(self._current())
+
+    def __repr__(self) -> str:
+        return repr(self._current())
+
+
+def register_material(model: type[MaterialModel]) -> type[MaterialModel]:
+    """Add a material model under its :attr:`~spacefit.materials.model.MaterialModel.name` (returned,
+    so that it may decorate the class). Registering the same class again is a no-op.
+
+    Raises:
+        ValueError: for a class that is not a frozen MaterialModel dataclass, a name taken by another
+            model or a preset, or a field whose name another model's field has with another unit or
+            range (one name, one meaning: ``parts.P.<field>`` is one parameter).
+    """
+    if not (isinstance(model, type) and issubclass(model, MaterialModel) and dataclasses.is_dataclass(model) and model.name):
+        raise ValueError(f"{model!r} is not a named MaterialModel dataclass")
+    if MODELS.get(model.name, model) is not model or model.name in PRESETS:
+        raise ValueError(f"the material name {model.name!r} is taken")
+    numeric = {f.name for f in model.fields}
+    if not numeric <= {f.name for f in dataclasses.fields(model)} or set(model.ties) & numeric:
+        raise ValueError(f"{model.__name__}: its fields {sorted(numeric)} and ties {sorted(model.ties)} must be distinct dataclass fields")
+    for name, f in shared_fields(model).items():
+        other = shared_fields(None)[name]
+        if (f.unit, f.lo, f.hi) != (other.unit, other.lo, other.hi):
+            raise ValueError(f"{model.__name__}.{name} is in {f.unit} on [{f.lo:g}, {f.hi:g}], another model's on "
+                             f"[{other.lo:g}, {other.hi:g}] in {other.unit}: one field name is one parameter")
+    MODELS[model.name] = model
+    return model
+
+
+def shared_fields(model: type[MaterialModel] | None) -> dict[str, Field]:
+    """The fields (and ties, as their first field) of ``model`` that registered models have too, by
+    name; or, for None, every registered model's fields by name (the first model's where several share one)."""
+    registered: dict[str, Field] = {}
+    for m in MODELS.values():
+        for name in (*(f.name for f in m.fields), *m.ties):
+            registered.setdefault(name, m.field(name))
+    if model is None:
+        return registered
+    return {name: model.field(name) for name in (*(f.name for f in model.fields), *model.ties) if name in registered}
+
+
+for _model in (Conductor, Mirror, Lambert, DiffuseConductor, OrenNayar):
+    register_material(_model)
 
 
 def make_material(name: str, overrides: Mapping[str, object] | None = None, *, where: str = "material") -> Material:
@@ -40,7 +120,7 @@ def make_material(name: str, overrides: Mapping[str, object] | None = None, *, w
     Args:
         name: a key of :data:`PRESETS` or of :data:`MODELS`.
         overrides: parameter name -> value; only the model's own parameters are allowed, and
-            ``alpha`` for both roughnesses of a conductor.
+            a tie (``alpha`` for both roughnesses of a conductor).
         where: how the user addressed this material, used in messages (e.g. ``"parts.panels"``).
 
     Raises:
@@ -52,7 +132,7 @@ def make_material(name: str, overrides: Mapping[str, object] | None = None, *, w
     if name in PRESETS:
         return with_material_values(PRESETS[name], overrides, where=where)
     model = MODELS[name]
-    given = {*overrides, *(("alpha_x", "alpha_y") if "alpha" in overrides else ())}
+    given = {*overrides, *(f for tie, (tied, _, _) in model.ties.items() if tie in overrides for f in tied)}
     missing = [f.name for f in dataclasses.fields(model) if f.default is dataclasses.MISSING and f.name not in given]
     if missing:
         raise InputError(f"`{where}.{missing[0]}` is missing: `{where}.material` = {name!r} states every value itself "
@@ -62,18 +142,18 @@ def make_material(name: str, overrides: Mapping[str, object] | None = None, *, w
 
 def with_material_values(material: Material | type, values: Mapping[str, object], *, where: str = "material") -> Material:
     """A copy of ``material`` with some parameters replaced (or, given a model class, one built from
-    all of them); ``alpha`` sets both roughnesses of a conductor. Errors name ``where.key``."""
+    all of them); a tie (``alpha``) sets its fields (both roughnesses of a conductor). Errors name ``where.key``."""
     model = material if isinstance(material, type) else type(material)
     values = dict(values)
-    if "alpha" in values and model in (Conductor, DiffuseConductor):
-        # shorthand for an isotropic roughness
-        if {"alpha_x", "alpha_y"} & set(values):
-            raise InputError(f"`{where}.alpha` sets alpha_x and alpha_y; do not give them as well.")
-        values["alpha_x"] = values["alpha_y"] = values.pop("alpha")
+    for tie, (tied, _, _) in model.ties.items():
+        if tie in values:  # a shorthand for several fields' one value (an isotropic roughness)
+            if set(tied) & set(values):
+                raise InputError(f"`{where}.{tie}` sets {' and '.join(tied)}; do not give them as well.")
+            values.update(dict.fromkeys(tied, values.pop(tie)))
     fields = [f.name for f in dataclasses.fields(model)]
     for key in values:
         if key not in fields:
-            close = closest(key, [*fields, *(["alpha"] if model in (Conductor, DiffuseConductor) else [])])
+            close = closest(key, [*fields, *model.ties])
             hint = f" Did you mean `{where}.{close}`?" if close else ""
             raise InputError(f"unknown scene key `{where}.{key}`: a {model.__name__} has {', '.join(fields)}; a part "
                              f"has `material` and `file` too.{hint}")
@@ -83,7 +163,7 @@ def with_material_values(material: Material | type, values: Mapping[str, object]
 
 def material_table(material: Material) -> dict[str, object]:
     """A material as a scene file's part table states it in full: its model's name and every value."""
-    name = next(n for n, m in MODELS.items() if isinstance(material, m))
+    name = type(material).name
     return {"material": name, **{f.name: _plain(getattr(material, f.name)) for f in dataclasses.fields(material)}}
 
 

@@ -1,6 +1,6 @@
 """Mitsuba's own evaluation of a material's BSDF: the reference that :mod:`spacefit.materials.brdf` follows.
 
-The material is loaded as the renderer loads it (:func:`spacefit.rendering.renderer.bsdf_dict`,
+The material is loaded as the renderer loads it (:func:`spacefit.rendering.materials.bsdf_dict`,
 ``twosided`` included) and evaluated by ``BSDF.eval`` at a surface interaction whose shading frame
 is the local frame (z the normal, x the tangent of ``alpha_x``). ``eval`` returns f_r cos(theta_o);
 this returns f_r (sr^-1), the mean of the RGB channels.
@@ -12,7 +12,7 @@ import numpy as np
 
 from spacefit.materials import Material
 from spacefit.rendering.backend import mi, variant_scope
-from spacefit.rendering.renderer import bsdf_dict
+from spacefit.rendering.materials import bsdf_dict
 
 
 @variant_scope("auto")

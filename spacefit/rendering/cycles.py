@@ -15,8 +15,9 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -54,15 +55,32 @@ def _rgb(value: float | tuple[float, ...]) -> list[float]:
     return list(value) if isinstance(value, tuple) else [float(value)] * 3
 
 
+# A material as ``cycles_render.py`` reads it, by its model's name (a material model's ``name``; this
+# module names models rather than importing them: Blender's Python imports it and has no JAX).
+# Each takes the material and whether the part has uv.
+Describe = Callable[[Any, bool], dict[str, object]]
+CYCLES: dict[str, Describe] = {}
+
+
+def register_cycles(model_name: str, describe: Describe) -> None:
+    """Add (or replace) the Cycles description of the material model named ``model_name``."""
+    CYCLES[model_name] = describe
+
+
+register_cycles("conductor", lambda m, has_uv: {
+    "type": "conductor", "eta": _rgb(m.eta), "k": _rgb(m.k), "alpha_x": m.alpha_x, "alpha_y": m.alpha_y,
+    "distribution": m.distribution, "tangent": "uv" if has_uv else None})
+register_cycles("lambert", lambda m, has_uv: {"type": "lambert", "kd": _rgb(m.kd)})
+
+
 def material_description(material: Material, has_uv: bool) -> dict[str, object]:
-    """A material as ``cycles_render.py`` reads it; a conductor's alpha_x lies along dp/du where the part has uv."""
-    from spacefit.materials import Conductor, Lambert  # deferred: Blender's Python imports this module too
-    if isinstance(material, Conductor):
-        return {"type": "conductor", "eta": _rgb(material.eta), "k": _rgb(material.k), "alpha_x": material.alpha_x,
-                "alpha_y": material.alpha_y, "distribution": material.distribution, "tangent": "uv" if has_uv else None}
-    if isinstance(material, Lambert):
-        return {"type": "lambert", "kd": _rgb(material.kd)}
-    raise ValueError(f"no Cycles material for {type(material).__name__}")
+    """A material as ``cycles_render.py`` reads it (:data:`CYCLES`); a conductor's alpha_x lies along
+    dp/du where the part has uv. Mirrors, diffuse conductors and Oren-Nayar have no entry (Cycles'
+    rough diffuse is another Oren-Nayar form, Fujii's)."""
+    name = type(material).name
+    if name not in CYCLES:
+        raise ValueError(f"no Cycles material for {type(material).__name__}")
+    return CYCLES[name](material, has_uv)
 
 
 def export_view(assembly: Assembly, folder: Path) -> dict[str, object]:

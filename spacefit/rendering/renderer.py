@@ -19,10 +19,11 @@ import numpy as np
 
 from spacefit.errors import InputError, check_array, check_count
 from spacefit.geometry.frames import project
-from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material, Mirror
+from spacefit.materials import Material
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.backend import dr, in_variant, mi, resolve_variant, variant_scope
+from spacefit.rendering.materials import bsdf_dict
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.overrides import as_parameters
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
@@ -76,46 +77,6 @@ def check_memory(width: int, height: int, window_pixels: int, spp: int, split: b
         raise InputError(f"a {width} x {height} px render at {spp} spp needs about {estimate / 2**30:.1f} GiB and this machine has "
                          f"{limit / 2**30:.1f} GiB available; lower `render.resolution`{'' if split else ' or `spp`'}.")
     return estimate
-
-
-def _spectrum(value: float | tuple[float, ...]) -> dict | float:
-    return {"type": "rgb", "value": list(value)} if isinstance(value, tuple) else float(value)
-
-
-def bsdf_dict(material: Material) -> dict:
-    """Mitsuba BSDF for a material, shading both sides of every face alike (Mitsuba's ``twosided``).
-
-    The thesis's renderer, pbrt-v3, shades the back of a face as its front (its BSDFs flip the
-    shading frame to the side of the outgoing ray), so a folded or inward-wound face is lit, not
-    black; ``twosided`` does the same. Traverse keys: :func:`spacefit.rendering.values.bsdf_key`.
-    """
-    return {"type": "twosided", "bsdf": _one_sided(material)}
-
-
-def _one_sided(material: Material) -> dict:
-    """The material's one-sided Mitsuba BSDF; the microfacet distribution is always named (Mitsuba's default is Beckmann)."""
-    if isinstance(material, Conductor):
-        return {
-            "type": "roughconductor",
-            "distribution": material.distribution,
-            "alpha_u": material.alpha_x,
-            "alpha_v": material.alpha_y,
-            "eta": _spectrum(material.eta),
-            "k": _spectrum(material.k),
-        }
-    if isinstance(material, DiffuseConductor):
-        # kd / pi + the conductor as 0.5 (2 kd / pi) + 0.5 (2 x the conductor): Mitsuba's blend is a mean
-        kd = material.kd if isinstance(material.kd, tuple) else (material.kd,) * 3
-        specular = _one_sided(Conductor(material.eta, material.k, material.alpha_x, material.alpha_y, material.distribution))
-        return {"type": "blendbsdf", "weight": 0.5,
-                "diffuse": {"type": "diffuse", "reflectance": {"type": "rgb", "value": [2.0 * v for v in kd]}},
-                "specular": {**specular, "specular_reflectance": 2.0}}
-    if isinstance(material, Mirror):
-        return {"type": "conductor", "eta": _spectrum(material.eta), "k": _spectrum(material.k)}
-    if isinstance(material, Lambert):
-        kd = material.kd if isinstance(material.kd, tuple) else (material.kd,) * 3
-        return {"type": "diffuse", "reflectance": {"type": "rgb", "value": list(kd)}}
-    raise TypeError(f"no Mitsuba BSDF for {type(material).__name__}")
 
 
 def mesh_object(name: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None, material: Material) -> "mi.Mesh":

@@ -1,7 +1,8 @@
 """Named scene parameters -> the Mitsuba scene values they set, by traverse key (a JAX function).
 
 This is the one place where a registered parameter (:mod:`spacefit.scene.parameters`) meets
-Mitsuba's vocabulary: ``parts.panels.alpha_x`` sets ``'panels.bsdf.brdf_0.alpha_u.value'``, the wrinkles'
+Mitsuba's vocabulary: ``parts.panels.alpha_x`` sets ``'panels.bsdf.brdf_0.alpha_u.value'`` (the keys
+of the part's material model, :func:`spacefit.rendering.materials.material_keys`), the wrinkles'
 D and G set every wrinkled part's ``vertex_positions`` through the JAX W-M heights (so their
 tangents are exact), the sun's angles set its frame ``'sun.to_world'`` (by the direction its
 light travels), the camera's roll the camera's frame ``'sensor.to_world'`` (whole). The bridge differentiates through the result; a :class:`Renderer` sets it in place.
@@ -15,20 +16,12 @@ from typing import Any
 import jax.numpy as jnp
 from jaxtyping import Array
 
+from spacefit.rendering.materials import material_keys
 from spacefit.scene.assembly import Assembly
 from spacefit.geometry.frames import CameraFrame, attitude_matrix
-from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, ROLL, SUN_ANGLES, G_of, parameter, scene_value, sun_direction
+from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, ROLL, SUN_ANGLES, G_of, scene_value, sun_direction
 
 SceneValuesFn = Callable[[Array], dict[str, Array]]
-
-
-def bsdf_key(part: str, field: str) -> str:
-    """Mitsuba traverse key of BSDF field ``field`` (``alpha_u``, ``reflectance``) of ``part``.
-
-    Every part's BSDF is wrapped in Mitsuba's ``twosided`` (:func:`spacefit.rendering.renderer.bsdf_dict`),
-    which names the BSDF it shades both sides with ``brdf_0``.
-    """
-    return f"{part}.bsdf.brdf_0.{field}.value"
 
 
 # A scene's view: what its scene values depend on besides the free parameters and the shared
@@ -85,9 +78,9 @@ def view_values_fn(assembly: Assembly, names: Sequence[str]) -> Callable[[Array,
             if name == "sun.irradiance_w_m2":
                 out["sun.irradiance.value"] = jnp.full(3, x[i])
             elif name.startswith("parts."):
-                part = name.split(".")[1]
-                for field in parameter(name).bsdf_fields:
-                    out[bsdf_key(part, field)] = jnp.full(3, x[i]) if field == "reflectance" else x[i]
+                _, part, field = name.split(".")
+                for key, write in material_keys(part, assembly.materials[part], field):
+                    out[key] = write(x[i])
         return out
 
     return values_of

@@ -15,7 +15,6 @@ wrinkles as specified, not as a mesh of some spacing would sample them.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +22,8 @@ import numpy as np
 from spacefit.errors import InputError
 from spacefit.geometry.frames import CameraFrame, Intrinsics
 from spacefit.geometry.wm import wm_rms_slope
-from spacefit.materials import Conductor, Material, Mirror
+from spacefit.materials import Material
+from spacefit.materials.conductor import effective_alpha
 from spacefit.scene.sections import WrinkleSettings
 
 
@@ -46,21 +46,11 @@ class LodChoice:
     reason: str
 
 
-def effective_alpha(alpha0: float, slope_rms: float) -> float:
-    """Roughness of a flat surface whose microfacets are tilted by wrinkles of rms slope ``slope_rms``."""
-    return math.sqrt(alpha0**2 + 2.0 * slope_rms**2)
-
-
 def effective_material(material: Material, slope_rms: float) -> Material | None:
-    """The part's material widened by the wrinkles' slopes; None if that exceeds GGX's alpha <= 1."""
-    if isinstance(material, Mirror):
-        material = Conductor(material.eta, material.k, 1e-4, 1e-4, "beckmann")
-    if not isinstance(material, Conductor):
-        return None
-    ax, ay = effective_alpha(material.alpha_x, slope_rms), effective_alpha(material.alpha_y, slope_rms)
-    if max(ax, ay) > 1.0:
-        return None
-    return Conductor(material.eta, material.k, ax, ay, "beckmann")
+    """The part's material widened by the wrinkles' slopes (its model's rule,
+    :meth:`~spacefit.materials.model.MaterialModel.effective`); None where it has none (a conductor's
+    alpha would exceed 1, or a model without one)."""
+    return material.effective(slope_rms)
 
 
 def choose_model(
@@ -71,7 +61,7 @@ def choose_model(
     footprint = distance * intrinsics.pixel_pitch / intrinsics.focal_length
     slope = float(wm_rms_slope(w.D, w.G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls))
     effective = effective_material(material, slope)
-    alpha = None if effective is None else float(effective.alpha_x)
+    alpha = getattr(effective, "alpha_x", None)  # a conductor's widened roughness; None for another model
     ratio = footprint / w.L
     if w.model == "geometry":
         model, reason = "geometry", "forced by wrinkles.model"

@@ -26,8 +26,8 @@ from spacefit.scene.parameters import PARAMETERS, VERTICAL_SUN, is_image, scene_
 from spacefit.scene.sections import SECTIONS, PartSettings, SceneLike, check_pitch_with_fov, unknown_part
 
 Overrides = Mapping[str, Any] | Sequence[str] | str
-# The keys of a part table besides its material's own values.
-PART_KEYS = ("material", "file", "alpha")
+# The keys of a part table besides its material's own values and the models' ties (``alpha``).
+PART_KEYS = ("material", "file")
 
 
 def toml_value(raw: str) -> Any:
@@ -113,9 +113,11 @@ def section_keys(section: str) -> list[str]:
 
 
 def part_keys(part: PartSettings | None) -> list[str]:
-    """The keys valid in a part's table: ``material``, ``file``, ``alpha`` and its material's values."""
+    """The keys valid in a part's table: ``material``, ``file``, the models' ties (``alpha``) and its
+    material's values (any registered model's for a new part)."""
     models = [type(part.material)] if part is not None else list(MODELS.values())
-    return list(dict.fromkeys([*PART_KEYS, *(f.name for m in models for f in dataclasses.fields(m))]))
+    ties = [t for m in MODELS.values() for t in m.ties]
+    return list(dict.fromkeys([*PART_KEYS, *ties, *(f.name for m in models for f in dataclasses.fields(m))]))
 
 
 def unknown_key(path: Sequence[str], parts: Sequence[str]) -> InputError:

@@ -4,8 +4,10 @@ Each :class:`Parameter` is one entry of :data:`PARAMETERS` carrying everything a
 pattern, unit, valid range (:class:`Bounds`), how to read its value from a scene and which
 scene-file keys it sets (its getter and setter), its groups (:data:`GROUPS`: moves vertices, a
 nuisance, image-space, one per observation, set jointly with others), its finite-difference step
-(or 0 for forward-mode AD), the scene-file fields it replaces and, for materials, the Mitsuba BSDF
-fields it sets. The group tuples (:data:`GEOMETRY`, :data:`ATTITUDE`, :data:`NUISANCES`, ...) are
+(or 0 for forward-mode AD), the scene-file fields it replaces and, for materials, the models that
+have it. The material entries (``parts.P.<field>``) are derived from the registered material
+models' fields (:mod:`spacefit.materials.registry`), so a model registered later, by a test's own
+module, is fittable by name; :data:`PARAMETERS` reads them live. The group tuples (:data:`GEOMETRY`, :data:`ATTITUDE`, :data:`NUISANCES`, ...) are
 derived from the entries, so a new parameter is added in one place. The CLI's help, the error
 messages and the documentation's table (:func:`parameter_table`) are generated from it. The module is
 plain Python and NumPy: the solver's coordinates on these ranges (bijections, in JAX) are the
@@ -43,9 +45,8 @@ import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_name_list, check_range
 from spacefit.geometry.wm import wm_G_from_rms, wm_rms
-from spacefit.materials import Conductor, Lambert, Material, Mirror
-from spacefit.materials.models import MIN_ALPHA
-
+from spacefit.materials import MODELS, Field, Material
+from spacefit.materials.registry import Derived
 from spacefit.scene.sections import SceneLike, WrinkleSettings, check_scene, unknown_part
 
 # A scene's value of parameter ``name`` (its full name, ``parts.panels.kd``).
@@ -94,10 +95,8 @@ class Bounds:
         return f"({self.lo:g}, {self.hi:g})"
 
 
-UNIT = Bounds(0.0, 1.0)
 POSITIVE = Bounds(0.0)
 WHOLE_LINE = Bounds(-math.inf)
-ROUGHNESS = Bounds(MIN_ALPHA, 1.0)
 # The widest Gaussian PSF (sigma, px) a fit may try; its kernel reaches out to 5 sigma.
 PSF_SIGMA_MAX_PX = 4.0
 # Default start of the PSF width (px): 0, no blur, is outside its open range, and its derivative vanishes there.
@@ -122,8 +121,7 @@ class Parameter:
             set as a whole transform. Larger steps than usual: the columns' Monte Carlo noise falls
             as 1 / step (README), the truncation error of these smooth maps is small.
         relative_step: ``fd_step`` is relative to the parameter's value.
-        materials: for ``parts.P.*``, the material types that have it (grey values only).
-        bsdf_fields: for ``parts.P.*``, the Mitsuba BSDF fields it sets.
+        materials: for ``parts.P.*``, the material models that have it (grey values only).
         scene_fields: the scene-file fields it replaces (default: its own).
         scale: the size of a change that matters, in its unit, for a parameter whose value may be
             near 0 (angles, shifts): a standard error is judged against the larger of it and the
@@ -141,7 +139,6 @@ class Parameter:
     fd_step: float = 0.0
     relative_step: bool = False
     materials: tuple[type, ...] = ()
-    bsdf_fields: tuple[str, ...] = ()
     scene_fields: tuple[str, ...] = ()
     scale: float = 0.0
     label: str = ""
@@ -155,8 +152,7 @@ class Parameter:
         """Whether a part of this material has this parameter (grey, i.e. scalar, values only)."""
         if not isinstance(material, self.materials):
             return False
-        value = getattr(material, "alpha_x" if self.field == "alpha" else self.field)
-        return not isinstance(value, tuple)
+        return not isinstance(getattr(material, type(material).field(self.field).name), tuple)
 
 
 def rms_of(w: WrinkleSettings, D: Any, G: Any) -> Any:
@@ -203,7 +199,7 @@ def _own_key(scene: SceneLike, name: str, values: Mapping[str, float]) -> dict[s
 def _material_value(scene: SceneLike, name: str) -> float:
     _, part, field = name.split(".")
     m = scene.parts[part].material
-    return m.alpha_x if field == "alpha" else getattr(m, field)
+    return getattr(m, type(m).field(field).name)
 
 
 def _constant(value: float) -> Getter:
@@ -262,28 +258,38 @@ def _components(
                  for n, axis in zip(names, "xyz"))
 
 
-_CONDUCTORS = (Conductor, Mirror)
+def _material_entry(name: str, f: Field, doc: str, label: str, tied: tuple[str, ...]) -> Parameter:
+    """The entry ``parts.P.<name>`` of a field (or a tie of ``tied`` fields) of the registered models."""
+    models = tuple(m for m in MODELS.values() if name in m.ties or any(g.name == name for g in m.fields))
+    grey = " (grey)" if f.spectral else ""
+    return Parameter(f"parts.P.{name}", f.unit, Bounds(f.lo, f.hi), doc + grey, _material_value, _own_key, materials=models,
+                     scene_fields=tied, label=label)
+
+
+def material_entries() -> dict[str, Parameter]:
+    """The ``parts.P.<field>`` entries of the registered material models' fields and ties, in
+    registration order (one entry per name: models sharing a field agree on it, as
+    :func:`spacefit.materials.register_material` checks)."""
+    out: dict[str, Parameter] = {}
+    for m in MODELS.values():
+        for f in m.fields:
+            out.setdefault(f"parts.P.{f.name}", _material_entry(f.name, f, f.doc, f.label, ()))
+        for tie, (tied, doc, label) in m.ties.items():
+            out.setdefault(f"parts.P.{tie}", _material_entry(tie, m.field(tie), doc, label, tied))
+    return out
+
+
 _WRINKLES = frozenset({"wrinkles", "moves-vertices"})
 _IMAGE = frozenset({"image", "nuisance", "per-observation"})
-PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
+_SCENE = (
     Parameter("wrinkles.D", "1", Bounds(2.0, 3.0), "W-M fractal dimension (eq. 2-1): vertex positions of every wrinkled part",
               _scene_field, _own_key, _WRINKLES, fd_step=0.02, label="fractal dimension D"),
     Parameter("wrinkles.G", "m", POSITIVE, "W-M height scale (eq. 2-1): vertex positions of every wrinkled part",
               _scene_field, _own_key, _WRINKLES, fd_step=0.01, relative_step=True, label="height scale G"),
     Parameter("wrinkles.rms_m", "m", POSITIVE, "rms height of the wrinkles: sets G at the current D",
               _get_rms, _set_rms, _WRINKLES, fd_step=0.03, relative_step=True, scene_fields=("G",), label="rms height"),
-    Parameter("parts.P.alpha_x", "1", ROUGHNESS, "GGX roughness along the part's tangent axis", _material_value, _own_key,
-              materials=(Conductor,), bsdf_fields=("alpha_u",), label="roughness alpha_x"),
-    Parameter("parts.P.alpha_y", "1", ROUGHNESS, "GGX roughness across the part's tangent axis", _material_value, _own_key,
-              materials=(Conductor,), bsdf_fields=("alpha_v",), label="roughness alpha_y"),
-    Parameter("parts.P.alpha", "1", ROUGHNESS, "both roughnesses, tied (isotropic)", _material_value, _own_key,
-              materials=(Conductor,), bsdf_fields=("alpha_u", "alpha_v"), scene_fields=("alpha_x", "alpha_y"), label="roughness alpha"),
-    Parameter("parts.P.eta", "1", POSITIVE, "real part of the conductor's refractive index (grey)", _material_value, _own_key,
-              materials=_CONDUCTORS, bsdf_fields=("eta",), label="refractive index eta"),
-    Parameter("parts.P.k", "1", POSITIVE, "imaginary part of the conductor's refractive index (grey)", _material_value, _own_key,
-              materials=_CONDUCTORS, bsdf_fields=("k",), label="extinction coefficient k"),
-    Parameter("parts.P.kd", "1", UNIT, "Lambert albedo (grey)", _material_value, _own_key,
-              materials=(Lambert,), bsdf_fields=("reflectance",), label="albedo kd"),
+)
+_OTHERS = (
     Parameter("sun.irradiance_w_m2", "W m^-2", POSITIVE, "the sun's irradiance on a surface facing it", _scene_field, _own_key,
               label="sun's irradiance"),
     *_sun_angles(("sun.elevation_deg", "sun.azimuth_deg"),
@@ -309,7 +315,9 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
                 f"sub-pixel shift of the image towards +{axis} ({where}), by a Fourier phase (fit only; default 0)",
                 _constant(0.0), _not_a_scene_value, _IMAGE, scale=0.1, label=f"image shift {axis}")
       for axis, where in (("x", "columns, rightwards"), ("y", "rows, downwards"))),
-)}
+)
+# Read live: the material entries are the registered models' (:func:`material_entries`).
+PARAMETERS: Mapping[str, Parameter] = Derived(lambda: {p.pattern: p for p in (*_SCENE, *material_entries().values(), *_OTHERS)})
 
 
 def group(name: str) -> tuple[str, ...]:

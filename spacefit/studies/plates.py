@@ -5,7 +5,7 @@ spacefit material. The irradiance at an observer at distance d is
 
     E = E_sun / d^2 sum_k A_k f_k(wi, wo) |n_k . wi| |n_k . wo|,
 
-f_k the plate's BRDF (:func:`spacefit.materials.brdf.brdf_value`, Mitsuba's evaluation, both sides
+f_k the plate's BRDF (:func:`spacefit.materials.brdf.brdf`, Mitsuba's evaluation, both sides
 alike as the renderer's ``twosided``, 0 where sun and observer are on opposite sides; or a measured
 table's, :class:`~spacefit.fitting.brdf_table.TabulatedBRDF`), wi and wo the
 directions towards the sun and the observer: the renderer's integrated irradiance of the same
@@ -35,8 +35,8 @@ from spacefit.fitting.brdf_table import PARAMETER_BOUNDS, TabulatedBRDF
 from spacefit.fitting.params import Bijection
 from spacefit.fitting.tabular import TableFit, fit_table
 from spacefit.geometry.frames import attitude_matrix
-from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material
-from spacefit.materials.brdf import brdf, brdf_value
+from spacefit.materials import Material, MaterialModel
+from spacefit.materials.brdf import brdf
 from spacefit.materials.registry import with_material_values
 from spacefit.precision import float64
 from spacefit.studies.observing import LN_PER_MAGNITUDE, LightCurveObservations, irradiance_of, magnitude_of
@@ -55,8 +55,11 @@ class Plate:
 
     def __post_init__(self) -> None:
         check_type("name", self.name, str, "a string")
-        check_type(f"{self.name}.material", self.material, tuple(FIELDS), "an sf.Lambert, sf.Conductor, sf.DiffuseConductor or "
-                   "sf.TabulatedBRDF (a Mirror's BRDF is a delta function: never lit towards an observer by a point sun)")
+        what = ("an sf.Lambert, sf.Conductor, sf.DiffuseConductor, sf.OrenNayar (a material model with a BRDF) or sf.TabulatedBRDF "
+                "(a Mirror's BRDF is a delta function: never lit towards an observer by a point sun)")
+        check_type(f"{self.name}.material", self.material, (MaterialModel, TabulatedBRDF), what)
+        if isinstance(self.material, MaterialModel) and self.material.delta:
+            raise InputError(f"`{self.name}.material` must be {what}, got {self.material!r}.")
         check_range(f"{self.name}.area_m2", self.area_m2, 0.0, lo_open=True, unit="m^2")
         n = check_vector(f"{self.name}.normal", self.normal)
         if np.linalg.norm(n) == 0:
@@ -82,10 +85,15 @@ def _grey(plate: Plate, name: str) -> float:
     return float(value)
 
 
-FIELDS = {Lambert: ("kd",), Conductor: ("eta", "k", "alpha_x", "alpha_y"), DiffuseConductor: ("kd", "eta", "k", "alpha_x", "alpha_y"),
-          TabulatedBRDF: ("scale",)}
-# The fitted values' ranges: the materials' own, and a measured table's factor.
-BOUNDS = {**PARAMETER_BOUNDS, "scale": Bijection(0.0, 1e3)}
+def _fields(material: Material | TabulatedBRDF) -> tuple[str, ...]:
+    """The names a plate's material may free: its model's fields and ties, or a measured table's ``scale``."""
+    if isinstance(material, TabulatedBRDF):
+        return ("scale",)
+    return (*(f.name for f in material.fields), *material.ties)
+
+
+# A measured table's factor's range; a material's fields' are its model's (PARAMETER_BOUNDS).
+SCALE_BOUNDS = Bijection(0.0, 1e3)
 # The target's attitude angles a fit may free ("target.attitude_x_deg"), and their range (deg).
 TARGET = "target"
 ATTITUDE = ("attitude_x_deg", "attitude_y_deg", "attitude_z_deg")
@@ -96,13 +104,7 @@ def _plate_brdf(plate: Plate, wi: jax.Array, wo: jax.Array, values: Mapping[str,
     """The plate's BRDF with some of its material's values replaced (by field name; JAX-traceable)."""
     if isinstance(plate.material, TabulatedBRDF):
         return plate.material.evaluate(wi, wo, values.get("scale"))
-    if not values:
-        return brdf(plate.material, wi, wo)
-    fields = {f: values[f] if f in values else _grey(plate, f) for f in FIELDS[type(plate.material)]}
-    if isinstance(plate.material, Lambert):
-        return brdf_value(wi, wo, kd=fields["kd"])
-    return brdf_value(wi, wo, kd=fields.get("kd"), eta=fields["eta"], k=fields["k"], alpha_x=fields["alpha_x"],
-                      alpha_y=fields["alpha_y"], distribution=plate.material.distribution)
+    return brdf(plate.material, wi, wo, values)
 
 
 @float64
@@ -148,6 +150,12 @@ def _check_observations(observations: object) -> None:
     check_type("observations", observations, LightCurveObservations, "an sf.LightCurveObservations (sf.read_light_curve)")
 
 
+def _tied(material: Material | TabulatedBRDF, field: str) -> tuple[str, ...]:
+    """The fields a free name sets: a tie's (``alpha``: both roughnesses), else itself."""
+    ties = getattr(material, "ties", {})
+    return ties[field][0] if field in ties else (field,)
+
+
 def _split(name: str, plates: Sequence[Plate]) -> tuple[str, str]:
     plate, _, field = name.partition(".")
     check_choice("free", plate, [TARGET, *(p.name for p in plates)])
@@ -155,7 +163,7 @@ def _split(name: str, plates: Sequence[Plate]) -> tuple[str, str]:
         check_choice(f"free ({TARGET})", field, ATTITUDE)
         return plate, field
     material = next(p for p in plates if p.name == plate).material
-    check_choice(f"free ({plate})", field, (*FIELDS[type(material)], *(("alpha",) if "alpha_x" in FIELDS[type(material)] else ())))
+    check_choice(f"free ({plate})", field, _fields(material))
     return plate, field
 
 
@@ -174,7 +182,8 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
     their given normals, started at 0, :func:`spacefit.geometry.frames.attitude_matrix`) to the
     observed magnitudes outside the Earth's shadow (module docstring), from the plates' values.
     ``bounds`` narrows a free value's range (``{"chassis.eta": (1.0, 100.0)}``: a dielectric's
-    physical range) within its own (:data:`BOUNDS`, attitudes +-180 deg); the start must lie inside."""
+    physical range) within its own (its model's field's, a table's scale :data:`SCALE_BOUNDS`, attitudes
+    +-180 deg); the start must lie inside."""
     plates = _check_plates(plates)
     _check_observations(observations)
     check_range("sun_irradiance_w_m2", sun_irradiance_w_m2, 0.0, lo_open=True, unit="W m^-2")
@@ -182,7 +191,7 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
     names = list(check_name_list("free", free))
     split = [_split(n, plates) for n in names]
     check_type("bounds", bounds, (Mapping, type(None)), "a dict of (low, high) ranges by free name, or None")
-    ranges = [BOUNDS[f] if p != TARGET else ATTITUDE_BOUNDS for p, f in split]
+    ranges = [ATTITUDE_BOUNDS if p == TARGET else SCALE_BOUNDS if f == "scale" else PARAMETER_BOUNDS[f] for p, f in split]
     for name, given in (bounds or {}).items():
         check_choice("bounds", name, names)
         i = names.index(name)
@@ -196,7 +205,7 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
         raise InputError(f"every observation of {observations.source} is in the Earth's shadow: there is nothing to fit.")
     obs = observations.subset(lit)
     plate_of = {p.name: p for p in plates}
-    start = [0.0 if p == TARGET else _grey(plate_of[p], "alpha_x" if f == "alpha" else f) for p, f in split]
+    start = [0.0 if p == TARGET else _grey(plate_of[p], _tied(plate_of[p].material, f)[0]) for p, f in split]
     for name, value, r in zip(names, start, ranges):
         if not r.lo < value < r.hi:
             raise InputError(f"`{name}` starts at {value:g}, outside its bounds ({r.lo:g}, {r.hi:g}): give the plates a value inside.")
@@ -206,7 +215,7 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
     def predict(x: jax.Array) -> jax.Array:
         values: dict[str, dict[str, jax.Array]] = {}
         for (plate, field), v in zip(split, x):
-            for f in (("alpha_x", "alpha_y") if field == "alpha" else (field,)):
+            for f in _tied(plate_of[plate].material, field):
                 values.setdefault(plate, {})[f] = v
         sun, observer = jnp.asarray(obs.sun), jnp.asarray(obs.observer)
         if TARGET in values:
