@@ -99,7 +99,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "default_scene": ("spacefit.scene.toml", "default_scene"),
     "load_scene": ("spacefit.scene.toml", "load_scene"),
     "PARAMETERS": ("spacefit.scene.parameters", "PARAMETERS"),
-    "Parameter": ("spacefit.scene.parameters", "Parameter"),
+    "Parameter": ("spacefit.scene.entries", "Parameter"),
     "available_parameters": ("spacefit.scene.parameters", "available"),
     "parameter_table": ("spacefit.scene.parameters", "parameter_table"),
     "Sensor": ("spacefit.sensor", "Sensor"),

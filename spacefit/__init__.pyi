@@ -70,8 +70,8 @@ from spacefit.rendering.exr import write_exr as write_exr
 from spacefit.rendering.renderer import PartImage as PartImage
 from spacefit.rendering.renderer import Renderer as Renderer
 from spacefit.rendering.renderer import render as render
+from spacefit.scene.entries import Parameter as Parameter
 from spacefit.scene.parameters import PARAMETERS as PARAMETERS
-from spacefit.scene.parameters import Parameter as Parameter
 from spacefit.scene.parameters import available as available_parameters
 from spacefit.scene.parameters import parameter_table as parameter_table
 from spacefit.scene.schema import Scene as Scene

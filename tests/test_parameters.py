@@ -13,10 +13,8 @@ import numpy as np
 import pytest
 
 import spacefit as sf
-from spacefit.scene.parameters import (
-    ATTITUDE, GEOMETRY, GROUPS, IMAGE, JOINT, MOVES_VERTICES, NUISANCES, PARAMETERS, PER_OBSERVATION, POSITION, ROLL,
-    SUN_ANGLES, check_value, parameter, scene_keys, scene_value, scene_with_values,
-)
+from spacefit.scene.parameters import ATTITUDE, GEOMETRY, IMAGE, JOINT, MOVES_VERTICES, NUISANCES, PARAMETERS, PER_OBSERVATION, POSITION, ROLL, SUN_ANGLES, check_value, parameter, scene_keys, scene_value, scene_with_values
+from spacefit.scene.entries import GROUPS
 
 ROOT = Path(__file__).resolve().parents[1]
 

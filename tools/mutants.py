@@ -166,7 +166,7 @@ MUTANTS = (
            "name = (key, spec.fd_steps, kind)", ("tests/test_pass.py::test_the_frames_of_a_pass_compile_once_not_once_per_frame",)),
     Mutant("logistic-inverse-width", "spacefit/fitting/params.py", "p = (x - self.lo) / (self.hi - self.lo)\n        return jnp.log(p)",
            "p = (x - self.lo) / self.hi\n        return jnp.log(p)", (PROPERTIES,)),
-    Mutant("sun-to-world-towards-the-sun", "spacefit/scene/parameters.py", 'return -xp.stack([xp.cos(el) * xp.cos(az)',
+    Mutant("sun-to-world-towards-the-sun", "spacefit/scene/conversions.py", 'return -xp.stack([xp.cos(el) * xp.cos(az)',
            'return xp.stack([xp.cos(el) * xp.cos(az)', (CONVENTIONS,)),
     # noise weights and the uncertainty
     Mutant("residual-over-sigma-squared", "spacefit/fitting/losses.py", "fixed = jnp.asarray(1.0 / s,",

@@ -3,7 +3,7 @@
 What each name means (range, unit, step, what it sets) is the registry's,
 :mod:`spacefit.scene.parameters`. A solver works on an unconstrained vector ``u``; each free
 parameter is ``x = b.forward(u)`` with a :class:`Bijection` ``b`` onto the open interval of its
-registered :class:`~spacefit.scene.parameters.Bounds`, so a solver never sees a clipped or invalid
+registered :class:`~spacefit.scene.entries.Bounds`, so a solver never sees a clipped or invalid
 value. Per observation k of a joint fit, :meth:`FreeParameters.rendered` says which free values its
 renderer sees (its own ``target.attitude_z_deg@k`` in place of a shared one).
 """
@@ -21,7 +21,8 @@ from jaxtyping import Array, Float
 
 from spacefit.errors import InputError
 from spacefit.scene.schema import Scene
-from spacefit.scene.parameters import Bounds, check_names, fd_step, is_image, observation_of, parameter
+from spacefit.scene.parameters import check_names, fd_step, is_image, observation_of, parameter
+from spacefit.scene.entries import Bounds
 
 
 @dataclass(frozen=True)

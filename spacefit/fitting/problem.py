@@ -36,7 +36,8 @@ from spacefit.scene.schema import Scene
 from spacefit.scene.sections import FILTER_RADIUS_PX, check_scene
 from spacefit.sensor import Sensor, check_flat, psf_rms_px, read_sensor_file, saturated_mask
 from spacefit.units import DN_UNIT, RADIANCE_UNIT
-from spacefit.scene.parameters import GEOMETRY, G_of, observation_of, rms_of, scene_value, scene_with_values
+from spacefit.scene.parameters import GEOMETRY, observation_of, scene_value, scene_with_values
+from spacefit.scene.conversions import G_of, rms_of
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
 # Seed offset of the second, independent Jacobian used for the standard errors.

@@ -28,7 +28,7 @@ from spacefit.scene.parameters import parameter
 # |correlation| above which two parameters are reported as not separately determined.
 CORRELATION_WARN = 0.95
 # Standard error, relative to the larger of the value and the parameter's own scale
-# (:attr:`~spacefit.scene.parameters.Parameter.scale`), above which it is reported as poorly determined.
+# (:attr:`~spacefit.scene.entries.Parameter.scale`), above which it is reported as poorly determined.
 REL_STDERR_WARN = 0.2
 
 

@@ -19,7 +19,8 @@ from jaxtyping import Array
 from spacefit.rendering.materials import material_keys
 from spacefit.scene.assembly import Assembly
 from spacefit.geometry.frames import CameraFrame, attitude_matrix
-from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, ROLL, SUN_ANGLES, G_of, scene_value, sun_direction
+from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, ROLL, SUN_ANGLES, scene_value
+from spacefit.scene.conversions import G_of, sun_direction
 
 SceneValuesFn = Callable[[Array], dict[str, Array]]
 

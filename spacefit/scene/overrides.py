@@ -22,7 +22,8 @@ import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_direction, check_path, check_vector, closest, quote
 from spacefit.materials import MODELS, make_material, with_material_values
-from spacefit.scene.parameters import PARAMETERS, VERTICAL_SUN, is_image, scene_keys, scene_with_values, sun_angles_deg
+from spacefit.scene.parameters import PARAMETERS, is_image, scene_keys, scene_with_values
+from spacefit.scene.conversions import VERTICAL_SUN, sun_angles_deg
 from spacefit.scene.sections import SECTIONS, PartSettings, SceneLike, check_pitch_with_fov, unknown_part
 
 Overrides = Mapping[str, Any] | Sequence[str] | str

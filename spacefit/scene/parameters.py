@@ -1,7 +1,7 @@
 """The registry of free parameters, as data: one home for every fittable (and sweepable) scene value.
 
-Each :class:`Parameter` is one entry of :data:`PARAMETERS` carrying everything about it: its name
-pattern, unit, valid range (:class:`Bounds`), how to read its value from a scene and which
+Each :class:`~spacefit.scene.entries.Parameter` is one entry of :data:`PARAMETERS` carrying everything about it: its name
+pattern, unit, valid range (:class:`~spacefit.scene.entries.Bounds`), how to read its value from a scene and which
 scene-file keys it sets (its getter and setter), its groups (:data:`GROUPS`: moves vertices, a
 nuisance, image-space, one per observation, set jointly with others), its finite-difference step
 (or 0 for forward-mode AD), the scene-file fields it replaces and, for materials, the models that
@@ -30,160 +30,28 @@ shared or their scene's value), ``image.scale`` one shared by all (:func:`observ
 
 ``wrinkles.rms_m`` is the expected rms height of eq. 2-1 (:func:`spacefit.geometry.wm.wm_rms`). In an
 image D and G trade off along a valley of nearly constant rms height; (D, rms) are the better
-determined coordinates (:func:`rms_of`, :func:`G_of` are the one place the two are converted).
+determined coordinates (:mod:`spacefit.scene.conversions` is the one place the two are converted).
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
-from types import ModuleType
+from collections.abc import Mapping, Sequence
 from typing import Any
 
-import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_name_list, check_range
-from spacefit.geometry.wm import wm_G_from_rms, wm_rms
 from spacefit.materials import MODELS, Field, Material
 from spacefit.materials.registry import Derived
-from spacefit.scene.sections import SceneLike, WrinkleSettings, check_scene, unknown_part
-
-# A scene's value of parameter ``name`` (its full name, ``parts.panels.kd``).
-Getter = Callable[[SceneLike, str], float]
-# The scene-file keys (and their values) that set parameter ``name`` to ``values[name]``, given every
-# value being set (a joint scene value takes its siblings from them, or from the scene).
-Setter = Callable[[SceneLike, str, Mapping[str, float]], dict[str, Any]]
-
-# The groups a parameter may belong to.
-GROUPS = {
-    "wrinkles": "the W-M height field's parameters (D, G, rms height)",
-    "sun-angles": "the direction towards the sun",
-    "attitude": "the target's attitude angles",
-    "position": "the target's position",
-    "roll": "the camera's roll",
-    "moves-vertices": "moves vertices (or the camera about them): a render needs the whole film, not the target's window",
-    "image": "a fit-only nuisance of the image formation, applied to the render in JAX",
-    "nuisance": "a fit's nuisance parameter, reported apart from the materials",
-    "per-observation": "a joint fit may free it once per observation (name@k)",
-    "joint": "sets one scene value together with the others of its group (they may be freed together)",
-}
+from spacefit.scene.conversions import G_of, rms_of, sun_angles_deg, sun_direction
+from spacefit.scene.entries import GROUPS, POSITIVE, WHOLE_LINE, Bounds, Getter, Parameter
+from spacefit.scene.sections import SceneLike, check_scene, unknown_part
 
 
-@dataclass(frozen=True)
-class Bounds:
-    """A parameter's valid range: the open interval (lo, hi) a fit moves in (-inf / inf: unbounded);
-    a scene value may lie on a finite bound."""
 
-    lo: float
-    hi: float = math.inf
-
-    def contains(self, x: float) -> bool:
-        """Whether x is strictly inside the interval (a valid start)."""
-        return bool(np.isfinite(x) and self.lo < x < self.hi)
-
-    def at_bound(self, x: float, tolerance: float = 1e-3) -> str | None:
-        """"lower" or "upper" when x lies within ``tolerance`` (a fraction of the width) of a bound
-        of a bounded interval, where the logistic saturates and the parameter stops moving."""
-        if math.isinf(self.lo) or math.isinf(self.hi):
-            return None
-        p = (x - self.lo) / (self.hi - self.lo)
-        return "lower" if p < tolerance else "upper" if p > 1.0 - tolerance else None
-
-    def describe(self) -> str:
-        """The interval as text, e.g. ``(0, 1)``."""
-        return f"({self.lo:g}, {self.hi:g})"
-
-
-POSITIVE = Bounds(0.0)
-WHOLE_LINE = Bounds(-math.inf)
 # The widest Gaussian PSF (sigma, px) a fit may try; its kernel reaches out to 5 sigma.
 PSF_SIGMA_MAX_PX = 4.0
 # Default start of the PSF width (px): 0, no blur, is outside its open range, and its derivative vanishes there.
 PSF_SIGMA_START_PX = 0.5
-
-
-@dataclass(frozen=True)
-class Parameter:
-    """One kind of free parameter.
-
-    Attributes:
-        pattern: its name, ``P`` standing for a part name (``parts.P.alpha_x``).
-        unit: SI unit ("1" for dimensionless; degrees at the user-facing edge, as in the scene file).
-        bounds: its valid range (the solver's coordinate maps the real line onto its inside).
-        doc: what it sets, in words.
-        get: its value in a scene (its fixed value, or a fit's default start).
-        set: the scene-file keys that set it.
-        groups: the :data:`GROUPS` it belongs to.
-        fd_step: central finite-difference step of its Jacobian column (0: a forward-mode AD render).
-            Geometry columns come from finite differences with common random numbers (the AD
-            integrators' derivatives in vertex positions are biased, README); the sun's frame is
-            set as a whole transform. Larger steps than usual: the columns' Monte Carlo noise falls
-            as 1 / step (README), the truncation error of these smooth maps is small.
-        relative_step: ``fd_step`` is relative to the parameter's value.
-        materials: for ``parts.P.*``, the material models that have it (grey values only).
-        scene_fields: the scene-file fields it replaces (default: its own).
-        scale: the size of a change that matters, in its unit, for a parameter whose value may be
-            near 0 (angles, shifts): a standard error is judged against the larger of it and the
-            value ("poorly determined", :mod:`spacefit.fitting.uncertainty`); 0: against the value.
-        label: what it is in a few words, for axes and tables (:func:`label`; without the part or unit).
-    """
-
-    pattern: str
-    unit: str
-    bounds: Bounds
-    doc: str
-    get: Getter
-    set: Setter
-    groups: frozenset[str] = frozenset()
-    fd_step: float = 0.0
-    relative_step: bool = False
-    materials: tuple[type, ...] = ()
-    scene_fields: tuple[str, ...] = ()
-    scale: float = 0.0
-    label: str = ""
-
-    @property
-    def field(self) -> str:
-        """The last component of the name (``alpha_x``)."""
-        return self.pattern.rsplit(".", 1)[-1]
-
-    def applies_to(self, material: Material) -> bool:
-        """Whether a part of this material has this parameter (grey, i.e. scalar, values only)."""
-        if not isinstance(material, self.materials):
-            return False
-        return not isinstance(getattr(material, type(material).field(self.field).name), tuple)
-
-
-def rms_of(w: WrinkleSettings, D: Any, G: Any) -> Any:
-    """Expected rms height (m) of the wrinkles ``w`` at (D, G) (floats, NumPy or JAX arrays)."""
-    return wm_rms(D, G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)
-
-
-def G_of(w: WrinkleSettings, D: Any, rms: Any) -> Any:
-    """The height scale G (m) that gives the wrinkles ``w`` an rms height ``rms`` (m) at D."""
-    return wm_G_from_rms(D, rms, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)
-
-
-# A sun at the zenith or the nadir (the default sun is at the zenith) has no azimuth of its own: it
-# reads STATED_AZIMUTH_DEG (world +x), and setting its elevation alone turns it towards +x.
-STATED_AZIMUTH_DEG = 0.0
-VERTICAL_SUN = 1e-9
-
-
-def sun_angles_deg(direction: tuple[float, float, float] | np.ndarray) -> tuple[float, float]:
-    """Elevation and azimuth (deg) of the direction towards the sun, from its direction of travel."""
-    towards = -np.asarray(direction, float) / np.linalg.norm(direction)
-    vertical = np.hypot(towards[0], towards[1]) < VERTICAL_SUN
-    azimuth = STATED_AZIMUTH_DEG if vertical else math.degrees(math.atan2(towards[1], towards[0]))
-    return math.degrees(math.asin(float(np.clip(towards[2], -1.0, 1.0)))), azimuth
-
-
-def sun_direction(elevation_deg: Any, azimuth_deg: Any, xp: ModuleType = np) -> Any:
-    """The sun's direction of travel from the elevation and azimuth (deg) of the direction towards
-    it, in the array module ``xp`` (NumPy, or ``jax.numpy`` to differentiate it)."""
-    el, az = xp.deg2rad(elevation_deg), xp.deg2rad(azimuth_deg)
-    return -xp.stack([xp.cos(el) * xp.cos(az), xp.cos(el) * xp.sin(az), xp.sin(el)])
 
 
 # Getters and setters shared by several entries.

@@ -50,7 +50,8 @@ from spacefit.errors import (InputError, check_array, check_choice, check_count,
 from spacefit.executors import Cluster, cluster_of
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.scene.assembly import assemble
-from spacefit.scene.parameters import scene_value, sun_angles_deg, sun_direction
+from spacefit.scene.parameters import scene_value
+from spacefit.scene.conversions import sun_angles_deg, sun_direction
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene, deg2rad
 from spacefit.studies.sensitivity import mean_and_error
