@@ -45,7 +45,7 @@ REFERENCE_SEED = 7
 from spacefit.rendering.renderer import Renderer  # noqa: E402
 from spacefit.rendering.backend import dr  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
-from spacefit.scene.sections import takes_sample_count  # noqa: E402
+from spacefit.scene.sampling import takes_sample_count  # noqa: E402
 from spacefit.scene.toml import load_scene  # noqa: E402
 from spacefit.studies.costs import pareto_front  # noqa: E402
 

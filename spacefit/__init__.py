@@ -86,7 +86,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "render_function": ("spacefit.rendering.derivatives", "render_function"),
     "read_exr": ("spacefit.rendering.exr", "read_exr"),
     "write_exr": ("spacefit.rendering.exr", "write_exr"),
-    "PartImage": ("spacefit.rendering.renderer", "PartImage"),
+    "PartImage": ("spacefit.rendering.parts", "PartImage"),
     "Renderer": ("spacefit.rendering.renderer", "Renderer"),
     "render": ("spacefit.rendering.renderer", "render"),
     "Scene": ("spacefit.scene.schema", "Scene"),

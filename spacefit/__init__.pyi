@@ -67,7 +67,7 @@ from spacefit.rendering.derivatives import jacobian as jacobian
 from spacefit.rendering.derivatives import render_function as render_function
 from spacefit.rendering.exr import read_exr as read_exr
 from spacefit.rendering.exr import write_exr as write_exr
-from spacefit.rendering.renderer import PartImage as PartImage
+from spacefit.rendering.parts import PartImage as PartImage
 from spacefit.rendering.renderer import Renderer as Renderer
 from spacefit.rendering.renderer import render as render
 from spacefit.scene.entries import Parameter as Parameter

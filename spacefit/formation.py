@@ -31,10 +31,8 @@ from jaxtyping import Array, Bool, Float
 from spacefit.errors import InputError, check_array, check_count, check_range, check_type
 from spacefit.geometry.distortion import Distortion, undistort
 from spacefit.geometry.frames import Intrinsics
-from spacefit.sensor import (
-    Sensor, airy_transfer, check_flat, diffraction_cutoff_px, electrons_per_radiance, psf_reach_px, quantise, target_pixels,
-    warn_if_saturated,
-)
+from spacefit.sensor import Sensor, check_flat, electrons_per_radiance, quantise, target_pixels, warn_if_saturated
+from spacefit.psf import airy_transfer, diffraction_cutoff_px, psf_reach_px
 
 
 def _check_image(image: Any, intrinsics: Intrinsics, name: str = "image") -> None:
@@ -78,7 +76,7 @@ def fourier_filter(image: Float[Array, "h w c"], transfer: Callable[[np.ndarray,
 
 def psf_transfer(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> Callable[[np.ndarray, np.ndarray], Array]:
     """The PSF's transfer function ``(fy, fx) -> T`` (cycles per px) at one wavelength: the
-    continuous Gaussian's times, with diffraction, the circular pupil's MTF (:func:`~spacefit.sensor.airy_transfer`)."""
+    continuous Gaussian's times, with diffraction, the circular pupil's MTF (:func:`~spacefit.psf.airy_transfer`)."""
     cutoff = diffraction_cutoff_px(sensor, intrinsics, wavelength_m)  # D / lambda in cycles per px
 
     def transfer(fy: np.ndarray, fx: np.ndarray) -> Array:

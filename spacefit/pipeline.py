@@ -26,7 +26,8 @@ from spacefit.output import prepare_output, staged_output, versions, write_json,
 from spacefit.progress import Progress
 from spacefit.rendering.exr import write_exr
 from spacefit.rendering.png import write_png
-from spacefit.rendering.renderer import PartImage, Renderer, errors_only, kernel_log
+from spacefit.rendering.renderer import Renderer, errors_only, kernel_log
+from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import Assembly, assemble, fold_notes
 from spacefit.scene.overrides import parse_override
 from spacefit.scene.parameters import scene_keys

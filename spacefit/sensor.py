@@ -31,9 +31,9 @@ numbers (DN) in this order:
    integer and the ADC's range [0, 2^bits - 1].
 
 This module is NumPy only (reading a FITS file needs no JAX): the :class:`Sensor`, its units, the
-per-pixel factors of steps 1 and 2, the Airy pattern and its transfer function, the PSF's reach and
-width, the flat field's check, quantising and :func:`saturated_mask`, which marks the pixels where
-the linear model does not hold. The image formation itself is in JAX, in
+per-pixel factors of steps 1 and 2, the flat field's check, quantising and :func:`saturated_mask`, which marks the pixels where
+the linear model does not hold. The PSF of step 3 (the Airy pattern, its transfer function, the PSF's
+reach and width) is :mod:`spacefit.psf`'s. The image formation itself is in JAX, in
 :mod:`spacefit.formation`: ``expected_dn`` (steps 1 to 3 in DN, the noise-free mean, linear
 in the radiance, which a fit differentiates), ``noise_variance_dn`` (the Poisson-Gaussian variance of
 step 4, Janesick 2007, "Photon Transfer", ch. 2) and ``observe`` (a simulated exposure).
@@ -52,7 +52,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
-from scipy import constants, optimize, special
+from scipy import constants
 
 from spacefit.errors import InputError, InputTypeError, check_array, check_choice, check_flag, check_path, check_range, check_type, quote
 from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
@@ -60,12 +60,6 @@ from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
 if TYPE_CHECKING:
     from jaxtyping import Bool, Float
 
-AIRY_FIRST_ZERO = 3.8317059702075125
-"""First zero of the Bessel function J1: the Airy pattern's first dark ring is at x = pi D theta / lambda = 3.8317, theta = 1.21967 lambda / D."""
-PSF_ENERGY = 0.99
-"""The Airy kernel reaches out to the radius that encloses this fraction of the energy (then it is normalised)."""
-GAUSSIAN_RADIUS_SIGMA = 5.0
-"""The Gaussian kernel reaches out to this many sigma (2.9e-7 of its energy lies beyond, per axis)."""
 SATURATION_MARGIN_READ_SIGMA = 3.0
 """A pixel within this many read-noise sigmas of the full well's DN counts as saturated."""
 SATURATED_WARNING_FRACTION = 1e-3
@@ -311,64 +305,6 @@ def electrons_per_radiance(sensor: Sensor, intrinsics: Intrinsics, channels: int
         return np.repeat(per_dn * shading[..., None], channels, axis=-1)
     photon_energy = constants.h * constants.c / np.asarray(sensor.wavelengths(channels))
     return (sensor.quantum_efficiency * sensor.exposure_time_s * pixel_etendue(sensor, intrinsics))[..., None] / photon_energy
-
-
-def airy_psf(theta_rad: Float[np.ndarray, "..."], wavelength_m: float, aperture_diameter_m: float) -> Float[np.ndarray, "..."]:
-    """The Airy pattern of a circular aperture as a density over directions (sr^-1), integrating to 1.
-
-    ``(pi D^2 / (4 lambda^2)) [2 J1(x) / x]^2`` with ``x = pi D theta / lambda`` (small angles).
-    Its first zero is at theta = 1.21967 lambda / D. References: Airy (1835); Born & Wolf,
-    "Principles of Optics", section 8.5.2.
-    """
-    x = np.pi * aperture_diameter_m * np.abs(np.asarray(theta_rad, dtype=float)) / wavelength_m
-    safe = np.where(x == 0.0, 1.0, x)  # 2 J1(x) / x -> 1 as x -> 0
-    amplitude = np.where(x == 0.0, 1.0, 2.0 * special.j1(safe) / safe)
-    return np.pi * aperture_diameter_m**2 / (4.0 * wavelength_m**2) * amplitude**2
-
-
-def _airy_radius(fraction: float) -> float:
-    """x = pi D theta / lambda within which the Airy pattern holds ``fraction`` of its energy (1 - J0^2 - J1^2, Rayleigh 1881)."""
-    return optimize.brentq(lambda x: 1.0 - special.j0(x) ** 2 - special.j1(x) ** 2 - fraction, 1e-6, 1e6)
-
-
-def _airy_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> float:
-    """Pixels per unit of x = pi D theta / lambda (theta in radians, a pixel ``pitch / focal length``)."""
-    return wavelength_m / (np.pi * sensor.aperture_diameter_m * intrinsics.pixel_pitch / intrinsics.focal_length)
-
-
-def airy_transfer(rho: Float[np.ndarray, "..."]) -> Float[np.ndarray, "..."]:
-    """The MTF of a diffraction-limited circular pupil at ``rho`` = frequency / cut-off (D / lambda
-    cycles per radian): ``(2 / pi) (acos rho - rho sqrt(1 - rho^2))``, 0 beyond 1 (Goodman,
-    "Introduction to Fourier Optics", 3rd ed., eq. 6-32): the Fourier transform of :func:`airy_psf`."""
-    r = np.clip(np.abs(np.asarray(rho, dtype=float)), 0.0, 1.0)
-    return 2.0 / np.pi * (np.arccos(r) - r * np.sqrt(1.0 - r**2))
-
-
-def diffraction_cutoff_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> float:
-    """The circular pupil's cut-off frequency D / lambda in cycles per px at one wavelength: where
-    :func:`airy_transfer` reaches 0."""
-    return 1.0 / (np.pi * _airy_px(sensor, intrinsics, wavelength_m))
-
-
-def psf_reach_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> int:
-    """How far (px) the PSF reaches: 5 sigma of the Gaussian plus the radius holding 99 % of the Airy pattern's energy."""
-    airy = _airy_radius(PSF_ENERGY) * _airy_px(sensor, intrinsics, wavelength_m) if sensor.diffraction else 0.0
-    return math.ceil(GAUSSIAN_RADIUS_SIGMA * sensor.psf_sigma_px + airy)
-
-
-def psf_rms_px(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> float:
-    """The rms width (px, per axis) of the widest channel's PSF: sqrt(sigma^2 + a^2), a the Airy
-    pattern's within the radius X that holds 99 % of its energy: ``a^2 = X^2 (J1^2 - J0 J2) /
-    (2 (1 - J0^2 - J1^2))`` at X, in px (from the integral of x J1(x)^2, Watson 1944, 5.11)."""
-    widths = []
-    for wavelength in sensor.wavelengths(channels):
-        airy = 0.0
-        if sensor.diffraction:
-            x = _airy_radius(PSF_ENERGY)
-            j0, j1, j2 = (special.jv(n, x) for n in (0, 1, 2))
-            airy = _airy_px(sensor, intrinsics, wavelength) * x * math.sqrt((j1**2 - j0 * j2) / (2.0 * (1.0 - j0**2 - j1**2)))
-        widths.append(math.hypot(sensor.psf_sigma_px, airy))
-    return max(widths)
 
 
 def check_flat(flat: Any, shape: tuple[int, ...], where: str = "`flat`") -> np.ndarray:

@@ -92,7 +92,7 @@ def test_problem_spreads_render_noise_by_the_sensors_psf(tmp_path):
     from spacefit.fitting.problem import setup
     from spacefit.scene.assembly import assemble
     from spacefit.scene.sections import FILTER_RADIUS_PX
-    from spacefit.sensor import psf_rms_px
+    from spacefit.psf import psf_rms_px
 
     # 1e-5 rad a pixel: the default sensor's diffraction spreads over several pixels
     scene = sphere(tmp_path).with_values({"camera.focal_length_mm": 500.0, "camera.pixel_pitch_mm": 0.005})

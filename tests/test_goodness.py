@@ -18,7 +18,7 @@ from spacefit.fitting.goodness import MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_S
 from spacefit.fitting.loop import _affordable, verdict
 from spacefit.fitting.problem import setup
 from spacefit.scene.sections import MAX_SPP
-from spacefit.rendering.renderer import PartImage
+from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import assemble
 
 N = 40_000
@@ -243,7 +243,7 @@ def test_the_models_dn_is_the_observations_mean_never_below_the_bias():
 
 def test_a_verdict_render_the_machine_cannot_hold_takes_fewer_samples(monkeypatch):
     """The fit's result must not be lost to its verdict: a render the memory cannot hold is not asked for."""
-    monkeypatch.setattr("spacefit.rendering.renderer.available_memory_bytes", lambda: 2**30)  # 1 GiB
+    monkeypatch.setattr("spacefit.rendering.memory.available_memory_bytes", lambda: 2**30)  # 1 GiB
     film = SimpleNamespace(references=[np.zeros((256, 256, 3))], spp=(64,))  # 4.2e6 samples, 0.26 GiB at 64 bytes each
     assert _affordable(film, 2) and not _affordable(film, 4)
 

@@ -24,7 +24,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("spacefit.geometry",),
     ("spacefit.materials",),
     ("spacefit.scene", "spacefit.display", "spacefit.plotting"),
-    ("spacefit.sensor", "spacefit.formation"),
+    ("spacefit.sensor", "spacefit.psf", "spacefit.formation"),
     ("spacefit.rendering",),
     ("spacefit.imageio", "spacefit.cases"),
     ("spacefit.fitting",),

@@ -141,9 +141,9 @@ def test_export_stl_refuses_another_extension_and_existing_files(tmp_path, capsy
 
 def test_a_render_too_big_for_the_memory_is_refused_before_it_starts(plate_toml, tmp_path, capsys, monkeypatch):
     """The estimate (film and wavefront) against the memory available; here a machine with 1 GiB free."""
-    import spacefit.rendering.renderer as renderer
+    import spacefit.rendering.memory as memory
 
-    monkeypatch.setattr(renderer, "available_memory_bytes", lambda: 1 << 30)
+    monkeypatch.setattr(memory, "available_memory_bytes", lambda: 1 << 30)
     assert main(["render", str(plate_toml), "--out", str(tmp_path / "out"), "--set", "render.resolution=[4096, 4096]"]) == 2
     err = capsys.readouterr().err
     needs = float(err.split("needs about ")[1].split(" GiB")[0])
@@ -154,9 +154,9 @@ def test_a_render_too_big_for_the_memory_is_refused_before_it_starts(plate_toml,
 def test_a_fit_render_too_big_for_the_memory_is_refused_before_jax(plate_toml, monkeypatch):
     """A fit's renders are one wavefront (not split into passes): its samples count, naming `spp`
     (`fit --spp 1e8` failed inside JAX; 1e8 is now past render.spp's range, and this is within it)."""
-    import spacefit.rendering.renderer as renderer
+    import spacefit.rendering.memory as memory
 
-    monkeypatch.setattr(renderer, "available_memory_bytes", lambda: 1 << 28)
+    monkeypatch.setattr(memory, "available_memory_bytes", lambda: 1 << 28)
     scene = sf.load_scene(plate_toml)
     with pytest.raises(sf.InputError, match=r"16 x 16 px render at 65536 spp needs about 1\.0 GiB .* or `spp`"):
         sf.jacobian(scene, ["parts.plate.kd"], spp=65536)

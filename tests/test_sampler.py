@@ -9,7 +9,8 @@ import pytest
 
 import spacefit as sf
 from spacefit.rendering.renderer import pass_seeds
-from spacefit.scene.sections import RenderSettings, split_sample_count
+from spacefit.scene.sections import RenderSettings
+from spacefit.scene.sampling import split_sample_count
 
 SMALL = {"wrinkles.spacing_m": 0.1, "render.resolution": [64, 64], "camera.pixel_pitch_mm": 37.5, "render.spp": 4,
          "wrinkles.model": "geometry"}

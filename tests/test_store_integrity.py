@@ -181,9 +181,9 @@ def test_a_sweep_of_a_billion_points_is_refused_before_allocating(tmp_path, monk
     assert peak < 20e6, peak  # a list of the points alone would be gigabytes
     assert not store.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["sphere.obj"]
     # asked for, it is still refused where its index cannot fit in the memory
-    import spacefit.rendering.renderer as renderer
+    import spacefit.rendering.memory as memory
 
-    monkeypatch.setattr(renderer, "available_memory_bytes", lambda: 1 << 30)
+    monkeypatch.setattr(memory, "available_memory_bytes", lambda: 1 << 30)
     with pytest.raises(sf.InputError, match=r"1,000,000,000 points needs about .* GiB of memory for its index"):
         sf.sweep(scene, grid, store=store, quiet=True, allow_large=True)
     assert not store.exists()

@@ -77,7 +77,7 @@ MUTANTS = (
     Mutant("lock-start-time-in-ticks", "spacefit/locks.py", "return boot + ticks / os.sysconf(\"SC_CLK_TCK\")", "return boot + ticks",
            ("tests/test_locks.py::test_this_process_as_a_holder_is_what_psutil_reads_of_it",)),
     # a camera set the way a user thinks: the field kept across resolutions, an exposure at its fraction of full scale
-    Mutant("fov-pitch-ignores-the-resolution", "spacefit/scene/sections.py", "math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]",
+    Mutant("fov-pitch-ignores-the-resolution", "spacefit/scene/optics.py", "math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]",
            "math.tan(math.radians(camera.fov_deg) / 2.0) / 48", ("tests/test_camera.py",)),
     Mutant("exposure-counts-the-bias-as-signal", "spacefit/formation.py", "fraction * (sensor.saturation_dn - sensor.bias_dn) / level",
            "fraction * sensor.saturation_dn / level", ("tests/test_sensor.py",)),
@@ -241,7 +241,7 @@ MUTANTS = (
            ("tests/test_plots.py",)),
     Mutant("figures-never-crop", "spacefit/plotting.py", "return target_box(images) if crop else", "return None or",
            ("tests/test_plots.py",)),
-    Mutant("part-means-count-masked-nan", RENDERER, "counted = self.ids >= 0 if used is None else (self.ids >= 0) & np.asarray(used, dtype=bool)",
+    Mutant("part-means-count-masked-nan", "spacefit/rendering/parts.py", "counted = self.ids >= 0 if used is None else (self.ids >= 0) & np.asarray(used, dtype=bool)",
            "counted = self.ids >= 0",
            ("tests/test_api.py::test_part_image_and_table_match_the_parts_lit_pixels",)),
     Mutant("exact-zero-called-noise", SENSITIVITY, "return (self.d_mean_radiance == 0.0) & (self.d_mean_radiance_se == 0.0)",
@@ -300,7 +300,7 @@ MUTANTS = (
     Mutant("ended-fit-solved-again", "spacefit/fitting/loop.py", "    if ended is not None:\n", "    if False:\n",
            ("tests/test_interrupts.py::test_a_fit_killed_after_its_solve_resumes_to_the_same_report",)),
     # every error in the user's terms (issue 20): the camera's derived quantities, the far clip, the fit's seeds
-    Mutant("field-of-view-unchecked", "spacefit/scene/sections.py", "        if fov > MAX_FOV_DEG:", "        if fov > 180.0:",
+    Mutant("field-of-view-unchecked", "spacefit/scene/optics.py", "        if fov > MAX_FOV_DEG:", "        if fov > 180.0:",
            ("tests/test_reliability.py",)),
     Mutant("mitsuba-default-far-clip", RENDERER, '        "far_clip": FAR_CLIP_M,\n', "", ("tests/test_reliability.py",)),
     Mutant("negative-fit-seed-passes", "spacefit/rendering/derivatives.py",
@@ -340,7 +340,7 @@ MUTANTS = (
            ("tests/test_render.py::test_the_preview_encodes_every_pixel_as_the_whole_image_formula_does",)),
     Mutant("mask-boxes-unclipped-right", "spacefit/rendering/silhouette.py", "np.minimum(x1, w - 1) + 1", "x1 + 1",
            ("tests/test_silhouette.py::test_small_triangles_mark_their_boxes_clipped_to_the_film",)),
-    Mutant("multijitter-rounds-silently", "spacefit/scene/sections.py", "    if sampler == \"multijitter\":\n        return spp % root == 0\n",
+    Mutant("multijitter-rounds-silently", "spacefit/scene/sampling.py", "    if sampler == \"multijitter\":\n        return spp % root == 0\n",
            "", ("tests/test_sampler.py",)),
     # the documentation site: the front page shows the render; a page's link to another resolves
     Mutant("docs-front-picture-a-thumbnail", "docs/index.md", ":width: 320px", ":width: 32px", ("tests/test_docs.py",)),

@@ -35,7 +35,8 @@ from spacefit.executors import Cluster, Executor, executor_of
 from spacefit.precision import float64
 from spacefit.rendering.bridge import seeded_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
-from spacefit.rendering.renderer import PartImage, render_threads, to_value
+from spacefit.rendering.renderer import render_threads, to_value
+from spacefit.rendering.parts import PartImage
 from spacefit.rendering.values import View, scene_view, view_values_fn
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.parameters import ATTITUDE, POSITION, ROLL, SUN_ANGLES, scene_value

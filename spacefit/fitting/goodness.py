@@ -56,7 +56,7 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.rendering.renderer import PartImage
+from spacefit.rendering.parts import PartImage
 from spacefit.scene.sections import MAX_SPP
 
 # A misfit is chi^2 / dof this many of its standard deviations (Goodness.expected_spread) above its expectation ...

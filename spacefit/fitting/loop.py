@@ -30,7 +30,9 @@ from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
-from spacefit.rendering.renderer import PartImage, check_memory, mitsuba_scene_dict
+from spacefit.rendering.renderer import mitsuba_scene_dict
+from spacefit.rendering.memory import check_memory
+from spacefit.rendering.parts import PartImage
 from spacefit.scene.schema import Scene
 from spacefit.scene.parameters import is_nuisance, observation_of, parameter, scene_with_values
 from spacefit.units import DN_UNIT
@@ -515,7 +517,7 @@ def _reference_ratio(spp: int, reference_spp: int | None) -> float:
 
 def _affordable(problem: Problem, factor: int) -> bool:
     """Whether every observation's whole film rendered at ``factor`` times its samples per pixel in one
-    wavefront (a fit's render) fits this machine (:func:`~spacefit.rendering.renderer.check_memory`):
+    wavefront (a fit's render) fits this machine (:func:`~spacefit.rendering.memory.check_memory`):
     a verdict render takes fewer samples rather than lose the fit's result."""
     try:
         for ref, spp in zip(problem.references, problem.spp):

@@ -24,7 +24,7 @@ from jaxtyping import Array, Float
 
 from spacefit.formation import fourier_filter, gaussian_transfer
 from spacefit.scene.parameters import IMAGE, PSF_SIGMA_MAX_PX, observation_name
-from spacefit.sensor import GAUSSIAN_RADIUS_SIGMA
+from spacefit.psf import GAUSSIAN_RADIUS_SIGMA
 
 # Black sky added round the image before the blur and shift, px: 5 sigma of the widest blur a fit
 # may try, and 8 px more for the shift.

@@ -30,11 +30,12 @@ from spacefit.fitting.params import FreeParameters, free_parameters
 from spacefit.geometry.frames import Intrinsics
 from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.derivatives import check_seeds, check_spp
-from spacefit.rendering.renderer import PartImage
+from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import assemble
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import FILTER_RADIUS_PX, check_scene
-from spacefit.sensor import Sensor, check_flat, psf_rms_px, read_sensor_file, saturated_mask
+from spacefit.sensor import Sensor, check_flat, read_sensor_file, saturated_mask
+from spacefit.psf import psf_rms_px
 from spacefit.units import DN_UNIT, RADIANCE_UNIT
 from spacefit.scene.parameters import GEOMETRY, observation_of, scene_value, scene_with_values
 from spacefit.scene.conversions import G_of, rms_of

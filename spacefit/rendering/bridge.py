@@ -35,7 +35,7 @@ from jaxtyping import Array, Float
 
 from spacefit.rendering.backend import dr, in_variant, mi
 from spacefit.rendering.renderer import Renderer, errors_only, pass_seed, render_threads, to_value
-from spacefit.scene.sections import split_sample_count
+from spacefit.scene.sampling import split_sample_count
 
 SceneValues = Mapping[str, Array]
 

@@ -25,11 +25,13 @@ from jaxtyping import Array, Float
 from spacefit.errors import InputError, check_count, check_type
 from spacefit.precision import float64
 from spacefit.rendering.bridge import DrJitScene, render_params, render_values
-from spacefit.rendering.renderer import Renderer, check_memory
+from spacefit.rendering.renderer import Renderer
+from spacefit.rendering.memory import check_memory
 from spacefit.rendering.values import SceneValuesFn, scene_values_fn
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import MAX_SEED, MAX_SPP, check_sample_count, check_scene
+from spacefit.scene.sections import MAX_SEED, MAX_SPP, check_scene
+from spacefit.scene.sampling import check_sample_count
 from spacefit.scene.parameters import MOVES_VERTICES, check_names, fd_step, scene_value, scene_with_values
 
 

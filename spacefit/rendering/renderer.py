@@ -6,77 +6,33 @@ Lambert part with kd 0.2 facing a sun of 5 W m^-2 reads 0.2 * 5 / pi in every ch
 
 from __future__ import annotations
 
-import functools
 import math
-import os
 from collections.abc import Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
-from dataclasses import dataclass
-from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, check_array, check_count
+from spacefit.errors import check_count
 from spacefit.geometry.frames import project
 from spacefit.materials import Material
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.backend import dr, in_variant, mi, resolve_variant, variant_scope
 from spacefit.rendering.materials import bsdf_dict
+from spacefit.rendering.memory import MAX_SAMPLES_PER_PASS, check_memory
+from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.overrides import as_parameters
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
 from spacefit.rendering.silhouette import traced_pixels
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import FAR_CLIP_M, FILTER_RADIUS_PX, MAX_SEED, MAX_SPP, NEAR_CLIP_M, check_sample_count, check_scene, split_sample_count
-from spacefit.units import RADIANCE_UNIT
+from spacefit.scene.sections import FAR_CLIP_M, FILTER_RADIUS_PX, MAX_SEED, MAX_SPP, NEAR_CLIP_M, check_scene
+from spacefit.scene.sampling import check_sample_count, split_sample_count
 
-# Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.
-MAX_SAMPLES_PER_PASS = 1 << 24
 # Pixels around the target's projected box that its light can still reach: the tent filter's
 # radius (1 px) and one for rounding.
 CROP_MARGIN_PX = 2
-# Bytes a render holds per film pixel: Mitsuba's film (RGB, alpha, weight in float32), the image and
-# its copies in NumPy (float32 RGB), the traced pixels' indices (int64, then uint32), the part IDs and
-# the preview's tone map (done in row blocks).
-BYTES_PER_PIXEL = 92
-# Bytes per sample in flight in the wavefront (about 1 GB at MAX_SAMPLES_PER_PASS, measured).
-BYTES_PER_SAMPLE = 64
-# Samples one Dr.Jit wavefront can hold: its arrays are indexed with 32-bit integers.
-MAX_WAVEFRONT = 2**32 - 1
-
-
-def available_memory_bytes() -> int:
-    """Memory the system can still give (MemAvailable of /proc/meminfo; total physical elsewhere)."""
-    try:
-        with open("/proc/meminfo") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
-
-
-def check_memory(width: int, height: int, window_pixels: int, spp: int, split: bool = True) -> int:
-    """Estimate a render's peak memory (bytes) and refuse one that would not fit in the machine's.
-
-    Samples are traced in passes of at most :data:`MAX_SAMPLES_PER_PASS` (``split``), so the wavefront is
-    bounded and the film's size is what can exceed the memory. A fit's renders (``split`` False) trace
-    all ``window_pixels * spp`` samples at once: at most :data:`MAX_WAVEFRONT` (Dr.Jit's 32-bit indices),
-    and their memory counts too (at :data:`BYTES_PER_SAMPLE`, a primal render's: an AD render needs more).
-    """
-    samples = window_pixels * spp
-    if not split and samples > MAX_WAVEFRONT:
-        raise InputError(f"`spp` = {spp} on the {window_pixels} px a fit renders is {samples:.3g} samples in one wavefront; "
-                         f"Dr.Jit traces at most {MAX_WAVEFRONT:.3g} (32-bit indices): lower `spp` or `render.resolution`.")
-    estimate = BYTES_PER_PIXEL * width * height + BYTES_PER_SAMPLE * (min(samples, MAX_SAMPLES_PER_PASS) if split else samples)
-    limit = available_memory_bytes()
-    if estimate > limit:
-        raise InputError(f"a {width} x {height} px render at {spp} spp needs about {estimate / 2**30:.1f} GiB and this machine has "
-                         f"{limit / 2**30:.1f} GiB available; lower `render.resolution`{'' if split else ' or `spp`'}.")
-    return estimate
 
 
 def mesh_object(name: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None, material: Material) -> "mi.Mesh":
@@ -252,61 +208,6 @@ def kernel_log() -> Iterator[dict[str, float]]:
             now = dr.detail.launch_stats()
             stats.update(launched=now[0] - launched, new=now[1] - read + now[2] - compiled, compiled=now[2] - compiled,
                          compile_s=sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in jit) / 1e3)
-
-
-@dataclass(frozen=True)
-class PartImage:
-    """Which part each pixel sees, and each part's share of a radiance image.
-
-    Attributes:
-        ids: (height, width) int16: the index into ``names`` of the part hit by the ray through
-            each pixel's centre, -1 where it misses the target (black space).
-        names: the parts, in the scene's order.
-    """
-
-    ids: np.ndarray
-    names: tuple[str, ...]
-
-    @property
-    def regions(self) -> tuple[str, ...]:
-        """The parts, then ``target``: all of them together."""
-        return (*self.names, "target")
-
-    def masks(self) -> np.ndarray:
-        """(regions, height, width) bool: the pixels whose centre sees each of :attr:`regions`."""
-        return np.stack([*(self.ids == i for i in range(len(self.names))), self.ids >= 0])
-
-    def means(self, image: np.ndarray, used: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-        """Per region (:attr:`regions`): the pixels counted, whose centre sees it (int), and the
-        mean of ``image``'s RGB mean over them (in its unit; NaN for a region out of view). Edge
-        pixels count for the part at their centre. ``used``: (height, width) bool, the pixels to
-        count (default: all)."""
-        image = check_array("image", image)
-        if image.shape[:2] != self.ids.shape or image.ndim != 3:
-            raise InputError(f"`image` must be (height, width, channels) with (height, width) = {self.ids.shape}, got shape {image.shape}.")
-        counted = self.ids >= 0 if used is None else (self.ids >= 0) & np.asarray(used, dtype=bool)
-        ids = self.ids[counted]  # a target in black space is a few % of the film: only its pixels are summed
-        rgb = image[counted][:, :3].astype(float)
-        grey = functools.reduce(np.add, rgb.T) / rgb.shape[-1]  # the mean over channels, 10x faster
-        parts = len(self.names)
-        pixels = np.append(np.bincount(ids, minlength=parts), ids.size)
-        sums = np.append(np.bincount(ids, weights=grey, minlength=parts), grey.sum())
-        with np.errstate(invalid="ignore", divide="ignore"):
-            means = np.where(pixels > 0, sums / pixels, math.nan)
-        return pixels, means
-
-    def table(self, radiance: np.ndarray, used: np.ndarray | None = None) -> Any:
-        """Per region (each part, then the whole ``target``): ``pixels`` and ``mean_radiance`` (W m^-2 sr^-1)
-        of :meth:`means`, as an xarray Dataset with dimension ``region``, each variable with its units
-        (``table(r).to_dataframe()`` is a pandas table of it)."""
-        import xarray as xr  # here: only a table needs xarray (slow to import)
-
-        pixels, means = self.means(radiance, used)
-        return xr.Dataset(
-            {"pixels": ("region", pixels, {"description": "pixels whose centre sees the region"}),
-             "mean_radiance": ("region", means, {"units": RADIANCE_UNIT,
-                                                  "description": "mean of the RGB mean over those pixels (NaN: out of view)"})},
-            coords={"region": list(self.regions)})
 
 
 class Renderer:

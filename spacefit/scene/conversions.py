@@ -32,8 +32,6 @@ def G_of(w: WrinkleSettings, D: Any, rms: Any) -> Any:
 # A sun at the zenith or the nadir (the default sun is at the zenith) has no azimuth of its own: it
 # reads STATED_AZIMUTH_DEG (world +x), and setting its elevation alone turns it towards +x.
 STATED_AZIMUTH_DEG = 0.0
-
-
 VERTICAL_SUN = 1e-9
 
 

@@ -22,8 +22,6 @@ Getter = Callable[[SceneLike, str], float]
 # The scene-file keys (and their values) that set parameter ``name`` to ``values[name]``, given every
 # value being set (a joint scene value takes its siblings from them, or from the scene).
 Setter = Callable[[SceneLike, str, Mapping[str, float]], dict[str, Any]]
-
-
 # The groups a parameter may belong to.
 GROUPS = {
     "wrinkles": "the W-M height field's parameters (D, G, rms height)",
@@ -65,8 +63,6 @@ class Bounds:
 
 
 POSITIVE = Bounds(0.0)
-
-
 WHOLE_LINE = Bounds(-math.inf)
 
 

@@ -24,7 +24,8 @@ from spacefit.errors import InputError, InputTypeError, check_direction, check_p
 from spacefit.materials import MODELS, make_material, with_material_values
 from spacefit.scene.parameters import PARAMETERS, is_image, scene_keys, scene_with_values
 from spacefit.scene.conversions import VERTICAL_SUN, sun_angles_deg
-from spacefit.scene.sections import SECTIONS, PartSettings, SceneLike, check_pitch_with_fov, unknown_part
+from spacefit.scene.sections import SECTIONS, PartSettings, SceneLike, unknown_part
+from spacefit.scene.optics import check_pitch_with_fov
 
 Overrides = Mapping[str, Any] | Sequence[str] | str
 # The keys of a part table besides its material's own values and the models' ties (``alpha``).

@@ -18,8 +18,8 @@ from spacefit.display import scene_html, scene_repr
 from spacefit.errors import InputError, InputTypeError, check_choice, quote
 from spacefit.materials import material_table
 from spacefit.scene.overrides import with_values
-from spacefit.scene.sections import (SECTIONS, CameraSettings, PartSettings, RenderSettings, SunSettings, TargetSettings, WrinkleSettings,
-                                     default_parts, plain, check_optics, fov_pitch_mm)
+from spacefit.scene.sections import SECTIONS, CameraSettings, PartSettings, RenderSettings, SunSettings, TargetSettings, WrinkleSettings, default_parts, plain
+from spacefit.scene.optics import check_optics, fov_pitch_mm
 
 
 @dataclass(frozen=True)

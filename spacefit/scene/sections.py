@@ -32,6 +32,7 @@ from spacefit.errors import (A_SCENE, InputError, InputTypeError, check_choice, 
                              closest, quote)
 from spacefit.geometry.wm import check_wm_params
 from spacefit.materials import MODELS, PRESETS, Material
+from spacefit.scene.sampling import SAMPLERS, check_sample_count
 
 SOLAR_IRRADIANCE_W_M2 = 1361.0
 # The differentiable variants: the bridge needs AD (scalar variants cannot render a Jacobian).
@@ -40,14 +41,6 @@ VARIANTS = ("auto", "llvm_ad_rgb", "cuda_ad_rgb")
 # half pixel, the Gaussian's 4 standard deviations of 0.5 px.
 FILTER_RADIUS_PX = {"tent": 1.0, "box": 0.5, "gaussian": 2.0}
 FILTERS = tuple(FILTER_RADIUS_PX)
-# Mitsuba samplers; "independent" draws every sample alone, the others stratify a pixel's samples.
-SAMPLERS = ("independent", "stratified", "multijitter", "ldsampler", "orthogonal")
-# The counts each rounding sampler takes (Mitsuba rounds any other count up, with only a log line:
-# more samples, more time than asked); spacefit refuses the others. "independent" takes any count;
-# "multijitter" a grid of isqrt(spp) rows (20 = 4 x 5, not 32), and spacefit renders another count as
-# passes of counts it takes (:func:`split_sample_count`: 32 = 30 + 2), exactly the samples asked.
-SAMPLE_COUNTS = {"stratified": "a perfect square (1, 4, 9, 16, 25, ...)", "ldsampler": "a power of 4 (4, 16, 64, 256, ...)",
-                 "orthogonal": "the square of a prime (4, 9, 25, 49, 121, ...)"}
 WRINKLE_MODELS = ("auto", "geometry", "effective")
 Vec3 = tuple[float, float, float]
 # Radiance is float32 (at most 3.4e38) and a glint's BRDF can reach 1e6 or more: irradiances above
@@ -64,7 +57,7 @@ NEAR_CLIP_M = 0.01
 FAR_CLIP_M = 4.0 * MAX_COORDINATE_M
 # Samples per pixel of one render: 65536 at 600 x 600 px is 2.4e10 samples, hours on a CPU; a fit's
 # renders are not split into passes, so there the product with the pixels is bounded too
-# (:func:`spacefit.rendering.renderer.check_memory`).
+# (:func:`spacefit.rendering.memory.check_memory`).
 MAX_SPP = 1 << 16
 # Seeds are Mitsuba's (uint32): a fit adds offsets to its seeds, so they stay below 2^31.
 MAX_SEED = 2**31 - 1
@@ -72,50 +65,6 @@ MAX_SEED = 2**31 - 1
 # length of 1e-200 mm, raises inside it); a pinhole's image grows as tan(fov / 2), and near 180 deg
 # float32 rays lose the pixels at the edge. The vertical field of view is held to the same bound.
 MAX_FOV_DEG = 179.0
-# The smallest angle (rad) a pixel may subtend, pixel pitch over focal length: Mitsuba's ray
-# directions are float32 (relative precision 6e-8), so narrower pixels get rays that repeat: a
-# sphere's limb seen from 11 km rendered blocks of 2 to 3 equal pixels at 3e-7 rad and of about 10
-# at 1e-7 rad, none at 1e-6 rad (about 16 float32 steps per pixel).
-MIN_PIXEL_ANGLE_RAD = 1e-6
-
-
-def takes_sample_count(sampler: str, spp: int) -> bool:
-    """Whether Mitsuba's ``sampler`` renders exactly ``spp`` samples per pixel (:data:`SAMPLE_COUNTS`)."""
-    root = math.isqrt(spp)
-    square = root * root == spp
-    if sampler == "stratified":
-        return square
-    if sampler == "ldsampler":
-        return square and spp & (spp - 1) == 0 and spp > 1
-    if sampler == "multijitter":
-        return spp % root == 0
-    if sampler == "orthogonal":
-        return square and root > 1 and all(root % k for k in range(2, math.isqrt(root) + 1))
-    return True
-
-
-def split_sample_count(sampler: str, spp: int) -> tuple[int, ...]:
-    """``spp`` as counts that Mitsuba's ``sampler`` takes, largest first, each rendered as a pass of its own:
-    ``(spp,)`` where it takes ``spp`` (always for ``independent``; refused counts are refused before, by
-    :func:`check_sample_count`), else for ``multijitter`` the largest grid below and the rest split alike."""
-    counts = []
-    while spp:
-        count = next(n for n in range(spp, 0, -1) if takes_sample_count(sampler, n))
-        counts.append(count)
-        spp -= count
-    return tuple(counts)
-
-
-def check_sample_count(name: str, spp: int, sampler: str) -> None:
-    """Refuse a count of samples per pixel that ``sampler`` would round (the policy: refuse, never round
-    silently; ``multijitter`` splits it instead, :func:`split_sample_count`); ``name`` is the argument's,
-    e.g. ``render.spp``."""
-    if sampler in SAMPLE_COUNTS and not takes_sample_count(sampler, spp):
-        nearest = [n for n in range(max(1, spp // 2), 2 * spp + 2) if takes_sample_count(sampler, n)]
-        below, above = [n for n in nearest if n < spp], [n for n in nearest if n > spp]
-        near = " or ".join(str(n) for n in (below[-1:] + above[:1]))
-        raise InputError(f"`{name}` = {spp} must be {SAMPLE_COUNTS[sampler]} with render.sampler = {sampler!r}"
-                         f"{f' (nearest: {near})' if near else ''}; 'independent' takes any count.")
 
 
 class Section:
@@ -375,39 +324,6 @@ def unknown_part(key: str, parts: Sequence[str]) -> InputError:
     close = closest(path[1], parts)
     hint = f" Did you mean `{'.'.join(['parts', close, *path[2:]])}`?" if close else ""
     return InputError(f"unknown scene key `{key}`: `{path[1]}` is not a part of the scene (parts: {', '.join(parts)}).{hint}")
-
-
-def fov_pitch_mm(camera: CameraSettings, render: RenderSettings) -> float:
-    """The pixel pitch (mm) that gives ``camera.fov_deg`` across ``render.resolution``'s width."""
-    return 2.0 * camera.focal_length_mm * math.tan(math.radians(camera.fov_deg) / 2.0) / render.resolution[0]
-
-
-def check_pitch_with_fov(scene: SceneLike, pitch_mm: Any) -> None:
-    """Raise :class:`InputError` if ``camera.pixel_pitch_mm`` was given (as ``pitch_mm``) while
-    ``camera.fov_deg`` sets the field of view, and with it the pitch."""
-    camera = scene.camera
-    if camera.fov_deg > 0.0:
-        raise InputError(f"`camera.pixel_pitch_mm` = {quote(pitch_mm)} was given while `camera.fov_deg` = {camera.fov_deg:g} sets "
-                         f"the field of view, which makes the pitch {camera.pixel_pitch_mm:.6g} mm at {scene.render.resolution[0]} px: "
-                         "give one of them (`camera.fov_deg` = 0 leaves the field to the pixel pitch).")
-
-
-def check_optics(camera: CameraSettings, render: RenderSettings) -> None:
-    """Check what the camera's values make together: the field of view along each image axis,
-    ``2 atan(size * pitch / (2 focal length))``, at most :data:`MAX_FOV_DEG`, and the angle of one
-    pixel, ``pitch / focal length``, at least :data:`MIN_PIXEL_ANGLE_RAD`."""
-    keys = "`camera.focal_length_mm`, `camera.pixel_pitch_mm` and `render.resolution`"
-    ratio = camera.pixel_pitch_mm / camera.focal_length_mm  # may over- or underflow: inf and 0 are refused below
-    for axis, size in zip(("horizontal", "vertical"), render.resolution):
-        fov = math.degrees(2.0 * math.atan(0.5 * size * ratio))
-        if fov > MAX_FOV_DEG:
-            raise InputError(f"{keys} give a {axis} field of view of {fov:.6g} deg ({size} px of {camera.pixel_pitch_mm:g} mm "
-                             f"behind a {camera.focal_length_mm:g} mm lens); a pinhole camera renders at most {MAX_FOV_DEG:g} deg: "
-                             "lengthen the focal length or use fewer or smaller pixels.")
-    if not ratio >= MIN_PIXEL_ANGLE_RAD:
-        raise InputError(f"`camera.pixel_pitch_mm` / `camera.focal_length_mm` = {camera.pixel_pitch_mm:g} / "
-                         f"{camera.focal_length_mm:g} gives pixels of {ratio:.3g} rad; at least {MIN_PIXEL_ANGLE_RAD:g} rad "
-                         "(float32 rays resolve no finer): shorten the focal length, or render nearer and rescale.")
 
 
 def check_position(name: str, value: Sequence[float]) -> None:

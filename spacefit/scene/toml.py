@@ -19,7 +19,8 @@ from spacefit.errors import InputError, InputTypeError, check_path, quote
 from spacefit.materials import make_material
 from spacefit.scene.overrides import Overrides, apply_overrides, section_keys, unknown_key, with_values
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import DEFAULT_PRESETS, SECTIONS, PartSettings, TargetSettings, check_pitch_with_fov
+from spacefit.scene.sections import DEFAULT_PRESETS, SECTIONS, PartSettings, TargetSettings
+from spacefit.scene.optics import check_pitch_with_fov
 
 
 def read_scene_dict(path: str | Path) -> dict[str, Any]:

@@ -558,7 +558,7 @@ def check_estimate(found: Estimate, store: str | Path | None, *, allow_large: bo
     """Refuse a sweep whose index (and store, when ``store`` is None: in memory) would not fit in the
     memory available; and unless ``allow_large``, one of more than :data:`MAX_POINTS` points or whose
     new store may not fit on its disk."""
-    from spacefit.rendering.renderer import available_memory_bytes  # deferred: Mitsuba (the sweep renders anyway)
+    from spacefit.rendering.memory import available_memory_bytes  # deferred: Mitsuba (the sweep renders anyway)
 
     if found.points > MAX_POINTS and not allow_large:
         raise InputError(f"a sweep of {found.points:,} points is more than {MAX_POINTS:,} (a file per point and "

@@ -1,0 +1,51 @@
+"""How much memory a render needs, and a refusal, before it starts, of one this machine cannot hold."""
+
+from __future__ import annotations
+
+import os
+
+from spacefit.errors import InputError
+
+
+# Samples traced per pass: bounds the wavefront's memory (about 1 GB on the CPU) on big renders.
+MAX_SAMPLES_PER_PASS = 1 << 24
+# Bytes a render holds per film pixel: Mitsuba's film (RGB, alpha, weight in float32), the image and
+# its copies in NumPy (float32 RGB), the traced pixels' indices (int64, then uint32), the part IDs and
+# the preview's tone map (done in row blocks).
+BYTES_PER_PIXEL = 92
+# Bytes per sample in flight in the wavefront (about 1 GB at MAX_SAMPLES_PER_PASS, measured).
+BYTES_PER_SAMPLE = 64
+# Samples one Dr.Jit wavefront can hold: its arrays are indexed with 32-bit integers.
+MAX_WAVEFRONT = 2**32 - 1
+
+
+def available_memory_bytes() -> int:
+    """Memory the system can still give (MemAvailable of /proc/meminfo; total physical elsewhere)."""
+    try:
+        with open("/proc/meminfo") as f:
+            for line in f:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+
+
+def check_memory(width: int, height: int, window_pixels: int, spp: int, split: bool = True) -> int:
+    """Estimate a render's peak memory (bytes) and refuse one that would not fit in the machine's.
+
+    Samples are traced in passes of at most :data:`MAX_SAMPLES_PER_PASS` (``split``), so the wavefront is
+    bounded and the film's size is what can exceed the memory. A fit's renders (``split`` False) trace
+    all ``window_pixels * spp`` samples at once: at most :data:`MAX_WAVEFRONT` (Dr.Jit's 32-bit indices),
+    and their memory counts too (at :data:`BYTES_PER_SAMPLE`, a primal render's: an AD render needs more).
+    """
+    samples = window_pixels * spp
+    if not split and samples > MAX_WAVEFRONT:
+        raise InputError(f"`spp` = {spp} on the {window_pixels} px a fit renders is {samples:.3g} samples in one wavefront; "
+                         f"Dr.Jit traces at most {MAX_WAVEFRONT:.3g} (32-bit indices): lower `spp` or `render.resolution`.")
+    estimate = BYTES_PER_PIXEL * width * height + BYTES_PER_SAMPLE * (min(samples, MAX_SAMPLES_PER_PASS) if split else samples)
+    limit = available_memory_bytes()
+    if estimate > limit:
+        raise InputError(f"a {width} x {height} px render at {spp} spp needs about {estimate / 2**30:.1f} GiB and this machine has "
+                         f"{limit / 2**30:.1f} GiB available; lower `render.resolution`{'' if split else ' or `spp`'}.")
+    return estimate
