@@ -99,10 +99,10 @@ from spacefit.studies.plates import fitted_plates as fitted_plates
 from spacefit.studies.plates import predict_magnitudes as predict_magnitudes
 from spacefit.studies.sensitivity import Sensitivity as Sensitivity
 from spacefit.studies.sensitivity import sensitivity as sensitivity
-from spacefit.studies.sweep import StoreReport as StoreReport
+from spacefit.studies.store import StoreReport as StoreReport
+from spacefit.studies.store import verify_store as verify_store
 from spacefit.studies.sweep import read_sweep_file as read_sweep_file
 from spacefit.studies.sweep import sweep as sweep
-from spacefit.studies.sweep import verify_store as verify_store
 
 __version__: str = '0.1.0'
 
