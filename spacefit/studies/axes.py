@@ -3,7 +3,8 @@
 An axis is one key's list of values, or several keys' lists of equal length zipped under the axis's
 name; a list may be spelled ``{"linspace": [start, stop, num]}`` or ``{"arange": [start, stop, step]}``
 (the spelling: :mod:`spacefit.studies.sweep`). Each key's unit is the parameter registry's, else its
-suffix's; the registered parameters are set on the loaded scene, other keys assemble it again.
+suffix's; the registered parameters but the wrinkles' D, G and rms height are set on the loaded scene
+(:func:`in_place_names`), other keys assemble it again.
 """
 
 from __future__ import annotations
