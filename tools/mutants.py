@@ -197,14 +197,14 @@ MUTANTS = (
     Mutant("map-covariance-transposed", COVARIANCE, "out = T @ np.where(np.isfinite(cov), cov, 0.0) @ T.T",
            "out = T.T @ np.where(np.isfinite(cov), cov, 0.0) @ T", (UNCERTAINTY,)),
     # observation files and the sensor as observers calibrate it (issue 18)
-    Mutant("fits-roworder-ignored", "spacefit/imageio.py", 'return stated, "header ROWORDER", notes',
+    Mutant("fits-roworder-ignored", "spacefit/imageio/fits.py", 'return stated, "header ROWORDER", notes',
            'return "bottom-up", "header ROWORDER", notes', ("tests/test_imageio.py",)),
-    Mutant("header-rdnoise-dropped", "spacefit/imageio.py", '"read_noise_electrons": ("RDNOISE", "READNOIS", "RON"),',
+    Mutant("header-rdnoise-dropped", "spacefit/imageio/fits.py", '"read_noise_electrons": ("RDNOISE", "READNOIS", "RON"),',
            '"read_noise_electrons": ("READNOIS", "RON"),', ("tests/test_imageio.py",)),
     # files and key languages refuse what they cannot use (issue 20)
-    Mutant("fits-cube-planes-unchecked", "spacefit/imageio.py", "    if data.shape[0] not in CHANNELS:", "    if False:",
+    Mutant("fits-cube-planes-unchecked", "spacefit/imageio/fits.py", "    if data.shape[0] not in CHANNELS:", "    if False:",
            ("tests/test_file_inputs.py",)),
-    Mutant("mask-nan-means-use", "spacefit/imageio.py",
+    Mutant("mask-nan-means-use", "spacefit/imageio/reading.py",
            "bad = ~np.isin(values, [0, *use]) if values.dtype != bool else np.zeros(values.shape, bool)",
            "bad = np.zeros(values.shape, bool)", ("tests/test_file_inputs.py",)),
     Mutant("string-is-a-number", "spacefit/errors.py", "    if isinstance(value, (str, bytes)):", "    if False:",
