@@ -47,11 +47,11 @@ from spacefit.geometry.frames import pixel_solid_angles as pixel_solid_angles
 from spacefit.geometry.wm import wm_rms as wm_rms
 from spacefit.geometry.wm import wm_rms_slope as wm_rms_slope
 from spacefit.geometry.wrinkle import MLI_SLOPE_RANGE as MLI_SLOPE_RANGE
-from spacefit.imageio import ObservedImage as ObservedImage
-from spacefit.imageio import format_sensor_sources as format_sensor_sources
-from spacefit.imageio import read_image as read_image
-from spacefit.imageio import sensor_of as sensor_of
-from spacefit.imageio import write_observation as write_observation
+from spacefit.imageio.provenance import format_sensor_sources as format_sensor_sources
+from spacefit.imageio.provenance import sensor_of as sensor_of
+from spacefit.imageio.reading import ObservedImage as ObservedImage
+from spacefit.imageio.reading import read_image as read_image
+from spacefit.imageio.writing import write_observation as write_observation
 from spacefit.materials import Conductor as Conductor
 from spacefit.materials import DiffuseConductor as DiffuseConductor
 from spacefit.materials import Lambert as Lambert
@@ -99,10 +99,10 @@ from spacefit.studies.plates import fitted_plates as fitted_plates
 from spacefit.studies.plates import predict_magnitudes as predict_magnitudes
 from spacefit.studies.sensitivity import Sensitivity as Sensitivity
 from spacefit.studies.sensitivity import sensitivity as sensitivity
-from spacefit.studies.sweep import StoreReport as StoreReport
+from spacefit.studies.store import StoreReport as StoreReport
+from spacefit.studies.store import verify_store as verify_store
 from spacefit.studies.sweep import read_sweep_file as read_sweep_file
 from spacefit.studies.sweep import sweep as sweep
-from spacefit.studies.sweep import verify_store as verify_store
 
 __version__: str = '0.1.0'
 

@@ -166,7 +166,8 @@ def _cluster(args: argparse.Namespace) -> int | str | None:
 def _sweep(args: argparse.Namespace) -> int:
     """Run ``spacefit sweep``; on Ctrl-C say where the finished points are; a dask sweep that cannot go on exits 1."""
     _load("spacefit.studies.sweep", "xarray", "zarr", "dask.array")  # deferred: the studies' modules and the store's (1 s), which render never needs
-    from spacefit.studies.sweep import read_sweep_file, sweep, verify_store
+    from spacefit.studies.store import verify_store
+    from spacefit.studies.sweep import read_sweep_file, sweep
 
     if args.verify:
         report = verify_store(args.sweep)

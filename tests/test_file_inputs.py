@@ -18,7 +18,8 @@ from spacefit.cli import main
 from spacefit.fitting.problem import check_reference
 from spacefit.imageio import read_image, sensor_of, sidecar_path
 from spacefit.sensor import read_sensor_file
-from spacefit.studies.sweep import axis_lengths, parse_axes, read_sweep_file
+from spacefit.studies.axes import axis_lengths, parse_axes
+from spacefit.studies.sweep import read_sweep_file
 
 # A calibrated camera as an observatory's FITS header gives it (GAIN in electrons per DN).
 CARDS = {"TELESCOP": "ground test", "OBJECT": "lander mock-up", "BUNIT": "adu", "ROWORDER": "TOP-DOWN", "RADSCALE": 4.0e4,

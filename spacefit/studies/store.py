@@ -1,0 +1,318 @@
+"""A sweep's resumable Zarr store: its layout, written point by point, verified and repaired.
+
+Each point's variables are one chunk each; a point is written data first, then the checksum of its
+bytes as read back (BLAKE2b), flushed to the disk, then its ``done`` flag. A reopened store's done
+points are read back against their checksums: :func:`verify_store` reports, :func:`repair` clears
+those that fail so that the sweep computes them again. A new store is made beside its place and
+moved there whole.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import math
+import os
+import shutil
+import tempfile
+import warnings
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spacefit.errors import InputError
+from spacefit.output import STAGE_PREFIX, check_writable, clean_stale_stages
+from spacefit.scene.parameters import parameter
+from spacefit.scene.schema import Scene
+from spacefit.studies.axes import Axis, units
+from spacefit.studies.sensitivity import SUMMARY_VARIABLES, normalisation
+from spacefit.studies.worker import regions
+from spacefit.units import RADIANCE_UNIT
+
+CHECKSUM = "checksum"  # the variable of each point's checksum (one chunk per point)
+VERIFY_BATCH_BYTES = 64 << 20  # a store is verified in reads of about this many bytes
+STORE_FORMAT = 2  # Zarr format 2: readable by every Zarr library (format 3 has no string type yet)
+
+
+def _coords(axes: list[Axis]) -> dict[str, Any]:
+    """Coordinates: a grid axis of scalars is indexed by its values; the keys of a zipped axis and
+    vector values (a key's components along ``KEY[i]``) are coordinates beside it."""
+    coords: dict[str, Any] = {}
+    for axis in axes:
+        for key, vals in axis.values.items():
+            arr = np.asarray(vals)
+            dims = (axis.name,) if arr.ndim == 1 else (axis.name, f"{key}[i]")
+            coords[key] = (dims, arr, {"units": units(key)})
+    return coords
+
+
+def point_variables(scene: Scene, *, images: bool, derivatives: tuple[str, ...]) -> dict[str, tuple[Any, ...]]:
+    """The variables of each point: name -> (extra dimensions, their sizes, dtype, fill, unit, description)."""
+    n = len(regions(scene))
+    out: dict[str, tuple[Any, ...]] = {
+        "mean_radiance": (("region",), (n,), np.float64, np.nan, RADIANCE_UNIT,
+                          "mean over the pixels whose centre sees the region of the RGB mean radiance"),
+        "pixels": (("region",), (n,), np.int32, -1, "1", "pixels whose centre sees the region"),
+        "irradiance": (("region",), (n,), np.float64, np.nan, "W m^-2",
+                       "sum of radiance times pixel solid angle over the region's pixels (target: the whole image), at the pinhole"),
+    }
+    if images:
+        w, h = scene.render.resolution
+        out["radiance"] = (("y", "x", "channel"), (h, w, 3), np.float32, np.nan, RADIANCE_UNIT, "the rendered image")
+    for name, (dtype, fill, unit, doc) in (SUMMARY_VARIABLES.items() if derivatives else ()):
+        out[name] = (("parameter", "region"), (len(derivatives), n), dtype, fill, unit, doc)
+    return out
+
+
+def template(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple[str, ...], attrs: Mapping[str, Any]) -> Any:
+    """The store's empty Dataset (dask arrays, never computed): dimensions, coordinates, chunks of one point."""
+    import dask.array as da  # here: dask and xarray take a second to import; only a sweep's store needs them
+    import xarray as xr
+
+    dims = tuple(a.name for a in axes)
+    shape = tuple(a.size for a in axes)
+    one = (1,) * len(dims)
+    layout = point_variables(scene, images=images, derivatives=derivatives)
+    variables: dict[str, Any] = {}
+    for name, (extra, size, dtype, fill, unit, doc) in layout.items():
+        data = da.full(shape + size, fill, dtype=dtype, chunks=one + size)
+        variables[name] = (dims + extra, data, {"units": unit, "description": doc})
+    variables[CHECKSUM] = (dims, da.zeros(shape, dtype=np.uint64, chunks=one), {
+        "description": f"BLAKE2b (8 bytes, little-endian) of the point's bytes of {', '.join(sorted(layout))} in this "
+                       "order (C order, the stored dtypes), written after them and before done; 0: none",
+        "variables": sorted(layout)})
+    variables["done"] = (dims, da.zeros(shape, dtype=bool, chunks=one),
+                         {"description": "the point is written, durably, and its checksum with it"})
+    coords = {**_coords(axes), "region": np.array(regions(scene), dtype=object)}
+    if images:
+        coords["channel"] = np.array(["R", "G", "B"], dtype=object)
+    if derivatives:
+        coords["parameter"] = np.array(derivatives, dtype=object)
+        coords["parameter_unit"] = ("parameter", np.array([parameter(n).unit for n in derivatives], dtype=object))
+        coords["normalised_unit"] = ("parameter", np.array([normalisation(n, 1.0)[1] for n in derivatives], dtype=object))
+    return xr.Dataset(variables, coords=coords, attrs=dict(attrs))
+
+
+def open_store(store: str | Path | None, spec: str, make: Callable[[], Any], overwrite: bool) -> Any:
+    """The Zarr group of the sweep ``spec``: created from ``make()`` when new (or ``overwrite``), reopened
+    when it holds the same sweep; refused when it holds another one or other files."""
+    import zarr  # here: only a sweep's store needs Zarr (slow to import)
+
+    if store is None:
+        memory = zarr.storage.MemoryStore()
+        make().to_zarr(memory, compute=False, mode="w", zarr_format=STORE_FORMAT)
+        return zarr.open_group(memory, mode="r+", zarr_format=STORE_FORMAT)
+    if not str(store).strip():
+        raise InputError("`store` must name a folder, got an empty string.")
+    target = Path(store)
+    if target.exists():
+        old = _stored_spec(target)
+        if old is None and (not target.is_dir() or any(target.iterdir())):
+            raise InputError(f"`store` {str(target)!r} exists and is not a spacefit sweep store; choose a new folder.")
+        if old is not None and old != spec and not overwrite:
+            raise InputError(f"`store` {str(target)!r} holds a sweep with other arguments (scene, mesh files, axes or options); rerun "
+                             "with the same ones to finish it, pass overwrite=True (--overwrite) to replace it, or choose a new store.")
+        if old == spec and not overwrite:
+            return zarr.open_group(str(target), mode="r+", zarr_format=STORE_FORMAT)
+    # the empty store is made beside its place and moved there whole: a kill leaves no half store
+    check_writable(target)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    clean_stale_stages(target.parent, of=f"-{target.name}")  # this store's, left by a kill while it was made
+    stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}-", suffix=f"-{target.name}", dir=target.parent))
+    try:
+        make().to_zarr(str(stage / "store"), compute=False, mode="w", zarr_format=STORE_FORMAT)
+        if target.exists():
+            shutil.rmtree(target)
+        os.replace(stage / "store", target)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    return zarr.open_group(str(target), mode="r+", zarr_format=STORE_FORMAT)
+
+
+def _stored_spec(path: Path) -> str | None:
+    """The arguments of the sweep stored at ``path``, or None if it is not a sweep store."""
+    import zarr  # here: only a sweep's store needs Zarr (slow to import)
+
+    try:
+        return zarr.open_group(str(path), mode="r", zarr_format=STORE_FORMAT).attrs.get("spacefit_sweep")
+    except Exception:  # noqa: BLE001  (any unreadable folder is "not a store")
+        return None
+
+
+def pending(done: np.ndarray, order: Sequence[int]) -> list[tuple[int, ...]]:
+    """The indices of the points not yet done, grouped by the axes in ``order`` (slowest first)."""
+    todo = [tuple(int(i) for i in idx) for idx in zip(*np.nonzero(~done))]
+    return sorted(todo, key=lambda idx: tuple(idx[a] for a in order))
+
+
+def point_checksum(values: Sequence[np.ndarray]) -> np.uint64:
+    """The checksum of one point: BLAKE2b (8 bytes) of its variables' bytes, in the order given."""
+    digest = hashlib.blake2b(digest_size=8)
+    for value in values:
+        digest.update(np.ascontiguousarray(value).tobytes())
+    return np.uint64(int.from_bytes(digest.digest(), "little"))
+
+
+def write_point(group: Any, index: tuple[int, ...], result: Mapping[str, np.ndarray], root: Path | None = None) -> None:
+    """Write one point's variables, then the checksum of their bytes as read back from the store,
+    flush them to the disk (``root``: the store's folder), then its ``done`` flag. Each is a chunk of
+    its own, which Zarr writes whole to a temporary file and renames."""
+    names = sorted(result)
+    for name in names:
+        group[name][index] = result[name]
+    group[CHECKSUM][index] = point_checksum([np.asarray(group[name][index]) for name in names])
+    if root is not None:
+        _flush(root, index, {**{name: np.ndim(result[name]) for name in names}, CHECKSUM: 0})
+    group["done"][index] = True
+
+
+def _flush(root: Path, index: tuple[int, ...], extra_dims: Mapping[str, int]) -> None:
+    """fsync the chunk files of the point ``index`` of each variable (with its number of dimensions
+    beyond the axes) and their folders, so that a crash of the machine cannot undo them."""
+    for name, extra in extra_dims.items():
+        _fsync(root / name / ".".join(map(str, index + (0,) * extra)))  # Zarr 2's chunk key, "." separated
+        _fsync(root / name)
+
+
+def _fsync(path: Path) -> None:
+    fd = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
+
+
+@dataclass(frozen=True)
+class StoreReport:
+    """What :func:`verify_store` found: counts of points, the done points whose data failed their
+    checksum (or whose flag is unreadable), and the variables missing from the store."""
+
+    points: int
+    done: int
+    verified: int
+    failed: tuple[tuple[int, ...], ...]
+    missing_variables: tuple[str, ...]
+
+    @property
+    def missing(self) -> int:
+        """Points not done (never computed, or failed)."""
+        return self.points - self.verified
+
+    @property
+    def damaged(self) -> bool:
+        """Some done point failed its checksum, or a variable is missing."""
+        return bool(self.failed or self.missing_variables)
+
+    def __str__(self) -> str:
+        lines = [f"{self.points:,} points: {self.done:,} done, {self.verified:,} verified, {len(self.failed):,} failed "
+                 f"their checksum, {self.missing:,} to compute"]
+        if self.missing_variables:
+            lines.append(f"missing variables: {', '.join(self.missing_variables)}")
+        return "\n".join(lines)
+
+
+def check_points(group: Any, root: Path) -> StoreReport:
+    """Read back every done point of the store in folder ``root`` (``group``, opened without its
+    consolidated metadata) in batches and compare its checksum; a missing chunk, an undecodable one
+    or a missing variable fails the points it holds, never raises."""
+    present = {p.parent.name for p in root.glob("*/.zarray")}
+    names = list(group[CHECKSUM].attrs.get("variables", ())) if CHECKSUM in present else []
+    missing = tuple(n for n in ["done", CHECKSUM, *names] if n not in present)
+    shape = tuple(group["done"].shape if "done" in present else group.attrs.get("sweep_shape", ()))
+    points, done_count, failed, verified = math.prod(shape) if shape else 0, 0, [], 0
+    point_bytes = sum(math.prod(group[n].shape[len(shape):]) * group[n].dtype.itemsize for n in names if n in present)
+    for slab in _slabs(shape, point_bytes + 9):
+        done, unreadable = _read(group["done"], slab) if "done" in present else (None, None)
+        if done is None or not (done.any() or unreadable.any()):
+            continue
+        done = done & ~unreadable
+        done_count += int(done.sum() + unreadable.sum())
+        bad = unreadable.copy()
+        if missing:
+            bad |= done
+        else:
+            stored, bad_sum = _read(group[CHECKSUM], slab)
+            data = [_read(group[n], slab) for n in names]
+            for local in zip(*np.nonzero(done)):
+                ok = not bad_sum[local] and not any(b[local] for _, b in data)
+                bad[local] = not (ok and stored[local] != 0 and point_checksum([v[local] for v, _ in data]) == stored[local])
+        verified += int((done & ~bad).sum())
+        start = tuple(s.start for s in slab)
+        failed += [tuple(int(a + b) for a, b in zip(start, local)) for local in zip(*np.nonzero(bad))]
+    return StoreReport(points, done_count, verified, tuple(failed), missing)
+
+
+def _slabs(shape: tuple[int, ...], point_bytes: int) -> Iterator[tuple[slice, ...]]:
+    """Blocks of the grid of points (C order) of at most VERIFY_BATCH_BYTES each (one point at least)."""
+    budget, block = max(1, VERIFY_BATCH_BYTES // max(point_bytes, 1)), []
+    for n in reversed(shape):
+        take = max(1, min(n, budget))
+        block.insert(0, take)
+        budget = max(1, budget // take)
+    for start in itertools.product(*(range(0, n, b) for n, b in zip(shape, block))):
+        yield tuple(slice(a, min(a + b, n)) for a, b, n in zip(start, block, shape))
+
+
+def _read(array: Any, slab: tuple[slice, ...]) -> tuple[np.ndarray, np.ndarray]:
+    """The values of ``array`` over ``slab`` and which points' chunks could not be read (those read as
+    zeros): one read for the slab, point by point only where it fails."""
+    shape = tuple(s.stop - s.start for s in slab)
+    try:
+        return np.asarray(array[slab]), np.zeros(shape, dtype=bool)
+    except Exception:  # noqa: BLE001  (a damaged chunk raises whatever its codec raises)
+        values = np.zeros(shape + tuple(array.shape[len(slab):]), dtype=array.dtype)
+        unreadable = np.zeros(shape, dtype=bool)
+        for local in np.ndindex(shape):
+            try:
+                values[local] = array[tuple(s.start + i for s, i in zip(slab, local))]
+            except Exception:  # noqa: BLE001
+                unreadable[local] = True
+        return values, unreadable
+
+
+def verify_store(store: str | Path) -> StoreReport:
+    """Check a sweep store without rendering: read back every done point and compare its checksum.
+
+    Returns:
+        A :class:`StoreReport`: counts of points done, verified, failed and to compute; ``damaged``
+        when a done point failed or a variable is missing (a rerun of the sweep recomputes them).
+
+    Raises:
+        InputError: ``store`` is not a spacefit sweep store.
+    """
+    import zarr  # here: only a sweep's store needs Zarr (slow to import)
+
+    path = Path(store)
+    if _stored_spec(path) is None:
+        raise InputError(f"`store` {str(store)!r} is not a spacefit sweep store (no folder with a sweep's attributes).")
+    group = zarr.open_group(str(path), mode="r", zarr_format=STORE_FORMAT, use_consolidated=False)
+    return check_points(group, path)
+
+
+def repair(group: Any, root: Path, make: Callable[[], Any]) -> Any:
+    """Verify the done points of a reopened store; recreate missing variables, clear the ``done``
+    flag of the points that failed (so that they are computed again) and say how many. Returns the
+    group to write to: ``group``, or the store opened again when variables were recreated."""
+    import zarr  # here: only a sweep's store needs Zarr (slow to import)
+
+    plain = zarr.open_group(str(root), mode="r", zarr_format=STORE_FORMAT, use_consolidated=False)
+    report = check_points(plain, root)
+    if report.missing_variables:
+        make()[list(report.missing_variables)].to_zarr(str(root), mode="a", compute=False, zarr_format=STORE_FORMAT)
+        group = zarr.open_group(str(root), mode="r+", zarr_format=STORE_FORMAT)  # its metadata now lists them
+    for index in report.failed:
+        group["done"][index] = False
+    gone = ", ".join(report.missing_variables)
+    if "done" in report.missing_variables:
+        said = f"the variable(s) {gone} were missing and are recreated; every point is computed again"
+    elif report.missing_variables:
+        said = f"the variable(s) {gone} were missing and are recreated; the {report.done:,} done points are recomputed"
+    else:
+        said = (f"{len(report.failed):,} of {report.done:,} done points failed their checksum (data chunk missing or "
+                "damaged) and are recomputed")
+    if report.damaged:
+        warnings.warn(f"store {str(root)!r}: {said}", stacklevel=3)
+    return group
