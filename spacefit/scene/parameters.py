@@ -284,6 +284,8 @@ PARAMETERS: dict[str, Parameter] = {p.pattern: p for p in (
               materials=_CONDUCTORS, bsdf_fields=("k",), label="extinction coefficient k"),
     Parameter("parts.P.kd", "1", UNIT, "Lambert albedo (grey)", _material_value, _own_key,
               materials=(Lambert,), bsdf_fields=("reflectance",), label="albedo kd"),
+    Parameter("parts.P.scale", "1", POSITIVE, "the factor on a measured BRDF table's values (a flat plate's tabulated BRDF; "
+              "no renderer material has it)", _material_value, _own_key, label="table factor"),
     Parameter("sun.irradiance_w_m2", "W m^-2", POSITIVE, "the sun's irradiance on a surface facing it", _scene_field, _own_key,
               label="sun's irradiance"),
     *_sun_angles(("sun.elevation_deg", "sun.azimuth_deg"),
