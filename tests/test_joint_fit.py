@@ -62,6 +62,7 @@ def test_an_image_and_a_light_curve_share_a_part_and_their_information_adds(obse
     # one result for both kinds: per observation, its goodness and its residuals (pixels, then irradiances)
     assert len(joint.observation_goodness) == 2 and joint.residuals[0].shape == (16, 16, 3) and joint.residuals[1].shape == (30,)
     assert joint.units[1] == "W m^-2" and joint.scene.parts["plate"].material.kd == pytest.approx(joint.values["parts.plate.kd"])
+    assert "observation 1 (W m^-2 values): goodness of fit: chi^2/dof" in sf.format_result(joint)
 
 
 class Line(ValueObservation):

@@ -307,7 +307,7 @@ MUTANTS = (
            "xy = v[..., 0] ** 2 + v[..., 1] ** 2", ("tests/test_brdf_tables.py",)),
     Mutant("shadow-on-the-sun-side", "spacefit/studies/observing.py", "return (along < 0) & (across < EARTH_RADIUS_M)",
            "return across < EARTH_RADIUS_M", ("tests/test_observed_lightcurves.py",)),
-    Mutant("table-fit-writes-into-a-foreign-folder", "spacefit/fitting/tabular.py",
+    Mutant("table-fit-writes-into-a-foreign-folder", "spacefit/fitting/report.py",
            'prepare_output(check_path("out_dir", out_dir), "table-fit", overwrite=check_flag("overwrite", overwrite))',
            'check_path("out_dir", out_dir)', ("tests/test_brdf_tables.py",)),
     Mutant("light-curve-sun-directions-not-normalised", "spacefit/studies/observing.py", "fields[name] = unit",

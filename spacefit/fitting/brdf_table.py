@@ -1,5 +1,6 @@
-"""Measured BRDF tables (goniometer data) as observations: reading them, fitting spacefit's material
-models to them with errors and a chi^2 verdict, and choosing the smallest model that fits.
+"""Measured BRDF tables (goniometer data): reading them, the material models fitted to them, and a
+table used as it is (:class:`TabulatedBRDF`). A table as an observation that :func:`spacefit.fit`
+fits, and the choice of the smallest model that fits, are :mod:`spacefit.fitting.observations.brdf`'s.
 
 Two file formats, both text with ``#`` comment lines, angles in degrees (radians inside), the BRDF
 in sr^-1:

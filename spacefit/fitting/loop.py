@@ -1,4 +1,4 @@
-"""``fit``: recover scene parameters from reference images with gradient-based solvers.
+"""``fit``: recover parameters from observations (images, tables, light curves) with gradient-based solvers.
 
 One function, one result type. The set-up is :mod:`spacefit.fitting.problem`, the solvers
 :mod:`spacefit.fitting.solvers`, the standard errors :mod:`spacefit.fitting.uncertainty`; this module runs
@@ -230,7 +230,9 @@ def fit(
             (:class:`~spacefit.fitting.observations.image.Observation`, (reference, scene) pairs) and
             other kinds (:mod:`spacefit.fitting.observations`: BRDF tables, light curves). Fixed
             parameters come from each image's scene or each observation's own values.
-        free: parameter names (see :mod:`spacefit.fitting.params`), e.g. ``["parts.panels.alpha_x"]``.
+        free: registered parameter names (:mod:`spacefit.scene.parameters`), e.g. ``["parts.panels.alpha_x"]``,
+            shared by every observation that depends on them (an image of part ``panels`` and a BRDF
+            table or a light curve of it); a per-observation name's ``@k`` counts the images.
         solver: a name in :data:`SOLVERS` (its defaults: rtol 1e-3, atol 1e-6; Adam's learning rate
             0.05), or an optimistix least-squares solver or minimiser, or :class:`Adam`, with its own
             tolerances (e.g. ``optx.LevenbergMarquardt(rtol=1e-4, atol=1e-8)``, ``sf.Adam(0.1)``).

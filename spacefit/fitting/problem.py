@@ -1,6 +1,8 @@
 """A fitting problem's set-up: observations checked, scenes assembled and loaded, residuals built.
 
-Nothing is rendered here: every input is checked first (:func:`setup`), so that a bad one is
+The observations are images (:mod:`spacefit.fitting.observations.image`) and value observations
+(tables, light curves: :mod:`spacefit.fitting.observations.base`), whose residual blocks follow the
+images' pixels. Nothing is rendered here: every input is checked first (:func:`setup`), so that a bad one is
 refused before any work. Every render of a solve uses the same seed (common random numbers), so
 the objective is a deterministic function; derivative renders use another seed. In a joint fit
 each observation's renderer sees the free values that are its own (``target.attitude_z_deg@k``)
@@ -276,11 +278,7 @@ def setup(
         check_choice("start", name, user.names)
     for k, obs in enumerate(observations):  # a start value is refused as the scene file would refuse it, with its message
         scene_with_values(obs.scene, {n: v for n, v in start.items() if observation_of(n)[0] in image_names}, observation=k)
-    # an image's own value (``target.attitude_z_deg@k``) starts at its scene's; a value only other kinds
-    # know, at the first one's
-    x0_user = np.array([start[n] if n in start else scene_value(observations[observation_of(n)[1] or 0].scene, n)
-                        if observation_of(n)[0] in image_names else next(o.start(n) for o in others if n in o.parameters())
-                        for n in user.names], dtype=float)
+    x0_user = np.array([start[n] if n in start else _own_value(n, observations, others, image_names) for n in user.names], dtype=float)
     user.check_start(x0_user)
     rms_index = None
     if wrinkle_coordinates == "rms" and {"wrinkles.D", "wrinkles.G"} <= set(user.names):
@@ -309,6 +307,15 @@ def setup(
                        render.integrator, executor, blocks, image_names)
     noise_given = all(o.sensor is not None or o.sigma is not None for o in observations) and all(b.noise_known for b in blocks)
     return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index, given, noise_given, image_names)
+
+
+def _own_value(name: str, images: Sequence[Observation], others: Sequence[ValueObservation], image_names: frozenset[str]) -> float:
+    """Where a fit of ``name`` starts by default: an image's scene value (an image's own value,
+    ``target.attitude_z_deg@k``, its scene's), or for a value only other kinds know, the first one's."""
+    base, k = observation_of(name)
+    if base in image_names:
+        return scene_value(images[k or 0].scene, name)
+    return next(o.start(name) for o in others if name in o.parameters())
 
 
 def free_of(scene: Scene | None, others: Sequence[ValueObservation], names: Sequence[str],

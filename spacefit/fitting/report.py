@@ -100,7 +100,8 @@ def write_residuals(path: Path, result: FitResult) -> None:
 
 def format_result(result: FitResult) -> str:
     """The verdict (first line), the goodness of fit, the fitted values with standard errors (marked
-    where they are not valid: a misfit's are too small), chi^2 per part, and the warnings, as lines of text."""
+    where they are not valid: a misfit's are too small), chi^2 per part of each image and, in a joint
+    fit, each other observation's goodness of fit, and the warnings, as lines of text."""
     check_type("result", result, FitResult, "an sf.FitResult (what sf.fit returns)")
     derived = [name for name in result.extras if f"{name}.stderr" in result.extras]  # e.g. wrinkles.rms_m
     width = max(len(name) for name in (*result.names, *derived))
@@ -123,6 +124,9 @@ def format_result(result: FitResult) -> str:
         if spread:
             what = "chi^2 per value" if result.goodness is not None and result.goodness.noise_known else "mean r^2 / render noise"
             lines.append(f"  {what}, observation {k}: " + ", ".join(f"{name} {value:.3g}" for name, value in spread.items()))
+    if len(result.observation_goodness) > 1:  # a joint fit: each value observation's own goodness (the images' by part above)
+        for k in range(len(result.parts), len(result.observation_goodness)):
+            lines.append(f"  observation {k} ({result.units[k]} values): {result.observation_goodness[k].line()}")
     lines += [f"warning: {w}" for w in result.warnings]
     return "\n".join(lines)
 

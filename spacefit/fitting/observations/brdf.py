@@ -58,14 +58,15 @@ class BRDFTableObservation(ValueObservation):
         check_type("values", self.values, Mapping, "a dict of the model's values by field")
         for key, value in self.values.items():
             check_choice("values", key, BRDF_MODELS[self.model].parameters)
-            check_value(self._name(key), value, key)
+            check_value(self.name_of(key), value, key)
 
-    def _name(self, field_name: str) -> str:
+    def name_of(self, field_name: str) -> str:
+        """The registered name of the model's field ``field_name``: ``parts.<part>.<field>``."""
         return f"parts.{self.part}.{field_name}"
 
     def parameters(self) -> tuple[str, ...]:
         """``parts.<part>.<field>`` of each of the model's fields."""
-        return tuple(self._name(f) for f in BRDF_MODELS[self.model].parameters)
+        return tuple(self.name_of(f) for f in BRDF_MODELS[self.model].parameters)
 
     def start(self, name: str) -> float:
         """The model's value of ``name``: :attr:`values`'s, else :data:`~spacefit.fitting.brdf_table.DEFAULT_START`'s."""
@@ -105,7 +106,7 @@ def fit_brdf_table(table: BRDFTable, model: str = "lambert+ggx", *, relative_err
     if not free:
         raise InputError(f"no parameter is left to fit: `fixed` holds every field of the model {model!r}.")
     result = fit(observation, free, max_steps=max_steps)
-    result.extras["fixed"] = {observation._name(k): float(v) for k, v in fixed.items()}
+    result.extras["fixed"] = {observation.name_of(k): float(v) for k, v in fixed.items()}
     return result
 
 
