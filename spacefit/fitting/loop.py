@@ -507,13 +507,15 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
     verdict_spp = [judged * spp for spp in problem.spp]
     ratios = [_reference_ratio(spp, ref) for spp, ref in zip(verdict_spp, problem.reference_spp)]
     pixels = loss == "pixel"
-    values = r.size - problem.pixels  # the value observations' residuals, after the pixels: no reference render noise
-    ratio = np.concatenate([np.repeat(ratios, [ref.size for ref in problem.references]), np.zeros(values)]) if pixels \
-        else float(np.mean(ratios or [0.0]))
-    fitted = np.concatenate([*(np.broadcast_to(used[..., None], ref.shape).ravel() for ref, used in zip(problem.references, problem.used)),
-                             np.ones(values, dtype=bool)])
+    if pixels:
+        values = r.size - problem.pixels  # the value observations' residuals, after the pixels: no reference render noise
+        ratio = np.concatenate([np.repeat(ratios, [ref.size for ref in problem.references]), np.zeros(values)])
+        fitted = np.concatenate([*(np.broadcast_to(used[..., None], ref.shape).ravel() for ref, used in zip(problem.references, problem.used)),
+                                 np.ones(values, dtype=bool)])
+    else:
+        ratio, fitted = float(np.mean(ratios or [0.0])), None
     quality = goodness(r, noise, len(s.x0), s.noise_given, [ref.shape for ref in problem.references] if pixels else [],
-                       fitted=fitted if pixels else None, reference_ratio=ratio, samples_factor=judged, verdict_spp=verdict_spp,
+                       fitted=fitted, reference_ratio=ratio, samples_factor=judged, verdict_spp=verdict_spp,
                        reference_spp=problem.reference_spp)
     return quality, r, noise, [np.asarray(m) for m in renders[0]]
 
