@@ -25,7 +25,7 @@ from spacefit.fitting.problem import INDEPENDENT_SEED_OFFSET
 from spacefit.geometry.frames import pixel_solid_angles
 from spacefit.rendering.derivatives import render_function
 from spacefit.scene.assembly import assemble
-from spacefit.scene.parameters import available, scene_value
+from spacefit.scene.parameters import IMAGE, available, scene_value
 from spacefit.scene.schema import Scene, check_scene
 from spacefit.studies.lightcurve import MAGNITUDE_PER_LN, SUN_MAGNITUDES
 
@@ -89,8 +89,9 @@ class RenderedLightCurve(ValueObservation):
         return tuple(sorted({key for p in self.points for key in p}))
 
     def parameters(self) -> tuple[str, ...]:
-        """Every parameter of the scene (:func:`~spacefit.scene.parameters.available`) but the points' geometry."""
-        return tuple(n for n in available(self.scene) if n not in self.geometry)
+        """Every parameter of the scene (:func:`~spacefit.scene.parameters.available`) but the points'
+        geometry and the image nuisances (an irradiance has no pixels)."""
+        return tuple(n for n in available(self.scene) if n not in self.geometry and n not in IMAGE)
 
     def start(self, name: str) -> float:
         """The scene's value of ``name``."""
