@@ -14,7 +14,8 @@ from spacefit.fitting.nuisance import blur, shift
 from spacefit.fitting.problem import setup
 from spacefit.geometry.frames import Intrinsics
 from spacefit.precision import float64
-from spacefit.scene.parameters import ATTITUDE, IMAGE, NUISANCES, POSITION, ROLL, fd_step, observation_name, scene_value, scene_with_values
+from spacefit.scene.names import Name
+from spacefit.scene.parameters import ATTITUDE, IMAGE, NUISANCES, POSITION, ROLL, fd_step, scene_value, scene_with_values
 from spacefit.sensor import Sensor
 
 # The panels case at 48 x 48 px (same field of view), 4 spp: renders take milliseconds.
@@ -224,7 +225,7 @@ def test_two_observations_with_different_gains_recover_each():
     case = sf.load_case("panels")
     truths = two_observations(256)
     observations = [sf.Observation(s, g * np.asarray(sf.render(t), float)) for g, s, t in zip(GAINS, two_observations(64), truths)]
-    free = [*case.free, observation_name("image.scale", 0), observation_name("image.scale", 1)]
+    free = [*case.free, Name("image.scale", 0), Name("image.scale", 1)]
     result = sf.fit(observations, free, start=case.start)
     assert result.success, result.status
     for k, g in enumerate(GAINS):

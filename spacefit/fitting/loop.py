@@ -37,7 +37,8 @@ from spacefit.rendering.renderer import mitsuba_scene_dict
 from spacefit.rendering.memory import check_memory
 from spacefit.rendering.parts import PartImage
 from spacefit.scene.schema import Scene
-from spacefit.scene.parameters import is_nuisance, observation_of, parameter, scene_with_values
+from spacefit.scene.names import Name
+from spacefit.scene.parameters import is_nuisance, parameter, scene_with_values
 from spacefit.units import DN_UNIT
 
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
@@ -481,7 +482,7 @@ def _fitted_scene(s: Setup, values: Mapping[str, float]) -> Scene | None:
     """The first image's scene with the fitted values it knows (None without an image)."""
     if s.scene is None:
         return None
-    return scene_with_values(s.scene, {n: v for n, v in values.items() if observation_of(n)[0] in s.image_names}, observation=0)
+    return scene_with_values(s.scene, {n: v for n, v in values.items() if Name(n).parameter in s.image_names}, observation=0)
 
 
 def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.ndarray, np.ndarray, list[np.ndarray]]:
@@ -558,7 +559,7 @@ def per_observation(r: np.ndarray, noise: np.ndarray, s: Setup, factor: int) -> 
     for k, ref in enumerate(problem.references):
         rows = slice(offset, offset + ref.size)
         offset = rows.stop
-        n_k = sum(1 for name in s.user.names if observation_of(name)[1] in (None, k))
+        n_k = sum(1 for name in s.user.names if Name(name).observation in (None, k))
         spp, reference = factor * problem.spp[k], problem.reference_spp[k]
         out.append(goodness(r[rows], noise[rows], n_k, s.noise_given, [ref.shape], fitted=np.broadcast_to(problem.used[k][..., None], ref.shape),
                             reference_ratio=_reference_ratio(spp, reference), samples_factor=factor, verdict_spp=[spp],

@@ -8,7 +8,7 @@ integration over the pixel), ``shift`` a sub-pixel translation by a Fourier phas
 rightwards along columns, +y downwards along rows); both in one Fourier transform
 (:func:`spacefit.formation.fourier_filter`, as the sensor's PSF), the image padded with black sky
 first, so nothing wraps round. Each may be one observation's own (``image.blur_sigma_px@k``,
-:func:`~spacefit.scene.parameters.observation_name`). Only the free ones are applied; their
+:class:`~spacefit.scene.names.Name`). Only the free ones are applied; their
 Jacobian columns are JAX's own derivatives (no render). The pose nuisances move vertices and are
 rendered (:mod:`spacefit.rendering.values`, central differences with common random numbers).
 """
@@ -23,7 +23,8 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.formation import fourier_filter, gaussian_transfer
-from spacefit.scene.parameters import IMAGE, PSF_SIGMA_MAX_PX, observation_name
+from spacefit.scene.names import Name
+from spacefit.scene.parameters import IMAGE, PSF_SIGMA_MAX_PX
 from spacefit.psf import GAUSSIAN_RADIUS_SIGMA
 
 # Black sky added round the image before the blur and shift, px: 5 sigma of the widest blur a fit
@@ -57,7 +58,7 @@ def shift(image: Float[Array, "h w c"], dx_px: Float[Array, ""], dy_px: Float[Ar
 def nuisance_index(names: Sequence[str], name: str, k: int) -> int | None:
     """Where observation k's image nuisance ``name`` is in the free ``names``: its own
     (``name@k``) if free, else the shared one, else None (not free)."""
-    for candidate in (observation_name(name, k), name):
+    for candidate in (Name(name, k), name):
         if candidate in names:
             return list(names).index(candidate)
     return None

@@ -21,7 +21,8 @@ from jaxtyping import Array, Float
 
 from spacefit.errors import InputError
 from spacefit.scene.schema import Scene
-from spacefit.scene.parameters import check_names, fd_step, is_image, observation_of, parameter
+from spacefit.scene.names import Name
+from spacefit.scene.parameters import check_names, fd_step, is_image, parameter
 from spacefit.scene.entries import Bounds
 
 
@@ -83,10 +84,10 @@ class FreeParameters:
         observations' own values are not among them."""
         names, indices = [], []
         for i, name in enumerate(self.names):
-            base, j = observation_of(name)
-            if is_image(name) or (j is not None and j != k):
+            ref = Name(name)
+            if is_image(name) or ref.observation not in (None, k):
                 continue
-            names.append(base)
+            names.append(ref.parameter)
             indices.append(i)
         return tuple(names), np.array(indices, dtype=int)
 

@@ -34,7 +34,8 @@ from typing import Any
 import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_count, quote
-from spacefit.scene.parameters import PER_OBSERVATION, observation_name, observation_of
+from spacefit.scene.names import Name
+from spacefit.scene.parameters import PER_OBSERVATION
 from spacefit.scene.schema import Scene
 
 # Scene-file keys that hold 3 numbers, given as one column of 3 or as KEY.x, KEY.y, KEY.z.
@@ -173,7 +174,7 @@ class Pass:
             if name not in PER_OBSERVATION:
                 raise InputError(f"`per_frame` name {name!r} cannot be one frame's own; the per-frame parameters are "
                                  f"{', '.join(PER_OBSERVATION)}.")
-        return [observation_name(name, k) for name in names for k in range(len(self.frames))]
+        return [Name(name, k) for name in names for k in range(len(self.frames))]
 
     def observation_files(self, scene: str | Path, **options: Any) -> Any:
         """The frames as :class:`~spacefit.fitting.observation_files.ObservationFiles` for
@@ -289,10 +290,10 @@ def frame_table(result: Any, frames: Pass | None = None, *, files: Sequence[str 
             quality = result.observation_goodness[k]
             row.update({"chi2_dof": quality.chi2_dof, "misfit": quality.misfit, "render_noise": quality.render_noise})
         for name in result.names:
-            base, j = observation_of(name)
-            if j == k:
-                row[base] = result.values[name]
-                row[f"{base}.stderr"] = result.stderr[name]
+            ref = Name(name)
+            if ref.observation == k:
+                row[ref.parameter] = result.values[name]
+                row[f"{ref.parameter}.stderr"] = result.stderr[name]
         rows.append(row)
     return rows
 

@@ -36,7 +36,8 @@ from spacefit.scene.sections import FILTER_RADIUS_PX
 from spacefit.sensor import saturated_mask
 from spacefit.psf import psf_rms_px
 from spacefit.units import DN_UNIT, RADIANCE_UNIT
-from spacefit.scene.parameters import GEOMETRY, available, check_names, fd_step, observation_of, scene_value, scene_with_values
+from spacefit.scene.names import Name
+from spacefit.scene.parameters import GEOMETRY, available, check_names, fd_step, scene_value, scene_with_values
 from spacefit.scene.conversions import G_of, rms_of
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
@@ -280,7 +281,7 @@ def setup(
     for name in start:
         check_choice("start", name, user.names)
     for k, obs in enumerate(observations):  # a start value is refused as the scene file would refuse it, with its message
-        scene_with_values(obs.scene, {n: v for n, v in start.items() if observation_of(n)[0] in image_names}, observation=k)
+        scene_with_values(obs.scene, {n: v for n, v in start.items() if Name(n).parameter in image_names}, observation=k)
     x0_user = np.array([start[n] if n in start else _own_value(n, observations, others, image_names) for n in user.names], dtype=float)
     user.check_start(x0_user)
     rms_index = None
@@ -315,9 +316,9 @@ def setup(
 def _own_value(name: str, images: Sequence[Observation], others: Sequence[ValueObservation], image_names: frozenset[str]) -> float:
     """Where a fit of ``name`` starts by default: an image's scene value (an image's own value,
     ``target.attitude_z_deg@k``, its scene's), or for a value only other kinds know, the first one's."""
-    base, k = observation_of(name)
-    if base in image_names:
-        return scene_value(images[k or 0].scene, name)
+    ref = Name(name)
+    if ref.parameter in image_names:
+        return scene_value(images[ref.observation or 0].scene, name)
     return next(o.start(name) for o in others if name in o.parameters())
 
 
@@ -335,7 +336,7 @@ def free_of(scene: Scene | None, others: Sequence[ValueObservation], names: Sequ
     names = check_name_list("free", names)
     elsewhere = {n for o in others for n in o.parameters()}
     in_scene = set(available(scene)) if scene is not None else set()
-    for_images = tuple(n for n in names if n not in elsewhere or observation_of(n)[0] in in_scene)
+    for_images = tuple(n for n in names if n not in elsewhere or Name(n).parameter in in_scene)
     if not names:
         raise InputError(f"`free` must name at least one parameter; valid: {', '.join(sorted(elsewhere | in_scene))}.")
     if scene is None:
@@ -350,4 +351,4 @@ def free_of(scene: Scene | None, others: Sequence[ValueObservation], names: Sequ
         ranges = [o.coordinate(name) for o in others if name in o.parameters()] or [bijection(name)]
         bijections.append(Bijection(max(b.lo for b in ranges), min(b.hi for b in ranges)))
     steps = np.array([fd_step(scene, n) if scene is not None and n in for_images else 0.0 for n in names])
-    return FreeParameters(names, tuple(bijections), steps), frozenset(observation_of(n)[0] for n in for_images)
+    return FreeParameters(names, tuple(bijections), steps), frozenset(Name(n).parameter for n in for_images)

@@ -26,7 +26,7 @@ camera's roll about its optical axis (``camera.roll_deg``) they are a fit's nuis
 (:data:`NUISANCES`), reported apart from the materials. Each nuisance may be one per observation
 of a joint fit (:data:`PER_OBSERVATION`): ``image.scale@k`` or ``target.attitude_z_deg@k`` is
 observation k's alone (k from 0, in the order the observations are given; the others keep the
-shared or their scene's value), ``image.scale`` one shared by all (:func:`observation_name`).
+shared or their scene's value), ``image.scale`` one shared by all (:class:`spacefit.scene.names.Name`).
 
 ``wrinkles.rms_m`` is the expected rms height of eq. 2-1 (:func:`spacefit.geometry.wm.wm_rms`). In an
 image D and G trade off along a valley of nearly constant rms height; (D, rms) are the better
@@ -43,6 +43,7 @@ from spacefit.errors import InputError, check_choice, check_name_list, check_ran
 from spacefit.materials import MODELS, Field, Material
 from spacefit.materials.registry import Derived
 from spacefit.scene.conversions import G_of, rms_of, sun_angles_deg, sun_direction
+from spacefit.scene.names import MARK, Name
 from spacefit.scene.entries import GROUPS, POSITIVE, WHOLE_LINE, Bounds, Getter, Parameter
 from spacefit.scene.sections import SceneLike, check_scene, unknown_part
 
@@ -205,33 +206,18 @@ MOVES_VERTICES = group("moves-vertices")
 IMAGE = group("image")
 NUISANCES = group("nuisance")
 PER_OBSERVATION = group("per-observation")
-# Joins a per-observation parameter's name and its observation's index: ``image.scale@1``.
-OBSERVATION_MARK = "@"
-
-
-def observation_name(name: str, observation: int | str) -> str:
-    """The name of per-observation parameter ``name`` for observation ``observation`` alone (``image.scale@1``)."""
-    return f"{name}{OBSERVATION_MARK}{observation}"
-
-
-def observation_of(name: str) -> tuple[str, int | None]:
-    """A parameter name without its observation index, and the index (None: not per observation)."""
-    base, mark, index = name.partition(OBSERVATION_MARK)
-    return base, (int(index) if mark and index.isascii() and index.isdigit() else None)
-
-
 def is_image(name: str) -> bool:
     """Whether ``name`` is a fit-only image nuisance (:data:`IMAGE`), shared or one observation's."""
-    return observation_of(name)[0] in IMAGE
+    return Name(name).parameter in IMAGE
 
 
 def is_nuisance(name: str) -> bool:
     """Whether ``name`` is a nuisance parameter (:data:`NUISANCES`), shared or one observation's."""
-    return observation_of(name)[0] in NUISANCES
+    return Name(name).parameter in NUISANCES
 
 
 def _pattern(name: str) -> str:
-    name = observation_of(name)[0]
+    name = Name(name).parameter
     section, *rest = name.split(".")
     return f"parts.P.{rest[-1]}" if section == "parts" and len(rest) == 2 else name
 
@@ -247,7 +233,8 @@ def parameter(name: str) -> Parameter:
 def label(name: str) -> str:
     """A parameter's name in words, without its unit, for axes and tables: ``parts.panels.kd`` ->
     "albedo kd of panels", ``image.scale@1`` -> "exposure scale, observation 1"."""
-    base, k = observation_of(name)
+    ref = Name(name)
+    base, k = ref.parameter, ref.observation
     section, *rest = base.split(".")
     words = f"{parameter(name).label} of {rest[0]}" if section == "parts" and len(rest) == 2 else parameter(name).label
     return words if k is None else f"{words}, observation {k}"
@@ -263,8 +250,9 @@ def check_value(name: str, value: float, argument: str | None = None) -> float:
 
 def scene_keys(name: str) -> set[str]:
     """The scene-file keys whose values parameter ``name`` replaces."""
-    head = observation_of(name)[0].rsplit(".", 1)[0]
-    return {f"{head}.{f}" for f in parameter(name).scene_fields} or {observation_of(name)[0]}
+    base = Name(name).parameter
+    head = base.rsplit(".", 1)[0]
+    return {f"{head}.{f}" for f in parameter(name).scene_fields} or {base}
 
 
 def _joint() -> tuple[tuple[str, ...], ...]:
@@ -297,10 +285,10 @@ def available(scene: SceneLike) -> list[str]:
 
 def _check_observation(argument: str, name: str, observations: int) -> None:
     """Raise :class:`InputError` unless ``name`` is a per-observation name (``image.scale@k``) with k in range."""
-    base, _, index = name.partition(OBSERVATION_MARK)
+    base, _, index = name.partition(MARK)  # the user's text, as given: its index may be no number
     if base not in PER_OBSERVATION:
         raise InputError(f"`{argument}` names {name!r}, but only {', '.join(PER_OBSERVATION)} may be one observation's "
-                         f"(`{PER_OBSERVATION[0]}{OBSERVATION_MARK}k`).")
+                         f"(`{PER_OBSERVATION[0]}{MARK}k`).")
     if index not in [str(k) for k in range(observations)]:
         raise InputError(f"`{argument}` names {name!r}: the observation index {index!r} must be an integer from 0 to "
                          f"{observations - 1} (the fit has {observations} observation{'s' * (observations > 1)}).")
@@ -320,7 +308,7 @@ def check_names(
         raise InputError(f"`{argument}` must name at least one parameter; valid: {', '.join(valid)}.")
     for name in names:
         forms = [n for n in valid if name not in valid and n not in IMAGE and name in scene_keys(n)]
-        if OBSERVATION_MARK in name and image:
+        if MARK in name and image:
             _check_observation(argument, name, observations)
         elif name.count(".") == 2 and name.startswith("parts.") and name.split(".")[1] not in scene.parts:
             raise unknown_part(name, list(scene.parts))
@@ -329,25 +317,25 @@ def check_names(
                              f"one number: give {', '.join(f'`{n}`' for n in forms)}.")
         else:
             check_choice(argument, name, valid)
-    for name in names:
-        base, k = observation_of(name)
-        if k is not None and base in names:
-            raise InputError(f"`{argument}` names both {base!r} (one for every observation) and {name!r} (observation {k}'s "
-                             "own); free one of the two forms.")
+    refs = [Name(n) for n in names]
+    for ref in refs:
+        if ref.observation is not None and ref.parameter in names:
+            raise InputError(f"`{argument}` names both {ref.parameter!r} (one for every observation) and {str(ref)!r} (observation "
+                             f"{ref.observation}'s own); free one of the two forms.")
     if len(set(names)) != len(names):
         raise InputError(f"`{argument}` names a parameter twice: {list(names)}.")
-    for a in names:
-        for b in names:
-            (base_a, k_a), (base_b, k_b) = observation_of(a), observation_of(b)
-            if (a < b and base_a != base_b and (k_a is None or k_b is None or k_a == k_b) and scene_keys(a) & scene_keys(b)
-                    and not any({base_a, base_b} <= set(g) for g in JOINT)):
+    for a in refs:
+        for b in refs:
+            shared = a.observation is None or b.observation is None or a.observation == b.observation
+            if (a < b and a.parameter != b.parameter and shared and scene_keys(a) & scene_keys(b)
+                    and not any({a.parameter, b.parameter} <= set(g) for g in JOINT)):
                 raise InputError(f"`{a}` and `{b}` set the same scene value; free one of them.")
-    return names
+    return tuple(refs)
 
 
 def scene_value(scene: SceneLike, name: str) -> float:
     """The value of parameter ``name`` in the scene (its fixed value, or a fit's default start)."""
-    name = observation_of(name)[0]
+    name = Name(name).parameter
     return float(parameter(name).get(scene, name))
 
 
@@ -364,7 +352,7 @@ def parameter_table() -> str:
         column = "forward-mode AD" if not p.fd_step else (
             f"central differences, step {p.fd_step:g}{' x value' if p.relative_step else ' ' + p.unit}")
         kinds = f" ({', '.join(m.__name__ for m in p.materials)})" if p.materials else ""
-        own = f"; `{observation_name(p.pattern, 'k')}`: observation k's own" if "per-observation" in p.groups else ""
+        own = f"; `{p.pattern}{MARK}k`: observation k's own" if "per-observation" in p.groups else ""
         rows.append(f"| `{p.pattern}` | {p.unit} | {p.bounds.describe()} | {column} | {p.doc}{kinds}{own} |")
     return "\n".join(rows)
 
@@ -383,10 +371,10 @@ def scene_with_values(scene: SceneLike, values: Mapping[str, float], observation
     """
     v: dict[str, Any] = {}
     for name, x in values.items():
-        base, k = observation_of(name)
-        if observation is not None and k is not None:
-            if k == observation:
-                v[base] = x
+        ref = Name(name)
+        if observation is not None and ref.observation is not None:
+            if ref.observation == observation:
+                v[ref.parameter] = x
         else:
             v[name] = x
     in_scene = [n for n in v if not is_image(n)]
