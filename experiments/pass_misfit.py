@@ -24,7 +24,7 @@ import numpy as np
 import spacefit as sf
 from spacefit.formation import noise_variance_dn
 from spacefit.fitting.goodness import goodness
-from spacefit.fitting.loop import judged_goodness, per_observation
+from spacefit.fitting.judging import judged_goodness, per_observation
 from spacefit.fitting.problem import setup
 from spacefit.precision import float64
 

@@ -2,7 +2,7 @@
 cells as the text tables, every value with its unit and error, escaped.
 
 The classes' ``_repr_html_`` methods call these (:class:`~spacefit.scene.schema.Scene`,
-:class:`~spacefit.fitting.loop.FitResult`, :class:`~spacefit.studies.sensitivity.Sensitivity`,
+:class:`~spacefit.fitting.result.FitResult`, :class:`~spacefit.studies.sensitivity.Sensitivity`,
 :class:`~spacefit.studies.lightcurve.LightCurve`), which sit above it: each function reads its object by
 attribute (typed ``Any``) and imports none of them; nothing here imports more than the parameter registry.
 """

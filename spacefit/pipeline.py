@@ -36,7 +36,8 @@ from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
 
 if TYPE_CHECKING:
-    from spacefit.fitting.loop import FitOptions, FitResult
+    from spacefit.fitting.loop import FitOptions
+    from spacefit.fitting.result import FitResult
     from spacefit.fitting.observation_files import ObservationFiles
 
 

@@ -13,7 +13,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 import spacefit as sf
-from spacefit.fitting.loop import FitResult
+from spacefit.fitting.result import FitResult
 from spacefit.fitting.plots import plot_residuals
 from spacefit.fitting.solvers import Status
 from spacefit.display import html_table

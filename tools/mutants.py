@@ -276,13 +276,13 @@ MUTANTS = (
     Mutant("dof-miscounted", "spacefit/fitting/goodness.py", "dof = max(values - n_free, 1)", "dof = max(values, 1)",
            ("tests/test_goodness.py",)),
     # the verdict render (issue 21): judged at more samples than the fit's, the references' own render noise counted
-    Mutant("verdict-on-the-fits-samples", "spacefit/fitting/loop.py", "k = verdict_factor(2.0 * goodness(r, noise, 0, True).render_noise, max(problem.spp))",
+    Mutant("verdict-on-the-fits-samples", "spacefit/fitting/judging.py", "k = verdict_factor(2.0 * goodness(r, noise, 0, True).render_noise, max(problem.spp))",
            "k = 1", ("tests/test_goodness.py",)),
     Mutant("zero-residuals-left-out", "spacefit/fitting/goodness.py", "counted |= np.ravel(np.asarray(fitted, dtype=bool))",
            "counted = counted", ("tests/test_goodness.py",)),
     Mutant("model-dips-below-the-bias", "spacefit/formation.py", "jnp.maximum(electrons(radiance), 0.0)", "electrons(radiance)",
            ("tests/test_goodness.py",)),
-    Mutant("reference-render-noise-ignored", "spacefit/fitting/loop.py", "return spp / reference_spp if reference_spp else 0.0", "return 0.0",
+    Mutant("reference-render-noise-ignored", "spacefit/fitting/judging.py", "return spp / reference_spp if reference_spp else 0.0", "return 0.0",
            ("tests/test_goodness.py",)),
     # a resumed fit goes on with its stop rule's record (the checkpoint's history)
     Mutant("resume-forgets-the-history", "spacefit/pipeline.py", "checkpoint.history if resume else ())", "())",

@@ -11,21 +11,22 @@ import dataclasses
 import math
 import time
 from collections.abc import Callable, Generator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.display import fit_html
-from spacefit.errors import InputError, check_choice, check_count, check_type
+from spacefit.errors import check_choice, check_count, check_type
 from spacefit.executors import Cluster
 from spacefit.fitting.frames import frame_executor
-from spacefit.fitting.goodness import Goodness, goodness, part_chi2, verdict_factor
+from spacefit.fitting.goodness import Goodness
+from spacefit.fitting.judging import judged_goodness, part_rows, per_observation
 from spacefit.fitting.observations.base import ValueObservation
 from spacefit.fitting.observations.image import Observation
-from spacefit.fitting.problem import FitRender, Problem, Setup, setup
+from spacefit.fitting.problem import FitRender, Setup, setup
+from spacefit.fitting.result import FitResult
 from spacefit.fitting.resume import Resume
 from spacefit.fitting.solvers import Outcome, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name
 from spacefit.fitting.stopping import NoiseFloor, loss_noise
@@ -33,140 +34,15 @@ from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
-from spacefit.rendering.renderer import mitsuba_scene_dict
-from spacefit.rendering.memory import check_memory
-from spacefit.rendering.parts import PartImage
 from spacefit.scene.schema import Scene
 from spacefit.scene.names import Name
-from spacefit.scene.parameters import is_nuisance, parameter, scene_with_values
-from spacefit.units import DN_UNIT
+from spacefit.scene.parameters import scene_with_values
 
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
 # region may try (and reject) a single non-finite point.
 NONFINITE_PATIENCE = 3
 DEFAULT_MAX_STEPS = 50
 STOP_RULES = ("noise", "tolerance")
-
-
-@dataclass
-class FitResult:
-    """Outcome of :func:`fit`: values in physical units and how far to trust them.
-
-    Attributes:
-        names: free parameter names, in order.
-        values: fitted value of each, physical units; :attr:`estimates` and :attr:`nuisances` split them.
-        stderr: standard error of each (from J^T J and the residual); inf if not determined.
-        correlation: (n, n) correlation matrix of the estimates.
-        success: whether the fit succeeded: the solver converged, at least one step lowered the
-            loss, no parameter is at a bound and the residuals are within the noise
-            (``status.success``).
-        status: how the fit ended, a verdict (``str(status)`` is its words; :class:`Status`).
-        warnings: identifiability and convergence warnings, in words.
-        history: one entry per step: the point the step evaluated (step 1 evaluates the start;
-            the accepted point of the last step is ``values``), its loss, ``accepted`` (the step
-            evaluated another point than the best so far and lowered its loss: accepted losses never rise), ``loss_noise`` (the loss's
-            Monte Carlo noise at the best point so far, :mod:`~spacefit.fitting.stopping`),
-            time_s since the start.
-        renders: each observation's final model, the images' first (the render with the image
-            nuisances), then the other kinds' (their predicted values), in the unit of its data: ``units``.
-        units: per observation, the unit of its data and model: for an image W m^-2 sr^-1 (radiance),
-            or DN where it has a sensor (the sensor's expected DN of the render); a value
-            observation's own (sr^-1 for a BRDF table, W m^-2 for a light curve's irradiances).
-        loss: final loss, 0.5 * sum of squared residuals.
-        solver, loss_name, steps, wall_time_s, start: what was run.
-        extras: derived quantities, e.g. the rms height (and its standard error) of a (D, G) fit.
-        parts: per observation, per part (and the whole ``target``): the fitted pixels (not masked
-            out) that see it and the mean of the reference and of the fit's render there, in ``units`` (keys
-            ``reference_mean_w_m2_sr`` and ``fit_mean_w_m2_sr``, or ``reference_mean_dn`` and ``fit_mean_dn``).
-            With the pixel loss, each row also holds ``chi2_per_value`` (the noise known) or
-            ``r2_over_render_noise`` (mean r^2 over the render noise's, :mod:`~spacefit.fitting.goodness`).
-        scene: the first observation's scene with the fitted values: ``scene.to_toml()`` is a scene
-            file that renders the fit again (the image nuisances are not scene values); None if
-            the values are not finite.
-        goodness: the goodness of fit at the result (:class:`~spacefit.fitting.goodness.Goodness`);
-            None where there is no finite result (interrupted, non-finite).
-        residuals: per observation, data - model in ``units`` (for an image NaN where not fitted).
-        observation_goodness: per observation, the goodness of fit of its own residuals (the
-            pixel loss), counting as free the shared parameters and its own (``name@k``; a value
-            observation those it depends on).
-    """
-
-    names: tuple[str, ...]
-    values: dict[str, float]
-    stderr: dict[str, float]
-    correlation: np.ndarray
-    success: bool
-    status: Status
-    warnings: list[str]
-    history: list[dict[str, Any]]
-    renders: list[np.ndarray]
-    loss: float
-    solver: str
-    loss_name: str
-    steps: int
-    wall_time_s: float
-    start: dict[str, float] = field(default_factory=dict)
-    extras: dict[str, Any] = field(default_factory=dict)
-    parts: list[dict[str, dict[str, float]]] = field(default_factory=list)
-    scene: Scene | None = None
-    units: list[str] = field(default_factory=list)
-    goodness: Goodness | None = None
-    residuals: list[np.ndarray] = field(default_factory=list)
-    observation_goodness: list[Goodness] = field(default_factory=list)
-
-    def _repr_html_(self) -> str:
-        return fit_html(self)
-
-    def mitsuba_scene_dict(self) -> dict[str, Any]:
-        """The fitted scene as a Mitsuba scene dictionary (``mi.load_dict`` loads it).
-
-        Raises:
-            InputError: if the fit has no scene (its values are not finite).
-        """
-        if self.scene is None:
-            raise InputError("this fit has no fitted scene: its values are not finite.")
-        return mitsuba_scene_dict(self.scene)
-
-    def uncertainty(self) -> dict[str, Any]:
-        """The values, standard errors and correlation matrix (rows and columns in ``names`` order),
-        with each parameter's unit: JSON-ready (``uncertainty.json`` of a fit's folder).
-        ``stderr_valid`` is False for a misfit (the errors assume a correct model: they are too
-        small, not scaled) and where the fit did not succeed; ``stderr_note`` says why."""
-        return {"names": list(self.names), "values": self.values, "stderr": self.stderr,
-                "units": {n: parameter(n).unit for n in self.names},
-                "correlation": np.asarray(self.correlation).tolist(), "nuisances": list(self.nuisances),
-                "stderr_valid": self.success, "stderr_note": self.stderr_note}
-
-    @property
-    def stderr_note(self) -> str:
-        """Whether the standard errors can be taken as such, in words ("" when they can)."""
-        if self.status is Status.MISFIT:
-            return "misfit: the errors assume a correct model and are too small (not scaled)"
-        return "" if self.success else f"not an estimate: {self.status}"
-
-    @property
-    def nuisances(self) -> dict[str, float]:
-        """The fitted nuisance parameters (image gain, offset, PSF, shift; the target's pose, the camera's
-        roll), physical units."""
-        return {n: v for n, v in self.values.items() if is_nuisance(n)}
-
-    @property
-    def estimates(self) -> dict[str, float]:
-        """The fitted values of the parameters that are not nuisances (materials, wrinkles, sun)."""
-        return {n: v for n, v in self.values.items() if not is_nuisance(n)}
-
-    def to_dict(self) -> dict[str, Any]:
-        """JSON-ready summary (no images); ``nuisances`` names the nuisance parameters among ``names``."""
-        d = dataclasses.asdict(self)
-        d.pop("renders")
-        d.pop("residuals")
-        d.pop("scene")
-        d["goodness"] = None if self.goodness is None else self.goodness.to_dict()
-        d["observation_goodness"] = [q.to_dict() for q in self.observation_goodness]
-        d["nuisances"] = list(self.nuisances)
-        d["correlation"] = np.asarray(self.correlation).tolist()
-        d["status"] = self.status.value
-        return d
 
 
 @dataclass(frozen=True)
@@ -451,7 +327,7 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         residuals = [*(np.where(used[..., None], ref - render, np.nan) for ref, render, used in zip(problem.references, renders, problem.used)),
                      *(b.data.value - render for b, render in zip(problem.blocks, renders[len(problem.references):]))]
         if loss == "pixel":
-            per_part = _per_part(r, noise, problem, quality)
+            per_part = per_part(r, noise, problem, quality)
             own_quality = per_observation(r, noise, s, quality.samples_factor)
         at_bound = any(b.at_bound(float(v)) for b, v in zip(s.user.bijections, x_user))
         status = verdict(status, steps.moved, at_bound, quality.misfit and loss == "pixel")
@@ -471,7 +347,7 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         success=status.success, status=status, warnings=warnings, history=steps.history, renders=renders, loss=loss_value,
         solver=solver, loss_name=loss, steps=outcome.steps, wall_time_s=time.perf_counter() - steps.t0,
         start=dict(zip(s.user.names, s.x0_user.tolist())), extras=extras,
-        parts=[_part_rows(*row) for row in zip(problem.part_images, problem.references, renders, problem.units, problem.used, per_part)],
+        parts=[part_rows(*row) for row in zip(problem.part_images, problem.references, renders, problem.units, problem.used, per_part)],
         scene=_fitted_scene(s, values) if np.all(np.isfinite(x_user)) else None,
         units=[*problem.units, *(b.data.unit for b in problem.blocks)], goodness=quality, residuals=residuals,
         observation_goodness=own_quality,
@@ -485,117 +361,8 @@ def _fitted_scene(s: Setup, values: Mapping[str, float]) -> Scene | None:
     return scene_with_values(s.scene, {n: v for n, v in values.items() if Name(n).parameter in s.image_names}, observation=0)
 
 
-def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.ndarray, np.ndarray, list[np.ndarray]]:
-    """The goodness of fit at ``x`` (:mod:`~spacefit.fitting.goodness`), the residuals it judged and a
-    draw of their render noise, and each observation's model (images, then value observations) at the
-    fit's seeds. With the noise known the judged model is the mean of two renders with independent
-    seeds at :func:`verdict_factor` times the fit's samples per pixel (the fit's own two where that is
-    1; primal renders only), the noise sigma taken at it; else the fit's own render. A model that is
-    not rendered is the same at every seed: its render noise is 0."""
-    problem = s.problem
-    renders = [problem.models_seeded(x, 0), problem.models_seeded(x, 1)]
-    if s.noise_given:
-        r, noise = _mean_and_noise(problem, renders)
-        k = verdict_factor(2.0 * goodness(r, noise, 0, True).render_noise, max(problem.spp)) if problem.spp else 1
-        while k > 1 and not _affordable(problem, k):
-            k //= 2
-        if k > 1:
-            finer = problem.resampled(k)
-            r, noise = _mean_and_noise(finer, [finer.models_seeded(x, 0), finer.models_seeded(x, 1)])
-        judged = 2 * k
-    else:
-        judged = 1
-        r, r_alt = (np.asarray(problem.residual_of(m), dtype=np.float64) for m in renders)
-        noise = (r - r_alt) / math.sqrt(2.0)
-    verdict_spp = [judged * spp for spp in problem.spp]
-    ratios = [_reference_ratio(spp, ref) for spp, ref in zip(verdict_spp, problem.reference_spp)]
-    pixels = loss == "pixel"
-    if pixels:
-        values = r.size - problem.pixels  # the value observations' residuals, after the pixels: no reference render noise
-        ratio = np.concatenate([np.repeat(ratios, [ref.size for ref in problem.references]), np.zeros(values)])
-        fitted = np.concatenate([*(np.broadcast_to(used[..., None], ref.shape).ravel() for ref, used in zip(problem.references, problem.used)),
-                                 np.ones(values, dtype=bool)])
-    else:
-        ratio, fitted = float(np.mean(ratios or [0.0])), None
-    quality = goodness(r, noise, len(s.x0), s.noise_given, [ref.shape for ref in problem.references] if pixels else [],
-                       fitted=fitted, reference_ratio=ratio, samples_factor=judged, verdict_spp=verdict_spp,
-                       reference_spp=problem.reference_spp)
-    return quality, r, noise, [np.asarray(m) for m in renders[0]]
-
-
-def _reference_ratio(spp: int, reference_spp: int | None) -> float:
-    """A reference's render noise over the judged model's, per value: the model's samples per pixel
-    ``spp`` over the reference's (0 for a real observation, ``reference_spp`` None)."""
-    return spp / reference_spp if reference_spp else 0.0
-
-
-def _affordable(problem: Problem, factor: int) -> bool:
-    """Whether every observation's whole film rendered at ``factor`` times its samples per pixel in one
-    wavefront (a fit's render) fits this machine (:func:`~spacefit.rendering.renderer.check_memory`):
-    a verdict render takes fewer samples rather than lose the fit's result."""
-    try:
-        for ref, spp in zip(problem.references, problem.spp):
-            check_memory(ref.shape[1], ref.shape[0], ref.shape[0] * ref.shape[1], factor * spp, split=False)
-    except InputError:
-        return False
-    return True
-
-
-def _mean_and_noise(problem: Problem, renders: list[list[jax.Array]]) -> tuple[np.ndarray, np.ndarray]:
-    """The residuals of the mean of two renders (each a list of model images), the noise sigma taken
-    at that mean, and a draw of their render noise: half the two renders' difference, weighted as the
-    residuals are (their derivative along it)."""
-    mean = [(a + b) / 2 for a, b in zip(*renders)]
-    half = [(a - b) / 2 for a, b in zip(*renders)]
-    r, noise = jax.jvp(problem.residual_of, (mean,), (half,))
-    return np.asarray(r, dtype=float), np.asarray(noise, dtype=float)
-
-
-def per_observation(r: np.ndarray, noise: np.ndarray, s: Setup, factor: int) -> list[Goodness]:
-    """Per observation (images, then value observations), the goodness of fit of its own residuals
-    (pixel loss), with the shared free parameters and its own (``name@k``) counted as free (a value
-    observation: those it depends on); ``factor``: the judged model's samples over the fit's."""
-    out, offset, problem = [], 0, s.problem
-    for k, ref in enumerate(problem.references):
-        rows = slice(offset, offset + ref.size)
-        offset = rows.stop
-        n_k = sum(1 for name in s.user.names if Name(name).observation in (None, k))
-        spp, reference = factor * problem.spp[k], problem.reference_spp[k]
-        out.append(goodness(r[rows], noise[rows], n_k, s.noise_given, [ref.shape], fitted=np.broadcast_to(problem.used[k][..., None], ref.shape),
-                            reference_ratio=_reference_ratio(spp, reference), samples_factor=factor, verdict_spp=[spp],
-                            reference_spp=[reference]))
-    for block in problem.blocks:
-        rows = slice(offset, offset + block.data.value.size)
-        offset = rows.stop
-        out.append(goodness(r[rows], noise[rows], len(block.known), block.noise_known, fitted=np.ones(rows.stop - rows.start, bool),
-                            samples_factor=factor))
-    return out
-
-
-def _per_part(r: np.ndarray, noise: np.ndarray, problem: Problem, quality: Goodness) -> list[dict[str, dict[str, float]]]:
-    """Per observation, per part: ``chi2_per_value`` (noise known) or ``r2_over_render_noise``."""
-    key = "chi2_per_value" if quality.noise_known else "r2_over_render_noise"
-    out, offset = [], 0
-    for parts, ref, used in zip(problem.part_images, problem.references, problem.used):
-        rows = slice(offset, offset + ref.size)
-        offset = rows.stop
-        values = part_chi2(r[rows].reshape(ref.shape), noise[rows].reshape(ref.shape), parts, used,
-                           1.0 if quality.noise_known else quality.render_noise, quality.noise_known)
-        out.append({name: {key: value} for name, value in values.items()})
-    return out
-
-
 def _nonfinite_run(history: list[dict[str, Any]]) -> bool:
     recent = history[-NONFINITE_PATIENCE:]
     return len(recent) == NONFINITE_PATIENCE and not any(np.isfinite(h["loss"]) for h in recent)
 
 
-def _part_rows(parts: PartImage, reference: np.ndarray, render: np.ndarray, unit: str, used: np.ndarray,
-               spread: Mapping[str, float]) -> dict[str, dict[str, float]]:
-    """Per part: its fitted pixels (``used``), the mean of the reference and of the fit's render there, in ``unit``,
-    and ``spread``'s value (chi^2 per value, or mean r^2 over the render noise's; absent for the losses that
-    are not per pixel)."""
-    (pixels, ref), (_, fitted) = parts.means(reference, used), parts.means(render, used)
-    suffix = "dn" if unit == DN_UNIT else "w_m2_sr"
-    return {name: {"pixels": int(n), f"reference_mean_{suffix}": float(r), f"fit_mean_{suffix}": float(f), **spread.get(name, {})}
-            for name, n, r, f in zip(parts.regions, pixels, ref, fitted)}

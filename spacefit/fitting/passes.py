@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, InputTypeError, check_count, quote
+from spacefit.errors import InputError, InputTypeError, quote
 from spacefit.scene.names import Name
 from spacefit.scene.parameters import PER_OBSERVATION
 from spacefit.scene.schema import Scene
@@ -133,7 +133,7 @@ class Pass:
         if any(length != n for length in lengths.values()):
             raise InputError(f"the frame table's columns must have one value per frame, got lengths {lengths}.")
         times = [_time_text(cols[TIME][i], i) for i in range(n)]
-        seconds = _seconds(times)
+        seconds = elapsed_seconds(times)
         base = Path(base_dir)
         values = _scene_columns(cols, n)
         frames = []
@@ -221,7 +221,7 @@ def _time_text(value: Any, row: int) -> str:
     return repr(float(value)) if isinstance(value, (int, float)) else str(value).strip()
 
 
-def _seconds(times: Sequence[str]) -> list[float]:
+def elapsed_seconds(times: Sequence[str]) -> list[float]:
     """Seconds since the first frame of ISO 8601 UTC times, or of numbers of seconds (all one kind)."""
     try:
         numbers = [float(t) for t in times]
@@ -272,136 +272,3 @@ def _scene_columns(cols: Mapping[str, list[Any]], n: int) -> list[dict[str, Any]
     return rows
 
 
-def frame_table(result: Any, frames: Pass | None = None, *, files: Sequence[str | Path] = (),
-                times: Sequence[str] = ()) -> list[dict[str, Any]]:
-    """Per frame of a pass's fit (:class:`~spacefit.fitting.loop.FitResult`): its file, time and
-    seconds since the first frame (from ``frames``, or ``files`` and ``times``), the goodness of
-    fit of its own pixels (``chi2_dof``, NaN without a known noise, ``misfit``, ``render_noise``),
-    and each per-frame parameter's value and standard error (``NAME``, ``NAME.stderr``: the name
-    without ``@k``)."""
-    if frames is not None:
-        files, times = frames.files, [f.time for f in frames.frames]
-    seconds = _seconds(times) if times else [math.nan] * len(result.units)
-    rows = []
-    for k in range(len(result.units)):
-        row: dict[str, Any] = {"frame": k, "file": str(files[k]) if k < len(files) else "",
-                               "time": times[k] if times else "", "time_s": seconds[k]}
-        if k < len(result.observation_goodness):
-            quality = result.observation_goodness[k]
-            row.update({"chi2_dof": quality.chi2_dof, "misfit": quality.misfit, "render_noise": quality.render_noise})
-        for name in result.names:
-            ref = Name(name)
-            if ref.observation == k:
-                row[ref.parameter] = result.values[name]
-                row[f"{ref.parameter}.stderr"] = result.stderr[name]
-        rows.append(row)
-    return rows
-
-
-def write_frame_table(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> None:
-    """The rows of :func:`frame_table` as CSV (a column per key; empty where a row has none)."""
-    import csv
-
-    keys = list(dict.fromkeys(key for row in rows for key in row))
-    with open(path, "w", newline="", encoding="utf-8") as f:
-        writer = csv.DictWriter(f, keys)
-        writer.writeheader()
-        writer.writerows(rows)
-
-
-def plot_frames(rows: Sequence[Mapping[str, Any]], *, ax: Any = None, fig: Any = None) -> Any:
-    """The per-frame parameters of :func:`frame_table`'s rows against time (one panel each, 1-sigma
-    error bars) and each frame's chi^2 / dof, into ``ax`` (one Axes per panel) or ``fig`` (a
-    matplotlib Figure or SubFigure; default a new one): the array of axes drawn (:mod:`spacefit.plotting`)."""
-    from spacefit.plotting import axis_label, panels  # deferred: plotting (0.5 s)
-
-    own = [k for k in dict.fromkeys(key for row in rows for key in row) if f"{k}.stderr" in rows[0]]
-    names = [*own, "chi2_dof"]
-    axes = panels(ax, fig, len(names), (6.0, 1.6 * len(names) + 0.6), lambda f: f.subplots(len(names), 1, sharex=True, squeeze=False))
-    t = np.array([r["time_s"] for r in rows], dtype=float)
-    known = np.all(np.isfinite(t))
-    t = t if known else np.arange(len(rows), dtype=float)
-    for panel, name in zip(axes, names):
-        y = np.array([r.get(name, np.nan) for r in rows], dtype=float)
-        err = np.array([r.get(f"{name}.stderr", np.nan) for r in rows], dtype=float)
-        panel.errorbar(t, y, yerr=np.where(np.isfinite(err), err, 0.0), fmt="o", ms=3, capsize=2)
-        panel.set_ylabel(axis_label(name) if name != "chi2_dof" else "chi$^2$ / dof", fontsize=7)
-        panel.grid(alpha=0.3)
-    axes[-1].set_xlabel("time since the first frame (s)" if known else "frame")
-    return axes
-
-
-def arc_pass(n: int, *, range_m: float = 25.0, zenith_deg: tuple[float, float] = (4.0, 16.0),
-             azimuth_deg: tuple[float, float] = (0.0, 40.0), sun_elevation_deg: tuple[float, float] = (82.0, 78.0),
-             sun_azimuth_deg: float = 200.0) -> list[dict[str, Any]]:
-    """The scene values of ``n`` frames of a synthetic pass: an observer at ``range_m`` from the
-    origin, looking at it, moving evenly from (zenith angle, azimuth) = (``zenith_deg[0]``,
-    ``azimuth_deg[0]``) to the second values, and the sun's elevation changing evenly between
-    ``sun_elevation_deg``'s (azimuth fixed). By default the observer crosses the panels' glint
-    (the sun's mirror direction, 10 deg from the zenith at azimuth 20 deg) half-way. Each frame: ``camera.position_m``, ``camera.look_at_m``
-    (the origin), ``sun.elevation_deg``, ``sun.azimuth_deg``."""
-    check_count("n", n)
-    out = []
-    for s in np.linspace(0.0, 1.0, n) if n > 1 else [0.0]:
-        theta = math.radians(zenith_deg[0] + s * (zenith_deg[1] - zenith_deg[0]))
-        phi = math.radians(azimuth_deg[0] + s * (azimuth_deg[1] - azimuth_deg[0]))
-        position = [range_m * math.sin(theta) * math.cos(phi), range_m * math.sin(theta) * math.sin(phi), range_m * math.cos(theta)]
-        out.append({"camera.position_m": [round(v, 9) for v in position], "camera.look_at_m": [0.0, 0.0, 0.0],
-                    "sun.elevation_deg": round(sun_elevation_deg[0] + s * (sun_elevation_deg[1] - sun_elevation_deg[0]), 9),
-                    "sun.azimuth_deg": sun_azimuth_deg})
-    return out
-
-
-def simulate_pass(scene: Scene, frames: Sequence[Mapping[str, Any]], out_dir: str | Path, *,
-                  truth: Mapping[str, Any] | None = None, errors: Sequence[Mapping[str, float]] = (),
-                  sensor: Any = None, spp: int = 256, seed: int = 7, interval_s: float = 10.0) -> Pass:
-    """Simulate a pass and write it: per frame k an observation ``frame<k>.fits`` (DN through
-    ``sensor``'s model, :func:`~spacefit.formation.observe`, the sensor in its header and
-    sidecar) or, without a sensor, ``frame<k>.exr`` (radiance), rendered at ``spp`` from ``scene``
-    with ``frames[k]``'s values (the FITS card or EXR attribute ``RENDSPP`` says ``spp``), ``truth`` (every frame) and ``errors[k]`` (the frame's own
-    departures from its nominal values, e.g. ``{"target.attitude_x_deg": 0.2}``, added to the
-    nominal); and ``frames.csv``, the frame table of the nominal values (without the errors), times
-    ``interval_s`` apart. Returns the pass read back from that table.
-
-    Raises:
-        InputError: a value refused by the scene, ``errors`` not one per frame, an existing ``out_dir``.
-    """
-    # here: simulating renders (Mitsuba) and forms images (JAX); reading or plotting a pass needs neither
-    from astropy.table import Table
-    from spacefit.formation import observe
-    from spacefit.imageio import RENDER_SPP_KEY, write_observation
-    from spacefit.rendering.exr import write_exr
-    from spacefit.rendering.renderer import render
-    from spacefit.scene.assembly import assemble
-    from spacefit.scene.parameters import scene_value
-
-    errors = list(errors) or [{}] * len(frames)
-    if len(errors) != len(frames):
-        raise InputError(f"`errors` must give one mapping per frame ({len(frames)}), got {len(errors)}.")
-    out = Path(out_dir)
-    if out.exists():
-        raise InputError(f"`out_dir` {str(out)!r} exists; simulate_pass writes a new folder.")
-    nominal = [scene.with_values({**dict(truth or {}), **dict(f)}) for f in frames]
-    true = [s.with_values({name: scene_value(s, name) + dx for name, dx in e.items()}) for s, e in zip(nominal, errors)]
-    out.mkdir(parents=True)
-    columns: dict[str, list[Any]] = {"file": [], "time": []}
-    for k, s in enumerate(true):
-        radiance = render(s.with_values({"render.spp": spp, "render.seed": seed + k}))
-        if sensor is None:
-            name = f"frame{k}.exr"
-            write_exr(out / name, radiance, header={RENDER_SPP_KEY: spp})
-        else:
-            name = f"frame{k}.fits"
-            write_observation(out / name, observe(radiance, sensor, assemble(s).intrinsics, seed=seed + k), sensor, render_spp=spp)
-        columns["file"].append(name)
-        columns["time"].append(k * interval_s)
-    keys = list(dict.fromkeys(key for f in frames for key in f))
-    for key in keys:
-        cells = [f[key] for f in frames]
-        if key in VECTOR_KEYS:
-            for c, axis in enumerate(COMPONENTS):
-                columns[f"{key}.{axis}"] = [float(v[c]) for v in cells]
-        else:
-            columns[key] = cells
-    Table(columns).write(out / "frames.csv")
-    return Pass.read(out / "frames.csv")

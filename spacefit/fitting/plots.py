@@ -18,7 +18,7 @@ from matplotlib.figure import Figure, SubFigure
 from matplotlib.ticker import MaxNLocator
 
 from spacefit.errors import check_choice, check_range
-from spacefit.fitting.loop import FitResult
+from spacefit.fitting.result import FitResult
 from spacefit.output import PREVIEW_PERCENTILE, preview_scale, to_srgb8
 from spacefit.plotting import axis_label, cropped, image_box, panels, show_image, unit_label
 from spacefit.units import RADIANCE_UNIT

@@ -31,9 +31,9 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from astropy.io import fits
 
 from spacefit.errors import InputTypeError, check_flag, check_name_list, check_path, check_type, quote
-from spacefit.fitting.loop import FitResult
+from spacefit.fitting.result import FitResult
 from spacefit.fitting.solvers import Status
-from spacefit.fitting.passes import frame_table, plot_frames, write_frame_table
+from spacefit.fitting.pass_report import frame_table, plot_frames, write_frame_table
 from spacefit.fitting.plots import plot_comparison, plot_convergence, plot_residuals
 from spacefit.locks import holding_lock
 from spacefit.output import prepare_output, staged_output, versions, write_json

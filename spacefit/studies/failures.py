@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 from spacefit.errors import InputError
 
 if TYPE_CHECKING:
-    from spacefit.fitting.loop import FitResult
+    from spacefit.fitting.result import FitResult
 
 FAILURE_CLASSES = ("success", "nan", "stalled", "wrong_minimum", "unidentifiable")
 # Relative tolerance of every parameter unless told otherwise.

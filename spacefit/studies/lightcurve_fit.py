@@ -19,7 +19,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import InputError, check_array, check_choice, check_count, check_range, check_type, check_vector, quote
-from spacefit.fitting.loop import FitResult, fit
+from spacefit.fitting.loop import fit
+from spacefit.fitting.result import FitResult
 from spacefit.fitting.observations.base import Block, MeasuredValues, ValueObservation
 from spacefit.fitting.problem import INDEPENDENT_SEED_OFFSET
 from spacefit.geometry.frames import pixel_solid_angles

@@ -31,7 +31,8 @@ import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_count, check_name_list, check_range, check_type, check_vector, quote
 from spacefit.fitting.brdf_table import TabulatedBRDF
-from spacefit.fitting.loop import FitResult, fit
+from spacefit.fitting.loop import fit
+from spacefit.fitting.result import FitResult
 from spacefit.fitting.observations.base import Block, MeasuredValues, ValueObservation
 from spacefit.fitting.params import Bijection, bijection
 from spacefit.geometry.frames import attitude_matrix

@@ -20,7 +20,8 @@ import jax.numpy as jnp
 
 from spacefit.errors import InputError, check_choice, check_count, check_name_list, check_range, check_type
 from spacefit.fitting.brdf_table import BRDF_MODELS, DEFAULT_START, BRDFTable
-from spacefit.fitting.loop import FitResult, fit
+from spacefit.fitting.loop import fit
+from spacefit.fitting.result import FitResult
 from spacefit.fitting.observations.base import Block, MeasuredValues, ValueObservation
 from spacefit.materials import Material
 from spacefit.scene.parameters import check_value

@@ -1,0 +1,73 @@
+"""A pass's fit frame by frame: each frame's own values, errors and goodness of fit against time, as a
+table (a fit's ``frames.csv``) and a figure (``frames.png``). The pass itself is :mod:`spacefit.fitting.passes`."""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spacefit.fitting.passes import Pass, elapsed_seconds
+from spacefit.scene.names import Name
+
+
+def frame_table(result: Any, frames: Pass | None = None, *, files: Sequence[str | Path] = (),
+                times: Sequence[str] = ()) -> list[dict[str, Any]]:
+    """Per frame of a pass's fit (:class:`~spacefit.fitting.result.FitResult`): its file, time and
+    seconds since the first frame (from ``frames``, or ``files`` and ``times``), the goodness of
+    fit of its own pixels (``chi2_dof``, NaN without a known noise, ``misfit``, ``render_noise``),
+    and each per-frame parameter's value and standard error (``NAME``, ``NAME.stderr``: the name
+    without ``@k``)."""
+    if frames is not None:
+        files, times = frames.files, [f.time for f in frames.frames]
+    seconds = elapsed_seconds(times) if times else [math.nan] * len(result.units)
+    rows = []
+    for k in range(len(result.units)):
+        row: dict[str, Any] = {"frame": k, "file": str(files[k]) if k < len(files) else "",
+                               "time": times[k] if times else "", "time_s": seconds[k]}
+        if k < len(result.observation_goodness):
+            quality = result.observation_goodness[k]
+            row.update({"chi2_dof": quality.chi2_dof, "misfit": quality.misfit, "render_noise": quality.render_noise})
+        for name in result.names:
+            ref = Name(name)
+            if ref.observation == k:
+                row[ref.parameter] = result.values[name]
+                row[f"{ref.parameter}.stderr"] = result.stderr[name]
+        rows.append(row)
+    return rows
+
+
+def write_frame_table(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> None:
+    """The rows of :func:`frame_table` as CSV (a column per key; empty where a row has none)."""
+
+    keys = list(dict.fromkeys(key for row in rows for key in row))
+    with open(path, "w", newline="", encoding="utf-8") as f:
+        writer = csv.DictWriter(f, keys)
+        writer.writeheader()
+        writer.writerows(rows)
+
+
+def plot_frames(rows: Sequence[Mapping[str, Any]], *, ax: Any = None, fig: Any = None) -> Any:
+    """The per-frame parameters of :func:`frame_table`'s rows against time (one panel each, 1-sigma
+    error bars) and each frame's chi^2 / dof, into ``ax`` (one Axes per panel) or ``fig`` (a
+    matplotlib Figure or SubFigure; default a new one): the array of axes drawn (:mod:`spacefit.plotting`)."""
+    from spacefit.plotting import axis_label, panels  # deferred: plotting (0.5 s)
+
+    own = [k for k in dict.fromkeys(key for row in rows for key in row) if f"{k}.stderr" in rows[0]]
+    names = [*own, "chi2_dof"]
+    axes = panels(ax, fig, len(names), (6.0, 1.6 * len(names) + 0.6), lambda f: f.subplots(len(names), 1, sharex=True, squeeze=False))
+    t = np.array([r["time_s"] for r in rows], dtype=float)
+    known = np.all(np.isfinite(t))
+    t = t if known else np.arange(len(rows), dtype=float)
+    for panel, name in zip(axes, names):
+        y = np.array([r.get(name, np.nan) for r in rows], dtype=float)
+        err = np.array([r.get(f"{name}.stderr", np.nan) for r in rows], dtype=float)
+        panel.errorbar(t, y, yerr=np.where(np.isfinite(err), err, 0.0), fmt="o", ms=3, capsize=2)
+        panel.set_ylabel(axis_label(name) if name != "chi2_dof" else "chi$^2$ / dof", fontsize=7)
+        panel.grid(alpha=0.3)
+    axes[-1].set_xlabel("time since the first frame (s)" if known else "frame")
+    return axes

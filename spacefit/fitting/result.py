@@ -1,0 +1,139 @@
+"""The one result of :func:`spacefit.fit`, whatever observations it fitted: values in physical units,
+their standard errors and correlation, the verdict, the goodness of fit and what was run."""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from spacefit.display import fit_html
+from spacefit.errors import InputError
+from spacefit.fitting.goodness import Goodness
+from spacefit.fitting.solvers import Status
+from spacefit.rendering.renderer import mitsuba_scene_dict
+from spacefit.scene.parameters import is_nuisance, parameter
+from spacefit.scene.schema import Scene
+
+
+@dataclass
+class FitResult:
+    """Outcome of :func:`fit`: values in physical units and how far to trust them.
+
+    Attributes:
+        names: free parameter names, in order.
+        values: fitted value of each, physical units; :attr:`estimates` and :attr:`nuisances` split them.
+        stderr: standard error of each (from J^T J and the residual); inf if not determined.
+        correlation: (n, n) correlation matrix of the estimates.
+        success: whether the fit succeeded: the solver converged, at least one step lowered the
+            loss, no parameter is at a bound and the residuals are within the noise
+            (``status.success``).
+        status: how the fit ended, a verdict (``str(status)`` is its words; :class:`Status`).
+        warnings: identifiability and convergence warnings, in words.
+        history: one entry per step: the point the step evaluated (step 1 evaluates the start;
+            the accepted point of the last step is ``values``), its loss, ``accepted`` (the step
+            evaluated another point than the best so far and lowered its loss: accepted losses never rise), ``loss_noise`` (the loss's
+            Monte Carlo noise at the best point so far, :mod:`~spacefit.fitting.stopping`),
+            time_s since the start.
+        renders: each observation's final model, the images' first (the render with the image
+            nuisances), then the other kinds' (their predicted values), in the unit of its data: ``units``.
+        units: per observation, the unit of its data and model: for an image W m^-2 sr^-1 (radiance),
+            or DN where it has a sensor (the sensor's expected DN of the render); a value
+            observation's own (sr^-1 for a BRDF table, W m^-2 for a light curve's irradiances).
+        loss: final loss, 0.5 * sum of squared residuals.
+        solver, loss_name, steps, wall_time_s, start: what was run.
+        extras: derived quantities, e.g. the rms height (and its standard error) of a (D, G) fit.
+        parts: per observation, per part (and the whole ``target``): the fitted pixels (not masked
+            out) that see it and the mean of the reference and of the fit's render there, in ``units`` (keys
+            ``reference_mean_w_m2_sr`` and ``fit_mean_w_m2_sr``, or ``reference_mean_dn`` and ``fit_mean_dn``).
+            With the pixel loss, each row also holds ``chi2_per_value`` (the noise known) or
+            ``r2_over_render_noise`` (mean r^2 over the render noise's, :mod:`~spacefit.fitting.goodness`).
+        scene: the first observation's scene with the fitted values: ``scene.to_toml()`` is a scene
+            file that renders the fit again (the image nuisances are not scene values); None if
+            the values are not finite.
+        goodness: the goodness of fit at the result (:class:`~spacefit.fitting.goodness.Goodness`);
+            None where there is no finite result (interrupted, non-finite).
+        residuals: per observation, data - model in ``units`` (for an image NaN where not fitted).
+        observation_goodness: per observation, the goodness of fit of its own residuals (the
+            pixel loss), counting as free the shared parameters and its own (``name@k``; a value
+            observation those it depends on).
+    """
+
+    names: tuple[str, ...]
+    values: dict[str, float]
+    stderr: dict[str, float]
+    correlation: np.ndarray
+    success: bool
+    status: Status
+    warnings: list[str]
+    history: list[dict[str, Any]]
+    renders: list[np.ndarray]
+    loss: float
+    solver: str
+    loss_name: str
+    steps: int
+    wall_time_s: float
+    start: dict[str, float] = field(default_factory=dict)
+    extras: dict[str, Any] = field(default_factory=dict)
+    parts: list[dict[str, dict[str, float]]] = field(default_factory=list)
+    scene: Scene | None = None
+    units: list[str] = field(default_factory=list)
+    goodness: Goodness | None = None
+    residuals: list[np.ndarray] = field(default_factory=list)
+    observation_goodness: list[Goodness] = field(default_factory=list)
+
+    def _repr_html_(self) -> str:
+        return fit_html(self)
+
+    def mitsuba_scene_dict(self) -> dict[str, Any]:
+        """The fitted scene as a Mitsuba scene dictionary (``mi.load_dict`` loads it).
+
+        Raises:
+            InputError: if the fit has no scene (its values are not finite).
+        """
+        if self.scene is None:
+            raise InputError("this fit has no fitted scene: its values are not finite.")
+        return mitsuba_scene_dict(self.scene)
+
+    def uncertainty(self) -> dict[str, Any]:
+        """The values, standard errors and correlation matrix (rows and columns in ``names`` order),
+        with each parameter's unit: JSON-ready (``uncertainty.json`` of a fit's folder).
+        ``stderr_valid`` is False for a misfit (the errors assume a correct model: they are too
+        small, not scaled) and where the fit did not succeed; ``stderr_note`` says why."""
+        return {"names": list(self.names), "values": self.values, "stderr": self.stderr,
+                "units": {n: parameter(n).unit for n in self.names},
+                "correlation": np.asarray(self.correlation).tolist(), "nuisances": list(self.nuisances),
+                "stderr_valid": self.success, "stderr_note": self.stderr_note}
+
+    @property
+    def stderr_note(self) -> str:
+        """Whether the standard errors can be taken as such, in words ("" when they can)."""
+        if self.status is Status.MISFIT:
+            return "misfit: the errors assume a correct model and are too small (not scaled)"
+        return "" if self.success else f"not an estimate: {self.status}"
+
+    @property
+    def nuisances(self) -> dict[str, float]:
+        """The fitted nuisance parameters (image gain, offset, PSF, shift; the target's pose, the camera's
+        roll), physical units."""
+        return {n: v for n, v in self.values.items() if is_nuisance(n)}
+
+    @property
+    def estimates(self) -> dict[str, float]:
+        """The fitted values of the parameters that are not nuisances (materials, wrinkles, sun)."""
+        return {n: v for n, v in self.values.items() if not is_nuisance(n)}
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready summary (no images); ``nuisances`` names the nuisance parameters among ``names``."""
+        d = dataclasses.asdict(self)
+        d.pop("renders")
+        d.pop("residuals")
+        d.pop("scene")
+        d["goodness"] = None if self.goodness is None else self.goodness.to_dict()
+        d["observation_goodness"] = [q.to_dict() for q in self.observation_goodness]
+        d["nuisances"] = list(self.nuisances)
+        d["correlation"] = np.asarray(self.correlation).tolist()
+        d["status"] = self.status.value
+        return d
