@@ -15,7 +15,8 @@ from helpers import small_scene, write_sphere_obj
 import spacefit as sf
 from spacefit.formation import expected_dn
 from spacefit.fitting.goodness import MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
-from spacefit.fitting.loop import _affordable, verdict
+from spacefit.fitting.judging import affordable
+from spacefit.fitting.loop import verdict
 from spacefit.fitting.problem import setup
 from spacefit.scene.sections import MAX_SPP
 from spacefit.rendering.parts import PartImage
@@ -245,7 +246,7 @@ def test_a_verdict_render_the_machine_cannot_hold_takes_fewer_samples(monkeypatc
     """The fit's result must not be lost to its verdict: a render the memory cannot hold is not asked for."""
     monkeypatch.setattr("spacefit.rendering.memory.available_memory_bytes", lambda: 2**30)  # 1 GiB
     film = SimpleNamespace(references=[np.zeros((256, 256, 3))], spp=(64,))  # 4.2e6 samples, 0.26 GiB at 64 bytes each
-    assert _affordable(film, 2) and not _affordable(film, 4)
+    assert affordable(film, 2) and not affordable(film, 4)
 
 
 def test_a_simulated_references_render_noise_raises_the_expectation():

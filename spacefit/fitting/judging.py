@@ -31,7 +31,7 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
     if s.noise_given:
         r, noise = _mean_and_noise(problem, renders)
         k = verdict_factor(2.0 * goodness(r, noise, 0, True).render_noise, max(problem.spp)) if problem.spp else 1
-        while k > 1 and not _affordable(problem, k):
+        while k > 1 and not affordable(problem, k):
             k //= 2
         if k > 1:
             finer = problem.resampled(k)
@@ -63,7 +63,7 @@ def _reference_ratio(spp: int, reference_spp: int | None) -> float:
     return spp / reference_spp if reference_spp else 0.0
 
 
-def _affordable(problem: Problem, factor: int) -> bool:
+def affordable(problem: Problem, factor: int) -> bool:
     """Whether every observation's whole film rendered at ``factor`` times its samples per pixel in one
     wavefront (a fit's render) fits this machine (:func:`~spacefit.rendering.renderer.check_memory`):
     a verdict render takes fewer samples rather than lose the fit's result."""
@@ -106,7 +106,7 @@ def per_observation(r: np.ndarray, noise: np.ndarray, s: Setup, factor: int) -> 
     return out
 
 
-def per_part(r: np.ndarray, noise: np.ndarray, problem: Problem, quality: Goodness) -> list[dict[str, dict[str, float]]]:
+def part_goodness(r: np.ndarray, noise: np.ndarray, problem: Problem, quality: Goodness) -> list[dict[str, dict[str, float]]]:
     """Per observation, per part: ``chi2_per_value`` (noise known) or ``r2_over_render_noise``."""
     key = "chi2_per_value" if quality.noise_known else "r2_over_render_noise"
     out, offset = [], 0

@@ -22,7 +22,7 @@ from spacefit.errors import check_choice, check_count, check_type
 from spacefit.executors import Cluster
 from spacefit.fitting.frames import frame_executor
 from spacefit.fitting.goodness import Goodness
-from spacefit.fitting.judging import judged_goodness, part_rows, per_observation
+from spacefit.fitting.judging import judged_goodness, part_goodness, part_rows, per_observation
 from spacefit.fitting.observations.base import ValueObservation
 from spacefit.fitting.observations.image import Observation
 from spacefit.fitting.problem import FitRender, Setup, setup
@@ -327,7 +327,7 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         residuals = [*(np.where(used[..., None], ref - render, np.nan) for ref, render, used in zip(problem.references, renders, problem.used)),
                      *(b.data.value - render for b, render in zip(problem.blocks, renders[len(problem.references):]))]
         if loss == "pixel":
-            per_part = per_part(r, noise, problem, quality)
+            per_part = part_goodness(r, noise, problem, quality)
             own_quality = per_observation(r, noise, s, quality.samples_factor)
         at_bound = any(b.at_bound(float(v)) for b, v in zip(s.user.bijections, x_user))
         status = verdict(status, steps.moved, at_bound, quality.misfit and loss == "pixel")
