@@ -90,9 +90,14 @@ from spacefit.studies.lightcurve import LightCurve as LightCurve
 from spacefit.studies.lightcurve import fit_light_curve as fit_light_curve
 from spacefit.studies.lightcurve import light_curve as light_curve
 from spacefit.studies.lightcurve import light_curve_convergence as light_curve_convergence
+from spacefit.studies.observation_files import RefusedRow as RefusedRow
 from spacefit.studies.observing import LightCurveObservations as LightCurveObservations
-from spacefit.studies.observing import Site as Site
 from spacefit.studies.observing import read_light_curve as read_light_curve
+from spacefit.studies.observing import write_light_curve as write_light_curve
+from spacefit.studies.orbit import Orbit as Orbit
+from spacefit.studies.orbit import PassGeometry as PassGeometry
+from spacefit.studies.orbit import Site as Site
+from spacefit.studies.orbit import pass_geometry as pass_geometry
 from spacefit.studies.plates import Plate as Plate
 from spacefit.studies.plates import fit_plates as fit_plates
 from spacefit.studies.plates import fitted_plates as fitted_plates
@@ -117,7 +122,7 @@ __all__ = [
     'simulate_pass', 'read_sweep_file', 'sweep', 'verify_store', 'StoreReport', 'ClusterError', 'Sensitivity', 'sensitivity', 'LightCurve',
     'light_curve', 'plot_comparison', 'plot_convergence', 'DiffuseConductor', 'OrenNayar', 'MaterialModel', 'register_material',
     'BRDFTable', 'BRDF_MODELS', 'read_brdf_table', 'fit_brdf_table', 'fitted_material', 'compare_brdf_models', 'TabulatedBRDF', 'TableFit',
-    'write_table_fit', 'Site', 'LightCurveObservations', 'read_light_curve', 'Plate', 'predict_magnitudes', 'fit_plates', 'fitted_plates',
-    'light_curve_convergence', 'fit_light_curve', 'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings',
-    'PartSettings',
+    'write_table_fit', 'Site', 'LightCurveObservations', 'read_light_curve', 'write_light_curve', 'RefusedRow', 'Orbit', 'PassGeometry',
+    'pass_geometry', 'Plate', 'predict_magnitudes', 'fit_plates', 'fitted_plates', 'light_curve_convergence', 'fit_light_curve',
+    'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings',
 ]
