@@ -92,9 +92,14 @@ from spacefit.studies.lightcurve import light_curve as light_curve
 from spacefit.studies.lightcurve import light_curve_convergence as light_curve_convergence
 from spacefit.studies.lightcurve_fit import RenderedLightCurve as RenderedLightCurve
 from spacefit.studies.lightcurve_fit import fit_light_curve as fit_light_curve
+from spacefit.studies.observation_files import RefusedRow as RefusedRow
 from spacefit.studies.observing import LightCurveObservations as LightCurveObservations
-from spacefit.studies.observing import Site as Site
 from spacefit.studies.observing import read_light_curve as read_light_curve
+from spacefit.studies.observing import write_light_curve as write_light_curve
+from spacefit.studies.orbit import Orbit as Orbit
+from spacefit.studies.orbit import PassGeometry as PassGeometry
+from spacefit.studies.orbit import Site as Site
+from spacefit.studies.orbit import pass_geometry as pass_geometry
 from spacefit.studies.plates import Plate as Plate
 from spacefit.studies.plates import PlateLightCurve as PlateLightCurve
 from spacefit.studies.plates import fit_plates as fit_plates
@@ -120,8 +125,8 @@ __all__ = [
     'frame_table', 'plot_frames', 'arc_pass', 'simulate_pass', 'read_sweep_file', 'sweep', 'verify_store', 'StoreReport', 'ClusterError',
     'Sensitivity', 'sensitivity', 'LightCurve', 'light_curve', 'plot_comparison', 'plot_convergence', 'DiffuseConductor', 'OrenNayar',
     'MaterialModel', 'register_material', 'BRDFTable', 'BRDF_MODELS', 'read_brdf_table', 'fit_brdf_table', 'fitted_material',
-    'compare_brdf_models', 'TabulatedBRDF', 'write_table_fit', 'Site', 'LightCurveObservations', 'read_light_curve', 'Plate',
-    'predict_magnitudes', 'fit_plates', 'fitted_plates', 'light_curve_convergence', 'fit_light_curve', 'BRDFTableObservation',
-    'PlateLightCurve', 'RenderedLightCurve', 'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings',
-    'PartSettings',
+    'compare_brdf_models', 'TabulatedBRDF', 'write_table_fit', 'Site', 'LightCurveObservations', 'read_light_curve', 'write_light_curve',
+    'RefusedRow', 'Orbit', 'PassGeometry', 'pass_geometry', 'Plate', 'predict_magnitudes', 'fit_plates', 'fitted_plates',
+    'light_curve_convergence', 'fit_light_curve', 'BRDFTableObservation', 'PlateLightCurve', 'RenderedLightCurve', 'RenderSettings',
+    'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings',
 ]

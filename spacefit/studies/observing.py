@@ -1,67 +1,60 @@
-"""Light curves as observations: reading measured magnitudes with their times and geometry, the sun
-from astropy offline, the target's frame, and the Earth's shadow.
+"""Light curves as observations: reading measured magnitudes with their times and geometry, and the
+target's frame.
 
-Two file formats, CSV with ``#`` comment lines and a header naming the columns:
+:func:`read_light_curve` reads four formats, found from the file (or named by ``format``):
 
-* the general format: ``time_utc`` (ISO 8601), ``magnitude``, optionally ``magnitude_sigma`` (mag),
-  and the geometry, either in the target's frame, ``sun_x, sun_y, sun_z`` and ``observer_x,
-  observer_y, observer_z`` (directions from the target, normalised on reading) and ``range_m``, or
-  seen from a site (the ``site`` argument), ``altitude_deg``, ``azimuth_deg`` (of the target,
-  azimuth from north through east) and ``height_m`` (the target's height above the Earth's surface).
-* the Pomenis format of the Starlink v1.5 observations (Fankhauser, Askari & Tyson 2023):
+* ``general``: CSV with ``#`` comment lines and a header naming the columns ``time_utc`` (ISO 8601),
+  ``magnitude``, optionally ``magnitude_sigma`` (mag), and the geometry, either in the target's frame,
+  ``sun_x, sun_y, sun_z`` and ``observer_x, observer_y, observer_z`` (directions from the target,
+  normalised on reading) and ``range_m``, or seen from a site (the ``site`` argument),
+  ``altitude_deg``, ``azimuth_deg`` (of the target, azimuth from north through east) and
+  ``height_m`` (the target's height above the Earth's surface).
+* ``pomenis``: the Starlink v1.5 observations (Fankhauser, Askari & Tyson 2023):
   ``observation_time, satellite_height`` (km), ``satellite_altitude, satellite_azimuth`` (deg),
   ``ab_magnitude`` (band ``AB532``, no stated errors).
+* ``score``: the IAU CPS SatHub SCORE CSV (:mod:`spacefit.studies.observation_files`), each row with
+  its own observer; the geometry from SatChecker's columns.
+* ``ecsv``: an astropy ECSV table of the general format's columns (:func:`write_light_curve` writes one).
 
-From a site, the sun's direction comes from astropy (``get_sun`` in the site's AltAz frame) with
-no attempt to download IERS tables (``astropy.utils.iers.conf.auto_download = False``; astropy's
-bundled tables, or none past their end: the sun is then placed within 0.01 deg, the Earth turning
-0.004 deg in UT1 - UTC's 0.9 s). The Earth is a sphere of radius :data:`EARTH_RADIUS_M` (as
-lumos-sat takes it), the site on it; the sun's parallax over the target's distance (5e-5 rad) is
-neglected. The target's frame (:func:`nadir_sun_frame`): z away from the Earth's centre, y towards
-the sun's direction projected onto the plane normal to z, x = y cross z: the frame of a satellite
-whose base faces nadir and whose solar array, turned about z, faces the sun (lumos-sat's
-"brightness frame").
+Given an ``orbit`` (:class:`~spacefit.studies.orbit.Orbit`, a TLE or OMM), the geometry is computed
+from it, the site and the time instead, offline (:func:`~spacefit.studies.orbit.pass_geometry`),
+and checked against SatChecker's columns where a SCORE file has them. Rows whose time cannot be right
+(before ``launch_utc``, in the future; in a SCORE file also unreadable) or that lack geometry are
+refused: listed in ``refused`` with their row, column, value and reason, and warned of.
 
-The Earth's shadow is a cylinder (the sun's rays parallel, no penumbra; the penumbra's width at
-550 km is about 60 km, 0.5 deg of the terminator): the target is in shadow where its position r
-from the Earth's centre has r . s < 0 and |r - (r . s) s| < R. Such a target is predicted dark, and
-an observation of it is flagged (``in_shadow``) and left out of fits.
+From a site, the sun's direction comes from astropy offline (:mod:`spacefit.studies.orbit`). The
+Earth is a sphere of radius :data:`EARTH_RADIUS_M` (as lumos-sat takes it), the site on it; the
+sun's parallax over the target's distance (5e-5 rad) is neglected. The target's frame
+(:func:`nadir_sun_frame`): z away from the Earth's centre, y towards the sun's direction projected
+onto the plane normal to z, x = y cross z: the frame of a satellite whose base faces nadir and whose
+solar array, turned about z, faces the sun (lumos-sat's "brightness frame"). A target in the Earth's
+shadow (:func:`~spacefit.studies.orbit.in_earth_shadow`, or a SCORE row not ``illuminated``) is
+predicted dark, and its observation flagged (``in_shadow``) and left out of fits.
 """
 
 from __future__ import annotations
 
 import csv
 import math
+import warnings
+from collections import Counter
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
-from spacefit.errors import InputError, check_array, check_choice, check_range, check_type, quote, read_text_rows, unit_rows
+from spacefit.errors import InputError, check_array, check_choice, check_type, quote, read_text_rows, unit_rows
 from spacefit.studies.lightcurve import SUN_MAGNITUDES
+from spacefit.studies.observation_files import (RefusedRow, ScoreRows, check_format, file_format, read_ecsv, read_score,
+                                                time_refusals, write_ecsv)
+from spacefit.studies.orbit import EARTH_RADIUS_M, Orbit, Site, altaz_to_enu, in_earth_shadow, pass_geometry, sun_directions_enu
 
-# The Earth's (equatorial) radius, m, as lumos-sat takes it (a sphere).
-EARTH_RADIUS_M = 6378.0e3
 POMENIS_COLUMNS = ("observation_time", "satellite_height", "satellite_altitude", "satellite_azimuth", "ab_magnitude")
 TARGET_FRAME_COLUMNS = ("sun_x", "sun_y", "sun_z", "observer_x", "observer_y", "observer_z", "range_m")
 SITE_COLUMNS = ("altitude_deg", "azimuth_deg", "height_m")
 # The greatest height above the Earth a light curve may give (m): the Moon's distance, twice.
 MAX_HEIGHT_M = 8e8
-
-
-@dataclass(frozen=True)
-class Site:
-    """An observer on the Earth: geodetic latitude and longitude (deg, east positive), height (m)."""
-
-    latitude_deg: float
-    longitude_deg: float
-    height_m: float = 0.0
-
-    def __post_init__(self) -> None:
-        check_range("site.latitude_deg", self.latitude_deg, -90.0, 90.0, unit="deg")
-        check_range("site.longitude_deg", self.longitude_deg, -360.0, 360.0, unit="deg")
-        check_range("site.height_m", self.height_m, -500.0, 1e4, unit="m")
 
 
 @dataclass(frozen=True)
@@ -76,6 +69,7 @@ class LightCurveObservations:
         in_shadow: (n,) the target in the Earth's shadow (predicted dark; left out of fits).
         time_utc: ISO times, or None.
         source: where they came from.
+        refused: the file's rows not used, with the reason (:class:`RefusedRow`).
     """
 
     magnitude: np.ndarray
@@ -87,6 +81,7 @@ class LightCurveObservations:
     in_shadow: np.ndarray
     time_utc: np.ndarray | None
     source: str
+    refused: tuple[RefusedRow, ...] = ()
 
     def __post_init__(self) -> None:
         check_type("source", self.source, str, "a string")
@@ -121,7 +116,7 @@ class LightCurveObservations:
         """These observations at ``rows`` (indices or a boolean mask)."""
         pick = (lambda a: None if a is None else a[rows])
         return LightCurveObservations(self.magnitude[rows], pick(self.magnitude_sigma), self.band, self.sun[rows], self.observer[rows],
-                                      self.range_m[rows], self.in_shadow[rows], pick(self.time_utc), self.source)
+                                      self.range_m[rows], self.in_shadow[rows], pick(self.time_utc), self.source, self.refused)
 
 
 def _finite(name: str, value: object, ndim: int, n: int | None = None) -> np.ndarray:
@@ -133,42 +128,6 @@ def _finite(name: str, value: object, ndim: int, n: int | None = None) -> np.nda
     return arr
 
 
-def sun_directions_enu(times_utc: Sequence[str], site: Site) -> np.ndarray:
-    """(n, 3) unit vectors towards the sun in the site's east-north-up frame, by astropy, offline."""
-    from astropy import units as u
-    from astropy.coordinates import AltAz, EarthLocation, get_sun
-    from astropy.time import Time
-    from astropy.utils import iers
-
-    iers.conf.auto_download = False
-    iso = [str(t).strip().replace(" ", "T", 1) for t in times_utc]  # 2020-03-01T04:00:00 or 2020-03-01 04:00:00
-    try:
-        times = Time(iso, format="isot", scale="utc")
-    except ValueError:
-        bad = next(t for t, text in zip(times_utc, iso) if not _is_time(text, Time))
-        raise InputError(f"`time_utc` must be ISO 8601 times (UTC, 2020-03-01T04:00:00), got {quote(str(bad))}.") from None
-    location = EarthLocation(lat=site.latitude_deg * u.deg, lon=site.longitude_deg * u.deg, height=site.height_m * u.m)
-    # past the bundled tables, or with their predictions old: the module docstring's 0.01 deg, with astropy's warning
-    with iers.conf.set_temp("iers_degraded_accuracy", "warn"), iers.conf.set_temp("auto_max_age", None):
-        altaz = get_sun(times).transform_to(AltAz(obstime=times, location=location))
-    return altaz_to_enu(np.asarray(altaz.alt.deg), np.asarray(altaz.az.deg))
-
-
-def _is_time(text: str, time_class: type) -> bool:
-    """Whether astropy's ``time_class`` reads ``text`` as an ISO 8601 time."""
-    try:
-        time_class([text], format="isot", scale="utc")
-    except ValueError:
-        return False
-    return True
-
-
-def altaz_to_enu(altitude_deg: np.ndarray, azimuth_deg: np.ndarray) -> np.ndarray:
-    """(n, 3) unit vectors (east, north, up) of altitudes and azimuths (deg, from north through east)."""
-    alt, az = np.radians(altitude_deg), np.radians(azimuth_deg)
-    return np.stack([np.cos(alt) * np.sin(az), np.cos(alt) * np.cos(az), np.sin(alt)], axis=-1)
-
-
 def target_positions(altitude_deg: np.ndarray, azimuth_deg: np.ndarray, height_m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """The target's position from the Earth's centre (n, 3; the site's east-north-up axes, the site at
     (0, 0, R)) and its distance from the site (m), seen at altitude / azimuth at ``height_m``."""
@@ -176,14 +135,6 @@ def target_positions(altitude_deg: np.ndarray, azimuth_deg: np.ndarray, height_m
     R, r = EARTH_RADIUS_M, EARTH_RADIUS_M + np.asarray(height_m, dtype=float)
     distance = -R * u[:, 2] + np.sqrt((R * u[:, 2]) ** 2 + r**2 - R**2)
     return np.array([0.0, 0.0, R]) + distance[:, None] * u, distance
-
-
-def in_earth_shadow(position_m: np.ndarray, sun: np.ndarray) -> np.ndarray:
-    """Whether targets at ``position_m`` (n, 3, from the Earth's centre) are in the cylindrical shadow
-    of a sun in directions ``sun`` (n, 3, unit)."""
-    along = np.sum(position_m * sun, axis=-1)
-    across = np.linalg.norm(position_m - along[:, None] * sun, axis=-1)
-    return (along < 0) & (across < EARTH_RADIUS_M)
 
 
 def nadir_sun_frame(position_m: np.ndarray, sun: np.ndarray) -> np.ndarray:
@@ -197,83 +148,197 @@ def nadir_sun_frame(position_m: np.ndarray, sun: np.ndarray) -> np.ndarray:
     return np.stack([np.cross(y, z), y, z], axis=1)
 
 
-def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | None = None) -> LightCurveObservations:
-    """Read measured magnitudes in the general or the Pomenis format (module docstring); ``site`` is
-    needed where the geometry is an altitude, azimuth and height; ``band`` names the general
-    format's band (one of :data:`~spacefit.studies.lightcurve.SUN_MAGNITUDES`).
+def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | None = None, format: str | None = None,
+                     orbit: Orbit | None = None, launch_utc: str | None = None, now_utc: str | None = None) -> LightCurveObservations:
+    """Read measured magnitudes from a file in one of the formats of the module docstring (found from
+    the file, or ``format``: ``general``, ``pomenis``, ``score``, ``ecsv``). ``site`` is needed where
+    the geometry is an altitude, azimuth and height (a SCORE file gives each row's); ``band`` names
+    the magnitudes' band (one of :data:`~spacefit.studies.lightcurve.SUN_MAGNITUDES`; a SCORE file's
+    from its filters). ``orbit`` computes the geometry from a TLE or OMM instead; rows before
+    ``launch_utc`` or after ``now_utc`` (default: now) are refused, with a warning.
 
     Raises:
-        InputError: missing columns, unreadable values, a missing site or band.
+        InputError: missing columns, unreadable values, an unknown filter, a missing site or band.
         OSError: the file cannot be read.
     """
     lines = read_text_rows("path", path, "light curve")
     path = Path(path)
     check_type("site", site, (Site, type(None)), "an sf.Site or None")
+    check_type("orbit", orbit, (Orbit, type(None)), "an sf.Orbit (Orbit.from_tle or Orbit.from_omm) or None")
     if band is not None:
         check_choice("band", band, SUN_MAGNITUDES)
     rows = list(csv.DictReader(lines))
+    kind = check_format(format) or file_format(path, list(rows[0]) if rows else None)
+    if kind == "ecsv":
+        rows, table_band, table_site = read_ecsv(path)
+        band, site, kind = band or table_band, site or table_site, "general"
     if not rows:
         raise InputError(f"light curve {path}: no data rows.")
+    try:
+        if kind == "score":
+            observations = _from_score(read_score(rows, band=band, with_orbit=orbit is not None, launch_utc=launch_utc,
+                                                  now_utc=now_utc), orbit, str(path))
+        else:
+            observations = _from_table(rows, kind, band, site, orbit, (launch_utc, now_utc), str(path))
+    except InputError as err:
+        raise type(err)(f"light curve {path}: {err}") from None
+    if observations.refused:
+        reasons = Counter(r.reason.split(" (")[0] for r in observations.refused)
+        warnings.warn(f"light curve {path}: {len(observations.refused)} rows refused ({', '.join(f'{n} {why}' for why, n in reasons.items())}): "
+                      f"{'; '.join(str(r) for r in observations.refused[:5])}{' ...' if len(observations.refused) > 5 else ''}",
+                      stacklevel=2)
+    return observations
+
+
+def _from_table(rows: list[dict[str, str]], kind: str, band: str | None, site: Site | None, orbit: Orbit | None,
+                bounds: tuple[str | None, str | None], source: str) -> LightCurveObservations:
+    """The general or Pomenis format's observations (:func:`read_light_curve`)."""
     header = list(rows[0])
-    if all(c in header for c in POMENIS_COLUMNS):
-        band = "AB532"
-        times = np.array([r["observation_time"] for r in rows])
-        numbers = _columns(path, rows, POMENIS_COLUMNS[1:])
+    if kind == "pomenis":
+        missing = [c for c in POMENIS_COLUMNS if c not in header]
+        if missing:
+            raise InputError(f"the header {header} lacks {missing}.")
+        band, time_column = "AB532", "observation_time"
+        numbers = _columns(rows, POMENIS_COLUMNS[1:])
         magnitude, sigma = numbers[:, 3], None
         geometry = ("site", numbers[:, 1], numbers[:, 2], numbers[:, 0] * 1e3)
     else:
         if band is None:
-            raise InputError(f"light curve {path}: give `band` (one of {', '.join(SUN_MAGNITUDES)}) for the general format.")
-        check_choice("band", band, SUN_MAGNITUDES)
-        for needed in (("time_utc", "magnitude"),):
-            missing = [c for c in needed if c not in header]
-            if missing:
-                raise InputError(f"light curve {path}: the header {header} lacks {missing}.")
-        times = np.array([r["time_utc"] for r in rows])
-        magnitude = _columns(path, rows, ("magnitude",))[:, 0]
-        sigma = _columns(path, rows, ("magnitude_sigma",))[:, 0] if "magnitude_sigma" in header else None
+            raise InputError(f"give `band` (one of {', '.join(SUN_MAGNITUDES)}) for the general format.")
+        missing = [c for c in ("time_utc", "magnitude") if c not in header]
+        if missing:
+            raise InputError(f"the header {header} lacks {missing}.")
+        time_column = "time_utc"
+        magnitude = _columns(rows, ("magnitude",))[:, 0]
+        sigma = _columns(rows, ("magnitude_sigma",))[:, 0] if "magnitude_sigma" in header else None
         if all(c in header for c in TARGET_FRAME_COLUMNS):
-            numbers = _columns(path, rows, TARGET_FRAME_COLUMNS)
-            geometry = ("frame", numbers[:, 0:3], numbers[:, 3:6], numbers[:, 6])
+            numbers = _columns(rows, TARGET_FRAME_COLUMNS)
+            shadow = np.array([r.get("in_shadow", "False").strip().lower() == "true" for r in rows])
+            geometry = ("frame", numbers[:, 0:3], numbers[:, 3:6], numbers[:, 6], shadow)
         elif all(c in header for c in SITE_COLUMNS):
-            numbers = _columns(path, rows, SITE_COLUMNS)
+            numbers = _columns(rows, SITE_COLUMNS)
             geometry = ("site", numbers[:, 0], numbers[:, 1], numbers[:, 2])
+        elif orbit is not None:
+            geometry = ("orbit",)
         else:
-            raise InputError(f"light curve {path}: the header {header} has no geometry: give {', '.join(TARGET_FRAME_COLUMNS)} "
-                             f"(the target's frame) or {', '.join(SITE_COLUMNS)} (seen from a `site`).")
+            raise InputError(f"the header {header} has no geometry: give {', '.join(TARGET_FRAME_COLUMNS)} "
+                             f"(the target's frame) or {', '.join(SITE_COLUMNS)} (seen from a `site`), or an `orbit`.")
+    times = np.array([r[time_column] for r in rows])
+    refused = time_refusals(times, time_column, *bounds, unreadable=False)
+    keep = np.array([i not in refused for i in range(len(rows))])
+    if not keep.any():
+        raise InputError(f"no usable rows: {'; '.join(str(r) for r in refused.values())}.")
+    times, magnitude = times[keep], magnitude[keep]
+    sigma = None if sigma is None else sigma[keep]
+    geometry = (geometry[0], *(g[keep] for g in geometry[1:]))
     if geometry[0] == "frame":
-        sun, observer, range_m = geometry[1:]
-        in_shadow = np.zeros(len(rows), dtype=bool)
+        sun, observer, range_m, in_shadow = geometry[1:]
     else:
         if site is None:
-            raise InputError(f"light curve {path} gives the target's altitude and azimuth: give the observer's `site` "
-                             f"(sf.Site(latitude_deg, longitude_deg, height_m)).")
-        altitude, azimuth, height = geometry[1], geometry[2], geometry[3]
-        if np.any((altitude < -90) | (altitude > 90)) or np.any((height <= 0) | (height > MAX_HEIGHT_M)):
-            raise InputError(f"light curve {path}: altitudes must lie in [-90, 90] deg and heights in (0, {MAX_HEIGHT_M:g}] m.")
-        sun_enu = sun_directions_enu(times, site)
-        position, range_m = target_positions(altitude, azimuth, height)
-        frame = nadir_sun_frame(position, sun_enu)
-        towards_observer = -(position - np.array([0.0, 0.0, EARTH_RADIUS_M])) / range_m[:, None]
-        sun = np.einsum("nij,nj->ni", frame, sun_enu)
-        observer = np.einsum("nij,nj->ni", frame, towards_observer)
-        in_shadow = in_earth_shadow(position, sun_enu)
-    try:
-        return LightCurveObservations(magnitude, sigma, band, sun, observer, range_m, in_shadow, times, str(path))
-    except InputError as err:
-        raise type(err)(f"light curve {path}: {err}") from None
+            raise InputError("the geometry is seen from a site: give the observer's `site` (sf.Site(latitude_deg, longitude_deg, height_m)).")
+        if orbit is not None:
+            sun, observer, range_m, in_shadow = _in_target_frame(*_orbit_geometry(orbit, site, times)[:4])
+        else:
+            altitude, azimuth, height = geometry[1:]
+            if np.any((altitude < -90) | (altitude > 90)) or np.any((height <= 0) | (height > MAX_HEIGHT_M)):
+                raise InputError(f"altitudes must lie in [-90, 90] deg and heights in (0, {MAX_HEIGHT_M:g}] m.")
+            position, range_m = target_positions(altitude, azimuth, height)
+            sun, observer, range_m, in_shadow = _in_target_frame(*_site_geometry(site, times, position, range_m))
+    return LightCurveObservations(magnitude, sigma, band, sun, observer, range_m, in_shadow, times, source,
+                                  tuple(refused[k] for k in sorted(refused)))
 
 
-def _columns(path: Path, rows: list[dict[str, str]], names: Sequence[str]) -> np.ndarray:
+def _site_geometry(site: Site, times: np.ndarray, position: np.ndarray,
+                   range_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Targets at ``position`` (the site's east-north-up axes, the site at (0, 0, R)): their position,
+    the sun's and the observer's directions from them, and the range."""
+    sun = sun_directions_enu(times, site)
+    towards_observer = -(position - np.array([0.0, 0.0, EARTH_RADIUS_M])) / range_m[:, None]
+    return position, sun, towards_observer, range_m
+
+
+def _orbit_geometry(orbit: Orbit, site: Site, times: np.ndarray) -> tuple[np.ndarray, ...]:
+    """:func:`_site_geometry`'s values from ``orbit`` (the Earth-fixed frame), and the altitude,
+    azimuth and phase angle (deg) for checking."""
+    g = pass_geometry(orbit, site, list(times))
+    return g.position_m, g.sun, g.towards_observer, g.range_m, g.altitude_deg, g.azimuth_deg, g.phase_deg
+
+
+def _in_target_frame(position: np.ndarray, sun: np.ndarray, towards_observer: np.ndarray,
+                     range_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The sun's and the observer's directions in the target's frame, the range, and the Earth's shadow."""
+    frame = nadir_sun_frame(position, sun)
+    in_shadow = in_earth_shadow(position, sun)
+    return np.einsum("nij,nj->ni", frame, sun), np.einsum("nij,nj->ni", frame, towards_observer), range_m, in_shadow
+
+
+# How far an orbit's geometry may stray from a SCORE file's SatChecker columns (deg) without a warning.
+SATCHECKER_TOLERANCE_DEG = {"phase_angle_deg_satchecker": 0.05, "alt_deg_satchecker": 0.01, "az_deg_satchecker": 0.01}
+
+
+def _from_score(score: ScoreRows, orbit: Orbit | None, source: str) -> LightCurveObservations:
+    """A SCORE file's observations (:func:`read_light_curve`), each row seen from its own site."""
+    n = len(score.magnitude)
+    values = [np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n)]
+    computed = {name: np.full(n, np.nan) for name in SATCHECKER_TOLERANCE_DEG}
+    for site in dict.fromkeys(score.sites):
+        rows = np.array([s == site for s in score.sites])
+        if orbit is not None:
+            *parts, altitude, azimuth, phase = _orbit_geometry(orbit, site, score.times_utc[rows])
+            for name, value in zip(("alt_deg_satchecker", "az_deg_satchecker", "phase_angle_deg_satchecker"), (altitude, azimuth, phase)):
+                computed[name][rows] = value
+        else:
+            u = altaz_to_enu(score.altitude_deg[rows], score.azimuth_deg[rows])
+            position = np.array([0.0, 0.0, EARTH_RADIUS_M]) + score.range_m[rows, None] * u
+            parts = _site_geometry(site, score.times_utc[rows], position, score.range_m[rows])
+        for whole, part in zip(values, parts):
+            whole[rows] = part
+    if orbit is not None:
+        given = {"alt_deg_satchecker": score.altitude_deg, "az_deg_satchecker": score.azimuth_deg,
+                 "phase_angle_deg_satchecker": score.phase_deg}
+        for name, tolerance in SATCHECKER_TOLERANCE_DEG.items():
+            off = np.abs((computed[name] - given[name] + 180.0) % 360.0 - 180.0)
+            if np.nanmax(off, initial=0.0) > tolerance:
+                k = int(np.nanargmax(off))
+                warnings.warn(f"{source}: the orbit's {name.split('_deg')[0]} differs from SatChecker's {name} by up to "
+                              f"{off[k]:.3g} deg (row {score.rows[k]}: {computed[name][k]:.4f} against {given[name][k]:.4f}); "
+                              f"the geometry used is the orbit's.", stacklevel=3)
+    sun, observer, range_m, in_shadow = _in_target_frame(*values)
+    return LightCurveObservations(score.magnitude, score.magnitude_sigma, score.band, sun, observer, range_m,
+                                  in_shadow | score.dark, score.times_utc, source, score.refused)
+
+
+def write_light_curve(observations: LightCurveObservations, path: str | Path) -> Path:
+    """Write ``observations`` as an ECSV table (the general format's columns in the target's frame,
+    ``in_shadow``, the time as an astropy Time column ``time``; ``band`` and ``source`` in its
+    metadata) that :func:`read_light_curve` reads back and astropy's ``TimeSeries.read`` reads.
+
+    Raises:
+        InputError: observations without times.
+    """
+    check_type("observations", observations, LightCurveObservations, "sf.LightCurveObservations")
+    if observations.time_utc is None:
+        raise InputError("`observations` have no times (time_utc is None): an ECSV light curve needs them.")
+    o = observations
+    columns = {"time_utc": o.time_utc, "magnitude": o.magnitude}
+    if o.magnitude_sigma is not None:
+        columns["magnitude_sigma"] = o.magnitude_sigma
+    columns |= {f"{name}_{axis}": v[:, k] for name, v in (("sun", o.sun), ("observer", o.observer)) for k, axis in enumerate("xyz")}
+    columns |= {"range_m": o.range_m, "in_shadow": o.in_shadow}
+    return write_ecsv(path, columns, {"band": o.band, "source": o.source})
+
+
+def _columns(rows: list[dict[str, str]], names: Sequence[str]) -> np.ndarray:
+    """The columns ``names`` of ``rows`` as finite numbers."""
     out = np.empty((len(rows), len(names)))
     for i, row in enumerate(rows):
         for j, name in enumerate(names):
             try:
                 out[i, j] = float(row[name])
             except (TypeError, ValueError):
-                raise InputError(f"light curve {path}: row {i + 1}'s {name} must be a number, got {row[name]!r}.") from None
+                raise InputError(f"row {i + 1}'s {name} must be a number, got {row[name]!r}.") from None
     if not np.all(np.isfinite(out)):
-        raise InputError(f"light curve {path}: every value of {', '.join(names)} must be finite.")
+        raise InputError(f"every value of {', '.join(names)} must be finite.")
     return out
 
 
