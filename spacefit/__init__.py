@@ -75,6 +75,10 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "predict_magnitudes": ("spacefit.studies.plates", "predict_magnitudes"),
     "fit_plates": ("spacefit.studies.plates", "fit_plates"),
     "fitted_plates": ("spacefit.studies.plates", "fitted_plates"),
+    "Earth": ("spacefit.studies.earthshine", "Earth"),
+    "EarthshineSources": ("spacefit.studies.earthshine", "EarthshineSources"),
+    "earthshine_sources": ("spacefit.studies.earthshine", "earthshine_sources"),
+    "earthshine_irradiance": ("spacefit.studies.earthshine", "earthshine_irradiance"),
     "light_curve_convergence": ("spacefit.studies.lightcurve", "light_curve_convergence"),
     "fit_light_curve": ("spacefit.studies.lightcurve", "fit_light_curve"),
     "Mirror": ("spacefit.materials", "Mirror"),
@@ -137,6 +141,7 @@ __all__ = [
     "plot_comparison", "plot_convergence",
     "DiffuseConductor", "OrenNayar", "MaterialModel", "register_material", "BRDFTable", "BRDF_MODELS", "read_brdf_table", "fit_brdf_table", "fitted_material", "compare_brdf_models", "TabulatedBRDF",
     "TableFit", "write_table_fit", "Site", "LightCurveObservations", "read_light_curve", "Plate", "predict_magnitudes", "fit_plates", "fitted_plates",
+    "Earth", "EarthshineSources", "earthshine_sources", "earthshine_irradiance",
     "light_curve_convergence", "fit_light_curve",
     "RenderSettings", "CameraSettings", "SunSettings", "TargetSettings", "WrinkleSettings", "PartSettings",
 ]

@@ -86,6 +86,10 @@ from spacefit.scene.toml import load_scene as load_scene
 from spacefit.sensor import Sensor as Sensor
 from spacefit.sensor import read_sensor_file as read_sensor_file
 from spacefit.sensor import saturated_mask as saturated_mask
+from spacefit.studies.earthshine import Earth as Earth
+from spacefit.studies.earthshine import EarthshineSources as EarthshineSources
+from spacefit.studies.earthshine import earthshine_irradiance as earthshine_irradiance
+from spacefit.studies.earthshine import earthshine_sources as earthshine_sources
 from spacefit.studies.lightcurve import LightCurve as LightCurve
 from spacefit.studies.lightcurve import fit_light_curve as fit_light_curve
 from spacefit.studies.lightcurve import light_curve as light_curve
@@ -118,6 +122,6 @@ __all__ = [
     'light_curve', 'plot_comparison', 'plot_convergence', 'DiffuseConductor', 'OrenNayar', 'MaterialModel', 'register_material',
     'BRDFTable', 'BRDF_MODELS', 'read_brdf_table', 'fit_brdf_table', 'fitted_material', 'compare_brdf_models', 'TabulatedBRDF', 'TableFit',
     'write_table_fit', 'Site', 'LightCurveObservations', 'read_light_curve', 'Plate', 'predict_magnitudes', 'fit_plates', 'fitted_plates',
-    'light_curve_convergence', 'fit_light_curve', 'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings',
-    'PartSettings',
+    'Earth', 'EarthshineSources', 'earthshine_sources', 'earthshine_irradiance', 'light_curve_convergence', 'fit_light_curve',
+    'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings',
 ]
