@@ -40,7 +40,7 @@ obs = sf.Observation(scene, reference)
 peak = {}
 def on_step(h):
     peak[h["step"]] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-sf.fit(obs, list(case.free), solver=sf.Adam(rtol=1e-12), start=case.start, max_steps=STEPS, on_step=on_step)
+sf.fit(obs, list(case.free), solver=sf.Adam(rtol=1e-12), start=case.start, max_steps=STEPS, resume=sf.Resume(on_step=on_step))
 last = max(peak)
 print(f"peak memory: {peak[10]:.1f} MiB after step 10, {peak[last]:.1f} MiB after step {last} "
       f"({peak[last] / peak[10] - 1:+.2%})")

@@ -34,8 +34,8 @@ DATA = ROOT / "data" / "starlink-v1p5"
     ("md", """## 1. A lab table and the model fitted to it
 
 Each surface's table against `lambert+ggx` (k = 0) fitted in log space at an assumed 10 % error;
-`sf.compare_brdf_models` says which of the models fits within it. The model's values are the lab
-values times exp(0.1 r), r the fit's normalised residuals, ln(model / lab) / 0.1."""),
+`sf.compare_brdf_models` says which of the models fits within it. The model's values are the fit's
+(`fit.renders[0]`, the table observation's predicted values)."""),
     ("code", """lab = {}
 for surface in ("chassis", "solar_array"):
     table = sf.read_brdf_table(DATA / f"{surface}_brdf.csv", floor=1e-4)
@@ -46,8 +46,8 @@ for surface in ("chassis", "solar_array"):
         chassis_table, chassis_fit = table, fit
 
 table, fit = chassis_table, chassis_fit
-print(fit.report())
-model = table.value * np.exp(0.1 * fit.residuals)
+print(sf.format_result(fit))
+model = fit.renders[0]
 zen_i = np.degrees(np.arccos(table.wi[:, 2]))
 zen_o = np.degrees(np.arctan2(table.wo[:, 0], table.wo[:, 2]))
 fig, ax = plt.subplots(figsize=(8, 4))
@@ -70,8 +70,8 @@ plates = [sf.Plate("chassis", 3.64, (0.0, 0.0, -1.0), lab["chassis"]), sf.Plate(
 held = np.zeros(len(obs), dtype=bool)
 held[np.random.default_rng(0).permutation(len(obs))[: len(obs) // 3]] = True
 predicted_lab = sf.predict_magnitudes(plates, obs)
-fit = sf.fit_plates(plates, obs.subset(~held), ["chassis.kd", "chassis.eta", "chassis.alpha", "array.eta", "array.alpha"])
-print(fit.report())
+fit = sf.fit_plates(plates, obs.subset(~held), ["parts.chassis.kd", "parts.chassis.eta", "parts.chassis.alpha", "parts.array.eta", "parts.array.alpha"])
+print(sf.format_result(fit))
 predicted_fit = sf.predict_magnitudes(sf.fitted_plates(plates, fit), obs)
 
 

@@ -11,6 +11,7 @@ neither the fitting stack (JAX, optimistix) nor the plotting one, about 2 s of a
 from __future__ import annotations
 
 import importlib
+import warnings
 
 __version__ = "0.1.0"
 
@@ -32,8 +33,9 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "LOSSES": ("spacefit.fitting.losses", "LOSSES"),
     "FitRender": ("spacefit.fitting.problem", "FitRender"),
     "FitOptions": ("spacefit.fitting.loop", "FitOptions"),
+    "Resume": ("spacefit.fitting.resume", "Resume"),
     "ObservationFiles": ("spacefit.fitting.observation_files", "ObservationFiles"),
-    "Observation": ("spacefit.fitting.problem", "Observation"),
+    "Observation": ("spacefit.fitting.observations.image", "Observation"),
     "format_result": ("spacefit.fitting.report", "format_result"),
     "write_fit_report": ("spacefit.fitting.report", "write_fit_report"),
     "Adam": ("spacefit.fitting.solvers", "Adam"),
@@ -62,12 +64,14 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "BRDFTable": ("spacefit.fitting.brdf_table", "BRDFTable"),
     "BRDF_MODELS": ("spacefit.fitting.brdf_table", "BRDF_MODELS"),
     "read_brdf_table": ("spacefit.fitting.brdf_table", "read_brdf_table"),
-    "fit_brdf_table": ("spacefit.fitting.brdf_table", "fit_brdf_table"),
-    "fitted_material": ("spacefit.fitting.brdf_table", "fitted_material"),
-    "compare_brdf_models": ("spacefit.fitting.brdf_table", "compare_brdf_models"),
+    "fit_brdf_table": ("spacefit.fitting.observations.brdf", "fit_brdf_table"),
+    "fitted_material": ("spacefit.fitting.observations.brdf", "fitted_material"),
+    "compare_brdf_models": ("spacefit.fitting.observations.brdf", "compare_brdf_models"),
+    "BRDFTableObservation": ("spacefit.fitting.observations.brdf", "BRDFTableObservation"),
+    "PlateLightCurve": ("spacefit.studies.plates", "PlateLightCurve"),
+    "RenderedLightCurve": ("spacefit.studies.lightcurve_fit", "RenderedLightCurve"),
     "TabulatedBRDF": ("spacefit.fitting.brdf_table", "TabulatedBRDF"),
-    "TableFit": ("spacefit.fitting.tabular", "TableFit"),
-    "write_table_fit": ("spacefit.fitting.tabular", "write_table_fit"),
+    "write_table_fit": ("spacefit.fitting.report", "write_table_fit"),
     "Site": ("spacefit.studies.observing", "Site"),
     "LightCurveObservations": ("spacefit.studies.observing", "LightCurveObservations"),
     "read_light_curve": ("spacefit.studies.observing", "read_light_curve"),
@@ -80,7 +84,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "earthshine_sources": ("spacefit.studies.earthshine", "earthshine_sources"),
     "earthshine_irradiance": ("spacefit.studies.earthshine", "earthshine_irradiance"),
     "light_curve_convergence": ("spacefit.studies.lightcurve", "light_curve_convergence"),
-    "fit_light_curve": ("spacefit.studies.lightcurve", "fit_light_curve"),
+    "fit_light_curve": ("spacefit.studies.lightcurve_fit", "fit_light_curve"),
     "Mirror": ("spacefit.materials", "Mirror"),
     "PRESETS": ("spacefit.materials", "PRESETS"),
     "fit_to_folder": ("spacefit.pipeline", "fit_to_folder"),
@@ -128,7 +132,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
 
 __all__ = [
     "PARAMETERS", "PRESETS", "LOSSES", "SOLVERS",
-    "Adam", "Case", "Conductor", "FitOptions", "FitRender", "FitResult", "Identifiability", "InputError", "Jacobian", "Lambert", "Mirror",
+    "Adam", "Case", "Conductor", "FitOptions", "Resume", "FitRender", "FitResult", "Identifiability", "InputError", "Jacobian", "Lambert", "Mirror",
     "Observation", "ObservationFiles", "Parameter", "PartImage", "Renderer", "Scene", "Status",
     "available_parameters", "case_names", "default_scene", "fit", "fit_to_folder", "format_result", "identifiability",
     "jacobian", "load_case", "load_scene", "parameter_table", "read_exr", "render", "render_function",
@@ -140,15 +144,25 @@ __all__ = [
     "read_sweep_file", "sweep", "verify_store", "StoreReport", "ClusterError", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
     "plot_comparison", "plot_convergence",
     "DiffuseConductor", "OrenNayar", "MaterialModel", "register_material", "BRDFTable", "BRDF_MODELS", "read_brdf_table", "fit_brdf_table", "fitted_material", "compare_brdf_models", "TabulatedBRDF",
-    "TableFit", "write_table_fit", "Site", "LightCurveObservations", "read_light_curve", "Plate", "predict_magnitudes", "fit_plates", "fitted_plates",
+    "write_table_fit", "Site", "LightCurveObservations", "read_light_curve", "Plate", "predict_magnitudes", "fit_plates", "fitted_plates",
+    "light_curve_convergence", "fit_light_curve", "BRDFTableObservation", "PlateLightCurve", "RenderedLightCurve",
     "Earth", "EarthshineSources", "earthshine_sources", "earthshine_irradiance",
-    "light_curve_convergence", "fit_light_curve",
     "RenderSettings", "CameraSettings", "SunSettings", "TargetSettings", "WrinkleSettings", "PartSettings",
 ]
 
 
+# Former public names -> (the name that replaces them, why): still reachable, with a DeprecationWarning.
+_DEPRECATED: dict[str, tuple[str, str]] = {
+    "TableFit": ("FitResult", "a table's or a light curve's fit is an sf.fit and returns an sf.FitResult"),
+}
+
+
 def __getattr__(name: str) -> object:
-    """Import a public name's module on first use (PEP 562)."""
+    """Import a public name's module on first use (PEP 562); a deprecated name warns and gives its replacement."""
+    if name in _DEPRECATED:
+        replacement, why = _DEPRECATED[name]
+        warnings.warn(f"sf.{name} is deprecated: {why}; use sf.{replacement}.", DeprecationWarning, stacklevel=2)
+        return __getattr__(replacement)
     if name not in _EXPORTS:
         raise AttributeError(f"module 'spacefit' has no attribute {name!r}")
     module, attr = _EXPORTS[name]

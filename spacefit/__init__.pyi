@@ -8,15 +8,17 @@ from spacefit.executors import ClusterError as ClusterError
 from spacefit.fitting.brdf_table import BRDFTable as BRDFTable
 from spacefit.fitting.brdf_table import BRDF_MODELS as BRDF_MODELS
 from spacefit.fitting.brdf_table import TabulatedBRDF as TabulatedBRDF
-from spacefit.fitting.brdf_table import compare_brdf_models as compare_brdf_models
-from spacefit.fitting.brdf_table import fit_brdf_table as fit_brdf_table
-from spacefit.fitting.brdf_table import fitted_material as fitted_material
 from spacefit.fitting.brdf_table import read_brdf_table as read_brdf_table
 from spacefit.fitting.loop import FitOptions as FitOptions
 from spacefit.fitting.loop import FitResult as FitResult
 from spacefit.fitting.loop import fit as fit
 from spacefit.fitting.losses import LOSSES as LOSSES
 from spacefit.fitting.observation_files import ObservationFiles as ObservationFiles
+from spacefit.fitting.observations.brdf import BRDFTableObservation as BRDFTableObservation
+from spacefit.fitting.observations.brdf import compare_brdf_models as compare_brdf_models
+from spacefit.fitting.observations.brdf import fit_brdf_table as fit_brdf_table
+from spacefit.fitting.observations.brdf import fitted_material as fitted_material
+from spacefit.fitting.observations.image import Observation as Observation
 from spacefit.fitting.passes import Frame as Frame
 from spacefit.fitting.passes import Pass as Pass
 from spacefit.fitting.passes import arc_pass as arc_pass
@@ -26,14 +28,13 @@ from spacefit.fitting.passes import simulate_pass as simulate_pass
 from spacefit.fitting.plots import plot_comparison as plot_comparison
 from spacefit.fitting.plots import plot_convergence as plot_convergence
 from spacefit.fitting.problem import FitRender as FitRender
-from spacefit.fitting.problem import Observation as Observation
 from spacefit.fitting.report import format_result as format_result
 from spacefit.fitting.report import write_fit_report as write_fit_report
+from spacefit.fitting.report import write_table_fit as write_table_fit
+from spacefit.fitting.resume import Resume as Resume
 from spacefit.fitting.solvers import Adam as Adam
 from spacefit.fitting.solvers import SOLVERS as SOLVERS
 from spacefit.fitting.solvers import Status as Status
-from spacefit.fitting.tabular import TableFit as TableFit
-from spacefit.fitting.tabular import write_table_fit as write_table_fit
 from spacefit.fitting.uncertainty import Identifiability as Identifiability
 from spacefit.fitting.uncertainty import identifiability as identifiability
 from spacefit.formation import choose_exposure as choose_exposure
@@ -91,13 +92,15 @@ from spacefit.studies.earthshine import EarthshineSources as EarthshineSources
 from spacefit.studies.earthshine import earthshine_irradiance as earthshine_irradiance
 from spacefit.studies.earthshine import earthshine_sources as earthshine_sources
 from spacefit.studies.lightcurve import LightCurve as LightCurve
-from spacefit.studies.lightcurve import fit_light_curve as fit_light_curve
 from spacefit.studies.lightcurve import light_curve as light_curve
 from spacefit.studies.lightcurve import light_curve_convergence as light_curve_convergence
+from spacefit.studies.lightcurve_fit import RenderedLightCurve as RenderedLightCurve
+from spacefit.studies.lightcurve_fit import fit_light_curve as fit_light_curve
 from spacefit.studies.observing import LightCurveObservations as LightCurveObservations
 from spacefit.studies.observing import Site as Site
 from spacefit.studies.observing import read_light_curve as read_light_curve
 from spacefit.studies.plates import Plate as Plate
+from spacefit.studies.plates import PlateLightCurve as PlateLightCurve
 from spacefit.studies.plates import fit_plates as fit_plates
 from spacefit.studies.plates import fitted_plates as fitted_plates
 from spacefit.studies.plates import predict_magnitudes as predict_magnitudes
@@ -111,17 +114,18 @@ from spacefit.studies.sweep import sweep as sweep
 __version__: str = '0.1.0'
 
 __all__ = [
-    'PARAMETERS', 'PRESETS', 'LOSSES', 'SOLVERS', 'Adam', 'Case', 'Conductor', 'FitOptions', 'FitRender', 'FitResult', 'Identifiability',
-    'InputError', 'Jacobian', 'Lambert', 'Mirror', 'Observation', 'ObservationFiles', 'Parameter', 'PartImage', 'Renderer', 'Scene',
-    'Status', 'available_parameters', 'case_names', 'default_scene', 'fit', 'fit_to_folder', 'format_result', 'identifiability', 'jacobian',
-    'load_case', 'load_scene', 'parameter_table', 'read_exr', 'render', 'render_function', 'render_to_folder', 'wm_rms', 'wm_rms_slope',
-    'write_exr', 'write_fit_report', 'Distortion', 'Intrinsics', 'ObservedImage', 'Sensor', 'distort_image', 'expected_dn',
-    'noise_variance_dn', 'observe', 'pixel_solid_angles', 'read_image', 'read_sensor_file', 'saturated_mask', 'choose_exposure',
-    'write_observation', 'sensor_of', 'format_sensor_sources', 'MLI_SLOPE_RANGE', 'Pass', 'Frame', 'frame_table', 'plot_frames', 'arc_pass',
-    'simulate_pass', 'read_sweep_file', 'sweep', 'verify_store', 'StoreReport', 'ClusterError', 'Sensitivity', 'sensitivity', 'LightCurve',
-    'light_curve', 'plot_comparison', 'plot_convergence', 'DiffuseConductor', 'OrenNayar', 'MaterialModel', 'register_material',
-    'BRDFTable', 'BRDF_MODELS', 'read_brdf_table', 'fit_brdf_table', 'fitted_material', 'compare_brdf_models', 'TabulatedBRDF', 'TableFit',
-    'write_table_fit', 'Site', 'LightCurveObservations', 'read_light_curve', 'Plate', 'predict_magnitudes', 'fit_plates', 'fitted_plates',
-    'Earth', 'EarthshineSources', 'earthshine_sources', 'earthshine_irradiance', 'light_curve_convergence', 'fit_light_curve',
-    'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings',
+    'PARAMETERS', 'PRESETS', 'LOSSES', 'SOLVERS', 'Adam', 'Case', 'Conductor', 'FitOptions', 'Resume', 'FitRender', 'FitResult',
+    'Identifiability', 'InputError', 'Jacobian', 'Lambert', 'Mirror', 'Observation', 'ObservationFiles', 'Parameter', 'PartImage',
+    'Renderer', 'Scene', 'Status', 'available_parameters', 'case_names', 'default_scene', 'fit', 'fit_to_folder', 'format_result',
+    'identifiability', 'jacobian', 'load_case', 'load_scene', 'parameter_table', 'read_exr', 'render', 'render_function',
+    'render_to_folder', 'wm_rms', 'wm_rms_slope', 'write_exr', 'write_fit_report', 'Distortion', 'Intrinsics', 'ObservedImage', 'Sensor',
+    'distort_image', 'expected_dn', 'noise_variance_dn', 'observe', 'pixel_solid_angles', 'read_image', 'read_sensor_file',
+    'saturated_mask', 'choose_exposure', 'write_observation', 'sensor_of', 'format_sensor_sources', 'MLI_SLOPE_RANGE', 'Pass', 'Frame',
+    'frame_table', 'plot_frames', 'arc_pass', 'simulate_pass', 'read_sweep_file', 'sweep', 'verify_store', 'StoreReport', 'ClusterError',
+    'Sensitivity', 'sensitivity', 'LightCurve', 'light_curve', 'plot_comparison', 'plot_convergence', 'DiffuseConductor', 'OrenNayar',
+    'MaterialModel', 'register_material', 'BRDFTable', 'BRDF_MODELS', 'read_brdf_table', 'fit_brdf_table', 'fitted_material',
+    'compare_brdf_models', 'TabulatedBRDF', 'write_table_fit', 'Site', 'LightCurveObservations', 'read_light_curve', 'Plate',
+    'predict_magnitudes', 'fit_plates', 'fitted_plates', 'light_curve_convergence', 'fit_light_curve', 'BRDFTableObservation',
+    'PlateLightCurve', 'RenderedLightCurve', 'Earth', 'EarthshineSources', 'earthshine_sources', 'earthshine_irradiance', 'RenderSettings',
+    'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings',
 ]

@@ -23,6 +23,7 @@ import json
 import os
 import platform
 import shlex
+import stat
 import sys
 import warnings
 from collections.abc import Callable, Iterator
@@ -116,16 +117,36 @@ def _read(fd: int) -> Holder | None:
 def _is_file_at(fd: int, path: Path) -> bool:
     """Whether the open file ``fd`` is still the file at ``path`` (a releasing holder removes it)."""
     try:
-        return os.path.samestat(os.fstat(fd), os.stat(path))
+        return os.path.samestat(os.fstat(fd), os.lstat(path))
     except FileNotFoundError:
         return False
+
+
+def _open_lock(path: Path, what: str) -> int:
+    """Open (or create) the lock file ``path`` without following a symbolic link or opening anything but a
+    regular file: a lock never writes through a link into a user's file, nor into a device or a pipe.
+
+    Raises:
+        InputError: ``path`` is a symbolic link or not a regular file, naming it and what to do.
+    """
+    try:
+        fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
+    except OSError as err:
+        if err.errno != errno.ELOOP:
+            raise
+        raise InputError(f"the lock file {str(path)!r} of {what} is a symbolic link (to {os.readlink(path)!r}); spacefit never "
+                         "writes a lock through a link: remove the link and run again.") from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise InputError(f"the lock file {str(path)!r} of {what} is not a regular file; remove it and run again.")
+    return fd
 
 
 def _take(path: Path, what: str) -> int:
     """Open and lock ``path`` (refusing when another process holds it, breaking it when its holder
     died), write this process into it and return its descriptor."""
     while True:
-        fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+        fd = _open_lock(path, what)
         try:
             fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:

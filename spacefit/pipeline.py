@@ -18,6 +18,7 @@ import numpy as np
 
 from spacefit.digests import changed, digests
 from spacefit.errors import InputError, check_choice, check_path, check_type
+from spacefit.fitting.resume import Resume
 from spacefit.geometry.mesh import export_stl
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
 from spacefit.interrupts import run_interruptibly
@@ -250,8 +251,8 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     created = not Path(out_dir).exists()
     t0 = time.perf_counter()
     try:
-        result = fit(observations, free, progress=progress, on_step=checkpoint.update, on_end=checkpoint.end,
-                     ended=checkpoint.ended, history=checkpoint.history if resume else (), cluster=cluster, **options.keywords())
+        plumbing = Resume(checkpoint.update, checkpoint.end, checkpoint.ended, checkpoint.history if resume else ())
+        result = fit(observations, free, progress=progress, resume=plumbing, cluster=cluster, **options.keywords())
         edited = changed(checkpoint.digests)  # the files read at the start, read again: a result of files that changed is none
         if edited:
             raise InputError(f"{', '.join(map(repr, edited))} changed while the fit ran (SHA-256 differs from the start's); "
@@ -297,8 +298,8 @@ class Checkpoint:
         self.digests = digests(files)
         self.best: dict[str, Any] | None = None
         self.steps = 0
-        self.history: list[dict[str, Any]] = []  # every step's entry (``fit``'s ``on_step``)
-        self.ended: dict[str, Any] | None = None  # the record of a solve that ended (``fit``'s ``on_end``)
+        self.history: list[dict[str, Any]] = []  # every step's entry (``Resume.on_step``)
+        self.ended: dict[str, Any] | None = None  # the record of a solve that ended (``Resume.on_end``)
 
     def update(self, entry: dict[str, Any]) -> None:
         """Record one step's history entry (the best point when it is the best so far) and write the file."""
@@ -310,7 +311,7 @@ class Checkpoint:
             self._write()
 
     def end(self, record: dict[str, Any]) -> None:
-        """Record that the solve has ended (``fit``'s ``on_end``): a fit killed after it resumes to the same report."""
+        """Record that the solve has ended (``Resume.on_end``): a fit killed after it resumes to the same report."""
         self.ended = record
         self._write()
 

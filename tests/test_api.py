@@ -219,3 +219,10 @@ def travel_direction(elevation_deg: float, azimuth_deg: float) -> np.ndarray:
     el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
     return -np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
 
+
+
+def test_a_former_name_warns_and_gives_its_replacement():
+    """sf.TableFit, the table fits' result type before they became sf.fit's, is sf.FitResult, with a DeprecationWarning."""
+    with pytest.warns(DeprecationWarning, match="sf.TableFit is deprecated"):
+        assert sf.TableFit is sf.FitResult
+    assert "TableFit" not in sf.__all__

@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from spacefit.errors import InputError
-from spacefit.fitting.brdf_table import (compare_brdf_models, fit_brdf_table, fitted_material, read_brdf_table,
-                                         simulate_brdf_table)
-from spacefit.fitting.tabular import write_table_fit
+from spacefit.fitting.brdf_table import read_brdf_table, simulate_brdf_table
+from spacefit.fitting.observations.brdf import compare_brdf_models, fit_brdf_table, fitted_material
+from spacefit.fitting.report import format_result, write_table_fit
 from spacefit.materials import Conductor, DiffuseConductor, Lambert, OrenNayar
 from spacefit.materials.brdf import brdf
 from spacefit.materials.conductor import fresnel_conductor
@@ -99,18 +99,20 @@ def test_a_ggx_table_is_fitted_back_and_chosen(tmp_path):
     table = simulate_brdf_table(truth, [5, 30, 45, 60, 75], np.arange(-85.0, 86.0, 5.0), [0.0, 30.0], relative_error=0.005, seed=1)
     comparison = compare_brdf_models(table, ("ggx", "lambert"))
     fit = comparison.fits["ggx"]
-    assert fit.success and not fit.goodness.misfit, fit.report()
+    assert fit.success and not fit.goodness.misfit, format_result(fit)
+    value = {name.rsplit(".", 1)[1]: v for name, v in fit.values.items()}
+    assert fit.names == ("parts.sample.eta", "parts.sample.k", "parts.sample.alpha")  # the part's registered parameters
     for name, true in (("eta", 1.8), ("k", 2.5), ("alpha", 0.12)):
-        assert fit.value(name) == pytest.approx(true, rel=0.01)
-        assert abs(fit.value(name) - true) < 4 * fit.stderr[fit.names.index(name)]
-    assert fitted_material("ggx", fit) == Conductor(fit.value("eta"), fit.value("k"), fit.value("alpha"), fit.value("alpha"))
+        assert value[name] == pytest.approx(true, rel=0.01)
+        assert abs(value[name] - true) < 4 * fit.stderr[f"parts.sample.{name}"]
+    assert fitted_material("ggx", fit) == Conductor(value["eta"], value["k"], value["alpha"], value["alpha"])
     assert comparison.fits["lambert"].goodness.misfit and comparison.chosen == "ggx"
     assert list(comparison.fits) == ["lambert", "ggx"] and "<- smallest within the errors" in comparison.table().splitlines()[2]
     folder = write_table_fit(tmp_path / "fit", fit, inputs={"table": table.source})
     assert sorted(p.name for p in folder.iterdir()) == ["fit.json", "report.txt"]
     saved = json.loads((folder / "fit.json").read_text())
-    assert saved["values"]["alpha"] == pytest.approx(fit.value("alpha")) and saved["status"] == "CONVERGED"
-    assert (folder / "report.txt").read_text().startswith("converged\ngoodness of fit: chi^2/dof")
+    assert saved["values"]["parts.sample.alpha"] == pytest.approx(value["alpha"]) and saved["status"] == "converged"
+    assert (folder / "report.txt").read_text().splitlines()[1].startswith("goodness of fit: chi^2/dof")
     with pytest.raises(InputError, match="previous spacefit table-fit result; pass --overwrite"):
         write_table_fit(folder, fit)
     assert write_table_fit(folder, fit, overwrite=True) == folder

@@ -78,6 +78,26 @@ def test_a_render_into_a_folder_in_use_is_refused_and_changes_nothing(tmp_path, 
     assert listing(out) == ["render.json"]
 
 
+@pytest.mark.parametrize("target", ["file", "dangling", "fifo"])
+def test_a_lock_file_that_is_a_link_or_a_pipe_is_refused_and_touches_nothing(tmp_path, capsys, target):
+    """Issue 35's data loss: with the lock's name a symbolic link to a user's notes, a render replaced them
+    with the lock's record. Now it exits 2 naming the link, and the notes, the link and the folder stay as they were."""
+    notes = tmp_path / "my_notes.txt"
+    notes.write_text("field notes\n")
+    lock = tmp_path / ".symlock.spacefit-lock"
+    if target == "fifo":
+        os.mkfifo(lock)
+    else:
+        lock.symlink_to(notes if target == "file" else tmp_path / "gone.txt")
+    before = listing(tmp_path)
+    assert main(["render", "--out", str(tmp_path / "symlock"), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    words = "is a symbolic link" if target != "fifo" else "is not a regular file"
+    assert err.startswith(f"spacefit: error: the lock file '{lock}' of `--out` '{tmp_path / 'symlock'}' {words}") and len(err.splitlines()) == 1
+    assert notes.read_text() == "field notes\n" and listing(tmp_path) == before
+    assert not (tmp_path / "gone.txt").exists()
+
+
 def test_a_stale_lock_of_this_host_is_broken_and_one_of_another_host_is_kept(tmp_path):
     store = tmp_path / "store.zarr"
     stale = write_lock(store)

@@ -14,7 +14,8 @@ import pytest
 from helpers import small_scene, write_plate_obj
 
 import spacefit as sf
-from spacefit.fitting.brdf_table import BRDF_MODELS, fit_brdf_table, simulate_brdf_table
+from spacefit.fitting.brdf_table import BRDF_MODELS, simulate_brdf_table
+from spacefit.fitting.observations.brdf import fit_brdf_table
 from spacefit.materials import MODELS, Field, MaterialModel
 from spacefit.rendering.materials import MITSUBA
 from spacefit.rendering.renderer import render
@@ -48,8 +49,8 @@ def test_a_plugin_model_is_rendered_and_fitted_by_name(tmp_path, toy):
 def test_a_plugin_model_fits_a_brdf_table(toy):
     assert "toy_diffuse" in BRDF_MODELS
     table = simulate_brdf_table(toy(0.27), [0.0, 30.0, 60.0], [10.0, 40.0, 70.0], (0.0, 90.0), relative_error=0.01, seed=2)
-    fit = fit_brdf_table(table, "toy_diffuse")
-    assert fit.value("albedo") == pytest.approx(0.27, rel=0.01)
+    fit = fit_brdf_table(table, "toy_diffuse", part="sample")
+    assert fit.values["parts.sample.albedo"] == pytest.approx(0.27, rel=0.01)
 
 
 def test_unregistered_after_the_test():

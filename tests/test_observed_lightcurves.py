@@ -166,13 +166,13 @@ def test_a_simulated_two_plate_light_curve_is_fitted_back_within_its_errors():
     m = predict_magnitudes(truth, exact) + 0.05 * rng.standard_normal(n)
     data = LightCurveObservations(m, np.full(n, 0.05), "AB532", sun, obs, np.full(n, 6e5), np.zeros(n, bool), None, "simulated")
     start = [Plate("chassis", 3.64, (0, 0, -1), Lambert(0.1)), Plate("array", 22.68, (0, 1, 0), Conductor(1.5, 0.0, 0.4, 0.4))]
-    fit = fit_plates(start, data, ["chassis.kd", "array.alpha"])
-    assert fit.success and not fit.goodness.misfit, fit.report()
-    assert abs(fit.value("chassis.kd") - 0.3) < 3 * fit.stderr[0]
-    assert abs(fit.value("array.alpha") - 0.2) < 3 * fit.stderr[1]
-    assert fit.stderr[0] < 0.01 and np.isfinite(magnitude_of(np.array([1e-12]), "AB532", 1360.0)).all()
+    fit = fit_plates(start, data, ["parts.chassis.kd", "parts.array.alpha"])
+    assert fit.success and not fit.goodness.misfit, sf.format_result(fit)
+    assert abs(fit.values["parts.chassis.kd"] - 0.3) < 3 * fit.stderr["parts.chassis.kd"]
+    assert abs(fit.values["parts.array.alpha"] - 0.2) < 3 * fit.stderr["parts.array.alpha"]
+    assert fit.stderr["parts.chassis.kd"] < 0.01 and np.isfinite(magnitude_of(np.array([1e-12]), "AB532", 1360.0)).all()
     with pytest.raises(InputError, match="`free` must be one of"):
-        fit_plates(start, data, ["panel.kd"])
+        fit_plates(start, data, ["parts.panel.kd"])
 
 
 def test_two_lambert_plates_agree_with_lumos_sat(pomenis):
@@ -231,18 +231,18 @@ def test_fit_plates_frees_the_attitude_and_a_tables_scale():
     exact = LightCurveObservations(np.zeros(n), None, "AB532", sun, obs, np.full(n, 6e5), np.zeros(n, bool), None, "simulated")
     m = predict_magnitudes(truth, exact) + 0.02 * rng.standard_normal(n)
     data = LightCurveObservations(m, np.full(n, 0.02), "AB532", sun, obs, np.full(n, 6e5), np.zeros(n, bool), None, "simulated")
-    free = ["target.attitude_z_deg", "chassis.scale"]
+    free = ["target.attitude_z_deg", "parts.chassis.scale"]
     fit = fit_plates(plates, data, free)
-    assert fit.success and not fit.goodness.misfit, fit.report()
+    assert fit.success and not fit.goodness.misfit, sf.format_result(fit)
     for name, true in zip(free, (6.0, 1.8)):
-        assert abs(fit.value(name) - true) < 3 * fit.stderr[fit.names.index(name)], fit.report()
-    assert fit.stderr[0] < 1.0 and fit.stderr[1] < 0.1
+        assert abs(fit.values[name] - true) < 3 * fit.stderr[name], sf.format_result(fit)
+    assert fit.stderr[free[0]] < 1.0 and fit.stderr[free[1]] < 0.1
     turned = sf.fitted_plates(plates, fit)
-    np.testing.assert_allclose(turned[1].normal, truth[1].normal, atol=3 * math.radians(fit.stderr[0]))
-    assert turned[0].normal == (0.0, 0.0, -1.0) and turned[0].material.scale == pytest.approx(fit.value("chassis.scale"))
+    np.testing.assert_allclose(turned[1].normal, truth[1].normal, atol=3 * math.radians(fit.stderr[free[0]]))
+    assert turned[0].normal == (0.0, 0.0, -1.0) and turned[0].material.scale == pytest.approx(fit.values["parts.chassis.scale"])
     with pytest.raises(InputError, match="starts at 1, outside its bounds"):
-        fit_plates(plates, data, ["chassis.scale"], bounds={"chassis.scale": (1.5, 3.0)})
+        fit_plates(plates, data, ["parts.chassis.scale"], bounds={"parts.chassis.scale": (1.5, 3.0)})
     with pytest.raises(InputError, match="`bounds` must be one of"):
-        fit_plates(plates, data, ["chassis.scale"], bounds={"array.eta": (1.0, 2.0)})
+        fit_plates(plates, data, ["parts.chassis.scale"], bounds={"parts.array.eta": (1.0, 2.0)})
     with pytest.raises(InputError, match="must not have a plate named 'target'"):
         fit_plates([Plate("target", 1.0, (0, 0, 1), Lambert(0.3))], data, ["target.kd"])

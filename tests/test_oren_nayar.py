@@ -12,7 +12,8 @@ from helpers import pixel_directions, small_scene, write_plate_obj
 
 import spacefit as sf
 from spacefit.errors import InputError
-from spacefit.fitting.brdf_table import fit_brdf_table, fitted_material, simulate_brdf_table
+from spacefit.fitting.brdf_table import simulate_brdf_table
+from spacefit.fitting.observations.brdf import fit_brdf_table, fitted_material
 from spacefit.materials import Lambert, OrenNayar, make_material
 from spacefit.materials.brdf import brdf
 from spacefit.rendering.derivatives import render_chain
@@ -136,11 +137,11 @@ def test_a_simulated_table_is_fitted_back_within_1_percent():
     truth = OrenNayar(0.42, 0.7)
     table = simulate_brdf_table(truth, np.arange(0.0, 80.0, 10.0), np.arange(0.0, 85.0, 7.0), (0.0, 45.0, 90.0, 180.0),
                                 relative_error=0.01, seed=3)
-    fit = fit_brdf_table(table, "oren_nayar")
-    assert list(fit.names) == ["kd", "sigma"]
-    assert fit.value("kd") == pytest.approx(0.42, rel=0.01)
-    assert fit.value("sigma") == pytest.approx(0.7, rel=0.01)
-    assert fitted_material("oren_nayar", fit) == OrenNayar(fit.value("kd"), fit.value("sigma"))
+    fit = fit_brdf_table(table, "oren_nayar", part="sample")
+    kd, sigma = fit.values["parts.sample.kd"], fit.values["parts.sample.sigma"]
+    assert list(fit.names) == ["parts.sample.kd", "parts.sample.sigma"]
+    assert kd == pytest.approx(0.42, rel=0.01) and sigma == pytest.approx(0.7, rel=0.01)
+    assert fitted_material("oren_nayar", fit) == OrenNayar(kd, sigma)
 
 
 def test_image_fit_recovers_a_parts_sigma(tmp_path):

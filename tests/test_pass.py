@@ -293,7 +293,7 @@ def test_a_worker_killed_mid_fit_changes_nothing(small_pass, client):
         if entry["step"] == 1:  # during the next step's renders
             threading.Timer(0.2, lambda: (os.kill(next(iter(pids.values())), signal.SIGKILL), killed.append(1))).start()
 
-    result = sf.fit(obs, free, cluster=client, on_step=kill_one_soon, **options)
+    result = sf.fit(obs, free, cluster=client, resume=sf.Resume(on_step=kill_one_soon), **options)
     assert killed
     assert set(client.run(os.getpid).values()) != set(pids.values())  # the nanny started a new worker
     same_fit(result, in_process)

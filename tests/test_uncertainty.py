@@ -35,6 +35,12 @@ class LinearProblem:
     references: tuple = ()  # no image layout: each residual its own block
     noise_spread_px: tuple = ()  # per reference: (pixel filter radius, PSF rms width), px
     free: object = field(default_factory=lambda: SimpleNamespace(names=()))  # no image nuisance is free
+    blocks: tuple = ()  # no value observation's block
+
+    @property
+    def pixels(self) -> int:
+        """The residuals laid out as the references' pixels (Problem.pixels)."""
+        return sum(int(np.size(ref)) for ref in self.references)
 
 
 def linear(A, b, A2=None, b2=None, noise_known=False) -> LinearProblem:

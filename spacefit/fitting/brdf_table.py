@@ -1,5 +1,6 @@
-"""Measured BRDF tables (goniometer data) as observations: reading them, fitting spacefit's material
-models to them with errors and a chi^2 verdict, and choosing the smallest model that fits.
+"""Measured BRDF tables (goniometer data): reading them, the material models fitted to them, and a
+table used as it is (:class:`TabulatedBRDF`). A table as an observation that :func:`spacefit.fit`
+fits, and the choice of the smallest model that fits, are :mod:`spacefit.fitting.observations.brdf`'s.
 
 Two file formats, both text with ``#`` comment lines, angles in degrees (radians inside), the BRDF
 in sr^-1:
@@ -33,7 +34,6 @@ without errors; with neither, the errors are scaled by the residuals and no verd
 from __future__ import annotations
 
 import csv
-import dataclasses
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -42,9 +42,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import InputError, check_array, check_choice, check_count, check_name_list, check_range, check_type, quote, read_text_rows
+from spacefit.errors import InputError, check_array, check_range, check_type, quote, read_text_rows
 from spacefit.fitting.params import Bijection
-from spacefit.fitting.tabular import TableFit, fit_table, smallest_adequate
 from spacefit.materials import MODELS, Conductor, DiffuseConductor, Lambert, Material, MaterialModel
 from spacefit.materials.registry import Derived, shared_fields
 from spacefit.precision import float64
@@ -213,89 +212,6 @@ def _models() -> dict[str, BRDFModel]:
 
 # The models by name, smallest (fewest parameters) first; a model registered later is among them.
 BRDF_MODELS: Mapping[str, BRDFModel] = Derived(_models)
-
-
-def fit_brdf_table(table: BRDFTable, model: str = "lambert+ggx", *, relative_error: float | None = None,
-                   start: dict[str, float] | None = None, fixed: dict[str, float] | None = None,
-                   max_steps: int = 200) -> TableFit:
-    """Fit the material model ``model`` (:data:`BRDF_MODELS`) to a measured table (module docstring):
-    ln(model / data) against each value's relative error, the table's own (``sigma``) or
-    ``relative_error`` (a fraction); with neither the errors are scaled by the residuals. ``fixed``
-    holds parameters at given values (``{"k": 0.0}``: a dielectric's Fresnel factor, for a coated
-    surface whose eta and k the table cannot separate); the fit's ``fixed`` records them."""
-    check_type("table", table, BRDFTable, "an sf.BRDFTable (sf.read_brdf_table)")
-    check_choice("model", model, BRDF_MODELS)
-    check_count("max_steps", max_steps, optional=False)
-    for name, given in (("start", start), ("fixed", fixed)):
-        check_type(name, given, (dict, type(None)), "a dict of parameter values by name, or None")
-    m = BRDF_MODELS[model]
-    if relative_error is not None:
-        check_range("relative_error", relative_error, 0.0, lo_open=True)
-    if table.sigma is not None and relative_error is not None:
-        raise InputError(f"BRDF table {table.source} states its errors (sigma_sr); do not give `relative_error` as well.")
-    fixed = dict(fixed or {})
-    for key, value in {**(start or {}), **fixed}.items():
-        check_choice("start" if key in (start or {}) else "fixed", key, m.parameters)
-        check_range(key, value, PARAMETER_BOUNDS[key].lo, PARAMETER_BOUNDS[key].hi)
-    start = {**DEFAULT_START, **(start or {})}
-    free = [p for p in m.parameters if p not in fixed]
-    sigma = table.sigma / table.value if table.sigma is not None else relative_error
-    wi, wo = jnp.asarray(table.wi), jnp.asarray(table.wo)
-
-    def predict(x: jax.Array) -> jax.Array:
-        return m.evaluate({**fixed, **dict(zip(free, x))}, wi, wo)
-
-    result = fit_table(predict, table.value, sigma, free, [PARAMETER_BOUNDS[p] for p in free], [start[p] for p in free],
-                       log=True, max_steps=max_steps)
-    return dataclasses.replace(result, fixed=fixed)
-
-
-def fitted_material(model: str, fit: TableFit) -> Material:
-    """The material of a :func:`fit_brdf_table` fit of ``model``: its estimates and fixed values."""
-    check_choice("model", model, BRDF_MODELS)
-    check_type("fit", fit, TableFit, "an sf.TableFit (of sf.fit_brdf_table)")
-    if sorted([*fit.names, *fit.fixed]) != sorted(BRDF_MODELS[model].parameters):
-        raise InputError(f"`fit` is not a fit of the model {model!r}: it has {sorted([*fit.names, *fit.fixed])}, "
-                         f"the model {list(BRDF_MODELS[model].parameters)}.")
-    return BRDF_MODELS[model].material({**fit.fixed, **dict(zip(fit.names, fit.values))})
-
-
-@dataclass(frozen=True)
-class ModelComparison:
-    """Fits of several models to one table, smallest first, and the smallest that fits within the errors."""
-
-    fits: dict[str, TableFit]
-    chosen: str | None
-
-    def table(self) -> str:
-        """One line per model: its parameters' count, chi^2 / dof against the misfit limit, its verdict."""
-        lines = [f"{'model':>24s} {'params':>6s} {'chi2/dof':>10s} {'limit':>7s}  verdict"]
-        for name, f in self.fits.items():
-            g = f.goodness
-            chi2 = f"{g.chi2_dof:10.4g} {g.limit:7.4g}" if g.noise_known else f"{'unknown':>10s} {'':7s}"
-            mark = "  <- smallest within the errors" if name == self.chosen else ""
-            lines.append(f"{name:>24s} {len(f.names):6d} {chi2}  {f.status.name.lower()}{mark}")
-        if self.chosen is None:
-            lines.append("no model fits within the errors" if any(f.goodness.noise_known for f in self.fits.values())
-                         else "errors unknown: give `relative_error` to choose a model")
-        return "\n".join(lines)
-
-
-def compare_brdf_models(table: BRDFTable, models: Sequence[str] = ("lambert", "ggx", "lambert+ggx", "lambert+beckmann",
-                                                                  "lambert+ggx_aniso"), *,
-                        relative_error: float | None = None, fixed: dict[str, float] | None = None) -> ModelComparison:
-    """Fit each of ``models`` (ordered by their number of parameters; ``fixed`` values held in those that
-    have them) and choose the smallest that is no misfit (:func:`spacefit.fitting.tabular.smallest_adequate`)."""
-    check_type("table", table, BRDFTable, "an sf.BRDFTable (sf.read_brdf_table)")
-    for name in check_name_list("models", models):
-        check_choice("models", name, BRDF_MODELS)
-    check_type("fixed", fixed, (dict, type(None)), "a dict of parameter values by name, or None")
-    ordered = sorted(models, key=lambda n: len(BRDF_MODELS[n].parameters))
-    fits = {name: fit_brdf_table(table, name, relative_error=relative_error,
-                                 fixed={k: v for k, v in (fixed or {}).items() if k in BRDF_MODELS[name].parameters})
-            for name in ordered}
-    chosen = smallest_adequate(list(fits.values()))
-    return ModelComparison(fits, None if chosen is None else ordered[chosen])
 
 
 def simulate_brdf_table(material: Material, zenith_i_deg: Sequence[float], zenith_o_deg: Sequence[float],

@@ -203,8 +203,9 @@ def goodness(r: np.ndarray, noise: np.ndarray, n_free: int, noise_known: bool, s
 
 def _neighbours(d: np.ndarray, shapes: Sequence[tuple[int, ...]]) -> float:
     """Correlation of horizontally and vertically adjacent pixels' values (the channels' mean) where
-    both are non-zero; NaN if ``d`` is not laid out as the images' pixels."""
-    if not shapes or sum(int(np.prod(s)) for s in shapes) != d.size:
+    both are non-zero; NaN if ``d`` does not begin with the images' pixels (a value observation's
+    residuals follow them)."""
+    if not shapes or sum(int(np.prod(s)) for s in shapes) > d.size:
         return math.nan
     a, b, offset = [], [], 0
     for shape in shapes:

@@ -1,4 +1,4 @@
-"""``fit``: recover scene parameters from reference images with gradient-based solvers.
+"""``fit``: recover parameters from observations (images, tables, light curves) with gradient-based solvers.
 
 One function, one result type. The set-up is :mod:`spacefit.fitting.problem`, the solvers
 :mod:`spacefit.fitting.solvers`, the standard errors :mod:`spacefit.fitting.uncertainty`; this module runs
@@ -19,11 +19,14 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.display import fit_html
-from spacefit.errors import InputError, check_choice, check_count
+from spacefit.errors import InputError, check_choice, check_count, check_type
 from spacefit.executors import Cluster
 from spacefit.fitting.frames import frame_executor
 from spacefit.fitting.goodness import Goodness, goodness, part_chi2, verdict_factor
-from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, setup
+from spacefit.fitting.observations.base import ValueObservation
+from spacefit.fitting.observations.image import Observation
+from spacefit.fitting.problem import FitRender, Problem, Setup, setup
+from spacefit.fitting.resume import Resume
 from spacefit.fitting.solvers import Outcome, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name
 from spacefit.fitting.stopping import NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
@@ -63,10 +66,11 @@ class FitResult:
             evaluated another point than the best so far and lowered its loss: accepted losses never rise), ``loss_noise`` (the loss's
             Monte Carlo noise at the best point so far, :mod:`~spacefit.fitting.stopping`),
             time_s since the start.
-        renders: each observation's final model image (the render with the image nuisances), in the
-            unit of its reference: ``units``.
-        units: per observation, the unit of its reference and render: W m^-2 sr^-1 (radiance), or
-            DN where the observation has a sensor (the sensor's expected DN of the render).
+        renders: each observation's final model, the images' first (the render with the image
+            nuisances), then the other kinds' (their predicted values), in the unit of its data: ``units``.
+        units: per observation, the unit of its data and model: for an image W m^-2 sr^-1 (radiance),
+            or DN where it has a sensor (the sensor's expected DN of the render); a value
+            observation's own (sr^-1 for a BRDF table, W m^-2 for a light curve's irradiances).
         loss: final loss, 0.5 * sum of squared residuals.
         solver, loss_name, steps, wall_time_s, start: what was run.
         extras: derived quantities, e.g. the rms height (and its standard error) of a (D, G) fit.
@@ -80,9 +84,10 @@ class FitResult:
             the values are not finite.
         goodness: the goodness of fit at the result (:class:`~spacefit.fitting.goodness.Goodness`);
             None where there is no finite result (interrupted, non-finite).
-        residuals: per observation, reference - model image in ``units`` (NaN where not fitted).
+        residuals: per observation, data - model in ``units`` (for an image NaN where not fitted).
         observation_goodness: per observation, the goodness of fit of its own residuals (the
-            pixel loss), counting as free the shared parameters and its own (``name@k``).
+            pixel loss), counting as free the shared parameters and its own (``name@k``; a value
+            observation those it depends on).
     """
 
     names: tuple[str, ...]
@@ -206,7 +211,7 @@ def _checked_solver(solver: str | Solver, max_steps: int, stop: str) -> Solver:
 
 @float64
 def fit(
-    observations: Observation | Sequence[Observation],
+    observations: Observation | ValueObservation | Sequence[Observation | ValueObservation],
     free: Sequence[str],
     *,
     solver: str | Solver = FitOptions.solver,
@@ -217,18 +222,19 @@ def fit(
     stop: str = FitOptions.stop,
     wrinkle_coordinates: str = FitOptions.wrinkle_coordinates,
     progress: ProgressCallback | None = None,
-    on_step: Callable[[dict[str, Any]], None] | None = None,
-    on_end: Callable[[dict[str, Any]], None] | None = None,
-    ended: Mapping[str, Any] | None = None,
+    resume: Resume = Resume(),
     cluster: Cluster | None = None,
-    history: Sequence[Mapping[str, Any]] = (),
 ) -> FitResult:
-    """Fit free scene parameters so that renders match reference images.
+    """Fit free parameters so that the models of the observations match them.
 
     Args:
-        observations: one or several (reference, scene) pairs of the same target; fitted jointly.
-            Fixed parameters come from each scene.
-        free: parameter names (see :mod:`spacefit.fitting.params`), e.g. ``["parts.panels.alpha_x"]``.
+        observations: one or several observations of the same target, fitted jointly: images
+            (:class:`~spacefit.fitting.observations.image.Observation`, (reference, scene) pairs) and
+            other kinds (:mod:`spacefit.fitting.observations`: BRDF tables, light curves). Fixed
+            parameters come from each image's scene or each observation's own values.
+        free: registered parameter names (:mod:`spacefit.scene.parameters`), e.g. ``["parts.panels.alpha_x"]``,
+            shared by every observation that depends on them (an image of part ``panels`` and a BRDF
+            table or a light curve of it); a per-observation name's ``@k`` counts the images.
         solver: a name in :data:`SOLVERS` (its defaults: rtol 1e-3, atol 1e-6; Adam's learning rate
             0.05), or an optimistix least-squares solver or minimiser, or :class:`Adam`, with its own
             tolerances (e.g. ``optx.LevenbergMarquardt(rtol=1e-4, atol=1e-8)``, ``sf.Adam(0.1)``).
@@ -246,17 +252,8 @@ def fit(
             better-determined coordinates, and reports D and G with their covariance mapped by
             the delta method; ``"G"`` solves in (D, G) directly.
         progress: called with (step, max_steps) after each step.
-        on_step: called with each step's history entry (step, loss, values, time_s), e.g. to
-            checkpoint the best point so far.
-        on_end: called once the solve has ended (not when interrupted), before the errors and renders
-            are computed, with the record that ``ended`` takes: its status, steps, end values and history.
-        ended: such a record, of a solve that ended before its process was killed: the solve is not
-            run again; ``start`` must be the record's values. The result is the one the ended fit
-            would have given: same status, steps, values and verdict.
-        history: the history of an interrupted solve (its steps' entries, as ``on_step`` had them), whose
-            best point is ``start``: the solve goes on from there, its steps counted after them, and
-            what the stop rule (:mod:`spacefit.fitting.stopping`) and the verdict know of them kept, so
-            that it ends as the uninterrupted one would (``--resume``).
+        resume: the checkpoint plumbing (:class:`~spacefit.fitting.resume.Resume`): what each step and
+            the end report, and the record of an ended or interrupted solve to end or go on as it would have.
         cluster: where the observations' renders and Jacobian columns run, as one batch per step
             (:mod:`spacefit.fitting.frames`): None, in this process, observation by observation; an
             int N, a new local dask cluster of N worker processes; a scheduler address; a
@@ -276,40 +273,41 @@ def fit(
         InputError: for any bad input, before rendering.
     """
     engine = _checked_solver(solver, max_steps, stop)
+    check_type("resume", resume, Resume, "an sf.Resume(on_step=..., ...)")
     executor = frame_executor(cluster)
     try:
         s = setup(observations, free, start=start, loss=loss, render=render, wrinkle_coordinates=wrinkle_coordinates,
                   executor=executor)
-        return _solve(s, engine, max_steps, stop, loss, progress, on_step, on_end, ended, history)
+        return _solve(s, engine, max_steps, stop, loss, progress, resume)
     finally:
         executor.close()
 
 
 def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progress: ProgressCallback | None,
-           on_step: Callable[[dict[str, Any]], None] | None, on_end: Callable[[dict[str, Any]], None] | None,
-           ended: Mapping[str, Any] | None, history: Sequence[Mapping[str, Any]]) -> FitResult:
-    """Run the solver on a set-up problem (or report the ended solve ``ended`` again; or go on with
-    the interrupted one of ``history``) and make its result."""
+           resume: Resume) -> FitResult:
+    """Run the solver on a set-up problem (or report the ended solve ``resume.ended`` again; or go on with
+    the interrupted one of ``resume.history``) and make its result."""
     fp, problem = s.solver_params, s.problem
 
     def residual_u(u: jax.Array) -> jax.Array:
         # renders are float32; the solver works in the dtype of u (float64) throughout
         return problem.residual_x(fp.to_physical(u)).astype(u.dtype)
 
-    steps = _Steps(s, stop == "noise" and is_least_squares(engine), max_steps, progress, on_step)
+    # a model without Monte Carlo noise (closed-form value observations only) has no noise floor to stop at
+    steps = _Steps(s, stop == "noise" and is_least_squares(engine) and problem.rendered, max_steps, progress, resume.on_step)
     u = jnp.asarray(fp.to_unconstrained(jnp.asarray(s.x0)))
-    if ended is not None:
-        return _result(s, steps.ended(ended, u), steps, solver_name(engine), loss)
-    if history:
-        steps.resumed(history, u)
+    if resume.ended is not None:
+        return _result(s, steps.ended(resume.ended, u), steps, solver_name(engine), loss)
+    if resume.history:
+        steps.resumed(resume.history, u)
     try:
         with deferred_interrupts() as interrupts:
             outcome = steps.run(drive(engine, residual_u, u, max_steps, problem.loss_u_reverse), interrupts)
     except KeyboardInterrupt as signal:
         best = steps.best_u if steps.best_u is not None else u
         outcome = Outcome(Status.TERMINATED if isinstance(signal, Terminated) else Status.INTERRUPTED, best, len(steps.history))
-    if on_end is not None and not outcome.status.interrupted:
-        on_end(steps.ending(outcome))
+    if resume.on_end is not None and not outcome.status.interrupted:
+        resume.on_end(steps.ending(outcome))
     return _result(s, outcome, steps, solver_name(engine), loss)
 
 
@@ -391,7 +389,7 @@ class _Steps:
         self.max_steps += len(self.history)
 
     def ending(self, outcome: Outcome) -> dict[str, Any]:
-        """The record of an ended solve that :meth:`ended` (``fit(ended=...)``) takes: status, steps,
+        """The record of an ended solve that :meth:`ended` (``fit(resume=Resume(ended=...))``) takes: status, steps,
         history and the values the result reports (the start where no step lowered the loss)."""
         x = self.s.solver_params.to_physical(jnp.asarray(outcome.u)) if self.moved else jnp.asarray(self.s.x0)
         values = dict(zip(self.s.user.names, np.asarray(self.s.to_user(x)).tolist()))
@@ -433,7 +431,7 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
     """The :class:`FitResult` of a solve's outcome: values, errors, goodness of fit, verdict, images."""
     problem, status = s.problem, outcome.status
     # a solve that never lowered the loss returns its start, not a point its solver drifted to; an ended
-    # solve reported again (``fit(ended=...)``) its start, which is its end (not rounded through ``u``)
+    # solve reported again (``fit(resume=Resume(ended=...))``) its start, which is its end (not rounded through ``u``)
     x = np.asarray(s.solver_params.to_physical(outcome.u) if steps.moved and not steps.reported_again else s.x0, dtype=float)
     n = len(x)
     x_user = np.asarray(s.to_user(jnp.asarray(x)), dtype=float)
@@ -449,7 +447,8 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         stderr, corr = stderr_corr(cov)
         warnings = warnings_for(s.user, x_user, stderr, corr)
         quality, r, noise, renders = judged_goodness(s, jnp.asarray(x), loss)
-        residuals = [np.where(used[..., None], ref - render, np.nan) for ref, render, used in zip(problem.references, renders, problem.used)]
+        residuals = [*(np.where(used[..., None], ref - render, np.nan) for ref, render, used in zip(problem.references, renders, problem.used)),
+                     *(b.data.value - render for b, render in zip(problem.blocks, renders[len(problem.references):]))]
         if loss == "pixel":
             per_part = _per_part(r, noise, problem, quality)
             own_quality = per_observation(r, noise, s, quality.samples_factor)
@@ -472,22 +471,31 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         solver=solver, loss_name=loss, steps=outcome.steps, wall_time_s=time.perf_counter() - steps.t0,
         start=dict(zip(s.user.names, s.x0_user.tolist())), extras=extras,
         parts=[_part_rows(*row) for row in zip(problem.part_images, problem.references, renders, problem.units, problem.used, per_part)],
-        scene=scene_with_values(s.scene, values, observation=0) if np.all(np.isfinite(x_user)) else None,
-        units=list(problem.units), goodness=quality, residuals=residuals, observation_goodness=own_quality,
+        scene=_fitted_scene(s, values) if np.all(np.isfinite(x_user)) else None,
+        units=[*problem.units, *(b.data.unit for b in problem.blocks)], goodness=quality, residuals=residuals,
+        observation_goodness=own_quality,
     )
+
+
+def _fitted_scene(s: Setup, values: Mapping[str, float]) -> Scene | None:
+    """The first image's scene with the fitted values it knows (None without an image)."""
+    if s.scene is None:
+        return None
+    return scene_with_values(s.scene, {n: v for n, v in values.items() if observation_of(n)[0] in s.image_names}, observation=0)
 
 
 def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.ndarray, np.ndarray, list[np.ndarray]]:
     """The goodness of fit at ``x`` (:mod:`~spacefit.fitting.goodness`), the residuals it judged and a
-    draw of their render noise, and each observation's model image at the fit's seeds. With the noise
-    known the judged model is the mean of two renders with independent seeds at :func:`verdict_factor`
-    times the fit's samples per pixel (the fit's own two where that is 1; primal renders only), the
-    noise sigma taken at it; else the fit's own render."""
+    draw of their render noise, and each observation's model (images, then value observations) at the
+    fit's seeds. With the noise known the judged model is the mean of two renders with independent
+    seeds at :func:`verdict_factor` times the fit's samples per pixel (the fit's own two where that is
+    1; primal renders only), the noise sigma taken at it; else the fit's own render. A model that is
+    not rendered is the same at every seed: its render noise is 0."""
     problem = s.problem
     renders = [problem.models_seeded(x, 0), problem.models_seeded(x, 1)]
     if s.noise_given:
         r, noise = _mean_and_noise(problem, renders)
-        k = verdict_factor(2.0 * goodness(r, noise, 0, True).render_noise, max(problem.spp))
+        k = verdict_factor(2.0 * goodness(r, noise, 0, True).render_noise, max(problem.spp)) if problem.spp else 1
         while k > 1 and not _affordable(problem, k):
             k //= 2
         if k > 1:
@@ -501,10 +509,15 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
     verdict_spp = [judged * spp for spp in problem.spp]
     ratios = [_reference_ratio(spp, ref) for spp, ref in zip(verdict_spp, problem.reference_spp)]
     pixels = loss == "pixel"
-    ratio = np.repeat(ratios, [ref.size for ref in problem.references]) if pixels else float(np.mean(ratios))
-    fitted = np.concatenate([np.broadcast_to(used[..., None], ref.shape).ravel() for ref, used in zip(problem.references, problem.used)])
+    if pixels:
+        values = r.size - problem.pixels  # the value observations' residuals, after the pixels: no reference render noise
+        ratio = np.concatenate([np.repeat(ratios, [ref.size for ref in problem.references]), np.zeros(values)])
+        fitted = np.concatenate([*(np.broadcast_to(used[..., None], ref.shape).ravel() for ref, used in zip(problem.references, problem.used)),
+                                 np.ones(values, dtype=bool)])
+    else:
+        ratio, fitted = float(np.mean(ratios or [0.0])), None
     quality = goodness(r, noise, len(s.x0), s.noise_given, [ref.shape for ref in problem.references] if pixels else [],
-                       fitted=fitted if pixels else None, reference_ratio=ratio, samples_factor=judged, verdict_spp=verdict_spp,
+                       fitted=fitted, reference_ratio=ratio, samples_factor=judged, verdict_spp=verdict_spp,
                        reference_spp=problem.reference_spp)
     return quality, r, noise, [np.asarray(m) for m in renders[0]]
 
@@ -517,7 +530,7 @@ def _reference_ratio(spp: int, reference_spp: int | None) -> float:
 
 def _affordable(problem: Problem, factor: int) -> bool:
     """Whether every observation's whole film rendered at ``factor`` times its samples per pixel in one
-    wavefront (a fit's render) fits this machine (:func:`~spacefit.rendering.memory.check_memory`):
+    wavefront (a fit's render) fits this machine (:func:`~spacefit.rendering.renderer.check_memory`):
     a verdict render takes fewer samples rather than lose the fit's result."""
     try:
         for ref, spp in zip(problem.references, problem.spp):
@@ -538,8 +551,9 @@ def _mean_and_noise(problem: Problem, renders: list[list[jax.Array]]) -> tuple[n
 
 
 def per_observation(r: np.ndarray, noise: np.ndarray, s: Setup, factor: int) -> list[Goodness]:
-    """Per observation, the goodness of fit of its own residuals (pixel loss), with the shared free
-    parameters and its own (``name@k``) counted as free; ``factor``: the judged model's samples over the fit's."""
+    """Per observation (images, then value observations), the goodness of fit of its own residuals
+    (pixel loss), with the shared free parameters and its own (``name@k``) counted as free (a value
+    observation: those it depends on); ``factor``: the judged model's samples over the fit's."""
     out, offset, problem = [], 0, s.problem
     for k, ref in enumerate(problem.references):
         rows = slice(offset, offset + ref.size)
@@ -549,6 +563,11 @@ def per_observation(r: np.ndarray, noise: np.ndarray, s: Setup, factor: int) -> 
         out.append(goodness(r[rows], noise[rows], n_k, s.noise_given, [ref.shape], fitted=np.broadcast_to(problem.used[k][..., None], ref.shape),
                             reference_ratio=_reference_ratio(spp, reference), samples_factor=factor, verdict_spp=[spp],
                             reference_spp=[reference]))
+    for block in problem.blocks:
+        rows = slice(offset, offset + block.data.value.size)
+        offset = rows.stop
+        out.append(goodness(r[rows], noise[rows], len(block.known), block.noise_known, fitted=np.ones(rows.stop - rows.start, bool),
+                            samples_factor=factor))
     return out
 
 

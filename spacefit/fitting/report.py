@@ -20,6 +20,7 @@ the second the goodness of fit (:mod:`spacefit.fitting.goodness`).
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -29,12 +30,13 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from astropy.io import fits
 
-from spacefit.errors import check_type
+from spacefit.errors import InputTypeError, check_flag, check_name_list, check_path, check_type, quote
 from spacefit.fitting.loop import FitResult
 from spacefit.fitting.solvers import Status
 from spacefit.fitting.passes import frame_table, plot_frames, write_frame_table
 from spacefit.fitting.plots import plot_comparison, plot_convergence, plot_residuals
-from spacefit.output import staged_output, versions, write_json
+from spacefit.locks import holding_lock
+from spacefit.output import prepare_output, staged_output, versions, write_json
 from spacefit.units import DN_UNIT
 
 # The residual images' units as FITS BUNIT.
@@ -98,7 +100,8 @@ def write_residuals(path: Path, result: FitResult) -> None:
 
 def format_result(result: FitResult) -> str:
     """The verdict (first line), the goodness of fit, the fitted values with standard errors (marked
-    where they are not valid: a misfit's are too small), chi^2 per part, and the warnings, as lines of text."""
+    where they are not valid: a misfit's are too small), chi^2 per part of each image and, in a joint
+    fit, each other observation's goodness of fit, and the warnings, as lines of text."""
     check_type("result", result, FitResult, "an sf.FitResult (what sf.fit returns)")
     derived = [name for name in result.extras if f"{name}.stderr" in result.extras]  # e.g. wrinkles.rms_m
     width = max(len(name) for name in (*result.names, *derived))
@@ -121,8 +124,33 @@ def format_result(result: FitResult) -> str:
         if spread:
             what = "chi^2 per value" if result.goodness is not None and result.goodness.noise_known else "mean r^2 / render noise"
             lines.append(f"  {what}, observation {k}: " + ", ".join(f"{name} {value:.3g}" for name, value in spread.items()))
+    if len(result.observation_goodness) > 1:  # a joint fit: each value observation's own goodness (the images' by part above)
+        for k in range(len(result.parts), len(result.observation_goodness)):
+            lines.append(f"  observation {k} ({result.units[k]} values): {result.observation_goodness[k].line()}")
     lines += [f"warning: {w}" for w in result.warnings]
     return "\n".join(lines)
+
+
+@holding_lock("out_dir")
+def write_table_fit(out_dir: str | Path, fit: FitResult, *, inputs: Mapping[str, Any] | None = None, overwrite: bool = False) -> Path:
+    """Write the folder of a fit of value observations alone (a BRDF table, a light curve): ``fit.json``
+    (:meth:`FitResult.to_dict`, the package versions and, if given, the ``inputs``: names and JSON
+    values) and ``report.txt`` (:func:`format_result`) into ``out_dir`` all at once (on an error
+    nothing is left behind). The folder must be new or empty, or hold an earlier table fit and
+    ``overwrite`` be given (:func:`~spacefit.output.prepare_output`); it is written holding its lock
+    (:mod:`spacefit.locks`)."""
+    check_type("fit", fit, FitResult, "an sf.FitResult")
+    check_type("inputs", inputs, (Mapping, type(None)), "a dict of names and JSON values, or None")
+    check_name_list("inputs", list(inputs or {}))
+    try:
+        json.dumps(dict(inputs or {}), allow_nan=False)
+    except (TypeError, ValueError, RecursionError) as err:
+        raise InputTypeError(f"`inputs` must hold JSON values (strings, finite numbers, lists, dicts): {err}; got {quote(inputs)}.") from None
+    prepare_output(check_path("out_dir", out_dir), "table-fit", overwrite=check_flag("overwrite", overwrite))
+    with staged_output(out_dir) as stage:
+        write_json(stage / "fit.json", {**fit.to_dict(), "versions": versions(), **({"inputs": dict(inputs)} if inputs else {})})
+        (stage / "report.txt").write_text(format_result(fit) + "\n", encoding="utf-8")
+    return Path(out_dir)
 
 
 def _save(axes: np.ndarray, path: Path) -> None:

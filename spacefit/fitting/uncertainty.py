@@ -97,13 +97,29 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
         cov, s2 = bread + 0.5 * bread @ noise @ bread, 1.0
         correction = -bread @ (0.5 * (J1.T @ r_alt + J2.T @ r))
     else:
-        cov, correction = bread @ meat(r**2 * informative / dof) @ bread, np.zeros(len(x))
+        cov, correction = bread @ meat(_unknown_noise_weights(problem, r, informative, dof)) @ bread, np.zeros(len(x))
     if tiny.any():
         touched = np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)
         cov[touched, :] = np.inf
         cov[:, touched] = np.inf
         correction = np.zeros(len(x))  # a step in the determined directions alone would move the undetermined
     return cov, 0.5 * float(r @ r), np.clip(eigval, 0.0, None) / s2, correction
+
+
+def _unknown_noise_weights(problem: Problem, r: np.ndarray, informative: int, dof: int) -> np.ndarray:
+    """Per residual, its variance in the sandwich's meat where the noise is not known: an image's
+    pixel its own r^2 (heteroscedastic: glints), with the HC1 factor ``informative / dof``; a value observation's
+    value 1 where its errors are stated, else its block's mean square r^2 over its degrees of freedom
+    (the errors then scale as s^2 (J^T J)^-1: one unknown noise level per table)."""
+    w, offset = r**2 * informative / dof, problem.pixels
+    for block in problem.blocks:
+        rows = slice(offset, offset + block.data.value.size)
+        offset = rows.stop
+        if block.noise_known:
+            w[rows] = 1.0
+        else:
+            w[rows] = float(r[rows] @ r[rows]) / max(rows.stop - rows.start - len(block.known), 1)
+    return w
 
 
 def render_meat(J1: np.ndarray, J2: np.ndarray, d: np.ndarray, problem: Problem, x: np.ndarray) -> np.ndarray:
@@ -114,19 +130,19 @@ def render_meat(J1: np.ndarray, J2: np.ndarray, d: np.ndarray, problem: Problem,
     neighbours; a per-residual variance, or blocks of 4 x 4 px, missed 40 to 60 % of that
     covariance (measured on the panels case with a 1 px PSF, where neighbours 1, 2, 3 px apart
     share 83, 47, 18 % of their render noise). ``d`` is one draw of the render noise per residual,
-    (r - r_alt) / sqrt(2). Residuals not laid out as the references' pixels count alone."""
+    (r - r_alt) / sqrt(2). The values after the images' pixels (value observations), and every
+    residual where they are not laid out as pixels (the losses that are not per pixel), count alone."""
     shapes = [np.shape(ref) for ref in problem.references]
-    if sum(int(np.prod(sh)) for sh in shapes) != d.size:
-        cross = (J1 * (d**2)[:, None]).T @ J2
-    else:
-        cross, offset = np.zeros((J1.shape[1], J1.shape[1])), 0
-        for k, shape in enumerate(shapes):
-            rows = slice(offset, offset + int(np.prod(shape)))
-            offset = rows.stop
-            s1, s2 = ((J[rows] * d[rows, None]).reshape(*shape, -1).sum(axis=2) for J in (J1, J2))
-            size = 2 * noise_reach_px(problem, x, k) + 1
-            near = np.stack([ndimage.uniform_filter(s2[..., p], size, mode="constant") for p in range(s2.shape[-1])], axis=-1)
-            cross += size**2 * s1.reshape(-1, s1.shape[-1]).T @ near.reshape(-1, near.shape[-1])
+    laid_out = problem.pixels if problem.pixels + sum(b.data.value.size for b in problem.blocks) == d.size else 0
+    alone = slice(laid_out, d.size)
+    cross, offset = (J1[alone] * (d[alone] ** 2)[:, None]).T @ J2[alone], 0
+    for k, shape in enumerate(shapes if laid_out else []):
+        rows = slice(offset, offset + int(np.prod(shape)))
+        offset = rows.stop
+        s1, s2 = ((J[rows] * d[rows, None]).reshape(*shape, -1).sum(axis=2) for J in (J1, J2))
+        size = 2 * noise_reach_px(problem, x, k) + 1
+        near = np.stack([ndimage.uniform_filter(s2[..., p], size, mode="constant") for p in range(s2.shape[-1])], axis=-1)
+        cross += size**2 * s1.reshape(-1, s1.shape[-1]).T @ near.reshape(-1, near.shape[-1])
     return _psd_part(0.5 * (cross + cross.T))
 
 

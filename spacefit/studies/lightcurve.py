@@ -37,16 +37,15 @@ requested magnitude precision needs.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from spacefit.display import light_curve_html
-from spacefit.errors import (InputError, check_array, check_choice, check_count, check_direction, check_name_list, check_range,
-                             check_type, check_vector, quote)
+from spacefit.errors import InputError, check_choice, check_count, check_direction, check_range, check_vector
 from spacefit.executors import Cluster, cluster_of
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.scene.assembly import assemble
@@ -56,9 +55,6 @@ from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene, deg2rad
 from spacefit.studies.sensitivity import mean_and_error
 from spacefit.studies.sweep import sweep
-
-if TYPE_CHECKING:  # the fit imports JAX; a forward light curve does not
-    from spacefit.fitting.tabular import TableFit
 
 # The sun's apparent magnitude by band (module docstring gives the source).
 SUN_MAGNITUDES = {"V": -26.74, "AB532": -2.5 * math.log10(1360.0 * 532e-9 / (3.0e8 * 3631e-26))}
@@ -359,74 +355,3 @@ def light_curve_convergence(scene: Scene, *, tolerance: float = 0.01, **kwargs: 
         return float(np.max(np.abs(other.irradiance_w_m2[lit] / base.irradiance_w_m2[lit] - 1.0)))
 
     return Convergence(change(light_curve(finer, **kwargs)), change(light_curve(more, **kwargs)), tolerance, base.irradiance_w_m2)
-
-
-def fit_light_curve(
-    scene: Scene,
-    free: Sequence[str],
-    points: Sequence[dict[str, Any]],
-    magnitude: Sequence[float],
-    magnitude_sigma: Sequence[float] | float | None,
-    *,
-    band: str = "V",
-    sun_magnitude: float | None = None,
-    observer_range_m: float | None = None,
-    seed: int = 1,
-    max_steps: int = 50,
-) -> "TableFit":
-    """Fit the registered parameters ``free`` of a rendered target (materials, attitude angles, ...)
-    to an observed light curve: ``magnitude`` (with ``magnitude_sigma``, mag, or None: unknown) at
-    ``points``, each the scene values of one observation's geometry (``{"target.attitude_z_deg":
-    30.0}``, ``{"sun.elevation_deg": ..., "sun.azimuth_deg": ...}``). Each point's irradiance is
-    its image's sum of radiance x pixel solid angle (:func:`spacefit.rendering.derivatives.render_function`,
-    differentiable), rescaled to ``observer_range_m``; the fit, its errors and goodness are
-    :func:`spacefit.fitting.tabular.fit_table`'s on ln E, the render noise measured by a second set
-    of renders with independent seeds (which the errors include). Starts from the scene's values."""
-    import jax.numpy as jnp  # here: a light curve's forward renders need no JAX
-
-    from spacefit.fitting.params import bijection
-    from spacefit.fitting.tabular import fit_table
-    from spacefit.geometry.frames import pixel_solid_angles
-    from spacefit.rendering.derivatives import render_function
-
-    check_scene(scene)
-    free = list(check_name_list("free", free))
-    band_magnitude = SUN_MAGNITUDES[check_choice("band", band, SUN_MAGNITUDES)]
-    sun_magnitude = band_magnitude if sun_magnitude is None else check_range("sun_magnitude", sun_magnitude)
-    check_count("seed", seed, 0, optional=False)
-    check_count("max_steps", max_steps, optional=False)
-    magnitude = check_vector("magnitude", magnitude, None)
-    if isinstance(points, (str, bytes, Mapping)) or not isinstance(points, Sequence):
-        raise InputError(f"`points` must be a list of dicts of scene values, got {quote(points)}.")
-    if len(points) != len(magnitude):
-        raise InputError(f"`points` and `magnitude` must be as long: {len(points)} points, {len(magnitude)} magnitudes.")
-    for i, p in enumerate(points):
-        check_type(f"points[{i}]", p, Mapping, "a dict of scene values")
-        for key, value in p.items():
-            check_type(f"points[{i}] key", key, str, "a scene key (a string)")
-            check_range(f"points[{i}].{key}", value)
-    if magnitude_sigma is not None:
-        sigma_given = check_array("magnitude_sigma", magnitude_sigma)
-        magnitude_sigma = check_vector("magnitude_sigma", np.broadcast_to(sigma_given, magnitude.shape) if sigma_given.ndim == 0
-                                       else sigma_given, len(magnitude))
-    geometry = sorted({key for p in points for key in p})
-    if any(set(p) != set(geometry) for p in points):
-        raise InputError(f"every point must set the same values, {geometry}; got {[sorted(p) for p in points]}.")
-    at = jnp.asarray([[float(p[key]) for key in geometry] for p in points])
-    rendered_range = float(np.linalg.norm(np.array(scene.camera.position_m) - np.array(scene.target.position_m)))
-    observer_range = rendered_range if observer_range_m is None else check_range("observer_range_m", observer_range_m, 0.0,
-                                                                                 lo_open=True, unit="m")
-    scale = (rendered_range / observer_range) ** 2
-    omega = jnp.asarray(pixel_solid_angles(assemble(scene).intrinsics))
-
-    def irradiance(seed_primal: int) -> Callable[[Any], Any]:
-        # one loaded scene; each point's geometry enters as fixed values of registered parameters
-        image = render_function(scene, [*free, *geometry], seed=seed_primal, seed_grad=seed_primal + 1)
-        return lambda x: scale * jnp.stack([jnp.sum(jnp.mean(image(jnp.concatenate([x, g.astype(x.dtype)])), axis=-1) * omega)
-                                            for g in at])
-
-    data = scene.sun.irradiance_w_m2 * 10.0 ** (-0.4 * (magnitude - sun_magnitude))
-    sigma = None if magnitude_sigma is None else MAGNITUDE_PER_LN ** -1 * np.broadcast_to(np.asarray(magnitude_sigma, float), data.shape)
-    start = [scene_value(scene, n) for n in free]
-    return fit_table(irradiance(seed), data, sigma, list(free), [bijection(n) for n in free], start, log=True,
-                     predict_alt=irradiance(seed + 1000), max_steps=max_steps)

@@ -12,28 +12,28 @@ directions towards the sun and the observer: the renderer's integrated irradianc
 plates for a point target (no plate shadowing or lighting another, one bounce; the test renders
 the two-plate satellite and compares). A target in the Earth's shadow is dark.
 
-:func:`fit_plates` fits named values of the plates' materials (``"array.kd"``, ``"chassis.alpha"``
-for both roughnesses, ``"array.scale"`` a table's factor) and, where freed, the target's attitude
-angles to observed magnitudes with :func:`spacefit.fitting.tabular.fit_table`: the
-residual is the magnitude's, (m_model - m_obs) / sigma_m, as ln(E_model / E_obs) / (0.4 ln 10
-sigma_m); without stated errors the errors are scaled by the residuals. Observations in the
-Earth's shadow are left out.
+Observed magnitudes of such a target are an observation (:class:`PlateLightCurve`) that
+:func:`spacefit.fit` fits, alone or jointly with images of the same parts: its parameters are the
+registered ones of the plates' materials (``parts.array.kd``, ``parts.chassis.alpha`` for both
+roughnesses, ``parts.array.scale`` a table's factor) and the target's attitude angles;
+:func:`fit_plates` is the convenience that fits it alone.
 """
 
 from __future__ import annotations
 
 import dataclasses
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_count, check_name_list, check_range, check_type, check_vector, quote
-from spacefit.fitting.brdf_table import PARAMETER_BOUNDS, TabulatedBRDF
-from spacefit.fitting.params import Bijection
-from spacefit.fitting.tabular import TableFit, fit_table
+from spacefit.fitting.brdf_table import TabulatedBRDF
+from spacefit.fitting.loop import FitResult, fit
+from spacefit.fitting.observations.base import Block, MeasuredValues, ValueObservation
+from spacefit.fitting.params import Bijection, bijection
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.materials import Material, MaterialModel
 from spacefit.materials.brdf import brdf
@@ -92,12 +92,9 @@ def _fields(material: Material | TabulatedBRDF) -> tuple[str, ...]:
     return (*(f.name for f in material.fields), *material.ties)
 
 
-# A measured table's factor's range; a material's fields' are its model's (PARAMETER_BOUNDS).
-SCALE_BOUNDS = Bijection(0.0, 1e3)
-# The target's attitude angles a fit may free ("target.attitude_x_deg"), and their range (deg).
+# The target's attitude angles a fit may free ("target.attitude_x_deg").
 TARGET = "target"
 ATTITUDE = ("attitude_x_deg", "attitude_y_deg", "attitude_z_deg")
-ATTITUDE_BOUNDS = Bijection(-180.0, 180.0)
 
 
 def _plate_brdf(plate: Plate, wi: jax.Array, wo: jax.Array, values: Mapping[str, jax.Array]) -> jax.Array:
@@ -156,15 +153,12 @@ def _tied(material: Material | TabulatedBRDF, field: str) -> tuple[str, ...]:
     return ties[field][0] if field in ties else (field,)
 
 
-def _split(name: str, plates: Sequence[Plate]) -> tuple[str, str]:
-    plate, _, field = name.partition(".")
-    check_choice("free", plate, [TARGET, *(p.name for p in plates)])
-    if plate == TARGET:
-        check_choice(f"free ({TARGET})", field, ATTITUDE)
-        return plate, field
-    material = next(p for p in plates if p.name == plate).material
-    check_choice(f"free ({plate})", field, _fields(material))
-    return plate, field
+def _split(name: str) -> tuple[str, str]:
+    """The plate (or ``target``) and the field of a parameter name ``parts.<plate>.<field>`` (``target.<angle>``)."""
+    if name.startswith(TARGET + "."):
+        return TARGET, name.partition(".")[2]
+    _, plate, field_name = name.split(".")
+    return plate, field_name
 
 
 def _rotation(angles_deg: Sequence[jax.Array | float]) -> jax.Array:
@@ -173,77 +167,130 @@ def _rotation(angles_deg: Sequence[jax.Array | float]) -> jax.Array:
     return attitude_matrix(jnp.radians(jnp.stack([jnp.asarray(a, dtype=float) for a in angles_deg])), xp=jnp)
 
 
+def plate_parameters(plates: Sequence[Plate]) -> tuple[str, ...]:
+    """The registered names of the plates' material values (``parts.<plate>.<field>``, ``alpha`` for
+    both roughnesses) and of the target's attitude angles."""
+    out = []
+    for plate in plates:
+        out += [f"parts.{plate.name}.{f}" for f in _fields(plate.material)]
+    return (*out, *(f"{TARGET}.{a}" for a in ATTITUDE))
+
+
+@dataclass(frozen=True, eq=False)
+class PlateLightCurve(ValueObservation):
+    """Observed magnitudes of a target of flat plates, the light-curve kind of observation
+    (:mod:`spacefit.fitting.observations`) whose model is :func:`plates_irradiance`.
+
+    Its parameters are the registered ones of each plate's material, ``parts.<plate>.<field>``
+    (``alpha`` for both roughnesses; a :class:`~spacefit.fitting.brdf_table.TabulatedBRDF`'s
+    ``scale``), and the target's attitude angles ``target.attitude_x_deg`` (``_y_``, ``_z_``: a
+    rotation of all the plates from their given normals, at 0 unless free,
+    :func:`spacefit.geometry.frames.attitude_matrix`). The residual is the magnitude's,
+    (m_model - m_obs) / sigma_m, as ln(E_model / E_obs) / (0.4 ln 10 sigma_m); without stated
+    errors the errors are scaled by the residuals. Observations in the Earth's shadow are left out.
+
+    Attributes:
+        plates: the target's plates, distinct names (none ``target``).
+        observations: the measured magnitudes and their geometry.
+        sun_irradiance_w_m2: the sun's irradiance at the target, W m^-2.
+        bounds: narrower (low, high) ranges of some parameters (``{"parts.chassis.eta": (1.0, 100.0)}``:
+            a dielectric's physical range) within their registered ones; the plates' values must lie inside.
+    """
+
+    plates: Sequence[Plate]
+    observations: LightCurveObservations
+    sun_irradiance_w_m2: float = 1360.0
+    bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "plates", tuple(_check_plates(self.plates)))
+        _check_observations(self.observations)
+        check_range("sun_irradiance_w_m2", self.sun_irradiance_w_m2, 0.0, lo_open=True, unit="W m^-2")
+        if not (~self.observations.in_shadow).any():
+            raise InputError(f"every observation of {self.observations.source} is in the Earth's shadow: there is nothing to fit.")
+        check_type("bounds", self.bounds, Mapping, "a dict of (low, high) ranges by parameter name")
+        for name, given in self.bounds.items():
+            check_choice("bounds", name, self.parameters())
+            if not (isinstance(given, (tuple, list)) and len(given) == 2):
+                raise InputError(f"`bounds[{name!r}]` must be a (low, high) pair, got {quote(given)}.")
+            own = bijection(name)
+            check_range(f"bounds[{name!r}][0]", given[0], own.lo, own.hi)
+            check_range(f"bounds[{name!r}][1]", given[1], float(given[0]), own.hi, lo_open=True)
+            if not given[0] < self.start(name) < given[1]:
+                raise InputError(f"`{name}` starts at {self.start(name):g}, outside its bounds ({given[0]:g}, {given[1]:g}): "
+                                 "give the plates a value inside.")
+
+    def parameters(self) -> tuple[str, ...]:
+        """Each plate's material values and the target's attitude angles (:func:`plate_parameters`)."""
+        return plate_parameters(self.plates)
+
+    def start(self, name: str) -> float:
+        """The plate's own value (``alpha``: its ``alpha_x``), or 0 for an attitude angle."""
+        plate, field_name = _split(name)
+        if plate == TARGET:
+            return 0.0
+        of = next(p for p in self.plates if p.name == plate)
+        return _grey(of, _tied(of.material, field_name)[0])
+
+    def coordinate(self, name: str) -> Bijection:
+        """The registered range of ``name``, or its narrower one in :attr:`bounds`."""
+        return Bijection(*map(float, self.bounds[name])) if name in self.bounds else bijection(name)
+
+    def block(self, free: tuple[str, ...]) -> Block:
+        """ln E against the magnitudes' errors, outside the Earth's shadow (class docstring)."""
+        obs = self.observations.subset(~self.observations.in_shadow)
+        data = irradiance_of(obs.magnitude, obs.band, self.sun_irradiance_w_m2)
+        sigma = None if obs.magnitude_sigma is None else LN_PER_MAGNITUDE * obs.magnitude_sigma
+        measured = MeasuredValues(data, sigma, True, "W m^-2", f"light curve {obs.source}")
+        known = [(i, _split(n)) for i, n in enumerate(free) if n in self.parameters()]
+        plates, sun_irradiance = self.plates, self.sun_irradiance_w_m2
+        material = {p.name: p.material for p in plates}
+
+        @jax.jit
+        def predict(x: jax.Array) -> jax.Array:
+            values: dict[str, dict[str, jax.Array]] = {}
+            for i, (plate, field_name) in known:
+                for f in (field_name,) if plate == TARGET else _tied(material[plate], field_name):
+                    values.setdefault(plate, {})[f] = x[i]
+            sun, observer = jnp.asarray(obs.sun), jnp.asarray(obs.observer)
+            if TARGET in values:
+                turn = _rotation([values[TARGET].get(a, 0.0) for a in ATTITUDE])
+                sun, observer = sun @ turn, observer @ turn
+            return plates_irradiance(plates, sun, observer, obs.range_m, sun_irradiance, values)
+
+        return Block(measured, lambda x, j: predict(x), tuple(free[i] for i, _ in known))
+
+
 def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, free: Sequence[str], *,
                bounds: Mapping[str, tuple[float, float]] | None = None, sun_irradiance_w_m2: float = 1360.0,
-               max_steps: int = 200) -> TableFit:
-    """Fit the plates' material values ``free`` (``"plate.field"``; ``alpha`` sets both roughnesses;
-    a :class:`~spacefit.fitting.brdf_table.TabulatedBRDF`'s ``scale``) and, where freed, the target's
-    attitude angles (``"target.attitude_x_deg"``, ``_y_``, ``_z_``: a rotation of all the plates from
-    their given normals, started at 0, :func:`spacefit.geometry.frames.attitude_matrix`) to the
-    observed magnitudes outside the Earth's shadow (module docstring), from the plates' values.
-    ``bounds`` narrows a free value's range (``{"chassis.eta": (1.0, 100.0)}``: a dielectric's
-    physical range) within its own (its model's field's, a table's scale :data:`SCALE_BOUNDS`, attitudes
-    +-180 deg); the start must lie inside."""
-    plates = _check_plates(plates)
-    _check_observations(observations)
-    check_range("sun_irradiance_w_m2", sun_irradiance_w_m2, 0.0, lo_open=True, unit="W m^-2")
-    check_count("max_steps", max_steps, optional=False)
-    names = list(check_name_list("free", free))
-    split = [_split(n, plates) for n in names]
+               max_steps: int = 200) -> FitResult:
+    """Fit the plates' registered values ``free`` (``parts.<plate>.<field>``, ``target.attitude_z_deg``;
+    :class:`PlateLightCurve`) to the observed magnitudes outside the Earth's shadow with
+    :func:`spacefit.fit`, from the plates' values. ``bounds`` narrows a free value's range within its
+    registered one (:attr:`PlateLightCurve.bounds`); the start must lie inside."""
     check_type("bounds", bounds, (Mapping, type(None)), "a dict of (low, high) ranges by free name, or None")
-    ranges = [ATTITUDE_BOUNDS if p == TARGET else SCALE_BOUNDS if f == "scale" else PARAMETER_BOUNDS[f] for p, f in split]
-    for name, given in (bounds or {}).items():
+    names = list(check_name_list("free", free))
+    for name in bounds or {}:
         check_choice("bounds", name, names)
-        i = names.index(name)
-        if not (isinstance(given, (tuple, list)) and len(given) == 2):
-            raise InputError(f"`bounds[{name!r}]` must be a (low, high) pair, got {quote(given)}.")
-        check_range(f"bounds[{name!r}][0]", given[0], ranges[i].lo, ranges[i].hi)
-        check_range(f"bounds[{name!r}][1]", given[1], float(given[0]), ranges[i].hi, lo_open=True)
-        ranges[i] = Bijection(float(given[0]), float(given[1]))
-    lit = ~observations.in_shadow
-    if not lit.any():
-        raise InputError(f"every observation of {observations.source} is in the Earth's shadow: there is nothing to fit.")
-    obs = observations.subset(lit)
-    plate_of = {p.name: p for p in plates}
-    start = [0.0 if p == TARGET else _grey(plate_of[p], _tied(plate_of[p].material, f)[0]) for p, f in split]
-    for name, value, r in zip(names, start, ranges):
-        if not r.lo < value < r.hi:
-            raise InputError(f"`{name}` starts at {value:g}, outside its bounds ({r.lo:g}, {r.hi:g}): give the plates a value inside.")
-    data = irradiance_of(obs.magnitude, obs.band, sun_irradiance_w_m2)
-    sigma = None if obs.magnitude_sigma is None else LN_PER_MAGNITUDE * obs.magnitude_sigma
-
-    def predict(x: jax.Array) -> jax.Array:
-        values: dict[str, dict[str, jax.Array]] = {}
-        for (plate, field), v in zip(split, x):
-            for f in _tied(plate_of[plate].material, field):
-                values.setdefault(plate, {})[f] = v
-        sun, observer = jnp.asarray(obs.sun), jnp.asarray(obs.observer)
-        if TARGET in values:
-            turn = _rotation([values[TARGET].get(a, 0.0) for a in ATTITUDE])
-            sun, observer = sun @ turn, observer @ turn
-        return plates_irradiance(plates, sun, observer, obs.range_m, sun_irradiance_w_m2, values)
-
-    return fit_table(predict, data, sigma, names, ranges, start, log=True, max_steps=max_steps)
+    curve = PlateLightCurve(plates, observations, sun_irradiance_w_m2, dict(bounds or {}))
+    check_count("max_steps", max_steps, optional=False)
+    return fit(curve, names, max_steps=max_steps)
 
 
-def fitted_plates(plates: Sequence[Plate], fit: TableFit) -> list[Plate]:
+def fitted_plates(plates: Sequence[Plate], fit: FitResult) -> list[Plate]:
     """The plates with a :func:`fit_plates` fit's values in their materials and, where it freed the
     attitude, their normals and tangents turned by it."""
     plates = _check_plates(plates)
-    check_type("fit", fit, TableFit, "an sf.TableFit (of sf.fit_plates)")
+    check_type("fit", fit, FitResult, "an sf.FitResult (of sf.fit_plates)")
     for name in fit.names:
-        _split(name, plates)
-    angles = {name.partition(".")[2]: float(v) for name, v in zip(fit.names, fit.values) if name.startswith(TARGET + ".")}
+        check_choice("fit.names", name, plate_parameters(plates))
+    angles = {_split(name)[1]: float(v) for name, v in fit.values.items() if name.startswith(TARGET + ".")}
     if angles:
         turn = np.asarray(_rotation([angles.get(a, 0.0) for a in ATTITUDE]))
         plates = [dataclasses.replace(p, normal=tuple(turn @ np.array(p.normal)), tangent=tuple(turn @ np.array(p.tangent))) for p in plates]
     out = []
     for plate in plates:
-        values = {}
-        for name, v in zip(fit.names, fit.values):
-            p, _, field = name.partition(".")
-            if p == plate.name:
-                values[field] = float(v)
+        values = {_split(name)[1]: float(v) for name, v in fit.values.items() if _split(name)[0] == plate.name}
         if isinstance(plate.material, TabulatedBRDF) and values:
             material = dataclasses.replace(plate.material, **values)
         else:

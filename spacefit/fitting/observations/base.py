@@ -1,0 +1,125 @@
+"""The contract of an observation whose data are a vector of values (a table, a light curve), and the
+block of residuals it adds to a fit.
+
+A :class:`ValueObservation` names the registered parameters it depends on (``parts.chassis.kd``,
+``target.attitude_z_deg``), gives its own value of each (what it holds them at when they are not
+free, and a fit's default start), and, for an ordered set of free names, builds its
+:class:`Block`: a JAX model of its data and the residuals of a model. The residuals are
+(model - data) / sigma, or, for values spanning decades (a BRDF's specular peak over its diffuse
+floor, a light curve's irradiances), ln(model / data) / sigma_rel with sigma_rel the relative error
+(:class:`MeasuredValues`); without stated errors sigma is 1 and the fit's covariance scales them by
+their mean square (:func:`spacefit.fitting.uncertainty.covariance`).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from spacefit.errors import InputError
+from spacefit.fitting.params import Bijection, bijection
+
+# a model of the data: (the fit's free values, physical; the seed index j: 0 the fit's, 1 an
+# independent one, more further ones) -> the predicted values, in the data's unit
+Model = Callable[[jax.Array, int], jax.Array]
+
+
+@dataclass(frozen=True)
+class MeasuredValues:
+    """Measured values with their errors.
+
+    Attributes:
+        value: (n,) the values, in ``unit``.
+        sigma: (n,) their standard errors, absolute, or relative with ``log``; None: not stated.
+        log: the residuals compare logarithms (every value must be positive).
+        unit: the values' unit, for reports.
+        source: where they came from, for messages.
+    """
+
+    value: np.ndarray
+    sigma: np.ndarray | None
+    log: bool
+    unit: str
+    source: str
+
+    def __post_init__(self) -> None:
+        value = np.asarray(self.value, dtype=float)
+        if value.ndim != 1 or not value.size or not np.all(np.isfinite(value)):
+            raise InputError(f"{self.source}: the data must be a vector of finite values, got shape {value.shape}.")
+        if self.log and not np.all(value > 0):
+            raise InputError(f"{self.source}: the data must be positive to fit their logarithm; {int(np.sum(~(value > 0)))} values are not.")
+        object.__setattr__(self, "value", value)
+        if self.sigma is not None:
+            sigma = np.broadcast_to(np.asarray(self.sigma, dtype=float), value.shape)
+            if not np.all(np.isfinite(sigma) & (sigma > 0)):
+                raise InputError(f"{self.source}: every sigma must be positive and finite.")
+            object.__setattr__(self, "sigma", sigma)
+
+    def residual(self, model: jax.Array) -> jax.Array:
+        """The residuals of predicted values ``model``: (model - value) / sigma, or with ``log``
+        ln(model / value) / sigma (sigma 1 where not stated)."""
+        scale = jnp.asarray(self.sigma if self.sigma is not None else np.ones_like(self.value))
+        if self.log:
+            return (jnp.log(jnp.maximum(model, 1e-300)) - jnp.asarray(np.log(self.value))) / scale
+        return (model - jnp.asarray(self.value)) / scale
+
+
+@dataclass(frozen=True)
+class Block:
+    """What one value observation adds to a fit's problem: its data, their model and residuals.
+
+    Attributes:
+        data: the measured values and errors.
+        model: (x, j) -> the predicted values at the fit's free values x at seed index j.
+        known: which of the fit's free names the model depends on (the others do not move it).
+        rendered: the model is rendered (Monte Carlo): seed index j changes it.
+    """
+
+    data: MeasuredValues
+    model: Model
+    known: tuple[str, ...]
+    rendered: bool = False
+
+    @property
+    def noise_known(self) -> bool:
+        """Whether the residuals are in units of the data's noise (their errors are stated)."""
+        return self.data.sigma is not None
+
+    def residual(self, model: jax.Array) -> jax.Array:
+        """The residuals of predicted values (:meth:`MeasuredValues.residual`)."""
+        return self.data.residual(model)
+
+
+class ValueObservation(ABC):
+    """An observation whose data are a vector of values predicted from named parameter values."""
+
+    @abstractmethod
+    def parameters(self) -> tuple[str, ...]:
+        """The registered parameter names this observation's prediction depends on."""
+
+    @abstractmethod
+    def start(self, name: str) -> float:
+        """This observation's own value of parameter ``name`` (one of :meth:`parameters`)."""
+
+    @abstractmethod
+    def block(self, free: tuple[str, ...]) -> Block:
+        """The residual block of a fit whose free values are ``free``, in order (the model takes
+        their vector; names it does not depend on are ignored, the others held at :meth:`start`)."""
+
+    def coordinate(self, name: str) -> Bijection:
+        """The solver's coordinate of ``name``: a bijection onto the registry's bounds
+        (:func:`spacefit.fitting.params.bijection`), unless this observation narrows them."""
+        return bijection(name)
+
+    def values_of(self, free: tuple[str, ...], x: jax.Array) -> dict[str, jax.Array]:
+        """Its parameters' values at the fit's free values ``x``: the free ones from ``x``, the
+        others at :meth:`start`."""
+        own = self.parameters()
+        values: dict[str, jax.Array] = {n: jnp.asarray(self.start(n)) for n in own}
+        values.update({n: x[i] for i, n in enumerate(free) if n in own})
+        return values
