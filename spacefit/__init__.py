@@ -84,6 +84,10 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "predict_magnitudes": ("spacefit.studies.plates", "predict_magnitudes"),
     "fit_plates": ("spacefit.studies.plates", "fit_plates"),
     "fitted_plates": ("spacefit.studies.plates", "fitted_plates"),
+    "Earth": ("spacefit.studies.earthshine", "Earth"),
+    "EarthshineSources": ("spacefit.studies.earthshine", "EarthshineSources"),
+    "earthshine_sources": ("spacefit.studies.earthshine", "earthshine_sources"),
+    "earthshine_irradiance": ("spacefit.studies.earthshine", "earthshine_irradiance"),
     "light_curve_convergence": ("spacefit.studies.lightcurve", "light_curve_convergence"),
     "fit_light_curve": ("spacefit.studies.lightcurve_fit", "fit_light_curve"),
     "Mirror": ("spacefit.materials", "Mirror"),
@@ -148,6 +152,7 @@ __all__ = [
     "write_table_fit", "Site", "LightCurveObservations", "read_light_curve", "write_light_curve", "RefusedRow",
     "Orbit", "PassGeometry", "pass_geometry", "Plate", "predict_magnitudes", "fit_plates", "fitted_plates",
     "light_curve_convergence", "fit_light_curve", "BRDFTableObservation", "PlateLightCurve", "RenderedLightCurve",
+    "Earth", "EarthshineSources", "earthshine_sources", "earthshine_irradiance",
     "RenderSettings", "CameraSettings", "SunSettings", "TargetSettings", "WrinkleSettings", "PartSettings",
 ]
 

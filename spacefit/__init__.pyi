@@ -87,6 +87,10 @@ from spacefit.scene.toml import load_scene as load_scene
 from spacefit.sensor import Sensor as Sensor
 from spacefit.sensor import read_sensor_file as read_sensor_file
 from spacefit.sensor import saturated_mask as saturated_mask
+from spacefit.studies.earthshine import Earth as Earth
+from spacefit.studies.earthshine import EarthshineSources as EarthshineSources
+from spacefit.studies.earthshine import earthshine_irradiance as earthshine_irradiance
+from spacefit.studies.earthshine import earthshine_sources as earthshine_sources
 from spacefit.studies.lightcurve import LightCurve as LightCurve
 from spacefit.studies.lightcurve import light_curve as light_curve
 from spacefit.studies.lightcurve import light_curve_convergence as light_curve_convergence
@@ -127,6 +131,7 @@ __all__ = [
     'MaterialModel', 'register_material', 'BRDFTable', 'BRDF_MODELS', 'read_brdf_table', 'fit_brdf_table', 'fitted_material',
     'compare_brdf_models', 'TabulatedBRDF', 'write_table_fit', 'Site', 'LightCurveObservations', 'read_light_curve', 'write_light_curve',
     'RefusedRow', 'Orbit', 'PassGeometry', 'pass_geometry', 'Plate', 'predict_magnitudes', 'fit_plates', 'fitted_plates',
-    'light_curve_convergence', 'fit_light_curve', 'BRDFTableObservation', 'PlateLightCurve', 'RenderedLightCurve', 'RenderSettings',
-    'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings',
+    'light_curve_convergence', 'fit_light_curve', 'BRDFTableObservation', 'PlateLightCurve', 'RenderedLightCurve', 'Earth',
+    'EarthshineSources', 'earthshine_sources', 'earthshine_irradiance', 'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings',
+    'WrinkleSettings', 'PartSettings',
 ]
