@@ -59,9 +59,10 @@ DEFAULT_POINTS = 32
 
 @dataclass(frozen=True)
 class Earth:
-    """The Earth for Earthshine: a sphere of ``radius_m`` whose surface reflects the sun with the
-    Phong-type BRDF ``kd / pi + ks (n + 2) / (2 pi) max(r . w, 0)^n`` (module docstring); ``ks = 0``
-    (the default) is a Lambert surface of albedo ``kd``."""
+    """The Earth for Earthshine, a sunlit sphere with a Phong-type surface; ``ks = 0`` (the default) is Lambert.
+
+    A sphere of ``radius_m`` whose surface reflects the sun with the BRDF
+    ``kd / pi + ks (n + 2) / (2 pi) max(r·w, 0)^n`` (module docstring); ``ks = 0`` is a Lambert surface of albedo ``kd``."""
 
     kd: float = 0.3
     ks: float = 0.0
