@@ -5,10 +5,7 @@ from spacefit.cases import case_names as case_names
 from spacefit.cases import load_case as load_case
 from spacefit.errors import InputError as InputError
 from spacefit.executors import ClusterError as ClusterError
-from spacefit.fitting.brdf_table import BRDFTable as BRDFTable
 from spacefit.fitting.brdf_table import BRDF_MODELS as BRDF_MODELS
-from spacefit.fitting.brdf_table import TabulatedBRDF as TabulatedBRDF
-from spacefit.fitting.brdf_table import read_brdf_table as read_brdf_table
 from spacefit.fitting.loop import FitOptions as FitOptions
 from spacefit.fitting.loop import fit as fit
 from spacefit.fitting.losses import LOSSES as LOSSES
@@ -61,6 +58,9 @@ from spacefit.materials import Mirror as Mirror
 from spacefit.materials import OrenNayar as OrenNayar
 from spacefit.materials import PRESETS as PRESETS
 from spacefit.materials import register_material as register_material
+from spacefit.materials.measured import BRDFTable as BRDFTable
+from spacefit.materials.measured import read_brdf_table as read_brdf_table
+from spacefit.materials.tabulated import TabulatedBRDF as TabulatedBRDF
 from spacefit.pipeline import fit_to_folder as fit_to_folder
 from spacefit.pipeline import render_to_folder as render_to_folder
 from spacefit.rendering.derivatives import Jacobian as Jacobian

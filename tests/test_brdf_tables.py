@@ -144,7 +144,7 @@ def test_a_tabulated_brdf_gives_its_table_back_and_extends_it_by_harvey_offsets(
     tab = TabulatedBRDF.from_table(table)
     assert len(tab.incidence_rad) == 4 and [len(x) for x in tab.offset] == [179] * 4
     with jax_x64():
-        evaluate = jax_jit(lambda wi, wo, scale: tab.evaluate(wi, wo, scale))
+        evaluate = jax_jit(lambda wi, wo, scale: tab.evaluate(wi, wo, {"scale": scale}))
         np.testing.assert_allclose(np.asarray(evaluate(table.wi, table.wo, 1.0)), table.value, rtol=1e-6)
         wi = unit_vectors(np.array([41.4]), np.array([180.0]))
         wo = unit_vectors(np.array([30.0]), np.array([50.0]))

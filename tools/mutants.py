@@ -326,9 +326,9 @@ MUTANTS = (
            ("tests/test_joint_fit.py",)),
     Mutant("light-curve-sun-directions-not-normalised", "spacefit/studies/observing.py", "fields[name] = unit",
            "fields[name] = v", ("tests/test_observed_lightcurves.py",)),
-    Mutant("tabulated-offset-unsigned", "spacefit/fitting/brdf_table.py", "return jnp.where(jnp.sum(delta * beta0, axis=-1) < 0, -d, d)",
+    Mutant("tabulated-offset-unsigned", "spacefit/materials/tabulated.py", "return jnp.where(jnp.sum(delta * beta0, axis=-1) < 0, -d, d)",
            "return d", ("tests/test_brdf_tables.py",)),
-    Mutant("tabulated-incidences-reversed", "spacefit/fitting/brdf_table.py", "jnp.interp(theta, grid, jnp.eye(len(grid))[k])",
+    Mutant("tabulated-incidences-reversed", "spacefit/materials/tabulated.py", "jnp.interp(theta, grid, jnp.eye(len(grid))[k])",
            "jnp.interp(theta, grid, jnp.eye(len(grid))[-1 - k])", ("tests/test_observed_lightcurves.py",)),
     # the traced mask (issue 23): conservative rasterisation, and the second dilation the tent's weights need
     Mutant("silhouette-tests-pixel-centres-only", "spacefit/rendering/silhouette.py",

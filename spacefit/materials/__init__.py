@@ -14,3 +14,4 @@ from spacefit.materials.registry import make_material as make_material
 from spacefit.materials.registry import material_table as material_table
 from spacefit.materials.registry import register_material as register_material
 from spacefit.materials.registry import with_material_values as with_material_values
+from spacefit.materials.tabulated import TabulatedBRDF as TabulatedBRDF

@@ -100,6 +100,9 @@ class MaterialModel:
     ties: ClassVar[Mapping[str, tuple[tuple[str, ...], str, str]]] = {}
     # Whether the BRDF is a delta function (no finite value to evaluate).
     delta: ClassVar[bool] = False
+    # Its dataclass fields that name files (a measured table's ``source``): a scene file's relative
+    # path is resolved against the scene file's folder.
+    paths: ClassVar[tuple[str, ...]] = ()
 
     def __post_init__(self) -> None:
         for f in self.fields:

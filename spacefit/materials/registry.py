@@ -18,6 +18,7 @@ from spacefit.materials.lambert import Lambert
 from spacefit.materials.mirror import Mirror
 from spacefit.materials.model import Field, Material, MaterialModel
 from spacefit.materials.oren_nayar import OrenNayar
+from spacefit.materials.tabulated import TabulatedBRDF
 
 # pbrt-v3's Metal material, which the thesis used for the MLI, defaults to roughness 0.01 remapped
 # by RoughnessToAlpha to a Trowbridge-Reitz alpha of 0.14; a true mirror is never lit directly by a
@@ -110,7 +111,7 @@ def shared_fields(model: type[MaterialModel] | None) -> dict[str, Field]:
     return {name: model.field(name) for name in (*(f.name for f in model.fields), *model.ties) if name in registered}
 
 
-for _model in (Conductor, Mirror, Lambert, DiffuseConductor, OrenNayar):
+for _model in (Conductor, Mirror, Lambert, DiffuseConductor, OrenNayar, TabulatedBRDF):
     register_material(_model)
 
 
@@ -162,9 +163,11 @@ def with_material_values(material: Material | type, values: Mapping[str, object]
 
 
 def material_table(material: Material) -> dict[str, object]:
-    """A material as a scene file's part table states it in full: its model's name and every value."""
+    """A material as a scene file's part table states it in full: its model's name and every value
+    (not the values it derives from others: a measured table's arrays, read from its ``source``)."""
     name = type(material).name
-    return {"material": name, **{f.name: _plain(getattr(material, f.name)) for f in dataclasses.fields(material)}}
+    return {"material": name, **{f.name: _plain(getattr(material, f.name)) for f in dataclasses.fields(material)
+                                 if not f.metadata.get("derived")}}
 
 
 def _plain(value: object) -> object:

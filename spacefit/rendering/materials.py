@@ -11,7 +11,9 @@ brings its own plugin (``plugin``), registered once per variant before its first
 
 Mitsuba 3 has no Oren-Nayar BSDF: :func:`oren_nayar_plugin` is a Python ``mi.BSDF``
 (:mod:`spacefit.materials.oren_nayar`'s qualitative model, cosine-weighted hemisphere sampling),
-differentiable in its ``reflectance`` and ``sigma``.
+differentiable in its ``reflectance`` and ``sigma``; nor a measured table's: :func:`tabulated_plugin`
+(:mod:`spacefit.materials.tabulated`'s interpolation, the table's arrays given as tensors),
+differentiable in its ``scale``.
 """
 
 from __future__ import annotations
@@ -20,7 +22,9 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material, Mirror, OrenNayar
+import numpy as np
+
+from spacefit.materials import Conductor, DiffuseConductor, Lambert, Material, Mirror, OrenNayar, TabulatedBRDF
 from spacefit.rendering.backend import dr, mi
 
 if TYPE_CHECKING:
@@ -136,6 +140,20 @@ register_mitsuba(DiffuseConductor, MitsubaMaterial(
                          **{f: tuple((f"bsdf_1.{key}", write) for key, write in keys) for f, keys in _CONDUCTOR_KEYS.items()}}))
 
 
+def _cosine_sample(bsdf: Any, ctx: Any, si: Any, sample2: Any, active: Any) -> tuple[Any, Any]:
+    """A cosine-weighted hemisphere sample of a diffuse-flagged Python BSDF and its weight f cos / pdf."""
+    bs = mi.BSDFSample3f()
+    bs.wo = mi.warp.square_to_cosine_hemisphere(sample2)
+    bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(bs.wo)
+    bs.eta = 1.0
+    bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+    bs.sampled_component = mi.UInt32(0)
+    on = active & (bs.pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0) & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection)
+    value = bsdf.eval(ctx, si, bs.wo, on)
+    bs.pdf = dr.select(on, bs.pdf, 0.0)
+    return bs, dr.select(on, value / dr.select(on, bs.pdf, 1.0), 0.0)
+
+
 def oren_nayar_plugin() -> None:
     """Register the Python BSDF ``oren_nayar`` in the current Mitsuba variant: f_r cos(theta_o) of
     Oren & Nayar's qualitative model (:func:`spacefit.materials.oren_nayar.oren_nayar_brdf`, the same
@@ -175,16 +193,7 @@ def oren_nayar_plugin() -> None:
             return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
 
         def sample(self, ctx: Any, si: Any, sample1: Any, sample2: Any, active: Any = True) -> tuple[Any, Any]:
-            bs = mi.BSDFSample3f()
-            bs.wo = mi.warp.square_to_cosine_hemisphere(sample2)
-            bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(bs.wo)
-            bs.eta = 1.0
-            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
-            bs.sampled_component = mi.UInt32(0)
-            f, front = self._value(si, bs.wo)
-            on = front & active & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection) & (bs.pdf > 0)
-            bs.pdf = dr.select(on, bs.pdf, 0.0)
-            return bs, dr.select(on, f * dr.pi, 0.0)  # f cos / pdf with pdf = cos / pi
+            return _cosine_sample(self, ctx, si, sample2, active)
 
         def traverse(self, callback: Any) -> None:
             callback.put("reflectance", self.reflectance, mi.ParamFlags.Differentiable)
@@ -202,3 +211,96 @@ def oren_nayar_plugin() -> None:
 register_mitsuba(OrenNayar, MitsubaMaterial(
     lambda m: {"type": "oren_nayar", "reflectance": {"type": "rgb", "value": _rgb_list(m.kd)}, "sigma": float(m.sigma)},
     {"kd": (("reflectance.value", rgb),), "sigma": (("sigma", scalar),)}, plugin=oren_nayar_plugin))
+
+
+def tabulated_plugin() -> None:
+    """Register the Python BSDF ``tabulated`` in the current Mitsuba variant: f_r cos(theta_o) of a
+    measured table (:class:`spacefit.materials.tabulated.TabulatedBRDF`'s interpolation in Dr.Jit:
+    per incidence a binary search among its offsets, linear weights between incidences), the light
+    the direction ``wo`` and the detector ``si.wi`` (radiance transport: the table need not be
+    reciprocal); cosine-weighted hemisphere sampling; ``scale`` a differentiable traverse parameter.
+    Its properties: ``incidence``, (K,) zeniths (rad); ``offset`` and ``log_value``, the K lines
+    concatenated; ``start``, (K + 1,) where each line starts in them (tensors)."""
+
+    class TabulatedBSDF(mi.BSDF):
+        def __init__(self, props: Any) -> None:
+            mi.BSDF.__init__(self, props)
+            self.scale = mi.Float(props["scale"])
+            self.incidence = [float(t) for t in props["incidence"].numpy()]
+            self.start = [int(i) for i in props["start"].numpy()]
+            self.offset = mi.Float(props["offset"].array)
+            self.log_value = mi.Float(props["log_value"].array)
+            flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+            self.m_components = [flags]
+            self.m_flags = flags
+
+        def _line(self, k: int, u: Any) -> Any:
+            """ln f of line k at offsets u: linear between its points, held at its ends."""
+            lo, hi = self.start[k], self.start[k + 1]
+            j = dr.binary_search(lo, hi - 2, lambda i: dr.gather(mi.Float, self.offset, i + 1) <= u)
+            x0, x1 = dr.gather(mi.Float, self.offset, j), dr.gather(mi.Float, self.offset, j + 1)
+            y0, y1 = dr.gather(mi.Float, self.log_value, j), dr.gather(mi.Float, self.log_value, j + 1)
+            t = dr.clip((u - x0) / (x1 - x0), 0.0, 1.0)
+            return dr.lerp(y0, y1, t)
+
+        def _weight(self, k: int, theta: Any) -> Any:
+            """The linear interpolation weight of incidence k at zenith theta (1 beyond the ends)."""
+            grid, weight = self.incidence, mi.Float(0.0)
+            if k > 0:
+                rise = dr.clip((theta - grid[k - 1]) / (grid[k] - grid[k - 1]), 0.0, 1.0)
+                weight = dr.select((theta > grid[k - 1]) & (theta <= grid[k]), rise, weight)
+            else:
+                weight = dr.select(theta <= grid[0], 1.0, weight)
+            if k < len(grid) - 1:
+                fall = dr.clip((grid[k + 1] - theta) / (grid[k + 1] - grid[k]), 0.0, 1.0)
+                weight = dr.select((theta > grid[k]) & (theta < grid[k + 1]), fall, weight)
+            else:
+                weight = dr.select(theta > grid[-1], 1.0, weight)
+            return weight
+
+        def eval(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> Any:
+            light, detector = wo, si.wi
+            beta0 = -mi.Vector2f(light.x, light.y)
+            delta = mi.Vector2f(detector.x, detector.y) - beta0
+            d = dr.norm(delta)
+            u = dr.select(dr.dot(delta, beta0) < 0, -d, d)
+            theta = dr.acos(dr.clip(mi.Frame3f.cos_theta(light), -1.0, 1.0))
+            log_f = mi.Float(0.0)
+            for k in range(len(self.incidence)):
+                log_f += self._weight(k, theta) * self._line(k, u)
+            front = (mi.Frame3f.cos_theta(light) > 0) & (mi.Frame3f.cos_theta(detector) > 0)
+            on = front & active & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection)
+            return dr.select(on, self.scale * dr.exp(log_f) * mi.Frame3f.cos_theta(light), 0.0)
+
+        def pdf(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> Any:
+            front = (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
+            on = front & active & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection)
+            return dr.select(on, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+
+        def eval_pdf(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> tuple[Any, Any]:
+            return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
+
+        def sample(self, ctx: Any, si: Any, sample1: Any, sample2: Any, active: Any = True) -> tuple[Any, Any]:
+            return _cosine_sample(self, ctx, si, sample2, active)
+
+        def traverse(self, callback: Any) -> None:
+            callback.put("scale", self.scale, mi.ParamFlags.Differentiable)
+
+        def parameters_changed(self, keys: Any = None) -> None:
+            """Nothing is precomputed: the table is fixed, ``scale`` multiplies at each call."""
+
+        def to_string(self) -> str:
+            return f"TabulatedBSDF[{len(self.incidence)} incidences, scale={self.scale}]"
+
+    mi.register_bsdf("tabulated", lambda props: TabulatedBSDF(props))
+
+
+def _tabulated(m: TabulatedBRDF) -> dict:
+    """The ``tabulated`` plugin's properties of a measured table (:func:`tabulated_plugin`)."""
+    start = np.concatenate([[0], np.cumsum([len(x) for x in m.offset])])
+    return {"type": "tabulated", "scale": float(m.scale), "incidence": mi.TensorXf(np.asarray(m.incidence_rad)),
+            "start": mi.TensorXf(start.astype(float)), "offset": mi.TensorXf(np.concatenate(m.offset)),
+            "log_value": mi.TensorXf(np.concatenate(m.log_value))}
+
+
+register_mitsuba(TabulatedBRDF, MitsubaMaterial(_tabulated, {"scale": (("scale", scalar),)}, plugin=tabulated_plugin))

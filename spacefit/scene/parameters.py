@@ -159,8 +159,6 @@ _SCENE = (
               _get_rms, _set_rms, _WRINKLES, fd_step=0.03, relative_step=True, scene_fields=("G",), label="rms height"),
 )
 _OTHERS = (
-    Parameter("parts.P.scale", "1", POSITIVE, "the factor on a measured BRDF table's values (a flat plate's tabulated BRDF; "
-              "no renderer material has it)", _material_value, _own_key, label="table factor"),
     Parameter("sun.irradiance_w_m2", "W m^-2", POSITIVE, "the sun's irradiance on a surface facing it", _scene_field, _own_key,
               label="sun's irradiance"),
     *_sun_angles(("sun.elevation_deg", "sun.azimuth_deg"),

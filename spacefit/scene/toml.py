@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from spacefit.errors import InputError, InputTypeError, check_path, quote
-from spacefit.materials import make_material
+from spacefit.materials import MODELS, make_material
 from spacefit.scene.overrides import Overrides, apply_overrides, section_keys, unknown_key, with_values
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import DEFAULT_PRESETS, SECTIONS, PartSettings, TargetSettings
@@ -81,6 +81,10 @@ def _parts(data: Mapping[str, Any], builtin: bool, base: Path) -> dict[str, Part
             raise InputTypeError(f"`parts.{name}.file` must be a path string, got {quote(file)}.")
         if file and not check_path(f"parts.{name}.file", file).is_absolute():
             file = str((base / file).resolve())
+        model = MODELS.get(table["material"]) if isinstance(table["material"], str) else None
+        for key in model.paths if model is not None else ():  # files a model reads (a measured table), beside the scene file
+            if isinstance(table.get(key), str) and table[key] and not Path(table[key]).is_absolute():
+                table[key] = str((base / table[key]).resolve())
         parts[name] = PartSettings(make_material(table.pop("material"), table, where=f"parts.{name}"), file)
     return parts
 

@@ -6,8 +6,8 @@ spacefit material. The irradiance at an observer at distance d is
     E = E_sun / d^2 sum_k A_k f_k(wi, wo) |n_k . wi| |n_k . wo|,
 
 f_k the plate's BRDF (:func:`spacefit.materials.brdf.brdf`, Mitsuba's evaluation, both sides
-alike as the renderer's ``twosided``, 0 where sun and observer are on opposite sides; or a measured
-table's, :class:`~spacefit.fitting.brdf_table.TabulatedBRDF`), wi and wo the
+alike as the renderer's ``twosided``, 0 where sun and observer are on opposite sides; a measured
+table's too, :class:`~spacefit.materials.tabulated.TabulatedBRDF`), wi and wo the
 directions towards the sun and the observer: the renderer's integrated irradiance of the same
 plates for a point target (no plate shadowing or lighting another, one bounce; the test renders
 the two-plate satellite and compares). A target in the Earth's shadow is dark.
@@ -30,7 +30,6 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_count, check_name_list, check_range, check_type, check_vector, quote
-from spacefit.fitting.brdf_table import TabulatedBRDF
 from spacefit.fitting.loop import fit
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.observations.base import Block, MeasuredValues, ValueObservation
@@ -51,14 +50,14 @@ class Plate:
     name: str
     area_m2: float
     normal: tuple[float, float, float]
-    material: Material | TabulatedBRDF
+    material: Material
     tangent: tuple[float, float, float] = (1.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
         check_type("name", self.name, str, "a string")
         what = ("an sf.Lambert, sf.Conductor, sf.DiffuseConductor, sf.OrenNayar (a material model with a BRDF) or sf.TabulatedBRDF "
                 "(a Mirror's BRDF is a delta function: never lit towards an observer by a point sun)")
-        check_type(f"{self.name}.material", self.material, (MaterialModel, TabulatedBRDF), what)
+        check_type(f"{self.name}.material", self.material, MaterialModel, what)
         if isinstance(self.material, MaterialModel) and self.material.delta:
             raise InputError(f"`{self.name}.material` must be {what}, got {self.material!r}.")
         check_range(f"{self.name}.area_m2", self.area_m2, 0.0, lo_open=True, unit="m^2")
@@ -86,10 +85,8 @@ def _grey(plate: Plate, name: str) -> float:
     return float(value)
 
 
-def _fields(material: Material | TabulatedBRDF) -> tuple[str, ...]:
-    """The names a plate's material may free: its model's fields and ties, or a measured table's ``scale``."""
-    if isinstance(material, TabulatedBRDF):
-        return ("scale",)
+def _fields(material: Material) -> tuple[str, ...]:
+    """The names a plate's material may free: its model's fields and ties (a measured table's ``scale``)."""
     return (*(f.name for f in material.fields), *material.ties)
 
 
@@ -100,8 +97,6 @@ ATTITUDE = ("attitude_x_deg", "attitude_y_deg", "attitude_z_deg")
 
 def _plate_brdf(plate: Plate, wi: jax.Array, wo: jax.Array, values: Mapping[str, jax.Array]) -> jax.Array:
     """The plate's BRDF with some of its material's values replaced (by field name; JAX-traceable)."""
-    if isinstance(plate.material, TabulatedBRDF):
-        return plate.material.evaluate(wi, wo, values.get("scale"))
     return brdf(plate.material, wi, wo, values)
 
 
@@ -148,9 +143,9 @@ def _check_observations(observations: object) -> None:
     check_type("observations", observations, LightCurveObservations, "an sf.LightCurveObservations (sf.read_light_curve)")
 
 
-def _tied(material: Material | TabulatedBRDF, field: str) -> tuple[str, ...]:
+def _tied(material: Material, field: str) -> tuple[str, ...]:
     """The fields a free name sets: a tie's (``alpha``: both roughnesses), else itself."""
-    ties = getattr(material, "ties", {})
+    ties = material.ties
     return ties[field][0] if field in ties else (field,)
 
 
@@ -183,7 +178,7 @@ class PlateLightCurve(ValueObservation):
     (:mod:`spacefit.fitting.observations`) whose model is :func:`plates_irradiance`.
 
     Its parameters are the registered ones of each plate's material, ``parts.<plate>.<field>``
-    (``alpha`` for both roughnesses; a :class:`~spacefit.fitting.brdf_table.TabulatedBRDF`'s
+    (``alpha`` for both roughnesses; a :class:`~spacefit.materials.tabulated.TabulatedBRDF`'s
     ``scale``), and the target's attitude angles ``target.attitude_x_deg`` (``_y_``, ``_z_``: a
     rotation of all the plates from their given normals, at 0 unless free,
     :func:`spacefit.geometry.frames.attitude_matrix`). The residual is the magnitude's,
@@ -292,9 +287,6 @@ def fitted_plates(plates: Sequence[Plate], fit: FitResult) -> list[Plate]:
     out = []
     for plate in plates:
         values = {_split(name)[1]: float(v) for name, v in fit.values.items() if _split(name)[0] == plate.name}
-        if isinstance(plate.material, TabulatedBRDF) and values:
-            material = dataclasses.replace(plate.material, **values)
-        else:
-            material = with_material_values(plate.material, values, where=plate.name) if values else plate.material
+        material = with_material_values(plate.material, values, where=plate.name) if values else plate.material
         out.append(dataclasses.replace(plate, material=material))
     return out
