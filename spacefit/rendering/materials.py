@@ -140,18 +140,39 @@ register_mitsuba(DiffuseConductor, MitsubaMaterial(
                          **{f: tuple((f"bsdf_1.{key}", write) for key, write in keys) for f, keys in _CONDUCTOR_KEYS.items()}}))
 
 
-def _cosine_sample(bsdf: Any, ctx: Any, si: Any, sample2: Any, active: Any) -> tuple[Any, Any]:
-    """A cosine-weighted hemisphere sample of a diffuse-flagged Python BSDF and its weight f cos / pdf."""
-    bs = mi.BSDFSample3f()
-    bs.wo = mi.warp.square_to_cosine_hemisphere(sample2)
-    bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(bs.wo)
-    bs.eta = 1.0
-    bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
-    bs.sampled_component = mi.UInt32(0)
-    on = active & (bs.pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0) & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection)
-    value = bsdf.eval(ctx, si, bs.wo, on)
-    bs.pdf = dr.select(on, bs.pdf, 0.0)
-    return bs, dr.select(on, value / dr.select(on, bs.pdf, 1.0), 0.0)
+def _cosine_sampled_bsdf() -> type:
+    """The base (in the current variant) of spacefit's Python BSDFs: diffuse-flagged, front-side,
+    sampled over the cosine-weighted hemisphere; a subclass gives ``eval`` and ``traverse``."""
+
+    class CosineSampledBSDF(mi.BSDF):
+        def __init__(self, props: Any) -> None:
+            mi.BSDF.__init__(self, props)
+            flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+            self.m_components = [flags]
+            self.m_flags = flags
+
+        def pdf(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> Any:
+            front = (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
+            on = front & active & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection)
+            return dr.select(on, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
+
+        def eval_pdf(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> tuple[Any, Any]:
+            return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
+
+        def sample(self, ctx: Any, si: Any, sample1: Any, sample2: Any, active: Any = True) -> tuple[Any, Any]:
+            """A cosine-weighted hemisphere sample and its weight f cos / pdf."""
+            bs = mi.BSDFSample3f()
+            bs.wo = mi.warp.square_to_cosine_hemisphere(sample2)
+            bs.pdf = mi.warp.square_to_cosine_hemisphere_pdf(bs.wo)
+            bs.eta = 1.0
+            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.DiffuseReflection)
+            bs.sampled_component = mi.UInt32(0)
+            on = active & (bs.pdf > 0) & (mi.Frame3f.cos_theta(si.wi) > 0) & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection)
+            value = self.eval(ctx, si, bs.wo, on)
+            bs.pdf = dr.select(on, bs.pdf, 0.0)
+            return bs, dr.select(on, value / dr.select(on, bs.pdf, 1.0), 0.0)
+
+    return CosineSampledBSDF
 
 
 def oren_nayar_plugin() -> None:
@@ -160,14 +181,11 @@ def oren_nayar_plugin() -> None:
     terms in Dr.Jit), cosine-weighted hemisphere sampling; ``reflectance`` (a texture) and ``sigma``
     (rad) are differentiable traverse parameters."""
 
-    class OrenNayarBSDF(mi.BSDF):
+    class OrenNayarBSDF(_cosine_sampled_bsdf()):
         def __init__(self, props: Any) -> None:
-            mi.BSDF.__init__(self, props)
+            super().__init__(props)
             self.reflectance = props.get_texture("reflectance")
             self.sigma = mi.Float(props["sigma"])
-            flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
-            self.m_components = [flags]
-            self.m_flags = flags
 
         def _value(self, si: Any, wo: Any) -> tuple[Any, Any]:
             """f_r / cos-weighted pdf ratio's numerator parts: (kd (A + B ...) / pi, front-side mask)."""
@@ -183,17 +201,6 @@ def oren_nayar_plugin() -> None:
             f, front = self._value(si, wo)
             on = front & active & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection)
             return dr.select(on, f * mi.Frame3f.cos_theta(wo), 0.0)
-
-        def pdf(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> Any:
-            front = (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
-            on = front & active & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection)
-            return dr.select(on, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
-
-        def eval_pdf(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> tuple[Any, Any]:
-            return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
-
-        def sample(self, ctx: Any, si: Any, sample1: Any, sample2: Any, active: Any = True) -> tuple[Any, Any]:
-            return _cosine_sample(self, ctx, si, sample2, active)
 
         def traverse(self, callback: Any) -> None:
             callback.put("reflectance", self.reflectance, mi.ParamFlags.Differentiable)
@@ -222,17 +229,14 @@ def tabulated_plugin() -> None:
     Its properties: ``incidence``, (K,) zeniths (rad); ``offset`` and ``log_value``, the K lines
     concatenated; ``start``, (K + 1,) where each line starts in them (tensors)."""
 
-    class TabulatedBSDF(mi.BSDF):
+    class TabulatedBSDF(_cosine_sampled_bsdf()):
         def __init__(self, props: Any) -> None:
-            mi.BSDF.__init__(self, props)
+            super().__init__(props)
             self.scale = mi.Float(props["scale"])
             self.incidence = [float(t) for t in props["incidence"].numpy()]
             self.start = [int(i) for i in props["start"].numpy()]
             self.offset = mi.Float(props["offset"].array)
             self.log_value = mi.Float(props["log_value"].array)
-            flags = mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
-            self.m_components = [flags]
-            self.m_flags = flags
 
         def _line(self, k: int, u: Any) -> Any:
             """ln f of line k at offsets u: linear between its points, held at its ends."""
@@ -271,17 +275,6 @@ def tabulated_plugin() -> None:
             front = (mi.Frame3f.cos_theta(light) > 0) & (mi.Frame3f.cos_theta(detector) > 0)
             on = front & active & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection)
             return dr.select(on, self.scale * dr.exp(log_f) * mi.Frame3f.cos_theta(light), 0.0)
-
-        def pdf(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> Any:
-            front = (mi.Frame3f.cos_theta(si.wi) > 0) & (mi.Frame3f.cos_theta(wo) > 0)
-            on = front & active & ctx.is_enabled(mi.BSDFFlags.DiffuseReflection)
-            return dr.select(on, mi.warp.square_to_cosine_hemisphere_pdf(wo), 0.0)
-
-        def eval_pdf(self, ctx: Any, si: Any, wo: Any, active: Any = True) -> tuple[Any, Any]:
-            return self.eval(ctx, si, wo, active), self.pdf(ctx, si, wo, active)
-
-        def sample(self, ctx: Any, si: Any, sample1: Any, sample2: Any, active: Any = True) -> tuple[Any, Any]:
-            return _cosine_sample(self, ctx, si, sample2, active)
 
         def traverse(self, callback: Any) -> None:
             callback.put("scale", self.scale, mi.ParamFlags.Differentiable)
