@@ -20,6 +20,7 @@ __version__ = "0.1.0"
 _EXPORTS: dict[str, tuple[str, str]] = {
     "Case": ("spacefit.cases", "Case"),
     "Pass": ("spacefit.fitting.passes", "Pass"),
+    "PassObservation": ("spacefit.fitting.observations.passes", "PassObservation"),
     "Frame": ("spacefit.fitting.passes", "Frame"),
     "frame_table": ("spacefit.fitting.pass_report", "frame_table"),
     "plot_frames": ("spacefit.fitting.pass_report", "plot_frames"),
@@ -145,7 +146,7 @@ __all__ = [
     "Distortion", "Intrinsics", "ObservedImage", "Sensor", "distort_image", "expected_dn", "noise_variance_dn", "observe",
     "pixel_solid_angles", "read_image", "read_sensor_file", "saturated_mask", "choose_exposure", "write_observation", "sensor_of", "format_sensor_sources",
     "MLI_SLOPE_RANGE",
-    "Pass", "Frame", "frame_table", "plot_frames", "arc_pass", "simulate_pass",
+    "Pass", "PassObservation", "Frame", "frame_table", "plot_frames", "arc_pass", "simulate_pass",
     "read_sweep_file", "sweep", "verify_store", "StoreReport", "ClusterError", "Sensitivity", "sensitivity", "LightCurve", "light_curve",
     "plot_comparison", "plot_convergence",
     "DiffuseConductor", "OrenNayar", "MaterialModel", "register_material", "BRDFTable", "BRDF_MODELS", "read_brdf_table", "fit_brdf_table", "fitted_material", "compare_brdf_models", "TabulatedBRDF",

@@ -23,7 +23,7 @@ from matplotlib.figure import Figure, SubFigure
 from matplotlib.image import AxesImage
 
 from spacefit.display import describe
-from spacefit.errors import InputError, check_type
+from spacefit.errors import InputError, check_choice, check_type
 # The crop's margin on each side: a fraction of the target's box, and at least this many pixels.
 TARGET_MARGIN = 0.15
 MIN_MARGIN_PX = 2
@@ -117,3 +117,31 @@ def new_figure(fig: Figure | SubFigure | None, figsize: tuple[float, float]) -> 
         return Figure(figsize=figsize, layout="constrained")
     check_type("fig", fig, (Figure, SubFigure), "a matplotlib Figure or SubFigure (fig.subfigures() makes one)")
     return fig
+
+
+def plot_values(x: np.ndarray, data: np.ndarray, model: np.ndarray, difference: np.ndarray, *, xlabel: str, ylabel: str,
+                difference_label: str, scale: str = "linear", title: str = "", ax: Axes | Sequence[Axes] | None = None,
+                fig: Figure | SubFigure | None = None) -> np.ndarray:
+    """Measured values ``data`` and their ``model`` against ``x`` (top; ``scale`` "linear", "log", or
+    "magnitude": linear with brighter up) and ``difference`` (data against model, bottom), into
+    ``ax`` (two Axes) or ``fig``: the array of the two axes drawn."""
+    check_choice("scale", scale, ("linear", "log", "magnitude"))
+    axes = panels(ax, fig, 2, (6.0, 4.4), lambda f: f.subplots(2, 1, sharex=True, squeeze=False, height_ratios=(2, 1)))
+    top, bottom = axes
+    top.plot(x, data, "o", ms=3, label="data")
+    top.plot(x, model, "x", ms=4, label="model")
+    if scale == "log":
+        top.set_yscale("log")
+    elif scale == "magnitude":
+        top.invert_yaxis()
+    top.set_ylabel(ylabel, fontsize=8)
+    top.legend(fontsize=7)
+    if title:
+        top.set_title(title, fontsize=9)
+    bottom.plot(x, difference, "o", ms=3, color="C2")
+    bottom.axhline(0.0, color="0.5", lw=0.8)
+    bottom.set_ylabel(difference_label, fontsize=8)
+    bottom.set_xlabel(xlabel)
+    for panel in axes:
+        panel.grid(alpha=0.3)
+    return axes

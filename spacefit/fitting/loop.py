@@ -23,7 +23,7 @@ from spacefit.executors import Cluster
 from spacefit.fitting.frames import frame_executor
 from spacefit.fitting.goodness import Goodness
 from spacefit.fitting.judging import judged_goodness, part_goodness, part_rows, per_observation
-from spacefit.fitting.observations.base import ValueObservation
+from spacefit.fitting.observations.base import Sequenced, ValueObservation
 from spacefit.fitting.observations.image import Observation
 from spacefit.fitting.problem import FitRender, Setup, setup
 from spacefit.fitting.result import FitResult
@@ -88,7 +88,7 @@ def _checked_solver(solver: str | Solver, max_steps: int, stop: str) -> Solver:
 
 @float64
 def fit(
-    observations: Observation | ValueObservation | Sequence[Observation | ValueObservation],
+    observations: Observation | ValueObservation | Sequenced | Sequence[Observation | ValueObservation | Sequenced],
     free: Sequence[str],
     *,
     solver: str | Solver = FitOptions.solver,
@@ -106,8 +106,10 @@ def fit(
 
     Args:
         observations: one or several observations of the same target, fitted jointly: images
-            (:class:`~spacefit.fitting.observations.image.Observation`, (reference, scene) pairs) and
-            other kinds (:mod:`spacefit.fitting.observations`: BRDF tables, light curves). Fixed
+            (:class:`~spacefit.fitting.observations.image.Observation`, (reference, scene) pairs), passes
+            (:class:`~spacefit.fitting.observations.passes.PassObservation`: its frames' images, each frame's
+            ``per_frame`` values freed) and other kinds (:mod:`spacefit.fitting.observations`: BRDF tables,
+            light curves). Fixed
             parameters come from each image's scene or each observation's own values.
         free: registered parameter names (:mod:`spacefit.scene.parameters`), e.g. ``["parts.panels.alpha_x"]``,
             shared by every observation that depends on them (an image of part ``panels`` and a BRDF
@@ -350,7 +352,7 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         parts=[part_rows(*row) for row in zip(problem.part_images, problem.references, renders, problem.units, problem.used, per_part)],
         scene=_fitted_scene(s, values) if np.all(np.isfinite(x_user)) else None,
         units=[*problem.units, *(b.data.unit for b in problem.blocks)], goodness=quality, residuals=residuals,
-        observation_goodness=own_quality,
+        observation_goodness=own_quality, observations=tuple(o for o, _ in s.layout), entries=tuple(e for _, e in s.layout),
     )
 
 

@@ -16,19 +16,21 @@ from spacefit.scene.names import Name
 
 
 def frame_table(result: Any, frames: Pass | None = None, *, files: Sequence[str | Path] = (),
-                times: Sequence[str] = ()) -> list[dict[str, Any]]:
+                times: Sequence[str] = (), entries: Sequence[int] | None = None) -> list[dict[str, Any]]:
     """Per frame of a pass's fit (:class:`~spacefit.fitting.result.FitResult`): its file, time and
     seconds since the first frame (from ``frames``, or ``files`` and ``times``), the goodness of
     fit of its own pixels (``chi2_dof``, NaN without a known noise, ``misfit``, ``render_noise``),
     and each per-frame parameter's value and standard error (``NAME``, ``NAME.stderr``: the name
-    without ``@k``)."""
+    without ``@k``). ``entries``: the frames' observation indices in the fit (None: every observation
+    of the fit is a frame, in order)."""
     if frames is not None:
         files, times = frames.files, [f.time for f in frames.frames]
-    seconds = elapsed_seconds(times) if times else [math.nan] * len(result.units)
+    entries = list(range(len(result.units))) if entries is None else list(entries)
+    seconds = elapsed_seconds(times) if times else [math.nan] * len(entries)
     rows = []
-    for k in range(len(result.units)):
-        row: dict[str, Any] = {"frame": k, "file": str(files[k]) if k < len(files) else "",
-                               "time": times[k] if times else "", "time_s": seconds[k]}
+    for i, k in enumerate(entries):
+        row: dict[str, Any] = {"frame": i, "file": str(files[i]) if i < len(files) else "",
+                               "time": times[i] if times else "", "time_s": seconds[i]}
         if k < len(result.observation_goodness):
             quality = result.observation_goodness[k]
             row.update({"chi2_dof": quality.chi2_dof, "misfit": quality.misfit, "render_noise": quality.render_noise})

@@ -19,7 +19,8 @@ Python columns). Its columns, in the scene's own vocabulary and units (degrees a
 Each frame's scene is the pass's scene with the frame's values set (:meth:`Pass.scenes`). A joint
 fit frees the materials once and, per frame, the nuisances the user names
 (:meth:`Pass.per_frame`: ``target.attitude_x_deg`` -> ``target.attitude_x_deg@k`` for each frame
-k); :func:`frame_table` and :func:`plot_frames` give the per-frame values and goodness of fit
+k), or, the pass given whole as one observation (:class:`~spacefit.fitting.observations.passes.PassObservation`),
+the fit frees them; :func:`frame_table` and :func:`plot_frames` give the per-frame values and goodness of fit
 against time (a fit's report writes them as ``frames.csv`` and ``frames.png``).
 """
 

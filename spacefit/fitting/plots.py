@@ -80,20 +80,26 @@ def plot_residuals(result: FitResult, *, ax: Axes | Sequence[Axes] | None = None
     """
     n = max(len(result.residuals), 1)
     axes = panels(ax, fig, n, (4.0 * n, 3.6), lambda f: f.subplots(1, n, squeeze=False))
-    cmap = colormaps["RdBu_r"].with_extremes(bad="0.6")
-    for k, (panel, residual) in enumerate(zip(axes, result.residuals)):
-        mean = np.asarray(residual, dtype=float).mean(axis=-1)
-        box = image_box([result.renders[k] if k < len(result.renders) else mean], crop)
-        image = show_image(panel, np.ma.masked_invalid(mean), box, cmap=cmap, **_centred(cropped(mean, box)))
-        panel.set_title(f"reference - fit, observation {k}", fontsize=9)
-        panel.figure.colorbar(image, ax=panel, extend="both", label=f"reference - fit ({unit_label(_unit(result, k))})")
-        panel.set_xticks([])
-        panel.set_yticks([])
+    for k, panel in enumerate(axes[:len(result.residuals)]):
+        residual_panel(panel, result, k, crop)
     if not result.residuals:
         axes[0].text(0.5, 0.5, "no residuals: the fit has no render", ha="center", va="center", transform=axes[0].transAxes)
     if ax is None:
         axes[0].figure.suptitle(f"{result.status}", fontsize=9)
     return axes
+
+
+def residual_panel(panel: Axes, result: FitResult, k: int, crop: bool = True) -> None:
+    """Image ``k``'s residual, reference - model (:attr:`FitResult.residuals`), the channels' mean in
+    its unit on a diverging colour map centred at 0 (grey where not fitted), into ``panel``."""
+    mean = np.asarray(result.residuals[k], dtype=float).mean(axis=-1)
+    box = image_box([result.renders[k] if k < len(result.renders) else mean], crop)
+    cmap = colormaps["RdBu_r"].with_extremes(bad="0.6")
+    image = show_image(panel, np.ma.masked_invalid(mean), box, cmap=cmap, **_centred(cropped(mean, box)))
+    panel.set_title(f"reference - fit, observation {k}", fontsize=9)
+    panel.figure.colorbar(image, ax=panel, extend="both", label=f"reference - fit ({unit_label(_unit(result, k))})")
+    panel.set_xticks([])
+    panel.set_yticks([])
 
 
 def _unit(result: FitResult, k: int) -> str:

@@ -24,7 +24,7 @@ from spacefit.errors import InputError, InputTypeError, check_choice, check_name
 from spacefit.executors import Executor
 from spacefit.fitting.frames import FrameSpec, InProcess, batched_renders, frame_part_image, run_frames, share_views
 from spacefit.fitting.nuisance import image_model as image_model_of
-from spacefit.fitting.observations.base import Block, ValueObservation
+from spacefit.fitting.observations.base import Block, Reported, Sequenced, ValueObservation
 from spacefit.fitting.observations.image import Observation, check_reference, image_residual, in_unit_of
 from spacefit.fitting.params import Bijection, FreeParameters, bijection
 from spacefit.rendering.bridge import seeds_array
@@ -197,6 +197,8 @@ class Setup:
     scene: Scene | None  # the first image's scene, as given (None: no image)
     noise_given: bool = False  # every observation has a sensor or a sigma: the residuals are in units of the noise
     image_names: frozenset[str] = frozenset()  # the free names (without ``@k``) the images' renderers see
+    # each observation as given (a pass whole) and its indices in the per-observation lists (FitResult.entries)
+    layout: tuple[tuple[Reported, tuple[int, ...]], ...] = ()
 
 
 def fit_scene(scene: Scene, free: Sequence[str]) -> Scene:
@@ -246,7 +248,8 @@ class FitRender:
 
 
 def setup(
-    observations: Observation | ValueObservation | Sequence[Observation | ValueObservation], free: Sequence[str], *,
+    observations: Observation | ValueObservation | Sequenced | Sequence[Observation | ValueObservation | Sequenced],
+    free: Sequence[str], *,
     start: Mapping[str, float] | None = None, loss: str = "pixel", render: FitRender = FitRender(), wrinkle_coordinates: str = "rms",
     executor: Executor | None = None,
 ) -> Setup:
@@ -257,16 +260,18 @@ def setup(
     Raises:
         InputError: for any bad input.
     """
-    kinds = (Observation, ValueObservation)
+    kinds = (Observation, ValueObservation, Sequenced)
     if not isinstance(observations, (*kinds, Sequence)):
         raise InputTypeError(f"`observations` must be an sf.Observation(scene, reference) or a list of them, got {quote(observations)}.")
     observations = [observations] if isinstance(observations, kinds) else list(observations)
     if not observations:
-        raise InputError("`observations` must hold at least one observation (an image, a table, a light curve).")
+        raise InputError("`observations` must hold at least one observation (an image, a pass, a table, a light curve).")
     for i, obs in enumerate(observations):
         if not isinstance(obs, kinds):
             raise InputTypeError(f"`observations[{i}]` must be an sf.Observation(scene, reference) or another observation "
                                  f"kind (spacefit.fitting.observations), got {quote(obs)}.")
+    observations, per_frame, layout = expanded(observations)
+    free = [*free, *per_frame] if per_frame and not isinstance(free, str) else free
     if not isinstance(render, FitRender):
         raise InputTypeError(f"`render` must be an sf.FitRender(spp=..., seed=...), got {quote(render)}.")
     check_choice("wrinkle_coordinates", wrinkle_coordinates, ("rms", "G"))
@@ -310,7 +315,29 @@ def setup(
     problem = _problem(observations, solver_params, loss, render.spp, render.spp_grad, render.seed, render.seed_grad,
                        render.integrator, executor, blocks, image_names)
     noise_given = all(o.sensor is not None or o.sigma is not None for o in observations) and all(b.noise_known for b in blocks)
-    return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index, given, noise_given, image_names)
+    return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index, given, noise_given, image_names, layout)
+
+
+def expanded(given: Sequence[Observation | ValueObservation | Sequenced]) -> tuple[
+        list[Observation | ValueObservation], list[Name], tuple[tuple[Reported, tuple[int, ...]], ...]]:
+    """The observations with each pass's frames' images in its place (a :class:`~spacefit.fitting.observations.base.Sequenced`:
+    :class:`~spacefit.fitting.observations.passes.PassObservation`), each pass's per-frame free names,
+    and each given observation with its indices in the fit's per-observation lists: the images' (a
+    pass's frames) first, in order, then the value observations'."""
+    flat: list[Observation | ValueObservation] = []
+    names: list[Name] = []
+    images: list[tuple[int, ...] | None] = []
+    for obs in given:
+        first = sum(isinstance(o, Observation) for o in flat)
+        if isinstance(obs, Sequenced):
+            names += obs.names(first)
+            flat += obs.images
+            images.append(tuple(range(first, first + len(obs.images))))
+        else:
+            flat.append(obs)
+            images.append((first,) if isinstance(obs, Observation) else None)
+    after = iter(range(sum(isinstance(o, Observation) for o in flat), len(flat)))
+    return flat, names, tuple((obs, own if own is not None else (next(after),)) for obs, own in zip(given, images))
 
 
 def _own_value(name: str, images: Sequence[Observation], others: Sequence[ValueObservation], image_names: frozenset[str]) -> float:

@@ -7,8 +7,12 @@
   correlation matrix (strict JSON: a non-finite error is null);
 * ``comparison.png``, ``convergence.png``: :func:`~spacefit.fitting.plots.plot_comparison` and
   :func:`~spacefit.fitting.plots.plot_convergence`, saved through matplotlib's Agg canvas;
-* ``frames.csv``, ``frames.png`` (a pass, whose ``inputs`` give each observation's time): per frame its
-  time, goodness of fit and own parameters, and their plot against time (:mod:`spacefit.fitting.passes`);
+* ``frames.csv``, ``frames.png`` (a pass: a :class:`~spacefit.fitting.observations.passes.PassObservation`,
+  or images whose ``inputs`` give each one's time): per frame its time, goodness of fit and own
+  parameters, and their plot against time (:mod:`spacefit.fitting.pass_report`; ``frames<i>`` for the
+  i-th observation where a fit has several passes);
+* ``observation<i>.png``: the figure of the i-th observation of another kind (a table, a light curve),
+  its :meth:`~spacefit.fitting.observations.base.Reported.plot`;
 * ``residuals.fits``: :attr:`FitResult.residuals`, reference - model, one image extension per
   observation (``EXTNAME`` ``OBS<k>``, (channels, height, width) float32 in the unit ``BUNIT`` of the
   observation, NaN where not fitted; rows stored top row first, ``ROWORDER = 'TOP-DOWN'``), and
@@ -31,6 +35,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from astropy.io import fits
 
 from spacefit.errors import InputTypeError, check_flag, check_name_list, check_path, check_type, quote
+from spacefit.fitting.observations.image import Observation
+from spacefit.fitting.observations.passes import PassObservation
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.solvers import Status
 from spacefit.fitting.pass_report import frame_table, plot_frames, write_frame_table
@@ -79,7 +85,15 @@ def write_fit_report(
         _save(plot_convergence(result), stage / "convergence.png")
         write_residuals(stage / "residuals.fits", result)
         _save(plot_residuals(result), stage / "residuals.png")
-        if inputs is not None and inputs.get("times"):  # a pass: its frames against time
+        passes = [i for i, o in enumerate(result.observations) if isinstance(o, PassObservation)]
+        for i, (observation, entries) in enumerate(zip(result.observations, result.entries)):
+            if i in passes:  # its frames against time
+                own = "" if len(passes) == 1 else str(i)
+                write_frame_table(stage / f"frames{own}.csv", frame_table(result, observation.frames, entries=entries))
+                _save(observation.plot(result, entries), stage / f"frames{own}.png")
+            elif not isinstance(observation, Observation):  # an image's figures are comparison.png and residuals.png
+                _save(observation.plot(result, entries), stage / f"observation{i}.png")
+        if not passes and inputs is not None and inputs.get("times"):  # a pass given as its frames' images
             rows = frame_table(result, files=inputs["references"], times=inputs["times"])
             write_frame_table(stage / "frames.csv", rows)
             _save(plot_frames(rows), stage / "frames.png")
@@ -100,8 +114,9 @@ def write_residuals(path: Path, result: FitResult) -> None:
 
 def format_result(result: FitResult) -> str:
     """The verdict (first line), the goodness of fit, the fitted values with standard errors (marked
-    where they are not valid: a misfit's are too small), chi^2 per part of each image and, in a joint
-    fit, each other observation's goodness of fit, and the warnings, as lines of text."""
+    where they are not valid: a misfit's are too small), each observation's own part
+    (:meth:`~spacefit.fitting.observations.base.Reported.report`: an image's chi^2 per part, a pass's
+    frames, a table's or a light curve's goodness of fit), and the warnings, as lines of text."""
     check_type("result", result, FitResult, "an sf.FitResult (what sf.fit returns)")
     derived = [name for name in result.extras if f"{name}.stderr" in result.extras]  # e.g. wrinkles.rms_m
     width = max(len(name) for name in (*result.names, *derived))
@@ -119,14 +134,8 @@ def format_result(result: FitResult) -> str:
     for name in derived:
         value, stderr = result.extras[name], result.extras[f"{name}.stderr"]
         lines.append(f"  {name:<{width}} = {value:.6g} +/- {stderr:.3g}  (derived)")
-    for k, parts in enumerate(result.parts):
-        spread = {name: row[key] for name, row in parts.items() for key in ("chi2_per_value", "r2_over_render_noise") if key in row}
-        if spread:
-            what = "chi^2 per value" if result.goodness is not None and result.goodness.noise_known else "mean r^2 / render noise"
-            lines.append(f"  {what}, observation {k}: " + ", ".join(f"{name} {value:.3g}" for name, value in spread.items()))
-    if len(result.observation_goodness) > 1:  # a joint fit: each value observation's own goodness (the images' by part above)
-        for k in range(len(result.parts), len(result.observation_goodness)):
-            lines.append(f"  observation {k} ({result.units[k]} values): {result.observation_goodness[k].line()}")
+    for observation, entries in zip(result.observations, result.entries):  # each observation's own part
+        lines += observation.report(result, entries)
     lines += [f"warning: {w}" for w in result.warnings]
     return "\n".join(lines)
 

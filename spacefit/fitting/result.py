@@ -59,6 +59,10 @@ class FitResult:
         observation_goodness: per observation, the goodness of fit of its own residuals (the
             pixel loss), counting as free the shared parameters and its own (``name@k``; a value
             observation those it depends on).
+        observations: the observations as the fit was given them (an image, a pass, a table, a light
+            curve), each of which reports its part (:class:`~spacefit.fitting.observations.base.Reported`).
+        entries: per one of ``observations``, its indices into the per-observation lists above (an
+            image's one, a pass's one per frame, the images' first, then the value observations').
     """
 
     names: tuple[str, ...]
@@ -83,6 +87,8 @@ class FitResult:
     goodness: Goodness | None = None
     residuals: list[np.ndarray] = field(default_factory=list)
     observation_goodness: list[Goodness] = field(default_factory=list)
+    observations: tuple[Any, ...] = ()
+    entries: tuple[tuple[int, ...], ...] = ()
 
     def _repr_html_(self) -> str:
         return fit_html(self)
@@ -127,13 +133,13 @@ class FitResult:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no images); ``nuisances`` names the nuisance parameters among ``names``."""
-        d = dataclasses.asdict(self)
-        d.pop("renders")
-        d.pop("residuals")
-        d.pop("scene")
+        d = dataclasses.asdict(dataclasses.replace(self, renders=[], residuals=[], scene=None, observations=()))
+        for name in ("renders", "residuals", "scene", "observations"):
+            d.pop(name)
         d["goodness"] = None if self.goodness is None else self.goodness.to_dict()
         d["observation_goodness"] = [q.to_dict() for q in self.observation_goodness]
         d["nuisances"] = list(self.nuisances)
         d["correlation"] = np.asarray(self.correlation).tolist()
         d["status"] = self.status.value
+        d["entries"] = [list(e) for e in self.entries]
         return d

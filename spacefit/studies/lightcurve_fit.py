@@ -21,7 +21,7 @@ import numpy as np
 from spacefit.errors import InputError, check_array, check_choice, check_count, check_range, check_type, check_vector, quote
 from spacefit.fitting.loop import fit
 from spacefit.fitting.result import FitResult
-from spacefit.fitting.observations.base import Block, MeasuredValues, ValueObservation
+from spacefit.fitting.observations.base import Block, MeasuredValues
 from spacefit.fitting.problem import INDEPENDENT_SEED_OFFSET
 from spacefit.geometry.frames import pixel_solid_angles
 from spacefit.rendering.derivatives import render_function
@@ -30,10 +30,11 @@ from spacefit.scene.parameters import IMAGE, available, scene_value
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
 from spacefit.studies.lightcurve import MAGNITUDE_PER_LN, SUN_MAGNITUDES
+from spacefit.studies.lightcurve_kind import LightCurveKind
 
 
 @dataclass(frozen=True, eq=False)
-class RenderedLightCurve(ValueObservation):
+class RenderedLightCurve(LightCurveKind):
     """Observed magnitudes of a rendered target at given geometries.
 
     Attributes:
@@ -127,6 +128,15 @@ class RenderedLightCurve(ValueObservation):
             return scale * jnp.stack([jnp.sum(jnp.mean(image(jnp.concatenate([y, g.astype(y.dtype)])), axis=-1) * omega) for g in at])
 
         return Block(MeasuredValues(data, sigma, True, "W m^-2", "light curve"), model, known, rendered=True)
+
+    def zero_point(self) -> tuple[float, float]:
+        """The sun's magnitude in the band (:attr:`sun_magnitude` or the band's) and the scene sun's irradiance."""
+        return SUN_MAGNITUDES[self.band] if self.sun_magnitude is None else self.sun_magnitude, self.scene.sun.irradiance_w_m2
+
+    def abscissa(self, count: int) -> tuple[np.ndarray, str]:
+        """Each point's first geometry value (:attr:`geometry`)."""
+        key = self.geometry[0]
+        return np.array([float(p[key]) for p in self.points]), key
 
 
 def fit_light_curve(

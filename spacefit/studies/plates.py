@@ -32,13 +32,15 @@ import numpy as np
 from spacefit.errors import InputError, check_choice, check_count, check_name_list, check_range, check_type, check_vector, quote
 from spacefit.fitting.loop import fit
 from spacefit.fitting.result import FitResult
-from spacefit.fitting.observations.base import Block, MeasuredValues, ValueObservation
+from spacefit.fitting.observations.base import Block, MeasuredValues
 from spacefit.fitting.params import Bijection, bijection
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.materials import Material, MaterialModel
 from spacefit.materials.brdf import brdf
 from spacefit.materials.registry import with_material_values
 from spacefit.precision import float64
+from spacefit.studies.lightcurve import SUN_MAGNITUDES
+from spacefit.studies.lightcurve_kind import LightCurveKind
 from spacefit.studies.observing import LN_PER_MAGNITUDE, LightCurveObservations, irradiance_of, magnitude_of
 
 
@@ -173,7 +175,7 @@ def plate_parameters(plates: Sequence[Plate]) -> tuple[str, ...]:
 
 
 @dataclass(frozen=True, eq=False)
-class PlateLightCurve(ValueObservation):
+class PlateLightCurve(LightCurveKind):
     """Observed magnitudes of a target of flat plates, the light-curve kind of observation
     (:mod:`spacefit.fitting.observations`) whose model is :func:`plates_irradiance`.
 
@@ -255,6 +257,15 @@ class PlateLightCurve(ValueObservation):
             return plates_irradiance(plates, sun, observer, obs.range_m, sun_irradiance, values)
 
         return Block(measured, lambda x, j: predict(x), tuple(free[i] for i, _ in known))
+
+    def zero_point(self) -> tuple[float, float]:
+        """The band's sun magnitude and :attr:`sun_irradiance_w_m2`."""
+        return SUN_MAGNITUDES[self.observations.band], self.sun_irradiance_w_m2
+
+    def abscissa(self, count: int) -> tuple[np.ndarray, str]:
+        """The solar phase angle (between the sun and the observer) of each fitted magnitude, degrees."""
+        obs = self.observations.subset(~self.observations.in_shadow)
+        return np.degrees(np.arccos(np.clip(np.sum(obs.sun * obs.observer, axis=1), -1.0, 1.0))), "solar phase angle (deg)"
 
 
 def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, free: Sequence[str], *,

@@ -9,13 +9,19 @@ free, and a fit's default start), and, for an ordered set of free names, builds 
 floor, a light curve's irradiances), ln(model / data) / sigma_rel with sigma_rel the relative error
 (:class:`MeasuredValues`); without stated errors sigma is 1 and the fit's covariance scales them by
 their mean square (:func:`spacefit.fitting.uncertainty.covariance`).
+
+Every kind, images and passes included, also keeps the contract of :class:`Reported`: its part of a
+fit's report (:meth:`Reported.report`, lines of :func:`~spacefit.fitting.report.format_result`) and its
+figure (:meth:`Reported.plot`), read from the fit's result at the entries that are its own
+(:attr:`~spacefit.fitting.result.FitResult.entries`).
 """
 
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
 
 import jax
 import jax.numpy as jnp
@@ -23,6 +29,8 @@ import numpy as np
 
 from spacefit.errors import InputError
 from spacefit.fitting.params import Bijection, bijection
+from spacefit.fitting.result import FitResult
+from spacefit.scene.names import Name
 
 # a model of the data: (the fit's free values, physical; the seed index j: 0 the fit's, 1 an
 # independent one, more further ones) -> the predicted values, in the data's unit
@@ -95,6 +103,30 @@ class Block:
         return self.data.residual(model)
 
 
+@runtime_checkable
+class Reported(Protocol):
+    """What every kind of observation reports of a fit: ``entries`` are its own indices into the
+    result's per-observation lists (``renders``, ``residuals``, ``units``, ``observation_goodness``:
+    an image's one, a pass's one per frame, a value observation's one)."""
+
+    def report(self, result: FitResult, entries: Sequence[int]) -> list[str]:
+        """Its lines of the fit's report (indented, no verdict: the fit's own lines give it)."""
+
+    def plot(self, result: FitResult, entries: Sequence[int], *, ax: Any = None, fig: Any = None) -> np.ndarray:
+        """Its figure of the fit into ``ax`` or ``fig`` (:mod:`spacefit.plotting`): the array of axes drawn."""
+
+
+@runtime_checkable
+class Sequenced(Reported, Protocol):
+    """An observation made of images (a pass, :class:`~spacefit.fitting.observations.passes.PassObservation`):
+    the fit's set-up puts its images in its place and frees its per-image names."""
+
+    images: Sequence[Any]
+
+    def names(self, first: int) -> list[Name]:
+        """Its per-image free names when its first image is the fit's observation ``first``."""
+
+
 class ValueObservation(ABC):
     """An observation whose data are a vector of values predicted from named parameter values."""
 
@@ -123,3 +155,40 @@ class ValueObservation(ABC):
         values: dict[str, jax.Array] = {n: jnp.asarray(self.start(n)) for n in own}
         values.update({n: x[i] for i, n in enumerate(free) if n in own})
         return values
+
+    def report(self, result: FitResult, entries: Sequence[int]) -> list[str]:
+        """Its goodness of fit, and how many values it has in which unit (:class:`Reported`)."""
+        k = entries[0]
+        head = f"  observation {k} ({result.units[k]} values)"
+        if k < len(result.observation_goodness):
+            return [f"{head}: {result.observation_goodness[k].line()}"]
+        return [f"{head}: {len(result.residuals[k]) if k < len(result.residuals) else 'no'} residuals"]
+
+    def abscissa(self, count: int) -> tuple[np.ndarray, str]:
+        """What its ``count`` values are plotted against and the axis label: by default their index."""
+        return np.arange(count, dtype=float), "value"
+
+    def shown(self, values: np.ndarray, unit: str) -> tuple[np.ndarray, str, str]:
+        """Its values in ``unit`` as its figure shows them, their axis label and the axis's scale
+        (:func:`~spacefit.plotting.plot_values`): by default as they are, on a linear scale."""
+        return np.asarray(values, dtype=float), f"value ({unit})", "linear"
+
+    def plot(self, result: FitResult, entries: Sequence[int], *, ax: Any = None, fig: Any = None) -> np.ndarray:
+        """Its data and model (:attr:`~spacefit.fitting.result.FitResult.renders`) against
+        :meth:`abscissa` as :meth:`shown`, and below the residual data - model
+        (:attr:`~spacefit.fitting.result.FitResult.residuals`; for magnitudes, observed - predicted
+        magnitude) (:func:`~spacefit.plotting.plot_values`)."""
+        from spacefit.plotting import plot_values  # deferred: matplotlib, which only figures need
+
+        k = entries[0]
+        unit = result.units[k] if k < len(result.units) else ""
+        model = np.asarray(result.renders[k], dtype=float) if k < len(result.renders) else np.zeros(0)
+        residual = np.asarray(result.residuals[k], dtype=float) if k < len(result.residuals) else np.zeros(0)
+        data = model + residual
+        x = self.abscissa(len(model))
+        shown_data, label, scale = self.shown(data, unit)
+        shown_model = self.shown(model, unit)[0]
+        difference, what = ((shown_data - shown_model, "observed - predicted (mag)") if scale == "magnitude"
+                            else (residual, f"data - model ({unit})"))
+        return plot_values(x[0], shown_data, shown_model, difference, xlabel=x[1], ylabel=label, difference_label=what,
+                           scale=scale, title=f"observation {k}", ax=ax, fig=fig)

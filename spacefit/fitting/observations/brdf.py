@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_count, check_name_list, check_range, check_type
 from spacefit.fitting.brdf_table import BRDF_MODELS, DEFAULT_START, BRDFTable
@@ -86,6 +87,14 @@ class BRDFTableObservation(ValueObservation):
             return m.evaluate({n.rsplit(".", 1)[-1]: v for n, v in self.values_of(free, x).items()}, wi, wo)
 
         return Block(data, lambda x, j: predict(x), tuple(n for n in free if n in self.parameters()))
+
+    def abscissa(self, count: int) -> tuple[np.ndarray, str]:
+        """Each value's angle of observation: the zenith angle of ``wo``, degrees."""
+        return np.degrees(np.arccos(np.clip(self.table.wo[:, 2], -1.0, 1.0))), "angle of observation from the normal (deg)"
+
+    def shown(self, values: np.ndarray, unit: str) -> tuple[np.ndarray, str, str]:
+        """The BRDF values as they are, on a log scale (they span the specular peak to the diffuse floor)."""
+        return np.asarray(values, dtype=float), f"BRDF of part {self.part} ({unit})", "log"
 
 
 def fit_brdf_table(table: BRDFTable, model: str = "lambert+ggx", *, relative_error: float | None = None,

@@ -7,7 +7,7 @@ module holds what is each image's own: its checks, its unit and its residuals.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -19,6 +19,7 @@ import numpy as np
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_array, check_count, negative_pixels, quote
 from spacefit.formation import dn_fn, noise_variance_dn
 from spacefit.fitting.losses import residual_fn
+from spacefit.fitting.result import FitResult
 from spacefit.geometry.frames import Intrinsics
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
@@ -123,6 +124,31 @@ class Observation:
         relative = None if flat is None else check_flat(flat, image.data.shape, f"the flat field of {image.path!r}")
         return cls(scene, image.data, sensor=measured, mask=image.mask, sensor_sources=sources, notes=notes, flat=relative,
                    render_spp=render_spp)
+
+    def report(self, result: FitResult, entries: Sequence[int]) -> list[str]:
+        """Its chi^2 per value (the noise known) or mean r^2 over the render noise, by part
+        (:attr:`~spacefit.fitting.result.FitResult.parts`; :class:`~spacefit.fitting.observations.base.Reported`)."""
+        return [line for k in entries for line in part_lines(result, k)]
+
+    def plot(self, result: FitResult, entries: Sequence[int], *, ax: Any = None, fig: Any = None) -> np.ndarray:
+        """Its residual image, reference - model (:func:`~spacefit.fitting.plots.residual_panel`)."""
+        from spacefit.fitting.plots import residual_panel  # deferred: matplotlib, which only figures need
+        from spacefit.plotting import panels  # deferred: matplotlib, which only figures need
+
+        axes = panels(ax, fig, 1, (4.0, 3.6), lambda f: f.subplots(1, 1, squeeze=False))
+        if entries[0] < len(result.residuals):
+            residual_panel(axes[0], result, entries[0])
+        return axes
+
+
+def part_lines(result: FitResult, k: int) -> list[str]:
+    """Image ``k``'s goodness of fit by part, one line (none where the fit has no such row)."""
+    parts = result.parts[k] if k < len(result.parts) else {}
+    spread = {name: row[key] for name, row in parts.items() for key in ("chi2_per_value", "r2_over_render_noise") if key in row}
+    if not spread:
+        return []
+    what = "chi^2 per value" if result.goodness is not None and result.goodness.noise_known else "mean r^2 / render noise"
+    return [f"  {what}, observation {k}: " + ", ".join(f"{name} {value:.3g}" for name, value in spread.items())]
 
 
 def _check_sigma(sigma: np.ndarray, shape: tuple[int, ...]) -> None:
