@@ -103,3 +103,18 @@ def test_a_new_kind_is_fitted_with_the_closed_form_least_squares_errors(sigma):
     np.testing.assert_allclose([result.values["parts.a.kd"], result.values["parts.b.kd"]], beta, atol=1e-6)
     np.testing.assert_allclose([result.stderr["parts.a.kd"], result.stderr["parts.b.kd"]], expected, rtol=1e-4)
     assert result.goodness.noise_known == (sigma is not None) and result.success, sf.format_result(result)
+
+
+def test_a_joint_fit_writes_its_folder_with_each_kind_in_its_own_figure(observations, tmp_path):
+    """The report of an image and a light curve: the image's residuals in residuals.fits / .png (one
+    extension, the image's), the light curve's observed and predicted magnitudes in observation1.png."""
+    from astropy.io import fits
+
+    image, light_curve = observations
+    joint = sf.fit([image, light_curve], ["parts.plate.kd"], max_steps=20)
+    out = sf.write_fit_report(tmp_path / "fit", joint, [image.reference])
+    assert {"fit.json", "uncertainty.json", "residuals.fits", "residuals.png", "comparison.png", "observation1.png"} <= {
+        p.name for p in out.iterdir()}
+    with fits.open(out / "residuals.fits") as hdus:
+        assert [h.name for h in hdus[1:]] == ["OBS0"]
+        np.testing.assert_array_equal(np.moveaxis(hdus[1].data, 0, -1), joint.residuals[0].astype(np.float32))

@@ -70,19 +70,20 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
 
 def plot_residuals(result: FitResult, *, ax: Axes | Sequence[Axes] | None = None, fig: Figure | SubFigure | None = None,
                    crop: bool = True) -> np.ndarray:
-    """Each observation's residual, reference - model (:attr:`FitResult.residuals`), the channels'
-    mean in the observation's unit on a diverging colour map centred at 0 (grey where not fitted),
+    """Each image's residual, reference - model (:attr:`FitResult.residuals`; a table's or a light
+    curve's are its own figure), the channels' mean in the observation's unit on a diverging colour map centred at 0 (grey where not fitted),
     cropped to the target (found in the fit's render) and a margin unless ``crop=False``; into
     ``ax`` (one per observation) or ``fig``.
 
     Returns:
-        the array of axes drawn (one per observation; one that says so where the fit has no residuals).
+        the array of axes drawn (one per image; one that says so where the fit has no image residuals).
     """
-    n = max(len(result.residuals), 1)
+    images = result.images
+    n = max(len(images), 1)
     axes = panels(ax, fig, n, (4.0 * n, 3.6), lambda f: f.subplots(1, n, squeeze=False))
-    for k, panel in enumerate(axes[:len(result.residuals)]):
+    for k, panel in zip(images, axes):
         residual_panel(panel, result, k, crop)
-    if not result.residuals:
+    if not images:
         axes[0].text(0.5, 0.5, "no residuals: the fit has no render", ha="center", va="center", transform=axes[0].transAxes)
     if ax is None:
         axes[0].figure.suptitle(f"{result.status}", fontsize=9)

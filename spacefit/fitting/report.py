@@ -101,9 +101,11 @@ def write_fit_report(
 
 
 def write_residuals(path: Path, result: FitResult) -> None:
-    """The residual images, reference - model, as FITS: one extension per observation (none without renders)."""
+    """The residual images, reference - model, as FITS: one extension per image ``OBSk``, k the
+    observation's index (none without renders; a table's or a light curve's are drawn in observation<k>.png)."""
     hdus: list[fits.PrimaryHDU | fits.ImageHDU] = [fits.PrimaryHDU()]
-    for k, residual in enumerate(result.residuals):
+    for k in result.images:
+        residual = result.residuals[k]
         header = fits.Header()
         header["BUNIT"] = FITS_UNITS.get(result.units[k], "W m-2 sr-1")
         header["ROWORDER"] = ("TOP-DOWN", "the first row stored is the top of the image")

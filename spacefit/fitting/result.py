@@ -103,6 +103,12 @@ class FitResult:
             raise InputError("this fit has no fitted scene: its values are not finite.")
         return mitsuba_scene_dict(self.scene)
 
+    @property
+    def images(self) -> list[int]:
+        """The indices of the observations that are images (their residuals are (h, w, channels));
+        a table's or a light curve's residuals are a vector."""
+        return [k for k, r in enumerate(self.residuals) if np.ndim(r) == 3]
+
     def uncertainty(self) -> dict[str, Any]:
         """The values, standard errors and correlation matrix (rows and columns in ``names`` order),
         with each parameter's unit: JSON-ready (``uncertainty.json`` of a fit's folder).
