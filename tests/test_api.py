@@ -46,6 +46,17 @@ def test_import_leaves_jax_x64_as_it_was():
     assert out.stdout.strip() == "False"
 
 
+def test_import_leaves_numpy_printing_as_it_was():
+    """A fresh process: importing what reads observation files (colour-science sets NumPy's legacy
+    printing at import) leaves NumPy's print options, and so every number written with str(), as they
+    were: with legacy printing a float64 prints 12 digits, and files written through it lose precision."""
+    code = ("import numpy as np; before = np.get_printoptions(); import spacefit as sf; sf.read_image; "
+            "assert np.get_printoptions() == before, np.get_printoptions(); print(str(np.float64(1313793.1220847701)))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "1313793.1220847701"
+
+
 def test_spacefit_gives_the_callers_mitsuba_variant_back(tmp_path):
     """Mitsuba has one global variant: after sf.render, a Renderer's methods and a render function's
     value and gradient, the caller's own variant is set again, and the caller's Mitsuba code runs in it;

@@ -32,8 +32,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-import colour
 import numpy as np
+
+with np.printoptions():  # colour-science sets NumPy's legacy (1.13) printing when imported: the caller's options stay
+    import colour
 
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_choice, check_count, check_path, check_range, negative_pixels, quote
 from spacefit.imageio.fits import ROW_ORDERS, fits_unit, header_sensor, iso_time, read_fits
