@@ -1,7 +1,8 @@
 """Triangle meshes of the target's parts: validation, import through trimesh, binary STL export.
 
-A part is a :class:`PartMesh` in the object frame (metres). Files are STL (binary or ASCII), PLY or
-OBJ: either one file per part, or one file whose face groups / objects are the parts.
+A part is a :class:`PartMesh` in the object frame (metres). Files are STL (binary or ASCII), PLY,
+OBJ or glTF (``.gltf`` / ``.glb``): either one file per part, or one file whose named groups are the
+parts (OBJ ``g`` / ``o``, glTF nodes, ASCII STL ``solid`` names; a PLY has none).
 """
 
 from __future__ import annotations
@@ -28,7 +29,7 @@ def _trimesh() -> ModuleType:
     return trimesh
 
 
-MESH_SUFFIXES = (".stl", ".ply", ".obj")
+MESH_SUFFIXES = (".stl", ".ply", ".obj", ".gltf", ".glb")
 # A triangle whose area is below this fraction of the squared longest edge of its part is
 # degenerate: it has no usable normal for shading or for displacing wrinkles.
 DEGENERATE_REL_AREA = 1e-12
@@ -134,20 +135,48 @@ def load_part(name: str, path: str | Path) -> PartMesh:
     return validate_part(name, _from_trimesh(loaded))
 
 
+def _declared_groups(path: Path) -> list[str]:
+    """The group and object names an OBJ file declares (``g`` / ``o`` lines), with or without faces."""
+    if path.suffix.lower() != ".obj":
+        return []
+    names = []
+    with open(path, encoding="utf-8", errors="replace") as f:
+        for line in f:
+            if line[:2] in ("g ", "o ") and line[2:].strip():
+                names.append(line[2:].strip())
+    return list(dict.fromkeys(names))
+
+
 def load_grouped(path: str | Path) -> dict[str, PartMesh]:
-    """Load one file whose named face groups or objects are the parts (OBJ ``g`` / ``o``)."""
-    scene = _load(Path(path), force="scene", split_groups=True, split_objects=True)
+    """Load one file whose named groups are the parts (OBJ ``g`` / ``o``, glTF nodes, ASCII STL
+    ``solid`` names); empty for a file without named groups (a PLY, a binary STL, an OBJ without
+    ``g`` / ``o``), whose whole mesh trimesh names after the file.
+
+    Raises:
+        InputError: for a file without triangles, or a named group without triangles (naming the
+            file's groups).
+    """
+    path = Path(path)
+    scene = _load(path, force="scene", split_groups=True, split_objects=True)
     parts: dict[str, PartMesh] = {}
+    empty: list[str] = []
     for node in scene.graph.nodes_geometry:
         transform, geom_name = scene.graph[node]
         mesh = scene.geometry[geom_name]
         if not isinstance(mesh, _trimesh().Trimesh) or len(mesh.faces) == 0:
+            empty.append(str(geom_name))
             continue
         mesh = mesh.copy()
         mesh.apply_transform(transform)
         parts[str(geom_name)] = validate_part(str(geom_name), _from_trimesh(mesh))
     if not parts:
         raise InputError(f"mesh file {str(path)!r} holds no triangles.")
+    if list(parts) == [path.name]:  # no named groups: trimesh names the whole mesh after the file
+        return {}
+    empty += [name for name in _declared_groups(path) if name not in parts and name not in empty]
+    if empty:
+        raise InputError(f"mesh file {str(path)!r}: group(s) {', '.join(map(repr, empty))} hold no triangles; "
+                         f"its groups with triangles: {', '.join(sorted(parts))}. Remove the empty group(s) or give them faces.")
     return parts
 
 

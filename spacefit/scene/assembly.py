@@ -32,7 +32,7 @@ from spacefit.geometry.wm import wm_n_max, wm_phases
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION, Refinement, displace, fold_fraction, refine
 from spacefit.materials import Material
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import NEAR_CLIP_M, WrinkleSettings, check_scene, deg2rad
+from spacefit.scene.sections import NEAR_CLIP_M, PartSettings, WrinkleSettings, check_scene, deg2rad
 from spacefit.scene.lod import LodChoice, choose_model
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need
@@ -201,23 +201,34 @@ def _builtin_lander() -> tuple[dict[str, PartMesh], str]:
 
 
 def _load_parts(scene: Scene, cache: dict[str, str]) -> dict[str, PartMesh]:
-    if scene.target.mesh in ("builtin", ""):
+    builtin = scene.target.mesh in ("builtin", "")
+    if builtin:
         source, cache["lander"] = _builtin_lander()
     else:
         source = load_grouped(scene.target.mesh)
-    parts: dict[str, PartMesh] = {}
-    for name, spec in scene.parts.items():
-        if spec.file:
-            parts[name] = load_part(name, spec.file)
-        elif name in source:
-            parts[name] = source[name]
-        else:
-            where = "the built-in lander" if scene.target.mesh in ("builtin", "") else repr(scene.target.mesh)
-            raise InputError(
-                f"part {name!r} has no `file` and {where} has no part of that name; "
-                f"it has: {', '.join(sorted(source))}."
-            )
-    return parts
+    check_part_names(scene.target.mesh if not builtin else "", source, scene.parts)
+    return {name: load_part(name, spec.file) if spec.file else source[name] for name, spec in scene.parts.items()}
+
+
+def check_part_names(mesh: str, groups: Mapping[str, PartMesh], parts: Mapping[str, PartSettings]) -> None:
+    """Refuse a scene whose parts and mesh groups differ: a part without its own ``file`` that the mesh
+    lacks (unknown), or a group of a mesh file (``mesh``; ``""`` for the built-in lander) that no part
+    names (missing: it would have no material). The error names the mesh's groups and the parts found."""
+    where = f"the mesh file {mesh!r}" if mesh else "the built-in lander"
+    found = f"the scene's parts: {', '.join(parts) or 'none'}"
+    unknown = [name for name, spec in parts.items() if not spec.file and name not in groups]
+    if unknown and not groups:
+        raise InputError(f"part(s) {', '.join(map(repr, unknown))} have no `file` and {where} has no named groups "
+                         f"(OBJ `g` / `o`, glTF nodes, ASCII STL `solid` names; a PLY or binary STL has none); "
+                         f"{found}. Name the groups in the mesh, or give each part its own file (`parts.<part>.file`).")
+    if unknown:
+        raise InputError(f"part(s) {', '.join(map(repr, unknown))} have no `file` and {where} has no group of that name; "
+                         f"its groups: {', '.join(groups)}; {found}.")
+    missing = [name for name in groups if name not in parts] if mesh else []
+    if missing:
+        raise InputError(f"{where} has group(s) {', '.join(map(repr, missing))} that no part names; its groups: "
+                         f"{', '.join(groups)}; {found}. Add a table per group, e.g. `[parts.{missing[0]}] "
+                         f'material = "white_paint"`.')
 
 
 def _camera(scene: Scene) -> tuple[CameraFrame, Intrinsics]:

@@ -16,6 +16,7 @@ from pathlib import Path
 from typing import Any
 
 from spacefit.errors import InputError, InputTypeError, check_path, quote
+from spacefit.geometry.mesh import load_grouped
 from spacefit.materials import MODELS, make_material
 from spacefit.scene.overrides import Overrides, apply_overrides, section_keys, unknown_key, with_values
 from spacefit.scene.schema import Scene
@@ -114,7 +115,13 @@ def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scen
         sections["target"] = dataclasses.replace(target, mesh=str((base / target.mesh).resolve()))
     user_parts = data.get("parts", {})
     if not builtin and not user_parts:
-        raise InputError("`parts` must list the parts of the mesh file `target.mesh`, each with a `material`.")
+        try:
+            groups = list(load_grouped(sections["target"].mesh))
+            have = f"its groups: {', '.join(groups)}" if groups else "it has no named groups (give each part a `file`)"
+        except InputError as err:
+            have = f"it cannot be read ({err})"
+        raise InputError(f"`parts` must list the parts of the mesh file `target.mesh` ({sections['target'].mesh!r}), "
+                         f"each with a `material`; {have}; parts found: none.")
     scene = Scene(**sections, parts=_parts(user_parts, builtin, base))
     if "pixel_pitch_mm" in data.get("camera", {}):
         check_pitch_with_fov(scene, data["camera"]["pixel_pitch_mm"])
