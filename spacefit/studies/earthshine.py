@@ -77,6 +77,12 @@ class Earth:
         check_range("earth.n", self.n, 0.0, 1e4, lo_open=True)
         check_range("earth.radius_m", self.radius_m, 0.0, lo_open=True, unit="m")
 
+    def describe(self) -> str:
+        """Its surface in words, for reports: ``Lambert Earth, albedo 0.3`` or the Phong-type values."""
+        if self.ks == 0:
+            return f"Lambert Earth, albedo {self.kd:g}"
+        return f"Phong-type Earth, kd {self.kd:g}, ks {self.ks:g}, n {self.n:g}"
+
     def brdf(self, normal: np.ndarray, sun: np.ndarray, towards: np.ndarray) -> np.ndarray:
         """f_E (sr^-1) at unit ``normal`` (..., 3) for the unit directions towards the sun and the viewer."""
         mirrored = 2.0 * np.sum(sun * normal, axis=-1, keepdims=True) * normal - sun

@@ -6,7 +6,8 @@ target's frame.
 * ``general``: CSV with ``#`` comment lines and a header naming the columns ``time_utc`` (ISO 8601),
   ``magnitude``, optionally ``magnitude_sigma`` (mag), and the geometry, either in the target's frame,
   ``sun_x, sun_y, sun_z`` and ``observer_x, observer_y, observer_z`` (directions from the target,
-  normalised on reading) and ``range_m``, or seen from a site (the ``site`` argument),
+  normalised on reading) and ``range_m`` (optionally ``earth_x, earth_y, earth_z``, the Earth's
+  centre from the target, m, for Earthshine), or seen from a site (the ``site`` argument),
   ``altitude_deg``, ``azimuth_deg`` (of the target, azimuth from north through east) and
   ``height_m`` (the target's height above the Earth's surface).
 * ``pomenis``: the Starlink v1.5 observations (Fankhauser, Askari & Tyson 2023):
@@ -53,6 +54,8 @@ from spacefit.studies.orbit import EARTH_RADIUS_M, Orbit, Site, altaz_to_enu, in
 POMENIS_COLUMNS = ("observation_time", "satellite_height", "satellite_altitude", "satellite_azimuth", "ab_magnitude")
 TARGET_FRAME_COLUMNS = ("sun_x", "sun_y", "sun_z", "observer_x", "observer_y", "observer_z", "range_m")
 SITE_COLUMNS = ("altitude_deg", "azimuth_deg", "height_m")
+# The Earth's centre from the target in its frame (m), optional beside TARGET_FRAME_COLUMNS.
+EARTH_COLUMNS = ("earth_x", "earth_y", "earth_z")
 # The greatest height above the Earth a light curve may give (m): the Moon's distance, twice.
 MAX_HEIGHT_M = 8e8
 
@@ -70,6 +73,8 @@ class LightCurveObservations:
         time_utc: ISO times, or None.
         source: where they came from.
         refused: the file's rows not used, with the reason (:class:`RefusedRow`).
+        earth_m: (n, 3) the Earth's centre seen from the target, in its frame (m; what Earthshine,
+            :mod:`spacefit.studies.earthshine`, needs), or None where the file gives no position.
     """
 
     magnitude: np.ndarray
@@ -82,6 +87,7 @@ class LightCurveObservations:
     time_utc: np.ndarray | None
     source: str
     refused: tuple[RefusedRow, ...] = ()
+    earth_m: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         check_type("source", self.source, str, "a string")
@@ -104,6 +110,11 @@ class LightCurveObservations:
         shadow = check_array("in_shadow", self.in_shadow, "a bool array")
         if shadow.shape != (n,):
             raise InputError(f"`in_shadow` must be {n} booleans, got shape {shadow.shape}.")
+        if self.earth_m is not None:
+            fields["earth_m"] = _finite("earth_m", self.earth_m, 2, n)
+            if fields["earth_m"].shape[1:] != (3,) or np.any(np.linalg.norm(fields["earth_m"], axis=1) <= EARTH_RADIUS_M):
+                raise InputError(f"`earth_m` must be None or ({n}, 3) positions of the Earth's centre, each farther than its "
+                                 f"radius {EARTH_RADIUS_M:g} m, got {quote(self.earth_m)}.")
         if self.time_utc is not None and np.shape(self.time_utc) != (n,):
             raise InputError(f"`time_utc` must be None or {n} times, got {quote(self.time_utc)}.")
         for name, value in fields.items():
@@ -116,7 +127,8 @@ class LightCurveObservations:
         """These observations at ``rows`` (indices or a boolean mask)."""
         pick = (lambda a: None if a is None else a[rows])
         return LightCurveObservations(self.magnitude[rows], pick(self.magnitude_sigma), self.band, self.sun[rows], self.observer[rows],
-                                      self.range_m[rows], self.in_shadow[rows], pick(self.time_utc), self.source, self.refused)
+                                      self.range_m[rows], self.in_shadow[rows], pick(self.time_utc), self.source, self.refused,
+                                      pick(self.earth_m))
 
 
 def _finite(name: str, value: object, ndim: int, n: int | None = None) -> np.ndarray:
@@ -214,7 +226,8 @@ def _from_table(rows: list[dict[str, str]], kind: str, band: str | None, site: S
         if all(c in header for c in TARGET_FRAME_COLUMNS):
             numbers = _columns(rows, TARGET_FRAME_COLUMNS)
             shadow = np.array([r.get("in_shadow", "False").strip().lower() == "true" for r in rows])
-            geometry = ("frame", numbers[:, 0:3], numbers[:, 3:6], numbers[:, 6], shadow)
+            earth = _columns(rows, EARTH_COLUMNS) if all(c in header for c in EARTH_COLUMNS) else np.full((len(rows), 3), np.nan)
+            geometry = ("frame", numbers[:, 0:3], numbers[:, 3:6], numbers[:, 6], shadow, earth)
         elif all(c in header for c in SITE_COLUMNS):
             numbers = _columns(rows, SITE_COLUMNS)
             geometry = ("site", numbers[:, 0], numbers[:, 1], numbers[:, 2])
@@ -232,20 +245,21 @@ def _from_table(rows: list[dict[str, str]], kind: str, band: str | None, site: S
     sigma = None if sigma is None else sigma[keep]
     geometry = (geometry[0], *(g[keep] for g in geometry[1:]))
     if geometry[0] == "frame":
-        sun, observer, range_m, in_shadow = geometry[1:]
+        sun, observer, range_m, in_shadow, earth_m = geometry[1:]
+        earth_m = None if np.isnan(earth_m).any() else earth_m
     else:
         if site is None:
             raise InputError("the geometry is seen from a site: give the observer's `site` (sf.Site(latitude_deg, longitude_deg, height_m)).")
         if orbit is not None:
-            sun, observer, range_m, in_shadow = _in_target_frame(*_orbit_geometry(orbit, site, times)[:4])
+            sun, observer, range_m, in_shadow, earth_m = _in_target_frame(*_orbit_geometry(orbit, site, times)[:4])
         else:
             altitude, azimuth, height = geometry[1:]
             if np.any((altitude < -90) | (altitude > 90)) or np.any((height <= 0) | (height > MAX_HEIGHT_M)):
                 raise InputError(f"altitudes must lie in [-90, 90] deg and heights in (0, {MAX_HEIGHT_M:g}] m.")
             position, range_m = target_positions(altitude, azimuth, height)
-            sun, observer, range_m, in_shadow = _in_target_frame(*_site_geometry(site, times, position, range_m))
+            sun, observer, range_m, in_shadow, earth_m = _in_target_frame(*_site_geometry(site, times, position, range_m))
     return LightCurveObservations(magnitude, sigma, band, sun, observer, range_m, in_shadow, times, source,
-                                  tuple(refused[k] for k in sorted(refused)))
+                                  tuple(refused[k] for k in sorted(refused)), earth_m)
 
 
 def _site_geometry(site: Site, times: np.ndarray, position: np.ndarray,
@@ -265,11 +279,13 @@ def _orbit_geometry(orbit: Orbit, site: Site, times: np.ndarray) -> tuple[np.nda
 
 
 def _in_target_frame(position: np.ndarray, sun: np.ndarray, towards_observer: np.ndarray,
-                     range_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The sun's and the observer's directions in the target's frame, the range, and the Earth's shadow."""
+                     range_m: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The sun's and the observer's directions in the target's frame, the range, the Earth's shadow,
+    and the Earth's centre from the target in its frame (``position`` is the target's from it)."""
     frame = nadir_sun_frame(position, sun)
     in_shadow = in_earth_shadow(position, sun)
-    return np.einsum("nij,nj->ni", frame, sun), np.einsum("nij,nj->ni", frame, towards_observer), range_m, in_shadow
+    to_frame = (lambda v: np.einsum("nij,nj->ni", frame, v))
+    return to_frame(sun), to_frame(towards_observer), range_m, in_shadow, to_frame(-position)
 
 
 # How far an orbit's geometry may stray from a SCORE file's SatChecker columns (deg) without a warning.
@@ -303,14 +319,15 @@ def _from_score(score: ScoreRows, orbit: Orbit | None, source: str) -> LightCurv
                 warnings.warn(f"{source}: the orbit's {name.split('_deg')[0]} differs from SatChecker's {name} by up to "
                               f"{off[k]:.3g} deg (row {score.rows[k]}: {computed[name][k]:.4f} against {given[name][k]:.4f}); "
                               f"the geometry used is the orbit's.", stacklevel=3)
-    sun, observer, range_m, in_shadow = _in_target_frame(*values)
+    sun, observer, range_m, in_shadow, earth_m = _in_target_frame(*values)
     return LightCurveObservations(score.magnitude, score.magnitude_sigma, score.band, sun, observer, range_m,
-                                  in_shadow | score.dark, score.times_utc, source, score.refused)
+                                  in_shadow | score.dark, score.times_utc, source, score.refused, earth_m)
 
 
 def write_light_curve(observations: LightCurveObservations, path: str | Path) -> Path:
     """Write ``observations`` as an ECSV table (the general format's columns in the target's frame,
-    ``in_shadow``, the time as an astropy Time column ``time``; ``band`` and ``source`` in its
+    ``in_shadow``, ``earth_x, earth_y, earth_z`` where the Earth's position is known, the time as an
+    astropy Time column ``time``; ``band`` and ``source`` in its
     metadata) that :func:`read_light_curve` reads back and astropy's ``TimeSeries.read`` reads.
 
     Raises:
@@ -325,6 +342,8 @@ def write_light_curve(observations: LightCurveObservations, path: str | Path) ->
         columns["magnitude_sigma"] = o.magnitude_sigma
     columns |= {f"{name}_{axis}": v[:, k] for name, v in (("sun", o.sun), ("observer", o.observer)) for k, axis in enumerate("xyz")}
     columns |= {"range_m": o.range_m, "in_shadow": o.in_shadow}
+    if o.earth_m is not None:
+        columns |= {name: o.earth_m[:, k] for k, name in enumerate(EARTH_COLUMNS)}
     return write_ecsv(path, columns, {"band": o.band, "source": o.source})
 
 

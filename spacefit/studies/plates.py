@@ -17,6 +17,12 @@ Observed magnitudes of such a target are an observation (:class:`PlateLightCurve
 registered ones of the plates' materials (``parts.array.kd``, ``parts.chassis.alpha`` for both
 roughnesses, ``parts.array.scale`` a table's factor) and the target's attitude angles;
 :func:`fit_plates` is the convenience that fits it alone.
+
+Given an :class:`~spacefit.studies.earthshine.Earth`, the irradiance is the sun's plus Earthshine's:
+the same plates lit by the sunlit Earth (:func:`~spacefit.studies.earthshine.earthshine_sources`
+once per set of observations, from their ``earth_m``, the sphere at the observing geometry's radius
+:data:`~spacefit.studies.orbit.EARTH_RADIUS_M`; :func:`~spacefit.studies.earthshine.earthshine_irradiance`
+with the plates' BRDF at the fitted values and attitude). Without one the model is the sun's alone.
 """
 
 from __future__ import annotations
@@ -39,9 +45,11 @@ from spacefit.materials import Material, MaterialModel
 from spacefit.materials.brdf import brdf
 from spacefit.materials.registry import with_material_values
 from spacefit.precision import float64
+from spacefit.studies.earthshine import EARTH_MEAN_RADIUS_M, Earth, EarthshineSources, earthshine_irradiance, earthshine_sources
 from spacefit.studies.lightcurve import SUN_MAGNITUDES
 from spacefit.studies.lightcurve_kind import LightCurveKind
 from spacefit.studies.observing import LN_PER_MAGNITUDE, LightCurveObservations, irradiance_of, magnitude_of
+from spacefit.studies.orbit import EARTH_RADIUS_M
 
 
 @dataclass(frozen=True)
@@ -118,13 +126,73 @@ def plates_irradiance(plates: Sequence[Plate], sun: np.ndarray, observer: np.nda
 
 
 @float64
-def predict_magnitudes(plates: Sequence[Plate], observations: LightCurveObservations, sun_irradiance_w_m2: float = 1360.0) -> np.ndarray:
-    """The plates' magnitudes in the observations' band at their geometry (inf in the Earth's shadow or unlit)."""
+def predict_magnitudes(plates: Sequence[Plate], observations: LightCurveObservations, sun_irradiance_w_m2: float = 1360.0, *,
+                       earth: Earth | None = None, shares: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
+    """The plates' magnitudes in the observations' band at their geometry (inf in the Earth's shadow or
+    unlit), lit by the sun and, given an ``earth``, by Earthshine (module docstring). With ``shares``
+    also each magnitude's Earthshine share of the irradiance, E_earthshine / (E_sun + E_earthshine)
+    (nan where dark).
+
+    Raises:
+        InputError: an ``earth`` for observations without the Earth's position (``earth_m`` None).
+    """
     plates = _check_plates(plates)
     _check_observations(observations)
     check_range("sun_irradiance_w_m2", sun_irradiance_w_m2, 0.0, lo_open=True, unit="W m^-2")
-    e = np.asarray(plates_irradiance(plates, observations.sun, observations.observer, observations.range_m, sun_irradiance_w_m2))
-    return magnitude_of(np.where(observations.in_shadow, 0.0, e), observations.band, sun_irradiance_w_m2)
+    check_type("shares", shares, bool, "True or False")
+    sources = _sources(earth, observations)
+    direct, earthshine = (np.asarray(e) for e in _light(plates, observations, sun_irradiance_w_m2, {}, sources))
+    total = np.where(observations.in_shadow, 0.0, direct if sources is None else direct + earthshine)
+    magnitudes = magnitude_of(total, observations.band, sun_irradiance_w_m2)
+    if not shares:
+        return magnitudes
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return magnitudes, np.where(total > 0, np.where(observations.in_shadow, 0.0, earthshine) / total, np.nan)
+
+
+def _sources(earth: Earth | None, observations: LightCurveObservations) -> EarthshineSources | None:
+    """The lit Earth seen from the observations' targets (None without an ``earth``), the sphere at
+    the observing geometry's radius :data:`~spacefit.studies.orbit.EARTH_RADIUS_M`."""
+    checked = _check_earth(earth, observations)
+    if checked is None or observations.earth_m is None:
+        return None
+    return earthshine_sources(observations.earth_m, observations.sun, dataclasses.replace(checked, radius_m=EARTH_RADIUS_M))
+
+
+def _check_earth(earth: object, observations: LightCurveObservations) -> Earth | None:
+    """``earth``: None, or an :class:`Earth` of the default radius for observations that carry ``earth_m``."""
+    check_type("earth", earth, (Earth, type(None)), "an sf.Earth or None")
+    if earth is None:
+        return None
+    if earth.radius_m not in (EARTH_MEAN_RADIUS_M, EARTH_RADIUS_M):
+        raise InputError(f"`earth.radius_m` is {earth.radius_m:g} m, but the observations' geometry puts the Earth's surface at "
+                         f"{EARTH_RADIUS_M:g} m: leave it at its default (Earthshine takes the geometry's radius).")
+    if observations.earth_m is None:
+        raise InputError(f"light curve {observations.source} has no Earth position (`earth_m` is None), which Earthshine needs: "
+                         "read it from a site's altitude, azimuth and height, a SCORE file or an `orbit`, give the columns "
+                         "earth_x, earth_y, earth_z, or pass earth=None.")
+    return earth
+
+
+def _light(plates: Sequence[Plate], observations: LightCurveObservations, sun_irradiance_w_m2: float,
+           values: Mapping[str, Mapping[str, jax.Array]], sources: EarthshineSources | None) -> tuple[jax.Array, jax.Array]:
+    """The sun's and Earthshine's irradiance at the observers (W m^-2; Earthshine 0 without ``sources``),
+    the plates at ``values`` (per plate name; ``target``'s attitude angles turn them; JAX-traceable)."""
+    sun, observer = jnp.asarray(observations.sun), jnp.asarray(observations.observer)
+    turn = None
+    if TARGET in values:
+        turn = _rotation([values[TARGET].get(a, 0.0) for a in ATTITUDE])
+        sun, observer = sun @ turn, observer @ turn
+    direct = plates_irradiance(plates, sun, observer, observations.range_m, sun_irradiance_w_m2, values)
+    if sources is None:
+        return direct, jnp.zeros_like(direct)
+
+    def reflect(wi: jax.Array, wo: jax.Array) -> jax.Array:
+        if turn is not None:
+            wi, wo = wi @ turn, wo @ turn
+        return plates_irradiance(plates, wi, wo, jnp.ones(len(wi)), 1.0, values)
+
+    return direct, earthshine_irradiance(reflect, sources, observations.observer, observations.range_m, sun_irradiance_w_m2)
 
 
 def _check_plates(plates: object) -> list[Plate]:
@@ -186,6 +254,7 @@ class PlateLightCurve(LightCurveKind):
     :func:`spacefit.geometry.frames.attitude_matrix`). The residual is the magnitude's,
     (m_model - m_obs) / sigma_m, as ln(E_model / E_obs) / (0.4 ln 10 sigma_m); without stated
     errors the errors are scaled by the residuals. Observations in the Earth's shadow are left out.
+    Given an ``earth``, the model adds Earthshine (module docstring) and the report says its share.
 
     Attributes:
         plates: the target's plates, distinct names (none ``target``).
@@ -193,12 +262,14 @@ class PlateLightCurve(LightCurveKind):
         sun_irradiance_w_m2: the sun's irradiance at the target, W m^-2.
         bounds: narrower (low, high) ranges of some parameters (``{"parts.chassis.eta": (1.0, 100.0)}``:
             a dielectric's physical range) within their registered ones; the plates' values must lie inside.
+        earth: the Earth lighting the target too (Earthshine; the observations must carry ``earth_m``), or None.
     """
 
     plates: Sequence[Plate]
     observations: LightCurveObservations
     sun_irradiance_w_m2: float = 1360.0
     bounds: Mapping[str, tuple[float, float]] = field(default_factory=dict)
+    earth: Earth | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "plates", tuple(_check_plates(self.plates)))
@@ -206,6 +277,7 @@ class PlateLightCurve(LightCurveKind):
         check_range("sun_irradiance_w_m2", self.sun_irradiance_w_m2, 0.0, lo_open=True, unit="W m^-2")
         if not (~self.observations.in_shadow).any():
             raise InputError(f"every observation of {self.observations.source} is in the Earth's shadow: there is nothing to fit.")
+        _check_earth(self.earth, self.observations)
         check_type("bounds", self.bounds, Mapping, "a dict of (low, high) ranges by parameter name")
         for name, given in self.bounds.items():
             check_choice("bounds", name, self.parameters())
@@ -240,23 +312,38 @@ class PlateLightCurve(LightCurveKind):
         data = irradiance_of(obs.magnitude, obs.band, self.sun_irradiance_w_m2)
         sigma = None if obs.magnitude_sigma is None else LN_PER_MAGNITUDE * obs.magnitude_sigma
         measured = MeasuredValues(data, sigma, True, "W m^-2", f"light curve {obs.source}")
-        known = [(i, _split(n)) for i, n in enumerate(free) if n in self.parameters()]
-        plates, sun_irradiance = self.plates, self.sun_irradiance_w_m2
-        material = {p.name: p.material for p in plates}
+        known = tuple(n for n in free if n in self.parameters())
+        sources = _sources(self.earth, obs)
 
         @jax.jit
         def predict(x: jax.Array) -> jax.Array:
-            values: dict[str, dict[str, jax.Array]] = {}
-            for i, (plate, field_name) in known:
-                for f in (field_name,) if plate == TARGET else _tied(material[plate], field_name):
-                    values.setdefault(plate, {})[f] = x[i]
-            sun, observer = jnp.asarray(obs.sun), jnp.asarray(obs.observer)
-            if TARGET in values:
-                turn = _rotation([values[TARGET].get(a, 0.0) for a in ATTITUDE])
-                sun, observer = sun @ turn, observer @ turn
-            return plates_irradiance(plates, sun, observer, obs.range_m, sun_irradiance, values)
+            direct, earthshine = self._light(obs, dict(zip(known, (x[free.index(n)] for n in known))), sources)
+            return direct if sources is None else direct + earthshine
 
-        return Block(measured, lambda x, j: predict(x), tuple(free[i] for i, _ in known))
+        return Block(measured, lambda x, j: predict(x), known)
+
+    def _light(self, obs: LightCurveObservations, named: Mapping[str, jax.Array | float],
+               sources: EarthshineSources | None) -> tuple[jax.Array, jax.Array]:
+        """The sun's and Earthshine's irradiance of ``obs`` with the parameters ``named`` set (:func:`_light`)."""
+        material = {p.name: p.material for p in self.plates}
+        values: dict[str, dict[str, jax.Array | float]] = {}
+        for name, value in named.items():
+            plate, field_name = _split(name)
+            for f in (field_name,) if plate == TARGET else _tied(material[plate], field_name):
+                values.setdefault(plate, {})[f] = value
+        return _light(self.plates, obs, self.sun_irradiance_w_m2, values, sources)
+
+    def report(self, result: FitResult, entries: Sequence[int]) -> list[str]:
+        """Its goodness of fit, and whether Earthshine was included, with its share of the fitted
+        irradiances at the fitted values (median and largest)."""
+        if self.earth is None:
+            return [*super().report(result, entries), "    Earthshine: not included"]
+        obs = self.observations.subset(~self.observations.in_shadow)
+        named = {n: v for n, v in result.values.items() if n in self.parameters()}
+        direct, earthshine = (np.asarray(e) for e in self._light(obs, named, _sources(self.earth, obs)))
+        share = 100.0 * earthshine / (direct + earthshine)
+        return [*super().report(result, entries), f"    Earthshine: included ({self.earth.describe()}), share median "
+                                                  f"{np.median(share):.3g} %, max {np.max(share):.3g} %"]
 
     def zero_point(self) -> tuple[float, float]:
         """The band's sun magnitude and :attr:`sun_irradiance_w_m2`."""
@@ -270,16 +357,17 @@ class PlateLightCurve(LightCurveKind):
 
 def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, free: Sequence[str], *,
                bounds: Mapping[str, tuple[float, float]] | None = None, sun_irradiance_w_m2: float = 1360.0,
-               max_steps: int = 200) -> FitResult:
+               max_steps: int = 200, earth: Earth | None = None) -> FitResult:
     """Fit the plates' registered values ``free`` (``parts.<plate>.<field>``, ``target.attitude_z_deg``;
     :class:`PlateLightCurve`) to the observed magnitudes outside the Earth's shadow with
     :func:`spacefit.fit`, from the plates' values. ``bounds`` narrows a free value's range within its
-    registered one (:attr:`PlateLightCurve.bounds`); the start must lie inside."""
+    registered one (:attr:`PlateLightCurve.bounds`); the start must lie inside. ``earth`` adds
+    Earthshine to the model (:attr:`PlateLightCurve.earth`)."""
     check_type("bounds", bounds, (Mapping, type(None)), "a dict of (low, high) ranges by free name, or None")
     names = list(check_name_list("free", free))
     for name in bounds or {}:
         check_choice("bounds", name, names)
-    curve = PlateLightCurve(plates, observations, sun_irradiance_w_m2, dict(bounds or {}))
+    curve = PlateLightCurve(plates, observations, sun_irradiance_w_m2, dict(bounds or {}), earth)
     check_count("max_steps", max_steps, optional=False)
     return fit(curve, names, max_steps=max_steps)
 
