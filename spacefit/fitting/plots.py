@@ -37,8 +37,8 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
         crop: show the target and a margin (found in the fit's render, else the reference); False:
             the whole film.
     Returns:
-        the (observations, 3) array of axes drawn: the fit at the reference's sRGB exposure, the
-        residual's RGB mean in that unit on a diverging colour map centred at 0.
+        The axes drawn, an array of one row of 3 per image (the fit at the reference's sRGB exposure,
+        the residual's RGB mean in that unit on a diverging colour map centred at 0).
     """
     n = len(references)
     axes = panels(ax, fig, 3 * n, (10.5, 3.2 * n), lambda f: f.subplots(n, 3, squeeze=False)).reshape(n, 3)
