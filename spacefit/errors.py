@@ -158,12 +158,16 @@ def read_text_rows(name: str, value: object, what: str) -> list[str]:
     are neither blank nor ``#`` comments; a file that is not UTF-8 text is refused.
 
     Raises:
-        InputError: not a path, or not text.
-        OSError: the file cannot be read.
+        InputError: not a path, no such file, a folder, or not text.
+        OSError: the file cannot be read otherwise (permissions, a device error).
     """
     path = check_path(name, value)
     try:
         text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise InputError(f"`{name}`: no {what} file {str(path)!r}.") from None
+    except IsADirectoryError:
+        raise InputError(f"`{name}`: {str(path)!r} is a folder, not a {what} file.") from None
     except UnicodeDecodeError as err:
         raise InputError(f"{what} {str(path)!r} is not a text file (UTF-8): byte {err.start} is {err.object[err.start:err.start + 1]!r}.") from None
     if "\0" in text:

@@ -149,6 +149,9 @@ def prepare_output(out_dir: str | Path, command: str, *, overwrite: bool = False
     if not str(out_dir).strip():
         raise InputError("`--out` must name a folder, got an empty string.")
     out = check_writable(out_dir)
+    if out.is_symlink() and not out.exists():
+        raise InputError(f"`--out` {str(out)!r} is a symbolic link to {os.readlink(out)!r}, which does not exist: spacefit writes "
+                         "into a folder, never through a dangling link; remove the link or choose another folder.")
     names, _ = RESULT_FILES[command]
     for path in inputs:
         p = Path(path)

@@ -60,6 +60,9 @@ from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
 if TYPE_CHECKING:
     from jaxtyping import Bool, Float
 
+MAX_EXPOSURE_S = 86400.0
+"""The longest exposure a sensor takes (one day): longer is a unit slip (ms or us read as s), and past about
+1e290 s a fit's expected DN overflows to inf."""
 SATURATION_MARGIN_READ_SIGMA = 3.0
 """A pixel within this many read-noise sigmas of the full well's DN counts as saturated."""
 SATURATED_WARNING_FRACTION = 1e-3
@@ -74,7 +77,7 @@ class Sensor:
     an illustrative 14-bit scientific CMOS detector whose full well saturates before its ADC does.
 
     Attributes:
-        exposure_time_s: integration time t (s), > 0.
+        exposure_time_s: integration time t (s), in (0, :data:`MAX_EXPOSURE_S`].
         aperture_diameter_m: entrance-pupil diameter D (m), > 0; area pi D^2 / 4.
         wavelength_m: effective wavelength (m) of each channel, or one for all: sets the photon
             energy h c / lambda and the Airy pattern's width.
@@ -116,7 +119,7 @@ class Sensor:
 
         if isinstance(self.bit_depth, bool) or not isinstance(self.bit_depth, (int, np.integer)) or not 1 <= self.bit_depth <= 32:
             raise InputError(f"`Sensor.bit_depth` must be an integer in [1, 32], got {self.bit_depth!r}.")
-        check("exposure_time_s", 0.0, lo_open=True, unit="s")
+        check("exposure_time_s", 0.0, MAX_EXPOSURE_S, lo_open=True, unit="s")
         check("aperture_diameter_m", 0.0, lo_open=True, unit="m")
         check("quantum_efficiency", 0.0, 1.0, lo_open=True)
         check("gain_dn_per_electron", 0.0, lo_open=True, unit="DN per electron")

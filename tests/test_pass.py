@@ -150,7 +150,7 @@ def test_a_frames_pose_jacobian_column_matches_central_differences():
 def tiny_frames(n: int, spp: int = 2) -> list[FrameSpec]:
     """n frames of the arc at 12 x 12 px, each frame's attitude about x free."""
     base = sf.load_scene("spacefit/synthetic/panels.toml", {"render.resolution": [12, 12], "camera.pixel_pitch_mm": 200.0})
-    scenes = sf.Pass.from_columns({"file": ["f.exr"] * n, "time": list(range(n)), **columns_of(sf.arc_pass(n))}).scenes(base)
+    scenes = sf.Pass.from_columns({"file": [f"f{k}.exr" for k in range(n)], "time": list(range(n)), **columns_of(sf.arc_pass(n))}).scenes(base)
     return [FrameSpec(s, ("parts.legs.kd", "target.attitude_x_deg"), (0.0, 0.5), spp, spp, "prb", shared_view=True) for s in scenes]
 
 

@@ -34,7 +34,7 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, InputTypeError, quote
+from spacefit.errors import InputError, InputTypeError, check_path, quote
 from spacefit.scene.names import Name
 from spacefit.scene.parameters import PER_OBSERVATION
 from spacefit.scene.schema import Scene
@@ -98,7 +98,7 @@ class Pass:
         """
         from astropy.table import Table  # deferred: astropy's table readers (0.3 s), which only a pass needs
 
-        path = Path(path)
+        path = check_path("path", path)
         formats = {".csv": "ascii.csv", ".ecsv": "ascii.ecsv", ".fits": "fits", ".fit": "fits", ".fts": "fits"}
         if path.suffix.lower() not in formats:
             raise InputError(f"frame table {str(path)!r}: the extension must be one of {', '.join(formats)} (CSV, ECSV, FITS table).")
@@ -118,7 +118,8 @@ class Pass:
 
         Raises:
             InputError: no ``file`` or ``time`` column, columns of unequal lengths, a time that is
-                neither ISO 8601 nor a number, a component column without its siblings.
+                neither ISO 8601 nor a number, a component column without its siblings, two frames
+                with the same file or the same time.
         """
         names = list(columns.colnames if hasattr(columns, "colnames") else columns)
         for name in names:
@@ -136,12 +137,21 @@ class Pass:
         times = [_time_text(cols[TIME][i], i) for i in range(n)]
         seconds = elapsed_seconds(times)
         base = Path(base_dir)
+        files = [base / str(_plain(cols[FILE][i])).strip() for i in range(n)]
+        for what, keys in (("file", [str(f) for f in files]), ("time", seconds)):
+            first: dict[Any, int] = {}
+            for i, key in enumerate(keys):
+                if key in first:
+                    raise InputError(f"frames {first[key]} and {i} of the frame table have the same {what} "
+                                     f"{str(files[i]) if what == 'file' else times[i]!r}: a frame is one observation, listed once "
+                                     "(a repeated frame would count its pixels twice); remove one of the rows.")
+                first[key] = i
         values = _scene_columns(cols, n)
         frames = []
         for i in range(n):
             sensor = {name[len(SENSOR_PREFIX):]: _plain(cols[name][i]) for name in cols if name.startswith(SENSOR_PREFIX)}
             mask = base / str(_plain(cols[MASK][i])).strip() if MASK in cols else None
-            frames.append(Frame(base / str(_plain(cols[FILE][i])).strip(), times[i], seconds[i], values[i], sensor, mask))
+            frames.append(Frame(files[i], times[i], seconds[i], values[i], sensor, mask))
         return cls(tuple(frames))
 
     @property

@@ -114,6 +114,9 @@ def header_sensor(header: fits.Header, data: np.ndarray, path: Path) -> dict[str
                              "make them agree or give the value (`sensor=`, --sensor-value).")
         if present:
             key, value = present[0]
+            if field == "gain_dn_per_electron" and not float(value) > 0.0:
+                raise InputError(f"{str(path)!r}: the FITS header's {key} = {value!r} electrons per DN must be > 0 (the ADC's gain is its "
+                                 "inverse); correct it or give the value (`sensor=`, --sensor-value).")
             found[field] = (1.0 / float(value) if field == "gain_dn_per_electron" else float(value), f"header {key}")
     if data.dtype.kind in "ui":
         found["bit_depth"] = (8 * data.dtype.itemsize, "header BITPIX")

@@ -34,6 +34,12 @@ from spacefit.errors import InputError, check_array, check_range, check_type, qu
 
 GENERAL_COLUMNS = ("theta_i_deg", "phi_i_deg", "theta_o_deg", "phi_o_deg", "brdf_sr")
 
+# The largest BRDF a table may hold (sr^-1): a goniometer's aperture of about 0.1 deg resolves a specular peak of
+# at most about 1 / (pi 0.0017^2) ~ 1e5 sr^-1. A measured table can come close: the Starlink chassis's peaks at
+# 8.0e3 sr^-1 and its solar array's at 5.3e4 (data/starlink-v1p5), so the limit is the resolvable one, not 1e3;
+# it refuses unit slips (1e30).
+MAX_BRDF_SR = 1e5
+
 
 @dataclass(frozen=True)
 class BRDFTable:
@@ -55,8 +61,8 @@ class BRDFTable:
     def __post_init__(self) -> None:
         check_type("source", self.source, str, "a string")
         value = check_array("value", self.value).astype(float)
-        if value.ndim != 1 or not np.all(np.isfinite(value)) or np.any(value < 0):
-            raise InputError(f"`value` must be a vector of finite BRDF values >= 0 sr^-1, got {quote(self.value)}.")
+        if value.ndim != 1 or not np.all(np.isfinite(value)) or np.any(value < 0) or np.any(value > MAX_BRDF_SR):
+            raise InputError(f"`value` must be a vector of finite BRDF values in [0, {MAX_BRDF_SR:g}] sr^-1, got {quote(self.value)}.")
         for name in ("wi", "wo"):
             w = check_array(name, getattr(self, name)).astype(float)
             if w.shape != (len(value), 3) or not np.all(np.isfinite(w)):
@@ -120,6 +126,10 @@ def read_brdf_table(path: str | Path, *, floor: float = 0.0) -> BRDFTable:
             raise InputError(f"BRDF table {path}: sigma_sr must be positive, row {int(np.argmax(sigma <= 0)) + 1} has {sigma[sigma <= 0][0]:g}.")
     if np.any(value < 0):
         raise InputError(f"BRDF table {path}: a BRDF is never negative, row {int(np.argmax(value < 0)) + 1} has {value[value < 0][0]:g} sr^-1.")
+    if np.any(value > MAX_BRDF_SR):
+        row = int(np.argmax(value > MAX_BRDF_SR))
+        raise InputError(f"BRDF table {path}: row {row + 1} has {value[row]:g} sr^-1, above {MAX_BRDF_SR:g} sr^-1, the sharpest "
+                         "specular peak a goniometer resolves (a unit slip? the BRDF in sr^-1, not percent or 1/deg^2).")
     keep = np.all(zenith < 90.0, axis=1) & (value > floor)
     if not keep.any():
         raise InputError(f"BRDF table {path}: no value above the floor {floor:g} sr^-1 away from grazing.")

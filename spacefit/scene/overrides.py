@@ -157,6 +157,18 @@ def is_file_key(path: Sequence[str]) -> bool:
             and path[1] in {f.name for f in dataclasses.fields(SECTIONS[path[0]])})
 
 
+# The sun's direction given as a vector and as both its angles: two answers to one question.
+SUN_FORMS = ("sun.direction", "sun.elevation_deg", "sun.azimuth_deg")
+
+
+def check_sun_forms(keys: set[str] | frozenset[str]) -> None:
+    """Refuse ``sun.direction`` given together with both of the sun's angles (one form sets the other:
+    the direction would be dropped); a direction with one angle keeps the other angle the direction's."""
+    if set(SUN_FORMS) <= set(keys):
+        raise InputError("`sun.direction` and both `sun.elevation_deg` and `sun.azimuth_deg` are given: each sets the sun's "
+                         "direction, so one would be dropped; give the direction or the two angles.")
+
+
 def with_values(scene: SceneLike, values: Mapping[str, Any]) -> SceneLike:
     """A checked copy of ``scene`` with values set by name: scene-file keys and parameter names
     (module docstring), a mapping of names to Python values.
@@ -171,6 +183,7 @@ def with_values(scene: SceneLike, values: Mapping[str, Any]) -> SceneLike:
     if not isinstance(values, Mapping):
         raise InputTypeError(f"`values` must be a mapping of dotted scene keys to values, got {quote(values)}.")
     items = override_items(values)
+    check_sun_forms({".".join(path) for path, _ in items})
     sections: dict[str, dict[str, Any]] = {}
     parts: dict[str, dict[str, Any]] = {}
     parameters: dict[str, Any] = {}

@@ -18,7 +18,7 @@ from typing import Any
 from spacefit.errors import InputError, InputTypeError, check_path, quote
 from spacefit.geometry.mesh import load_grouped
 from spacefit.materials import MODELS, make_material
-from spacefit.scene.overrides import Overrides, apply_overrides, section_keys, unknown_key, with_values
+from spacefit.scene.overrides import Overrides, apply_overrides, check_sun_forms, section_keys, unknown_key, with_values
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import DEFAULT_PRESETS, SECTIONS, PartSettings, TargetSettings
 from spacefit.scene.optics import check_pitch_with_fov
@@ -101,6 +101,8 @@ def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scen
     base = Path(base_dir)
     sections: dict[str, Any] = {}
     later: dict[str, Any] = {}
+    if isinstance(data.get("sun"), Mapping):
+        check_sun_forms({f"sun.{key}" for key in data["sun"]})
     for key, value in data.items():
         if key not in [*SECTIONS, "parts"]:
             first = next(iter(value), None) if isinstance(value, Mapping) else None
