@@ -27,12 +27,12 @@ import numpy as np
 from spacefit.errors import InputError, check_direction
 from spacefit.geometry.cache import cached
 from spacefit.geometry.frames import CameraFrame, Intrinsics, object_to_world, project
-from spacefit.geometry.mesh import PartMesh, load_grouped, load_part
+from spacefit.geometry.mesh import PartMesh, load_grouped, load_part, validate_part
 from spacefit.geometry.wm import wm_n_max, wm_phases
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION, Refinement, displace, fold_fraction, refine
 from spacefit.materials import Material
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import NEAR_CLIP_M, PartSettings, WrinkleSettings, check_scene, deg2rad
+from spacefit.scene.sections import NEAR_CLIP_M, NO_MESH, PartSettings, WrinkleSettings, check_scene, deg2rad
 from spacefit.scene.lod import LodChoice, choose_model
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need
@@ -201,22 +201,28 @@ def _builtin_lander() -> tuple[dict[str, PartMesh], str]:
 
 
 def _load_parts(scene: Scene, cache: dict[str, str]) -> dict[str, PartMesh]:
-    builtin = scene.target.mesh in ("builtin", "")
-    if builtin:
+    source: dict[str, PartMesh] = {}
+    if scene.target.mesh in ("builtin", ""):
         source, cache["lander"] = _builtin_lander()
-    else:
+    elif scene.target.mesh != NO_MESH:
         source = load_grouped(scene.target.mesh)
-    check_part_names(scene.target.mesh if not builtin else "", source, scene.parts)
-    return {name: load_part(name, spec.file) if spec.file else source[name] for name, spec in scene.parts.items()}
+    check_part_names(scene.target.mesh if scene.target.mesh not in ("builtin", "") else "", source, scene.parts)
+    return {name: load_part(name, spec.file) if spec.file else validate_part(name, spec.shape.mesh())
+            if spec.shape is not None else source[name] for name, spec in scene.parts.items()}
 
 
 def check_part_names(mesh: str, groups: Mapping[str, PartMesh], parts: Mapping[str, PartSettings]) -> None:
     """Refuse a scene whose parts and mesh groups differ: a part without its own ``file`` that the mesh
     lacks (unknown), or a group of a mesh file (``mesh``; ``""`` for the built-in lander) that no part
-    names (missing: it would have no material). The error names the mesh's groups and the parts found."""
-    where = f"the mesh file {mesh!r}" if mesh else "the built-in lander"
+    names (missing: it would have no material); with no mesh (``"none"``), a part without a ``file`` or a
+    ``shape``. The error names the mesh's groups and the parts found."""
+    where = ("no mesh file (`target.mesh` = \"none\")" if mesh == NO_MESH else f"the mesh file {mesh!r}" if mesh
+             else "the built-in lander")
     found = f"the scene's parts: {', '.join(parts) or 'none'}"
-    unknown = [name for name, spec in parts.items() if not spec.file and name not in groups]
+    unknown = [name for name, spec in parts.items() if not spec.file and spec.shape is None and name not in groups]
+    if unknown and mesh == NO_MESH:
+        raise InputError(f"part(s) {', '.join(map(repr, unknown))} have no `file` and no `shape` and there is {where}; "
+                         f"{found}. Give each part a `shape` (box, plate, cylinder) or a `file`.")
     if unknown and not groups:
         raise InputError(f"part(s) {', '.join(map(repr, unknown))} have no `file` and {where} has no named groups "
                          f"(OBJ `g` / `o`, glTF nodes, ASCII STL `solid` names; a PLY or binary STL has none); "
@@ -224,7 +230,7 @@ def check_part_names(mesh: str, groups: Mapping[str, PartMesh], parts: Mapping[s
     if unknown:
         raise InputError(f"part(s) {', '.join(map(repr, unknown))} have no `file` and {where} has no group of that name; "
                          f"its groups: {', '.join(groups)}; {found}.")
-    missing = [name for name in groups if name not in parts] if mesh else []
+    missing = [name for name in groups if name not in parts] if mesh not in ("", NO_MESH) else []
     if missing:
         raise InputError(f"{where} has group(s) {', '.join(map(repr, missing))} that no part names; its groups: "
                          f"{', '.join(groups)}; {found}. Add a table per group, e.g. `[parts.{missing[0]}] "

@@ -21,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_direction, check_path, check_vector, closest, quote
+from spacefit.geometry.primitives import pop_primitive
 from spacefit.materials import MODELS, make_material, with_material_values
 from spacefit.scene.parameters import PARAMETERS, is_image, scene_keys, scene_with_values
 from spacefit.scene.conversions import VERTICAL_SUN, sun_angles_deg
@@ -209,11 +210,12 @@ def with_values(scene: SceneLike, values: Mapping[str, Any]) -> SceneLike:
         if not isinstance(file, str):
             raise InputTypeError(f"`parts.{name}.file` must be a path string, got {quote(file)}.")
         file = str(Path(file).resolve()) if file and not check_path(f"parts.{name}.file", file).is_absolute() else file
+        shape = pop_primitive(table, f"parts.{name}", old.shape if old is not None else None)
         if "material" in table:
             material = make_material(table.pop("material"), table, where=f"parts.{name}")
         else:
             material = with_material_values(old.material, table, where=f"parts.{name}")  # type: ignore[union-attr]
-        new_parts[name] = PartSettings(material, file)
+        new_parts[name] = PartSettings(material, file, shape)
     if parts:
         changed["parts"] = new_parts
     out = dataclasses.replace(scene, **changed) if changed else scene

@@ -18,7 +18,7 @@ from spacefit.display import scene_html, scene_repr
 from spacefit.errors import InputError, InputTypeError, check_choice, quote
 from spacefit.materials import material_table
 from spacefit.scene.overrides import with_values
-from spacefit.scene.sections import SECTIONS, CameraSettings, PartSettings, RenderSettings, SunSettings, TargetSettings, WrinkleSettings, default_parts, plain
+from spacefit.scene.sections import MESHLESS, SECTIONS, CameraSettings, PartSettings, RenderSettings, SunSettings, TargetSettings, WrinkleSettings, default_parts, plain
 from spacefit.scene.optics import check_optics, fov_pitch_mm
 
 
@@ -61,7 +61,7 @@ class Scene:
     def mesh_files(self) -> list[str]:
         """The mesh files the scene reads (none for the built-in lander)."""
         paths = (self.target.mesh, *(part.file for part in self.parts.values()))
-        return list(dict.fromkeys(str(p) for p in paths if p not in ("", "builtin")))
+        return list(dict.fromkeys(str(p) for p in paths if p not in MESHLESS))
 
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (TOML-ready): every value, defaults included, of the camera's field the
@@ -70,7 +70,8 @@ class Scene:
                                for name in SECTIONS}
         # One of the two sets the field: the pitch follows from a field of view and the resolution.
         del out["camera"]["pixel_pitch_mm" if self.camera.fov_deg > 0.0 else "fov_deg"]
-        out["parts"] = {name: {**material_table(p.material), **({"file": p.file} if p.file else {})}
+        out["parts"] = {name: {**material_table(p.material), **({"file": p.file} if p.file else {}),
+                               **(p.shape.table() if p.shape is not None else {})}
                         for name, p in self.parts.items()}
         return out
 

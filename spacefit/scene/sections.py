@@ -30,6 +30,7 @@ import numpy as np
 
 from spacefit.errors import (A_SCENE, InputError, InputTypeError, check_choice, check_direction, check_flag, check_path, check_range, check_vector,
                              closest, quote)
+from spacefit.geometry.primitives import Primitive
 from spacefit.geometry.wm import check_wm_params
 from spacefit.materials import MODELS, PRESETS, Material
 from spacefit.scene.sampling import SAMPLERS, check_sample_count
@@ -59,6 +60,10 @@ FAR_CLIP_M = 4.0 * MAX_COORDINATE_M
 # renders are not split into passes, so there the product with the pixels is bounded too
 # (:func:`spacefit.rendering.memory.check_memory`).
 MAX_SPP = 1 << 16
+# `target.mesh` of a target built only from its parts' primitives and files.
+NO_MESH = "none"
+# The values of `target.mesh` that name no file: the built-in lander ("builtin", or "") and no mesh.
+MESHLESS = ("builtin", "", NO_MESH)
 # Seeds are Mitsuba's (uint32): a fit adds offsets to its seeds, so they stay below 2^31.
 MAX_SEED = 2**31 - 1
 # Mitsuba's perspective camera takes a horizontal field of view in [0, 180] deg (180, or a focal
@@ -198,7 +203,8 @@ class SunSettings(Section):
 
 @dataclass(frozen=True)
 class TargetSettings(Section):
-    """Target pose and geometry source: ``"builtin"`` or a mesh file whose groups are the parts."""
+    """Target pose and geometry source: ``"builtin"`` (the lander), a mesh file whose groups are the
+    parts, or ``"none"`` (:data:`NO_MESH`): only the parts given, each a primitive or a file of its own."""
 
     position_m: Vec3 = (0.0, 0.0, 0.0)
     attitude_deg: Vec3 = (90.0, 0.0, 0.0)
@@ -262,10 +268,12 @@ class WrinkleSettings(Section):
 
 @dataclass(frozen=True)
 class PartSettings:
-    """A part: its material (a :mod:`spacefit.materials` object) and, for a part of its own, a mesh file."""
+    """A part: its material (a :mod:`spacefit.materials` object) and, for a part of its own, a mesh file
+    or a primitive (:class:`~spacefit.geometry.primitives.Primitive`)."""
 
     material: Material
     file: str = ""
+    shape: Primitive | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.material, tuple(MODELS.values())):
@@ -275,6 +283,11 @@ class PartSettings:
             raise InputTypeError(f"`file` must be a path string, got {quote(self.file)}.")
         if self.file:
             check_path("file", self.file)
+        if self.shape is not None and not isinstance(self.shape, Primitive):
+            raise InputTypeError(f"`shape` must be a spacefit.geometry.primitives.Primitive, got {quote(self.shape)}.")
+        if self.shape is not None and self.file:
+            raise InputError(f"a part takes a `file` or a `shape`, not both; got file {self.file!r} and shape "
+                             f"{self.shape.shape!r}.")
 
 
 # The built-in lander's parts and their presets (thesis Table 4-2).

@@ -17,10 +17,11 @@ from typing import Any
 
 from spacefit.errors import InputError, InputTypeError, check_path, quote
 from spacefit.geometry.mesh import load_grouped
+from spacefit.geometry.primitives import pop_primitive
 from spacefit.materials import MODELS, make_material
 from spacefit.scene.overrides import Overrides, apply_overrides, check_sun_forms, section_keys, unknown_key, with_values
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import DEFAULT_PRESETS, SECTIONS, PartSettings, TargetSettings
+from spacefit.scene.sections import DEFAULT_PRESETS, MESHLESS, SECTIONS, PartSettings, TargetSettings
 from spacefit.scene.optics import check_pitch_with_fov
 
 
@@ -86,7 +87,8 @@ def _parts(data: Mapping[str, Any], builtin: bool, base: Path) -> dict[str, Part
         for key in model.paths if model is not None else ():  # files a model reads (a measured table), beside the scene file
             if isinstance(table.get(key), str) and table[key] and not Path(table[key]).is_absolute():
                 table[key] = str((base / table[key]).resolve())
-        parts[name] = PartSettings(make_material(table.pop("material"), table, where=f"parts.{name}"), file)
+        shape = pop_primitive(table, f"parts.{name}")
+        parts[name] = PartSettings(make_material(table.pop("material"), table, where=f"parts.{name}"), file, shape)
     return parts
 
 
@@ -113,10 +115,10 @@ def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scen
             sections[key] = _section(key, value, later)
     target = sections.get("target", TargetSettings())
     builtin = target.mesh in ("builtin", "")
-    if not builtin and not Path(target.mesh).is_absolute():
+    if target.mesh not in MESHLESS and not Path(target.mesh).is_absolute():
         sections["target"] = dataclasses.replace(target, mesh=str((base / target.mesh).resolve()))
     user_parts = data.get("parts", {})
-    if not builtin and not user_parts:
+    if target.mesh not in MESHLESS and not user_parts:
         try:
             groups = list(load_grouped(sections["target"].mesh))
             have = f"its groups: {', '.join(groups)}" if groups else "it has no named groups (give each part a `file`)"
