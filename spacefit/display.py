@@ -68,8 +68,7 @@ def scene_html(scene: Any) -> str:
 def fit_html(result: Any) -> str:
     """The verdict, the goodness of fit, each fitted value with its standard error, unit and start,
     the derived values, and the warnings."""
-    lines = [f"{result.status} ({result.solver} on the {result.loss_name} loss, {result.steps} steps, "
-             f"{result.wall_time_s:.1f} s, loss {result.loss:.4g})"]
+    lines = [result.headline]
     if result.goodness is not None:
         lines.append(result.goodness.line())
     if result.stderr_note:

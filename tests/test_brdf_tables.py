@@ -100,6 +100,8 @@ def test_a_ggx_table_is_fitted_back_and_chosen(tmp_path):
     comparison = compare_brdf_models(table, ("ggx", "lambert"))
     fit = comparison.fits["ggx"]
     assert fit.success and not fit.goodness.misfit, format_result(fit)
+    # a table is fitted by least squares on its values, whatever the fit's image loss is called
+    assert format_result(fit).splitlines()[0].startswith(f"{fit.status} (lm on the values' residuals, ")
     value = {name.rsplit(".", 1)[1]: v for name, v in fit.values.items()}
     assert fit.names == ("parts.sample.eta", "parts.sample.k", "parts.sample.alpha")  # the part's registered parameters
     for name, true in (("eta", 1.8), ("k", 2.5), ("alpha", 0.12)):

@@ -122,8 +122,7 @@ def format_result(result: FitResult) -> str:
     check_type("result", result, FitResult, "an sf.FitResult (what sf.fit returns)")
     derived = [name for name in result.extras if f"{name}.stderr" in result.extras]  # e.g. wrinkles.rms_m
     width = max(len(name) for name in (*result.names, *derived))
-    lines = [f"{result.status} ({result.solver} on the {result.loss_name} loss, {result.steps} steps, "
-             f"{result.wall_time_s:.1f} s, loss {result.loss:.4g})"]
+    lines = [result.headline]
     if result.goodness is not None:
         lines.append(result.goodness.line())
     mark = f"  [{result.stderr_note}]" if result.status is Status.MISFIT else ""

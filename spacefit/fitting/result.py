@@ -16,6 +16,7 @@ from spacefit.fitting.solvers import Status
 from spacefit.rendering.renderer import mitsuba_scene_dict
 from spacefit.scene.parameters import is_nuisance, parameter
 from spacefit.scene.schema import Scene
+from spacefit.units import DN_UNIT, RADIANCE_UNIT
 
 
 @dataclass
@@ -102,6 +103,14 @@ class FitResult:
         if self.scene is None:
             raise InputError("this fit has no fitted scene: its values are not finite.")
         return mitsuba_scene_dict(self.scene)
+
+    @property
+    def headline(self) -> str:
+        """The verdict and what was run, in one line: the solver on its loss ("lm on the pixel loss"), or, for a fit
+        of tables and light curves alone, on their residuals (their loss is least squares whatever ``loss_name``)."""
+        images = any(unit in (RADIANCE_UNIT, DN_UNIT) for unit in self.units)
+        on = f"the {self.loss_name} loss" if images else "the values' residuals"
+        return f"{self.status} ({self.solver} on {on}, {self.steps} steps, {self.wall_time_s:.1f} s, loss {self.loss:.4g})"
 
     @property
     def images(self) -> list[int]:
