@@ -43,7 +43,8 @@ from pathlib import Path
 
 import numpy as np
 
-from spacefit.fitting.brdf_table import TabulatedBRDF, read_brdf_table
+from spacefit.materials.measured import read_brdf_table
+from spacefit.materials.tabulated import TabulatedBRDF
 from spacefit.fitting.observations.brdf import compare_brdf_models, fit_brdf_table, fitted_material
 from spacefit.fitting.report import format_result
 from spacefit.studies.observing import Site, read_light_curve, sun_directions_enu

@@ -61,8 +61,8 @@ if TYPE_CHECKING:
     from jaxtyping import Bool, Float
 
 MAX_EXPOSURE_S = 86400.0
-"""The longest exposure a sensor takes (one day): longer is a unit slip (ms or us read as s), and past about
-1e290 s a fit's expected DN overflows to inf."""
+"""The longest exposure a sensor takes (one day): longer is a unit slip (ms or us read as s); at 1e300 s a fit's
+expected DN overflowed and the fit went NaN."""
 SATURATION_MARGIN_READ_SIGMA = 3.0
 """A pixel within this many read-noise sigmas of the full well's DN counts as saturated."""
 SATURATED_WARNING_FRACTION = 1e-3

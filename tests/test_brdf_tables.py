@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from spacefit.errors import InputError
-from spacefit.fitting.brdf_table import read_brdf_table, simulate_brdf_table
+from spacefit.fitting.brdf_table import simulate_brdf_table
+from spacefit.materials.measured import read_brdf_table
 from spacefit.fitting.observations.brdf import compare_brdf_models, fit_brdf_table, fitted_material
 from spacefit.fitting.report import format_result, write_table_fit
 from spacefit.materials import Conductor, DiffuseConductor, Lambert, OrenNayar
@@ -140,7 +141,8 @@ def test_a_tabulated_brdf_gives_its_table_back_and_extends_it_by_harvey_offsets(
     passes through them), the same value at a direction mirrored across the plane of incidence
     (isotropic), the value of the measured row at the same signed offset u = |beta - beta_0| out of
     the plane, a table's factor, and a refusal of tables it cannot read in-plane."""
-    from spacefit.fitting.brdf_table import TabulatedBRDF, signed_offset, unit_vectors
+    from spacefit.materials.measured import unit_vectors
+    from spacefit.materials.tabulated import TabulatedBRDF, signed_offset
 
     table = read_brdf_table(DATA / "chassis_brdf.csv")
     tab = TabulatedBRDF.from_table(table)

@@ -195,7 +195,8 @@ def test_a_plate_with_a_tabulated_brdf_agrees_with_lumos_sat(pomenis):
     the same plate: the chassis alone and the array alone, each with its measured table used as it
     is (sf.TabulatedBRDF; lumos-sat given a BRDF function of the same definition,
     ``experiments/starlink_lumos.py`` wrote its magnitudes), within 1 % at every lit Pomenis geometry."""
-    from spacefit.fitting.brdf_table import TabulatedBRDF, read_brdf_table
+    from spacefit.materials.measured import read_brdf_table
+    from spacefit.materials.tabulated import TabulatedBRDF
 
     rows = [line.split(",") for line in (Path(__file__).resolve().parents[1] / "experiments" / "results" / "starlink" /
                                           "lumos_tabulated.csv").read_text().splitlines()[2:]]
@@ -214,7 +215,8 @@ def test_fit_plates_frees_the_attitude_and_a_tables_scale():
     and a GGX array, the target turned 6 deg about z: fit_plates gives back the angle and the
     scale within 3 standard errors; fitted_plates turns the normals by the fitted angle and scales
     the table; a start outside the bounds given is refused, and so is a plate named ``target``."""
-    from spacefit.fitting.brdf_table import TabulatedBRDF, read_brdf_table
+    from spacefit.materials.measured import read_brdf_table
+    from spacefit.materials.tabulated import TabulatedBRDF
     from spacefit.geometry.frames import attitude_matrix
 
     rng = np.random.default_rng(3)

@@ -25,16 +25,11 @@ import jax
 import numpy as np
 
 from spacefit.errors import check_range
-from spacefit.fitting.params import Bijection
 from spacefit.materials import MODELS, Conductor, DiffuseConductor, Lambert, Material, MaterialModel
 from spacefit.materials.measured import BRDFTable, unit_vectors
-from spacefit.materials.measured import read_brdf_table as read_brdf_table
 from spacefit.materials.registry import Derived, shared_fields
-from spacefit.materials.tabulated import TabulatedBRDF as TabulatedBRDF
-from spacefit.materials.tabulated import signed_offset as signed_offset
 
-# The parameters' ranges in a fit and their default starts: the registered models' fields' (open ranges).
-PARAMETER_BOUNDS: Mapping[str, Bijection] = Derived(lambda: {n: Bijection(f.lo, f.hi) for n, f in shared_fields(None).items()})
+# The parameters' default starts in a fit: the registered models' fields' (their ranges are the registry's).
 DEFAULT_START: Mapping[str, float] = Derived(lambda: {n: f.start for n, f in shared_fields(None).items()})
 
 

@@ -1,4 +1,4 @@
-"""The BRDF-table kind of observation: a measured table (:class:`~spacefit.fitting.brdf_table.BRDFTable`)
+"""The BRDF-table kind of observation: a measured table (:class:`~spacefit.materials.measured.BRDFTable`)
 of one part's material, predicted by a material model (:data:`~spacefit.fitting.brdf_table.BRDF_MODELS`),
 and the conveniences that fit it with :func:`spacefit.fit` and choose the smallest model that fits.
 
@@ -20,7 +20,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import InputError, check_choice, check_count, check_name_list, check_range, check_type
-from spacefit.fitting.brdf_table import BRDF_MODELS, DEFAULT_START, BRDFTable
+from spacefit.fitting.brdf_table import BRDF_MODELS, DEFAULT_START
+from spacefit.materials.measured import BRDFTable
 from spacefit.fitting.loop import fit
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.observations.base import Block, MeasuredValues, ValueObservation
