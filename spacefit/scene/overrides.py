@@ -20,7 +20,8 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, InputTypeError, check_direction, check_path, check_vector, closest, quote
+from spacefit.errors import InputError, InputTypeError, check_direction, check_path, check_vector, closest, inside, quote
+from spacefit.geometry.attitude import ARTICULATION_KEYS, pop_articulation
 from spacefit.geometry.primitives import pop_primitive
 from spacefit.materials import MODELS, make_material, with_material_values
 from spacefit.scene.parameters import PARAMETERS, is_image, scene_keys, scene_with_values
@@ -29,8 +30,8 @@ from spacefit.scene.sections import SECTIONS, PartSettings, SceneLike, unknown_p
 from spacefit.scene.optics import check_pitch_with_fov
 
 Overrides = Mapping[str, Any] | Sequence[str] | str
-# The keys of a part table besides its material's own values and the models' ties (``alpha``).
-PART_KEYS = ("material", "file")
+# The keys of a part table besides its material's own values and the models' ties (``alpha``) and a primitive's.
+PART_KEYS = ("material", "file", *ARTICULATION_KEYS)
 
 
 def toml_value(raw: str) -> Any:
@@ -211,11 +212,14 @@ def with_values(scene: SceneLike, values: Mapping[str, Any]) -> SceneLike:
             raise InputTypeError(f"`parts.{name}.file` must be a path string, got {quote(file)}.")
         file = str(Path(file).resolve()) if file and not check_path(f"parts.{name}.file", file).is_absolute() else file
         shape = pop_primitive(table, f"parts.{name}", old.shape if old is not None else None)
+        law = pop_articulation(table, f"parts.{name}", old.articulation if old is not None else None,
+                               shape.position_m if shape is not None else (0.0, 0.0, 0.0))
         if "material" in table:
             material = make_material(table.pop("material"), table, where=f"parts.{name}")
         else:
             material = with_material_values(old.material, table, where=f"parts.{name}")  # type: ignore[union-attr]
-        new_parts[name] = PartSettings(material, file, shape)
+        with inside(f"parts.{name}"):
+            new_parts[name] = PartSettings(material, file, shape, law)
     if parts:
         changed["parts"] = new_parts
     out = dataclasses.replace(scene, **changed) if changed else scene
