@@ -30,7 +30,7 @@ import numpy as np
 
 from spacefit.errors import (A_SCENE, InputError, InputTypeError, check_choice, check_direction, check_flag, check_path, check_range, check_vector,
                              closest, inside, quote)
-from spacefit.geometry.attitude import (ATTITUDES, Articulation, AxisAngle, Fixed, FixedAttitude, NadirSun, QuaternionTable, SunPointing,
+from spacefit.geometry.attitude import (ATTITUDES, PARALLEL_SINE, Articulation, AxisAngle, Fixed, FixedAttitude, NadirSun, QuaternionTable, SunPointing,
                                         SunTracking, utc_seconds)
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.geometry.primitives import Primitive
@@ -271,8 +271,12 @@ class TargetSettings(Section):
             InputError: the sun along ``target.nadir`` (nadir_sun, sun), a time outside the quaternion table."""
         law = self.attitude_law()
         if isinstance(law, (NadirSun, SunPointing)):
-            with inside("target"):
-                return law.rotation(self.nadir, sun)
+            nadir = check_direction("target.nadir", self.nadir)
+            if np.linalg.norm(np.cross(nadir, sun)) < PARALLEL_SINE:
+                raise InputError(f"`target.nadir` {list(self.nadir)} is along the sun's direction (`sun.direction` "
+                                 f"{np.round(-np.asarray(sun), 6).tolist()}): with the sun at the target's zenith or nadir "
+                                 f"`target.attitude` = {self.attitude!r} is undefined.")
+            return law.rotation(nadir, sun)
         if isinstance(law, QuaternionTable):
             with inside("target"):
                 return law.rotation(self.time_utc)
