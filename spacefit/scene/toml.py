@@ -92,8 +92,9 @@ def _parts(data: Mapping[str, Any], builtin: bool, base: Path) -> dict[str, Part
                 table[key] = str((base / table[key]).resolve())
         shape = pop_primitive(table, f"parts.{name}")
         law = pop_articulation(table, f"parts.{name}", default_pivot_m=shape.position_m if shape is not None else (0.0, 0.0, 0.0))
+        material = make_material(table.pop("material"), table, where=f"parts.{name}")
         with inside(f"parts.{name}"):
-            parts[name] = PartSettings(make_material(table.pop("material"), table, where=f"parts.{name}"), file, shape, law)
+            parts[name] = PartSettings(material, file, shape, law)
     return parts
 
 
