@@ -110,6 +110,11 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "TargetSettings": ("spacefit.scene.sections", "TargetSettings"),
     "WrinkleSettings": ("spacefit.scene.sections", "WrinkleSettings"),
     "PartSettings": ("spacefit.scene.sections", "PartSettings"),
+    "SunTracking": ("spacefit.geometry.attitude", "SunTracking"),
+    "AxisAngle": ("spacefit.geometry.attitude", "AxisAngle"),
+    "NadirSun": ("spacefit.geometry.attitude", "NadirSun"),
+    "SunPointing": ("spacefit.geometry.attitude", "SunPointing"),
+    "QuaternionTable": ("spacefit.geometry.attitude", "QuaternionTable"),
     "default_scene": ("spacefit.scene.toml", "default_scene"),
     "load_scene": ("spacefit.scene.toml", "load_scene"),
     "PARAMETERS": ("spacefit.scene.parameters", "PARAMETERS"),
@@ -155,6 +160,7 @@ __all__ = [
     "light_curve_convergence", "fit_light_curve", "BRDFTableObservation", "PlateLightCurve", "RenderedLightCurve",
     "Earth", "EarthshineSources", "earthshine_sources", "earthshine_irradiance",
     "RenderSettings", "CameraSettings", "SunSettings", "TargetSettings", "WrinkleSettings", "PartSettings",
+    "SunTracking", "AxisAngle", "NadirSun", "SunPointing", "QuaternionTable",
 ]
 
 

@@ -179,7 +179,7 @@ def box_wing(**changes: dict) -> dict:
      r"`parts.wing_left.angle_deg` must be in \[-360, 360\] deg, got 400"),
     ({"wing_left": {"articulation": "sun_tracking", "axis": [0, 0, 0]}}, {}, r"`parts.wing_left.axis` must not be the zero vector"),
     ({"wing_left": {"articulation": "sun_tracking", "axis": [0, 0, 1]}}, {},
-     r"`parts.wing_left.axis` \[0.0, 0.0, 1.0\] must not be parallel to `the part's normal \(its \+z in the body\)`"),
+     r"`parts.wing_left.axis` \[0.0, 0.0, 1.0\] must not be parallel to the part's normal \(its \+z in the body\) \[0.0, 0.0, 1.0\]"),
     ({}, {"attitude": "nadir"}, r"`target.attitude` must be one of 'fixed', 'nadir_sun', 'sun', 'table'; got 'nadir'. Did you mean 'nadir_sun'\?"),
     ({}, {"attitude": "nadir_sun"}, r"`target.nadir` is missing: `target.attitude` = 'nadir_sun' takes nadir"),
     ({}, {"nadir": [0.0, 0.0, -1.0]}, r"`target.nadir` = \[0.0, 0.0, -1.0\] is not used by `target.attitude` = 'fixed' \(it takes attitude_deg\)"),
@@ -308,7 +308,7 @@ def test_a_tracking_plate_in_the_light_curve_model():
         facing = unit(sun[i, 0], sun[i, 1], 0)
         by_hand = Plate("a", 2.0, tuple(facing), Lambert(0.4), tangent=(0, 0, 1))
         assert np.isclose(ours[i], plates_irradiance([by_hand], sun[i:i + 1], observer[i:i + 1], np.full(1, 1e6), 1361.0)[0], rtol=1e-12)
-    with pytest.raises(sf.InputError, match=r"`a.axis` \[0.0, 1.0, 0.0\] must not be parallel to `normal`"):
+    with pytest.raises(sf.InputError, match=r"`a.tracking_axis` \[0.0, 1.0, 0.0\] must not be parallel to `a.normal` \[0.0, 1.0, 0.0\]"):
         Plate("a", 2.0, (0, 1, 0), Lambert(0.4), tracking_axis=(0, 2, 0))
 
     def total(angle):

@@ -98,7 +98,7 @@ def _unit(name: str, value: Any) -> tuple[float, float, float]:
 
 def _not_parallel(name: str, a: np.ndarray, other: str, b: np.ndarray) -> None:
     if np.linalg.norm(np.cross(a, b)) < PARALLEL_SINE:
-        raise InputError(f"`{name}` {np.round(a, 6).tolist()} must not be parallel to `{other}` {np.round(b, 6).tolist()}: "
+        raise InputError(f"`{name}` {np.round(a, 6).tolist()} must not be parallel to {other} {np.round(b, 6).tolist()}: "
                          "the rotation about it would be undefined.")
 
 
@@ -131,9 +131,10 @@ class SunTracking:
         object.__setattr__(self, "axis", _unit("axis", self.axis))
         object.__setattr__(self, "pivot_m", tuple(check_vector("pivot_m", self.pivot_m).tolist()))
 
-    def check_normal(self, normal: Float[np.ndarray, "3"], name: str = "normal") -> None:
-        """Refuse a part ``normal`` along the axis: no turn about it moves the normal towards the sun."""
-        _not_parallel("axis", np.asarray(self.axis), name, np.asarray(normal, float))
+    def check_normal(self, normal: Float[np.ndarray, "3"], name: str = "`normal`", axis_name: str = "axis") -> None:
+        """Refuse a part ``normal`` along the axis: no turn about it moves the normal towards the sun
+        (``name``, ``axis_name``: the normal and the axis as the message shows them)."""
+        _not_parallel(axis_name, np.asarray(self.axis), name, np.asarray(normal, float))
 
     def rotation(self, normal: Float[np.ndarray, "3"], sun: Float[np.ndarray, "3"]) -> Float[np.ndarray, "3 3"]:
         """The part's turn in the body frame for the unit direction ``sun`` towards the sun (body frame)."""
@@ -268,7 +269,7 @@ class NadirSun:
     def __post_init__(self) -> None:
         object.__setattr__(self, "nadir_axis", _unit("nadir_axis", self.nadir_axis))
         object.__setattr__(self, "sun_axis", _unit("sun_axis", self.sun_axis))
-        _not_parallel("sun_axis", np.asarray(self.sun_axis), "nadir_axis", np.asarray(self.nadir_axis))
+        _not_parallel("sun_axis", np.asarray(self.sun_axis), "`nadir_axis`", np.asarray(self.nadir_axis))
 
     def rotation(self, nadir: Float[np.ndarray, "3"], sun: Float[np.ndarray, "3"]) -> Float[np.ndarray, "3 3"]:
         """The body-to-world rotation for world directions towards ``nadir`` and towards the ``sun``.
@@ -276,7 +277,7 @@ class NadirSun:
         Raises:
             InputError: the sun at the target's nadir or zenith (the frame is undefined there)."""
         nadir, sun = check_direction("nadir", nadir), check_direction("sun", sun)
-        _not_parallel("sun", sun, "nadir", nadir)
+        _not_parallel("sun", sun, "`nadir`", nadir)
         return _two_axis(np.asarray(self.nadir_axis), nadir, np.asarray(self.sun_axis), sun)
 
 
@@ -293,7 +294,7 @@ class SunPointing:
     def __post_init__(self) -> None:
         object.__setattr__(self, "sun_axis", _unit("sun_axis", self.sun_axis))
         object.__setattr__(self, "nadir_axis", _unit("nadir_axis", self.nadir_axis))
-        _not_parallel("nadir_axis", np.asarray(self.nadir_axis), "sun_axis", np.asarray(self.sun_axis))
+        _not_parallel("nadir_axis", np.asarray(self.nadir_axis), "`sun_axis`", np.asarray(self.sun_axis))
 
     def rotation(self, nadir: Float[np.ndarray, "3"], sun: Float[np.ndarray, "3"]) -> Float[np.ndarray, "3 3"]:
         """The body-to-world rotation for world directions towards ``nadir`` and towards the ``sun``.
@@ -301,7 +302,7 @@ class SunPointing:
         Raises:
             InputError: the sun at the target's nadir or zenith (the turn about the sun is undefined there)."""
         nadir, sun = check_direction("nadir", nadir), check_direction("sun", sun)
-        _not_parallel("nadir", nadir, "sun", sun)
+        _not_parallel("nadir", nadir, "`sun`", sun)
         return _two_axis(np.asarray(self.sun_axis), sun, np.asarray(self.nadir_axis), nadir)
 
 

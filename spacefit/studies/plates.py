@@ -36,7 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import (InputError, check_choice, check_count, check_direction, check_name_list, check_range, check_type, check_vector,
-                             inside, quote)
+                             quote)
 from spacefit.geometry.attitude import SunTracking, tracking_rotation
 from spacefit.fitting.loop import fit
 from spacefit.fitting.result import FitResult
@@ -89,8 +89,7 @@ class Plate:
         object.__setattr__(self, "tangent", tuple((t / np.linalg.norm(t)).tolist()))
         if self.tracking_axis is not None:
             tracking = SunTracking(check_direction(f"{self.name}.tracking_axis", self.tracking_axis))
-            with inside(self.name):
-                tracking.check_normal(n)
+            tracking.check_normal(n, f"`{self.name}.normal`", f"{self.name}.tracking_axis")
             object.__setattr__(self, "tracking_axis", tracking.axis)
 
     def frame(self) -> np.ndarray:
