@@ -225,7 +225,7 @@ def test_fits_refuse_angles_that_a_law_sets():
     from spacefit.rendering.values import scene_values_fn  # the rendering layer: it imports Mitsuba's seam
 
     tracked = assemble(scene_from_dict(box_wing(parts={"wing_left": {"articulation": "sun_tracking", "axis": [0, 1, 0]}})))
-    with pytest.raises(sf.InputError, match=r"`sun.elevation_deg` cannot be free: part\(s\) 'wing_left' track the sun"):
+    with pytest.raises(sf.InputError, match=r"`sun.elevation_deg` cannot be set in place: parts.wing_left follow the sun"):
         scene_values_fn(tracked, ["sun.elevation_deg"])
     pointed = assemble(scene_from_dict(box_wing(target={"attitude": "sun", "nadir": [0.0, 0.0, -1.0]})))
     with pytest.raises(sf.InputError, match=r"`target.attitude_x_deg` cannot be free: `target.attitude` = 'sun' sets"):
@@ -317,3 +317,18 @@ def test_a_tracking_plate_in_the_light_curve_model():
 
     h = 1e-6
     assert np.isclose(jax.grad(total)(0.3), (total(0.3 + h) - total(0.3 - h)) / (2 * h), rtol=1e-7)
+
+
+def test_a_sweep_of_the_sun_assembles_a_tracking_scene_again():
+    """The sun's angles are set in place only where nothing follows the sun; a sweep of a tracking wing's
+    sun gives what the scene assembled at that sun renders."""
+    from spacefit.studies.axes import in_place_names  # the studies' sweep axes
+
+    parts = {"bus": DARK, "wing_right": DARK, "wing_left": {"material": "lambert", "kd": 0.5}}
+    fixed = scene_from_dict(box_wing(parts=parts, **FACE_ON))
+    tracking = fixed.with_values({"parts.wing_left.articulation": "sun_tracking", "parts.wing_left.axis": [0, 1, 0]})
+    assert "sun.elevation_deg" in in_place_names(fixed) and "sun.elevation_deg" not in in_place_names(tracking)
+    swept = sf.sweep(tracking, {"sun.elevation_deg": [30.0]}, quiet=True)
+    there = sf.sweep(tracking.with_values({"sun.elevation_deg": 30.0}), {"render.seed": [0]}, quiet=True)
+    a, b = (ds.mean_radiance.sel(region="wing_left").values.ravel() for ds in (swept, there))
+    assert a[0] > 0 and a[0] == b[0]

@@ -17,11 +17,11 @@ import jax.numpy as jnp
 from jaxtyping import Array
 
 from spacefit.errors import InputError
-from spacefit.geometry.attitude import SunTracking
 from spacefit.rendering.materials import material_keys
 from spacefit.scene.assembly import Assembly
 from spacefit.geometry.frames import CameraFrame, attitude_matrix
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, ROLL, SUN_ANGLES, scene_value
+from spacefit.scene.sections import sun_followers
 from spacefit.scene.conversions import G_of, sun_direction
 
 SceneValuesFn = Callable[[Array], dict[str, Array]]
@@ -53,14 +53,14 @@ def _check_laws(assembly: Assembly, free: Sequence[str]) -> None:
     """Refuse freeing the target's attitude angles under an attitude law other than ``fixed``, or the
     sun's angles where a law follows the sun: the law, evaluated once by the assembly, sets what they would."""
     scene = assembly.scene
-    tracking = [name for name, p in scene.parts.items() if isinstance(p.articulation, SunTracking)]
+    followers = sun_followers(scene)
     for name in free:
         if name in ATTITUDE and scene.target.attitude != "fixed":
             raise InputError(f"`{name}` cannot be free: `target.attitude` = {scene.target.attitude!r} sets the target's "
                              "attitude (free the angles with target.attitude = \"fixed\").")
-        if name in SUN_ANGLES and (tracking or scene.target.attitude in ("nadir_sun", "sun")):
-            what = f"part(s) {', '.join(map(repr, tracking))} track" if tracking else f"`target.attitude` = {scene.target.attitude!r} follows"
-            raise InputError(f"`{name}` cannot be free: {what} the sun, turned once for the scene's sun when it is assembled.")
+        if name in SUN_ANGLES and followers:
+            raise InputError(f"`{name}` cannot be set in place: {', '.join(followers)} follow the sun, turned for the scene's "
+                             "sun when it is assembled (assemble the scene again for another sun).")
 
 
 def view_values_fn(assembly: Assembly, names: Sequence[str]) -> Callable[[Array, View], dict[str, Array]]:

@@ -403,6 +403,13 @@ class SceneLike(Protocol):
         ...
 
 
+def sun_followers(scene: SceneLike) -> list[str]:
+    """What the scene turns by its sun when it is assembled: its sun-tracking parts (``parts.<name>``) and
+    its target where the attitude law follows the sun (``target``); a sun moved in place would leave them."""
+    parts = [f"parts.{name}" for name, p in scene.parts.items() if isinstance(p.articulation, SunTracking)]
+    return [*parts, *(["target"] if scene.target.attitude in ("nadir_sun", "sun") else [])]
+
+
 def check_scene(scene: object, name: str = "scene") -> SceneLike:
     """Raise :class:`InputTypeError` unless ``scene`` is a scene (:class:`spacefit.scene.schema.Scene`)."""
     if not isinstance(scene, SceneLike):
