@@ -141,8 +141,12 @@ def plates_irradiance(plates: Sequence[Plate], sun: np.ndarray, observer: np.nda
     ``sun`` comes from elsewhere (Earthshine); ``sun`` itself by default."""
     total = jnp.zeros(len(range_m))
     for plate in plates:
-        frames = plate.frames(jnp.asarray(sun if tracking_sun is None else tracking_sun))
-        wi, wo = jnp.einsum("nij,nj->ni", frames, jnp.asarray(sun)), jnp.einsum("nij,nj->ni", frames, jnp.asarray(observer))
+        if plate.tracking_axis is None:
+            frame = jnp.asarray(plate.frame())
+            wi, wo = jnp.asarray(sun) @ frame.T, jnp.asarray(observer) @ frame.T
+        else:
+            frames = plate.frames(jnp.asarray(sun if tracking_sun is None else tracking_sun))
+            wi, wo = jnp.einsum("nij,nj->ni", frames, jnp.asarray(sun)), jnp.einsum("nij,nj->ni", frames, jnp.asarray(observer))
         f = _plate_brdf(plate, wi, wo, (values or {}).get(plate.name, {}))
         total = total + plate.area_m2 * f * jnp.abs(wi[:, 2]) * jnp.abs(wo[:, 2])
     return sun_irradiance_w_m2 * total / jnp.asarray(range_m) ** 2
