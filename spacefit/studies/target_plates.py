@@ -179,37 +179,31 @@ class PlatesVsRender:
     spp: int
     notes: tuple[str, ...]
 
-    def _lit(self) -> tuple[np.ndarray, np.ndarray]:
-        """Where the plates and where the path tracer are above :data:`DARK_FRACTION` of the brightest point."""
-        floor = DARK_FRACTION * max(float(np.max(self.plates_w_m2)), float(np.max(self.rendered_w_m2)))
-        return self.plates_w_m2 > floor, self.rendered_w_m2 > floor
-
     @property
     def compared(self) -> np.ndarray:
-        """The points lit in one or both (:data:`DARK_FRACTION`); where both are dark no magnitude is compared."""
-        plates, rendered = self._lit()
-        return plates | rendered
+        """The points lit in one or both, above :data:`DARK_FRACTION` of the brightest point; where both
+        are dark no magnitude is compared."""
+        floor = DARK_FRACTION * max(float(np.max(self.plates_w_m2)), float(np.max(self.rendered_w_m2)))
+        return (self.plates_w_m2 > floor) | (self.rendered_w_m2 > floor)
 
     @property
     def difference_mag(self) -> np.ndarray:
         """Plates minus path tracer, magnitudes: -2.5 log10(E_plates / E_rendered) (positive: plates
-        fainter; +-inf where one is dark and the other lit); NaN where not :attr:`compared`."""
-        plates, rendered = self._lit()
+        fainter; +-inf where one is 0 and the other not); NaN where not :attr:`compared`."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            both = -2.5 * np.log10(self.plates_w_m2 / self.rendered_w_m2)
-        return np.where(plates & rendered, both, np.where(plates, -np.inf, np.where(rendered, np.inf, np.nan)))
+            return np.where(self.compared, -2.5 * np.log10(self.plates_w_m2 / self.rendered_w_m2), np.nan)
 
     @property
     def difference_percent(self) -> np.ndarray:
-        """Plates against path tracer, per cent of the path tracer's irradiance (inf where it is dark and
-        the plates lit); NaN where not :attr:`compared`."""
+        """Plates against path tracer, per cent of the path tracer's irradiance (inf where it is 0 and the
+        plates not); NaN where not :attr:`compared`."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(self.compared, np.where(self._lit()[1], 100.0 * (self.plates_w_m2 / self.rendered_w_m2 - 1.0), np.inf), np.nan)
+            return np.where(self.compared, 100.0 * (self.plates_w_m2 / self.rendered_w_m2 - 1.0), np.nan)
 
     @property
     def rms_mag(self) -> float:
-        """The RMS of :attr:`difference_mag` over the :attr:`compared` points (inf where one is dark and
-        the other lit; NaN where none is compared)."""
+        """The RMS of :attr:`difference_mag` over the :attr:`compared` points (inf where one is 0 and the
+        other not; NaN where none is compared)."""
         return _rms(self.difference_mag)
 
     @property
