@@ -45,7 +45,7 @@ from spacefit.materials import Material
 from spacefit.scene.assembly import assemble
 from spacefit.scene.conversions import sun_angles_deg
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import check_scene, deg2rad
+from spacefit.scene.sections import MAX_COORDINATE_M, check_scene, deg2rad
 from spacefit.studies.lightcurve import phase_plane_sun
 from spacefit.studies.lightcurve_fit import RenderedLightCurve
 from spacefit.studies.lightcurve_kind import LightCurveKind
@@ -245,15 +245,33 @@ def _body_geometry(scene: Scene) -> tuple[np.ndarray, np.ndarray, float]:
     return to_body @ (sun / np.linalg.norm(sun)), to_body @ (towards / np.linalg.norm(towards)), float(np.linalg.norm(towards))
 
 
+def at_range(scene: Scene, range_m: float) -> Scene:
+    """``scene`` with its camera moved along its line of sight to ``range_m`` from the target, looking at
+    it, the focal length scaled with the range: the same image of the target, seen from further away
+    (what the plates assume: an unresolved target, every point of it seeing the observer in one direction)."""
+    check_scene(scene)
+    check_range("range_m", range_m, 0.0, MAX_COORDINATE_M, lo_open=True, unit="m")
+    target = np.array(scene.target.position_m)
+    towards = np.array(scene.camera.position_m) - target
+    now = float(np.linalg.norm(towards))
+    return scene.with_values({"camera.position_m": (target + range_m * towards / now).tolist(), "camera.look_at_m": target.tolist(),
+                              "camera.focal_length_mm": scene.camera.focal_length_mm * range_m / now})
+
+
 def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None = None,
-                             points: Sequence[Mapping[str, float]] | None = None, quiet: bool = True) -> PlatesVsRender:
+                             points: Sequence[Mapping[str, float]] | None = None, range_m: float | None = None,
+                             quiet: bool = True) -> PlatesVsRender:
     """The plates' light curve of ``scene``'s target (:func:`target_plates`) against the path tracer's
     (:func:`~spacefit.studies.sweep.sweep`: the image's radiance x pixel solid angle summed, as
     :func:`~spacefit.studies.lightcurve.light_curve` has it), both at the scene's camera with the scene's
     sun irradiance, at either the solar phase angles ``phase_deg`` (the sun turning about the target
     from the camera's direction, :func:`~spacefit.studies.lightcurve.phase_plane_sun`) or ``points``,
-    each a dict of scene values (``{"target.attitude_z_deg": 30.0}``), every one setting the same keys."""
+    each a dict of scene values (``{"target.attitude_z_deg": 30.0}``), every one setting the same keys.
+    ``range_m`` moves the camera there first (:func:`at_range`): a camera near a specular target sees
+    its glint from a spread of directions, the plates from one."""
     check_scene(scene)
+    if range_m is not None:
+        scene = at_range(scene, range_m)
     if (phase_deg is None) == (points is None):
         raise InputError("give exactly one of `phase_deg` and `points`.")
     if phase_deg is not None:
