@@ -21,7 +21,7 @@ from spacefit.scene.toml import scene_from_dict
 from spacefit.studies.observing import LightCurveObservations
 from spacefit.studies.plates import PlateLightCurve, plates_irradiance
 from spacefit.studies.lightcurve_fit import RenderedLightCurve
-from spacefit.studies.target_plates import _body_geometry, attitude_angles_deg, observation_points, plate_notes
+from spacefit.studies.target_plates import _body_geometry, at_range, attitude_angles_deg, observation_points, plate_notes
 
 E = 5.0
 ANISOTROPIC = {"material": "panel_thesis", "alpha_x": 0.5, "alpha_y": 0.1}
@@ -176,6 +176,16 @@ def test_observation_points_put_each_observations_geometry_in_the_scene():
         at_sun, at_observer, _ = _body_geometry(target.with_values(point))
         np.testing.assert_allclose(at_sun, sun, atol=1e-9)
         np.testing.assert_allclose(at_observer, observer, atol=1e-9)
+
+
+def test_a_camera_moved_to_a_range_sees_the_same_image_of_the_target_from_further():
+    near = scene({"bus": box({"material": "white_paint"})}, camera={"position_m": [30.0, 0.0, 40.0], "focal_length_mm": 50.0})
+    far = at_range(near, 5000.0)
+    np.testing.assert_allclose(far.camera.position_m, [3000.0, 0.0, 4000.0])
+    assert far.camera.focal_length_mm == pytest.approx(5000.0) and far.camera.look_at_m == (0.0, 0.0, 0.0)
+    assert _body_geometry(far)[1] == pytest.approx(_body_geometry(near)[1])
+    with pytest.raises(InputError, match="range_m"):
+        at_range(near, 2e5)
 
 
 def observations(rng: np.random.Generator, n: int, magnitude: np.ndarray | None = None, sigma: float | None = None) -> LightCurveObservations:
