@@ -20,6 +20,7 @@ from spacefit.geometry.primitives import CYLINDER_SECTIONS
 from spacefit.scene.toml import scene_from_dict
 from spacefit.studies.observing import LightCurveObservations
 from spacefit.studies.plates import PlateLightCurve, plates_irradiance
+from spacefit.studies.lightcurve import SUN_MAGNITUDES
 from spacefit.studies.lightcurve_fit import RenderedLightCurve
 from spacefit.studies.target_plates import _body_geometry, at_range, attitude_angles_deg, observation_points, plate_notes
 
@@ -243,3 +244,31 @@ def test_the_path_tracer_is_chosen_where_the_plates_differ_more_than_the_noise()
     assert any("2 parts" in n for n in chosen.comparison.notes)
     with pytest.raises(InputError, match="`sigma_mag` is 0.1, but the observations state their errors"):
         sf.choose_light_curve_model(target, dataclasses.replace(obs, magnitude_sigma=np.full(10, 0.1)), sigma_mag=0.1)
+
+
+@pytest.mark.slow
+def test_a_fit_with_the_path_tracer_chosen_says_so_and_fits_the_rendered_truth():
+    """The shaded box's magnitude rendered by the path tracer at kd 0.5 (the observation's own
+    geometry and range): the rendered model is chosen and fits the sheet's kd back from 0.3 within
+    2 %, and the report names it (about 60 s). One observation: a rendered light curve of several
+    points has its renders called from several threads at once, which Mitsuba's scene updates do
+    not survive (an abort in spacefit.rendering.bridge, seen in 2 of 3 runs with 4 points)."""
+    rng = np.random.default_rng(9)
+    parts = {"bus": box({"material": "white_paint", "kd": 0.5}),
+             "shade": {"material": "white_paint", "kd": 0.5, "shape": "plate", "size_m": [4.0, 4.0], "position_m": [0.0, 0.0, 1.0]}}
+    target = scene(parts, target={"attitude_deg": [0.0, 0.0, 0.0]})
+    drawn = observations(rng, 1)
+    up = [(np.abs(v) * [1, 1, 0] + [0, 0, 2]) for v in (drawn.sun, drawn.observer)]
+    sun, towards = (v / np.linalg.norm(v, axis=1, keepdims=True) for v in up)
+    bare = LightCurveObservations(np.full(1, 5.0), None, "V", sun, towards, drawn.range_m, np.zeros(1, bool), None, "simulated")
+    points = observation_points(target, bare)
+    truth = sf.compare_plates_to_render(target, points=points)
+    rendered_range = 1000.0
+    m = SUN_MAGNITUDES["V"] - 2.5 * np.log10(truth.rendered_w_m2 * (rendered_range / bare.range_m) ** 2 / E)
+    obs = LightCurveObservations(m, np.full(1, 0.01), "V", sun, towards, bare.range_m, np.zeros(1, bool), None, "simulated")
+    start = target.with_values({"parts.shade.kd": 0.3})
+    chosen = sf.choose_light_curve_model(start, obs, samples=1)
+    assert isinstance(chosen.chosen, RenderedLightCurve)
+    result = sf.fit(chosen, ["parts.shade.kd"], max_steps=10)
+    assert result.values["parts.shade.kd"] == pytest.approx(0.5, rel=0.02)
+    assert "light-curve model: path tracer (sf.RenderedLightCurve)" in sf.format_result(result)
