@@ -3,8 +3,8 @@
 :func:`target_plates` turns the parts of a scene, as :func:`~spacefit.scene.assembly.assemble` loads
 them (a mesh file's groups, a part's own file, the primitives of :mod:`spacefit.geometry.primitives`),
 into :class:`~spacefit.studies.plates.Plate` s in the target's body frame: each part's triangles
-grouped by normal (and by tangent where its material is anisotropic), their areas summed. A box gives its six faces, a plate primitive one
-plate, a cylinder its facets and its two caps. Each plate carries its part's name (the plates of one
+grouped by normal (and by tangent where its material is anisotropic), their areas summed. A box
+gives its six faces, a plate primitive one plate, a cylinder its facets and its two caps. Each plate carries its part's name (the plates of one
 part share its parameters, ``parts.<part>.<field>``), the material the renderer gives the part, and
 the tangent the renderer uses for an anisotropic conductor's ``alpha_x``: Mitsuba's shading frame,
 dp/du made normal to the face, from the part's texture coordinates (a primitive's u runs along its
@@ -117,9 +117,10 @@ def part_plates(name: str, part: PartMesh, material: Material) -> list[Plate]:
 
 def target_plates(scene: Scene) -> tuple[Plate, ...]:
     """The flat plates of ``scene``'s target in its body frame, derived from its parts as the renderer
-    assembles them (module docstring): per part, its triangles grouped by normal (and tangent, :func:`part_plates`), with
-    the part's name, the material the renderer gives it and Mitsuba's tangent; a closed part's plates
-    one-sided, an open part's two-sided. A wrinkled part gives its flat base.
+    assembles them (module docstring): per part, its triangles grouped by normal (and tangent,
+    :func:`part_plates`), with the part's name, the material the renderer gives it and Mitsuba's
+    tangent; a closed part's plates one-sided, an open part's two-sided. A wrinkled part gives its
+    flat base.
 
     Raises:
         InputError: a part whose material has no BRDF towards an observer (a mirror), naming it.
