@@ -196,7 +196,7 @@ def test_score_reader_names_a_missing_column(tmp_path, pass_rows):
     with pytest.raises(InputError, match="the SCORE header lacks observing_filter"):
         sf.read_light_curve(path)
     with pytest.raises(InputError, match="`format` must be one of"):
-        sf.read_light_curve(path, format="mmt9")
+        sf.read_light_curve(path, format="votable")
 
 
 def test_geometry_from_a_tle_or_omm_matches_satchecker_columns(tmp_path, pass_rows):
@@ -223,7 +223,7 @@ def test_geometry_from_a_tle_or_omm_matches_satchecker_columns(tmp_path, pass_ro
     np.testing.assert_allclose(phase_of(obs), column("phase_angle_deg_satchecker"), atol=0.05)
     np.testing.assert_allclose(obs.range_m, g.range_m)
     write_score(path, [pass_rows[0], pass_rows[1] | {"alt_deg_satchecker": pass_rows[1]["alt_deg_satchecker"] + 0.1}])
-    with pytest.warns(UserWarning, match=r"the orbit's alt differs from SatChecker's alt_deg_satchecker by up to 0.1 deg \(row 2"):
+    with pytest.warns(UserWarning, match=r"the orbit's altitude differs from the file's alt_deg_satchecker by up to 0.1 deg \(row 2"):
         sf.read_light_curve(path, orbit=orbit)
     with pytest.raises(InputError, match="`tle` must be two element lines"):
         sf.Orbit.from_tle("1 25544U")

@@ -38,10 +38,13 @@ from spacefit.errors import InputError, check_choice
 from spacefit.studies.lightcurve import SUN_MAGNITUDES
 from spacefit.studies.orbit import Site, is_time, iso_text
 
-FORMATS = ("general", "pomenis", "score", "ecsv")
+FORMATS = ("general", "pomenis", "score", "ecsv", "mmt9", "tdm")
 SCORE_REQUIRED = ("observation_time_utc", "apparent_magnitude", "apparent_magnitude_uncertainty", "observer_latitude_deg",
                   "observer_longitude_deg", "observer_altitude_m", "instrument", "observing_mode", "observing_filter")
 SCORE_GEOMETRY = ("alt_deg_satchecker", "az_deg_satchecker", "range_to_sat_km_satchecker")
+# SiteRows' quantities -> SatChecker's columns of them.
+SCORE_CHECKED = {"altitude_deg": "alt_deg_satchecker", "azimuth_deg": "az_deg_satchecker", "range_m": "range_to_sat_km_satchecker",
+                 "phase_deg": "phase_angle_deg_satchecker"}
 # SCORE's observing_filter (lower case, spaces for - and _) -> spacefit's band. Only Johnson V has one:
 # spacefit's other band is the Pomenis AB magnitude at 532 nm.
 SCORE_BANDS = {"v": "V", "johnson v": "V", "bessel v": "V", "johnson cousins v": "V"}
@@ -62,22 +65,25 @@ class RefusedRow:
 
 
 @dataclass(frozen=True)
-class ScoreRows:
-    """The usable rows of a SCORE file (:func:`read_score`); geometry NaN where the file has none.
+class SiteRows:
+    """The usable rows of a file whose observations are each seen from a site (SCORE, MMT-9, TDM),
+    with the geometry the file gives (NaN where it has none).
 
     Attributes:
         rows: their numbers in the file (1: the first data row).
-        times_utc, magnitude, magnitude_sigma, band: as the file gives them.
+        times_utc, magnitude, band: as the file gives them; magnitude_sigma: None where it states no errors.
         sites: each row's observer.
-        altitude_deg, azimuth_deg, range_m, phase_deg: SatChecker's.
-        dark: the file says the target was not illuminated.
+        altitude_deg, azimuth_deg, range_m, phase_deg: the target seen from the site, by the file.
+        dark: the file says the target was not illuminated (in the Earth's shadow or penumbra).
         refused: the rows not used.
+        columns: the file's name of each of ``altitude_deg``, ``azimuth_deg``, ``range_m`` and
+            ``phase_deg`` it gives, for the messages of a check against an orbit.
     """
 
     rows: np.ndarray
     times_utc: np.ndarray
     magnitude: np.ndarray
-    magnitude_sigma: np.ndarray
+    magnitude_sigma: np.ndarray | None
     band: str
     sites: tuple[Site, ...]
     altitude_deg: np.ndarray
@@ -86,6 +92,7 @@ class ScoreRows:
     phase_deg: np.ndarray
     dark: np.ndarray
     refused: tuple[RefusedRow, ...]
+    columns: dict[str, str]
 
 
 def file_format(path: Path, header: Sequence[str] | None) -> str:
@@ -161,7 +168,7 @@ def _number(text: str | None) -> float:
 
 
 def read_score(rows: list[dict[str, str]], *, band: str | None, with_orbit: bool, launch_utc: str | None = None,
-               now_utc: str | None = None) -> ScoreRows:
+               now_utc: str | None = None) -> SiteRows:
     """The usable rows of a SCORE CSV's ``rows`` (module docstring); ``band`` states the magnitudes'
     band (else from each row's filter); ``with_orbit``: geometry will come from an orbit, so rows
     without SatChecker's are kept.
@@ -213,10 +220,10 @@ def read_score(rows: list[dict[str, str]], *, band: str | None, with_orbit: bool
         raise InputError(f"no usable rows: {'; '.join(str(r) for r in refused.values())}.")
     column = (lambda name: np.array(numbers[name]))
     dark = np.array([(rows[i].get("illuminated") or "").strip().lower() in ("false", "0", "no") for i in kept])
-    return ScoreRows(np.array(kept) + 1, np.array([times[i] for i in kept]), column("apparent_magnitude"),
-                     column("apparent_magnitude_uncertainty"), bands.pop(), tuple(sites), column("alt_deg_satchecker"),
-                     column("az_deg_satchecker"), column("range_to_sat_km_satchecker") * 1e3, column("phase_angle_deg_satchecker"),
-                     dark, tuple(refused[k] for k in sorted(refused)))
+    return SiteRows(np.array(kept) + 1, np.array([times[i] for i in kept]), column("apparent_magnitude"),
+                    column("apparent_magnitude_uncertainty"), bands.pop(), tuple(sites), column("alt_deg_satchecker"),
+                    column("az_deg_satchecker"), column("range_to_sat_km_satchecker") * 1e3, column("phase_angle_deg_satchecker"),
+                    dark, tuple(refused[k] for k in sorted(refused)), SCORE_CHECKED)
 
 
 def read_ecsv(path: Path) -> tuple[list[dict[str, str]], str | None, Site | None]:

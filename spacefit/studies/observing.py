@@ -47,8 +47,10 @@ import numpy as np
 
 from spacefit.errors import InputError, check_array, check_choice, check_type, quote, read_text_rows, unit_rows
 from spacefit.studies.lightcurve import SUN_MAGNITUDES
-from spacefit.studies.observation_files import (RefusedRow, ScoreRows, check_format, file_format, read_ecsv, read_score,
-                                                time_refusals, write_ecsv)
+from spacefit.studies.mmt9 import is_mmt9, read_mmt9
+from spacefit.studies.observation_files import (RefusedRow, SiteRows, check_format, file_format, read_ecsv, read_score, time_refusals,
+                                                write_ecsv)
+from spacefit.studies.tdm import is_tdm, read_tdm
 from spacefit.studies.orbit import EARTH_RADIUS_M, Orbit, Site, altaz_to_enu, in_earth_shadow, pass_geometry, sun_directions_enu
 
 POMENIS_COLUMNS = ("observation_time", "satellite_height", "satellite_altitude", "satellite_azimuth", "ab_magnitude")
@@ -173,23 +175,26 @@ def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | 
         InputError: missing columns, unreadable values, an unknown filter, a missing site or band.
         OSError: the file cannot be read.
     """
-    lines = read_text_rows("path", path, "light curve")
+    read_text_rows("path", path, "light curve")  # a text file, else a one-line error
     path = Path(path)
+    text = path.read_text(encoding="utf-8").splitlines()
     check_type("site", site, (Site, type(None)), "an sf.Site or None")
     check_type("orbit", orbit, (Orbit, type(None)), "an sf.Orbit (Orbit.from_tle or Orbit.from_omm) or None")
     if band is not None:
         check_choice("band", band, SUN_MAGNITUDES)
-    rows = list(csv.DictReader(lines))
-    kind = check_format(format) or file_format(path, list(rows[0]) if rows else None)
+    rows = list(csv.DictReader(line for line in text if line.strip() and not line.lstrip().startswith("#")))
+    kind = check_format(format) or ("tdm" if is_tdm(text) else "mmt9" if is_mmt9(text) else file_format(path, list(rows[0]) if rows else None))
     if kind == "ecsv":
         rows, table_band, table_site = read_ecsv(path)
         band, site, kind = band or table_band, site or table_site, "general"
-    if not rows:
+    if not rows and kind not in ("tdm", "mmt9"):
         raise InputError(f"light curve {path}: no data rows.")
+    options = {"band": band, "with_orbit": orbit is not None, "launch_utc": launch_utc, "now_utc": now_utc}
     try:
-        if kind == "score":
-            observations = _from_score(read_score(rows, band=band, with_orbit=orbit is not None, launch_utc=launch_utc,
-                                                  now_utc=now_utc), orbit, str(path))
+        if kind in ("score", "mmt9", "tdm"):
+            given = (read_score(rows, **options) if kind == "score" else
+                     (read_mmt9 if kind == "mmt9" else read_tdm)(text, site=site, **options))
+            observations = _from_site_rows(given, orbit, str(path))
         else:
             observations = _from_table(rows, kind, band, site, orbit, (launch_utc, now_utc), str(path))
     except InputError as err:
@@ -288,40 +293,40 @@ def _in_target_frame(position: np.ndarray, sun: np.ndarray, towards_observer: np
     return to_frame(sun), to_frame(towards_observer), range_m, in_shadow, to_frame(-position)
 
 
-# How far an orbit's geometry may stray from a SCORE file's SatChecker columns (deg) without a warning.
-SATCHECKER_TOLERANCE_DEG = {"phase_angle_deg_satchecker": 0.05, "alt_deg_satchecker": 0.01, "az_deg_satchecker": 0.01}
+# How far an orbit's geometry may stray from a file's (SatChecker's columns, an MMT-9 track's, a TDM's
+# angles and range) without a warning: deg, and m for the range.
+ORBIT_TOLERANCE = {"altitude_deg": 0.01, "azimuth_deg": 0.01, "phase_deg": 0.05, "range_m": 1000.0}
 
 
-def _from_score(score: ScoreRows, orbit: Orbit | None, source: str) -> LightCurveObservations:
-    """A SCORE file's observations (:func:`read_light_curve`), each row seen from its own site."""
-    n = len(score.magnitude)
+def _from_site_rows(given: SiteRows, orbit: Orbit | None, source: str) -> LightCurveObservations:
+    """The observations of a file whose rows are each seen from a site (:func:`read_light_curve`):
+    the geometry the orbit's where one is given (checked against the file's), else the file's."""
+    n = len(given.magnitude)
     values = [np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n)]
-    computed = {name: np.full(n, np.nan) for name in SATCHECKER_TOLERANCE_DEG}
-    for site in dict.fromkeys(score.sites):
-        rows = np.array([s == site for s in score.sites])
+    computed = {name: np.full(n, np.nan) for name in ORBIT_TOLERANCE}
+    for site in dict.fromkeys(given.sites):
+        rows = np.array([s == site for s in given.sites])
         if orbit is not None:
-            *parts, altitude, azimuth, phase = _orbit_geometry(orbit, site, score.times_utc[rows])
-            for name, value in zip(("alt_deg_satchecker", "az_deg_satchecker", "phase_angle_deg_satchecker"), (altitude, azimuth, phase)):
+            *parts, altitude, azimuth, phase = _orbit_geometry(orbit, site, given.times_utc[rows])
+            for name, value in zip(ORBIT_TOLERANCE, (altitude, azimuth, phase, parts[3])):
                 computed[name][rows] = value
         else:
-            u = altaz_to_enu(score.altitude_deg[rows], score.azimuth_deg[rows])
-            position = np.array([0.0, 0.0, EARTH_RADIUS_M]) + score.range_m[rows, None] * u
-            parts = _site_geometry(site, score.times_utc[rows], position, score.range_m[rows])
+            u = altaz_to_enu(given.altitude_deg[rows], given.azimuth_deg[rows])
+            position = np.array([0.0, 0.0, EARTH_RADIUS_M]) + given.range_m[rows, None] * u
+            parts = _site_geometry(site, given.times_utc[rows], position, given.range_m[rows])
         for whole, part in zip(values, parts):
             whole[rows] = part
-    if orbit is not None:
-        given = {"alt_deg_satchecker": score.altitude_deg, "az_deg_satchecker": score.azimuth_deg,
-                 "phase_angle_deg_satchecker": score.phase_deg}
-        for name, tolerance in SATCHECKER_TOLERANCE_DEG.items():
-            off = np.abs((computed[name] - given[name] + 180.0) % 360.0 - 180.0)
-            if np.nanmax(off, initial=0.0) > tolerance:
-                k = int(np.nanargmax(off))
-                warnings.warn(f"{source}: the orbit's {name.split('_deg')[0]} differs from SatChecker's {name} by up to "
-                              f"{off[k]:.3g} deg (row {score.rows[k]}: {computed[name][k]:.4f} against {given[name][k]:.4f}); "
-                              f"the geometry used is the orbit's.", stacklevel=3)
+    for name, column in given.columns.items() if orbit is not None else ():
+        off = computed[name] - getattr(given, name)
+        off = np.abs((off + 180.0) % 360.0 - 180.0 if name.endswith("_deg") else off)
+        if np.nanmax(off, initial=0.0) > ORBIT_TOLERANCE[name]:
+            k, unit, scale = int(np.nanargmax(off)), *(("deg", 1.0) if name.endswith("_deg") else ("km", 1e-3))
+            warnings.warn(f"{source}: the orbit's {name.rsplit('_', 1)[0]} differs from the file's {column} by up to {off[k] * scale:.3g} "
+                          f"{unit} (row {given.rows[k]}: {computed[name][k] * scale:.4f} against {getattr(given, name)[k] * scale:.4f}); "
+                          f"the geometry used is the orbit's.", stacklevel=3)
     sun, observer, range_m, in_shadow, earth_m = _in_target_frame(*values)
-    return LightCurveObservations(score.magnitude, score.magnitude_sigma, score.band, sun, observer, range_m,
-                                  in_shadow | score.dark, score.times_utc, source, score.refused, earth_m)
+    return LightCurveObservations(given.magnitude, given.magnitude_sigma, given.band, sun, observer, range_m,
+                                  in_shadow | given.dark, given.times_utc, source, given.refused, earth_m)
 
 
 def write_light_curve(observations: LightCurveObservations, path: str | Path) -> Path:
