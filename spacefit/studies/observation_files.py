@@ -140,11 +140,11 @@ def time_refusals(times: Sequence[str], column: str, launch_utc: str | None, now
     for i, text in enumerate(times):
         if not readable[i]:
             if unreadable:
-                out[i] = RefusedRow(i + 1, column, text, "not an ISO 8601 time (UTC)")
+                out[i] = RefusedRow(i + 1, column, str(text), "not an ISO 8601 time (UTC)")
         elif early[i]:
-            out[i] = RefusedRow(i + 1, column, text, f"before the launch ({launch_utc})")
+            out[i] = RefusedRow(i + 1, column, str(text), f"before the launch ({launch_utc})")
         elif late[i]:
-            out[i] = RefusedRow(i + 1, column, text, f"in the future (after {now.isot})")
+            out[i] = RefusedRow(i + 1, column, str(text), f"in the future (after {now.isot})")
     return out
 
 

@@ -27,6 +27,7 @@ unreadable, before the launch or in the future, or where it has no geometry and 
 from __future__ import annotations
 
 import re
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,6 +40,10 @@ from spacefit.studies.orbit import Site, offline_iers
 TIME_SYSTEMS = {"UTC": ("utc", 0.0), "TAI": ("tai", 0.0), "TT": ("tt", 0.0), "GPS": ("tai", 19.0), "TDB": ("tdb", 0.0),
                 "TCB": ("tcb", 0.0), "TCG": ("tcg", 0.0), "UT1": ("ut1", 0.0)}
 GEOMETRY_KEYWORDS = ("ANGLE_1", "ANGLE_2", "RANGE")
+# What each geometry keyword's value may be (AZEL angles, range in km).
+GEOMETRY_LIMITS = {"ANGLE_1": (lambda v: -180.0 <= v < 360.0, "an azimuth in [-180, 360) deg"),
+                   "ANGLE_2": (lambda v: -90.0 <= v <= 90.0, "an elevation in [-90, 90] deg"),
+                   "RANGE": (lambda v: v > 0.0, "a positive distance (km)")}
 DAY_OF_YEAR = re.compile(r"^(\d{4})-(\d{3})T(.*)$")
 
 
@@ -71,7 +76,7 @@ def read_tdm(lines: list[str], *, band: str | None, site: Site | None, with_orbi
     rows, times, magnitude, geometry = [], [], [], []
     refused: dict[int, RefusedRow] = {}
     for segment in segments:
-        for row, time_utc, value, angles in _observations(segment, lines):
+        for row, time_utc, value, angles in _observations(segment):
             if time_utc is None:
                 refused[len(rows)] = RefusedRow(row, "MAG", value, "its time is not ISO 8601 (nor a day of year)")
             rows.append(row)
@@ -149,31 +154,28 @@ def _first_line(lines: list[str]) -> int:
     return next((i for i, line in enumerate(lines, start=1) if line.strip() and not line.strip().startswith("COMMENT")), 1)
 
 
-def _observations(segment: _Segment, lines: list[str]) -> list[tuple[int, str | None, float, tuple[float, float, float]]]:
+def _observations(segment: _Segment) -> list[tuple[int, str | None, float, tuple[float, float, float]]]:
     """Each ``MAG`` line of ``segment``: its line, UTC time (None: unreadable), corrected magnitude and
     (azimuth, elevation, range km) at its time, NaN where the segment gives none."""
     meta = segment.meta
     corrected = meta.get("CORRECTIONS_APPLIED", "NO").upper() == "NO"
-    values: dict[tuple[str, str], float] = {}
-    for row, key, time, text in segment.lines:
-        if key in ("MAG", *GEOMETRY_KEYWORDS):
-            values[(key, time)] = _number(row, key, text) + (_number(row, f"CORRECTION_{key}", meta.get(f"CORRECTION_{key}", "0"))
-                                                            if corrected else 0.0)
     use_angles = meta.get("ANGLE_TYPE", "").upper() == "AZEL"
     path = [p for p in meta.get("PATH", "").split(",") if p.strip()]
     use_range = meta.get("RANGE_UNITS", "km").lower() == "km" and len(path) == 2
+    values: dict[tuple[str, str], float] = {}
+    for row, key, time, text in segment.lines:
+        if key == "MAG" or (key == "RANGE" and use_range) or (key.startswith("ANGLE_") and use_angles):
+            value = _number(row, key, text) + (_number(row, f"CORRECTION_{key}", meta.get(f"CORRECTION_{key}", "0")) if corrected else 0.0)
+            allowed, what = GEOMETRY_LIMITS.get(key, (lambda v: True, ""))
+            if not allowed(value):
+                raise InputError(f"line {row}: {key} at {time} must be {what}, got {value:g}.")
+            values[(key, time)] = value
     utc = _utc(sorted({time for (key, time) in values if key == "MAG"}), meta["TIME_SYSTEM"])
     out = []
     for row, key, time, _ in segment.lines:
         if key != "MAG":
             continue
-        azimuth, elevation = (values.get(("ANGLE_1", time), np.nan), values.get(("ANGLE_2", time), np.nan)) if use_angles else (np.nan, np.nan)
-        distance = values.get(("RANGE", time), np.nan) if use_range else np.nan
-        if not (np.isnan(azimuth) or -180.0 <= azimuth < 360.0) or not (np.isnan(elevation) or -90.0 <= elevation <= 90.0):
-            raise InputError(f"line {row}: the AZEL angles at {time} must be an azimuth in [-180, 360) and an elevation in "
-                             f"[-90, 90] deg, got {azimuth:g} and {elevation:g}.")
-        if distance <= 0:
-            raise InputError(f"line {row}: RANGE at {time} must be positive (km), got {distance:g}.")
+        azimuth, elevation, distance = (values.get((k, time), np.nan) for k in GEOMETRY_KEYWORDS)
         out.append((row, utc[time], values[("MAG", time)], (azimuth % 360.0, elevation, distance)))
     return out
 
@@ -191,19 +193,21 @@ def _number(row: int, key: str, text: str) -> float:
 
 def _utc(times: list[str], system: str) -> dict[str, str | None]:
     """Each TDM time of the scale ``system`` as an ISO 8601 UTC text (None: not a time)."""
+    scale, offset_s = TIME_SYSTEMS[system]
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=".*dubious year")  # a time far from now: refused later, not warned of twice
+        return {text: _one_utc(text, scale, offset_s) for text in times}
+
+
+def _one_utc(text: str, scale: str, offset_s: float) -> str | None:
+    """A TDM time ``text`` of astropy's ``scale``, ``offset_s`` added, as ISO 8601 UTC (None: not a time)."""
     from astropy import units as u  # astropy: heavy, loaded when times are read
     from astropy.time import Time
 
-    scale, offset_s = TIME_SYSTEMS[system]
-    out: dict[str, str | None] = {}
-    for text in times:
-        match = DAY_OF_YEAR.match(text)
-        iso = f"{match[1]}:{match[2]}:{match[3]}" if match else text
-        try:
-            t = Time(iso, format="yday" if match else "isot", scale=scale)
-        except ValueError:
-            out[text] = None
-            continue
-        with offline_iers():
-            out[text] = (t + offset_s * u.s).utc.isot
-    return out
+    match = DAY_OF_YEAR.match(text)
+    try:
+        t = Time(f"{match[1]}:{match[2]}:{match[3]}" if match else text, format="yday" if match else "isot", scale=scale)
+    except ValueError:
+        return None
+    with offline_iers():
+        return (t + offset_s * u.s).utc.isot
