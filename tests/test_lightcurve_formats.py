@@ -13,6 +13,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 import test_lightcurve_files as iss
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import spacefit as sf
 from spacefit.errors import InputError
@@ -208,3 +210,45 @@ def test_general_and_pomenis_rows_that_cannot_be_right(tmp_path):
                     "2019-12-09T16:37:00,550,40,120,5.1\n2019-12-09T16:38:00,,40,120,5.1\n")
     with pytest.raises(InputError, match="row 2's satellite_height must be a number, got ''"):
         sf.read_light_curve(path, site=iss.SITE)
+
+
+TOKENS = ["", "None", "nan", "inf", "-1", "0", "1e300", "V", "B", "Clear", "2", "META_START", "META_STOP", "DATA_START", "DATA_STOP",
+          "MAG", "=", "2019-343T16:37:00", "2019-12-09T16:37:00", "TIME_SYSTEM = MET", "#", "x"]
+
+
+@settings(max_examples=60, deadline=None, derandomize=True, database=None)
+@given(data=st.data())
+def test_mutated_mmt9_and_tdm_files_are_read_or_refused_by_name(tmp_path_factory, data):
+    """A valid track or message with a few tokens replaced or lines dropped: read (finite magnitudes,
+    unit directions, every row used or refused) or a one-line InputError naming the file."""
+    kind = data.draw(st.sampled_from(["mmt9", "tdm"]))
+    if kind == "mmt9":
+        text = MMT_HEADER.format(n=3) + "\n".join(mmt_line(t) for t in TIMES[:3]) + "\n"
+    else:
+        text = tdm("".join(tdm_lines(t) for t in TIMES[:2]))
+    lines = [line.split(" ") for line in text.splitlines()]
+    for _ in range(data.draw(st.integers(1, 3))):
+        i = data.draw(st.integers(0, len(lines) - 1))
+        if data.draw(st.booleans()) or len(lines[i]) == 0:
+            del lines[i]
+        else:
+            lines[i][data.draw(st.integers(0, len(lines[i]) - 1))] = data.draw(st.sampled_from(TOKENS))
+        if not lines:
+            break
+    path = tmp_path_factory.mktemp("mutated") / f"lc.{kind}"
+    path.write_text("\n".join(" ".join(line) for line in lines) + "\n")
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            obs = sf.read_light_curve(path, site=iss.SITE, orbit=ORBIT, format=kind)
+    except InputError as err:
+        assert str(err).startswith(f"light curve {path}: ") and "\n" not in str(err)
+        return
+    assert len(obs) > 0 and np.all(np.isfinite(obs.magnitude)) and np.all(obs.range_m > 0)
+    np.testing.assert_allclose(np.linalg.norm(obs.sun, axis=1), 1.0)
+    if kind == "mmt9":
+        rows = [line for line in lines if line and line[0] and not line[0].startswith("#")]
+    else:
+        starts = [i for i, line in enumerate(lines) if line == ["DATA_START"]]
+        rows = [line for line in lines[starts[0]:] if line[0] == "MAG"] if starts else []
+    assert len(obs) + len(obs.refused) == len(rows)  # every row used or refused, none dropped

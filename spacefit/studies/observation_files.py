@@ -114,10 +114,9 @@ def check_format(value: str | None) -> str | None:
     return None if value is None else check_choice("format", value, FORMATS)
 
 
-def time_refusals(times: Sequence[str], column: str, launch_utc: str | None, now_utc: str | None,
-                  unreadable: bool = True) -> dict[int, RefusedRow]:
-    """The rows (0-based) whose times cannot be right: not ISO 8601 (where ``unreadable``), before
-    ``launch_utc``, after ``now_utc`` (default: now)."""
+def time_refusals(times: Sequence[str], column: str, launch_utc: str | None, now_utc: str | None) -> dict[int, RefusedRow]:
+    """The rows (0-based) whose times cannot be right: not ISO 8601, before ``launch_utc``, after
+    ``now_utc`` (default: now)."""
     from astropy.time import Time  # astropy: heavy, loaded when times are read
 
     bounds = {}
@@ -139,8 +138,7 @@ def time_refusals(times: Sequence[str], column: str, launch_utc: str | None, now
     out = {}
     for i, text in enumerate(times):
         if not readable[i]:
-            if unreadable:
-                out[i] = RefusedRow(i + 1, column, str(text), "not an ISO 8601 time (UTC)")
+            out[i] = RefusedRow(i + 1, column, str(text), "not an ISO 8601 time (UTC)")
         elif early[i]:
             out[i] = RefusedRow(i + 1, column, str(text), f"before the launch ({launch_utc})")
         elif late[i]:

@@ -242,7 +242,7 @@ def _from_table(rows: list[dict[str, str]], kind: str, band: str | None, site: S
             raise InputError(f"the header {header} has no geometry: give {', '.join(TARGET_FRAME_COLUMNS)} "
                              f"(the target's frame) or {', '.join(SITE_COLUMNS)} (seen from a `site`), or an `orbit`.")
     times = np.array([r[time_column] for r in rows])
-    refused = time_refusals(times, time_column, *bounds, unreadable=False)
+    refused = time_refusals(times, time_column, *bounds)
     keep = np.array([i not in refused for i in range(len(rows))])
     if not keep.any():
         raise InputError(f"no usable rows: {'; '.join(str(r) for r in refused.values())}.")
