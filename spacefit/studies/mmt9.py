@@ -1,7 +1,8 @@
-"""Track files of the Mini-MegaTORTORA (MMT-9) satellite database (Karpov et al. 2015, "Mini-Mega-TORTORA
-wide-field monitoring system with sub-second temporal resolution", Astrophysics and Space Science
-Proceedings 42, 219; Beskin et al. 2017, "Wide-field optical monitoring with Mini-MegaTORTORA (MMT-9)
-multichannel high temporal resolution telescope", Physics-Uspekhi 60, 1007).
+"""Track files of the Mini-MegaTORTORA (MMT-9) satellite database (Karpov et al. 2016, "Massive
+photometry of low-altitude artificial satellites on Mini-MegaTORTORA", Revista Mexicana de Astronomia
+y Astrofisica (Serie de Conferencias) 48, 112; the instrument: Beskin et al. 2017, "Wide-field
+monitoring with Mini-MegaTORTORA multi-channel telescope with high temporal resolution",
+Astrophysical Bulletin 72, 81).
 
 The layout is the database's track download (``track_<id>.txt``), as its web application writes it
 (``satellite_download`` in ``fweb/views_satellites.py`` of the MMT-9 software,
@@ -38,7 +39,7 @@ from spacefit.studies.lightcurve import SUN_MAGNITUDES
 from spacefit.studies.observation_files import RefusedRow, SiteRows, time_refusals
 from spacefit.studies.orbit import Site
 
-# MMT-9 at the Special Astrophysical Observatory, Nizhnij Arkhyz (the MMT-9 software's satellites.py).
+# MMT-9 at the Special Astrophysical Observatory, Nizhnij Arkhyz (the MMT-9 software's fweb/settings.py).
 MMT9_SITE = Site(43.65722222, 41.43235417, 2065.0)
 MMT9_COLUMNS = ("Date", "Time", "StdMag", "Mag", "Filter", "Penumbra", "Distance", "Phase", "Channel")
 # An MMT-9 filter -> spacefit's band (the others have none: Clear is unfiltered, Pol polarised).

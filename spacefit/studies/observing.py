@@ -1,14 +1,14 @@
 """Light curves as observations: reading measured magnitudes with their times and geometry, and the
 target's frame.
 
-:func:`read_light_curve` reads four formats, found from the file (or named by ``format``):
+:func:`read_light_curve` reads six formats, found from the file (or named by ``format``):
 
 * ``general``: CSV with ``#`` comment lines and a header naming the columns ``time_utc`` (ISO 8601),
   ``magnitude``, optionally ``magnitude_sigma`` (mag), and the geometry, either in the target's frame,
   ``sun_x, sun_y, sun_z`` and ``observer_x, observer_y, observer_z`` (directions from the target,
   normalised on reading) and ``range_m`` (optionally ``earth_x, earth_y, earth_z``, the Earth's
-  centre from the target, m, for Earthshine), or seen from a site (the ``site`` argument),
-  ``altitude_deg``, ``azimuth_deg`` (of the target, azimuth from north through east) and
+  centre from the target, m, for Earthshine, and ``in_shadow``), or seen from a site (the ``site``
+  argument), ``altitude_deg``, ``azimuth_deg`` (of the target, azimuth from north through east) and
   ``height_m`` (the target's height above the Earth's surface).
 * ``pomenis``: the Starlink v1.5 observations (Fankhauser, Askari & Tyson 2023):
   ``observation_time, satellite_height`` (km), ``satellite_altitude, satellite_azimuth`` (deg),
@@ -16,12 +16,20 @@ target's frame.
 * ``score``: the IAU CPS SatHub SCORE CSV (:mod:`spacefit.studies.observation_files`), each row with
   its own observer; the geometry from SatChecker's columns.
 * ``ecsv``: an astropy ECSV table of the general format's columns (:func:`write_light_curve` writes one).
+* ``mmt9``: a track download of the Mini-MegaTORTORA satellite database (:mod:`spacefit.studies.mmt9`),
+  found by its header line ``# Date Time StdMag Mag Filter ...``; the geometry from an ``orbit``.
+* ``tdm``: a CCSDS Tracking Data Message with ``MAG`` data (:mod:`spacefit.studies.tdm`), found by its
+  first keyword ``CCSDS_TDM_VERS``; the geometry from its AZEL angles and range seen from ``site``, or
+  from an ``orbit``.
 
 Given an ``orbit`` (:class:`~spacefit.studies.orbit.Orbit`, a TLE or OMM), the geometry is computed
 from it, the site and the time instead, offline (:func:`~spacefit.studies.orbit.pass_geometry`),
-and checked against SatChecker's columns where a SCORE file has them. Rows whose time cannot be right
-(before ``launch_utc``, in the future; in a SCORE file also unreadable) or that lack geometry are
-refused: listed in ``refused`` with their row, column, value and reason, and warned of.
+and checked against the file's where it gives any (SatChecker's columns, an MMT-9 track's distance
+and phase angle, a TDM's angles and range: :data:`ORBIT_TOLERANCE`). Rows whose time cannot be right
+(not ISO 8601, before ``launch_utc``, in the future), and SCORE rows, MMT-9 points and TDM ``MAG``
+lines without a magnitude or geometry, are refused: listed in ``refused`` with their row, column,
+value and reason, and warned of. A missing value in the general or Pomenis format is an error
+naming its row and column.
 
 From a site, the sun's direction comes from astropy offline (:mod:`spacefit.studies.orbit`). The
 Earth is a sphere of radius :data:`EARTH_RADIUS_M` (as lumos-sat takes it), the site on it; the
@@ -29,8 +37,9 @@ sun's parallax over the target's distance (5e-5 rad) is neglected. The target's 
 (:func:`nadir_sun_frame`): z away from the Earth's centre, y towards the sun's direction projected
 onto the plane normal to z, x = y cross z: the frame of a satellite whose base faces nadir and whose
 solar array, turned about z, faces the sun (lumos-sat's "brightness frame"). A target in the Earth's
-shadow (:func:`~spacefit.studies.orbit.in_earth_shadow`, or a SCORE row not ``illuminated``) is
-predicted dark, and its observation flagged (``in_shadow``) and left out of fits.
+shadow (:func:`~spacefit.studies.orbit.in_earth_shadow`, a SCORE row not ``illuminated``, an MMT-9
+point in the penumbra, a general row ``in_shadow``) is predicted dark, and its observation flagged
+(``in_shadow``) and left out of fits.
 """
 
 from __future__ import annotations
@@ -165,14 +174,18 @@ def nadir_sun_frame(position_m: np.ndarray, sun: np.ndarray) -> np.ndarray:
 def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | None = None, format: str | None = None,
                      orbit: Orbit | None = None, launch_utc: str | None = None, now_utc: str | None = None) -> LightCurveObservations:
     """Read measured magnitudes from a file in one of the formats of the module docstring (found from
-    the file, or ``format``: ``general``, ``pomenis``, ``score``, ``ecsv``). ``site`` is needed where
-    the geometry is an altitude, azimuth and height (a SCORE file gives each row's); ``band`` names
-    the magnitudes' band (one of :data:`~spacefit.studies.lightcurve.SUN_MAGNITUDES`; a SCORE file's
-    from its filters). ``orbit`` computes the geometry from a TLE or OMM instead; rows before
-    ``launch_utc`` or after ``now_utc`` (default: now) are refused, with a warning.
+    the file, or ``format``: ``general``, ``pomenis``, ``score``, ``ecsv``, ``mmt9``, ``tdm``). ``site``
+    is the observer where the geometry is seen from one (a SCORE file gives each row's; an MMT-9
+    track's default is MMT-9's); ``band`` names the magnitudes' band (one of
+    :data:`~spacefit.studies.lightcurve.SUN_MAGNITUDES`; a SCORE file's or MMT-9 track's from its
+    filters, a TDM's ``V``). ``orbit`` computes the geometry from a TLE or OMM instead (an MMT-9
+    track needs one); rows before ``launch_utc`` or after ``now_utc`` (default: now) are refused,
+    with a warning.
 
     Raises:
-        InputError: missing columns, unreadable values, an unknown filter, a missing site or band.
+        InputError: one line naming the file and, where one is to blame, the row (a TDM's line), the
+            column (keyword) and the value: missing columns or metadata, unreadable values, an unknown
+            filter or time system, a missing site, band or orbit.
         OSError: the file cannot be read.
     """
     read_text_rows("path", path, "light curve")  # a text file, else a one-line error
