@@ -187,7 +187,8 @@ def test_tdm_refusals_site_and_shadow(tmp_path):
     path.write_text(tdm(data))
     with pytest.warns(UserWarning, match="3 rows refused"):
         obs = sf.read_light_curve(path, site=iss.SITE)
-    assert [(r.row, r.column) for r in obs.refused] == [(18, "ANGLE_1"), (19, "MAG"), (20, "MAG")]
+    assert [(r.row, r.column, r.value) for r in obs.refused] == [(18, "ANGLE_1", ""), (19, "MAG", "2019-12-09T25:61:00"),
+                                                                  (20, "MAG", "2999-01-01T00:00:00")]
     assert [r.reason.split(" (")[0] for r in obs.refused] == ["missing geometry", "its time is not ISO 8601", "in the future"]
     assert obs.in_shadow.tolist() == [False, True]
     with pytest.warns(UserWarning, match="2 rows refused"):

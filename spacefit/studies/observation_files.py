@@ -216,11 +216,11 @@ def read_score(rows: list[dict[str, str]], *, band: str | None, with_orbit: bool
         raise InputError(f"the rows' filters are in several bands ({', '.join(sorted(bands))}): give `band`, or read one band per file.")
     if not kept:
         raise InputError(f"no usable rows: {'; '.join(str(r) for r in refused.values())}.")
-    column = (lambda name: np.array(numbers[name]))
+    array = (lambda name: np.array(numbers[name]))
     dark = np.array([(rows[i].get("illuminated") or "").strip().lower() in ("false", "0", "no") for i in kept])
-    return SiteRows(np.array(kept) + 1, np.array([times[i] for i in kept]), column("apparent_magnitude"),
-                    column("apparent_magnitude_uncertainty"), bands.pop(), tuple(sites), column("alt_deg_satchecker"),
-                    column("az_deg_satchecker"), column("range_to_sat_km_satchecker") * 1e3, column("phase_angle_deg_satchecker"),
+    return SiteRows(np.array(kept) + 1, np.array([times[i] for i in kept]), array("apparent_magnitude"),
+                    array("apparent_magnitude_uncertainty"), bands.pop(), tuple(sites), array("alt_deg_satchecker"),
+                    array("az_deg_satchecker"), array("range_to_sat_km_satchecker") * 1e3, array("phase_angle_deg_satchecker"),
                     dark, tuple(refused[k] for k in sorted(refused)), SCORE_CHECKED)
 
 

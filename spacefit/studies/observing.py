@@ -202,11 +202,12 @@ def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | 
         band, site, kind = band or table_band, site or table_site, "general"
     if not rows and kind not in ("tdm", "mmt9"):
         raise InputError(f"light curve {path}: no data rows.")
-    options = {"band": band, "with_orbit": orbit is not None, "launch_utc": launch_utc, "now_utc": now_utc}
+    with_orbit = orbit is not None
     try:
         if kind in ("score", "mmt9", "tdm"):
-            given = (read_score(rows, **options) if kind == "score" else
-                     (read_mmt9 if kind == "mmt9" else read_tdm)(text, site=site, **options))
+            given = (read_score(rows, band=band, with_orbit=with_orbit, launch_utc=launch_utc, now_utc=now_utc) if kind == "score" else
+                     (read_mmt9 if kind == "mmt9" else read_tdm)(text, band=band, site=site, with_orbit=with_orbit,
+                                                                 launch_utc=launch_utc, now_utc=now_utc))
             observations = _from_site_rows(given, orbit, str(path))
         else:
             observations = _from_table(rows, kind, band, site, orbit, (launch_utc, now_utc), str(path))

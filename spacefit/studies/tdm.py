@@ -73,13 +73,18 @@ def read_tdm(lines: list[str], *, band: str | None, site: Site | None, with_orbi
         raise InputError("a TDM names its participants but not where they are: give the observer's `site` "
                          "(sf.Site(latitude_deg, longitude_deg, height_m)).")
     segments = _segments(lines)
-    rows, times, magnitude, geometry = [], [], [], []
+    rows: list[int] = []
+    times: list[str] = []
+    tags: list[str] = []
+    magnitude: list[float] = []
+    geometry: list[tuple[float, float, float]] = []
     refused: dict[int, RefusedRow] = {}
     for segment in segments:
-        for row, time_utc, value, angles in _observations(segment):
+        for row, tag, time_utc, value, angles in _observations(segment):
             if time_utc is None:
-                refused[len(rows)] = RefusedRow(row, "MAG", value, "its time is not ISO 8601 (nor a day of year)")
+                refused[len(rows)] = RefusedRow(row, "MAG", tag, "its time is not ISO 8601 (nor a day of year)")
             rows.append(row)
+            tags.append(tag)
             times.append(time_utc or "2000-01-01T00:00:00")
             magnitude.append(value)
             geometry.append(angles)
@@ -87,7 +92,7 @@ def read_tdm(lines: list[str], *, band: str | None, site: Site | None, with_orbi
         raise InputError("no MAG data lines.")
     readable = [i for i in range(len(rows)) if i not in refused]
     for k, why in time_refusals([times[i] for i in readable], "MAG", launch_utc, now_utc).items():
-        refused[readable[k]] = RefusedRow(rows[readable[k]], why.column, f"{times[readable[k]]} UTC", why.reason)
+        refused[readable[k]] = RefusedRow(rows[readable[k]], why.column, tags[readable[k]], why.reason)
     geometry_array = np.array(geometry, dtype=float).reshape(-1, 3)
     for i in range(len(rows)):
         if i not in refused and not with_orbit and np.isnan(geometry_array[i]).any():
@@ -154,9 +159,9 @@ def _first_line(lines: list[str]) -> int:
     return next((i for i, line in enumerate(lines, start=1) if line.strip() and not line.strip().startswith("COMMENT")), 1)
 
 
-def _observations(segment: _Segment) -> list[tuple[int, str | None, float, tuple[float, float, float]]]:
-    """Each ``MAG`` line of ``segment``: its line, UTC time (None: unreadable), corrected magnitude and
-    (azimuth, elevation, range km) at its time, NaN where the segment gives none."""
+def _observations(segment: _Segment) -> list[tuple[int, str, str | None, float, tuple[float, float, float]]]:
+    """Each ``MAG`` line of ``segment``: its line, time as written and in UTC (None: unreadable),
+    corrected magnitude and (azimuth, elevation, range km) at its time, NaN where the segment gives none."""
     meta = segment.meta
     corrected = meta.get("CORRECTIONS_APPLIED", "NO").upper() == "NO"
     use_angles = meta.get("ANGLE_TYPE", "").upper() == "AZEL"
@@ -176,7 +181,7 @@ def _observations(segment: _Segment) -> list[tuple[int, str | None, float, tuple
         if key != "MAG":
             continue
         azimuth, elevation, distance = (values.get((k, time), np.nan) for k in GEOMETRY_KEYWORDS)
-        out.append((row, utc[time], values[("MAG", time)], (azimuth % 360.0, elevation, distance)))
+        out.append((row, time, utc[time], values[("MAG", time)], (azimuth % 360.0, elevation, distance)))
     return out
 
 
