@@ -121,6 +121,11 @@ from spacefit.studies.store import StoreReport as StoreReport
 from spacefit.studies.store import verify_store as verify_store
 from spacefit.studies.sweep import read_sweep_file as read_sweep_file
 from spacefit.studies.sweep import sweep as sweep
+from spacefit.studies.target_plates import ChosenLightCurve as ChosenLightCurve
+from spacefit.studies.target_plates import PlatesVsRender as PlatesVsRender
+from spacefit.studies.target_plates import choose_light_curve_model as choose_light_curve_model
+from spacefit.studies.target_plates import compare_plates_to_render as compare_plates_to_render
+from spacefit.studies.target_plates import target_plates as target_plates
 
 __version__: str = '0.1.0'
 
@@ -139,5 +144,6 @@ __all__ = [
     'write_light_curve', 'RefusedRow', 'Orbit', 'PassGeometry', 'pass_geometry', 'Plate', 'predict_magnitudes', 'fit_plates',
     'fitted_plates', 'light_curve_convergence', 'fit_light_curve', 'BRDFTableObservation', 'PlateLightCurve', 'RenderedLightCurve', 'Earth',
     'EarthshineSources', 'earthshine_sources', 'earthshine_irradiance', 'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings',
-    'WrinkleSettings', 'PartSettings', 'SunTracking', 'AxisAngle', 'NadirSun', 'SunPointing', 'QuaternionTable',
+    'WrinkleSettings', 'PartSettings', 'target_plates', 'compare_plates_to_render', 'PlatesVsRender', 'choose_light_curve_model',
+    'ChosenLightCurve', 'SunTracking', 'AxisAngle', 'NadirSun', 'SunPointing', 'QuaternionTable',
 ]

@@ -11,6 +11,7 @@ ephemeris instead. Both share only the SGP4 propagator, as SatChecker (skyfield)
 from __future__ import annotations
 
 import csv
+import json
 import math
 import warnings
 from pathlib import Path
@@ -20,6 +21,7 @@ import pytest
 
 import spacefit as sf
 from spacefit.errors import InputError
+from spacefit.studies.orbit import offline_iers
 
 # The ISS on 2019-12-09 (the sgp4 package's published example); a pass over northern France at dusk.
 TLE = ("ISS (ZARYA)\n1 25544U 98067A   19343.69339541  .00001764  00000-0  38792-4 0  9991\n"
@@ -34,6 +36,8 @@ SHADOW_TIME = "2019-12-09T17:00:00.000Z"  # the ISS in the Earth's shadow (16:46
 # UT1 - UTC on 2019-12-09 (s), IERS Bulletin A.
 DUT1_S = -0.1724
 AU_M = 1.495978707e11
+# SatChecker's own values for one TLE, site and time (its test's expected values; BSD 3-Clause, data/satchecker/).
+SATCHECKER_VALUES = Path(__file__).resolve().parents[1] / "data" / "satchecker" / "iss_2020-05-31.json"
 SCORE_COLUMNS = ("satellite_name", "norad_cat_id", "observation_time_utc", "observation_time_uncertainty_sec", "apparent_magnitude",
                  "apparent_magnitude_uncertainty", "observer_latitude_deg", "observer_longitude_deg", "observer_altitude_m",
                  "limiting_magnitude", "instrument", "observing_mode", "observing_filter", "observer_email", "observer_orcid",
@@ -196,7 +200,7 @@ def test_score_reader_names_a_missing_column(tmp_path, pass_rows):
     with pytest.raises(InputError, match="the SCORE header lacks observing_filter"):
         sf.read_light_curve(path)
     with pytest.raises(InputError, match="`format` must be one of"):
-        sf.read_light_curve(path, format="mmt9")
+        sf.read_light_curve(path, format="votable")
 
 
 def test_geometry_from_a_tle_or_omm_matches_satchecker_columns(tmp_path, pass_rows):
@@ -223,12 +227,32 @@ def test_geometry_from_a_tle_or_omm_matches_satchecker_columns(tmp_path, pass_ro
     np.testing.assert_allclose(phase_of(obs), column("phase_angle_deg_satchecker"), atol=0.05)
     np.testing.assert_allclose(obs.range_m, g.range_m)
     write_score(path, [pass_rows[0], pass_rows[1] | {"alt_deg_satchecker": pass_rows[1]["alt_deg_satchecker"] + 0.1}])
-    with pytest.warns(UserWarning, match=r"the orbit's alt differs from SatChecker's alt_deg_satchecker by up to 0.1 deg \(row 2"):
+    with pytest.warns(UserWarning, match=r"the orbit's altitude differs from the file's alt_deg_satchecker by up to 0.1 deg \(row 2"):
         sf.read_light_curve(path, orbit=orbit)
     with pytest.raises(InputError, match="`tle` must be two element lines"):
         sf.Orbit.from_tle("1 25544U")
     with pytest.raises(InputError, match="OMM .* cannot be read: KeyError 'EPOCH'"):
         sf.Orbit.from_omm({k: v for k, v in OMM.items() if k != "EPOCH"})
+
+
+def test_geometry_matches_satcheckers_own_values():
+    """SatChecker's values (its Skyfield propagation, data/satchecker) at Julian date 2459000.5, which
+    SatChecker reads as UT1 (00:00:00.254 UTC): altitude and azimuth within 0.01 deg, the phase angle
+    within 0.05 deg, the range within 100 m, the sun within 0.01 deg, in the Earth's shadow as
+    SatChecker says. Read as UTC instead, the azimuth is more than 0.01 deg off: UT1 - UTC matters."""
+    from astropy.time import Time
+
+    given = json.loads(SATCHECKER_VALUES.read_text())
+    orbit, site = sf.Orbit.from_tle("\n".join(given["tle"])), sf.Site(given["latitude_deg"], given["longitude_deg"], given["elevation_m"])
+    with offline_iers():
+        utc = Time(given["julian_date_ut1"], format="jd", scale="ut1").utc.isot
+    g = sf.pass_geometry(orbit, site, [utc])
+    assert abs(g.altitude_deg[0] - given["alt_deg"]) < 0.01 and abs(g.azimuth_deg[0] - given["az_deg"]) < 0.01
+    assert abs(g.phase_deg[0] - given["phase_angle_deg"]) < 0.05 and abs(g.range_m[0] - given["distance_km"] * 1e3) < 100.0
+    assert abs(g.sun_altitude_deg[0] - given["solar_elevation_deg"]) < 0.01 and abs(g.sun_azimuth_deg[0] - given["solar_azimuth_deg"]) < 0.01
+    assert g.in_shadow.tolist() == [not given["illuminated"]]
+    as_utc = sf.pass_geometry(orbit, site, [Time(given["julian_date_ut1"], format="jd", scale="utc").isot])
+    assert abs(as_utc.azimuth_deg[0] - given["az_deg"]) > 0.01
 
 
 def test_a_target_in_the_earths_shadow_is_flagged(tmp_path):

@@ -117,3 +117,19 @@ def test_a_scene_file_names_the_table_beside_it(tmp_path):
     assert material_table(part) == {"material": "tabulated", "source": part.source, "scale": 0.5}
     with pytest.raises(InputError, match=r"parts\.plate.*source"):
         make_material("tabulated", {"scale": 1.0}, where="parts.plate")
+
+
+def test_another_source_reads_the_other_table(chassis):
+    """Setting ``source`` to another file (an override, a sweep's axis) reads that file's table: the
+    arrays read from the first are not kept; the same source keeps them, a new ``scale`` too."""
+    array_file = CHASSIS.with_name("solar_array_brdf.csv")
+    swapped = with_material_values(chassis, {"source": str(array_file)})
+    fresh = sf.TabulatedBRDF(source=str(array_file))
+    assert swapped.source == str(array_file)
+    for k in range(len(fresh.incidence_rad)):
+        np.testing.assert_array_equal(swapped.log_value[k], fresh.log_value[k])
+    assert not np.array_equal(np.concatenate(swapped.log_value), np.concatenate(chassis.log_value))
+    rescaled = with_material_values(chassis, {"source": chassis.source, "scale": 2.0})
+    assert rescaled.scale == 2.0
+    for k in range(len(chassis.incidence_rad)):
+        np.testing.assert_array_equal(rescaled.log_value[k], chassis.log_value[k])

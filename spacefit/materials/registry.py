@@ -158,6 +158,9 @@ def with_material_values(material: Material | type, values: Mapping[str, object]
             hint = f" Did you mean `{where}.{close}`?" if close else ""
             raise InputError(f"unknown scene key `{where}.{key}`: a {model.__name__} has {', '.join(fields)}; a part "
                              f"has `material` and `file` too.{hint}")
+    if not isinstance(material, type) and any(values.get(k, getattr(material, k)) != getattr(material, k) for k in model.paths):
+        # another file: what was read from the old one (the ``derived`` fields) is read again from the new
+        values.update({f.name: f.default for f in dataclasses.fields(model) if f.metadata.get("derived") and f.name not in values})
     with inside(where):
         return model(**values) if isinstance(material, type) else dataclasses.replace(material, **values)
 

@@ -38,10 +38,13 @@ from spacefit.errors import InputError, check_choice
 from spacefit.studies.lightcurve import SUN_MAGNITUDES
 from spacefit.studies.orbit import Site, is_time, iso_text
 
-FORMATS = ("general", "pomenis", "score", "ecsv")
+FORMATS = ("general", "pomenis", "score", "ecsv", "mmt9", "tdm")
 SCORE_REQUIRED = ("observation_time_utc", "apparent_magnitude", "apparent_magnitude_uncertainty", "observer_latitude_deg",
                   "observer_longitude_deg", "observer_altitude_m", "instrument", "observing_mode", "observing_filter")
 SCORE_GEOMETRY = ("alt_deg_satchecker", "az_deg_satchecker", "range_to_sat_km_satchecker")
+# SiteRows' quantities -> SatChecker's columns of them.
+SCORE_CHECKED = {"altitude_deg": "alt_deg_satchecker", "azimuth_deg": "az_deg_satchecker", "range_m": "range_to_sat_km_satchecker",
+                 "phase_deg": "phase_angle_deg_satchecker"}
 # SCORE's observing_filter (lower case, spaces for - and _) -> spacefit's band. Only Johnson V has one:
 # spacefit's other band is the Pomenis AB magnitude at 532 nm.
 SCORE_BANDS = {"v": "V", "johnson v": "V", "bessel v": "V", "johnson cousins v": "V"}
@@ -62,22 +65,25 @@ class RefusedRow:
 
 
 @dataclass(frozen=True)
-class ScoreRows:
-    """The usable rows of a SCORE file (:func:`read_score`); geometry NaN where the file has none.
+class SiteRows:
+    """The usable rows of a file whose observations are each seen from a site (SCORE, MMT-9, TDM),
+    with the geometry the file gives (NaN where it has none).
 
     Attributes:
         rows: their numbers in the file (1: the first data row).
-        times_utc, magnitude, magnitude_sigma, band: as the file gives them.
+        times_utc, magnitude, band: as the file gives them; magnitude_sigma: None where it states no errors.
         sites: each row's observer.
-        altitude_deg, azimuth_deg, range_m, phase_deg: SatChecker's.
-        dark: the file says the target was not illuminated.
+        altitude_deg, azimuth_deg, range_m, phase_deg: the target seen from the site, by the file.
+        dark: the file says the target was not illuminated (in the Earth's shadow or penumbra).
         refused: the rows not used.
+        columns: the file's name of each of ``altitude_deg``, ``azimuth_deg``, ``range_m`` and
+            ``phase_deg`` it gives, for the messages of a check against an orbit.
     """
 
     rows: np.ndarray
     times_utc: np.ndarray
     magnitude: np.ndarray
-    magnitude_sigma: np.ndarray
+    magnitude_sigma: np.ndarray | None
     band: str
     sites: tuple[Site, ...]
     altitude_deg: np.ndarray
@@ -86,6 +92,7 @@ class ScoreRows:
     phase_deg: np.ndarray
     dark: np.ndarray
     refused: tuple[RefusedRow, ...]
+    columns: dict[str, str]
 
 
 def file_format(path: Path, header: Sequence[str] | None) -> str:
@@ -107,10 +114,9 @@ def check_format(value: str | None) -> str | None:
     return None if value is None else check_choice("format", value, FORMATS)
 
 
-def time_refusals(times: Sequence[str], column: str, launch_utc: str | None, now_utc: str | None,
-                  unreadable: bool = True) -> dict[int, RefusedRow]:
-    """The rows (0-based) whose times cannot be right: not ISO 8601 (where ``unreadable``), before
-    ``launch_utc``, after ``now_utc`` (default: now)."""
+def time_refusals(times: Sequence[str], column: str, launch_utc: str | None, now_utc: str | None) -> dict[int, RefusedRow]:
+    """The rows (0-based) whose times cannot be right: not ISO 8601, before ``launch_utc``, after
+    ``now_utc`` (default: now)."""
     from astropy.time import Time  # astropy: heavy, loaded when times are read
 
     bounds = {}
@@ -132,12 +138,11 @@ def time_refusals(times: Sequence[str], column: str, launch_utc: str | None, now
     out = {}
     for i, text in enumerate(times):
         if not readable[i]:
-            if unreadable:
-                out[i] = RefusedRow(i + 1, column, text, "not an ISO 8601 time (UTC)")
+            out[i] = RefusedRow(i + 1, column, str(text), "not an ISO 8601 time (UTC)")
         elif early[i]:
-            out[i] = RefusedRow(i + 1, column, text, f"before the launch ({launch_utc})")
+            out[i] = RefusedRow(i + 1, column, str(text), f"before the launch ({launch_utc})")
         elif late[i]:
-            out[i] = RefusedRow(i + 1, column, text, f"in the future (after {now.isot})")
+            out[i] = RefusedRow(i + 1, column, str(text), f"in the future (after {now.isot})")
     return out
 
 
@@ -161,7 +166,7 @@ def _number(text: str | None) -> float:
 
 
 def read_score(rows: list[dict[str, str]], *, band: str | None, with_orbit: bool, launch_utc: str | None = None,
-               now_utc: str | None = None) -> ScoreRows:
+               now_utc: str | None = None) -> SiteRows:
     """The usable rows of a SCORE CSV's ``rows`` (module docstring); ``band`` states the magnitudes'
     band (else from each row's filter); ``with_orbit``: geometry will come from an orbit, so rows
     without SatChecker's are kept.
@@ -211,12 +216,12 @@ def read_score(rows: list[dict[str, str]], *, band: str | None, with_orbit: bool
         raise InputError(f"the rows' filters are in several bands ({', '.join(sorted(bands))}): give `band`, or read one band per file.")
     if not kept:
         raise InputError(f"no usable rows: {'; '.join(str(r) for r in refused.values())}.")
-    column = (lambda name: np.array(numbers[name]))
+    array = (lambda name: np.array(numbers[name]))
     dark = np.array([(rows[i].get("illuminated") or "").strip().lower() in ("false", "0", "no") for i in kept])
-    return ScoreRows(np.array(kept) + 1, np.array([times[i] for i in kept]), column("apparent_magnitude"),
-                     column("apparent_magnitude_uncertainty"), bands.pop(), tuple(sites), column("alt_deg_satchecker"),
-                     column("az_deg_satchecker"), column("range_to_sat_km_satchecker") * 1e3, column("phase_angle_deg_satchecker"),
-                     dark, tuple(refused[k] for k in sorted(refused)))
+    return SiteRows(np.array(kept) + 1, np.array([times[i] for i in kept]), array("apparent_magnitude"),
+                    array("apparent_magnitude_uncertainty"), bands.pop(), tuple(sites), array("alt_deg_satchecker"),
+                    array("az_deg_satchecker"), array("range_to_sat_km_satchecker") * 1e3, array("phase_angle_deg_satchecker"),
+                    dark, tuple(refused[k] for k in sorted(refused)), SCORE_CHECKED)
 
 
 def read_ecsv(path: Path) -> tuple[list[dict[str, str]], str | None, Site | None]:

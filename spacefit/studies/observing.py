@@ -1,14 +1,14 @@
 """Light curves as observations: reading measured magnitudes with their times and geometry, and the
 target's frame.
 
-:func:`read_light_curve` reads four formats, found from the file (or named by ``format``):
+:func:`read_light_curve` reads six formats, found from the file (or named by ``format``):
 
 * ``general``: CSV with ``#`` comment lines and a header naming the columns ``time_utc`` (ISO 8601),
   ``magnitude``, optionally ``magnitude_sigma`` (mag), and the geometry, either in the target's frame,
   ``sun_x, sun_y, sun_z`` and ``observer_x, observer_y, observer_z`` (directions from the target,
   normalised on reading) and ``range_m`` (optionally ``earth_x, earth_y, earth_z``, the Earth's
-  centre from the target, m, for Earthshine), or seen from a site (the ``site`` argument),
-  ``altitude_deg``, ``azimuth_deg`` (of the target, azimuth from north through east) and
+  centre from the target, m, for Earthshine, and ``in_shadow``), or seen from a site (the ``site``
+  argument), ``altitude_deg``, ``azimuth_deg`` (of the target, azimuth from north through east) and
   ``height_m`` (the target's height above the Earth's surface).
 * ``pomenis``: the Starlink v1.5 observations (Fankhauser, Askari & Tyson 2023):
   ``observation_time, satellite_height`` (km), ``satellite_altitude, satellite_azimuth`` (deg),
@@ -16,12 +16,20 @@ target's frame.
 * ``score``: the IAU CPS SatHub SCORE CSV (:mod:`spacefit.studies.observation_files`), each row with
   its own observer; the geometry from SatChecker's columns.
 * ``ecsv``: an astropy ECSV table of the general format's columns (:func:`write_light_curve` writes one).
+* ``mmt9``: a track download of the Mini-MegaTORTORA satellite database (:mod:`spacefit.studies.mmt9`),
+  found by its header line ``# Date Time StdMag Mag Filter ...``; the geometry from an ``orbit``.
+* ``tdm``: a CCSDS Tracking Data Message with ``MAG`` data (:mod:`spacefit.studies.tdm`), found by its
+  first keyword ``CCSDS_TDM_VERS``; the geometry from its AZEL angles and range seen from ``site``, or
+  from an ``orbit``.
 
 Given an ``orbit`` (:class:`~spacefit.studies.orbit.Orbit`, a TLE or OMM), the geometry is computed
 from it, the site and the time instead, offline (:func:`~spacefit.studies.orbit.pass_geometry`),
-and checked against SatChecker's columns where a SCORE file has them. Rows whose time cannot be right
-(before ``launch_utc``, in the future; in a SCORE file also unreadable) or that lack geometry are
-refused: listed in ``refused`` with their row, column, value and reason, and warned of.
+and checked against the file's where it gives any (SatChecker's columns, an MMT-9 track's distance
+and phase angle, a TDM's angles and range: :data:`ORBIT_TOLERANCE`). Rows whose time cannot be right
+(not ISO 8601, before ``launch_utc``, in the future), and SCORE rows, MMT-9 points and TDM ``MAG``
+lines without a magnitude or geometry, are refused: listed in ``refused`` with their row, column,
+value and reason, and warned of. A missing value in the general or Pomenis format is an error
+naming its row and column.
 
 From a site, the sun's direction comes from astropy offline (:mod:`spacefit.studies.orbit`). The
 Earth is a sphere of radius :data:`EARTH_RADIUS_M` (as lumos-sat takes it), the site on it; the
@@ -29,8 +37,9 @@ sun's parallax over the target's distance (5e-5 rad) is neglected. The target's 
 (:func:`nadir_sun_frame`): z away from the Earth's centre, y towards the sun's direction projected
 onto the plane normal to z, x = y cross z: the frame of a satellite whose base faces nadir and whose
 solar array, turned about z, faces the sun (lumos-sat's "brightness frame"). A target in the Earth's
-shadow (:func:`~spacefit.studies.orbit.in_earth_shadow`, or a SCORE row not ``illuminated``) is
-predicted dark, and its observation flagged (``in_shadow``) and left out of fits.
+shadow (:func:`~spacefit.studies.orbit.in_earth_shadow`, a SCORE row not ``illuminated``, an MMT-9
+point in the penumbra, a general row ``in_shadow``) is predicted dark, and its observation flagged
+(``in_shadow``) and left out of fits.
 """
 
 from __future__ import annotations
@@ -47,8 +56,10 @@ import numpy as np
 
 from spacefit.errors import InputError, check_array, check_choice, check_type, quote, read_text_rows, unit_rows
 from spacefit.studies.lightcurve import SUN_MAGNITUDES
-from spacefit.studies.observation_files import (RefusedRow, ScoreRows, check_format, file_format, read_ecsv, read_score,
-                                                time_refusals, write_ecsv)
+from spacefit.studies.mmt9 import is_mmt9, read_mmt9
+from spacefit.studies.observation_files import (RefusedRow, SiteRows, check_format, file_format, read_ecsv, read_score, time_refusals,
+                                                write_ecsv)
+from spacefit.studies.tdm import is_tdm, read_tdm
 from spacefit.studies.orbit import EARTH_RADIUS_M, Orbit, Site, altaz_to_enu, in_earth_shadow, pass_geometry, sun_directions_enu
 
 POMENIS_COLUMNS = ("observation_time", "satellite_height", "satellite_altitude", "satellite_azimuth", "ab_magnitude")
@@ -163,33 +174,41 @@ def nadir_sun_frame(position_m: np.ndarray, sun: np.ndarray) -> np.ndarray:
 def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | None = None, format: str | None = None,
                      orbit: Orbit | None = None, launch_utc: str | None = None, now_utc: str | None = None) -> LightCurveObservations:
     """Read measured magnitudes from a file in one of the formats of the module docstring (found from
-    the file, or ``format``: ``general``, ``pomenis``, ``score``, ``ecsv``). ``site`` is needed where
-    the geometry is an altitude, azimuth and height (a SCORE file gives each row's); ``band`` names
-    the magnitudes' band (one of :data:`~spacefit.studies.lightcurve.SUN_MAGNITUDES`; a SCORE file's
-    from its filters). ``orbit`` computes the geometry from a TLE or OMM instead; rows before
-    ``launch_utc`` or after ``now_utc`` (default: now) are refused, with a warning.
+    the file, or ``format``: ``general``, ``pomenis``, ``score``, ``ecsv``, ``mmt9``, ``tdm``). ``site``
+    is the observer where the geometry is seen from one (a SCORE file gives each row's; an MMT-9
+    track's default is MMT-9's); ``band`` names the magnitudes' band (one of
+    :data:`~spacefit.studies.lightcurve.SUN_MAGNITUDES`; a SCORE file's or MMT-9 track's from its
+    filters, a TDM's ``V``). ``orbit`` computes the geometry from a TLE or OMM instead (an MMT-9
+    track needs one); rows before ``launch_utc`` or after ``now_utc`` (default: now) are refused,
+    with a warning.
 
     Raises:
-        InputError: missing columns, unreadable values, an unknown filter, a missing site or band.
+        InputError: one line naming the file and, where one is to blame, the row (a TDM's line), the
+            column (keyword) and the value: missing columns or metadata, unreadable values, an unknown
+            filter or time system, a missing site, band or orbit.
         OSError: the file cannot be read.
     """
-    lines = read_text_rows("path", path, "light curve")
+    read_text_rows("path", path, "light curve")  # a text file, else a one-line error
     path = Path(path)
+    text = path.read_text(encoding="utf-8").splitlines()
     check_type("site", site, (Site, type(None)), "an sf.Site or None")
     check_type("orbit", orbit, (Orbit, type(None)), "an sf.Orbit (Orbit.from_tle or Orbit.from_omm) or None")
     if band is not None:
         check_choice("band", band, SUN_MAGNITUDES)
-    rows = list(csv.DictReader(lines))
-    kind = check_format(format) or file_format(path, list(rows[0]) if rows else None)
+    rows = list(csv.DictReader(line for line in text if line.strip() and not line.lstrip().startswith("#")))
+    kind = check_format(format) or ("tdm" if is_tdm(text) else "mmt9" if is_mmt9(text) else file_format(path, list(rows[0]) if rows else None))
     if kind == "ecsv":
         rows, table_band, table_site = read_ecsv(path)
         band, site, kind = band or table_band, site or table_site, "general"
-    if not rows:
+    if not rows and kind not in ("tdm", "mmt9"):
         raise InputError(f"light curve {path}: no data rows.")
+    with_orbit = orbit is not None
     try:
-        if kind == "score":
-            observations = _from_score(read_score(rows, band=band, with_orbit=orbit is not None, launch_utc=launch_utc,
-                                                  now_utc=now_utc), orbit, str(path))
+        if kind in ("score", "mmt9", "tdm"):
+            given = (read_score(rows, band=band, with_orbit=with_orbit, launch_utc=launch_utc, now_utc=now_utc) if kind == "score" else
+                     (read_mmt9 if kind == "mmt9" else read_tdm)(text, band=band, site=site, with_orbit=with_orbit,
+                                                                 launch_utc=launch_utc, now_utc=now_utc))
+            observations = _from_site_rows(given, orbit, str(path))
         else:
             observations = _from_table(rows, kind, band, site, orbit, (launch_utc, now_utc), str(path))
     except InputError as err:
@@ -237,7 +256,7 @@ def _from_table(rows: list[dict[str, str]], kind: str, band: str | None, site: S
             raise InputError(f"the header {header} has no geometry: give {', '.join(TARGET_FRAME_COLUMNS)} "
                              f"(the target's frame) or {', '.join(SITE_COLUMNS)} (seen from a `site`), or an `orbit`.")
     times = np.array([r[time_column] for r in rows])
-    refused = time_refusals(times, time_column, *bounds, unreadable=False)
+    refused = time_refusals(times, time_column, *bounds)
     keep = np.array([i not in refused for i in range(len(rows))])
     if not keep.any():
         raise InputError(f"no usable rows: {'; '.join(str(r) for r in refused.values())}.")
@@ -288,40 +307,40 @@ def _in_target_frame(position: np.ndarray, sun: np.ndarray, towards_observer: np
     return to_frame(sun), to_frame(towards_observer), range_m, in_shadow, to_frame(-position)
 
 
-# How far an orbit's geometry may stray from a SCORE file's SatChecker columns (deg) without a warning.
-SATCHECKER_TOLERANCE_DEG = {"phase_angle_deg_satchecker": 0.05, "alt_deg_satchecker": 0.01, "az_deg_satchecker": 0.01}
+# How far an orbit's geometry may stray from a file's (SatChecker's columns, an MMT-9 track's, a TDM's
+# angles and range) without a warning: deg, and m for the range.
+ORBIT_TOLERANCE = {"altitude_deg": 0.01, "azimuth_deg": 0.01, "phase_deg": 0.05, "range_m": 1000.0}
 
 
-def _from_score(score: ScoreRows, orbit: Orbit | None, source: str) -> LightCurveObservations:
-    """A SCORE file's observations (:func:`read_light_curve`), each row seen from its own site."""
-    n = len(score.magnitude)
+def _from_site_rows(given: SiteRows, orbit: Orbit | None, source: str) -> LightCurveObservations:
+    """The observations of a file whose rows are each seen from a site (:func:`read_light_curve`):
+    the geometry the orbit's where one is given (checked against the file's), else the file's."""
+    n = len(given.magnitude)
     values = [np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3)), np.empty(n)]
-    computed = {name: np.full(n, np.nan) for name in SATCHECKER_TOLERANCE_DEG}
-    for site in dict.fromkeys(score.sites):
-        rows = np.array([s == site for s in score.sites])
+    computed = {name: np.full(n, np.nan) for name in ORBIT_TOLERANCE}
+    for site in dict.fromkeys(given.sites):
+        rows = np.array([s == site for s in given.sites])
         if orbit is not None:
-            *parts, altitude, azimuth, phase = _orbit_geometry(orbit, site, score.times_utc[rows])
-            for name, value in zip(("alt_deg_satchecker", "az_deg_satchecker", "phase_angle_deg_satchecker"), (altitude, azimuth, phase)):
+            *parts, altitude, azimuth, phase = _orbit_geometry(orbit, site, given.times_utc[rows])
+            for name, value in zip(ORBIT_TOLERANCE, (altitude, azimuth, phase, parts[3])):
                 computed[name][rows] = value
         else:
-            u = altaz_to_enu(score.altitude_deg[rows], score.azimuth_deg[rows])
-            position = np.array([0.0, 0.0, EARTH_RADIUS_M]) + score.range_m[rows, None] * u
-            parts = _site_geometry(site, score.times_utc[rows], position, score.range_m[rows])
+            u = altaz_to_enu(given.altitude_deg[rows], given.azimuth_deg[rows])
+            position = np.array([0.0, 0.0, EARTH_RADIUS_M]) + given.range_m[rows, None] * u
+            parts = _site_geometry(site, given.times_utc[rows], position, given.range_m[rows])
         for whole, part in zip(values, parts):
             whole[rows] = part
-    if orbit is not None:
-        given = {"alt_deg_satchecker": score.altitude_deg, "az_deg_satchecker": score.azimuth_deg,
-                 "phase_angle_deg_satchecker": score.phase_deg}
-        for name, tolerance in SATCHECKER_TOLERANCE_DEG.items():
-            off = np.abs((computed[name] - given[name] + 180.0) % 360.0 - 180.0)
-            if np.nanmax(off, initial=0.0) > tolerance:
-                k = int(np.nanargmax(off))
-                warnings.warn(f"{source}: the orbit's {name.split('_deg')[0]} differs from SatChecker's {name} by up to "
-                              f"{off[k]:.3g} deg (row {score.rows[k]}: {computed[name][k]:.4f} against {given[name][k]:.4f}); "
-                              f"the geometry used is the orbit's.", stacklevel=3)
+    for name, column in given.columns.items() if orbit is not None else ():
+        off = computed[name] - getattr(given, name)
+        off = np.abs((off + 180.0) % 360.0 - 180.0 if name.endswith("_deg") else off)
+        if np.nanmax(off, initial=0.0) > ORBIT_TOLERANCE[name]:
+            k, unit, scale = int(np.nanargmax(off)), *(("deg", 1.0) if name.endswith("_deg") else ("km", 1e-3))
+            warnings.warn(f"{source}: the orbit's {name.rsplit('_', 1)[0]} differs from the file's {column} by up to {off[k] * scale:.3g} "
+                          f"{unit} (row {given.rows[k]}: {computed[name][k] * scale:.4f} against {getattr(given, name)[k] * scale:.4f}); "
+                          f"the geometry used is the orbit's.", stacklevel=3)
     sun, observer, range_m, in_shadow, earth_m = _in_target_frame(*values)
-    return LightCurveObservations(score.magnitude, score.magnitude_sigma, score.band, sun, observer, range_m,
-                                  in_shadow | score.dark, score.times_utc, source, score.refused, earth_m)
+    return LightCurveObservations(given.magnitude, given.magnitude_sigma, given.band, sun, observer, range_m,
+                                  in_shadow | given.dark, given.times_utc, source, given.refused, earth_m)
 
 
 def write_light_curve(observations: LightCurveObservations, path: str | Path) -> Path:

@@ -57,9 +57,12 @@ from spacefit.studies.orbit import EARTH_RADIUS_M
 @dataclass(frozen=True)
 class Plate:
     """A flat plate: ``area_m2``, unit ``normal`` and ``tangent`` (the direction of a conductor's
-    ``alpha_x``; made normal to ``normal``) in the target's frame, and its material. A plate with a
-    ``tracking_axis`` (target frame) is a sun-tracking part: for each observation its normal and tangent
-    are turned about that axis to face the sun as closely as the turn allows
+    ``alpha_x``; made normal to ``normal``) in the target's frame, and its material. ``two_sided``:
+    lit and seen from both sides (a thin sheet), or, False, from the side its normal points to only
+    (a face of a closed part, whose back is inside it). Plates of one name are one part's: they share
+    its material and its parameters (``parts.<name>.<field>``). A plate with a ``tracking_axis``
+    (target frame) is a sun-tracking part: for each observation its normal and tangent are turned about
+    that axis to face the sun as closely as the turn allows
     (:func:`spacefit.geometry.attitude.tracking_rotation`; unturned with the sun along the axis)."""
 
     name: str
@@ -67,10 +70,12 @@ class Plate:
     normal: tuple[float, float, float]
     material: Material
     tangent: tuple[float, float, float] = (1.0, 0.0, 0.0)
+    two_sided: bool = True
     tracking_axis: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         check_type("name", self.name, str, "a string")
+        check_type(f"{self.name}.two_sided", self.two_sided, bool, "True or False")
         what = ("an sf.Lambert, sf.Conductor, sf.DiffuseConductor, sf.OrenNayar (a material model with a BRDF) or sf.TabulatedBRDF "
                 "(a Mirror's BRDF is a delta function: never lit towards an observer by a point sun)")
         check_type(f"{self.name}.material", self.material, MaterialModel, what)
@@ -148,7 +153,8 @@ def plates_irradiance(plates: Sequence[Plate], sun: np.ndarray, observer: np.nda
             frames = plate.frames(jnp.asarray(sun if tracking_sun is None else tracking_sun))
             wi, wo = jnp.einsum("nij,nj->ni", frames, jnp.asarray(sun)), jnp.einsum("nij,nj->ni", frames, jnp.asarray(observer))
         f = _plate_brdf(plate, wi, wo, (values or {}).get(plate.name, {}))
-        total = total + plate.area_m2 * f * jnp.abs(wi[:, 2]) * jnp.abs(wo[:, 2])
+        lit = jnp.abs(wi[:, 2]) if plate.two_sided else jnp.maximum(wi[:, 2], 0.0)  # f is 0 where wo is on the other side
+        total = total + plate.area_m2 * f * lit * jnp.abs(wo[:, 2])
     return sun_irradiance_w_m2 * total / jnp.asarray(range_m) ** 2
 
 
@@ -227,7 +233,7 @@ def _light(plates: Sequence[Plate], observations: LightCurveObservations, sun_ir
 
 
 def _check_plates(plates: object) -> list[Plate]:
-    """``plates`` as a list: one or more :class:`Plate` of distinct names."""
+    """``plates`` as a list: one or more :class:`Plate`, those of one name (one part's) of one material."""
     if isinstance(plates, (str, bytes)) or not isinstance(plates, Sequence) or not plates:
         raise InputError(f"`plates` must be a list of one or more sf.Plate, got {quote(plates)}.")
     for i, p in enumerate(plates):
@@ -235,8 +241,11 @@ def _check_plates(plates: object) -> list[Plate]:
     names = [p.name for p in plates]
     if TARGET in names:
         raise InputError(f"`plates` must not have a plate named {TARGET!r}: the name is the target's attitude's in `free`.")
-    if len(set(names)) != len(names):
-        raise InputError(f"`plates` must have distinct names, got {names}.")
+    material = {}
+    for p in plates:
+        if material.setdefault(p.name, p.material) != p.material:
+            raise InputError(f"`plates` named {p.name!r} must share one material (they are one part's), got "
+                             f"{material[p.name]!r} and {p.material!r}; give plates of different materials distinct names.")
     return list(plates)
 
 
@@ -267,9 +276,9 @@ def _rotation(angles_deg: Sequence[jax.Array | float]) -> jax.Array:
 def plate_parameters(plates: Sequence[Plate]) -> tuple[str, ...]:
     """The registered names of the plates' material values (``parts.<plate>.<field>``, ``alpha`` for
     both roughnesses) and of the target's attitude angles."""
-    out = []
+    out: dict[str, None] = {}
     for plate in plates:
-        out += [f"parts.{plate.name}.{f}" for f in _fields(plate.material)]
+        out |= dict.fromkeys(f"parts.{plate.name}.{f}" for f in _fields(plate.material))
     return (*out, *(f"{TARGET}.{a}" for a in ATTITUDE))
 
 
@@ -288,7 +297,7 @@ class PlateLightCurve(LightCurveKind):
     Given an ``earth``, the model adds Earthshine (module docstring) and the report says its share.
 
     Attributes:
-        plates: the target's plates, distinct names (none ``target``).
+        plates: the target's plates (none named ``target``; those of one name share a material: one part's).
         observations: the measured magnitudes and their geometry.
         sun_irradiance_w_m2: the sun's irradiance at the target, W m^-2.
         bounds: narrower (low, high) ranges of some parameters (``{"parts.chassis.eta": (1.0, 100.0)}``:

@@ -1,0 +1,448 @@
+"""A target's flat plates derived from its own parts: the plate level of detail of the path-traced target.
+
+:func:`target_plates` turns the parts of a scene, as :func:`~spacefit.scene.assembly.assemble` loads
+them (a mesh file's groups, a part's own file, the primitives of :mod:`spacefit.geometry.primitives`),
+into :class:`~spacefit.studies.plates.Plate` s in the target's body frame: each part's triangles
+grouped by normal (and by tangent where its material is anisotropic), their areas summed. A box
+gives its six faces, a plate primitive one plate, a cylinder its facets and its two caps. Each plate carries its part's name (the plates of one
+part share its parameters, ``parts.<part>.<field>``), the material the renderer gives the part, and
+the tangent the renderer uses for an anisotropic conductor's ``alpha_x``: Mitsuba's shading frame,
+dp/du made normal to the face, from the part's texture coordinates (a primitive's u runs along its
+z where the face contains it, else along x), else along the triangle's first edge (what Mitsuba does
+without texture coordinates; ``spacefit.geometry.mesh.PartMesh``).
+
+A closed part's faces are lit and seen from outside only (``two_sided=False``: their backs are
+inside it); an open part's are thin sheets, lit and seen from both sides, as the renderer's
+``twosided`` BSDFs shade them. What the plates cannot know, the path tracer adds: a face covered by
+another part (a wing's root against the bus), a concave part's faces turned towards each other, one
+part shadowing or hiding another, and light bounced between parts (the scene's ``render.depth``
+bounces; the plates have one). A wrinkled part (the W-M fractal wrinkles of
+:mod:`spacefit.geometry.wrinkle`) is not a flat plate: its plates are its flat base with the
+material the renderer gives it, its own where the renderer displaces the wrinkles (the wrinkles'
+slopes, shadowing and masking are the path tracer's alone) and the effective rough material where
+the renderer draws the part flat (:mod:`spacefit.scene.lod`). :func:`plate_notes` says which of these
+apply to a target; :func:`compare_plates_to_render` measures what they amount to, and
+:func:`choose_light_curve_model` fits a light curve with the plates only where that difference is
+below the observations' noise.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from spacefit.errors import InputError, check_count, check_range, check_type, check_vector
+from spacefit.fitting.observations.base import Block
+from spacefit.fitting.params import Bijection
+from spacefit.fitting.result import FitResult
+from spacefit.geometry.frames import attitude_matrix
+from spacefit.geometry.mesh import PartMesh, _trimesh
+from spacefit.materials import Material
+from spacefit.scene.assembly import assemble
+from spacefit.scene.conversions import sun_angles_deg
+from spacefit.scene.schema import Scene
+from spacefit.scene.sections import MAX_COORDINATE_M, check_scene, deg2rad
+from spacefit.studies.lightcurve import phase_plane_sun
+from spacefit.studies.lightcurve_fit import RenderedLightCurve
+from spacefit.studies.lightcurve_kind import LightCurveKind
+from spacefit.studies.observing import LightCurveObservations
+from spacefit.studies.plates import Plate, PlateLightCurve, plates_irradiance
+from spacefit.studies.sweep import sweep
+
+# Triangles whose unit normals and tangents differ by less than this (1 - cos) are one plate's.
+SAME_DIRECTION = 1e-9
+# An irradiance below this fraction (10 mag) of a comparison's brightest point is dark: where both are, no
+# magnitude is compared (Starlink's second bounce seen from behind, 1e-5 of its peak, beside the plates' 0).
+DARK_FRACTION = 1e-4
+# The geometry keys of a rendered point: the target's attitude and the sun's angles (the camera stays).
+POINT_KEYS = ("target.attitude_x_deg", "target.attitude_y_deg", "target.attitude_z_deg", "sun.elevation_deg", "sun.azimuth_deg")
+
+
+def _triangle_frames(part: PartMesh) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each triangle's unit normal (by its winding), area (m^2) and Mitsuba's tangent: dp/du from the
+    part's uv, else the first edge, made normal to the face."""
+    v = np.asarray(part.vertices, float)[np.asarray(part.faces)]
+    dp0, dp1 = v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]
+    cross = np.cross(dp0, dp1)
+    twice_area = np.linalg.norm(cross, axis=1)
+    normal = cross / twice_area[:, None]
+    tangent = dp0
+    if part.uv is not None:
+        uv = np.asarray(part.uv, float)[np.asarray(part.faces)]
+        duv0, duv1 = uv[:, 1] - uv[:, 0], uv[:, 2] - uv[:, 0]
+        det = duv0[:, 0] * duv1[:, 1] - duv0[:, 1] * duv1[:, 0]
+        safe = np.where(det != 0, det, 1.0)[:, None]
+        tangent = np.where((det != 0)[:, None], (duv1[:, 1:2] * dp0 - duv0[:, 1:2] * dp1) / safe, dp0)
+    tangent = tangent - np.einsum("ij,ij->i", tangent, normal)[:, None] * normal
+    return normal, 0.5 * twice_area, tangent / np.linalg.norm(tangent, axis=1, keepdims=True)
+
+
+def _closed(part: PartMesh) -> bool:
+    """Whether the part is a closed surface once vertices at equal positions are merged (as
+    :func:`spacefit.geometry.mesh.validate_part` judges it)."""
+    mesh = _trimesh().Trimesh(np.asarray(part.vertices, float), np.asarray(part.faces), process=False)
+    mesh.merge_vertices(merge_tex=True, merge_norm=True)
+    return bool(mesh.is_watertight)
+
+
+def anisotropic(material: Material) -> bool:
+    """Whether the material's BRDF depends on the tangent: its ``alpha_x`` and ``alpha_y`` differ."""
+    return getattr(material, "alpha_x", None) != getattr(material, "alpha_y", None)
+
+
+def part_plates(name: str, part: PartMesh, material: Material) -> list[Plate]:
+    """One part's plates: its triangles grouped by normal (within :data:`SAME_DIRECTION`), and by
+    tangent too where the material is :func:`anisotropic` (an isotropic part's plates take their first
+    triangle's tangent: a fit that frees its ``alpha_x`` alone needs them apart), areas summed,
+    one-sided where the part is closed (module docstring)."""
+    normal, area, tangent = _triangle_frames(part)
+    two_sided = not _closed(part)
+    by_tangent = anisotropic(material)
+    left = np.ones(len(area), bool)
+    plates = []
+    while left.any():
+        first = int(np.argmax(left))
+        same = left & (normal @ normal[first] > 1 - SAME_DIRECTION)
+        if by_tangent:
+            same &= tangent @ tangent[first] > 1 - SAME_DIRECTION
+        n = (area[same, None] * normal[same]).sum(axis=0)
+        plates.append(Plate(name, float(area[same].sum()), tuple(n / np.linalg.norm(n)), material, tuple(tangent[first]), two_sided))
+        left &= ~same
+    return plates
+
+
+def target_plates(scene: Scene) -> tuple[Plate, ...]:
+    """The flat plates of ``scene``'s target in its body frame, derived from its parts as the renderer
+    assembles them (module docstring): per part, its triangles grouped by normal (and tangent,
+    :func:`part_plates`), with the part's name, the material the renderer gives it and Mitsuba's
+    tangent; a closed part's plates one-sided, an open part's two-sided. A wrinkled part gives its
+    flat base.
+
+    Raises:
+        InputError: a part whose material has no BRDF towards an observer (a mirror), naming it.
+    """
+    check_scene(scene)
+    assembly = assemble(scene)
+    plates: list[Plate] = []
+    for name, part in assembly.parts.items():
+        plates += part_plates(name, part, assembly.materials[name])
+    return tuple(plates)
+
+
+def plate_notes(scene: Scene) -> tuple[str, ...]:
+    """What the plates of ``scene``'s target leave out and the path tracer has (module docstring): its
+    wrinkled parts, parts that could shadow or hide each other, open parts seen from both sides, and
+    the bounces beyond the first; one line each."""
+    check_scene(scene)
+    assembly = assemble(scene)
+    notes = []
+    for name, choice in assembly.lod.items():
+        if choice.model == "geometry":
+            notes.append(f"part {name!r} is wrinkled (W-M, D = {scene.wrinkles.D:g}, G = {scene.wrinkles.G:g} m): its plates are its "
+                         "flat base with its own material; the wrinkles' slopes, shadowing and masking are the path tracer's alone")
+        else:
+            notes.append(f"part {name!r} is wrinkled and rendered flat with the effective rough material "
+                         f"({choice.reason}): its plates have that material")
+    for name, part in assembly.parts.items():
+        if not _closed(part):
+            notes.append(f"part {name!r} is open: its plates are lit and seen from both sides")
+        elif not _trimesh().Trimesh(part.vertices, part.faces).is_convex:
+            notes.append(f"part {name!r} is not convex: its faces may shadow and hide each other, which plates do not")
+    if len(assembly.parts) > 1:
+        notes.append(f"{len(assembly.parts)} parts: plates count every face, also one covered, shadowed or hidden by another part")
+    if scene.render.depth > 1:
+        notes.append(f"the path tracer follows {scene.render.depth} bounces (render.depth), the plates one")
+    return tuple(notes)
+
+
+@dataclass(frozen=True)
+class PlatesVsRender:
+    """The plates' light curve (:func:`target_plates`, :func:`~spacefit.studies.plates.plates_irradiance`)
+    against the path tracer's of the same target at the same points.
+
+    Attributes:
+        points: the scene values of each point's geometry.
+        phase_deg: each point's solar phase angle (deg).
+        plates_w_m2, rendered_w_m2: the irradiance at the scene's camera (W m^-2), each point.
+        depth, spp: the path tracer's bounces (``render.depth``) and samples per pixel.
+        notes: what the plates leave out (:func:`plate_notes`).
+    """
+
+    points: tuple[Mapping[str, float], ...]
+    phase_deg: np.ndarray
+    plates_w_m2: np.ndarray
+    rendered_w_m2: np.ndarray
+    depth: int
+    spp: int
+    notes: tuple[str, ...]
+
+    @property
+    def compared(self) -> np.ndarray:
+        """The points lit in one or both, above :data:`DARK_FRACTION` of the brightest point; where both
+        are dark no magnitude is compared."""
+        floor = DARK_FRACTION * max(float(np.max(self.plates_w_m2)), float(np.max(self.rendered_w_m2)))
+        return (self.plates_w_m2 > floor) | (self.rendered_w_m2 > floor)
+
+    @property
+    def difference_mag(self) -> np.ndarray:
+        """Plates minus path tracer, magnitudes: -2.5 log10(E_plates / E_rendered) (positive: plates
+        fainter; +-inf where one is 0 and the other not); NaN where not :attr:`compared`."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.compared, -2.5 * np.log10(self.plates_w_m2 / self.rendered_w_m2), np.nan)
+
+    @property
+    def difference_percent(self) -> np.ndarray:
+        """Plates against path tracer, per cent of the path tracer's irradiance (inf where it is 0 and the
+        plates not); NaN where not :attr:`compared`."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.compared, 100.0 * (self.plates_w_m2 / self.rendered_w_m2 - 1.0), np.nan)
+
+    @property
+    def rms_mag(self) -> float:
+        """The RMS of :attr:`difference_mag` over the :attr:`compared` points (inf where one is 0 and the
+        other not; NaN where none is compared)."""
+        return _rms(self.difference_mag)
+
+    @property
+    def rms_percent(self) -> float:
+        """The RMS of :attr:`difference_percent` over the :attr:`compared` points (NaN where none is)."""
+        return _rms(self.difference_percent)
+
+    @property
+    def largest_mag(self) -> float:
+        """The largest absolute :attr:`difference_mag` (NaN where no point is :attr:`compared`)."""
+        return float(np.max(np.abs(self.difference_mag[self.compared]))) if self.compared.any() else math.nan
+
+    def table(self) -> str:
+        """Each point's phase angle, both irradiances and their difference, the RMS, and the notes."""
+        lines = [f"{'phase (deg)':>11s} {'plates (W m^-2)':>16s} {'rendered (W m^-2)':>18s} {'diff (mag)':>11s} {'diff (%)':>9s}"]
+        for i in range(len(self.points)):
+            diff = (f"{self.difference_mag[i]:11.4f} {self.difference_percent[i]:9.2f}" if self.compared[i]
+                    else f"{'dark':>11s} {'':>9s}")
+            lines.append(f"{self.phase_deg[i]:11.2f} {self.plates_w_m2[i]:16.5g} {self.rendered_w_m2[i]:18.5g} {diff}")
+        dark = int((~self.compared).sum())
+        lines.append(f"RMS over {int(self.compared.sum())} points: {self.rms_mag:.4f} mag, {self.rms_percent:.2f} %; largest "
+                     f"{self.largest_mag:.4f} mag" + (f"; {dark} dark in both (below {DARK_FRACTION:g} of the brightest)"
+                                                        if dark else "")
+                     + f" (path tracer: depth {self.depth}, {self.spp} spp; plates: one bounce)")
+        return "\n".join([*lines, *(f"note: {n}" for n in self.notes)])
+
+
+def _rms(values: np.ndarray) -> float:
+    """The RMS of the values that are not NaN (NaN where there are none)."""
+    kept = values[~np.isnan(values)]
+    return float(np.sqrt(np.mean(kept**2))) if kept.size else math.nan
+
+
+def _body_geometry(scene: Scene) -> tuple[np.ndarray, np.ndarray, float]:
+    """The directions towards the sun and the camera in the target's body frame, and the camera's range (m)."""
+    to_body = attitude_matrix(np.array(deg2rad(scene.target.attitude_deg))).T
+    towards = np.array(scene.camera.position_m) - np.array(scene.target.position_m)
+    sun = -np.asarray(scene.sun.direction, float)
+    return to_body @ (sun / np.linalg.norm(sun)), to_body @ (towards / np.linalg.norm(towards)), float(np.linalg.norm(towards))
+
+
+def at_range(scene: Scene, range_m: float) -> Scene:
+    """``scene`` with its camera moved along its line of sight to ``range_m`` from the target, looking at
+    it, the focal length scaled with the range: the same image of the target, seen from further away
+    (what the plates assume: an unresolved target, every point of it seeing the observer in one direction)."""
+    check_scene(scene)
+    check_range("range_m", range_m, 0.0, MAX_COORDINATE_M, lo_open=True, unit="m")
+    target = np.array(scene.target.position_m)
+    towards = np.array(scene.camera.position_m) - target
+    now = float(np.linalg.norm(towards))
+    return scene.with_values({"camera.position_m": (target + range_m * towards / now).tolist(), "camera.look_at_m": target.tolist(),
+                              "camera.focal_length_mm": scene.camera.focal_length_mm * range_m / now})
+
+
+def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None = None,
+                             points: Sequence[Mapping[str, float]] | None = None, range_m: float | None = None,
+                             quiet: bool = True) -> PlatesVsRender:
+    """The plates' light curve of ``scene``'s target (:func:`target_plates`) against the path tracer's
+    (:func:`~spacefit.studies.sweep.sweep`: the image's radiance x pixel solid angle summed, as
+    :func:`~spacefit.studies.lightcurve.light_curve` has it), both at the scene's camera with the scene's
+    sun irradiance, at either the solar phase angles ``phase_deg`` (the sun turning about the target
+    from the camera's direction, :func:`~spacefit.studies.lightcurve.phase_plane_sun`) or ``points``,
+    each a dict of scene values (``{"target.attitude_z_deg": 30.0}``), every one setting the same keys.
+    ``range_m`` moves the camera there first (:func:`at_range`): a camera near a specular target sees
+    its glint from a spread of directions, the plates from one."""
+    check_scene(scene)
+    if range_m is not None:
+        scene = at_range(scene, range_m)
+    if (phase_deg is None) == (points is None):
+        raise InputError("give exactly one of `phase_deg` and `points`.")
+    if phase_deg is not None:
+        angles = check_vector("phase_deg", phase_deg, None)
+        for a in angles:
+            check_range("phase_deg", a, 0.0, 180.0, hi_open=True, unit="deg")
+        sun = phase_plane_sun(scene, angles)
+        points = [{key: sun[key][i] for key in sun} for i in range(len(angles))]
+    points = _checked_points(points)
+    keys = list(points[0])
+    ds = sweep(scene, {"point": {key: [float(p[key]) for p in points] for key in keys}}, quiet=quiet)
+    rendered = np.atleast_1d(np.asarray(ds.irradiance.sel(region="target").values, float))
+    plates = target_plates(scene)
+    geometry = [_body_geometry(scene.with_values(dict(p))) for p in points]
+    sun_b, obs_b = np.array([g[0] for g in geometry]), np.array([g[1] for g in geometry])
+    ranges = np.array([g[2] for g in geometry])
+    modelled = np.asarray(plates_irradiance(plates, sun_b, obs_b, ranges, scene.sun.irradiance_w_m2))
+    phase = np.degrees(np.arccos(np.clip(np.sum(sun_b * obs_b, axis=1), -1.0, 1.0)))
+    return PlatesVsRender(tuple(points), phase, modelled, rendered, scene.render.depth, scene.render.spp, plate_notes(scene))
+
+
+def _checked_points(points: object) -> list[Mapping[str, float]]:
+    """``points``: a non-empty list of dicts of scene values, all setting the same keys."""
+    if isinstance(points, (str, bytes, Mapping)) or not isinstance(points, Sequence) or not points:
+        raise InputError(f"`points` must be a non-empty list of dicts of scene values, got {points!r}.")
+    for i, p in enumerate(points):
+        check_type(f"points[{i}]", p, Mapping, "a dict of scene values")
+        for key, value in p.items():
+            check_range(f"points[{i}].{key}", value)
+    if any(set(p) != set(points[0]) for p in points):
+        raise InputError(f"every point must set the same values, {sorted(points[0])}; got {[sorted(p) for p in points]}.")
+    return list(points)
+
+
+def attitude_angles_deg(rotation: np.ndarray) -> tuple[float, float, float]:
+    """The target's attitude angles (deg) of a body-to-world rotation, the inverse of
+    :func:`~spacefit.geometry.frames.attitude_matrix` (R1(a) R2(b) R3(c) is the rotation
+    x(-a) y(-b) z(-c) of the vectors, intrinsic)."""
+    return tuple(float(-a) for a in Rotation.from_matrix(rotation).as_euler("XYZ", degrees=True))
+
+
+def _turning(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The smallest rotation taking unit ``a`` to unit ``b`` (half a turn about a normal of ``a`` if opposite)."""
+    axis, cos = np.cross(a, b), float(np.dot(a, b))
+    if np.linalg.norm(axis) < 1e-12:
+        if cos > 0:
+            return np.eye(3)
+        normal = np.cross(a, np.eye(3)[int(np.argmin(np.abs(a)))])
+        return Rotation.from_rotvec(math.pi * normal / np.linalg.norm(normal)).as_matrix()
+    return Rotation.from_rotvec(axis / np.linalg.norm(axis) * math.atan2(np.linalg.norm(axis), cos)).as_matrix()
+
+
+def observation_points(scene: Scene, observations: LightCurveObservations) -> list[dict[str, float]]:
+    """Each observation's geometry as scene values, the scene's camera kept: the target's attitude
+    angles turning its body frame's direction towards the observer onto the camera's, and the sun's
+    elevation and azimuth (deg, world) of its body direction so turned."""
+    check_scene(scene)
+    check_type("observations", observations, LightCurveObservations, "an sf.LightCurveObservations (sf.read_light_curve)")
+    towards = np.array(scene.camera.position_m) - np.array(scene.target.position_m)
+    towards /= np.linalg.norm(towards)
+    points = []
+    for sun, observer in zip(observations.sun, observations.observer):
+        turn = _turning(observer / np.linalg.norm(observer), towards)
+        elevation, azimuth = sun_angles_deg(-(turn @ sun))
+        points.append(dict(zip(POINT_KEYS, (*attitude_angles_deg(turn), elevation, azimuth))))
+    return points
+
+
+@dataclass(frozen=True, eq=False)
+class ChosenLightCurve(LightCurveKind):
+    """A light curve fitted with the model :func:`choose_light_curve_model` chose: it is the ``chosen``
+    observation (a :class:`~spacefit.studies.plates.PlateLightCurve` or a
+    :class:`~spacefit.studies.lightcurve_fit.RenderedLightCurve`) in every way, and its report adds
+    which it is and why (:attr:`reason`).
+
+    Attributes:
+        chosen: the observation fitted.
+        comparison: the plates against the path tracer at a sample of the observations' geometry.
+        noise_mag: the observations' noise the difference was held to (mag).
+        reason: the choice in words.
+    """
+
+    chosen: PlateLightCurve | RenderedLightCurve
+    comparison: PlatesVsRender
+    noise_mag: float
+    reason: str
+
+    def parameters(self) -> tuple[str, ...]:
+        """The chosen model's parameters."""
+        return self.chosen.parameters()
+
+    def start(self, name: str) -> float:
+        """The chosen model's value of ``name``."""
+        return self.chosen.start(name)
+
+    def block(self, free: tuple[str, ...]) -> Block:
+        """The chosen model's residual block."""
+        return self.chosen.block(free)
+
+    def coordinate(self, name: str) -> Bijection:
+        """The chosen model's coordinate of ``name``."""
+        return self.chosen.coordinate(name)
+
+    def zero_point(self) -> tuple[float, float]:
+        """The chosen model's band zero point."""
+        return self.chosen.zero_point()
+
+    def abscissa(self, count: int) -> tuple[np.ndarray, str]:
+        """The chosen model's abscissa."""
+        return self.chosen.abscissa(count)
+
+    def report(self, result: FitResult, entries: Sequence[int]) -> list[str]:
+        """The chosen model's lines, and which model it is and why."""
+        return [*self.chosen.report(result, entries), f"    {self.reason}"]
+
+
+def choose_light_curve_model(scene: Scene, observations: LightCurveObservations, *, samples: int = 8,
+                             sigma_mag: float | None = None, quiet: bool = True) -> ChosenLightCurve:
+    """The light-curve observation of ``observations`` of ``scene``'s target to fit: the flat plates
+    (:class:`~spacefit.studies.plates.PlateLightCurve` of :func:`target_plates`, the scene's sun
+    irradiance) where their difference from the path tracer is below the observations' noise, else
+    the path tracer (:class:`~spacefit.studies.lightcurve_fit.RenderedLightCurve`).
+
+    The difference is measured (:func:`compare_plates_to_render`) at ``samples`` of the lit
+    observations' geometries, spread over their phase angles, with the scene's camera (the target's
+    attitude turning each observation's body-frame directions onto it, :func:`observation_points`)
+    and the scene's render settings; its RMS in magnitudes is held to the observations' noise, the
+    median of their ``magnitude_sigma``, or ``sigma_mag`` where they state none (which the report
+    says it assumed). The rendered observation has every lit observation at that geometry, its
+    magnitudes carried to their median range by the inverse square law (exact for an unresolved
+    target); its attitude angles are the points' geometry, so it cannot free them as the plates can.
+
+    Raises:
+        InputError: observations without errors and no ``sigma_mag``, or none lit.
+    """
+    check_scene(scene)
+    check_type("observations", observations, LightCurveObservations, "an sf.LightCurveObservations (sf.read_light_curve)")
+    check_count("samples", samples, 1, optional=False)
+    lit = np.flatnonzero(~observations.in_shadow)
+    if not lit.size:
+        raise InputError(f"every observation of {observations.source} is in the Earth's shadow: there is nothing to fit.")
+    if observations.magnitude_sigma is not None:
+        if sigma_mag is not None:
+            raise InputError(f"`sigma_mag` is {sigma_mag!r}, but the observations state their errors: leave it None.")
+        noise = float(np.median(observations.magnitude_sigma[lit]))
+        said = f"the observations' median error {noise:.3g} mag"
+    elif sigma_mag is None:
+        raise InputError(f"the observations {observations.source} state no magnitude errors: give `sigma_mag` (mag), the noise "
+                         "the plates-vs-render difference is held to.")
+    else:
+        noise = check_range("sigma_mag", sigma_mag, 0.0, lo_open=True, unit="mag")
+        said = f"an assumed noise of {noise:.3g} mag (sigma_mag; the observations state no errors)"
+    obs = observations.subset(lit)
+    phase = np.arccos(np.clip(np.sum(obs.sun * obs.observer, axis=1), -1.0, 1.0))
+    order = np.argsort(phase, kind="stable")
+    sample = order[np.unique(np.round(np.linspace(0, len(order) - 1, min(samples, len(order)))).astype(int))]
+    points = observation_points(scene, obs)
+    comparison = compare_plates_to_render(scene, points=[points[i] for i in sample], quiet=quiet)
+    dark = int((~comparison.compared).sum())
+    measured = (f"plates - path tracer RMS {comparison.rms_mag:.3g} mag (largest {comparison.largest_mag:.3g}) at "
+                f"{int(comparison.compared.sum())} of the observations' geometries" + (f" ({dark} more dark in both)" if dark else "")
+                + f" (depth {comparison.depth}, {comparison.spp} spp)")
+    if comparison.rms_mag < noise:
+        chosen: PlateLightCurve | RenderedLightCurve = PlateLightCurve(target_plates(scene), observations, scene.sun.irradiance_w_m2)
+        reason = f"light-curve model: flat plates (sf.target_plates), {measured} < {said}"
+    else:
+        reference = float(np.median(obs.range_m))
+        magnitude = obs.magnitude - 5.0 * np.log10(obs.range_m / reference)
+        sigma = None if obs.magnitude_sigma is None else obs.magnitude_sigma
+        chosen = RenderedLightCurve(scene, points, magnitude, sigma, obs.band, observer_range_m=reference)
+        reason = f"light-curve model: path tracer (sf.RenderedLightCurve), {measured} >= {said}"
+    return ChosenLightCurve(chosen, comparison, noise, reason)
+
