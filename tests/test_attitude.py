@@ -332,3 +332,22 @@ def test_a_sweep_of_the_sun_assembles_a_tracking_scene_again():
     there = sf.sweep(tracking.with_values({"sun.elevation_deg": 30.0}), {"render.seed": [0]}, quiet=True)
     a, b = (ds.mean_radiance.sel(region="wing_left").values.ravel() for ds in (swept, there))
     assert a[0] > 0 and a[0] == b[0]
+
+
+def test_target_plates_of_tracking_parts_turn_with_each_sun():
+    """The plates derived from a scene whose wing and box bus track the sun about y, evaluated at another
+    sun, are the plates of the scene assembled at that sun; the Starlink array's carry its axis and +y."""
+    parts = {"wing_left": {"material": "lambert", "kd": 0.5, "articulation": "sun_tracking", "axis": [0, 1, 0]},
+             "bus": {"material": "lambert", "kd": 0.3, "articulation": "sun_tracking", "axis": [0, 1, 0]}}
+    here = scene_from_dict(box_wing(parts=parts, **FACE_ON))
+    there = here.with_values({"sun.direction": [0.5, -0.3, 0.6]})
+    sun, observer = unit(-0.5, 0.3, -0.6)[None], unit(0.2, 0.1, 1.0)[None]  # the target's attitude is [0, 0, 0]
+    moved = sf.target_plates(here)
+    assert {p.tracking_axis for p in moved if p.name in parts} == {(0.0, 1.0, 0.0)}
+    assert all(p.tracking_axis is None for p in moved if p.name not in parts)
+    for plates_here, plates_there in ((moved, sf.target_plates(there)),):
+        ours = float(plates_irradiance(list(plates_here), sun, observer, np.ones(1), 1361.0)[0])
+        assembled = float(plates_irradiance(list(plates_there), sun, observer, np.ones(1), 1361.0)[0])
+        assert ours > 0 and math.isclose(ours, assembled, rel_tol=1e-12)
+    array = [p for p in sf.target_plates(sf.load_scene(SCENES / "starlink-v1p5.toml")) if p.name == "solar_array"]
+    assert len(array) == 1 and array[0].tracking_axis == (0.0, 0.0, 1.0) and np.allclose(array[0].tracking_normal, Y, atol=1e-12)

@@ -61,8 +61,9 @@ class Plate:
     lit and seen from both sides (a thin sheet), or, False, from the side its normal points to only
     (a face of a closed part, whose back is inside it). Plates of one name are one part's: they share
     its material and its parameters (``parts.<name>.<field>``). A plate with a ``tracking_axis``
-    (target frame) is a sun-tracking part: for each observation its normal and tangent are turned about
-    that axis to face the sun as closely as the turn allows
+    (target frame) is (a face of) a sun-tracking part: for each observation its normal and tangent are
+    turned about that axis by the turn that makes the part's ``tracking_normal`` (default: the plate's
+    own normal) face the sun as closely as the turn allows
     (:func:`spacefit.geometry.attitude.tracking_rotation`; unturned with the sun along the axis)."""
 
     name: str
@@ -72,6 +73,7 @@ class Plate:
     tangent: tuple[float, float, float] = (1.0, 0.0, 0.0)
     two_sided: bool = True
     tracking_axis: tuple[float, float, float] | None = None
+    tracking_normal: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         check_type("name", self.name, str, "a string")
@@ -92,10 +94,15 @@ class Plate:
             raise InputError(f"`{self.name}.tangent` must not be parallel to its normal {tuple(n)}.")
         object.__setattr__(self, "normal", tuple(n.tolist()))
         object.__setattr__(self, "tangent", tuple((t / np.linalg.norm(t)).tolist()))
+        if self.tracking_normal is not None and self.tracking_axis is None:
+            raise InputError(f"`{self.name}.tracking_normal` is given without a `tracking_axis` to turn about.")
         if self.tracking_axis is not None:
             tracking = SunTracking(check_direction(f"{self.name}.tracking_axis", self.tracking_axis))
-            tracking.check_normal(n, f"`{self.name}.normal`", f"{self.name}.tracking_axis")
+            own = self.tracking_normal is None
+            tracked = n if own else check_direction(f"{self.name}.tracking_normal", self.tracking_normal)
+            tracking.check_normal(tracked, f"`{self.name}.{'normal' if own else 'tracking_normal'}`", f"{self.name}.tracking_axis")
             object.__setattr__(self, "tracking_axis", tracking.axis)
+            object.__setattr__(self, "tracking_normal", tuple(tracked.tolist()))
 
     def frame(self) -> np.ndarray:
         """(3, 3) rows: tangent, bitangent, normal (the plate's local frame in the target's), unturned."""
@@ -109,7 +116,7 @@ class Plate:
         frame = jnp.asarray(self.frame())
         if self.tracking_axis is None:
             return jnp.broadcast_to(frame, (len(sun), 3, 3))
-        turn = tracking_rotation(jnp.asarray(self.tracking_axis), jnp.asarray(self.normal), jnp.asarray(sun), xp=jnp)
+        turn = tracking_rotation(jnp.asarray(self.tracking_axis), jnp.asarray(self.tracking_normal), jnp.asarray(sun), xp=jnp)
         return jnp.einsum("kj,nij->nki", frame, turn)  # each row r of the frame turned: R r
 
 
@@ -414,7 +421,7 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
 
 def fitted_plates(plates: Sequence[Plate], fit: FitResult) -> list[Plate]:
     """The plates with a :func:`fit_plates` fit's values in their materials and, where it freed the
-    attitude, their normals, tangents and tracking axes turned by it."""
+    attitude, their normals, tangents and tracking axes and normals turned by it."""
     plates = _check_plates(plates)
     check_type("fit", fit, FitResult, "an sf.FitResult (of sf.fit_plates)")
     for name in fit.names:
@@ -423,7 +430,8 @@ def fitted_plates(plates: Sequence[Plate], fit: FitResult) -> list[Plate]:
     if angles:
         turn = np.asarray(_rotation([angles.get(a, 0.0) for a in ATTITUDE]))
         plates = [dataclasses.replace(p, normal=tuple(turn @ np.array(p.normal)), tangent=tuple(turn @ np.array(p.tangent)),
-                                      tracking_axis=None if p.tracking_axis is None else tuple(turn @ np.array(p.tracking_axis)))
+                                      **({} if p.tracking_axis is None else {"tracking_axis": tuple(turn @ np.array(p.tracking_axis)),
+                                                                             "tracking_normal": tuple(turn @ np.array(p.tracking_normal))}))
                   for p in plates]
     out = []
     for plate in plates:

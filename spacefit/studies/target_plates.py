@@ -28,6 +28,7 @@ below the observations' noise.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -39,6 +40,7 @@ from spacefit.errors import InputError, check_count, check_range, check_type, ch
 from spacefit.fitting.observations.base import Block
 from spacefit.fitting.params import Bijection
 from spacefit.fitting.result import FitResult
+from spacefit.geometry.attitude import SunTracking
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.geometry.mesh import PartMesh, _trimesh
 from spacefit.materials import Material
@@ -120,16 +122,24 @@ def target_plates(scene: Scene) -> tuple[Plate, ...]:
     assembles them (module docstring): per part, its triangles grouped by normal (and tangent,
     :func:`part_plates`), with the part's name, the material the renderer gives it and Mitsuba's
     tangent; a closed part's plates one-sided, an open part's two-sided. A wrinkled part gives its
-    flat base.
+    flat base. A sun-tracking part's plates carry its axis and normal (``tracking_axis``,
+    ``tracking_normal``): they turn with it to each observation's sun.
 
     Raises:
         InputError: a part whose material has no BRDF towards an observer (a mirror), naming it.
     """
     check_scene(scene)
     assembly = assemble(scene)
+    sun = assembly.to_world[:3, :3].T @ -assembly.sun_direction  # towards the sun, body frame
     plates: list[Plate] = []
     for name, part in assembly.parts.items():
-        plates += part_plates(name, part, assembly.materials[name])
+        law = scene.parts[name].articulation
+        if isinstance(law, SunTracking):  # its faces turn together, the part's normal (as assembled) to each sun
+            normal = law.rotation(scene.parts[name].reference_normal(), sun) @ scene.parts[name].reference_normal()
+            plates += [dataclasses.replace(p, tracking_axis=law.axis, tracking_normal=tuple(normal))
+                       for p in part_plates(name, part, assembly.materials[name])]
+        else:
+            plates += part_plates(name, part, assembly.materials[name])
     return tuple(plates)
 
 
