@@ -221,6 +221,16 @@ def test_laws_round_trip_through_the_scene_file(tmp_path):
     assert np.allclose(assemble(scene).to_world[:3, :3], expected, atol=1e-12)
 
 
+def test_attitude_angles_are_refused_where_a_law_sets_the_attitude():
+    scene = sf.load_scene(SCENES / "starlink-v1p5.toml")
+    for values in ({"target.attitude_z_deg": 3.0}, {"target.attitude_deg": [0.0, 0.0, 3.0]}):
+        with pytest.raises(sf.InputError, match=rf"`{next(iter(values))}` sets an attitude angle, which `target.attitude` = "
+                                                r"'nadir_sun' does not use"):
+            scene.with_values(values)
+    fixed = scene.with_values({"target.attitude": "fixed", "target.nadir": [], "target.attitude_z_deg": 3.0})
+    assert fixed.target.attitude_deg[2] == 3.0
+
+
 def test_fits_refuse_angles_that_a_law_sets():
     from spacefit.rendering.values import scene_values_fn  # the rendering layer: it imports Mitsuba's seam
 
@@ -351,3 +361,16 @@ def test_target_plates_of_tracking_parts_turn_with_each_sun():
         assert ours > 0 and math.isclose(ours, assembled, rel_tol=1e-12)
     array = [p for p in sf.target_plates(sf.load_scene(SCENES / "starlink-v1p5.toml")) if p.name == "solar_array"]
     assert len(array) == 1 and array[0].tracking_axis == (0.0, 0.0, 1.0) and np.allclose(array[0].tracking_normal, Y, atol=1e-12)
+
+
+def test_a_law_made_fixed_for_the_plates_comparison_keeps_the_assembled_target():
+    """compare_plates_to_render sets the body's attitude angles per point: the Starlink scene's nadir_sun
+    law is first replaced by the fixed attitude it gives, the target assembled the same."""
+    from spacefit.studies.target_plates import body_fixed  # the plates-vs-render module
+
+    scene = sf.load_scene(SCENES / "starlink-v1p5.toml")
+    fixed = body_fixed(scene)
+    assert fixed.target.attitude == "fixed" and body_fixed(fixed) is fixed
+    a, b = assemble(scene), assemble(fixed)
+    assert np.allclose(a.to_world, b.to_world, atol=1e-12)
+    assert all(np.allclose(a.scene_vertices[n], b.scene_vertices[n], atol=1e-12) for n in scene.parts)

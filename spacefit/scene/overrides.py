@@ -24,7 +24,7 @@ from spacefit.errors import InputError, InputTypeError, check_direction, check_p
 from spacefit.geometry.attitude import ARTICULATION_KEYS, pop_articulation
 from spacefit.geometry.primitives import pop_primitive
 from spacefit.materials import MODELS, make_material, with_material_values
-from spacefit.scene.parameters import PARAMETERS, is_image, scene_keys, scene_with_values
+from spacefit.scene.parameters import ATTITUDE, PARAMETERS, is_image, scene_keys, scene_with_values
 from spacefit.scene.conversions import VERTICAL_SUN, sun_angles_deg
 from spacefit.scene.sections import SECTIONS, PartSettings, SceneLike, unknown_part
 from spacefit.scene.optics import check_pitch_with_fov
@@ -223,6 +223,11 @@ def with_values(scene: SceneLike, values: Mapping[str, Any]) -> SceneLike:
     if parts:
         changed["parts"] = new_parts
     out = dataclasses.replace(scene, **changed) if changed else scene
+    angles = [key for key in (*(f"target.{k}" for k in sections.get("target", {}) if k == "attitude_deg"), *parameters)
+              if key == "target.attitude_deg" or key in ATTITUDE]
+    if angles and out.target.attitude != "fixed":
+        raise InputError(f"`{angles[0]}` sets an attitude angle, which `target.attitude` = {out.target.attitude!r} does not use "
+                         "(the law sets the attitude): set `target.attitude` = \"fixed\" with it.")
     if "pixel_pitch_mm" in sections.get("camera", {}):
         check_pitch_with_fov(out, sections["camera"]["pixel_pitch_mm"])
     return scene_with_values(out, parameters) if parameters else out
