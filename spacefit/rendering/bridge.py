@@ -34,6 +34,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.rendering.backend import dr, in_variant, mi
+from spacefit.rendering.frozen import splat
 from spacefit.rendering.renderer import Renderer, errors_only, pass_seed, render_threads, to_value
 from spacefit.scene.sampling import split_sample_count
 
@@ -165,15 +166,29 @@ class DrJitScene:
                 attempt += 1
 
     def _forward_once(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
-        """One forward-mode render of :meth:`forward`, with AD on the keys of ``tangent`` only."""
+        """One forward-mode render of :meth:`forward`, with AD on the keys of ``tangent`` only: each pass's
+        samples on all threads (:func:`~spacefit.rendering.frozen.derivative_samples`, replayed after its
+        first call), splatted on one thread when the render is deterministic, in the samples' order, as
+        Mitsuba's ``render_forward`` splats them (the image it gives on one thread, bit for bit)."""
         self._set(values, grad=tangent)
+        film = self.renderer.scene.sensors()[0].film()
+        image = None
         try:
             for key, t in tangent.items():
                 dr.set_grad(self.params[key], to_value(self.params[key], t))
-            with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():  # a fixed order of the film's sums
-                image = self._render_ad(seed_grad)
-                dr.forward_to(image)
-                return self.renderer.to_film(np.asarray(dr.grad(image), dtype=np.float32))
+            with errors_only():
+                for seed, count, weight in self._passes(self.spp_grad, seed_grad):
+                    position, value = self.renderer.frozen.derivative(self.renderer.scene, self._integrator, mi.UInt32(seed), count)
+                    dr.eval(position, value)
+                    with render_threads(self.renderer.assembly.scene.render.deterministic):
+                        block = film.create_block()
+                        block.set_coalesce(block.coalesce() and count >= 4)
+                        splat(block, position, value)
+                        film.put_block(block)
+                        pass_image = film.develop() * weight
+                        image = pass_image if image is None else image + pass_image
+                        dr.eval(image)
+            return self.renderer.to_film(np.asarray(image, dtype=np.float32))
         finally:
             self._set(values)
 

@@ -19,6 +19,7 @@ from spacefit.materials import Material
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.backend import dr, in_variant, mi, resolve_variant, variant_scope
+from spacefit.rendering.frozen import FrozenPasses, splat
 from spacefit.rendering.materials import bsdf_dict
 from spacefit.rendering.memory import MAX_SAMPLES_PER_PASS, check_memory
 from spacefit.rendering.parts import PartImage
@@ -217,7 +218,9 @@ class Renderer:
     within the film window around it, :func:`target_window`), the rest of the image is black;
     ``crop=False`` traces the whole film, for vertices that will move (the window and the mask are
     fixed when the scene is loaded). :attr:`traced` is the mask over the window. Load once and render many times: reloading scenes
-    leaks memory in Mitsuba (mitsuba3#1890); change values in place with :meth:`set_values`.
+    leaks memory in Mitsuba (mitsuba3#1890); change values in place with :meth:`set_values`. Each
+    kind of pass is traced at its first render and replayed after (:attr:`frozen`,
+    :class:`~spacefit.rendering.frozen.FrozenPasses`).
     """
 
     def __init__(self, scene: Scene | Assembly, variant: str | None = None, crop: bool = True) -> None:
@@ -238,6 +241,7 @@ class Renderer:
             self.traced = traced.result() if traced is not None else np.ones(self.window[:1:-1], dtype=bool)
             self._pixels = mi.UInt32(np.flatnonzero(self.traced).astype(np.uint32))
             self.params = mi.traverse(self.scene)
+            self.frozen = FrozenPasses()
 
     def to_film(self, window_image: np.ndarray) -> np.ndarray:
         """The whole film (height, width, ...) from an image of the rendered window, black outside it."""
@@ -336,31 +340,17 @@ class Renderer:
 
     def _trace(self, block: "mi.ImageBlock", seed: int, spp: int, start: int, count: int, deterministic: bool) -> None:
         """Trace ``spp`` samples in each of the traced pixels ``start`` to ``start + count`` and splat them
-        into ``block``, as Mitsuba's own render loop does over a whole window (sample positions
-        uniform in each pixel, or stratified by the sampler; the film's filter weights them).
+        into ``block``, as Mitsuba's own render loop does over a whole window
+        (:func:`~spacefit.rendering.frozen.camera_samples`, replayed after its first call).
 
         The samples are traced on all of Dr.Jit's threads, each sample's value its own; only the
         splatting, where neighbours' samples add into the same pixels, runs on one thread when
         ``deterministic`` (:func:`render_threads`), in the samples' order: the image is the one a
         render wholly on one thread gives, bit for bit, in 0.54 to 0.62x its time on 2 cores."""
-        sensor = self.scene.sensors()[0]
-        film, sampler = sensor.film(), sensor.sampler().clone()
-        sampler.set_sample_count(spp)
-        sampler.set_samples_per_wavefront(spp)
-        sampler.seed(seed, count * spp)
-        # sample k of the wavefront belongs to traced pixel k // spp, as in Mitsuba's loop (the samplers stratify by it)
-        index = dr.gather(mi.UInt32, self._pixels, start + dr.arange(mi.UInt32, count * spp) // spp)
-        width = self.window[2]
-        offset = mi.ScalarVector2f(film.crop_offset())
-        position = mi.Vector2f(mi.Float(index % width), mi.Float(index // width)) + offset + sampler.next_2d()
-        ray, weight = sensor.sample_ray_differential(sensor.shutter_open(), 0.0, (position - offset) / mi.ScalarVector2f(film.crop_size()),
-                                                     mi.Point2f(0.5))
-        radiance, _, _ = self.scene.integrator().sample(self.scene, sampler, ray)
-        rgb = radiance * weight
+        position, rgb = self.frozen.camera(self.scene, self._pixels, mi.UInt32(seed), spp, start, count, self.window[2])
         dr.eval(position, rgb)
         with render_threads(deterministic):
-            block.put(position, [rgb.x, rgb.y, rgb.z, mi.Float(1.0)])
-            dr.eval(block.tensor())
+            splat(block, position, rgb)
 
 
 def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray:
