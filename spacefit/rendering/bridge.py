@@ -35,16 +35,10 @@ from jaxtyping import Array, Float
 
 from spacefit.rendering.backend import dr, in_variant, mi
 from spacefit.rendering.frozen import splat
-from spacefit.rendering.renderer import Renderer, errors_only, pass_seed, render_threads, to_value
+from spacefit.rendering.renderer import Renderer, differentiable, errors_only, pass_seed, render_threads, to_value
 from spacefit.scene.sampling import split_sample_count
 
 SceneValues = Mapping[str, Array]
-
-
-def _differentiable(value: object) -> bool:
-    """Whether the bridge differentiates a scene value: a frame (the sun's, the camera's) is set whole, its
-    Jacobian columns come from finite differences."""
-    return not isinstance(value, mi.AffineTransform4f)
 
 
 def _flat_grad(value: object) -> np.ndarray:
@@ -107,11 +101,7 @@ class DrJitScene:
 
     def _set(self, values: Mapping[str, np.ndarray], grad: Collection[str] = ()) -> None:
         """Set scene values by traverse key: those named in ``grad`` attached to Dr.Jit's AD graph, the others detached."""
-        for key, value in values.items():
-            self.params[key] = to_value(self.params[key], value)
-            if key in grad and _differentiable(self.params[key]):
-                dr.enable_grad(self.params[key])
-        self.params.update()
+        self.renderer.set_params(values, grad)
 
     def _passes(self, spp: int, seed: int) -> list[tuple[int, int, float]]:
         """(seed, spp, weight) of each pass of a render: the counts the sampler takes (``multijitter``
@@ -153,7 +143,7 @@ class DrJitScene:
         moves vertices must attach them: its render is tried again on that refusal, from freshly set
         values (the same seed, so the same image). The values are detached again after an error too.
         """
-        moved = [key for key, t in tangent.items() if np.any(np.asarray(t) != 0) and _differentiable(self.params[key])]
+        moved = [key for key, t in tangent.items() if np.any(np.asarray(t) != 0) and differentiable(self.params[key])]
         if not moved:  # nothing the render differentiates moves (Dr.Jit would refuse an image attached to nothing)
             return np.zeros(self.shape, np.float32)
         attempt = 1
@@ -178,7 +168,8 @@ class DrJitScene:
                 dr.set_grad(self.params[key], to_value(self.params[key], t))
             with errors_only():
                 for seed, count, weight in self._passes(self.spp_grad, seed_grad):
-                    position, value = self.renderer.frozen.derivative(self.renderer.scene, self._integrator, mi.UInt32(seed), count)
+                    _, derivative = self.renderer.frozen.functions(self.renderer.geometry)
+                    position, value = derivative(self.renderer.scene, self._integrator, mi.UInt32(seed), count)
                     dr.eval(position, value)
                     with render_threads(self.renderer.assembly.scene.render.deterministic):
                         block = film.create_block()
@@ -201,7 +192,7 @@ class DrJitScene:
             with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():
                 image = self._render_ad(seed_grad)
                 dr.backward_from(image * mi.TensorXf(self.renderer.to_window(np.asarray(cotangent, dtype=np.float32))))
-                return {key: _flat_grad(self.params[key]) if _differentiable(self.params[key]) else np.zeros(np.size(values[key]), np.float32)
+                return {key: _flat_grad(self.params[key]) if differentiable(self.params[key]) else np.zeros(np.size(values[key]), np.float32)
                         for key in values}
         finally:
             self._set(values)

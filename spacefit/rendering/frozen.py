@@ -19,6 +19,8 @@ What a pass's samples are a function of:
 - the film (resolution, window) and the integrator: fixed for a loaded scene; each
   :class:`FrozenPasses` belongs to one loaded scene, so a new film or integrator is a new object with
   recordings of its own.
+- the scene's ray-tracing acceleration structure: not an operand; rebuilt when vertices move, which
+  drops the recordings (:meth:`FrozenPasses.functions`).
 
 Only the samples are frozen: each sample's value is computed on all of Dr.Jit's threads, the same
 whichever thread computes it, and its splatting into the film, where neighbours' samples add into
@@ -28,6 +30,8 @@ thread count, so a frozen splat could not be made to run on one).
 """
 
 from __future__ import annotations
+
+from collections.abc import Callable
 
 from spacefit.rendering.backend import dr, mi
 
@@ -77,11 +81,32 @@ def derivative_samples(scene: "mi.Scene", integrator: "mi.SamplingIntegrator", s
 
 class FrozenPasses:
     """One loaded scene's frozen passes: :func:`camera_samples` and :func:`derivative_samples`, each
-    recorded at its first call per key and replayed after (see the module's notes)."""
+    recorded per key and replayed after (see the module's notes), for one geometry at a time.
+
+    A recording holds the scene's ray-tracing acceleration structure as it was: after vertices move
+    (the pose, W-M wrinkles), which rebuilds it, a replay traced the old one (an image of half the
+    light at 2 deg of attitude). :meth:`functions` is therefore asked with the scene's geometry
+    (:attr:`~spacefit.rendering.renderer.Renderer.geometry`, counted up at each rebuild): a new one drops
+    the recordings, and its first render runs unfrozen (a fit that moves vertices at every render, its
+    pose free, renders as before: a recording costs about a trace), its later ones record and replay.
+    """
 
     def __init__(self) -> None:
+        self.geometry: int | None = None
+        self._drop()
+
+    def _drop(self) -> None:
         self.camera = dr.freeze(camera_samples, warn_after=WARN_AFTER)
         self.derivative = dr.freeze(derivative_samples, warn_after=WARN_AFTER)
+
+    def functions(self, geometry: int) -> tuple[Callable[..., tuple], Callable[..., tuple]]:
+        """The (camera, derivative) pass functions for the scene's ``geometry``: the frozen ones while it
+        is the one of the last call, the plain ones at the first call of a new one."""
+        if geometry == self.geometry:
+            return self.camera, self.derivative
+        self.geometry = geometry
+        self._drop()
+        return camera_samples, derivative_samples
 
     @property
     def recordings(self) -> int:
