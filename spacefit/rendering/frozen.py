@@ -91,13 +91,14 @@ class FrozenPasses:
     pose free, renders as before: a recording costs about a trace), its later ones record and replay.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, enabled: bool = True) -> None:
+        self.enabled = enabled  # False: every pass traced, as with no freezing (a reference for tests)
         self.geometry: int | None = None
         self._drop()
 
     def _drop(self) -> None:
-        self.camera = dr.freeze(camera_samples, warn_after=WARN_AFTER)
-        self.derivative = dr.freeze(derivative_samples, warn_after=WARN_AFTER)
+        self.camera = dr.freeze(camera_samples, warn_after=WARN_AFTER, enabled=self.enabled)
+        self.derivative = dr.freeze(derivative_samples, warn_after=WARN_AFTER, enabled=self.enabled)
 
     def functions(self, geometry: int) -> tuple[Callable[..., tuple], Callable[..., tuple]]:
         """The (camera, derivative) pass functions for the scene's ``geometry``: the frozen ones while it
