@@ -110,7 +110,8 @@ class DrJitScene:
         return [(pass_seed(seed, i), count, count / spp) for i, count in enumerate(counts)]
 
     def _render_ad(self, seed_grad: int) -> object:
-        # The derivative render's own primal is not used: its seed only has to differ from seed_grad.
+        """The image attached to the AD graph, for :meth:`backward` (Mitsuba's ``mi.render``). Its own primal
+        is not used: its seed only has to differ from ``seed_grad``."""
         return sum(mi.render(self.renderer.scene, self.params, integrator=self._integrator, seed=seed + 1, seed_grad=seed, spp=count) * weight
                    for seed, count, weight in self._passes(self.spp_grad, seed_grad))
 
@@ -156,32 +157,37 @@ class DrJitScene:
                 attempt += 1
 
     def _forward_once(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
-        """One forward-mode render of :meth:`forward`, with AD on the keys of ``tangent`` only: each pass's
-        samples on all threads (:func:`~spacefit.rendering.frozen.derivative_samples`, replayed after its
-        first call), splatted on one thread when the render is deterministic, in the samples' order, as
-        Mitsuba's ``render_forward`` splats them (the image it gives on one thread, bit for bit)."""
+        """One forward-mode render of :meth:`forward`, with AD on the keys of ``tangent`` only."""
         self._set(values, grad=tangent)
-        film = self.renderer.scene.sensors()[0].film()
-        image = None
         try:
             for key, t in tangent.items():
                 dr.set_grad(self.params[key], to_value(self.params[key], t))
-            with errors_only():
-                for seed, count, weight in self._passes(self.spp_grad, seed_grad):
-                    _, derivative = self.renderer.frozen.functions(self.renderer.geometry)
-                    position, value = derivative(self.renderer.scene, self._integrator, mi.UInt32(seed), count)
-                    dr.eval(position, value)
-                    with render_threads(self.renderer.assembly.scene.render.deterministic):
-                        block = film.create_block()
-                        block.set_coalesce(block.coalesce() and count >= 4)
-                        splat(block, position, value)
-                        film.put_block(block)
-                        pass_image = film.develop() * weight
-                        image = pass_image if image is None else image + pass_image
-                        dr.eval(image)
-            return self.renderer.to_film(np.asarray(image, dtype=np.float32))
+            return self.renderer.to_film(np.asarray(self._render_forward(seed_grad), dtype=np.float32))
         finally:
             self._set(values)
+
+    def _render_forward(self, seed_grad: int) -> "mi.TensorXf":
+        """The window's forward-mode derivative image along the gradients set on the scene's values:
+        each pass's samples on all threads (:func:`~spacefit.rendering.frozen.derivative_samples`,
+        replayed after its first call), splatted on one thread when the render is deterministic, in the
+        samples' order, as Mitsuba's ``render_forward`` splats them (the image it gives wholly on one
+        thread, bit for bit), the passes weighted by their shares of the samples."""
+        film = self.renderer.scene.sensors()[0].film()
+        _, derivative = self.renderer.frozen.functions(self.renderer.geometry)
+        image = None
+        with errors_only():  # projective integrators warn about film borders per call
+            for seed, count, weight in self._passes(self.spp_grad, seed_grad):
+                position, value = derivative(self.renderer.scene, self._integrator, mi.UInt32(seed), count)
+                dr.eval(position, value)
+                with render_threads(self.renderer.assembly.scene.render.deterministic):
+                    block = film.create_block()
+                    block.set_coalesce(block.coalesce() and count >= 4)  # as render_forward sets it
+                    splat(block, position, value)
+                    film.put_block(block)
+                    developed = film.develop() * weight
+                    image = developed if image is None else image + developed
+                    dr.eval(image)
+        return image
 
     @in_variant
     def backward(self, values: Mapping[str, np.ndarray], cotangent: np.ndarray, seed_grad: int) -> dict[str, np.ndarray]:
