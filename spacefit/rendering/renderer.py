@@ -222,8 +222,8 @@ class Renderer:
     ``crop=False`` traces the whole film, for vertices that will move (the window and the mask are
     fixed when the scene is loaded). :attr:`traced` is the mask over the window. Load once and render many times: reloading scenes
     leaks memory in Mitsuba (mitsuba3#1890); change values in place with :meth:`set_values`. Each
-    kind of pass is traced at its first render and replayed after (:attr:`frozen`,
-    :class:`~spacefit.rendering.frozen.FrozenPasses`).
+    kind of pass is traced at its first render and replayed after until vertices move (:attr:`frozen`,
+    :class:`~spacefit.rendering.frozen.FrozenPasses`; :attr:`geometry` counts the moves).
     """
 
     def __init__(self, scene: Scene | Assembly, variant: str | None = None, crop: bool = True) -> None:
