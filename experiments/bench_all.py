@@ -1,6 +1,6 @@
 """Every speed figure in one run (``make bench``): the main job's wall time cold and warm, a notebook's
-first render (a fresh process: what it waits for), forward renders at equal error against plain
-Mitsuba, the fit of an observation of a sensor (issue 23: 8 parameters at 128 x 128, 32 spp), the
+first render (a fresh process: what it waits for), the per-call fixed cost of a fit's frozen renders
+(issue 33's 5 ms), forward renders at equal error against plain Mitsuba, the fit of an observation of a sensor (issue 23: 8 parameters at 128 x 128, 32 spp), the
 fits' solve times and accuracy, peak memory, and Dr.Jit kernel compilations over a long fit, and
 where a CUDA GPU is usable, the default forward render and the panels fit on it against the CPU
 (elsewhere it says so). Each section prints the machine's load average (1 min) as it starts.
@@ -183,6 +183,8 @@ def main() -> None:
     first_render(args.repeats)
     if args.start_up:
         return
+    wall, peak, text = child([sys.executable, str(HERE / "bench_fixed_cost.py")], {"PYTHONPATH": str(ROOT)})
+    print(f"\n## per-call fixed cost of a fit's renders (bench_fixed_cost.py; {wall:.0f} s; {load()} at the end)\n{text.strip()}")
     wall, peak, text = child([sys.executable, str(HERE / "bench_fit.py"), "--observed"], {"PYTHONPATH": str(ROOT)})
     print(f"\n## the fit of an observation (bench_fit.py --observed; {wall:.0f} s whole process with its truth's "
           f"render, peak {peak:.0f} MiB; {load()})\n{text.strip()}")

@@ -35,7 +35,7 @@ from spacefit.executors import Cluster, Executor, executor_of
 from spacefit.precision import float64
 from spacefit.rendering.bridge import seeded_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
-from spacefit.rendering.renderer import render_threads, to_value
+from spacefit.rendering.renderer import render_threads
 from spacefit.rendering.parts import PartImage
 from spacefit.rendering.values import View, scene_view, view_values_fn
 from spacefit.scene.assembly import Assembly, assemble
@@ -213,10 +213,7 @@ def frame_part_image(spec: FrameSpec, key: str, loaded: Loaded | None = None) ->
     """Which part each pixel of the frame sees at its scene's values (loading its scene)."""
     chain = (loaded or _LOADED).chain(spec, key)
     x = jnp.asarray([scene_value(spec.scene, n) for n in spec.names], dtype=jnp.float64)
-    params = chain.renderer.params
-    for name, value in chain.values_of(x).items():
-        params[name] = to_value(params[name], np.asarray(value))
-    params.update()
+    chain.renderer.set_params({name: np.asarray(value) for name, value in chain.values_of(x).items()})
     return chain.renderer.part_image()
 
 

@@ -34,16 +34,11 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.rendering.backend import dr, in_variant, mi
-from spacefit.rendering.renderer import Renderer, errors_only, pass_seed, render_threads, to_value
+from spacefit.rendering.frozen import splat
+from spacefit.rendering.renderer import Renderer, differentiable, errors_only, pass_seed, render_threads, to_value
 from spacefit.scene.sampling import split_sample_count
 
 SceneValues = Mapping[str, Array]
-
-
-def _differentiable(value: object) -> bool:
-    """Whether the bridge differentiates a scene value: a frame (the sun's, the camera's) is set whole, its
-    Jacobian columns come from finite differences."""
-    return not isinstance(value, mi.AffineTransform4f)
 
 
 def _flat_grad(value: object) -> np.ndarray:
@@ -106,11 +101,7 @@ class DrJitScene:
 
     def _set(self, values: Mapping[str, np.ndarray], grad: Collection[str] = ()) -> None:
         """Set scene values by traverse key: those named in ``grad`` attached to Dr.Jit's AD graph, the others detached."""
-        for key, value in values.items():
-            self.params[key] = to_value(self.params[key], value)
-            if key in grad and _differentiable(self.params[key]):
-                dr.enable_grad(self.params[key])
-        self.params.update()
+        self.renderer.set_params(values, grad)
 
     def _passes(self, spp: int, seed: int) -> list[tuple[int, int, float]]:
         """(seed, spp, weight) of each pass of a render: the counts the sampler takes (``multijitter``
@@ -119,7 +110,8 @@ class DrJitScene:
         return [(pass_seed(seed, i), count, count / spp) for i, count in enumerate(counts)]
 
     def _render_ad(self, seed_grad: int) -> object:
-        # The derivative render's own primal is not used: its seed only has to differ from seed_grad.
+        """The image attached to the AD graph, for :meth:`backward` (Mitsuba's ``mi.render``). Its own primal
+        is not used: its seed only has to differ from ``seed_grad``."""
         return sum(mi.render(self.renderer.scene, self.params, integrator=self._integrator, seed=seed + 1, seed_grad=seed, spp=count) * weight
                    for seed, count, weight in self._passes(self.spp_grad, seed_grad))
 
@@ -152,7 +144,7 @@ class DrJitScene:
         moves vertices must attach them: its render is tried again on that refusal, from freshly set
         values (the same seed, so the same image). The values are detached again after an error too.
         """
-        moved = [key for key, t in tangent.items() if np.any(np.asarray(t) != 0) and _differentiable(self.params[key])]
+        moved = [key for key, t in tangent.items() if np.any(np.asarray(t) != 0) and differentiable(self.params[key])]
         if not moved:  # nothing the render differentiates moves (Dr.Jit would refuse an image attached to nothing)
             return np.zeros(self.shape, np.float32)
         attempt = 1
@@ -170,12 +162,32 @@ class DrJitScene:
         try:
             for key, t in tangent.items():
                 dr.set_grad(self.params[key], to_value(self.params[key], t))
-            with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():  # a fixed order of the film's sums
-                image = self._render_ad(seed_grad)
-                dr.forward_to(image)
-                return self.renderer.to_film(np.asarray(dr.grad(image), dtype=np.float32))
+            return self.renderer.to_film(np.asarray(self._render_forward(seed_grad), dtype=np.float32))
         finally:
             self._set(values)
+
+    def _render_forward(self, seed_grad: int) -> "mi.TensorXf":
+        """The window's forward-mode derivative image along the gradients set on the scene's values:
+        each pass's samples on all threads (:func:`~spacefit.rendering.frozen.derivative_samples`,
+        replayed after its first call), splatted on one thread when the render is deterministic, in the
+        samples' order, as Mitsuba's ``render_forward`` splats them (the image it gives wholly on one
+        thread, bit for bit), the passes weighted by their shares of the samples."""
+        film = self.renderer.scene.sensors()[0].film()
+        _, derivative = self.renderer.frozen.functions(self.renderer.geometry)
+        image = None
+        with errors_only():  # projective integrators warn about film borders per call
+            for seed, count, weight in self._passes(self.spp_grad, seed_grad):
+                position, value = derivative(self.renderer.scene, self._integrator, mi.UInt32(seed), count)
+                dr.eval(position, value)
+                with render_threads(self.renderer.assembly.scene.render.deterministic):
+                    block = film.create_block()
+                    block.set_coalesce(block.coalesce() and count >= 4)  # as render_forward sets it
+                    splat(block, position, value)
+                    film.put_block(block)
+                    developed = film.develop() * weight
+                    image = developed if image is None else image + developed
+                    dr.eval(image)
+        return image
 
     @in_variant
     def backward(self, values: Mapping[str, np.ndarray], cotangent: np.ndarray, seed_grad: int) -> dict[str, np.ndarray]:
@@ -186,7 +198,7 @@ class DrJitScene:
             with render_threads(self.renderer.assembly.scene.render.deterministic), errors_only():
                 image = self._render_ad(seed_grad)
                 dr.backward_from(image * mi.TensorXf(self.renderer.to_window(np.asarray(cotangent, dtype=np.float32))))
-                return {key: _flat_grad(self.params[key]) if _differentiable(self.params[key]) else np.zeros(np.size(values[key]), np.float32)
+                return {key: _flat_grad(self.params[key]) if differentiable(self.params[key]) else np.zeros(np.size(values[key]), np.float32)
                         for key in values}
         finally:
             self._set(values)

@@ -7,7 +7,7 @@ Lambert part with kd 0.2 facing a sun of 5 W m^-2 reads 0.2 * 5 / pi in every ch
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping
+from collections.abc import Collection, Iterator, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 
@@ -19,6 +19,7 @@ from spacefit.materials import Material
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.backend import dr, in_variant, mi, resolve_variant, variant_scope
+from spacefit.rendering.frozen import FrozenPasses, splat
 from spacefit.rendering.materials import bsdf_dict
 from spacefit.rendering.memory import MAX_SAMPLES_PER_PASS, check_memory
 from spacefit.rendering.parts import PartImage
@@ -29,6 +30,9 @@ from spacefit.rendering.silhouette import traced_pixels
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import FAR_CLIP_M, FILTER_RADIUS_PX, MAX_SEED, MAX_SPP, NEAR_CLIP_M, check_scene
 from spacefit.scene.sampling import check_sample_count, split_sample_count
+
+# Mitsuba mesh values whose update rebuilds the scene's ray-tracing acceleration structure.
+REBUILDS = (".vertex_positions", ".faces")
 
 # Pixels around the target's projected box that its light can still reach: the tent filter's
 # radius (1 px) and one for rounding.
@@ -217,7 +221,9 @@ class Renderer:
     within the film window around it, :func:`target_window`), the rest of the image is black;
     ``crop=False`` traces the whole film, for vertices that will move (the window and the mask are
     fixed when the scene is loaded). :attr:`traced` is the mask over the window. Load once and render many times: reloading scenes
-    leaks memory in Mitsuba (mitsuba3#1890); change values in place with :meth:`set_values`.
+    leaks memory in Mitsuba (mitsuba3#1890); change values in place with :meth:`set_values`. Each
+    kind of pass is traced at its first render and replayed after until vertices move (:attr:`frozen`,
+    :class:`~spacefit.rendering.frozen.FrozenPasses`; :attr:`geometry` counts the moves).
     """
 
     def __init__(self, scene: Scene | Assembly, variant: str | None = None, crop: bool = True) -> None:
@@ -238,6 +244,8 @@ class Renderer:
             self.traced = traced.result() if traced is not None else np.ones(self.window[:1:-1], dtype=bool)
             self._pixels = mi.UInt32(np.flatnonzero(self.traced).astype(np.uint32))
             self.params = mi.traverse(self.scene)
+            self.frozen = FrozenPasses()
+            self.geometry = 0  # counted up at each rebuild of the acceleration structure (set_params)
 
     def to_film(self, window_image: np.ndarray) -> np.ndarray:
         """The whole film (height, width, ...) from an image of the rendered window, black outside it."""
@@ -281,10 +289,21 @@ class Renderer:
                 names.append(name)
         names = list(dict.fromkeys(names))
         x = np.array([float(given[n]) if n in given else scene_value(scene, n) for n in names])
-        for key, value in scene_values_fn(self.assembly, names)(x).items():
-            self.params[key] = to_value(self.params[key], np.asarray(value))
-        self.params.update()
+        self.set_params({key: np.asarray(value) for key, value in scene_values_fn(self.assembly, names)(x).items()})
         self.current_scene = scene
+
+    def set_params(self, values: Mapping[str, np.ndarray], grad: Collection[str] = ()) -> None:
+        """Set Mitsuba scene values by traverse key (``'panels.bsdf.brdf_0.alpha_u.value'``,
+        ``'body.vertex_positions'``; a frame by :func:`to_value`'s numbers), those named in ``grad`` attached
+        to Dr.Jit's AD graph (those :func:`differentiable`), the others detached. Setting vertex positions
+        rebuilds the ray-tracing acceleration structure and counts up :attr:`geometry`."""
+        for key, value in values.items():
+            self.params[key] = to_value(self.params[key], value)
+            if key in grad and differentiable(self.params[key]):
+                dr.enable_grad(self.params[key])
+        if any(key.endswith(REBUILDS) for key in values):
+            self.geometry += 1
+        self.params.update()
 
     @in_variant
     def part_image(self) -> PartImage:
@@ -336,31 +355,18 @@ class Renderer:
 
     def _trace(self, block: "mi.ImageBlock", seed: int, spp: int, start: int, count: int, deterministic: bool) -> None:
         """Trace ``spp`` samples in each of the traced pixels ``start`` to ``start + count`` and splat them
-        into ``block``, as Mitsuba's own render loop does over a whole window (sample positions
-        uniform in each pixel, or stratified by the sampler; the film's filter weights them).
+        into ``block``, as Mitsuba's own render loop does over a whole window
+        (:func:`~spacefit.rendering.frozen.camera_samples`, replayed after its first call).
 
         The samples are traced on all of Dr.Jit's threads, each sample's value its own; only the
         splatting, where neighbours' samples add into the same pixels, runs on one thread when
         ``deterministic`` (:func:`render_threads`), in the samples' order: the image is the one a
         render wholly on one thread gives, bit for bit, in 0.54 to 0.62x its time on 2 cores."""
-        sensor = self.scene.sensors()[0]
-        film, sampler = sensor.film(), sensor.sampler().clone()
-        sampler.set_sample_count(spp)
-        sampler.set_samples_per_wavefront(spp)
-        sampler.seed(seed, count * spp)
-        # sample k of the wavefront belongs to traced pixel k // spp, as in Mitsuba's loop (the samplers stratify by it)
-        index = dr.gather(mi.UInt32, self._pixels, start + dr.arange(mi.UInt32, count * spp) // spp)
-        width = self.window[2]
-        offset = mi.ScalarVector2f(film.crop_offset())
-        position = mi.Vector2f(mi.Float(index % width), mi.Float(index // width)) + offset + sampler.next_2d()
-        ray, weight = sensor.sample_ray_differential(sensor.shutter_open(), 0.0, (position - offset) / mi.ScalarVector2f(film.crop_size()),
-                                                     mi.Point2f(0.5))
-        radiance, _, _ = self.scene.integrator().sample(self.scene, sampler, ray)
-        rgb = radiance * weight
+        camera, _ = self.frozen.functions(self.geometry)
+        position, rgb = camera(self.scene, self._pixels, mi.UInt32(seed), spp, start, count, self.window[2])
         dr.eval(position, rgb)
         with render_threads(deterministic):
-            block.put(position, [rgb.x, rgb.y, rgb.z, mi.Float(1.0)])
-            dr.eval(block.tensor())
+            splat(block, position, rgb)
 
 
 def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray:
@@ -370,19 +376,30 @@ def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray
         return Renderer(scene).render(progress=progress)
 
 
+def differentiable(value: object) -> bool:
+    """Whether AD differentiates a scene value: a frame (the sun's, the camera's) is set whole, its
+    Jacobian columns come from finite differences."""
+    return not isinstance(value, mi.AffineTransform4f)
+
+
 def to_value(template: object, value: np.ndarray) -> object:
-    """A Dr.Jit value of the type of ``template`` (a scene parameter) from a float array.
+    """A Dr.Jit value of the type of ``template`` (a scene parameter) from a float array, opaque
+    (evaluated, not a literal): the frozen passes (:mod:`spacefit.rendering.frozen`) take it as an
+    operand and replay, where a literal would be compiled into their kernels and retraced at each change.
 
     A transform is given whole (16 numbers, the camera's :meth:`~spacefit.geometry.frames.CameraFrame.mitsuba_to_world`)
     or, for a distant light's frame, by the direction its +z axis points along (3 numbers).
     """
     value = np.asarray(value, dtype=np.float32).ravel()
     if isinstance(template, mi.AffineTransform4f) and value.size == 16:
-        return mi.AffineTransform4f(value.reshape(4, 4))
-    if isinstance(template, mi.AffineTransform4f):
+        result = mi.AffineTransform4f(value.reshape(4, 4))
+    elif isinstance(template, mi.AffineTransform4f):
         d = value / np.linalg.norm(value)
         up = [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0]
-        return mi.AffineTransform4f(mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=d.tolist(), up=up))
-    if isinstance(template, mi.Color3f):
-        return mi.Color3f(*(mi.Float(value[i % len(value)]) for i in range(3)))
-    return type(template)(value)
+        result = mi.AffineTransform4f(mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=d.tolist(), up=up))
+    elif isinstance(template, mi.Color3f):
+        result = mi.Color3f(*(mi.Float(value[i % len(value)]) for i in range(3)))
+    else:
+        result = type(template)(value)
+    dr.make_opaque(result)
+    return result

@@ -104,8 +104,8 @@ class RenderSettings(Section):
     ``deterministic`` makes a seed give a bitwise-identical image on the CPU: Mitsuba's film adds
     float32 samples from parallel threads in a varying order (differences about 1e-7 relative), so
     deterministic renders add them on one thread, in the samples' order (a render traces them on all
-    threads first, and takes about the time of ``false``; the derivative renders run wholly on one
-    thread, about 2x slower on 2 cores). On CUDA images agree to that rounding only.
+    threads first, and takes about the time of ``false``; the forward-mode derivative renders likewise,
+    their samples traced on all threads, splatted on one). On CUDA images agree to that rounding only.
 
     ``sampler`` is Mitsuba's: ``multijitter`` (the default) stratifies each pixel's samples on a
     jittered grid; at equal samples it gave the lowest error of the five in both views of

@@ -1,0 +1,122 @@
+"""A loaded scene's renders recorded once and replayed: Dr.Jit's ``@dr.freeze`` over each pass's samples.
+
+Tracing a render in Python (the sampler, the camera's rays, the integrator's loop: hundreds of Dr.Jit
+operations) cost about as much as its kernels took to run on a small film: 8 ms of a 25 ms primal
+render and 30 ms of an 85 ms forward-mode derivative render at 128 x 128 px, 32 spp
+(docs/performance.md). :class:`FrozenPasses` records the first call of each kind of pass and, for new
+scene values, seeds and tangents, launches the recorded kernels again without tracing.
+
+What a pass's samples are a function of:
+
+- the scene's Dr.Jit variables (BSDF values, vertex positions, the sun's and the camera's frames) and,
+  in a derivative pass, the gradients set on them: inputs of the recording, replayed with their new
+  values. A value that was a literal at the first call is baked into its kernel; when it changes,
+  Dr.Jit records again with it opaque (``auto_opaque``), so it is never replayed stale.
+- the seed: an ``mi.UInt32`` operand, replayed.
+- the sample count, the pixel range and the set of values differentiated (their AD status): each a
+  key of its own recording (Python integers are compared, AD status is part of Dr.Jit's key), made at
+  its first call and replayed at the next with the same key.
+- the film (resolution, window) and the integrator: fixed for a loaded scene; each
+  :class:`FrozenPasses` belongs to one loaded scene, so a new film or integrator is a new object with
+  recordings of its own.
+- the scene's ray-tracing acceleration structure: not an operand; rebuilt when vertices move, which
+  drops the recordings (:meth:`FrozenPasses.functions`).
+
+Only the samples are frozen: each sample's value is computed on all of Dr.Jit's threads, the same
+whichever thread computes it, and its splatting into the film, where neighbours' samples add into
+the same pixels, is left to the caller, on one thread when the render is deterministic
+(:func:`~spacefit.rendering.renderer.render_threads`: Dr.Jit does not record a change of its
+thread count, so a frozen splat could not be made to run on one).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from spacefit.rendering.backend import dr, mi
+
+# Distinct keys a loaded scene records before Dr.Jit warns: a fit's passes (at most a few sample counts
+# and pixel ranges) times its differentiated sets (one per forward-mode column); more means a caller
+# keeps changing a Python value it should pass as a Dr.Jit one.
+WARN_AFTER = 64
+
+
+def camera_samples(scene: "mi.Scene", pixels: "mi.UInt32", seed: "mi.UInt32", spp: int, start: int, count: int,
+                   width: int) -> tuple["mi.Vector2f", "mi.Color3f"]:
+    """Film positions (px) and radiance times the camera's importance weight (W m^-2 sr^-1) of ``spp``
+    samples in each of the traced pixels ``start`` to ``start + count`` of ``pixels`` (indices into the
+    film window of ``width`` px), as Mitsuba's own render loop traces them (positions uniform in each
+    pixel, or stratified by the sampler), with the scene's integrator."""
+    sensor = scene.sensors()[0]
+    film, sampler = sensor.film(), sensor.sampler().clone()
+    sampler.set_sample_count(spp)
+    sampler.set_samples_per_wavefront(spp)
+    sampler.seed(seed, count * spp)
+    # sample k of the wavefront belongs to traced pixel k // spp, as in Mitsuba's loop (the samplers stratify by it)
+    index = dr.gather(mi.UInt32, pixels, start + dr.arange(mi.UInt32, count * spp) // spp)
+    offset = mi.ScalarVector2f(film.crop_offset())
+    position = mi.Vector2f(mi.Float(index % width), mi.Float(index // width)) + offset + sampler.next_2d()
+    ray, weight = sensor.sample_ray_differential(sensor.shutter_open(), 0.0, (position - offset) / mi.ScalarVector2f(film.crop_size()),
+                                                 mi.Point2f(0.5))
+    radiance, _, _ = scene.integrator().sample(scene, sampler, ray)
+    return position, radiance * weight
+
+
+def derivative_samples(scene: "mi.Scene", integrator: "mi.SamplingIntegrator", seed: "mi.UInt32",
+                       spp: int) -> tuple["mi.Point2f", "mi.Color3f"]:
+    """Film positions (px) and forward-mode derivatives of radiance times the camera's weight of ``spp``
+    samples in every pixel of the film window, along the gradients set on the scene's values: the
+    samples of Mitsuba's ``RBIntegrator.render_forward`` (Mitsuba 3.9, ``python/ad/integrators/common.py``:
+    a primal pass, then the forward pass from its state; Vicini et al. 2021, "Path replay
+    backpropagation"), before they are splatted."""
+    sensor = scene.sensors()[0]
+    with dr.suspend_grad():
+        sampler, spp = integrator.prepare(sensor, seed, spp, integrator.aov_names())
+        ray, weight, position = integrator.sample_rays(scene, sensor, sampler)
+        common = {"scene": scene, "ray": ray, "depth": mi.UInt32(0), "δL": None, "active": mi.Bool(True)}
+        _, _, _, state = integrator.sample(mode=dr.ADMode.Primal, sampler=sampler.clone(), state_in=None, **common)
+        derivative, _, _, _ = integrator.sample(mode=dr.ADMode.Forward, sampler=sampler, state_in=state, δaovs=None, **common)
+        return position, derivative * weight
+
+
+class FrozenPasses:
+    """One loaded scene's frozen passes: :func:`camera_samples` and :func:`derivative_samples`, each
+    recorded per key and replayed after (see the module's notes), for one geometry at a time.
+
+    A recording holds the scene's ray-tracing acceleration structure as it was: after vertices move
+    (the pose, W-M wrinkles), which rebuilds it, a replay traced the old one (an image of half the
+    light at 2 deg of attitude). :meth:`functions` is therefore asked with the scene's geometry
+    (:attr:`~spacefit.rendering.renderer.Renderer.geometry`, counted up at each rebuild): a new one drops
+    the recordings, and its first render runs unfrozen (a fit that moves vertices at every render, its
+    pose free, renders as before: a recording costs about a trace), its later ones record and replay.
+    """
+
+    def __init__(self, enabled: bool = True) -> None:
+        self.enabled = enabled  # False: every pass traced, as with no freezing (a reference for tests)
+        self.geometry: int | None = None
+        self._drop()
+
+    def _drop(self) -> None:
+        self.camera = dr.freeze(camera_samples, warn_after=WARN_AFTER, enabled=self.enabled)
+        self.derivative = dr.freeze(derivative_samples, warn_after=WARN_AFTER, enabled=self.enabled)
+
+    def functions(self, geometry: int) -> tuple[Callable[..., tuple], Callable[..., tuple]]:
+        """The (camera, derivative) pass functions for the scene's ``geometry``: the frozen ones while it
+        is the one of the last call, the plain ones at the first call of a new one."""
+        if geometry == self.geometry:
+            return self.camera, self.derivative
+        self.geometry = geometry
+        self._drop()
+        return camera_samples, derivative_samples
+
+    @property
+    def recordings(self) -> int:
+        """How many recordings the two hold: one more means a render was traced anew, not replayed."""
+        return self.camera.n_recordings + self.derivative.n_recordings
+
+
+def splat(block: "mi.ImageBlock", position: "mi.Point2f", value: "mi.Color3f") -> None:
+    """Add samples of unit weight at film ``position`` (px) into ``block`` through its filter, in the
+    samples' order on the current thread count, and evaluate it (the caller sets the thread count)."""
+    block.put(position, [value.x, value.y, value.z, mi.Float(1.0)])
+    dr.eval(block.tensor())
