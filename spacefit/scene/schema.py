@@ -15,7 +15,7 @@ from typing import Any
 import tomli_w
 
 from spacefit.display import scene_html, scene_repr
-from spacefit.errors import InputError, InputTypeError, check_choice, quote
+from spacefit.errors import InputError, InputTypeError, check_choice, check_direction, quote
 from spacefit.materials import material_table
 from spacefit.scene.overrides import with_values
 from spacefit.scene.sections import MESHLESS, SECTIONS, CameraSettings, PartSettings, RenderSettings, SunSettings, TargetSettings, WrinkleSettings, default_parts, plain
@@ -50,6 +50,8 @@ class Scene:
         if self.camera.fov_deg > 0.0:
             object.__setattr__(self, "camera", dataclasses.replace(self.camera, pixel_pitch_mm=fov_pitch_mm(self.camera, self.render)))
         check_optics(self.camera, self.render)
+        if self.target.attitude in ("nadir_sun", "sun"):  # the sun along nadir leaves the attitude undefined
+            self.target.rotation(-check_direction("sun.direction", self.sun.direction))
 
     def __repr__(self) -> str:
         """One short line (:func:`spacefit.display.scene_repr`); ``to_toml()`` gives every value."""
@@ -71,7 +73,7 @@ class Scene:
         # One of the two sets the field: the pitch follows from a field of view and the resolution.
         del out["camera"]["pixel_pitch_mm" if self.camera.fov_deg > 0.0 else "fov_deg"]
         out["parts"] = {name: {**material_table(p.material), **({"file": p.file} if p.file else {}),
-                               **(p.shape.table() if p.shape is not None else {})}
+                               **(p.shape.table() if p.shape is not None else {}), **p.articulation.table()}
                         for name, p in self.parts.items()}
         return out
 
