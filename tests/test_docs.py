@@ -7,6 +7,7 @@ tests/test_docs_examples.py, for a failure that names its block)."""
 from __future__ import annotations
 
 import functools
+from html import unescape
 import os
 import re
 import shutil
@@ -94,7 +95,8 @@ def internal_link_errors(html: Path) -> list[str]:
 def test_site_builds_without_warnings_and_its_internal_links_resolve(site):
     pages = {p.relative_to(site).as_posix() for p in site.rglob("*.html")}
     for page in ["index.html", "getting-started.html", "guide/fitting.html", "guide/dask.html", "conventions.html", "api.html",
-                 "cli.html", "validation.html", "performance.html", "gallery/index.html", "notebooks/walkthrough.html"]:
+                 "cli.html", "validation.html", "performance.html", "gallery/index.html", "notebooks/walkthrough.html",
+                 "notebooks/own-spacecraft.html"]:
         assert page in pages, page
     assert internal_link_errors(site) == []
 
@@ -187,15 +189,24 @@ def test_front_page_in_a_browser_shows_the_render_and_the_navigation(site, tmp_p
     assert "API reference" in dom and 'href="api.html"' in dom
 
 
-NOTEBOOKS = sorted((ROOT / "experiments").glob("*.ipynb"))
+# The notebooks: those stored with their outputs (experiments/, linked from docs/notebooks/) and the MyST text
+# notebooks of docs/notebooks/ (their ```{code-cell} blocks run in the build).
+NOTEBOOKS = sorted((ROOT / "experiments").glob("*.ipynb")) + sorted((DOCS / "notebooks").glob("*.md"))
+
+
+def notebook_code(notebook: Path) -> str:
+    """A notebook's code cells, joined: an .ipynb's, or a MyST text notebook's ```{code-cell} blocks."""
+    if notebook.suffix == ".md":
+        return "\n".join(re.findall(r"```\{code-cell\} ipython3\n(.*?)```", notebook.read_text(), flags=re.DOTALL))
+    import nbformat
+
+    return "\n".join(c.source for c in nbformat.read(notebook, as_version=4).cells if c.cell_type == "code")
 
 
 @pytest.mark.parametrize("notebook", NOTEBOOKS, ids=[p.name for p in NOTEBOOKS])
 def test_notebook_uses_public_names_and_no_stored_pictures(notebook):
     """The shipped notebooks teach the public API: ``sf.`` names only, every figure computed (no stored PNG shown)."""
-    import nbformat
-
-    code = "\n".join(c.source for c in nbformat.read(notebook, as_version=4).cells if c.cell_type == "code")
+    code = notebook_code(notebook)
     assert "import spacefit as sf" in code
     assert not re.search(r"from spacefit[.\w]* import|import spacefit\.", code), notebook.name
     assert "IPython.display import Image" not in code and ".png" not in code, notebook.name
@@ -206,3 +217,17 @@ def test_the_build_ran_the_gallery_and_the_notebooks(site):
     assert len(list((site / "_images").glob("sphx_glr_plot_*.png"))) >= len(list((DOCS / "examples").glob("plot_*.py")))
     for page in sorted((site / "notebooks").glob("*.html")):
         assert "data:image/png" in page.read_text() or re.search(r'<img[^>]+\.png', page.read_text()), f"{page.name} shows no computed figure"
+
+
+def test_own_spacecraft_page_shows_both_builds_the_mistake_and_the_fit(site):
+    """"Your own spacecraft" ran in the build: the mesh's groups as parts, the refused part's message naming the
+    groups and the parts, the two renders and the light curve as computed figures, and the fitted values against
+    the truth (the page itself fails the build where a fit misses its truth by 3 errors)."""
+    page = unescape((site / "notebooks" / "own-spacecraft.html").read_text())
+    assert "wing_left   -> parts.wing_left" in page
+    assert ("part(s) 'antenna' have no `file` and the mesh file 'box-wing.obj' has no group of that name; its groups: "
+            in page and "the scene's parts: bus, wing_left, wing_right, antenna." in page)
+    assert "light-curve model: flat plates" in page
+    assert len(re.findall(r"data:image/png|<img[^>]+\.png", page)) >= 2
+    assert re.search(r"parts\.bus\.alpha +0\.250 +0\.2\d{3} +0\.\d{4}", page)
+    assert re.search(r"parts\.wings\.alpha_x +0\.150 +0\.1\d{3} +0\.\d{4}", page)
