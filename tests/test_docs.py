@@ -225,7 +225,7 @@ def test_own_spacecraft_page_shows_both_builds_the_mistake_and_the_fit(site):
     the truth (the page itself fails the build where a fit misses its truth by 3 errors)."""
     page = unescape((site / "notebooks" / "own-spacecraft.html").read_text())
     assert "wing_left   -> parts.wing_left" in page
-    assert ("part(s) 'antenna' have no `file` and the mesh file 'box-wing.obj' has no group of that name; its groups: "
+    assert ("part(s) 'antenna' have no `file` and the mesh file 'box-wing.obj' has no group of that name; its groups: bus, wing_left, wing_right;"
             in page and "the scene's parts: bus, wing_left, wing_right, antenna." in page)
     assert "light-curve model: flat plates" in page
     assert len(re.findall(r"data:image/png|<img[^>]+\.png", page)) >= 2

@@ -173,11 +173,12 @@ def load_grouped(path: str | Path) -> dict[str, PartMesh]:
         raise InputError(f"mesh file {str(path)!r} holds no triangles.")
     if list(parts) == [path.name]:  # no named groups: trimesh names the whole mesh after the file
         return {}
-    empty += [name for name in _declared_groups(path) if name not in parts and name not in empty]
+    declared = _declared_groups(path)
+    empty += [name for name in declared if name not in parts and name not in empty]
     if empty:
         raise InputError(f"mesh file {str(path)!r}: group(s) {', '.join(map(repr, empty))} hold no triangles; "
                          f"its groups with triangles: {', '.join(sorted(parts))}. Remove the empty group(s) or give them faces.")
-    return parts
+    return {name: parts[name] for name in sorted(parts, key=lambda n: declared.index(n) if n in declared else len(declared))}  # the file's order
 
 
 def export_stl(path: str | Path, vertices: Float[np.ndarray, "n 3"], faces: Int[np.ndarray, "m 3"]) -> None:
