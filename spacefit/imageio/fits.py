@@ -40,6 +40,7 @@ from spacefit.errors import InputError
 from spacefit.imageio.formats import CHANNELS
 from spacefit.sensor import Sensor, check_fields
 from spacefit.units import RADIANCE_UNIT
+from spacefit.timescales import quiet_future_utc
 
 FITS_RADIANCE_UNIT = "W m-2 sr-1"
 FITS_SENSOR_KEY = "SPACEFIT SENSOR"
@@ -213,6 +214,7 @@ def read_fits(path: Path, row_order: str | None = None) -> tuple[np.ndarray, fit
     return (planes[::-1] if order[0] == "bottom-up" else planes), header, order
 
 
+@quiet_future_utc
 def iso_time(value: Any, path: Path) -> str:
     """A FITS ``DATE-OBS`` as an ISO time (astropy Time, UTC unless it says otherwise)."""
     from astropy.time import Time  # deferred: astropy.time takes 0.2 s; only a FITS DATE-OBS needs it
