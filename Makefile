@@ -31,6 +31,7 @@ mutants: setup
 SOAK_ARGS ?= --minutes 10
 soak: setup
 	.venv/bin/python tools/soak.py $(SOAK_ARGS)
+	.venv/bin/python experiments/fit_memory.py 50 5
 
 bench: setup
 	.venv/bin/python experiments/bench_all.py

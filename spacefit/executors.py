@@ -31,6 +31,8 @@ SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
 PROBE_TIMEOUT_S = 5.0
 # How long a batch waits for a worker when the cluster has none (s).
 WAIT_FOR_WORKERS_S = 120.0
+# How long closing a local cluster may take (s): workers that keep dying must not hold the caller.
+CLOSE_S = 20.0
 CLUSTER_WORDS = "None, a number of local workers, a scheduler address or a dask Client"
 
 
@@ -126,8 +128,8 @@ def connect(cluster: Cluster, config: Mapping[str, Any] | None = None) -> tuple[
     client = Client(local)
 
     def close() -> None:
-        client.close()
-        local.close()
+        client.close(timeout=CLOSE_S)
+        local.close(timeout=CLOSE_S)
 
     return client, close
 

@@ -159,3 +159,35 @@ def test_solver_by_name_or_object_with_its_own_tolerances():
         make_solver(42)
     with pytest.raises(InputError, match="learning_rate"):
         sf.Adam(learning_rate=0.0)
+
+
+def test_nothing_of_a_fit_outlives_it(monkeypatch, tmp_path):
+    """After sf.fit returns, its problem and its executor (loaded scenes, compiled renders) are
+    garbage: JAX's caches kept them, through the solver's function and the renders' callbacks, for
+    the life of the process (13.6 MiB per fit; experiments/fit_memory.py measures the memory)."""
+    import gc
+    import weakref
+
+    from spacefit.fitting import loop
+
+    scene = PANELS.scene().with_values({"render.resolution": [24, 24], "render.spp": 4})
+    sf.write_exr(tmp_path / "ref.exr", render(scene.with_values({"parts.legs.kd": 0.5})))
+    kept: list[weakref.ref] = []
+    executor_of, setup = loop.frame_executor, loop.setup
+
+    def recorded_executor(cluster):
+        executor = executor_of(cluster)
+        kept.append(weakref.ref(executor))
+        return executor
+
+    def recorded_setup(*args, **kwargs):
+        s = setup(*args, **kwargs)
+        kept.append(weakref.ref(s.problem))
+        return s
+
+    monkeypatch.setattr(loop, "frame_executor", recorded_executor)
+    monkeypatch.setattr(loop, "setup", recorded_setup)
+    result = fit(Observation.from_file(tmp_path / "ref.exr", scene), ["parts.legs.kd"], start={"parts.legs.kd": 0.42}, max_steps=2)
+    assert result.steps >= 1
+    gc.collect()
+    assert len(kept) == 2 and [ref() for ref in kept] == [None, None]

@@ -70,6 +70,22 @@ def test_foreign_fits_radiance_and_saturate_keyword(tmp_path):
         read_image(tmp_path / "r.fits", unit="DN")
 
 
+def test_a_tile_compressed_fits_is_read_as_its_uncompressed_copy_and_its_truncation_refused(tmp_path):
+    """A Rice-compressed 256 x 256 image (smaller on disk than the image it holds) reads as the same
+    image written plain; the compressed file cut short is still refused as truncated."""
+    dn = np.random.default_rng(3).integers(0, 4000, (256, 256)).astype(np.int16)
+    header = fits.Header([("ROWORDER", "TOP-DOWN"), ("SATURATE", 4095)])
+    fits.PrimaryHDU(dn, header=header).writeto(tmp_path / "plain.fits")
+    fits.HDUList([fits.PrimaryHDU(), fits.CompImageHDU(dn, header=header, compression_type="RICE_1")]).writeto(tmp_path / "rice.fits")
+    assert (tmp_path / "rice.fits").stat().st_size < dn.nbytes
+    rice, plain = read_image(tmp_path / "rice.fits"), read_image(tmp_path / "plain.fits")
+    assert rice.unit == plain.unit == "DN" and np.array_equal(rice.data, plain.data) and np.array_equal(rice.data[..., 0], dn)
+    whole = (tmp_path / "rice.fits").read_bytes()
+    (tmp_path / "cut.fits").write_bytes(whole[: len(whole) - 5000])
+    with pytest.raises(InputError, match="^'[^']*cut.fits' is truncated: the header of HDU 1 promises data up to byte"):
+        read_image(tmp_path / "cut.fits")
+
+
 def test_exr_radiance_and_its_refusals(tmp_path):
     rad = np.full((4, 5, 3), 0.25, dtype=np.float32)
     write_exr(tmp_path / "ok.exr", rad)

@@ -20,6 +20,7 @@ import spacefit as sf
 from spacefit.cli import INTERRUPTED, TERMINATED, main
 from spacefit.executors import ClusterError
 from spacefit.studies.cluster import run_on_dask
+from spacefit.studies.worker import Task
 
 # Seconds from the signal to the process's end that the test allows on a loaded machine (measured:
 # 0.02 to 0.05 s on an idle one, README "What spacefit refuses, and what it keeps").
@@ -134,6 +135,53 @@ def test_a_sweep_with_no_progress_stops_saying_so():
     with pytest.raises(ClusterError, match=r"no point of the sweep finished in 2 s \(`stall_s`\)"):
         list(run_on_dask([(0,)], lambda index: 60, cluster=1, max_renders_per_worker=100,
                          stall_s=2.0, render=time.sleep))
+
+
+@pytest.mark.slow
+def test_workers_that_keep_dying_end_the_run_within_stall_s(tmp_path):
+    """Two workers, every task killing its worker (about one death a second, each ending a task with
+    an error): with retries enough for an hour, the run stops stall_s after its last finished point."""
+    start = time.monotonic()
+    with pytest.raises(ClusterError, match=r"^no point of the sweep finished in 15 s \(`stall_s`\)[^\n]*$"):
+        list(run_on_dask([(i,) for i in range(4)], lambda index: (-2, str(tmp_path / "marker")), cluster=2,
+                         max_renders_per_worker=100, stall_s=15.0, retries=10_000, render=render_or_die))
+    assert (tmp_path / "marker").exists()  # the workers did die
+    assert time.monotonic() - start < 15.0 + 25.0  # the stall, the cluster's start and its close (CLOSE_S)
+
+
+def render_or_kill_task(task: Task) -> tuple[dict[str, np.ndarray], str, int]:
+    """``render_on_worker`` of a sweep's task, whose worker dies instead for the sphere's kd 0.8."""
+    from spacefit.studies.cluster import render_on_worker
+
+    if ("parts.sphere.kd", 0.8) in task.in_place:
+        os._exit(1)
+    return render_on_worker(task)
+
+
+@pytest.mark.slow
+def test_a_sweep_whose_workers_keep_dying_ends_with_its_store_intact_and_resumable(tmp_path, monkeypatch):
+    import functools
+
+    from test_sweep import sphere_scene
+
+    from spacefit.studies import cluster, sweep, worker
+
+    scene = sphere_scene(tmp_path)
+    axes = {"parts.sphere.kd": [0.2, 0.5, 0.8], "render.seed": [1, 2]}
+    store = tmp_path / "store.zarr"
+    monkeypatch.setattr(sweep, "run_on_dask", functools.partial(cluster.run_on_dask, retries=10_000, render=render_or_kill_task))
+    start = time.monotonic()
+    with pytest.raises(ClusterError, match=r"no point of the sweep finished in 8 s"):
+        sf.sweep(scene, axes, store=store, cluster=2, stall_s=8.0, quiet=True)
+    assert time.monotonic() - start < 8.0 + 40.0
+    report = sf.verify_store(store)
+    assert report.points == 6 and report.done == report.verified <= 4 and not report.damaged  # kd 0.8 never done
+    monkeypatch.undo()
+    run, rendered = worker.run_task, []
+    monkeypatch.setattr(worker, "run_task", lambda task: (rendered.append(task), run(task))[1])
+    finished = sf.sweep(scene, axes, store=store, quiet=True).load()
+    assert len(rendered) == 6 - report.done and sf.verify_store(store).verified == 6
+    assert finished["done"].all() and np.isfinite(finished["mean_radiance"]).all()
 
 
 def test_a_stalled_dask_sweep_exits_1_with_one_line_and_keeps_its_store(tmp_path, capsys):

@@ -20,7 +20,8 @@ PACKAGE = Path(__file__).resolve().parent.parent / "spacefit"
 # Low to high: each module's floor is that of the longest prefix listed.
 FLOORS: tuple[tuple[str, ...], ...] = (
     ("spacefit.errors", "spacefit.units", "spacefit.precision", "spacefit.interrupts", "spacefit.progress",
-     "spacefit.versions", "spacefit.locks", "spacefit.output", "spacefit.digests", "spacefit.executors"),
+     "spacefit.versions", "spacefit.locks", "spacefit.output", "spacefit.digests", "spacefit.executors",
+     "spacefit.timescales"),
     ("spacefit.geometry",),
     ("spacefit.materials",),
     ("spacefit.scene", "spacefit.display", "spacefit.plotting"),

@@ -293,3 +293,39 @@ def test_this_process_as_a_holder_is_what_psutil_reads_of_it():
     assert abs(me.started - process.create_time()) < START_TOLERANCE_S / 100
     assert me.command == shorten(" ".join(shlex.join(process.cmdline()).split()), 300)
     assert me.host == socket.gethostname() and me.pid == os.getpid() and me.runs()
+
+
+def test_a_holder_psutil_may_not_inspect_is_taken_to_run_and_its_lock_kept(tmp_path, monkeypatch):
+    """A lock whose holder's process exists but psutil is denied reading (another user's, under a
+    hardened /proc): refused as in use, never broken, the lock file unchanged."""
+    import psutil
+
+    path = write_lock(tmp_path / "out")
+    before = path.read_bytes()
+
+    def denied(pid: int) -> None:
+        raise psutil.AccessDenied(pid)
+
+    monkeypatch.setattr(psutil, "Process", denied)
+    with pytest.raises(sf.InputError, match=r"`--out` '.*out' is in use by spacefit process \d+ on host"):
+        with hold_lock(tmp_path / "out"):
+            pass
+    assert path.read_bytes() == before and listing(tmp_path) == [path.name]
+
+
+def test_every_spelling_of_a_folder_shares_its_lock(tmp_path):
+    """The folder named through a symlink, and through a/../ where a is a symlink elsewhere (the system
+    follows a before ..), takes the lock of the folder itself."""
+    real = tmp_path / "deep" / "data" / "out"
+    real.parent.mkdir(parents=True)
+    (tmp_path / "link").symlink_to(real)
+    (tmp_path / "a").symlink_to(tmp_path / "deep" / "data" / "sub", target_is_directory=True)
+    (tmp_path / "deep" / "data" / "sub").mkdir()
+    spellings = [tmp_path / "link", tmp_path / "a" / ".." / "out", tmp_path / "deep" / "." / "data" / "out"]
+    with hold_lock(real):
+        for spelling in spellings:
+            assert lock_file(spelling) == lock_file(real)
+            with pytest.raises(sf.InputError, match="is in use by spacefit process"):
+                with hold_lock(spelling):
+                    pass
+    assert listing(real.parent) == ["sub"]  # released: nothing left

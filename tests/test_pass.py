@@ -179,6 +179,28 @@ def test_the_frames_of_a_pass_share_one_loaded_scene_and_render_as_on_their_own(
         assert np.array_equal(frame_part_image(spec, spec.key, shared).ids, frame_part_image(spec, spec.key, Loaded()).ids)
 
 
+def test_a_caller_s_own_mitsuba_variant_changes_no_frame_and_is_kept():
+    """With the caller's variant scalar_rgb, each frame's image, Jacobian and part image equal those
+    rendered with spacefit's own variant set, bit for bit, and the caller's variant is set after each."""
+    from spacefit.rendering.backend import mi
+
+    specs = tiny_frames(2)
+    x = np.array([0.5, 0.1])
+    own = Loaded()
+    expected = [(frame_jacobian(s, s.key, x, 3, 4, own), frame_part_image(s, s.key, own).ids) for s in specs]
+    before = mi.variant()
+    try:
+        mi.set_variant("scalar_rgb")
+        theirs = Loaded()
+        for spec, ((image, J), ids) in zip(specs, expected):
+            got_image, got_J = frame_jacobian(spec, spec.key, x, 3, 4, theirs)
+            assert mi.variant() == "scalar_rgb"
+            assert np.array_equal(frame_part_image(spec, spec.key, theirs).ids, ids) and mi.variant() == "scalar_rgb"
+            assert np.array_equal(got_image, image) and np.array_equal(got_J, J)
+    finally:
+        mi.set_variant(before or "llvm_ad_rgb")
+
+
 # JAX's event for one XLA compilation (jax.monitoring).
 XLA_COMPILE = "/jax/core/compile/backend_compile_duration"
 

@@ -112,6 +112,36 @@ def test_keys_change_with_every_input_and_concurrent_writers_leave_a_whole_entry
     assert list(tmp_path.glob(".tmp-*")) == []
 
 
+def test_a_flipped_bit_or_another_entry_s_valid_file_is_rebuilt_to_the_clean_arrays(monkeypatch, tmp_path):
+    """Bit flips spread over an entry, and another input's whole entry copied under its name: each is
+    rebuilt, and what is returned equals the clean build bit for bit."""
+    monkeypatch.setenv(cache.ENV, str(tmp_path))
+    builds = []
+
+    def build(scale: float):
+        builds.append(scale)
+        return {"v": np.linspace(0.0, scale, 257), "f": np.arange(96, dtype=np.int64).reshape(32, 3)}
+
+    clean, status = cache.cached("refinement", ("part", 1.0), lambda: build(1.0))
+    assert status == "miss"
+    (entry,) = tmp_path.glob("refinement-*.npz")
+    intact = entry.read_bytes()
+    statuses = []
+    for n, at in enumerate(range(0, len(intact), len(intact) // 40)):
+        entry.write_bytes(intact[:at] + bytes([intact[at] ^ (1 << (n % 8))]) + intact[at + 1:])
+        arrays, status = cache.cached("refinement", ("part", 1.0), lambda: build(1.0))
+        statuses.append(status)  # a "hit" only where the flip fell on what the zip format does not read back
+        assert {k: a.tobytes() for k, a in arrays.items()} == {k: a.tobytes() for k, a in clean.items()}
+        assert cache.cached("refinement", ("part", 1.0), lambda: build(1.0))[1] == "hit"
+    assert statuses.count("miss") >= 30 and len(builds) == 1 + statuses.count("miss")
+    cache.cached("refinement", ("part", 2.0), lambda: build(2.0))
+    (other,) = set(tmp_path.glob("refinement-*.npz")) - {entry}
+    entry.write_bytes(other.read_bytes())
+    arrays, status = cache.cached("refinement", ("part", 1.0), lambda: build(1.0))
+    assert status == "miss" and builds[-1] == 1.0
+    np.testing.assert_array_equal(arrays["v"], clean["v"])
+
+
 def test_every_public_name_resolves_and_is_listed():
     assert set(sf.__all__) <= set(dir(sf))
     assert set(sf._EXPORTS) == set(sf.__all__)  # every lazily imported name is public, and the reverse

@@ -270,3 +270,56 @@ def test_a_reference_edited_while_the_fit_runs_is_refused_with_nothing_written(t
     err = capsys.readouterr().err
     assert "ref.exr" in err and "changed while the fit ran" in err
     assert not out.exists()
+
+
+def test_damaged_or_deleted_coordinate_chunks_fail_verify_and_are_written_again(finished, tmp_path, monkeypatch, capsys):
+    store, copy = finished
+    kd = next((store / "parts.sphere.kd").glob("[0-9]*"))
+    kd.write_bytes(bytes([kd.read_bytes()[0] ^ 1]) + kd.read_bytes()[1:])  # a flipped bit in the swept values
+    (next((store / "render.seed").glob("[0-9]*"))).unlink()
+    report = sf.verify_store(store)
+    assert report.damaged and report.damaged_coordinates == ("parts.sphere.kd", "render.seed")
+    assert main(["sweep", str(store), "--verify"]) == DAMAGED
+    assert "damaged coordinates (chunks changed or missing): parts.sphere.kd, render.seed" in capsys.readouterr().out
+    calls = counting(monkeypatch)
+    with pytest.warns(UserWarning, match=r"the damaged coordinate\(s\) parts.sphere.kd, render.seed are written again"):
+        sf.sweep(sphere_scene(tmp_path), AXES, store=store, quiet=True)
+    assert calls == []  # the points' data were intact
+    same_store(store, copy)
+    assert not sf.verify_store(store).damaged
+
+
+def test_two_points_chunks_swapped_with_their_checksums_fail_verify(finished, tmp_path, monkeypatch):
+    store, copy = finished
+    for variable in ("mean_radiance", "pixels", "irradiance", "checksum"):
+        suffix = "" if variable == "checksum" else ".0"
+        a, b = store / variable / f"0.0{suffix}", store / variable / f"2.1{suffix}"
+        first, second = a.read_bytes(), b.read_bytes()
+        a.write_bytes(second)
+        b.write_bytes(first)
+    report = sf.verify_store(store)
+    assert report.failed == ((0, 0), (2, 1)) and report.verified == 4
+    calls = counting(monkeypatch)
+    with pytest.warns(UserWarning, match="2 of 6 done points failed their checksum"):
+        sf.sweep(sphere_scene(tmp_path), AXES, store=store, quiet=True)
+    assert len(calls) == 2
+    same_store(store, copy)
+
+
+@pytest.mark.parametrize(("name", "damage"), [
+    ("mean_radiance/.zarray", lambda b: b"\xff\xfe" + b[2:]),  # not UTF-8
+    ("pixels/.zattrs", lambda b: b[: len(b) // 2]),  # truncated JSON
+    (".zattrs", lambda b: b"[]"),  # JSON, not an object
+    (".zmetadata", lambda b: b""),
+])
+def test_a_damaged_metadata_file_is_a_one_line_error_naming_it(finished, tmp_path, capsys, name, damage):
+    store, _ = finished
+    path = store / name
+    path.write_bytes(damage(path.read_bytes()))
+    before = {p: p.read_bytes() for p in store.rglob("*") if p.is_file()}
+    assert main(["sweep", str(store), "--verify"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"its metadata file {name!r} is damaged" in err and "Traceback" not in err
+    with pytest.raises(sf.InputError, match=f"its metadata file {name!r} is damaged"):
+        sf.sweep(sphere_scene(tmp_path), AXES, store=store, quiet=True)
+    assert {p: p.read_bytes() for p in store.rglob("*") if p.is_file()} == before  # nothing written

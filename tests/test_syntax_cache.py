@@ -125,3 +125,95 @@ def test_mitsuba_s_integrators_set_up_from_the_cache_in_a_new_process(tmp_path):
             for _ in range(2)]
     assert len(entries(tmp_path)) >= 5  # PRB, its basic, volumetric and projective forms
     assert runs[0].stdout == runs[1].stdout and len(runs[0].stdout.strip()) == 64
+
+
+def same_code(f, g) -> bool:
+    """Whether two functions run the same code: bytecode, constants (nested code included), names and lines."""
+    return f.__code__ == g.__code__ and f.__code__.co_consts == g.__code__.co_consts and f.__code__.co_linetable == g.__code__.co_linetable
+
+
+def bit_flips(data: bytes, count: int) -> list[bytes]:
+    """``count`` copies of ``data``, each with one bit flipped, spread evenly over its bytes."""
+    flipped = []
+    for k in range(count):
+        at = k * len(data) // count
+        flipped.append(data[:at] + bytes([data[at] ^ (1 << (k % 8))]) + data[at + 1:])
+    return flipped
+
+
+def test_a_flipped_bit_anywhere_in_an_entry_is_rewritten_to_the_clean_run_s_code(calls, tmp_path):
+    src = tmp_path / "fake.py"
+    src.write_text(SOURCE)
+    clean = load(src, "mitsuba.fake_integrator")
+    (entry,) = entries(tmp_path)
+    intact = entry.read_bytes()
+    for n, damaged in enumerate(bit_flips(intact, 40), start=2):
+        entry.write_bytes(damaged)
+        again = load(src, "mitsuba.fake_integrator")
+        assert len(calls) == n  # rewritten by Dr.Jit, never read
+        assert same_code(again, clean) and again(5)[0] == 20.0
+        assert same_code(load(src, "mitsuba.fake_integrator"), clean) and len(calls) == n  # replaced by a whole entry
+
+
+OTHER = SOURCE + textwrap.dedent("""
+    def count_down(n: int, step=2):
+        i = UInt32(n)
+        total = Float(0)
+        while i > 0:
+            total -= Float(i) * step
+            i -= 1
+        return total
+""")
+
+
+def test_another_function_s_valid_code_under_this_function_s_entry_is_rewritten(calls, tmp_path):
+    """Another function's code, with the identity line and a checksum that holds, is not run as count_to."""
+    src = tmp_path / "fake.py"
+    src.write_text(OTHER)
+    clean = load(src, "mitsuba.fake_integrator")
+    (entry,) = entries(tmp_path)
+    line = entry.read_bytes().split(b"\n", 1)[0]
+    spec = importlib.util.spec_from_file_location("other_fake", src)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    wrong = drjit.ast.syntax(mod.count_down).__code__
+    entry.write_bytes(syntax_cache._entry(line, wrong))
+    again = load(src, "mitsuba.fake_integrator")
+    assert calls == ["count_to", "count_to"]
+    assert same_code(again, clean) and again(5)[0] == 20.0
+    # an entry written for another function (its own identity line) is not read either
+    entry.write_bytes(syntax_cache._entry(line.replace(b'"count_to"', b'"count_down"'), wrong))
+    assert load(src, "mitsuba.fake_integrator")(5)[0] == 20.0 and len(calls) == 3
+
+
+NESTED = textwrap.dedent("""
+    import drjit as dr
+    from drjit.llvm import Float, UInt32
+
+    def outer(n: int):
+        def inner(m):
+            i = UInt32(0)
+            total = Float(0)
+            while i < m:
+                total += 1
+                i += 1
+            return total
+        return inner(n)
+""")
+
+
+def test_recursive_and_plain_rewrites_are_separate_entries(calls, tmp_path):
+    src = tmp_path / "nested.py"
+    src.write_text(NESTED)
+    spec = importlib.util.spec_from_file_location("mitsuba.nested", src)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    mod.outer.__module__ = "mitsuba.nested"
+    plain = syntax_cache.cached_syntax(mod.outer)
+    deep = syntax_cache.cached_syntax(mod.outer, recursive=True)
+    assert calls == ["outer", "outer"] and len(entries(tmp_path)) == 2
+    assert same_code(deep, drjit.ast.syntax(mod.outer, recursive=True))
+    assert same_code(plain, drjit.ast.syntax(mod.outer))
+    assert not same_code(plain, deep)
+    again = syntax_cache.cached_syntax(mod.outer, recursive=True)
+    assert calls == ["outer", "outer"] and same_code(again, deep)

@@ -38,6 +38,7 @@ from spacefit.errors import InputError, InputTypeError, check_path, quote
 from spacefit.scene.names import Name
 from spacefit.scene.parameters import PER_OBSERVATION
 from spacefit.scene.schema import Scene
+from spacefit.timescales import quiet_future_utc
 
 # Scene-file keys that hold 3 numbers, given as one column of 3 or as KEY.x, KEY.y, KEY.z.
 VECTOR_KEYS = ("camera.position_m", "camera.attitude_deg", "camera.look_at_m", "camera.up", "sun.direction",
@@ -232,8 +233,11 @@ def _time_text(value: Any, row: int) -> str:
     return repr(float(value)) if isinstance(value, (int, float)) else str(value).strip()
 
 
+@quiet_future_utc
 def elapsed_seconds(times: Sequence[str]) -> list[float]:
-    """Seconds since the first frame of ISO 8601 UTC times, or of numbers of seconds (all one kind)."""
+    """Seconds since the first frame of ISO 8601 UTC times (rounded to the nanosecond: astropy's
+    difference of two Julian dates is off by picoseconds, 9.999999999998 s for 10 s), or of numbers of
+    seconds (all one kind)."""
     try:
         numbers = [float(t) for t in times]
     except ValueError:
@@ -247,7 +251,7 @@ def elapsed_seconds(times: Sequence[str]) -> list[float]:
     out = []
     for i, t in enumerate(times):
         try:
-            out.append(float((Time(t, format="isot", scale="utc") - Time(times[0], format="isot", scale="utc")).sec))
+            out.append(round(float((Time(t, format="isot", scale="utc") - Time(times[0], format="isot", scale="utc")).sec), 9))
         except ValueError:
             raise InputError(f"frame {i}: `time` must be an ISO 8601 UTC time (2026-03-04T05:06:07.5) or seconds, got {t!r} "
                              "(one kind for every frame).") from None

@@ -22,8 +22,8 @@ sky, top-down; optics with a mirror break this rule: give ``row_order``); else t
 
 spacefit writes every :class:`~spacefit.sensor.Sensor` value in the header (:func:`fits_header`):
 standard keys where they exist, ``HIERARCH SPACEFIT SENSOR <FIELD>`` for all. A FITS file shorter
-than its headers say (truncated) and a cube of other than 1 or 3 planes (NAXIS3) are refused,
-naming the file.
+than its headers say (truncated; a tile-compressed image counted by its compressed bytes, so it is
+read) and a cube of other than 1 or 3 planes (NAXIS3) are refused, naming the file.
 """
 
 from __future__ import annotations
@@ -40,6 +40,7 @@ from spacefit.errors import InputError
 from spacefit.imageio.formats import CHANNELS
 from spacefit.sensor import Sensor, check_fields
 from spacefit.units import RADIANCE_UNIT
+from spacefit.timescales import quiet_future_utc
 
 FITS_RADIANCE_UNIT = "W m-2 sr-1"
 FITS_SENSOR_KEY = "SPACEFIT SENSOR"
@@ -165,12 +166,21 @@ def _row_order(header: fits.Header, row_order: str | None, path: Path) -> tuple[
     return "bottom-up", "FITS standard (no ROWORDER, no WCS)", [note]
 
 
+def _stored_bytes(hdu: Any, path: Path, index: int) -> int:
+    """Bytes of HDU ``index``'s data as the file stores them: for a tile-compressed image (Rice, GZIP...;
+    FITS 4.0 section 10), its binary table of compressed tiles, not the larger image it decompresses to."""
+    if isinstance(hdu, fits.CompImageHDU):
+        with fits.open(path, disable_image_compression=True) as raw:
+            return raw[index].size
+    return hdu.size
+
+
 def _image_hdu(hdus: fits.HDUList, path: Path) -> fits.PrimaryHDU | fits.ImageHDU | fits.CompImageHDU:
     """The first HDU with an image of 2 or more axes, after checking that the file holds every byte
     its headers promise up to it (a truncated copy would fail inside astropy)."""
     size = path.stat().st_size
     for index, hdu in enumerate(hdus):
-        expected = hdu.fileinfo()["datLoc"] + hdu.size
+        expected = hdu.fileinfo()["datLoc"] + _stored_bytes(hdu, path, index)
         if expected > size:
             raise InputError(f"{str(path)!r} is truncated: the header of HDU {index} promises data up to byte {expected}, "
                              f"the file holds {size} bytes.")
@@ -188,6 +198,8 @@ def read_fits(path: Path, row_order: str | None = None) -> tuple[np.ndarray, fit
             with fits.open(path) as hdus:
                 hdu = _image_hdu(hdus, path)
                 data, header = np.array(hdu.data), hdu.header.copy()
+    except InputError:
+        raise  # already in the user's words
     except (OSError, TypeError, ValueError) as err:  # astropy raises TypeError or ValueError for a damaged data unit
         raise InputError(f"{str(path)!r} could not be read as FITS: {err}") from None
     if data.ndim == 2:
@@ -202,6 +214,7 @@ def read_fits(path: Path, row_order: str | None = None) -> tuple[np.ndarray, fit
     return (planes[::-1] if order[0] == "bottom-up" else planes), header, order
 
 
+@quiet_future_utc
 def iso_time(value: Any, path: Path) -> str:
     """A FITS ``DATE-OBS`` as an ISO time (astropy Time, UTC unless it says otherwise)."""
     from astropy.time import Time  # deferred: astropy.time takes 0.2 s; only a FITS DATE-OBS needs it

@@ -292,11 +292,13 @@ class Renderer:
         self.set_params({key: np.asarray(value) for key, value in scene_values_fn(self.assembly, names)(x).items()})
         self.current_scene = scene
 
+    @in_variant
     def set_params(self, values: Mapping[str, np.ndarray], grad: Collection[str] = ()) -> None:
         """Set Mitsuba scene values by traverse key (``'panels.bsdf.brdf_0.alpha_u.value'``,
         ``'body.vertex_positions'``; a frame by :func:`to_value`'s numbers), those named in ``grad`` attached
-        to Dr.Jit's AD graph (those :func:`differentiable`), the others detached. Setting vertex positions
-        rebuilds the ray-tracing acceleration structure and counts up :attr:`geometry`."""
+        to Dr.Jit's AD graph (those :func:`differentiable`), the others detached, in the scene's variant
+        whatever variant the caller has set. Setting vertex positions rebuilds the ray-tracing
+        acceleration structure and counts up :attr:`geometry`."""
         for key, value in values.items():
             self.params[key] = to_value(self.params[key], value)
             if key in grad and differentiable(self.params[key]):

@@ -8,12 +8,15 @@ process, so a worker is restarted by its nanny after ``max_renders_per_worker`` 
 running there then is sent to another worker. At most two tasks per worker are in flight, so
 that Ctrl-C stops soon and a restart loses little. Only this process writes the store. A point
 whose worker dies (a crash, a memory limit) is retried :data:`RETRIES_PER_POINT` times, then the
-sweep stops naming it; a sweep where no point finishes for ``stall_s`` stops too (:class:`ClusterError`).
+sweep stops naming it; a sweep where no point finishes for ``stall_s`` stops too (:class:`ClusterError`),
+counted from the last point that finished: workers that die again and again (each death ends a task,
+with an error) do not keep it going.
 """
 
 from __future__ import annotations
 
 import itertools
+import time
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -51,7 +54,7 @@ def run_on_dask(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]]
 
     Raises:
         ClusterError: a point lost ``retries + 1`` times (naming it and its worker's memory limit), or
-            no point finished for ``stall_s`` seconds.
+            no point finished for ``stall_s`` seconds (workers dying meanwhile or not).
     """
     from distributed import wait  # here: only a cluster needs dask.distributed (seconds to import)
     from distributed.scheduler import KilledWorker
@@ -73,13 +76,18 @@ def run_on_dask(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]]
 
         for index in itertools.islice(queue, IN_FLIGHT_PER_WORKER * n):
             submit(index)
+        stall = ClusterError(f"no point of the sweep finished in {stall_s:g} s (`stall_s`): the dask workers are stuck, "
+                             "gone or dying; every finished point is in the store (rerun the same command to finish, or "
+                             "raise `stall_s` for renders that long).")
+        deadline = time.monotonic() + stall_s  # a point finished by then, or the sweep stops
         while pending:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                raise stall
             try:
-                done, _ = wait(list(pending), timeout=stall_s, return_when="FIRST_COMPLETED")
+                done, _ = wait(list(pending), timeout=left, return_when="FIRST_COMPLETED")
             except TimeoutError:
-                raise ClusterError(f"no point of the sweep finished in {stall_s:g} s (`stall_s`): the dask workers are "
-                                   "stuck or gone; every finished point is in the store (rerun the same command to "
-                                   "finish, or raise `stall_s` for renders that long).") from None
+                raise stall from None
             for future in done:
                 index, lost = pending.pop(future)
                 try:
@@ -89,14 +97,21 @@ def run_on_dask(todo: list[tuple[int, ...]], task_of: Callable[[tuple[int, ...]]
                         raise ClusterError(_lost(index, task_of(index), lost + 1, err)) from None
                     submit(index, lost + 1)
                     continue
+                deadline = time.monotonic() + stall_s
                 yield index, result
                 if renders >= max_renders_per_worker:
-                    client.restart_workers([address])
+                    restart(client, address, stall_s)
                 following = next(queue, None)
                 if following is not None:
                     submit(following)
     finally:
         close()
+
+
+def restart(client: Any, address: str, timeout_s: float) -> None:
+    """Restart the worker at ``address`` (its renders done), waiting at most ``timeout_s``; a worker gone
+    meanwhile, or one that does not come back in time, is left to its nanny (the sweep goes on)."""
+    client.restart_workers([address], timeout=timeout_s, raise_for_error=False)
 
 
 def _lost(index: tuple[int, ...], task: Any, times: int, err: Exception) -> str:

@@ -26,7 +26,6 @@ where the geometry is seen from a site, ``site`` (``latitude_deg``, ``longitude_
 from __future__ import annotations
 
 import re
-import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +36,7 @@ import numpy as np
 from spacefit.errors import InputError, check_choice
 from spacefit.studies.lightcurve import SUN_MAGNITUDES
 from spacefit.studies.orbit import Site, is_time, iso_text
+from spacefit.timescales import quiet_future_utc
 
 FORMATS = ("general", "pomenis", "score", "ecsv", "mmt9", "tdm")
 SCORE_REQUIRED = ("observation_time_utc", "apparent_magnitude", "apparent_magnitude_uncertainty", "observer_latitude_deg",
@@ -114,6 +114,7 @@ def check_format(value: str | None) -> str | None:
     return None if value is None else check_choice("format", value, FORMATS)
 
 
+@quiet_future_utc
 def time_refusals(times: Sequence[str], column: str, launch_utc: str | None, now_utc: str | None) -> dict[int, RefusedRow]:
     """The rows (0-based) whose times cannot be right: not ISO 8601, before ``launch_utc``, after
     ``now_utc`` (default: now)."""
@@ -125,14 +126,12 @@ def time_refusals(times: Sequence[str], column: str, launch_utc: str | None, now
             raise InputError(f"`{name}` must be an ISO 8601 time (UTC), got {value!r}.")
         bounds[name] = Time(iso_text(value), scale="utc") if value is not None else None
     now = bounds["now_utc"] if bounds["now_utc"] is not None else Time.now()
-    with warnings.catch_warnings():
-        warnings.filterwarnings("ignore", message=".*dubious year")  # a time far from now: refused below, not warned of twice
-        try:
-            readable = np.ones(len(times), dtype=bool)
-            parsed = Time([iso_text(t) for t in times], format="isot", scale="utc")
-        except ValueError:
-            readable = np.array([is_time(t) for t in times], dtype=bool)
-            parsed = Time([iso_text(t) if ok else "2000-01-01T00:00:00" for t, ok in zip(times, readable)], format="isot", scale="utc")
+    try:
+        readable = np.ones(len(times), dtype=bool)
+        parsed = Time([iso_text(t) for t in times], format="isot", scale="utc")
+    except ValueError:
+        readable = np.array([is_time(t) for t in times], dtype=bool)
+        parsed = Time([iso_text(t) if ok else "2000-01-01T00:00:00" for t, ok in zip(times, readable)], format="isot", scale="utc")
     early = parsed < bounds["launch_utc"] if bounds["launch_utc"] is not None else np.zeros(len(times), dtype=bool)
     late = parsed > now
     out = {}
@@ -251,6 +250,7 @@ def read_ecsv(path: Path) -> tuple[list[dict[str, str]], str | None, Site | None
     return rows, table.meta.get("band"), site
 
 
+@quiet_future_utc
 def write_ecsv(path: str | Path, columns: dict[str, np.ndarray], meta: dict[str, Any]) -> Path:
     """Write ``columns`` (``time_utc`` as an astropy Time column ``time``) with ``meta`` as an ECSV table."""
     from astropy.table import Table  # astropy: heavy, loaded when an ECSV file is written

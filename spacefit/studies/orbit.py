@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from spacefit.errors import InputError, check_range, check_type, quote
+from spacefit.timescales import quiet_future_utc
 
 # The Earth's (equatorial) radius, m, as lumos-sat takes it (a sphere).
 EARTH_RADIUS_M = 6378.0e3
@@ -56,6 +57,7 @@ def offline_iers() -> Iterator[None]:
         yield
 
 
+@quiet_future_utc
 def utc_times(times_utc: Sequence[str], name: str = "time_utc") -> Any:
     """astropy ``Time`` (UTC) of ISO 8601 texts (``2020-03-01T04:00:00``, a space for the ``T`` and a
     trailing ``Z`` allowed).
@@ -79,6 +81,7 @@ def iso_text(text: str) -> str:
     return text[:-1] if text.endswith(("Z", "z")) else text
 
 
+@quiet_future_utc
 def is_time(text: str) -> bool:
     """Whether astropy reads ``text`` (after :func:`iso_text`) as an ISO 8601 UTC time."""
     from astropy.time import Time  # astropy: heavy, loaded when times are read
@@ -90,6 +93,7 @@ def is_time(text: str) -> bool:
     return True
 
 
+@quiet_future_utc
 def sun_directions_enu(times_utc: Sequence[str], site: Site) -> np.ndarray:
     """(n, 3) unit vectors towards the sun in the site's east-north-up frame, by astropy, offline."""
     from astropy import units as u  # astropy: heavy, loaded when geometry is computed

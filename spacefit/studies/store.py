@@ -1,16 +1,21 @@
 """A sweep's resumable Zarr store: its layout, written point by point, verified and repaired.
 
 Each point's variables are one chunk each; a point is written data first, then the checksum of its
-bytes as read back (BLAKE2b), flushed to the disk, then its ``done`` flag. A reopened store's done
+bytes as read back (BLAKE2b keyed with the point's index, so that two points' chunks swapped, their
+checksums with them, fail), flushed to the disk, then its ``done`` flag. A reopened store's done
 points are read back against their checksums: :func:`verify_store` reports, :func:`repair` clears
-those that fail so that the sweep computes them again. A new store is made beside its place and
-moved there whole.
+those that fail so that the sweep computes them again. The coordinates' digests are kept in the
+store's attributes (:data:`COORDINATES`) and read back too: a damaged or deleted coordinate chunk is
+reported by name. A metadata file (``.zgroup``, ``.zattrs``, ``.zarray``, ``.zmetadata``) that is not
+JSON is a one-line :class:`~spacefit.errors.InputError` naming it, never a traceback. A new store is
+made beside its place and moved there whole.
 """
 
 from __future__ import annotations
 
 import hashlib
 import itertools
+import json
 import math
 import os
 import shutil
@@ -33,6 +38,8 @@ from spacefit.studies.worker import regions
 from spacefit.units import RADIANCE_UNIT
 
 CHECKSUM = "checksum"  # the variable of each point's checksum (one chunk per point)
+COORDINATES = "spacefit_coordinates"  # the store's attribute of each coordinate's digest (coordinate_digest)
+METADATA_FILES = (".zgroup", ".zattrs", ".zarray", ".zmetadata", "zarr.json")
 VERIFY_BATCH_BYTES = 64 << 20  # a store is verified in reads of about this many bytes
 STORE_FORMAT = 2  # Zarr format 2: readable by every Zarr library (format 3 has no string type yet)
 
@@ -81,7 +88,7 @@ def template(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple
         data = da.full(shape + size, fill, dtype=dtype, chunks=one + size)
         variables[name] = (dims + extra, data, {"units": unit, "description": doc})
     variables[CHECKSUM] = (dims, da.zeros(shape, dtype=np.uint64, chunks=one), {
-        "description": f"BLAKE2b (8 bytes, little-endian) of the point's bytes of {', '.join(sorted(layout))} in this "
+        "description": f"BLAKE2b (8 bytes, little-endian, keyed with the point's index as 'i,j,...') of the point's bytes of {', '.join(sorted(layout))} in this "
                        "order (C order, the stored dtypes), written after them and before done; 0: none",
         "variables": sorted(layout)})
     variables["done"] = (dims, da.zeros(shape, dtype=bool, chunks=one),
@@ -93,7 +100,24 @@ def template(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple
         coords["parameter"] = np.array(derivatives, dtype=object)
         coords["parameter_unit"] = ("parameter", np.array([parameter(n).unit for n in derivatives], dtype=object))
         coords["normalised_unit"] = ("parameter", np.array([normalisation(n, 1.0)[1] for n in derivatives], dtype=object))
-    return xr.Dataset(variables, coords=coords, attrs=dict(attrs))
+    ds = xr.Dataset(variables, coords=coords)
+    ds.attrs = {**attrs, COORDINATES: {name: coordinate_digest(ds[name].values) for name in sorted(ds.coords)}}
+    return ds
+
+
+def coordinate_digest(values: Any) -> str:
+    """BLAKE2b (hex, 16 bytes) of a coordinate's values: numbers by dtype, shape and bytes; strings by
+    their UTF-8 text, each ended by a NUL."""
+    array = np.asarray(values)
+    digest = hashlib.blake2b(digest_size=16)
+    digest.update(f"{array.shape}|".encode())
+    if array.dtype.kind in "OUST":
+        for item in array.reshape(-1):
+            digest.update(str(item).encode() + b"\0")
+    else:
+        digest.update(f"{array.dtype.str}|".encode())
+        digest.update(np.ascontiguousarray(array).tobytes())
+    return digest.hexdigest()
 
 
 def open_store(store: str | Path | None, spec: str, make: Callable[[], Any], overwrite: bool) -> Any:
@@ -109,6 +133,8 @@ def open_store(store: str | Path | None, spec: str, make: Callable[[], Any], ove
         raise InputError("`store` must name a folder, got an empty string.")
     target = Path(store)
     if target.exists():
+        if target.is_dir() and (target / ".zgroup").is_file():
+            check_metadata(target)
         old = _stored_spec(target)
         if old is None and (not target.is_dir() or any(target.iterdir())):
             raise InputError(f"`store` {str(target)!r} exists and is not a spacefit sweep store; choose a new folder.")
@@ -148,9 +174,10 @@ def pending(done: np.ndarray, order: Sequence[int]) -> list[tuple[int, ...]]:
     return sorted(todo, key=lambda idx: tuple(idx[a] for a in order))
 
 
-def point_checksum(values: Sequence[np.ndarray]) -> np.uint64:
-    """The checksum of one point: BLAKE2b (8 bytes) of its variables' bytes, in the order given."""
-    digest = hashlib.blake2b(digest_size=8)
+def point_checksum(values: Sequence[np.ndarray], index: tuple[int, ...]) -> np.uint64:
+    """The checksum of the point ``index``: BLAKE2b (8 bytes, keyed with the index) of its variables'
+    bytes, in the order given."""
+    digest = hashlib.blake2b(digest_size=8, key=",".join(map(str, index)).encode())
     for value in values:
         digest.update(np.ascontiguousarray(value).tobytes())
     return np.uint64(int.from_bytes(digest.digest(), "little"))
@@ -163,7 +190,7 @@ def write_point(group: Any, index: tuple[int, ...], result: Mapping[str, np.ndar
     names = sorted(result)
     for name in names:
         group[name][index] = result[name]
-    group[CHECKSUM][index] = point_checksum([np.asarray(group[name][index]) for name in names])
+    group[CHECKSUM][index] = point_checksum([np.asarray(group[name][index]) for name in names], index)
     if root is not None:
         _flush(root, index, {**{name: np.ndim(result[name]) for name in names}, CHECKSUM: 0})
     group["done"][index] = True
@@ -188,13 +215,15 @@ def _fsync(path: Path) -> None:
 @dataclass(frozen=True)
 class StoreReport:
     """What :func:`verify_store` found: counts of points, the done points whose data failed their
-    checksum (or whose flag is unreadable), and the variables missing from the store."""
+    checksum (or whose flag is unreadable), the variables missing from the store and the coordinates
+    whose values are not those recorded when it was made."""
 
     points: int
     done: int
     verified: int
     failed: tuple[tuple[int, ...], ...]
     missing_variables: tuple[str, ...]
+    damaged_coordinates: tuple[str, ...] = ()
 
     @property
     def missing(self) -> int:
@@ -203,14 +232,16 @@ class StoreReport:
 
     @property
     def damaged(self) -> bool:
-        """Some done point failed its checksum, or a variable is missing."""
-        return bool(self.failed or self.missing_variables)
+        """Some done point failed its checksum, a variable is missing or a coordinate is damaged."""
+        return bool(self.failed or self.missing_variables or self.damaged_coordinates)
 
     def __str__(self) -> str:
         lines = [f"{self.points:,} points: {self.done:,} done, {self.verified:,} verified, {len(self.failed):,} failed "
                  f"their checksum, {self.missing:,} to compute"]
         if self.missing_variables:
             lines.append(f"missing variables: {', '.join(self.missing_variables)}")
+        if self.damaged_coordinates:
+            lines.append(f"damaged coordinates (chunks changed or missing): {', '.join(self.damaged_coordinates)}")
         return "\n".join(lines)
 
 
@@ -236,13 +267,46 @@ def check_points(group: Any, root: Path) -> StoreReport:
         else:
             stored, bad_sum = _read(group[CHECKSUM], slab)
             data = [_read(group[n], slab) for n in names]
+            start = tuple(s.start for s in slab)
             for local in zip(*np.nonzero(done)):
+                index = tuple(int(a + b) for a, b in zip(start, local))
                 ok = not bad_sum[local] and not any(b[local] for _, b in data)
-                bad[local] = not (ok and stored[local] != 0 and point_checksum([v[local] for v, _ in data]) == stored[local])
+                bad[local] = not (ok and stored[local] != 0 and point_checksum([v[local] for v, _ in data], index) == stored[local])
         verified += int((done & ~bad).sum())
         start = tuple(s.start for s in slab)
         failed += [tuple(int(a + b) for a, b in zip(start, local)) for local in zip(*np.nonzero(bad))]
-    return StoreReport(points, done_count, verified, tuple(failed), missing)
+    return StoreReport(points, done_count, verified, tuple(failed), missing, _damaged_coordinates(group))
+
+
+def _damaged_coordinates(group: Any) -> tuple[str, ...]:
+    """The coordinates whose values (read back) are not those recorded in :data:`COORDINATES` when the
+    store was made (an unreadable or deleted one included); none checked in a store that records none."""
+    damaged = []
+    for name, recorded in sorted(dict(group.attrs.get(COORDINATES, {})).items()):
+        try:
+            values = np.asarray(group[name][...])
+        except Exception:  # noqa: BLE001  (a damaged chunk raises whatever its codec raises; a deleted array KeyError)
+            damaged.append(name)
+            continue
+        if coordinate_digest(values) != recorded:
+            damaged.append(name)
+    return tuple(damaged)
+
+
+def check_metadata(root: Path) -> None:
+    """Raise a one-line InputError naming the first metadata file of the store in ``root`` that is not
+    a JSON object (damaged, truncated, not UTF-8)."""
+    for path in sorted(p for name in METADATA_FILES for p in [root / name, *root.glob(f"*/{name}")] if p.is_file()):
+        try:
+            data = json.loads(path.read_bytes().decode("utf-8"))
+        except (OSError, UnicodeDecodeError, ValueError) as err:
+            reason = type(err).__name__
+        else:
+            if isinstance(data, dict):
+                continue
+            reason = f"a JSON {type(data).__name__}, not an object"
+        raise InputError(f"`store` {str(root)!r}: its metadata file {str(path.relative_to(root))!r} is damaged ({reason}); "
+                         "restore it from a copy, or rerun the sweep with overwrite=True (--overwrite) to compute the store again.")
 
 
 def _slabs(shape: tuple[int, ...], point_bytes: int) -> Iterator[tuple[slice, ...]]:
@@ -281,11 +345,14 @@ def verify_store(store: str | Path) -> StoreReport:
         when a done point failed or a variable is missing (a rerun of the sweep recomputes them).
 
     Raises:
-        InputError: ``store`` is not a spacefit sweep store.
+        InputError: ``store`` is not a spacefit sweep store, or one of its metadata files is damaged
+            (named).
     """
     import zarr  # here: only a sweep's store needs Zarr (slow to import)
 
     path = Path(store)
+    if path.is_dir() and (path / ".zgroup").is_file():
+        check_metadata(path)
     if _stored_spec(path) is None:
         raise InputError(f"`store` {str(store)!r} is not a spacefit sweep store (no folder with a sweep's attributes).")
     group = zarr.open_group(str(path), mode="r", zarr_format=STORE_FORMAT, use_consolidated=False)
@@ -305,6 +372,8 @@ def repair(group: Any, root: Path, make: Callable[[], Any]) -> Any:
         group = zarr.open_group(str(root), mode="r+", zarr_format=STORE_FORMAT)  # its metadata now lists them
     for index in report.failed:
         group["done"][index] = False
+    if report.damaged_coordinates:
+        _rewrite_coordinates(root, make(), report.damaged_coordinates)
     gone = ", ".join(report.missing_variables)
     if "done" in report.missing_variables:
         said = f"the variable(s) {gone} were missing and are recreated; every point is computed again"
@@ -313,6 +382,22 @@ def repair(group: Any, root: Path, make: Callable[[], Any]) -> Any:
     else:
         said = (f"{len(report.failed):,} of {report.done:,} done points failed their checksum (data chunk missing or "
                 "damaged) and are recomputed")
+    if report.damaged_coordinates:
+        said += f"; the damaged coordinate(s) {', '.join(report.damaged_coordinates)} are written again"
     if report.damaged:
         warnings.warn(f"store {str(root)!r}: {said}", stacklevel=3)
     return group
+
+
+def _rewrite_coordinates(root: Path, made: Any, names: Sequence[str]) -> None:
+    """Write the coordinates ``names`` of the store in ``root`` again from its template ``made`` (the
+    same sweep's, so the same values); one deleted whole is a one-line InputError naming it."""
+    import zarr  # here: only a sweep's store needs Zarr (slow to import)
+
+    plain = zarr.open_group(str(root), mode="r+", zarr_format=STORE_FORMAT, use_consolidated=False)
+    for name in names:
+        try:
+            plain[name][...] = made[name].values
+        except KeyError:
+            raise InputError(f"`store` {str(root)!r}: its coordinate {name!r} is gone; rerun the sweep with overwrite=True "
+                             "(--overwrite) to compute the store again.") from None
