@@ -18,14 +18,19 @@ from spacefit.display import scene_html, scene_repr
 from spacefit.errors import InputError, InputTypeError, check_choice, quote
 from spacefit.materials import material_table
 from spacefit.scene.overrides import with_values
-from spacefit.scene.sections import MESHLESS, SECTIONS, CameraSettings, PartSettings, RenderSettings, SunSettings, TargetSettings, WrinkleSettings, default_parts, plain
+from spacefit.scene.sections import BUILTIN, DEFAULT_PRESETS, MESHLESS, SECTIONS, CameraSettings, PartSettings, RenderSettings, SunSettings, TargetSettings, WrinkleSettings, default_parts, plain
 from spacefit.scene.optics import check_optics, fov_pitch_mm
 
 
 @dataclass(frozen=True)
 class Scene:
     """A whole scene: what :func:`~spacefit.scene.toml.load_scene` reads and the sidecar of every render
-    records. Checked on construction, each section by itself and here what joins them."""
+    records. Checked on construction, each section by itself and here what joins them.
+
+    The built-in lander's parts may be any of its own (:func:`~spacefit.scene.sections.default_parts`: body, panels, legs),
+    and parts of their own (a ``file`` or a ``shape``); they are held in the order a scene file
+    reads them: the lander's, in its order, then the others, in theirs.
+    """
 
     render: RenderSettings = field(default_factory=RenderSettings)
     camera: CameraSettings = field(default_factory=CameraSettings)
@@ -43,7 +48,10 @@ class Scene:
         for name, part in self.parts.items():
             if not isinstance(part, PartSettings):
                 raise InputTypeError(f"`parts.{name}` must be a PartSettings, got {quote(part)}.")
-        object.__setattr__(self, "parts", dict(self.parts))
+        parts = dict(self.parts)
+        if self.target.mesh in BUILTIN:
+            parts = {**{name: parts[name] for name in DEFAULT_PRESETS if name in parts}, **parts}
+        object.__setattr__(self, "parts", parts)
         if self.wrinkles.enabled:
             for name in self.wrinkles.parts:
                 check_choice("wrinkles.parts", name, self.parts)
@@ -65,7 +73,8 @@ class Scene:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (TOML-ready): every value, defaults included, of the camera's field the
-        one that sets it (``camera.fov_deg`` when > 0, else ``camera.pixel_pitch_mm``); each material in full."""
+        one that sets it (``camera.fov_deg`` when > 0, else ``camera.pixel_pitch_mm``); each material in
+        full; each part of the built-in lander that the scene lacks as ``parts.NAME = false``."""
         out: dict[str, Any] = {name: {k: plain(v) for k, v in dataclasses.asdict(getattr(self, name)).items()}
                                for name in SECTIONS}
         # One of the two sets the field: the pitch follows from a field of view and the resolution.
@@ -73,6 +82,8 @@ class Scene:
         out["parts"] = {name: {**material_table(p.material), **({"file": p.file} if p.file else {}),
                                **(p.shape.table() if p.shape is not None else {})}
                         for name, p in self.parts.items()}
+        if self.target.mesh in BUILTIN:  # a scene file's lander has all its parts but those removed
+            out["parts"] = {**{name: False for name in DEFAULT_PRESETS if name not in self.parts}, **out["parts"]}
         return out
 
     def to_toml(self) -> str:
