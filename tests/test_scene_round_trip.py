@@ -6,6 +6,7 @@ receive that text, gives each region the numbers of a direct render of the scene
 from __future__ import annotations
 
 import dataclasses
+import re
 import tomllib
 from pathlib import Path
 
@@ -14,9 +15,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from helpers import write_sphere_obj
+
 import spacefit as sf
 from spacefit.geometry.primitives import Primitive
 from spacefit.materials import PRESETS, Conductor, Lambert, TabulatedBRDF
+from spacefit.materials.measured import read_brdf_table
 from spacefit.scene.sections import DEFAULT_PRESETS, PartSettings
 from spacefit.scene.toml import load_scene, scene_from_dict
 from spacefit.studies import worker
@@ -82,6 +86,37 @@ def test_the_lander_parts_are_held_in_the_order_a_file_reads_them():
     scene = lander({"box": box, "legs": s.parts["legs"], "body": s.parts["body"]})
     assert list(scene.parts) == ["body", "legs", "box"]
     assert_same(scene)
+
+
+def test_relative_files_are_the_same_files_wherever_the_text_is_read(tmp_path, monkeypatch):
+    (tmp_path / "tables").mkdir()
+    (tmp_path / "tables" / "chassis.csv").write_text(CHASSIS.read_text())
+    write_sphere_obj(tmp_path / "ball.obj", subdivisions=1)
+    monkeypatch.chdir(tmp_path)
+    s = sf.default_scene()
+    scene = lander({"body": s.parts["body"], "ball": PartSettings(TabulatedBRDF(source="tables/chassis.csv", scale=2.0), file="ball.obj")})
+    ball = scene.parts["ball"]
+    assert ball.file == str(tmp_path / "ball.obj") and ball.material.source == str(tmp_path / "tables" / "chassis.csv")
+    (tmp_path / "elsewhere").mkdir()
+    (tmp_path / "elsewhere" / "scene.toml").write_text(scene.to_toml())
+    back = load_scene(tmp_path / "elsewhere" / "scene.toml")
+    assert back == scene and back.mesh_files() == [str(tmp_path / "ball.obj")]
+
+
+def test_tables_differ_by_source_scale_and_values_and_one_a_file_cannot_state_is_refused():
+    table = TabulatedBRDF(source=str(CHASSIS))
+    assert table == TabulatedBRDF(source=str(CHASSIS)) != TabulatedBRDF(source=str(CHASSIS), scale=2.0)
+    assert table != TabulatedBRDF(source=str(CHASSIS.with_name("solar_array_brdf.csv")))
+    floored = TabulatedBRDF.from_table(read_brdf_table(CHASSIS, floor=0.5))
+    assert (floored.source, floored.scale) == (table.source, table.scale) and floored != table
+    s = sf.default_scene()
+    scene = lander({**s.parts, "body": PartSettings(floored)})
+    with pytest.raises(sf.InputError, match=rf"^`parts.body` cannot be written to a scene file, which states its source = '{re.escape(str(CHASSIS))}', "
+                                            r"scale = 1.0: these give another table \(a table read with a floor"):
+        scene.to_toml()
+    made = TabulatedBRDF(table.incidence_rad, table.offset, table.log_value, "a table made in Python")
+    with pytest.raises(sf.InputError, match=r"^`parts.body` cannot be written .*: these cannot be read \(.*no BRDF table file 'a table made in Python'"):
+        lander({**s.parts, "body": PartSettings(made)}).to_toml()
 
 
 materials = st.one_of(

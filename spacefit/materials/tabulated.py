@@ -137,6 +137,17 @@ class TabulatedBRDF(MaterialModel):
             logs.append(np.bincount(where, np.log(value[rows])) / np.bincount(where))
         return cls(incidences, tuple(offsets), tuple(logs), table.source, scale)
 
+    def __eq__(self, other: object) -> bool:
+        """Equal tables: the same source and scale and the same arrays (compared by value)."""
+        if type(other) is not type(self):
+            return NotImplemented
+        arrays = ((self.incidence_rad,), (other.incidence_rad,)), (self.offset, other.offset), (self.log_value, other.log_value)
+        return (self.source, self.scale) == (other.source, other.scale) and all(
+            len(a) == len(b) and all(np.array_equal(x, y) for x, y in zip(a, b)) for a, b in arrays)
+
+    def __hash__(self) -> int:
+        return hash((self.source, self.scale))
+
     def f_r(self, wi: Array, wo: Array, **values: Array) -> Array:
         """scale exp(ln f(theta_i, u)), the table's interpolation (module docstring), for front-side
         directions towards the light (``wi``) and the detector (``wo``): not reciprocal."""

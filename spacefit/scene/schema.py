@@ -10,13 +10,14 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import tomli_w
 
 from spacefit.display import scene_html, scene_repr
 from spacefit.errors import InputError, InputTypeError, check_choice, quote
-from spacefit.materials import material_table
+from spacefit.materials import Material, make_material, material_table
 from spacefit.scene.overrides import with_values
 from spacefit.scene.sections import BUILTIN, DEFAULT_PRESETS, MESHLESS, SECTIONS, CameraSettings, PartSettings, RenderSettings, SunSettings, TargetSettings, WrinkleSettings, default_parts, plain
 from spacefit.scene.optics import check_optics, fov_pitch_mm
@@ -29,7 +30,10 @@ class Scene:
 
     The built-in lander's parts may be any of its own (:func:`~spacefit.scene.sections.default_parts`: body, panels, legs),
     and parts of their own (a ``file`` or a ``shape``); they are held in the order a scene file
-    reads them: the lander's, in its order, then the others, in theirs.
+    reads them: the lander's, in its order, then the others, in theirs. Files (``target.mesh``, a
+    part's ``file``, a measured table's ``source``) are held as absolute paths, a relative one
+    resolved against the working folder, as a scene file's against its folder: ``to_toml()``
+    names the same files wherever it is read.
     """
 
     render: RenderSettings = field(default_factory=RenderSettings)
@@ -48,7 +52,9 @@ class Scene:
         for name, part in self.parts.items():
             if not isinstance(part, PartSettings):
                 raise InputTypeError(f"`parts.{name}` must be a PartSettings, got {quote(part)}.")
-        parts = dict(self.parts)
+        parts = {name: _absolute(part) for name, part in self.parts.items()}
+        if self.target.mesh not in MESHLESS and not Path(self.target.mesh).is_absolute():
+            object.__setattr__(self, "target", dataclasses.replace(self.target, mesh=str(Path(self.target.mesh).resolve())))
         if self.target.mesh in BUILTIN:
             parts = {**{name: parts[name] for name in DEFAULT_PRESETS if name in parts}, **parts}
         object.__setattr__(self, "parts", parts)
@@ -87,7 +93,11 @@ class Scene:
         return out
 
     def to_toml(self) -> str:
-        """The scene as TOML text, loadable by :func:`~spacefit.scene.toml.load_scene` to an equal scene."""
+        """The scene as TOML text, loadable by :func:`~spacefit.scene.toml.load_scene` to an equal scene.
+        A material that its written values do not give again is refused, naming its part: a measured
+        table (whose file states its ``source`` and ``scale``) read with a ``floor`` or made from arrays."""
+        for name, part in self.parts.items():
+            _check_written(f"parts.{name}", part.material)
         return tomli_w.dumps(self.to_dict())
 
     def replace(self, **sections: Any) -> Scene:
@@ -99,3 +109,32 @@ class Scene:
         ``parts.panels.alpha_x``) or parameter names (``sun.elevation_deg``); see
         :func:`spacefit.scene.overrides.with_values`."""
         return with_values(self, values)
+
+
+def _absolute(part: PartSettings) -> PartSettings:
+    """``part`` with its ``file`` and its material's files (a measured table's ``source``, where it
+    names a file) as absolute paths, relative ones resolved against the working folder."""
+    material = part.material
+    files = {key: str(Path(value).resolve()) for key in type(material).paths
+             if isinstance(value := getattr(material, key), str) and value and not Path(value).is_absolute() and Path(value).is_file()}
+    if not files and (not part.file or Path(part.file).is_absolute()):
+        return part
+    return dataclasses.replace(part, material=dataclasses.replace(material, **files) if files else material,
+                               file=str(Path(part.file).resolve()) if part.file else "")
+
+
+def _check_written(where: str, material: Material) -> None:
+    """Refuse a material with values derived from others (a measured table's arrays) that its
+    written values (:func:`~spacefit.materials.material_table`) do not give again."""
+    if not any(f.metadata.get("derived") for f in dataclasses.fields(material)):
+        return
+    table = material_table(material)
+    try:
+        again: object = make_material(str(table.pop("material")), table, where=where)
+    except InputError as err:
+        again = err
+    if again != material:
+        states = ", ".join(f"{key} = {value!r}" for key, value in table.items())
+        found = f"cannot be read ({again})" if isinstance(again, InputError) else "give another table"
+        raise InputError(f"`{where}` cannot be written to a scene file, which states its {states}: these {found} (a table "
+                         f"read with a floor, or made from arrays); write the table it renders to a file and give that file as `source`.")
