@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import given, reject, settings
 from hypothesis import strategies as st
 
 from helpers import write_sphere_obj
@@ -21,7 +21,8 @@ import spacefit as sf
 from spacefit.geometry.primitives import Primitive
 from spacefit.materials import PRESETS, Conductor, Lambert, TabulatedBRDF
 from spacefit.materials.measured import read_brdf_table
-from spacefit.scene.sections import DEFAULT_PRESETS, PartSettings
+from spacefit.scene.parameters import parameter, scene_value, scene_with_values
+from spacefit.scene.sections import DEFAULT_PRESETS, PartSettings, TargetSettings
 from spacefit.scene.toml import load_scene, scene_from_dict
 from spacefit.studies import worker
 from spacefit.studies.worker import Task
@@ -142,8 +143,29 @@ def test_scenes_changed_in_python_round_trip(order, removed, mats, own, mesh, el
     parts |= {f"own{i}": PartSettings(mats[-1 - i], shape=shape) for i, shape in enumerate(own)}
     if not parts:
         parts = {"plate": PartSettings(mats[0], shape=Primitive("plate", (1.0, 2.0)))}
-    scene = lander(parts, target=sf.default_scene().target.__class__(mesh=mesh))
+    scene = lander(parts, target=TargetSettings(mesh=mesh))
     assert_same(scene.with_values({"sun.elevation_deg": elevation_deg, "render.seed": seed}))
+
+
+SCENES = {"default": sf.default_scene(), **{p.stem: load_scene(p) for p in sorted((ROOT / "data" / "scenes").glob("*.toml"))}}
+
+
+@settings(max_examples=40, deadline=None, database=None)
+@given(st.sampled_from(sorted(SCENES)), st.data())
+def test_registered_values_set_in_python_round_trip(name, data):
+    """Any registered parameters of a shipped scene (materials, sun, pose, wrinkles) set in Python,
+    each within its bounds near its value, survive the TOML text."""
+    scene = SCENES[name]
+    values = {}
+    for key in data.draw(st.lists(st.sampled_from(sf.available_parameters(scene)), min_size=1, max_size=4, unique=True)):
+        bounds, start = parameter(key).bounds, scene_value(scene, key)
+        near = st.floats(max(bounds.lo, start - 1.0 - abs(start)), min(bounds.hi, start + 1.0 + abs(start)))
+        values[key] = data.draw(near.filter(bounds.contains), label=key)
+    try:
+        changed = scene_with_values(scene, values)
+    except sf.InputError:  # values that join to a scene refused as a whole (a camera that misses the target...)
+        reject()
+    assert_same(changed)
 
 
 def small_lander() -> sf.Scene:
