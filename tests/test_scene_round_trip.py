@@ -68,6 +68,8 @@ def test_a_lander_without_a_part_is_written_as_such():
     assert 'body = false' in scene.to_toml()
     back = through_toml(scene)
     assert list(back.parts) == ["panels", "legs"] and back == scene
+    cell = "<td style='text-align:left'>{}</td>"
+    assert "".join(map(cell.format, ("parts", "body", "False"))) in scene._repr_html_()  # the notebook's table says so too
 
 
 def test_removing_a_part_in_a_file_names_the_lander_parts():
