@@ -115,6 +115,11 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "TargetSettings": ("spacefit.scene.sections", "TargetSettings"),
     "WrinkleSettings": ("spacefit.scene.sections", "WrinkleSettings"),
     "PartSettings": ("spacefit.scene.sections", "PartSettings"),
+    "SunTracking": ("spacefit.geometry.attitude", "SunTracking"),
+    "AxisAngle": ("spacefit.geometry.attitude", "AxisAngle"),
+    "NadirSun": ("spacefit.geometry.attitude", "NadirSun"),
+    "SunPointing": ("spacefit.geometry.attitude", "SunPointing"),
+    "QuaternionTable": ("spacefit.geometry.attitude", "QuaternionTable"),
     "default_scene": ("spacefit.scene.toml", "default_scene"),
     "load_scene": ("spacefit.scene.toml", "load_scene"),
     "PARAMETERS": ("spacefit.scene.parameters", "PARAMETERS"),
@@ -161,6 +166,7 @@ __all__ = [
     "target_plates", "compare_plates_to_render", "PlatesVsRender", "choose_light_curve_model", "ChosenLightCurve",
     "Earth", "EarthshineSources", "earthshine_sources", "earthshine_irradiance",
     "RenderSettings", "CameraSettings", "SunSettings", "TargetSettings", "WrinkleSettings", "PartSettings",
+    "SunTracking", "AxisAngle", "NadirSun", "SunPointing", "QuaternionTable",
 ]
 
 

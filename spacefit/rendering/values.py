@@ -16,10 +16,12 @@ from typing import Any
 import jax.numpy as jnp
 from jaxtyping import Array
 
+from spacefit.errors import InputError
 from spacefit.rendering.materials import material_keys
 from spacefit.scene.assembly import Assembly
 from spacefit.geometry.frames import CameraFrame, attitude_matrix
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, ROLL, SUN_ANGLES, scene_value
+from spacefit.scene.sections import sun_followers
 from spacefit.scene.conversions import G_of, sun_direction
 
 SceneValuesFn = Callable[[Array], dict[str, Array]]
@@ -47,6 +49,20 @@ def scene_values_fn(assembly: Assembly, names: Sequence[str]) -> SceneValuesFn:
     return lambda x: values(x, view)
 
 
+def _check_laws(assembly: Assembly, free: Sequence[str]) -> None:
+    """Refuse freeing the target's attitude angles under an attitude law other than ``fixed``, or the
+    sun's angles where a law follows the sun: the law, evaluated once by the assembly, sets what they would."""
+    scene = assembly.scene
+    followers = sun_followers(scene)
+    for name in free:
+        if name in ATTITUDE and scene.target.attitude != "fixed":
+            raise InputError(f"`{name}` cannot be free: `target.attitude` = {scene.target.attitude!r} sets the target's "
+                             "attitude (free the angles with target.attitude = \"fixed\").")
+        if name in SUN_ANGLES and followers:
+            raise InputError(f"`{name}` cannot be set in place: {', '.join(followers)} follow the sun, turned for the scene's "
+                             "sun when it is assembled (assemble the scene again for another sun).")
+
+
 def view_values_fn(assembly: Assembly, names: Sequence[str]) -> Callable[[Array, View], dict[str, Array]]:
     """JAX function: physical values (n,) of the parameters ``names`` and a view (:func:`scene_view`
     of this scene or of one differing in its view only) -> the scene values they set."""
@@ -56,6 +72,8 @@ def view_values_fn(assembly: Assembly, names: Sequence[str]) -> Callable[[Array,
     geometry = [n for n in GEOMETRY if n in index]
     pose = [n for n in (*ATTITUDE, *POSITION) if n in index]
     sun_angles = [n for n in SUN_ANGLES if n in index]
+    _check_laws(assembly, [n for n in (*ATTITUDE, *sun_angles) if n in index])
+    law_rotation = None if scene.target.attitude == "fixed" else jnp.asarray(assembly.to_world[:3, :3])
 
     def values_of(x: Array, view: View) -> dict[str, Array]:
         def value(name: str) -> Array:
@@ -71,7 +89,7 @@ def view_values_fn(assembly: Assembly, names: Sequence[str]) -> Callable[[Array,
             G = x[index["wrinkles.G"]] if "wrinkles.G" in index else w.G
             if "wrinkles.rms_m" in index:
                 G = G_of(w, D, x[index["wrinkles.rms_m"]])
-            rotation = attitude_matrix(jnp.deg2rad(jnp.stack([value(n) for n in ATTITUDE])), jnp)
+            rotation = attitude_matrix(jnp.deg2rad(jnp.stack([value(n) for n in ATTITUDE])), jnp) if law_rotation is None else law_rotation
             position = jnp.stack([value(n) for n in POSITION])
             for part in assembly.parts if pose else assembly.refinements:
                 out[f"{part}.vertex_positions"] = jnp.ravel(assembly.object_vertices(part, D, G) @ rotation.T + position)

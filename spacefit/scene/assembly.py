@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spacefit.errors import InputError, check_direction
+from spacefit.geometry.attitude import Fixed
 from spacefit.geometry.cache import cached
 from spacefit.geometry.frames import CameraFrame, Intrinsics, object_to_world, project
 from spacefit.geometry.mesh import PartMesh, load_grouped, load_part, validate_part
@@ -237,6 +238,34 @@ def check_part_names(mesh: str, groups: Mapping[str, PartMesh], parts: Mapping[s
                          f'material = "white_paint"`.')
 
 
+def body_to_world(scene: Scene) -> Float[np.ndarray, "4 4"]:
+    """The homogeneous body-to-world matrix of the scene's target: its position and the rotation of its
+    attitude law (``target.attitude``, :meth:`~spacefit.scene.sections.TargetSettings.rotation`) for the
+    scene's sun."""
+    target = scene.target
+    if target.attitude == "fixed":
+        return object_to_world(np.array(target.position_m), np.array(deg2rad(target.attitude_deg)))
+    m = np.eye(4)
+    m[:3, :3] = target.rotation(-check_direction("sun.direction", scene.sun.direction))
+    m[:3, 3] = target.position_m
+    return m
+
+
+def articulated(parts: Mapping[str, PartMesh], specs: Mapping[str, PartSettings],
+                sun: Float[np.ndarray, "3"]) -> dict[str, PartMesh]:
+    """The parts with each articulated part turned about its pivot by its law (body frame), ``sun`` the
+    unit direction towards the sun in the body frame; fixed parts are the same objects."""
+    out = dict(parts)
+    for name, spec in specs.items():
+        law = spec.articulation
+        if isinstance(law, Fixed):
+            continue
+        turn, pivot = law.rotation(spec.reference_normal(), sun), np.asarray(law.pivot_m)
+        part = parts[name]
+        out[name] = PartMesh((part.vertices - pivot) @ turn.T + pivot, part.faces, part.uv)
+    return out
+
+
 def _camera(scene: Scene) -> tuple[CameraFrame, Intrinsics]:
     c = scene.camera
     if c.look_at_m:
@@ -322,7 +351,8 @@ def assemble(scene: Scene) -> Assembly:
     parts = _load_parts(scene, cache)
     w = scene.wrinkles
     materials = {name: p.material for name, p in scene.parts.items()}
-    to_world = object_to_world(np.array(scene.target.position_m), np.array(deg2rad(scene.target.attitude_deg)))
+    to_world = body_to_world(scene)
+    parts = articulated(parts, scene.parts, to_world[:3, :3].T @ -check_direction("sun.direction", scene.sun.direction))
     camera, intrinsics = _camera(scene)
     sources, lod = {}, {}
     for name in w.parts if w.enabled else ():

@@ -20,17 +20,18 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, InputTypeError, check_direction, check_path, check_vector, closest, quote
+from spacefit.errors import InputError, InputTypeError, check_direction, check_path, check_vector, closest, inside, quote
+from spacefit.geometry.attitude import ARTICULATION_KEYS, pop_articulation
 from spacefit.geometry.primitives import pop_primitive
 from spacefit.materials import MODELS, make_material, with_material_values
-from spacefit.scene.parameters import PARAMETERS, is_image, scene_keys, scene_with_values
+from spacefit.scene.parameters import ATTITUDE, PARAMETERS, is_image, scene_keys, scene_with_values
 from spacefit.scene.conversions import VERTICAL_SUN, sun_angles_deg
 from spacefit.scene.sections import SECTIONS, PartSettings, SceneLike, unknown_part
 from spacefit.scene.optics import check_pitch_with_fov
 
 Overrides = Mapping[str, Any] | Sequence[str] | str
-# The keys of a part table besides its material's own values and the models' ties (``alpha``).
-PART_KEYS = ("material", "file")
+# The keys of a part table besides its material's own values and the models' ties (``alpha``) and a primitive's.
+PART_KEYS = ("material", "file", *ARTICULATION_KEYS)
 
 
 def toml_value(raw: str) -> Any:
@@ -211,14 +212,22 @@ def with_values(scene: SceneLike, values: Mapping[str, Any]) -> SceneLike:
             raise InputTypeError(f"`parts.{name}.file` must be a path string, got {quote(file)}.")
         file = str(Path(file).resolve()) if file and not check_path(f"parts.{name}.file", file).is_absolute() else file
         shape = pop_primitive(table, f"parts.{name}", old.shape if old is not None else None)
+        law = pop_articulation(table, f"parts.{name}", old.articulation if old is not None else None,
+                               shape.position_m if shape is not None else (0.0, 0.0, 0.0))
         if "material" in table:
             material = make_material(table.pop("material"), table, where=f"parts.{name}")
         else:
             material = with_material_values(old.material, table, where=f"parts.{name}")  # type: ignore[union-attr]
-        new_parts[name] = PartSettings(material, file, shape)
+        with inside(f"parts.{name}"):
+            new_parts[name] = PartSettings(material, file, shape, law)
     if parts:
         changed["parts"] = new_parts
     out = dataclasses.replace(scene, **changed) if changed else scene
+    angles = [key for key in (*(f"target.{k}" for k in sections.get("target", {}) if k == "attitude_deg"), *parameters)
+              if key == "target.attitude_deg" or key in ATTITUDE]
+    if angles and out.target.attitude != "fixed":
+        raise InputError(f"`{angles[0]}` sets an attitude angle, which `target.attitude` = {out.target.attitude!r} does not use "
+                         "(the law sets the attitude): set `target.attitude` = \"fixed\" with it.")
     if "pixel_pitch_mm" in sections.get("camera", {}):
         check_pitch_with_fov(out, sections["camera"]["pixel_pitch_mm"])
     return scene_with_values(out, parameters) if parameters else out

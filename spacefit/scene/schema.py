@@ -16,7 +16,7 @@ from typing import Any
 import tomli_w
 
 from spacefit.display import scene_html, scene_repr
-from spacefit.errors import InputError, InputTypeError, check_choice, quote
+from spacefit.errors import InputError, InputTypeError, check_choice, check_direction, quote
 from spacefit.materials import Material, make_material, material_table
 from spacefit.scene.overrides import with_values
 from spacefit.scene.sections import BUILTIN, DEFAULT_PRESETS, MESHLESS, SECTIONS, CameraSettings, PartSettings, RenderSettings, SunSettings, TargetSettings, WrinkleSettings, default_parts, plain
@@ -30,8 +30,8 @@ class Scene:
 
     The built-in lander's parts may be any of its own (:func:`~spacefit.scene.sections.default_parts`: body, panels, legs),
     and parts of their own (a ``file`` or a ``shape``); they are held in the order a scene file
-    reads them: the lander's, in its order, then the others, in theirs. Files (``target.mesh``, a
-    part's ``file``, a measured table's ``source``) are held as absolute paths, a relative one
+    reads them: the lander's, in its order, then the others, in theirs. Files (``target.mesh``,
+    ``target.quaternions``, a part's ``file``, a measured table's ``source``) are held as absolute paths, a relative one
     resolved against the working folder, as a scene file's against its folder: ``to_toml()``
     names the same files wherever it is read.
     """
@@ -53,8 +53,10 @@ class Scene:
             if not isinstance(part, PartSettings):
                 raise InputTypeError(f"`parts.{name}` must be a PartSettings, got {quote(part)}.")
         parts = {name: _absolute(part) for name, part in self.parts.items()}
-        if self.target.mesh not in MESHLESS and not Path(self.target.mesh).is_absolute():
-            object.__setattr__(self, "target", dataclasses.replace(self.target, mesh=str(Path(self.target.mesh).resolve())))
+        files = {key: str(Path(value).resolve()) for key in ("mesh", "quaternions")
+                 if (value := getattr(self.target, key)) not in MESHLESS and not Path(value).is_absolute()}
+        if files:
+            object.__setattr__(self, "target", dataclasses.replace(self.target, **files))
         if self.target.mesh in BUILTIN:
             parts = {**{name: parts[name] for name in DEFAULT_PRESETS if name in parts}, **parts}
         object.__setattr__(self, "parts", parts)
@@ -64,6 +66,8 @@ class Scene:
         if self.camera.fov_deg > 0.0:
             object.__setattr__(self, "camera", dataclasses.replace(self.camera, pixel_pitch_mm=fov_pitch_mm(self.camera, self.render)))
         check_optics(self.camera, self.render)
+        if self.target.attitude in ("nadir_sun", "sun"):  # the sun along nadir leaves the attitude undefined
+            self.target.rotation(-check_direction("sun.direction", self.sun.direction))
 
     def __repr__(self) -> str:
         """One short line (:func:`spacefit.display.scene_repr`); ``to_toml()`` gives every value."""
@@ -86,7 +90,7 @@ class Scene:
         # One of the two sets the field: the pitch follows from a field of view and the resolution.
         del out["camera"]["pixel_pitch_mm" if self.camera.fov_deg > 0.0 else "fov_deg"]
         out["parts"] = {name: {**material_table(p.material), **({"file": p.file} if p.file else {}),
-                               **(p.shape.table() if p.shape is not None else {})}
+                               **(p.shape.table() if p.shape is not None else {}), **p.articulation.table()}
                         for name, p in self.parts.items()}
         if self.target.mesh in BUILTIN:  # a scene file's lander has all its parts but those removed
             out["parts"] = {**{name: False for name in DEFAULT_PRESETS if name not in self.parts}, **out["parts"]}

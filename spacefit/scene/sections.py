@@ -24,16 +24,22 @@ import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, ClassVar, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
 
 import numpy as np
 
 from spacefit.errors import (A_SCENE, InputError, InputTypeError, check_choice, check_direction, check_flag, check_path, check_range, check_vector,
-                             closest, quote)
+                             closest, inside, quote)
+from spacefit.geometry.attitude import (ATTITUDES, PARALLEL_SINE, Articulation, AxisAngle, Fixed, FixedAttitude, NadirSun, QuaternionTable, SunPointing,
+                                        SunTracking, utc_seconds)
+from spacefit.geometry.frames import attitude_matrix
 from spacefit.geometry.primitives import Primitive
 from spacefit.geometry.wm import check_wm_params
 from spacefit.materials import MODELS, PRESETS, Material
 from spacefit.scene.sampling import SAMPLERS, check_sample_count
+
+if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s)
+    from jaxtyping import Float
 
 SOLAR_IRRADIANCE_W_M2 = 1361.0
 # The differentiable variants: the bridge needs AD (scalar variants cannot render a Jacobian).
@@ -205,18 +211,77 @@ class SunSettings(Section):
 @dataclass(frozen=True)
 class TargetSettings(Section):
     """Target pose and geometry source: ``"builtin"`` (the lander), a mesh file whose groups are the
-    parts, or ``"none"`` (:data:`NO_MESH`): only the parts given, each a primitive or a file of its own."""
+    parts, or ``"none"`` (:data:`NO_MESH`): only the parts given, each a primitive or a file of its own.
+
+    ``attitude`` is the body's attitude law (:mod:`spacefit.geometry.attitude`): ``"fixed"`` (the
+    default) at ``attitude_deg``; ``"nadir_sun"`` (body -z to ``nadir``, +y towards the sun as far as
+    allowed) and ``"sun"`` (body +z to the sun, +x towards ``nadir`` as far as allowed), ``nadir`` the
+    world direction towards the Earth's centre and the sun the scene's; ``"table"``, the file
+    ``quaternions`` (``time_utc,qw,qx,qy,qz``) at ``time_utc``. ``attitude_deg`` counts for ``"fixed"`` only."""
 
     position_m: Vec3 = (0.0, 0.0, 0.0)
     attitude_deg: Vec3 = (90.0, 0.0, 0.0)
     mesh: str = "builtin"
+    attitude: str = "fixed"
+    nadir: tuple[float, ...] = ()
+    quaternions: str = ""
+    time_utc: str = ""
 
     SECTION: ClassVar[str] = "target"
+    # What each attitude law takes besides the scene's sun.
+    TAKES: ClassVar[dict[str, tuple[str, ...]]] = {"fixed": (), "nadir_sun": ("nadir",), "sun": ("nadir",),
+                                                   "table": ("quaternions", "time_utc")}
 
     def check(self) -> None:
         """Check this section's values (:class:`Section`)."""
         check_position("target.position_m", self.position_m)
         check_vector("target.attitude_deg", self.attitude_deg)
+        check_choice("target.attitude", self.attitude, ATTITUDES)
+        takes = self.TAKES[self.attitude]
+        for key in ("nadir", "quaternions", "time_utc"):
+            value = getattr(self, key)
+            if key in takes and not value:
+                raise InputError(f"`target.{key}` is missing: `target.attitude` = {self.attitude!r} takes "
+                                 f"{' and '.join(takes)}.")
+            if key not in takes and value:
+                raise InputError(f"`target.{key}` = {quote(plain(value))} is not used by `target.attitude` = {self.attitude!r} "
+                                 f"(it takes {' and '.join(takes) or 'attitude_deg'}).")
+        if self.nadir:
+            check_direction("target.nadir", self.nadir)
+            object.__setattr__(self, "nadir", tuple(float(v) for v in self.nadir))
+        if self.quaternions:
+            check_path("target.quaternions", self.quaternions)
+        if self.time_utc:
+            utc_seconds("target.time_utc", self.time_utc)
+
+    def attitude_law(self) -> FixedAttitude | NadirSun | SunPointing | QuaternionTable:
+        """The body's attitude law (a quaternion table is read here)."""
+        if self.attitude == "nadir_sun":
+            return NadirSun()
+        if self.attitude == "sun":
+            return SunPointing()
+        if self.attitude == "table":
+            with inside("target"):
+                return QuaternionTable.read(self.quaternions)
+        return FixedAttitude(self.attitude_deg)
+
+    def rotation(self, sun: Float[np.ndarray, "3"]) -> Float[np.ndarray, "3 3"]:
+        """The body-to-world rotation of the attitude law, ``sun`` the world direction towards the sun.
+
+        Raises:
+            InputError: the sun along ``target.nadir`` (nadir_sun, sun), a time outside the quaternion table."""
+        law = self.attitude_law()
+        if isinstance(law, (NadirSun, SunPointing)):
+            nadir = check_direction("target.nadir", self.nadir)
+            if np.linalg.norm(np.cross(nadir, sun)) < PARALLEL_SINE:
+                raise InputError(f"`target.nadir` {list(self.nadir)} is along the sun's direction (`sun.direction` "
+                                 f"{np.round(-np.asarray(sun), 6).tolist()}): with the sun at the target's zenith or nadir "
+                                 f"`target.attitude` = {self.attitude!r} is undefined.")
+            return law.rotation(nadir, sun)
+        if isinstance(law, QuaternionTable):
+            with inside("target"):
+                return law.rotation(self.time_utc)
+        return law.rotation()
 
 
 @dataclass(frozen=True)
@@ -269,12 +334,14 @@ class WrinkleSettings(Section):
 
 @dataclass(frozen=True)
 class PartSettings:
-    """A part: its material (a :mod:`spacefit.materials` object) and, for a part of its own, a mesh file
-    or a primitive (:class:`~spacefit.geometry.primitives.Primitive`)."""
+    """A part: its material (a :mod:`spacefit.materials` object), for a part of its own a mesh file or a
+    primitive (:class:`~spacefit.geometry.primitives.Primitive`), and its articulation law in the body
+    (:mod:`spacefit.geometry.attitude`; fixed by default)."""
 
     material: Material
     file: str = ""
     shape: Primitive | None = None
+    articulation: Articulation = Fixed()
 
     def __post_init__(self) -> None:
         if not isinstance(self.material, tuple(MODELS.values())):
@@ -289,6 +356,18 @@ class PartSettings:
         if self.shape is not None and self.file:
             raise InputError(f"a part takes a `file` or a `shape`, not both; got file {self.file!r} and shape "
                              f"{self.shape.shape!r}.")
+        if not isinstance(self.articulation, (Fixed, SunTracking, AxisAngle)):
+            raise InputTypeError(f"`articulation` must be a spacefit.geometry.attitude law (Fixed, SunTracking, AxisAngle), "
+                                 f"got {quote(self.articulation)}.")
+        if isinstance(self.articulation, SunTracking):
+            self.articulation.check_normal(self.reference_normal(), "the part's normal (its +z in the body)")
+
+    def reference_normal(self) -> Float[np.ndarray, "3"]:
+        """The normal a sun-tracking part turns towards the sun: the part's own +z in the body frame (a
+        plate's normal; a box's +z face; body +z for a mesh group or file)."""
+        if self.shape is None:
+            return np.array([0.0, 0.0, 1.0])
+        return attitude_matrix(np.radians(self.shape.attitude_deg))[:, 2]
 
 
 # The built-in lander's parts and their presets (thesis Table 4-2).
@@ -323,6 +402,13 @@ class SceneLike(Protocol):
     def with_values(self, values: Mapping[str, Any]) -> SceneLike:
         """A checked copy with values replaced by name."""
         ...
+
+
+def sun_followers(scene: SceneLike) -> list[str]:
+    """What the scene turns by its sun when it is assembled: its sun-tracking parts (``parts.<name>``) and
+    its target where the attitude law follows the sun (``target``); a sun moved in place would leave them."""
+    parts = [f"parts.{name}" for name, p in scene.parts.items() if isinstance(p.articulation, SunTracking)]
+    return [*parts, *(["target"] if scene.target.attitude in ("nadir_sun", "sun") else [])]
 
 
 def check_scene(scene: object, name: str = "scene") -> SceneLike:

@@ -1,7 +1,9 @@
 """Reading scene files: TOML text to a checked :class:`~spacefit.scene.schema.Scene` (whose module
 docstring gives the defaults, the units and the sun's conventions).
 
-A part's ``material`` names a preset (:data:`spacefit.materials.PRESETS`, the other keys of its
+A part's articulation keys (``articulation``, ``axis``, ``angle_deg``, ``pivot_m``,
+:func:`spacefit.geometry.attitude.pop_articulation`) pivot by default about a primitive's
+``position_m``. A part's ``material`` names a preset (:data:`spacefit.materials.PRESETS`, the other keys of its
 table replacing the preset's values) or a model (``"conductor"``, ``"mirror"``, ``"lambert"``, with
 every value given, as :meth:`Scene.to_toml` writes it); it becomes a material object here, when
 the file is read. A section may also give parameter names (``[sun] elevation_deg = 30``,
@@ -15,7 +17,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from spacefit.errors import InputError, InputTypeError, check_path, quote
+from spacefit.errors import InputError, InputTypeError, check_path, inside, quote
+from spacefit.geometry.attitude import pop_articulation
 from spacefit.geometry.mesh import load_grouped
 from spacefit.geometry.primitives import pop_primitive
 from spacefit.materials import MODELS, make_material
@@ -95,7 +98,10 @@ def _parts(data: Mapping[str, Any], builtin: bool, base: Path) -> dict[str, Part
             if isinstance(table.get(key), str) and table[key] and not Path(table[key]).is_absolute():
                 table[key] = str((base / table[key]).resolve())
         shape = pop_primitive(table, f"parts.{name}")
-        parts[name] = PartSettings(make_material(table.pop("material"), table, where=f"parts.{name}"), file, shape)
+        law = pop_articulation(table, f"parts.{name}", default_pivot_m=shape.position_m if shape is not None else (0.0, 0.0, 0.0))
+        material = make_material(table.pop("material"), table, where=f"parts.{name}")
+        with inside(f"parts.{name}"):
+            parts[name] = PartSettings(material, file, shape, law)
     return parts
 
 
@@ -124,7 +130,9 @@ def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scen
     target = sections.get("target", TargetSettings())
     builtin = target.mesh in BUILTIN
     if target.mesh not in MESHLESS and not Path(target.mesh).is_absolute():
-        sections["target"] = dataclasses.replace(target, mesh=str((base / target.mesh).resolve()))
+        sections["target"] = target = dataclasses.replace(target, mesh=str((base / target.mesh).resolve()))
+    if target.quaternions and not Path(target.quaternions).is_absolute():
+        sections["target"] = dataclasses.replace(target, quaternions=str((base / target.quaternions).resolve()))
     user_parts = data.get("parts", {})
     if target.mesh not in MESHLESS and not user_parts:
         try:

@@ -18,8 +18,9 @@ from typing import Any
 import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_count, check_range, closest, quote
-from spacefit.scene.parameters import GEOMETRY, available, parameter
+from spacefit.scene.parameters import GEOMETRY, SUN_ANGLES, available, parameter
 from spacefit.scene.schema import Scene
+from spacefit.scene.sections import sun_followers
 
 # Scene keys a sweep cannot vary: they fix the shape of the store's images and part lists.
 FIXED_KEYS = ("render.resolution", "target.mesh")
@@ -120,8 +121,9 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
 def in_place_names(scene: Scene) -> set[str]:
     """The registered parameters a sweep sets on the loaded scene: all but the wrinkles' D, G and rms
     height, whose points assemble the scene again (the refinement is kept, the displacement redone, and
-    the level of detail's effective roughness follows them)."""
-    return set(available(scene)) - set(GEOMETRY)
+    the level of detail's effective roughness follows them), and the sun's angles where parts or the
+    body follow the sun (:func:`~spacefit.scene.sections.sun_followers`: they turn when assembled)."""
+    return set(available(scene)) - set(GEOMETRY) - (set(SUN_ANGLES) if sun_followers(scene) else set())
 
 
 def axis_lengths(axes: AxesSpec) -> list[int]:

@@ -47,12 +47,11 @@ import numpy as np
 from spacefit.display import light_curve_html
 from spacefit.errors import InputError, check_choice, check_count, check_direction, check_range, check_vector
 from spacefit.executors import Cluster, cluster_of
-from spacefit.geometry.frames import attitude_matrix
-from spacefit.scene.assembly import assemble
+from spacefit.scene.assembly import assemble, body_to_world
 from spacefit.scene.parameters import scene_value
 from spacefit.scene.conversions import sun_angles_deg, sun_direction
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import check_scene, deg2rad
+from spacefit.scene.sections import check_scene
 from spacefit.studies.sensitivity import mean_and_error
 from spacefit.studies.sweep import sweep
 
@@ -72,7 +71,7 @@ def direction(scene: Scene, value: Sequence[float], name: str) -> np.ndarray:
         check_range(f"{name} elevation", el, -90.0, 90.0, unit="deg")
         el, az = math.radians(el), math.radians(az)
         local = np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
-        return attitude_matrix(np.array(deg2rad(scene.target.attitude_deg))) @ local
+        return body_to_world(scene)[:3, :3] @ local
     if len(value) != 3:
         raise InputError(f"`{name}` must be a world vector (3 numbers) or (elevation_deg, azimuth_deg) in the target's "
                          f"frame (2 numbers), got {value.tolist()}.")
@@ -262,6 +261,9 @@ def light_curve(
     observer_range = rendered_range if observer_range_m is None else check_range("observer_range_m", observer_range_m, 0.0,
                                                                                  lo_open=True, unit="m")
     key = f"target.attitude_{axis}_deg"
+    if phase_deg is None and scene.target.attitude != "fixed":
+        raise InputError(f"a light curve over the target's attitude needs `target.attitude` = \"fixed\"; the scene's "
+                         f"{scene.target.attitude!r} law sets the attitude (give phase_deg, or make the law fixed).")
     if phase_deg is not None:
         x = check_vector("phase_deg", phase_deg, None)
         for a in x:

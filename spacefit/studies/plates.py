@@ -35,7 +35,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import InputError, check_choice, check_count, check_name_list, check_range, check_type, check_vector, quote
+from spacefit.errors import (InputError, check_choice, check_count, check_direction, check_name_list, check_range, check_type, check_vector,
+                             quote)
+from spacefit.geometry.attitude import SunTracking, tracking_rotation
 from spacefit.fitting.loop import fit
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.observations.base import Block, MeasuredValues
@@ -58,7 +60,11 @@ class Plate:
     ``alpha_x``; made normal to ``normal``) in the target's frame, and its material. ``two_sided``:
     lit and seen from both sides (a thin sheet), or, False, from the side its normal points to only
     (a face of a closed part, whose back is inside it). Plates of one name are one part's: they share
-    its material and its parameters (``parts.<name>.<field>``)."""
+    its material and its parameters (``parts.<name>.<field>``). A plate with a ``tracking_axis``
+    (target frame) is (a face of) a sun-tracking part: for each observation its normal and tangent are
+    turned about that axis by the turn that makes the part's ``tracking_normal`` (default: the plate's
+    own normal) face the sun as closely as the turn allows
+    (:func:`spacefit.geometry.attitude.tracking_rotation`; unturned with the sun along the axis)."""
 
     name: str
     area_m2: float
@@ -66,6 +72,8 @@ class Plate:
     material: Material
     tangent: tuple[float, float, float] = (1.0, 0.0, 0.0)
     two_sided: bool = True
+    tracking_axis: tuple[float, float, float] | None = None
+    tracking_normal: tuple[float, float, float] | None = None
 
     def __post_init__(self) -> None:
         check_type("name", self.name, str, "a string")
@@ -86,11 +94,30 @@ class Plate:
             raise InputError(f"`{self.name}.tangent` must not be parallel to its normal {tuple(n)}.")
         object.__setattr__(self, "normal", tuple(n.tolist()))
         object.__setattr__(self, "tangent", tuple((t / np.linalg.norm(t)).tolist()))
+        if self.tracking_normal is not None and self.tracking_axis is None:
+            raise InputError(f"`{self.name}.tracking_normal` is given without a `tracking_axis` to turn about.")
+        if self.tracking_axis is not None:
+            tracking = SunTracking(check_direction(f"{self.name}.tracking_axis", self.tracking_axis))
+            own = self.tracking_normal is None
+            tracked = n if own else check_direction(f"{self.name}.tracking_normal", self.tracking_normal)
+            tracking.check_normal(tracked, f"`{self.name}.{'normal' if own else 'tracking_normal'}`", f"{self.name}.tracking_axis")
+            object.__setattr__(self, "tracking_axis", tracking.axis)
+            object.__setattr__(self, "tracking_normal", tuple(tracked.tolist()))
 
     def frame(self) -> np.ndarray:
-        """(3, 3) rows: tangent, bitangent, normal (the plate's local frame in the target's)."""
+        """(3, 3) rows: tangent, bitangent, normal (the plate's local frame in the target's), unturned."""
         n, t = np.array(self.normal), np.array(self.tangent)
         return np.stack([t, np.cross(n, t), n])
+
+    def frames(self, sun: jax.Array) -> jax.Array:
+        """(n, 3, 3) the plate's frame (:meth:`frame`) for each of the (n, 3) unit directions ``sun``
+        towards the sun (target frame): turned to track it with a ``tracking_axis``, else repeated.
+        Differentiable in ``sun`` (JAX)."""
+        frame = jnp.asarray(self.frame())
+        if self.tracking_axis is None:
+            return jnp.broadcast_to(frame, (len(sun), 3, 3))
+        turn = tracking_rotation(jnp.asarray(self.tracking_axis), jnp.asarray(self.tracking_normal), jnp.asarray(sun), xp=jnp)
+        return jnp.einsum("kj,nij->nki", frame, turn)  # each row r of the frame turned: R r
 
 
 def _grey(plate: Plate, name: str) -> float:
@@ -117,14 +144,21 @@ def _plate_brdf(plate: Plate, wi: jax.Array, wo: jax.Array, values: Mapping[str,
 
 @float64
 def plates_irradiance(plates: Sequence[Plate], sun: np.ndarray, observer: np.ndarray, range_m: np.ndarray,
-                      sun_irradiance_w_m2: float, values: Mapping[str, Mapping[str, jax.Array]] | None = None) -> jax.Array:
+                      sun_irradiance_w_m2: float, values: Mapping[str, Mapping[str, jax.Array]] | None = None, *,
+                      tracking_sun: np.ndarray | None = None) -> jax.Array:
     """Irradiance at the observer (W m^-2) of the plates lit by the sun (module docstring); ``sun``,
     ``observer`` (n, 3) unit directions from the target in its frame, ``range_m`` (n,). ``values``:
-    per plate name, material values replacing the plate's own (a fit's)."""
+    per plate name, material values replacing the plate's own (a fit's). ``tracking_sun`` (n, 3): the
+    directions towards the sun that sun-tracking plates turn to (:meth:`Plate.frames`), where the light
+    ``sun`` comes from elsewhere (Earthshine); ``sun`` itself by default."""
     total = jnp.zeros(len(range_m))
     for plate in plates:
-        frame = jnp.asarray(plate.frame())
-        wi, wo = jnp.asarray(sun) @ frame.T, jnp.asarray(observer) @ frame.T
+        if plate.tracking_axis is None:
+            frame = jnp.asarray(plate.frame())
+            wi, wo = jnp.asarray(sun) @ frame.T, jnp.asarray(observer) @ frame.T
+        else:
+            frames = plate.frames(jnp.asarray(sun if tracking_sun is None else tracking_sun))
+            wi, wo = jnp.einsum("nij,nj->ni", frames, jnp.asarray(sun)), jnp.einsum("nij,nj->ni", frames, jnp.asarray(observer))
         f = _plate_brdf(plate, wi, wo, (values or {}).get(plate.name, {}))
         lit = jnp.abs(wi[:, 2]) if plate.two_sided else jnp.maximum(wi[:, 2], 0.0)  # f is 0 where wo is on the other side
         total = total + plate.area_m2 * f * lit * jnp.abs(wo[:, 2])
@@ -193,10 +227,14 @@ def _light(plates: Sequence[Plate], observations: LightCurveObservations, sun_ir
     if sources is None:
         return direct, jnp.zeros_like(direct)
 
+    # The observation of each Earthshine direction reflect() is given: earthshine_irradiance passes the
+    # sources' nodes that carry light in np.nonzero's order.
+    rows = np.nonzero(sources.weights > 0)[0]
+
     def reflect(wi: jax.Array, wo: jax.Array) -> jax.Array:
         if turn is not None:
             wi, wo = wi @ turn, wo @ turn
-        return plates_irradiance(plates, wi, wo, jnp.ones(len(wi)), 1.0, values)
+        return plates_irradiance(plates, wi, wo, jnp.ones(len(wi)), 1.0, values, tracking_sun=sun[rows])
 
     return direct, earthshine_irradiance(reflect, sources, observations.observer, observations.range_m, sun_irradiance_w_m2)
 
@@ -383,7 +421,7 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
 
 def fitted_plates(plates: Sequence[Plate], fit: FitResult) -> list[Plate]:
     """The plates with a :func:`fit_plates` fit's values in their materials and, where it freed the
-    attitude, their normals and tangents turned by it."""
+    attitude, their normals, tangents and tracking axes and normals turned by it."""
     plates = _check_plates(plates)
     check_type("fit", fit, FitResult, "an sf.FitResult (of sf.fit_plates)")
     for name in fit.names:
@@ -391,7 +429,10 @@ def fitted_plates(plates: Sequence[Plate], fit: FitResult) -> list[Plate]:
     angles = {_split(name)[1]: float(v) for name, v in fit.values.items() if name.startswith(TARGET + ".")}
     if angles:
         turn = np.asarray(_rotation([angles.get(a, 0.0) for a in ATTITUDE]))
-        plates = [dataclasses.replace(p, normal=tuple(turn @ np.array(p.normal)), tangent=tuple(turn @ np.array(p.tangent))) for p in plates]
+        plates = [dataclasses.replace(p, normal=tuple(turn @ np.array(p.normal)), tangent=tuple(turn @ np.array(p.tangent)),
+                                      **({} if p.tracking_axis is None else {"tracking_axis": tuple(turn @ np.array(p.tracking_axis)),
+                                                                             "tracking_normal": tuple(turn @ np.array(p.tracking_normal))}))
+                  for p in plates]
     out = []
     for plate in plates:
         values = {_split(name)[1]: float(v) for name, v in fit.values.items() if _split(name)[0] == plate.name}

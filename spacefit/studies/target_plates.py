@@ -28,6 +28,7 @@ below the observations' noise.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
@@ -39,10 +40,11 @@ from spacefit.errors import InputError, check_count, check_range, check_type, ch
 from spacefit.fitting.observations.base import Block
 from spacefit.fitting.params import Bijection
 from spacefit.fitting.result import FitResult
+from spacefit.geometry.attitude import SunTracking
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.geometry.mesh import PartMesh, _trimesh
 from spacefit.materials import Material
-from spacefit.scene.assembly import assemble
+from spacefit.scene.assembly import assemble, body_to_world
 from spacefit.scene.conversions import sun_angles_deg
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import MAX_COORDINATE_M, check_scene, deg2rad
@@ -120,16 +122,24 @@ def target_plates(scene: Scene) -> tuple[Plate, ...]:
     assembles them (module docstring): per part, its triangles grouped by normal (and tangent,
     :func:`part_plates`), with the part's name, the material the renderer gives it and Mitsuba's
     tangent; a closed part's plates one-sided, an open part's two-sided. A wrinkled part gives its
-    flat base.
+    flat base. A sun-tracking part's plates carry its axis and normal (``tracking_axis``,
+    ``tracking_normal``): they turn with it to each observation's sun.
 
     Raises:
         InputError: a part whose material has no BRDF towards an observer (a mirror), naming it.
     """
     check_scene(scene)
     assembly = assemble(scene)
+    sun = assembly.to_world[:3, :3].T @ -assembly.sun_direction  # towards the sun, body frame
     plates: list[Plate] = []
     for name, part in assembly.parts.items():
-        plates += part_plates(name, part, assembly.materials[name])
+        law = scene.parts[name].articulation
+        if isinstance(law, SunTracking):  # its faces turn together, the part's normal (as assembled) to each sun
+            normal = law.rotation(scene.parts[name].reference_normal(), sun) @ scene.parts[name].reference_normal()
+            plates += [dataclasses.replace(p, tracking_axis=law.axis, tracking_normal=tuple(normal))
+                       for p in part_plates(name, part, assembly.materials[name])]
+        else:
+            plates += part_plates(name, part, assembly.materials[name])
     return tuple(plates)
 
 
@@ -238,6 +248,17 @@ def _rms(values: np.ndarray) -> float:
     return float(np.sqrt(np.mean(kept**2))) if kept.size else math.nan
 
 
+def body_fixed(scene: Scene) -> Scene:
+    """``scene`` with its target's attitude law (``target.attitude``) replaced by the fixed attitude it
+    gives at the scene's sun (its attitude angles): the points of a comparison or a rendered light curve
+    set the body's attitude angles themselves, the observations' geometry being in the body frame."""
+    if scene.target.attitude == "fixed":
+        return scene
+    angles = attitude_angles_deg(body_to_world(scene)[:3, :3])
+    return scene.with_values({"target.attitude": "fixed", "target.nadir": [], "target.quaternions": "", "target.time_utc": "",
+                              "target.attitude_deg": list(angles)})
+
+
 def _body_geometry(scene: Scene) -> tuple[np.ndarray, np.ndarray, float]:
     """The directions towards the sun and the camera in the target's body frame, and the camera's range (m)."""
     to_body = attitude_matrix(np.array(deg2rad(scene.target.attitude_deg))).T
@@ -270,7 +291,7 @@ def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None 
     each a dict of scene values (``{"target.attitude_z_deg": 30.0}``), every one setting the same keys.
     ``range_m`` moves the camera there first (:func:`at_range`): a camera near a specular target sees
     its glint from a spread of directions, the plates from one."""
-    check_scene(scene)
+    scene = body_fixed(check_scene(scene))  # type: ignore[arg-type]
     if range_m is not None:
         scene = at_range(scene, range_m)
     if (phase_deg is None) == (points is None):
@@ -408,7 +429,7 @@ def choose_light_curve_model(scene: Scene, observations: LightCurveObservations,
     Raises:
         InputError: observations without errors and no ``sigma_mag``, or none lit.
     """
-    check_scene(scene)
+    scene = body_fixed(check_scene(scene))  # type: ignore[arg-type]
     check_type("observations", observations, LightCurveObservations, "an sf.LightCurveObservations (sf.read_light_curve)")
     check_count("samples", samples, 1, optional=False)
     lit = np.flatnonzero(~observations.in_shadow)
