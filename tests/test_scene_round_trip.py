@@ -18,6 +18,7 @@ from hypothesis import strategies as st
 from helpers import write_sphere_obj
 
 import spacefit as sf
+from spacefit.geometry.attitude import AxisAngle, Fixed
 from spacefit.geometry.primitives import Primitive
 from spacefit.materials import PRESETS, Conductor, Lambert, TabulatedBRDF
 from spacefit.materials.measured import read_brdf_table
@@ -95,11 +96,14 @@ def test_relative_files_are_the_same_files_wherever_the_text_is_read(tmp_path, m
     (tmp_path / "tables").mkdir()
     (tmp_path / "tables" / "chassis.csv").write_text(CHASSIS.read_text())
     write_sphere_obj(tmp_path / "ball.obj", subdivisions=1)
+    (tmp_path / "q.csv").write_text("time_utc,qw,qx,qy,qz\n2024-03-01T04:00:00,1,0,0,0\n2024-03-01T04:01:00,0.6,0,0.8,0\n")
     monkeypatch.chdir(tmp_path)
     s = sf.default_scene()
-    scene = lander({"body": s.parts["body"], "ball": PartSettings(TabulatedBRDF(source="tables/chassis.csv", scale=2.0), file="ball.obj")})
+    scene = lander({"body": s.parts["body"], "ball": PartSettings(TabulatedBRDF(source="tables/chassis.csv", scale=2.0), file="ball.obj")},
+                   target=TargetSettings(attitude="table", quaternions="q.csv", time_utc="2024-03-01T04:00:30"))
     ball = scene.parts["ball"]
     assert ball.file == str(tmp_path / "ball.obj") and ball.material.source == str(tmp_path / "tables" / "chassis.csv")
+    assert scene.target.quaternions == str(tmp_path / "q.csv")
     (tmp_path / "elsewhere").mkdir()
     (tmp_path / "elsewhere" / "scene.toml").write_text(scene.to_toml())
     back = load_scene(tmp_path / "elsewhere" / "scene.toml")
@@ -128,6 +132,8 @@ materials = st.one_of(
     st.tuples(st.floats(0.1, 5.0), st.floats(0.0, 5.0), st.floats(1e-3, 1.0), st.floats(1e-3, 1.0)).map(lambda a: Conductor(*a)),
     st.floats(0.1, 10.0).map(lambda scale: TabulatedBRDF(source=str(CHASSIS), scale=scale)),
 )
+turns = st.one_of(st.just(Fixed()), st.tuples(st.floats(-360.0, 360.0), st.floats(-2.0, 2.0)).map(
+    lambda a: AxisAngle((0.0, 1.0, 0.0), a[0], (0.0, a[1], 0.0))))
 shapes = st.one_of(
     st.tuples(st.floats(0.1, 3.0), st.floats(0.1, 3.0), st.floats(0.1, 3.0)).map(lambda size: Primitive("box", size)),
     st.tuples(st.floats(0.1, 3.0), st.floats(0.1, 3.0)).map(lambda size: Primitive("cylinder", radius_m=size[0], length_m=size[1])),
@@ -135,14 +141,14 @@ shapes = st.one_of(
 
 
 @settings(max_examples=40, deadline=None, database=None)
-@given(st.permutations(LANDER), st.integers(0, 3), st.lists(materials, min_size=5, max_size=5), st.lists(shapes, max_size=2),
+@given(st.permutations(LANDER), st.integers(0, 3), st.lists(materials, min_size=5, max_size=5), st.lists(st.tuples(shapes, turns), max_size=2),
        st.sampled_from(["builtin", "", "none"]), st.floats(1.0, 20.0), st.integers(0, 2**31 - 1))
 def test_scenes_changed_in_python_round_trip(order, removed, mats, own, mesh, elevation_deg, seed):
-    """Lander parts removed and reordered, materials replaced, primitives added, on the lander or
-    without a mesh; values set by name on top."""
+    """Lander parts removed and reordered, materials replaced, primitives added (turned or not), on
+    the lander or without a mesh; values set by name on top."""
     kept = order[removed:] if mesh != "none" else ()
     parts = {name: PartSettings(m) for name, m in zip(kept, mats)}
-    parts |= {f"own{i}": PartSettings(mats[-1 - i], shape=shape) for i, shape in enumerate(own)}
+    parts |= {f"own{i}": PartSettings(mats[-1 - i], shape=shape, articulation=turn) for i, (shape, turn) in enumerate(own)}
     if not parts:
         parts = {"plate": PartSettings(mats[0], shape=Primitive("plate", (1.0, 2.0)))}
     scene = lander(parts, target=TargetSettings(mesh=mesh))
