@@ -59,7 +59,8 @@ def scene_html(scene: Any) -> str:
     """The scene's repr line, then each section's values (``Scene.to_dict``) in a table."""
     rows = []
     for section, values in scene.to_dict().items():
-        items = values.items() if section != "parts" else ((f"{part}.{k}", v) for part, t in values.items() for k, v in t.items())
+        items = values.items() if section != "parts" else (  # a lander's part it lacks is `parts.NAME = false`
+            row for part, t in values.items() for row in (((f"{part}.{k}", v) for k, v in t.items()) if isinstance(t, dict) else [(part, t)]))
         rows += [(section, key, _vector(v) if isinstance(v, list) and all(isinstance(x, float) for x in v) else v)
                  for key, v in items]
     return f"<p>{html.escape(scene_repr(scene))}</p>" + html_table(("section", "key", "value"), rows)

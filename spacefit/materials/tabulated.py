@@ -137,6 +137,21 @@ class TabulatedBRDF(MaterialModel):
             logs.append(np.bincount(where, np.log(value[rows])) / np.bincount(where))
         return cls(incidences, tuple(offsets), tuple(logs), table.source, scale)
 
+    def __eq__(self, other: object) -> bool:
+        """Equal tables: the same source and scale and the same arrays (compared by value)."""
+        if type(other) is not type(self):
+            return NotImplemented
+        mine, theirs = self._arrays(), other._arrays()
+        return ((self.source, self.scale) == (other.source, other.scale) and len(mine) == len(theirs)
+                and all(np.array_equal(x, y) for x, y in zip(mine, theirs)))
+
+    def __hash__(self) -> int:
+        return hash((self.source, self.scale))
+
+    def _arrays(self) -> tuple[np.ndarray, ...]:
+        """The table's arrays in one tuple: the incidences, then each incidence's offsets, then its ln f."""
+        return (np.asarray(self.incidence_rad), *(self.offset or ()), *(self.log_value or ()))
+
     def f_r(self, wi: Array, wo: Array, **values: Array) -> Array:
         """scale exp(ln f(theta_i, u)), the table's interpolation (module docstring), for front-side
         directions towards the light (``wi``) and the detector (``wo``): not reciprocal."""

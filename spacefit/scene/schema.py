@@ -10,22 +10,31 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import tomli_w
 
 from spacefit.display import scene_html, scene_repr
 from spacefit.errors import InputError, InputTypeError, check_choice, check_direction, quote
-from spacefit.materials import material_table
+from spacefit.materials import Material, make_material, material_table
 from spacefit.scene.overrides import with_values
-from spacefit.scene.sections import MESHLESS, SECTIONS, CameraSettings, PartSettings, RenderSettings, SunSettings, TargetSettings, WrinkleSettings, default_parts, plain
+from spacefit.scene.sections import BUILTIN, DEFAULT_PRESETS, MESHLESS, SECTIONS, CameraSettings, PartSettings, RenderSettings, SunSettings, TargetSettings, WrinkleSettings, default_parts, plain
 from spacefit.scene.optics import check_optics, fov_pitch_mm
 
 
 @dataclass(frozen=True)
 class Scene:
     """A whole scene: what :func:`~spacefit.scene.toml.load_scene` reads and the sidecar of every render
-    records. Checked on construction, each section by itself and here what joins them."""
+    records. Checked on construction, each section by itself and here what joins them.
+
+    The built-in lander's parts may be any of its own (:func:`~spacefit.scene.sections.default_parts`: body, panels, legs),
+    and parts of their own (a ``file`` or a ``shape``); they are held in the order a scene file
+    reads them: the lander's, in its order, then the others, in theirs. Files (``target.mesh``,
+    ``target.quaternions``, a part's ``file``, a measured table's ``source``) are held as absolute paths, a relative one
+    resolved against the working folder, as a scene file's against its folder: ``to_toml()``
+    names the same files wherever it is read.
+    """
 
     render: RenderSettings = field(default_factory=RenderSettings)
     camera: CameraSettings = field(default_factory=CameraSettings)
@@ -43,7 +52,14 @@ class Scene:
         for name, part in self.parts.items():
             if not isinstance(part, PartSettings):
                 raise InputTypeError(f"`parts.{name}` must be a PartSettings, got {quote(part)}.")
-        object.__setattr__(self, "parts", dict(self.parts))
+        parts = {name: _absolute(part) for name, part in self.parts.items()}
+        files = {key: str(Path(value).resolve()) for key in ("mesh", "quaternions")
+                 if (value := getattr(self.target, key)) not in MESHLESS and not Path(value).is_absolute()}
+        if files:
+            object.__setattr__(self, "target", dataclasses.replace(self.target, **files))
+        if self.target.mesh in BUILTIN:
+            parts = {**{name: parts[name] for name in DEFAULT_PRESETS if name in parts}, **parts}
+        object.__setattr__(self, "parts", parts)
         if self.wrinkles.enabled:
             for name in self.wrinkles.parts:
                 check_choice("wrinkles.parts", name, self.parts)
@@ -67,7 +83,8 @@ class Scene:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain nested dict (TOML-ready): every value, defaults included, of the camera's field the
-        one that sets it (``camera.fov_deg`` when > 0, else ``camera.pixel_pitch_mm``); each material in full."""
+        one that sets it (``camera.fov_deg`` when > 0, else ``camera.pixel_pitch_mm``); each material in
+        full; each part of the built-in lander that the scene lacks as ``parts.NAME = false``."""
         out: dict[str, Any] = {name: {k: plain(v) for k, v in dataclasses.asdict(getattr(self, name)).items()}
                                for name in SECTIONS}
         # One of the two sets the field: the pitch follows from a field of view and the resolution.
@@ -75,10 +92,16 @@ class Scene:
         out["parts"] = {name: {**material_table(p.material), **({"file": p.file} if p.file else {}),
                                **(p.shape.table() if p.shape is not None else {}), **p.articulation.table()}
                         for name, p in self.parts.items()}
+        if self.target.mesh in BUILTIN:  # a scene file's lander has all its parts but those removed
+            out["parts"] = {**{name: False for name in DEFAULT_PRESETS if name not in self.parts}, **out["parts"]}
         return out
 
     def to_toml(self) -> str:
-        """The scene as TOML text, loadable by :func:`~spacefit.scene.toml.load_scene` to an equal scene."""
+        """The scene as TOML text, loadable by :func:`~spacefit.scene.toml.load_scene` to an equal scene.
+        A material that its written values do not give again is refused, naming its part: a measured
+        table (whose file states its ``source`` and ``scale``) read with a ``floor`` or made from arrays."""
+        for name, part in self.parts.items():
+            _check_written(f"parts.{name}", part.material)
         return tomli_w.dumps(self.to_dict())
 
     def replace(self, **sections: Any) -> Scene:
@@ -90,3 +113,32 @@ class Scene:
         ``parts.panels.alpha_x``) or parameter names (``sun.elevation_deg``); see
         :func:`spacefit.scene.overrides.with_values`."""
         return with_values(self, values)
+
+
+def _absolute(part: PartSettings) -> PartSettings:
+    """``part`` with its ``file`` and its material's files (a measured table's ``source``, where it
+    names a file) as absolute paths, relative ones resolved against the working folder."""
+    material = part.material
+    files = {key: str(Path(value).resolve()) for key in type(material).paths
+             if isinstance(value := getattr(material, key), str) and value and not Path(value).is_absolute() and Path(value).is_file()}
+    if not files and (not part.file or Path(part.file).is_absolute()):
+        return part
+    return dataclasses.replace(part, material=dataclasses.replace(material, **files) if files else material,
+                               file=str(Path(part.file).resolve()) if part.file else "")
+
+
+def _check_written(where: str, material: Material) -> None:
+    """Refuse a material with values derived from others (a measured table's arrays) that its
+    written values (:func:`~spacefit.materials.material_table`) do not give again."""
+    if not any(f.metadata.get("derived") for f in dataclasses.fields(material)):
+        return
+    table = material_table(material)
+    try:
+        again: object = make_material(str(table.pop("material")), table, where=where)
+    except InputError as err:
+        again = err
+    if again != material:
+        states = ", ".join(f"{key} = {value!r}" for key, value in table.items())
+        found = f"cannot be read ({again})" if isinstance(again, InputError) else "give another table"
+        raise InputError(f"`{where}` cannot be written to a scene file, which states its {states}: these {found} (a table "
+                         f"read with a floor, or made from arrays); write the table it renders to a file and give that file as `source`.")

@@ -68,8 +68,9 @@ FAR_CLIP_M = 4.0 * MAX_COORDINATE_M
 MAX_SPP = 1 << 16
 # `target.mesh` of a target built only from its parts' primitives and files.
 NO_MESH = "none"
-# The values of `target.mesh` that name no file: the built-in lander ("builtin", or "") and no mesh.
-MESHLESS = ("builtin", "", NO_MESH)
+# The values of `target.mesh` of the built-in lander, and those that name no file: the lander and no mesh.
+BUILTIN = ("builtin", "")
+MESHLESS = (*BUILTIN, NO_MESH)
 # Seeds are Mitsuba's (uint32): a fit adds offsets to its seeds, so they stay below 2^31.
 MAX_SEED = 2**31 - 1
 # Mitsuba's perspective camera takes a horizontal field of view in [0, 180] deg (180, or a focal

@@ -24,7 +24,7 @@ from spacefit.geometry.primitives import pop_primitive
 from spacefit.materials import MODELS, make_material
 from spacefit.scene.overrides import Overrides, apply_overrides, check_sun_forms, section_keys, unknown_key, with_values
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import DEFAULT_PRESETS, MESHLESS, SECTIONS, PartSettings, TargetSettings
+from spacefit.scene.sections import BUILTIN, DEFAULT_PRESETS, MESHLESS, SECTIONS, PartSettings, TargetSettings
 from spacefit.scene.optics import check_pitch_with_fov
 
 
@@ -64,10 +64,17 @@ def _section(name: str, data: Mapping[str, Any], later: dict[str, Any]) -> Any:
 
 def _parts(data: Mapping[str, Any], builtin: bool, base: Path) -> dict[str, PartSettings]:
     """The parts: with the built-in lander, tables merge into its default parts (a table without a
-    ``material`` changes the preset's values); with a mesh file exactly those given."""
+    ``material`` changes the preset's values; ``NAME = false`` removes the part); with a mesh file
+    exactly those given."""
     names = list(DEFAULT_PRESETS) if builtin else []
     tables: dict[str, dict[str, Any]] = {name: {"material": preset} for name, preset in DEFAULT_PRESETS.items()} if builtin else {}
     for name, table in data.items():
+        if table is False:
+            if name not in names:
+                raise InputError(f"`parts.{name} = false` removes a part of the built-in lander ({', '.join(DEFAULT_PRESETS)}); "
+                                 f"{name!r} is not one" + ("." if builtin else " (`target.mesh` is not \"builtin\")."))
+            del tables[name]
+            continue
         if not isinstance(table, Mapping):
             raise InputError(f"`parts.{name}` must be a table with at least `material`, got {quote(table)}.")
         if "material" in table:
@@ -103,8 +110,9 @@ def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scen
     take defaults.
 
     With the built-in lander, ``parts`` tables merge into the default parts (so
-    ``parts.panels.alpha_x = 0.1`` keeps the panels' preset); with a mesh file the parts are
-    exactly those given. Relative mesh paths are resolved against ``base_dir`` (the TOML's folder).
+    ``parts.panels.alpha_x = 0.1`` keeps the panels' preset) and ``parts.legs = false`` removes one
+    (as :meth:`Scene.to_toml` writes a lander without it); with a mesh file the parts are exactly
+    those given. Relative mesh paths are resolved against ``base_dir`` (the TOML's folder).
     """
     base = Path(base_dir)
     sections: dict[str, Any] = {}
@@ -120,7 +128,7 @@ def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scen
         if key != "parts":
             sections[key] = _section(key, value, later)
     target = sections.get("target", TargetSettings())
-    builtin = target.mesh in ("builtin", "")
+    builtin = target.mesh in BUILTIN
     if target.mesh not in MESHLESS and not Path(target.mesh).is_absolute():
         sections["target"] = target = dataclasses.replace(target, mesh=str((base / target.mesh).resolve()))
     if target.quaternions and not Path(target.quaternions).is_absolute():

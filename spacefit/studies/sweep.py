@@ -79,7 +79,7 @@ def tasks(scene: Scene, axes: list[Axis], *, images: bool, derivatives: tuple[st
     names = in_place_names(scene)
     in_place = [k for a in axes for k in a.values if k in names]
     crop = not any(k in MOVES_VERTICES for k in in_place)
-    base = Task(scene.to_toml(), crop=crop, images=images, derivatives=derivatives, derivative_seeds=derivative_seeds)
+    base = Task(scene.to_toml(), tuple(worker.regions(scene)), crop=crop, images=images, derivatives=derivatives, derivative_seeds=derivative_seeds)
     tomls: dict[str, str] = {}
 
     def task(index: tuple[int, ...]) -> Task:

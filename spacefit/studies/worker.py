@@ -13,12 +13,14 @@ from __future__ import annotations
 
 import functools
 import tomllib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from spacefit.digests import status
+from spacefit.errors import InputError
 from spacefit.geometry.frames import pixel_solid_angles
 from spacefit.scene.parameters import scene_with_values
 from spacefit.scene.schema import Scene
@@ -32,6 +34,9 @@ class Task:
 
     Attributes:
         scene_toml: the scene with this point's scene-file values.
+        regions: the regions the sweep's store holds, in its order (:func:`regions` of the sweep's
+            scene): the results are looked up by these names, and a rendered scene of other parts
+            is an error.
         in_place: registered parameter name -> value (its unit), set on the loaded scene.
         crop: render only the target's window (False when the swept values move vertices).
         spp, seed: samples per pixel and seed of the render (None: the scene's).
@@ -41,6 +46,7 @@ class Task:
     """
 
     scene_toml: str
+    regions: tuple[str, ...]
     in_place: tuple[tuple[str, float], ...] = ()
     crop: bool = True
     spp: int | None = None
@@ -71,13 +77,13 @@ def regions(scene: Scene) -> list[str]:
     return [*scene.parts, TARGET]
 
 
-def summaries(radiance: np.ndarray, part_image: object, solid_angles: np.ndarray, names: list[str]) -> dict[str, np.ndarray]:
+def summaries(radiance: np.ndarray, part_image: object, solid_angles: np.ndarray, names: Sequence[str]) -> dict[str, np.ndarray]:
     """Per region: ``mean_radiance`` (W m^-2 sr^-1, mean over the pixels whose centre sees it, NaN if
     none), ``pixels`` and ``irradiance`` (W m^-2: the sum of radiance times pixel solid angle over
     its pixels, at the camera's pinhole; for the target, over the whole image, edges included).
     Radiance is the mean of the RGB channels (the sun's irradiance is the same in each)."""
     pixels, means = part_image.means(radiance)
-    order = [part_image.regions.index(n) for n in names]
+    order = _columns(part_image.regions, names)
     grey = np.asarray(radiance, dtype=float).mean(axis=-1) * solid_angles
     ids = part_image.ids
     irradiance = [grey.sum() if n == TARGET else grey[ids == part_image.names.index(n)].sum() for n in names]
@@ -116,13 +122,23 @@ def run_task(task: Task) -> dict[str, np.ndarray]:
     radiance = renderer.render(spp=task.spp, seed=task.seed)
     state.renders += 1
     scene = renderer.assembly.scene
-    out = summaries(radiance, state.part_image, state.solid_angles, regions(scene))
+    out = summaries(radiance, state.part_image, state.solid_angles, task.regions)
     if task.images:
         out["radiance"] = radiance
     if task.derivatives:
         render = {k: v for k, v in (("render.seed", task.seed), ("render.spp", task.spp)) if v is not None}
         point = scene_with_values(scene.with_values(render), dict(task.in_place))
         sens = sensitivity(point, task.derivatives, seeds=task.derivative_seeds, quiet=True)
-        order = [sens.regions.index(r) for r in regions(scene)]
+        order = _columns(sens.regions, task.regions)
         out.update({k: v[:, order] for k, v in point_summaries(sens).items()})
     return out
+
+
+def _columns(rendered: Sequence[str], expected: Sequence[str]) -> list[int]:
+    """The column of each ``expected`` region (the sweep's store's) in a render's ``rendered`` ones,
+    found by name; regions that differ are refused, naming both (their numbers would land in other
+    regions' columns)."""
+    if sorted(rendered) != sorted(expected):
+        raise InputError(f"the rendered scene's regions ({', '.join(rendered)}) are not the sweep's ({', '.join(expected)}): "
+                         f"the scene changed on its way through its TOML text (Scene.to_toml).")
+    return [list(rendered).index(name) for name in expected]
