@@ -33,7 +33,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from spacefit.rendering.backend import dr, in_variant, mi
+from spacefit.rendering.backend import dr, in_variant, mi, on_drjit_thread
 from spacefit.rendering.renderer import Renderer, errors_only, pass_seed, render_threads, to_value
 from spacefit.scene.sampling import split_sample_count
 
@@ -124,6 +124,7 @@ class DrJitScene:
                    for seed, count, weight in self._passes(self.spp_grad, seed_grad))
 
     # Each render logs errors only (errors_only): projective integrators warn about film borders per call.
+    @on_drjit_thread
     @in_variant
     def primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """Radiance image (h, w, 3) float32 at ``values``; bitwise reproducible if the scene is deterministic.
@@ -134,12 +135,14 @@ class DrJitScene:
             self._last = (key, self.render_primal(values, seed))
         return self._last[1].copy()
 
+    @on_drjit_thread
     @in_variant
     def render_primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """:meth:`primal` rendered, not kept (a finite difference's renders are used once)."""
         self._set(values)
         return self.renderer.radiance(self.spp, seed)  # the scene's path tracer: a seed gives the image Renderer.render gives
 
+    @on_drjit_thread
     @in_variant
     def forward(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
         """Directional derivative of the image along ``tangent`` (same keys as ``values``), one render.
@@ -177,6 +180,7 @@ class DrJitScene:
         finally:
             self._set(values)
 
+    @on_drjit_thread
     @in_variant
     def backward(self, values: Mapping[str, np.ndarray], cotangent: np.ndarray, seed_grad: int) -> dict[str, np.ndarray]:
         """Gradient of sum(cotangent * image) with respect to every key of ``values``, one backward pass
