@@ -13,8 +13,9 @@ from astropy.io import fits
 from helpers import small_scene, write_sphere_obj
 
 import spacefit as sf
+from spacefit.cli import exit_code
 from spacefit.formation import expected_dn
-from spacefit.fitting.goodness import MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
+from spacefit.fitting.goodness import MAX_JUDGED_RENDER_NOISE, MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
 from spacefit.fitting.judging import affordable
 from spacefit.fitting.loop import verdict
 from spacefit.fitting.problem import setup
@@ -64,6 +65,24 @@ def test_a_model_error_beyond_the_margin_is_a_misfit():
     # dof counts: a few values with 3 free parameters leave 2 degrees of freedom
     few = goodness(np.array([1.0, -1.0, 0.5, 0.5, 0.0]), np.array([1.0, -1.0, 0.5, 0.5, 0.0]), n_free=2, noise_known=True)
     assert few.values == 4 and few.dof == 2 and few.chi2_dof == pytest.approx(2.5 / 2)
+
+
+def test_a_model_whose_render_noise_exceeds_the_datas_is_not_judged():
+    """Planted: 8 values whose model misses the data by 60 of their sigmas, judged on a model whose own
+    render noise has a variance of 1771 data variances (the light curve of issue 34 called chi^2/dof
+    5691 "within the expected range" of 1 + 1771). It is not judged, and says so; the same misfit
+    judged on a model with a tenth of the data's noise is a misfit."""
+    rng = np.random.default_rng(3)
+    data = rng.normal(0.0, 1.0, 8) + 60.0
+    for render_sigma, judged in ((np.sqrt(1771.0), False), (np.sqrt(0.1), True)):
+        r_one, r_two = (data + rng.normal(0.0, render_sigma, 8) for _ in range(2))
+        g = goodness((r_one + r_two) / 2, (r_one - r_two) / 2, n_free=3, noise_known=True)
+        assert g.judged is judged and (g.render_noise > MAX_JUDGED_RENDER_NOISE) is not judged
+        assert g.misfit is judged  # a misfit only where it could be judged
+        assert ("CANNOT JUDGE" in g.line()) is not judged and ("within the expected range" not in g.line())
+    assert verdict(sf.Status.CONVERGED, True, False, False, True) is sf.Status.UNJUDGED
+    assert verdict(sf.Status.CONVERGED, True, True, False, True) is sf.Status.AT_BOUND
+    assert not sf.Status.UNJUDGED.success and exit_code(sf.Status.UNJUDGED) == 9
 
 
 def test_without_a_known_noise_the_spread_and_correlation_are_reported_against_the_render_noise():

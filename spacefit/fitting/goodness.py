@@ -35,6 +35,13 @@ spp 0.004 above it; a render's Monte Carlo error at few samples is long-tailed (
 scattered by several tenths between seeds at 16 spp, a few hundredths at 64). Figures of the pass: docs/guide/pass.md and
 ``experiments/pass_misfit.py``.
 
+Where the judged model's own render noise is still larger than the data's noise (v above
+:data:`MAX_JUDGED_RENDER_NOISE`: a model rendered with too few samples for its data, or one whose
+verdict render could not take more), chi^2 / dof's expectation is mostly that render noise, measured
+from two renders, and a misfit far larger than the data's noise hides inside it (an 8-point light
+curve judged 5691 "within the expected range" of 1 + 1771): the goodness says it cannot judge, and
+the fit's status says so (:attr:`~spacefit.fitting.solvers.Status.UNJUDGED`).
+
 A misfit means the model or its nuisances miss something (a pose, a blur, a shift, a material):
 the error bars, which assume a correct model, are then too small.
 
@@ -69,6 +76,9 @@ MISFIT_FLOOR = 0.1
 VERDICT_RENDER_NOISE = 0.1
 # ... but with at most this many times the fit's samples.
 MAX_VERDICT_FACTOR = 16
+# No verdict is taken on a judged model whose render noise per value is above this, in units of the
+# data's noise squared: chi^2's expectation would be mostly the model's own noise (module docstring).
+MAX_JUDGED_RENDER_NOISE = 1.0
 
 
 def verdict_factor(render_noise: float, spp: int = 1) -> int:
@@ -97,7 +107,9 @@ class Goodness:
         render_noise: the judged model's own Monte Carlo noise v, per value (in units of the noise
             squared when it is known, else the residuals' unit squared).
         limit: chi^2 / dof above which the fit is a misfit (NaN without a known noise).
-        misfit: chi^2 / dof > limit.
+        misfit: chi^2 / dof > limit, on a judged fit.
+        judged: the verdict could be taken: the noise is known and the judged model's render noise is
+            at most :data:`MAX_JUDGED_RENDER_NOISE` (False: it cannot tell a misfit).
         spread: mean r^2 / ``render_noise``, the residuals' spread against the render noise (NaN
             where the renders have no noise).
         correlation, render_correlation: the correlation of neighbouring pixels' residuals
@@ -126,11 +138,14 @@ class Goodness:
     verdict_spp: tuple[int, ...] = ()
     reference_noise: float = 0.0
     reference_spp: tuple[int | None, ...] = ()
+    judged: bool = True
 
     def line(self) -> str:
         """One line of words: chi^2 / dof against its expected range, or the residuals against the render noise."""
         if self.noise_known:
-            verdict = "a MISFIT" if self.misfit else "within the expected range"
+            verdict = ("a MISFIT" if self.misfit else "within the expected range" if self.judged else
+                       f"CANNOT JUDGE: the model's own render noise is above {MAX_JUDGED_RENDER_NOISE:g} x the data's noise "
+                       "and would hide a misfit; render with more samples")
             spp = "/".join(str(s) for s in dict.fromkeys(self.verdict_spp))
             judged = f"{spp} spp, " if spp else ""
             return (f"goodness of fit: chi^2/dof = {self.chi2_dof:.3f} over {self.dof} dof, expected 1 + {self.render_noise:.3f} "
@@ -152,7 +167,7 @@ class Goodness:
         """JSON-ready: the fields, with the misfit rule's constants."""
         return {**{k: getattr(self, k) for k in self.__dataclass_fields__}, "misfit_sigmas": MISFIT_SIGMAS,
                 "misfit_floor": MISFIT_FLOOR, "verdict_render_noise": VERDICT_RENDER_NOISE,
-                "max_verdict_factor": MAX_VERDICT_FACTOR}
+                "max_verdict_factor": MAX_VERDICT_FACTOR, "max_judged_render_noise": MAX_JUDGED_RENDER_NOISE}
 
 
 def goodness(r: np.ndarray, noise: np.ndarray, n_free: int, noise_known: bool, shapes: Sequence[tuple[int, ...]] = (), *,
@@ -196,9 +211,10 @@ def goodness(r: np.ndarray, noise: np.ndarray, n_free: int, noise_known: bool, s
     else:
         chi2_dof = limit = math.nan
     spread = float(np.mean(r[counted] ** 2)) / render_noise if render_noise > 0 else math.nan
-    return Goodness(noise_known, values, dof, chi2_dof, spread_sd, render_noise, limit, bool(chi2_dof > limit), spread,
+    judged = noise_known and render_noise <= MAX_JUDGED_RENDER_NOISE
+    return Goodness(noise_known, values, dof, chi2_dof, spread_sd, render_noise, limit, judged and bool(chi2_dof > limit), spread,
                     _neighbours(r, shapes), _neighbours(noise, shapes), samples_factor, tuple(int(s) for s in verdict_spp),
-                    reference_noise, tuple(None if s is None else int(s) for s in reference_spp))
+                    reference_noise, tuple(None if s is None else int(s) for s in reference_spp), judged)
 
 
 def _neighbours(d: np.ndarray, shapes: Sequence[tuple[int, ...]]) -> float:
