@@ -15,7 +15,7 @@ from helpers import small_scene, write_sphere_obj
 import spacefit as sf
 from spacefit.cli import exit_code
 from spacefit.formation import expected_dn
-from spacefit.fitting.goodness import MAX_JUDGED_RENDER_NOISE, MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
+from spacefit.fitting.goodness import MAX_JUDGED_RENDER_NOISE, REFERENCE_RENDER_NOISE, RESIDUALS, MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
 from spacefit.fitting.judging import affordable
 from spacefit.fitting.loop import verdict
 from spacefit.fitting.problem import setup
@@ -83,6 +83,27 @@ def test_a_model_whose_render_noise_exceeds_the_datas_is_not_judged():
     assert verdict(sf.Status.CONVERGED, True, False, False, True) is sf.Status.UNJUDGED
     assert verdict(sf.Status.CONVERGED, True, True, False, True) is sf.Status.AT_BOUND
     assert not sf.Status.UNJUDGED.success and exit_code(sf.Status.UNJUDGED) == 9
+
+
+@pytest.mark.parametrize("misfit", [0.0, 0.8])
+def test_without_a_stated_noise_a_rendered_references_own_render_noise_is_the_noise_judged(misfit):
+    """Radiance residuals (W m^-2 sr^-1, no sensor): a reference rendered at half the fit's samples has
+    twice its render noise, the data's noise of the verdict. A correct model's chi^2 / dof in its units
+    is 1 + v / v_ref = 1.5 and within range; a planted model error of 0.8 of the reference's noise
+    sigma (chi^2 + 0.64) is a misfit. A real observation (no render samples) has its noise from the
+    residuals, s over n - p, and no chi^2."""
+    rng, model_sigma = np.random.default_rng(5), 0.004
+    reference = rng.normal(0.0, model_sigma * np.sqrt(2.0), N) + misfit * model_sigma * np.sqrt(2.0)
+    r_one, r_two = (reference + rng.normal(0.0, model_sigma, N) for _ in range(2))
+    g = goodness(r_one, (r_one - r_two) / np.sqrt(2.0), n_free=3, noise_known=False, reference_ratio=2.0)
+    assert g.basis == REFERENCE_RENDER_NOISE and not g.noise_known and g.judged
+    assert g.noise_sigma == pytest.approx(model_sigma * np.sqrt(2.0), rel=0.02)
+    assert g.chi2_dof == pytest.approx(1.5 + misfit**2, abs=0.05) and g.misfit is (misfit > 0)
+    assert "estimated as the references' render noise" in g.line() and ("MISFIT" in g.line()) is (misfit > 0)
+    real = goodness(r_one, (r_one - r_two) / np.sqrt(2.0), n_free=3, noise_known=False)
+    assert real.basis == RESIDUALS and np.isnan(real.chi2_dof) and not real.misfit
+    assert real.noise_sigma == pytest.approx(np.sqrt(np.sum(r_one**2) / (N - 3)), rel=1e-12)
+    assert "estimated from the residuals (s^2 over n - p)" in real.line()
 
 
 def test_without_a_known_noise_the_spread_and_correlation_are_reported_against_the_render_noise():
