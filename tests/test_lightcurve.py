@@ -227,3 +227,9 @@ def test_a_light_curve_of_12_points_is_fitted_with_progress_and_checkpoints():
     assert abs(fit.values["parts.legs.kd"] - 0.2) < 3 * fit.stderr["parts.legs.kd"] < 0.1
     assert [s for s, _ in steps] == list(range(1, len(steps) + 1)) and {t for _, t in steps} == {10}
     assert [c["step"] for c in checkpoints] == [h["step"] for h in fit.history]
+
+
+def test_a_magnitudes_error_is_ln_es_over_1086():
+    """sigma_m = 2.5 / ln 10 x sigma_ln E: the residuals' relative errors are sigma_m / 1.0857."""
+    curve = RenderedLightCurve(lander(8, 1), turning(2), [10.0, 11.0], [0.05, 0.1])
+    np.testing.assert_allclose(curve.block(("parts.legs.kd",)).data.sigma, np.array([0.05, 0.1]) * math.log(10.0) / 2.5)
