@@ -23,7 +23,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import InputError, check_array, check_choice, check_count, check_range, check_type, check_vector, quote
+from spacefit.errors import InputError, check_array, check_choice, check_count, check_name_list, check_range, check_type, check_vector, quote
 from spacefit.fitting.frames import POSE, POSE_KEYS, VIEW, VIEW_KEYS, FrameSpec, InProcess, batched_renders, share_views
 from spacefit.fitting.loop import fit
 from spacefit.fitting.resume import Resume
@@ -190,5 +190,5 @@ def fit_light_curve(
     check_count("max_steps", max_steps, optional=False)
     curve = RenderedLightCurve(scene, points, magnitude, magnitude_sigma, band, sun_magnitude, observer_range_m, seed)
     if progress is None and not quiet:
-        progress = Progress(f"light-curve fit {', '.join(free)}")
+        progress = Progress(f"light-curve fit {', '.join(check_name_list('free', free))}")
     return fit(curve, free, max_steps=max_steps, progress=progress, resume=resume)
