@@ -19,7 +19,9 @@ place that wires Renderer -> :class:`DrJitScene` -> scene values -> these functi
 Renders are deterministic for a seed (JAX treats callbacks as pure). The primal image and finite
 differences use ``seed``; derivative renders use ``seed_grad``, a different seed, so that an L2
 loss's gradient is not biased by noise shared with its residual. Inputs are validated before any
-callback runs: callbacks never raise.
+callback runs: callbacks never raise. XLA calls a program's callbacks from any thread of its pool;
+every render of :class:`DrJitScene` runs on the process's one Dr.Jit thread
+(:func:`~spacefit.rendering.backend.on_drjit_thread`), whose AD state is per thread.
 """
 
 from __future__ import annotations
