@@ -34,6 +34,7 @@ NOT_CONVERGED = 3  # the solver stopped without converging (step limit, divergen
 NO_PROGRESS = 4  # no step lowered the loss: the values are the start
 MISFIT = 5  # the residuals exceed the noise: the model or its nuisances miss something
 AT_BOUND = 6  # a parameter ended at a bound of its range
+UNJUDGED = 9  # the model's own render noise is above the data's: the residuals could not be judged
 INTERRUPTED = 130  # 128 + SIGINT, as shells report Ctrl-C
 TERMINATED = 143  # 128 + SIGTERM
 # Exit codes of `spacefit sweep STORE --verify` that is not a success.
@@ -83,7 +84,8 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
                                    f"0 converged, 1 file system error, 2 bad input, {NOT_CONVERGED} not converged, "
                                    f"{NO_PROGRESS} no progress (no step lowered the loss), {MISFIT} misfit (chi^2/dof "
                                    f"beyond its expected range: the model misses something), {AT_BOUND} a parameter at a "
-                                   f"bound, {INTERRUPTED} Ctrl-C, {TERMINATED} SIGTERM; the report is written for 0 and 3 to 6.")
+                                   f"bound, {UNJUDGED} not judged (the model's render noise above the data's: render with more samples), "
+                                   f"{INTERRUPTED} Ctrl-C, {TERMINATED} SIGTERM; the report is written for 0, 3 to 6 and 9.")
     f.add_argument("references", nargs="*", metavar="REFERENCE",
                    help="reference images fitted jointly: .exr radiance (W m^-2 sr^-1); .fits radiance (BUNIT "
                         "'W m-2 sr-1') or DN; .png / .tif DN (give --response unless spacefit wrote them)")
@@ -267,12 +269,12 @@ def _fit(args: argparse.Namespace) -> int:
 
 def exit_code(status: Status) -> int:
     """The exit code of a fit that ended with ``status``: 0 for a success, else NO_PROGRESS, MISFIT,
-    AT_BOUND, INTERRUPTED, TERMINATED, or NOT_CONVERGED for the solver's other endings."""
+    AT_BOUND, UNJUDGED, INTERRUPTED, TERMINATED, or NOT_CONVERGED for the solver's other endings."""
     from spacefit.fitting.solvers import Status  # deferred: it imports JAX (0.6 s), which render never needs
 
     if status.success:
         return 0
-    return {Status.NO_PROGRESS: NO_PROGRESS, Status.MISFIT: MISFIT, Status.AT_BOUND: AT_BOUND,
+    return {Status.NO_PROGRESS: NO_PROGRESS, Status.MISFIT: MISFIT, Status.AT_BOUND: AT_BOUND, Status.UNJUDGED: UNJUDGED,
             Status.INTERRUPTED: INTERRUPTED, Status.TERMINATED: TERMINATED}.get(status, NOT_CONVERGED)
 
 
@@ -327,7 +329,7 @@ def file_system_error(err: OSError) -> str:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point; returns the process exit code: 0, 1 for a file system error, 2 for bad input, for a
-    fit 3 not converged, 4 no progress, 5 misfit, 6 a parameter at a bound (:func:`exit_code`), for
+    fit 3 not converged, 4 no progress, 5 misfit, 6 a parameter at a bound, 9 not judged (:func:`exit_code`), for
     ``sweep --verify`` 7 a damaged store and 8 an unfinished one, 130 for
     Ctrl-C and 143 for SIGTERM (one line, no traceback). Run as the program (no ``argv``), a render
     that succeeded ends the process at once (:func:`_ended`)."""

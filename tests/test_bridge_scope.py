@@ -6,7 +6,8 @@ dask's worker profiler samples the task thread's stack every 10 ms and holds the
 reads them; a frame of Mitsuba PRB's first trace of its symbolic branch (``if depth >= 1``) held
 past its return keeps that trace's AD variables, made from the vertex positions, alive, and Dr.Jit's
 forward mode then follows the positions' edges to them. :class:`KeepFrames` holds such frames on
-purpose (a profile hook instead of a sampling thread), so that the failure happens every time.
+purpose (a profile hook instead of a sampling thread, on the thread where the bridge renders), so
+that the failure happens every time.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import numpy as np
 import pytest
 
 from spacefit.precision import float64
-from spacefit.rendering.backend import dr, variant_scope
+from spacefit.rendering.backend import dr, on_drjit_thread, variant_scope
 from spacefit.rendering.derivatives import render_chain
 from spacefit.scene.parameters import scene_value
 from spacefit.scene.toml import load_scene
@@ -46,11 +47,11 @@ class KeepFrames:
             self.kept.append(frame)
 
     def __enter__(self) -> KeepFrames:
-        sys.setprofile(self)
+        on_drjit_thread(sys.setprofile)(self)  # on the thread where the bridge renders
         return self
 
     def __exit__(self, *exc: object) -> None:
-        sys.setprofile(None)
+        on_drjit_thread(sys.setprofile)(None)
 
 
 @pytest.fixture(scope="module")

@@ -258,3 +258,12 @@ def test_dn_below_the_sensors_bias_is_refused_in_dn_words_and_bias_subtracted_dn
     noise = np.random.default_rng(1).normal(0.0, 1.5, (32, 32, 1))  # a dark, bias-subtracted frame: half its values below 0
     ref, used = check_reference(sf.Observation(scene, noise, sensor=subtracted), 0)
     assert used.all() and np.array_equal(ref, noise.astype(np.float32))
+
+
+def test_a_frames_own_sensor_values_win_over_the_pass_wide_ones(tmp_path):
+    """``frame_sensor_values`` replace ``sensor_values``' fields for their frame only."""
+    files = sf.ObservationFiles([tmp_path / "a.fits", tmp_path / "b.fits"], [tmp_path / "scene.toml"],
+                                sensor_values={"bias_dn": 100.0, "gain_dn_per_electron": 0.5},
+                                frame_sensor_values=[{"bias_dn": 50.0}, {}])
+    assert files._sensor_values(0) == {"bias_dn": 50.0, "gain_dn_per_electron": 0.5}
+    assert files._sensor_values(1) == {"bias_dn": 100.0, "gain_dn_per_electron": 0.5}

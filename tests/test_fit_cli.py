@@ -12,7 +12,7 @@ from astropy.io import fits
 from helpers import small_scene, write_sphere_obj
 
 import spacefit as sf
-from spacefit.cli import AT_BOUND, MISFIT, NO_PROGRESS, NOT_CONVERGED, exit_code, main
+from spacefit.cli import AT_BOUND, MISFIT, NO_PROGRESS, NOT_CONVERGED, UNJUDGED, exit_code, main
 from spacefit import FitResult
 from spacefit.imageio import sidecar_path
 from spacefit.rendering.png import write_png
@@ -170,9 +170,10 @@ def test_cli_fit_that_makes_no_progress_exits_4_and_says_so(dn_case, tmp_path, c
 def test_exit_codes_are_distinct():
     codes = {status: exit_code(status) for status in sf.Status}
     assert codes[sf.Status.CONVERGED] == codes[sf.Status.NOISE_FLOOR] == 0
-    assert (codes[sf.Status.NO_PROGRESS], codes[sf.Status.MISFIT], codes[sf.Status.AT_BOUND]) == (NO_PROGRESS, MISFIT, AT_BOUND)
+    assert (codes[sf.Status.NO_PROGRESS], codes[sf.Status.MISFIT], codes[sf.Status.AT_BOUND], codes[sf.Status.UNJUDGED]) == (
+        NO_PROGRESS, MISFIT, AT_BOUND, UNJUDGED)
     assert codes[sf.Status.MAX_STEPS] == codes[sf.Status.NONFINITE] == NOT_CONVERGED
-    assert len({NOT_CONVERGED, NO_PROGRESS, MISFIT, AT_BOUND, 0, 1, 2, 130, 143}) == 9
+    assert len({NOT_CONVERGED, NO_PROGRESS, MISFIT, AT_BOUND, UNJUDGED, 0, 1, 2, 7, 8, 130, 143}) == 12
 
 
 def test_error_while_writing_the_report_leaves_nothing(case, tmp_path, monkeypatch):

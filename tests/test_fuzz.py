@@ -300,8 +300,8 @@ def check_command_line_fit(plate: dict[str, Any], data: st.DataObject) -> None:
     for option, value in options:
         args += [option, *([value, value] if option == "--resolution" else [value])]
     code, err = command_line(args)
-    # a fit that ran ends 0 or with its verdict (3 to 6); a mask or sensor file not found is a file error (1)
-    assert_clean(code, err, (0, 1, 2, 3, 4, 5, 6))
+    # a fit that ran ends 0 or with its verdict (3 to 6, 9); a mask or sensor file not found is a file error (1)
+    assert_clean(code, err, (0, 1, 2, 3, 4, 5, 6, 9))
 
 
 

@@ -13,9 +13,11 @@ from astropy.io import fits
 from helpers import small_scene, write_sphere_obj
 
 import spacefit as sf
+from spacefit.cli import exit_code
 from spacefit.formation import expected_dn
-from spacefit.fitting.goodness import MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
-from spacefit.fitting.judging import affordable
+from spacefit.fitting.goodness import MAX_JUDGED_RENDER_NOISE, REFERENCE_RENDER_NOISE, RESIDUALS, MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
+from spacefit.fitting.goodness import _neighbours
+from spacefit.fitting.judging import _mean_and_noise, affordable, judged_goodness, per_observation
 from spacefit.fitting.loop import verdict
 from spacefit.fitting.problem import setup
 from spacefit.scene.sections import MAX_SPP
@@ -64,6 +66,45 @@ def test_a_model_error_beyond_the_margin_is_a_misfit():
     # dof counts: a few values with 3 free parameters leave 2 degrees of freedom
     few = goodness(np.array([1.0, -1.0, 0.5, 0.5, 0.0]), np.array([1.0, -1.0, 0.5, 0.5, 0.0]), n_free=2, noise_known=True)
     assert few.values == 4 and few.dof == 2 and few.chi2_dof == pytest.approx(2.5 / 2)
+
+
+def test_a_model_whose_render_noise_exceeds_the_datas_is_not_judged():
+    """Planted: 8 values whose model misses the data by 60 of their sigmas, judged on a model whose own
+    render noise has a variance of 1771 data variances (the light curve of issue 34 called chi^2/dof
+    5691 "within the expected range" of 1 + 1771). It is not judged, and says so; the same misfit
+    judged on a model with a tenth of the data's noise is a misfit."""
+    rng = np.random.default_rng(3)
+    data = rng.normal(0.0, 1.0, 8) + 60.0
+    for render_sigma, judged in ((np.sqrt(1771.0), False), (np.sqrt(0.1), True)):
+        r_one, r_two = (data + rng.normal(0.0, render_sigma, 8) for _ in range(2))
+        g = goodness((r_one + r_two) / 2, (r_one - r_two) / 2, n_free=3, noise_known=True)
+        assert g.judged is judged and (g.render_noise > MAX_JUDGED_RENDER_NOISE) is not judged
+        assert g.misfit is judged  # a misfit only where it could be judged
+        assert ("CANNOT JUDGE" in g.line()) is not judged and ("within the expected range" not in g.line())
+    assert verdict(sf.Status.CONVERGED, True, False, False, True) is sf.Status.UNJUDGED
+    assert verdict(sf.Status.CONVERGED, True, True, False, True) is sf.Status.AT_BOUND
+    assert not sf.Status.UNJUDGED.success and exit_code(sf.Status.UNJUDGED) == 9
+
+
+@pytest.mark.parametrize("misfit", [0.0, 0.8])
+def test_without_a_stated_noise_a_rendered_references_own_render_noise_is_the_noise_judged(misfit):
+    """Radiance residuals (W m^-2 sr^-1, no sensor): a reference rendered at half the fit's samples has
+    twice its render noise, the data's noise of the verdict. A correct model's chi^2 / dof in its units
+    is 1 + v / v_ref = 1.5 and within range; a planted model error of 0.8 of the reference's noise
+    sigma (chi^2 + 0.64) is a misfit. A real observation (no render samples) has its noise from the
+    residuals, s over n - p, and no chi^2."""
+    rng, model_sigma = np.random.default_rng(5), 0.004
+    reference = rng.normal(0.0, model_sigma * np.sqrt(2.0), N) + misfit * model_sigma * np.sqrt(2.0)
+    r_one, r_two = (reference + rng.normal(0.0, model_sigma, N) for _ in range(2))
+    g = goodness(r_one, (r_one - r_two) / np.sqrt(2.0), n_free=3, noise_known=False, reference_ratio=2.0)
+    assert g.basis == REFERENCE_RENDER_NOISE and not g.noise_known and g.judged
+    assert g.noise_sigma == pytest.approx(model_sigma * np.sqrt(2.0), rel=0.02)
+    assert g.chi2_dof == pytest.approx(1.5 + misfit**2, abs=0.05) and g.misfit is (misfit > 0)
+    assert "estimated as the references' render noise" in g.line() and ("MISFIT" in g.line()) is (misfit > 0)
+    real = goodness(r_one, (r_one - r_two) / np.sqrt(2.0), n_free=3, noise_known=False)
+    assert real.basis == RESIDUALS and np.isnan(real.chi2_dof) and not real.misfit
+    assert real.noise_sigma == pytest.approx(np.sqrt(np.sum(r_one**2) / (N - 3)), rel=1e-12)
+    assert "estimated from the residuals (s^2 over n - p)" in real.line()
 
 
 def test_without_a_known_noise_the_spread_and_correlation_are_reported_against_the_render_noise():
@@ -274,3 +315,69 @@ def test_a_fit_where_every_step_is_rejected_makes_no_progress(tmp_path):
     assert result.status is sf.Status.NO_PROGRESS and not result.success
     assert result.values == result.start
     assert "converged" not in sf.format_result(result).splitlines()[0]
+
+
+def test_the_neighbour_correlation_is_taken_over_each_pixels_channel_mean():
+    """Channels (1, 2, 3) x a checkerboard of +-1: the channels' mean is the checkerboard, whose
+    horizontal and vertical neighbours are perfectly anti-correlated (over rows instead, the mean is 0)."""
+    board = np.where(np.add.outer(np.arange(4), np.arange(6)) % 2 == 0, 1.0, -1.0)
+    image = board[..., None] * np.array([1.0, 2.0, 3.0])
+    assert _neighbours(image.ravel(), [image.shape]) == pytest.approx(-1.0)
+
+
+def test_the_misfit_margin_is_five_standard_deviations():
+    """103 equal residuals, 3 free, no render noise: chi^2 / dof's spread is sqrt(2 / 100); at 4
+    spreads above 1 (past the 10 % floor) it is within range, at 6 a misfit."""
+    spread = np.sqrt(2.0 / 100.0)
+    for sigmas, misfit in ((4.0, False), (6.0, True)):
+        r = np.full(103, np.sqrt((1.0 + sigmas * spread) * 100.0 / 103.0))
+        g = goodness(r, np.zeros(103), n_free=3, noise_known=True)
+        assert g.expected_spread == pytest.approx(spread) and g.misfit is misfit
+
+
+def test_the_render_noise_of_the_mean_of_two_renders_is_half_their_difference():
+    """The mean of renders a and b is judged; a draw of its noise is (a - b) / 2, the residuals' unit."""
+    problem = SimpleNamespace(residual_of=lambda models: jnp.concatenate(models) / 2.0)
+    a, b = jnp.asarray([1.0, 4.0]), jnp.asarray([3.0, 0.0])
+    r, noise = _mean_and_noise(problem, [[a], [b]])
+    np.testing.assert_allclose(r, [1.0, 1.0])
+    np.testing.assert_allclose(noise, [-0.5, 1.0])
+
+
+def value_setup(render_sigma: float, names: tuple[str, ...] = ("parts.a.kd",)) -> SimpleNamespace:
+    """A fit of 4000 values with unit noise and no image, whose model is rendered: at samples factor f
+    each of its renders has noise ``render_sigma`` / sqrt(f) (seeded by the seed index j and f)."""
+    data = np.random.default_rng(0).normal(0.0, 1.0, 4000)
+
+    def problem(factor: int) -> SimpleNamespace:
+        def model(x: jnp.ndarray, j: int) -> jnp.ndarray:
+            return jnp.asarray(np.random.default_rng(100 * factor + j).normal(0.0, render_sigma / np.sqrt(factor), data.size))
+
+        block = SimpleNamespace(resampled=True, spp=8, data=SimpleNamespace(value=data), known=names, noise_known=True)
+        return SimpleNamespace(models_seeded=lambda x, j: [model(x, j)], residual_of=lambda models: models[0] - jnp.asarray(data),
+                               spp=(), blocks=(block,), resampled=problem, references=[], used=[], reference_spp=(), pixels=0,
+                               part_images=[])
+
+    return SimpleNamespace(problem=problem(1), noise_given=True, x0=np.zeros(len(names)), user=SimpleNamespace(names=names))
+
+
+def test_the_verdict_renders_twice_at_the_factor_a_single_renders_noise_asks():
+    """A rendered value model with v = 0.6 per render at the fit's samples: the verdict's two renders
+    take k = 4 times the samples (0.6 / 8 <= 0.1, 0.6 / 4 is not), the mean of two: 8 times a render's,
+    its noise v / 8."""
+    s = value_setup(np.sqrt(0.6))
+    quality = judged_goodness(s, jnp.zeros(1), "pixel")[0]
+    assert quality.samples_factor == 8 and quality.render_noise == pytest.approx(0.6 / 8, rel=0.1)
+
+
+def test_each_observations_goodness_counts_the_shared_and_its_own_free_parameters():
+    """An image of 4 values with a shared parameter and its own scale (of 3 free names, one another
+    image's): its goodness has 4 - 2 degrees of freedom; a value observation of 4000 with 1 known: 3999."""
+    image = SimpleNamespace(problem=SimpleNamespace(references=[np.zeros((2, 2, 1))], spp=(4,), reference_spp=(None,),
+                                                    used=[np.ones((2, 2), bool)], blocks=()),
+                            user=SimpleNamespace(names=("parts.a.kd", "image.scale@0", "image.scale@1")), noise_given=True)
+    r = np.array([1.0, -1.0, 0.5, 0.5])
+    assert per_observation(r, r, image, 1)[0].dof == 2
+    s = value_setup(0.1)
+    data = s.problem.blocks[0].data.value
+    assert per_observation(data, data, s, 1)[0].dof == data.size - 1

@@ -245,3 +245,10 @@ def test_an_image_written_past_the_file_size_limit_is_an_os_error_naming_the_fil
     finally:
         resource.setrlimit(resource.RLIMIT_FSIZE, (soft, hard))
     assert err.value.errno == errno.EFBIG and err.value.filename == str(path), err.value
+
+
+def test_the_egain_alias_is_read_as_the_gain(tmp_path):
+    """EGAIN (electrons per DN), GAIN's alias, gives the gain as GAIN does, and names itself as the source."""
+    _write(tmp_path / "egain.fits", IMAGE, ROWORDER="TOP-DOWN", BUNIT="adu", EGAIN=2.5, RDNOISE=3.2, BIAS=100.0, RADSCALE=1234.5, PSFSIGMA=0.8)
+    sensor, sources = sensor_of(read_image(tmp_path / "egain.fits"))
+    assert sensor.gain_dn_per_electron == pytest.approx(0.4) and sources["gain_dn_per_electron"] == "header EGAIN"

@@ -336,3 +336,12 @@ def test_two_views_with_their_own_attitude_errors_recover_each():
     for name, truth in case.truth.items():
         assert abs(result.values[name] / truth - 1.0) < 0.05, result.values
     assert set(result.nuisances) == {"target.attitude_z_deg@0", "target.attitude_z_deg@1"}
+
+
+def test_the_image_scale_multiplies_the_render():
+    """image.scale 2 doubles the render (a gain), offset 0.5 adds after it."""
+    from spacefit.fitting.nuisance import image_model
+
+    render = jnp.arange(12.0).reshape(2, 2, 3)
+    out = image_model(("parts.a.kd", "image.scale", "image.offset_w_m2_sr"))(render, jnp.asarray([0.3, 2.0, 0.5]), 0)
+    np.testing.assert_allclose(out, 2.0 * render + 0.5)

@@ -432,3 +432,31 @@ def test_observation_files_take_one_frame_entry_per_reference():
     files = sf.Pass.from_columns(columns(pass_geometry(2))).observation_files("s.toml", sensor_values={"bias_dn": 90.0})
     assert files.times == ("2026-11-25T12:00:00.5", "2026-11-25T12:00:10.5")
     assert files._sensor_values(1) == {"bias_dn": 90.0, "exposure_time_s": 2e-6}  # the frame's own value added to the option's
+
+
+def test_frames_share_a_loaded_scene_across_target_poses_only_when_they_set_the_pose():
+    """Two views of a pass whose target is turned differently, materials free: their loaded scenes
+    differ (the pose is loaded, not set) unless the frames set the pose from their view (a light
+    curve's points, ``view_pose``)."""
+    from spacefit.fitting.frames import _stage
+
+    base = sf.Scene().with_values({"render.resolution": [8, 8], "camera.pixel_pitch_mm": 300.0, "wrinkles.enabled": False})
+    scenes = [base.with_values({"target.attitude_z_deg": a, "sun.elevation_deg": e}) for a, e in ((0.0, 30.0), (40.0, 50.0))]
+    specs = [FrameSpec(s, ("parts.legs.kd",), (0.0,), None, None, "prb", shared_view=True) for s in scenes]
+    stages = [_stage(spec, assemble(spec.scene)) for spec in specs]
+    assert stages[0] != stages[1]
+    posed = [dataclasses.replace(spec, view_pose=True) for spec in specs]
+    assert _stage(posed[0], assemble(scenes[0])) == _stage(posed[1], assemble(scenes[1]))
+
+
+def test_a_frames_cached_jacobian_is_keyed_by_its_seeds_too():
+    """The last Jacobian of a frame is reused at the same values and seeds only: other seeds render anew."""
+    from types import SimpleNamespace
+
+    def function(spec, key, kind):
+        return lambda x, seeds: (np.full((1, 1, 3, 1), float(seeds[0])), np.full((1, 1, 3), float(seeds[1])))
+
+    loaded, spec = SimpleNamespace(jacobians={}, function=function), SimpleNamespace(names=("parts.legs.kd",))
+    x = np.array([0.3])
+    assert frame_jacobian(spec, "k", x, 1, 2, loaded)[0][0, 0, 0] == 2.0
+    assert frame_jacobian(spec, "k", x, 1001, 1002, loaded)[0][0, 0, 0] == 1002.0

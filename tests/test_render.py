@@ -240,3 +240,12 @@ def test_part_image_of_the_window_equals_the_whole_films():
     ids, expected = windowed.part_image().ids, film.part_image().ids
     assert set(np.unique(expected)) == {-1, 0, 1, 2}
     assert np.mean(ids == expected) > 0.999, np.mean(ids == expected)
+
+
+def test_a_renders_pass_seeds_are_not_another_seeds():
+    """Pass i of seed s is not pass 0 of seed s + i: renders of neighbouring seeds share no pass."""
+    from spacefit.rendering.renderer import pass_seed
+
+    for seed in (0, 1, 7, 1000):
+        assert pass_seed(seed, 0) == seed
+        assert {pass_seed(seed, i) for i in range(1, 8)}.isdisjoint({pass_seed(seed + i, 0) for i in range(1, 8)})

@@ -14,7 +14,7 @@ from spacefit.geometry.distortion import Distortion, distort, undistort
 from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
 from spacefit.formation import choose_exposure
 from spacefit.sensor import Sensor, quantise, saturated_mask
-from spacefit.psf import airy_psf, airy_transfer, psf_rms_px
+from spacefit.psf import airy_psf, airy_transfer, psf_reach_px, psf_rms_px
 
 THESIS = Intrinsics(7.0, 4e-3, 601, 601)  # Table 4-2's optics; odd size puts a pixel centre on the axis
 SHARP = dict(diffraction=False, psf_sigma_px=0.0)
@@ -298,3 +298,14 @@ def test_choose_exposure_refuses_bad_input(kwargs, words):
     with pytest.raises(InputError) as err:
         choose_exposure(**args)
     assert words in str(err.value)
+
+
+def test_the_psf_reaches_five_sigma_and_its_widths_add_in_quadrature():
+    """A 2 px Gaussian reaches ceil(5 x 2) = 10 px; with diffraction, the rms width is the Gaussian's and the
+    Airy pattern's in quadrature (independent blurs' variances add)."""
+    intrinsics = Intrinsics(7.0, 4e-3, 64, 64)
+    gaussian = Sensor(psf_sigma_px=2.0, diffraction=False)
+    assert psf_reach_px(gaussian, intrinsics, 550e-9) == 10
+    airy = psf_rms_px(Sensor(psf_sigma_px=0.0, diffraction=True, aperture_diameter_m=2e-3), intrinsics, 1)
+    both = psf_rms_px(Sensor(psf_sigma_px=2.0, diffraction=True, aperture_diameter_m=2e-3), intrinsics, 1)
+    assert airy > 0.5 and both == pytest.approx(np.hypot(2.0, airy), rel=1e-12)

@@ -297,3 +297,15 @@ def test_poorly_determined_is_judged_against_the_parameters_own_scale():
     assert poorly([0.004, 0.008, 0.2]) == ["parts.panels.alpha_x"]
     assert poorly([0.021, 0.021, 0.019]) == ["image.shift_x_px", "target.attitude_x_deg"]
     assert poorly([0.019, 0.019, 0.021]) == ["parts.panels.alpha_x"]
+
+
+def test_a_value_observation_without_errors_has_its_noise_from_s2_over_n_minus_p():
+    """A table of 10 values without errors, 2 parameters known: each value's weight in the sandwich is
+    sum r^2 / (10 - 2); with errors stated, 1."""
+    from spacefit.fitting.uncertainty import _unknown_noise_weights
+
+    r = np.arange(1.0, 11.0)
+    for known, expected in ((False, np.full(10, r @ r / 8.0)), (True, np.ones(10))):
+        block = SimpleNamespace(data=SimpleNamespace(value=r), known=("a", "b"), noise_known=known)
+        problem = SimpleNamespace(pixels=0, blocks=(block,))
+        np.testing.assert_allclose(_unknown_noise_weights(problem, r, 10, 8), expected)

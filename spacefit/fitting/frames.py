@@ -57,6 +57,9 @@ class FrameSpec:
         shared_view: the frame sets its camera and sun on a loaded scene it shares with frames of
             other views, rendered whole (:func:`share_views`); else it has a loaded scene of its
             own, which renders only the window round the target unless vertices move.
+        view_pose: with ``shared_view``, the frame sets its target's pose too, free or not (frames
+            that turn the target: a light curve's points), so that frames of other poses share its
+            loaded scene.
     """
 
     scene: Scene
@@ -66,11 +69,13 @@ class FrameSpec:
     spp_grad: int | None
     integrator: str
     shared_view: bool = False
+    view_pose: bool = False
 
     @cached_property
     def key(self) -> str:
         """A digest of everything that selects the frame's chain: equal specs share one."""
-        text = repr((self.scene.to_toml(), self.names, self.fd_steps, self.spp, self.spp_grad, self.integrator, self.shared_view))
+        text = repr((self.scene.to_toml(), self.names, self.fd_steps, self.spp, self.spp_grad, self.integrator, self.shared_view,
+                     self.view_pose))
         return hashlib.sha256(text.encode()).hexdigest()
 
 
@@ -99,18 +104,26 @@ def _stage(spec: FrameSpec, assembly: Assembly) -> str:
     pose, sun direction and (a pose parameter free) target pose, the meshes as loaded, the
     materials, the free names and how they are rendered."""
     text = spec.scene.to_dict()
-    for section, keys in (*VIEW_KEYS.items(), *(POSE_KEYS.items() if set(spec.names) & set(POSE) else ())):
+    for section, keys in (*VIEW_KEYS.items(), *(POSE_KEYS.items() if spec.view_pose or set(spec.names) & set(POSE) else ())):
         text[section] = {k: v for k, v in text.get(section, {}).items() if k not in keys}
     meshes = {name: hashlib.sha256(np.ascontiguousarray(assembly.faces(name)).tobytes()).hexdigest() for name in assembly.parts}
     return hashlib.sha256(repr((sorted(text.items()), meshes, sorted(assembly.materials.items()), spec.names, spec.spp,
                                 spec.spp_grad, spec.integrator)).encode()).hexdigest()
 
 
-def _frame_values(assembly: Assembly, names: Sequence[str], shared_view: bool) -> Callable[[jax.Array, View], dict[str, jax.Array]]:
+def _view_names(spec: FrameSpec) -> tuple[str, ...]:
+    """The values a frame sets from its view besides its free ones: on a loaded scene shared with other
+    views its camera and sun, and its target's pose with :attr:`FrameSpec.view_pose`."""
+    if not spec.shared_view:
+        return ()
+    return tuple(n for n in (*VIEW, *(POSE if spec.view_pose else ())) if n not in spec.names)
+
+
+def _frame_values(assembly: Assembly, names: Sequence[str], extra: Sequence[str]) -> Callable[[jax.Array, View], dict[str, jax.Array]]:
     """A frame's scene values as a function of its free values (``names``) and its view
-    (:func:`~spacefit.rendering.values.scene_view`, an operand): on a loaded scene shared with other
-    views every render sets the frame's camera and sun (and its pose, when free)."""
-    extra = [n for n in VIEW if n not in names] if shared_view else []
+    (:func:`~spacefit.rendering.values.scene_view`, an operand), which gives the ``extra`` ones
+    (:func:`_view_names`): on a loaded scene shared with other views every render sets the frame's
+    camera and sun (and its pose, when free or :attr:`FrameSpec.view_pose`)."""
     values = view_values_fn(assembly, (*names, *extra))
 
     def values_of(x: jax.Array, view: View) -> dict[str, jax.Array]:
@@ -159,11 +172,11 @@ class Loaded:
         if stage not in self.stages:
             while len(self.stages) >= self.max_scenes:
                 self._drop(next(iter(self.stages)))
-            names = (*spec.names, *(n for n in VIEW if n not in spec.names)) if spec.shared_view else spec.names
-            chain = render_chain(assembly, names, spp=spec.spp, spp_grad=spec.spp_grad, integrator=spec.integrator,
+            extra = _view_names(spec)
+            chain = render_chain(assembly, (*spec.names, *extra), spp=spec.spp, spp_grad=spec.spp_grad, integrator=spec.integrator,
                                  fd_steps=None if spec.shared_view else np.asarray(spec.fd_steps, dtype=float),
                                  crop=False if spec.shared_view else None)
-            self.stages[stage] = Stage(chain, _frame_values(assembly, spec.names, spec.shared_view))
+            self.stages[stage] = Stage(chain, _frame_values(assembly, spec.names, extra))
         self.stages.move_to_end(stage)
         on, view = self.stages[stage], scene_view(assembly)
         chain = RenderChain(spec.names, on.chain.renderer, on.chain.drjit, lambda x: on.values(x, view),

@@ -35,11 +35,25 @@ spp 0.004 above it; a render's Monte Carlo error at few samples is long-tailed (
 scattered by several tenths between seeds at 16 spp, a few hundredths at 64). Figures of the pass: docs/guide/pass.md and
 ``experiments/pass_misfit.py``.
 
+Where the judged model's own render noise is still larger than the data's noise (v above
+:data:`MAX_JUDGED_RENDER_NOISE`: a model rendered with too few samples for its data, or one whose
+verdict render could not take more), chi^2 / dof's expectation is mostly that render noise, measured
+from two renders, and a misfit far larger than the data's noise hides inside it (an 8-point light
+curve judged 5691 "within the expected range" of 1 + 1771): the goodness says it cannot judge, and
+the fit's status says so (:attr:`~spacefit.fitting.solvers.Status.UNJUDGED`).
+
 A misfit means the model or its nuisances miss something (a pose, a blur, a shift, a material):
 the error bars, which assume a correct model, are then too small.
 
-Without a known noise the residuals' scale is unknown: the fit's own render is judged (k = 1), the
-report gives its residuals' mean square against the render noise's (a reference rendered like the
+Without a known noise the fit's own render is judged (k = 1) and the noise is estimated from the
+data, on one of two bases (:attr:`Goodness.basis`). Where every reference says what it was rendered
+with, its noise is its own render noise, v_ref = v x (fit's spp) / (reference's spp) per value,
+measured from the model's: the residuals are judged in units of it as with a known noise (chi^2 /
+dof expected 1 + v / v_ref, the same misfit rule, not judged where v / v_ref is above
+:data:`MAX_JUDGED_RENDER_NOISE`; a 6-frame pass of radiance EXR frames said "noise unknown, no
+verdict" with kd 3.2 of its standard errors off). Else (a real observation without a noise model) the
+noise is the residuals' own, s^2 = sum r^2 / (n - p), which leaves chi^2 no room to judge: the
+report gives s, and its residuals' mean square against the render noise's (a reference rendered like the
 fit, with another seed, gives 2) and their correlation between neighbouring pixels against the
 render noise's (a structured misfit correlates its residuals over many pixels; render noise only
 over the pixel filter's reach), and no verdict. Values masked out count for nothing, and without a
@@ -49,6 +63,7 @@ reference).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -69,6 +84,14 @@ MISFIT_FLOOR = 0.1
 VERDICT_RENDER_NOISE = 0.1
 # ... but with at most this many times the fit's samples.
 MAX_VERDICT_FACTOR = 16
+# No verdict is taken on a judged model whose render noise per value is above this, in units of the
+# data's noise squared: chi^2's expectation would be mostly the model's own noise (module docstring).
+MAX_JUDGED_RENDER_NOISE = 1.0
+# What a goodness's noise is (Goodness.basis): the stated one (a sensor's model, a sigma), the
+# references' own render noise (measured from the model's), or the residuals' own spread.
+NOISE_MODEL = "the noise model"
+REFERENCE_RENDER_NOISE = "the references' render noise"
+RESIDUALS = "the residuals (s^2 over n - p)"
 
 
 def verdict_factor(render_noise: float, spp: int = 1) -> int:
@@ -97,7 +120,13 @@ class Goodness:
         render_noise: the judged model's own Monte Carlo noise v, per value (in units of the noise
             squared when it is known, else the residuals' unit squared).
         limit: chi^2 / dof above which the fit is a misfit (NaN without a known noise).
-        misfit: chi^2 / dof > limit.
+        misfit: chi^2 / dof > limit, on a judged fit.
+        judged: the verdict could be taken: the noise is known (or the references' render noise) and the
+            judged model's render noise is at most :data:`MAX_JUDGED_RENDER_NOISE` (False: it cannot tell a misfit).
+        basis: what the noise is: :data:`NOISE_MODEL`, :data:`REFERENCE_RENDER_NOISE` (chi^2 and the
+            verdict in its units, ``render_noise`` too) or :data:`RESIDUALS` (no chi^2).
+        noise_sigma: without a known noise, the noise estimated per value on that basis, in the
+            residuals' unit (NaN with a known noise: 1 in its units).
         spread: mean r^2 / ``render_noise``, the residuals' spread against the render noise (NaN
             where the renders have no noise).
         correlation, render_correlation: the correlation of neighbouring pixels' residuals
@@ -126,17 +155,29 @@ class Goodness:
     verdict_spp: tuple[int, ...] = ()
     reference_noise: float = 0.0
     reference_spp: tuple[int | None, ...] = ()
+    judged: bool = True
+    basis: str = NOISE_MODEL
+    noise_sigma: float = math.nan
 
     def line(self) -> str:
         """One line of words: chi^2 / dof against its expected range, or the residuals against the render noise."""
+        if self.basis == REFERENCE_RENDER_NOISE:
+            verdict = ("a MISFIT" if self.misfit else "within the expected range" if self.judged else
+                       f"CANNOT JUDGE: the model's own render noise is above {MAX_JUDGED_RENDER_NOISE:g} x the references'")
+            return (f"goodness of fit (noise unknown, estimated as {self.basis}: {self.noise_sigma:.3g} per value): chi^2/dof = "
+                    f"{self.chi2_dof:.3f} over {self.dof} dof, expected 1 + {self.render_noise:.3f} (the fit's render noise) "
+                    f"+- {self.expected_spread:.3f}, misfit above {self.limit:.3f}: {verdict}")
         if self.noise_known:
-            verdict = "a MISFIT" if self.misfit else "within the expected range"
+            verdict = ("a MISFIT" if self.misfit else "within the expected range" if self.judged else
+                       f"CANNOT JUDGE: the model's own render noise is above {MAX_JUDGED_RENDER_NOISE:g} x the data's noise "
+                       "and would hide a misfit; render with more samples")
             spp = "/".join(str(s) for s in dict.fromkeys(self.verdict_spp))
             judged = f"{spp} spp, " if spp else ""
             return (f"goodness of fit: chi^2/dof = {self.chi2_dof:.3f} over {self.dof} dof, expected 1 + {self.render_noise:.3f} "
                     f"(render noise at {judged}{self.samples_factor} x the fit's samples) + {self.reference_noise:.3f} "
                     f"({self._references()}) +- {self.expected_spread:.3f}, misfit above {self.limit:.3f}: {verdict}")
-        return (f"goodness of fit (noise unknown, no verdict): mean r^2 = {self.spread:.3g} x the render noise's; neighbour "
+        return (f"goodness of fit (noise unknown, estimated from {self.basis}: {self.noise_sigma:.3g} per value, which leaves "
+                f"chi^2 no verdict): mean r^2 = {self.spread:.3g} x the render noise's; neighbour "
                 f"correlation {self.correlation:+.2f} (render noise {self.render_correlation:+.2f}) over {self.values} values")
 
     def _references(self) -> str:
@@ -152,7 +193,7 @@ class Goodness:
         """JSON-ready: the fields, with the misfit rule's constants."""
         return {**{k: getattr(self, k) for k in self.__dataclass_fields__}, "misfit_sigmas": MISFIT_SIGMAS,
                 "misfit_floor": MISFIT_FLOOR, "verdict_render_noise": VERDICT_RENDER_NOISE,
-                "max_verdict_factor": MAX_VERDICT_FACTOR}
+                "max_verdict_factor": MAX_VERDICT_FACTOR, "max_judged_render_noise": MAX_JUDGED_RENDER_NOISE}
 
 
 def goodness(r: np.ndarray, noise: np.ndarray, n_free: int, noise_known: bool, shapes: Sequence[tuple[int, ...]] = (), *,
@@ -176,13 +217,21 @@ def goodness(r: np.ndarray, noise: np.ndarray, n_free: int, noise_known: bool, s
         samples_factor, verdict_spp, reference_spp: recorded as :class:`Goodness` holds them.
     """
     r, noise = np.ravel(np.asarray(r, dtype=float)), np.ravel(np.asarray(noise, dtype=float))
+    ratio = np.broadcast_to(np.ravel(np.asarray(reference_ratio, dtype=float)), r.shape)
+    if not noise_known:
+        counted = (r != 0) | (noise != 0)
+        reference = float(np.mean((noise**2 * ratio)[counted])) if counted.any() else 0.0
+        if reference > 0 and np.all(ratio[counted] > 0):  # every reference's own render noise: the data's noise
+            scale = math.sqrt(reference)
+            g = goodness(r / scale, noise / scale, n_free, True, shapes, fitted=fitted, samples_factor=samples_factor,
+                         verdict_spp=verdict_spp, reference_spp=reference_spp)
+            return dataclasses.replace(g, noise_known=False, basis=REFERENCE_RENDER_NOISE, noise_sigma=scale)
     counted = (r != 0) | (noise != 0)
     if noise_known and fitted is not None:
         counted |= np.ravel(np.asarray(fitted, dtype=bool))
     values = int(counted.sum())
     dof = max(values - n_free, 1)
     render_noise = float(np.mean(noise[counted] ** 2)) if values else math.nan
-    ratio = np.broadcast_to(np.ravel(np.asarray(reference_ratio, dtype=float)), r.shape)
     reference_noise = float(np.mean((noise**2 * ratio)[counted])) if values else 0.0
     expected = 1.0 + render_noise + reference_noise
     # chi^2 / dof's spread, and the error of the render noise measured with it: render noise is not
@@ -196,9 +245,12 @@ def goodness(r: np.ndarray, noise: np.ndarray, n_free: int, noise_known: bool, s
     else:
         chi2_dof = limit = math.nan
     spread = float(np.mean(r[counted] ** 2)) / render_noise if render_noise > 0 else math.nan
-    return Goodness(noise_known, values, dof, chi2_dof, spread_sd, render_noise, limit, bool(chi2_dof > limit), spread,
+    judged = noise_known and render_noise <= MAX_JUDGED_RENDER_NOISE
+    sigma = math.nan if noise_known else math.sqrt(float(np.sum(r[counted] ** 2)) / dof)
+    return Goodness(noise_known, values, dof, chi2_dof, spread_sd, render_noise, limit, judged and bool(chi2_dof > limit), spread,
                     _neighbours(r, shapes), _neighbours(noise, shapes), samples_factor, tuple(int(s) for s in verdict_spp),
-                    reference_noise, tuple(None if s is None else int(s) for s in reference_spp))
+                    reference_noise, tuple(None if s is None else int(s) for s in reference_spp), judged,
+                    NOISE_MODEL if noise_known else RESIDUALS, sigma)
 
 
 def _neighbours(d: np.ndarray, shapes: Sequence[tuple[int, ...]]) -> float:

@@ -24,13 +24,14 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
     draw of their render noise, and each observation's model (images, then value observations) at the
     fit's seeds. With the noise known the judged model is the mean of two renders with independent
     seeds at :func:`verdict_factor` times the fit's samples per pixel (the fit's own two where that is
-    1; primal renders only), the noise sigma taken at it; else the fit's own render. A model that is
+    1; primal renders only; a rendered value observation's too, :attr:`~spacefit.fitting.observations.base.Block.resampled`), the noise sigma taken at it; else the fit's own render. A model that is
     not rendered is the same at every seed: its render noise is 0."""
     problem = s.problem
     renders = [problem.models_seeded(x, 0), problem.models_seeded(x, 1)]
     if s.noise_given:
         r, noise = _mean_and_noise(problem, renders)
-        k = verdict_factor(2.0 * goodness(r, noise, 0, True).render_noise, max(problem.spp)) if problem.spp else 1
+        spps = [*problem.spp, *(b.spp for b in problem.blocks if b.resampled is not None and b.spp)]
+        k = verdict_factor(2.0 * goodness(r, noise, 0, True).render_noise, max(spps)) if spps else 1
         while k > 1 and not affordable(problem, k):
             k //= 2
         if k > 1:

@@ -295,16 +295,19 @@ def _number(value: float | None) -> float:
     return math.nan if value is None else float(value)
 
 
-def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool) -> Status:
+def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool, unjudged: bool = False) -> Status:
     """The fit's status from the solver's: a solve that ended without failing is
     :attr:`Status.NO_PROGRESS` if no step lowered the loss, else :attr:`Status.AT_BOUND` if a
-    parameter ended at a bound, else :attr:`Status.MISFIT` if the residuals exceed the noise."""
+    parameter ended at a bound, else :attr:`Status.UNJUDGED` if its residuals could not be judged
+    (``unjudged``), else :attr:`Status.MISFIT` if the residuals exceed the noise."""
     if status not in (Status.CONVERGED, Status.NOISE_FLOOR, Status.NO_BETTER_POINT, Status.MAX_STEPS):
         return status
     if not moved:
         return Status.NO_PROGRESS
     if at_bound:
         return Status.AT_BOUND
+    if unjudged:
+        return Status.UNJUDGED
     if misfit:
         return Status.MISFIT
     return status
@@ -336,12 +339,15 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
             per_part = part_goodness(r, noise, problem, quality)
             own_quality = per_observation(r, noise, s, quality.samples_factor)
         at_bound = any(b.at_bound(float(v)) for b, v in zip(s.user.bijections, x_user))
-        status = verdict(status, steps.moved, at_bound, quality.misfit and loss == "pixel")
+        pixels = loss == "pixel"
+        status = verdict(status, steps.moved, at_bound, quality.misfit and pixels, quality.noise_known and not quality.judged and pixels)
         if not math.isfinite(loss_value):
             status = Status.NONFINITE
             warnings.insert(0, "the render or its Jacobian at the result is not finite (NaN); no errors are reported.")
         if status is Status.MISFIT:
             warnings.insert(0, f"a misfit: {quality.line()}; the standard errors assume a correct model and are too small.")
+        elif status is Status.UNJUDGED:
+            warnings.insert(0, f"no verdict: {quality.line()}.")
         elif not status.success:
             warnings.insert(0, f"the fit did not succeed ({status}).")
     else:

@@ -167,7 +167,8 @@ def _problem(
 
     def resampled(factor: int) -> Problem:
         finer = [dataclasses.replace(o, scene=o.scene.with_values({"render.spp": factor * n})) for o, n in zip(observations, spps)]
-        return _problem(finer, free, loss, None, None, seed, seed_grad, integrator, executor, blocks, image_names)
+        finer_blocks = [b if b.resampled is None else b.resampled(factor) for b in blocks]
+        return _problem(finer, free, loss, None, None, seed, seed_grad, integrator, executor, finer_blocks, image_names)
 
     return Problem(free, lambda x: residual_at(x, main, 0), lambda x: residual_at(x, independent, 1), reverse,
                    lambda x: models_seeded(x, 0), part_images, references, models_seeded, residual_of, resampled,

@@ -37,11 +37,12 @@ DEFAULT_RTOL, DEFAULT_ATOL = 1e-3, 1e-6
 class Status(enum.Enum):
     """How a fit ended. ``value`` is the words a report prints on its first line.
 
-    The solver's own endings (converged, noise floor, step limit, failures, signals), and three
+    The solver's own endings (converged, noise floor, step limit, failures, signals), and four
     verdicts on a solve that ended without a failure, in this order of precedence:
     :attr:`NO_PROGRESS` (no step lowered the loss: the start is returned), :attr:`AT_BOUND` (a
-    parameter ended at a bound of its range) and :attr:`MISFIT` (the residuals exceed the noise,
-    :mod:`spacefit.fitting.goodness`). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
+    parameter ended at a bound of its range), :attr:`UNJUDGED` (the noise is known but the model's
+    own render noise is too large to judge its residuals) and :attr:`MISFIT` (the residuals exceed
+    the noise, :mod:`spacefit.fitting.goodness`). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
     :attr:`NO_BETTER_POINT` (:mod:`spacefit.fitting.stopping`) are a success, and only where the
     verdicts leave them: a solve stopped there whose residuals exceed the noise is a :attr:`MISFIT`.
     """
@@ -54,6 +55,8 @@ class Status(enum.Enum):
     NO_PROGRESS = "failed: no step lowered the loss; the values are the start"
     AT_BOUND = "failed: a parameter is at a bound of its range; neither it nor its error is an estimate"
     MISFIT = "misfit: the residuals exceed the noise; the model or its nuisances miss something, the error bars are too small"
+    UNJUDGED = ("not judged: the model's own render noise is above the data's noise, so chi^2 cannot tell a misfit; "
+                "render with more samples")
     DIVERGED = "failed: the solve diverged"
     NONFINITE = "failed: the loss or a parameter became NaN"
     FAILED = "failed: the solver reported an error"

@@ -18,6 +18,7 @@ import os
 import re
 import threading
 from collections.abc import Callable, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from typing import ParamSpec, TypeVar
 
@@ -138,3 +139,35 @@ def in_variant(method: Callable[P, R]) -> Callable[P, R]:
             return method(*args, **kwargs)
 
     return scoped
+
+
+# Dr.Jit keeps its AD and tracing state per thread (isolation scopes, symbolic-loop recordings), and
+# XLA runs a program's host callbacks on whichever thread of its pool is free: a light curve of 4 to
+# 24 points, its renders' forward-mode columns made on one thread after their primal images on
+# another, failed at random with "ad_add_special(): internal error!", a forward-propagation "outside
+# of the current dr.isolate_grad() scope" or a segmentation fault (never when every call ran on one
+# thread). Every derivative render of the bridge therefore runs on this process's one Dr.Jit thread.
+_drjit_thread: tuple[int, ThreadPoolExecutor] | None = None  # (the process that started it, the thread)
+_on_drjit_thread = threading.local()
+
+
+def _start_drjit_thread() -> None:
+    _on_drjit_thread.here = True
+
+
+def on_drjit_thread(method: Callable[P, R]) -> Callable[P, R]:
+    """Run ``method`` on the process's one Dr.Jit thread (the calling thread waits; a call made on
+    that thread runs at once): the renders of every JAX callback, whatever XLA thread calls them."""
+
+    @functools.wraps(method)
+    def on_thread(*args: P.args, **kwargs: P.kwargs) -> R:
+        global _drjit_thread
+        if getattr(_on_drjit_thread, "here", False):
+            return method(*args, **kwargs)
+        with _scope_lock:
+            if _drjit_thread is None or _drjit_thread[0] != os.getpid():  # none yet, or one of the parent of a forked process
+                _drjit_thread = (os.getpid(), ThreadPoolExecutor(1, "spacefit-drjit", _start_drjit_thread))
+            pool = _drjit_thread[1]
+        return pool.submit(method, *args, **kwargs).result()
+
+    return on_thread

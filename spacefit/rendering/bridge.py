@@ -19,7 +19,9 @@ place that wires Renderer -> :class:`DrJitScene` -> scene values -> these functi
 Renders are deterministic for a seed (JAX treats callbacks as pure). The primal image and finite
 differences use ``seed``; derivative renders use ``seed_grad``, a different seed, so that an L2
 loss's gradient is not biased by noise shared with its residual. Inputs are validated before any
-callback runs: callbacks never raise.
+callback runs: callbacks never raise. XLA calls a program's callbacks from any thread of its pool;
+every render of :class:`DrJitScene` runs on the process's one Dr.Jit thread
+(:func:`~spacefit.rendering.backend.on_drjit_thread`), whose AD state is per thread.
 """
 
 from __future__ import annotations
@@ -33,7 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from spacefit.rendering.backend import dr, in_variant, mi
+from spacefit.rendering.backend import dr, in_variant, mi, on_drjit_thread
 from spacefit.rendering.frozen import splat
 from spacefit.rendering.renderer import Renderer, differentiable, errors_only, pass_seed, render_threads, to_value
 from spacefit.scene.sampling import split_sample_count
@@ -116,6 +118,7 @@ class DrJitScene:
                    for seed, count, weight in self._passes(self.spp_grad, seed_grad))
 
     # Each render logs errors only (errors_only): projective integrators warn about film borders per call.
+    @on_drjit_thread
     @in_variant
     def primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """Radiance image (h, w, 3) float32 at ``values``; bitwise reproducible if the scene is deterministic.
@@ -126,12 +129,14 @@ class DrJitScene:
             self._last = (key, self.render_primal(values, seed))
         return self._last[1].copy()
 
+    @on_drjit_thread
     @in_variant
     def render_primal(self, values: Mapping[str, np.ndarray], seed: int) -> np.ndarray:
         """:meth:`primal` rendered, not kept (a finite difference's renders are used once)."""
         self._set(values)
         return self.renderer.radiance(self.spp, seed)  # the scene's path tracer: a seed gives the image Renderer.render gives
 
+    @on_drjit_thread
     @in_variant
     def forward(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
         """Directional derivative of the image along ``tangent`` (same keys as ``values``), one render.
@@ -189,6 +194,7 @@ class DrJitScene:
                     dr.eval(image)
         return image
 
+    @on_drjit_thread
     @in_variant
     def backward(self, values: Mapping[str, np.ndarray], cotangent: np.ndarray, seed_grad: int) -> dict[str, np.ndarray]:
         """Gradient of sum(cotangent * image) with respect to every key of ``values``, one backward pass

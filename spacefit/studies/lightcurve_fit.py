@@ -1,36 +1,48 @@
 """The rendered light-curve kind of observation: observed magnitudes at given geometries, predicted by
 the path tracer (:mod:`spacefit.studies.lightcurve`), and the convenience that fits it alone.
 
-Each point's irradiance is its image's sum of radiance x pixel solid angle
-(:func:`spacefit.rendering.derivatives.render_function`, differentiable), rescaled to the observer's
-range; the residuals compare ln E with the magnitudes' errors (0.4 ln 10 sigma_m). The model is
-rendered: its render noise, measured from renders with independent seeds, enters the fit's goodness
-and its errors as an image's does (:func:`spacefit.fitting.uncertainty.covariance`).
+Each point's irradiance is its image's sum of radiance x pixel solid angle, rescaled from its
+camera's range to the observer's; the residuals compare ln E with the magnitudes' errors
+(0.4 ln 10 sigma_m). A point is a scene: the target's scene with the point's geometry (its camera,
+sun and target pose, given as any scene values of them). The points are the frames of one batch
+(:func:`spacefit.fitting.frames.batched_renders`): one loaded scene on which each point sets its
+own view, rendered one after another, their Jacobian columns the bridge's. The model is rendered:
+its render noise, measured from renders with independent seeds, enters the fit's goodness and its
+errors as an image's does (:func:`spacefit.fitting.uncertainty.covariance`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
+
+import dataclasses
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.errors import InputError, check_array, check_choice, check_count, check_range, check_type, check_vector, quote
+from spacefit.errors import InputError, check_array, check_choice, check_count, check_name_list, check_range, check_type, check_vector, quote
+from spacefit.fitting.frames import POSE, POSE_KEYS, VIEW, VIEW_KEYS, FrameSpec, InProcess, batched_renders, share_views
 from spacefit.fitting.loop import fit
+from spacefit.fitting.resume import Resume
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.observations.base import Block, MeasuredValues
 from spacefit.fitting.problem import INDEPENDENT_SEED_OFFSET
 from spacefit.geometry.frames import pixel_solid_angles
-from spacefit.rendering.derivatives import render_function
+from spacefit.progress import Progress, ProgressCallback
+from spacefit.rendering.bridge import seeds_array
 from spacefit.scene.assembly import assemble
-from spacefit.scene.parameters import IMAGE, available, scene_value
+from spacefit.scene.parameters import IMAGE, available, fd_step, scene_value
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
 from spacefit.studies.lightcurve import MAGNITUDE_PER_LN, SUN_MAGNITUDES
 from spacefit.studies.lightcurve_kind import LightCurveKind
+
+# What a point may set: its camera, sun and target pose, as registered parameters or scene-file values
+# (the values a frame sets on a loaded scene it shares, spacefit.fitting.frames).
+POINT_KEYS = tuple(sorted({*VIEW, *POSE, *(f"{section}.{key}" for section, keys in (*VIEW_KEYS.items(), *POSE_KEYS.items()) for key in keys)}))
 
 
 @dataclass(frozen=True, eq=False)
@@ -39,24 +51,26 @@ class RenderedLightCurve(LightCurveKind):
 
     Attributes:
         scene: the target; its values are the parameters' own (a fit's default start).
-        points: per magnitude, the scene values of its geometry (``{"target.attitude_z_deg": 30.0}``,
-            ``{"sun.elevation_deg": ..., "sun.azimuth_deg": ...}``), every point setting the same ones.
+        points: per magnitude, the scene values of its geometry, any of :data:`POINT_KEYS`
+            (``{"target.attitude_z_deg": 30.0}``, ``{"sun.elevation_deg": ..., "sun.azimuth_deg": ...}``,
+            ``{"camera.position_m": [x, y, z], "sun.direction": [x, y, z]}``), every point setting the same ones.
         magnitude: the observed magnitudes.
         magnitude_sigma: their errors (mag; one for all, or one each), or None: unknown.
         band: the band (:data:`~spacefit.studies.lightcurve.SUN_MAGNITUDES`).
         sun_magnitude: the sun's magnitude in it (None: the band's).
-        observer_range_m: the observer's range (None: the scene camera's).
+        observer_range_m: the observer's range (None: each point's camera's).
         seed: the renders' seed (independent ones: ``seed + 1000 j``).
     """
 
     scene: Scene
-    points: Sequence[Mapping[str, float]]
+    points: Sequence[Mapping[str, Any]]
     magnitude: Sequence[float]
     magnitude_sigma: Sequence[float] | float | None
     band: str = "V"
     sun_magnitude: float | None = None
     observer_range_m: float | None = None
     seed: int = 1
+    scenes: tuple[Scene, ...] = field(init=False, repr=False)  # each point's scene: the target's with its geometry
 
     def __post_init__(self) -> None:
         check_scene(self.scene)
@@ -70,13 +84,21 @@ class RenderedLightCurve(LightCurveKind):
             raise InputError(f"`points` must be a list of dicts of scene values, got {quote(points)}.")
         if len(points) != len(magnitude):
             raise InputError(f"`points` and `magnitude` must be as long: {len(points)} points, {len(magnitude)} magnitudes.")
+        scenes = []
         for i, p in enumerate(points):
             check_type(f"points[{i}]", p, Mapping, "a dict of scene values")
-            for key, value in p.items():
+            for key in p:
                 check_type(f"points[{i}] key", key, str, "a scene key (a string)")
-                check_range(f"points[{i}].{key}", value)
+                if key not in POINT_KEYS:
+                    raise InputError(f"`points[{i}]` sets {key!r}, which is not a point's geometry; a point sets any of {list(POINT_KEYS)}.")
+            try:
+                scenes.append(self.scene.with_values(dict(p)))
+                assemble(scenes[-1])  # the point's view checked: its camera sees the target
+            except InputError as err:
+                raise type(err)(f"`points[{i}]`: {err}") from None
         if any(set(p) != set(self.geometry) for p in points):
             raise InputError(f"every point must set the same values, {list(self.geometry)}; got {[sorted(p) for p in points]}.")
+        object.__setattr__(self, "scenes", tuple(scenes))
         sigma = self.magnitude_sigma
         if sigma is not None:
             given = check_array("magnitude_sigma", sigma)
@@ -92,9 +114,10 @@ class RenderedLightCurve(LightCurveKind):
         return tuple(sorted({key for p in self.points for key in p}))
 
     def parameters(self) -> tuple[str, ...]:
-        """Every parameter of the scene (:func:`~spacefit.scene.parameters.available`) but the points'
-        geometry and the image nuisances (an irradiance has no pixels)."""
-        return tuple(n for n in available(self.scene) if n not in self.geometry and n not in IMAGE)
+        """Every parameter of the scene (:func:`~spacefit.scene.parameters.available`) but those the points
+        set (named, or moved by a vector they set) and the image nuisances (an irradiance has no pixels)."""
+        names = [n for n in available(self.scene) if n not in self.geometry and n not in IMAGE]
+        return tuple(n for n in names if len({scene_value(s, n) for s in self.scenes}) == 1)
 
     def start(self, name: str) -> float:
         """The scene's value of ``name``."""
@@ -102,47 +125,51 @@ class RenderedLightCurve(LightCurveKind):
 
     def block(self, free: tuple[str, ...]) -> Block:
         """ln E of each point's render against the magnitudes' errors (module docstring)."""
-        scene, geometry = self.scene, list(self.geometry)
         known = tuple(n for n in free if n in self.parameters())
-        index = jnp.asarray([free.index(n) for n in known], dtype=int)
-        at = jnp.asarray([[float(p[key]) for key in geometry] for p in self.points])
-        rendered_range = float(np.linalg.norm(np.array(scene.camera.position_m) - np.array(scene.target.position_m)))
-        scale = (rendered_range / (self.observer_range_m or rendered_range)) ** 2
-        omega = jnp.asarray(pixel_solid_angles(assemble(scene).intrinsics))
+        index = np.asarray([free.index(n) for n in known], dtype=int)
+        steps = tuple(fd_step(self.scene, n) for n in known)
+        specs = share_views([FrameSpec(scene, known, steps, None, None, "prb") for scene in self.scenes])
+        if len({repr(scene.to_dict()["target"]) for scene in self.scenes}) > 1:  # the points turn or move the target
+            specs = [dataclasses.replace(spec, view_pose=True) for spec in specs]
+        intrinsics = assemble(self.scene).intrinsics
+        shape = (intrinsics.height, intrinsics.width, 3)
+        # each point's rescaling from its camera's range to the observer's
+        ranges = np.array([np.linalg.norm(np.subtract(s.camera.position_m, s.target.position_m)) for s in self.scenes])
+        scale = jnp.asarray((ranges / (self.observer_range_m or ranges)) ** 2)
+        omega = jnp.asarray(pixel_solid_angles(intrinsics))
         sun_magnitude = SUN_MAGNITUDES[self.band] if self.sun_magnitude is None else self.sun_magnitude
-        data = scene.sun.irradiance_w_m2 * 10.0 ** (-0.4 * (np.asarray(self.magnitude) - sun_magnitude))
+        data = self.scene.sun.irradiance_w_m2 * 10.0 ** (-0.4 * (np.asarray(self.magnitude) - sun_magnitude))
         sigma = None if self.magnitude_sigma is None else np.asarray(self.magnitude_sigma, float) / MAGNITUDE_PER_LN
-
-        def loaded(j: int) -> Any:
-            """The render function at seed index j: one loaded scene, each point's geometry as fixed parameter values."""
-            seed = self.seed + j * INDEPENDENT_SEED_OFFSET
-            return render_function(scene, [*known, *geometry], seed=seed, seed_grad=seed + 1)
-
-        # the fit's and the independent seeds' are made here, outside the solver's traces; a verdict's further ones when asked
-        renders = {0: loaded(0), 1: loaded(1)}
+        images = batched_renders(InProcess(), specs, [index] * len(specs), [shape] * len(specs))
 
         def model(x: jax.Array, j: int) -> jax.Array:
-            if j not in renders:
-                renders[j] = loaded(j)
-            image, y = renders[j], x[index].astype(float)
-            return scale * jnp.stack([jnp.sum(jnp.mean(image(jnp.concatenate([y, g.astype(y.dtype)])), axis=-1) * omega) for g in at])
+            seed = self.seed + j * INDEPENDENT_SEED_OFFSET
+            rendered = images(x, seeds_array(seed, seed + 1))
+            return scale * jnp.stack([jnp.sum(jnp.mean(image.astype(x.dtype), axis=-1) * omega) for image in rendered])
 
-        return Block(MeasuredValues(data, sigma, True, "W m^-2", "light curve"), model, known, rendered=True)
+        spp = self.scene.render.spp
+
+        def resampled(factor: int) -> Block:
+            return dataclasses.replace(self, scene=self.scene.with_values({"render.spp": factor * spp})).block(free)
+
+        return Block(MeasuredValues(data, sigma, True, "W m^-2", "light curve"), model, known, rendered=True, spp=spp, resampled=resampled)
 
     def zero_point(self) -> tuple[float, float]:
         """The sun's magnitude in the band (:attr:`sun_magnitude` or the band's) and the scene sun's irradiance."""
         return SUN_MAGNITUDES[self.band] if self.sun_magnitude is None else self.sun_magnitude, self.scene.sun.irradiance_w_m2
 
     def abscissa(self, count: int) -> tuple[np.ndarray, str]:
-        """Each point's first geometry value (:attr:`geometry`)."""
-        key = self.geometry[0]
-        return np.array([float(p[key]) for p in self.points]), key
+        """Each point's first geometry value (:attr:`geometry`) that is a number, else its index."""
+        for key in self.geometry:
+            if all(np.ndim(p[key]) == 0 for p in self.points):
+                return np.array([float(p[key]) for p in self.points]), key
+        return np.arange(count, dtype=float), "point"
 
 
 def fit_light_curve(
     scene: Scene,
     free: Sequence[str],
-    points: Sequence[dict[str, Any]],
+    points: Sequence[Mapping[str, Any]],
     magnitude: Sequence[float],
     magnitude_sigma: Sequence[float] | float | None,
     *,
@@ -151,10 +178,17 @@ def fit_light_curve(
     observer_range_m: float | None = None,
     seed: int = 1,
     max_steps: int = 50,
+    progress: ProgressCallback | None = None,
+    resume: Resume = Resume(),
+    quiet: bool = False,
 ) -> FitResult:
     """Fit the registered parameters ``free`` of a rendered target (materials, attitude angles, ...)
     to an observed light curve (:class:`RenderedLightCurve` of these arguments) with
-    :func:`spacefit.fit`, from the scene's values."""
+    :func:`spacefit.fit`, from the scene's values. ``progress``: called with (step, max_steps) after
+    each step (default: a progress display on stderr, none with ``quiet``); ``resume``: the fit's
+    checkpoint plumbing (:class:`~spacefit.fitting.resume.Resume`), as :func:`spacefit.fit` takes it."""
     check_count("max_steps", max_steps, optional=False)
     curve = RenderedLightCurve(scene, points, magnitude, magnitude_sigma, band, sun_magnitude, observer_range_m, seed)
-    return fit(curve, free, max_steps=max_steps)
+    if progress is None and not quiet:
+        progress = Progress(f"light-curve fit {', '.join(check_name_list('free', free))}")
+    return fit(curve, free, max_steps=max_steps, progress=progress, resume=resume)

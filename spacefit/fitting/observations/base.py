@@ -86,12 +86,17 @@ class Block:
         model: (x, j) -> the predicted values at the fit's free values x at seed index j.
         known: which of the fit's free names the model depends on (the others do not move it).
         rendered: the model is rendered (Monte Carlo): seed index j changes it.
+        spp: a rendered model's samples per pixel (None: not rendered, or not resampled).
+        resampled: factor -> the block rendered with factor times :attr:`spp` (a verdict's render,
+            :mod:`spacefit.fitting.judging`); None: the model cannot take more samples.
     """
 
     data: MeasuredValues
     model: Model
     known: tuple[str, ...]
     rendered: bool = False
+    spp: int | None = None
+    resampled: Callable[[int], Block] | None = None
 
     @property
     def noise_known(self) -> bool:
