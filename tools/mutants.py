@@ -58,11 +58,11 @@ MUTANTS = (
     Mutant("libllvm-searched-per-render", "spacefit/rendering/backend.py", "@functools.cache  # the file system's search",
            "# the file system's search", ("tests/test_api.py::test_a_render_asks_the_file_system_nothing",)),
     # Mitsuba's rewritten integrators read from the disk only while their source is the one rewritten
-    Mutant("syntax-cache-ignores-the-source", "spacefit/rendering/syntax_cache.py", "source, f.__qualname__, str(code.co_firstlineno)",
-           "f.__qualname__, str(code.co_firstlineno)", ("tests/test_syntax_cache.py::test_a_changed_source_is_rewritten_again",)),
+    Mutant("syntax-cache-ignores-the-source", "spacefit/rendering/syntax_cache.py", "\"source\": source, ",
+           "", ("tests/test_syntax_cache.py::test_a_changed_source_is_rewritten_again",)),
     # a deterministic render: its samples traced on all threads, added into the film on one in their order
-    Mutant("deterministic-splat-in-parallel", RENDERER, "        with render_threads(deterministic):\n            block.put",
-           "        with render_threads(False):\n            block.put",
+    Mutant("deterministic-splat-in-parallel", RENDERER, "        with render_threads(deterministic):\n            splat(block, position, rgb)",
+           "        with render_threads(False):\n            splat(block, position, rgb)",
            ("tests/test_render.py::test_a_deterministic_render_is_the_render_wholly_on_one_thread_bit_for_bit",)),
     # a background job's ignored SIGINT stays ignored; a scene never replaces a device, a pipe or a folder
     Mutant("ignored-signal-caught", "spacefit/interrupts.py", "if signal.getsignal(s) is not signal.SIG_IGN)", ")",
@@ -135,12 +135,12 @@ MUTANTS = (
            (CONVENTIONS,)),
     Mutant("backward-with-primal-seed", BRIDGE, "scene.backward(v, c, seed_grad)", "scene.backward(v, c, seed)", (CONVENTIONS,)),
     # a forward-mode column survives a profiler holding PRB's frames (a pass on dask died of it), and leaves no AD state behind
-    Mutant("forward-attaches-every-value", BRIDGE, "if np.any(np.asarray(t) != 0) and _differentiable(", "if _differentiable(",
+    Mutant("forward-attaches-every-value", BRIDGE, "if np.any(np.asarray(t) != 0) and differentiable(", "if differentiable(",
            ("tests/test_bridge_scope.py::test_a_material_column_is_the_same_with_prb_frames_held",)),
     Mutant("forward-tried-once", BRIDGE, "FORWARD_ATTEMPTS = 2", "FORWARD_ATTEMPTS = 1",
            ("tests/test_bridge_scope.py::test_a_vertex_column_is_rendered_again_when_a_sample_held_its_branch",)),
-    Mutant("forward-leaves-values-attached-on-error", BRIDGE, "        finally:\n            self._set(values)\n\n    @on_drjit_thread",
-           "        finally:\n            pass\n\n    @on_drjit_thread",
+    Mutant("forward-leaves-values-attached-on-error", BRIDGE, "        finally:\n            self._set(values)\n\n    def _render_forward",
+           "        finally:\n            pass\n\n    def _render_forward",
            ("tests/test_bridge_scope.py::test_other_render_errors_are_not_repeated_and_leave_the_values_detached",)),
     Mutant("primal-kept-whatever-the-seed", BRIDGE, "return seed, digest.digest()", "return 0, digest.digest()",
            ("tests/test_stopping.py::test_history_flags_match_the_loss_sequence",)),
@@ -261,7 +261,7 @@ MUTANTS = (
            (PLUMBING,)),
     # stores that cannot lie (issue 20): a done point is trusted only when its data match its checksum
     Mutant("done-without-checksum-check", "spacefit/studies/store.py",
-           "point_checksum([v[local] for v, _ in data]) == stored[local]", "True", ("tests/test_store_integrity.py",)),
+           "point_checksum([v[local] for v, _ in data], index) == stored[local]", "True", ("tests/test_store_integrity.py",)),
     Mutant("sweep-marks-done-after-a-mesh-edit", "spacefit/studies/sweep.py",
            "if watch is not None and (edited := watch.check()):", "if False:", ("tests/test_store_integrity.py",)),
     # the fit's verdicts (spacefit/fitting/goodness.py, loop.py)
