@@ -246,6 +246,10 @@ class TargetSettings(Section):
             if key not in takes and value:
                 raise InputError(f"`target.{key}` = {quote(plain(value))} is not used by `target.attitude` = {self.attitude!r} "
                                  f"(it takes {' and '.join(takes) or 'attitude_deg'}).")
+        default = TargetSettings.__dataclass_fields__["attitude_deg"].default
+        if self.attitude != "fixed" and tuple(self.attitude_deg) != default:
+            raise InputError(f"`target.attitude_deg` = {quote(plain(self.attitude_deg))} is not used by `target.attitude` = "
+                             f"{self.attitude!r}, which sets the attitude; give `attitude = \"fixed\"` to place the body by angles.")
         if self.nadir:
             check_direction("target.nadir", self.nadir)
             object.__setattr__(self, "nadir", tuple(float(v) for v in self.nadir))
