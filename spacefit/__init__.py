@@ -85,6 +85,14 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "predict_magnitudes": ("spacefit.studies.plates", "predict_magnitudes"),
     "fit_plates": ("spacefit.studies.plates", "fit_plates"),
     "fitted_plates": ("spacefit.studies.plates", "fitted_plates"),
+    "DesignMember": ("spacefit.studies.design", "DesignMember"),
+    "fit_design": ("spacefit.studies.design", "fit_design"),
+    "predict_design": ("spacefit.studies.design", "predict_design"),
+    "design_noise_mag": ("spacefit.studies.design", "design_noise_mag"),
+    "MagnitudePrediction": ("spacefit.studies.design", "MagnitudePrediction"),
+    "Prediction": ("spacefit.fitting.prediction", "Prediction"),
+    "predictive_intervals": ("spacefit.fitting.prediction", "predictive_intervals"),
+    "residual_noise": ("spacefit.fitting.prediction", "residual_noise"),
     "Earth": ("spacefit.studies.earthshine", "Earth"),
     "EarthshineSources": ("spacefit.studies.earthshine", "EarthshineSources"),
     "earthshine_sources": ("spacefit.studies.earthshine", "earthshine_sources"),
@@ -154,6 +162,7 @@ __all__ = [
     "Orbit", "PassGeometry", "pass_geometry", "Plate", "predict_magnitudes", "fit_plates", "fitted_plates",
     "light_curve_convergence", "fit_light_curve", "BRDFTableObservation", "PlateLightCurve", "RenderedLightCurve",
     "Earth", "EarthshineSources", "earthshine_sources", "earthshine_irradiance",
+    "DesignMember", "fit_design", "predict_design", "design_noise_mag", "MagnitudePrediction", "Prediction", "predictive_intervals", "residual_noise",
     "RenderSettings", "CameraSettings", "SunSettings", "TargetSettings", "WrinkleSettings", "PartSettings",
 ]
 

@@ -24,6 +24,9 @@ from spacefit.fitting.passes import Frame as Frame
 from spacefit.fitting.passes import Pass as Pass
 from spacefit.fitting.plots import plot_comparison as plot_comparison
 from spacefit.fitting.plots import plot_convergence as plot_convergence
+from spacefit.fitting.prediction import Prediction as Prediction
+from spacefit.fitting.prediction import predictive_intervals as predictive_intervals
+from spacefit.fitting.prediction import residual_noise as residual_noise
 from spacefit.fitting.problem import FitRender as FitRender
 from spacefit.fitting.report import format_result as format_result
 from spacefit.fitting.report import write_fit_report as write_fit_report
@@ -88,6 +91,11 @@ from spacefit.scene.toml import load_scene as load_scene
 from spacefit.sensor import Sensor as Sensor
 from spacefit.sensor import read_sensor_file as read_sensor_file
 from spacefit.sensor import saturated_mask as saturated_mask
+from spacefit.studies.design import DesignMember as DesignMember
+from spacefit.studies.design import MagnitudePrediction as MagnitudePrediction
+from spacefit.studies.design import design_noise_mag as design_noise_mag
+from spacefit.studies.design import fit_design as fit_design
+from spacefit.studies.design import predict_design as predict_design
 from spacefit.studies.earthshine import Earth as Earth
 from spacefit.studies.earthshine import EarthshineSources as EarthshineSources
 from spacefit.studies.earthshine import earthshine_irradiance as earthshine_irradiance
@@ -134,5 +142,5 @@ __all__ = [
     'write_light_curve', 'RefusedRow', 'Orbit', 'PassGeometry', 'pass_geometry', 'Plate', 'predict_magnitudes', 'fit_plates',
     'fitted_plates', 'light_curve_convergence', 'fit_light_curve', 'BRDFTableObservation', 'PlateLightCurve', 'RenderedLightCurve', 'Earth',
     'EarthshineSources', 'earthshine_sources', 'earthshine_irradiance', 'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings',
-    'WrinkleSettings', 'PartSettings',
+    'WrinkleSettings', 'PartSettings', 'DesignMember', 'fit_design', 'predict_design', 'design_noise_mag', 'MagnitudePrediction', 'Prediction', 'predictive_intervals', 'residual_noise',
 ]
