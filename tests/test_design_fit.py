@@ -90,6 +90,10 @@ def test_without_stated_errors_the_noise_is_estimated_from_the_training_residual
     result = fit_design(curves, FREE, OWN, max_steps=100)
     noise = design_noise_mag(result, curves, OWN)
     assert 0.08 < noise < 0.12, noise
+    # for normal residuals the half-width of their central 68 % is their rms
+    assert abs(design_noise_mag(result, curves, OWN, "central68") / noise - 1) < 0.2
+    with pytest.raises(InputError, match="`estimator`"):
+        design_noise_mag(result, curves, OWN, "mad")
     held = simulated(OFFSETS_DEG[0], 400, 77, sigma=False)
     p = predict_design(result, curves[0], held, member=0, own=OWN, members=2, noise_mag=noise)
     assert p.noise == "training residuals"

@@ -222,7 +222,7 @@ def predict_design(result: FitResult, curve: PlateLightCurve, observations: Ligh
                                "stated" if p.noise == "stated" else "training residuals")
 
 
-def design_noise_mag(result: FitResult, curves: Sequence[PlateLightCurve], own: Sequence[str] = ()) -> float:
+def design_noise_mag(result: FitResult, curves: Sequence[PlateLightCurve], own: Sequence[str] = (), estimator: str = "rms") -> float:
     """The observations' error (mag) estimated from a design fit's residuals over its degrees of
-    freedom (:func:`~spacefit.fitting.prediction.residual_noise`)."""
-    return residual_noise(design_members(curves, own), result) / LN_PER_MAGNITUDE
+    freedom (:func:`~spacefit.fitting.prediction.residual_noise`: ``"rms"`` or ``"central68"``)."""
+    return residual_noise(design_members(curves, own), result, estimator) / LN_PER_MAGNITUDE
