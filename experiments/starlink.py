@@ -194,6 +194,24 @@ def binned(residual: np.ndarray, by: np.ndarray, edges: np.ndarray) -> list[dict
     return out
 
 
+def write_geometry(path: Path, obs: LightCurveObservations, split: dict[str, list[tuple[str, np.ndarray]]]) -> None:
+    """Per observation: the sun's altitude and azimuth at the site, in shadow, night, night fold, date
+    half (1: the later) and the random split's held-out row (what ``starlink_lumos.py`` reads)."""
+    sun = sun_directions_enu(obs.time_utc, MOUNT_LEMMON)
+    night = nights(obs)
+    fold_of = np.zeros(len(obs), dtype=int)
+    for k, (_, held) in enumerate(split["night"]):
+        fold_of[held] = k
+    with open(path, "w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["sun_altitude_deg", "sun_azimuth_deg", "in_shadow", "night", "night_fold", "date_half", "random_held_out"])
+        for i in range(len(obs)):
+            alt = np.degrees(np.arcsin(sun[i, 2]))
+            az = np.degrees(np.arctan2(sun[i, 0], sun[i, 1])) % 360.0
+            w.writerow([f"{alt:.6f}", f"{az:.6f}", int(obs.in_shadow[i]), str(night[i]), fold_of[i],
+                        int(not split["date"][0][1][i]), int(split["random"][0][1][i])])
+
+
 def write_satellite_obj(path: Path) -> Path:
     """The two-part satellite mesh: the chassis underside, a 3.64 m^2 square at x = -15 m facing -z,
     and the solar array, a 2.52 m x 9 m (22.68 m^2) rectangle facing +y at x = +15 m, where it
@@ -312,16 +330,7 @@ def main() -> None:
     out["wall_s"] = time.time() - t0
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "starlink.json").write_text(json.dumps(out, indent=1))
-    fold_of = np.zeros(len(obs), dtype=int)
-    for k, (_, held) in enumerate(split["night"]):
-        fold_of[held] = k
-    with open(args.out / "geometry.csv", "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["sun_altitude_deg", "sun_azimuth_deg", "in_shadow", "night", "night_fold", "date_half", "random_held_out"])
-        for i in range(len(obs)):
-            az = np.degrees(np.arctan2(sun[i, 0], sun[i, 1])) % 360.0
-            w.writerow([f"{sun_altitude[i]:.6f}", f"{az:.6f}", int(obs.in_shadow[i]), str(night[i]), fold_of[i],
-                        int(not split["date"][0][1][i]), int(split["random"][0][1][i])])
+    write_geometry(args.out / "geometry.csv", obs, split)
     for kind, record in out["splits"].items():
         for m, r in record["models"].items():
             s = r["pooled"]
