@@ -110,8 +110,8 @@ ONE_SIGMA = 0.6826894921370859
 def residual_noise(observations: Sequence[ValueObservation], result: FitResult, estimator: str = "rms") -> float:
     """The observations' error estimated from a fit's own residuals r (model - data in their
     residual space, unscaled) at its values, n values, p free parameters: ``"rms"``,
-    sqrt(sum r^2 / (n - p)); ``"central68"``, the half-width of the central 68.27 % of |r| (the
-    ``ONE_SIGMA`` quantile of |r|, times sqrt(n / (n - p))), which equals the rms for normal
+    sqrt(sum r^2 / (n - p)); ``"central68"``, the half-width of the central 68.27 % of ``abs(r)`` (the
+    ``ONE_SIGMA`` quantile of ``abs(r)``, times sqrt(n / (n - p))), which equals the rms for normal
     residuals and, for heavy-tailed ones, gives 1-sigma intervals that hold 68 % of them where
     the rms's hold more.
 
