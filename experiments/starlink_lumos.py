@@ -1,11 +1,12 @@
 """The peer for experiments/starlink.py: the published model, lumos-sat 1.0.9 (Fankhauser, Askari &
-Tyson 2023), computed the same way on the same observations and the same held-out third.
+Tyson 2023), computed the same way on the same observations and the same splits (whole nights in 3
+folds, date halves, the former random third).
 
 Runs in its own environment (lumos-sat pins numpy 1.24 and astropy 5.2, which spacefit's do not
 allow): ``python3 -m venv .venv-lumos && .venv-lumos/bin/pip install lumos-sat``, then
 ``.venv-lumos/bin/python experiments/starlink_lumos.py`` after ``experiments/starlink.py`` (whose
 ``geometry.csv`` gives each observation's sun altitude and azimuth, by astropy offline, the Earth's
-shadow and the split).
+shadow and the splits).
 
 (a) lab tables, three ways: the paper's own lab model, a Binomial fit (Greynolds) to each table
     whose coefficients the package does not ship but the paper's repository does
@@ -15,9 +16,9 @@ shadow and the split).
     ``brdf.tools.fit`` (log space, values above the 1e-4 sr^-1 floor); and the tables used as they
     are, interpolated as ``sf.TabulatedBRDF`` does (:func:`tabulated`, written here again in numpy
     from its definition, on lumos-sat's own reading of the files).
-(b) observations: the two surfaces' Phong parameters fitted to the training two thirds of the
-    observed magnitudes (scipy least squares in magnitudes, as the paper's analysis), scored on
-    the held-out third.
+(b) observations: the two surfaces' Phong parameters fitted to each split's training rows of the
+    observed magnitudes (scipy least squares in magnitudes, as the paper's analysis, from the
+    Phong fits to the tables), scored on its held-out rows; pooled over a split's folds and per fold.
 Sun only (no Earthshine) unless ``--earthshine`` (lumos-sat's Earth mesh, a Lambertian Earth of
 albedo 0.3, 51 x 51 panels). Writes ``experiments/results/starlink/lumos.json`` and
 ``lumos_lambert.csv``: lumos-sat's AB magnitude of each observation with both surfaces Lambertian
@@ -137,8 +138,7 @@ def main() -> None:
            "azimuth": np.array([float(r["satellite_azimuth"]) for r in rows]),
            "magnitude": np.array([float(r["ab_magnitude"]) for r in rows])}
     g = list(csv.DictReader((RESULTS / "geometry.csv").read_text().splitlines()))
-    geometry = {"sun_alt": np.array([float(r["sun_altitude_deg"]) for r in g]), "sun_az": np.array([float(r["sun_azimuth_deg"]) for r in g]),
-                "held_out": np.array([r["held_out"] == "1" for r in g])}
+    geometry = {"sun_alt": np.array([float(r["sun_altitude_deg"]) for r in g]), "sun_az": np.array([float(r["sun_azimuth_deg"]) for r in g])}
     lambert = lumos.brdf.library.LAMBERTIAN(0.5)
     surfaces = [lumos.geometry.Surface(3.64, np.array([0, 0, -1]), lambert), lumos.geometry.Surface(22.68, np.array([0, 1, 0]), lambert)]
     with open(RESULTS / "lumos_lambert.csv", "w", newline="") as f:
@@ -162,35 +162,54 @@ def main() -> None:
             w.writerow(["row", "chassis_ab_magnitude", "array_ab_magnitude"])
             for i in range(len(rows)):
                 w.writerow([i, f"{alone['chassis'][i]:.6f}", f"{alone['array'][i]:.6f}"])
-    held = np.flatnonzero(geometry["held_out"])
-    train = np.flatnonzero(~geometry["held_out"])
     everything = np.arange(len(rows))
     lab = []
     for surface in ("chassis", "solar_array"):
         popt = lumos.brdf.tools.fit(str(DATA / f"{surface}_brdf.csv"), lumos.brdf.library.PHONG,
                                     bounds=([0, 0, 0], [1, 1, 1e4]), p0=(0.1, 0.5, 50), log_space=True, clip=1e-4)
         lab.extend(float(p) for p in popt)
-    out: dict = {"earthshine": args.earthshine, "lab_phong": lab}
-    predicted = magnitudes(lab, obs, geometry, everything, args.earthshine)
-    out["lab"] = {"all": scores(obs["magnitude"], predicted), "held_out": scores(obs["magnitude"][held], predicted[held])}
+    out: dict = {"earthshine": args.earthshine, "lab_phong": lab, "splits": {}}
+    lab_predictions = {"lab": magnitudes(lab, obs, geometry, everything, args.earthshine)}
     for name, chassis, array in (("lab_binomial", BINOMIAL_CHASSIS, BINOMIAL_ARRAY), ("lab_tabulated", tables["chassis"], tables["array"])):
-        predicted = magnitudes_of([lumos.geometry.Surface(*CHASSIS, chassis), lumos.geometry.Surface(*ARRAY, array)], obs, geometry,
-                                  everything, args.earthshine)
-        out[name] = {"all": scores(obs["magnitude"], predicted), "held_out": scores(obs["magnitude"][held], predicted[held])}
+        lab_predictions[name] = magnitudes_of([lumos.geometry.Surface(*CHASSIS, chassis), lumos.geometry.Surface(*ARRAY, array)], obs,
+                                              geometry, everything, args.earthshine)
+    lit = np.array([r["in_shadow"] == "0" for r in g])
+    folds_of = {"night": [(f"fold {k}", np.array([r["night_fold"] == str(k) for r in g])) for k in range(3)],
+                "date": [(f"date half {k}", np.array([r["date_half"] == str(k) for r in g])) for k in range(2)],
+                "random": [("random third", np.array([r["random_held_out"] == "1" for r in g]))]}
+    for kind, folds in folds_of.items():
+        # fitted on the sun-only run and the whole-night splits alone: a fit is 100 s of CPU
+        fit_here = not args.earthshine and kind != "random"
+        record: dict = {"models": {m: {"folds": []} for m in (*lab_predictions, *(["fitted"] if fit_here else []))}}
+        fitted_all = np.full(len(rows), np.nan)
+        for fold, held in folds:
+            for m, predicted in lab_predictions.items():
+                record["models"][m]["folds"].append({"fold": fold, "held_out": scores(obs["magnitude"][held], predicted[held])})
+            if not fit_here:
+                continue
+            train = np.flatnonzero(~held & lit)
 
-    def residual(p):
-        m = magnitudes(p, obs, geometry, train, False)
-        return np.where(np.isfinite(m), obs["magnitude"][train] - m, 0.0)
+            def residual(p, train=train):
+                m = magnitudes(p, obs, geometry, train, False)
+                return np.where(np.isfinite(m), obs["magnitude"][train] - m, 0.0)
 
-    fit = scipy.optimize.least_squares(residual, lab, bounds=([0, 0, 0, 0, 0, 0], [1, 1, 1e4, 1, 1, 1e4]), x_scale="jac")
-    fitted = magnitudes(fit.x, obs, geometry, everything, args.earthshine)
-    out["fitted_phong"] = fit.x.tolist()
-    out["fitted"] = {"held_out": scores(obs["magnitude"][held], fitted[held]), "in_sample": scores(obs["magnitude"][train], fitted[train])}
+            fit = scipy.optimize.least_squares(residual, lab, bounds=([0, 0, 0, 0, 0, 0], [1, 1, 1e4, 1, 1, 1e4]), x_scale="jac")
+            fitted_all[held] = magnitudes(fit.x, obs, geometry, np.flatnonzero(held), args.earthshine)
+            record["models"]["fitted"]["folds"].append({"fold": fold, "phong": fit.x.tolist(),
+                                                         "held_out": scores(obs["magnitude"][held], fitted_all[held])})
+        every = np.zeros(len(rows), dtype=bool)
+        for _, held in folds:
+            every |= held
+        for m, predicted in (*lab_predictions.items(), *([("fitted", fitted_all)] if fit_here else [])):
+            record["models"][m]["pooled"] = scores(obs["magnitude"][every], predicted[every])
+        out["splits"][kind] = record
     name = "lumos_earthshine.json" if args.earthshine else "lumos.json"
     (RESULTS / name).write_text(json.dumps(out, indent=1))
-    for key in ("lab", "lab_binomial", "lab_tabulated", "fitted"):
-        for part, s in out[key].items():
-            print(f"lumos {key:>13s} {part:>9s}: n {s['n']}, R {s['pearson_r']:.3f}, RMS {s['rms_mag']:.3f}, "
+    for kind, record in out["splits"].items():
+        for m, r in record["models"].items():
+            s = r["pooled"]
+            folds = ", ".join(f"{f['held_out']['rms_mag']:.3f}" for f in r["folds"])
+            print(f"lumos {kind:>6s} {m:>13s} pooled: n {s['n']}, R {s['pearson_r']:.3f}, RMS {s['rms_mag']:.3f} (folds {folds}), "
                   f"median {s['median_mag']:+.3f}, bias {s['bias_mag']:+.3f}")
 
 

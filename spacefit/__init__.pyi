@@ -24,6 +24,9 @@ from spacefit.fitting.passes import Frame as Frame
 from spacefit.fitting.passes import Pass as Pass
 from spacefit.fitting.plots import plot_comparison as plot_comparison
 from spacefit.fitting.plots import plot_convergence as plot_convergence
+from spacefit.fitting.prediction import Prediction as Prediction
+from spacefit.fitting.prediction import predictive_intervals as predictive_intervals
+from spacefit.fitting.prediction import residual_noise as residual_noise
 from spacefit.fitting.problem import FitRender as FitRender
 from spacefit.fitting.report import format_result as format_result
 from spacefit.fitting.report import write_fit_report as write_fit_report
@@ -93,6 +96,11 @@ from spacefit.scene.toml import load_scene as load_scene
 from spacefit.sensor import Sensor as Sensor
 from spacefit.sensor import read_sensor_file as read_sensor_file
 from spacefit.sensor import saturated_mask as saturated_mask
+from spacefit.studies.design import DesignMember as DesignMember
+from spacefit.studies.design import MagnitudePrediction as MagnitudePrediction
+from spacefit.studies.design import design_noise_mag as design_noise_mag
+from spacefit.studies.design import fit_design as fit_design
+from spacefit.studies.design import predict_design as predict_design
 from spacefit.studies.earthshine import Earth as Earth
 from spacefit.studies.earthshine import EarthshineSources as EarthshineSources
 from spacefit.studies.earthshine import earthshine_irradiance as earthshine_irradiance
@@ -145,5 +153,6 @@ __all__ = [
     'fitted_plates', 'light_curve_convergence', 'fit_light_curve', 'BRDFTableObservation', 'PlateLightCurve', 'RenderedLightCurve', 'Earth',
     'EarthshineSources', 'earthshine_sources', 'earthshine_irradiance', 'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings',
     'WrinkleSettings', 'PartSettings', 'target_plates', 'compare_plates_to_render', 'PlatesVsRender', 'choose_light_curve_model',
-    'ChosenLightCurve', 'SunTracking', 'AxisAngle', 'NadirSun', 'SunPointing', 'QuaternionTable',
+    'ChosenLightCurve', 'SunTracking', 'AxisAngle', 'NadirSun', 'SunPointing', 'QuaternionTable', 'DesignMember', 'fit_design',
+    'predict_design', 'design_noise_mag', 'MagnitudePrediction', 'Prediction', 'predictive_intervals', 'residual_noise',
 ]
