@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spacefit.digests import changed, digests
-from spacefit.errors import InputError, check_choice, check_name_list, check_path, check_type
+from spacefit.errors import InputError, check_choice, check_path, check_type
 from spacefit.fitting.resume import Resume
 from spacefit.geometry.mesh import export_stl
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
@@ -30,7 +30,6 @@ from spacefit.rendering.png import write_png
 from spacefit.rendering.renderer import Renderer, errors_only, kernel_log
 from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import Assembly, assemble, fold_notes
-from spacefit.scene.names import Name
 from spacefit.scene.overrides import parse_override
 from spacefit.scene.parameters import scene_keys
 from spacefit.scene.schema import Scene
@@ -220,7 +219,7 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     # deferred: the fitting stack (JAX, optimistix: 1.5 s) and the image files' readers (astropy), which renders never need
     from spacefit.fitting.loop import FitOptions, fit
     from spacefit.fitting.observation_files import ObservationFiles
-    from spacefit.fitting.problem import images_memory
+    from spacefit.fitting.problem import SAY_SIZE
     from spacefit.fitting.report import write_fit_report
     from spacefit.imageio import format_sensor_sources
 
@@ -235,10 +234,6 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
         said = "\n".join([*obs.notes, *([f"{path}: " + format_sensor_sources(obs.sensor, obs.sensor_sources)] if obs.sensor_sources else [])])
         _say(said, quiet or not said)
     images = [obs.reference for obs in observations]
-    # its size first (refused here if this machine cannot hold it, before anything is written)
-    names = check_name_list("free", free)
-    size, _ = images_memory(observations, names, {Name(n).parameter for n in names}, options.render.spp, allow_large=options.allow_large)
-    _say(f"{size} (estimate)", quiet)
     t_read = time.perf_counter() - t0
     display, last = Progress(f"fit {', '.join(free)}"), [0, 0]
 
@@ -259,9 +254,11 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     t0 = time.perf_counter()
     try:
         plumbing = Resume(checkpoint.update, checkpoint.end, checkpoint.ended, checkpoint.history if resume else ())
-        with warnings.catch_warnings():  # its size, said above
-            warnings.filterwarnings("ignore", message="a fit of .* needs about")
+        said = SAY_SIZE.set(lambda size: _say(size, quiet))  # its size, once its inputs are checked, before it renders
+        try:
             result = fit(observations, free, progress=progress, resume=plumbing, cluster=cluster, **options.keywords())
+        finally:
+            SAY_SIZE.reset(said)
         edited = changed(checkpoint.digests)  # the files read at the start, read again: a result of files that changed is none
         if edited:
             raise InputError(f"{', '.join(map(repr, edited))} changed while the fit ran (SHA-256 differs from the start's); "

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import dataclasses
 import warnings
+from contextvars import ContextVar
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -250,6 +251,11 @@ class FitRender:
         check_seeds([(self.seed, self.seed_grad)])
 
 
+# Where a fit's set-up says its size, every fit's (``spacefit fit``: on stderr, :func:`~spacefit.pipeline.fit_to_folder`
+# sets it); None: a fit above LARGE_FIT_BYTES warns it.
+SAY_SIZE: ContextVar[Callable[[str], None] | None] = ContextVar("SAY_SIZE", default=None)
+
+
 def setup(
     observations: Observation | ValueObservation | Sequenced | Sequence[Observation | ValueObservation | Sequenced],
     free: Sequence[str], *,
@@ -258,8 +264,8 @@ def setup(
 ) -> Setup:
     """Check every input and build the problem; nothing is rendered here. ``executor``: where the
     images' renders run, as one batch per step (:mod:`spacefit.fitting.frames`; None: each
-    image's own render functions in this process). A fit whose estimated memory (:func:`images_memory`)
-    is above :data:`~spacefit.rendering.memory.LARGE_FIT_BYTES` says it (a warning) before it starts.
+    image's own render functions in this process). A fit says its estimated memory (:func:`images_memory`)
+    to :data:`SAY_SIZE`, or, unset, warns it when above :data:`~spacefit.rendering.memory.LARGE_FIT_BYTES`.
 
     Raises:
         InputError: for any bad input; a fit whose estimated memory is more than this machine has
@@ -296,7 +302,10 @@ def setup(
     user.check_start(x0_user)
     if observations:
         size, estimate = images_memory(observations, user.names, image_names, render.spp, allow_large=allow_large)
-        if estimate > LARGE_FIT_BYTES:
+        say = SAY_SIZE.get()
+        if say is not None:
+            say(f"{size} (estimate)")
+        elif estimate > LARGE_FIT_BYTES:
             warnings.warn(f"{size} (estimate).", stacklevel=3)
     rms_index = None
     if wrinkle_coordinates == "rms" and {"wrinkles.D", "wrinkles.G"} <= set(user.names):
