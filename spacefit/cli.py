@@ -94,6 +94,8 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
                         "docs/guide/pass.md) in place of REFERENCE; --scene is the pass's one scene")
     f.add_argument("--per-frame", metavar="NAME[,NAME...]",
                    help="with --pass: parameters each frame has its own of, e.g. target.attitude_x_deg,image.scale")
+    f.add_argument("--large", action="store_true", help="run a fit (a pass of many frames) whose estimated memory, said "
+                   "before it starts, is more than this machine has available")
     f.add_argument("--workers", type=int, metavar="N", help="render on a local dask cluster of N worker processes")
     f.add_argument("--scheduler", metavar="ADDRESS", help="render on the dask scheduler at ADDRESS (tcp://host:8786)")
     f.add_argument("--scene", dest="scenes", action="append", required=True, metavar="SCENE.toml",
@@ -253,7 +255,8 @@ def _fit(args: argparse.Namespace) -> int:
         files = ObservationFiles(args.references, args.scenes, **reading)
     render = FitRender(**{k: v for k, v in (("spp", args.spp), ("spp_grad", args.spp_grad)) if v is not None})
     given = {"solver": args.solver, "loss": args.loss, "max_steps": args.max_steps, "stop": args.stop}
-    options = FitOptions(start=_start_values(args.start) or None, render=render, **{k: v for k, v in given.items() if v is not None})
+    options = FitOptions(start=_start_values(args.start) or None, render=render, allow_large=args.large,
+                         **{k: v for k, v in given.items() if v is not None})
     result = fit_to_folder(files, free, args.out, options, quiet=args.quiet, overwrite=args.overwrite, resume=args.resume,
                            cluster=_cluster(args))
     print(format_result(result))

@@ -219,6 +219,7 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     # deferred: the fitting stack (JAX, optimistix: 1.5 s) and the image files' readers (astropy), which renders never need
     from spacefit.fitting.loop import FitOptions, fit
     from spacefit.fitting.observation_files import ObservationFiles
+    from spacefit.fitting.problem import SAY_SIZE
     from spacefit.fitting.report import write_fit_report
     from spacefit.imageio import format_sensor_sources
 
@@ -253,7 +254,11 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     t0 = time.perf_counter()
     try:
         plumbing = Resume(checkpoint.update, checkpoint.end, checkpoint.ended, checkpoint.history if resume else ())
-        result = fit(observations, free, progress=progress, resume=plumbing, cluster=cluster, **options.keywords())
+        said = SAY_SIZE.set(lambda size: _say(size, quiet))  # its size, once its inputs are checked, before it renders
+        try:
+            result = fit(observations, free, progress=progress, resume=plumbing, cluster=cluster, **options.keywords())
+        finally:
+            SAY_SIZE.reset(said)
         edited = changed(checkpoint.digests)  # the files read at the start, read again: a result of files that changed is none
         if edited:
             raise InputError(f"{', '.join(map(repr, edited))} changed while the fit ran (SHA-256 differs from the start's); "
@@ -278,8 +283,8 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
 
 
 CHECKPOINT = "checkpoint.json"
-# FitOptions a resumed fit may change: how it solves, not what it fits.
-SOLVE_OPTIONS = ("solver", "max_steps", "start", "stop")
+# FitOptions a resumed fit may change: how it solves (or whether it may be large), not what it fits.
+SOLVE_OPTIONS = ("solver", "max_steps", "start", "stop", "allow_large")
 
 
 def _problem_of(value: Any, key: str) -> Any:

@@ -5,6 +5,7 @@ pass with per-frame attitude errors."""
 from __future__ import annotations
 
 import dataclasses
+import re
 
 import jax
 import numpy as np
@@ -13,6 +14,10 @@ from astropy.table import Table
 
 import spacefit as sf
 from spacefit.fitting.frames import FrameSpec, InProcess, Loaded, frame_jacobian, frame_part_image, frame_primal, run_frames, share_views
+from spacefit.fitting import problem
+from spacefit.fitting.problem import images_memory
+from spacefit.rendering import memory
+from spacefit.rendering.memory import describe_fit, fit_memory
 from spacefit.rendering.renderer import kernel_log
 from spacefit.scene.assembly import assemble
 
@@ -321,8 +326,11 @@ def test_a_worker_killed_mid_fit_changes_nothing(small_pass, client):
     same_fit(result, in_process)
 
 
-def test_spacefit_fit_pass_writes_the_frames_table_and_plot(small_pass, tmp_path, capsys):
+def test_spacefit_fit_pass_writes_the_frames_table_and_plot(small_pass, tmp_path, capsys, monkeypatch):
+    """It says its size first; with --large it runs on a machine whose available memory is below that."""
     from spacefit.cli import main
+
+    monkeypatch.setattr(memory, "available_memory_bytes", lambda: 2**20)
 
     folder = small_pass[4]
     scene = tmp_path / "scene.toml"
@@ -330,8 +338,11 @@ def test_spacefit_fit_pass_writes_the_frames_table_and_plot(small_pass, tmp_path
     out = tmp_path / "fit"
     code = main(["fit", "--pass", str(folder / "frames.csv"), "--scene", str(scene), "--free", "parts.legs.kd",
                  "--per-frame", "target.attitude_x_deg", "--start", "parts.legs.kd=0.4", "--spp", "4", "--max-steps", "2",
-                 "--out", str(out), "--quiet"])
+                 "--out", str(out), "--large"])
     assert code in (0, 3)  # converged, or not after two steps: the report is written either way
+    # its size first: 3 frames of 24 x 24 px, each seeing the albedo and its own attitude, at 4 spp
+    first = capsys.readouterr().err.splitlines()[0]
+    assert first == f"{describe_fit(3, 24, 24, fit_memory(3, 24 * 24, 2, 4))} (estimate)"
     assert {"frames.csv", "frames.png", "fit.json"} <= {p.name for p in out.iterdir()}
     rows = (out / "frames.csv").read_text().splitlines()
     assert len(rows) == 4 and "target.attitude_x_deg" in rows[0] and "chi2_dof" in rows[0] and "time_s" in rows[0]
@@ -460,3 +471,41 @@ def test_a_frames_cached_jacobian_is_keyed_by_its_seeds_too():
     x = np.array([0.3])
     assert frame_jacobian(spec, "k", x, 1, 2, loaded)[0][0, 0, 0] == 2.0
     assert frame_jacobian(spec, "k", x, 1001, 1002, loaded)[0][0, 0, 0] == 1002.0
+
+
+def test_a_fits_memory_estimate_grows_linearly_with_frames_from_its_inputs(small_pass):
+    """Each added frame adds the same bytes, more per pixel and per free column; a fit's estimate is
+    made from its images' count and size, the columns each frame sees (the shared albedo and its own
+    attitude: 2) and the fit's spp (None: the scene's)."""
+    steps = np.diff([fit_memory(n, 64 * 64, 2, 4) for n in range(1, 6)])
+    assert np.all(steps == steps[0]) and steps[0] > 0
+    assert fit_memory(2, 128 * 128, 2, 4) - fit_memory(1, 128 * 128, 2, 4) > steps[0]
+    assert fit_memory(2, 64 * 64, 3, 4) - fit_memory(1, 64 * 64, 3, 4) > steps[0]
+    obs, free, _, _, _ = small_pass
+    size, estimate = images_memory(obs, free, {"parts.legs.kd", "target.attitude_x_deg"}, None)
+    assert estimate == fit_memory(3, 24 * 24, 2, obs[0].scene.render.spp)
+    assert size == describe_fit(3, 24, 24, estimate)
+    assert images_memory(obs, free[:1], {"parts.legs.kd"}, 8)[1] == fit_memory(3, 24 * 24, 1, 8)
+
+
+def test_a_fit_too_large_for_the_machine_is_refused_with_its_estimate_and_nothing_written(small_pass, tmp_path, monkeypatch, capsys):
+    from spacefit.cli import main
+
+    obs, free, options, _, folder = small_pass
+    monkeypatch.setattr(memory, "available_memory_bytes", lambda: 2**20)
+    estimate = fit_memory(3, 24 * 24, 2, 8)
+    message = (f"a fit of 3 frames of 24 x 24 px needs about {estimate / 2**30:.2f} GiB of memory (estimate) and this machine has "
+               "0.00 GiB available; fit fewer frames or fewer pixels, or pass allow_large=True (--large) to run it.")
+    with pytest.raises(sf.InputError) as error:
+        sf.fit(obs, free, **options)
+    assert str(error.value) == message
+    assert images_memory(obs, free, {"parts.legs.kd", "target.attitude_x_deg"}, 8, allow_large=True)[1] == estimate
+    monkeypatch.setattr(problem, "LARGE_FIT_BYTES", estimate - 1)  # a large fit says its size before it starts
+    with pytest.warns(UserWarning, match=re.escape(f"{describe_fit(3, 24, 24, estimate)} (estimate).")):
+        problem.setup(obs, free, render=sf.FitRender(spp=8), allow_large=True)
+    scene = tmp_path / "scene.toml"
+    scene.write_text(obs[0].scene.to_toml())
+    code = main(["fit", "--pass", str(folder / "frames.csv"), "--scene", str(scene), "--free", "parts.legs.kd",
+                 "--per-frame", "target.attitude_x_deg", "--spp", "8", "--out", str(tmp_path / "fit")])
+    assert code == 2 and capsys.readouterr().err.strip() == f"spacefit: error: {message}"
+    assert [p.name for p in tmp_path.iterdir()] == ["scene.toml"]

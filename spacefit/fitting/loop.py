@@ -52,9 +52,9 @@ class FitOptions:
     construction, the rest by ``fit``'s set-up against the observations.
 
     Attributes:
-        solver, loss, start, render, max_steps, stop, wrinkle_coordinates: :func:`fit`'s arguments of
+        solver, loss, start, render, max_steps, stop, wrinkle_coordinates, allow_large: :func:`fit`'s arguments of
             those names; by default ``"lm"``, ``"pixel"``, the first scene's values, the scene's spp
-            (``FitRender()``), 50 steps, ``"noise"`` and ``"rms"``.
+            (``FitRender()``), 50 steps, ``"noise"``, ``"rms"`` and False.
     """
 
     solver: str | Solver = "lm"
@@ -64,6 +64,7 @@ class FitOptions:
     max_steps: int = DEFAULT_MAX_STEPS
     stop: str = "noise"
     wrinkle_coordinates: str = "rms"
+    allow_large: bool = False
 
     def __post_init__(self) -> None:
         _checked_solver(self.solver, self.max_steps, self.stop)
@@ -98,6 +99,7 @@ def fit(
     max_steps: int = FitOptions.max_steps,
     stop: str = FitOptions.stop,
     wrinkle_coordinates: str = FitOptions.wrinkle_coordinates,
+    allow_large: bool = FitOptions.allow_large,
     progress: ProgressCallback | None = None,
     resume: Resume = Resume(),
     cluster: Cluster | None = None,
@@ -149,14 +151,15 @@ def fit(
     The defaults are :class:`FitOptions`'s, which holds these settings as one value.
 
     Raises:
-        InputError: for any bad input, before rendering.
+        InputError: for any bad input, before rendering; a fit too large for this machine's memory (its estimate and
+            the memory available in the message), unless ``allow_large``.
     """
     engine = _checked_solver(solver, max_steps, stop)
     check_type("resume", resume, Resume, "an sf.Resume(on_step=..., ...)")
     executor = frame_executor(cluster)
     try:
         s = setup(observations, free, start=start, loss=loss, render=render, wrinkle_coordinates=wrinkle_coordinates,
-                  executor=executor)
+                  executor=executor, allow_large=allow_large)
         return _solve(s, engine, max_steps, stop, loss, progress, resume)
     finally:
         executor.close()

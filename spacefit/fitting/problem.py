@@ -13,6 +13,8 @@ its render in JAX (:mod:`spacefit.fitting.nuisance`).
 from __future__ import annotations
 
 import dataclasses
+import warnings
+from contextvars import ContextVar
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -29,6 +31,7 @@ from spacefit.fitting.observations.image import Observation, check_reference, im
 from spacefit.fitting.params import Bijection, FreeParameters, bijection
 from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.derivatives import check_seeds, check_spp
+from spacefit.rendering.memory import LARGE_FIT_BYTES, check_fit_memory, describe_fit
 from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import assemble
 from spacefit.scene.schema import Scene
@@ -248,18 +251,25 @@ class FitRender:
         check_seeds([(self.seed, self.seed_grad)])
 
 
+# Where a fit's set-up says its size, every fit's (``spacefit fit``: on stderr, :func:`~spacefit.pipeline.fit_to_folder`
+# sets it); None: a fit above LARGE_FIT_BYTES warns it.
+SAY_SIZE: ContextVar[Callable[[str], None] | None] = ContextVar("SAY_SIZE", default=None)
+
+
 def setup(
     observations: Observation | ValueObservation | Sequenced | Sequence[Observation | ValueObservation | Sequenced],
     free: Sequence[str], *,
     start: Mapping[str, float] | None = None, loss: str = "pixel", render: FitRender = FitRender(), wrinkle_coordinates: str = "rms",
-    executor: Executor | None = None,
+    executor: Executor | None = None, allow_large: bool = False,
 ) -> Setup:
     """Check every input and build the problem; nothing is rendered here. ``executor``: where the
     images' renders run, as one batch per step (:mod:`spacefit.fitting.frames`; None: each
-    image's own render functions in this process).
+    image's own render functions in this process). A fit says its estimated memory (:func:`images_memory`)
+    to :data:`SAY_SIZE`, or, unset, warns it when above :data:`~spacefit.rendering.memory.LARGE_FIT_BYTES`.
 
     Raises:
-        InputError: for any bad input.
+        InputError: for any bad input; a fit whose estimated memory is more than this machine has
+            available, unless ``allow_large``.
     """
     kinds = (Observation, ValueObservation, Sequenced)
     if not isinstance(observations, (*kinds, Sequence)):
@@ -290,6 +300,13 @@ def setup(
         scene_with_values(obs.scene, {n: v for n, v in start.items() if Name(n).parameter in image_names}, observation=k)
     x0_user = np.array([start[n] if n in start else _own_value(n, observations, others, image_names) for n in user.names], dtype=float)
     user.check_start(x0_user)
+    if observations:
+        size, estimate = images_memory(observations, user.names, image_names, render.spp, allow_large=allow_large)
+        say = SAY_SIZE.get()
+        if say is not None:
+            say(f"{size} (estimate)")
+        elif estimate > LARGE_FIT_BYTES:
+            warnings.warn(f"{size} (estimate).", stacklevel=3)
     rms_index = None
     if wrinkle_coordinates == "rms" and {"wrinkles.D", "wrinkles.G"} <= set(user.names):
         scene = observations[0].scene
@@ -317,6 +334,19 @@ def setup(
                        render.integrator, executor, blocks, image_names)
     noise_given = all(o.sensor is not None or o.sigma is not None for o in observations) and all(b.noise_known for b in blocks)
     return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index, given, noise_given, image_names, layout)
+
+
+def images_memory(images: Sequence[Observation], free: Sequence[str], image_names: frozenset[str] | set[str], spp: int | None, *,
+                  allow_large: bool = False) -> tuple[str, int]:
+    """A fit's size in words and its estimated peak memory (bytes) from its images (count, largest size),
+    the free parameters each one's renderer sees (``free``'s names in ``image_names``: the shared ones and its
+    share of the ``@k`` ones) and ``spp`` (None: the first scene's), :func:`~spacefit.rendering.memory.check_fit_memory`,
+    which refuses one this machine cannot hold unless ``allow_large``."""
+    height, width = max(o.reference.shape[0] for o in images), max(o.reference.shape[1] for o in images)
+    seen = [Name(n) for n in free if Name(n).parameter in image_names]
+    columns = sum(n.observation is None for n in seen) + -(-sum(n.observation is not None for n in seen) // len(images))
+    estimate = check_fit_memory(len(images), width, height, columns, spp or images[0].scene.render.spp, allow_large=allow_large)
+    return describe_fit(len(images), width, height, estimate), estimate
 
 
 def expanded(given: Sequence[Observation | ValueObservation | Sequenced]) -> tuple[

@@ -49,3 +49,41 @@ def check_memory(width: int, height: int, window_pixels: int, spp: int, split: b
         raise InputError(f"a {width} x {height} px render at {spp} spp needs about {estimate / 2**30:.1f} GiB and this machine has "
                          f"{limit / 2**30:.1f} GiB available; lower `render.resolution`{'' if split else ' or `spp`'}.")
     return estimate
+
+
+# A fit's memory besides the rendering's, fitted (rounded up) to the peak RSS of pass fits of 2 to 16
+# frames at 32 x 32 and 64 x 64 px, each frame with 2 free columns (experiments/pass_memory.py;
+# docs/guide/reliability.md, "Memory per frame"): the process with JAX, Mitsuba and a loaded scene
+# (610 MiB measured); per frame a fixed part (its compiled render, scene and records: 5.1 MiB
+# measured) and 1314 B per pixel for its image and 2 columns (reference, weights, rendered image,
+# Jacobian columns and the renders' caches), taken as the same per pixel for the image and each column.
+FIT_BASE_BYTES = 640 * 2**20
+FIT_FRAME_BYTES = 6 * 2**20
+FIT_FRAME_PIXEL_COLUMN_BYTES = 480
+# A fit estimated above this states its size before it starts (a warning; ``spacefit fit`` says every pass's).
+LARGE_FIT_BYTES = 2**30
+
+
+def fit_memory(frames: int, pixels: int, columns: int, spp: int) -> int:
+    """Estimate the peak memory (bytes) of a fit of ``frames`` images of ``pixels`` pixels each, each
+    frame's renderer seeing ``columns`` free parameters, rendered at ``spp``: the process's base, the
+    frames' own memory (:data:`FIT_FRAME_BYTES`, and :data:`FIT_FRAME_PIXEL_COLUMN_BYTES` per pixel for
+    the image and each column) and one render's wavefront at a time (:data:`BYTES_PER_SAMPLE`)."""
+    per_frame = FIT_FRAME_BYTES + FIT_FRAME_PIXEL_COLUMN_BYTES * pixels * (1 + columns)
+    return FIT_BASE_BYTES + frames * per_frame + BYTES_PER_SAMPLE * pixels * spp
+
+
+def describe_fit(frames: int, width: int, height: int, estimate: int) -> str:
+    """A fit's size in words: its frames, their size and its estimated memory."""
+    return f"a fit of {frames} frame{'s' * (frames != 1)} of {width} x {height} px needs about {estimate / 2**30:.2f} GiB of memory"
+
+
+def check_fit_memory(frames: int, width: int, height: int, columns: int, spp: int, *, allow_large: bool = False) -> int:
+    """Estimate a fit's peak memory (:func:`fit_memory`, bytes) and, unless ``allow_large``, refuse one
+    above the memory this machine has available."""
+    estimate = fit_memory(frames, width * height, columns, spp)
+    limit = available_memory_bytes()
+    if estimate > limit and not allow_large:
+        raise InputError(f"{describe_fit(frames, width, height, estimate)} (estimate) and this machine has {limit / 2**30:.2f} GiB "
+                         "available; fit fewer frames or fewer pixels, or pass allow_large=True (--large) to run it.")
+    return estimate
