@@ -22,6 +22,7 @@ def test_light_level_sweep_is_linear_in_irradiance(tmp_path):
         assert value == pytest.approx(mean["1"] * float(label), rel=1e-5)
 
 
+@pytest.mark.slow  # the study at reduced size, 36 s: the slow set
 def test_identifiability_study_shape(tmp_path):
     run_script("identifiability", "--out", str(tmp_path))  # the reduced study: 25 and 70 m at 64 and 128 px, 8 spp
     assert (tmp_path / "identifiability.png").stat().st_size > 0

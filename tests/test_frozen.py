@@ -98,6 +98,7 @@ def test_moved_vertices_are_never_replayed(scene):
         np.testing.assert_array_equal(image, fresh.drjit.render_primal(values(fresh, [x0 + dx]), 3))
 
 
+@pytest.mark.slow  # 23 s: the slow set (test_render keeps the primal's)
 def test_derivative_render_on_every_thread_equals_one_thread(scene):
     """Traced on all threads and splatted on one, the forward-mode render is Mitsuba's own
     (``mi.render`` and ``dr.forward_to``) wholly on one thread, bit for bit."""

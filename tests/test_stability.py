@@ -94,6 +94,7 @@ def test_edge_on_view_shows_the_panels_as_a_line():
     assert 0 < edge_on < 0.4 * face_on, (edge_on, face_on)
 
 
+@pytest.mark.slow  # the study at reduced size, 44 s: the slow set
 def test_stability_study_shape(tmp_path):
     """The reduced study, run as a script: every condition's values with both solvers, each run
     classified, files written, the easy start recovered."""
