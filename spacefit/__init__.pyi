@@ -33,6 +33,7 @@ from spacefit.fitting.report import write_fit_report as write_fit_report
 from spacefit.fitting.report import write_table_fit as write_table_fit
 from spacefit.fitting.result import FitResult as FitResult
 from spacefit.fitting.resume import Resume as Resume
+from spacefit.fitting.saved import read_fit as read_fit
 from spacefit.fitting.solvers import Adam as Adam
 from spacefit.fitting.solvers import SOLVERS as SOLVERS
 from spacefit.fitting.solvers import Status as Status
@@ -142,8 +143,8 @@ __all__ = [
     'Identifiability', 'InputError', 'Jacobian', 'Lambert', 'Mirror', 'Observation', 'ObservationFiles', 'Parameter', 'PartImage',
     'Renderer', 'Scene', 'Status', 'available_parameters', 'case_names', 'default_scene', 'fit', 'fit_to_folder', 'format_result',
     'identifiability', 'jacobian', 'load_case', 'load_scene', 'parameter_table', 'read_exr', 'render', 'render_function',
-    'render_to_folder', 'wm_rms', 'wm_rms_slope', 'write_exr', 'write_fit_report', 'Distortion', 'Intrinsics', 'ObservedImage', 'Sensor',
-    'distort_image', 'expected_dn', 'noise_variance_dn', 'observe', 'pixel_solid_angles', 'read_image', 'read_sensor_file',
+    'render_to_folder', 'wm_rms', 'wm_rms_slope', 'write_exr', 'write_fit_report', 'read_fit', 'Distortion', 'Intrinsics', 'ObservedImage',
+    'Sensor', 'distort_image', 'expected_dn', 'noise_variance_dn', 'observe', 'pixel_solid_angles', 'read_image', 'read_sensor_file',
     'saturated_mask', 'choose_exposure', 'write_observation', 'sensor_of', 'format_sensor_sources', 'MLI_SLOPE_RANGE', 'Pass',
     'PassObservation', 'Frame', 'frame_table', 'plot_frames', 'arc_pass', 'simulate_pass', 'read_sweep_file', 'sweep', 'verify_store',
     'StoreReport', 'ClusterError', 'Sensitivity', 'sensitivity', 'LightCurve', 'light_curve', 'plot_comparison', 'plot_convergence',

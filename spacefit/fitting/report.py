@@ -1,6 +1,6 @@
 """A fit's output folder: ``fit.json``, ``comparison.png`` and ``convergence.png``, and a text summary.
 
-* ``fit.json``: :meth:`FitResult.to_dict` (values, standard errors, correlation, status, warnings,
+* ``fit.json``: :meth:`FitResult.to_dict` (values, standard errors, correlation, status and its name, warnings,
   goodness of fit, per-part chi^2, history) plus ``timings_s``, ``versions`` and, if given, the ``inputs``;
 * ``fit.toml``: the fitted scene (:attr:`FitResult.scene`), which renders the fit again;
 * ``uncertainty.json``: :meth:`FitResult.uncertainty`, values, standard errors, units and the
@@ -18,7 +18,8 @@
   observation, NaN where not fitted; rows stored top row first, ``ROWORDER = 'TOP-DOWN'``), and
   ``residuals.png``, its picture (:func:`~spacefit.fitting.plots.plot_residuals`).
 
-The summary's (:func:`format_result`) first line is the verdict, :class:`~spacefit.fitting.solvers.Status`;
+:func:`~spacefit.fitting.saved.read_fit` reads the folder back into its :class:`FitResult` (without
+the renders). The summary's (:func:`format_result`) first line is the verdict, :class:`~spacefit.fitting.solvers.Status`;
 the second the goodness of fit (:mod:`spacefit.fitting.goodness`).
 """
 
