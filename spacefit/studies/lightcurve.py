@@ -213,9 +213,15 @@ class LightCurve:
         magnitude.set_ylabel(f"apparent {self.band} magnitude (mag; m$_{{sun}}$ = {self.sun_magnitude:.4g})")
         if len(axes) == 1:  # the irradiance each magnitude stands for, on the right
             sun_m, sun_e = self.sun_magnitude, self.sun_irradiance_w_m2
-            magnitude.secondary_yaxis("right", functions=(lambda m: sun_e * 10.0 ** (-0.4 * (np.asarray(m) - sun_m)),
-                                                          lambda e: sun_m - 2.5 * np.log10(np.maximum(np.asarray(e), 1e-300) / sun_e))
-                                      ).set_ylabel("irradiance at the observer (W m$^{-2}$)")
+
+            def irradiance_of(m: np.ndarray) -> np.ndarray:  # the magnitude's definition, inverted
+                return sun_e * 10.0 ** (-0.4 * (np.asarray(m) - sun_m))
+
+            def magnitude_of(e: np.ndarray) -> np.ndarray:  # E <= 0, which matplotlib may probe, has no magnitude: clipped
+                return sun_m - 2.5 * np.log10(np.maximum(np.asarray(e), np.finfo(float).tiny) / sun_e)
+
+            second = magnitude.secondary_yaxis("right", functions=(irradiance_of, magnitude_of))
+            second.set_ylabel("irradiance at the observer (W m$^{-2}$)")
         for panel in axes:
             panel.set_xlabel(axis_label(self.against))
         errors = f"1-sigma Monte Carlo errors of {self.seeds} seeds" if known else "one seed: Monte Carlo error unknown"
