@@ -137,6 +137,26 @@ def test_frames_without_a_known_noise_draw_no_chi2_panel_and_say_why():
     assert len(sf.plot_frames(frame_rows())) == 2  # with the noise known: its chi^2 / dof too
 
 
+def test_a_frame_table_reads_back_as_written(tmp_path):
+    from spacefit.fitting.pass_report import write_frame_table
+
+    rows = [{"frame": k, "file": f"f{k}.fits", "time": "", "time_s": 10.0 * k, "chi2_dof": 1.0 + 0.1 * k, "misfit": k == 2,
+             "render_noise": 1 / 3, "target.attitude_z_deg": 0.1 * k, "target.attitude_z_deg.stderr": math.inf if k else math.nan}
+            for k in range(3)]
+    del rows[1]["chi2_dof"]  # a frame without its goodness (none in the fit)
+    write_frame_table(tmp_path / "frames.csv", rows)
+    read = sf.read_frame_table(tmp_path / "frames.csv")
+    assert [list(r) for r in read] == [list(r) for r in rows] and math.isnan(read[0]["target.attitude_z_deg.stderr"])
+    assert read[1:] == rows[1:] and {k: v for k, v in read[0].items() if "stderr" not in k} == {
+        k: v for k, v in rows[0].items() if "stderr" not in k}  # floats exactly, types as frame_table's
+    assert len(sf.plot_frames(read)) == 2
+    (tmp_path / "frames.csv").write_text("frame,misfit,time_s\n0,maybe,1.0\n")
+    with pytest.raises(sf.InputError, match=r"line 2: misfit = 'maybe' is not True or False\.$"):
+        sf.read_frame_table(tmp_path / "frames.csv")
+    with pytest.raises(sf.InputError, match="no frame table there"):
+        sf.read_frame_table(tmp_path / "nothing.csv")
+
+
 @pytest.mark.parametrize("name", FIGURES)
 def test_every_figure_lays_out_its_panels_in_the_figure_given(name):
     draw, count, _ = FIGURES[name]

@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from spacefit.errors import InputError
+from spacefit.errors import InputError, check_path
 from spacefit.fitting.passes import Pass, elapsed_seconds
 from spacefit.scene.names import Name
 
@@ -48,13 +48,58 @@ def frame_table(result: Any, frames: Pass | None = None, *, files: Sequence[str 
 
 
 def write_frame_table(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> None:
-    """The rows of :func:`frame_table` as CSV (a column per key; empty where a row has none)."""
+    """The rows of :func:`frame_table` as CSV (a column per key; empty where a row has none; numbers
+    as Python writes them, so that :func:`read_frame_table` reads them back exactly)."""
 
     keys = list(dict.fromkeys(key for row in rows for key in row))
     with open(path, "w", newline="", encoding="utf-8") as f:
         writer = csv.DictWriter(f, keys)
         writer.writeheader()
         writer.writerows(rows)
+
+
+# frames.csv's columns that are not numbers (:func:`frame_table`'s keys): text, whole numbers, flags.
+TEXT_COLUMNS, INTEGER_COLUMNS, FLAG_COLUMNS = ("file", "time"), ("frame",), ("misfit",)
+
+
+def read_frame_table(path: str | Path) -> list[dict[str, Any]]:
+    """The rows of a fit's ``frames.csv`` (:func:`frame_table`'s, as the fit wrote them) back as
+    :func:`frame_table` gives them: ``file`` and ``time`` text, ``frame`` an int, ``misfit`` a bool,
+    the rest floats; a value a row did not have (empty) is left out of it. :func:`plot_frames` draws them.
+
+    Raises:
+        InputError: not a path, no such file, or a cell that is not what its column holds.
+    """
+    path = check_path("path", path)
+    if not path.is_file():
+        raise InputError(f"`path` {str(path)!r}: no frame table there (a pass's fit writes frames.csv).")
+    with open(path, newline="", encoding="utf-8") as f:
+        table = list(csv.DictReader(f))
+    rows = []
+    for line, cells in enumerate(table, start=2):  # line 1 is the header
+        row: dict[str, Any] = {}
+        for key, cell in cells.items():
+            if key in TEXT_COLUMNS:
+                row[key] = cell
+            elif cell != "":
+                row[key] = _cell(key, cell, f"{str(path)!r} line {line}")
+        rows.append(row)
+    return rows
+
+
+def _cell(key: str, cell: str, where: str) -> int | bool | float:
+    """A frames.csv cell of column ``key`` as :func:`frame_table` had it."""
+    if key in FLAG_COLUMNS and cell in ("True", "False"):
+        return cell == "True"
+    try:
+        if key in INTEGER_COLUMNS:
+            return int(cell)
+        if key not in FLAG_COLUMNS:
+            return float(cell)
+    except ValueError:
+        pass
+    what = "a whole number" if key in INTEGER_COLUMNS else "True or False" if key in FLAG_COLUMNS else "a number"
+    raise InputError(f"{where}: {key} = {cell!r} is not {what}.")
 
 
 def frame_panels(rows: Sequence[Mapping[str, Any]]) -> list[str]:
