@@ -340,7 +340,7 @@ def _checkpointed_fit(out_dir: str | Path, solve: Callable[[dict[str, Any], Prog
         raise
     if not result.status.interrupted:
         checkpoint.remove()
-    _say(f"wrote {Path(out_dir) / 'fit.json'}, fit.toml, uncertainty.json and the figures", quiet)
+    _say(f"wrote {Path(out_dir) / 'fit.json'} and the rest of the report", quiet)
     return result
 
 

@@ -146,10 +146,14 @@ def _point_table(path: Path) -> tuple[list[dict[str, Any]], np.ndarray, np.ndarr
 
 
 def _number(column: str, value: Any, row: int) -> float:
-    """A table cell that must be a number."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise InputError(f"row {row}'s `{column}` must be a number, got {value!r}.")
-    return float(value)
+    """A table cell that must be a finite number (a column with a word in it is read as text)."""
+    try:
+        number = float(value) if isinstance(value, (int, float, str)) and not isinstance(value, bool) else None
+    except ValueError:
+        number = None
+    if number is None or not np.isfinite(number):
+        raise InputError(f"row {row}'s `{column}` must be a finite number, got {value!r}.")
+    return number
 
 
 def _with_sigma(observations: LightCurveObservations, sigma_mag: float) -> LightCurveObservations:
