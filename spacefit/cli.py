@@ -296,7 +296,7 @@ def _fit_light_curve(args: argparse.Namespace) -> int:
     """Run ``spacefit fit-light-curve``; exit code 0 when the fit succeeded, else the verdict's (:func:`exit_code`)."""
     # deferred: the fitting stack imports JAX and optimistix (1.5 s), which render never needs
     _load("spacefit.fitting.loop", "spacefit.studies.lightcurve_files", "spacefit.fitting.report")
-    from spacefit.pipeline import fit_light_curve_to_folder
+    from spacefit.pipeline import fit_light_curve_to_folder  # here: with the light-curve readers (astropy, JAX) loaded above
     from spacefit.studies.lightcurve_files import LightCurveFiles
 
     files = LightCurveFiles(args.curve, args.scene, overrides=args.overrides, band=args.band, site=_site(args.site),

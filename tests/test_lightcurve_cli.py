@@ -56,7 +56,7 @@ def test_a_light_curve_fitted_from_the_command_line_recovers_the_albedo(case, tm
     out = tmp_path / "fit"
     assert main(args(case, out)) == 0, capsys.readouterr()
     report = json.loads((out / "fit.json").read_text())
-    assert report["status"] == "converged" or report["success"]
+    assert report["success"] and report["status"].startswith("converged")
     kd, error = report["values"]["parts.legs.kd"], report["stderr"]["parts.legs.kd"]
     assert abs(kd - TRUTH) < 3 * error < 0.15, (kd, error)
     assert {"fit.json", "uncertainty.json", "convergence.png", "observation0.png"} <= {p.name for p in out.iterdir()}
@@ -72,7 +72,7 @@ def test_a_light_curve_fitted_from_the_command_line_recovers_the_albedo(case, tm
         rows[i] = f"{float(m) - 0.5!r},{rest}"
     (wrong / "curve.csv").write_text("\n".join(rows) + "\n")
     assert main(args(wrong, tmp_path / "misfit")) == MISFIT
-    assert json.loads((tmp_path / "misfit" / "fit.json").read_text())["status"] == "misfit"
+    assert json.loads((tmp_path / "misfit" / "fit.json").read_text())["status"].startswith("misfit")
 
 
 class Killed(BaseException):
