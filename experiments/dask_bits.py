@@ -3,7 +3,8 @@
 For each frame count, the tests' reduced pass (tests/test_pass.py ``small_pass``: frames at 24 x 24 px,
 64 spp, each turned off its table's attitude; the legs' albedo and each frame's attitude free, 8 spp)
 is fitted in this process and on a new local cluster of 2 single-threaded worker processes; it
-prints, per step, the loss of each and their relative difference, then the largest relative
+prints, per step, the loss of each and their relative difference (and their loss noises',
+:func:`~spacefit.fitting.stopping.loss_noise`), then the largest relative
 difference of the values and the standard errors (0: the same bit for bit).
 
 Usage: python experiments/dask_bits.py [FRAMES ...]   (default: 3 5)
@@ -46,7 +47,8 @@ def compare(frames: int, folder: Path) -> None:
     t2 = time.perf_counter()
     print(f"{frames} frames: in process {t1 - t0:.1f} s, on 2 workers {t2 - t1:.1f} s; status {here.status.value} / {there.status.value}")
     for a, b in zip(here.history, there.history):
-        print(f"  step {a['step']:2d}  loss {a['loss']!r:>22} {b['loss']!r:>22}  relative difference {relative(a['loss'], b['loss']):.2e}")
+        print(f"  step {a['step']:2d}  loss {a['loss']!r:>22} {b['loss']!r:>22}  relative difference {relative(a['loss'], b['loss']):.2e}; "
+              f"loss noise {relative(a['loss_noise'], b['loss_noise']):.2e}")
     if len(here.history) != len(there.history):
         print(f"  steps differ: {len(here.history)} against {len(there.history)}")
     values = max(relative(here.values[n], there.values[n]) for n in here.values)
