@@ -161,3 +161,23 @@ def test_light_curve_files_read_a_point_tables_scene_values(quick):
     np.testing.assert_array_equal(curve.magnitude_sigma, [SIGMA_MAG] * 3)
     assert sf.LightCurveFiles(quick / "nosigma.csv", quick / "scene.toml").load().magnitude_sigma is None
     assert scene_value(curve.scene, "parts.legs.kd") == TRUTH
+
+
+def test_light_curve_files_take_an_observers_file_in_the_targets_frame(quick, tmp_path):
+    """An ECSV light curve of sun and observer directions in the target's frame (sf.write_light_curve):
+    each lit observation a point at its geometry with the scene's camera, the one in the Earth's shadow
+    left out, the magnitudes carried to the median range by the inverse square law; a given
+    `sigma_mag` where the file states no errors."""
+    sun = np.array([[0.0, 1.0, 1.0], [1.0, 0.0, 1.0], [0.0, 0.0, 1.0], [1.0, 1.0, 0.0]])
+    observations = sf.LightCurveObservations(np.array([5.0, 5.5, 6.0, 7.0]), None, "V", sun, np.array([[0.0, 0.0, 1.0]] * 4),
+                                             np.array([1e6, 2e6, 4e6, 1e6]), np.array([False, False, False, True]),
+                                             np.array([f"2026-01-01T00:00:0{k}" for k in range(4)]), "test")
+    path = sf.write_light_curve(observations, tmp_path / "curve.ecsv")
+    curve = sf.LightCurveFiles(path, quick / "scene.toml", sigma_mag=0.02).load()
+    assert len(curve.points) == 3 and set(curve.geometry) == {"target.attitude_x_deg", "target.attitude_y_deg", "target.attitude_z_deg",
+                                                              "sun.elevation_deg", "sun.azimuth_deg"}
+    np.testing.assert_allclose(curve.magnitude, [5.0 + 5 * np.log10(2.0), 5.5, 6.0 - 5 * np.log10(2.0)])
+    np.testing.assert_array_equal(curve.magnitude_sigma, [0.02] * 3)
+    assert curve.observer_range_m == 2e6
+    with pytest.raises(sf.InputError, match="`sigma_mag` must be"):
+        sf.LightCurveFiles(path, quick / "scene.toml", sigma_mag=-0.1)
