@@ -7,7 +7,11 @@ prints, per step, the loss of each and their relative difference (and their loss
 :func:`~spacefit.fitting.stopping.loss_noise`), then the largest relative
 difference of the values and the standard errors (0: the same bit for bit).
 
-Usage: python experiments/dask_bits.py [FRAMES ...]   (default: 3 5)
+With ``--dn`` the frames are DN through a sensor (tests/test_pass.py's ``PASS_SENSOR``) and each
+frame frees its attitude about x, y and z and its image scale (5 parameters a frame, as the hidden
+observations' passes were fitted).
+
+Usage: python experiments/dask_bits.py [--dn] [FRAMES ...]   (default: 3 5)
 """
 
 from __future__ import annotations
@@ -28,13 +32,19 @@ def relative(a: float, b: float) -> float:
     return 0.0 if a == b else abs(a - b) / max(abs(a), abs(b))
 
 
-def compare(frames: int, folder: Path) -> None:
+# A sensor of tests/test_pass.py's DN passes.
+SENSOR = sf.Sensor(radiometric_scale_dn_per_w_m2_sr=500.0, gain_dn_per_electron=0.5, bias_dn=100.0, read_noise_electrons=5.0,
+                   bit_depth=16, full_well_electrons=None, diffraction=False, psf_sigma_px=0.0)
+PER_FRAME = {False: ["target.attitude_x_deg"], True: ["target.attitude_x_deg", "target.attitude_y_deg", "target.attitude_z_deg", "image.scale"]}
+
+
+def compare(frames: int, folder: Path, dn: bool = False) -> None:
     base = sf.load_scene("spacefit/synthetic/panels.toml", {"render.resolution": [24, 24], "camera.pixel_pitch_mm": 100.0})
     offsets = [0.2 * np.cos(2.1 * k) for k in range(frames)]
-    table = sf.simulate_pass(base, sf.arc_pass(frames), folder / f"frames{frames}", spp=64,
-                             errors=[{"target.attitude_x_deg": e} for e in offsets])
+    table = sf.simulate_pass(base, sf.arc_pass(frames), folder / f"frames{frames}{'dn' * dn}", spp=64,
+                             errors=[{"target.attitude_x_deg": e} for e in offsets], sensor=SENSOR if dn else None)
     obs = [sf.Observation.from_file(f.file, s) for f, s in zip(table.frames, table.scenes(base))]
-    free = ["parts.legs.kd", *table.per_frame(["target.attitude_x_deg"])]
+    free = ["parts.legs.kd", *table.per_frame(PER_FRAME[dn])]
     options = {"start": {"parts.legs.kd": 0.4}, "render": sf.FitRender(spp=8), "max_steps": 6}
     t0 = time.perf_counter()
     here = sf.fit(obs, free, **options)
@@ -45,7 +55,7 @@ def compare(frames: int, folder: Path) -> None:
     finally:
         close()
     t2 = time.perf_counter()
-    print(f"{frames} frames: in process {t1 - t0:.1f} s, on 2 workers {t2 - t1:.1f} s; status {here.status.value} / {there.status.value}")
+    print(f"{frames} {'DN ' * dn}frames, {len(free)} free: in process {t1 - t0:.1f} s, on 2 workers {t2 - t1:.1f} s; status {here.status.value} / {there.status.value}")
     for a, b in zip(here.history, there.history):
         print(f"  step {a['step']:2d}  loss {a['loss']!r:>22} {b['loss']!r:>22}  relative difference {relative(a['loss'], b['loss']):.2e}; "
               f"loss noise {relative(a['loss_noise'], b['loss_noise']):.2e}")
@@ -59,5 +69,6 @@ def compare(frames: int, folder: Path) -> None:
 
 if __name__ == "__main__":
     with tempfile.TemporaryDirectory() as tmp:
-        for n in [int(a) for a in sys.argv[1:]] or [3, 5]:
-            compare(n, Path(tmp))
+        dn = "--dn" in sys.argv[1:]
+        for n in [int(a) for a in sys.argv[1:] if a != "--dn"] or [3, 5]:
+            compare(n, Path(tmp), dn)
