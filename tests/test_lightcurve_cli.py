@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_lightcurve import lander, observed, turning
+from helpers import lander, observed, turning
 
 import spacefit as sf
 from spacefit.cli import MISFIT, main
