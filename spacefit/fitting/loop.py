@@ -29,7 +29,7 @@ from spacefit.fitting.problem import FitRender, Setup, setup
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.resume import Resume
 from spacefit.fitting.solvers import Outcome, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name
-from spacefit.fitting.stopping import NoiseFloor, loss_noise
+from spacefit.fitting.stopping import REJECTED_PATIENCE, REJECTED_RTOL, NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
 from spacefit.precision import float64
@@ -239,7 +239,8 @@ class _Steps:
         # the same point evaluated again is no step, whatever the rounding of its loss (a solver that
         # cannot move re-evaluates its point, and the sum's rounding differs between compiled steps)
         same = self.best_u is not None and np.array_equal(step.u, self.best_u)
-        accepted = not same and self.floor.record(step.loss)
+        # (a resumed solve's first step evaluates its best point again: no step of the interrupted solve's)
+        accepted = not self.restarted and self.floor.record(step.loss, new_point=not same)
         if accepted:
             self.best_u, self.best_loss = step.u, step.loss
             if self.noise_stop:
@@ -262,12 +263,11 @@ class _Steps:
     def resumed(self, history: Sequence[Mapping[str, Any]], u: jax.Array) -> None:
         """Go on with the interrupted solve whose steps were ``history`` and whose best point is ``u``:
         its entries begin this history, and the stop rule's record is theirs again (each loss recorded
-        as the solve recorded it, the evaluations of the best point again left out)."""
+        as the solve recorded it, an evaluation of the best point again a rejected step)."""
         self.history = [{**entry, "loss": _number(entry["loss"]), "loss_noise": _number(entry["loss_noise"])} for entry in history]
         best = None
         for entry in self.history:
-            if best is None or entry["values"] != best:
-                self.floor.record(entry["loss"])
+            self.floor.record(entry["loss"], new_point=best is None or entry["values"] != best)
             if entry["accepted"] or best is None:
                 best = entry["values"]
         self.floor.set_noise(self.history[-1]["loss_noise"])
@@ -351,6 +351,11 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
             warnings.insert(0, f"a misfit: {quality.line()}; the standard errors assume a correct model and are too small.")
         elif status is Status.UNJUDGED:
             warnings.insert(0, f"no verdict: {quality.line()}.")
+        elif status is Status.NO_PROGRESS and outcome.status is Status.NO_BETTER_POINT:
+            warnings.insert(0, f"the fit did not succeed ({status}): its last {REJECTED_PATIENCE} trial steps each raised the loss by "
+                               f"less than {REJECTED_RTOL:g} of the start's, so the solver stopped: no step along its direction lowers "
+                               f"the loss here (the start is the loss's minimum for these free parameters, or the data need another "
+                               f"one freed); {quality.line()}.")
         elif not status.success:
             warnings.insert(0, f"the fit did not succeed ({status}).")
     else:
