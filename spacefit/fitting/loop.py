@@ -176,8 +176,9 @@ def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progr
     fp, problem = s.solver_params, s.problem
 
     def residual_u(u: jax.Array) -> jax.Array:
-        # renders are float32; the solver works in the dtype of u (float64) throughout
-        return problem.residual_x(fp.to_physical(u)).astype(u.dtype)
+        # renders are float32; the solver works in the dtype of u (float64) throughout. The residuals it
+        # descends: its direction descends the loss its steps are judged by (spacefit.fitting.losses)
+        return problem.descent_x(fp.to_physical(u)).astype(u.dtype)
 
     # a model without Monte Carlo noise (closed-form value observations only) has no noise floor to stop at
     steps = _Steps(s, stop == "noise" and is_least_squares(engine) and problem.rendered, max_steps, progress, resume.on_step)
@@ -244,8 +245,8 @@ class _Steps:
         if accepted:
             self.best_u, self.best_loss = step.u, step.loss
             if self.noise_stop:
-                r = step.residuals if step.residuals is not None else np.asarray(problem.residual_x(x_solver))
-                self.floor.set_noise(loss_noise(r, np.asarray(problem.residual_x_independent(x_solver))))
+                r = step.residuals if step.residuals is not None else np.asarray(problem.descent_x(x_solver))
+                self.floor.set_noise(loss_noise(r, np.asarray(problem.descent_x_independent(x_solver))))
         x = np.asarray(s.to_user(x_solver))
         self.history.append({"step": k, "loss": step.loss, "accepted": accepted, "loss_noise": self.floor.noise,
                              "values": dict(zip(s.user.names, x.tolist())), "time_s": time.perf_counter() - self.t0})
