@@ -336,12 +336,12 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         x_user, cov, loss_value, extras = estimate(s, x, correct=steps.moved)
         stderr, corr = stderr_corr(cov)
         warnings = warnings_for(s.user, x_user, stderr, corr)
-        quality, r, noise, renders = judged_goodness(s, jnp.asarray(x), loss)
+        quality, r, noise, renders, signal = judged_goodness(s, jnp.asarray(x), loss)
         residuals = [*(np.where(used[..., None], ref - render, np.nan) for ref, render, used in zip(problem.references, renders, problem.used)),
                      *(b.data.value - render for b, render in zip(problem.blocks, renders[len(problem.references):]))]
         if loss == "pixel":
             per_part = part_goodness(r, noise, problem, quality)
-            own_quality = per_observation(r, noise, s, quality.samples_factor)
+            own_quality = per_observation(r, noise, s, quality.samples_factor, signal)
         at_bound = any(b.at_bound(float(v)) for b, v in zip(s.user.bijections, x_user))
         pixels = loss == "pixel"
         status = verdict(status, steps.moved, at_bound, quality.misfit and pixels, quality.noise_known and not quality.judged and pixels)
@@ -359,6 +359,7 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
                                f"one freed); {quality.line()}.")
         elif not status.success:
             warnings.insert(0, f"the fit did not succeed ({status}).")
+        warnings += _own_misfits(s, own_quality)
     else:
         warnings = ["the solve produced non-finite parameters; no estimate is reported."]
         status = Status.NONFINITE
@@ -373,6 +374,18 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         units=[*problem.units, *(b.data.unit for b in problem.blocks)], goodness=quality, residuals=residuals,
         observation_goodness=own_quality, observations=tuple(o for o, _ in s.layout), entries=tuple(e for _, e in s.layout),
     )
+
+
+def _own_misfits(s: Setup, own: Sequence[Goodness]) -> list[str]:
+    """A warning per observation whose own residuals are a misfit (:func:`~spacefit.fitting.judging.per_observation`),
+    named by its frame where it is a pass's: a pooled verdict within range can hold a frame that is not."""
+    out = []
+    for observation, entries in s.layout:
+        for j, k in enumerate(entries):
+            if k < len(own) and own[k].misfit:
+                name = f"frame {j} of the pass (observation {k})" if isinstance(observation, Sequenced) else f"observation {k}"
+                out.append(f"{name} is a misfit on its own: chi^2/dof {own[k].chi2_dof:.3f} above its limit {own[k].limit:.3f}.")
+    return out
 
 
 def _fitted_scene(s: Setup, values: Mapping[str, float]) -> Scene | None:

@@ -82,6 +82,7 @@ class Problem:
     spp: tuple[int, ...] = ()  # per image, the samples per pixel of its primal renders
     reference_spp: tuple[int | None, ...] = ()  # per image, its reference's (Observation.render_spp)
     blocks: tuple[Block, ...] = ()  # the value observations' residual blocks, after the images' pixels
+    dark: tuple[float, ...] = ()  # per image, its model of no light in its unit (a sensor's bias, DN; 0 for radiance)
 
     @property
     def rendered(self) -> bool:
@@ -99,7 +100,7 @@ def _problem(
     seed: int, seed_grad: int, integrator: str, executor: Executor | None = None, blocks: Sequence[Block] = (),
     image_names: frozenset[str] = frozenset(),
 ) -> Problem:
-    residuals, descents, references, spread, to_units, units, used_pixels, specs, shapes = [], [], [], [], [], [], [], [], []
+    residuals, descents, references, spread, to_units, units, used_pixels, specs, shapes, dark = [], [], [], [], [], [], [], [], [], []
     # the image nuisances act on the render in JAX; each renderer sees the other parameters it knows
     # (``image_names``), an observation's own pose (``target.attitude_z_deg@k``) in place of the shared
     # one; every observation's render of a step runs in one batch (spacefit.fitting.frames)
@@ -119,6 +120,7 @@ def _problem(
         descents.append(image_residual(obs, ref, used, loss, descent=True))
         to_units.append(in_unit_of(obs, ref.shape[-1], assembly.intrinsics))
         units.append(RADIANCE_UNIT if obs.sensor is None else DN_UNIT)
+        dark.append(0.0 if obs.sensor is None else float(obs.sensor.bias_dn))
         references.append(ref)
         used_pixels.append(np.all(used, axis=-1))
         blur = 0.0 if obs.sensor is None else psf_rms_px(obs.sensor, assembly.intrinsics, ref.shape[-1])
@@ -185,7 +187,7 @@ def _problem(
     return Problem(free, lambda x: residual_at(x, main, 0), lambda x: residual_at(x, independent, 1), reverse,
                    lambda x: models_seeded(x, 0), part_images, references, models_seeded, residual_of, resampled,
                    lambda x: residual_at(x, main, 0, 2), lambda x: residual_at(x, independent, 1, 2), all(o.sensor is not None for o in observations) and all(b.noise_known for b in blocks), tuple(spread),
-                   tuple(units), tuple(used_pixels), spps, tuple(o.render_spp for o in observations), tuple(blocks))
+                   tuple(units), tuple(used_pixels), spps, tuple(o.render_spp for o in observations), tuple(blocks), tuple(dark))
 
 
 def _seen(free: FreeParameters, k: int, image_names: frozenset[str]) -> tuple[tuple[str, ...], np.ndarray]:
