@@ -159,7 +159,7 @@ SENSOR = sf.Sensor(radiometric_scale_dn_per_w_m2_sr=10000.0, gain_dn_per_electro
                    bit_depth=16, full_well_electrons=None, diffraction=False, psf_sigma_px=1.0)
 
 
-@pytest.mark.slow  # 60 s at load 8: two Jacobians and 12 renders
+@pytest.mark.slow  # 2 min at load 8: two Jacobians, 12 renders and a fit of 16 steps
 @float64
 def test_the_solvers_direction_descends_the_loss_it_is_judged_by():
     """Far from the data the held-noise Jacobian's gradient J^T r was not that of its loss 0.5 |r|^2 (the noise
@@ -185,3 +185,9 @@ def test_the_solvers_direction_descends_the_loss_it_is_judged_by():
     # equal but for the Jacobian's Monte Carlo noise (derivative renders with their own seed): 4 % here
     assert cosine(descent, descent_fd) > 0.999 and np.linalg.norm(descent - descent_fd) < 0.05 * np.linalg.norm(descent_fd)
     np.testing.assert_allclose(descent, held, rtol=1e-6)  # the quasi-likelihood's estimating function, both
+    # the fit from there moves (it re-tried its start 27 times before), and is judged a misfit
+    result = sf.fit(sf.Observation(case.scene(), dn, sensor=SENSOR), list(case.free), start=STUCK, max_steps=16)
+    assert any(h["accepted"] for h in result.history[1:])
+    accepted = [h["loss"] for h in result.history if h["accepted"]]
+    assert len(accepted) >= 2 and accepted == sorted(accepted, reverse=True)
+    assert result.status is sf.Status.MISFIT and sf.format_result(result).startswith("misfit:")
