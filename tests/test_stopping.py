@@ -147,7 +147,7 @@ def test_from_the_start_three_rejections_within_the_tolerance_stop_the_solve():
     again = NoiseFloor()
     assert again.record(5.0)
     for k in range(REJECTED_PATIENCE):
-        assert not again.record(5.0 * (1.0 - 0.5 * ROUNDING), new_point=False)  # the start again, rounded lower
+        assert not again.record(5.0 * (1.0 - 2.0 * ROUNDING), new_point=False)  # the start again, its sum rounded lower
         assert again.no_better_point() == (k == REJECTED_PATIENCE - 1)
 
 
