@@ -322,10 +322,10 @@ def test_a_fit_where_every_step_is_rejected_makes_no_progress(tmp_path):
     assert result.status is sf.Status.NO_PROGRESS and not result.success
     assert result.values == result.start
     assert "converged" not in sf.format_result(result).splitlines()[0]
-    # it stops at once and says why: the start, then REJECTED_PATIENCE trial steps that re-evaluate it (issue 34)
-    assert len(result.history) == 1 + REJECTED_PATIENCE
-    assert result.warnings[0].startswith(f"the fit did not succeed ({sf.Status.NO_PROGRESS}): its last {REJECTED_PATIENCE} trial "
-                                         "steps each raised the loss by less than 0.001 of the start's, so the solver stopped")
+    # it stops at once (the solver's own tolerance, or at most REJECTED_PATIENCE re-evaluations of the start: issue 34)
+    # and says why, with how far the start is from the data
+    assert len(result.history) <= 1 + REJECTED_PATIENCE
+    assert result.warnings[0].startswith(f"the fit did not succeed ({sf.Status.NO_PROGRESS})") and "goodness of fit" in result.warnings[0]
 
 
 def test_the_neighbour_correlation_is_taken_over_each_pixels_channel_mean():

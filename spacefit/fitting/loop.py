@@ -352,11 +352,11 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
             warnings.insert(0, f"a misfit: {quality.line()}; the standard errors assume a correct model and are too small.")
         elif status is Status.UNJUDGED:
             warnings.insert(0, f"no verdict: {quality.line()}.")
-        elif status is Status.NO_PROGRESS and outcome.status is Status.NO_BETTER_POINT:
-            warnings.insert(0, f"the fit did not succeed ({status}): its last {REJECTED_PATIENCE} trial steps each raised the loss by "
-                               f"less than {REJECTED_RTOL:g} of the start's, so the solver stopped: no step along its direction lowers "
-                               f"the loss here (the start is the loss's minimum for these free parameters, or the data need another "
-                               f"one freed); {quality.line()}.")
+        elif status is Status.NO_PROGRESS:
+            why = (f": its last {REJECTED_PATIENCE} trial steps each raised the loss by less than {REJECTED_RTOL:g} of the start's, so "
+                   "the solver stopped; no step along its direction lowers the loss here (the start is the loss's minimum for these "
+                   "free parameters, or the data need another one freed)" if outcome.status is Status.NO_BETTER_POINT else "")
+            warnings.insert(0, f"the fit did not succeed ({status}){why}; {quality.line()}.")
         elif not status.success:
             warnings.insert(0, f"the fit did not succeed ({status}).")
         warnings += _own_misfits(s, own_quality)

@@ -95,9 +95,10 @@ class AffineVariance:
     def deviance_residual(self, mu: Array, y: Array) -> Array:
         """sign(mu - y) sqrt(2 D), D = int_y^mu (t - y) / V(t) dt, the quasi-deviance of the mean ``mu`` for the value
         ``y``; its derivative in mu is (mu - y) / (V(mu) r). Computed as (mu - y) sqrt(2 Q), Q = D / (mu - y)^2 =
-        int_0^1 u / V(y + u (mu - y)) du in closed form on each side of ``offset`` (float64; finite, with finite
-        derivatives, everywhere, mu = y included)."""
-        mu, y = jnp.asarray(mu, jnp.float64), jnp.asarray(y, jnp.float64)
+        int_0^1 u / V(y + u (mu - y)) du in closed form on each side of ``offset`` (in float64 where JAX's 64-bit mode
+        is on, as in a fit; finite, with finite derivatives, everywhere, mu = y included)."""
+        wide = jax.dtypes.canonicalize_dtype(jnp.float64)
+        mu, y = jnp.asarray(mu, wide), jnp.asarray(y, wide)
         c, g = self.floor, self.slope
         d, a_y, a_mu = mu - y, y - self.offset, mu - self.offset
         v_y = c + g * jnp.maximum(a_y, 0.0)
