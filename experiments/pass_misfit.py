@@ -59,7 +59,7 @@ def main() -> None:
         print(f"{spp} spp, at the truth, the old rule: chi^2/dof {old.chi2_dof:.3f}, v {old.render_noise:.3f}, limit {old.limit:.3f}: "
               f"{'MISFIT' if old.misfit else 'within the expected range'}")
         t0 = time.perf_counter()
-        new, r, noise, _ = judged_goodness(s, x, "pixel")
+        new, r, noise, _, _ = judged_goodness(s, x, "pixel")
         print(f"  the verdict ({time.perf_counter() - t0:.1f} s): {new.line()}")
         for k, gk in enumerate(per_observation(r, noise, s, new.samples_factor)):
             print(f"  frame {k}: chi^2/dof {gk.chi2_dof:.3f}, v {gk.render_noise:.3f}, v_ref {gk.reference_noise:.3f}, above its "

@@ -165,8 +165,15 @@ def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Ar
     check_type("sensor", sensor, Sensor, "an sf.Sensor")
     if not isinstance(expected, jax.Array):
         check_array("expected", expected)
+    floor, slope, offset = noise_variance_terms(sensor)
+    return slope * jnp.maximum(jnp.asarray(expected) - offset, 0.0) + floor
+
+
+def noise_variance_terms(sensor: Sensor) -> tuple[float, float, float]:
+    """:func:`noise_variance_dn` as floor + slope * max(expected - offset, 0): the floor (read and rounding
+    noise, DN^2), the slope (the gain, DN per electron: shot noise) and the offset (the bias, DN)."""
     g = sensor.gain_dn_per_electron
-    return g * jnp.maximum(jnp.asarray(expected) - sensor.bias_dn, 0.0) + (g * sensor.read_noise_electrons) ** 2 + 1.0 / 12.0
+    return (g * sensor.read_noise_electrons) ** 2 + 1.0 / 12.0, g, sensor.bias_dn
 
 
 def observe(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: Intrinsics, seed: int) -> np.ndarray:

@@ -14,12 +14,13 @@ from helpers import small_scene, write_sphere_obj
 
 import spacefit as sf
 from spacefit.cli import exit_code
-from spacefit.formation import expected_dn
+from spacefit.formation import expected_dn, noise_variance_dn
 from spacefit.fitting.goodness import MAX_JUDGED_RENDER_NOISE, REFERENCE_RENDER_NOISE, RESIDUALS, MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
 from spacefit.fitting.goodness import _neighbours
 from spacefit.fitting.judging import _mean_and_noise, affordable, judged_goodness, per_observation
 from spacefit.fitting.loop import verdict
 from spacefit.fitting.problem import setup
+from spacefit.fitting.stopping import REJECTED_PATIENCE
 from spacefit.scene.sections import MAX_SPP
 from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import assemble
@@ -200,6 +201,12 @@ def test_a_correct_model_at_few_samples_is_within_the_expected_range(sensor_fits
     assert result.uncertainty()["stderr_valid"] and not result.stderr_note
     target = result.parts[0]["target"]["chi2_per_value"]
     assert abs(target - (1.0 + g.render_noise + g.reference_noise)) < 0.5, result.parts
+    # what it could hide, beside the verdict: the rule's fraction of the signal, from the model's DN above the bias
+    model = np.asarray(result.renders[0], dtype=float)
+    snr = (model - SENSOR.bias_dn) / np.sqrt(np.asarray(noise_variance_dn(model, SENSOR)))
+    assert g.detectable == pytest.approx(np.sqrt(g.margin * g.dof / np.sum(snr**2)), rel=0.05)
+    assert f"below {100 * g.detectable:.2g} % of the signal" in sf.format_result(result).splitlines()[1]
+    assert result.to_dict()["goodness"]["detectable"] == g.detectable and result.observation_goodness[0].detectable == pytest.approx(g.detectable)
 
 
 def test_the_reference_render_noise_is_read_from_the_file_and_counted(sensor_fits):
@@ -310,11 +317,15 @@ def test_a_fit_where_every_step_is_rejected_makes_no_progress(tmp_path):
     mesh = write_sphere_obj(tmp_path / "sphere.obj", subdivisions=2)
     lit = small_scene(mesh, {"material": "white_paint", "kd": 0.5}, camera={"pixel_pitch_mm": 0.5}, render={"spp": 4})
     behind = lit.with_values({"sun.direction": [0.0, 0.0, 1.0]})
-    result = sf.fit(sf.Observation(behind, np.asarray(sf.render(lit)), sigma=0.01), ["parts.sphere.kd"], max_steps=5)
+    result = sf.fit(sf.Observation(behind, np.asarray(sf.render(lit)), sigma=0.01), ["parts.sphere.kd"], max_steps=20)
     assert not any(h["accepted"] for h in result.history[1:])
     assert result.status is sf.Status.NO_PROGRESS and not result.success
     assert result.values == result.start
     assert "converged" not in sf.format_result(result).splitlines()[0]
+    # it stops at once (the solver's own tolerance, or at most REJECTED_PATIENCE re-evaluations of the start: issue 34)
+    # and says why, with how far the start is from the data
+    assert len(result.history) <= 1 + REJECTED_PATIENCE
+    assert result.warnings[0].startswith(f"the fit did not succeed ({sf.Status.NO_PROGRESS})") and "goodness of fit" in result.warnings[0]
 
 
 def test_the_neighbour_correlation_is_taken_over_each_pixels_channel_mean():
@@ -356,7 +367,7 @@ def value_setup(render_sigma: float, names: tuple[str, ...] = ("parts.a.kd",)) -
         block = SimpleNamespace(resampled=True, spp=8, data=SimpleNamespace(value=data), known=names, noise_known=True)
         return SimpleNamespace(models_seeded=lambda x, j: [model(x, j)], residual_of=lambda models: models[0] - jnp.asarray(data),
                                spp=(), blocks=(block,), resampled=problem, references=[], used=[], reference_spp=(), pixels=0,
-                               part_images=[])
+                               part_images=[], dark=())
 
     return SimpleNamespace(problem=problem(1), noise_given=True, x0=np.zeros(len(names)), user=SimpleNamespace(names=names))
 
@@ -381,3 +392,38 @@ def test_each_observations_goodness_counts_the_shared_and_its_own_free_parameter
     s = value_setup(0.1)
     data = s.problem.blocks[0].data.value
     assert per_observation(data, data, s, 1)[0].dof == data.size - 1
+
+
+def test_the_verdict_states_the_smallest_effect_it_could_see_and_one_just_above_it_is_a_misfit():
+    """Planted: an unmodelled effect proportional to the signal, a checkerboard of +- epsilon of it (no
+    free parameter absorbs it), on 40k unit-noise values at 5 to 40 noise sigmas of signal each. The stated
+    fraction is the rule's sqrt(margin x dof / sum (s / sigma)^2): 1.05 times it is a misfit, 0.95 times it passes."""
+    rng = np.random.default_rng(7)
+    snr = rng.uniform(5.0, 40.0, N)
+    effect = snr * np.where(np.arange(N) % 2 == 0, 1.0, -1.0)
+    noise = rng.normal(0.0, 1.0, N)
+    noise -= effect * (noise @ effect) / (effect @ effect)  # no cross term: chi^2 rises by the effect's own share
+    noise *= np.sqrt((N - 3) / np.sum(noise**2))  # chi^2 / dof 1 without it
+    clean = goodness(noise, np.zeros(N), n_free=3, noise_known=True, signal=snr)
+    assert clean.margin == pytest.approx(MISFIT_FLOOR) and not clean.misfit
+    assert clean.detectable == pytest.approx(np.sqrt(MISFIT_FLOOR * (N - 3) / np.sum(snr**2)))
+    for factor, misfit in ((1.05, True), (0.95, False)):
+        assert goodness(noise + factor * clean.detectable * effect, np.zeros(N), n_free=3, noise_known=True, signal=snr).misfit is misfit
+    assert f"cannot see an unmodelled effect below {100 * clean.detectable:.2g} % of the signal" in clean.line()
+    assert json.loads(json.dumps(clean.to_dict()))["detectable"] == clean.detectable
+    unjudged = goodness(noise, np.full(N, 2.0), n_free=3, noise_known=True, signal=snr)  # render noise 4 x the data's
+    assert not unjudged.judged and np.isnan(unjudged.detectable) and "cannot see" not in unjudged.line()
+
+
+def test_a_frame_that_misfits_on_its_own_is_named_by_frame():
+    """A pooled verdict within range can hold a frame that is not: each observation's own misfit is a warning
+    naming it, by its frame in a pass."""
+    from spacefit.fitting.loop import _own_misfits
+
+    passed, failed = (goodness(*residuals(misfit=m), n_free=1, noise_known=True) for m in (0.0, 0.6))
+    frames = SimpleNamespace(images=[None] * 3, names=lambda first: [], report=lambda *a: [], plot=lambda *a, **k: None)
+    s = SimpleNamespace(layout=((frames, (0, 1, 2)), (SimpleNamespace(), (3,))))
+    warnings = _own_misfits(s, [passed, failed, passed, failed])
+    assert warnings == [f"frame 1 of the pass (observation 1) is a misfit on its own: chi^2/dof {failed.chi2_dof:.3f} above its "
+                        f"limit {failed.limit:.3f}.",
+                        f"observation 3 is a misfit on its own: chi^2/dof {failed.chi2_dof:.3f} above its limit {failed.limit:.3f}."]

@@ -3,6 +3,8 @@ predicted Poisson-Gaussian noise, and standard errors that cover the truth (redu
 
 from __future__ import annotations
 
+import jax
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
@@ -65,3 +67,22 @@ def test_errors_cover_the_truth_at_about_one_sigma(study):
     # neighbouring pixels share))
     assert np.all(np.abs(errors) <= 6 * stderr), np.abs(errors / stderr).max(axis=0)
     assert np.all(stderr.mean(axis=0) / np.array([0.15, 0.03, 0.5]) < [0.10, 0.05, 0.08]), stderr.mean(axis=0)
+
+
+@pytest.mark.parametrize(("mu", "y"), [(150.0, 120.0), (120.0, 150.0), (100.0, 90.0), (105.0, 80.0), (90.0, 80.0), (95.0, 120.0),
+                                       (20000.0, 100.0), (100.0, 20000.0), (100.0001, 100.0), (80.0, 110.0), (130.0, 130.0)])
+def test_the_descended_residual_is_the_quasi_deviance_whose_gradient_is_the_weighted_difference(mu, y):
+    """0.5 r^2 = int_y^mu (t - y) / V(t) dt for V(t) = floor + slope max(t - bias, 0), on every side of the bias
+    (quadrature), and its derivative in mu is (mu - y) / V(mu): the held-noise residuals' J^T r, finite at mu = y."""
+    from scipy.integrate import quad
+
+    from spacefit.fitting.losses import AffineVariance
+
+    noise = AffineVariance(6.33, 0.5, 100.0)
+    variance = lambda t: noise.floor + noise.slope * max(t - noise.offset, 0.0)  # noqa: E731
+    kink = [noise.offset] if min(mu, y) < noise.offset < max(mu, y) else None
+    deviance = quad(lambda t: (t - y) / variance(t), y, mu, points=kink, epsabs=0.0, epsrel=1e-12, limit=200)[0]
+    r = float64(lambda: float(noise.deviance_residual(mu, y)))()
+    gradient = float64(lambda: float(jax.grad(lambda m: 0.5 * noise.deviance_residual(m, y) ** 2)(jnp.float64(mu))))()
+    assert 0.5 * r**2 == pytest.approx(deviance, rel=1e-9, abs=1e-300) and np.sign(r) == np.sign(mu - y)
+    assert gradient == pytest.approx((mu - y) / variance(mu), rel=1e-9, abs=1e-300)

@@ -359,6 +359,21 @@ MUTANTS = (
            ("tests/test_goodness.py::test_the_neighbour_correlation_is_taken_over_each_pixels_channel_mean",)),
     Mutant("misfit-at-three-sigma", "spacefit/fitting/goodness.py", "MISFIT_SIGMAS = 5.0", "MISFIT_SIGMAS = 3.0",
            ("tests/test_goodness.py::test_the_misfit_margin_is_five_standard_deviations",)),
+    # a solver that descends the loss it is judged by, or stops at once and says why (issue 34, item 3) ...
+    Mutant("no-stop-before-the-solve-moved", "spacefit/fitting/stopping.py",
+           "        last = [loss for loss in self.rejected[-REJECTED_PATIENCE:] if math.isfinite(loss)]\n",
+           "        if not self.decreases:\n            return False\n"
+           "        last = [loss for loss in self.rejected[-REJECTED_PATIENCE:] if math.isfinite(loss)]\n",
+           ("tests/test_stopping.py::test_from_the_start_three_rejections_within_the_tolerance_stop_the_solve",)),
+    Mutant("best-point-again-accepted-by-its-rounding", "spacefit/fitting/stopping.py",
+           "if not (new_point and math.isfinite(loss)", "if not (math.isfinite(loss)",
+           ("tests/test_stopping.py::test_from_the_start_three_rejections_within_the_tolerance_stop_the_solve",)),
+    Mutant("deviance-below-the-bias-as-above", "spacefit/fitting/losses.py", "f * (1 - f) * _psi(w)", "f * (1 - f) * _phi(w)",
+           ("tests/test_noise_model.py::test_the_descended_residual_is_the_quasi_deviance_whose_gradient_is_the_weighted_difference",)),
+    # ... and verdicts that say what they can hide (item 4)
+    Mutant("detectable-effect-without-dof", "spacefit/fitting/goodness.py", "math.sqrt((limit - expected) * dof / power)",
+           "math.sqrt((limit - expected) / power)",
+           ("tests/test_goodness.py::test_the_verdict_states_the_smallest_effect_it_could_see_and_one_just_above_it_is_a_misfit",)),
     Mutant("judged-spp-k-not-2k", "spacefit/fitting/judging.py", "judged = 2 * k", "judged = k",
            ("tests/test_goodness.py::test_the_verdict_renders_twice_at_the_factor_a_single_renders_noise_asks",)),
     Mutant("verdict-factor-of-the-means-noise", "spacefit/fitting/judging.py", "verdict_factor(2.0 * goodness(", "verdict_factor(goodness(",

@@ -45,6 +45,19 @@ the fit's status says so (:attr:`~spacefit.fitting.solvers.Status.UNJUDGED`).
 A misfit means the model or its nuisances miss something (a pose, a blur, a shift, a material):
 the error bars, which assume a correct model, are then too small.
 
+What a verdict within the range can hide (:attr:`Goodness.detectable`, beside the verdict in its line
+and fit.json). An unmodelled effect e_i that the free parameters do not absorb adds sum (e_i / sigma_i)^2 /
+dof to chi^2 / dof; the verdict calls a misfit once that exceeds the margin m = limit - expectation =
+max(:data:`MISFIT_SIGMAS` x spread, :data:`MISFIT_FLOOR`), i.e. an effect of rms sqrt(m) noise sigmas per
+value. For an effect proportional to the model's signal s_i (its value less the dark model's, a sensor's
+bias: a model error of a fixed fraction epsilon, e_i = epsilon s_i) that is
+
+    epsilon_min = sqrt(m x dof / sum (s_i / sigma_i)^2),
+
+the smallest such fraction this data could have shown; a smaller one passes. On a bright pass of 196k values
+the floor m = 0.1 is some 30 times the statistical spread (issue 34): the floor, not the data, sets what
+is hidden. A model whose own render noise inflates the spread hides more, and says how much.
+
 Without a known noise the fit's own render is judged (k = 1) and the noise is estimated from the
 data, on one of two bases (:attr:`Goodness.basis`). Where every reference says what it was rendered
 with, its noise is its own render noise, v_ref = v x (fit's spp) / (reference's spp) per value,
@@ -138,6 +151,8 @@ class Goodness:
             (0: real observations).
         reference_spp: per observation, the samples per pixel its reference was rendered with
             (None: a real observation, no render noise; empty: not recorded).
+        detectable: the smallest unmodelled effect proportional to the signal, as a fraction of it, that the
+            verdict would call a misfit (the module's epsilon_min; NaN where nothing is judged or no signal is known).
     """
 
     noise_known: bool
@@ -158,6 +173,20 @@ class Goodness:
     judged: bool = True
     basis: str = NOISE_MODEL
     noise_sigma: float = math.nan
+    detectable: float = math.nan
+
+    @property
+    def margin(self) -> float:
+        """How far above its expectation chi^2 / dof may lie and pass: max(:data:`MISFIT_SIGMAS` x spread, :data:`MISFIT_FLOOR`)."""
+        return self.limit - (1.0 + self.render_noise + self.reference_noise)
+
+    def hides(self) -> str:
+        """What a pass could hide, in words (empty where nothing is judged)."""
+        if not (self.judged and math.isfinite(self.limit)):
+            return ""
+        signal = f"{100.0 * self.detectable:.2g} % of the signal, or " if math.isfinite(self.detectable) else ""
+        return (f"; it cannot see an unmodelled effect below {signal}an rms of {math.sqrt(max(self.margin, 0.0)):.2g} noise sigma "
+                "per value")
 
     def line(self) -> str:
         """One line of words: chi^2 / dof against its expected range, or the residuals against the render noise."""
@@ -166,7 +195,7 @@ class Goodness:
                        f"CANNOT JUDGE: the model's own render noise is above {MAX_JUDGED_RENDER_NOISE:g} x the references'")
             return (f"goodness of fit (noise unknown, estimated as {self.basis}: {self.noise_sigma:.3g} per value): chi^2/dof = "
                     f"{self.chi2_dof:.3f} over {self.dof} dof, expected 1 + {self.render_noise:.3f} (the fit's render noise) "
-                    f"+- {self.expected_spread:.3f}, misfit above {self.limit:.3f}: {verdict}")
+                    f"+- {self.expected_spread:.3f}, misfit above {self.limit:.3f}: {verdict}{self.hides()}")
         if self.noise_known:
             verdict = ("a MISFIT" if self.misfit else "within the expected range" if self.judged else
                        f"CANNOT JUDGE: the model's own render noise is above {MAX_JUDGED_RENDER_NOISE:g} x the data's noise "
@@ -175,7 +204,7 @@ class Goodness:
             judged = f"{spp} spp, " if spp else ""
             return (f"goodness of fit: chi^2/dof = {self.chi2_dof:.3f} over {self.dof} dof, expected 1 + {self.render_noise:.3f} "
                     f"(render noise at {judged}{self.samples_factor} x the fit's samples) + {self.reference_noise:.3f} "
-                    f"({self._references()}) +- {self.expected_spread:.3f}, misfit above {self.limit:.3f}: {verdict}")
+                    f"({self._references()}) +- {self.expected_spread:.3f}, misfit above {self.limit:.3f}: {verdict}{self.hides()}")
         return (f"goodness of fit (noise unknown, estimated from {self.basis}: {self.noise_sigma:.3g} per value, which leaves "
                 f"chi^2 no verdict): mean r^2 = {self.spread:.3g} x the render noise's; neighbour "
                 f"correlation {self.correlation:+.2f} (render noise {self.render_correlation:+.2f}) over {self.values} values")
@@ -191,14 +220,14 @@ class Goodness:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready: the fields, with the misfit rule's constants."""
-        return {**{k: getattr(self, k) for k in self.__dataclass_fields__}, "misfit_sigmas": MISFIT_SIGMAS,
+        return {**{k: getattr(self, k) for k in self.__dataclass_fields__}, "margin": self.margin, "misfit_sigmas": MISFIT_SIGMAS,
                 "misfit_floor": MISFIT_FLOOR, "verdict_render_noise": VERDICT_RENDER_NOISE,
                 "max_verdict_factor": MAX_VERDICT_FACTOR, "max_judged_render_noise": MAX_JUDGED_RENDER_NOISE}
 
 
 def goodness(r: np.ndarray, noise: np.ndarray, n_free: int, noise_known: bool, shapes: Sequence[tuple[int, ...]] = (), *,
              fitted: np.ndarray | None = None, reference_ratio: float | np.ndarray = 0.0, samples_factor: int = 1,
-             verdict_spp: Sequence[int] = (), reference_spp: Sequence[int | None] = ()) -> Goodness:
+             verdict_spp: Sequence[int] = (), reference_spp: Sequence[int | None] = (), signal: np.ndarray | None = None) -> Goodness:
     """The goodness of fit of residuals ``r`` with ``n_free`` free parameters.
 
     Args:
@@ -215,6 +244,8 @@ def goodness(r: np.ndarray, noise: np.ndarray, n_free: int, noise_known: bool, s
         reference_ratio: per value (or one for all), the reference's render noise over the judged
             model's, the model's samples per pixel over the reference's (0: a real observation).
         samples_factor, verdict_spp, reference_spp: recorded as :class:`Goodness` holds them.
+        signal: per value, the model's signal in the residuals' unit (s_i / sigma_i with the noise known),
+            for :attr:`Goodness.detectable`; None: not known.
     """
     r, noise = np.ravel(np.asarray(r, dtype=float)), np.ravel(np.asarray(noise, dtype=float))
     ratio = np.broadcast_to(np.ravel(np.asarray(reference_ratio, dtype=float)), r.shape)
@@ -224,7 +255,7 @@ def goodness(r: np.ndarray, noise: np.ndarray, n_free: int, noise_known: bool, s
         if reference > 0 and np.all(ratio[counted] > 0):  # every reference's own render noise: the data's noise
             scale = math.sqrt(reference)
             g = goodness(r / scale, noise / scale, n_free, True, shapes, fitted=fitted, samples_factor=samples_factor,
-                         verdict_spp=verdict_spp, reference_spp=reference_spp)
+                         verdict_spp=verdict_spp, reference_spp=reference_spp, signal=None if signal is None else np.asarray(signal) / scale)
             return dataclasses.replace(g, noise_known=False, basis=REFERENCE_RENDER_NOISE, noise_sigma=scale)
     counted = (r != 0) | (noise != 0)
     if noise_known and fitted is not None:
@@ -247,10 +278,14 @@ def goodness(r: np.ndarray, noise: np.ndarray, n_free: int, noise_known: bool, s
     spread = float(np.mean(r[counted] ** 2)) / render_noise if render_noise > 0 else math.nan
     judged = noise_known and render_noise <= MAX_JUDGED_RENDER_NOISE
     sigma = math.nan if noise_known else math.sqrt(float(np.sum(r[counted] ** 2)) / dof)
+    detectable = math.nan
+    if judged and signal is not None:
+        power = float(np.sum(np.ravel(np.asarray(signal, dtype=float))[counted] ** 2))
+        detectable = math.sqrt((limit - expected) * dof / power) if power > 0 else math.nan
     return Goodness(noise_known, values, dof, chi2_dof, spread_sd, render_noise, limit, judged and bool(chi2_dof > limit), spread,
                     _neighbours(r, shapes), _neighbours(noise, shapes), samples_factor, tuple(int(s) for s in verdict_spp),
                     reference_noise, tuple(None if s is None else int(s) for s in reference_spp), judged,
-                    NOISE_MODEL if noise_known else RESIDUALS, sigma)
+                    NOISE_MODEL if noise_known else RESIDUALS, sigma, detectable)
 
 
 def _neighbours(d: np.ndarray, shapes: Sequence[tuple[int, ...]]) -> float:

@@ -19,15 +19,16 @@ from spacefit.scene.names import Name
 from spacefit.units import DN_UNIT
 
 
-def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.ndarray, np.ndarray, list[np.ndarray]]:
+def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.ndarray, np.ndarray, list[np.ndarray], np.ndarray]:
     """The goodness of fit at ``x`` (:mod:`~spacefit.fitting.goodness`), the residuals it judged and a
-    draw of their render noise, and each observation's model (images, then value observations) at the
+    draw of their render noise, each observation's model (images, then value observations) at the
     fit's seeds. With the noise known the judged model is the mean of two renders with independent
     seeds at :func:`verdict_factor` times the fit's samples per pixel (the fit's own two where that is
-    1; primal renders only; a rendered value observation's too, :attr:`~spacefit.fitting.observations.base.Block.resampled`), the noise sigma taken at it; else the fit's own render. A model that is
-    not rendered is the same at every seed: its render noise is 0."""
+    1; primal renders only; a rendered value observation's too, :attr:`~spacefit.fitting.observations.base.Block.resampled`), the noise sigma taken at it; else the fit's own render; and the judged models' signal (:func:`_signal`).
+    A model that is not rendered is the same at every seed: its render noise is 0."""
     problem = s.problem
     renders = [problem.models_seeded(x, 0), problem.models_seeded(x, 1)]
+    judged_models = [(a + b) / 2 for a, b in zip(*renders)]
     if s.noise_given:
         r, noise = _mean_and_noise(problem, renders)
         spps = [*problem.spp, *(b.spp for b in problem.blocks if b.resampled is not None and b.spp)]
@@ -36,10 +37,12 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
             k //= 2
         if k > 1:
             finer = problem.resampled(k)
-            r, noise = _mean_and_noise(finer, [finer.models_seeded(x, 0), finer.models_seeded(x, 1)])
+            fine = [finer.models_seeded(x, 0), finer.models_seeded(x, 1)]
+            r, noise = _mean_and_noise(finer, fine)
+            judged_models = [(a + b) / 2 for a, b in zip(*fine)]
         judged = 2 * k
     else:
-        judged = 1
+        judged, judged_models = 1, renders[0]
         r, r_alt = (np.asarray(problem.residual_of(m), dtype=np.float64) for m in renders)
         noise = (r - r_alt) / math.sqrt(2.0)
     verdict_spp = [judged * spp for spp in problem.spp]
@@ -52,10 +55,19 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
                                  np.ones(values, dtype=bool)])
     else:
         ratio, fitted = float(np.mean(ratios or [0.0])), None
+    signal = _signal(problem, judged_models)
     quality = goodness(r, noise, len(s.x0), s.noise_given, [ref.shape for ref in problem.references] if pixels else [],
                        fitted=fitted, reference_ratio=ratio, samples_factor=judged, verdict_spp=verdict_spp,
-                       reference_spp=problem.reference_spp)
-    return quality, r, noise, [np.asarray(m) for m in renders[0]]
+                       reference_spp=problem.reference_spp, signal=signal if pixels else None)
+    return quality, r, noise, [np.asarray(m) for m in renders[0]], signal
+
+
+def _signal(problem: Problem, models: list[jax.Array]) -> np.ndarray:
+    """Per residual, the models' signal in the residuals' unit: each model less its model of no light
+    (:attr:`~spacefit.fitting.problem.Problem.dark`; a value observation's 0), weighted as the residuals
+    are (their derivative along it: s_i / sigma_i with the noise known), for :attr:`~spacefit.fitting.goodness.Goodness.detectable`."""
+    dark = [*problem.dark, *(0.0 for _ in models[len(problem.dark):])]
+    return np.asarray(jax.jvp(problem.residual_of, (models,), ([m - d for m, d in zip(models, dark)],))[1], dtype=float)
 
 
 def _reference_ratio(spp: int, reference_spp: int | None) -> float:
@@ -86,10 +98,11 @@ def _mean_and_noise(problem: Problem, renders: list[list[jax.Array]]) -> tuple[n
     return np.asarray(r, dtype=float), np.asarray(noise, dtype=float)
 
 
-def per_observation(r: np.ndarray, noise: np.ndarray, s: Setup, factor: int) -> list[Goodness]:
+def per_observation(r: np.ndarray, noise: np.ndarray, s: Setup, factor: int, signal: np.ndarray | None = None) -> list[Goodness]:
     """Per observation (images, then value observations), the goodness of fit of its own residuals
     (pixel loss), with the shared free parameters and its own (``name@k``) counted as free (a value
-    observation: those it depends on); ``factor``: the judged model's samples over the fit's."""
+    observation: those it depends on); ``factor``: the judged model's samples over the fit's; ``signal``:
+    the judged models' (:func:`_signal`), for what each verdict could hide."""
     out, offset, problem = [], 0, s.problem
     for k, ref in enumerate(problem.references):
         rows = slice(offset, offset + ref.size)
@@ -98,12 +111,12 @@ def per_observation(r: np.ndarray, noise: np.ndarray, s: Setup, factor: int) -> 
         spp, reference = factor * problem.spp[k], problem.reference_spp[k]
         out.append(goodness(r[rows], noise[rows], n_k, s.noise_given, [ref.shape], fitted=np.broadcast_to(problem.used[k][..., None], ref.shape),
                             reference_ratio=_reference_ratio(spp, reference), samples_factor=factor, verdict_spp=[spp],
-                            reference_spp=[reference]))
+                            reference_spp=[reference], signal=None if signal is None else signal[rows]))
     for block in problem.blocks:
         rows = slice(offset, offset + block.data.value.size)
         offset = rows.stop
         out.append(goodness(r[rows], noise[rows], len(block.known), block.noise_known, fitted=np.ones(rows.stop - rows.start, bool),
-                            samples_factor=factor))
+                            samples_factor=factor, signal=None if signal is None else signal[rows]))
     return out
 
 

@@ -29,7 +29,7 @@ from spacefit.fitting.problem import FitRender, Setup, setup
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.resume import Resume
 from spacefit.fitting.solvers import Outcome, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name
-from spacefit.fitting.stopping import NoiseFloor, loss_noise
+from spacefit.fitting.stopping import REJECTED_PATIENCE, REJECTED_RTOL, NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
 from spacefit.precision import float64
@@ -177,8 +177,9 @@ def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progr
     fp, problem = s.solver_params, s.problem
 
     def residual_u(u: jax.Array) -> jax.Array:
-        # renders are float32; the solver works in the dtype of u (float64) throughout
-        return problem.residual_x(fp.to_physical(u)).astype(u.dtype)
+        # renders are float32; the solver works in the dtype of u (float64) throughout. The residuals it
+        # descends: its direction descends the loss its steps are judged by (spacefit.fitting.losses)
+        return problem.descent_x(fp.to_physical(u)).astype(u.dtype)
 
     # a model without Monte Carlo noise (closed-form value observations only) has no noise floor to stop at
     steps = _Steps(s, stop == "noise" and is_least_squares(engine) and problem.rendered, max_steps, progress, resume.on_step)
@@ -240,12 +241,13 @@ class _Steps:
         # the same point evaluated again is no step, whatever the rounding of its loss (a solver that
         # cannot move re-evaluates its point, and the sum's rounding differs between compiled steps)
         same = self.best_u is not None and np.array_equal(step.u, self.best_u)
-        accepted = not same and self.floor.record(step.loss)
+        # (a resumed solve's first step evaluates its best point again: no step of the interrupted solve's)
+        accepted = not self.restarted and self.floor.record(step.loss, new_point=not same)
         if accepted:
             self.best_u, self.best_loss = step.u, step.loss
             if self.noise_stop:
-                r = step.residuals if step.residuals is not None else np.asarray(problem.residual_x(x_solver))
-                self.floor.set_noise(loss_noise(r, np.asarray(problem.residual_x_independent(x_solver))))
+                r = step.residuals if step.residuals is not None else np.asarray(problem.descent_x(x_solver))
+                self.floor.set_noise(loss_noise(r, np.asarray(problem.descent_x_independent(x_solver))))
         x = np.asarray(s.to_user(x_solver))
         self.history.append({"step": k, "loss": step.loss, "accepted": accepted, "loss_noise": self.floor.noise,
                              "values": dict(zip(s.user.names, x.tolist())), "time_s": time.perf_counter() - self.t0})
@@ -263,12 +265,11 @@ class _Steps:
     def resumed(self, history: Sequence[Mapping[str, Any]], u: jax.Array) -> None:
         """Go on with the interrupted solve whose steps were ``history`` and whose best point is ``u``:
         its entries begin this history, and the stop rule's record is theirs again (each loss recorded
-        as the solve recorded it, the evaluations of the best point again left out)."""
+        as the solve recorded it, an evaluation of the best point again a rejected step)."""
         self.history = [{**entry, "loss": _number(entry["loss"]), "loss_noise": _number(entry["loss_noise"])} for entry in history]
         best = None
         for entry in self.history:
-            if best is None or entry["values"] != best:
-                self.floor.record(entry["loss"])
+            self.floor.record(entry["loss"], new_point=best is None or entry["values"] != best)
             if entry["accepted"] or best is None:
                 best = entry["values"]
         self.floor.set_noise(self.history[-1]["loss_noise"])
@@ -336,12 +337,12 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         x_user, cov, loss_value, extras = estimate(s, x, correct=steps.moved)
         stderr, corr = stderr_corr(cov)
         warnings = warnings_for(s.user, x_user, stderr, corr)
-        quality, r, noise, renders = judged_goodness(s, jnp.asarray(x), loss)
+        quality, r, noise, renders, signal = judged_goodness(s, jnp.asarray(x), loss)
         residuals = [*(np.where(used[..., None], ref - render, np.nan) for ref, render, used in zip(problem.references, renders, problem.used)),
                      *(b.data.value - render for b, render in zip(problem.blocks, renders[len(problem.references):]))]
         if loss == "pixel":
             per_part = part_goodness(r, noise, problem, quality)
-            own_quality = per_observation(r, noise, s, quality.samples_factor)
+            own_quality = per_observation(r, noise, s, quality.samples_factor, signal)
         at_bound = any(b.at_bound(float(v)) for b, v in zip(s.user.bijections, x_user))
         pixels = loss == "pixel"
         status = verdict(status, steps.moved, at_bound, quality.misfit and pixels, quality.noise_known and not quality.judged and pixels)
@@ -352,8 +353,14 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
             warnings.insert(0, f"a misfit: {quality.line()}; the standard errors assume a correct model and are too small.")
         elif status is Status.UNJUDGED:
             warnings.insert(0, f"no verdict: {quality.line()}.")
+        elif status is Status.NO_PROGRESS:
+            why = (f": its last {REJECTED_PATIENCE} trial steps each raised the loss by less than {REJECTED_RTOL:g} of the start's, so "
+                   "the solver stopped; no step along its direction lowers the loss here (the start is the loss's minimum for these "
+                   "free parameters, or the data need another one freed)" if outcome.status is Status.NO_BETTER_POINT else "")
+            warnings.insert(0, f"the fit did not succeed ({status}){why}; {quality.line()}.")
         elif not status.success:
             warnings.insert(0, f"the fit did not succeed ({status}).")
+        warnings += _own_misfits(s, own_quality)
     else:
         warnings = ["the solve produced non-finite parameters; no estimate is reported."]
         status = Status.NONFINITE
@@ -368,6 +375,18 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         units=[*problem.units, *(b.data.unit for b in problem.blocks)], goodness=quality, residuals=residuals,
         observation_goodness=own_quality, observations=tuple(o for o, _ in s.layout), entries=tuple(e for _, e in s.layout),
     )
+
+
+def _own_misfits(s: Setup, own: Sequence[Goodness]) -> list[str]:
+    """A warning per observation whose own residuals are a misfit (:func:`~spacefit.fitting.judging.per_observation`),
+    named by its frame where it is a pass's: a pooled verdict within range can hold a frame that is not."""
+    out = []
+    for observation, entries in s.layout:
+        for j, k in enumerate(entries):
+            if k < len(own) and own[k].misfit:
+                name = f"frame {j} of the pass (observation {k})" if isinstance(observation, Sequenced) else f"observation {k}"
+                out.append(f"{name} is a misfit on its own: chi^2/dof {own[k].chi2_dof:.3f} above its limit {own[k].limit:.3f}.")
+    return out
 
 
 def _fitted_scene(s: Setup, values: Mapping[str, float]) -> Scene | None:

@@ -57,7 +57,7 @@ class Problem:
     free: FreeParameters
     residual_x: Callable[[jax.Array], jax.Array]  # physical x -> stacked residuals (J by forward mode)
     residual_x_independent: Callable[[jax.Array], jax.Array]  # the same with independent seeds
-    loss_u_reverse: Callable[[jax.Array], jax.Array] | None  # unconstrained u -> loss (reverse mode)
+    loss_u_reverse: Callable[[jax.Array], jax.Array] | None  # unconstrained u -> the descended loss (reverse mode)
     renders_x: Callable[[jax.Array], list[jax.Array]]  # each observation's model in its data's unit
     part_images: list[PartImage]  # which part each pixel of each image sees
     references: list[np.ndarray]  # the checked references, (h, w, 3) or (h, w, 1) float32, 0 where not used
@@ -69,6 +69,10 @@ class Problem:
     residual_of: Callable[[list[jax.Array]], jax.Array]
     # ... and factor -> the same problem rendered with factor times the samples per pixel (the verdict render)
     resampled: Callable[[int], Problem]
+    # physical x -> the residuals a solver descends, at the fit's seeds and at the independent ones: residual_x's
+    # but for a sensor's noise, its quasi-deviance's (spacefit.fitting.losses)
+    descent_x: Callable[[jax.Array], jax.Array]
+    descent_x_independent: Callable[[jax.Array], jax.Array]
     noise_known: bool = False  # every residual is divided by its predicted or stated noise (a sensor per image)
     # per image, how far (px) its render noise spreads before the residuals: the pixel
     # filter's radius and the rms width of the sensor's PSF (0 without a sensor)
@@ -78,6 +82,7 @@ class Problem:
     spp: tuple[int, ...] = ()  # per image, the samples per pixel of its primal renders
     reference_spp: tuple[int | None, ...] = ()  # per image, its reference's (Observation.render_spp)
     blocks: tuple[Block, ...] = ()  # the value observations' residual blocks, after the images' pixels
+    dark: tuple[float, ...] = ()  # per image, its model of no light in its unit (a sensor's bias, DN; 0 for radiance)
 
     @property
     def rendered(self) -> bool:
@@ -95,7 +100,7 @@ def _problem(
     seed: int, seed_grad: int, integrator: str, executor: Executor | None = None, blocks: Sequence[Block] = (),
     image_names: frozenset[str] = frozenset(),
 ) -> Problem:
-    residuals, references, spread, to_units, units, used_pixels, specs, shapes = [], [], [], [], [], [], [], []
+    residuals, descents, references, spread, to_units, units, used_pixels, specs, shapes, dark = [], [], [], [], [], [], [], [], [], []
     # the image nuisances act on the render in JAX; each renderer sees the other parameters it knows
     # (``image_names``), an observation's own pose (``target.attitude_z_deg@k``) in place of the shared
     # one; every observation's render of a step runs in one batch (spacefit.fitting.frames)
@@ -112,8 +117,10 @@ def _problem(
         if obs.sensor is not None:
             used = used & ~saturated_mask(ref, obs.sensor)  # a saturated value says only "at least this bright"
         residuals.append(image_residual(obs, ref, used, loss))
+        descents.append(image_residual(obs, ref, used, loss, descent=True))
         to_units.append(in_unit_of(obs, ref.shape[-1], assembly.intrinsics))
         units.append(RADIANCE_UNIT if obs.sensor is None else DN_UNIT)
+        dark.append(0.0 if obs.sensor is None else float(obs.sensor.bias_dn))
         references.append(ref)
         used_pixels.append(np.all(used, axis=-1))
         blur = 0.0 if obs.sensor is None else psf_rms_px(obs.sensor, assembly.intrinsics, ref.shape[-1])
@@ -123,11 +130,14 @@ def _problem(
     images = batched_renders(executor, specs, indices, shapes) if specs else (lambda x, seeds: [])
     part_images = run_frames(executor, frame_part_image, specs) if specs else []
 
-    def stack(images: Callable[[jax.Array], Sequence[jax.Array]]) -> Callable[[jax.Array], tuple[list[jax.Array], jax.Array]]:
-        """x -> each image's model and the stacked residuals."""
-        def both(x: jax.Array) -> tuple[list[jax.Array], jax.Array]:
+    def stack(images: Callable[[jax.Array], Sequence[jax.Array]]) -> Callable[[jax.Array], tuple[list[jax.Array], jax.Array, jax.Array]]:
+        """x -> each image's model, the stacked residuals and the stacked residuals a solver descends."""
+        def both(x: jax.Array) -> tuple[list[jax.Array], jax.Array, jax.Array]:
             models = [to_units[k](image_model(image, x, k)) for k, image in enumerate(images(x))]
-            return models, jnp.concatenate([res(model) for res, model in zip(residuals, models)]) if models else jnp.zeros(0)
+            if not models:
+                return models, jnp.zeros(0), jnp.zeros(0)
+            return (models, jnp.concatenate([res(model) for res, model in zip(residuals, models)]),
+                    jnp.concatenate([res(model) for res, model in zip(descents, models)]))
         return both
 
     # compiled once per fit, the seeds an operand: one program for the model images and residuals at the
@@ -150,14 +160,15 @@ def _problem(
         def reverse(u: jax.Array) -> jax.Array:
             frames = lambda x: [render(x[indices[k]]) for k, render in enumerate(renders_v)]  # noqa: E731
             x = free.to_physical(u)
-            return 0.5 * jnp.sum(with_blocks(stack(frames)(x)[1], block_models(x, 0)) ** 2)
+            return 0.5 * jnp.sum(with_blocks(stack(frames)(x)[2], block_models(x, 0)) ** 2)
 
     def models_seeded(x: jax.Array, j: int) -> list[jax.Array]:
         seeds = seeds_array(seed + j * INDEPENDENT_SEED_OFFSET, seed_grad + j * INDEPENDENT_SEED_OFFSET)
         return [*models_residuals(x, seeds)[0], *block_models(x, j)]
 
-    def residual_at(x: jax.Array, seeds: jax.Array, j: int) -> jax.Array:
-        return with_blocks(models_residuals(x, seeds)[1], block_models(x, j))
+    def residual_at(x: jax.Array, seeds: jax.Array, j: int, kind: int = 1) -> jax.Array:
+        """The stacked residuals (``kind`` 1; 2: those a solver descends) at the j-th seeds ``seeds``."""
+        return with_blocks(models_residuals(x, seeds)[kind], block_models(x, j))
 
     n_images = len(observations)
     image_residual_of = jax.jit(lambda models: jnp.concatenate([res(model) for res, model in zip(residuals, models)]) if models
@@ -175,8 +186,8 @@ def _problem(
 
     return Problem(free, lambda x: residual_at(x, main, 0), lambda x: residual_at(x, independent, 1), reverse,
                    lambda x: models_seeded(x, 0), part_images, references, models_seeded, residual_of, resampled,
-                   all(o.sensor is not None for o in observations) and all(b.noise_known for b in blocks), tuple(spread),
-                   tuple(units), tuple(used_pixels), spps, tuple(o.render_spp for o in observations), tuple(blocks))
+                   lambda x: residual_at(x, main, 0, 2), lambda x: residual_at(x, independent, 1, 2), all(o.sensor is not None for o in observations) and all(b.noise_known for b in blocks), tuple(spread),
+                   tuple(units), tuple(used_pixels), spps, tuple(o.render_spp for o in observations), tuple(blocks), tuple(dark))
 
 
 def _seen(free: FreeParameters, k: int, image_names: frozenset[str]) -> tuple[tuple[str, ...], np.ndarray]:

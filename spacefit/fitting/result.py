@@ -43,7 +43,8 @@ class FitResult:
         status: how the fit ended, a verdict (``str(status)`` is its words; :class:`Status`).
         warnings: identifiability and convergence warnings, in words.
         history: one entry per step: the point the step evaluated (step 1 evaluates the start;
-            the accepted point of the last step is ``values``), its loss, ``accepted`` (the step
+            the accepted point of the last step is ``values``), its loss (the one the solver descends: with a
+            sensor, the quasi-deviance, :mod:`~spacefit.fitting.losses`), ``accepted`` (the step
             evaluated another point than the best so far and lowered its loss: accepted losses never rise), ``loss_noise`` (the loss's
             Monte Carlo noise at the best point so far, :mod:`~spacefit.fitting.stopping`),
             time_s since the start.
@@ -52,7 +53,7 @@ class FitResult:
         units: per observation, the unit of its data and model: for an image W m^-2 sr^-1 (radiance),
             or DN where it has a sensor (the sensor's expected DN of the render); a value
             observation's own (sr^-1 for a BRDF table, W m^-2 for a light curve's irradiances).
-        loss: final loss, 0.5 * sum of squared residuals.
+        loss: final loss, 0.5 * sum of squared residuals (the noise-weighted differences, whose chi^2 the goodness judges).
         solver, loss_name, steps, wall_time_s, start: what was run.
         extras: derived quantities, e.g. the rms height (and its standard error) of a (D, G) fit.
         parts: per observation, per part (and the whole ``target``): the fitted pixels (not masked

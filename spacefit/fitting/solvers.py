@@ -180,10 +180,16 @@ class _Evaluations:
         self.last: tuple[np.ndarray, float, np.ndarray | None] | None = None
 
     def keep(self, u: jax.Array, value: jax.Array, r: jax.Array | None = None) -> None:
-        jax.debug.callback(self._store, u, value, r)
+        # jax.debug.callback puts its arguments on a device in the thread that calls it, whose JAX need not be in
+        # 64-bit mode (a thread of XLA's, now and then): float64 would arrive rounded to float32. They travel as bits.
+        arrays = [jnp.asarray(a) for a in (u, value, r) if a is not None]
+        kinds = [(np.dtype(a.dtype), a.shape) for a in arrays]
 
-    def _store(self, u: np.ndarray, value: np.ndarray, r: np.ndarray | None) -> None:
-        self.last = (np.asarray(u), float(value), None if r is None else np.asarray(r))
+        def store(*bits: np.ndarray) -> None:
+            u_, value_, *r_ = (np.ascontiguousarray(b).view(dtype).reshape(shape) for b, (dtype, shape) in zip(bits, kinds))
+            self.last = (u_, float(value_), r_[0] if r_ else None)
+
+        jax.debug.callback(store, *(jax.lax.bitcast_convert_type(a, jnp.uint32) for a in arrays))
 
     def step(self, iterate: jax.Array) -> Step:
         assert self.last is not None, "the solver step evaluated nothing"

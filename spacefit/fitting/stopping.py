@@ -21,7 +21,12 @@ each by 0.1 to 6 in loss against a noise of 0.02, about 20 s after the optimum),
 * two successive rejected steps' losses differ by less than the loss's noise (the solver re-tries
   what it tried: its trial points look alike to the data), or
 * :data:`REJECTED_PATIENCE` steps in a row are rejected, each by less than :data:`REJECTED_RTOL` of
-  the best loss (a relative change the estimates cannot feel).
+  the best loss (a relative change the estimates cannot feel). This one applies from the start too:
+  a solver whose smallest trial steps raise the loss (its direction does not descend it here: a start
+  at the loss's minimum for its free parameters, a Jacobian dominated by its Monte Carlo noise) stops
+  after them, where it had re-tried the start to its step limit (28 steps of a materials-only fit with a pose
+  error, issue 34), and the verdict says that no step lowered the loss. An evaluation of the best point
+  itself again (a trial step too small to move it) is such a rejected step.
 
 Either says "no better point nearby", not "the residuals are at the noise": the fit's verdict
 (:func:`~spacefit.fitting.loop.verdict`) still calls a fit whose residuals exceed the noise a misfit.
@@ -78,11 +83,12 @@ class NoiseFloor:
     decreases: list[float] = field(default_factory=list)
     rejected: list[float] = field(default_factory=list)
 
-    def record(self, loss: float) -> bool:
+    def record(self, loss: float, new_point: bool = True) -> bool:
         """Record a step's loss; True if the step is accepted (a finite loss below the best so far by
-        more than the loss's rounding, :data:`ROUNDING`)."""
+        more than the loss's rounding, :data:`ROUNDING`). ``new_point`` False: the step evaluated the
+        best point again, a rejected step whatever its loss's rounding."""
         below = self.best - ROUNDING * abs(self.best) if math.isfinite(self.best) else self.best
-        if not (math.isfinite(loss) and loss < below):
+        if not (new_point and math.isfinite(loss) and loss < below):
             self.rejected.append(loss)
             return False
         if math.isfinite(self.best):
@@ -115,11 +121,10 @@ class NoiseFloor:
 
     def no_better_point(self) -> bool:
         """Whether the rejected steps since the last accepted one say that there is no better point
-        nearby: the last two differ by less than the loss's noise, or the last
-        :data:`REJECTED_PATIENCE` were each rejected by less than :data:`REJECTED_RTOL` of the best loss."""
-        if not self.decreases:
-            return False  # the solve has not moved yet
+        nearby: after the solve has moved, the last two differ by less than the loss's noise; from the
+        start on, the last :data:`REJECTED_PATIENCE` were each rejected by less than :data:`REJECTED_RTOL`
+        of the best loss."""
         last = [loss for loss in self.rejected[-REJECTED_PATIENCE:] if math.isfinite(loss)]
-        if len(last) >= 2 and math.isfinite(self.noise) and abs(last[-1] - last[-2]) < self.noise:
+        if self.decreases and len(last) >= 2 and math.isfinite(self.noise) and abs(last[-1] - last[-2]) < self.noise:
             return True
         return len(last) == REJECTED_PATIENCE and all(loss - self.best < REJECTED_RTOL * abs(self.best) for loss in last)

@@ -17,8 +17,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_array, check_count, negative_pixels, quote
-from spacefit.formation import dn_fn, noise_variance_dn
-from spacefit.fitting.losses import residual_fn
+from spacefit.formation import dn_fn, noise_variance_terms
+from spacefit.fitting.losses import AffineVariance, residual_fn
 from spacefit.fitting.result import FitResult
 from spacefit.geometry.frames import Intrinsics
 from spacefit.scene.schema import Scene
@@ -219,10 +219,11 @@ def in_unit_of(obs: Observation, channels: int, intrinsics: Intrinsics) -> Calla
     return to_dn
 
 
-def image_residual(obs: Observation, reference: np.ndarray, used: np.ndarray, loss: str) -> Callable[[jax.Array], jax.Array]:
+def image_residual(obs: Observation, reference: np.ndarray, used: np.ndarray, loss: str,
+                   descent: bool = False) -> Callable[[jax.Array], jax.Array]:
     """The residuals of a model image in the reference's unit, 0 where ``used`` is False: in
-    radiance, or with a sensor, in DN divided by the noise the sensor predicts at the model's DN."""
+    radiance, or with a sensor, in DN divided by the noise the sensor predicts at the model's DN
+    (``descent``: the deviance residuals a solver descends, :mod:`~spacefit.fitting.losses`)."""
     if obs.sensor is None:
         return residual_fn(reference, loss, obs.sigma, used)
-    sensor = obs.sensor
-    return residual_fn(reference, loss, lambda dn: jnp.sqrt(noise_variance_dn(dn, sensor)), used)
+    return residual_fn(reference, loss, AffineVariance(*noise_variance_terms(obs.sensor)), used, descent=descent)

@@ -92,7 +92,8 @@ class PassObservation:
         for row in frame_table(result, self.frames, entries=entries):
             chi2 = row.get("chi2_dof", math.nan)
             own = ", ".join(f"{name} = {row[name]:.6g} +/- {row[f'{name}.stderr']:.3g}" for name in self.per_frame if name in row)
-            lines.append(f"    frame {row['frame']} at {row['time_s']:.6g} s: chi^2/dof {chi2:.3g}" + (f"; {own}" if own else ""))
+            misfit = " (a MISFIT on its own)" if row.get("misfit") else ""
+            lines.append(f"    frame {row['frame']} at {row['time_s']:.6g} s: chi^2/dof {chi2:.3g}{misfit}" + (f"; {own}" if own else ""))
         return lines
 
     def plot(self, result: FitResult, entries: Sequence[int], *, ax: AxesArg = None, fig: FigureArg = None) -> np.ndarray:
