@@ -75,8 +75,7 @@ def main() -> None:
                   f"peak {peaks[-1]:.0f} MiB (target 1 GB); {out.strip().splitlines()[-1]}; load {os.getloadavg()[0]:.1f}", flush=True)
     if len(counts) > 1:
         slope = np.polyfit(counts, peaks, 1)[0]
-        print(f"memory per added frame: {slope:.1f} MiB ({slope * 2**20 / 1e6 * (128 / size) ** 2:.1f} MB per 128 x 128 frame at that "
-              f"rate per pixel; target 20 MB)")
+        print(f"memory per added {size} x {size} frame: {slope:.1f} MiB (target: 20 MB per 128 x 128 frame, measured with --full)")
 
 
 if __name__ == "__main__":

@@ -50,7 +50,7 @@ def image_scene(size: int) -> sf.Scene:
 @functools.cache
 def image_reference(size: int) -> np.ndarray:
     """The image fit's reference at ``size`` px, rendered at REFERENCE_SPP."""
-    return np.asarray(sf.render(image_scene(size).with_values({"render.spp": REFERENCE_SPP}), seed=11))
+    return np.asarray(sf.render(image_scene(size).with_values({"render.spp": REFERENCE_SPP, "render.seed": 11})))
 
 
 def image_fit(size: int, spp: int) -> dict[str, object]:
