@@ -11,7 +11,8 @@ samples per pixel and its resolution, for an image fit and a light-curve fit, at
 Each row: kind, resolution, spp, wall time of the fit call (set-up and JAX's compilation included, which
 every fit pays again; the process warm: a first fit of each kind is run and not recorded), steps, error.
 The rows that no other row beats in both time and error are the front; the default spp (16: the panels
-case's scene and ``sf.FitRender``'s default of the scene's spp) at the largest resolution here is marked. Writes ``speed_accuracy.csv`` and
+case's scene and ``sf.FitRender``'s default of the scene's spp) at the largest resolution measured is marked.
+The CSV is written after each row; ``--plot-only`` draws the chart from it again. Writes ``speed_accuracy.csv`` and
 ``speed_accuracy.png`` to ``--out`` and prints the table with the machine's load.
 Run: ``.venv/bin/python experiments/speed_accuracy.py [--out experiments/results/speed_accuracy]``.
 """
@@ -19,6 +20,7 @@ Run: ``.venv/bin/python experiments/speed_accuracy.py [--out experiments/results
 from __future__ import annotations
 
 import argparse
+import csv
 import functools
 import os
 import time
@@ -120,8 +122,12 @@ def plot(rows: list[dict[str, object]], defaults: dict[str, tuple[int, int]], pa
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--out", type=Path, default=Path(__file__).resolve().parent / "results" / "speed_accuracy")
+    p.add_argument("--plot-only", action="store_true", help="draw the chart and print the fronts of the saved speed_accuracy.csv")
     args = p.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.plot_only:
+        report(read_rows(args.out / "speed_accuracy.csv"), args.out)
+        return
     print(f"machine: {machine()}; load {os.getloadavg()[0]:.1f}", flush=True)
     rows = []
     for kind, sizes, run in (("image", IMAGE_RESOLUTIONS, image_fit), ("light curve", CURVE_RESOLUTIONS, curve_fit)):
@@ -131,9 +137,21 @@ def main() -> None:
                 rows.append(run(size, spp))
                 print(f"{kind:12s} {size:3d} px {spp:3d} spp: {rows[-1]['wall_s']:6.2f} s, {rows[-1]['steps']:2d} steps, "
                       f"error {rows[-1]['error']:.2%}; load {os.getloadavg()[0]:.1f}", flush=True)
-    defaults = {"image": (IMAGE_RESOLUTIONS[-1], 16), "light curve": (CURVE_RESOLUTIONS[-1], 16)}
-    write_csv(args.out / "speed_accuracy.csv", rows)
-    plot(rows, defaults, args.out / "speed_accuracy.png")
+                write_csv(args.out / "speed_accuracy.csv", rows)  # after each row: a run cut short keeps what it measured
+    report(rows, args.out)
+
+
+def read_rows(path: Path) -> list[dict[str, object]]:
+    """The rows of a saved speed_accuracy.csv, numbers as numbers."""
+    with open(path, newline="") as f:
+        return [{"kind": r["kind"], "resolution": int(r["resolution"]), "spp": int(r["spp"]), "wall_s": float(r["wall_s"]),
+                 "steps": int(r["steps"]), "error": float(r["error"])} for r in csv.DictReader(f)]
+
+
+def report(rows: list[dict[str, object]], out: Path) -> None:
+    """Draw ``rows``' chart into ``out`` and print each kind's front; the default is the largest resolution measured at 16 spp."""
+    defaults = {kind: (max(r["resolution"] for r in rows if r["kind"] == kind), 16) for kind in sorted({r["kind"] for r in rows})}
+    plot(rows, defaults, out / "speed_accuracy.png")
     for kind in defaults:
         print(f"{kind} front: " + ", ".join(f"{r['resolution']} px {r['spp']} spp ({r['wall_s']:.1f} s, {r['error']:.2%})"
                                             for r in front([r for r in rows if r["kind"] == kind])))
