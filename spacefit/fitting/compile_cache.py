@@ -4,6 +4,8 @@ A fit's solver, losses and image model are XLA programs that JAX compiles on fir
 (about 6 s of the 8-parameter observation fit, issue 33). :func:`use_compile_cache` points JAX's
 persistent compilation cache at ``$SPACEFIT_JAX_CACHE_DIR`` (default: ``jax`` in spacefit's cache folder,
 :func:`spacefit.geometry.cache.cache_dir`; ``off`` disables it) before the first fit compiles anything.
+This is the one piece of JAX's configuration a fit changes for the whole process (its cache folder and
+the floors on what is written): JAX opens its cache once per process and has no scoped setting for it.
 
 JAX writes no entry for a program that calls back into Python (``jax.pure_callback``): the solver's step,
 the Jacobian and the residuals, whose renders are such callbacks, are compiled in every process (about
