@@ -60,6 +60,14 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
     return np.where(linear <= 0.0031308, 12.92 * linear, 1.055 * np.power(np.maximum(linear, 0.0031308), 1 / 2.4) - 0.055)
 
 
+def srgb_decode(encoded: np.ndarray) -> np.ndarray:
+    """The inverse of :func:`srgb_encode`: linear values of sRGB-encoded values in [0, 1] (IEC 61966-2-1), written
+    out for the same reason: colour-science's import (with Matplotlib's and pandas') costs a fit 1.5-4 s."""
+    encoded = np.asarray(encoded, dtype=float)
+    knee = 12.92 * 0.0031308  # where the encoding's two pieces meet (0.0404500)
+    return np.where(encoded <= knee, encoded / 12.92, np.power((np.maximum(encoded, knee) + 0.055) / 1.055, 2.4))
+
+
 def versions() -> dict[str, str]:
     """Versions of Python and the packages that decide a render's pixels."""
     return {"python": platform.python_version(), **{name: package_version(name) or "not installed" for name in PACKAGES}}

@@ -4,8 +4,11 @@ from __future__ import annotations
 
 import json
 import os
+import subprocess
+import sys
 from pathlib import Path
 
+import jax
 import numpy as np
 import pytest
 from astropy.io import fits
@@ -21,6 +24,8 @@ from spacefit.scene.toml import load_scene
 from spacefit.pipeline import fit_to_folder
 from spacefit.rendering.renderer import render
 from spacefit.rendering.exr import read_exr, write_exr
+from spacefit.fitting.compile_cache import ENV as JAX_CACHE_ENV, compile_cache_dir, use_compile_cache
+from spacefit.geometry.cache import ENV as SPACEFIT_CACHE_ENV
 
 TRUE_KD = 0.5
 REPORT = ["comparison.png", "convergence.png", "fit.json", "fit.toml", "residuals.fits", "residuals.png", "uncertainty.json"]
@@ -113,6 +118,55 @@ def test_bad_observation_inputs_exit_2_and_leave_nothing(dn_case, tmp_path, caps
 def _args(case: Path, out: Path, *extra: str, reference: str = "a.exr") -> list[str]:
     return ["fit", str(case / reference), "--scene", str(case / "a.toml"), "--free", "parts.sphere.kd",
             "--out", str(out), "--max-steps", "3", "--quiet", *extra]
+
+
+# `spacefit fit` as the program, with JAX's persistent-cache hits counted as they happen (on stderr: the fit ends the
+# process at once, atexit handlers included).
+COUNT_HITS = ("import runpy, sys\n"
+              "from jax._src import monitoring\n"
+              "monitoring.register_event_listener(lambda event, **kw: event.endswith('/cache_hits') and print('cache hit', file=sys.stderr))\n"
+              "sys.argv[0] = 'spacefit'\n"
+              "runpy.run_module('spacefit.cli', run_name='__main__')\n")
+
+
+@pytest.mark.slow  # two fit processes: 15-20 s on a quiet machine
+def test_the_fit_program_ends_at_once_with_its_report_and_reads_jax_s_programs_from_the_disk(case, tmp_path):
+    """Two `spacefit fit` processes sharing a JAX cache folder: the first writes the programs it compiled, the
+    second reads them back and writes none; each ends at once (os._exit) with its report whole and its exit
+    code the report's verdict, and leaves no lock or stage."""
+    runs = []
+    for k in range(2):
+        out = tmp_path / f"run{k}"
+        env = {**os.environ, JAX_CACHE_ENV: str(tmp_path / "jax"), "PYTHONPATH": os.pathsep.join(sys.path)}
+        run = subprocess.run([sys.executable, "-c", COUNT_HITS, *_args(case, out, "--spp", "2")], env=env,
+                             capture_output=True, text=True)
+        report = json.loads((out / "fit.json").read_text())
+        assert run.returncode == exit_code(sf.Status(report["status"])), run.stderr
+        assert sorted(os.listdir(out)) == REPORT and "parts.sphere.kd" in run.stdout
+        runs.append((run.stderr.count("cache hit"), sorted(p.name for p in (tmp_path / "jax").iterdir())))
+    (first, written), (second, read) = runs
+    assert len(written) >= 10 and read == written
+    assert second >= first + len(written) - 1  # every program written is read back (one may be compiled twice in a process)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["jax", "run0", "run1"]
+
+
+def test_jax_s_cache_folder_follows_the_environment_and_a_folder_the_process_chose(monkeypatch, tmp_path):
+    monkeypatch.delenv(JAX_CACHE_ENV, raising=False)
+    monkeypatch.setenv(SPACEFIT_CACHE_ENV, str(tmp_path))
+    assert compile_cache_dir() == tmp_path / "jax"
+    monkeypatch.setenv(SPACEFIT_CACHE_ENV, "off")
+    assert compile_cache_dir() is None
+    monkeypatch.setenv(JAX_CACHE_ENV, str(tmp_path / "mine"))
+    assert compile_cache_dir() == tmp_path / "mine"
+    monkeypatch.setenv(JAX_CACHE_ENV, "OFF")
+    assert compile_cache_dir() is None and use_compile_cache() is None
+    before = jax.config.jax_compilation_cache_dir
+    jax.config.update("jax_compilation_cache_dir", str(tmp_path / "chosen"))  # e.g. JAX_COMPILATION_CACHE_DIR
+    try:
+        monkeypatch.setenv(JAX_CACHE_ENV, str(tmp_path / "mine"))
+        assert use_compile_cache() == tmp_path / "chosen" and jax.config.jax_compilation_cache_dir == str(tmp_path / "chosen")
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before)
 
 
 def test_cli_fit_writes_the_report(case, tmp_path, capsys):

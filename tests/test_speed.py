@@ -15,7 +15,7 @@ import pytest
 import spacefit as sf
 from spacefit import cli
 from spacefit.geometry import cache
-from spacefit.output import srgb_encode
+from spacefit.output import srgb_decode, srgb_encode
 from spacefit.scene import assembly as assembly_module
 from spacefit.scene.assembly import assemble
 
@@ -189,6 +189,22 @@ def test_the_render_command_s_process_imports_none_of_the_stacks_it_does_not_nee
     assert runs[1].stdout.strip() == "0 []", runs[1].stdout + runs[1].stderr
 
 
+# Modules the fit command's stack must not import: colour-science (with pandas and Matplotlib's colour maps: 1.5-4 s;
+# sRGB is written out in spacefit.output), optax (only Adam's), and the store's and clusters' stacks.
+NOT_FOR_A_FIT = ("colour", "pandas", "optax", "chex", "xarray", "zarr", "dask", "distributed", "tqdm")
+
+
+def test_the_fit_command_s_modules_import_none_of_the_stacks_a_default_fit_does_not_need():
+    """What `spacefit fit` imports before it fits (cli.main's and _fit's modules, the files' readers) and what
+    writing its report imports: none of NOT_FOR_A_FIT."""
+    script = ("import sys, spacefit.cli, spacefit.pipeline, spacefit.scene.toml, spacefit.fitting.loop, spacefit.fitting.problem, "
+              "spacefit.fitting.observation_files, spacefit.fitting.report, spacefit.imageio.reading\n"
+              f"print(sorted(m for m in {NOT_FOR_A_FIT!r} if m in sys.modules))\n")
+    run = subprocess.run([sys.executable, "-c", script], env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
+                         capture_output=True, text=True, check=True)
+    assert run.stdout.strip() == "[]", run.stdout + run.stderr
+
+
 def test_the_render_program_ends_at_once_with_its_folder_written_and_its_messages_out(tmp_path):
     """Run as the program, a render skips Python's shutdown (os._exit): its exit status, its messages (through pipes)
     and its four files are all there, and no lock or stage is left."""
@@ -235,10 +251,12 @@ def test_package_versions_read_from_the_header_equal_importlib_metadata_s():
     assert package_version("no-such-distribution-spacefit-test") is None
 
 
-def test_srgb_encoding_equals_colour_science():
+def test_srgb_encoding_and_decoding_equal_colour_science_s():
     colour = pytest.importorskip("colour")
     x = np.concatenate([np.linspace(0.0, 0.01, 101), np.linspace(0.0, 1.0, 1001)])
     np.testing.assert_allclose(srgb_encode(x), colour.cctf_encoding(x, function="sRGB"), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(srgb_decode(x), colour.cctf_decoding(x, function="sRGB"), rtol=0, atol=1e-12)
+    np.testing.assert_allclose(srgb_decode(srgb_encode(x)), x, rtol=0, atol=1e-12)
 
 
 def test_a_refinement_held_in_memory_says_so_and_one_not_needed_is_not_read(monkeypatch, tmp_path):

@@ -20,6 +20,7 @@ import numpy as np
 
 from spacefit.errors import check_choice, check_count, check_type
 from spacefit.executors import Cluster
+from spacefit.fitting.compile_cache import use_compile_cache
 from spacefit.fitting.frames import frame_executor
 from spacefit.fitting.goodness import Goodness
 from spacefit.fitting.judging import judged_goodness, part_goodness, part_rows, per_observation
@@ -157,6 +158,7 @@ def fit(
     """
     engine = _checked_solver(solver, max_steps, stop)
     check_type("resume", resume, Resume, "an sf.Resume(on_step=..., ...)")
+    use_compile_cache()  # the solver's programs from disk when a process before compiled them
     executor = frame_executor(cluster)
     try:
         s = setup(observations, free, start=start, loss=loss, render=render, wrinkle_coordinates=wrinkle_coordinates,

@@ -34,13 +34,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-with np.printoptions():  # colour-science sets NumPy's legacy (1.13) printing when imported: the caller's options stay
-    import colour
-
 from spacefit.errors import NEGATIVE_SIGMAS, InputError, InputTypeError, check_choice, check_count, check_path, check_range, negative_pixels, quote
 from spacefit.imageio.fits import ROW_ORDERS, fits_unit, header_sensor, iso_time, read_fits
 from spacefit.imageio.formats import CHANNELS, FORMATS, RENDER_SPP_KEY, RESPONSES, UNITS, file_format, sidecar_path
 from spacefit.imageio.raster import read_png, read_tiff
+from spacefit.output import srgb_decode
 from spacefit.sensor import Sensor, check_fields
 from spacefit.units import RADIANCE_UNIT
 
@@ -209,7 +207,7 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         usable &= values < meta["saturation_dn"]
     if meta["response"] == "srgb":
         scale = full_scale or 1.0
-        values = np.asarray(colour.cctf_decoding(values / scale, function="sRGB")) * scale
+        values = srgb_decode(values / scale) * scale
     return ObservedImage(values, found_unit, usable, meta, str(p))
 
 
