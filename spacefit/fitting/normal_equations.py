@@ -13,6 +13,7 @@ in tests/test_normal_equations.py).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import Any
 
 import equinox as eqx
@@ -22,26 +23,35 @@ import lineax as lx
 import lineax.internal as lxi
 from jaxtyping import Array, PyTree
 
-# Jacobian columns applied at once: the memory is this many rows-long vectors.
-CHUNK = 8
+# Columns applied at once: at most this many, and at most CHUNK_ELEMENTS values of rows-long vectors
+# (2^24 float64: 128 MiB) at a time.
+MAX_CHUNK = 8
+CHUNK_ELEMENTS = 1 << 24
 
 
-def gram(operator: lx.AbstractLinearOperator, chunk: int = CHUNK) -> Array:
-    """J^T J of a linear operator J, ``chunk`` columns at a time (memory: ``chunk`` of J's columns)."""
-    packed = lxi.pack_structures(operator)
-    transposed = operator.transpose()
-    n = operator.in_size()
-    dtype = jnp.result_type(*[leaf.dtype for leaf in jax.tree_util.tree_leaves(operator.in_structure())])
+def chunk_for(rows: int) -> int:
+    """How many columns of a ``rows``-long linear map :func:`by_columns` applies at once."""
+    return max(1, min(MAX_CHUNK, CHUNK_ELEMENTS // max(rows, 1)))
 
-    def columns(basis: Array) -> Array:
-        def one(e: Array) -> Array:
-            image = operator.mv(lxi.unravel_solution(e, packed))
-            return lxi.ravel_vector(transposed.mv(image), lxi.transpose_packed_structures(packed))
-        return jax.vmap(one)(basis)
 
+def by_columns(fn: Callable[[Array], Array], n: int, dtype: Any, chunk: int) -> Array:
+    """The matrix whose column j is ``fn(e_j)``, e_j the j-th of the ``n`` unit vectors, ``chunk`` at a time."""
     blocks = -(-n // chunk)
     basis = jnp.eye(blocks * chunk, n, dtype=dtype).reshape(blocks, chunk, n)
-    g = jax.lax.map(columns, basis).reshape(blocks * chunk, n)[:n]
+    return jax.lax.map(jax.vmap(fn), basis).reshape(blocks * chunk, -1)[:n].T
+
+
+def gram(operator: lx.AbstractLinearOperator, chunk: int | None = None) -> Array:
+    """J^T J of a linear operator J, ``chunk`` columns at a time (default :func:`chunk_for` its rows)."""
+    packed = lxi.pack_structures(operator)
+    transposed = operator.transpose()
+    dtype = jnp.result_type(*[leaf.dtype for leaf in jax.tree_util.tree_leaves(operator.in_structure())])
+
+    def column(e: Array) -> Array:
+        image = operator.mv(lxi.unravel_solution(e, packed))
+        return lxi.ravel_vector(transposed.mv(image), lxi.transpose_packed_structures(packed))
+
+    g = by_columns(column, operator.in_size(), dtype, chunk or chunk_for(operator.out_size()))
     return 0.5 * (g + g.T)
 
 
@@ -49,12 +59,12 @@ class NormalEquations(lx.AbstractLinearSolver):
     """The least-squares (pseudo-inverse) solution of J dx = b from J^T J, formed by :func:`gram`.
 
     Attributes:
-        chunk: Jacobian columns applied at once.
+        chunk: Jacobian columns applied at once (None: :func:`chunk_for` the operator's rows).
         rcond: eigenvalues of J^T J below ``rcond`` times the largest count as zero (default: machine
             epsilon times the number of columns, J^T J's own round-off).
     """
 
-    chunk: int = eqx.field(static=True, default=CHUNK)
+    chunk: int | None = eqx.field(static=True, default=None)
     rcond: float | None = None
 
     def init(self, operator: lx.AbstractLinearOperator, options: dict[str, Any]) -> Any:
