@@ -69,12 +69,13 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
     xj = jnp.asarray(x)
     r, J1 = jax.linearize(problem.residual_x, xj)
     r_alt, J2 = jax.linearize(problem.residual_x_independent, xj)
-    J1T, J2T = jax.linear_transpose(J1, xj), jax.linear_transpose(J2, xj)
+    # the transposes take the residuals' dtype (float32 renders: J^T v sums in float32, ~1e-6 relative)
+    J1T, J2T = ((lambda v, t=jax.linear_transpose(J, xj), dtype=r.dtype: t(v.astype(dtype))[0]) for J in (J1, J2))
     r, r_alt = np.asarray(r, dtype=float), np.asarray(r_alt, dtype=float)
     n, chunk = len(x), chunk_for(r.size)
 
     def cross(weight: Callable[[jax.Array], jax.Array]) -> np.ndarray:  # sym(J1^T W J2), W symmetric
-        m = np.asarray(by_columns(lambda e: J1T(weight(J2(e)))[0], n, xj.dtype, chunk), dtype=float)
+        m = np.asarray(by_columns(lambda e: J1T(weight(J2(e))), n, xj.dtype, chunk), dtype=float)
         return 0.5 * (m + m.T)
 
     def meat(w: np.ndarray) -> np.ndarray:
@@ -99,12 +100,12 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
 
         def jacobian_noise_column(e: jax.Array) -> jax.Array:
             v = r2 * (J1(e) - J2(e))
-            return J1T(v)[0] - J2T(v)[0]
+            return J1T(v) - J2T(v)
 
         jacobian_noise = 0.5 * np.asarray(by_columns(jacobian_noise_column, n, xj.dtype, chunk), dtype=float)
         noise = render_meat(cross, (r - r_alt) / math.sqrt(2.0), problem, x) + jacobian_noise
         cov, s2 = bread + 0.5 * bread @ noise @ bread, 1.0
-        correction = -bread @ (0.5 * (np.asarray(J1T(jnp.asarray(r_alt))[0]) + np.asarray(J2T(jnp.asarray(r))[0])))
+        correction = -bread @ (0.5 * (np.asarray(J1T(jnp.asarray(r_alt))) + np.asarray(J2T(jnp.asarray(r)))))
     else:
         cov, correction = bread @ meat(_unknown_noise_weights(problem, r, informative, dof)) @ bread, np.zeros(len(x))
     if tiny.any():
