@@ -19,11 +19,11 @@ from typing import Any, Union
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import lineax as lx
 import numpy as np
 import optimistix as optx
 
 from spacefit.errors import InputTypeError, check_choice, check_range, quote
+from spacefit.fitting.normal_equations import NormalEquations
 
 # Residuals of an unconstrained vector u.
 ResidualFn = Callable[[jax.Array], jax.Array]
@@ -97,17 +97,19 @@ class Adam:
 Solver = Union[optx.AbstractLeastSquaresSolver, optx.AbstractMinimiser, Adam]
 
 
-def _no_qr(cls: type) -> Callable[[], Solver]:
-    # Gauss-Newton and dogleg steps by SVD: the default QR returns NaN where the Jacobian is rank
-    # deficient (unidentifiable directions, saturated bijections); SVD takes the minimum-norm step.
-    return lambda: cls(rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL, linear_solver=lx.AutoLinearSolver(well_posed=False))
+def _normal(cls: type) -> Callable[[], Solver]:
+    # Steps from J^T J formed a few columns at a time (spacefit.fitting.normal_equations): a joint
+    # fit's Jacobian, rows of every frame by columns of every frame's values, is never held whole
+    # (optimistix's default QR materialises it, and returns NaN where it is rank deficient:
+    # unidentifiable directions, saturated bijections; the pseudo-inverse takes the minimum-norm step).
+    return lambda: cls(rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL, linear_solver=NormalEquations())
 
 
 # The solvers by name, each with its default settings.
 SOLVERS: dict[str, Callable[[], Solver]] = {
-    "lm": lambda: optx.LevenbergMarquardt(rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL),
-    "gn": _no_qr(optx.GaussNewton),
-    "dogleg": _no_qr(optx.Dogleg),
+    "lm": _normal(optx.LevenbergMarquardt),
+    "gn": _normal(optx.GaussNewton),
+    "dogleg": _normal(optx.Dogleg),
     "bfgs": lambda: optx.BFGS(rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL),
     "adam": Adam,
 }

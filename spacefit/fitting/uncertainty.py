@@ -10,15 +10,15 @@ References:
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from scipy import ndimage
 
+from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
 from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, setup
@@ -66,23 +66,29 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
     seed's residuals), one Gauss-Newton step from ``x`` (the returned correction); it averages the
     two seeds' render and Jacobian noise, so those two terms enter the covariance at half weight.
     """
-    r = np.asarray(problem.residual_x(jnp.asarray(x)), dtype=float)
-    J1 = np.asarray(jax.jacfwd(problem.residual_x)(jnp.asarray(x)), dtype=float)
-    J2 = np.asarray(jax.jacfwd(problem.residual_x_independent)(jnp.asarray(x)), dtype=float)
-    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J1)) and np.all(np.isfinite(J2))):
-        n = len(x)
-        return np.full((n, n), np.nan), math.nan, np.full(n, np.nan), np.zeros(n)
-    informative = int((np.any(J1 != 0, axis=1) | (r != 0)).sum())
-    dof = max(informative - len(x), 1)
-    s2 = float(r @ r) / dof
+    xj = jnp.asarray(x)
+    r, J1 = jax.linearize(problem.residual_x, xj)
+    r_alt, J2 = jax.linearize(problem.residual_x_independent, xj)
+    # the transposes take the residuals' dtype (float32 renders: J^T v sums in float32, ~1e-6 relative)
+    J1T, J2T = ((lambda v, t=jax.linear_transpose(J, xj), dtype=r.dtype: t(v.astype(dtype))[0]) for J in (J1, J2))
+    r, r_alt = np.asarray(r, dtype=float), np.asarray(r_alt, dtype=float)
+    n, chunk = len(x), chunk_for(r.size)
 
-    def cross(w: np.ndarray) -> np.ndarray:  # sym(J1^T diag(w) J2)
-        return 0.5 * ((J1 * w[:, None]).T @ J2 + (J2 * w[:, None]).T @ J1)
+    def cross(weight: Callable[[jax.Array], jax.Array]) -> np.ndarray:  # sym(J1^T W J2), W symmetric
+        m = np.asarray(by_columns(lambda e: J1T(weight(J2(e))), n, xj.dtype, chunk), dtype=float)
+        return 0.5 * (m + m.T)
 
     def meat(w: np.ndarray) -> np.ndarray:
-        return _psd_part(cross(w))
+        return _psd_part(cross(lambda v: jnp.asarray(w) * v))
 
-    eigval, eigvec = np.linalg.eigh(cross(np.ones_like(r)))
+    eigval, eigvec = np.linalg.eigh(ones := cross(lambda v: v))
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(ones))):
+        return np.full((n, n), np.nan), math.nan, np.full(n, np.nan), np.zeros(n)
+    # a row no parameter moves shows as 0 in J1 times a random direction (with probability 1)
+    probe = np.asarray(J1(jnp.asarray(np.random.default_rng(0).normal(size=n), dtype=xj.dtype)), dtype=float)
+    informative = int(((probe != 0) | (r != 0)).sum())
+    dof = max(informative - len(x), 1)
+    s2 = float(r @ r) / dof
     tiny = eigval <= 1e-9 * max(np.abs(eigval).max(), 1e-300)
     bread = (eigvec[:, ~tiny] / eigval[~tiny]) @ eigvec[:, ~tiny].T
     if problem.noise_known:
@@ -90,12 +96,16 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
         # (r - r_alt)^2 / 2 from the two seeds, through the sandwich, plus the noise of the
         # Jacobian the fit steered by: it stops where J^T r = 0 for its noisy J, off by
         # (J^T J)^-1 dJ^T r, whose covariance per row is r^2 (J1 - J2)(J1 - J2)^T / 2
-        r_alt = np.asarray(problem.residual_x_independent(jnp.asarray(x)), dtype=float)
-        dJ = J1 - J2
-        jacobian_noise = 0.5 * (dJ * (r**2)[:, None]).T @ dJ
-        noise = render_meat(J1, J2, (r - r_alt) / math.sqrt(2.0), problem, x) + jacobian_noise
+        r2 = jnp.asarray(r**2)
+
+        def jacobian_noise_column(e: jax.Array) -> jax.Array:
+            v = r2 * (J1(e) - J2(e))
+            return J1T(v) - J2T(v)
+
+        jacobian_noise = 0.5 * np.asarray(by_columns(jacobian_noise_column, n, xj.dtype, chunk), dtype=float)
+        noise = render_meat(cross, (r - r_alt) / math.sqrt(2.0), problem, x) + jacobian_noise
         cov, s2 = bread + 0.5 * bread @ noise @ bread, 1.0
-        correction = -bread @ (0.5 * (J1.T @ r_alt + J2.T @ r))
+        correction = -bread @ (0.5 * (np.asarray(J1T(jnp.asarray(r_alt))) + np.asarray(J2T(jnp.asarray(r)))))
     else:
         cov, correction = bread @ meat(_unknown_noise_weights(problem, r, informative, dof)) @ bread, np.zeros(len(x))
     if tiny.any():
@@ -122,7 +132,8 @@ def _unknown_noise_weights(problem: Problem, r: np.ndarray, informative: int, do
     return w
 
 
-def render_meat(J1: np.ndarray, J2: np.ndarray, d: np.ndarray, problem: Problem, x: np.ndarray) -> np.ndarray:
+def render_meat(cross: Callable[[Callable[[jax.Array], jax.Array]], np.ndarray], d: np.ndarray, problem: Problem,
+                x: np.ndarray) -> np.ndarray:
     """The fit's render noise through the sandwich's meat: a spatial HAC estimate (Conley 1999)
     with a flat kernel, sym(sum_i s1_i sum_{j near i} s2_j^T) with s_i = sum over pixel i's channels
     of J_i d_i, j within :func:`noise_reach_px` of i (Chebyshev distance). One path lights all
@@ -130,20 +141,28 @@ def render_meat(J1: np.ndarray, J2: np.ndarray, d: np.ndarray, problem: Problem,
     neighbours; a per-residual variance, or blocks of 4 x 4 px, missed 40 to 60 % of that
     covariance (measured on the panels case with a 1 px PSF, where neighbours 1, 2, 3 px apart
     share 83, 47, 18 % of their render noise). ``d`` is one draw of the render noise per residual,
-    (r - r_alt) / sqrt(2). The values after the images' pixels (value observations), and every
-    residual where they are not laid out as pixels (the losses that are not per pixel), count alone."""
+    (r - r_alt) / sqrt(2); ``cross(W)`` is sym(J1^T W J2) for a symmetric linear map W of the
+    residuals, here v -> d * (the box sum over the reach of the per-pixel sums of d * v). The values
+    after the images' pixels (value observations), and every residual where they are not laid out
+    as pixels (the losses that are not per pixel), count alone: W is d^2 v there."""
     shapes = [np.shape(ref) for ref in problem.references]
     laid_out = problem.pixels if problem.pixels + sum(b.data.value.size for b in problem.blocks) == d.size else 0
-    alone = slice(laid_out, d.size)
-    cross, offset = (J1[alone] * (d[alone] ** 2)[:, None]).T @ J2[alone], 0
-    for k, shape in enumerate(shapes if laid_out else []):
-        rows = slice(offset, offset + int(np.prod(shape)))
-        offset = rows.stop
-        s1, s2 = ((J[rows] * d[rows, None]).reshape(*shape, -1).sum(axis=2) for J in (J1, J2))
-        size = 2 * noise_reach_px(problem, x, k) + 1
-        near = np.stack([ndimage.uniform_filter(s2[..., p], size, mode="constant") for p in range(s2.shape[-1])], axis=-1)
-        cross += size**2 * s1.reshape(-1, s1.shape[-1]).T @ near.reshape(-1, near.shape[-1])
-    return _psd_part(0.5 * (cross + cross.T))
+    images = shapes if laid_out else []
+    sizes = [2 * noise_reach_px(problem, x, k) + 1 for k in range(len(images))]
+    dj = jnp.asarray(d)
+
+    def weight(v: jax.Array) -> jax.Array:
+        parts, offset = [], 0
+        for shape, size in zip(images, sizes):
+            rows = slice(offset, offset + int(np.prod(shape)))
+            offset = rows.stop
+            per_pixel = (dj[rows] * v[rows]).reshape(shape).sum(axis=2)
+            reach = (size - 1) // 2
+            near = jax.lax.reduce_window(per_pixel, 0.0, jax.lax.add, (size, size), (1, 1), ((reach, reach), (reach, reach)))
+            parts.append(dj[rows] * jnp.repeat(near.reshape(-1), shape[2]))
+        return jnp.concatenate([*parts, dj[offset:] ** 2 * v[offset:]])
+
+    return _psd_part(cross(weight))
 
 
 def noise_reach_px(problem: Problem, x: np.ndarray, k: int) -> int:

@@ -51,15 +51,17 @@ def check_memory(width: int, height: int, window_pixels: int, spp: int, split: b
     return estimate
 
 
-# A fit's memory besides the rendering's, fitted (rounded up) to the peak RSS of pass fits of 2 to 16
-# frames at 32 x 32 and 64 x 64 px, each frame with 2 free columns (experiments/pass_memory.py;
-# docs/guide/reliability.md, "Memory per frame"): the process with JAX, Mitsuba and a loaded scene
-# (610 MiB measured); per frame a fixed part (its compiled render, scene and records: 5.1 MiB
-# measured) and 1314 B per pixel for its image and 2 columns (reference, weights, rendered image,
-# Jacobian columns and the renders' caches), taken as the same per pixel for the image and each column.
-FIT_BASE_BYTES = 640 * 2**20
-FIT_FRAME_BYTES = 6 * 2**20
-FIT_FRAME_PIXEL_COLUMN_BYTES = 480
+# A fit's memory besides the rendering's, fitted (rounded up) to the peak RSS of pass fits, each frame
+# with 2 free columns (experiments/pass_memory.py; docs/guide/reliability.md, "Memory per frame"): the
+# process with JAX, Mitsuba and a loaded scene (634 MiB at 64 px, 681 MiB at 128 px, intercepts); per
+# frame a fixed part (its programs' share, scene values and records: 3.5 MiB) and 222 B per pixel for
+# its image and each column (reference, weights, rendered image, Jacobian columns as the solver's
+# linearisation holds them), from the growth of 6.1 MiB per frame at 64 x 64 px (16 to 48 frames) and
+# 13.9 MiB at 128 x 128 px (12 to 48). The Jacobian is never held whole (fitting/normal_equations.py):
+# held whole, rows of every frame by the columns of every frame, it grew as frames^2.
+FIT_BASE_BYTES = 700 * 2**20
+FIT_FRAME_BYTES = 4 * 2**20
+FIT_FRAME_PIXEL_COLUMN_BYTES = 240
 # A fit estimated above this states its size before it starts (a warning; ``spacefit fit`` says every pass's).
 LARGE_FIT_BYTES = 2**30
 
