@@ -30,7 +30,7 @@ extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.autosummary",
     "sphinx.ext.napoleon",
-    "sphinx.ext.mathjax",
+    "offline_mathjax",  # sphinx.ext.mathjax with MathJax from the site itself (docs/_ext/offline_mathjax.py)
     "sphinxarg.ext",
     "sphinx_gallery.gen_gallery",
 ]
@@ -73,6 +73,7 @@ sphinx_gallery_conf = {
     "matplotlib_animations": False,
     "image_scrapers": ("matplotlib", FigureScraper()),
     "reset_modules": ("matplotlib",),
+    "write_computation_times": False,  # its page loads DataTables from a CDN: the site serves every asset itself
 }
 
 html_theme = "pydata_sphinx_theme"
@@ -81,10 +82,10 @@ html_static_path: list[str] = []
 html_theme_options = {
     "navigation_with_keys": False,
     "show_toc_level": 2,
-    "header_links_before_dropdown": 4,
+    "header_links_before_dropdown": 7,
     "secondary_sidebar_items": ["page-toc"],
 }
-html_sidebars = {"index": [], "getting-started": []}
+html_sidebars = {"index": [], "getting-started": []}  # the sections' pages: the section's own navigation
 html_show_sourcelink = False
 
 

@@ -1,7 +1,7 @@
 """Build and execute ``experiments/walkthrough.ipynb``: what spacefit simulates and fits, every figure computed.
 
 The notebook uses ``sf.`` names only and computes every figure it shows, at small sizes (it runs in
-``make docs``, docs/notebooks/). Executing it here stores its outputs, so it reads on GitHub without
+``make docs``, docs/tutorials/). Executing it here stores its outputs, so it reads on GitHub without
 a kernel. Run: ``.venv/bin/python experiments/make_notebook.py`` (needs the ``notebook`` extra:
 ``pip install -e .[notebook]``).
 """

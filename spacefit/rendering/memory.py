@@ -53,7 +53,7 @@ def check_memory(width: int, height: int, window_pixels: int, spp: int, split: b
 
 # A fit's memory besides the rendering's, fitted (rounded up) to the peak RSS of pass fits of 2 to 16
 # frames at 32 x 32 and 64 x 64 px, each frame with 2 free columns (experiments/pass_memory.py;
-# docs/guide/reliability.md, "Memory per frame"): the process with JAX, Mitsuba and a loaded scene
+# docs/measurements/reliability.md, "Memory per frame"): the process with JAX, Mitsuba and a loaded scene
 # (610 MiB measured); per frame a fixed part (its compiled render, scene and records: 5.1 MiB
 # measured) and 1314 B per pixel for its image and 2 columns (reference, weights, rendered image,
 # Jacobian columns and the renders' caches), taken as the same per pixel for the image and each column.
