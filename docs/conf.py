@@ -36,7 +36,7 @@ extensions = [
 ]
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "gallery/*.ipynb", "gallery/*.py", "gallery/*.zip",
-                    "gallery/*.md5", "gallery/*.json", "examples/*", "jupyter_execute", "_generated/*", "_ext/*"]
+                    "gallery/*.md5", "gallery/*.json", "examples/*", "jupyter_execute", "_generated/*", "_ext/*", "_static/*"]
 suppress_warnings = ["config.cache"]  # sphinx-gallery's conf holds functions, which Sphinx cannot pickle
 
 # MyST: headings get anchors so pages can link to sections
@@ -78,7 +78,8 @@ sphinx_gallery_conf = {
 
 html_theme = "pydata_sphinx_theme"
 html_title = "spacefit"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["spacefit.css"]  # wider pages for the code cells
 html_theme_options = {
     "navigation_with_keys": False,
     "show_toc_level": 2,
