@@ -8,6 +8,7 @@ by one in tests/test_docs_examples.py, for a failure that names its block)."""
 from __future__ import annotations
 
 import functools
+import json
 from html import unescape
 import os
 import re
@@ -213,6 +214,14 @@ def test_api_reference_documents_every_public_name(site):
         assert f"generated/spacefit.{name}.html" in api, name
     fit = (site / "reference" / "generated" / "spacefit.fit.html").read_text()
     assert "noise floor" in fit.lower() or "Monte Carlo noise" in fit
+    assert set(sf.__all__) <= searchable_names(site), "the site's search does not find every public name"
+
+
+def searchable_names(html: Path) -> set[str]:
+    """The names the site's search finds as objects of ``spacefit`` (Sphinx's searchindex.js)."""
+    text = (html / "searchindex.js").read_text()
+    index = json.loads(text[text.index("(") + 1:text.rindex(")")])
+    return {entry[4] for entry in index["objects"].get("spacefit", [])}
 
 
 def test_cli_reference_is_the_parser(site):
