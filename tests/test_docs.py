@@ -162,11 +162,11 @@ def cells_without_figures(html: Path) -> list[str]:
         if where.parts[0] in ("_static", "_sources", "gallery", "reference", "measurements"):
             continue
         text = page.read_text(encoding="utf-8")
-        for cell in text.split('<div class="cell docutils container')[1:]:
-            code_html, _, output = cell.partition('class="cell_output')
+        for cell in re.split(r'<div class="cell docutils container[^>]*>', text)[1:]:
+            code_html, _, output = cell.partition('<div class="cell_output')
             code = unescape(re.sub(r"<[^>]+>", "", code_html))
-            if DRAWS.search(code) and not re.search(r"<img[^>]+src=", output.split('<div class="cell docutils container')[0]):
-                missing.append(f"{where}: {code.strip().splitlines()[0] if code.strip() else code!r}")
+            if DRAWS.search(code) and not re.search(r"<img[^>]+src=", output):
+                missing.append(f"{where}: {code.strip().splitlines()[0]}")
         static = [unescape(re.sub(r"<[^>]+>", "", block)) for block in re.findall(r'<div class="highlight-(?:python|default) notranslate">(.*?)</pre>', text, re.S)]
         if any(DRAWS.search(code) for code in static) and "<img" not in text:
             missing.append(f"{where}: a static code block draws, the page shows no figure")
@@ -185,7 +185,7 @@ def test_every_cell_that_draws_shows_its_figure(site):
 
 def test_figure_checker_finds_a_cell_without_its_figure(tmp_path):
     """The check above can fail: a cell that calls plt.imshow with no image in its output is named, one with it is not."""
-    cell = '<div class="cell docutils container"><div class="cell_input"><pre>{code}</pre></div><div class="cell_output">{out}</div></div>'
+    cell = '<div class="cell docutils container"><div class="cell_input"><pre>{code}</pre></div><div class="cell_output docutils container">{out}</div></div>'
     (tmp_path / "p.html").write_text(cell.format(code="plt.imshow(x)", out="<pre>text</pre>")
                                      + cell.format(code="sf.plot_frames(rows)", out='<img src="a.png">') + cell.format(code="print(1)", out=""))
     assert cells_without_figures(tmp_path) == ["p.html: plt.imshow(x)"]
