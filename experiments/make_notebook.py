@@ -65,7 +65,7 @@ reference = sf.render(truth_scene.with_values({"render.spp": 256}))
 result = sf.fit(sf.Observation(truth_scene, reference), case.free, start=case.start)
 print(sf.format_result(result))
 print("truth:", {name: case.truth[name] for name in case.free})
-sf.plot_convergence(result);"""),
+sf.plot_convergence(result).flat[0].figure"""),
     ("md", """## 3. D and G of the wrinkles
 
 How well could one reference of the wrinkles case determine the fractal dimension D and the height

@@ -149,8 +149,9 @@ def test_asset_checker_finds_a_script_from_a_cdn(tmp_path):
                                          "s.css: https://fonts.example.org/css?family=X"]
 
 
-# A cell's code that draws: a pyplot call, a spacefit plot or figure, an image shown
-DRAWS = re.compile(r"\bplt\.|\bplot_\w+\(|\.figure\(|imshow\(")
+# A cell's code that draws, on a line of its own (not in a function's body): a pyplot call, a spacefit plot or figure, an
+# image shown
+DRAWS = re.compile(r"^(?:\S.*)?(?:\bplt\.|\bplot_\w+\(|\.figure\(|imshow\()", re.MULTILINE)
 
 
 def cells_without_figures(html: Path) -> list[str]:
@@ -163,8 +164,9 @@ def cells_without_figures(html: Path) -> list[str]:
             continue
         text = page.read_text(encoding="utf-8")
         for cell in re.split(r'<div class="cell docutils container[^>]*>', text)[1:]:
-            code_html, _, output = cell.partition('<div class="cell_output')
-            code = unescape(re.sub(r"<[^>]+>", "", code_html))
+            source = re.search(r"<pre>(.*?)</pre>", cell, re.S)  # the cell's code; its output follows, if it has one
+            code = unescape(re.sub(r"<[^>]+>", "", source.group(1))) if source else ""
+            output = cell.partition('<div class="cell_output')[2]
             if DRAWS.search(code) and not re.search(r"<img[^>]+src=", output):
                 missing.append(f"{where}: {code.strip().splitlines()[0]}")
         static = [unescape(re.sub(r"<[^>]+>", "", block)) for block in re.findall(r'<div class="highlight-(?:python|default) notranslate">(.*?)</pre>', text, re.S)]
