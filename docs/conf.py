@@ -30,13 +30,13 @@ extensions = [
     "sphinx.ext.autodoc",
     "sphinx.ext.autosummary",
     "sphinx.ext.napoleon",
-    "sphinx.ext.mathjax",
+    "offline_mathjax",  # sphinx.ext.mathjax with MathJax from the site itself (docs/_ext/offline_mathjax.py)
     "sphinxarg.ext",
     "sphinx_gallery.gen_gallery",
 ]
 source_suffix = {".rst": "restructuredtext", ".md": "myst-nb", ".ipynb": "myst-nb"}
 exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "gallery/*.ipynb", "gallery/*.py", "gallery/*.zip",
-                    "gallery/*.md5", "gallery/*.json", "examples/*", "jupyter_execute", "_generated/*", "_ext/*"]
+                    "gallery/*.md5", "gallery/*.json", "examples/*", "jupyter_execute", "_generated/*", "_ext/*", "_static/*"]
 suppress_warnings = ["config.cache"]  # sphinx-gallery's conf holds functions, which Sphinx cannot pickle
 
 # MyST: headings get anchors so pages can link to sections
@@ -73,18 +73,20 @@ sphinx_gallery_conf = {
     "matplotlib_animations": False,
     "image_scrapers": ("matplotlib", FigureScraper()),
     "reset_modules": ("matplotlib",),
+    "write_computation_times": False,  # its page loads DataTables from a CDN: the site serves every asset itself
 }
 
 html_theme = "pydata_sphinx_theme"
 html_title = "spacefit"
-html_static_path: list[str] = []
+html_static_path = ["_static"]
+html_css_files = ["spacefit.css"]  # wider pages for the code cells
 html_theme_options = {
     "navigation_with_keys": False,
     "show_toc_level": 2,
-    "header_links_before_dropdown": 4,
+    "header_links_before_dropdown": 7,
     "secondary_sidebar_items": ["page-toc"],
 }
-html_sidebars = {"index": [], "getting-started": []}
+html_sidebars = {"index": [], "getting-started": []}  # the sections' pages: the section's own navigation
 html_show_sourcelink = False
 
 

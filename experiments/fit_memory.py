@@ -3,7 +3,7 @@ in one process, the resident set size (RSS, MiB) after each, and the growth per 
 ``warm`` (the first ones fill Dr.Jit's, LLVM's and the allocator's pools).
 
 The case: the panels scene at 32 x 32 px, its legs' albedo fitted from 0.42 to a reference rendered at
-0.5 (3 Levenberg-Marquardt steps, 4 spp). Figures in docs/guide/reliability.md ("Memory per fit").
+0.5 (3 Levenberg-Marquardt steps, 4 spp). Figures in docs/measurements/reliability.md ("Memory per fit").
 
 Usage: python experiments/fit_memory.py [FITS] [WARM]; ``make soak`` runs it with 50 and 5.
 """

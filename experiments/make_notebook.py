@@ -1,7 +1,7 @@
 """Build and execute ``experiments/walkthrough.ipynb``: what spacefit simulates and fits, every figure computed.
 
 The notebook uses ``sf.`` names only and computes every figure it shows, at small sizes (it runs in
-``make docs``, docs/notebooks/). Executing it here stores its outputs, so it reads on GitHub without
+``make docs``, docs/tutorials/). Executing it here stores its outputs, so it reads on GitHub without
 a kernel. Run: ``.venv/bin/python experiments/make_notebook.py`` (needs the ``notebook`` extra:
 ``pip install -e .[notebook]``).
 """
@@ -65,7 +65,7 @@ reference = sf.render(truth_scene.with_values({"render.spp": 256}))
 result = sf.fit(sf.Observation(truth_scene, reference), case.free, start=case.start)
 print(sf.format_result(result))
 print("truth:", {name: case.truth[name] for name in case.free})
-sf.plot_convergence(result);"""),
+sf.plot_convergence(result).flat[0].figure"""),
     ("md", """## 3. D and G of the wrinkles
 
 How well could one reference of the wrinkles case determine the fractal dimension D and the height

@@ -15,7 +15,7 @@ from nbclient import NotebookClient
 HERE = Path(__file__).resolve().parent
 
 CELLS: list[tuple[str, str]] = [
-    ("md", """# Fitting a pass
+    ("md", """# Fit a pass: frames, their poses and the materials
 
 A telescope follows a target through a pass: each frame has its own time, sun, observer and a
 slightly wrong target attitude. Here four frames of the panels case are simulated through a sensor
@@ -57,7 +57,7 @@ print(sf.format_result(result).split("\\n  nuisance")[0])"""),
     ("md", """The goodness of fit above is judged on the mean of two new renders at the fitted values, at more samples
 than the fit's (k x, k a power of 2 up to 16, chosen so that their render noise adds at most a tenth to the expected
 chi^2/dof), every fitted value counted, and with the references' own render noise in the expected range (they were
-rendered at 1024 spp, which their FITS card `RENDSPP` records): docs/guide/pass.md.
+rendered at 1024 spp, which their FITS card `RENDSPP` records): docs/how-to/pass.md.
 
 The materials against the truth, with their standard errors:"""),
     ("code", """for name, value in truth.items():

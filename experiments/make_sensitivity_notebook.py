@@ -10,7 +10,7 @@ from __future__ import annotations
 from make_notebook import HERE, build
 
 CELLS: list[tuple[str, str]] = [
-    ("md", """# Sensitivity studies and light curves
+    ("md", """# A sensitivity study, a sweep and light curves of the lander
 
 How the lander's image responds to its parameters, with the Monte Carlo error of every derivative,
 a sweep of sun elevation and panel roughness, and what a telescope on the Earth sees of it: light

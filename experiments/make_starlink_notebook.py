@@ -13,7 +13,7 @@ from nbclient import NotebookClient
 HERE = Path(__file__).resolve().parent
 
 CELLS: list[tuple[str, str]] = [
-    ("md", """# Starlink v1.5: laboratory BRDFs and observed magnitudes
+    ("md", """# Fit a light curve: Starlink v1.5, laboratory BRDFs and observed magnitudes
 
 1,173 AB magnitudes of Starlink v1.5 satellites observed from Mount Lemmon and the laboratory BRDFs
 of their two surfaces (Fankhauser, Askari & Tyson 2023, AJ 166:59; MIT licence, `data/starlink-v1p5/`).

@@ -2,7 +2,7 @@
 simulated once, then each count of its first frames is fitted in a fresh process (the legs' albedo and
 each frame's attitude about x free, 2 Levenberg-Marquardt steps, 4 spp) and the process's peak
 resident set size (ru_maxrss) printed; the growth per frame is the least-squares slope, and per
-pixel that slope over the frame's pixels. Figures in docs/guide/reliability.md ("Memory per frame").
+pixel that slope over the frame's pixels. Figures in docs/measurements/reliability.md ("Memory per frame").
 
 Usage: python experiments/pass_memory.py [SIZE_PX] [COUNTS...]   (default: 64 px, 2 4 8 16 frames)
 """

@@ -1,5 +1,5 @@
 """Forward-mode Jacobian columns rendered while dask's worker profiler samples the rendering thread:
-how many fail with Dr.Jit's "... outside of the current dr.isolate_grad() scope" (docs/guide/dask.md).
+how many fail with Dr.Jit's "... outside of the current dr.isolate_grad() scope" (docs/how-to/dask.md).
 
 A dask worker's profiler (``Worker.trigger_profile``, every 10 ms) takes ``sys._current_frames()``
 and walks the task thread's stack with ``distributed.profile.process``; a frame it still holds when

@@ -1,5 +1,5 @@
 """What Mitsuba's variant switch costs a caller who keeps another variant: ``renders`` small renders
-(sf.Renderer.render) with the caller's variant set to ``variant`` before each (docs/api.md).
+(sf.Renderer.render) with the caller's variant set to ``variant`` before each (docs/reference/api.md).
 
 Usage: python experiments/variant_switch.py VARIANT [RENDERS]; time it as a whole process against llvm_ad_rgb
 (no switch), runs in turn, e.g. ``/usr/bin/time -v python experiments/variant_switch.py scalar_rgb`` then the same

@@ -1,12 +1,14 @@
 """The documentation site (docs/, ``make docs``): it builds with warnings as errors, its internal links
-resolve, its front page opens in a real headless browser showing the rendered picture and the
-navigation, the gallery's scripts and the notebooks run in the build and show their figures, and the
-notebooks use public names only (the pages' Python blocks and the gallery's scripts also run one by one in
-tests/test_docs_examples.py, for a failure that names its block)."""
+resolve, it loads no script, style or font from another site (it works offline), its front page and a
+page of each kind open in a real headless browser with their navigation, the gallery's scripts, the
+tutorials and the how-to pages run in the build and every cell that draws shows its figure, and the
+notebooks use public names only (the gallery's scripts and the pages' static Python blocks also run one
+by one in tests/test_docs_examples.py, for a failure that names its block)."""
 
 from __future__ import annotations
 
 import functools
+import json
 from html import unescape
 import os
 import re
@@ -94,11 +96,101 @@ def internal_link_errors(html: Path) -> list[str]:
 
 def test_site_builds_without_warnings_and_its_internal_links_resolve(site):
     pages = {p.relative_to(site).as_posix() for p in site.rglob("*.html")}
-    for page in ["index.html", "getting-started.html", "guide/fitting.html", "guide/dask.html", "conventions.html", "api.html",
-                 "cli.html", "validation.html", "performance.html", "gallery/index.html", "notebooks/walkthrough.html",
-                 "notebooks/own-spacecraft.html"]:
+    for page in ["index.html", "getting-started.html", "how-to/fitting.html", "how-to/dask.html", "reference/conventions.html",
+                 "reference/api.html", "reference/cli.html", "measurements/validation.html", "measurements/performance.html",
+                 "gallery/index.html", "tutorials/walkthrough.html", "tutorials/own-spacecraft.html"]:
         assert page in pages, page
     assert internal_link_errors(site) == []
+
+
+class _Assets(HTMLParser):
+    """What a page loads to show itself: scripts, stylesheets, fonts and other preloads (not the links a reader follows)."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.loaded: list[str] = []
+
+    def handle_starttag(self, tag, attrs) -> None:
+        values = dict(attrs)
+        if tag in ("script", "img", "iframe") and values.get("src"):
+            self.loaded.append(values["src"])
+        if tag == "link" and values.get("href") and set((values.get("rel") or "").split()) & {"stylesheet", "preload", "modulepreload", "icon"}:
+            self.loaded.append(values["href"])
+
+
+def external_assets(html: Path) -> list[str]:
+    """Every script, stylesheet, font or image that a built page or stylesheet would fetch from another site, as 'page: url'."""
+    found = []
+    for page in sorted(html.rglob("*.html")):
+        parser = _Assets()
+        parser.feed(page.read_text(encoding="utf-8"))
+        found += [f"{page.relative_to(html)}: {url}" for url in parser.loaded if urlsplit(url).scheme in ("http", "https") or url.startswith("//")]
+    for sheet in sorted(html.rglob("*.css")):
+        found += [f"{sheet.relative_to(html)}: {url}" for url in re.findall(r"""(?:url\(|@import\s+)['"]?((?:https?:)?//[^'")\s]+)""", sheet.read_text(errors="replace"))]
+    return found
+
+
+def test_the_site_loads_nothing_from_other_sites(site):
+    """Scripts, styles and fonts are served from the site itself (it works offline): MathJax among them, on the pages
+    with equations."""
+    assert external_assets(site) == []
+    page = (site / "explanation" / "wrinkles.html").read_text()
+    assert re.search(r'<script[^>]+src="\.\./_static/mathjax/tex-chtml\.js', page), "the equations' MathJax is not the site's own"
+    assert (site / "_static" / "mathjax" / "tex-chtml.js").exists()
+    assert list((site / "_static" / "mathjax" / "output" / "chtml" / "fonts").rglob("*.woff*")), "MathJax's fonts are not served"
+
+
+def test_asset_checker_finds_a_script_from_a_cdn(tmp_path):
+    """The check above can fail: a CDN's script, a stylesheet and a font import are found; a link a reader follows is not."""
+    (tmp_path / "a.html").write_text('<script src="https://cdn.example.org/m.js"></script><link rel="stylesheet" href="//cdn.example.org/s.css">'
+                                     '<script src="_static/local.js"></script><a href="https://example.org/paper">paper</a>')
+    (tmp_path / "s.css").write_text('@import url("https://fonts.example.org/css?family=X"); body { background: url(local.png) }')
+    assert external_assets(tmp_path) == ["a.html: https://cdn.example.org/m.js", "a.html: //cdn.example.org/s.css",
+                                         "s.css: https://fonts.example.org/css?family=X"]
+
+
+# A cell's code that draws, on a line of its own (not in a function's body): a pyplot call, a spacefit plot or figure, an
+# image shown
+DRAWS = re.compile(r"^(?:\S.*)?(?:\bplt\.|\bplot_\w+\(|\.figure\(|imshow\()", re.MULTILINE)
+
+
+def cells_without_figures(html: Path) -> list[str]:
+    """Every executed cell (MyST-NB) whose code draws but whose output shows no image, and every page whose static code
+    draws but which shows no image at all, as 'page: code'. The gallery's pages have their own figures' check."""
+    missing = []
+    for page in sorted(html.rglob("*.html")):
+        where = page.relative_to(html)
+        if where.parts[0] in ("_static", "_sources", "gallery", "reference", "measurements"):
+            continue
+        text = page.read_text(encoding="utf-8")
+        for cell in re.split(r'<div class="cell docutils container[^>]*>', text)[1:]:
+            source = re.search(r"<pre>(.*?)</pre>", cell, re.S)  # the cell's code; its output follows, if it has one
+            code = unescape(re.sub(r"<[^>]+>", "", source.group(1))) if source else ""
+            output = cell.partition('<div class="cell_output')[2]
+            if DRAWS.search(code) and not re.search(r"<img[^>]+src=", output):
+                missing.append(f"{where}: {code.strip().splitlines()[0]}")
+        static = [unescape(re.sub(r"<[^>]+>", "", block)) for block in re.findall(r'<div class="highlight-(?:python|default) notranslate">(.*?)</pre>', text, re.S)]
+        if any(DRAWS.search(code) for code in static) and "<img" not in text:
+            missing.append(f"{where}: a static code block draws, the page shows no figure")
+    return missing
+
+
+def test_every_cell_that_draws_shows_its_figure(site):
+    """The tutorials and the how-to pages ran in the build: each cell whose code draws shows an image in its output, and
+    the how-to and tutorial pages have no static Python block (their code is executed)."""
+    assert cells_without_figures(site) == []
+    for source in sorted([*(DOCS / "how-to").glob("*.md"), *(DOCS / "tutorials").glob("*.md"), DOCS / "getting-started.md"]):
+        assert "```python" not in source.read_text(), f"{source.relative_to(ROOT)} has a static Python block: make it a code-cell"
+    executed = [p for p in (site / "how-to").glob("*.html") if '<div class="cell docutils container' in p.read_text()]
+    assert len(executed) >= 6, [p.name for p in executed]
+
+
+def test_figure_checker_finds_a_cell_without_its_figure(tmp_path):
+    """The check above can fail: a cell that calls plt.imshow with no image in its output is named, one with it is not."""
+    cell = '<div class="cell docutils container"><div class="cell_input"><pre>{code}</pre></div><div class="cell_output docutils container">{out}</div></div>'
+    (tmp_path / "p.html").write_text(cell.format(code="plt.imshow(x)", out="<pre>text</pre>")
+                                     + cell.format(code="sf.plot_frames(rows)", out='<img src="a.png">') + cell.format(code="print(1)", out=""))
+    assert cells_without_figures(tmp_path) == ["p.html: plt.imshow(x)"]
 
 
 def test_link_checker_finds_a_broken_link(tmp_path):
@@ -111,26 +203,34 @@ def test_link_checker_finds_a_broken_link(tmp_path):
 def test_parameter_table_is_the_registry(site):
     """The user guide's table of free parameters is written from ``sf.PARAMETERS`` at build time: every entry is on
     the page with its unit."""
-    page = (site / "guide" / "fitting.html").read_text()
+    page = (site / "how-to" / "fitting.html").read_text()
     for parameter in sf.PARAMETERS.values():
         assert f"<code class=\"docutils literal notranslate\"><span class=\"pre\">{parameter.pattern}</span></code>" in page, parameter.pattern
 
 
 def test_api_reference_documents_every_public_name(site):
     """Every name of ``sf.__all__`` has its page in the API reference, made from its docstring."""
-    api = (site / "api.html").read_text()
+    api = (site / "reference" / "api.html").read_text()
     for name in sf.__all__:
-        assert (site / "generated" / f"spacefit.{name}.html").exists(), name
+        assert (site / "reference" / "generated" / f"spacefit.{name}.html").exists(), name
         assert f"generated/spacefit.{name}.html" in api, name
-    fit = (site / "generated" / "spacefit.fit.html").read_text()
+    fit = (site / "reference" / "generated" / "spacefit.fit.html").read_text()
     assert "noise floor" in fit.lower() or "Monte Carlo noise" in fit
+    assert set(sf.__all__) <= searchable_names(site), "the site's search does not find every public name"
+
+
+def searchable_names(html: Path) -> set[str]:
+    """The names the site's search finds as objects of ``spacefit`` (Sphinx's searchindex.js)."""
+    text = (html / "searchindex.js").read_text()
+    index = json.loads(text[text.index("(") + 1:text.rindex(")")])
+    return {entry[4] for entry in index["objects"].get("spacefit", [])}
 
 
 def test_cli_reference_is_the_parser(site):
     """The command-line page is generated from the parser: every sub-command and option is on it."""
     from spacefit.cli import _parser
 
-    page = (site / "cli.html").read_text()
+    page = (site / "reference" / "cli.html").read_text()
     commands = next(a for a in _parser()._actions if a.dest == "command").choices
     assert set(commands) >= {"render", "fit", "sweep"}
     for name, sub in commands.items():
@@ -184,14 +284,39 @@ def test_front_page_in_a_browser_shows_the_render_and_the_navigation(site, tmp_p
 
     dom = browse(site / "index.html", "--dump-dom").stdout
     nav = dom.split('class="bd-header', 1)[1].split("</nav>", 1)[0]
-    for label, page in [("Getting started", "getting-started.html"), ("Rendering and scenes", "guide/render.html")]:
+    for label, page in SECTIONS:
         assert re.search(rf'href="{re.escape(page)}"[^>]*>\s*{re.escape(label)}', nav), label
-    assert "API reference" in dom and 'href="api.html"' in dom
 
 
-# The notebooks: those stored with their outputs (experiments/, linked from docs/notebooks/) and the MyST text
-# notebooks of docs/notebooks/ (their ```{code-cell} blocks run in the build).
-NOTEBOOKS = sorted((ROOT / "experiments").glob("*.ipynb")) + sorted((DOCS / "notebooks").glob("*.md"))
+SECTIONS = [("Getting started", "getting-started.html"), ("Tutorials", "tutorials/index.html"), ("How-to guides", "how-to/index.html"),
+            ("Explanation", "explanation/index.html"), ("Reference", "reference/index.html"), ("Measurements", "measurements/index.html")]
+
+
+@pytest.mark.parametrize("page,sidebar", [("tutorials/fit-observation.html", "Fit a pass"), ("how-to/render.html", "Observations"),
+                                          ("reference/generated/spacefit.fit.html", "Command line"), ("gallery/index.html", None)])
+def test_a_page_of_each_kind_in_a_browser_has_its_navigation(site, page, sidebar, tmp_path_factory):
+    """Chromium opens a tutorial, a how-to page, an API page and the gallery: the header links every section, the
+    sidebar navigates within the page's section (no empty "Section Navigation"), and the screenshot (kept in the test's
+    tmp folder to be looked at) shows a page with text and, where the page draws, its figures."""
+    folder = tmp_path_factory.mktemp("screenshots")
+    shot = folder / (page.replace("/", "_").removesuffix(".html") + ".png")
+    done = browse(site / page, f"--screenshot={shot}")
+    assert shot.exists(), done.stderr[-2000:]
+    pixels = np.asarray(Image.open(shot).convert("L"), dtype=float)
+    assert (pixels < 128).mean() > 0.01, f"{page}: the screenshot shows almost nothing"
+    dom = browse(site / page, "--dump-dom").stdout
+    header = dom.split('class="bd-header', 1)[1].split("</nav>", 1)[0]
+    for label, target in SECTIONS:
+        relative = os.path.relpath(target, os.path.dirname(page) or ".")
+        assert re.search(rf'href="{re.escape(relative)}"[^>]*>\s*{re.escape(label)}', header), (page, label)
+    if sidebar is not None:
+        nav = dom.split('class="bd-docs-nav', 1)[1].split("</nav>", 1)[0]
+        assert len(re.findall(r"<a ", nav)) >= 3 and sidebar in nav, (page, nav[:500])
+
+
+# The notebooks: those stored with their outputs (experiments/, linked from docs/tutorials/) and the MyST text
+# notebooks of docs/tutorials/ (their ```{code-cell} blocks run in the build).
+NOTEBOOKS = sorted((ROOT / "experiments").glob("*.ipynb")) + sorted(p for p in (DOCS / "tutorials").glob("*.md") if p.name != "index.md")
 
 
 def notebook_code(notebook: Path) -> str:
@@ -215,7 +340,7 @@ def test_notebook_uses_public_names_and_no_stored_pictures(notebook):
 def test_the_build_ran_the_gallery_and_the_notebooks(site):
     """Each gallery script's figure and each notebook's computed figures are in the built site."""
     assert len(list((site / "_images").glob("sphx_glr_plot_*.png"))) >= len(list((DOCS / "examples").glob("plot_*.py")))
-    for page in sorted((site / "notebooks").glob("*.html")):
+    for page in sorted(p for p in (site / "tutorials").glob("*.html") if p.name != "index.html"):
         assert "data:image/png" in page.read_text() or re.search(r'<img[^>]+\.png', page.read_text()), f"{page.name} shows no computed figure"
 
 
@@ -223,7 +348,7 @@ def test_own_spacecraft_page_shows_both_builds_the_mistake_and_the_fit(site):
     """"Your own spacecraft" ran in the build: the mesh's groups as parts, the refused part's message naming the
     groups and the parts, the two renders and the light curve as computed figures, and the fitted values against
     the truth (the page itself fails the build where a fit misses its truth by 3 errors)."""
-    page = unescape((site / "notebooks" / "own-spacecraft.html").read_text())
+    page = unescape((site / "tutorials" / "own-spacecraft.html").read_text())
     assert "wing_left   -> parts.wing_left" in page
     assert ("part(s) 'antenna' have no `file` and the mesh file 'box-wing.obj' has no group of that name; its groups: bus, wing_left, wing_right;"
             in page and "the scene's parts: bus, wing_left, wing_right, antenna." in page)

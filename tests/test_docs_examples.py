@@ -1,5 +1,7 @@
-"""Every code example of the docs runs as written: the README's and the docs pages' Python blocks and the
-gallery's scripts (``make docs`` runs the gallery again and shows its figures), with ``sf.`` names only."""
+"""Every code example of the docs runs as written: the README's and the docs pages' static Python blocks and the
+gallery's scripts (``make docs`` runs the gallery again and shows its figures), with ``sf.`` names only. The
+tutorials' and how-to pages' code cells (MyST-NB ``{code-cell}``) run in the docs build itself (tests/test_docs.py),
+not here again."""
 
 from __future__ import annotations
 
@@ -13,7 +15,8 @@ DOCS = ROOT / "docs"
 
 
 def markdown_python_blocks() -> list[tuple[str, str]]:
-    """Every ```python block of the README and the docs' Markdown pages, as (where, code)."""
+    """Every static ```python block of the README and the docs' Markdown pages, as (where, code) (a ``{code-cell}`` is
+    executed by the docs build)."""
     blocks = []
     for path in [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]:
         if "_build" in path.parts:

@@ -3,7 +3,7 @@ and the rest at the scene's values, the default solver rejects at most two trial
 first accepted one. Measured 2026-11-28 with optimistix's Levenberg-Marquardt as spacefit sets it
 (first damping 1): none rejected on the synthetic panels case and on the observed 8-parameter fit
 (experiments/bench_fit.py); a damping scaled to J^T J (Madsen, Nielsen & Tingleff's tau = 1e-3) was
-no better and was not kept (docs/performance.md)."""
+no better and was not kept (docs/measurements/performance.md)."""
 
 from __future__ import annotations
 

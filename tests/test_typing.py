@@ -46,10 +46,13 @@ def test_the_stub_and_the_marker_are_package_data():
 
 
 def test_mypy_passes_the_readme_examples_and_catches_a_misuse(tmp_path):
-    """One mypy run (a cold cache: about 8 s of CPU) over each Python block of the README and the docs'
+    """One mypy run (a cold cache: about 8 s of CPU) over each Python block and code cell of the README and the docs'
     pages as a user script, and a misuse: a path for a scene, a misspelt name, a float image width."""
     pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
     blocks = [b for page in pages for b in re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.DOTALL)]
+    for page in pages:  # an executed page's code cells run in turn, as one script
+        cells = re.findall(r"```\{code-cell\} ipython3\n(?::tags:.*\n)?(.*?)```", page.read_text(), flags=re.DOTALL)
+        blocks += ["\n".join(cells)] if cells else []
     assert len(blocks) >= 1
     for i, block in enumerate(blocks):
         (tmp_path / f"readme_{i}.py").write_text(f'from pathlib import Path\nOUT = Path("out")\n{block}')

@@ -349,7 +349,7 @@ MUTANTS = (
            "", ("tests/test_sampler.py",)),
     # the documentation site: the front page shows the render; a page's link to another resolves
     Mutant("docs-front-picture-a-thumbnail", "docs/index.md", ":width: 320px", ":width: 32px", ("tests/test_docs.py",)),
-    Mutant("docs-link-to-a-missing-page", "docs/getting-started.md", "([](guide/render.md))", "([](guide/rendering.md))",
+    Mutant("docs-link-to-a-missing-page", "docs/getting-started.md", "([](how-to/render.md))", "([](how-to/rendering.md))",
            ("tests/test_docs.py",)),
     # issue 34's survivors, each now caught by a test of its own (their files moved since: the verdict's
     # plumbing is judging.py, the value observations' s^2 uncertainty.py, the light curve's sigma lightcurve_fit.py)

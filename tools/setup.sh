@@ -36,7 +36,7 @@ if ! command -v chromium >/dev/null && ! command -v chromium-browser >/dev/null;
     fi
 fi
 
-if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c "import spacefit, pytest, xdist, hypothesis, xarray, zarr, dask.distributed, tqdm, sphinx, myst_nb, sphinx_gallery, pydata_sphinx_theme, sphinxarg" 2>/dev/null; then
+if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c "import spacefit, pytest, xdist, hypothesis, xarray, zarr, dask.distributed, tqdm, sphinx, myst_nb, sphinx_gallery, pydata_sphinx_theme, sphinxarg; import importlib; importlib.import_module('sphinx-mathjax-offline')" 2>/dev/null; then
     echo "setup: creating .venv and installing spacefit (a few minutes the first time)" >&2
     python3 -m venv .venv
     .venv/bin/python -m pip install -q --upgrade pip

@@ -168,7 +168,7 @@ def fit(
         executor.close()
         # JAX's caches keep every fit's traced programs, and what their callbacks reach (loaded scenes,
         # compiled renders), keyed by its solver's functions for the life of the process: 13.6 MiB per
-        # fit, freed neither by the fit's end nor by gc (docs/guide/reliability.md, "Memory per fit").
+        # fit, freed neither by the fit's end nor by gc (docs/measurements/reliability.md, "Memory per fit").
         jax.clear_caches()
 
 

@@ -3,7 +3,7 @@
 A real spacecraft turns its solar arrays towards the sun and points its body at the Earth; these
 laws say how, each a small frozen dataclass checked on construction.
 
-Conventions (docs/conventions.md; those of :mod:`spacefit.geometry.frames`):
+Conventions (docs/reference/conventions.md; those of :mod:`spacefit.geometry.frames`):
 
 * A body attitude is a rotation R from the body frame to the world frame, ``p_world = R p_body +
   position``, as ``target.attitude_deg`` gives it (:func:`~spacefit.geometry.frames.attitude_matrix`).

@@ -10,7 +10,7 @@ front-side directions; :meth:`~MaterialModel.evaluate` wraps it the way the rend
 BSDF (Mitsuba's ``twosided``) and averages the RGB channels. :meth:`~MaterialModel.effective` is its
 level-of-detail rule (:mod:`spacefit.scene.lod`). A model is added by
 :func:`spacefit.materials.registry.register_material`; its rendering backends' entries live in
-:mod:`spacefit.rendering` (docs/development.md, "Adding a material model").
+:mod:`spacefit.rendering` (docs/reference/development.md, "Adding a material model").
 """
 
 from __future__ import annotations

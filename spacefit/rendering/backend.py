@@ -99,7 +99,7 @@ def variant_scope(requested: str = "auto") -> Iterator[str]:
     switch nothing on the way out until the last one ends, and a nested scope of another variant
     gives its outer scope's back. A caller who keeps another variant pays a switch each way per
     outermost scope (about 0.01 s of CPU a pair: Mitsuba reloads its AD integrators, from
-    :mod:`~spacefit.rendering.syntax_cache`, docs/api.md); a caller with spacefit's variant, or none, pays nothing."""
+    :mod:`~spacefit.rendering.syntax_cache`, docs/reference/api.md); a caller with spacefit's variant, or none, pays nothing."""
     global _scope_depth, _caller_variant
     with _scope_lock:
         entry = mi.variant()

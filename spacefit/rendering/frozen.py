@@ -3,7 +3,7 @@
 Tracing a render in Python (the sampler, the camera's rays, the integrator's loop: hundreds of Dr.Jit
 operations) cost about as much as its kernels took to run on a small film: 8 ms of a 25 ms primal
 render and 30 ms of an 85 ms forward-mode derivative render at 128 x 128 px, 32 spp
-(docs/performance.md). :class:`FrozenPasses` records the first call of each kind of pass and, for new
+(docs/measurements/performance.md). :class:`FrozenPasses` records the first call of each kind of pass and, for new
 scene values, seeds and tangents, launches the recorded kernels again without tracing.
 
 What a pass's samples are a function of:

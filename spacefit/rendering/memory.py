@@ -52,7 +52,7 @@ def check_memory(width: int, height: int, window_pixels: int, spp: int, split: b
 
 
 # A fit's memory besides the rendering's, fitted (rounded up) to the peak RSS of pass fits, each frame
-# with 2 free columns (experiments/pass_memory.py; docs/guide/reliability.md, "Memory per frame"): the
+# with 2 free columns (experiments/pass_memory.py; docs/measurements/reliability.md, "Memory per frame"): the
 # process with JAX, Mitsuba and a loaded scene (634 MiB at 64 px, 681 MiB at 128 px, intercepts); per
 # frame a fixed part (its programs' share, scene values and records: 3.5 MiB) and 222 B per pixel for
 # its image and each column (reference, weights, rendered image, Jacobian columns as the solver's
