@@ -71,7 +71,7 @@ sphinx_gallery_conf = {
     "remove_config_comments": True,
     "within_subsection_order": "FileNameSortKey",
     "matplotlib_animations": False,
-    "image_scrapers": ("matplotlib", FigureScraper()),
+    "image_scrapers": (FigureScraper(),),  # every figure once, pyplot's and spacefit's (docs/_ext/gallery_figures.py)
     "reset_modules": ("matplotlib",),
 }
 
