@@ -73,6 +73,7 @@ sphinx_gallery_conf = {
     "matplotlib_animations": False,
     "image_scrapers": (FigureScraper(),),  # every figure once, pyplot's and spacefit's (docs/_ext/gallery_figures.py)
     "reset_modules": ("matplotlib",),
+    "ignore_repr_types": r"matplotlib[._]",  # a block's last line that draws shows no "Text(...)" or "Legend" line
 }
 
 html_theme = "pydata_sphinx_theme"

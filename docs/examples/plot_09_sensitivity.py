@@ -14,7 +14,13 @@ import matplotlib.pyplot as plt
 
 import spacefit as sf
 
-scene = sf.load_case("panels").scene().with_values({"render.resolution": [40, 40], "camera.pixel_pitch_mm": 60.0, "render.spp": 8})
+scene = (
+    sf.load_case("panels")
+    .scene()
+    .with_values(
+        {"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0, "render.spp": 8}
+    )
+)
 names = ["parts.panels.alpha_x", "parts.legs.kd"]
 sens = sf.sensitivity(scene, names, seeds=3, quiet=True)
 for row in sens.rows():

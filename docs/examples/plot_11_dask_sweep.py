@@ -14,9 +14,24 @@ from distributed import LocalCluster
 
 import spacefit as sf
 
-scene = sf.load_case("panels").scene().with_values({"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0, "render.spp": 4})
-axes = {"sun.elevation_deg": [15, 30, 45, 60, 75, 90], "parts.panels.alpha_x": [0.05, 0.3]}
-with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp", dashboard_address=None) as cluster:
+scene = (
+    sf.load_case("panels")
+    .scene()
+    .with_values(
+        {"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0, "render.spp": 4}
+    )
+)
+axes = {
+    "sun.elevation_deg": [15, 30, 45, 60, 75, 90],
+    "parts.panels.alpha_x": [0.05, 0.3],
+}
+with LocalCluster(
+    n_workers=1,
+    threads_per_worker=1,
+    processes=False,
+    protocol="tcp",
+    dashboard_address=":0",
+) as cluster:
     ds = sf.sweep(scene, axes, cluster=cluster.scheduler_address, quiet=True).compute()
 print("the target's mean radiance (W m^-2 sr^-1):")
 print(ds.mean_radiance.sel(region="target").to_pandas().round(3))
@@ -26,7 +41,18 @@ elevation = ds["sun.elevation_deg"].values
 for i, alpha in enumerate(ds["parts.panels.alpha_x"].values):
     for region, style in (("panels", "o-"), ("body", "s--")):
         radiance = ds.mean_radiance.sel(region=region).isel({"parts.panels.alpha_x": i})
-        ax.plot(elevation, radiance, style, color=f"C{i}", label=f"{region}, panels' alpha_x {alpha}")
-ax.set(yscale="log", xlabel="sun elevation (deg)", ylabel="mean radiance (W m$^{-2}$ sr$^{-1}$)", title="a 6 x 2 sweep, rendered on the cluster")
+        ax.plot(
+            elevation,
+            radiance,
+            style,
+            color=f"C{i}",
+            label=f"{region}, panels' alpha_x {alpha}",
+        )
+ax.set(
+    yscale="log",
+    xlabel="sun elevation (deg)",
+    ylabel="mean radiance (W m$^{-2}$ sr$^{-1}$)",
+    title="a 6 x 2 sweep, rendered on the cluster",
+)
 ax.legend(fontsize=9)
 ax.grid(alpha=0.3)

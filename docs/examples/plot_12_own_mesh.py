@@ -18,11 +18,15 @@ import trimesh
 import spacefit as sf
 
 folder = Path(tempfile.mkdtemp())
-bus = trimesh.creation.cylinder(radius=0.8, height=2.0, sections=24)                  # m, axis along z
+bus = trimesh.creation.cylinder(radius=0.8, height=2.0, sections=24)  # m, axis along z
 cone = trimesh.creation.cone(radius=1.2, height=0.5, sections=24)
-dish = trimesh.Trimesh(cone.vertices, cone.faces[cone.triangles_center[:, 2] > 1e-9])      # its side, no base
-dish.apply_transform(trimesh.transformations.rotation_matrix(np.pi, [1, 0, 0]))        # opening upwards ...
-dish.apply_translation([0.0, 0.0, 1.6])                                                 # ... above the bus
+dish = trimesh.Trimesh(
+    cone.vertices, cone.faces[cone.triangles_center[:, 2] > 1e-9]
+)  # its side, no base
+dish.apply_transform(
+    trimesh.transformations.rotation_matrix(np.pi, [1, 0, 0])
+)  # opening upwards ...
+dish.apply_translation([0.0, 0.0, 1.6])  # ... above the bus
 lines, first = [], 1
 for name, part in {"bus": bus, "dish": dish}.items():
     lines += [f"g {name}", *(f"v {x:.6g} {y:.6g} {z:.6g}" for x, y, z in part.vertices)]
@@ -60,14 +64,34 @@ material = "white_paint"
 renderer = sf.Renderer(sf.load_scene(folder / "probe.toml"))
 radiance = renderer.render()
 parts = renderer.part_image()
-print(parts.table(radiance)[["pixels", "mean_radiance"]].to_dataframe().round(3).to_string())
+print(
+    parts.table(radiance)[["pixels", "mean_radiance"]]
+    .to_dataframe()
+    .round(3)
+    .to_string()
+)
 
 fig, (left, right) = plt.subplots(1, 2, figsize=(8, 4), layout="constrained")
-left.imshow(np.clip(radiance / np.percentile(radiance[radiance > 0], 99.5), 0, 1) ** (1 / 2.2))
+left.imshow(
+    np.clip(radiance / np.percentile(radiance[radiance > 0], 99.5), 0, 1) ** (1 / 2.2)
+)
 left.set_title("radiance (display gamma 2.2)")
-right.imshow(np.ma.masked_less(parts.ids, 0), cmap="tab10", vmin=0, vmax=9, interpolation="nearest")
+right.imshow(
+    np.ma.masked_less(parts.ids, 0),
+    cmap="tab10",
+    vmin=0,
+    vmax=9,
+    interpolation="nearest",
+)
 right.set_title("the part each pixel sees")
-right.legend(handles=[plt.Rectangle((0, 0), 1, 1, color=plt.get_cmap("tab10")(i)) for i in range(len(parts.names))],
-             labels=list(parts.names), loc="lower right", fontsize=9)
+right.legend(
+    handles=[
+        plt.Rectangle((0, 0), 1, 1, color=plt.get_cmap("tab10")(i))
+        for i in range(len(parts.names))
+    ],
+    labels=list(parts.names),
+    loc="lower right",
+    fontsize=9,
+)
 for ax in (left, right):
     ax.set_axis_off()
