@@ -3,7 +3,7 @@ The default render and its parts
 ================================
 
 Render the default lander (the thesis's Table 4-2 scene) small, and ask which part each pixel's
-centre sees. Radiance is in W m^-2 sr^-1 at the camera's entrance pupil; the table gives each
+centre sees. Its solar panels are seen edge-on, a line one pixel thin. Radiance is in W m^-2 sr^-1 at the camera's entrance pupil; the table gives each
 part's pixels and mean radiance.
 """
 
@@ -13,7 +13,7 @@ import numpy as np
 import spacefit as sf
 
 scene = sf.load_scene(
-    None, {"render.resolution": [96, 96], "camera.pixel_pitch_mm": 7.0, "render.spp": 8}
+    None, {"render.resolution": [96, 96], "camera.pixel_pitch_mm": 8.0, "render.spp": 8}
 )
 renderer = sf.Renderer(scene)
 radiance = renderer.render()  # (96, 96, 3) float32
@@ -37,7 +37,7 @@ right.legend(
         plt.Rectangle((0, 0), 1, 1, color=colours(i)) for i in range(len(parts.names))
     ],
     labels=list(parts.names),
-    loc="lower right",
+    loc="upper right",
     fontsize=9,
 )
 for ax in (left, right):
