@@ -37,6 +37,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from spacefit.errors import InputError, check_count, check_range, check_type, check_vector
+from spacefit.executors import Cluster, cluster_of
 from spacefit.fitting.observations.base import Block
 from spacefit.fitting.params import Bijection
 from spacefit.fitting.result import FitResult
@@ -282,7 +283,7 @@ def at_range(scene: Scene, range_m: float) -> Scene:
 
 def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None = None,
                              points: Sequence[Mapping[str, float]] | None = None, range_m: float | None = None,
-                             quiet: bool = True) -> PlatesVsRender:
+                             quiet: bool = True, cluster: Cluster | None = None) -> PlatesVsRender:
     """The plates' light curve of ``scene``'s target (:func:`target_plates`) against the path tracer's
     (:func:`~spacefit.studies.sweep.sweep`: the image's radiance x pixel solid angle summed, as
     :func:`~spacefit.studies.lightcurve.light_curve` has it), both at the scene's camera with the scene's
@@ -290,7 +291,9 @@ def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None 
     from the camera's direction, :func:`~spacefit.studies.lightcurve.phase_plane_sun`) or ``points``,
     each a dict of scene values (``{"target.attitude_z_deg": 30.0}``), every one setting the same keys.
     ``range_m`` moves the camera there first (:func:`at_range`): a camera near a specular target sees
-    its glint from a spread of directions, the plates from one."""
+    its glint from a spread of directions, the plates from one. ``cluster``: where the renders run
+    (:mod:`spacefit.executors`: None, this process; N local workers; a scheduler address; a dask Client)."""
+    cluster = cluster_of(cluster)
     scene = body_fixed(check_scene(scene))  # type: ignore[arg-type]
     if range_m is not None:
         scene = at_range(scene, range_m)
@@ -304,7 +307,7 @@ def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None 
         points = [{key: sun[key][i] for key in sun} for i in range(len(angles))]
     points = _checked_points(points)
     keys = list(points[0])
-    ds = sweep(scene, {"point": {key: [float(p[key]) for p in points] for key in keys}}, quiet=quiet)
+    ds = sweep(scene, {"point": {key: [float(p[key]) for p in points] for key in keys}}, quiet=quiet, cluster=cluster)
     rendered = np.atleast_1d(np.asarray(ds.irradiance.sel(region="target").values, float))
     plates = target_plates(scene)
     geometry = [_body_geometry(scene.with_values(dict(p))) for p in points]
@@ -362,6 +365,26 @@ def observation_points(scene: Scene, observations: LightCurveObservations) -> li
     return points
 
 
+def rendered_light_curve(scene: Scene, observations: LightCurveObservations, *, seed: int = 1) -> RenderedLightCurve:
+    """The path tracer's light curve of ``observations`` of ``scene``'s target: every lit observation at
+    its geometry (:func:`observation_points`, the scene's attitude law fixed: :func:`body_fixed`), its
+    magnitude carried to their median range by the inverse square law (exact for an unresolved target).
+
+    Raises:
+        InputError: every observation in the Earth's shadow.
+    """
+    scene = body_fixed(check_scene(scene))  # type: ignore[arg-type]
+    check_type("observations", observations, LightCurveObservations, "an sf.LightCurveObservations (sf.read_light_curve)")
+    lit = np.flatnonzero(~observations.in_shadow)
+    if not lit.size:
+        raise InputError(f"every observation of {observations.source} is in the Earth's shadow: there is nothing to fit.")
+    obs = observations.subset(lit)
+    reference = float(np.median(obs.range_m))
+    magnitude = obs.magnitude - 5.0 * np.log10(obs.range_m / reference)
+    return RenderedLightCurve(scene, observation_points(scene, obs), magnitude, obs.magnitude_sigma, obs.band,
+                              observer_range_m=reference, seed=seed)
+
+
 @dataclass(frozen=True, eq=False)
 class ChosenLightCurve(LightCurveKind):
     """A light curve fitted with the model :func:`choose_light_curve_model` chose: it is the ``chosen``
@@ -411,7 +434,7 @@ class ChosenLightCurve(LightCurveKind):
 
 
 def choose_light_curve_model(scene: Scene, observations: LightCurveObservations, *, samples: int = 8,
-                             sigma_mag: float | None = None, quiet: bool = True) -> ChosenLightCurve:
+                             sigma_mag: float | None = None, quiet: bool = True, cluster: Cluster | None = None) -> ChosenLightCurve:
     """The light-curve observation of ``observations`` of ``scene``'s target to fit: the flat plates
     (:class:`~spacefit.studies.plates.PlateLightCurve` of :func:`target_plates`, the scene's sun
     irradiance) where their difference from the path tracer is below the observations' noise, else
@@ -425,10 +448,12 @@ def choose_light_curve_model(scene: Scene, observations: LightCurveObservations,
     says it assumed). The rendered observation has every lit observation at that geometry, its
     magnitudes carried to their median range by the inverse square law (exact for an unresolved
     target); its attitude angles are the points' geometry, so it cannot free them as the plates can.
+    ``cluster``: where the comparison's renders run (:func:`compare_plates_to_render`'s).
 
     Raises:
         InputError: observations without errors and no ``sigma_mag``, or none lit.
     """
+    cluster = cluster_of(cluster)
     scene = body_fixed(check_scene(scene))  # type: ignore[arg-type]
     check_type("observations", observations, LightCurveObservations, "an sf.LightCurveObservations (sf.read_light_curve)")
     check_count("samples", samples, 1, optional=False)
@@ -451,7 +476,7 @@ def choose_light_curve_model(scene: Scene, observations: LightCurveObservations,
     order = np.argsort(phase, kind="stable")
     sample = order[np.unique(np.round(np.linspace(0, len(order) - 1, min(samples, len(order)))).astype(int))]
     points = observation_points(scene, obs)
-    comparison = compare_plates_to_render(scene, points=[points[i] for i in sample], quiet=quiet)
+    comparison = compare_plates_to_render(scene, points=[points[i] for i in sample], quiet=quiet, cluster=cluster)
     dark = int((~comparison.compared).sum())
     measured = (f"plates - path tracer RMS {comparison.rms_mag:.3g} mag (largest {comparison.largest_mag:.3g}) at "
                 f"{int(comparison.compared.sum())} of the observations' geometries" + (f" ({dark} more dark in both)" if dark else "")
@@ -460,10 +485,7 @@ def choose_light_curve_model(scene: Scene, observations: LightCurveObservations,
         chosen: PlateLightCurve | RenderedLightCurve = PlateLightCurve(target_plates(scene), observations, scene.sun.irradiance_w_m2)
         reason = f"light-curve model: flat plates (sf.target_plates), {measured} < {said}"
     else:
-        reference = float(np.median(obs.range_m))
-        magnitude = obs.magnitude - 5.0 * np.log10(obs.range_m / reference)
-        sigma = None if obs.magnitude_sigma is None else obs.magnitude_sigma
-        chosen = RenderedLightCurve(scene, points, magnitude, sigma, obs.band, observer_range_m=reference)
+        chosen = rendered_light_curve(scene, observations)
         reason = f"light-curve model: path tracer (sf.RenderedLightCurve), {measured} >= {said}"
     return ChosenLightCurve(chosen, comparison, noise, reason)
 
