@@ -4,13 +4,14 @@ A sweep on a Dask cluster
 
 ``sf.sweep`` renders a scene at every point of a grid of values and returns a labelled xarray
 Dataset: each region's pixels, mean radiance (W m^-2 sr^-1) and irradiance. ``cluster=`` says where
-the points render: this process (None), a new local cluster of N worker processes (an int), or a
-running scheduler's address. Here a tiny cluster started in this process (one worker thread) stands
-in for a real one; on several machines you would give the address ``dask scheduler`` prints.
+the points render: this process (None), a new local cluster of N worker processes (an int), a
+running scheduler's address or a ``distributed.Client``. Here a client of a tiny cluster started in
+this process (one worker thread) stands in for a real one; on several machines you would give the
+address ``dask scheduler`` prints.
 """
 
 import matplotlib.pyplot as plt
-from distributed import LocalCluster
+from distributed import Client, LocalCluster
 
 import spacefit as sf
 
@@ -25,14 +26,12 @@ axes = {
     "sun.elevation_deg": [15, 30, 45, 60, 75, 90],
     "parts.panels.alpha_x": [0.05, 0.3],
 }
-with LocalCluster(
-    n_workers=1,
-    threads_per_worker=1,
-    processes=False,
-    protocol="tcp",
-    dashboard_address=":0",
-) as cluster:
-    ds = sf.sweep(scene, axes, cluster=cluster.scheduler_address, quiet=True).compute()
+# one worker thread: Dr.Jit renders on one thread per process (two threads crashed it)
+local = LocalCluster(
+    n_workers=1, threads_per_worker=1, processes=False, dashboard_address=":0"
+)
+with local, Client(local) as client:
+    ds = sf.sweep(scene, axes, cluster=client, quiet=True).compute()
 print("the target's mean radiance (W m^-2 sr^-1):")
 print(ds.mean_radiance.sel(region="target").to_pandas().round(3))
 
