@@ -71,9 +71,10 @@ sphinx_gallery_conf = {
     "remove_config_comments": True,
     "within_subsection_order": "FileNameSortKey",
     "matplotlib_animations": False,
-    "image_scrapers": ("matplotlib", FigureScraper()),
+    "image_scrapers": (FigureScraper(),),  # every figure once, pyplot's and spacefit's (docs/_ext/gallery_figures.py)
     "reset_modules": ("matplotlib",),
     "write_computation_times": False,  # its page loads DataTables from a CDN: the site serves every asset itself
+    "ignore_repr_types": r"matplotlib[._]",  # a block's last line that draws shows no "Text(...)" or "Legend" line
 }
 
 html_theme = "pydata_sphinx_theme"

@@ -337,9 +337,24 @@ def test_notebook_uses_public_names_and_no_stored_pictures(notebook):
     assert "IPython.display import Image" not in code and ".png" not in code, notebook.name
 
 
+# The longest line of a printed output the gallery's page shows whole (its box, about 90 monospace characters wide).
+GALLERY_OUTPUT_CHARS = 90
+
+
 def test_the_build_ran_the_gallery_and_the_notebooks(site):
-    """Each gallery script's figure and each notebook's computed figures are in the built site."""
-    assert len(list((site / "_images").glob("sphx_glr_plot_*.png"))) >= len(list((DOCS / "examples").glob("plot_*.py")))
+    """Each gallery script ran in the build: its page shows its own figures, each a single image at least 1000 px wide
+    (readable at the page's width: no strip of thumbnails side by side), and printed outputs whose lines fit their box;
+    each notebook's computed figures are in the built site."""
+    for script in sorted((DOCS / "examples").glob("plot_*.py")):
+        page = (site / "gallery" / f"{script.stem}.html").read_text()
+        images = re.findall(rf'<img[^>]+src="([^"]*sphx_glr_{script.stem}_\d+\.png)"', page)
+        assert images, f"{script.name} shows no figure"
+        assert "sphx-glr-multi-img" not in page, f"{script.name}: figures side by side as thumbnails"
+        for src in images:
+            assert Image.open(site / "gallery" / unquote(src)).width >= 1000, src
+        for block in re.findall(r'class="sphx-glr-script-out[^"]*"><div class="highlight"><pre>(.*?)</pre>', page, flags=re.DOTALL):
+            for line in unescape(re.sub(r"<[^>]+>", "", block)).splitlines():
+                assert len(line) <= GALLERY_OUTPUT_CHARS, f"{script.name} prints a line of {len(line)} characters: {line!r}"
     for page in sorted(p for p in (site / "tutorials").glob("*.html") if p.name != "index.html"):
         assert "data:image/png" in page.read_text() or re.search(r'<img[^>]+\.png', page.read_text()), f"{page.name} shows no computed figure"
 
