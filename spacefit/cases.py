@@ -81,7 +81,16 @@ class Case:
 
 
 def case_names() -> list[str]:
-    """The names of the synthetic cases."""
+    """The names of the synthetic cases :func:`load_case` loads (package data, in the order of its cases file).
+
+    Returns:
+        The case names.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.case_names()
+        ['default', 'panels', 'materials', 'wrinkles', 'wrinkles_128', 'wrinkles_far']
+    """
     return list(_table())
 
 
@@ -94,7 +103,27 @@ def _table() -> dict[str, Any]:
 
 
 def load_case(name: str) -> Case:
-    """The synthetic case ``name`` (see :func:`case_names`)."""
+    """A synthetic fitting case with known truth: the scene its reference is rendered from, the
+    parameters a fit frees and where it starts. The tests, the experiments and the documentation's
+    examples share these cases.
+
+    Args:
+        name: one of :func:`case_names`.
+
+    Returns:
+        The :class:`Case`; ``case.reference()`` renders its reference image.
+
+    Raises:
+        InputError: ``name`` is not one of :func:`case_names`.
+
+    Example:
+        >>> import spacefit as sf
+        >>> case = sf.load_case("default")
+        >>> case.free
+        ('parts.panels.alpha_x', 'parts.panels.alpha_y', 'parts.legs.kd')
+        >>> case.truth_scene.render.resolution
+        (128, 128)
+    """
     table = _table()
     entry = table[check_choice("case", name, table)]
     with as_file(CASES_DIR / f"{entry.get('scene', name)}.toml") as path:

@@ -104,7 +104,17 @@ def _no_qr(cls: type) -> Callable[[], Solver]:
     return lambda: cls(rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL, linear_solver=lx.AutoLinearSolver(well_posed=False))
 
 
-# The solvers by name, each with its default settings.
+#: The solvers ``sf.fit(solver=...)`` takes by name, each a function returning the solver object with
+#: its default tolerances: ``lm`` (Levenberg-Marquardt, the default), ``gn`` (Gauss-Newton), ``dogleg``
+#: and ``bfgs`` (optimistix) and ``adam`` (:class:`Adam`). Pass a solver object instead of a name to
+#: set other tolerances.
+#:
+#: Example:
+#:     >>> import spacefit as sf
+#:     >>> list(sf.SOLVERS)
+#:     ['lm', 'gn', 'dogleg', 'bfgs', 'adam']
+#:     >>> type(sf.SOLVERS["lm"]()).__name__
+#:     'LevenbergMarquardt'
 SOLVERS: dict[str, Callable[[], Solver]] = {
     "lm": lambda: optx.LevenbergMarquardt(rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL),
     "gn": _no_qr(optx.GaussNewton),

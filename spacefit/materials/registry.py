@@ -31,6 +31,17 @@ GOLD_K = (3.98316, 2.38572, 1.60322)
 SILVER_ETA = (0.155265, 0.116723, 0.138342)
 SILVER_K = (4.82835, 3.12225, 2.14696)
 
+#: Named materials a scene file gives a part (``material = "mli_gold"``) or Python takes as they are:
+#: the thesis's MLI, mirror and panel values, gold and silver MLI (RGB complex refractive indices
+#: as tabulated for pbrt / Mitsuba) and a white paint. Each is a :class:`Conductor`, :class:`Mirror`
+#: or :class:`Lambert` value (frozen); roughness alpha is dimensionless.
+#:
+#: Example:
+#:     >>> import spacefit as sf
+#:     >>> list(sf.PRESETS)
+#:     ['mli_thesis', 'mli_gold', 'mli_silver', 'mirror_thesis', 'panel_thesis', 'white_paint']
+#:     >>> sf.PRESETS["white_paint"]
+#:     Lambert(kd=0.2)
 PRESETS: Mapping[str, Material] = {
     "mli_thesis": Conductor(eta=0.18, k=0.01, alpha_x=MLI_ALPHA, alpha_y=MLI_ALPHA),
     "mli_gold": Conductor(eta=GOLD_ETA, k=GOLD_K, alpha_x=MLI_ALPHA, alpha_y=MLI_ALPHA),

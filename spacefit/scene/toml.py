@@ -162,5 +162,21 @@ def load_scene(path: str | Path | None = None, overrides: Overrides = ()) -> Sce
 
 
 def default_scene() -> Scene:
-    """The default scene: the thesis's Table 4-2 (its lander, camera, sun and wrinkles, G read as micrometres: 1e-5 m)."""
+    """The default scene: the thesis's Table 4-2 (its lander, camera, sun and wrinkles, G read as micrometres: 1e-5 m).
+
+    The same scene as ``sf.Scene()`` and ``sf.load_scene(None)``: a lunar lander of three parts
+    (``body`` in wrinkled MLI, ``panels``, ``legs``) 70 m in front of a 600 x 600 px camera, lit by a
+    sun of 5 W m^-2. Change it with :meth:`Scene.with_values` or :func:`load_scene`'s overrides.
+
+    Returns:
+        The default :class:`Scene`.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene()
+        >>> scene
+        Scene(600x600 px, 20 spp; camera at (0, 0, 70) m; sun 5 W m^-2; parts body (conductor), panels (conductor), legs (lambert); wrinkles D 2.3 G 1e-05 m on body)
+        >>> scene.with_values({"render.resolution": [64, 64]}).render.resolution
+        (64, 64)
+    """
     return Scene()
