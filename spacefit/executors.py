@@ -1,6 +1,6 @@
 """Where work runs: this process or a dask.distributed cluster, named by one ``cluster=`` argument.
 
-Fits (:func:`spacefit.fit`), sweeps (:func:`spacefit.sweep`) and light curves (:func:`spacefit.light_curve`)
+Fits (:func:`fit`), sweeps (:func:`spacefit.sweep`) and light curves (:func:`spacefit.light_curve`)
 take the same ``cluster``: None, this process; an int N, a new local cluster of N single-threaded
 worker processes (closed when the work ends); a scheduler's address (``tcp://host:8786``); or a
 ``distributed.Client`` of the caller's (left open). :func:`check_cluster` refuses anything else before

@@ -133,7 +133,7 @@ def expected_electrons(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsi
 
 def expected_dn(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Intrinsics,
                 flat: Float[np.ndarray, "..."] | None = None) -> Float[Array, "h w c"]:
-    """Noise-free mean DN, ``bias + gain * expected_electrons``: not rounded, not clipped (see :func:`~spacefit.sensor.saturated_mask`).
+    """Noise-free mean DN, ``bias + gain * expected_electrons``: not rounded, not clipped (see :func:`saturated_mask`).
 
     Args:
         radiance: (height, width, channels) entrance-pupil radiance, W m^-2 sr^-1 (NumPy or JAX).
@@ -160,7 +160,7 @@ def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Ar
 
     ``gain^2 (electrons + read_noise^2) + 1/12``: Poisson shot noise (variance = mean electrons,
     ``(expected - bias) / gain``), Gaussian read noise and the rounding to integers (uniform, 1/12).
-    Meaningless where :func:`~spacefit.sensor.saturated_mask` holds.
+    Meaningless where :func:`saturated_mask` holds.
     """
     check_type("sensor", sensor, Sensor, "an sf.Sensor")
     if not isinstance(expected, jax.Array):
@@ -171,8 +171,8 @@ def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Ar
 
 def observe(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: Intrinsics, seed: int) -> np.ndarray:
     """One simulated exposure: DN with shot and read noise, the full well, rounding and the ADC's range.
-    Warns (``UserWarning``) when more than :data:`~spacefit.sensor.SATURATED_WARNING_FRACTION` of the
-    target's pixels (those with radiance > 0) saturate; :func:`~spacefit.sensor.choose_exposure` picks
+    Warns (``UserWarning``) when more than 0.1 % of the
+    target's pixels (those with radiance > 0) saturate; :func:`choose_exposure` picks
     an exposure that leaves them unsaturated.
 
     Args:

@@ -52,12 +52,11 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
                      show_timings: bool = False) -> tuple[np.ndarray, dict[str, Any]]:
     """Render ``scene`` and write radiance.exr, preview.png, scene.toml and render.json to ``out_dir``.
 
-    It runs holding the folder's lock (:mod:`spacefit.locks`: one writer per folder). Every input is
-    checked and the folder is checked (:func:`~spacefit.output.prepare_output`: new,
-    empty, or a previous render replaced only with ``overwrite``; none of the ``inputs`` files
+    It runs holding the folder's lock (one writer per folder: a second is refused, naming the folder). Every input is
+    checked and the folder is checked (new, empty, or a previous render replaced only with ``overwrite``; none of the ``inputs`` files
     written over) before rendering; on any error or interruption nothing is left behind. Ctrl-C or
     SIGTERM during the render raises KeyboardInterrupt within about 0.1 s; the render goes on in the
-    background to the end of its pass (:func:`~spacefit.interrupts.run_interruptibly`). A
+    background to the end of its pass. A
     non-finite image is refused, naming the cause; an all-black one is written with a warning that
     says why. Returns the radiance image (W m^-2 sr^-1) and the sidecar dict as render.json holds it.
 
@@ -194,23 +193,23 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
                   quiet: bool = False, overwrite: bool = False, resume: bool = False, cluster: Any = None) -> FitResult:
     """Fit the ``free`` parameters to reference image files; write fit.json, fit.toml, uncertainty.json and the plots to ``out_dir``.
 
-    It runs holding the folder's lock (:mod:`spacefit.locks`: one writer per folder). The folder is
+    It runs holding the folder's lock (one writer per folder: a second is refused, naming the folder). The folder is
     checked writable, then every file is read and checked before rendering; on any error nothing is
     left behind.
 
     Args:
-        files: the reference and scene files and how to read them (:class:`~spacefit.fitting.observation_files.ObservationFiles`);
+        files: the reference and scene files and how to read them (:class:`ObservationFiles`);
             none of its ``overrides`` may fix a free parameter.
-        free: parameter names (see :mod:`spacefit.scene.parameters`); their start values are the first
+        free: parameter names (:func:`available_parameters`); their start values are the first
             scene's unless ``options.start`` gives them.
-        out_dir: output folder of the report (see :mod:`spacefit.fitting.report`).
-        options: the settings of :func:`spacefit.fitting.fit` (:class:`~spacefit.fitting.loop.FitOptions`;
+        out_dir: output folder of the report (:func:`write_fit_report`).
+        options: the settings of :func:`fit` (:class:`FitOptions`;
             None: its defaults), recorded in fit.json's ``inputs.options``.
         quiet: no progress display or messages on stderr.
         overwrite: replace a previous fit report in ``out_dir``.
         resume: continue the interrupted fit whose checkpoint is in ``out_dir`` (same files, free
             parameters and options but the solver's: ``solver``, ``max_steps``, ``start``, ``stop``).
-        cluster: where the renders run (:func:`~spacefit.fitting.loop.fit`'s ``cluster``: None, this
+        cluster: where the renders run (:func:`fit`'s ``cluster``: None, this
             process; N local dask workers; a scheduler address; a dask Client).
 
     Returns:

@@ -1,5 +1,5 @@
 """Measured BRDF tables (goniometer data): reading them, the material models fitted to them, and a
-table used as it is (:class:`TabulatedBRDF`, re-exported here). A table as an observation that :func:`spacefit.fit`
+table used as it is (:class:`TabulatedBRDF`, re-exported here). A table as an observation that :func:`fit`
 fits, and the choice of the smallest model that fits, are :mod:`spacefit.fitting.observations.brdf`'s.
 The tables are read by :mod:`spacefit.materials.measured` (the file formats are described there);
 a table used as it is is a material of its own (:mod:`spacefit.materials.tabulated`).

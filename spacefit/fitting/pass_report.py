@@ -17,7 +17,7 @@ from spacefit.scene.names import Name
 
 def frame_table(result: Any, frames: Pass | None = None, *, files: Sequence[str | Path] = (),
                 times: Sequence[str] = (), entries: Sequence[int] | None = None) -> list[dict[str, Any]]:
-    """Per frame of a pass's fit (:class:`~spacefit.fitting.result.FitResult`): its file, time and
+    """Per frame of a pass's fit (:class:`FitResult`): its file, time and
     seconds since the first frame (from ``frames``, or ``files`` and ``times``), the goodness of
     fit of its own pixels (``chi2_dof``, NaN without a known noise, ``misfit``, ``render_noise``),
     and each per-frame parameter's value and standard error (``NAME``, ``NAME.stderr``: the name
@@ -56,7 +56,7 @@ def write_frame_table(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> No
 def plot_frames(rows: Sequence[Mapping[str, Any]], *, ax: Any = None, fig: Any = None) -> Any:
     """The per-frame parameters of :func:`frame_table`'s rows against time (one panel each, 1-sigma
     error bars) and each frame's chi^2 / dof, into ``ax`` (one Axes per panel) or ``fig`` (a
-    matplotlib Figure or SubFigure; default a new one): the array of axes drawn (:mod:`spacefit.plotting`)."""
+    matplotlib Figure or SubFigure; default a new one): the array of axes drawn."""
     from spacefit.plotting import axis_label, panels  # deferred: plotting (0.5 s)
 
     own = [k for k in dict.fromkeys(key for row in rows for key in row) if f"{k}.stderr" in rows[0]]

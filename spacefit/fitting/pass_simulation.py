@@ -47,7 +47,7 @@ def simulate_pass(scene: Scene, frames: Sequence[Mapping[str, Any]], out_dir: st
                   truth: Mapping[str, Any] | None = None, errors: Sequence[Mapping[str, float]] = (),
                   sensor: Any = None, spp: int = 256, seed: int = 7, interval_s: float = 10.0) -> Pass:
     """Simulate a pass and write it: per frame k an observation ``frame<k>.fits`` (DN through
-    ``sensor``'s model, :func:`~spacefit.formation.observe`, the sensor in its header and
+    ``sensor``'s model, :func:`observe`, the sensor in its header and
     sidecar) or, without a sensor, ``frame<k>.exr`` (radiance), rendered at ``spp`` from ``scene``
     with ``frames[k]``'s values (the FITS card or EXR attribute ``RENDSPP`` says ``spp``), ``truth`` (every frame) and ``errors[k]`` (the frame's own
     departures from its nominal values, e.g. ``{"target.attitude_x_deg": 0.2}``, added to the

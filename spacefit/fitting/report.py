@@ -5,9 +5,9 @@
 * ``fit.toml``: the fitted scene (:attr:`FitResult.scene`), which renders the fit again;
 * ``uncertainty.json``: :meth:`FitResult.uncertainty`, values, standard errors, units and the
   correlation matrix (strict JSON: a non-finite error is null);
-* ``comparison.png``, ``convergence.png``: :func:`~spacefit.fitting.plots.plot_comparison` and
-  :func:`~spacefit.fitting.plots.plot_convergence`, saved through matplotlib's Agg canvas;
-* ``frames.csv``, ``frames.png`` (a pass: a :class:`~spacefit.fitting.observations.passes.PassObservation`,
+* ``comparison.png``, ``convergence.png``: :func:`plot_comparison` and
+  :func:`plot_convergence`, saved through matplotlib's Agg canvas;
+* ``frames.csv``, ``frames.png`` (a pass: a :class:`PassObservation`,
   or images whose ``inputs`` give each one's time): per frame its time, goodness of fit and own
   parameters, and their plot against time (:mod:`spacefit.fitting.pass_report`; ``frames<i>`` for the
   i-th observation where a fit has several passes);
@@ -18,7 +18,7 @@
   observation, NaN where not fitted; rows stored top row first, ``ROWORDER = 'TOP-DOWN'``), and
   ``residuals.png``, its picture (:func:`~spacefit.fitting.plots.plot_residuals`).
 
-The summary's (:func:`format_result`) first line is the verdict, :class:`~spacefit.fitting.solvers.Status`;
+The summary's (:func:`format_result`) first line is the verdict, :class:`Status`;
 the second the goodness of fit (:mod:`spacefit.fitting.goodness`).
 """
 
@@ -117,7 +117,7 @@ def write_residuals(path: Path, result: FitResult) -> None:
 def format_result(result: FitResult) -> str:
     """The verdict (first line), the goodness of fit, the fitted values with standard errors (marked
     where they are not valid: a misfit's are too small), each observation's own part
-    (:meth:`~spacefit.fitting.observations.base.Reported.report`: an image's chi^2 per part, a pass's
+    (:meth:`Observation.report`: an image's chi^2 per part, a pass's
     frames, a table's or a light curve's goodness of fit), and the warnings, as lines of text."""
     check_type("result", result, FitResult, "an sf.FitResult (what sf.fit returns)")
     derived = [name for name in result.extras if f"{name}.stderr" in result.extras]  # e.g. wrinkles.rms_m
@@ -147,8 +147,8 @@ def write_table_fit(out_dir: str | Path, fit: FitResult, *, inputs: Mapping[str,
     (:meth:`FitResult.to_dict`, the package versions and, if given, the ``inputs``: names and JSON
     values) and ``report.txt`` (:func:`format_result`) into ``out_dir`` all at once (on an error
     nothing is left behind). The folder must be new or empty, or hold an earlier table fit and
-    ``overwrite`` be given (:func:`~spacefit.output.prepare_output`); it is written holding its lock
-    (:mod:`spacefit.locks`)."""
+    ``overwrite`` be given ; it is written holding its lock
+    (one writer per folder)."""
     check_type("fit", fit, FitResult, "an sf.FitResult")
     check_type("inputs", inputs, (Mapping, type(None)), "a dict of names and JSON values, or None")
     check_name_list("inputs", list(inputs or {}))

@@ -1,4 +1,4 @@
-"""The one result of :func:`spacefit.fit`, whatever observations it fitted: values in physical units,
+"""The one result of :func:`fit`, whatever observations it fitted: values in physical units,
 their standard errors and correlation, the verdict, the goodness of fit and what was run."""
 
 from __future__ import annotations
@@ -36,7 +36,7 @@ class FitResult:
         history: one entry per step: the point the step evaluated (step 1 evaluates the start;
             the accepted point of the last step is ``values``), its loss, ``accepted`` (the step
             evaluated another point than the best so far and lowered its loss: accepted losses never rise), ``loss_noise`` (the loss's
-            Monte Carlo noise at the best point so far, :mod:`~spacefit.fitting.stopping`),
+            Monte Carlo noise at the best point so far, the Fitting guide's stop rule),
             time_s since the start.
         renders: each observation's final model, the images' first (the render with the image
             nuisances), then the other kinds' (their predicted values), in the unit of its data: ``units``.
@@ -50,18 +50,18 @@ class FitResult:
             out) that see it and the mean of the reference and of the fit's render there, in ``units`` (keys
             ``reference_mean_w_m2_sr`` and ``fit_mean_w_m2_sr``, or ``reference_mean_dn`` and ``fit_mean_dn``).
             With the pixel loss, each row also holds ``chi2_per_value`` (the noise known) or
-            ``r2_over_render_noise`` (mean r^2 over the render noise's, :mod:`~spacefit.fitting.goodness`).
+            ``r2_over_render_noise`` (mean r^2 over the render noise's; the Fitting guide's goodness of fit).
         scene: the first observation's scene with the fitted values: ``scene.to_toml()`` is a scene
             file that renders the fit again (the image nuisances are not scene values); None if
             the values are not finite.
-        goodness: the goodness of fit at the result (:class:`~spacefit.fitting.goodness.Goodness`);
+        goodness: the goodness of fit at the result (chi^2, degrees of freedom, p-value; printed by :func:`format_result`);
             None where there is no finite result (interrupted, non-finite).
         residuals: per observation, data - model in ``units`` (for an image NaN where not fitted).
         observation_goodness: per observation, the goodness of fit of its own residuals (the
             pixel loss), counting as free the shared parameters and its own (``name@k``; a value
             observation those it depends on).
         observations: the observations as the fit was given them (an image, a pass, a table, a light
-            curve), each of which reports its part (:class:`~spacefit.fitting.observations.base.Reported`).
+            curve), each of which reports its part (:meth:`Observation.report`, :meth:`PassObservation.report`).
         entries: per one of ``observations``, its indices into the per-observation lists above (an
             image's one, a pass's one per frame, the images' first, then the value observations').
     """

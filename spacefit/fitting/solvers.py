@@ -41,9 +41,8 @@ class Status(enum.Enum):
     verdicts on a solve that ended without a failure, in this order of precedence:
     :attr:`NO_PROGRESS` (no step lowered the loss: the start is returned), :attr:`AT_BOUND` (a
     parameter ended at a bound of its range), :attr:`UNJUDGED` (the noise is known but the model's
-    own render noise is too large to judge its residuals) and :attr:`MISFIT` (the residuals exceed
-    the noise, :mod:`spacefit.fitting.goodness`). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
-    :attr:`NO_BETTER_POINT` (:mod:`spacefit.fitting.stopping`) are a success, and only where the
+    own render noise is too large to judge its residuals) and :attr:`MISFIT` (the residuals exceed the noise, :attr:`FitResult.goodness`). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
+    :attr:`NO_BETTER_POINT` (``sf.fit(stop=...)``) are a success, and only where the
     verdicts leave them: a solve stopped there whose residuals exceed the noise is a :attr:`MISFIT`.
     """
 

@@ -139,7 +139,7 @@ class Intrinsics:
     def from_scene(cls, scene: Any) -> Intrinsics:
         """The intrinsics of a scene's camera (an ``sf.Scene``), in metres: ``camera.focal_length_mm`` and
         ``camera.pixel_pitch_mm`` (set by ``camera.fov_deg`` where it is given), ``render.resolution``
-        and ``camera.principal_offset_px``; what :func:`spacefit.observe` and a sensor take.
+        and ``camera.principal_offset_px``; what :func:`observe` and a sensor take.
 
         Raises:
             InputTypeError: ``scene`` has no camera and render settings (the geometry sits under the scene's schema,

@@ -31,18 +31,18 @@ def sensor_of(image: ObservedImage, sensor: Sensor | Mapping[str, Any] | None = 
     replacing the ones before: the illustrative defaults (only with ``defaults="illustrative"``),
     the file's (its integer type's bits, a spacefit sidecar, the FITS header's keywords,
     :data:`HEADER_KEYWORDS`), ``sensor_file`` (the fields of a sensor file,
-    :func:`~spacefit.sensor.read_sensor_file`), and the mapping ``sensor`` (an option or argument).
+    :func:`read_sensor_file`), and the mapping ``sensor`` (an option or argument).
     Without defaults, the values not given follow documented rules, not illustrative numbers: no
     full well (the ``SATURATE`` level or the ADC's range saturates); diffraction only when both the
     aperture and the wavelength are given; vignetting off for a calibrated camera (a radiometric
     scale), on otherwise.
 
     Returns:
-        the sensor and, for each field it uses (:func:`~spacefit.sensor.used_fields`), its source:
+        the sensor and, for each field it uses , its source:
         ``"header KEY"``, ``"spacefit sidecar"``, ``"sensor file"``, ``"option/argument"``,
         ``"default (illustrative)"`` or ``"rule: ..."``.
     Raises:
-        InputError: a value a fit needs (:func:`~spacefit.sensor.missing_for_measurement`) that no
+        InputError: a value a fit needs  that no
             source gives, naming each and the three ways to give it.
     """
     check_type("image", image, ObservedImage, "an sf.ObservedImage (what sf.read_image returns)")

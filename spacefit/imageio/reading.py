@@ -14,7 +14,7 @@ Saturated values are masked: at or above the FITS ``SATURATE`` keyword, else the
 ``saturation_dn``, else the integer type's full scale (2^bits - 1); float DN without either has no
 saturation mask. Pixels a user mask or a PNG's alpha leaves out are not checked and read as 0.
 
-What is refused, naming the file (:class:`~spacefit.errors.InputError`): an image of other than 1
+What is refused, naming the file (:class:`InputError`): an image of other than 1
 (grey) or 3 (RGB) channels, a FITS cube's planes (NAXIS3) included; alpha is read as a mask (0
 leaves the pixel out, any other value keeps it as it is) in PNG and in TIFF with an unassociated
 alpha (ExtraSamples = 2), and refused elsewhere (an RGBA EXR, a TIFF's unmarked fourth sample); a
@@ -123,7 +123,7 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         sigma: the noise standard deviation of a radiance image (W m^-2 sr^-1, scalar or per
             pixel): its values may then dip below 0 by up to :data:`NEGATIVE_SIGMAS` sigma.
         row_order: ``"top-down"`` or ``"bottom-up"``: how a FITS file's rows run, whatever it says
-            (None: as it states, :mod:`spacefit.imageio.fits`).
+            (None: as it states).
     Returns:
         the data, unit, metadata and usable-pixel mask (see :class:`ObservedImage`).
     Raises:

@@ -17,7 +17,7 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class DiffuseConductor(MaterialModel):
-    """A rough conductor plus a diffuse term: f_r = kd / pi + the :class:`~spacefit.materials.Conductor`'s
+    """A rough conductor plus a diffuse term: f_r = kd / pi + the :class:`Conductor`'s
     BRDF (the sum a measured table of a painted or coated surface often needs: a specular peak over a
     diffuse floor). The renderer draws it as Mitsuba's ``blendbsdf`` of the two, each doubled, at weight 0.5."""
 

@@ -8,8 +8,8 @@ flat plates' fits (:mod:`spacefit.studies.plates`) take their bounds from them. 
 :meth:`~MaterialModel.f_r` is its BRDF in JAX under the paper's names, for one grey channel and
 front-side directions; :meth:`~MaterialModel.evaluate` wraps it the way the renderer wraps every
 BSDF (Mitsuba's ``twosided``) and averages the RGB channels. :meth:`~MaterialModel.effective` is its
-level-of-detail rule (:mod:`spacefit.scene.lod`). A model is added by
-:func:`spacefit.materials.registry.register_material`; its rendering backends' entries live in
+level-of-detail rule (:class:`WrinkleSettings`' ``lod``). A model is added by
+:func:`register_material`; its rendering backends' entries live in
 :mod:`spacefit.rendering` (docs/development.md, "Adding a material model").
 """
 
@@ -135,7 +135,7 @@ class MaterialModel:
 
     def effective(self, slope_rms: float) -> MaterialModel | None:
         """The level-of-detail rule: a flat part's material that renders this one's as wrinkled with
-        rms slope ``slope_rms`` (per axis), or None where the model has none (:mod:`spacefit.scene.lod`)."""
+        rms slope ``slope_rms`` (per axis), or None where the model has none (:class:`WrinkleSettings`' ``lod``)."""
         return None
 
 

@@ -53,8 +53,8 @@ def oren_nayar_brdf(wi: Array, wo: Array, kd: Array, sigma: Array) -> Array:
 @dataclass(frozen=True)
 class OrenNayar(MaterialModel):
     """Oren-Nayar rough diffuse reflector (Oren & Nayar 1994, qualitative model, eq. 30): albedo ``kd``
-    in [0, 1] and facet-slope deviation ``sigma`` in [0, pi/2) rad (:mod:`spacefit.materials.oren_nayar`).
-    sigma = 0 is :class:`~spacefit.materials.Lambert`."""
+    in [0, 1] and facet-slope deviation ``sigma`` in [0, pi/2) rad (Oren & Nayar 1994).
+    sigma = 0 is :class:`Lambert`."""
 
     name: ClassVar[str] = "oren_nayar"
     fields: ClassVar[tuple[Field, ...]] = (KD, SIGMA)

@@ -1,6 +1,6 @@
 """The material models by the name a scene file gives them, and the named presets; unknown names list the valid ones.
 
-A model (:class:`~spacefit.materials.model.MaterialModel`) is added by one call,
+A model (:class:`MaterialModel`) is added by one call,
 :func:`register_material`, from any module (a test's own included); the parameter table
 (``parts.P.<field>``) and every place that asks for a model by name see it from then on.
 """
@@ -86,7 +86,7 @@ class Derived(Mapping[str, V]):
 
 
 def register_material(model: type[MaterialModel]) -> type[MaterialModel]:
-    """Add a material model under its :attr:`~spacefit.materials.model.MaterialModel.name` (returned,
+    """Add a material model under its :attr:`MaterialModel.name` (returned,
     so that it may decorate the class). Registering the same class again is a no-op.
 
     Raises:

@@ -13,7 +13,7 @@ theta_i between incidences, held at the end values beyond both; ``scale`` multip
 table's values). The renderer evaluates the same interpolation in Dr.Jit
 (:func:`spacefit.rendering.materials.tabulated_plugin`).
 
-A scene file names it by its table's file (read by :func:`spacefit.materials.measured.read_brdf_table`,
+A scene file names it by its table's file (read by :func:`read_brdf_table`,
 relative to the scene file's folder)::
 
     [parts.chassis]
@@ -58,7 +58,7 @@ def signed_offset(wi: Array | np.ndarray, wo: Array | np.ndarray) -> Array:
 class TabulatedBRDF(MaterialModel):
     """A measured in-plane BRDF table used as it is (module docstring), the material ``tabulated``
     of any part and of a flat plate (:class:`sf.Plate`). Both sides alike, 0 where sun and observer
-    are on opposite sides, as every material's BRDF (:func:`spacefit.materials.brdf.brdf`).
+    are on opposite sides, as every material's BRDF.
     Isotropic: the part's tangent does not matter. Built from a table's file (``source`` alone,
     as a scene file names it), from a read table (:meth:`from_table`) or from its arrays. ln f is
     piecewise linear in the angles: a fit of directions through it (an attitude) sees one segment's

@@ -222,8 +222,7 @@ class Renderer:
     ``crop=False`` traces the whole film, for vertices that will move (the window and the mask are
     fixed when the scene is loaded). :attr:`traced` is the mask over the window. Load once and render many times: reloading scenes
     leaks memory in Mitsuba (mitsuba3#1890); change values in place with :meth:`set_values`. Each
-    kind of pass is traced at its first render and replayed after until vertices move (:attr:`frozen`,
-    :class:`~spacefit.rendering.frozen.FrozenPasses`; :attr:`geometry` counts the moves).
+    kind of pass is traced at its first render and replayed after until vertices move (:attr:`frozen`; :attr:`geometry` counts the moves).
     """
 
     def __init__(self, scene: Scene | Assembly, variant: str | None = None, crop: bool = True) -> None:
@@ -263,11 +262,9 @@ class Renderer:
     @in_variant
     @float64  # the pose and the W-M heights in float64, rounded to float32 only where Mitsuba takes them
     def set_values(self, values: Mapping[str, float]) -> None:
-        """Set values by name in the loaded scene, without reloading it: parameter names
-        (:mod:`spacefit.scene.parameters`, e.g. ``{"parts.panels.alpha_x": 0.1, "sun.elevation_deg": 30}``)
-        or the scene-file keys they spell another way (``sun.direction``, ``target.attitude_deg``,
-        :func:`spacefit.scene.overrides.as_parameters`). Each value is checked as
-        :func:`~spacefit.scene.toml.load_scene` checks it, with the same message, before anything is
+        """Set values by name in the loaded scene, without reloading it: parameter names (:func:`available_parameters`, e.g. ``{"parts.panels.alpha_x": 0.1, "sun.elevation_deg": 30}``)
+        or the scene-file keys they spell another way (``sun.direction``, ``target.attitude_deg``). Each value is checked as
+        :func:`load_scene` checks it, with the same message, before anything is
         set. Values set earlier stay: setting one sun angle keeps the other. :attr:`current_scene`
         is the scene the renderer now renders.
 
@@ -373,7 +370,7 @@ class Renderer:
 
 def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray:
     """Render a scene's radiance image (W m^-2 sr^-1, (height, width, 3) float32). Mitsuba's
-    variant is the caller's again after (:func:`~spacefit.rendering.backend.variant_scope`)."""
+    variant is the caller's again after (see the API page's notes for integrators)."""
     with variant_scope(check_scene(scene).render.variant):
         return Renderer(scene).render(progress=progress)
 

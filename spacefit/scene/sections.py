@@ -4,7 +4,7 @@ A section coerces what a TOML file or Python gives (lists to tuples, integers to
 number belongs) and checks every value before it exists, naming ``section.key``, the value and the
 allowed range (:func:`spacefit.errors.check_range`): ``RenderSettings(spp=-1)`` raises at once. A
 part's material is a :mod:`spacefit.materials` object from the start. The whole scene that joins
-them is :class:`spacefit.scene.schema.Scene`; what the layers below it read of a scene is
+them is :class:`Scene`; what the layers below it read of a scene is
 :class:`SceneLike` (the parameter registry and the override language sit under the ``Scene`` class,
 whose ``with_values`` is theirs). Reading a file is :mod:`spacefit.scene.toml`; changing values by
 name is :mod:`spacefit.scene.overrides`.
@@ -213,7 +213,7 @@ class TargetSettings(Section):
     """Target pose and geometry source: ``"builtin"`` (the lander), a mesh file whose groups are the
     parts, or ``"none"`` (:data:`NO_MESH`): only the parts given, each a primitive or a file of its own.
 
-    ``attitude`` is the body's attitude law (:mod:`spacefit.geometry.attitude`): ``"fixed"`` (the
+    ``attitude`` is the body's attitude law (:class:`NadirSun`, :class:`SunPointing`, :class:`QuaternionTable`): ``"fixed"`` (the
     default) at ``attitude_deg``; ``"nadir_sun"`` (body -z to ``nadir``, +y towards the sun as far as
     allowed) and ``"sun"`` (body +z to the sun, +x towards ``nadir`` as far as allowed), ``nadir`` the
     world direction towards the Earth's centre and the sun the scene's; ``"table"``, the file
@@ -296,7 +296,7 @@ class WrinkleSettings(Section):
     an rms height of 0.27 m on a 1.4 m body and an rms slope of 37 (spikes like hair; the body
     folds over itself), and no common unit for all lengths changes the slope. The default G is
     1e-5 m, the thesis's "10" read as micrometres with L and Ls in metres: rms height 4.3 mm, rms
-    slope 0.59, inside :data:`spacefit.geometry.wrinkle.MLI_SLOPE_RANGE` (crumpled foil). The literal
+    slope 0.59, inside :data:`MLI_SLOPE_RANGE` (crumpled foil). The literal
     reading is kept as the scene ``data/scenes/thesis-literal.toml`` (docs/guide/materials.md).
 
     ``spacing_m`` is the refinement density: the distance between the sample points that carry
@@ -304,11 +304,11 @@ class WrinkleSettings(Section):
 
     ``model`` chooses how wrinkles are rendered: ``"geometry"`` displaces a refined mesh, the
     thesis's way; ``"effective"`` keeps the flat mesh and widens the part's microfacet roughness by
-    the wrinkles' slopes (:func:`spacefit.scene.lod.effective_material`); ``"auto"`` (default)
+    the wrinkles' slopes; ``"auto"`` (default)
     takes the effective model, cheaper and far less noisy, where a pixel at the part spans at least
     ``lod_footprint`` times the largest wrinkle (L) and the wrinkles are gentle enough for a
     roughness, and the geometry otherwise. The default ``lod_footprint`` is where the level of
-    detail study measured the effective model within :data:`spacefit.scene.lod.LOD_TOLERANCE` of
+    detail study measured the effective model within 15 % of
     the geometry (docs/guide/lod.md). Fits render the geometry for ``"auto"``.
     """
 
@@ -338,9 +338,9 @@ class WrinkleSettings(Section):
 
 @dataclass(frozen=True)
 class PartSettings:
-    """A part: its material (a :mod:`spacefit.materials` object), for a part of its own a mesh file or a
-    primitive (:class:`~spacefit.geometry.primitives.Primitive`), and its articulation law in the body
-    (:mod:`spacefit.geometry.attitude`; fixed by default)."""
+    """A part: its material (:class:`Conductor`, :class:`Lambert`, ... or a :data:`PRESETS` name), for a part of its own a mesh file or a
+    primitive (a box, cylinder, ... table in the scene file), and its articulation law in the body
+    (:class:`SunTracking`, :class:`AxisAngle`; fixed by default)."""
 
     material: Material
     file: str = ""
@@ -393,7 +393,7 @@ SECTIONS: Mapping[str, type[Section]] = {
 
 @runtime_checkable
 class SceneLike(Protocol):
-    """A whole scene as the layers under :class:`spacefit.scene.schema.Scene` read it: its sections,
+    """A whole scene as the layers under :class:`Scene` read it: its sections,
     its parts, and a checked copy with values set by name (the ``Scene`` class is the one implementation)."""
 
     render: RenderSettings
@@ -416,7 +416,7 @@ def sun_followers(scene: SceneLike) -> list[str]:
 
 
 def check_scene(scene: object, name: str = "scene") -> SceneLike:
-    """Raise :class:`InputTypeError` unless ``scene`` is a scene (:class:`spacefit.scene.schema.Scene`)."""
+    """Raise :class:`InputTypeError` unless ``scene`` is a scene (:class:`Scene`)."""
     if not isinstance(scene, SceneLike):
         raise InputTypeError(f"`{name}` must be {A_SCENE}, got {quote(scene)}.")
     return scene

@@ -1,9 +1,9 @@
-"""Reading scene files: TOML text to a checked :class:`~spacefit.scene.schema.Scene` (whose module
+"""Reading scene files: TOML text to a checked :class:`Scene` (whose module
 docstring gives the defaults, the units and the sun's conventions).
 
 A part's articulation keys (``articulation``, ``axis``, ``angle_deg``, ``pivot_m``,
 :func:`spacefit.geometry.attitude.pop_articulation`) pivot by default about a primitive's
-``position_m``. A part's ``material`` names a preset (:data:`spacefit.materials.PRESETS`, the other keys of its
+``position_m``. A part's ``material`` names a preset (:data:`PRESETS`, the other keys of its
 table replacing the preset's values) or a model (``"conductor"``, ``"mirror"``, ``"lambert"``, with
 every value given, as :meth:`Scene.to_toml` writes it); it becomes a material object here, when
 the file is read. A section may also give parameter names (``[sun] elevation_deg = 30``,
@@ -151,8 +151,7 @@ def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scen
 def load_scene(path: str | Path | None = None, overrides: Overrides = ()) -> Scene:
     """Load a scene TOML file (or the defaults when ``path`` is None) and apply overrides.
 
-    ``overrides``: a mapping of names (scene-file keys or parameter names,
-    :mod:`spacefit.scene.overrides`) to Python values (``{"camera.position_m": [0, 0, 50],
+    ``overrides``: a mapping of names (scene-file keys or parameter names, :func:`available_parameters`) to Python values (``{"camera.position_m": [0, 0, 50],
     "parts.panels.alpha_x": 0.1, "sun.elevation_deg": 30}``), or ``"key=value"`` strings with the
     value in TOML syntax, as on the command line (``--set``).
     """

@@ -15,7 +15,7 @@ member the fit has not seen (a new night, a new satellite), the members' mean wi
 added to the parameters' covariance: the spread s^2 of the fitted members' values about their mean
 plus the mean's own variance, so that a per-member nuisance widens the interval of an unseen member
 as much as it varied between the seen ones. The interval is
-:func:`~spacefit.fitting.prediction.predictive_intervals`'s, the observation's error with the parameters'
+:func:`predictive_intervals`'s, the observation's error with the parameters'
 errors, in magnitudes.
 """
 
@@ -116,9 +116,9 @@ def design_names(free: Sequence[str], own: Sequence[str], members: int) -> list[
 
 
 def fit_design(curves: Sequence[PlateLightCurve], free: Sequence[str], own: Sequence[str] = (), **options: Any) -> FitResult:
-    """Fit light curves of one design jointly with :func:`spacefit.fit`: the ``free`` values shared
+    """Fit light curves of one design jointly with :func:`fit`: the ``free`` values shared
     by every curve and the ``own`` ones each curve's (``<name>@k``, k the curve's place in
-    ``curves``; :class:`DesignMember`). ``options``: :func:`spacefit.fit`'s keywords.
+    ``curves``; :class:`DesignMember`). ``options``: :func:`fit`'s keywords.
 
     Raises:
         InputError: no curve; a name both shared and own; an unknown name (listing the valid ones).
@@ -224,5 +224,5 @@ def predict_design(result: FitResult, curve: PlateLightCurve, observations: Ligh
 
 def design_noise_mag(result: FitResult, curves: Sequence[PlateLightCurve], own: Sequence[str] = (), estimator: str = "rms") -> float:
     """The observations' error (mag) estimated from a design fit's residuals over its degrees of
-    freedom (:func:`~spacefit.fitting.prediction.residual_noise`: ``"rms"`` or ``"central68"``)."""
+    freedom (:func:`residual_noise`: ``"rms"`` or ``"central68"``)."""
     return residual_noise(design_members(curves, own), result, estimator) / LN_PER_MAGNITUDE

@@ -135,8 +135,7 @@ def _perpendicular(c: np.ndarray) -> np.ndarray:
 
 def earthshine_sources(earth_m: np.ndarray, sun: np.ndarray, earth: Earth = Earth(), points: int = DEFAULT_POINTS) -> EarthshineSources:
     """The lit, visible Earth seen from targets (module docstring): ``earth_m`` (n, 3) the Earth's centre
-    from each target (m), ``sun`` (n, 3) directions towards the sun, both in the targets' frame (for
-    :func:`~spacefit.studies.observing.nadir_sun_frame`, the frame of a light curve's ``sun`` and
+    from each target (m), ``sun`` (n, 3) directions towards the sun, both in the targets' frame (for :class:`NadirSun`, the frame of a light curve's ``sun`` and
     ``observer``, the Earth's centre is (0, 0, -(R + height))); ``points`` Gauss-Legendre nodes per
     dimension and piece of the lit cap.
 

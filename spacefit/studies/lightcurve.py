@@ -1,7 +1,7 @@
 """Light curves: what a ground telescope sees of an unresolved target, from sweeps of renders.
 
 The irradiance at the camera's pinhole is the sum over the image of radiance times each pixel's
-solid angle (:func:`spacefit.geometry.frames.pixel_solid_angles`), W m^-2, radiance being the mean
+solid angle (:func:`pixel_solid_angles`), W m^-2, radiance being the mean
 of the RGB channels (grey materials: the reflectance in the band is taken equal to it). It is
 rendered at the scene's camera range and rescaled to the observer's range by the inverse square law,
 E_obs = E (d_rendered / d_obs)^2, exact for an unresolved target (Mitsuba traces in float32, so a far
@@ -25,7 +25,7 @@ the observer.
 
 Monte Carlo errors: with ``seeds`` (two or more), each point's irradiance is the mean of the seeds'
 renders and carries its standard error, the seeds' standard deviation over sqrt(seeds)
-(:func:`spacefit.studies.sensitivity.mean_and_error`). The magnitude's error follows by the delta
+(:func:`sensitivity.mean_and_error`). The magnitude's error follows by the delta
 method, sigma_m = 2.5 / ln 10 * sigma_E / E (about 1.086 sigma_E / E); where sigma_E / E is large
 that linearisation fails, so :meth:`LightCurve.magnitude_interval` gives the asymmetric interval
 m(E + sigma_E), m(E - sigma_E) (the faint side infinite when sigma_E >= E), which the figure draws.
@@ -240,8 +240,8 @@ def light_curve(
     scene's; ``observer_range_m``: the observer's distance (default: the rendered one). ``band`` and
     ``sun_magnitude`` (default: :data:`SUN_MAGNITUDES`) give the magnitudes. ``seeds`` averages
     renders of these seeds, two or more giving each point's Monte Carlo standard error (module
-    docstring); ``cluster`` where its renders run (:mod:`spacefit.executors`; ``workers`` / ``scheduler``: its
-    deprecated spellings). The rest is :func:`spacefit.studies.sweep.sweep`'s."""
+    docstring); ``cluster`` where its renders run (as :func:`sweep` takes it; ``workers`` / ``scheduler``: its
+    deprecated spellings). The rest is :func:`sweep`'s."""
     check_scene(scene)
     cluster = cluster_of(cluster, workers, scheduler)
     given = [n for n, v in (("phase_deg", phase_deg), ("attitude_deg", attitude_deg), ("times_s", times_s)) if v is not None]

@@ -56,7 +56,7 @@ class RenderedLightCurve(LightCurveKind):
             ``{"camera.position_m": [x, y, z], "sun.direction": [x, y, z]}``), every point setting the same ones.
         magnitude: the observed magnitudes.
         magnitude_sigma: their errors (mag; one for all, or one each), or None: unknown.
-        band: the band (:data:`~spacefit.studies.lightcurve.SUN_MAGNITUDES`).
+        band: the band (``V`` or ``AB532``).
         sun_magnitude: the sun's magnitude in it (None: the band's).
         observer_range_m: the observer's range (None: each point's camera's).
         seed: the renders' seed (independent ones: ``seed + 1000 j``).
@@ -114,7 +114,7 @@ class RenderedLightCurve(LightCurveKind):
         return tuple(sorted({key for p in self.points for key in p}))
 
     def parameters(self) -> tuple[str, ...]:
-        """Every parameter of the scene (:func:`~spacefit.scene.parameters.available`) but those the points
+        """Every parameter of the scene (:func:`available_parameters`) but those the points
         set (named, or moved by a vector they set) and the image nuisances (an irradiance has no pixels)."""
         names = [n for n in available(self.scene) if n not in self.geometry and n not in IMAGE]
         return tuple(n for n in names if len({scene_value(s, n) for s in self.scenes}) == 1)
@@ -184,9 +184,9 @@ def fit_light_curve(
 ) -> FitResult:
     """Fit the registered parameters ``free`` of a rendered target (materials, attitude angles, ...)
     to an observed light curve (:class:`RenderedLightCurve` of these arguments) with
-    :func:`spacefit.fit`, from the scene's values. ``progress``: called with (step, max_steps) after
+    :func:`fit`, from the scene's values. ``progress``: called with (step, max_steps) after
     each step (default: a progress display on stderr, none with ``quiet``); ``resume``: the fit's
-    checkpoint plumbing (:class:`~spacefit.fitting.resume.Resume`), as :func:`spacefit.fit` takes it."""
+    checkpoint plumbing (:class:`Resume`), as :func:`fit` takes it."""
     check_count("max_steps", max_steps, optional=False)
     curve = RenderedLightCurve(scene, points, magnitude, magnitude_sigma, band, sun_magnitude, observer_range_m, seed)
     if progress is None and not quiet:

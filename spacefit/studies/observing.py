@@ -22,8 +22,8 @@ target's frame.
   first keyword ``CCSDS_TDM_VERS``; the geometry from its AZEL angles and range seen from ``site``, or
   from an ``orbit``.
 
-Given an ``orbit`` (:class:`~spacefit.studies.orbit.Orbit`, a TLE or OMM), the geometry is computed
-from it, the site and the time instead, offline (:func:`~spacefit.studies.orbit.pass_geometry`),
+Given an ``orbit`` (:class:`Orbit`, a TLE or OMM), the geometry is computed
+from it, the site and the time instead, offline (:func:`pass_geometry`),
 and checked against the file's where it gives any (SatChecker's columns, an MMT-9 track's distance
 and phase angle, a TDM's angles and range: :data:`ORBIT_TOLERANCE`). Rows whose time cannot be right
 (not ISO 8601, before ``launch_utc``, in the future), and SCORE rows, MMT-9 points and TDM ``MAG``
@@ -85,7 +85,7 @@ class LightCurveObservations:
         source: where they came from.
         refused: the file's rows not used, with the reason (:class:`RefusedRow`).
         earth_m: (n, 3) the Earth's centre seen from the target, in its frame (m; what Earthshine,
-            :mod:`spacefit.studies.earthshine`, needs), or None where the file gives no position.
+            :func:`earthshine_irradiance`, needs), or None where the file gives no position.
     """
 
     magnitude: np.ndarray
@@ -176,8 +176,7 @@ def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | 
     """Read measured magnitudes from a file in one of the formats of the module docstring (found from
     the file, or ``format``: ``general``, ``pomenis``, ``score``, ``ecsv``, ``mmt9``, ``tdm``). ``site``
     is the observer where the geometry is seen from one (a SCORE file gives each row's; an MMT-9
-    track's default is MMT-9's); ``band`` names the magnitudes' band (one of
-    :data:`~spacefit.studies.lightcurve.SUN_MAGNITUDES`; a SCORE file's or MMT-9 track's from its
+    track's default is MMT-9's); ``band`` names the magnitudes' band (``V`` or ``AB532``; a SCORE file's or MMT-9 track's from its
     filters, a TDM's ``V``). ``orbit`` computes the geometry from a TLE or OMM instead (an MMT-9
     track needs one); rows before ``launch_utc`` or after ``now_utc`` (default: now) are refused,
     with a warning.

@@ -7,21 +7,21 @@ spacefit material. The irradiance at an observer at distance d is
 
 f_k the plate's BRDF (:func:`spacefit.materials.brdf.brdf`, Mitsuba's evaluation, both sides
 alike as the renderer's ``twosided``, 0 where sun and observer are on opposite sides; a measured
-table's too, :class:`~spacefit.materials.tabulated.TabulatedBRDF`), wi and wo the
+table's too, :class:`TabulatedBRDF`), wi and wo the
 directions towards the sun and the observer: the renderer's integrated irradiance of the same
 plates for a point target (no plate shadowing or lighting another, one bounce; the test renders
 the two-plate satellite and compares). A target in the Earth's shadow is dark.
 
 Observed magnitudes of such a target are an observation (:class:`PlateLightCurve`) that
-:func:`spacefit.fit` fits, alone or jointly with images of the same parts: its parameters are the
+:func:`fit` fits, alone or jointly with images of the same parts: its parameters are the
 registered ones of the plates' materials (``parts.array.kd``, ``parts.chassis.alpha`` for both
 roughnesses, ``parts.array.scale`` a table's factor) and the target's attitude angles;
 :func:`fit_plates` is the convenience that fits it alone.
 
-Given an :class:`~spacefit.studies.earthshine.Earth`, the irradiance is the sun's plus Earthshine's:
-the same plates lit by the sunlit Earth (:func:`~spacefit.studies.earthshine.earthshine_sources`
+Given an :class:`Earth`, the irradiance is the sun's plus Earthshine's:
+the same plates lit by the sunlit Earth (:func:`earthshine_sources`
 once per set of observations, from their ``earth_m``, the sphere at the observing geometry's radius
-:data:`~spacefit.studies.orbit.EARTH_RADIUS_M`; :func:`~spacefit.studies.earthshine.earthshine_irradiance`
+:data:`~spacefit.studies.orbit.EARTH_RADIUS_M`; :func:`earthshine_irradiance`
 with the plates' BRDF at the fitted values and attitude). Without one the model is the sun's alone.
 """
 
@@ -64,7 +64,7 @@ class Plate:
     (target frame) is (a face of) a sun-tracking part: for each observation its normal and tangent are
     turned about that axis by the turn that makes the part's ``tracking_normal`` (default: the plate's
     own normal) face the sun as closely as the turn allows
-    (:func:`spacefit.geometry.attitude.tracking_rotation`; unturned with the sun along the axis)."""
+    (as :class:`SunTracking` turns a part; unturned with the sun along the axis)."""
 
     name: str
     area_m2: float
@@ -291,14 +291,12 @@ def plate_parameters(plates: Sequence[Plate]) -> tuple[str, ...]:
 
 @dataclass(frozen=True, eq=False)
 class PlateLightCurve(LightCurveKind):
-    """Observed magnitudes of a target of flat plates, the light-curve kind of observation
-    (:mod:`spacefit.fitting.observations`) whose model is :func:`plates_irradiance`.
+    """Observed magnitudes of a target of flat plates, the light-curve kind of observation :func:`fit` fits whose model is :func:`plates_irradiance`.
 
     Its parameters are the registered ones of each plate's material, ``parts.<plate>.<field>``
-    (``alpha`` for both roughnesses; a :class:`~spacefit.materials.tabulated.TabulatedBRDF`'s
+    (``alpha`` for both roughnesses; a :class:`TabulatedBRDF`'s
     ``scale``), and the target's attitude angles ``target.attitude_x_deg`` (``_y_``, ``_z_``: a
-    rotation of all the plates from their given normals, at 0 unless free,
-    :func:`spacefit.geometry.frames.attitude_matrix`). The residual is the magnitude's,
+    rotation of all the plates from their given normals, at 0 unless free, as ``target.attitude_deg``). The residual is the magnitude's,
     (m_model - m_obs) / sigma_m, as ln(E_model / E_obs) / (0.4 ln 10 sigma_m); without stated
     errors the errors are scaled by the residuals. Observations in the Earth's shadow are left out.
     Given an ``earth``, the model adds Earthshine (module docstring) and the report says its share.
@@ -407,7 +405,7 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
                max_steps: int = 200, earth: Earth | None = None) -> FitResult:
     """Fit the plates' registered values ``free`` (``parts.<plate>.<field>``, ``target.attitude_z_deg``;
     :class:`PlateLightCurve`) to the observed magnitudes outside the Earth's shadow with
-    :func:`spacefit.fit`, from the plates' values. ``bounds`` narrows a free value's range within its
+    :func:`fit`, from the plates' values. ``bounds`` narrows a free value's range within its
     registered one (:attr:`PlateLightCurve.bounds`); the start must lie inside. ``earth`` adds
     Earthshine to the model (:attr:`PlateLightCurve.earth`)."""
     check_type("bounds", bounds, (Mapping, type(None)), "a dict of (low, high) ranges by free name, or None")

@@ -120,20 +120,19 @@ def sweep(
         scene: the scene every point starts from.
         axes: the swept values (module docstring): key -> list, or axis name -> {key: list} (zipped).
         store: a Zarr folder written point by point (None: in memory). An existing store of the
-            same sweep is completed, not recomputed. It is locked while the sweep runs
-            (:mod:`spacefit.locks`): a store another process writes is refused, naming it.
+            same sweep is completed, not recomputed. It is locked while the sweep runs: a store another process writes is refused, naming it.
         images: store each point's radiance image (W m^-2 sr^-1) too.
         derivatives: registered parameters whose derivatives of each region's mean radiance to
             store at every point, with their Monte Carlo standard errors (:func:`sf.sensitivity`).
         derivative_seeds: independent seeds of each derivative (>= 2).
         overwrite: replace a store that holds another sweep.
-        cluster: where the points render (:mod:`spacefit.executors`): None, this process; an int N, a new
+        cluster: where the points render: None, this process; an int N, a new
             local dask.distributed cluster of N worker processes; a scheduler address (``tcp://host:8786``);
             a ``distributed.Client`` (left open).
         max_renders_per_worker: restart a dask worker after this many renders (Mitsuba leaks).
         allow_large: run a sweep of more than :data:`MAX_POINTS` points, or whose store may not fit
             on its disk (:func:`check_estimate`; the size is printed first unless ``quiet``).
-        stall_s: on dask, stop with :class:`~spacefit.executors.ClusterError` when no point
+        stall_s: on dask, stop with :class:`ClusterError` when no point
             finishes for this long (s); a point whose worker dies is retried twice, then named the same way.
         quiet: no size estimate, no progress bar.
         workers, scheduler: deprecated spellings of ``cluster`` (an int, an address).

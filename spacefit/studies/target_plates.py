@@ -2,7 +2,7 @@
 
 :func:`target_plates` turns the parts of a scene, as :func:`~spacefit.scene.assembly.assemble` loads
 them (a mesh file's groups, a part's own file, the primitives of :mod:`spacefit.geometry.primitives`),
-into :class:`~spacefit.studies.plates.Plate` s in the target's body frame: each part's triangles
+into :class:`Plate` s in the target's body frame: each part's triangles
 grouped by normal (and by tangent where its material is anisotropic), their areas summed. A box
 gives its six faces, a plate primitive one plate, a cylinder its facets and its two caps. Each plate carries its part's name (the plates of one
 part share its parameters, ``parts.<part>.<field>``), the material the renderer gives the part, and
@@ -171,7 +171,7 @@ def plate_notes(scene: Scene) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class PlatesVsRender:
-    """The plates' light curve (:func:`target_plates`, :func:`~spacefit.studies.plates.plates_irradiance`)
+    """The plates' light curve (:func:`target_plates`)
     against the path tracer's of the same target at the same points.
 
     Attributes:
@@ -284,10 +284,10 @@ def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None 
                              points: Sequence[Mapping[str, float]] | None = None, range_m: float | None = None,
                              quiet: bool = True) -> PlatesVsRender:
     """The plates' light curve of ``scene``'s target (:func:`target_plates`) against the path tracer's
-    (:func:`~spacefit.studies.sweep.sweep`: the image's radiance x pixel solid angle summed, as
-    :func:`~spacefit.studies.lightcurve.light_curve` has it), both at the scene's camera with the scene's
+    (:func:`sweep`: the image's radiance x pixel solid angle summed, as
+    :func:`light_curve` has it), both at the scene's camera with the scene's
     sun irradiance, at either the solar phase angles ``phase_deg`` (the sun turning about the target
-    from the camera's direction, :func:`~spacefit.studies.lightcurve.phase_plane_sun`) or ``points``,
+    from the camera's direction) or ``points``,
     each a dict of scene values (``{"target.attitude_z_deg": 30.0}``), every one setting the same keys.
     ``range_m`` moves the camera there first (:func:`at_range`): a camera near a specular target sees
     its glint from a spread of directions, the plates from one."""
@@ -365,8 +365,8 @@ def observation_points(scene: Scene, observations: LightCurveObservations) -> li
 @dataclass(frozen=True, eq=False)
 class ChosenLightCurve(LightCurveKind):
     """A light curve fitted with the model :func:`choose_light_curve_model` chose: it is the ``chosen``
-    observation (a :class:`~spacefit.studies.plates.PlateLightCurve` or a
-    :class:`~spacefit.studies.lightcurve_fit.RenderedLightCurve`) in every way, and its report adds
+    observation (a :class:`PlateLightCurve` or a
+    :class:`RenderedLightCurve`) in every way, and its report adds
     which it is and why (:attr:`reason`).
 
     Attributes:
@@ -413,9 +413,9 @@ class ChosenLightCurve(LightCurveKind):
 def choose_light_curve_model(scene: Scene, observations: LightCurveObservations, *, samples: int = 8,
                              sigma_mag: float | None = None, quiet: bool = True) -> ChosenLightCurve:
     """The light-curve observation of ``observations`` of ``scene``'s target to fit: the flat plates
-    (:class:`~spacefit.studies.plates.PlateLightCurve` of :func:`target_plates`, the scene's sun
+    (:class:`PlateLightCurve` of :func:`target_plates`, the scene's sun
     irradiance) where their difference from the path tracer is below the observations' noise, else
-    the path tracer (:class:`~spacefit.studies.lightcurve_fit.RenderedLightCurve`).
+    the path tracer (:class:`RenderedLightCurve`).
 
     The difference is measured (:func:`compare_plates_to_render`) at ``samples`` of the lit
     observations' geometries, spread over their phase angles, with the scene's camera (the target's

@@ -1,6 +1,6 @@
-"""The BRDF-table kind of observation: a measured table (:class:`~spacefit.materials.measured.BRDFTable`)
-of one part's material, predicted by a material model (:data:`~spacefit.fitting.brdf_table.BRDF_MODELS`),
-and the conveniences that fit it with :func:`spacefit.fit` and choose the smallest model that fits.
+"""The BRDF-table kind of observation: a measured table (:class:`BRDFTable`)
+of one part's material, predicted by a material model (:data:`BRDF_MODELS`),
+and the conveniences that fit it with :func:`fit` and choose the smallest model that fits.
 
 The model's values are the part's registered parameters: a table measuring part ``chassis`` fits
 ``parts.chassis.eta``, ``parts.chassis.alpha`` (:mod:`spacefit.scene.parameters`, whose bounds they
@@ -37,11 +37,11 @@ class BRDFTableObservation(ValueObservation):
 
     Attributes:
         table: the measured values.
-        model: a name in :data:`~spacefit.fitting.brdf_table.BRDF_MODELS`.
+        model: a name in :data:`BRDF_MODELS`.
         part: the part whose material the table measures: its parameters are ``parts.<part>.<field>``.
         relative_error: each value's relative error where the table states none (None: unknown).
         values: the model's values by field (``{"k": 0.0}``), what a fit holds them at when they
-            are not free and its default start (otherwise :data:`~spacefit.fitting.brdf_table.DEFAULT_START`).
+            are not free and its default start (otherwise the model's own start, :class:`MaterialModel`).
     """
 
     table: BRDFTable
@@ -72,12 +72,12 @@ class BRDFTableObservation(ValueObservation):
         return tuple(self.name_of(f) for f in BRDF_MODELS[self.model].parameters)
 
     def start(self, name: str) -> float:
-        """The model's value of ``name``: :attr:`values`'s, else :data:`~spacefit.fitting.brdf_table.DEFAULT_START`'s."""
+        """The model's value of ``name``: :attr:`values`'s, else the model's own start."""
         key = name.rsplit(".", 1)[-1]
         return float(self.values.get(key, DEFAULT_START[key]))
 
     def block(self, free: tuple[str, ...]) -> Block:
-        """ln(model / data) against the relative errors (module docstring)."""
+        """ln(model / data) against the relative errors."""
         m, table = BRDF_MODELS[self.model], self.table
         sigma = table.sigma / table.value if table.sigma is not None else self.relative_error
         data = MeasuredValues(table.value, sigma, True, BRDF_UNIT, f"BRDF table {table.source}")
@@ -101,8 +101,8 @@ class BRDFTableObservation(ValueObservation):
 def fit_brdf_table(table: BRDFTable, model: str = "lambert+ggx", *, relative_error: float | None = None,
                    start: dict[str, float] | None = None, fixed: dict[str, float] | None = None,
                    max_steps: int = 200, part: str = "sample") -> FitResult:
-    """Fit the material model ``model`` (:data:`~spacefit.fitting.brdf_table.BRDF_MODELS`) of part
-    ``part`` to a measured table with :func:`spacefit.fit` (module docstring): every field of the
+    """Fit the material model ``model`` (:data:`BRDF_MODELS`) of part
+    ``part`` to a measured table with :func:`fit`: every field of the
     model is free (``parts.<part>.<field>``) but those ``fixed`` holds at given values (``{"k": 0.0}``:
     a dielectric's Fresnel factor, for a coated surface whose eta and k the table cannot separate;
     the result's ``extras["fixed"]`` records them); ``start``: start values by field."""
