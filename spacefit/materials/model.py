@@ -89,7 +89,19 @@ def two_sided(wi: Array, wo: Array, f_r: Any) -> Array:
 class MaterialModel:
     """Base of the material models: validation from :attr:`fields`, the two-sided RGB-mean BRDF, the
     level-of-detail rule. Subclasses are frozen dataclasses whose numeric dataclass fields are
-    declared in :attr:`fields` (other dataclass fields are options, e.g. a conductor's ``distribution``)."""
+    declared in :attr:`fields` (other dataclass fields are options, e.g. a conductor's ``distribution``).
+
+    Subclass it (a frozen dataclass with ``name``, ``fields`` and ``f_r``) and add it with
+    :func:`register_material` to give scene files and fits a material of your own; the
+    development page's "Adding a material model" shows one whole.
+
+    Example:
+        >>> import spacefit as sf
+        >>> [f.name for f in sf.Conductor.fields]
+        ['eta', 'k', 'alpha_x', 'alpha_y']
+        >>> issubclass(sf.Lambert, sf.MaterialModel)
+        True
+    """
 
     # The name a scene file gives the model (``material = "conductor"``).
     name: ClassVar[str] = ""

@@ -93,6 +93,17 @@ def register_material(model: type[MaterialModel]) -> type[MaterialModel]:
         ValueError: for a class that is not a frozen MaterialModel dataclass, a name taken by another
             model or a preset, or a field whose name another model's field has with another unit or
             range (one name, one meaning: ``parts.P.<field>`` is one parameter).
+
+    Args:
+        model: the class, a frozen dataclass subclassing :class:`MaterialModel`.
+
+    Returns:
+        ``model`` itself.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.register_material(sf.Lambert) is sf.Lambert  # registered already: a no-op
+        True
     """
     if not (isinstance(model, type) and issubclass(model, MaterialModel) and dataclasses.is_dataclass(model) and model.name):
         raise ValueError(f"{model!r} is not a named MaterialModel dataclass")
