@@ -62,6 +62,12 @@ class ObservedImage:
             ``date_obs`` (ISO time, FITS ``DATE-OBS``), ``row_order`` and ``row_order_source``
             (FITS), ``notes`` (what a report should say about the file), ``sidecar`` (its content).
         path: the file read.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sf.write_exr("reference.exr", np.full((4, 6, 3), 0.5))
+        >>> sf.read_image("reference.exr").metadata["format"]
+        'exr'
     """
 
     data: Float[np.ndarray, "h w c"]
@@ -131,6 +137,13 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
             without a response, NaN or infinity (any unit), negative radiance, other than 1 or 3
             channels, a truncated FITS, a malformed sidecar, a mask of another size, not binary or
             empty; each naming the file and the number of pixels or values.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sf.write_exr("reference.exr", np.full((4, 6, 3), 0.5))
+        >>> image = sf.read_image("reference.exr")
+        >>> image.unit, image.data.shape, bool(image.mask.all())
+        ('W m^-2 sr^-1', (4, 6, 3), True)
     """
     wanted = UNITS[check_choice("unit", unit, UNITS)] if unit is not None else None
     if response is not None:

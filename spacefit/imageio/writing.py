@@ -36,6 +36,17 @@ def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata
             :data:`RENDER_SPP_KEY`, sidecar ``render_spp``); None: not a simulation.
     Returns:
         the sidecar's path.
+
+    Raises:
+        InputError: an unknown extension, DN that are not unsigned integers in the ADC's range, or a
+            folder that does not exist.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sensor, camera = sf.Sensor(), sf.Intrinsics(focal_length=0.05, pixel_pitch=1e-5, width=4, height=3)
+        >>> dn = sf.observe(np.full((3, 4, 3), 1.0), sensor, camera, seed=0)
+        >>> sf.write_observation("frame.fits", dn, sensor).name
+        'frame.fits.json'
     """
     p = Path(path)
     kind = file_format(p, WRITABLE)
