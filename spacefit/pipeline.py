@@ -63,6 +63,29 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
     The sidecar's ``timings_s`` holds the wall time (s) of each stage, after the caller's earlier
     ones (``timings_s``, e.g. the CLI's imports); ``show_timings`` prints them as a table on stderr,
     with the writing of the folder (which render.json cannot hold).
+
+    Args:
+        scene: the scene (:class:`Scene`).
+        out_dir: the folder to write (made if missing; its parent must exist).
+        quiet: print nothing.
+        overwrite: replace a previous render in ``out_dir``.
+        inputs: files the render reads (a mesh, the scene file), never written over.
+        timings_s: the caller's earlier stages' wall times (s).
+        show_timings: print the stages' times on stderr.
+
+    Returns:
+        The radiance image and the sidecar (render.json's content).
+
+    Raises:
+        InputError: a bad scene, a folder that is not empty (without ``overwrite``) or not writable,
+            or one another process writes.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> image, sidecar = sf.render_to_folder(scene, "render", quiet=True)
+        >>> import pathlib; sorted(p.name for p in pathlib.Path("render").iterdir())
+        ['preview.png', 'radiance.exr', 'render.json', 'scene.toml']
     """
     check_scene(scene)
     prepare_output(check_path("out_dir", out_dir), "render", overwrite=overwrite, inputs=inputs)

@@ -14,7 +14,11 @@ from sphinx.pycode import ModuleAnalyzer
 import spacefit as sf
 
 # Examples that take more than about a second (a render, a fit): run with ``-m slow``, each with its reason.
-EXPENSIVE: dict[str, str] = {}
+RENDERS = "renders the default scene at 48 x 48 px (a few seconds with Mitsuba's start)"
+EXPENSIVE: dict[str, str] = {
+    "render": RENDERS, "Renderer": RENDERS, "PartImage": RENDERS, "render_to_folder": RENDERS,
+    "render_function": "renders and differentiates", "jacobian": "renders and differentiates", "Jacobian": "renders and differentiates",
+}
 
 
 def docstring(name: str) -> str:

@@ -215,14 +215,30 @@ def kernel_log() -> Iterator[dict[str, float]]:
 
 
 class Renderer:
-    """A scene loaded into Mitsuba once; renders deterministic radiance images (h, w, 3).
+    """Only the pixels whose samples can reach the target's silhouette are traced, the rest of the image
+    is black; ``crop=False`` traces the whole film, for vertices that will move (the traced pixels are
+    fixed when the scene is loaded). Load once and render many times: reloading scenes leaks memory in
+    Mitsuba (mitsuba3#1890); change values in place with :meth:`set_values`. Each kind of pass is
+    traced at its first render and replayed after until vertices move (:attr:`geometry` counts the
+    moves).
 
-    Only the pixels whose samples can reach the target's silhouette are traced (:func:`target_mask`,
-    within the film window around it, :func:`target_window`), the rest of the image is black;
-    ``crop=False`` traces the whole film, for vertices that will move (the window and the mask are
-    fixed when the scene is loaded). :attr:`traced` is the mask over the window. Load once and render many times: reloading scenes
-    leaks memory in Mitsuba (mitsuba3#1890); change values in place with :meth:`set_values`. Each
-    kind of pass is traced at its first render and replayed after until vertices move (:attr:`frozen`; :attr:`geometry` counts the moves).
+    Args:
+        scene: the scene (:class:`Scene`).
+        variant: a Mitsuba variant; None: the scene's ``render.variant``.
+        crop: trace only the pixels near the target.
+
+    Raises:
+        InputError: ``scene`` is not a :class:`Scene`, or the render would not fit in memory.
+
+    Example:
+        >>> import spacefit as sf
+        >>> renderer = sf.Renderer(sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4}))
+        >>> before = renderer.render()
+        >>> renderer.set_values({"parts.legs.kd": 0.5})
+        >>> renderer.current_scene.parts["legs"].material
+        Lambert(kd=0.5)
+        >>> bool(renderer.render().sum() > before.sum())  # brighter legs
+        True
     """
 
     def __init__(self, scene: Scene | Assembly, variant: str | None = None, crop: bool = True) -> None:
@@ -369,8 +385,28 @@ class Renderer:
 
 
 def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray:
-    """Render a scene's radiance image (W m^-2 sr^-1, (height, width, 3) float32). Mitsuba's
-    variant is the caller's again after (see the API page's notes for integrators)."""
+    """Render a scene's radiance image (W m^-2 sr^-1, (height, width, 3) float32). Mitsuba's variant
+    is the caller's again after (the API page's notes for integrators). To render one scene many
+    times with other values, load it once in a :class:`Renderer`.
+
+    Args:
+        scene: the scene (:func:`default_scene`, :func:`load_scene`).
+        progress: called with (samples done, samples in all) as the render goes on; None: silent.
+
+    Returns:
+        The radiance image; black where no ray meets the target.
+
+    Raises:
+        InputError: ``scene`` is not a :class:`Scene` (a path, say: :func:`load_scene` reads files),
+            or the render would not fit in memory.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> image = sf.render(scene)
+        >>> image.shape, image.dtype
+        ((48, 48, 3), dtype('float32'))
+    """
     with variant_scope(check_scene(scene).render.variant):
         return Renderer(scene).render(progress=progress)
 
