@@ -148,7 +148,30 @@ def write_table_fit(out_dir: str | Path, fit: FitResult, *, inputs: Mapping[str,
     values) and ``report.txt`` (:func:`format_result`) into ``out_dir`` all at once (on an error
     nothing is left behind). The folder must be new or empty, or hold an earlier table fit and
     ``overwrite`` be given ; it is written holding its lock
-    (one writer per folder)."""
+    (one writer per folder).
+
+    Args:
+        out_dir: the folder.
+        fit: the :class:`FitResult`.
+        inputs: what was fitted, by name (JSON values).
+        overwrite: replace an earlier table fit in ``out_dir``.
+
+    Returns:
+        The folder's path.
+
+    Raises:
+        InputError: a folder that holds other files, or an earlier fit without ``overwrite``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> folder = sf.write_table_fit("paint-fit", sf.fit_brdf_table(table, "lambert"))
+        >>> sorted(p.name for p in folder.iterdir())
+        ['fit.json', 'report.txt']
+    """
     check_type("fit", fit, FitResult, "an sf.FitResult")
     check_type("inputs", inputs, (Mapping, type(None)), "a dict of names and JSON values, or None")
     check_name_list("inputs", list(inputs or {}))
