@@ -105,7 +105,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "light_curve_convergence": ("spacefit.studies.lightcurve", "light_curve_convergence"),
     "fit_light_curve": ("spacefit.studies.lightcurve_fit", "fit_light_curve"),
     "Mirror": ("spacefit.materials", "Mirror"),
-    "PRESETS": ("spacefit.materials", "PRESETS"),
+    "PRESETS": ("spacefit.materials.registry", "PRESETS"),
     "fit_to_folder": ("spacefit.pipeline", "fit_to_folder"),
     "render_to_folder": ("spacefit.pipeline", "render_to_folder"),
     "Jacobian": ("spacefit.rendering.derivatives", "Jacobian"),

@@ -18,7 +18,8 @@ RENDERS = "renders the default scene at 48 x 48 px (a few seconds with Mitsuba's
 EXPENSIVE: dict[str, str] = {
     "render": RENDERS, "Renderer": RENDERS, "PartImage": RENDERS, "render_to_folder": RENDERS,
     "render_function": "renders and differentiates", "jacobian": "renders and differentiates", "Jacobian": "renders and differentiates",
-    **dict.fromkeys(["fit_brdf_table", "fitted_material", "compare_brdf_models", "BRDFTableObservation", "write_table_fit"],
+    **dict.fromkeys(["fit_brdf_table", "fitted_material", "compare_brdf_models", "BRDFTableObservation", "write_table_fit", "fit",
+                     "FitResult", "format_result"],
                     "fits a BRDF table: JAX compiles the solver (about 10 s)"),
 }
 

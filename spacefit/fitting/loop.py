@@ -55,6 +55,20 @@ class FitOptions:
         solver, loss, start, render, max_steps, stop, wrinkle_coordinates, allow_large: :func:`fit`'s arguments of
             those names; by default ``"lm"``, ``"pixel"``, the first scene's values, the scene's spp
             (``FitRender()``), 50 steps, ``"noise"``, ``"rms"`` and False.
+
+    Raises:
+        InputError: an unknown solver or stop rule, or ``max_steps`` < 1.
+
+    Example:
+        >>> import spacefit as sf
+        >>> options = sf.FitOptions(solver="gn", max_steps=20)
+        >>> options.keywords()["max_steps"]  # sf.fit(observations, free, **options.keywords())
+        20
+        >>> try:
+        ...     sf.FitOptions(solver="newton")
+        ... except sf.InputError as err:
+        ...     print(err)
+        `solver` must be one of 'adam', 'bfgs', 'dogleg', 'gn', 'lm'; got 'newton'.
     """
 
     solver: str | Solver = "lm"
@@ -152,6 +166,23 @@ def fit(
     Raises:
         InputError: for any bad input, before rendering; a fit too large for this machine's memory (its estimate and
             the memory available in the message), unless ``allow_large``.
+
+    Returns:
+        A :class:`FitResult`: the values with standard errors, the status (the verdict), the goodness
+        of fit, the history of steps, and for images the renders and residuals.
+
+    Example:
+        A BRDF table's Lambert albedo, the cheapest fit (an image fit takes
+        ``sf.Observation(scene, reference, sigma=...)`` the same way):
+
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> result = sf.fit([sf.BRDFTableObservation(table, "lambert", part="paint")], ["parts.paint.kd"])
+        >>> result.status.success, round(result.values["parts.paint.kd"], 3), round(result.stderr["parts.paint.kd"], 4)
+        (True, 0.3, 0.0031)
     """
     engine = _checked_solver(solver, max_steps, stop)
     check_type("resume", resume, Resume, "an sf.Resume(on_step=..., ...)")

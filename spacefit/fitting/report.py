@@ -66,6 +66,19 @@ def write_fit_report(
         references: the reference images (h, w, 3), in observation order, in the units of the fit (``result.units``).
         inputs: what was fitted (reference files, scenes, options), recorded in fit.json.
         timings_s: timings (s) to record besides the solve's own ``result.wall_time_s``.
+
+    Returns:
+        The folder's path.
+
+    Raises:
+        InputError: a folder that exists and is not empty, references that do not match the
+            observations.
+
+    Example:
+        An image fit's folder, as ``spacefit fit`` writes it (``result`` from :func:`fit` on images,
+        ``reference`` its image)::
+
+            sf.write_fit_report("fit-out", result, [reference])
     """
     data = {
         **result.to_dict(),
@@ -118,7 +131,24 @@ def format_result(result: FitResult) -> str:
     """The verdict (first line), the goodness of fit, the fitted values with standard errors (marked
     where they are not valid: a misfit's are too small), each observation's own part
     (:meth:`Observation.report`: an image's chi^2 per part, a pass's
-    frames, a table's or a light curve's goodness of fit), and the warnings, as lines of text."""
+    frames, a table's or a light curve's goodness of fit), and the warnings, as lines of text.
+
+    Args:
+        result: the fit's result.
+
+    Returns:
+        The report, lines joined by newlines (what ``spacefit fit`` prints and report.txt holds).
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> text = sf.format_result(sf.fit_brdf_table(table, "lambert"))
+        >>> text.splitlines()[0].startswith("converged")
+        True
+    """
     check_type("result", result, FitResult, "an sf.FitResult (what sf.fit returns)")
     derived = [name for name in result.extras if f"{name}.stderr" in result.extras]  # e.g. wrinkles.rms_m
     width = max(len(name) for name in (*result.names, *derived))

@@ -64,6 +64,18 @@ class FitResult:
             curve), each of which reports its part (:meth:`Observation.report`, :meth:`PassObservation.report`).
         entries: per one of ``observations``, its indices into the per-observation lists above (an
             image's one, a pass's one per frame, the images' first, then the value observations').
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> result = sf.fit_brdf_table(table, "lambert")
+        >>> result.names, result.status.value
+        (('parts.sample.kd',), 'converged')
+        >>> print(sf.format_result(result).splitlines()[2])
+          parts.sample.kd = 0.3 +/- 0.00314  (start 0.1)
     """
 
     names: tuple[str, ...]

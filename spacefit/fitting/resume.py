@@ -25,6 +25,15 @@ class Resume:
             best point is the fit's ``start``: the solve goes on from there, its steps counted after
             them, and what the stop rule (``sf.fit(stop=...)``) and the verdict know of them
             kept, so that it ends as the uninterrupted one would (``--resume``).
+
+    Example:
+        Keep each step's values, as a checkpoint would:
+
+        >>> import spacefit as sf
+        >>> steps = []
+        >>> resume = sf.Resume(on_step=steps.append)  # sf.fit(..., resume=resume)
+        >>> resume.ended is None
+        True
     """
 
     on_step: Callable[[dict[str, Any]], None] | None = None

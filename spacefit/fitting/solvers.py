@@ -44,6 +44,13 @@ class Status(enum.Enum):
     own render noise is too large to judge its residuals) and :attr:`MISFIT` (the residuals exceed the noise, :attr:`FitResult.goodness`). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
     :attr:`NO_BETTER_POINT` (``sf.fit(stop=...)``) are a success, and only where the
     verdicts leave them: a solve stopped there whose residuals exceed the noise is a :attr:`MISFIT`.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.Status.CONVERGED.success, sf.Status.MISFIT.success
+        (True, False)
+        >>> sf.Status.CONVERGED.value
+        'converged'
     """
 
     CONVERGED = "converged"
@@ -84,6 +91,14 @@ class Adam:
     Attributes:
         learning_rate: the initial step size in unconstrained coordinates.
         rtol: stop when no unconstrained coordinate moved more than this for :data:`ADAM_PATIENCE` steps.
+
+    Raises:
+        InputError: ``learning_rate`` or ``rtol`` not > 0.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.Adam(learning_rate=0.1)  # sf.fit(..., solver=sf.Adam(learning_rate=0.1))
+        Adam(learning_rate=0.1, rtol=0.001)
     """
 
     learning_rate: float = 0.05
