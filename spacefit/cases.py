@@ -46,6 +46,14 @@ class Case:
         free: the free parameters.
         start: where fits start (physical units).
         fit_values: scene values fits render with (e.g. fewer samples).
+
+    Example:
+        >>> import spacefit as sf
+        >>> case = sf.load_case("default")
+        >>> case.truth
+        {'parts.panels.alpha_x': 0.08, 'parts.panels.alpha_y': 0.05, 'parts.legs.kd': 0.2}
+        >>> case.start
+        {'parts.panels.alpha_x': 0.04, 'parts.panels.alpha_y': 0.025, 'parts.legs.kd': 0.1}
     """
 
     name: str

@@ -46,6 +46,16 @@ class ObservationFiles:
             ``overrides``: a pass's frames (:class:`Pass`); none, or one per reference.
         frame_sensor_values: per reference, sensor fields replacing ``sensor_values``' (none, or one per reference).
         times: per reference, its time (ISO 8601 UTC, or seconds), recorded; none, or one per reference.
+
+    Raises:
+        InputError: counts that do not match (one scene for all references or one each), an
+            unknown option value.
+
+    Example:
+        >>> import spacefit as sf
+        >>> files = sf.ObservationFiles(references=["ref.exr"], scenes=["lander.toml"], sigma=0.01)
+        >>> files.references  # files.load() reads them into sf.Observation objects
+        ('ref.exr',)
     """
 
     references: Sequence[str | Path]

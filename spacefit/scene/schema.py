@@ -34,6 +34,23 @@ class Scene:
     ``target.quaternions``, a part's ``file``, a measured table's ``source``) are held as absolute paths, a relative one
     resolved against the working folder, as a scene file's against its folder: ``to_toml()``
     names the same files wherever it is read.
+
+    Attributes:
+        render, camera, sun, target, wrinkles: the scene file's sections (:class:`RenderSettings`,
+            :class:`CameraSettings`, :class:`SunSettings`, :class:`TargetSettings`, :class:`WrinkleSettings`).
+        parts: the parts by name (:class:`PartSettings`).
+
+    Raises:
+        InputError: a value out of range (naming it as a scene-file key), a part the target does not
+            have, or sections that contradict each other.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.Scene(render=sf.RenderSettings(resolution=(64, 64)))
+        >>> scene.with_values({"sun.elevation_deg": 30, "parts.legs.kd": 0.5}).parts["legs"].material
+        Lambert(kd=0.5)
+        >>> sf.load_scene(None) == sf.Scene()
+        True
     """
 
     render: RenderSettings = field(default_factory=RenderSettings)

@@ -154,6 +154,30 @@ def load_scene(path: str | Path | None = None, overrides: Overrides = ()) -> Sce
     ``overrides``: a mapping of names (scene-file keys or parameter names, :func:`available_parameters`) to Python values (``{"camera.position_m": [0, 0, 50],
     "parts.panels.alpha_x": 0.1, "sun.elevation_deg": 30}``), or ``"key=value"`` strings with the
     value in TOML syntax, as on the command line (``--set``).
+
+    Args:
+        path: a scene TOML file; None: the default scene (:func:`default_scene`).
+        overrides: values by scene-file key or parameter name, or ``"key=value"`` strings.
+
+    Returns:
+        The checked :class:`Scene`; its relative file names resolved against the file's folder.
+
+    Raises:
+        InputError: a missing or malformed file, an unknown key (the message suggests the nearest),
+            a value out of range.
+
+    Example:
+        >>> import spacefit as sf
+        >>> with open("lander.toml", "w") as f:
+        ...     _ = f.write(sf.default_scene().to_toml())
+        >>> scene = sf.load_scene("lander.toml", {"render.spp": 8, "sun.elevation_deg": 30})
+        >>> scene.render.spp
+        8
+        >>> try:
+        ...     sf.load_scene(None, {"render.sp": 8})
+        ... except sf.InputError as err:
+        ...     print(err)
+        unknown scene key `render.sp`; valid keys here: resolution, spp, depth, seed, variant, filter, deterministic, sampler. Did you mean `render.spp`?
     """
     data = read_scene_dict(path) if path is not None else {}
     base = Path(path).parent if path is not None else Path.cwd()

@@ -51,6 +51,18 @@ class Observation:
     observation, without render noise.
     :meth:`from_file` reads all of these from an image file (``render_spp`` from a FITS ``RENDSPP``
     card or a spacefit sidecar).
+
+    Raises:
+        InputError: a scene that is not a :class:`Scene`, a reference that is not a real array, a
+            sigma or mask of another shape, a mask that leaves nothing, ``sigma`` given with a
+            ``sensor`` or ``flat`` without one; :func:`fit` checks the reference's size against the scene.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48]})
+        >>> observation = sf.Observation(scene, np.zeros((48, 48, 3)), sigma=0.01)  # sf.fit([observation], free)
+        >>> observation.sigma
+        0.01
     """
 
     scene: Scene
