@@ -49,13 +49,13 @@ def member_docstrings(name: str) -> list[tuple[str, str]]:
     return out
 
 
-PRIVATE = re.compile(r"\bspacefit\.(?!toml\b)[a-z_]\w*|\bspacefit/\w+\.py\b")
+PRIVATE = re.compile(r"\bspacefit\.(?!toml\b)[a-z_]\w*|\bspacefit/\w+\.py\b|\bmodule\s+docstring\b")
 
 
 @pytest.mark.parametrize("name", sorted(sf.__all__))
 def test_docstring_points_to_public_names(name):
     """A docstring names public things (``sf.fit``, :class:`FitResult`, a docs page), never a private module such as
-    ``spacefit.fitting.params``: the reader cannot import it and its page does not exist."""
+    ``spacefit.fitting.params`` or "the module docstring": the reader cannot import it and its page does not exist."""
     for where, text in [(name, docstring(name)), *member_docstrings(name)]:
         assert not PRIVATE.findall(text), f"{where}'s docstring names private modules: {PRIVATE.findall(text)}"
 
@@ -64,6 +64,7 @@ def test_private_reference_is_caught():
     """The scan above finds a private module named in the ways docstrings did."""
     assert PRIVATE.findall("see `spacefit.fitting.params` and :func:`spacefit.sensor.read_sensor_file`") == [
         "spacefit.fitting", "spacefit.sensor"]
+    assert PRIVATE.findall("the formats of the module\n    docstring") == ["module\n    docstring"]
     assert not PRIVATE.findall("a scene file (spacefit.toml) read by `sf.load_scene`")
 
 

@@ -65,7 +65,7 @@ def covariance_of(result: FitResult) -> np.ndarray:
 @float64
 def predictive_intervals(observation: ValueObservation, names: Sequence[str], values: Mapping[str, float], covariance: np.ndarray, *,
                noise: float | None = None) -> Prediction:
-    """The predictive values and errors of ``observation`` (module docstring) at the parameter
+    """The predictive values and errors of ``observation`` (the guide "BRDF tables and light curves as observations") at the parameter
     ``values`` (by name; those of ``names`` it depends on move it) with ``covariance`` ((n, n),
     ``names`` order). ``noise``: the observation's error in its residual space (relative for a
     logarithmic one), used where it states none.

@@ -394,7 +394,7 @@ def quaternion_matrix(q: Float[np.ndarray, "... 4"]) -> Float[np.ndarray, "... 3
 @dataclass(frozen=True, eq=False)
 class QuaternionTable:
     """The body's attitude over time: ``times_s`` (n,) seconds since 1970 UTC, increasing, and unit
-    quaternions ``quaternions`` (n, 4), scalar first (body to world, module docstring), interpolated
+    quaternions ``quaternions`` (n, 4), scalar first (body to world, the Conventions page), interpolated
     by spherical linear interpolation along the shorter arc; ``source`` names where they came from.
 
     A scene's ``target.attitude = "table"`` reads one from ``target.quaternions`` (:meth:`read`).

@@ -56,7 +56,7 @@ def signed_offset(wi: Array | np.ndarray, wo: Array | np.ndarray) -> Array:
 
 @dataclass(frozen=True, eq=False)
 class TabulatedBRDF(MaterialModel):
-    """A measured in-plane BRDF table used as it is (module docstring), the material ``tabulated``
+    """A measured in-plane BRDF table used as it is (the guide "BRDF tables and light curves as observations"), the material ``tabulated``
     of any part and of a flat plate (:class:`sf.Plate`). Both sides alike, 0 where sun and observer
     are on opposite sides, as every material's BRDF.
     Isotropic: the part's tangent does not matter. Built from a table's file (``source`` alone,
@@ -153,7 +153,7 @@ class TabulatedBRDF(MaterialModel):
         return (np.asarray(self.incidence_rad), *(self.offset or ()), *(self.log_value or ()))
 
     def f_r(self, wi: Array, wo: Array, **values: Array) -> Array:
-        """scale exp(ln f(theta_i, u)), the table's interpolation (module docstring), for front-side
+        """scale exp(ln f(theta_i, u)), the table's interpolation (the guide "BRDF tables and light curves as observations"), for front-side
         directions towards the light (``wi``) and the detector (``wo``): not reciprocal."""
         import jax.numpy as jnp  # deferred: a model's fields are read without JAX (the parameter table, a scene file)
         u = signed_offset(wi, wo)

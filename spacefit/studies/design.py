@@ -47,7 +47,7 @@ SCALE = "image.scale"
 class DesignMember(ValueObservation):
     """One light curve of a design fit: ``curve``'s parameters, shared, except ``own`` (registered
     names, ``target.attitude_x_deg``, :data:`SCALE`), which are member ``index``'s alone
-    (``target.attitude_x_deg@<index>``); :data:`SCALE` scales its irradiance (module docstring).
+    (``target.attitude_x_deg@<index>``); :data:`SCALE` scales its irradiance (the guide "BRDF tables and light curves as observations").
 
     Attributes:
         curve: the member's light curve (its plates, observations, sun, bounds, Earth).
@@ -187,7 +187,7 @@ def predict_design(result: FitResult, curve: PlateLightCurve, observations: Ligh
     """Predicted magnitudes of ``observations`` (outside the Earth's shadow) by a design fit's result
     (:func:`fit_design` of ``members`` curves with per-member ``own`` names) for the design of
     ``curve`` (its plates, sun, Earth; its observations replaced), with their predictive errors
-    (module docstring): as ``member``'s, or (None) as a member the fit has not seen. ``noise_mag``:
+    (the guide "BRDF tables and light curves as observations"): as ``member``'s, or (None) as a member the fit has not seen. ``noise_mag``:
     the observations' error (mag) where they state none, e.g. :func:`design_noise_mag` of the fit.
 
     Raises:

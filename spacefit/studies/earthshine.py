@@ -62,7 +62,7 @@ class Earth:
     """The Earth for Earthshine, a sunlit sphere with a Phong-type surface; ``ks = 0`` (the default) is Lambert.
 
     A sphere of ``radius_m`` whose surface reflects the sun with the BRDF
-    ``kd / pi + ks (n + 2) / (2 pi) max(r·w, 0)^n`` (module docstring); ``ks = 0`` is a Lambert surface of albedo ``kd``."""
+    ``kd / pi + ks (n + 2) / (2 pi) max(r·w, 0)^n`` (the guide "BRDF tables and light curves as observations"); ``ks = 0`` is a Lambert surface of albedo ``kd``."""
 
     kd: float = 0.3
     ks: float = 0.0
@@ -134,7 +134,7 @@ def _perpendicular(c: np.ndarray) -> np.ndarray:
 
 
 def earthshine_sources(earth_m: np.ndarray, sun: np.ndarray, earth: Earth = Earth(), points: int = DEFAULT_POINTS) -> EarthshineSources:
-    """The lit, visible Earth seen from targets (module docstring): ``earth_m`` (n, 3) the Earth's centre
+    """The lit, visible Earth seen from targets (the guide "BRDF tables and light curves as observations"): ``earth_m`` (n, 3) the Earth's centre
     from each target (m), ``sun`` (n, 3) directions towards the sun, both in the targets' frame (for :class:`NadirSun`, the frame of a light curve's ``sun`` and
     ``observer``, the Earth's centre is (0, 0, -(R + height))); ``points`` Gauss-Legendre nodes per
     dimension and piece of the lit cap.
@@ -199,8 +199,7 @@ Reflection = Callable[[jax.Array, jax.Array], jax.Array]
 @float64
 def earthshine_irradiance(reflect: Reflection, sources: EarthshineSources, observer: np.ndarray, range_m: np.ndarray,
                           sun_irradiance_w_m2: float = 1360.0) -> jax.Array:
-    """(n,) the irradiance at the observers (W m^-2) of the Earthshine a target reflects (module
-    docstring): ``reflect`` the target's reflection (:data:`Reflection`; for plates
+    """(n,) the irradiance at the observers (W m^-2) of the Earthshine a target reflects (the guide "BRDF tables and light curves as observations"): ``reflect`` the target's reflection (:data:`Reflection`; for plates
     ``lambda wi, wo: plates_irradiance(plates, wi, wo, np.ones(len(wi)), 1.0, values)``), ``sources``
     the Earth seen from it (:func:`earthshine_sources`, same frame), ``observer`` (n, 3) directions
     towards the observer, ``range_m`` (n,) its distance. Differentiable in what ``reflect`` closes over."""

@@ -236,11 +236,10 @@ def light_curve(
     """The light curve of ``scene``'s target against one of: the solar phase angle ``phase_deg`` (the sun
     turns about the target from the observer's direction), the attitude angle about ``axis``
     (``attitude_deg``), or time ``times_s`` under a spin of ``spin_rate_deg_s`` about ``axis`` from the
-    scene's attitude. ``sun`` / ``observer``: directions towards them (module docstring), else the
+    scene's attitude. ``sun`` / ``observer``: directions towards them (the Studies guide), else the
     scene's; ``observer_range_m``: the observer's distance (default: the rendered one). ``band`` and
     ``sun_magnitude`` (default: :data:`SUN_MAGNITUDES`) give the magnitudes. ``seeds`` averages
-    renders of these seeds, two or more giving each point's Monte Carlo standard error (module
-    docstring); ``cluster`` where its renders run (as :func:`sweep` takes it; ``workers`` / ``scheduler``: its
+    renders of these seeds, two or more giving each point's Monte Carlo standard error (the Studies guide); ``cluster`` where its renders run (as :func:`sweep` takes it; ``workers`` / ``scheduler``: its
     deprecated spellings). The rest is :func:`sweep`'s."""
     check_scene(scene)
     cluster = cluster_of(cluster, workers, scheduler)

@@ -124,7 +124,7 @@ class RenderedLightCurve(LightCurveKind):
         return scene_value(self.scene, name)
 
     def block(self, free: tuple[str, ...]) -> Block:
-        """ln E of each point's render against the magnitudes' errors (module docstring)."""
+        """ln E of each point's render against the magnitudes' errors (the guide "BRDF tables and light curves as observations")."""
         known = tuple(n for n in free if n in self.parameters())
         index = np.asarray([free.index(n) for n in known], dtype=int)
         steps = tuple(fd_step(self.scene, n) for n in known)

@@ -173,7 +173,7 @@ def nadir_sun_frame(position_m: np.ndarray, sun: np.ndarray) -> np.ndarray:
 
 def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | None = None, format: str | None = None,
                      orbit: Orbit | None = None, launch_utc: str | None = None, now_utc: str | None = None) -> LightCurveObservations:
-    """Read measured magnitudes from a file in one of the formats of the module docstring (found from
+    """Read measured magnitudes from a file in one of the formats the guide "BRDF tables and light curves as observations" describes (found from
     the file, or ``format``: ``general``, ``pomenis``, ``score``, ``ecsv``, ``mmt9``, ``tdm``). ``site``
     is the observer where the geometry is seen from one (a SCORE file gives each row's; an MMT-9
     track's default is MMT-9's); ``band`` names the magnitudes' band (``V`` or ``AB532``; a SCORE file's or MMT-9 track's from its

@@ -196,7 +196,7 @@ class PassGeometry:
         range_m: the site's distance to it; height_m: its height above the WGS84 ellipsoid.
         phase_deg: the angle at the satellite between the sun and the observer.
         sun_altitude_deg, sun_azimuth_deg: the sun's, from the site.
-        in_shadow: the satellite in the Earth's shadow (module docstring).
+        in_shadow: the satellite in the Earth's shadow (the guide "BRDF tables and light curves as observations").
         position_m, sun, towards_observer: (n, 3) in the Earth-fixed ITRS frame: the satellite from the
             Earth's centre, and unit vectors from it towards the sun and towards the observer.
     """
@@ -223,7 +223,7 @@ def enu_rows(site: Site) -> np.ndarray:
 
 
 def pass_geometry(orbit: Orbit, site: Site, times_utc: Sequence[str]) -> PassGeometry:
-    """``orbit``'s satellite seen from ``site`` at ``times_utc`` (ISO 8601), offline (module docstring).
+    """``orbit``'s satellite seen from ``site`` at ``times_utc`` (ISO 8601), offline (the guide "BRDF tables and light curves as observations").
 
     Raises:
         InputError: a time that is not ISO 8601, or one SGP4 cannot propagate to (the orbit decayed, ...).

@@ -169,7 +169,7 @@ def plates_irradiance(plates: Sequence[Plate], sun: np.ndarray, observer: np.nda
 def predict_magnitudes(plates: Sequence[Plate], observations: LightCurveObservations, sun_irradiance_w_m2: float = 1360.0, *,
                        earth: Earth | None = None, shares: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """The plates' magnitudes in the observations' band at their geometry (inf in the Earth's shadow or
-    unlit), lit by the sun and, given an ``earth``, by Earthshine (module docstring). With ``shares``
+    unlit), lit by the sun and, given an ``earth``, by Earthshine (the guide "BRDF tables and light curves as observations"). With ``shares``
     also each magnitude's Earthshine share of the irradiance, E_earthshine / (E_sun + E_earthshine)
     (nan where dark).
 
@@ -299,7 +299,7 @@ class PlateLightCurve(LightCurveKind):
     rotation of all the plates from their given normals, at 0 unless free, as ``target.attitude_deg``). The residual is the magnitude's,
     (m_model - m_obs) / sigma_m, as ln(E_model / E_obs) / (0.4 ln 10 sigma_m); without stated
     errors the errors are scaled by the residuals. Observations in the Earth's shadow are left out.
-    Given an ``earth``, the model adds Earthshine (module docstring) and the report says its share.
+    Given an ``earth``, the model adds Earthshine (the guide "BRDF tables and light curves as observations") and the report says its share.
 
     Attributes:
         plates: the target's plates (none named ``target``; those of one name share a material: one part's).

@@ -85,7 +85,7 @@ class Sensitivity:
         regions: each part, then ``target`` (all parts); ``pixels`` whose centre sees each.
         mean_radiance: (regions,) W m^-2 sr^-1.
         d_mean_radiance, d_mean_radiance_se: (n, regions) derivative of each region's mean radiance.
-        sensitivity, sensitivity_se: (n, regions) normalised sensitivities (module docstring),
+        sensitivity, sensitivity_se: (n, regions) normalised sensitivities (the Studies guide),
             in ``normalised_units``.
         t: the Student t factor of the confidence interval (``t * se``).
     """

@@ -118,7 +118,7 @@ def sweep(
 
     Args:
         scene: the scene every point starts from.
-        axes: the swept values (module docstring): key -> list, or axis name -> {key: list} (zipped).
+        axes: the swept values (the Studies guide): key -> list, or axis name -> {key: list} (zipped).
         store: a Zarr folder written point by point (None: in memory). An existing store of the
             same sweep is completed, not recomputed. It is locked while the sweep runs: a store another process writes is refused, naming it.
         images: store each point's radiance image (W m^-2 sr^-1) too.

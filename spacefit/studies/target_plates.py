@@ -119,7 +119,7 @@ def part_plates(name: str, part: PartMesh, material: Material) -> list[Plate]:
 
 def target_plates(scene: Scene) -> tuple[Plate, ...]:
     """The flat plates of ``scene``'s target in its body frame, derived from its parts as the renderer
-    assembles them (module docstring): per part, its triangles grouped by normal (and tangent,
+    assembles them (the guide "BRDF tables and light curves as observations"): per part, its triangles grouped by normal (and tangent,
     :func:`part_plates`), with the part's name, the material the renderer gives it and Mitsuba's
     tangent; a closed part's plates one-sided, an open part's two-sided. A wrinkled part gives its
     flat base. A sun-tracking part's plates carry its axis and normal (``tracking_axis``,
