@@ -21,6 +21,8 @@ EXPENSIVE: dict[str, str] = {
     **dict.fromkeys(["fit_brdf_table", "fitted_material", "compare_brdf_models", "BRDFTableObservation", "write_table_fit", "fit",
                      "FitResult", "format_result"],
                     "fits a BRDF table: JAX compiles the solver (about 10 s)"),
+    **dict.fromkeys(["fit_plates", "fitted_plates"], "fits plates to a light curve: JAX compiles the solver (about 13 s)"),
+    **dict.fromkeys(["pass_geometry", "PassGeometry"], "loads astropy's coordinate frames (about 5 s)"),
 }
 
 

@@ -62,7 +62,22 @@ class Earth:
     """The Earth for Earthshine, a sunlit sphere with a Phong-type surface; ``ks = 0`` (the default) is Lambert.
 
     A sphere of ``radius_m`` whose surface reflects the sun with the BRDF
-    ``kd / pi + ks (n + 2) / (2 pi) max(r·w, 0)^n`` (the guide "BRDF tables and light curves as observations"); ``ks = 0`` is a Lambert surface of albedo ``kd``."""
+    ``kd / pi + ks (n + 2) / (2 pi) max(r·w, 0)^n`` (the guide "BRDF tables and light curves as observations"); ``ks = 0`` is a Lambert surface of albedo ``kd``.
+
+    Args:
+        kd: the diffuse albedo, in [0, 1].
+        ks: the specular share, >= 0 (kd + ks <= 1).
+        n: the Phong exponent, >= 0.
+        radius_m: the sphere's radius (m).
+
+    Raises:
+        InputError: a value out of range.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.Earth()
+        Earth(kd=0.3, ks=0.0, n=1.0, radius_m=6371000.0)
+    """
 
     kd: float = 0.3
     ks: float = 0.0
@@ -104,6 +119,12 @@ class EarthshineSources:
         weights: (n, m) each node's irradiance at the target on a surface facing it, per unit solar
             irradiance (f_E (N . s) (N . w) dA / D^2; 0 at unused nodes).
         solid_angles: (n, m) each node's solid angle seen from the target (sr; 0 at unused nodes).
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sources = sf.earthshine_sources(np.array([[0.0, 0.0, -(6371e3 + 550e3)]]), sun=np.array([[1.0, 0.0, 0.0]]))
+        >>> float(sources.irradiance(np.array([0.0, 0.0, -1.0]))[0]) > 0  # per unit solar irradiance, facing the Earth
+        True
     """
 
     directions: np.ndarray
@@ -141,6 +162,16 @@ def earthshine_sources(earth_m: np.ndarray, sun: np.ndarray, earth: Earth = Eart
 
     Raises:
         InputError: a target on or inside the Earth, shapes that disagree, a zero sun direction.
+
+    Returns:
+        The :class:`EarthshineSources`.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> below = np.array([[0.0, 0.0, -(6371e3 + 550e3)]])  # the Earth's centre, 550 km under the target
+        >>> sources = sf.earthshine_sources(below, sun=np.array([[1.0, 0.0, 0.0]]))
+        >>> sources.directions.shape
+        (1, 3072, 3)
     """
     check_type("earth", earth, Earth, "an sf.Earth")
     check_count("points", points, 2, 1000, optional=False)

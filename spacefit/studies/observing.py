@@ -86,6 +86,16 @@ class LightCurveObservations:
         refused: the file's rows not used, with the reason (:class:`RefusedRow`).
         earth_m: (n, 3) the Earth's centre seen from the target, in its frame (m; what Earthshine,
             :func:`earthshine_irradiance`, needs), or None where the file gives no position.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> curve.magnitude
+        array([5. , 5.2, 5.5])
     """
 
     magnitude: np.ndarray
@@ -186,6 +196,28 @@ def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | 
             column (keyword) and the value: missing columns or metadata, unreadable values, an unknown
             filter or time system, a missing site, band or orbit.
         OSError: the file cannot be read.
+
+    Args:
+        path: the file.
+        site: the observer (:class:`Site`), where the geometry is computed.
+        band: the magnitudes' band where the file does not say.
+        format: the file's format; None: found from the file.
+        orbit: the satellite's :class:`Orbit`, for geometry from its elements.
+        launch_utc, now_utc: rows outside these times are refused.
+
+    Returns:
+        The :class:`LightCurveObservations`; rows refused are in its ``refused``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=np.array(['2024-01-01T00:00:00', '2024-01-01T00:00:10', '2024-01-01T00:00:20']), source="example")
+        >>> back = sf.read_light_curve(sf.write_light_curve(curve, "curve.ecsv"))
+        >>> back.band, back.refused
+        ('V', ())
     """
     read_text_rows("path", path, "light curve")  # a text file, else a one-line error
     path = Path(path)
@@ -350,6 +382,24 @@ def write_light_curve(observations: LightCurveObservations, path: str | Path) ->
 
     Raises:
         InputError: observations without times.
+
+    Args:
+        observations: the observations (with times).
+        path: the ``.ecsv`` file to write.
+
+    Returns:
+        The file's path.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=np.array(['2024-01-01T00:00:00', '2024-01-01T00:00:10', '2024-01-01T00:00:20']), source="example")
+        >>> path = sf.write_light_curve(curve, "curve.ecsv")
+        >>> sf.read_light_curve(path).magnitude
+        array([5. , 5.2, 5.5])
     """
     check_type("observations", observations, LightCurveObservations, "sf.LightCurveObservations")
     if observations.time_utc is None:

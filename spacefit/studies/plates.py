@@ -64,7 +64,17 @@ class Plate:
     (target frame) is (a face of) a sun-tracking part: for each observation its normal and tangent are
     turned about that axis by the turn that makes the part's ``tracking_normal`` (default: the plate's
     own normal) face the sun as closely as the turn allows
-    (as :class:`SunTracking` turns a part; unturned with the sun along the axis)."""
+    (as :class:`SunTracking` turns a part; unturned with the sun along the axis).
+
+    Raises:
+        InputError: a non-positive area, a zero normal or tangent, a material without a finite BRDF.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> plate = sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))
+        >>> plate.area_m2, plate.normal
+        (10.0, (0.0, 0.0, 1.0))
+    """
 
     name: str
     area_m2: float
@@ -175,6 +185,27 @@ def predict_magnitudes(plates: Sequence[Plate], observations: LightCurveObservat
 
     Raises:
         InputError: an ``earth`` for observations without the Earth's position (``earth_m`` None).
+
+    Args:
+        plates: the target's plates.
+        observations: the geometry (and band) to predict at.
+        sun_irradiance_w_m2: the sun's irradiance at the target (W m^-2).
+        earth: the Earth for Earthshine, or None.
+        shares: also return the Earthshine shares.
+
+    Returns:
+        (n,) magnitudes, and with ``shares`` the (n,) shares.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plate = sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))
+        >>> np.round(sf.predict_magnitudes([plate], curve), 2)
+        array([3.38, 3.6 , 4.06])
     """
     plates = _check_plates(plates)
     _check_observations(observations)
@@ -407,7 +438,35 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
     :class:`PlateLightCurve`) to the observed magnitudes outside the Earth's shadow with
     :func:`fit`, from the plates' values. ``bounds`` narrows a free value's range within its
     registered one (:attr:`PlateLightCurve.bounds`); the start must lie inside. ``earth`` adds
-    Earthshine to the model (:attr:`PlateLightCurve.earth`)."""
+    Earthshine to the model (:attr:`PlateLightCurve.earth`).
+
+    Args:
+        plates: the target's plates.
+        observations: the observed magnitudes.
+        free: parameter names (``parts.<plate>.<field>``, ``target.attitude_x_deg``, ...).
+        bounds: narrower ranges by name.
+        sun_irradiance_w_m2: the sun's irradiance at the target (W m^-2).
+        max_steps: the solver's step limit.
+        earth: the Earth for Earthshine, or None.
+
+    Returns:
+        The :class:`FitResult`.
+
+    Raises:
+        InputError: a name the plates cannot free, a start outside ``bounds``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plate = sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))
+        >>> result = sf.fit_plates([plate], curve, ["parts.panel.kd"])
+        >>> result.status.value, sf.fitted_plates([plate], result)[0].material.kd < 0.3  # fainter than predicted
+        ('converged', True)
+    """
     check_type("bounds", bounds, (Mapping, type(None)), "a dict of (low, high) ranges by free name, or None")
     names = list(check_name_list("free", free))
     for name in bounds or {}:
@@ -419,7 +478,27 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
 
 def fitted_plates(plates: Sequence[Plate], fit: FitResult) -> list[Plate]:
     """The plates with a :func:`fit_plates` fit's values in their materials and, where it freed the
-    attitude, their normals, tangents and tracking axes and normals turned by it."""
+    attitude, their normals, tangents and tracking axes and normals turned by it.
+
+    Args:
+        plates: the plates the fit started from.
+        fit: the :func:`fit_plates` result.
+
+    Returns:
+        New plates.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plate = sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))
+        >>> fitted = sf.fitted_plates([plate], sf.fit_plates([plate], curve, ["parts.panel.kd"]))
+        >>> type(fitted[0].material).__name__
+        'Lambert'
+    """
     plates = _check_plates(plates)
     check_type("fit", fit, FitResult, "an sf.FitResult (of sf.fit_plates)")
     for name in fit.names:
