@@ -23,6 +23,8 @@ EXPENSIVE: dict[str, str] = {
                     "fits a BRDF table: JAX compiles the solver (about 10 s)"),
     **dict.fromkeys(["fit_plates", "fitted_plates"], "fits plates to a light curve: JAX compiles the solver (about 13 s)"),
     **dict.fromkeys(["pass_geometry", "PassGeometry"], "loads astropy's coordinate frames (about 5 s)"),
+    **dict.fromkeys(["sweep", "verify_store", "StoreReport", "sensitivity", "Sensitivity", "light_curve", "LightCurve"],
+                    "renders several points of the default scene at 48 x 48 px"),
 }
 
 

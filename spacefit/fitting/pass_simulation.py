@@ -30,7 +30,27 @@ def arc_pass(n: int, *, range_m: float = 25.0, zenith_deg: tuple[float, float] =
     ``azimuth_deg[0]``) to the second values, and the sun's elevation changing evenly between
     ``sun_elevation_deg``'s (azimuth fixed). By default the observer crosses the panels' glint
     (the sun's mirror direction, 10 deg from the zenith at azimuth 20 deg) half-way. Each frame: ``camera.position_m``, ``camera.look_at_m``
-    (the origin), ``sun.elevation_deg``, ``sun.azimuth_deg``."""
+    (the origin), ``sun.elevation_deg``, ``sun.azimuth_deg``.
+
+    Args:
+        n: the number of frames, >= 1.
+        range_m: the observer's distance from the origin (m).
+        zenith_deg, azimuth_deg: the observer's first and last direction (deg).
+        sun_elevation_deg: the sun's first and last elevation (deg).
+        sun_azimuth_deg: the sun's azimuth (deg).
+
+    Returns:
+        One dict of scene values per frame, for :func:`simulate_pass` or ``Scene.with_values``.
+
+    Raises:
+        InputError: ``n`` < 1 or a value out of range.
+
+    Example:
+        >>> import spacefit as sf
+        >>> frames = sf.arc_pass(3)
+        >>> sorted(frames[0])
+        ['camera.look_at_m', 'camera.position_m', 'sun.azimuth_deg', 'sun.elevation_deg']
+    """
     check_count("n", n)
     out = []
     for s in np.linspace(0.0, 1.0, n) if n > 1 else [0.0]:

@@ -59,6 +59,12 @@ class Frame:
         values: the frame's scene values by name (scene-file keys and parameter names), in the scene's units.
         sensor: the frame's own sensor values (:class:`Sensor` fields).
         mask: a mask image of the frame, or None.
+
+    Example:
+        >>> import spacefit as sf
+        >>> frame = sf.Pass.from_columns({"file": ["f0.exr"], "time": ["2026-03-04T05:06:07"]}).frames[0]
+        >>> frame.file.name, frame.time_s
+        ('f0.exr', 0.0)
     """
 
     file: Path
@@ -73,7 +79,20 @@ class Frame:
 class Pass:
     """The frames of a pass, in time order as given (:meth:`read` a table file, :meth:`from_columns`
     Python columns or an astropy table). Checked on construction; each frame's scene values are
-    checked against a scene by :meth:`scenes`."""
+    checked against a scene by :meth:`scenes`.
+
+    Args:
+        frames: the frames (:class:`Frame`).
+
+    Raises:
+        InputError: no frame, times of two kinds or not in order, a frame's bad value, naming the frame.
+
+    Example:
+        >>> import spacefit as sf
+        >>> p = sf.Pass.from_columns({"file": ["f0.exr", "f1.exr"], "time": ["0", "10"], "sun.elevation_deg": [80.0, 78.0]})
+        >>> p.frames[1].time_s, p.frames[1].values
+        (10.0, {'sun.elevation_deg': 78.0})
+    """
 
     frames: tuple[Frame, ...]
 

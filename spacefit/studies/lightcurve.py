@@ -124,6 +124,13 @@ class LightCurve:
         rendered_range_m, observer_range_m: camera range rendered and observer range (m).
         sun_irradiance_w_m2: the sun's irradiance at the target.
         dataset: the sweep's Dataset, with ``irradiance_observer``, ``magnitude`` and their ``_se`` added.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> curve = sf.light_curve(scene, phase_deg=[10, 40], quiet=True)
+        >>> [round(float(a), 6) for a in curve.phase_angle_deg]
+        [10.0, 40.0]
     """
 
     against: str
@@ -240,7 +247,22 @@ def light_curve(
     scene's; ``observer_range_m``: the observer's distance (default: the rendered one). ``band`` and
     ``sun_magnitude`` (default: :data:`SUN_MAGNITUDES`) give the magnitudes. ``seeds`` averages
     renders of these seeds, two or more giving each point's Monte Carlo standard error (the Studies guide); ``cluster`` where its renders run (as :func:`sweep` takes it; ``workers`` / ``scheduler``: its
-    deprecated spellings). The rest is :func:`sweep`'s."""
+    deprecated spellings). The rest is :func:`sweep`'s.
+
+    Returns:
+        A :class:`LightCurve`.
+
+    Raises:
+        InputError: none or more than one of ``phase_deg``, ``attitude_deg``, ``times_s``; an unknown
+            band or axis; a value the scene refuses.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> curve = sf.light_curve(scene, phase_deg=[10, 40], quiet=True)
+        >>> curve.magnitude.shape
+        (2,)
+    """
     check_scene(scene)
     cluster = cluster_of(cluster, workers, scheduler)
     given = [n for n, v in (("phase_deg", phase_deg), ("attitude_deg", attitude_deg), ("times_s", times_s)) if v is not None]

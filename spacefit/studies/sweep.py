@@ -145,6 +145,19 @@ def sweep(
     checksums compared first: those that fail are computed again (a warning says how many). The
     mesh files are checked before each point is marked done and hashed again at the end: a changed
     one raises InputError naming it, the points rendered after the change not marked done.
+
+    Raises:
+        InputError: an unknown key or a value the scene refuses (before any render), a store that
+            holds another sweep (without ``overwrite``) or that another process writes, a sweep too
+            large without ``allow_large``.
+        ClusterError: on dask, a point whose worker died three times, or no point finished in ``stall_s``.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> ds = sf.sweep(scene, {"sun.elevation_deg": [30, 60]}, store="sweep.zarr", quiet=True)
+        >>> ds["mean_radiance"].sel(region="target").shape  # one value per point
+        (2,)
     """
     import xarray as xr  # here: only a sweep's store needs xarray (slow to import)
 
@@ -199,6 +212,22 @@ def read_sweep_file(path: str | Path, overrides: Sequence[str] = ()) -> tuple[Sc
     takes it, and options (``images``, ``derivatives``, ``derivative_seeds``, ``max_renders_per_worker``, ``stall_s``).
 
     Returns ``(scene, axes, options)``: ``sf.sweep(scene, axes, store=..., **options)`` runs it.
+
+    Args:
+        path: the sweep TOML file.
+        overrides: ``"key=value"`` scene overrides (TOML values), as ``--set`` gives them.
+
+    Raises:
+        InputError: a missing or malformed file, an unknown option, a scene the overrides break.
+
+    Example:
+        >>> import spacefit as sf
+        >>> with open("sweep.toml", "w") as f:
+        ...     print('[axes]', file=f)
+        ...     print('"sun.elevation_deg" = [30, 60]', file=f)
+        >>> scene, axes, options = sf.read_sweep_file("sweep.toml", ["render.spp=4"])
+        >>> axes, scene.render.spp
+        ({'sun.elevation_deg': [30, 60]}, 4)
     """
     data = read_scene_dict(path)  # the same checks and messages as a scene file's
     for key in data:
