@@ -25,6 +25,8 @@ EXPENSIVE: dict[str, str] = {
     **dict.fromkeys(["pass_geometry", "PassGeometry"], "loads astropy's coordinate frames (about 5 s)"),
     **dict.fromkeys(["sweep", "verify_store", "StoreReport", "sensitivity", "Sensitivity", "light_curve", "LightCurve"],
                     "renders several points of the default scene at 48 x 48 px"),
+    **dict.fromkeys(["PlateLightCurve", "fit_design", "predict_design", "MagnitudePrediction", "design_noise_mag",
+                     "predictive_intervals", "Prediction", "residual_noise"], "fits plates to a light curve (about 15 s)"),
 }
 
 

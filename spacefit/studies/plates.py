@@ -339,6 +339,24 @@ class PlateLightCurve(LightCurveKind):
         bounds: narrower (low, high) ranges of some parameters (``{"parts.chassis.eta": (1.0, 100.0)}``:
             a dielectric's physical range) within their registered ones; the plates' values must lie inside.
         earth: the Earth lighting the target too (Earthshine; the observations must carry ``earth_m``), or None.
+
+    Raises:
+        InputError: a plate named ``target``, plates of one name with different materials, bounds
+            outside the registered ranges or not holding the plates' values, an ``earth`` without the
+            Earth's positions.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plates = sf.PlateLightCurve([sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))], curve)
+        >>> plates.parameters()
+        ('parts.panel.kd', 'target.attitude_x_deg', 'target.attitude_y_deg', 'target.attitude_z_deg')
+        >>> sf.fit([plates], ["parts.panel.kd"]).status.value
+        'converged'
     """
 
     plates: Sequence[Plate]
