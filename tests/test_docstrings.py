@@ -27,6 +27,9 @@ EXPENSIVE: dict[str, str] = {
                     "renders several points of the default scene at 48 x 48 px"),
     **dict.fromkeys(["PlateLightCurve", "fit_design", "predict_design", "MagnitudePrediction", "design_noise_mag",
                      "predictive_intervals", "Prediction", "residual_noise"], "fits plates to a light curve (about 15 s)"),
+    **dict.fromkeys(["identifiability", "Identifiability"], "renders and differentiates"),
+    "target_plates": "builds the lander's wrinkled mesh (about 9 s)",
+    "plot_convergence": "fits a BRDF table: JAX compiles the solver (about 10 s)",
 }
 
 

@@ -230,10 +230,37 @@ Reflection = Callable[[jax.Array, jax.Array], jax.Array]
 @float64
 def earthshine_irradiance(reflect: Reflection, sources: EarthshineSources, observer: np.ndarray, range_m: np.ndarray,
                           sun_irradiance_w_m2: float = 1360.0) -> jax.Array:
-    """(n,) the irradiance at the observers (W m^-2) of the Earthshine a target reflects (the guide "BRDF tables and light curves as observations"): ``reflect`` the target's reflection (:data:`Reflection`; for plates
-    ``lambda wi, wo: plates_irradiance(plates, wi, wo, np.ones(len(wi)), 1.0, values)``), ``sources``
-    the Earth seen from it (:func:`earthshine_sources`, same frame), ``observer`` (n, 3) directions
-    towards the observer, ``range_m`` (n,) its distance. Differentiable in what ``reflect`` closes over."""
+    """The irradiance at the observers (W m^-2) of the Earthshine a target reflects: the sunlit Earth's
+    quadrature nodes (``sources``) each light the target, whose reflection sends part of it to the
+    observer (the guide "BRDF tables and light curves as observations"). Differentiable in what
+    ``reflect`` closes over.
+
+    Args:
+        reflect: the target's reflection, ``(wi, wo) -> (k,)``: for (k, 3) unit directions towards the
+            light and the observer in the target's frame, sum over its surfaces of area x BRDF x
+            |n . wi| |n . wo| (m^2 sr^-1; JAX-traceable).
+        sources: the Earth seen from the target (:func:`earthshine_sources`, same frame).
+        observer: (n, 3) directions towards the observer.
+        range_m: (n,) the observer's distance (m).
+        sun_irradiance_w_m2: the sun's irradiance at the target (W m^-2).
+
+    Returns:
+        (n,) irradiance (W m^-2).
+
+    Raises:
+        InputError: shapes that disagree with ``sources``, a zero direction, a non-positive range.
+
+    Example:
+        A 10 m^2 white plate facing the Earth, seen from 550 km below:
+
+        >>> import jax.numpy as jnp, numpy as np, spacefit as sf
+        >>> sources = sf.earthshine_sources(np.array([[0.0, 0.0, -(6371e3 + 550e3)]]), sun=np.array([[1.0, 0.0, 0.0]]))
+        >>> def plate(wi, wo):  # Lambert, albedo 0.3, normal -z, lit and seen from below only
+        ...     return 10.0 * 0.3 / np.pi * jnp.abs(wi[:, 2] * wo[:, 2]) * (wi[:, 2] < 0) * (wo[:, 2] < 0)
+        >>> E = sf.earthshine_irradiance(plate, sources, observer=np.array([[0.0, 0.0, -1.0]]), range_m=np.array([550e3]))
+        >>> f"{float(E[0]):.2g} W m^-2"
+        '3.2e-11 W m^-2'
+    """
     check_type("sources", sources, EarthshineSources, "an sf.EarthshineSources (sf.earthshine_sources)")
     check_range("sun_irradiance_w_m2", sun_irradiance_w_m2, 0.0, lo_open=True, unit="W m^-2")
     n, m = sources.weights.shape

@@ -127,6 +127,18 @@ def target_plates(scene: Scene) -> tuple[Plate, ...]:
 
     Raises:
         InputError: a part whose material has no BRDF towards an observer (a mirror), naming it.
+
+    Args:
+        scene: the scene.
+
+    Returns:
+        The plates (:class:`Plate`), for :class:`PlateLightCurve` and :func:`predict_magnitudes`.
+
+    Example:
+        >>> import spacefit as sf
+        >>> plates = sf.target_plates(sf.default_scene())
+        >>> sorted({p.name for p in plates})
+        ['body', 'legs', 'panels']
     """
     check_scene(scene)
     assembly = assemble(scene)
