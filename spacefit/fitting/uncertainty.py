@@ -281,7 +281,7 @@ def identifiability(
         loss: one of :data:`LOSSES`.
         spp: samples per pixel of the renders (None: the scene's).
         seed, seed_grad: the primal's and the derivatives' seeds.
-        wrinkle_coordinates: ``"rms"`` or ``"DG"``, the wrinkles' coordinates.
+        wrinkle_coordinates: ``"rms"`` (solve in D and the rms height) or ``"G"`` (in D and G).
 
     Returns:
         An :class:`Identifiability`.
