@@ -76,6 +76,24 @@ def simulate_pass(scene: Scene, frames: Sequence[Mapping[str, Any]], out_dir: st
 
     Raises:
         InputError: a value refused by the scene, ``errors`` not one per frame, an existing ``out_dir``.
+
+    Args:
+        scene: the scene of every frame.
+        frames: each frame's scene values (:func:`arc_pass`).
+        out_dir: a new folder.
+        truth: values every frame takes (the true parameters).
+        errors: per frame, departures from its nominal values.
+        sensor: a :class:`Sensor` for DN frames (FITS), or None for radiance (EXR).
+        spp: the frames' samples per pixel.
+        seed: the first frame's seed (and the noise's).
+        interval_s: the time between frames (s).
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> frames = sf.simulate_pass(scene, sf.arc_pass(2), "pass", spp=4)
+        >>> [frame.file.name for frame in frames.frames]
+        ['frame0.exr', 'frame1.exr']
     """
     errors = list(errors) or [{}] * len(frames)
     if len(errors) != len(frames):

@@ -71,6 +71,19 @@ class TabulatedBRDF(MaterialModel):
         log_value: K arrays of ln f (f in sr^-1) at those offsets.
         source: where the table came from: its file, or a description of a table made otherwise.
         scale: the factor on the table's values.
+
+    Raises:
+        InputError: incidences not increasing or outside [0, 90) deg, offsets not increasing, fewer
+            than two offsets at an incidence, arrays of different lengths, a non-positive ``scale``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> offsets = (np.array([-0.5, 0.0, 0.5]), np.array([-0.5, 0.0, 0.5]))
+        >>> table = sf.TabulatedBRDF(incidence_rad=np.radians([10.0, 40.0]), offset=offsets,
+        ...                          log_value=(np.log([0.1, 0.5, 0.1]), np.log([0.1, 0.4, 0.1])), source="example")
+        >>> mirror = np.array([-np.sin(0.2), 0.0, np.cos(0.2)])  # the specular direction of a light at 0.2 rad
+        >>> round(float(table.evaluate(np.array([np.sin(0.2), 0.0, np.cos(0.2)]), mirror)), 3)  # sr^-1
+        0.495
     """
 
     name: ClassVar[str] = "tabulated"

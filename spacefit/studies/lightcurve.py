@@ -363,7 +363,26 @@ def light_curve_convergence(scene: Scene, *, tolerance: float = 0.01, **kwargs: 
     """Render the light curve (:func:`light_curve`, its keyword arguments) at the scene's resolution and
     spp, at twice the resolution and at four times the spp, and compare: a point target needs few
     pixels, and this says whether the scene's are enough (the irradiance of the points that are lit
-    at the scene's settings; a dark point's change is not relative)."""
+    at the scene's settings; a dark point's change is not relative).
+
+    Args:
+        scene: the scene.
+        tolerance: the relative change of irradiance allowed.
+        kwargs: :func:`light_curve`'s keywords (``phase_deg=[...]``, ...).
+
+    Returns:
+        The changes in pixels and in samples, and ``converged``.
+
+    Raises:
+        InputError: a ``tolerance`` not > 0, or what :func:`light_curve` refuses.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> check = sf.light_curve_convergence(scene, phase_deg=[10, 40], quiet=True)
+        >>> check.tolerance
+        0.01
+    """
     check_scene(scene)
     check_range("tolerance", tolerance, 0.0, lo_open=True)
     base = light_curve(scene, **kwargs)

@@ -60,6 +60,18 @@ class RenderedLightCurve(LightCurveKind):
         sun_magnitude: the sun's magnitude in it (None: the band's).
         observer_range_m: the observer's range (None: each point's camera's).
         seed: the renders' seed (independent ones: ``seed + 1000 j``).
+
+    Raises:
+        InputError: points that set unknown keys, magnitudes and points of different counts, a bad
+            error or band.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> curve = sf.RenderedLightCurve(scene, points=[{"sun.elevation_deg": 80}, {"sun.elevation_deg": 50}],
+        ...                               magnitude=[5.0, 5.3], magnitude_sigma=0.05)
+        >>> "parts.legs.kd" in curve.parameters()  # what sf.fit([curve], free) may free
+        True
     """
 
     scene: Scene

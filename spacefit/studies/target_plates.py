@@ -192,6 +192,13 @@ class PlatesVsRender:
         plates_w_m2, rendered_w_m2: the irradiance at the scene's camera (W m^-2), each point.
         depth, spp: the path tracer's bounces (``render.depth``) and samples per pixel.
         notes: what the plates leave out (:func:`plate_notes`).
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> comparison = sf.compare_plates_to_render(scene, phase_deg=[10, 40])
+        >>> comparison.rendered_w_m2.shape, comparison.plates_w_m2.shape
+        ((2,), (2,))
     """
 
     points: tuple[Mapping[str, float], ...]
@@ -302,7 +309,28 @@ def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None 
     from the camera's direction) or ``points``,
     each a dict of scene values (``{"target.attitude_z_deg": 30.0}``), every one setting the same keys.
     ``range_m`` moves the camera there first (:func:`at_range`): a camera near a specular target sees
-    its glint from a spread of directions, the plates from one."""
+    its glint from a spread of directions, the plates from one.
+
+    Args:
+        scene: the scene.
+        phase_deg: solar phase angles (deg), or ``points``: scene values per point.
+        range_m: the observer's distance for the magnitudes (m); None: the camera's.
+        quiet: no progress bar.
+
+    Returns:
+        A :class:`PlatesVsRender`.
+
+    Raises:
+        InputError: neither or both of ``phase_deg`` and ``points``, a value the scene refuses, a part
+            without a BRDF towards an observer.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> comparison = sf.compare_plates_to_render(scene, phase_deg=[10, 40])
+        >>> comparison.phase_deg
+        array([10., 40.])
+    """
     scene = body_fixed(check_scene(scene))  # type: ignore[arg-type]
     if range_m is not None:
         scene = at_range(scene, range_m)
@@ -386,6 +414,18 @@ class ChosenLightCurve(LightCurveKind):
         comparison: the plates against the path tracer at a sample of the observations' geometry.
         noise_mag: the observations' noise the difference was held to (mag).
         reason: the choice in words.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> phase = np.radians([20.0, 40.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2]), magnitude_sigma=np.full(2, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (2, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(2, 1.0e6), in_shadow=np.zeros(2, bool), time_utc=None, source="example")
+        >>> chosen = sf.choose_light_curve_model(scene, curve, samples=2)
+        >>> bool(chosen.reason)  # the choice in words
+        True
     """
 
     chosen: PlateLightCurve | RenderedLightCurve
@@ -440,6 +480,18 @@ def choose_light_curve_model(scene: Scene, observations: LightCurveObservations,
 
     Raises:
         InputError: observations without errors and no ``sigma_mag``, or none lit.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> phase = np.radians([20.0, 40.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2]), magnitude_sigma=np.full(2, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (2, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(2, 1.0e6), in_shadow=np.zeros(2, bool), time_utc=None, source="example")
+        >>> chosen = sf.choose_light_curve_model(scene, curve, samples=2)
+        >>> type(chosen.chosen).__name__ in ("PlateLightCurve", "RenderedLightCurve")
+        True
     """
     scene = body_fixed(check_scene(scene))  # type: ignore[arg-type]
     check_type("observations", observations, LightCurveObservations, "an sf.LightCurveObservations (sf.read_light_curve)")

@@ -40,6 +40,14 @@ class PassObservation:
         images: each frame's image and scene (:meth:`read` makes them from the frames' files).
         per_frame: the parameters each frame has its own value of (:meth:`Pass.per_frame`
             checks them), freed per frame by the fit.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> _ = sf.simulate_pass(scene, sf.arc_pass(2), "pass", spp=4)
+        >>> observation = sf.PassObservation.read("pass/frames.csv", scene, per_frame=["target.attitude_x_deg"])
+        >>> type(observation).__name__  # sf.fit([observation], free) frees each frame's attitude too
+        'PassObservation'
     """
 
     frames: Pass
