@@ -237,6 +237,13 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
 
     Returns:
         The fit's result.
+
+    Example:
+        Not run by the tests (an image fit takes minutes)::
+
+            files = sf.ObservationFiles(references=["ref.exr"], scenes=["lander.toml"], sigma=0.01)
+            result = sf.fit_to_folder(files, ["parts.legs.kd"], "fit-out", sf.FitOptions(max_steps=20))
+            print(sf.format_result(result))
     """
     # deferred: the fitting stack (JAX, optimistix: 1.5 s) and the image files' readers (astropy), which renders never need
     from spacefit.fitting.loop import FitOptions, fit

@@ -22,7 +22,25 @@ def frame_table(result: Any, frames: Pass | None = None, *, files: Sequence[str 
     fit of its own pixels (``chi2_dof``, NaN without a known noise, ``misfit``, ``render_noise``),
     and each per-frame parameter's value and standard error (``NAME``, ``NAME.stderr``: the name
     without ``@k``). ``entries``: the frames' observation indices in the fit (None: every observation
-    of the fit is a frame, in order)."""
+    of the fit is a frame, in order).
+
+    Args:
+        result: the pass's fit.
+        frames: the :class:`Pass` (its files and times); or ``files`` and ``times``.
+        entries: the frames' observation indices in the fit.
+
+    Returns:
+        One dict per frame.
+
+    Example:
+        Not run by the tests (an image fit takes minutes)::
+
+            scene = sf.load_scene("lander.toml")
+            observation = sf.PassObservation.read("pass/frames.csv", scene, per_frame=["target.attitude_x_deg"])
+            result = sf.fit([observation], ["parts.legs.kd"])
+            for row in sf.frame_table(result):
+                print(row["frame"], row["chi2_dof"], row["target.attitude_x_deg"], row["target.attitude_x_deg.stderr"])
+    """
     if frames is not None:
         files, times = frames.files, [f.time for f in frames.frames]
     entries = list(range(len(result.units))) if entries is None else list(entries)
@@ -56,7 +74,24 @@ def write_frame_table(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> No
 def plot_frames(rows: Sequence[Mapping[str, Any]], *, ax: Any = None, fig: Any = None) -> Any:
     """The per-frame parameters of :func:`frame_table`'s rows against time (one panel each, 1-sigma
     error bars) and each frame's chi^2 / dof, into ``ax`` (one Axes per panel) or ``fig`` (a
-    matplotlib Figure or SubFigure; default a new one): the array of axes drawn."""
+    matplotlib Figure or SubFigure; default a new one): the array of axes drawn.
+
+    Args:
+        rows: :func:`frame_table`'s rows.
+        ax: the axes to draw into, or ``fig``: the Figure or SubFigure to lay them out in.
+
+    Returns:
+        The array of axes drawn.
+
+    Example:
+        Not run by the tests (an image fit takes minutes)::
+
+            scene = sf.load_scene("lander.toml")
+            observation = sf.PassObservation.read("pass/frames.csv", scene, per_frame=["target.attitude_x_deg"])
+            result = sf.fit([observation], ["parts.legs.kd"])
+            axes = sf.plot_frames(sf.frame_table(result))
+            axes.flat[0].figure.savefig("frames.png")
+    """
     from spacefit.plotting import axis_label, panels  # deferred: plotting (0.5 s)
 
     own = [k for k in dict.fromkeys(key for row in rows for key in row) if f"{k}.stderr" in rows[0]]

@@ -39,6 +39,15 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
     Returns:
         The axes drawn, an array of one row of 3 per image (the fit at the reference's sRGB exposure,
         the residual's RGB mean in that unit on a diverging colour map centred at 0).
+
+    Example:
+        Not run by the tests (an image fit takes minutes)::
+
+            scene = sf.load_scene("lander.toml")
+            observation = sf.PassObservation.read("pass/frames.csv", scene, per_frame=["target.attitude_x_deg"])
+            result = sf.fit([observation], ["parts.legs.kd"])
+            references = [sf.read_exr(frame.file) for frame in sf.Pass.read("pass/frames.csv").frames]
+            axes = sf.plot_comparison(result, references)
     """
     n = len(references)
     axes = panels(ax, fig, 3 * n, (10.5, 3.2 * n), lambda f: f.subplots(n, 3, squeeze=False)).reshape(n, 3)

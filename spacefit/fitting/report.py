@@ -71,14 +71,17 @@ def write_fit_report(
         The folder's path.
 
     Raises:
-        InputError: a folder that exists and is not empty, references that do not match the
-            observations.
+        InputError: a folder that cannot be written (files of other names in it are kept, the
+            report's own replaced).
 
     Example:
-        An image fit's folder, as ``spacefit fit`` writes it (``result`` from :func:`fit` on images,
-        ``reference`` its image)::
+        Not run by the tests (an image fit takes minutes)::
 
-            sf.write_fit_report("fit-out", result, [reference])
+            scene = sf.load_scene("lander.toml")
+            observation = sf.PassObservation.read("pass/frames.csv", scene, per_frame=["target.attitude_x_deg"])
+            result = sf.fit([observation], ["parts.legs.kd"])
+            references = [sf.read_exr(frame.file) for frame in sf.Pass.read("pass/frames.csv").frames]
+            sf.write_fit_report("fit-out", result, references)
     """
     data = {
         **result.to_dict(),

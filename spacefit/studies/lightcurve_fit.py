@@ -198,7 +198,33 @@ def fit_light_curve(
     to an observed light curve (:class:`RenderedLightCurve` of these arguments) with
     :func:`fit`, from the scene's values. ``progress``: called with (step, max_steps) after
     each step (default: a progress display on stderr, none with ``quiet``); ``resume``: the fit's
-    checkpoint plumbing (:class:`Resume`), as :func:`fit` takes it."""
+    checkpoint plumbing (:class:`Resume`), as :func:`fit` takes it.
+
+    Args:
+        scene: the scene of the target, at the start values.
+        free: registered parameter names.
+        points: per observation, the scene values of its geometry (``sun.elevation_deg``, ...).
+        magnitude: the observed magnitudes.
+        magnitude_sigma: their errors (mag): one for all, one each, or None (unknown).
+        band: the magnitudes' band, ``V`` or ``AB532``.
+        sun_magnitude: the sun's magnitude in ``band`` (None: the band's).
+        observer_range_m: the observer's distance (m; None: the camera's).
+        seed: the renders' seed.
+        max_steps: the solver's step limit.
+
+    Returns:
+        The :class:`FitResult`.
+
+    Raises:
+        InputError: what :class:`RenderedLightCurve` and :func:`fit` refuse.
+
+    Example:
+        Not run by the tests (a rendered light curve's fit takes minutes)::
+
+            scene = sf.load_scene("lander.toml")
+            points = [{"sun.elevation_deg": e} for e in (80, 60, 40)]
+            result = sf.fit_light_curve(scene, ["parts.panels.alpha"], points, [5.0, 5.3, 5.9], 0.05)
+    """
     check_count("max_steps", max_steps, optional=False)
     curve = RenderedLightCurve(scene, points, magnitude, magnitude_sigma, band, sun_magnitude, observer_range_m, seed)
     if progress is None and not quiet:
