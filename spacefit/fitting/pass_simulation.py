@@ -72,7 +72,10 @@ def simulate_pass(scene: Scene, frames: Sequence[Mapping[str, Any]], out_dir: st
     with ``frames[k]``'s values (the FITS card or EXR attribute ``RENDSPP`` says ``spp``), ``truth`` (every frame) and ``errors[k]`` (the frame's own
     departures from its nominal values, e.g. ``{"target.attitude_x_deg": 0.2}``, added to the
     nominal); and ``frames.csv``, the frame table of the nominal values (without the errors), times
-    ``interval_s`` apart. Returns the pass read back from that table.
+    ``interval_s`` apart.
+
+    Returns:
+        The :class:`Pass` read back from ``frames.csv``.
 
     Raises:
         InputError: a value refused by the scene, ``errors`` not one per frame, an existing ``out_dir``.

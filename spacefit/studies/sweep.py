@@ -211,11 +211,12 @@ def read_sweep_file(path: str | Path, overrides: Sequence[str] = ()) -> tuple[Sc
     thesis's scene, with ``overrides`` as ``--set`` gives them), an ``[axes]`` table as :func:`sweep`
     takes it, and options (``images``, ``derivatives``, ``derivative_seeds``, ``max_renders_per_worker``, ``stall_s``).
 
-    Returns ``(scene, axes, options)``: ``sf.sweep(scene, axes, store=..., **options)`` runs it.
-
     Args:
         path: the sweep TOML file.
         overrides: ``"key=value"`` scene overrides (TOML values), as ``--set`` gives them.
+
+    Returns:
+        ``(scene, axes, options)``: ``sf.sweep(scene, axes, store=..., **options)`` runs it.
 
     Raises:
         InputError: a missing or malformed file, an unknown option, a scene the overrides break.

@@ -478,6 +478,16 @@ def choose_light_curve_model(scene: Scene, observations: LightCurveObservations,
     magnitudes carried to their median range by the inverse square law (exact for an unresolved
     target); its attitude angles are the points' geometry, so it cannot free them as the plates can.
 
+    Args:
+        scene: the scene of the target (its parts, camera and render settings).
+        observations: the measured magnitudes and their geometry.
+        samples: the number of geometries the plates are compared with the path tracer at.
+        sigma_mag: the observations' noise (mag) where they state none.
+        quiet: no progress bar.
+
+    Returns:
+        A :class:`ChosenLightCurve`, for ``sf.fit([chosen], free)``.
+
     Raises:
         InputError: observations without errors and no ``sigma_mag``, or none lit.
 
