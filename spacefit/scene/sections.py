@@ -524,12 +524,20 @@ class SceneLike(Protocol):
     """A whole scene as the layers under :class:`Scene` read it: its sections,
     its parts, and a checked copy with values set by name (the ``Scene`` class is the one implementation)."""
 
-    render: RenderSettings
-    camera: CameraSettings
-    sun: SunSettings
-    target: TargetSettings
-    wrinkles: WrinkleSettings
-    parts: Mapping[str, PartSettings]
+    # Read-only members (properties): the frozen Scene's attributes cannot be set, which a plain
+    # attribute in a Protocol would demand (mypy refused sf.available_parameters(scene) for it).
+    @property
+    def render(self) -> RenderSettings: ...
+    @property
+    def camera(self) -> CameraSettings: ...
+    @property
+    def sun(self) -> SunSettings: ...
+    @property
+    def target(self) -> TargetSettings: ...
+    @property
+    def wrinkles(self) -> WrinkleSettings: ...
+    @property
+    def parts(self) -> Mapping[str, PartSettings]: ...
 
     def with_values(self, values: Mapping[str, Any]) -> SceneLike:
         """A checked copy with values replaced by name."""
