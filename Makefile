@@ -27,10 +27,12 @@ mutants: setup
 	.venv/bin/python tools/mutants.py $(MUTANTS)
 
 # Hostile cases over many runs (kill -9, signals, damaged stores, concurrent writers, worker deaths, full disk,
-# file-size limits), time-boxed; prints the counts of data loss, wrong results and crashes (not in CI).
+# file-size limits), time-boxed; issue 35's hostile inputs judged one by one; memory over 50 fits in one process;
+# each prints its counts (data loss, wrong results, crashes) or its curve (not in CI).
 SOAK_ARGS ?= --minutes 10
 soak: setup
 	.venv/bin/python tools/soak.py $(SOAK_ARGS)
+	.venv/bin/python experiments/hostile_cases.py
 	.venv/bin/python experiments/fit_memory.py 50 5
 
 bench: setup

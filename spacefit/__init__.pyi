@@ -18,6 +18,7 @@ from spacefit.fitting.observations.image import Observation as Observation
 from spacefit.fitting.observations.passes import PassObservation as PassObservation
 from spacefit.fitting.pass_report import frame_table as frame_table
 from spacefit.fitting.pass_report import plot_frames as plot_frames
+from spacefit.fitting.pass_report import read_frame_table as read_frame_table
 from spacefit.fitting.pass_simulation import arc_pass as arc_pass
 from spacefit.fitting.pass_simulation import simulate_pass as simulate_pass
 from spacefit.fitting.passes import Frame as Frame
@@ -33,6 +34,7 @@ from spacefit.fitting.report import write_fit_report as write_fit_report
 from spacefit.fitting.report import write_table_fit as write_table_fit
 from spacefit.fitting.result import FitResult as FitResult
 from spacefit.fitting.resume import Resume as Resume
+from spacefit.fitting.saved import read_fit as read_fit
 from spacefit.fitting.solvers import Adam as Adam
 from spacefit.fitting.solvers import SOLVERS as SOLVERS
 from spacefit.fitting.solvers import Status as Status
@@ -142,17 +144,18 @@ __all__ = [
     'Identifiability', 'InputError', 'Jacobian', 'Lambert', 'Mirror', 'Observation', 'ObservationFiles', 'Parameter', 'PartImage',
     'Renderer', 'Scene', 'Status', 'available_parameters', 'case_names', 'default_scene', 'fit', 'fit_to_folder', 'format_result',
     'identifiability', 'jacobian', 'load_case', 'load_scene', 'parameter_table', 'read_exr', 'render', 'render_function',
-    'render_to_folder', 'wm_rms', 'wm_rms_slope', 'write_exr', 'write_fit_report', 'Distortion', 'Intrinsics', 'ObservedImage', 'Sensor',
-    'distort_image', 'expected_dn', 'noise_variance_dn', 'observe', 'pixel_solid_angles', 'read_image', 'read_sensor_file',
+    'render_to_folder', 'wm_rms', 'wm_rms_slope', 'write_exr', 'write_fit_report', 'read_fit', 'Distortion', 'Intrinsics', 'ObservedImage',
+    'Sensor', 'distort_image', 'expected_dn', 'noise_variance_dn', 'observe', 'pixel_solid_angles', 'read_image', 'read_sensor_file',
     'saturated_mask', 'choose_exposure', 'write_observation', 'sensor_of', 'format_sensor_sources', 'MLI_SLOPE_RANGE', 'Pass',
-    'PassObservation', 'Frame', 'frame_table', 'plot_frames', 'arc_pass', 'simulate_pass', 'read_sweep_file', 'sweep', 'verify_store',
-    'StoreReport', 'ClusterError', 'Sensitivity', 'sensitivity', 'LightCurve', 'light_curve', 'plot_comparison', 'plot_convergence',
-    'DiffuseConductor', 'OrenNayar', 'MaterialModel', 'register_material', 'BRDFTable', 'BRDF_MODELS', 'read_brdf_table', 'fit_brdf_table',
-    'fitted_material', 'compare_brdf_models', 'TabulatedBRDF', 'write_table_fit', 'Site', 'LightCurveObservations', 'read_light_curve',
-    'write_light_curve', 'RefusedRow', 'Orbit', 'PassGeometry', 'pass_geometry', 'Plate', 'predict_magnitudes', 'fit_plates',
-    'fitted_plates', 'light_curve_convergence', 'fit_light_curve', 'BRDFTableObservation', 'PlateLightCurve', 'RenderedLightCurve',
-    'target_plates', 'compare_plates_to_render', 'PlatesVsRender', 'choose_light_curve_model', 'ChosenLightCurve', 'Earth',
-    'EarthshineSources', 'earthshine_sources', 'earthshine_irradiance', 'DesignMember', 'fit_design', 'predict_design', 'design_noise_mag',
-    'MagnitudePrediction', 'Prediction', 'predictive_intervals', 'residual_noise', 'RenderSettings', 'CameraSettings', 'SunSettings',
-    'TargetSettings', 'WrinkleSettings', 'PartSettings', 'SunTracking', 'AxisAngle', 'NadirSun', 'SunPointing', 'QuaternionTable',
+    'PassObservation', 'Frame', 'frame_table', 'read_frame_table', 'plot_frames', 'arc_pass', 'simulate_pass', 'read_sweep_file', 'sweep',
+    'verify_store', 'StoreReport', 'ClusterError', 'Sensitivity', 'sensitivity', 'LightCurve', 'light_curve', 'plot_comparison',
+    'plot_convergence', 'DiffuseConductor', 'OrenNayar', 'MaterialModel', 'register_material', 'BRDFTable', 'BRDF_MODELS',
+    'read_brdf_table', 'fit_brdf_table', 'fitted_material', 'compare_brdf_models', 'TabulatedBRDF', 'write_table_fit', 'Site',
+    'LightCurveObservations', 'read_light_curve', 'write_light_curve', 'RefusedRow', 'Orbit', 'PassGeometry', 'pass_geometry', 'Plate',
+    'predict_magnitudes', 'fit_plates', 'fitted_plates', 'light_curve_convergence', 'fit_light_curve', 'BRDFTableObservation',
+    'PlateLightCurve', 'RenderedLightCurve', 'target_plates', 'compare_plates_to_render', 'PlatesVsRender', 'choose_light_curve_model',
+    'ChosenLightCurve', 'Earth', 'EarthshineSources', 'earthshine_sources', 'earthshine_irradiance', 'DesignMember', 'fit_design',
+    'predict_design', 'design_noise_mag', 'MagnitudePrediction', 'Prediction', 'predictive_intervals', 'residual_noise', 'RenderSettings',
+    'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings', 'SunTracking', 'AxisAngle', 'NadirSun',
+    'SunPointing', 'QuaternionTable',
 ]

@@ -3,8 +3,9 @@
 Fits (:func:`fit`), sweeps (:func:`spacefit.sweep`) and light curves (:func:`spacefit.light_curve`)
 take the same ``cluster``: None, this process; an int N, a new local cluster of N single-threaded
 worker processes (closed when the work ends); a scheduler's address (``tcp://host:8786``); or a
-``distributed.Client`` of the caller's (left open). :func:`check_cluster` refuses anything else before
-work starts, :func:`connect` opens it, and an :class:`Executor` runs one function per item in a fixed
+``distributed.Client`` of the caller's (left open; a subclass's too). :func:`check_cluster` refuses
+anything else before work starts, in one line (:func:`cluster_of` checks a function's ``cluster`` and
+its deprecated spellings), :func:`connect` opens it, and an :class:`Executor` runs one function per item in a fixed
 order: :class:`InProcess` one after another here, :class:`OnDask` all at once on the workers, each item
 sent back to the worker that ran it last (a soft placement: a lost worker's items run elsewhere).
 
@@ -25,8 +26,11 @@ from spacefit.errors import InputError, InputTypeError, check_count, quote
 
 # What a ``cluster`` argument may be: None, a worker count, a scheduler address, a ``distributed.Client``.
 Cluster = int | str | Any
-# dask.distributed's schemes for a scheduler's address (an address without one is tcp://).
-SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx")
+# dask.distributed's schemes for a scheduler's address (an address without one is tcp://); inproc://
+# is a scheduler in this process (``LocalCluster(processes=False)``'s).
+SCHEDULER_SCHEMES = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
+# The schemes whose scheduler a check cannot reach with a TCP connection (it is left to the client).
+UNPROBED_SCHEMES = ("ucx", "inproc")
 # How long a check waits for a scheduler to accept a connection (s).
 PROBE_TIMEOUT_S = 5.0
 # How long a batch waits for a worker when the cluster has none (s).
@@ -52,14 +56,15 @@ class ClusterError(RuntimeError):
 
 
 def is_client(cluster: object) -> bool:
-    """Whether ``cluster`` is a ``distributed.Client`` (recognised without importing dask)."""
-    return type(cluster).__name__ == "Client" and hasattr(cluster, "submit")
+    """Whether ``cluster`` is a ``distributed.Client`` or of a subclass (dask-gateway's, a cloud
+    provider's), recognised without importing dask."""
+    return any(c.__name__ == "Client" and c.__module__.split(".")[0] == "distributed" for c in type(cluster).__mro__)
 
 
 def check_scheduler(address: object, argument: str = "cluster") -> None:
     """Refuse a scheduler address before anything is made: not ``SCHEME://HOST:PORT`` with a scheme
-    of :data:`SCHEDULER_SCHEMES`, or (for the schemes over TCP) nothing accepting connections there
-    within :data:`PROBE_TIMEOUT_S`.
+    of :data:`SCHEDULER_SCHEMES` (``inproc://`` takes dask's own form), or (for the schemes over TCP)
+    nothing accepting connections there within :data:`PROBE_TIMEOUT_S`.
 
     Raises:
         InputError: naming ``argument``, the address and what is wrong with it.
@@ -72,10 +77,12 @@ def check_scheduler(address: object, argument: str = "cluster") -> None:
     if scheme not in SCHEDULER_SCHEMES:
         raise InputError(f"`{argument}` {address!r} has the scheme {scheme!r}; use one of "
                          f"{', '.join(s + '://' for s in SCHEDULER_SCHEMES)} (e.g. tcp://host:8786).")
+    if scheme == "inproc":
+        return
     host, _, port = rest.rstrip("/").rpartition(":")
     if not host or not port.isdigit():
         raise InputError(f"`{argument}` {address!r} must be SCHEME://HOST:PORT, e.g. tcp://host:8786.")
-    if scheme != "ucx":
+    if scheme not in UNPROBED_SCHEMES:
         try:
             socket.create_connection((host.strip("[]"), int(port)), timeout=PROBE_TIMEOUT_S).close()
         except OSError as err:
@@ -98,20 +105,22 @@ def check_cluster(cluster: object, argument: str = "cluster") -> None:
 
 
 def cluster_of(cluster: Cluster | None, workers: int | None = None, scheduler: str | None = None) -> Cluster | None:
-    """``cluster``, or the same from the ``workers=`` / ``scheduler=`` arguments that sweeps and light curves
-    took before ``cluster=`` (deprecated: a DeprecationWarning says so).
+    """``cluster``, checked (:func:`check_cluster`), or the same from the ``workers=`` / ``scheduler=``
+    arguments that sweeps and light curves took before ``cluster=`` (deprecated: a DeprecationWarning
+    says so).
 
     Raises:
-        InputError: more than one of the three is given.
+        InputError: more than one of the three is given, or what is given is none of :data:`Cluster`'s forms.
     """
     given = [name for name, v in (("cluster", cluster), ("workers", workers), ("scheduler", scheduler)) if v is not None]
     if len(given) > 1:
         raise InputError(f"give one of `cluster`, `workers` and `scheduler`, not {' and '.join(f'`{g}`' for g in given)}.")
-    if workers is None and scheduler is None:
-        return cluster
-    warnings.warn(f"`{given[0]}=` is deprecated: give `cluster=` (a number of local workers, a scheduler address or a "
-                  "dask Client), as fits take it.", DeprecationWarning, stacklevel=3)
-    return workers if workers is not None else scheduler
+    if workers is not None or scheduler is not None:
+        warnings.warn(f"`{given[0]}=` is deprecated: give `cluster=` (a number of local workers, a scheduler address or a "
+                      "dask Client), as fits take it.", DeprecationWarning, stacklevel=3)
+        cluster = workers if workers is not None else scheduler
+    check_cluster(cluster, given[0] if given else "cluster")
+    return cluster
 
 
 def connect(cluster: Cluster, config: Mapping[str, Any] | None = None) -> tuple[Any, Callable[[], None]]:

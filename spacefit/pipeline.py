@@ -18,6 +18,7 @@ import numpy as np
 
 from spacefit.digests import changed, digests
 from spacefit.errors import InputError, check_choice, check_path, check_type
+from spacefit.executors import Cluster, cluster_of
 from spacefit.fitting.resume import Resume
 from spacefit.geometry.mesh import export_stl
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
@@ -213,7 +214,7 @@ def export_part_stl(scene: Scene, part: str, path: str | Path) -> Path:
 
 @holding_lock("out_dir")
 def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | Path, options: FitOptions | None = None, *,
-                  quiet: bool = False, overwrite: bool = False, resume: bool = False, cluster: Any = None) -> FitResult:
+                  quiet: bool = False, overwrite: bool = False, resume: bool = False, cluster: Cluster | None = None) -> FitResult:
     """Fit the ``free`` parameters to reference image files; write fit.json, fit.toml, uncertainty.json and the plots to ``out_dir``.
 
     It runs holding the folder's lock (one writer per folder: a second is refused, naming the folder). The folder is
@@ -255,6 +256,7 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     options = FitOptions() if options is None else options
     check_type("files", files, ObservationFiles, "an sf.ObservationFiles(references, scenes, ...)")
     check_type("options", options, FitOptions, "an sf.FitOptions or None")
+    cluster = cluster_of(cluster)
     prepare_output(check_path("out_dir", out_dir), "fit", overwrite=overwrite, resume=resume, inputs=files.files)
     _check_not_fixed(free, files.overrides)
     t0 = time.perf_counter()

@@ -1,21 +1,26 @@
 """What the figures share: axis labels in words with units, the crop to the target, their axes.
 
-Every figure function takes ``ax=`` (the matplotlib Axes to draw into: one per panel, in the
-user's own layout) or ``fig=`` (a matplotlib Figure or SubFigure to lay its panels out in), and
-returns the array of axes it drew (:func:`panels`). Without either it makes a Figure of its own
-without pyplot, so the global backend (a notebook's) is left alone: ``axes[0].figure.savefig(path)``
-saves it. A figure-wide title is drawn only on a figure the function lays out. Images are cropped to the target by default (its bounding box
-and a margin, :func:`target_box`), their axes keeping the film's pixel coordinates; ``crop=False``
-shows the whole film. Labels come from the parameter registry (each parameter's words,
-:func:`spacefit.scene.parameters.label`, and unit) and :data:`spacefit.display.QUANTITIES` for what
-is not a parameter. matplotlib is imported with this module, which only the figure functions load.
+Every figure function takes ``ax=`` as matplotlib users pass it (:data:`AxesArg`): one Axes for a
+figure of one panel, or an array or sequence of Axes (``plt.subplots``'s, in any shape) for one of
+several, one per panel in the user's own layout; a wrong count is refused, naming the count given
+and the count needed. Or it takes ``fig=`` (a matplotlib Figure or SubFigure to lay its panels out
+in). It returns the flat array of axes it drew (:func:`panels`). Without either it makes a Figure of
+its own without pyplot, so the global backend (a notebook's) is left alone:
+``axes[0].figure.savefig(path)`` saves it. A figure-wide title is drawn only on a figure the
+function lays out. A panel that would be empty is not drawn (its reason is in the function's
+docstring and, where the others are drawn, in the figure). Images are cropped to the target by
+default (its bounding box and a margin, :func:`target_box`), their axes keeping the film's pixel
+coordinates; ``crop=False`` shows the whole film. Labels come from the parameter registry (each
+parameter's words, :func:`spacefit.scene.parameters.label`, and unit) and
+:data:`spacefit.display.QUANTITIES` for what is not a parameter. matplotlib is imported with this
+module, which only the figure functions load.
 """
 
 from __future__ import annotations
 
 import re
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, TypeAlias
 
 import numpy as np
 from matplotlib.axes import Axes
@@ -24,6 +29,12 @@ from matplotlib.image import AxesImage
 
 from spacefit.display import describe
 from spacefit.errors import InputError, check_choice, check_type
+
+# What ``ax=`` takes: one Axes, Axes in a sequence or an array of any shape, or None (a new figure).
+AxesArg: TypeAlias = Axes | Sequence[Axes] | np.ndarray | None
+# What ``fig=`` takes: a Figure or SubFigure to lay the panels out in, or None.
+FigureArg: TypeAlias = Figure | SubFigure | None
+
 # The crop's margin on each side: a fraction of the target's box, and at least this many pixels.
 TARGET_MARGIN = 0.15
 MIN_MARGIN_PX = 2
@@ -94,24 +105,32 @@ def show_image(ax: Axes, image: np.ndarray, box: tuple[int, int, int, int], **kw
     return ax.imshow(cropped(image, box), extent=(x0 - 0.5, x1 - 0.5, y1 - 0.5, y0 - 0.5), **kwargs)
 
 
-def panels(ax: Axes | Sequence[Axes] | None, fig: Figure | SubFigure | None, count: int, figsize: tuple[float, float],
+def panels(ax: AxesArg, fig: FigureArg, count: int | Sequence[int], figsize: tuple[float, float],
            make: Callable[[Figure | SubFigure], Any]) -> np.ndarray:
-    """The ``count`` axes a figure function draws, flat: ``ax`` (one Axes, or a sequence or array of
-    ``count``: the user's layout), checked; else ``make(figure)``'s, on ``fig`` or on a new Figure
-    of ``figsize`` (inches) made without pyplot."""
+    """The axes a figure function draws, flat: ``ax`` (:data:`AxesArg`: one Axes, or a sequence or
+    array of them in any shape: the user's layout), checked to hold ``count`` Axes (or one of the
+    counts ``count`` lists, for a figure that draws fewer panels into fewer axes); else
+    ``make(figure)``'s, on ``fig`` or on a new Figure of ``figsize`` (inches) made without pyplot.
+
+    Raises:
+        InputError: ``ax`` and ``fig`` both given, an ``ax`` that is not Axes, or a count of them that
+            is not ``count`` (naming both).
+    """
     if ax is None:
         return np.asarray(make(new_figure(fig, figsize)), dtype=object).ravel()
     if fig is not None:
         raise InputError("give `ax` (the axes to draw into) or `fig` (a figure to lay them out in), not both.")
+    counts = (count,) if isinstance(count, int) else tuple(count)
+    needed = " or ".join(map(str, counts))
     axes = np.asarray([ax] if isinstance(ax, Axes) else list(np.ravel(np.asarray(ax, dtype=object))), dtype=object)
     for one in axes:
-        check_type("ax", one, Axes, f"a matplotlib Axes, or {count} of them (one per panel)")
-    if len(axes) != count:
-        raise InputError(f"`ax` must be {count} matplotlib Axes here (one per panel), got {len(axes)}.")
+        check_type("ax", one, Axes, f"a matplotlib Axes, or an array of {needed} (one per panel)")
+    if len(axes) not in counts:
+        raise InputError(f"`ax` must be {needed} matplotlib Axes here (one per panel), got {len(axes)}.")
     return axes
 
 
-def new_figure(fig: Figure | SubFigure | None, figsize: tuple[float, float]) -> Figure | SubFigure:
+def new_figure(fig: FigureArg, figsize: tuple[float, float]) -> Figure | SubFigure:
     """``fig``, checked, or a new Figure of ``figsize`` (inches) made without pyplot."""
     if fig is None:
         return Figure(figsize=figsize, layout="constrained")
@@ -120,8 +139,8 @@ def new_figure(fig: Figure | SubFigure | None, figsize: tuple[float, float]) -> 
 
 
 def plot_values(x: np.ndarray, data: np.ndarray, model: np.ndarray, difference: np.ndarray, *, xlabel: str, ylabel: str,
-                difference_label: str, scale: str = "linear", title: str = "", ax: Axes | Sequence[Axes] | None = None,
-                fig: Figure | SubFigure | None = None) -> np.ndarray:
+                difference_label: str, scale: str = "linear", title: str = "", ax: AxesArg = None,
+                fig: FigureArg = None) -> np.ndarray:
     """Measured values ``data`` and their ``model`` against ``x`` (top; ``scale`` "linear", "log", or
     "magnitude": linear with brighter up) and ``difference`` (data against model, bottom), into
     ``ax`` (two Axes) or ``fig``: the array of the two axes drawn."""

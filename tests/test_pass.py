@@ -347,6 +347,14 @@ def test_spacefit_fit_pass_writes_the_frames_table_and_plot(small_pass, tmp_path
     rows = (out / "frames.csv").read_text().splitlines()
     assert len(rows) == 4 and "target.attitude_x_deg" in rows[0] and "chi2_dof" in rows[0] and "time_s" in rows[0]
     assert rows[2].split(",")[3] == "10.0"  # frame 1, 10 s after the first
+    # the folder reads back: its result, and its frames as sf.frame_table gives them from it
+    result = sf.read_fit(out)
+    assert result.names == ("parts.legs.kd", *(f"target.attitude_x_deg@{k}" for k in range(3)))
+    again = sf.frame_table(result, sf.Pass.read(folder / "frames.csv"))
+    read = sf.read_frame_table(out / "frames.csv")
+    assert [list(row) for row in read] == [list(row) for row in again]
+    for row, other in zip(read, again):
+        assert all(row[k] == other[k] or (row[k] != row[k] and other[k] != other[k]) for k in row), (row, other)  # NaN as NaN
 
 
 @pytest.mark.slow

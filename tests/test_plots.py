@@ -10,6 +10,7 @@ import math
 import numpy as np
 import pytest
 from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 import spacefit as sf
@@ -67,40 +68,98 @@ def frame_rows() -> list[dict[str, float]]:
             for k in range(3)]
 
 
-# Each figure function: name -> (call with keyword arguments, how many axes it draws).
+# Each figure function: name -> (call with keyword arguments, how many axes it draws, the counts of Axes it takes).
 FIGURES = {
-    "plot_comparison": (lambda **kw: sf.plot_comparison(fit_result(), [film()], **kw), 3),
-    "plot_residuals": (lambda **kw: plot_residuals(fit_result(), **kw), 1),
-    "plot_convergence": (lambda **kw: sf.plot_convergence(fit_result(), **kw), 3),
-    "plot_frames": (lambda **kw: sf.plot_frames(frame_rows(), **kw), 2),
-    "Sensitivity.figure": (lambda **kw: sensitivity().figure(**kw), 4),
-    "LightCurve.figure": (lambda **kw: light_curve().figure(**kw), 2),
+    "plot_comparison": (lambda **kw: sf.plot_comparison(fit_result(), [film()], **kw), 3, "3"),
+    "plot_residuals": (lambda **kw: plot_residuals(fit_result(), **kw), 1, "1"),
+    "plot_convergence": (lambda **kw: sf.plot_convergence(fit_result(), **kw), 3, "3"),
+    "plot_frames": (lambda **kw: sf.plot_frames(frame_rows(), **kw), 2, "2"),
+    "Sensitivity.figure": (lambda **kw: sensitivity().figure(**kw), 4, "4"),
+    "LightCurve.figure": (lambda **kw: light_curve().figure(**kw), 2, "1 or 2"),
 }
 
 
 @pytest.mark.parametrize("name", FIGURES)
 def test_every_figure_draws_into_the_axes_given_and_returns_them(name):
-    draw, count = FIGURES[name]
+    draw, count, counts = FIGURES[name]
     fig = Figure()
     mine = fig.subplots(1, count + 1)  # the user's own layout, one more panel than it needs
     axes = draw(ax=mine[1:])
     assert np.size(axes) == count and all(a is b for a, b in zip(np.ravel(axes), mine[1:]))
     assert all(a.has_data() or a.get_title() for a in mine[1:]) and not mine[0].has_data()  # drawn there, nowhere else
     assert len(fig.axes) >= count + 1 and fig._suptitle is None  # the user's figure keeps its own title
-    if count == 1:
-        one = Figure().add_subplot()
-        assert np.ravel(draw(ax=one))[0] is one  # a single Axes is taken as is
-    with pytest.raises(sf.InputError, match=f"`ax` must be {count} matplotlib Axes"):
+    one = Figure().add_subplot()
+    if "1" in counts.split(" or "):
+        assert list(np.ravel(draw(ax=one))) == [one]  # a single Axes is taken as is
+    else:
+        with pytest.raises(sf.InputError, match=rf"^`ax` must be {counts} matplotlib Axes here \(one per panel\), got 1\.$"):
+            draw(ax=one)
+    with pytest.raises(sf.InputError, match=rf"^`ax` must be {counts} matplotlib Axes here \(one per panel\), got {count + 1}\.$"):
         draw(ax=list(mine))
-    with pytest.raises(sf.InputError, match="`ax`"):
+    with pytest.raises(sf.InputError, match=f"^`ax` must be a matplotlib Axes, or an array of {counts} "):
         draw(ax=["left", "right"][:count] * count)
     with pytest.raises(sf.InputError, match="not both"):
         draw(ax=mine[1:], fig=fig)
 
 
+def test_an_array_of_axes_in_any_shape_is_taken_panel_by_panel():
+    """plt.subplots(2, 2)'s array as it comes (2-D), a tuple, and a list of rows: row by row."""
+    grid = Figure().subplots(2, 2)
+    assert list(sensitivity().figure(ax=grid)) == list(grid.ravel())
+    assert list(light_curve().figure(ax=tuple(grid[0]))) == list(grid[0])
+    rows = Figure().subplots(3, 1, squeeze=False)
+    assert list(sf.plot_convergence(fit_result(), ax=[list(r) for r in rows])) == list(rows.ravel())
+
+
+def test_a_light_curve_in_one_axes_is_its_magnitudes_with_the_irradiance_on_a_second_axis():
+    curve = light_curve()
+    one = Figure().add_subplot()
+    (drawn,) = curve.figure(ax=one)
+    assert drawn is one and drawn.yaxis_inverted() and "magnitude" in drawn.get_ylabel()
+    np.testing.assert_allclose(drawn.containers[0].lines[0].get_ydata(), curve.magnitude)
+    (second,) = drawn.child_axes
+    assert "irradiance" in second.get_ylabel()
+    FigureCanvasAgg(one.figure).draw()  # a second axis takes its limits when drawn
+    # its limits are the irradiances of the magnitude axis's (E = E_sun 10^(-0.4 (m - m_sun)))
+    irradiance = curve.sun_irradiance_w_m2 * 10.0 ** (-0.4 * (np.array(drawn.get_ylim()) - curve.sun_magnitude))
+    np.testing.assert_allclose(sorted(second.get_ylim()), sorted(irradiance), rtol=1e-9)
+
+
+def test_frames_without_a_known_noise_draw_no_chi2_panel_and_say_why():
+    rows = [{k: v for k, v in row.items() if k != "chi2_dof"} | {"chi2_dof": math.nan} for row in frame_rows()]
+    axes = sf.plot_frames(rows)
+    assert len(axes) == 1 and "attitude" in axes[0].get_ylabel() and "noise is unknown" in axes[0].get_title()
+    assert "chi" not in " ".join(a.get_ylabel() for a in axes[0].figure.axes)
+    with pytest.raises(sf.InputError, match="got 2"):
+        sf.plot_frames(rows, ax=Figure().subplots(2, 1))
+    with pytest.raises(sf.InputError, match="nothing to draw"):
+        sf.plot_frames([{"frame": 0, "time_s": 0.0, "chi2_dof": math.nan}])
+    assert len(sf.plot_frames(frame_rows())) == 2  # with the noise known: its chi^2 / dof too
+
+
+def test_a_frame_table_reads_back_as_written(tmp_path):
+    from spacefit.fitting.pass_report import write_frame_table
+
+    rows = [{"frame": k, "file": f"f{k}.fits", "time": "", "time_s": 10.0 * k, "chi2_dof": 1.0 + 0.1 * k, "misfit": k == 2,
+             "render_noise": 1 / 3, "target.attitude_z_deg": 0.1 * k, "target.attitude_z_deg.stderr": math.inf if k else math.nan}
+            for k in range(3)]
+    del rows[1]["chi2_dof"]  # a frame without its goodness (none in the fit)
+    write_frame_table(tmp_path / "frames.csv", rows)
+    read = sf.read_frame_table(tmp_path / "frames.csv")
+    assert [list(r) for r in read] == [list(r) for r in rows] and math.isnan(read[0]["target.attitude_z_deg.stderr"])
+    assert read[1:] == rows[1:] and {k: v for k, v in read[0].items() if "stderr" not in k} == {
+        k: v for k, v in rows[0].items() if "stderr" not in k}  # floats exactly, types as frame_table's
+    assert len(sf.plot_frames(read)) == 2
+    (tmp_path / "frames.csv").write_text("frame,misfit,time_s\n0,maybe,1.0\n")
+    with pytest.raises(sf.InputError, match=r"line 2: misfit = 'maybe' is not True or False\.$"):
+        sf.read_frame_table(tmp_path / "frames.csv")
+    with pytest.raises(sf.InputError, match="no frame table there"):
+        sf.read_frame_table(tmp_path / "nothing.csv")
+
+
 @pytest.mark.parametrize("name", FIGURES)
 def test_every_figure_lays_out_its_panels_in_the_figure_given(name):
-    draw, count = FIGURES[name]
+    draw, count, _ = FIGURES[name]
     outer = Figure()
     left, right = outer.subfigures(1, 2)
     axes = np.asarray(draw(fig=right)).ravel()

@@ -189,3 +189,51 @@ def test_an_edited_mesh_file_is_another_sweep(tmp_path):
     write_sphere_obj(tmp_path / "sphere.obj", subdivisions=3)
     with pytest.raises(sf.InputError, match=r"other arguments \(scene, mesh files"):
         sf.sweep(scene, axes, store=store, quiet=True)
+
+
+@pytest.fixture(scope="module")
+def thread_client():
+    """A dask client of a one-worker cluster in this process (threads: starts in a fraction of a second), at a TCP address."""
+    from distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False, protocol="tcp", dashboard_address=None) as cluster:
+        with Client(cluster) as client:
+            yield client
+
+
+def test_a_sweep_takes_a_client_its_address_or_none_as_a_fit_does(tmp_path, thread_client):
+    from spacefit.executors import is_client
+
+    scene = sphere_scene(tmp_path)
+    axes = {"sun.elevation_deg": [30.0, 60.0]}
+    here = sf.sweep(scene, axes, quiet=True).load()
+    assert thread_client.scheduler.address.startswith("tcp://")
+    for cluster in (thread_client, thread_client.scheduler.address):
+        xr.testing.assert_identical(sf.sweep(scene, axes, cluster=cluster, quiet=True).load().drop_attrs(), here.drop_attrs())
+    assert thread_client.status == "running"  # the caller's client is left open
+    assert is_client(thread_client) and not is_client(thread_client.scheduler.address)
+
+
+CLUSTER_WORDS = "must be None, a number of local workers, a scheduler address or a dask Client"
+# Every public function with a `cluster=`, called with everything else valid enough to reach its check.
+WITH_CLUSTER = {
+    "fit": lambda cluster: sf.fit([], ["parts.legs.kd"], cluster=cluster),
+    "sweep": lambda cluster: sf.sweep(sf.default_scene(), {"sun.elevation_deg": [30.0]}, cluster=cluster, quiet=True),
+    "light_curve": lambda cluster: sf.light_curve(sf.default_scene(), phase_deg=[10.0], cluster=cluster, quiet=True),
+    "fit_to_folder": lambda cluster: sf.fit_to_folder(sf.ObservationFiles(["missing.exr"], ["missing.toml"]), ["parts.legs.kd"],
+                                                      "never-written", cluster=cluster),
+    "compare_plates_to_render": lambda cluster: sf.compare_plates_to_render(sf.default_scene(), phase_deg=[10.0], cluster=cluster),
+    "choose_light_curve_model": lambda cluster: sf.choose_light_curve_model(sf.default_scene(), None, cluster=cluster),
+}
+
+
+@pytest.mark.parametrize("name", WITH_CLUSTER)
+@pytest.mark.parametrize(("cluster", "message"), [
+    (1.5, f"^`cluster` {CLUSTER_WORDS}, got 1.5"), ("grid", "^`cluster` 'grid' must be SCHEME://HOST:PORT"),
+    ("file:///tmp/x", "^`cluster` 'file:///tmp/x' has the scheme 'file'"), (0, "^`cluster` must be an integer >= 1"),
+])
+def test_every_cluster_argument_refuses_what_is_not_a_cluster_in_one_line(name, cluster, message, tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    with pytest.raises(sf.InputError, match=message) as err:
+        WITH_CLUSTER[name](cluster)
+    assert len(str(err.value).splitlines()) == 1 and not (tmp_path / "never-written").exists()

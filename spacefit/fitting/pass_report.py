@@ -7,12 +7,16 @@ import csv
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from spacefit.errors import InputError, check_path
 from spacefit.fitting.passes import Pass, elapsed_seconds
 from spacefit.scene.names import Name
+
+if TYPE_CHECKING:  # types only: matplotlib loads where a figure is drawn
+    from spacefit.plotting import AxesArg, FigureArg
 
 
 def frame_table(result: Any, frames: Pass | None = None, *, files: Sequence[str | Path] = (),
@@ -62,7 +66,8 @@ def frame_table(result: Any, frames: Pass | None = None, *, files: Sequence[str 
 
 
 def write_frame_table(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> None:
-    """The rows of :func:`frame_table` as CSV (a column per key; empty where a row has none)."""
+    """The rows of :func:`frame_table` as CSV (a column per key; empty where a row has none; numbers
+    as Python writes them, so that :func:`read_frame_table` reads them back exactly)."""
 
     keys = list(dict.fromkeys(key for row in rows for key in row))
     with open(path, "w", newline="", encoding="utf-8") as f:
@@ -71,17 +76,74 @@ def write_frame_table(path: str | Path, rows: Sequence[Mapping[str, Any]]) -> No
         writer.writerows(rows)
 
 
-def plot_frames(rows: Sequence[Mapping[str, Any]], *, ax: Any = None, fig: Any = None) -> Any:
+# frames.csv's columns that are not numbers (:func:`frame_table`'s keys): text, whole numbers, flags.
+TEXT_COLUMNS, INTEGER_COLUMNS, FLAG_COLUMNS = ("file", "time"), ("frame",), ("misfit",)
+
+
+def read_frame_table(path: str | Path) -> list[dict[str, Any]]:
+    """The rows of a fit's ``frames.csv`` (:func:`frame_table`'s, as the fit wrote them) back as
+    :func:`frame_table` gives them: ``file`` and ``time`` text, ``frame`` an int, ``misfit`` a bool,
+    the rest floats; a value a row did not have (empty) is left out of it. :func:`plot_frames` draws them.
+
+    Raises:
+        InputError: not a path, no such file, or a cell that is not what its column holds.
+    """
+    path = check_path("path", path)
+    if not path.is_file():
+        raise InputError(f"`path` {str(path)!r}: no frame table there (a pass's fit writes frames.csv).")
+    with open(path, newline="", encoding="utf-8") as f:
+        table = list(csv.DictReader(f))
+    rows = []
+    for line, cells in enumerate(table, start=2):  # line 1 is the header
+        row: dict[str, Any] = {}
+        for key, cell in cells.items():
+            if key in TEXT_COLUMNS:
+                row[key] = cell
+            elif cell != "":
+                row[key] = _cell(key, cell, f"{str(path)!r} line {line}")
+        rows.append(row)
+    return rows
+
+
+def _cell(key: str, cell: str, where: str) -> int | bool | float:
+    """A frames.csv cell of column ``key`` as :func:`frame_table` had it."""
+    if key in FLAG_COLUMNS and cell in ("True", "False"):
+        return cell == "True"
+    try:
+        if key in INTEGER_COLUMNS:
+            return int(cell)
+        if key not in FLAG_COLUMNS:
+            return float(cell)
+    except ValueError:
+        pass
+    what = "a whole number" if key in INTEGER_COLUMNS else "True or False" if key in FLAG_COLUMNS else "a number"
+    raise InputError(f"{where}: {key} = {cell!r} is not {what}.")
+
+
+def frame_panels(rows: Sequence[Mapping[str, Any]]) -> list[str]:
+    """The quantities :func:`plot_frames` draws of :func:`frame_table`'s ``rows``, one panel each: every
+    per-frame parameter (a key with its ``.stderr``), then ``chi2_dof`` where a frame has a finite one
+    (none without a known noise: chi^2 has no meaning there, and an empty panel is not drawn)."""
+    own = [k for k in dict.fromkeys(key for row in rows for key in row) if any(f"{k}.stderr" in row for row in rows)]
+    chi2 = np.array([row.get("chi2_dof", math.nan) for row in rows], dtype=float)
+    return [*own, *(["chi2_dof"] if np.isfinite(chi2).any() else [])]
+
+
+def plot_frames(rows: Sequence[Mapping[str, Any]], *, ax: AxesArg = None, fig: FigureArg = None) -> np.ndarray:
     """The per-frame parameters of :func:`frame_table`'s rows against time (one panel each, 1-sigma
     error bars) and each frame's chi^2 / dof, into ``ax`` (one Axes per panel) or ``fig`` (a
-    matplotlib Figure or SubFigure; default a new one): the array of axes drawn.
+    matplotlib Figure or SubFigure; default a new one): the array of axes drawn. Without a known
+    noise the frames have no chi^2 / dof and its panel is left out (the first panel's title says so).
 
     Args:
-        rows: :func:`frame_table`'s rows.
-        ax: the axes to draw into, or ``fig``: the Figure or SubFigure to lay them out in.
+        rows: :func:`frame_table`'s rows (or :func:`read_frame_table`'s, of a saved frames.csv).
+        ax: the axes to draw into, one per panel, or ``fig``: the Figure or SubFigure to lay them out in.
 
     Returns:
         The array of axes drawn.
+
+    Raises:
+        InputError: the rows have neither a per-frame parameter nor a chi^2 / dof: nothing to draw.
 
     Example:
         Not run by the tests (an image fit takes minutes)::
@@ -94,8 +156,10 @@ def plot_frames(rows: Sequence[Mapping[str, Any]], *, ax: Any = None, fig: Any =
     """
     from spacefit.plotting import axis_label, panels  # deferred: plotting (0.5 s)
 
-    own = [k for k in dict.fromkeys(key for row in rows for key in row) if f"{k}.stderr" in rows[0]]
-    names = [*own, "chi2_dof"]
+    names = frame_panels(rows)
+    if not names:
+        raise InputError("`rows` hold no per-frame parameter and no chi^2 / dof (the frames' noise is unknown): "
+                         "plot_frames has nothing to draw.")
     axes = panels(ax, fig, len(names), (6.0, 1.6 * len(names) + 0.6), lambda f: f.subplots(len(names), 1, sharex=True, squeeze=False))
     t = np.array([r["time_s"] for r in rows], dtype=float)
     known = np.all(np.isfinite(t))
@@ -106,5 +170,7 @@ def plot_frames(rows: Sequence[Mapping[str, Any]], *, ax: Any = None, fig: Any =
         panel.errorbar(t, y, yerr=np.where(np.isfinite(err), err, 0.0), fmt="o", ms=3, capsize=2)
         panel.set_ylabel(axis_label(name) if name != "chi2_dof" else "chi$^2$ / dof", fontsize=7)
         panel.grid(alpha=0.3)
+    if "chi2_dof" not in names:
+        axes[0].set_title("no chi$^2$ / dof panel: the frames' noise is unknown", fontsize=8)
     axes[-1].set_xlabel("time since the first frame (s)" if known else "frame")
     return axes

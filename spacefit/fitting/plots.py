@@ -20,12 +20,12 @@ from matplotlib.ticker import MaxNLocator
 from spacefit.errors import check_choice, check_range
 from spacefit.fitting.result import FitResult
 from spacefit.output import PREVIEW_PERCENTILE, preview_scale, to_srgb8
-from spacefit.plotting import axis_label, cropped, image_box, panels, show_image, unit_label
+from spacefit.plotting import AxesArg, FigureArg, axis_label, cropped, image_box, panels, show_image, unit_label
 from spacefit.units import RADIANCE_UNIT
 
 
-def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: Axes | Sequence[Axes] | None = None,
-                    fig: Figure | SubFigure | None = None, crop: bool = True) -> np.ndarray:
+def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: AxesArg = None,
+                    fig: FigureArg = None, crop: bool = True) -> np.ndarray:
     """Reference | fit | residual fit - reference, one row per observation.
 
     Args:
@@ -77,7 +77,7 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
     return axes
 
 
-def plot_residuals(result: FitResult, *, ax: Axes | Sequence[Axes] | None = None, fig: Figure | SubFigure | None = None,
+def plot_residuals(result: FitResult, *, ax: AxesArg = None, fig: FigureArg = None,
                    crop: bool = True) -> np.ndarray:
     """Each image's residual, reference - model (:attr:`FitResult.residuals`; a table's or a light
     curve's are its own figure), the channels' mean in the observation's unit on a diverging colour map centred at 0 (grey where not fitted),
@@ -132,8 +132,8 @@ def _rgb(image: np.ndarray) -> np.ndarray:
     return np.repeat(image, 3, axis=-1) if image.shape[-1] == 1 else image[..., :3]
 
 
-def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = None, ax: Axes | Sequence[Axes] | None = None,
-                     fig: Figure | SubFigure | None = None) -> np.ndarray:
+def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = None, ax: AxesArg = None,
+                     fig: FigureArg = None) -> np.ndarray:
     """The loss per step (log axis; accepted steps joined, rejected trials as crosses, the loss's
     Monte Carlo noise as a band above the best loss) and, one panel each, every parameter's value
     per step in its unit, with the fitted value's one-standard-error band and, where ``truths``

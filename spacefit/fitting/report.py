@@ -1,6 +1,6 @@
 """A fit's output folder: ``fit.json``, ``comparison.png`` and ``convergence.png``, and a text summary.
 
-* ``fit.json``: :meth:`FitResult.to_dict` (values, standard errors, correlation, status, warnings,
+* ``fit.json``: :meth:`FitResult.to_dict` (values, standard errors, correlation, status and its name, warnings,
   goodness of fit, per-part chi^2, history) plus ``timings_s``, ``versions`` and, if given, the ``inputs``;
 * ``fit.toml``: the fitted scene (:attr:`FitResult.scene`), which renders the fit again;
 * ``uncertainty.json``: :meth:`FitResult.uncertainty`, values, standard errors, units and the
@@ -10,7 +10,7 @@
 * ``frames.csv``, ``frames.png`` (a pass: a :class:`PassObservation`,
   or images whose ``inputs`` give each one's time): per frame its time, goodness of fit and own
   parameters, and their plot against time (:mod:`spacefit.fitting.pass_report`; ``frames<i>`` for the
-  i-th observation where a fit has several passes);
+  i-th observation where a fit has several passes; no plot where a frame has neither own parameters nor a known noise);
 * ``observation<i>.png``: the figure of the i-th observation of another kind (a table, a light curve),
   its :meth:`~spacefit.fitting.observations.base.Reported.plot`;
 * ``residuals.fits``: :attr:`FitResult.residuals`, reference - model, one image extension per
@@ -18,7 +18,8 @@
   observation, NaN where not fitted; rows stored top row first, ``ROWORDER = 'TOP-DOWN'``), and
   ``residuals.png``, its picture (:func:`~spacefit.fitting.plots.plot_residuals`).
 
-The summary's (:func:`format_result`) first line is the verdict, :class:`Status`;
+:func:`~spacefit.fitting.saved.read_fit` reads the folder back into its :class:`FitResult` (without
+the renders). The summary's (:func:`format_result`) first line is the verdict, :class:`~spacefit.fitting.solvers.Status`;
 the second the goodness of fit (:mod:`spacefit.fitting.goodness`).
 """
 
@@ -39,7 +40,7 @@ from spacefit.fitting.observations.image import Observation
 from spacefit.fitting.observations.passes import PassObservation
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.solvers import Status
-from spacefit.fitting.pass_report import frame_table, plot_frames, write_frame_table
+from spacefit.fitting.pass_report import frame_panels, frame_table, plot_frames, write_frame_table
 from spacefit.fitting.plots import plot_comparison, plot_convergence, plot_residuals
 from spacefit.locks import holding_lock
 from spacefit.output import prepare_output, staged_output, versions, write_json
@@ -105,14 +106,17 @@ def write_fit_report(
         for i, (observation, entries) in enumerate(zip(result.observations, result.entries)):
             if i in passes:  # its frames against time
                 own = "" if len(passes) == 1 else str(i)
-                write_frame_table(stage / f"frames{own}.csv", frame_table(result, observation.frames, entries=entries))
-                _save(observation.plot(result, entries), stage / f"frames{own}.png")
+                rows = frame_table(result, observation.frames, entries=entries)
+                write_frame_table(stage / f"frames{own}.csv", rows)
+                if frame_panels(rows):
+                    _save(plot_frames(rows), stage / f"frames{own}.png")
             elif not isinstance(observation, Observation):  # an image's figures are comparison.png and residuals.png
                 _save(observation.plot(result, entries), stage / f"observation{i}.png")
         if not passes and inputs is not None and inputs.get("times"):  # a pass given as its frames' images
             rows = frame_table(result, files=inputs["references"], times=inputs["times"])
             write_frame_table(stage / "frames.csv", rows)
-            _save(plot_frames(rows), stage / "frames.png")
+            if frame_panels(rows):
+                _save(plot_frames(rows), stage / "frames.png")
     return Path(out_dir)
 
 

@@ -4,6 +4,9 @@ their standard errors and correlation, the verdict, the goodness of fit and what
 from __future__ import annotations
 
 import dataclasses
+import math
+import typing
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -19,9 +22,15 @@ from spacefit.scene.schema import Scene
 from spacefit.units import DN_UNIT, RADIANCE_UNIT
 
 
+# The fields of a fit's summary (:meth:`FitResult.to_dict`) without which it is not one.
+SUMMARY_FIELDS = ("names", "values", "stderr", "correlation", "success", "status", "warnings", "history", "loss", "solver",
+                  "loss_name", "steps", "wall_time_s")
+
+
 @dataclass
 class FitResult:
-    """Outcome of :func:`fit`: values in physical units and how far to trust them.
+    """Outcome of :func:`fit`: values in physical units and how far to trust them. A saved one
+    (its folder or ``fit.json``) reads back with :func:`~spacefit.fitting.saved.read_fit`.
 
     Attributes:
         names: free parameter names, in order.
@@ -168,5 +177,73 @@ class FitResult:
         d["nuisances"] = list(self.nuisances)
         d["correlation"] = np.asarray(self.correlation).tolist()
         d["status"] = self.status.value
+        d["status_name"] = self.status.name
+        d["stderr_undetermined"] = [n for n, e in self.stderr.items() if math.isinf(e)]
         d["entries"] = [list(e) for e in self.entries]
         return d
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], where: str = "fit") -> FitResult:
+        """The result of :meth:`to_dict`'s summary (as JSON gives it back: a non-finite number as
+        None), without what it leaves out (renders, residuals, the scene, the observations:
+        :func:`~spacefit.fitting.saved.read_fit` reads a fit's folder with its scene and residuals).
+        A None standard error reads back as inf where ``stderr_undetermined`` names it (not determined),
+        else NaN (not estimated), and any other None number as NaN. ``where`` names the source in errors.
+
+        Raises:
+            InputError: a field of :data:`SUMMARY_FIELDS` missing or malformed, or a status that is none of :class:`Status`'s.
+        """
+        missing = [key for key in SUMMARY_FIELDS if key not in data]
+        if missing:
+            raise InputError(f"{where} has no {missing[0]!r}: it is not a fit's summary (FitResult.to_dict).")
+        try:
+            status = Status[data["status_name"]] if "status_name" in data else Status(data["status"])
+        except (KeyError, ValueError, TypeError):
+            raise InputError(f"{where}: the status {data.get('status_name', data['status'])!r} is none of "
+                             f"sf.Status's ({', '.join(s.name for s in Status)}).") from None
+        try:
+            names = tuple(data["names"])
+
+            def by_name(values: Mapping[str, Any]) -> dict[str, Any]:  # in ``names`` order (JSON's keys are sorted)
+                return {n: values[n] for n in sorted(values, key=lambda n: names.index(n) if n in names else len(names))}
+
+            undetermined = set(data.get("stderr_undetermined", ()))
+            stderr = {n: (math.inf if n in undetermined else math.nan) if e is None else float(e) for n, e in data["stderr"].items()}
+            history = [{**h, "values": by_name(h["values"])} if isinstance(h.get("values"), dict) else h for h in _numbers(data["history"])]
+            units = data.get("units", [])
+            return cls(
+                names=names, values=by_name(_numbers(data["values"])), stderr=by_name(stderr),
+                correlation=np.array(_numbers(data["correlation"]), dtype=float).reshape(len(names), len(names)),
+                success=bool(data["success"]), status=status, warnings=list(data["warnings"]), history=history,
+                renders=[], loss=_numbers(data["loss"]), solver=data["solver"], loss_name=data["loss_name"],
+                steps=int(data["steps"]), wall_time_s=_numbers(data["wall_time_s"]), start=by_name(_numbers(data.get("start", {}))),
+                extras=_numbers(data.get("extras", {})), parts=_numbers(data.get("parts", [])),
+                units=list(units["observations"] if isinstance(units, Mapping) else units),  # a fit folder's: with the unit words
+                goodness=None if data.get("goodness") is None else _goodness(data["goodness"]),
+                observation_goodness=[_goodness(g) for g in data.get("observation_goodness", [])],
+                entries=tuple(tuple(e) for e in data.get("entries", [])))
+        except (KeyError, TypeError, ValueError, AttributeError) as err:
+            raise InputError(f"{where} is not a fit's summary (FitResult.to_dict): {type(err).__name__} {err}.") from None
+
+
+def _numbers(value: Any) -> Any:
+    """``value`` (JSON's numbers, lists and dicts) with every None as NaN."""
+    if value is None:
+        return math.nan
+    if isinstance(value, dict):
+        return {k: _numbers(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_numbers(v) for v in value]
+    return value
+
+
+def _goodness(data: Mapping[str, Any]) -> Goodness:
+    """The :class:`Goodness` of its ``to_dict`` (its fields; a None float as NaN, tuples from lists)."""
+    hints = typing.get_type_hints(Goodness)
+    fields = {}
+    for f in dataclasses.fields(Goodness):
+        if f.name in data:
+            value = data[f.name]
+            fields[f.name] = (math.nan if value is None else float(value)) if hints[f.name] is float else (
+                tuple(value) if isinstance(value, list) else value)
+    return Goodness(**fields)

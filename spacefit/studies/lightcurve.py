@@ -40,7 +40,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -54,6 +54,9 @@ from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
 from spacefit.studies.sensitivity import mean_and_error
 from spacefit.studies.sweep import sweep
+
+if TYPE_CHECKING:  # types only: matplotlib loads where a figure is drawn
+    from spacefit.plotting import AxesArg, FigureArg
 
 # The sun's apparent magnitude by band (module docstring gives the source).
 SUN_MAGNITUDES = {"V": -26.74, "AB532": -2.5 * math.log10(1360.0 * 532e-9 / (3.0e8 * 3631e-26))}
@@ -193,31 +196,46 @@ class LightCurve:
     def _repr_html_(self) -> str:
         return light_curve_html(self)
 
-    def figure(self, *, ax: Any = None, fig: Any = None) -> Any:
+    def figure(self, *, ax: AxesArg = None, fig: FigureArg = None) -> np.ndarray:
         """Irradiance and magnitude (brighter up) against the swept quantity, with one-sigma Monte
-        Carlo error bars when more than one seed was run (asymmetric in magnitude), into ``ax`` (two
-        Axes) or ``fig`` (a matplotlib Figure or SubFigure; default: a new one). Returns the array of
-        the two axes."""
+        Carlo error bars when more than one seed was run (asymmetric in magnitude): into ``ax``, two
+        Axes (irradiance, magnitude) or one (the magnitude, with the irradiance it stands for on a
+        second y axis), or ``fig`` (a matplotlib Figure or SubFigure; default: a new one with both
+        panels). Returns the array of the axes drawn."""
         from spacefit.plotting import axis_label, panels  # here: only a figure needs matplotlib (optional; slow to import)
 
-        left, right = panels(ax, fig, 2, (9.0, 3.6), lambda f: f.subplots(1, 2))
+        axes = panels(ax, fig, (1, 2), (9.0, 3.6), lambda f: f.subplots(1, 2))
         known = self.seeds > 1
         bright, faint = self.magnitude_interval()
         faint = np.where(np.isfinite(faint), faint, np.nanmax(np.where(np.isfinite(faint), faint, self.magnitude)) + 1.0)
-        left.errorbar(self.x, self.irradiance_w_m2, yerr=self.irradiance_se_w_m2 if known else None, fmt="o-", capsize=2)
-        left.set_yscale("log")
-        left.set_ylabel("irradiance at the observer (W m$^{-2}$)")
-        right.errorbar(self.x, self.magnitude, yerr=np.stack([self.magnitude - bright, faint - self.magnitude]) if known else None,
-                       fmt="o-", capsize=2)
-        right.invert_yaxis()  # brighter up
-        right.set_ylabel(f"apparent {self.band} magnitude (mag; m$_{{sun}}$ = {self.sun_magnitude:.4g})")
-        for panel in (left, right):
+        magnitude = axes[-1]
+        if len(axes) == 2:
+            irradiance = axes[0]
+            irradiance.errorbar(self.x, self.irradiance_w_m2, yerr=self.irradiance_se_w_m2 if known else None, fmt="o-", capsize=2)
+            irradiance.set_yscale("log")
+            irradiance.set_ylabel("irradiance at the observer (W m$^{-2}$)")
+        magnitude.errorbar(self.x, self.magnitude, yerr=np.stack([self.magnitude - bright, faint - self.magnitude]) if known else None,
+                           fmt="o-", capsize=2)
+        magnitude.invert_yaxis()  # brighter up
+        magnitude.set_ylabel(f"apparent {self.band} magnitude (mag; m$_{{sun}}$ = {self.sun_magnitude:.4g})")
+        if len(axes) == 1:  # the irradiance each magnitude stands for, on the right
+            sun_m, sun_e = self.sun_magnitude, self.sun_irradiance_w_m2
+
+            def irradiance_of(m: np.ndarray) -> np.ndarray:  # the magnitude's definition, inverted
+                return sun_e * 10.0 ** (-0.4 * (np.asarray(m) - sun_m))
+
+            def magnitude_of(e: np.ndarray) -> np.ndarray:  # E <= 0, which matplotlib may probe, has no magnitude: clipped
+                return sun_m - 2.5 * np.log10(np.maximum(np.asarray(e), np.finfo(float).tiny) / sun_e)
+
+            second = magnitude.secondary_yaxis("right", functions=(irradiance_of, magnitude_of))
+            second.set_ylabel("irradiance at the observer (W m$^{-2}$)")
+        for panel in axes:
             panel.set_xlabel(axis_label(self.against))
         errors = f"1-sigma Monte Carlo errors of {self.seeds} seeds" if known else "one seed: Monte Carlo error unknown"
         if ax is None:
-            left.figure.suptitle(f"observer at {self.observer_range_m:.4g} m (rendered at {self.rendered_range_m:.4g} m, "
-                                 f"inverse square); {errors}", fontsize=9)
-        return np.array([left, right], dtype=object)
+            axes[0].figure.suptitle(f"observer at {self.observer_range_m:.4g} m (rendered at {self.rendered_range_m:.4g} m, "
+                                    f"inverse square); {errors}", fontsize=9)
+        return axes
 
 
 def light_curve(

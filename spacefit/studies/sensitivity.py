@@ -19,7 +19,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -30,6 +30,9 @@ from spacefit.scene.parameters import check_names, label, parameter
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
 from spacefit.units import RADIANCE_UNIT
+
+if TYPE_CHECKING:  # types only: matplotlib loads where a figure is drawn
+    from spacefit.plotting import AxesArg, FigureArg
 
 TARGET = "target"  # the region of every part together, beside the parts
 CONFIDENCE = 0.95  # two-sided: a derivative is resolved when this interval excludes zero
@@ -184,7 +187,7 @@ class Sensitivity:
                 out[name] = (abs(self.at[name]) / 10.0, "a tenth of its value")
         return out
 
-    def figure(self, *, ax: Any = None, fig: Any = None, crop: bool = True, steps: Mapping[str, float] | None = None) -> Any:
+    def figure(self, *, ax: AxesArg = None, fig: FigureArg = None, crop: bool = True, steps: Mapping[str, float] | None = None) -> np.ndarray:
         """Each derivative image (unresolved pixels grey), cropped to the target and a margin unless
         ``crop=False``; and each region's change of mean radiance for a step of each parameter
         (:meth:`chart_steps`, ``steps``: name -> step in its unit), relative to the region's mean

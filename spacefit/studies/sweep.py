@@ -45,7 +45,7 @@ from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
 from spacefit.scene.toml import load_scene, read_scene_dict
 from spacefit.scene.parameters import GEOMETRY, MOVES_VERTICES, check_names, scene_with_values
-from spacefit.executors import Cluster, check_cluster, cluster_of
+from spacefit.executors import Cluster, cluster_of
 from spacefit.studies.axes import Axis, AxesSpec, in_place_names, parse_axes, parsed_seeds
 from spacefit.studies.cluster import STALL_S, run_on_dask
 from spacefit.studies.estimate import check_estimate, estimate
@@ -166,7 +166,6 @@ def sweep(
     check_count("max_renders_per_worker", max_renders_per_worker, optional=False)
     stall_s = check_range("stall_s", stall_s, 0.0, lo_open=True, unit="s")
     cluster = cluster_of(cluster, workers, scheduler)
-    check_cluster(cluster)
     derivatives = check_name_list("derivatives", derivatives)
     if derivatives:
         check_names(scene, derivatives, "derivatives")

@@ -37,6 +37,7 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from spacefit.errors import InputError, check_count, check_range, check_type, check_vector
+from spacefit.executors import Cluster, cluster_of
 from spacefit.fitting.observations.base import Block
 from spacefit.fitting.params import Bijection
 from spacefit.fitting.result import FitResult
@@ -301,7 +302,7 @@ def at_range(scene: Scene, range_m: float) -> Scene:
 
 def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None = None,
                              points: Sequence[Mapping[str, float]] | None = None, range_m: float | None = None,
-                             quiet: bool = True) -> PlatesVsRender:
+                             quiet: bool = True, cluster: Cluster | None = None) -> PlatesVsRender:
     """The plates' light curve of ``scene``'s target (:func:`target_plates`) against the path tracer's
     (:func:`sweep`: the image's radiance x pixel solid angle summed, as
     :func:`light_curve` has it), both at the scene's camera with the scene's
@@ -316,6 +317,8 @@ def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None 
         phase_deg: solar phase angles (deg), or ``points``: scene values per point.
         range_m: the observer's distance for the magnitudes (m); None: the camera's.
         quiet: no progress bar.
+        cluster: where the renders run: None, this process; N local workers; a scheduler address; a
+            dask Client.
 
     Returns:
         A :class:`PlatesVsRender`.
@@ -331,6 +334,7 @@ def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None 
         >>> comparison.phase_deg
         array([10., 40.])
     """
+    cluster = cluster_of(cluster)
     scene = body_fixed(check_scene(scene))  # type: ignore[arg-type]
     if range_m is not None:
         scene = at_range(scene, range_m)
@@ -344,7 +348,7 @@ def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None 
         points = [{key: sun[key][i] for key in sun} for i in range(len(angles))]
     points = _checked_points(points)
     keys = list(points[0])
-    ds = sweep(scene, {"point": {key: [float(p[key]) for p in points] for key in keys}}, quiet=quiet)
+    ds = sweep(scene, {"point": {key: [float(p[key]) for p in points] for key in keys}}, quiet=quiet, cluster=cluster)
     rendered = np.atleast_1d(np.asarray(ds.irradiance.sel(region="target").values, float))
     plates = target_plates(scene)
     geometry = [_body_geometry(scene.with_values(dict(p))) for p in points]
@@ -463,7 +467,7 @@ class ChosenLightCurve(LightCurveKind):
 
 
 def choose_light_curve_model(scene: Scene, observations: LightCurveObservations, *, samples: int = 8,
-                             sigma_mag: float | None = None, quiet: bool = True) -> ChosenLightCurve:
+                             sigma_mag: float | None = None, quiet: bool = True, cluster: Cluster | None = None) -> ChosenLightCurve:
     """The light-curve observation of ``observations`` of ``scene``'s target to fit: the flat plates
     (:class:`PlateLightCurve` of :func:`target_plates`, the scene's sun
     irradiance) where their difference from the path tracer is below the observations' noise, else
@@ -477,6 +481,7 @@ def choose_light_curve_model(scene: Scene, observations: LightCurveObservations,
     says it assumed). The rendered observation has every lit observation at that geometry, its
     magnitudes carried to their median range by the inverse square law (exact for an unresolved
     target); its attitude angles are the points' geometry, so it cannot free them as the plates can.
+    ``cluster``: where the comparison's renders run (:func:`compare_plates_to_render`'s).
 
     Args:
         scene: the scene of the target (its parts, camera and render settings).
@@ -484,6 +489,7 @@ def choose_light_curve_model(scene: Scene, observations: LightCurveObservations,
         samples: the number of geometries the plates are compared with the path tracer at.
         sigma_mag: the observations' noise (mag) where they state none.
         quiet: no progress bar.
+        cluster: where the comparison's renders run, as :func:`compare_plates_to_render` takes it.
 
     Returns:
         A :class:`ChosenLightCurve`, for ``sf.fit([chosen], free)``.
@@ -503,6 +509,7 @@ def choose_light_curve_model(scene: Scene, observations: LightCurveObservations,
         >>> type(chosen.chosen).__name__ in ("PlateLightCurve", "RenderedLightCurve")
         True
     """
+    cluster = cluster_of(cluster)
     scene = body_fixed(check_scene(scene))  # type: ignore[arg-type]
     check_type("observations", observations, LightCurveObservations, "an sf.LightCurveObservations (sf.read_light_curve)")
     check_count("samples", samples, 1, optional=False)
@@ -525,7 +532,7 @@ def choose_light_curve_model(scene: Scene, observations: LightCurveObservations,
     order = np.argsort(phase, kind="stable")
     sample = order[np.unique(np.round(np.linspace(0, len(order) - 1, min(samples, len(order)))).astype(int))]
     points = observation_points(scene, obs)
-    comparison = compare_plates_to_render(scene, points=[points[i] for i in sample], quiet=quiet)
+    comparison = compare_plates_to_render(scene, points=[points[i] for i in sample], quiet=quiet, cluster=cluster)
     dark = int((~comparison.compared).sum())
     measured = (f"plates - path tracer RMS {comparison.rms_mag:.3g} mag (largest {comparison.largest_mag:.3g}) at "
                 f"{int(comparison.compared.sum())} of the observations' geometries" + (f" ({dark} more dark in both)" if dark else "")

@@ -21,7 +21,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 import jax
 import jax.numpy as jnp
@@ -31,6 +31,9 @@ from spacefit.errors import InputError
 from spacefit.fitting.params import Bijection, bijection
 from spacefit.fitting.result import FitResult
 from spacefit.scene.names import Name
+
+if TYPE_CHECKING:  # types only: matplotlib loads where a figure is drawn
+    from spacefit.plotting import AxesArg, FigureArg
 
 # a model of the data: (the fit's free values, physical; the seed index j: 0 the fit's, 1 an
 # independent one, more further ones) -> the predicted values, in the data's unit
@@ -117,7 +120,7 @@ class Reported(Protocol):
     def report(self, result: FitResult, entries: Sequence[int]) -> list[str]:
         """Its lines of the fit's report (indented, no verdict: the fit's own lines give it)."""
 
-    def plot(self, result: FitResult, entries: Sequence[int], *, ax: Any = None, fig: Any = None) -> np.ndarray:
+    def plot(self, result: FitResult, entries: Sequence[int], *, ax: AxesArg = None, fig: FigureArg = None) -> np.ndarray:
         """Its figure of the fit into ``ax`` or ``fig`` (:mod:`spacefit.plotting`): the array of axes drawn."""
 
 
@@ -178,7 +181,7 @@ class ValueObservation(ABC):
         (:func:`~spacefit.plotting.plot_values`): by default as they are, on a linear scale."""
         return np.asarray(values, dtype=float), f"value ({unit})", "linear"
 
-    def plot(self, result: FitResult, entries: Sequence[int], *, ax: Any = None, fig: Any = None) -> np.ndarray:
+    def plot(self, result: FitResult, entries: Sequence[int], *, ax: AxesArg = None, fig: FigureArg = None) -> np.ndarray:
         """Its data and model (:attr:`~spacefit.fitting.result.FitResult.renders`) against
         :meth:`abscissa` as :meth:`shown`, and below the residual data - model
         (:attr:`~spacefit.fitting.result.FitResult.residuals`; for magnitudes, observed - predicted

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import jax
 import jax.numpy as jnp
@@ -25,6 +25,9 @@ from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
 from spacefit.sensor import Sensor, check_flat, read_sensor_file
 from spacefit.units import RADIANCE_UNIT
+
+if TYPE_CHECKING:  # types only: matplotlib loads where a figure is drawn
+    from spacefit.plotting import AxesArg, FigureArg
 
 
 @dataclass(frozen=True)
@@ -142,14 +145,17 @@ class Observation:
         (:attr:`FitResult.parts`)."""
         return [line for k in entries for line in part_lines(result, k)]
 
-    def plot(self, result: FitResult, entries: Sequence[int], *, ax: Any = None, fig: Any = None) -> np.ndarray:
-        """Its residual image, reference - model (the residual panel of :func:`plot_comparison`)."""
+    def plot(self, result: FitResult, entries: Sequence[int], *, ax: AxesArg = None, fig: FigureArg = None) -> np.ndarray:
+        """Its residual image, reference - model (the residual panel of :func:`plot_comparison`), into
+        ``ax`` (one Axes) or ``fig``; where the fit has none (a failed solve), the panel says so."""
         from spacefit.fitting.plots import residual_panel  # deferred: matplotlib, which only figures need
         from spacefit.plotting import panels  # deferred: matplotlib, which only figures need
 
         axes = panels(ax, fig, 1, (4.0, 3.6), lambda f: f.subplots(1, 1, squeeze=False))
         if entries[0] < len(result.residuals):
             residual_panel(axes[0], result, entries[0])
+        else:  # not an empty panel: it says why
+            axes[0].text(0.5, 0.5, "no residual: the fit has no render", ha="center", va="center", transform=axes[0].transAxes)
         return axes
 
 

@@ -17,7 +17,7 @@ import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -29,6 +29,9 @@ from spacefit.fitting.result import FitResult
 from spacefit.scene.names import Name
 from spacefit.scene.schema import Scene
 from spacefit.sensor import Sensor
+
+if TYPE_CHECKING:  # types only: matplotlib loads where a figure is drawn
+    from spacefit.plotting import AxesArg, FigureArg
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,6 +101,6 @@ class PassObservation:
             lines.append(f"    frame {row['frame']} at {row['time_s']:.6g} s: chi^2/dof {chi2:.3g}" + (f"; {own}" if own else ""))
         return lines
 
-    def plot(self, result: FitResult, entries: Sequence[int], *, ax: Any = None, fig: Any = None) -> np.ndarray:
+    def plot(self, result: FitResult, entries: Sequence[int], *, ax: AxesArg = None, fig: FigureArg = None) -> np.ndarray:
         """Its frames' own values and chi^2 / dof against time (:func:`plot_frames`)."""
         return plot_frames(frame_table(result, self.frames, entries=entries), ax=ax, fig=fig)
