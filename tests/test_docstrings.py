@@ -30,6 +30,7 @@ EXPENSIVE: dict[str, str] = {
     **dict.fromkeys(["identifiability", "Identifiability"], "renders and differentiates"),
     "target_plates": "builds the lander's wrinkled mesh (about 9 s)",
     "plot_convergence": "fits a BRDF table: JAX compiles the solver (about 10 s)",
+    "read_fit": "fits a BRDF table: JAX compiles the solver (about 10 s)",
     **dict.fromkeys(["RenderedLightCurve", "compare_plates_to_render", "PlatesVsRender", "choose_light_curve_model", "ChosenLightCurve",
                      "light_curve_convergence", "simulate_pass", "PassObservation"], "renders the default scene at 48 x 48 px"),
 }

@@ -87,6 +87,21 @@ def read_frame_table(path: str | Path) -> list[dict[str, Any]]:
 
     Raises:
         InputError: not a path, no such file, or a cell that is not what its column holds.
+
+    Args:
+        path: a ``frames.csv`` a pass's fit wrote.
+
+    Returns:
+        The rows, one dict per frame.
+
+    Example:
+        >>> import spacefit as sf
+        >>> with open("frames.csv", "w") as f:
+        ...     print("frame,file,time,time_s,chi2_dof,misfit,target.attitude_x_deg,target.attitude_x_deg.stderr", file=f)
+        ...     print("0,frame0.exr,0,0,1.02,False,90.1,0.05", file=f)
+        >>> row = sf.read_frame_table("frames.csv")[0]
+        >>> row["frame"], row["misfit"], row["target.attitude_x_deg"]
+        (0, False, 90.1)
     """
     path = check_path("path", path)
     if not path.is_file():

@@ -18,7 +18,7 @@
   observation, NaN where not fitted; rows stored top row first, ``ROWORDER = 'TOP-DOWN'``), and
   ``residuals.png``, its picture (:func:`~spacefit.fitting.plots.plot_residuals`).
 
-:func:`~spacefit.fitting.saved.read_fit` reads the folder back into its :class:`FitResult` (without
+:func:`read_fit` reads the folder back into its :class:`FitResult` (without
 the renders). The summary's (:func:`format_result`) first line is the verdict, :class:`~spacefit.fitting.solvers.Status`;
 the second the goodness of fit (:mod:`spacefit.fitting.goodness`).
 """

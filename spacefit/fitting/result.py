@@ -30,7 +30,7 @@ SUMMARY_FIELDS = ("names", "values", "stderr", "correlation", "success", "status
 @dataclass
 class FitResult:
     """Outcome of :func:`fit`: values in physical units and how far to trust them. A saved one
-    (its folder or ``fit.json``) reads back with :func:`~spacefit.fitting.saved.read_fit`.
+    (its folder or ``fit.json``) reads back with :func:`read_fit`.
 
     Attributes:
         names: free parameter names, in order.
@@ -186,7 +186,7 @@ class FitResult:
     def from_dict(cls, data: Mapping[str, Any], where: str = "fit") -> FitResult:
         """The result of :meth:`to_dict`'s summary (as JSON gives it back: a non-finite number as
         None), without what it leaves out (renders, residuals, the scene, the observations:
-        :func:`~spacefit.fitting.saved.read_fit` reads a fit's folder with its scene and residuals).
+        :func:`read_fit` reads a fit's folder with its scene and residuals).
         A None standard error reads back as inf where ``stderr_undetermined`` names it (not determined),
         else NaN (not estimated), and any other None number as NaN. ``where`` names the source in errors.
 
