@@ -238,7 +238,7 @@ def earthshine_irradiance(reflect: Reflection, sources: EarthshineSources, obser
     Args:
         reflect: the target's reflection, ``(wi, wo) -> (k,)``: for (k, 3) unit directions towards the
             light and the observer in the target's frame, sum over its surfaces of area x BRDF x
-            |n . wi| |n . wo| (m^2 sr^-1; JAX-traceable).
+            ``|n . wi| |n . wo|`` (m^2 sr^-1; JAX-traceable).
         sources: the Earth seen from the target (:func:`earthshine_sources`, same frame).
         observer: (n, 3) directions towards the observer.
         range_m: (n,) the observer's distance (m).
