@@ -72,6 +72,7 @@ from spacefit.materials.measured import BRDFTable as BRDFTable
 from spacefit.materials.measured import read_brdf_table as read_brdf_table
 from spacefit.materials.registry import PRESETS as PRESETS
 from spacefit.materials.tabulated import TabulatedBRDF as TabulatedBRDF
+from spacefit.pipeline import fit_light_curve_to_folder as fit_light_curve_to_folder
 from spacefit.pipeline import fit_to_folder as fit_to_folder
 from spacefit.pipeline import render_to_folder as render_to_folder
 from spacefit.rendering.derivatives import Jacobian as Jacobian
@@ -110,6 +111,7 @@ from spacefit.studies.earthshine import earthshine_sources as earthshine_sources
 from spacefit.studies.lightcurve import LightCurve as LightCurve
 from spacefit.studies.lightcurve import light_curve as light_curve
 from spacefit.studies.lightcurve import light_curve_convergence as light_curve_convergence
+from spacefit.studies.lightcurve_files import LightCurveFiles as LightCurveFiles
 from spacefit.studies.lightcurve_fit import RenderedLightCurve as RenderedLightCurve
 from spacefit.studies.lightcurve_fit import fit_light_curve as fit_light_curve
 from spacefit.studies.observation_files import RefusedRow as RefusedRow
@@ -153,9 +155,9 @@ __all__ = [
     'read_brdf_table', 'fit_brdf_table', 'fitted_material', 'compare_brdf_models', 'TabulatedBRDF', 'write_table_fit', 'Site',
     'LightCurveObservations', 'read_light_curve', 'write_light_curve', 'RefusedRow', 'Orbit', 'PassGeometry', 'pass_geometry', 'Plate',
     'predict_magnitudes', 'fit_plates', 'fitted_plates', 'light_curve_convergence', 'fit_light_curve', 'BRDFTableObservation',
-    'PlateLightCurve', 'RenderedLightCurve', 'target_plates', 'compare_plates_to_render', 'PlatesVsRender', 'choose_light_curve_model',
-    'ChosenLightCurve', 'Earth', 'EarthshineSources', 'earthshine_sources', 'earthshine_irradiance', 'DesignMember', 'fit_design',
-    'predict_design', 'design_noise_mag', 'MagnitudePrediction', 'Prediction', 'predictive_intervals', 'residual_noise', 'RenderSettings',
-    'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings', 'PartSettings', 'SunTracking', 'AxisAngle', 'NadirSun',
-    'SunPointing', 'QuaternionTable',
+    'PlateLightCurve', 'RenderedLightCurve', 'LightCurveFiles', 'fit_light_curve_to_folder', 'target_plates', 'compare_plates_to_render',
+    'PlatesVsRender', 'choose_light_curve_model', 'ChosenLightCurve', 'Earth', 'EarthshineSources', 'earthshine_sources',
+    'earthshine_irradiance', 'DesignMember', 'fit_design', 'predict_design', 'design_noise_mag', 'MagnitudePrediction', 'Prediction',
+    'predictive_intervals', 'residual_noise', 'RenderSettings', 'CameraSettings', 'SunSettings', 'TargetSettings', 'WrinkleSettings',
+    'PartSettings', 'SunTracking', 'AxisAngle', 'NadirSun', 'SunPointing', 'QuaternionTable',
 ]

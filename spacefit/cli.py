@@ -1,5 +1,6 @@
 """Command line: ``spacefit render|scene|export-stl [SCENE.toml] --out PATH [--set key=value ...]`` and
 ``spacefit fit REFERENCE ... --scene SCENE.toml --free NAME[,NAME...] --out DIR [--mask M] [--sensor S]``,
+``spacefit fit-light-curve CURVE --scene SCENE.toml --free NAME[,NAME...] --out DIR [--resume]``,
 ``spacefit sweep SWEEP.toml --out STORE``, ``spacefit sweep STORE --verify``."""
 
 from __future__ import annotations
@@ -27,7 +28,9 @@ with deferred_interrupts() as _STARTUP:
     from spacefit.scene.parameters import PARAMETERS
 
 if TYPE_CHECKING:
+    from spacefit.fitting.result import FitResult
     from spacefit.fitting.solvers import Status
+    from spacefit.studies.orbit import Site
 
 # Exit codes of `spacefit fit` that is not a success (its report is written in each case).
 NOT_CONVERGED = 3  # the solver stopped without converging (step limit, divergence, NaN)
@@ -37,15 +40,21 @@ AT_BOUND = 6  # a parameter ended at a bound of its range
 UNJUDGED = 9  # the model's own render noise is above the data's: the residuals could not be judged
 INTERRUPTED = 130  # 128 + SIGINT, as shells report Ctrl-C
 TERMINATED = 143  # 128 + SIGTERM
+# The commands that fit, and what their exit codes say.
+FITS = ("fit", "fit-light-curve")
+FIT_EXIT_CODES = (f"0 converged, 1 file system error, 2 bad input, {NOT_CONVERGED} not converged, {NO_PROGRESS} no progress (no "
+                  f"step lowered the loss), {MISFIT} misfit (chi^2/dof beyond its expected range: the model misses something), "
+                  f"{AT_BOUND} a parameter at a bound, {UNJUDGED} not judged (the model's render noise above the data's: render "
+                  f"with more samples), {INTERRUPTED} Ctrl-C, {TERMINATED} SIGTERM; the report is written for 0, 3 to 6 and 9.")
 # Exit codes of `spacefit sweep STORE --verify` that is not a success.
 DAMAGED = 7  # a done point failed its checksum, or a variable is missing: rerun the sweep to recompute them
 UNFINISHED = 8  # every done point verifies, but some points are not done yet
 
 
 def _free_help(command: str | None) -> str:
-    """Help of ``fit --free``: the parameter registry, listed only for ``spacefit fit``."""
+    """Help of ``--free``: the parameter registry, listed only for ``spacefit fit`` and ``fit-light-curve``."""
     text = "parameters to fit, e.g. parts.panels.alpha_x,parts.legs.kd (P: a part's name)"
-    if command != "fit":
+    if command not in FITS:
         return text + "; see spacefit fit --help"
     return text + ": " + ", ".join(f"{p.pattern} [{p.unit}] {p.bounds.describe()}" for p in PARAMETERS.values())
 
@@ -81,11 +90,7 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
                        description="Fit free scene parameters to reference images: radiance (EXR, FITS) or "
                                    "DN (FITS, 16-bit PNG / TIFF) with their sensor's noise model. "
                                    "--set applies to every scene. The report's first line is the verdict. Exit codes: "
-                                   f"0 converged, 1 file system error, 2 bad input, {NOT_CONVERGED} not converged, "
-                                   f"{NO_PROGRESS} no progress (no step lowered the loss), {MISFIT} misfit (chi^2/dof "
-                                   f"beyond its expected range: the model misses something), {AT_BOUND} a parameter at a "
-                                   f"bound, {UNJUDGED} not judged (the model's render noise above the data's: render with more samples), "
-                                   f"{INTERRUPTED} Ctrl-C, {TERMINATED} SIGTERM; the report is written for 0, 3 to 6 and 9.")
+                                   + FIT_EXIT_CODES)
     f.add_argument("references", nargs="*", metavar="REFERENCE",
                    help="reference images fitted jointly: .exr radiance (W m^-2 sr^-1); .fits radiance (BUNIT "
                         "'W m-2 sr-1') or DN; .png / .tif DN (give --response unless spacefit wrote them)")
@@ -139,6 +144,32 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     f.add_argument("--response", metavar="linear|srgb",
                    help="how PNG / TIFF values encode light: linear DN or sRGB-encoded (spacefit's own files say)")
     f.add_argument("--quiet", action="store_true", help="no progress output (the fitted values are still printed)")
+    c = sub.add_parser("fit-light-curve", parents=[overrides],
+                       help="fit scene parameters of a rendered target to a light curve: fit.json, fit.toml, uncertainty.json, "
+                            "convergence.png, observation0.png",
+                       description="Fit free scene parameters of a rendered target (materials, attitude angles the points do not "
+                                   "set) to observed magnitudes, each point rendered at its own geometry (sf.fit_light_curve). "
+                                   "--set applies to the scene. The report's first line is the verdict. Exit codes: " + FIT_EXIT_CODES)
+    c.add_argument("curve", metavar="CURVE",
+                   help="light-curve file: a point table (.csv, .ecsv, .fits: magnitude, optionally magnitude_sigma, and each "
+                        "point's geometry as scene values, e.g. target.attitude_z_deg, sun.elevation_deg, camera.position_m.x, .y, "
+                        ".z; docs/guide/brdf-tables.md), or any light curve sf.read_light_curve reads (geometry in the target's "
+                        "frame, or seen from --site)")
+    c.add_argument("--scene", required=True, metavar="SCENE.toml", help="scene of the target; its values are the start")
+    c.add_argument("--free", required=True, metavar="NAME[,NAME...]", help=_free_help(command))
+    c.add_argument("--out", required=True, metavar="DIR", help="output folder (new, empty, or a previous light-curve fit with --overwrite)")
+    c.add_argument("--overwrite", action="store_true", help="replace a previous light-curve fit report in --out")
+    c.add_argument("--resume", action="store_true", help="continue the interrupted fit whose checkpoint is in --out")
+    c.add_argument("--max-steps", type=int, default=50, metavar="N", help="solver step limit (default 50)")
+    c.add_argument("--start", action="append", default=[], metavar="NAME=VALUE",
+                   help="start value of a free parameter (default: the scene's value; repeatable)")
+    c.add_argument("--band", metavar="V|AB532", help="the magnitudes' band (default: the file's, else V)")
+    c.add_argument("--sigma-mag", type=float, metavar="S", help="the magnitudes' error (mag) where the file states none")
+    c.add_argument("--site", metavar="LAT,LON[,HEIGHT_M]",
+                   help="the observer (deg, deg, m) of a light curve whose geometry is seen from a site")
+    c.add_argument("--large", action="store_true", help="run a fit whose estimated memory, said before it starts, is more than "
+                   "this machine has available")
+    c.add_argument("--quiet", action="store_true", help="no progress output (the fitted values are still printed)")
     s = sub.add_parser("sweep", parents=[overrides], help="render a sweep of scene values into a resumable Zarr store",
                        description="Render a scene at every point of a sweep file's axes into a Zarr store, point by "
                                    "point; rerun the same command to finish an interrupted sweep. --set applies to the scene.")
@@ -231,7 +262,6 @@ def _fit(args: argparse.Namespace) -> int:
     from spacefit.fitting.loop import FitOptions  # here: JAX and optimistix, which render never needs
     from spacefit.fitting.observation_files import ObservationFiles
     from spacefit.fitting.problem import FitRender
-    from spacefit.fitting.report import format_result
     from spacefit.pipeline import fit_to_folder
 
     reading = dict(overrides=args.overrides, resolution=args.resolution, sigma=args.sigma, masks=args.masks,
@@ -259,14 +289,51 @@ def _fit(args: argparse.Namespace) -> int:
                          **{k: v for k, v in given.items() if v is not None})
     result = fit_to_folder(files, free, args.out, options, quiet=args.quiet, overwrite=args.overwrite, resume=args.resume,
                            cluster=_cluster(args))
+    return _verdict(result, args.out)
+
+
+def _fit_light_curve(args: argparse.Namespace) -> int:
+    """Run ``spacefit fit-light-curve``; exit code 0 when the fit succeeded, else the verdict's (:func:`exit_code`)."""
+    # deferred: the fitting stack imports JAX and optimistix (1.5 s), which render never needs
+    _load("spacefit.fitting.loop", "spacefit.studies.lightcurve_files", "spacefit.fitting.report")
+    from spacefit.pipeline import fit_light_curve_to_folder  # here: with the light-curve readers (astropy, JAX) loaded above
+    from spacefit.studies.lightcurve_files import LightCurveFiles
+
+    files = LightCurveFiles(args.curve, args.scene, overrides=args.overrides, band=args.band, site=_site(args.site),
+                            sigma_mag=args.sigma_mag)
+    free = [name.strip() for name in args.free.split(",")]
+    result = fit_light_curve_to_folder(files, free, args.out, max_steps=args.max_steps, start=_start_values(args.start) or None,
+                                       allow_large=args.large, quiet=args.quiet, overwrite=args.overwrite, resume=args.resume)
+    return _verdict(result, args.out)
+
+
+def _site(text: str | None) -> Site | None:
+    """``--site LAT,LON[,HEIGHT_M]`` as an sf.Site (None: not given)."""
+    if text is None:
+        return None
+    from spacefit.studies.orbit import Site  # deferred: with the light-curve readers
+
+    try:
+        numbers = [float(v) for v in text.split(",")]
+    except ValueError:
+        numbers = []
+    if len(numbers) not in (2, 3):
+        raise InputError(f"`--site` takes LAT,LON or LAT,LON,HEIGHT_M (deg, deg, m), got {text!r}.")
+    return Site(*numbers)
+
+
+def _verdict(result: FitResult, out: str) -> int:
+    """Print a fit's result and say where its report is; its exit code (:func:`exit_code`)."""
+    from spacefit.fitting.report import format_result  # deferred: loaded with the fit
+
     print(format_result(result))
     code = exit_code(result.status)
     if result.status.interrupted:
-        print(f"spacefit: interrupted; the best point so far is in {args.out} (continue with --resume)", file=sys.stderr)
+        print(f"spacefit: interrupted; the best point so far is in {out} (continue with --resume)", file=sys.stderr)
     elif code == NOT_CONVERGED:
-        print(f"spacefit: the fit did not converge ({result.status}); its report is in {args.out}", file=sys.stderr)
+        print(f"spacefit: the fit did not converge ({result.status}); its report is in {out}", file=sys.stderr)
     elif code:
-        print(f"spacefit: {result.status}; its report is in {args.out}", file=sys.stderr)
+        print(f"spacefit: {result.status}; its report is in {out}", file=sys.stderr)
     return code
 
 
@@ -353,6 +420,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         if args.command == "fit":
             return _fit(args)
+        if args.command == "fit-light-curve":
+            return _fit_light_curve(args)
         if args.command == "sweep":
             return _sweep(args)
         scene = load_scene(args.scene, args.overrides)

@@ -89,6 +89,7 @@ RESULT_FILES = {
     "render": ({"radiance.exr", "preview.png", "scene.toml", "render.json"}, "render.json"),
     "fit": ({"fit.json", "fit.toml", "uncertainty.json", "comparison.png", "convergence.png", "residuals.fits", "residuals.png",
              "checkpoint.json", "frames.csv", "frames.png"}, "fit.json"),
+    "light-curve-fit": ({"fit.json", "fit.toml", "uncertainty.json", "convergence.png", "observation0.png", "checkpoint.json"}, "fit.json"),
     "table-fit": ({"fit.json", "report.txt"}, "fit.json"),
 }
 

@@ -10,7 +10,7 @@ import warnings
 import sys
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -25,7 +25,7 @@ from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
 from spacefit.interrupts import run_interruptibly
 from spacefit.locks import holding_lock
 from spacefit.output import prepare_output, staged_output, versions, write_json, write_render
-from spacefit.progress import Progress
+from spacefit.progress import Progress, ProgressCallback
 from spacefit.rendering.exr import write_exr
 from spacefit.rendering.png import write_png
 from spacefit.rendering.renderer import Renderer, errors_only, kernel_log
@@ -37,6 +37,7 @@ from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
 
 if TYPE_CHECKING:
+    from spacefit.studies.lightcurve_files import LightCurveFiles
     from spacefit.fitting.loop import FitOptions
     from spacefit.fitting.result import FitResult
     from spacefit.fitting.observation_files import ObservationFiles
@@ -249,8 +250,6 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
     # deferred: the fitting stack (JAX, optimistix: 1.5 s) and the image files' readers (astropy), which renders never need
     from spacefit.fitting.loop import FitOptions, fit
     from spacefit.fitting.observation_files import ObservationFiles
-    from spacefit.fitting.problem import SAY_SIZE
-    from spacefit.fitting.report import write_fit_report
     from spacefit.imageio import format_sensor_sources
 
     options = FitOptions() if options is None else options
@@ -266,18 +265,87 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
         _say(said, quiet or not said)
     images = [obs.reference for obs in observations]
     t_read = time.perf_counter() - t0
-    display, last = Progress(f"fit {', '.join(free)}"), [0, 0]
+    inputs = {**files.record(observations), "free": list(free), "options": options.to_dict()}
+    read = [*files.files, *(path for obs in observations for path in obs.scene.mesh_files())]
+
+    def solve(resumed: dict[str, Any], progress: ProgressCallback, plumbing: Resume) -> FitResult:
+        return fit(observations, free, progress=progress, resume=plumbing, cluster=cluster,
+                   **dataclasses.replace(options, **resumed).keywords())
+
+    return _checkpointed_fit(out_dir, solve, images, inputs=inputs, read=read, label=f"fit {', '.join(free)}",
+                             max_steps=options.max_steps, resume=resume, quiet=quiet, t_read=t_read)
+
+
+@holding_lock("out_dir")
+def fit_light_curve_to_folder(files: LightCurveFiles, free: Sequence[str], out_dir: str | Path, *, max_steps: int = 50,
+                              start: Mapping[str, float] | None = None, allow_large: bool = False, quiet: bool = False,
+                              overwrite: bool = False, resume: bool = False) -> FitResult:
+    """Fit the ``free`` parameters of a rendered target to a light-curve file (:func:`fit_light_curve`);
+    write its report (fit.json, fit.toml, uncertainty.json, convergence.png, observation0.png: the
+    magnitudes against the model's, ...) to ``out_dir``, as :func:`fit_to_folder` does an image fit's:
+    holding the folder's lock, every input checked before rendering, its size said first, progress,
+    a checkpoint after every step (``resume``: continue it, with the same files, free parameters and
+    options but ``max_steps`` and ``start``), and nothing left behind on an error.
+
+    Args:
+        files: the light-curve and scene files and how to read them (:class:`LightCurveFiles`).
+        free: registered parameter names (materials, attitude angles the points do not set).
+        out_dir: output folder of the report.
+        max_steps, start, allow_large: :func:`fit`'s.
+        quiet: no progress display or messages on stderr.
+        overwrite: replace a previous light-curve fit report in ``out_dir``.
+        resume: continue the interrupted fit whose checkpoint is in ``out_dir``.
+
+    Returns:
+        The fit's result.
+
+    Example:
+        Not run by the tests (a rendered light curve's fit takes minutes)::
+
+            files = sf.LightCurveFiles(curve="curve.csv", scene="lander.toml", sigma_mag=0.05)
+            result = sf.fit_light_curve_to_folder(files, ["parts.panels.alpha"], "lc-fit")
+    """
+    from spacefit.fitting.loop import fit  # deferred: the fitting stack (JAX, optimistix: 1.5 s), which renders never need
+    from spacefit.studies.lightcurve_files import LightCurveFiles
+
+    check_type("files", files, LightCurveFiles, "an sf.LightCurveFiles(curve, scene, ...)")
+    prepare_output(check_path("out_dir", out_dir), "light-curve-fit", overwrite=overwrite, resume=resume, inputs=files.files)
+    t0 = time.perf_counter()
+    curve = files.load()
+    t_read = time.perf_counter() - t0
+    inputs = {**files.record(), "free": list(free), "options": {"max_steps": max_steps, "start": start, "allow_large": allow_large}}
+
+    def solve(resumed: dict[str, Any], progress: ProgressCallback, plumbing: Resume) -> FitResult:
+        given = {"max_steps": max_steps, "start": start, **resumed}
+        return fit(curve, free, allow_large=allow_large, progress=progress, resume=plumbing, **given)
+
+    return _checkpointed_fit(out_dir, solve, [], inputs=inputs, read=[*files.files, *curve.scene.mesh_files()],
+                             label=f"light-curve fit {', '.join(free)}", max_steps=max_steps, resume=resume, quiet=quiet,
+                             t_read=t_read)
+
+
+def _checkpointed_fit(out_dir: str | Path, solve: Callable[[dict[str, Any], ProgressCallback, Resume], FitResult],
+                      references: Sequence[np.ndarray], *, inputs: dict[str, Any], read: Sequence[str | Path], label: str,
+                      max_steps: int, resume: bool, quiet: bool, t_read: float) -> FitResult:
+    """Run a fit (``solve``, given the options a resume changes, the progress callback and the checkpoint
+    plumbing) with a progress display (``label``) and a checkpoint in ``out_dir``, then write its report
+    (:func:`~spacefit.fitting.report.write_fit_report` of ``references``). ``inputs``: what fit.json
+    records and the checkpoint compares on ``resume``; ``read``: the files whose SHA-256 it keeps.
+    On an error nothing of this run stays (an interruption keeps the checkpoint)."""
+    from spacefit.fitting.problem import SAY_SIZE  # deferred: the fitting stack, which renders never need
+    from spacefit.fitting.report import write_fit_report
+
+    display, last = Progress(label), [0, 0]
 
     def progress(step: int, total: int) -> None:
         last[:] = step, total
         if not quiet:
             display(step, total)
 
-    inputs = {**files.record(observations), "free": list(free), "options": options.to_dict()}
-    read = [*files.files, *(path for obs in observations for path in obs.scene.mesh_files())]
     checkpoint = Checkpoint(Path(out_dir) / CHECKPOINT, inputs, read)
+    resumed: dict[str, Any] = {}
     if resume:
-        options = dataclasses.replace(options, **checkpoint.resume(options.max_steps))
+        resumed = checkpoint.resume(max_steps)
         _say(f"the solve in {out_dir} had ended at step {checkpoint.ended['steps']}; writing its report" if checkpoint.ended
              else f"resuming from step {checkpoint.steps} of the checkpoint in {out_dir}", quiet)
 
@@ -287,7 +355,7 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
         plumbing = Resume(checkpoint.update, checkpoint.end, checkpoint.ended, checkpoint.history if resume else ())
         said = SAY_SIZE.set(lambda size: _say(size, quiet))  # its size, once its inputs are checked, before it renders
         try:
-            result = fit(observations, free, progress=progress, resume=plumbing, cluster=cluster, **options.keywords())
+            result = solve(resumed, progress, plumbing)
         finally:
             SAY_SIZE.reset(said)
         edited = changed(checkpoint.digests)  # the files read at the start, read again: a result of files that changed is none
@@ -298,7 +366,7 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
         if not quiet and last[0] < last[1]:
             display(last[0], last[0])  # the solve stopped before its step limit: end the display there
         timings = {"read_inputs": t_read, "setup": t_fit - result.wall_time_s}
-        write_fit_report(out_dir, result, images, inputs=inputs, timings_s=timings)
+        write_fit_report(out_dir, result, references, inputs=inputs, timings_s=timings)
     except Exception:
         # an error, not an interruption: nothing of this run stays (an interruption keeps the checkpoint)
         if not resume:
@@ -309,7 +377,7 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
         raise
     if not result.status.interrupted:
         checkpoint.remove()
-    _say(f"wrote {Path(out_dir) / 'fit.json'}, fit.toml, uncertainty.json, comparison.png, convergence.png and residuals", quiet)
+    _say(f"wrote {Path(out_dir) / 'fit.json'} and the rest of the report", quiet)
     return result
 
 

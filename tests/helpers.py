@@ -2,12 +2,15 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import trimesh
 
+from spacefit.precision import float64
+from spacefit.scene.parameters import scene_value
 from spacefit.scene.schema import Scene
 from spacefit.scene.toml import scene_from_dict
 
@@ -72,3 +75,39 @@ def pixel_directions(scene: Scene) -> np.ndarray:
     y = -(jj - v0) / intr.focal_px
     d = x[..., None] * cam.right + y[..., None] * cam.up + cam.forward
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def lander(size: int, spp: int) -> Scene:
+    """The default lander, unwrinkled, ``size`` x ``size`` px over the default field of view at ``spp``."""
+    return Scene().with_values({"render.resolution": [size, size], "camera.pixel_pitch_mm": 2400.0 / size,
+                                "render.spp": spp, "wrinkles.enabled": False})
+
+
+def turning(count: int) -> list[dict[str, float]]:
+    """``count`` points of the lander turned about z once, the sun's elevation swinging 10 to 50 deg."""
+    angles = np.linspace(0.0, 360.0, count, endpoint=False)
+    return [{"target.attitude_z_deg": float(a), "sun.elevation_deg": 30.0 + 20.0 * math.sin(math.radians(a))} for a in angles]
+
+
+@float64
+def irradiances(scene: Scene, free: tuple[str, ...], points: list[dict[str, Any]], x: list[float], seed: int = 1,
+                observer_range_m: float | None = None) -> np.ndarray:
+    """The light-curve model's irradiance (W m^-2) of ``points`` at the free values ``x`` (seed index 0)."""
+    # here: the fitting stack (JAX), which the other helpers' tests never need
+    import jax.numpy as jnp
+
+    from spacefit.studies.lightcurve_fit import RenderedLightCurve
+
+    curve = RenderedLightCurve(scene, points, np.zeros(len(points)), 0.05, observer_range_m=observer_range_m, seed=seed)
+    return np.asarray(curve.block(free).model(jnp.asarray(x, dtype=jnp.float64), 0))
+
+
+def observed(scene: Scene, free: tuple[str, ...], points: list[dict[str, Any]], sigma: float) -> np.ndarray:
+    """Magnitudes of ``points`` at the scene's values, rendered at 8 x its samples with another seed, plus
+    normal noise of ``sigma`` mag."""
+    from spacefit.studies.lightcurve import SUN_MAGNITUDES  # here: with the fitting stack, as irradiances
+
+    truth = irradiances(scene.with_values({"render.spp": 8 * scene.render.spp}), free, points,
+                        [scene_value(scene, n) for n in free], seed=77)
+    magnitude = SUN_MAGNITUDES["V"] - 2.5 * np.log10(truth / scene.sun.irradiance_w_m2)
+    return magnitude + sigma * np.random.default_rng(0).standard_normal(len(points))

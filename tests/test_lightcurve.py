@@ -4,17 +4,14 @@ and magnitudes, directions as angles in the target's frame, and spins."""
 from __future__ import annotations
 
 import math
-from typing import Any
 
-import jax.numpy as jnp
 import numpy as np
 import pytest
-from helpers import small_scene, write_sphere_obj
+from helpers import irradiances, lander, observed, small_scene, turning, write_sphere_obj
 
 import spacefit as sf
-from spacefit.precision import float64
 from spacefit.scene.parameters import scene_value
-from spacefit.studies.lightcurve import SUN_MAGNITUDES, direction
+from spacefit.studies.lightcurve import direction
 from spacefit.studies.lightcurve_fit import RenderedLightCurve
 
 
@@ -164,35 +161,6 @@ def test_a_rendered_light_curve_of_the_lander_is_fitted_for_kd_within_its_error(
     assert abs(kd - 0.5) < 3 * error and error < 0.02
     with pytest.raises(sf.InputError, match="every point must set the same values"):
         fit_light_curve(base, ["parts.body.kd"], [{"target.attitude_z_deg": 0.0}, {"sun.elevation_deg": 10.0}], [1.0, 2.0], 0.01)
-
-
-def lander(size: int, spp: int) -> sf.Scene:
-    """The default lander, unwrinkled, ``size`` x ``size`` px over the default field of view at ``spp``."""
-    return sf.Scene().with_values({"render.resolution": [size, size], "camera.pixel_pitch_mm": 2400.0 / size,
-                                   "render.spp": spp, "wrinkles.enabled": False})
-
-
-def turning(count: int) -> list[dict[str, float]]:
-    """``count`` points of the lander turned about z once, the sun's elevation swinging 10 to 50 deg."""
-    angles = np.linspace(0.0, 360.0, count, endpoint=False)
-    return [{"target.attitude_z_deg": float(a), "sun.elevation_deg": 30.0 + 20.0 * math.sin(math.radians(a))} for a in angles]
-
-
-@float64
-def irradiances(scene: sf.Scene, free: tuple[str, ...], points: list[dict[str, Any]], x: list[float], seed: int = 1,
-                observer_range_m: float | None = None) -> np.ndarray:
-    """The light-curve model's irradiance (W m^-2) of ``points`` at the free values ``x`` (seed index 0)."""
-    curve = RenderedLightCurve(scene, points, np.zeros(len(points)), 0.05, observer_range_m=observer_range_m, seed=seed)
-    return np.asarray(curve.block(free).model(jnp.asarray(x, dtype=jnp.float64), 0))
-
-
-def observed(scene: sf.Scene, free: tuple[str, ...], points: list[dict[str, Any]], sigma: float) -> np.ndarray:
-    """Magnitudes of ``points`` at the scene's values, rendered at 8 x its samples with another seed, plus
-    normal noise of ``sigma`` mag."""
-    truth = irradiances(scene.with_values({"render.spp": 8 * scene.render.spp}), free, points,
-                        [scene_value(scene, n) for n in free], seed=77)
-    magnitude = SUN_MAGNITUDES["V"] - 2.5 * np.log10(truth / scene.sun.irradiance_w_m2)
-    return magnitude + sigma * np.random.default_rng(0).standard_normal(len(points))
 
 
 def test_light_curve_points_take_vector_geometry_as_scenes_do():

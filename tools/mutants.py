@@ -149,7 +149,7 @@ MUTANTS = (
            ("tests/test_stopping.py::test_consecutive_rejections_below_the_relative_tolerance_stop_the_solve",)),
     # a pass: each frame's scene from its table row, each frame's Jacobian on its own rows
     Mutant("frame-vector-components-reversed", "spacefit/fitting/passes.py",
-           "[_plain(cols[parts[c]][i]) for c in COMPONENTS]", "[_plain(cols[parts[c]][i]) for c in reversed(COMPONENTS)]",
+           "[cell(cols[parts[c]][i]) for c in COMPONENTS]", "[cell(cols[parts[c]][i]) for c in reversed(COMPONENTS)]",
            ("tests/test_pass.py::test_each_frames_scene_equals_one_built_by_hand",)),
     Mutant("frame-jacobian-on-another-frame", "spacefit/fitting/frames.py",
            "for J, idx in zip(Js, indices))", "for J, idx in zip(Js, indices[::-1]))",

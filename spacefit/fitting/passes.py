@@ -148,7 +148,7 @@ class Pass:
             if required not in names:
                 raise InputError(f"the frame table has no `{required}` column (columns: {', '.join(names) or 'none'}); "
                                  "every frame needs its observation file and its time.")
-        cols = {name: _column(columns[name]) for name in names}
+        cols = {name: table_column(columns[name]) for name in names}
         lengths = {name: len(col) for name, col in cols.items()}
         n = lengths[FILE]
         if any(length != n for length in lengths.values()):
@@ -156,7 +156,7 @@ class Pass:
         times = [_time_text(cols[TIME][i], i) for i in range(n)]
         seconds = elapsed_seconds(times)
         base = Path(base_dir)
-        files = [base / str(_plain(cols[FILE][i])).strip() for i in range(n)]
+        files = [base / str(cell(cols[FILE][i])).strip() for i in range(n)]
         for what, keys in (("file", [str(f) for f in files]), ("time", seconds)):
             first: dict[Any, int] = {}
             for i, key in enumerate(keys):
@@ -165,11 +165,11 @@ class Pass:
                                      f"{str(files[i]) if what == 'file' else times[i]!r}: a frame is one observation, listed once "
                                      "(a repeated frame would count its pixels twice); remove one of the rows.")
                 first[key] = i
-        values = _scene_columns(cols, n)
+        values = scene_columns(cols, n)
         frames = []
         for i in range(n):
-            sensor = {name[len(SENSOR_PREFIX):]: _plain(cols[name][i]) for name in cols if name.startswith(SENSOR_PREFIX)}
-            mask = base / str(_plain(cols[MASK][i])).strip() if MASK in cols else None
+            sensor = {name[len(SENSOR_PREFIX):]: cell(cols[name][i]) for name in cols if name.startswith(SENSOR_PREFIX)}
+            mask = base / str(cell(cols[MASK][i])).strip() if MASK in cols else None
             frames.append(Frame(files[i], times[i], seconds[i], values[i], sensor, mask))
         return cls(tuple(frames))
 
@@ -225,19 +225,19 @@ class Pass:
                                 times=[f.time for f in self.frames], **options)
 
 
-def _column(values: Any) -> list[Any]:
-    """A column as a list of per-frame values (a vector column: per-frame lists of 3)."""
+def table_column(values: Any) -> list[Any]:
+    """A table's column as a list of per-row values (a vector column: per-row lists of 3)."""
     if hasattr(values, "isot"):  # an astropy Time column (ECSV)
         return list(values.isot)
     if np.any(np.ma.getmaskarray(values)):
-        raise InputError("the frame table has empty cells; give every frame every column's value.")
+        raise InputError("the table has empty cells; give every row every column's value.")
     array = np.asarray(values)
     if array.ndim == 0:
-        raise InputError(f"a frame table column must hold one value per frame, got {quote(values)}.")
+        raise InputError(f"a table column must hold one value per row, got {quote(values)}.")
     return [v.tolist() if isinstance(v, np.ndarray) else v for v in array]
 
 
-def _plain(value: Any) -> Any:
+def cell(value: Any) -> Any:
     """A table cell as a plain Python value."""
     if isinstance(value, bytes):
         return value.decode()
@@ -245,7 +245,7 @@ def _plain(value: Any) -> Any:
 
 
 def _time_text(value: Any, row: int) -> str:
-    value = _plain(value)
+    value = cell(value)
     if isinstance(value, bool):
         raise InputTypeError(f"frame {row}: `time` must be an ISO 8601 UTC time or seconds, got {value!r}.")
     return repr(float(value)) if isinstance(value, (int, float)) else str(value).strip()
@@ -276,10 +276,10 @@ def elapsed_seconds(times: Sequence[str]) -> list[float]:
     return out
 
 
-def _scene_columns(cols: Mapping[str, list[Any]], n: int) -> list[dict[str, Any]]:
-    """Per frame, the scene values of the table's columns: scalar names as given, vector keys from one
-    column of 3 or from their KEY.x, KEY.y, KEY.z columns."""
-    names = [c for c in cols if c not in (FILE, TIME, MASK) and not c.startswith(SENSOR_PREFIX)]
+def scene_columns(cols: Mapping[str, list[Any]], n: int, other: Sequence[str] = (FILE, TIME, MASK)) -> list[dict[str, Any]]:
+    """Per row, the scene values of a table's columns (those not in ``other`` nor ``sensor.FIELD``): scalar
+    names as given, vector keys from one column of 3 or from their KEY.x, KEY.y, KEY.z columns."""
+    names = [c for c in cols if c not in other and not c.startswith(SENSOR_PREFIX)]
     split: dict[str, dict[str, str]] = {}
     plain = []
     for name in names:
@@ -291,14 +291,14 @@ def _scene_columns(cols: Mapping[str, list[Any]], n: int) -> list[dict[str, Any]
     for key, parts in split.items():
         if set(parts) != set(COMPONENTS):
             missing = [f"{key}.{c}" for c in COMPONENTS if c not in parts]
-            raise InputError(f"the frame table gives {', '.join(sorted(parts.values()))} but not {', '.join(missing)}: "
+            raise InputError(f"the table gives {', '.join(sorted(parts.values()))} but not {', '.join(missing)}: "
                              f"`{key}` needs all three components.")
         if key in plain:
-            raise InputError(f"the frame table gives `{key}` both whole and by components; keep one.")
+            raise InputError(f"the table gives `{key}` both whole and by components; keep one.")
     rows = []
     for i in range(n):
-        row = {name: _plain(cols[name][i]) for name in plain}
-        row.update({key: [_plain(cols[parts[c]][i]) for c in COMPONENTS] for key, parts in split.items()})
+        row = {name: cell(cols[name][i]) for name in plain}
+        row.update({key: [cell(cols[parts[c]][i]) for c in COMPONENTS] for key, parts in split.items()})
         if "camera.attitude_deg" in row and "camera.look_at_m" not in row:
             row["camera.look_at_m"] = []  # an attitude given per frame poses the camera by attitude
         rows.append(row)

@@ -315,12 +315,11 @@ def setup(
     x0_user = np.array([start[n] if n in start else _own_value(n, observations, others, image_names) for n in user.names], dtype=float)
     user.check_start(x0_user)
     if observations:
-        size, estimate = images_memory(observations, user.names, image_names, render.spp, allow_large=allow_large)
-        say = SAY_SIZE.get()
-        if say is not None:
-            say(f"{size} (estimate)")
-        elif estimate > LARGE_FIT_BYTES:
-            warnings.warn(f"{size} (estimate).", stacklevel=3)
+        say_size(*images_memory(observations, user.names, image_names, render.spp, allow_large=allow_large))
+    for other in others:  # a rendered value observation (a light curve's points) says its own
+        sized = other.size(user.names, allow_large=allow_large)
+        if sized is not None:
+            say_size(*sized)
     rms_index = None
     if wrinkle_coordinates == "rms" and {"wrinkles.D", "wrinkles.G"} <= set(user.names):
         scene = observations[0].scene
@@ -348,6 +347,16 @@ def setup(
                        render.integrator, executor, blocks, image_names)
     noise_given = all(o.sensor is not None or o.sigma is not None for o in observations) and all(b.noise_known for b in blocks)
     return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index, given, noise_given, image_names, layout)
+
+
+def say_size(size: str, estimate: int) -> None:
+    """Say a fit's size (in words, its estimated peak memory ``estimate`` in bytes) to :data:`SAY_SIZE`,
+    or, unset, warn it when above :data:`~spacefit.rendering.memory.LARGE_FIT_BYTES`."""
+    say = SAY_SIZE.get()
+    if say is not None:
+        say(f"{size} (estimate)")
+    elif estimate > LARGE_FIT_BYTES:
+        warnings.warn(f"{size} (estimate).", stacklevel=4)
 
 
 def images_memory(images: Sequence[Observation], free: Sequence[str], image_names: frozenset[str] | set[str], spp: int | None, *,

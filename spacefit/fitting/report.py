@@ -5,7 +5,7 @@
 * ``fit.toml``: the fitted scene (:attr:`FitResult.scene`), which renders the fit again;
 * ``uncertainty.json``: :meth:`FitResult.uncertainty`, values, standard errors, units and the
   correlation matrix (strict JSON: a non-finite error is null);
-* ``comparison.png``, ``convergence.png``: :func:`plot_comparison` and
+* ``comparison.png`` (a fit of images), ``convergence.png``: :func:`plot_comparison` and
   :func:`plot_convergence`, saved through matplotlib's Agg canvas;
 * ``frames.csv``, ``frames.png`` (a pass: a :class:`PassObservation`,
   or images whose ``inputs`` give each one's time): per frame its time, goodness of fit and own
@@ -13,7 +13,7 @@
   i-th observation where a fit has several passes; no plot where a frame has neither own parameters nor a known noise);
 * ``observation<i>.png``: the figure of the i-th observation of another kind (a table, a light curve),
   its :meth:`~spacefit.fitting.observations.base.Reported.plot`;
-* ``residuals.fits``: :attr:`FitResult.residuals`, reference - model, one image extension per
+* ``residuals.fits`` (a fit of images): :attr:`FitResult.residuals`, reference - model, one image extension per
   observation (``EXTNAME`` ``OBS<k>``, (channels, height, width) float32 in the unit ``BUNIT`` of the
   observation, NaN where not fitted; rows stored top row first, ``ROWORDER = 'TOP-DOWN'``), and
   ``residuals.png``, its picture (:func:`~spacefit.fitting.plots.plot_residuals`).
@@ -58,8 +58,8 @@ def write_fit_report(
     inputs: Mapping[str, Any] | None = None,
     timings_s: Mapping[str, float] | None = None,
 ) -> Path:
-    """Write fit.json, fit.toml, uncertainty.json, comparison.png, convergence.png, residuals.fits and
-    residuals.png into ``out_dir`` all at once.
+    """Write fit.json, fit.toml, uncertainty.json, convergence.png and, with images, comparison.png,
+    residuals.fits and residuals.png into ``out_dir`` all at once.
 
     Args:
         out_dir: output folder (created; on any error nothing is left behind).
@@ -98,10 +98,11 @@ def write_fit_report(
         write_json(stage / "uncertainty.json", result.uncertainty())
         if result.scene is not None:
             (stage / "fit.toml").write_text(result.scene.to_toml(), encoding="utf-8")
-        _save(plot_comparison(result, references), stage / "comparison.png")
         _save(plot_convergence(result), stage / "convergence.png")
-        write_residuals(stage / "residuals.fits", result)
-        _save(plot_residuals(result), stage / "residuals.png")
+        if result.images:  # images' figures; a table's or a light curve's is its observation<i>.png
+            _save(plot_comparison(result, references), stage / "comparison.png")
+            write_residuals(stage / "residuals.fits", result)
+            _save(plot_residuals(result), stage / "residuals.png")
         passes = [i for i, o in enumerate(result.observations) if isinstance(o, PassObservation)]
         for i, (observation, entries) in enumerate(zip(result.observations, result.entries)):
             if i in passes:  # its frames against time

@@ -33,6 +33,7 @@ from spacefit.fitting.problem import INDEPENDENT_SEED_OFFSET
 from spacefit.geometry.frames import pixel_solid_angles
 from spacefit.progress import Progress, ProgressCallback
 from spacefit.rendering.bridge import seeds_array
+from spacefit.rendering.memory import check_fit_memory, describe_fit
 from spacefit.scene.assembly import assemble
 from spacefit.scene.parameters import IMAGE, available, fd_step, scene_value
 from spacefit.scene.schema import Scene
@@ -166,6 +167,16 @@ class RenderedLightCurve(LightCurveKind):
 
         return Block(MeasuredValues(data, sigma, True, "W m^-2", "light curve"), model, known, rendered=True, spp=spp, resampled=resampled)
 
+    def size(self, free: Sequence[str], *, allow_large: bool = False) -> tuple[str, int] | None:
+        """The fit's size in words and its estimated peak memory (bytes): its points are the frames of one
+        batch (the memory check of an image fit, which refuses a fit this machine cannot hold unless
+        ``allow_large``), each seeing the free parameters it depends on."""
+        intrinsics, own = assemble(self.scene).intrinsics, self.parameters()
+        columns = sum(name in own for name in free)
+        estimate = check_fit_memory(len(self.scenes), intrinsics.width, intrinsics.height, columns, self.scene.render.spp,
+                                    allow_large=allow_large)
+        return describe_fit(len(self.scenes), intrinsics.width, intrinsics.height, estimate), estimate
+
     def zero_point(self) -> tuple[float, float]:
         """The sun's magnitude in the band (:attr:`sun_magnitude` or the band's) and the scene sun's irradiance."""
         return SUN_MAGNITUDES[self.band] if self.sun_magnitude is None else self.sun_magnitude, self.scene.sun.irradiance_w_m2
@@ -190,13 +201,17 @@ def fit_light_curve(
     observer_range_m: float | None = None,
     seed: int = 1,
     max_steps: int = 50,
+    start: Mapping[str, float] | None = None,
+    allow_large: bool = False,
     progress: ProgressCallback | None = None,
     resume: Resume = Resume(),
     quiet: bool = False,
 ) -> FitResult:
     """Fit the registered parameters ``free`` of a rendered target (materials, attitude angles, ...)
     to an observed light curve (:class:`RenderedLightCurve` of these arguments) with
-    :func:`fit`, from the scene's values. ``progress``: called with (step, max_steps) after
+    :func:`fit`, from the scene's values or ``start``'s. Its size (points, pixels, estimated
+    memory: :meth:`RenderedLightCurve.size`) is said as an image fit's is, and a fit above the memory
+    available is refused unless ``allow_large``. ``progress``: called with (step, max_steps) after
     each step (default: a progress display on stderr, none with ``quiet``); ``resume``: the fit's
     checkpoint plumbing (:class:`Resume`), as :func:`fit` takes it.
 
@@ -211,6 +226,8 @@ def fit_light_curve(
         observer_range_m: the observer's distance (m; None: the camera's).
         seed: the renders' seed.
         max_steps: the solver's step limit.
+        start: start values by name (physical units); None: the scene's.
+        allow_large: run a fit above the memory available.
 
     Returns:
         The :class:`FitResult`.
@@ -229,4 +246,4 @@ def fit_light_curve(
     curve = RenderedLightCurve(scene, points, magnitude, magnitude_sigma, band, sun_magnitude, observer_range_m, seed)
     if progress is None and not quiet:
         progress = Progress(f"light-curve fit {', '.join(check_name_list('free', free))}")
-    return fit(curve, free, max_steps=max_steps, progress=progress, resume=resume)
+    return fit(curve, free, max_steps=max_steps, start=start, allow_large=allow_large, progress=progress, resume=resume)

@@ -406,6 +406,26 @@ def observation_points(scene: Scene, observations: LightCurveObservations) -> li
     return points
 
 
+def rendered_light_curve(scene: Scene, observations: LightCurveObservations, *, seed: int = 1) -> RenderedLightCurve:
+    """The path tracer's light curve of ``observations`` of ``scene``'s target: every lit observation at
+    its geometry (:func:`observation_points`, the scene's attitude law fixed: :func:`body_fixed`), its
+    magnitude carried to their median range by the inverse square law (exact for an unresolved target).
+
+    Raises:
+        InputError: every observation in the Earth's shadow.
+    """
+    scene = body_fixed(check_scene(scene))  # type: ignore[arg-type]
+    check_type("observations", observations, LightCurveObservations, "an sf.LightCurveObservations (sf.read_light_curve)")
+    lit = np.flatnonzero(~observations.in_shadow)
+    if not lit.size:
+        raise InputError(f"every observation of {observations.source} is in the Earth's shadow: there is nothing to fit.")
+    obs = observations.subset(lit)
+    reference = float(np.median(obs.range_m))
+    magnitude = obs.magnitude - 5.0 * np.log10(obs.range_m / reference)
+    return RenderedLightCurve(scene, observation_points(scene, obs), magnitude, obs.magnitude_sigma, obs.band,
+                              observer_range_m=reference, seed=seed)
+
+
 @dataclass(frozen=True, eq=False)
 class ChosenLightCurve(LightCurveKind):
     """A light curve fitted with the model :func:`choose_light_curve_model` chose: it is the ``chosen``
@@ -541,10 +561,7 @@ def choose_light_curve_model(scene: Scene, observations: LightCurveObservations,
         chosen: PlateLightCurve | RenderedLightCurve = PlateLightCurve(target_plates(scene), observations, scene.sun.irradiance_w_m2)
         reason = f"light-curve model: flat plates (sf.target_plates), {measured} < {said}"
     else:
-        reference = float(np.median(obs.range_m))
-        magnitude = obs.magnitude - 5.0 * np.log10(obs.range_m / reference)
-        sigma = None if obs.magnitude_sigma is None else obs.magnitude_sigma
-        chosen = RenderedLightCurve(scene, points, magnitude, sigma, obs.band, observer_range_m=reference)
+        chosen = rendered_light_curve(scene, observations)
         reason = f"light-curve model: path tracer (sf.RenderedLightCurve), {measured} >= {said}"
     return ChosenLightCurve(chosen, comparison, noise, reason)
 

@@ -151,6 +151,11 @@ class ValueObservation(ABC):
         """The residual block of a fit whose free values are ``free``, in order (the model takes
         their vector; names it does not depend on are ignored, the others held at :meth:`start`)."""
 
+    def size(self, free: Sequence[str], *, allow_large: bool = False) -> tuple[str, int] | None:
+        """Its renders' size in words and their estimated peak memory (bytes), refused above the
+        memory available unless ``allow_large``; None (the default) where it renders nothing."""
+        return None
+
     def coordinate(self, name: str) -> Bijection:
         """The solver's coordinate of ``name``: a bijection onto the registry's bounds
         (:func:`spacefit.fitting.params.bijection`), unless this observation narrows them."""
