@@ -93,8 +93,14 @@ html_show_sourcelink = False
 
 def _constant_docstring(app, what, name, obj, options, lines) -> None:
     """A public constant (a dict or tuple such as ``sf.PARAMETERS``) would show its type's docstring:
-    say what it holds instead."""
-    if isinstance(obj, (dict, tuple, list, frozenset)) and lines and lines[0].startswith(("dict(", "Built-in", "tuple(", "list(")):
+    show the ``#:`` comment above it in its home module, else say what it holds."""
+    from sphinx.pycode import ModuleAnalyzer
+
+    home = spacefit._EXPORTS.get(name.removeprefix("spacefit."))
+    comment = ModuleAnalyzer.for_module(home[0]).find_attr_docs().get(("", home[1])) if what == "data" and home else None
+    if comment:
+        lines[:] = list(comment)
+    elif isinstance(obj, (dict, tuple, list, frozenset)) and lines and lines[0].startswith(("dict(", "Built-in", "tuple(", "list(")):
         lines[:] = [f"A {type(obj).__name__} of {len(obj)} entries: " + ", ".join(f"``{k}``" for k in list(obj)[:12])
                     + (", ..." if len(obj) > 12 else "") + "."]
 

@@ -107,7 +107,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "light_curve_convergence": ("spacefit.studies.lightcurve", "light_curve_convergence"),
     "fit_light_curve": ("spacefit.studies.lightcurve_fit", "fit_light_curve"),
     "Mirror": ("spacefit.materials", "Mirror"),
-    "PRESETS": ("spacefit.materials", "PRESETS"),
+    "PRESETS": ("spacefit.materials.registry", "PRESETS"),
     "fit_to_folder": ("spacefit.pipeline", "fit_to_folder"),
     "fit_light_curve_to_folder": ("spacefit.pipeline", "fit_light_curve_to_folder"),
     "LightCurveFiles": ("spacefit.studies.lightcurve_files", "LightCurveFiles"),

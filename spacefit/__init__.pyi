@@ -67,10 +67,10 @@ from spacefit.materials import Lambert as Lambert
 from spacefit.materials import MaterialModel as MaterialModel
 from spacefit.materials import Mirror as Mirror
 from spacefit.materials import OrenNayar as OrenNayar
-from spacefit.materials import PRESETS as PRESETS
 from spacefit.materials import register_material as register_material
 from spacefit.materials.measured import BRDFTable as BRDFTable
 from spacefit.materials.measured import read_brdf_table as read_brdf_table
+from spacefit.materials.registry import PRESETS as PRESETS
 from spacefit.materials.tabulated import TabulatedBRDF as TabulatedBRDF
 from spacefit.pipeline import fit_light_curve_to_folder as fit_light_curve_to_folder
 from spacefit.pipeline import fit_to_folder as fit_to_folder

@@ -46,6 +46,14 @@ class Case:
         free: the free parameters.
         start: where fits start (physical units).
         fit_values: scene values fits render with (e.g. fewer samples).
+
+    Example:
+        >>> import spacefit as sf
+        >>> case = sf.load_case("default")
+        >>> case.truth
+        {'parts.panels.alpha_x': 0.08, 'parts.panels.alpha_y': 0.05, 'parts.legs.kd': 0.2}
+        >>> case.start
+        {'parts.panels.alpha_x': 0.04, 'parts.panels.alpha_y': 0.025, 'parts.legs.kd': 0.1}
     """
 
     name: str
@@ -81,7 +89,16 @@ class Case:
 
 
 def case_names() -> list[str]:
-    """The names of the synthetic cases."""
+    """The names of the synthetic cases :func:`load_case` loads (package data, in the order of its cases file).
+
+    Returns:
+        The case names.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.case_names()
+        ['default', 'panels', 'materials', 'wrinkles', 'wrinkles_128', 'wrinkles_far']
+    """
     return list(_table())
 
 
@@ -94,7 +111,27 @@ def _table() -> dict[str, Any]:
 
 
 def load_case(name: str) -> Case:
-    """The synthetic case ``name`` (see :func:`case_names`)."""
+    """A synthetic fitting case with known truth: the scene its reference is rendered from, the
+    parameters a fit frees and where it starts. The tests, the experiments and the documentation's
+    examples share these cases.
+
+    Args:
+        name: one of :func:`case_names`.
+
+    Returns:
+        The :class:`Case`; ``case.reference()`` renders its reference image.
+
+    Raises:
+        InputError: ``name`` is not one of :func:`case_names`.
+
+    Example:
+        >>> import spacefit as sf
+        >>> case = sf.load_case("default")
+        >>> case.free
+        ('parts.panels.alpha_x', 'parts.panels.alpha_y', 'parts.legs.kd')
+        >>> case.truth_scene.render.resolution
+        (128, 128)
+    """
     table = _table()
     entry = table[check_choice("case", name, table)]
     with as_file(CASES_DIR / f"{entry.get('scene', name)}.toml") as path:

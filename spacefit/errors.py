@@ -17,7 +17,21 @@ import numpy as np
 
 
 class InputError(ValueError):
-    """A user-supplied value is missing, malformed or outside its allowed range."""
+    """A user-supplied value is missing, malformed or outside its allowed range.
+
+    Every public function checks its inputs before any rendering starts and raises this error with a
+    one-line message naming the argument, the value given and the values allowed. It is a
+    ``ValueError``, so code that catches those catches it too; a value of the wrong type raises a
+    subclass that is also a ``TypeError``.
+
+    Example:
+        >>> import spacefit as sf
+        >>> try:
+        ...     sf.load_case("nope")
+        ... except sf.InputError as err:
+        ...     print(err)
+        `case` must be one of 'default', 'materials', 'panels', 'wrinkles', 'wrinkles_128', 'wrinkles_far'; got 'nope'.
+    """
 
 
 class InputTypeError(InputError, TypeError):

@@ -1,6 +1,6 @@
 """Where work runs: this process or a dask.distributed cluster, named by one ``cluster=`` argument.
 
-Fits (:func:`spacefit.fit`), sweeps (:func:`spacefit.sweep`) and light curves (:func:`spacefit.light_curve`)
+Fits (:func:`fit`), sweeps (:func:`spacefit.sweep`) and light curves (:func:`spacefit.light_curve`)
 take the same ``cluster``: None, this process; an int N, a new local cluster of N single-threaded
 worker processes (closed when the work ends); a scheduler's address (``tcp://host:8786``); or a
 ``distributed.Client`` of the caller's (left open; a subclass's too). :func:`check_cluster` refuses
@@ -43,7 +43,16 @@ CLUSTER_WORDS = "None, a number of local workers, a scheduler address or a dask 
 class ClusterError(RuntimeError):
     """Work on dask that cannot go on, in one line (the CLI exits 1): a point whose worker died more
     than its retry budget allows, naming the point and the likely cause, or no point finished for the
-    stated time. Everything finished before it is kept."""
+    stated time. Everything finished before it is kept.
+
+    A ``RuntimeError``: not a bad input but a cluster that failed. A rerun of the sweep with the same
+    store computes only the points left.
+
+    Example:
+        >>> import spacefit as sf
+        >>> issubclass(sf.ClusterError, RuntimeError)
+        True
+    """
 
 
 def is_client(cluster: object) -> bool:

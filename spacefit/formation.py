@@ -133,7 +133,7 @@ def expected_electrons(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsi
 
 def expected_dn(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Intrinsics,
                 flat: Float[np.ndarray, "..."] | None = None) -> Float[Array, "h w c"]:
-    """Noise-free mean DN, ``bias + gain * expected_electrons``: not rounded, not clipped (see :func:`~spacefit.sensor.saturated_mask`).
+    """Noise-free mean DN, ``bias + gain * expected_electrons``: not rounded, not clipped (see :func:`saturated_mask`).
 
     Args:
         radiance: (height, width, channels) entrance-pupil radiance, W m^-2 sr^-1 (NumPy or JAX).
@@ -141,6 +141,16 @@ def expected_dn(radiance: Float[Array, "h w c"], sensor: Sensor, intrinsics: Int
             relative response, multiplying the signal above the bias (None: uniform).
     Returns:
         (height, width, channels) float64 JAX array, DN.
+
+    Raises:
+        InputError: ``radiance`` not (height, width, channels) of the camera's size, or a bad ``flat``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> camera = sf.Intrinsics(focal_length=0.05, pixel_pitch=1e-5, width=4, height=3)
+        >>> dn = sf.expected_dn(np.full((3, 4, 3), 1.0), sf.Sensor(), camera)
+        >>> dn.shape
+        (3, 4, 3)
     """
     _check_radiance(radiance, sensor, intrinsics)
     return _finite(dn_fn(sensor, intrinsics, np.shape(radiance)[2], flat)(radiance), radiance)
@@ -160,7 +170,19 @@ def noise_variance_dn(expected: Float[Array, "..."], sensor: Sensor) -> Float[Ar
 
     ``gain^2 (electrons + read_noise^2) + 1/12``: Poisson shot noise (variance = mean electrons,
     ``(expected - bias) / gain``), Gaussian read noise and the rounding to integers (uniform, 1/12).
-    Meaningless where :func:`~spacefit.sensor.saturated_mask` holds.
+    Meaningless where :func:`saturated_mask` holds.
+
+    Args:
+        expected: mean DN (:func:`expected_dn`), any shape.
+        sensor: the sensor (its bias, gain and read noise).
+
+    Returns:
+        The variance (DN^2), ``expected``'s shape.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sf.noise_variance_dn(np.array([100.0, 1000.0]), sf.Sensor())  # bias alone: read noise and rounding
+        Array([ 16.08..., 736.08...], dtype=float32)
     """
     check_type("sensor", sensor, Sensor, "an sf.Sensor")
     if not isinstance(expected, jax.Array):
@@ -178,8 +200,8 @@ def noise_variance_terms(sensor: Sensor) -> tuple[float, float, float]:
 
 def observe(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: Intrinsics, seed: int) -> np.ndarray:
     """One simulated exposure: DN with shot and read noise, the full well, rounding and the ADC's range.
-    Warns (``UserWarning``) when more than :data:`~spacefit.sensor.SATURATED_WARNING_FRACTION` of the
-    target's pixels (those with radiance > 0) saturate; :func:`~spacefit.sensor.choose_exposure` picks
+    Warns (``UserWarning``) when more than 0.1 % of the
+    target's pixels (those with radiance > 0) saturate; :func:`choose_exposure` picks
     an exposure that leaves them unsaturated.
 
     Args:
@@ -187,6 +209,16 @@ def observe(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrinsics: In
         seed: seed of the noise (NumPy's default generator); the same seed gives the same image.
     Returns:
         (height, width, channels) uint16 (bit_depth <= 16) or uint32 DN.
+
+    Raises:
+        InputError: a bad ``radiance`` (shape, negative or non-finite values) or ``seed``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> camera = sf.Intrinsics(focal_length=0.05, pixel_pitch=1e-5, width=4, height=3)
+        >>> dn = sf.observe(np.full((3, 4, 3), 1.0), sf.Sensor(), camera, seed=0)
+        >>> dn.shape, dn.dtype
+        ((3, 4, 3), dtype('uint16'))
     """
     check_count("seed", seed, 0, optional=False)
     mean = np.maximum(np.asarray(_finite(expected_electrons(radiance, sensor, intrinsics), radiance)), 0.0)  # FFT round-off leaves -1e-12 in black pixels
@@ -212,6 +244,20 @@ def distort_image(image: Float[Array, "h w c"], intrinsics: Intrinsics, coeffici
 
     Returns:
         (height, width, channels) float JAX array.
+
+    Args:
+        image: (height, width, channels) pinhole render (any unit: radiance, DN).
+        intrinsics: the camera (:class:`Intrinsics`), of the image's size.
+        coefficients: the lens's :class:`Distortion`.
+
+    Raises:
+        InputError: an image of another size than ``intrinsics``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> camera = sf.Intrinsics(focal_length=0.05, pixel_pitch=1e-5, width=4, height=3)
+        >>> sf.distort_image(np.ones((3, 4, 3)), camera, sf.Distortion(k1=-0.1)).shape
+        (3, 4, 3)
     """
     check_type("coefficients", coefficients, Distortion, "an sf.Distortion")
     _check_image(image, intrinsics)
@@ -243,6 +289,20 @@ def choose_exposure(radiance: Float[np.ndarray, "h w c"], sensor: Sensor, intrin
         percentile: in (0, 100]; at the default 99.9 at most 0.1 % of the target's pixels saturate
             (:data:`SATURATED_WARNING_FRACTION`).
         target: the target's pixels (boolean, height x width); None: those brighter than 0.
+
+    Returns:
+        A copy of ``sensor`` with the chosen ``exposure_time_s``.
+
+    Raises:
+        InputError: a bad ``radiance``, ``fraction``, ``percentile`` or ``target``, or a target
+            without a lit pixel.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> camera = sf.Intrinsics(focal_length=0.05, pixel_pitch=1e-5, width=4, height=3)
+        >>> sensor = sf.choose_exposure(np.full((3, 4, 3), 1.0), sf.Sensor(), camera)
+        >>> f"{sensor.exposure_time_s:.3g} s"
+        '0.00313 s'
     """
     check_type("sensor", sensor, Sensor, "an sf.Sensor")
     if sensor.calibrated:

@@ -54,18 +54,40 @@ def render_to_folder(scene: Scene, out_dir: str | Path, *, quiet: bool = False, 
                      show_timings: bool = False) -> tuple[np.ndarray, dict[str, Any]]:
     """Render ``scene`` and write radiance.exr, preview.png, scene.toml and render.json to ``out_dir``.
 
-    It runs holding the folder's lock (:mod:`spacefit.locks`: one writer per folder). Every input is
-    checked and the folder is checked (:func:`~spacefit.output.prepare_output`: new,
-    empty, or a previous render replaced only with ``overwrite``; none of the ``inputs`` files
+    It runs holding the folder's lock (one writer per folder: a second is refused, naming the folder). Every input is
+    checked and the folder is checked (new, empty, or a previous render replaced only with ``overwrite``; none of the ``inputs`` files
     written over) before rendering; on any error or interruption nothing is left behind. Ctrl-C or
     SIGTERM during the render raises KeyboardInterrupt within about 0.1 s; the render goes on in the
-    background to the end of its pass (:func:`~spacefit.interrupts.run_interruptibly`). A
+    background to the end of its pass. A
     non-finite image is refused, naming the cause; an all-black one is written with a warning that
     says why. Returns the radiance image (W m^-2 sr^-1) and the sidecar dict as render.json holds it.
 
     The sidecar's ``timings_s`` holds the wall time (s) of each stage, after the caller's earlier
     ones (``timings_s``, e.g. the CLI's imports); ``show_timings`` prints them as a table on stderr,
     with the writing of the folder (which render.json cannot hold).
+
+    Args:
+        scene: the scene (:class:`Scene`).
+        out_dir: the folder to write (made if missing; its parent must exist).
+        quiet: print nothing.
+        overwrite: replace a previous render in ``out_dir``.
+        inputs: files the render reads (a mesh, the scene file), never written over.
+        timings_s: the caller's earlier stages' wall times (s).
+        show_timings: print the stages' times on stderr.
+
+    Returns:
+        The radiance image and the sidecar (render.json's content).
+
+    Raises:
+        InputError: a bad scene, a folder that is not empty (without ``overwrite``) or not writable,
+            or one another process writes.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> image, sidecar = sf.render_to_folder(scene, "render", quiet=True)
+        >>> import pathlib; sorted(p.name for p in pathlib.Path("render").iterdir())
+        ['preview.png', 'radiance.exr', 'render.json', 'scene.toml']
     """
     check_scene(scene)
     prepare_output(check_path("out_dir", out_dir), "render", overwrite=overwrite, inputs=inputs)
@@ -196,27 +218,34 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
                   quiet: bool = False, overwrite: bool = False, resume: bool = False, cluster: Cluster | None = None) -> FitResult:
     """Fit the ``free`` parameters to reference image files; write fit.json, fit.toml, uncertainty.json and the plots to ``out_dir``.
 
-    It runs holding the folder's lock (:mod:`spacefit.locks`: one writer per folder). The folder is
+    It runs holding the folder's lock (one writer per folder: a second is refused, naming the folder). The folder is
     checked writable, then every file is read and checked before rendering; on any error nothing is
     left behind.
 
     Args:
-        files: the reference and scene files and how to read them (:class:`~spacefit.fitting.observation_files.ObservationFiles`);
+        files: the reference and scene files and how to read them (:class:`ObservationFiles`);
             none of its ``overrides`` may fix a free parameter.
-        free: parameter names (see :mod:`spacefit.scene.parameters`); their start values are the first
+        free: parameter names (:func:`available_parameters`); their start values are the first
             scene's unless ``options.start`` gives them.
-        out_dir: output folder of the report (see :mod:`spacefit.fitting.report`).
-        options: the settings of :func:`spacefit.fitting.fit` (:class:`~spacefit.fitting.loop.FitOptions`;
+        out_dir: output folder of the report (:func:`write_fit_report`).
+        options: the settings of :func:`fit` (:class:`FitOptions`;
             None: its defaults), recorded in fit.json's ``inputs.options``.
         quiet: no progress display or messages on stderr.
         overwrite: replace a previous fit report in ``out_dir``.
         resume: continue the interrupted fit whose checkpoint is in ``out_dir`` (same files, free
             parameters and options but the solver's: ``solver``, ``max_steps``, ``start``, ``stop``).
-        cluster: where the renders run (:func:`~spacefit.fitting.loop.fit`'s ``cluster``: None, this
+        cluster: where the renders run (:func:`fit`'s ``cluster``: None, this
             process; N local dask workers; a scheduler address; a dask Client).
 
     Returns:
         The fit's result.
+
+    Example:
+        Not run by the tests (an image fit takes minutes)::
+
+            files = sf.ObservationFiles(references=["ref.exr"], scenes=["lander.toml"], sigma=0.01)
+            result = sf.fit_to_folder(files, ["parts.legs.kd"], "fit-out", sf.FitOptions(max_steps=20))
+            print(sf.format_result(result))
     """
     # deferred: the fitting stack (JAX, optimistix: 1.5 s) and the image files' readers (astropy), which renders never need
     from spacefit.fitting.loop import FitOptions, fit
@@ -251,7 +280,7 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
 def fit_light_curve_to_folder(files: LightCurveFiles, free: Sequence[str], out_dir: str | Path, *, max_steps: int = 50,
                               start: Mapping[str, float] | None = None, allow_large: bool = False, quiet: bool = False,
                               overwrite: bool = False, resume: bool = False) -> FitResult:
-    """Fit the ``free`` parameters of a rendered target to a light-curve file (:func:`spacefit.fit_light_curve`);
+    """Fit the ``free`` parameters of a rendered target to a light-curve file (:func:`fit_light_curve`);
     write its report (fit.json, fit.toml, uncertainty.json, convergence.png, observation0.png: the
     magnitudes against the model's, ...) to ``out_dir``, as :func:`fit_to_folder` does an image fit's:
     holding the folder's lock, every input checked before rendering, its size said first, progress,
@@ -259,16 +288,22 @@ def fit_light_curve_to_folder(files: LightCurveFiles, free: Sequence[str], out_d
     options but ``max_steps`` and ``start``), and nothing left behind on an error.
 
     Args:
-        files: the light-curve and scene files and how to read them (:class:`~spacefit.studies.lightcurve_files.LightCurveFiles`).
+        files: the light-curve and scene files and how to read them (:class:`LightCurveFiles`).
         free: registered parameter names (materials, attitude angles the points do not set).
         out_dir: output folder of the report.
-        max_steps, start, allow_large: :func:`spacefit.fit`'s.
+        max_steps, start, allow_large: :func:`fit`'s.
         quiet: no progress display or messages on stderr.
         overwrite: replace a previous light-curve fit report in ``out_dir``.
         resume: continue the interrupted fit whose checkpoint is in ``out_dir``.
 
     Returns:
         The fit's result.
+
+    Example:
+        Not run by the tests (a rendered light curve's fit takes minutes)::
+
+            files = sf.LightCurveFiles(curve="curve.csv", scene="lander.toml", sigma_mag=0.05)
+            result = sf.fit_light_curve_to_folder(files, ["parts.panels.alpha"], "lc-fit")
     """
     from spacefit.fitting.loop import fit  # deferred: the fitting stack (JAX, optimistix: 1.5 s), which renders never need
     from spacefit.studies.lightcurve_files import LightCurveFiles

@@ -96,6 +96,20 @@ class Sensor:
             None: from the full well and the ADC (:attr:`saturation_dn`).
         vignetting: whether the cos^4 fall-off off axis is in the image; None: yes, unless the
             camera is calibrated (``radiometric_scale_dn_per_w_m2_sr`` given: a flat-fielded image).
+
+    Raises:
+        InputError: a field outside its range, naming it (``Sensor.bit_depth``, say).
+
+    Example:
+        >>> import spacefit as sf
+        >>> sensor = sf.Sensor(exposure_time_s=0.002)
+        >>> sensor.saturation_dn  # the full well's DN, below the 14-bit ADC's 16383
+        16088.0
+        >>> try:
+        ...     sf.Sensor(bit_depth=40)
+        ... except sf.InputError as err:
+        ...     print(err)
+        `Sensor.bit_depth` must be an integer in [1, 32], got 40.
     """
 
     exposure_time_s: float = 1e-3
@@ -261,7 +275,25 @@ def read_sensor_file(path: str | Path) -> dict[str, Any]:
     """The fields of :class:`Sensor` in a JSON or TOML file, checked (unknown fields and bad values
     refused, naming the file): a table of fields, or a file whose ``sensor`` table holds them (a
     spacefit sidecar ``obs.fits.json``). TOML has no null: a sensor without a full well
-    (``full_well_electrons = null``) is written as JSON."""
+    (``full_well_electrons = null``) is written as JSON.
+
+    Args:
+        path: a ``.json`` or ``.toml`` file.
+
+    Returns:
+        The fields by name, as :class:`Sensor` takes them (``sf.Sensor(**fields)``).
+
+    Raises:
+        InputError: a missing or unreadable file, an unknown field or a bad value, naming the file.
+
+    Example:
+        >>> import json, spacefit as sf
+        >>> with open("camera.json", "w") as f:
+        ...     json.dump({"exposure_time_s": 0.002, "gain_dn_per_electron": 1.0}, f)
+        >>> fields = sf.read_sensor_file("camera.json")
+        >>> sf.Sensor(**fields).exposure_time_s
+        0.002
+    """
     p = check_path("path", path)
     if not p.is_file():
         raise InputError(f"sensor file {str(p)!r} does not exist.")
@@ -334,7 +366,22 @@ def quantise(dn: Float[np.ndarray, "..."], sensor: Sensor) -> np.ndarray:
 
 
 def saturated_mask(dn: Float[np.ndarray, "..."], sensor: Sensor) -> Bool[np.ndarray, "..."]:
-    """True where a DN (observed or expected, any shape) is at or above ``sensor.saturation_dn``."""
+    """True where a DN (observed or expected, any shape) is at or above ``sensor.saturation_dn``.
+
+    Saturated pixels carry no information on the signal: a fit leaves them out.
+
+    Args:
+        dn: DN values, any shape.
+        sensor: the sensor (:attr:`Sensor.saturation_dn`).
+
+    Returns:
+        A boolean array of ``dn``'s shape.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sf.saturated_mask(np.array([100.0, 16383.0]), sf.Sensor())
+        array([False,  True])
+    """
     check_type("sensor", sensor, Sensor, "an sf.Sensor")
     return check_array("dn", dn) >= sensor.saturation_dn
 

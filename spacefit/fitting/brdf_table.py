@@ -1,5 +1,5 @@
 """Measured BRDF tables (goniometer data): reading them, the material models fitted to them, and a
-table used as it is (:class:`TabulatedBRDF`, re-exported here). A table as an observation that :func:`spacefit.fit`
+table used as it is (:class:`TabulatedBRDF`, re-exported here). A table as an observation that :func:`fit`
 fits, and the choice of the smallest model that fits, are :mod:`spacefit.fitting.observations.brdf`'s.
 The tables are read by :mod:`spacefit.materials.measured` (the file formats are described there);
 a table used as it is is a material of its own (:mod:`spacefit.materials.tabulated`).
@@ -76,7 +76,15 @@ def _models() -> dict[str, BRDFModel]:
     return dict(sorted(out.items(), key=lambda item: len(item[1].parameters)))
 
 
-# The models by name, smallest (fewest parameters) first; a model registered later is among them.
+#: The material models a BRDF table is fitted with (:func:`fit_brdf_table`, :func:`compare_brdf_models`)
+#: by name, smallest (fewest parameters) first: Lambert, the conductors (GGX or Beckmann, isotropic or
+#: anisotropic, with or without a diffuse term) and every other model registered with a BRDF
+#: (:func:`register_material`), a model registered later among them.
+#:
+#: Example:
+#:     >>> import spacefit as sf
+#:     >>> list(sf.BRDF_MODELS)[:4]
+#:     ['lambert', 'oren_nayar', 'ggx', 'beckmann']
 BRDF_MODELS: Mapping[str, BRDFModel] = Derived(_models)
 
 

@@ -48,7 +48,7 @@ STOP_RULES = ("noise", "tolerance")
 
 @dataclass(frozen=True)
 class FitOptions:
-    """The settings of :func:`fit` as one value (:func:`~spacefit.pipeline.fit_to_folder` takes it);
+    """The settings of :func:`fit` as one value (:func:`fit_to_folder` takes it);
     the home of ``fit``'s defaults. ``solver``, ``max_steps`` and ``stop`` are checked on
     construction, the rest by ``fit``'s set-up against the observations.
 
@@ -56,6 +56,20 @@ class FitOptions:
         solver, loss, start, render, max_steps, stop, wrinkle_coordinates, allow_large: :func:`fit`'s arguments of
             those names; by default ``"lm"``, ``"pixel"``, the first scene's values, the scene's spp
             (``FitRender()``), 50 steps, ``"noise"``, ``"rms"`` and False.
+
+    Raises:
+        InputError: an unknown solver or stop rule, or ``max_steps`` < 1.
+
+    Example:
+        >>> import spacefit as sf
+        >>> options = sf.FitOptions(solver="gn", max_steps=20)
+        >>> options.keywords()["max_steps"]  # sf.fit(observations, free, **options.keywords())
+        20
+        >>> try:
+        ...     sf.FitOptions(solver="newton")
+        ... except sf.InputError as err:
+        ...     print(err)
+        `solver` must be one of 'adam', 'bfgs', 'dogleg', 'gn', 'lm'; got 'newton'.
     """
 
     solver: str | Solver = "lm"
@@ -109,24 +123,24 @@ def fit(
 
     Args:
         observations: one or several observations of the same target, fitted jointly: images
-            (:class:`~spacefit.fitting.observations.image.Observation`, (reference, scene) pairs), passes
-            (:class:`~spacefit.fitting.observations.passes.PassObservation`: its frames' images, each frame's
-            ``per_frame`` values freed) and other kinds (:mod:`spacefit.fitting.observations`: BRDF tables,
+            (:class:`Observation`, (reference, scene) pairs), passes
+            (:class:`PassObservation`: its frames' images, each frame's
+            ``per_frame`` values freed) and other kinds (:class:`BRDFTableObservation`,
             light curves). Fixed
             parameters come from each image's scene or each observation's own values.
-        free: registered parameter names (:mod:`spacefit.scene.parameters`), e.g. ``["parts.panels.alpha_x"]``,
+        free: registered parameter names (:func:`available_parameters`, :data:`PARAMETERS`), e.g. ``["parts.panels.alpha_x"]``,
             shared by every observation that depends on them (an image of part ``panels`` and a BRDF
             table or a light curve of it); a per-observation name's ``@k`` counts the images.
         solver: a name in :data:`SOLVERS` (its defaults: rtol 1e-3, atol 1e-6; Adam's learning rate
             0.05), or an optimistix least-squares solver or minimiser, or :class:`Adam`, with its own
             tolerances (e.g. ``optx.LevenbergMarquardt(rtol=1e-4, atol=1e-8)``, ``sf.Adam(0.1)``).
-        loss: ``"pixel"``, ``"pyramid"`` or ``"stats"`` (see :mod:`spacefit.fitting.losses`).
+        loss: ``"pixel"``, ``"pyramid"`` or ``"stats"`` (see :data:`LOSSES`).
         start: start values (physical units); default: the first scene's values.
         render: how the fit renders (:class:`FitRender`: samples per pixel, seeds, integrator,
             the wrinkles' Jacobian method); render references with other seeds.
         max_steps: solver step limit.
         stop: ``"noise"``: least-squares solvers stop as well when the expected decrease of the loss
-            is below its Monte Carlo noise (:attr:`Status.NOISE_FLOOR`, :mod:`spacefit.fitting.stopping`;
+            is below its Monte Carlo noise (:attr:`Status.NOISE_FLOOR`;
             one more primal render per accepted step) or when their trial steps keep finding no lower
             loss (:attr:`Status.NO_BETTER_POINT`), BFGS and Adam on their tolerances;
             ``"tolerance"``: every solver only on its tolerances.
@@ -134,17 +148,16 @@ def fit(
             better-determined coordinates, and reports D and G with their covariance mapped by
             the delta method; ``"G"`` solves in (D, G) directly.
         progress: called with (step, max_steps) after each step.
-        resume: the checkpoint plumbing (:class:`~spacefit.fitting.resume.Resume`): what each step and
+        resume: the checkpoint plumbing (:class:`Resume`): what each step and
             the end report, and the record of an ended or interrupted solve to end or go on as it would have.
-        cluster: where the observations' renders and Jacobian columns run, as one batch per step
-            (:mod:`spacefit.fitting.frames`): None, in this process, observation by observation; an
+        cluster: where the observations' renders and Jacobian columns run, as one batch per step: None, in this process, observation by observation; an
             int N, a new local dask cluster of N worker processes; a scheduler address; a
             ``distributed.Client``. The status is the same and the values within 1e-3 of their
             standard errors (measured the same bit for bit in every case but one: docs/guide/dask.md).
 
     The result's :attr:`~FitResult.status` is a verdict (:class:`Status`): no step that lowered
     the loss (:attr:`Status.NO_PROGRESS`), a parameter at a bound (:attr:`Status.AT_BOUND`) and
-    residuals beyond the noise (:attr:`Status.MISFIT`, :mod:`spacefit.fitting.goodness`) are
+    residuals beyond the noise (:attr:`Status.MISFIT`) are
     failures, whatever the solver said. An interruption (Ctrl-C or SIGTERM; taken at the end of
     the current step, at once if repeated) stops the solve and returns the best point evaluated so
     far with status :attr:`Status.INTERRUPTED` (:attr:`Status.TERMINATED` for SIGTERM), no
@@ -155,6 +168,23 @@ def fit(
     Raises:
         InputError: for any bad input, before rendering; a fit too large for this machine's memory (its estimate and
             the memory available in the message), unless ``allow_large``.
+
+    Returns:
+        A :class:`FitResult`: the values with standard errors, the status (the verdict), the goodness
+        of fit, the history of steps, and for images the renders and residuals.
+
+    Example:
+        A BRDF table's Lambert albedo, the cheapest fit (an image fit takes
+        ``sf.Observation(scene, reference, sigma=...)`` the same way):
+
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> result = sf.fit([sf.BRDFTableObservation(table, "lambert", part="paint")], ["parts.paint.kd"])
+        >>> result.status.success, round(result.values["parts.paint.kd"], 3), round(result.stderr["parts.paint.kd"], 4)
+        (True, 0.3, 0.0031)
     """
     engine = _checked_solver(solver, max_steps, stop)
     check_type("resume", resume, Resume, "an sf.Resume(on_step=..., ...)")

@@ -36,6 +36,17 @@ from jaxtyping import Array, Bool, Float
 from spacefit.errors import InputError, check_choice
 
 Residual = Callable[[Float[Array, "h w 3"]], Float[Array, " m"]]
+#: The losses ``sf.fit(loss=...)`` takes: ``pixel`` compares images pixel by pixel, divided by the
+#: noise sigma where it is known (the default); ``pyramid`` compares block means of the difference at
+#: 1, 2, 4, ... px blocks (coarse levels see glints that moved a little: a wider basin for a far
+#: start); ``stats`` compares the lit pixels' mean, standard deviation and percentiles and 8 x 8 px
+#: block means, which need no glint to line up pixel for pixel (for wrinkles, whose pattern is
+#: random). Another name raises :class:`InputError`.
+#:
+#: Example:
+#:     >>> import spacefit as sf
+#:     >>> sf.LOSSES
+#:     ('pixel', 'pyramid', 'stats')
 LOSSES = ("pixel", "pyramid", "stats")
 PYRAMID_LEVELS = 4
 STATS_BLOCK = 8

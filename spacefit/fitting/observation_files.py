@@ -1,5 +1,5 @@
 """``ObservationFiles``: how a fit's reference image files and scene files are read into
-:class:`~spacefit.fitting.problem.Observation`s (``spacefit fit``'s file options as one value)."""
+:class:`Observation`s (``spacefit fit``'s file options as one value)."""
 
 from __future__ import annotations
 
@@ -23,8 +23,7 @@ class ObservationFiles:
     ``overrides`` are kept as tuples; one file (or override) may be given as itself.
 
     Attributes:
-        references: reference images, fitted jointly, read by :meth:`Observation.from_file
-            <spacefit.fitting.problem.Observation.from_file>`: radiance (EXR, FITS with a radiance
+        references: reference images, fitted jointly, read by :meth:`Observation.from_file`: radiance (EXR, FITS with a radiance
             ``BUNIT``), or DN (FITS, 16-bit PNG / TIFF) fitted with their sensor's noise model.
         scenes: scene TOML files: one for all references, or one per reference in order.
         overrides: ``key=value`` scene overrides applied to every scene.
@@ -33,20 +32,30 @@ class ObservationFiles:
         sigma: noise standard deviation of radiance references, W m^-2 sr^-1 (residuals are divided by it).
         masks: mask images (FITS, PNG, TIFF; 0 = leave the pixel out, 1 or full scale = use it): none, one for all
             references, or one per reference in order; saturated pixels are left out in any case.
-        sensor_file: a JSON or TOML file of :class:`~spacefit.sensor.Sensor` fields
-            (:func:`~spacefit.sensor.read_sensor_file`) for DN references: they replace the
+        sensor_file: a JSON or TOML file of :class:`Sensor` fields
+            (:func:`read_sensor_file`) for DN references: they replace the
             fields of each file's own sensor (FITS header or sidecar), or describe the camera of a
             file that names none.
         sensor_values: sensor fields replacing the file's and the sensor file's.
         sensor_defaults: ``"illustrative"`` to fill missing sensor values with the illustrative defaults.
         row_order: ``"top-down"`` / ``"bottom-up"``: how FITS rows run, whatever the files say.
         flat: a flat-field image (FITS, PNG, TIFF) of the DN references' detector, for all of them.
-        unit: ``"radiance"`` / ``"DN"`` to require one (:func:`~spacefit.imageio.read_image`).
+        unit: ``"radiance"`` / ``"DN"`` to require one (:func:`read_image`).
         response: ``"linear"`` / ``"srgb"`` for PNG and TIFF.
         values: per reference, scene values (by name, as ``overrides``) set on its scene after
-            ``overrides``: a pass's frames (:class:`~spacefit.fitting.passes.Pass`); none, or one per reference.
+            ``overrides``: a pass's frames (:class:`Pass`); none, or one per reference.
         frame_sensor_values: per reference, sensor fields replacing ``sensor_values``' (none, or one per reference).
         times: per reference, its time (ISO 8601 UTC, or seconds), recorded; none, or one per reference.
+
+    Raises:
+        InputError: counts that do not match (one scene for all references or one each), an
+            unknown option value.
+
+    Example:
+        >>> import spacefit as sf
+        >>> files = sf.ObservationFiles(references=["ref.exr"], scenes=["lander.toml"], sigma=0.01)
+        >>> files.references  # files.load() reads them into sf.Observation objects
+        ('ref.exr',)
     """
 
     references: Sequence[str | Path]
@@ -118,8 +127,8 @@ class ObservationFiles:
         """Read the scenes and the references, one observation per reference.
 
         Raises:
-            InputError: for a scene or an image file refused (:func:`~spacefit.scene.toml.load_scene`,
-                :meth:`Observation.from_file <spacefit.fitting.problem.Observation.from_file>`).
+            InputError: for a scene or an image file refused (:func:`load_scene`,
+                :meth:`Observation.from_file`).
         """
         loaded = [load_scene(path, self.scene_overrides) for path in self.scenes]
         return [Observation.from_file(path, self._scene(loaded[i % len(loaded)], i), sensor=self._sensor_values(i),

@@ -21,12 +21,30 @@ if TYPE_CHECKING:  # types only: matplotlib loads where a figure is drawn
 
 def frame_table(result: Any, frames: Pass | None = None, *, files: Sequence[str | Path] = (),
                 times: Sequence[str] = (), entries: Sequence[int] | None = None) -> list[dict[str, Any]]:
-    """Per frame of a pass's fit (:class:`~spacefit.fitting.result.FitResult`): its file, time and
+    """Per frame of a pass's fit (:class:`FitResult`): its file, time and
     seconds since the first frame (from ``frames``, or ``files`` and ``times``), the goodness of
     fit of its own pixels (``chi2_dof``, NaN without a known noise, ``misfit``, ``render_noise``),
     and each per-frame parameter's value and standard error (``NAME``, ``NAME.stderr``: the name
     without ``@k``). ``entries``: the frames' observation indices in the fit (None: every observation
-    of the fit is a frame, in order)."""
+    of the fit is a frame, in order).
+
+    Args:
+        result: the pass's fit.
+        frames: the :class:`Pass` (its files and times); or ``files`` and ``times``.
+        entries: the frames' observation indices in the fit.
+
+    Returns:
+        One dict per frame.
+
+    Example:
+        Not run by the tests (an image fit takes minutes)::
+
+            scene = sf.load_scene("lander.toml")
+            observation = sf.PassObservation.read("pass/frames.csv", scene, per_frame=["target.attitude_x_deg"])
+            result = sf.fit([observation], ["parts.legs.kd"])
+            for row in sf.frame_table(result):
+                print(row["frame"], row["chi2_dof"], row["target.attitude_x_deg"], row["target.attitude_x_deg.stderr"])
+    """
     if frames is not None:
         files, times = frames.files, [f.time for f in frames.frames]
     entries = list(range(len(result.units))) if entries is None else list(entries)
@@ -69,6 +87,21 @@ def read_frame_table(path: str | Path) -> list[dict[str, Any]]:
 
     Raises:
         InputError: not a path, no such file, or a cell that is not what its column holds.
+
+    Args:
+        path: a ``frames.csv`` a pass's fit wrote.
+
+    Returns:
+        The rows, one dict per frame.
+
+    Example:
+        >>> import spacefit as sf
+        >>> with open("frames.csv", "w") as f:
+        ...     print("frame,file,time,time_s,chi2_dof,misfit,target.attitude_x_deg,target.attitude_x_deg.stderr", file=f)
+        ...     print("0,frame0.exr,0,0,1.02,False,90.1,0.05", file=f)
+        >>> row = sf.read_frame_table("frames.csv")[0]
+        >>> row["frame"], row["misfit"], row["target.attitude_x_deg"]
+        (0, False, 90.1)
     """
     path = check_path("path", path)
     if not path.is_file():
@@ -113,13 +146,28 @@ def frame_panels(rows: Sequence[Mapping[str, Any]]) -> list[str]:
 
 def plot_frames(rows: Sequence[Mapping[str, Any]], *, ax: AxesArg = None, fig: FigureArg = None) -> np.ndarray:
     """The per-frame parameters of :func:`frame_table`'s rows against time (one panel each, 1-sigma
-    error bars) and each frame's chi^2 / dof, into ``ax`` (one Axes per panel, :func:`frame_panels`)
-    or ``fig`` (a matplotlib Figure or SubFigure; default a new one): the array of axes drawn
-    (:mod:`spacefit.plotting`). Without a known noise the frames have no chi^2 / dof and its panel is
-    left out (the first panel's title says so).
+    error bars) and each frame's chi^2 / dof, into ``ax`` (one Axes per panel) or ``fig`` (a
+    matplotlib Figure or SubFigure; default a new one): the array of axes drawn. Without a known
+    noise the frames have no chi^2 / dof and its panel is left out (the first panel's title says so).
+
+    Args:
+        rows: :func:`frame_table`'s rows (or :func:`read_frame_table`'s, of a saved frames.csv).
+        ax: the axes to draw into, one per panel, or ``fig``: the Figure or SubFigure to lay them out in.
+
+    Returns:
+        The array of axes drawn.
 
     Raises:
         InputError: the rows have neither a per-frame parameter nor a chi^2 / dof: nothing to draw.
+
+    Example:
+        Not run by the tests (an image fit takes minutes)::
+
+            scene = sf.load_scene("lander.toml")
+            observation = sf.PassObservation.read("pass/frames.csv", scene, per_frame=["target.attitude_x_deg"])
+            result = sf.fit([observation], ["parts.legs.kd"])
+            axes = sf.plot_frames(sf.frame_table(result))
+            axes.flat[0].figure.savefig("frames.png")
     """
     from spacefit.plotting import axis_label, panels  # deferred: plotting (0.5 s)
 

@@ -30,7 +30,27 @@ def arc_pass(n: int, *, range_m: float = 25.0, zenith_deg: tuple[float, float] =
     ``azimuth_deg[0]``) to the second values, and the sun's elevation changing evenly between
     ``sun_elevation_deg``'s (azimuth fixed). By default the observer crosses the panels' glint
     (the sun's mirror direction, 10 deg from the zenith at azimuth 20 deg) half-way. Each frame: ``camera.position_m``, ``camera.look_at_m``
-    (the origin), ``sun.elevation_deg``, ``sun.azimuth_deg``."""
+    (the origin), ``sun.elevation_deg``, ``sun.azimuth_deg``.
+
+    Args:
+        n: the number of frames, >= 1.
+        range_m: the observer's distance from the origin (m).
+        zenith_deg, azimuth_deg: the observer's first and last direction (deg).
+        sun_elevation_deg: the sun's first and last elevation (deg).
+        sun_azimuth_deg: the sun's azimuth (deg).
+
+    Returns:
+        One dict of scene values per frame, for :func:`simulate_pass` or ``Scene.with_values``.
+
+    Raises:
+        InputError: ``n`` < 1 or a value out of range.
+
+    Example:
+        >>> import spacefit as sf
+        >>> frames = sf.arc_pass(3)
+        >>> sorted(frames[0])
+        ['camera.look_at_m', 'camera.position_m', 'sun.azimuth_deg', 'sun.elevation_deg']
+    """
     check_count("n", n)
     out = []
     for s in np.linspace(0.0, 1.0, n) if n > 1 else [0.0]:
@@ -47,15 +67,36 @@ def simulate_pass(scene: Scene, frames: Sequence[Mapping[str, Any]], out_dir: st
                   truth: Mapping[str, Any] | None = None, errors: Sequence[Mapping[str, float]] = (),
                   sensor: Any = None, spp: int = 256, seed: int = 7, interval_s: float = 10.0) -> Pass:
     """Simulate a pass and write it: per frame k an observation ``frame<k>.fits`` (DN through
-    ``sensor``'s model, :func:`~spacefit.formation.observe`, the sensor in its header and
+    ``sensor``'s model, :func:`observe`, the sensor in its header and
     sidecar) or, without a sensor, ``frame<k>.exr`` (radiance), rendered at ``spp`` from ``scene``
     with ``frames[k]``'s values (the FITS card or EXR attribute ``RENDSPP`` says ``spp``), ``truth`` (every frame) and ``errors[k]`` (the frame's own
     departures from its nominal values, e.g. ``{"target.attitude_x_deg": 0.2}``, added to the
     nominal); and ``frames.csv``, the frame table of the nominal values (without the errors), times
-    ``interval_s`` apart. Returns the pass read back from that table.
+    ``interval_s`` apart.
+
+    Returns:
+        The :class:`Pass` read back from ``frames.csv``.
 
     Raises:
         InputError: a value refused by the scene, ``errors`` not one per frame, an existing ``out_dir``.
+
+    Args:
+        scene: the scene of every frame.
+        frames: each frame's scene values (:func:`arc_pass`).
+        out_dir: a new folder.
+        truth: values every frame takes (the true parameters).
+        errors: per frame, departures from its nominal values.
+        sensor: a :class:`Sensor` for DN frames (FITS), or None for radiance (EXR).
+        spp: the frames' samples per pixel.
+        seed: the first frame's seed (and the noise's).
+        interval_s: the time between frames (s).
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> frames = sf.simulate_pass(scene, sf.arc_pass(2), "pass", spp=4)
+        >>> [frame.file.name for frame in frames.frames]
+        ['frame0.exr', 'frame1.exr']
     """
     errors = list(errors) or [{}] * len(frames)
     if len(errors) != len(frames):

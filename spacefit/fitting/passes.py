@@ -4,8 +4,7 @@ sun, observer and nominal target attitude, read from a table and fitted jointly.
 A frame table has one row per frame (CSV, ECSV or a FITS table, read by ``astropy.table``; or
 Python columns). Its columns, in the scene's own vocabulary and units (degrees at this edge):
 
-- ``file``: the frame's observation (any image :meth:`Observation.from_file
-  <spacefit.fitting.problem.Observation.from_file>` reads), relative to the table's folder;
+- ``file``: the frame's observation (any image :meth:`Observation.from_file` reads), relative to the table's folder;
 - ``time``: an ISO 8601 UTC time (``2026-03-04T05:06:07.5``) or seconds (any origin);
 - any scene value by name, as ``--set`` takes it: a scene-file key or a parameter name
   (``sun.elevation_deg``, ``sun.azimuth_deg``, ``target.attitude_x_deg``, ``camera.roll_deg``); a
@@ -13,13 +12,13 @@ Python columns). Its columns, in the scene's own vocabulary and units (degrees a
   ``sun.direction``, ``target.attitude_deg``, ``target.position_m``) as one column of 3 numbers
   per row (ECSV, FITS) or as three columns ``KEY.x``, ``KEY.y``, ``KEY.z`` (any table). A frame that
   gives the camera's ``attitude_deg`` and no ``look_at_m`` is posed by attitude;
-- ``sensor.FIELD``: a per-frame :class:`~spacefit.sensor.Sensor` value (``sensor.exposure_time_s``);
+- ``sensor.FIELD``: a per-frame :class:`Sensor` value (``sensor.exposure_time_s``);
 - ``mask``: a per-frame mask image (optional).
 
 Each frame's scene is the pass's scene with the frame's values set (:meth:`Pass.scenes`). A joint
 fit frees the materials once and, per frame, the nuisances the user names
 (:meth:`Pass.per_frame`: ``target.attitude_x_deg`` -> ``target.attitude_x_deg@k`` for each frame
-k), or, the pass given whole as one observation (:class:`~spacefit.fitting.observations.passes.PassObservation`),
+k), or, the pass given whole as one observation (:class:`PassObservation`),
 the fit frees them; :func:`frame_table` and :func:`plot_frames` give the per-frame values and goodness of fit
 against time (a fit's report writes them as ``frames.csv`` and ``frames.png``).
 """
@@ -58,8 +57,14 @@ class Frame:
         time: as given: an ISO 8601 UTC time, or seconds as text.
         time_s: seconds since the pass's first frame (by ``time``).
         values: the frame's scene values by name (scene-file keys and parameter names), in the scene's units.
-        sensor: the frame's own sensor values (:class:`~spacefit.sensor.Sensor` fields).
+        sensor: the frame's own sensor values (:class:`Sensor` fields).
         mask: a mask image of the frame, or None.
+
+    Example:
+        >>> import spacefit as sf
+        >>> frame = sf.Pass.from_columns({"file": ["f0.exr"], "time": ["2026-03-04T05:06:07"]}).frames[0]
+        >>> frame.file.name, frame.time_s
+        ('f0.exr', 0.0)
     """
 
     file: Path
@@ -74,7 +79,20 @@ class Frame:
 class Pass:
     """The frames of a pass, in time order as given (:meth:`read` a table file, :meth:`from_columns`
     Python columns or an astropy table). Checked on construction; each frame's scene values are
-    checked against a scene by :meth:`scenes`."""
+    checked against a scene by :meth:`scenes`.
+
+    Args:
+        frames: the frames (:class:`Frame`).
+
+    Raises:
+        InputError: no frame, times of two kinds or not in order, a frame's bad value, naming the frame.
+
+    Example:
+        >>> import spacefit as sf
+        >>> p = sf.Pass.from_columns({"file": ["f0.exr", "f1.exr"], "time": ["0", "10"], "sun.elevation_deg": [80.0, 78.0]})
+        >>> p.frames[1].time_s, p.frames[1].values
+        (10.0, {'sun.elevation_deg': 78.0})
+    """
 
     frames: tuple[Frame, ...]
 
@@ -189,8 +207,8 @@ class Pass:
         return [Name(name, k) for name in names for k in range(len(self.frames))]
 
     def observation_files(self, scene: str | Path, **options: Any) -> Any:
-        """The frames as :class:`~spacefit.fitting.observation_files.ObservationFiles` for
-        :func:`~spacefit.pipeline.fit_to_folder`: one scene file for all, each frame's values,
+        """The frames as :class:`ObservationFiles` for
+        :func:`fit_to_folder`: one scene file for all, each frame's values,
         sensor values, mask and time; ``options``: the other ``ObservationFiles`` fields
         (``overrides``, ``resolution``, ``sensor_values``, ``sensor_defaults``...)."""
         from spacefit.fitting.observation_files import ObservationFiles  # here: it loads the fitting stack (JAX); reading a pass does not

@@ -39,6 +39,15 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
     Returns:
         The axes drawn, an array of one row of 3 per image (the fit at the reference's sRGB exposure,
         the residual's RGB mean in that unit on a diverging colour map centred at 0).
+
+    Example:
+        Not run by the tests (an image fit takes minutes)::
+
+            scene = sf.load_scene("lander.toml")
+            observation = sf.PassObservation.read("pass/frames.csv", scene, per_frame=["target.attitude_x_deg"])
+            result = sf.fit([observation], ["parts.legs.kd"])
+            references = [sf.read_exr(frame.file) for frame in sf.Pass.read("pass/frames.csv").frames]
+            axes = sf.plot_comparison(result, references)
     """
     n = len(references)
     axes = panels(ax, fig, 3 * n, (10.5, 3.2 * n), lambda f: f.subplots(n, 3, squeeze=False)).reshape(n, 3)
@@ -133,6 +142,20 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
 
     Returns:
         the array of axes drawn: the loss's, then one per parameter in ``result.names`` order.
+
+    Args:
+        result: the fit's result (its history).
+        truths: known values by name, drawn as dashed lines.
+        ax: the axes to draw into, or ``fig``: the Figure or SubFigure to lay them out in (default: a new one).
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> table = sf.BRDFTable(wi=wi, wo=np.tile([0.0, 0.0, 1.0], (4, 1)), value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="paint")
+        >>> axes = sf.plot_convergence(sf.fit_brdf_table(table, "lambert"), truths={"parts.sample.kd": 0.3})
+        >>> len(axes)  # the loss, then kd
+        2
     """
     truths = dict(truths or {})
     for name, value in truths.items():

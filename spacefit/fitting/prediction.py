@@ -40,6 +40,20 @@ class Prediction:
         sigma_noise: (n,) the observation's own error.
         noise: where ``sigma_noise`` came from: ``"stated"`` (the observation's errors) or ``"given"``.
         log: the values are logarithms (natural) of the observation's.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plates = sf.PlateLightCurve([sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))], curve)
+        >>> result = sf.fit([plates], ["parts.panel.kd"])
+        >>> s = np.array([result.stderr[n] for n in result.names])
+        >>> prediction = sf.predictive_intervals(plates, result.names, result.values, result.correlation * np.outer(s, s))
+        >>> prediction.noise
+        'stated'
     """
 
     value: np.ndarray
@@ -65,7 +79,7 @@ def covariance_of(result: FitResult) -> np.ndarray:
 @float64
 def predictive_intervals(observation: ValueObservation, names: Sequence[str], values: Mapping[str, float], covariance: np.ndarray, *,
                noise: float | None = None) -> Prediction:
-    """The predictive values and errors of ``observation`` (module docstring) at the parameter
+    """The predictive values and errors of ``observation`` (the guide "BRDF tables and light curves as observations") at the parameter
     ``values`` (by name; those of ``names`` it depends on move it) with ``covariance`` ((n, n),
     ``names`` order). ``noise``: the observation's error in its residual space (relative for a
     logarithmic one), used where it states none.
@@ -73,6 +87,30 @@ def predictive_intervals(observation: ValueObservation, names: Sequence[str], va
     Raises:
         InputError: ``noise`` missing for an observation without stated errors, or not positive; a
             covariance of the wrong shape or not finite; a name without a value.
+
+    Args:
+        observation: a value observation (:class:`PlateLightCurve`, :class:`BRDFTableObservation`, ...).
+        names: the fit's parameter names, ``covariance``'s order.
+        values: the parameter values by name.
+        covariance: (n, n) the parameters' covariance.
+        noise: the observation's error where it states none.
+
+    Returns:
+        A :class:`Prediction`.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plates = sf.PlateLightCurve([sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))], curve)
+        >>> result = sf.fit([plates], ["parts.panel.kd"])
+        >>> s = np.array([result.stderr[n] for n in result.names])
+        >>> prediction = sf.predictive_intervals(plates, result.names, result.values, result.correlation * np.outer(s, s))
+        >>> prediction.log, prediction.value.shape  # ln of the irradiance
+        (True, (3,))
     """
     check_type("observation", observation, ValueObservation, "a value observation (sf.PlateLightCurve, ...)")
     names = tuple(str(n) for n in names)
@@ -117,6 +155,26 @@ def residual_noise(observations: Sequence[ValueObservation], result: FitResult, 
 
     Raises:
         InputError: an unknown ``estimator``; no more values than free parameters.
+
+    Args:
+        observations: the fit's value observations, in its order.
+        result: the fit's result.
+        estimator: ``"rms"`` or ``"central68"``.
+
+    Returns:
+        The error in the observations' residual space (relative, for magnitudes' ln irradiance).
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plates = sf.PlateLightCurve([sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))], curve)
+        >>> result = sf.fit([plates], ["parts.panel.kd"])
+        >>> round(sf.residual_noise([plates], result), 3)
+        0.093
     """
     check_type("result", result, FitResult, "an sf.FitResult")
     check_choice("estimator", estimator, NOISE_ESTIMATORS)

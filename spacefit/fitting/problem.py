@@ -246,6 +246,20 @@ class FitRender:
         integrator: AD integrator of the derivative renders, one of :data:`INTEGRATORS`.
         geometry_jacobian: ``"fd"`` (central differences with common random numbers) or ``"ad"``
             (the integrator's derivative) for the wrinkles' D and G.
+
+    Raises:
+        InputError: a sample count or seed out of range, ``seed == seed_grad``, an unknown integrator
+            or geometry Jacobian.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.FitRender(spp=8, spp_grad=4)  # sf.fit(..., render=sf.FitRender(spp=8, spp_grad=4))
+        FitRender(spp=8, spp_grad=4, seed=1, seed_grad=2, integrator='prb', geometry_jacobian='fd')
+        >>> try:
+        ...     sf.FitRender(seed=1, seed_grad=1)
+        ... except sf.InputError as err:
+        ...     print(err)
+        `seed` and `seed_grad` must differ (a shared seed biases L2 gradients).
     """
 
     spp: int | None = None

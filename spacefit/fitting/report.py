@@ -5,9 +5,9 @@
 * ``fit.toml``: the fitted scene (:attr:`FitResult.scene`), which renders the fit again;
 * ``uncertainty.json``: :meth:`FitResult.uncertainty`, values, standard errors, units and the
   correlation matrix (strict JSON: a non-finite error is null);
-* ``comparison.png`` (a fit of images), ``convergence.png``: :func:`~spacefit.fitting.plots.plot_comparison` and
-  :func:`~spacefit.fitting.plots.plot_convergence`, saved through matplotlib's Agg canvas;
-* ``frames.csv``, ``frames.png`` (a pass: a :class:`~spacefit.fitting.observations.passes.PassObservation`,
+* ``comparison.png`` (a fit of images), ``convergence.png``: :func:`plot_comparison` and
+  :func:`plot_convergence`, saved through matplotlib's Agg canvas;
+* ``frames.csv``, ``frames.png`` (a pass: a :class:`PassObservation`,
   or images whose ``inputs`` give each one's time): per frame its time, goodness of fit and own
   parameters, and their plot against time (:mod:`spacefit.fitting.pass_report`; ``frames<i>`` for the
   i-th observation where a fit has several passes; no plot where a frame has neither own parameters nor a known noise);
@@ -18,7 +18,7 @@
   observation, NaN where not fitted; rows stored top row first, ``ROWORDER = 'TOP-DOWN'``), and
   ``residuals.png``, its picture (:func:`~spacefit.fitting.plots.plot_residuals`).
 
-:func:`~spacefit.fitting.saved.read_fit` reads the folder back into its :class:`FitResult` (without
+:func:`read_fit` reads the folder back into its :class:`FitResult` (without
 the renders). The summary's (:func:`format_result`) first line is the verdict, :class:`~spacefit.fitting.solvers.Status`;
 the second the goodness of fit (:mod:`spacefit.fitting.goodness`).
 """
@@ -67,6 +67,22 @@ def write_fit_report(
         references: the reference images (h, w, 3), in observation order, in the units of the fit (``result.units``).
         inputs: what was fitted (reference files, scenes, options), recorded in fit.json.
         timings_s: timings (s) to record besides the solve's own ``result.wall_time_s``.
+
+    Returns:
+        The folder's path.
+
+    Raises:
+        InputError: a folder that cannot be written (files of other names in it are kept, the
+            report's own replaced).
+
+    Example:
+        Not run by the tests (an image fit takes minutes)::
+
+            scene = sf.load_scene("lander.toml")
+            observation = sf.PassObservation.read("pass/frames.csv", scene, per_frame=["target.attitude_x_deg"])
+            result = sf.fit([observation], ["parts.legs.kd"])
+            references = [sf.read_exr(frame.file) for frame in sf.Pass.read("pass/frames.csv").frames]
+            sf.write_fit_report("fit-out", result, references)
     """
     data = {
         **result.to_dict(),
@@ -122,8 +138,25 @@ def write_residuals(path: Path, result: FitResult) -> None:
 def format_result(result: FitResult) -> str:
     """The verdict (first line), the goodness of fit, the fitted values with standard errors (marked
     where they are not valid: a misfit's are too small), each observation's own part
-    (:meth:`~spacefit.fitting.observations.base.Reported.report`: an image's chi^2 per part, a pass's
-    frames, a table's or a light curve's goodness of fit), and the warnings, as lines of text."""
+    (:meth:`Observation.report`: an image's chi^2 per part, a pass's
+    frames, a table's or a light curve's goodness of fit), and the warnings, as lines of text.
+
+    Args:
+        result: the fit's result.
+
+    Returns:
+        The report, lines joined by newlines (what ``spacefit fit`` prints and report.txt holds).
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> text = sf.format_result(sf.fit_brdf_table(table, "lambert"))
+        >>> text.splitlines()[0].startswith("converged")
+        True
+    """
     check_type("result", result, FitResult, "an sf.FitResult (what sf.fit returns)")
     derived = [name for name in result.extras if f"{name}.stderr" in result.extras]  # e.g. wrinkles.rms_m
     width = max(len(name) for name in (*result.names, *derived))
@@ -152,8 +185,31 @@ def write_table_fit(out_dir: str | Path, fit: FitResult, *, inputs: Mapping[str,
     (:meth:`FitResult.to_dict`, the package versions and, if given, the ``inputs``: names and JSON
     values) and ``report.txt`` (:func:`format_result`) into ``out_dir`` all at once (on an error
     nothing is left behind). The folder must be new or empty, or hold an earlier table fit and
-    ``overwrite`` be given (:func:`~spacefit.output.prepare_output`); it is written holding its lock
-    (:mod:`spacefit.locks`)."""
+    ``overwrite`` be given ; it is written holding its lock
+    (one writer per folder).
+
+    Args:
+        out_dir: the folder.
+        fit: the :class:`FitResult`.
+        inputs: what was fitted, by name (JSON values).
+        overwrite: replace an earlier table fit in ``out_dir``.
+
+    Returns:
+        The folder's path.
+
+    Raises:
+        InputError: a folder that holds other files, or an earlier fit without ``overwrite``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> folder = sf.write_table_fit("paint-fit", sf.fit_brdf_table(table, "lambert"))
+        >>> sorted(p.name for p in folder.iterdir())
+        ['fit.json', 'report.txt']
+    """
     check_type("fit", fit, FitResult, "an sf.FitResult")
     check_type("inputs", inputs, (Mapping, type(None)), "a dict of names and JSON values, or None")
     check_name_list("inputs", list(inputs or {}))

@@ -1,4 +1,4 @@
-"""The one result of :func:`spacefit.fit`, whatever observations it fitted: values in physical units,
+"""The one result of :func:`fit`, whatever observations it fitted: values in physical units,
 their standard errors and correlation, the verdict, the goodness of fit and what was run."""
 
 from __future__ import annotations
@@ -30,7 +30,7 @@ SUMMARY_FIELDS = ("names", "values", "stderr", "correlation", "success", "status
 @dataclass
 class FitResult:
     """Outcome of :func:`fit`: values in physical units and how far to trust them. A saved one
-    (its folder or ``fit.json``) reads back with :func:`~spacefit.fitting.saved.read_fit`.
+    (its folder or ``fit.json``) reads back with :func:`read_fit`.
 
     Attributes:
         names: free parameter names, in order.
@@ -46,7 +46,7 @@ class FitResult:
             the accepted point of the last step is ``values``), its loss (the one the solver descends: with a
             sensor, the quasi-deviance, :mod:`~spacefit.fitting.losses`), ``accepted`` (the step
             evaluated another point than the best so far and lowered its loss: accepted losses never rise), ``loss_noise`` (the loss's
-            Monte Carlo noise at the best point so far, :mod:`~spacefit.fitting.stopping`),
+            Monte Carlo noise at the best point so far, the Fitting guide's stop rule),
             time_s since the start.
         renders: each observation's final model, the images' first (the render with the image
             nuisances), then the other kinds' (their predicted values), in the unit of its data: ``units``.
@@ -60,20 +60,32 @@ class FitResult:
             out) that see it and the mean of the reference and of the fit's render there, in ``units`` (keys
             ``reference_mean_w_m2_sr`` and ``fit_mean_w_m2_sr``, or ``reference_mean_dn`` and ``fit_mean_dn``).
             With the pixel loss, each row also holds ``chi2_per_value`` (the noise known) or
-            ``r2_over_render_noise`` (mean r^2 over the render noise's, :mod:`~spacefit.fitting.goodness`).
+            ``r2_over_render_noise`` (mean r^2 over the render noise's; the Fitting guide's goodness of fit).
         scene: the first observation's scene with the fitted values: ``scene.to_toml()`` is a scene
             file that renders the fit again (the image nuisances are not scene values); None if
             the values are not finite.
-        goodness: the goodness of fit at the result (:class:`~spacefit.fitting.goodness.Goodness`);
+        goodness: the goodness of fit at the result (chi^2, degrees of freedom, p-value; printed by :func:`format_result`);
             None where there is no finite result (interrupted, non-finite).
         residuals: per observation, data - model in ``units`` (for an image NaN where not fitted).
         observation_goodness: per observation, the goodness of fit of its own residuals (the
             pixel loss), counting as free the shared parameters and its own (``name@k``; a value
             observation those it depends on).
         observations: the observations as the fit was given them (an image, a pass, a table, a light
-            curve), each of which reports its part (:class:`~spacefit.fitting.observations.base.Reported`).
+            curve), each of which reports its part (:meth:`Observation.report`, :meth:`PassObservation.report`).
         entries: per one of ``observations``, its indices into the per-observation lists above (an
             image's one, a pass's one per frame, the images' first, then the value observations').
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> result = sf.fit_brdf_table(table, "lambert")
+        >>> result.names, result.status.value
+        (('parts.sample.kd',), 'converged')
+        >>> print(sf.format_result(result).splitlines()[2])
+          parts.sample.kd = 0.3 +/- 0.00314  (start 0.1)
     """
 
     names: tuple[str, ...]
@@ -175,7 +187,7 @@ class FitResult:
     def from_dict(cls, data: Mapping[str, Any], where: str = "fit") -> FitResult:
         """The result of :meth:`to_dict`'s summary (as JSON gives it back: a non-finite number as
         None), without what it leaves out (renders, residuals, the scene, the observations:
-        :func:`~spacefit.fitting.saved.read_fit` reads a fit's folder with its scene and residuals).
+        :func:`read_fit` reads a fit's folder with its scene and residuals).
         A None standard error reads back as inf where ``stderr_undetermined`` names it (not determined),
         else NaN (not estimated), and any other None number as NaN. ``where`` names the source in errors.
 

@@ -1,6 +1,6 @@
-"""The checkpoint plumbing of a fit, as one value: what :func:`spacefit.fit` reports of each step and of
+"""The checkpoint plumbing of a fit, as one value: what :func:`fit` reports of each step and of
 its end, and what it takes back to end or go on as an interrupted or killed fit would have
-(:func:`spacefit.pipeline.fit_to_folder`'s checkpoint and ``--resume``)."""
+(:func:`fit_to_folder`'s checkpoint and ``--resume``)."""
 
 from __future__ import annotations
 
@@ -23,8 +23,17 @@ class Resume:
             fit would have given: same status, steps, values and verdict.
         history: the history of an interrupted solve (its steps' entries, as ``on_step`` had them), whose
             best point is the fit's ``start``: the solve goes on from there, its steps counted after
-            them, and what the stop rule (:mod:`spacefit.fitting.stopping`) and the verdict know of them
+            them, and what the stop rule (``sf.fit(stop=...)``) and the verdict know of them
             kept, so that it ends as the uninterrupted one would (``--resume``).
+
+    Example:
+        Keep each step's values, as a checkpoint would:
+
+        >>> import spacefit as sf
+        >>> steps = []
+        >>> resume = sf.Resume(on_step=steps.append)  # sf.fit(..., resume=resume)
+        >>> resume.ended is None
+        True
     """
 
     on_step: Callable[[dict[str, Any]], None] | None = None

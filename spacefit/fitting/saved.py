@@ -30,6 +30,22 @@ def read_fit(path: str | Path) -> FitResult:
     Raises:
         InputError: no such file or folder, a folder without ``fit.json``, or a ``fit.json`` that is not
             a fit's (not JSON, a field missing, an unknown status).
+
+    Args:
+        path: a fit's folder, or its ``fit.json``.
+
+    Returns:
+        The :class:`FitResult`.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> table = sf.BRDFTable(wi=wi, wo=np.tile([0.0, 0.0, 1.0], (4, 1)), value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="paint")
+        >>> folder = sf.write_table_fit("paint-fit", sf.fit_brdf_table(table, "lambert"))
+        >>> back = sf.read_fit(folder)
+        >>> back.status.value, round(back.values["parts.sample.kd"], 3)
+        ('converged', 0.3)
     """
     path = check_path("path", path)
     file = path / "fit.json" if path.is_dir() else path

@@ -40,10 +40,16 @@ class Status(enum.Enum):
     verdicts on a solve that ended without a failure, in this order of precedence:
     :attr:`NO_PROGRESS` (no step lowered the loss: the start is returned), :attr:`AT_BOUND` (a
     parameter ended at a bound of its range), :attr:`UNJUDGED` (the noise is known but the model's
-    own render noise is too large to judge its residuals) and :attr:`MISFIT` (the residuals exceed
-    the noise, :mod:`spacefit.fitting.goodness`). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
-    :attr:`NO_BETTER_POINT` (:mod:`spacefit.fitting.stopping`) are a success, and only where the
+    own render noise is too large to judge its residuals) and :attr:`MISFIT` (the residuals exceed the noise, :attr:`FitResult.goodness`). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
+    :attr:`NO_BETTER_POINT` (``sf.fit(stop=...)``) are a success, and only where the
     verdicts leave them: a solve stopped there whose residuals exceed the noise is a :attr:`MISFIT`.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.Status.CONVERGED.success, sf.Status.MISFIT.success
+        (True, False)
+        >>> sf.Status.CONVERGED.value
+        'converged'
     """
 
     CONVERGED = "converged"
@@ -84,6 +90,14 @@ class Adam:
     Attributes:
         learning_rate: the initial step size in unconstrained coordinates.
         rtol: stop when no unconstrained coordinate moved more than this for :data:`ADAM_PATIENCE` steps.
+
+    Raises:
+        InputError: ``learning_rate`` or ``rtol`` not > 0.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.Adam(learning_rate=0.1)  # sf.fit(..., solver=sf.Adam(learning_rate=0.1))
+        Adam(learning_rate=0.1, rtol=0.001)
     """
 
     learning_rate: float = 0.05
@@ -105,7 +119,17 @@ def _normal(cls: type) -> Callable[[], Solver]:
     return lambda: cls(rtol=DEFAULT_RTOL, atol=DEFAULT_ATOL, linear_solver=NormalEquations())
 
 
-# The solvers by name, each with its default settings.
+#: The solvers ``sf.fit(solver=...)`` takes by name, each a function returning the solver object with
+#: its default tolerances: ``lm`` (Levenberg-Marquardt, the default), ``gn`` (Gauss-Newton), ``dogleg``
+#: and ``bfgs`` (optimistix) and ``adam`` (:class:`Adam`). Pass a solver object instead of a name to
+#: set other tolerances.
+#:
+#: Example:
+#:     >>> import spacefit as sf
+#:     >>> list(sf.SOLVERS)
+#:     ['lm', 'gn', 'dogleg', 'bfgs', 'adam']
+#:     >>> type(sf.SOLVERS["lm"]()).__name__
+#:     'LevenbergMarquardt'
 SOLVERS: dict[str, Callable[[], Solver]] = {
     "lm": _normal(optx.LevenbergMarquardt),
     "gn": _normal(optx.GaussNewton),

@@ -259,6 +259,14 @@ class Identifiability:
             (their square roots are the noise-weighted Jacobian's singular values); 0 marks a
             direction nothing constrains.
         extras: derived quantities, e.g. the rms height's standard error when D and G are free.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> observation = sf.Observation(scene, sf.render(scene), sigma=0.01)
+        >>> what = sf.identifiability([observation], ["parts.legs.kd"], {"parts.legs.kd": 0.2})
+        >>> what.names, what.correlation.shape
+        (('parts.legs.kd',), (1, 1))
     """
 
     names: tuple[str, ...]
@@ -284,6 +292,29 @@ def identifiability(
 
     With references rendered at ``at`` (and their noise ``sigma``), this predicts how well a fit
     could determine each parameter from these observations.
+
+    Args:
+        observations: the observations (their references and noise), as :func:`fit` takes them.
+        free: the parameters.
+        at: the values to evaluate at (physical units), by name.
+        loss: one of :data:`LOSSES`.
+        spp: samples per pixel of the renders (None: the scene's).
+        seed, seed_grad: the primal's and the derivatives' seeds.
+        wrinkle_coordinates: ``"rms"`` (solve in D and the rms height) or ``"G"`` (in D and G).
+
+    Returns:
+        An :class:`Identifiability`.
+
+    Raises:
+        InputError: any bad input, as :func:`fit` refuses it.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> observation = sf.Observation(scene, sf.render(scene), sigma=0.01)
+        >>> what = sf.identifiability([observation], ["parts.legs.kd"], {"parts.legs.kd": 0.2})
+        >>> bool(0 < what.stderr["parts.legs.kd"] < 0.2)
+        True
     """
     s = setup(observations, free, start=at, loss=loss, render=FitRender(spp=spp, seed=seed, seed_grad=seed_grad),
               wrinkle_coordinates=wrinkle_coordinates)

@@ -120,7 +120,22 @@ class Fixed:
 @dataclass(frozen=True)
 class SunTracking:
     """A part turned about the body ``axis`` through ``pivot_m`` (body frame, m) so that its normal faces
-    the sun as closely as that rotation allows (:func:`tracking_rotation`), as solar arrays are."""
+    the sun as closely as that rotation allows (:func:`tracking_rotation`), as solar arrays are.
+
+    A scene file gives it in a part's table: ``articulation = "sun_tracking"``, ``axis = [1, 0, 0]``.
+
+    Args:
+        axis: the rotation axis in the body frame (any length but 0).
+        pivot_m: a point on the axis (body frame, m).
+
+    Raises:
+        InputError: a zero or non-finite axis or pivot.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.SunTracking(axis=(1, 0, 0))
+        SunTracking(axis=(1.0, 0.0, 0.0), pivot_m=(0.0, 0.0, 0.0))
+    """
 
     axis: tuple[float, float, float]
     pivot_m: tuple[float, float, float] = (0.0, 0.0, 0.0)
@@ -149,7 +164,21 @@ class SunTracking:
 @dataclass(frozen=True)
 class AxisAngle:
     """A part turned by ``angle_deg`` about the body ``axis`` through ``pivot_m`` (body frame, m), in
-    spacefit's convention (:func:`axis_rotation`)."""
+    spacefit's convention (:func:`axis_rotation`).
+
+    Args:
+        axis: the rotation axis in the body frame (any length but 0).
+        angle_deg: the turn (deg), right-handed about ``axis``.
+        pivot_m: a point on the axis (body frame, m).
+
+    Raises:
+        InputError: a zero or non-finite axis, pivot or angle.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.AxisAngle(axis=(0, 0, 1), angle_deg=30)
+        AxisAngle(axis=(0.0, 0.0, 1.0), angle_deg=30.0, pivot_m=(0.0, 0.0, 0.0))
+    """
 
     axis: tuple[float, float, float]
     angle_deg: float
@@ -259,7 +288,24 @@ class FixedAttitude:
 @dataclass(frozen=True)
 class NadirSun:
     """The body's ``nadir_axis`` to nadir and its ``sun_axis`` towards the sun as far as that allows
-    (body frame; defaults: lumos-sat's frame, z away from the Earth's centre, y towards the sun)."""
+    (body frame; defaults: lumos-sat's frame, z away from the Earth's centre, y towards the sun).
+
+    A scene's ``target.attitude = "nadir_sun"``, with ``target.nadir`` the world direction to nadir.
+
+    Args:
+        nadir_axis: the body axis pointed at nadir.
+        sun_axis: the body axis turned towards the sun, not parallel to ``nadir_axis``.
+
+    Raises:
+        InputError: a zero axis, or two parallel ones.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> law = sf.NadirSun()
+        >>> rotation = law.rotation(nadir=np.array([0.0, 0.0, -1.0]), sun=np.array([1.0, 0.0, 0.0]))
+        >>> np.round(rotation @ np.array(law.sun_axis), 6)  # body +y turned to the sun
+        array([1., 0., 0.])
+    """
 
     nadir_axis: tuple[float, float, float] = (0.0, 0.0, -1.0)
     sun_axis: tuple[float, float, float] = (0.0, 1.0, 0.0)
@@ -284,7 +330,24 @@ class NadirSun:
 @dataclass(frozen=True)
 class SunPointing:
     """The body's ``sun_axis`` to the sun and its ``nadir_axis`` towards nadir as far as that allows
-    (body frame; defaults +z and +x)."""
+    (body frame; defaults +z and +x).
+
+    A scene's ``target.attitude = "sun"``.
+
+    Args:
+        sun_axis: the body axis pointed at the sun.
+        nadir_axis: the body axis turned towards nadir, not parallel to ``sun_axis``.
+
+    Raises:
+        InputError: a zero axis, or two parallel ones.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> law = sf.SunPointing()
+        >>> rotation = law.rotation(nadir=np.array([0.0, 0.0, -1.0]), sun=np.array([1.0, 0.0, 0.0]))
+        >>> np.round(rotation @ np.array(law.sun_axis), 6)  # body +z to the sun
+        array([1., 0., 0.])
+    """
 
     sun_axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
     nadir_axis: tuple[float, float, float] = (1.0, 0.0, 0.0)
@@ -331,8 +394,25 @@ def quaternion_matrix(q: Float[np.ndarray, "... 4"]) -> Float[np.ndarray, "... 3
 @dataclass(frozen=True, eq=False)
 class QuaternionTable:
     """The body's attitude over time: ``times_s`` (n,) seconds since 1970 UTC, increasing, and unit
-    quaternions ``quaternions`` (n, 4), scalar first (body to world, module docstring), interpolated
-    by spherical linear interpolation along the shorter arc; ``source`` names where they came from."""
+    quaternions ``quaternions`` (n, 4), scalar first (body to world, the Conventions page), interpolated
+    by spherical linear interpolation along the shorter arc; ``source`` names where they came from.
+
+    A scene's ``target.attitude = "table"`` reads one from ``target.quaternions`` (:meth:`read`).
+
+    Args:
+        times_s: (n,) times, seconds since 1970 UTC, increasing.
+        quaternions: (n, 4) unit quaternions (w, x, y, z), body to world.
+        source: the file or name they came from, for messages.
+
+    Raises:
+        InputError: times that do not increase, or quaternions that are not (n, 4) unit ones.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> table = sf.QuaternionTable(times_s=np.array([0.0, 10.0]), quaternions=np.array([[1.0, 0, 0, 0], [1.0, 0, 0, 0]]))
+        >>> table.times_s
+        array([ 0., 10.])
+    """
 
     times_s: np.ndarray
     quaternions: np.ndarray

@@ -37,7 +37,24 @@ UNDISTORT_MAX_STEPS = 50
 
 @dataclass(frozen=True)
 class Distortion:
-    """Brown-Conrady coefficients: radial k1, k2, k3 and tangential p1, p2 (dimensionless, OpenCV's order and signs)."""
+    """Brown-Conrady coefficients: radial k1, k2, k3 and tangential p1, p2 (dimensionless, OpenCV's order and signs).
+
+    Lens distortion of a camera, applied to a pinhole render by :func:`distort_image`: a point at
+    normalised image coordinates (x, y), r^2 = x^2 + y^2, moves to
+    x (1 + k1 r^2 + k2 r^4 + k3 r^6) + 2 p1 x y + p2 (r^2 + 2 x^2), and likewise in y.
+
+    Args:
+        k1, k2, k3: radial coefficients.
+        p1, p2: tangential coefficients.
+
+    Raises:
+        InputError: a coefficient that is not finite.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.Distortion(k1=-0.1)
+        Distortion(k1=-0.1, k2=0.0, k3=0.0, p1=0.0, p2=0.0)
+    """
 
     k1: float = 0.0
     k2: float = 0.0

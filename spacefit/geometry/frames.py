@@ -120,7 +120,24 @@ class CameraFrame:
 
 @dataclass(frozen=True)
 class Intrinsics:
-    """Pinhole intrinsics: focal length and pixel pitch (m), size (px), principal point offset (px)."""
+    """Pinhole intrinsics: focal length and pixel pitch (m), size (px), principal point offset (px).
+
+    Args:
+        focal_length: f (m), > 0.
+        pixel_pitch: the pixels' side (m), > 0 (square pixels).
+        width, height: the image's size (px), >= 1.
+        principal_offset: the principal point's offset from the image centre (px), (x right, y down).
+
+    Raises:
+        InputError: a value outside its range, naming it.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.Intrinsics(focal_length=0.05, pixel_pitch=1e-5, width=640, height=480)
+        Intrinsics(focal_length=0.05, pixel_pitch=1e-05, width=640, height=480, principal_offset=(0.0, 0.0))
+        >>> sf.Intrinsics.from_scene(sf.default_scene()).width
+        600
+    """
 
     focal_length: float
     pixel_pitch: float
@@ -139,7 +156,7 @@ class Intrinsics:
     def from_scene(cls, scene: Any) -> Intrinsics:
         """The intrinsics of a scene's camera (an ``sf.Scene``), in metres: ``camera.focal_length_mm`` and
         ``camera.pixel_pitch_mm`` (set by ``camera.fov_deg`` where it is given), ``render.resolution``
-        and ``camera.principal_offset_px``; what :func:`spacefit.observe` and a sensor take.
+        and ``camera.principal_offset_px``; what :func:`observe` and a sensor take.
 
         Raises:
             InputTypeError: ``scene`` has no camera and render settings (the geometry sits under the scene's schema,
@@ -197,6 +214,15 @@ def pixel_solid_angles(intrinsics: Intrinsics) -> Float[np.ndarray, "h w"]:
 
     Returns:
         (height, width) solid angles in sr, row v, column u (pixel (u, v) covers [u, u + 1) x [v, v + 1)).
+
+    Args:
+        intrinsics: the camera (:class:`Intrinsics`).
+
+    Example:
+        >>> import spacefit as sf
+        >>> omega = sf.pixel_solid_angles(sf.Intrinsics(focal_length=0.05, pixel_pitch=1e-5, width=4, height=3))
+        >>> omega.shape, f"{omega[1, 2]:.4g}"  # about (p / f)^2 sr near the axis
+        ((3, 4), '4e-08')
     """
     check_type("intrinsics", intrinsics, Intrinsics, "an sf.Intrinsics")
     f, p = intrinsics.focal_length, intrinsics.pixel_pitch

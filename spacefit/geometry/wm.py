@@ -168,6 +168,22 @@ def wm_rms(D: float | Array, G: float | Array, *, gamma: float, M: int, L: float
 
     Each of the M (nmax + 1) cosines has variance 1/2 over the plane, so the rms height is
     ``L (G/L)^(D-2) sqrt(ln(gamma)/2 * sum_n gamma^(2 (D-3) n))``, independent of M.
+
+    Args:
+        D: fractal dimension, in (2, 3).
+        G: height scale (m).
+        gamma: the frequencies' ratio, > 1.
+        M: the number of ridge directions.
+        L, Ls: the longest and the cut-off wavelength (m).
+
+    Returns:
+        The rms height (m), a JAX scalar (or D's and G's broadcast shape); differentiable in D and G.
+
+    Example:
+        >>> import spacefit as sf
+        >>> w = sf.default_scene().wrinkles
+        >>> f"{float(sf.wm_rms(w.D, w.G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)) * 1e3:.2f} mm"
+        '4.29 mm'
     """
     return L * (G / L) ** (D - 2.0) * _rms_factor(D, gamma, M, L, Ls)
 
@@ -183,6 +199,22 @@ def wm_rms_slope(D: float | Array, G: float | Array, *, gamma: float, M: int, L:
     With wave numbers k_n = 2 pi gamma^n / L and ridges at angles pi m / M (sum of cos^2 over them
     M / 2 for M >= 2), each axis's slope variance is
     ``L^2 (G/L)^(2(D-2)) ln(gamma)/4 * sum_n gamma^(2(D-3)n) k_n^2``.
+
+    Args:
+        D: fractal dimension, in (2, 3).
+        G: height scale (m).
+        gamma: the frequencies' ratio, > 1.
+        M: the number of ridge directions.
+        L, Ls: the longest and the cut-off wavelength (m).
+
+    Returns:
+        The rms slope, a JAX scalar (or D's and G's broadcast shape); compare :data:`MLI_SLOPE_RANGE`.
+
+    Example:
+        >>> import spacefit as sf
+        >>> w = sf.default_scene().wrinkles
+        >>> round(float(sf.wm_rms_slope(w.D, w.G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls)), 2)
+        0.59
     """
     n = np.arange(wm_n_max(L, Ls, gamma) + 1)
     k2 = (2.0 * np.pi * gamma**n / L) ** 2

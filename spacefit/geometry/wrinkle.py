@@ -35,11 +35,16 @@ COPLANAR_TOL = 1e-9
 _AXIS_DECIMALS = 9
 # Which base edges (corner i to corner i + 1) each corner of a triangle lies on.
 _CORNER_SIDES = np.array([[True, False, True], [True, True, False], [False, True, True]])
-# The rms slope (per axis, dimensionless, :func:`spacefit.geometry.wm.wm_rms_slope`) of wrinkles
-# that look like crumpled MLI foil: from about 11 deg (gentler reads as a flat sheet with a
-# ripple) to 45 deg (steeper starts to fold the body over itself: the default body's fold
-# fraction is 0.45 % at rms slope 2.3, 7.6 % at the thesis's literal 37). A stated modelling
-# choice: no published slope statistics of crumpled MLI or foil were found (docs/how-to/materials.md).
+#: The rms slope (per axis, dimensionless, :func:`wm_rms_slope`) of wrinkles that look like
+#: crumpled MLI foil, (low, high): from about 11 deg (gentler reads as a flat sheet with a ripple)
+#: to 45 deg (steeper starts to fold the body over itself: the default body's fold fraction is
+#: 0.45 % at rms slope 2.3, 7.6 % at the thesis's literal 37). A stated modelling choice: no
+#: published slope statistics of crumpled MLI or foil were found (the Materials guide).
+#:
+#: Example:
+#:     >>> import spacefit as sf
+#:     >>> sf.MLI_SLOPE_RANGE
+#:     (0.2, 1.0)
 MLI_SLOPE_RANGE = (0.2, 1.0)
 # Fraction of a wrinkled part's faces folded over (:func:`fold_fraction`) above which assembly warns.
 FOLD_WARN_FRACTION = 0.01

@@ -31,19 +31,33 @@ def sensor_of(image: ObservedImage, sensor: Sensor | Mapping[str, Any] | None = 
     replacing the ones before: the illustrative defaults (only with ``defaults="illustrative"``),
     the file's (its integer type's bits, a spacefit sidecar, the FITS header's keywords,
     :data:`HEADER_KEYWORDS`), ``sensor_file`` (the fields of a sensor file,
-    :func:`~spacefit.sensor.read_sensor_file`), and the mapping ``sensor`` (an option or argument).
+    :func:`read_sensor_file`), and the mapping ``sensor`` (an option or argument).
     Without defaults, the values not given follow documented rules, not illustrative numbers: no
     full well (the ``SATURATE`` level or the ADC's range saturates); diffraction only when both the
     aperture and the wavelength are given; vignetting off for a calibrated camera (a radiometric
     scale), on otherwise.
 
     Returns:
-        the sensor and, for each field it uses (:func:`~spacefit.sensor.used_fields`), its source:
+        the sensor and, for each field it uses, its source:
         ``"header KEY"``, ``"spacefit sidecar"``, ``"sensor file"``, ``"option/argument"``,
         ``"default (illustrative)"`` or ``"rule: ..."``.
     Raises:
-        InputError: a value a fit needs (:func:`~spacefit.sensor.missing_for_measurement`) that no
+        InputError: a value a fit needs that no
             source gives, naming each and the three ways to give it.
+
+    Args:
+        image: a DN image (:func:`read_image`).
+        sensor: a whole :class:`Sensor`, or fields replacing the file's; None: the file's.
+        sensor_file: the fields of a sensor file (:func:`read_sensor_file`).
+        defaults: ``"illustrative"`` to fill values no source gives with :class:`Sensor`'s defaults.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sensor, camera = sf.Sensor(), sf.Intrinsics(focal_length=0.05, pixel_pitch=1e-5, width=4, height=3)
+        >>> _ = sf.write_observation("frame.fits", sf.observe(np.full((3, 4, 3), 1.0), sensor, camera, seed=0), sensor)
+        >>> found, sources = sf.sensor_of(sf.read_image("frame.fits"), {"exposure_time_s": 0.002})
+        >>> found.exposure_time_s, sources["exposure_time_s"]
+        (0.002, 'option/argument')
     """
     check_type("image", image, ObservedImage, "an sf.ObservedImage (what sf.read_image returns)")
     if isinstance(sensor, Sensor):
@@ -82,7 +96,21 @@ def sensor_of(image: ObservedImage, sensor: Sensor | Mapping[str, Any] | None = 
 
 
 def format_sensor_sources(sensor: Sensor, sources: Mapping[str, str]) -> str:
-    """The values of ``sensor`` that a fit uses with their sources (:func:`sensor_of`), one line each."""
+    """The values of ``sensor`` that a fit uses with their sources (:func:`sensor_of`), one line each.
+
+    Args:
+        sensor: the sensor (:func:`sensor_of`'s first value).
+        sources: field -> source (:func:`sensor_of`'s second value).
+
+    Returns:
+        A title line and one line per field: name, value and source.
+
+    Example:
+        >>> import spacefit as sf
+        >>> print(sf.format_sensor_sources(sf.Sensor(), {"exposure_time_s": "sensor file"}))
+        sensor values and their sources:
+          exposure_time_s = 0.001  (sensor file)
+    """
     width = max(map(len, sources), default=0)
     lines = [f"  {name:<{width}} = {getattr(sensor, name) if name != 'vignetting' else sensor.vignetted}  ({source})"
              for name, source in sources.items()]

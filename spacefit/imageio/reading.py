@@ -14,7 +14,7 @@ Saturated values are masked: at or above the FITS ``SATURATE`` keyword, else the
 ``saturation_dn``, else the integer type's full scale (2^bits - 1); float DN without either has no
 saturation mask. Pixels a user mask or a PNG's alpha leaves out are not checked and read as 0.
 
-What is refused, naming the file (:class:`~spacefit.errors.InputError`): an image of other than 1
+What is refused, naming the file (:class:`InputError`): an image of other than 1
 (grey) or 3 (RGB) channels, a FITS cube's planes (NAXIS3) included; alpha is read as a mask (0
 leaves the pixel out, any other value keeps it as it is) in PNG and in TIFF with an unassociated
 alpha (ExtraSamples = 2), and refused elsewhere (an RGBA EXR, a TIFF's unmarked fourth sample); a
@@ -60,6 +60,12 @@ class ObservedImage:
             ``date_obs`` (ISO time, FITS ``DATE-OBS``), ``row_order`` and ``row_order_source``
             (FITS), ``notes`` (what a report should say about the file), ``sidecar`` (its content).
         path: the file read.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sf.write_exr("reference.exr", np.full((4, 6, 3), 0.5))
+        >>> sf.read_image("reference.exr").metadata["format"]
+        'exr'
     """
 
     data: Float[np.ndarray, "h w c"]
@@ -121,7 +127,7 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
         sigma: the noise standard deviation of a radiance image (W m^-2 sr^-1, scalar or per
             pixel): its values may then dip below 0 by up to :data:`NEGATIVE_SIGMAS` sigma.
         row_order: ``"top-down"`` or ``"bottom-up"``: how a FITS file's rows run, whatever it says
-            (None: as it states, :mod:`spacefit.imageio.fits`).
+            (None: as it states).
     Returns:
         the data, unit, metadata and usable-pixel mask (see :class:`ObservedImage`).
     Raises:
@@ -129,6 +135,13 @@ def read_image(path: str | Path, *, unit: str | None = None, response: str | Non
             without a response, NaN or infinity (any unit), negative radiance, other than 1 or 3
             channels, a truncated FITS, a malformed sidecar, a mask of another size, not binary or
             empty; each naming the file and the number of pixels or values.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sf.write_exr("reference.exr", np.full((4, 6, 3), 0.5))
+        >>> image = sf.read_image("reference.exr")
+        >>> image.unit, image.data.shape, bool(image.mask.all())
+        ('W m^-2 sr^-1', (4, 6, 3), True)
     """
     wanted = UNITS[check_choice("unit", unit, UNITS)] if unit is not None else None
     if response is not None:

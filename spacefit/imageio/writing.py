@@ -1,7 +1,7 @@
 """Writing observation files: simulated DN as 16-bit PNG, TIFF or FITS with a JSON sidecar.
 
-:func:`write_observation` stores integer DN (from :func:`spacefit.formation.observe`) and every
-:class:`~spacefit.sensor.Sensor` value twice: in a JSON sidecar ``<file>.json`` and, for FITS, in the
+:func:`write_observation` stores integer DN (from :func:`observe`) and every
+:class:`Sensor` value twice: in a JSON sidecar ``<file>.json`` and, for FITS, in the
 header (standard keys where they exist, ``HIERARCH SPACEFIT SENSOR <FIELD>`` for all).
 """
 
@@ -29,13 +29,24 @@ def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata
     Args:
         path: ``.png``, ``.tif`` / ``.tiff`` or ``.fits`` / ``.fit`` / ``.fts``.
         dn: (height, width, channels) unsigned integers (1 or 3 channels for PNG) in the sensor's
-            ADC range, as :func:`spacefit.formation.observe` returns.
+            ADC range, as :func:`observe` returns.
         sensor: the sensor that made them; all its values go to the sidecar and the FITS header.
         metadata: anything JSON can hold, added to the sidecar under ``metadata``.
         render_spp: the samples per pixel of the render the DN were simulated from (FITS
             :data:`RENDER_SPP_KEY`, sidecar ``render_spp``); None: not a simulation.
     Returns:
         the sidecar's path.
+
+    Raises:
+        InputError: an unknown extension, DN that are not unsigned integers in the ADC's range, or a
+            folder that does not exist.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sensor, camera = sf.Sensor(), sf.Intrinsics(focal_length=0.05, pixel_pitch=1e-5, width=4, height=3)
+        >>> dn = sf.observe(np.full((3, 4, 3), 1.0), sensor, camera, seed=0)
+        >>> sf.write_observation("frame.fits", dn, sensor).name
+        'frame.fits.json'
     """
     p = Path(path)
     kind = file_format(p, WRITABLE)

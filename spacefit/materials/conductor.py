@@ -114,6 +114,26 @@ class Conductor(MaterialModel):
     thesis eq. 2-9) or "beckmann" (Gaussian slopes of per-axis variance alpha^2 / 2, which the
     level of detail uses for wrinkles' slopes). Masking is Smith's separable form, as in Walter et
     al. 2007 and Mitsuba 3.
+
+    Args:
+        eta: real part of the complex refractive index, one value or RGB (3 values), > 0.
+        k: imaginary part (extinction coefficient), one value or RGB, >= 0.
+        alpha_x: roughness along the tangent (dimensionless microfacet alpha), in [1e-4, 1].
+        alpha_y: roughness across the tangent, in [1e-4, 1].
+        distribution: ``"ggx"`` or ``"beckmann"``.
+
+    Raises:
+        InputError: a value outside its range or an unknown distribution, naming the field.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.Conductor(eta=0.18, k=0.01, alpha_x=0.14, alpha_y=0.14)  # the thesis's MLI
+        Conductor(eta=0.18, k=0.01, alpha_x=0.14, alpha_y=0.14, distribution='ggx')
+        >>> try:
+        ...     sf.Conductor(eta=0.18, k=0.01, alpha_x=2.0, alpha_y=0.1)
+        ... except sf.InputError as err:
+        ...     print(err)
+        `alpha_x` must be in [0.0001, 1], got 2.
     """
 
     name: ClassVar[str] = "conductor"

@@ -17,9 +17,24 @@ if TYPE_CHECKING:
 
 @dataclass(frozen=True)
 class DiffuseConductor(MaterialModel):
-    """A rough conductor plus a diffuse term: f_r = kd / pi + the :class:`~spacefit.materials.Conductor`'s
+    """A rough conductor plus a diffuse term: f_r = kd / pi + the :class:`Conductor`'s
     BRDF (the sum a measured table of a painted or coated surface often needs: a specular peak over a
-    diffuse floor). The renderer draws it as Mitsuba's ``blendbsdf`` of the two, each doubled, at weight 0.5."""
+    diffuse floor). The renderer draws it as Mitsuba's ``blendbsdf`` of the two, each doubled, at weight 0.5.
+
+    Args:
+        kd: albedo of the diffuse term, one value or RGB, in [0, 1].
+        eta, k: the conductor's complex refractive index (one value or RGB; eta > 0, k >= 0).
+        alpha_x, alpha_y: the conductor's roughness along and across the tangent, in [1e-4, 1].
+        distribution: ``"ggx"`` or ``"beckmann"``.
+
+    Raises:
+        InputError: a value outside its range.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.DiffuseConductor(kd=0.1, eta=1.5, k=3.0, alpha_x=0.2, alpha_y=0.2)
+        DiffuseConductor(kd=0.1, eta=1.5, k=3.0, alpha_x=0.2, alpha_y=0.2, distribution='ggx')
+    """
 
     name: ClassVar[str] = "diffuse_conductor"
     fields: ClassVar[tuple[Field, ...]] = (KD, ETA, K, ALPHA_X, ALPHA_Y)

@@ -16,7 +16,24 @@ KD = Field("kd", "1", 0.0, 1.0, 0.1, "diffuse albedo", "albedo kd", spectral=Tru
 
 @dataclass(frozen=True)
 class Lambert(MaterialModel):
-    """Lambertian reflector, f_r = kd / pi (thesis eq. 2-10); kd in [0, 1]."""
+    """Lambertian reflector, f_r = kd / pi (thesis eq. 2-10); kd in [0, 1].
+
+    A diffuse surface that reflects alike in every direction: paint, a matte coating, the default
+    lander's legs.
+
+    Args:
+        kd: the albedo (diffuse reflectance), one value or RGB (3 values), in [0, 1].
+
+    Raises:
+        InputError: ``kd`` outside [0, 1].
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> paint = sf.Lambert(kd=0.5)
+        >>> up = np.array([0.0, 0.0, 1.0])
+        >>> round(float(paint.evaluate(up, up)), 4)  # kd / pi, sr^-1
+        0.1592
+    """
 
     name: ClassVar[str] = "lambert"
     fields: ClassVar[tuple[Field, ...]] = (KD,)

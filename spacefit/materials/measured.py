@@ -50,6 +50,19 @@ class BRDFTable:
         value: (n,) the BRDF, sr^-1.
         sigma: (n,) its standard errors, sr^-1, or None (not stated).
         source: where it came from (a path), for messages.
+
+    Raises:
+        InputError: directions that are not (n, 3) unit vectors, values or errors that are negative,
+            not finite or of another length.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> len(table.value), table.source
+        (4, 'white paint')
     """
 
     wi: np.ndarray
@@ -90,12 +103,38 @@ def unit_vectors(zenith_deg: np.ndarray, azimuth_deg: np.ndarray) -> np.ndarray:
 
 
 def read_brdf_table(path: str | Path, *, floor: float = 0.0) -> BRDFTable:
-    """Read a BRDF table in the general format or the Starlink (lumos-sat) format (module docstring),
-    dropping grazing rows and values at or below ``floor`` (sr^-1).
+    """Read a measured BRDF table, dropping rows at or beyond grazing (zenith >= 90 deg) and values at
+    or below ``floor`` (sr^-1, an instrument's noise floor). Two text formats, ``#`` lines comments,
+    angles in degrees, the BRDF in sr^-1:
+
+    * the general format: a CSV file whose header names its columns ``theta_i_deg, phi_i_deg,
+      theta_o_deg, phi_o_deg, brdf_sr`` and optionally ``sigma_sr`` (each value's standard error);
+      theta is the zenith angle from the surface normal, phi the azimuth from the surface's x axis
+      (a conductor's ``alpha_x`` tangent) towards y; ``_i`` towards the light, ``_o`` towards the
+      detector;
+    * the Scatterworks / lumos-sat format of the Starlink tables (Fankhauser, Askari & Tyson 2023,
+      AJ 166:59): five unnamed columns ``phi_i theta_i phi_o theta_o brdf``, phi the zenith and
+      theta the azimuth; a negative zenith is the direction on the far side of the normal.
+
+    Args:
+        path: the table's file.
+        floor: values at or below it are dropped (sr^-1), >= 0.
+
+    Returns:
+        The :class:`BRDFTable`.
 
     Raises:
         InputError: an unreadable row, missing columns, a negative BRDF or error, nothing left.
         OSError: the file cannot be read.
+
+    Example:
+        >>> import spacefit as sf
+        >>> with open("paint.csv", "w") as f:
+        ...     print("theta_i_deg,phi_i_deg,theta_o_deg,phi_o_deg,brdf_sr,sigma_sr", file=f)
+        ...     print("10,0,0,0,0.0955,0.002", file=f)
+        ...     print("30,0,0,0,0.0955,0.002", file=f)
+        >>> sf.read_brdf_table("paint.csv").value
+        array([0.0955, 0.0955])
     """
     check_range("floor", floor, 0.0, unit="sr^-1")
     rows = read_text_rows("path", path, "BRDF table")

@@ -15,6 +15,18 @@ class Mirror(MaterialModel):
 
     Under a single distant sun a mirror is never seen lit directly (delta BRDF times delta light);
     it only shows what it reflects. Its BRDF has no finite value (:attr:`delta`).
+
+    Args:
+        eta: real part of the complex refractive index, one value or RGB (3 values), > 0.
+        k: imaginary part (extinction coefficient), one value or RGB, >= 0.
+
+    Raises:
+        InputError: a value outside its range.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.Mirror(eta=0.18, k=0.01).delta
+        True
     """
 
     name: ClassVar[str] = "mirror"

@@ -8,8 +8,8 @@ flat plates' fits (:mod:`spacefit.studies.plates`) take their bounds from them. 
 :meth:`~MaterialModel.f_r` is its BRDF in JAX under the paper's names, for one grey channel and
 front-side directions; :meth:`~MaterialModel.evaluate` wraps it the way the renderer wraps every
 BSDF (Mitsuba's ``twosided``) and averages the RGB channels. :meth:`~MaterialModel.effective` is its
-level-of-detail rule (:mod:`spacefit.scene.lod`). A model is added by
-:func:`spacefit.materials.registry.register_material`; its rendering backends' entries live in
+level-of-detail rule (:class:`WrinkleSettings`' ``lod``). A model is added by
+:func:`register_material`; its rendering backends' entries live in
 :mod:`spacefit.rendering` (docs/reference/development.md, "Adding a material model").
 """
 
@@ -89,7 +89,19 @@ def two_sided(wi: Array, wo: Array, f_r: Any) -> Array:
 class MaterialModel:
     """Base of the material models: validation from :attr:`fields`, the two-sided RGB-mean BRDF, the
     level-of-detail rule. Subclasses are frozen dataclasses whose numeric dataclass fields are
-    declared in :attr:`fields` (other dataclass fields are options, e.g. a conductor's ``distribution``)."""
+    declared in :attr:`fields` (other dataclass fields are options, e.g. a conductor's ``distribution``).
+
+    Subclass it (a frozen dataclass with ``name``, ``fields`` and ``f_r``) and add it with
+    :func:`register_material` to give scene files and fits a material of your own; the
+    development page's "Adding a material model" shows one whole.
+
+    Example:
+        >>> import spacefit as sf
+        >>> [f.name for f in sf.Conductor.fields]
+        ['eta', 'k', 'alpha_x', 'alpha_y']
+        >>> issubclass(sf.Lambert, sf.MaterialModel)
+        True
+    """
 
     # The name a scene file gives the model (``material = "conductor"``).
     name: ClassVar[str] = ""
@@ -135,7 +147,7 @@ class MaterialModel:
 
     def effective(self, slope_rms: float) -> MaterialModel | None:
         """The level-of-detail rule: a flat part's material that renders this one's as wrinkled with
-        rms slope ``slope_rms`` (per axis), or None where the model has none (:mod:`spacefit.scene.lod`)."""
+        rms slope ``slope_rms`` (per axis), or None where the model has none (:class:`WrinkleSettings`' ``lod``)."""
         return None
 
 

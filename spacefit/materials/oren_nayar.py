@@ -53,8 +53,26 @@ def oren_nayar_brdf(wi: Array, wo: Array, kd: Array, sigma: Array) -> Array:
 @dataclass(frozen=True)
 class OrenNayar(MaterialModel):
     """Oren-Nayar rough diffuse reflector (Oren & Nayar 1994, qualitative model, eq. 30): albedo ``kd``
-    in [0, 1] and facet-slope deviation ``sigma`` in [0, pi/2) rad (:mod:`spacefit.materials.oren_nayar`).
-    sigma = 0 is :class:`~spacefit.materials.Lambert`."""
+    in [0, 1] and facet-slope deviation ``sigma`` in [0, pi/2) rad (Oren & Nayar 1994).
+    sigma = 0 is :class:`Lambert`.
+
+    Args:
+        kd: albedo, one value or RGB, in [0, 1].
+        sigma: standard deviation of the facets' slope angle (rad), in [0, pi/2).
+
+    Raises:
+        InputError: a value outside its range.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.OrenNayar(kd=0.5, sigma=0.3)
+        OrenNayar(kd=0.5, sigma=0.3)
+        >>> try:
+        ...     sf.OrenNayar(kd=0.5, sigma=2.0)
+        ... except sf.InputError as err:
+        ...     print(err)
+        `sigma` must be in [0, 1.5708) rad, got 2.
+    """
 
     name: ClassVar[str] = "oren_nayar"
     fields: ClassVar[tuple[Field, ...]] = (KD, SIGMA)

@@ -1,6 +1,6 @@
 """The material models by the name a scene file gives them, and the named presets; unknown names list the valid ones.
 
-A model (:class:`~spacefit.materials.model.MaterialModel`) is added by one call,
+A model (:class:`MaterialModel`) is added by one call,
 :func:`register_material`, from any module (a test's own included); the parameter table
 (``parts.P.<field>``) and every place that asks for a model by name see it from then on.
 """
@@ -31,6 +31,17 @@ GOLD_K = (3.98316, 2.38572, 1.60322)
 SILVER_ETA = (0.155265, 0.116723, 0.138342)
 SILVER_K = (4.82835, 3.12225, 2.14696)
 
+#: Named materials a scene file gives a part (``material = "mli_gold"``) or Python takes as they are:
+#: the thesis's MLI, mirror and panel values, gold and silver MLI (RGB complex refractive indices
+#: as tabulated for pbrt / Mitsuba) and a white paint. Each is a :class:`Conductor`, :class:`Mirror`
+#: or :class:`Lambert` value (frozen); roughness alpha is dimensionless.
+#:
+#: Example:
+#:     >>> import spacefit as sf
+#:     >>> list(sf.PRESETS)
+#:     ['mli_thesis', 'mli_gold', 'mli_silver', 'mirror_thesis', 'panel_thesis', 'white_paint']
+#:     >>> sf.PRESETS["white_paint"]
+#:     Lambert(kd=0.2)
 PRESETS: Mapping[str, Material] = {
     "mli_thesis": Conductor(eta=0.18, k=0.01, alpha_x=MLI_ALPHA, alpha_y=MLI_ALPHA),
     "mli_gold": Conductor(eta=GOLD_ETA, k=GOLD_K, alpha_x=MLI_ALPHA, alpha_y=MLI_ALPHA),
@@ -75,13 +86,24 @@ class Derived(Mapping[str, V]):
 
 
 def register_material(model: type[MaterialModel]) -> type[MaterialModel]:
-    """Add a material model under its :attr:`~spacefit.materials.model.MaterialModel.name` (returned,
+    """Add a material model under its :attr:`MaterialModel.name` (returned,
     so that it may decorate the class). Registering the same class again is a no-op.
 
     Raises:
         ValueError: for a class that is not a frozen MaterialModel dataclass, a name taken by another
             model or a preset, or a field whose name another model's field has with another unit or
             range (one name, one meaning: ``parts.P.<field>`` is one parameter).
+
+    Args:
+        model: the class, a frozen dataclass subclassing :class:`MaterialModel`.
+
+    Returns:
+        ``model`` itself.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.register_material(sf.Lambert) is sf.Lambert  # registered already: a no-op
+        True
     """
     if not (isinstance(model, type) and issubclass(model, MaterialModel) and dataclasses.is_dataclass(model) and model.name):
         raise ValueError(f"{model!r} is not a named MaterialModel dataclass")

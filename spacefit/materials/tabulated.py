@@ -13,7 +13,7 @@ theta_i between incidences, held at the end values beyond both; ``scale`` multip
 table's values). The renderer evaluates the same interpolation in Dr.Jit
 (:func:`spacefit.rendering.materials.tabulated_plugin`).
 
-A scene file names it by its table's file (read by :func:`spacefit.materials.measured.read_brdf_table`,
+A scene file names it by its table's file (read by :func:`read_brdf_table`,
 relative to the scene file's folder)::
 
     [parts.chassis]
@@ -56,9 +56,9 @@ def signed_offset(wi: Array | np.ndarray, wo: Array | np.ndarray) -> Array:
 
 @dataclass(frozen=True, eq=False)
 class TabulatedBRDF(MaterialModel):
-    """A measured in-plane BRDF table used as it is (module docstring), the material ``tabulated``
+    """A measured in-plane BRDF table used as it is (the guide "BRDF tables and light curves as observations"), the material ``tabulated``
     of any part and of a flat plate (:class:`sf.Plate`). Both sides alike, 0 where sun and observer
-    are on opposite sides, as every material's BRDF (:func:`spacefit.materials.brdf.brdf`).
+    are on opposite sides, as every material's BRDF.
     Isotropic: the part's tangent does not matter. Built from a table's file (``source`` alone,
     as a scene file names it), from a read table (:meth:`from_table`) or from its arrays. ln f is
     piecewise linear in the angles: a fit of directions through it (an attitude) sees one segment's
@@ -71,6 +71,19 @@ class TabulatedBRDF(MaterialModel):
         log_value: K arrays of ln f (f in sr^-1) at those offsets.
         source: where the table came from: its file, or a description of a table made otherwise.
         scale: the factor on the table's values.
+
+    Raises:
+        InputError: incidences not increasing or outside [0, 90) deg, offsets not increasing, fewer
+            than two offsets at an incidence, arrays of different lengths, a non-positive ``scale``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> offsets = (np.array([-0.5, 0.0, 0.5]), np.array([-0.5, 0.0, 0.5]))
+        >>> table = sf.TabulatedBRDF(incidence_rad=np.radians([10.0, 40.0]), offset=offsets,
+        ...                          log_value=(np.log([0.1, 0.5, 0.1]), np.log([0.1, 0.4, 0.1])), source="example")
+        >>> mirror = np.array([-np.sin(0.2), 0.0, np.cos(0.2)])  # the specular direction of a light at 0.2 rad
+        >>> round(float(table.evaluate(np.array([np.sin(0.2), 0.0, np.cos(0.2)]), mirror)), 3)  # sr^-1
+        0.495
     """
 
     name: ClassVar[str] = "tabulated"
@@ -153,7 +166,7 @@ class TabulatedBRDF(MaterialModel):
         return (np.asarray(self.incidence_rad), *(self.offset or ()), *(self.log_value or ()))
 
     def f_r(self, wi: Array, wo: Array, **values: Array) -> Array:
-        """scale exp(ln f(theta_i, u)), the table's interpolation (module docstring), for front-side
+        """scale exp(ln f(theta_i, u)), the table's interpolation (the guide "BRDF tables and light curves as observations"), for front-side
         directions towards the light (``wi``) and the detector (``wo``): not reciprocal."""
         import jax.numpy as jnp  # deferred: a model's fields are read without JAX (the parameter table, a scene file)
         u = signed_offset(wi, wo)

@@ -112,6 +112,26 @@ def render_function(
     The image has the dtype of the input (float32 unless the caller enabled JAX's 64-bit mode).
     ``spp`` / ``spp_grad``: samples per pixel of the primal and the derivative renders (default:
     the scene's); ``seed`` / ``seed_grad`` must differ so that an L2 loss's gradient is unbiased.
+
+    Args:
+        scene: the scene whose other values stay fixed.
+        free: registered parameter names (:func:`available_parameters`).
+        spp, spp_grad: samples per pixel of the primal and the derivative renders.
+        seed, seed_grad: their seeds.
+
+    Returns:
+        A function of an (n,) array of the free values (physical units, in ``free``'s order) to the
+        (h, w, 3) image, differentiable by ``jax.jacfwd`` / ``jax.grad``.
+
+    Raises:
+        InputError: a name the scene cannot free, or ``seed == seed_grad``.
+
+    Example:
+        >>> import jax.numpy as jnp, spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> image_of = sf.render_function(scene, ["parts.legs.kd"])
+        >>> image_of(jnp.array([0.3])).shape
+        (48, 48, 3)
     """
     check_seeds([(seed, seed_grad)])
     return render_functions(scene, free, spp=spp, spp_grad=spp_grad)[0](seed, seed_grad)
@@ -158,6 +178,13 @@ class Jacobian:
         at: the value of each (physical units).
         image: (h, w, 3) radiance, W m^-2 sr^-1.
         columns: name -> (h, w, 3) d(radiance)/d(parameter), W m^-2 sr^-1 per the parameter's unit.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> j = sf.jacobian(scene, ["parts.legs.kd"])
+        >>> j.names, j.image.shape
+        (('parts.legs.kd',), (48, 48, 3))
     """
 
     names: tuple[str, ...]
@@ -171,7 +198,28 @@ def jacobian(
     scene: Scene, free: Sequence[str], *, at: Mapping[str, float] | None = None, spp: int | None = None,
     spp_grad: int | None = None, seed: int = 1, seed_grad: int = 2,
 ) -> Jacobian:
-    """The image and d(image)/d(parameter) for each of ``free`` at the scene's values (or ``at``)."""
+    """The image and d(image)/d(parameter) for each of ``free`` at the scene's values (or ``at``).
+
+    Args:
+        scene: the scene.
+        free: registered parameter names (:func:`available_parameters`).
+        at: values of some of ``free`` (physical units) replacing the scene's.
+        spp, spp_grad: samples per pixel of the primal and the derivative renders (None: the scene's).
+        seed, seed_grad: their seeds, different.
+
+    Returns:
+        A :class:`Jacobian`.
+
+    Raises:
+        InputError: a name the scene cannot free (the message lists those it can), a value out of range.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> j = sf.jacobian(scene, ["parts.legs.kd"])
+        >>> j.at, j.columns["parts.legs.kd"].shape
+        ({'parts.legs.kd': 0.2}, (48, 48, 3))
+    """
     return jacobians(scene, free, [(seed, seed_grad)], at=at, spp=spp, spp_grad=spp_grad)[0][0]
 
 

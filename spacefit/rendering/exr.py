@@ -14,7 +14,22 @@ from spacefit.rendering.bitmap import write_bitmap
 
 def write_exr(path: str | Path, image: np.ndarray, header: Mapping[str, int | float | str] | None = None) -> None:
     """Write a (height, width, 3) float radiance image as a 32-bit float RGB OpenEXR file, with
-    ``header``'s attributes in its header (a simulated reference's ``{"RENDSPP": spp}``, say)."""
+    ``header``'s attributes in its header (a simulated reference's ``{"RENDSPP": spp}``, say).
+
+    Args:
+        path: the file to write, ending in ``.exr``; its folder must exist.
+        image: (height, width, 3) radiance, W m^-2 sr^-1 (any float array; written as float32).
+        header: attributes for the file's header: names to int, float or str values.
+
+    Raises:
+        InputError: ``path`` does not end in ``.exr``, or ``image`` is not a real (h, w, 3) array.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sf.write_exr("flat.exr", np.full((4, 6, 3), 0.5))
+        >>> sf.read_exr("flat.exr").shape
+        (4, 6, 3)
+    """
     path = check_path("path", path)
     if path.suffix.lower() != ".exr":
         raise InputError(f"`path` must end in .exr, got {str(path)!r}.")
@@ -28,7 +43,26 @@ def write_exr(path: str | Path, image: np.ndarray, header: Mapping[str, int | fl
 
 
 def read_exr(path: str | Path) -> np.ndarray:
-    """Read an OpenEXR file as a (height, width, channels) float32 array."""
+    """Read an OpenEXR file as a (height, width, channels) float32 array: a render's radiance.exr,
+    say. For a reference to fit, :func:`read_image` reads EXR, FITS, PNG and TIFF with their units
+    and usable-pixel mask.
+
+    Args:
+        path: an OpenEXR file.
+
+    Returns:
+        The pixel values as stored (radiance in W m^-2 sr^-1 for spacefit's own renders).
+
+    Raises:
+        InputError: the file does not exist or is not OpenEXR.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sf.write_exr("flat.exr", np.full((4, 6, 3), 0.5))
+        >>> image = sf.read_exr("flat.exr")
+        >>> image.dtype, float(image.max())
+        (dtype('float32'), 0.5)
+    """
     return read_exr_with_header(path)[0]
 
 

@@ -22,6 +22,16 @@ class PartImage:
         ids: (height, width) int16: the index into ``names`` of the part hit by the ray through
             each pixel's centre, -1 where it misses the target (black space).
         names: the parts, in the scene's order.
+
+    Example:
+        >>> import spacefit as sf
+        >>> renderer = sf.Renderer(sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4}))
+        >>> parts = renderer.part_image()
+        >>> parts.regions
+        ('body', 'panels', 'legs', 'target')
+        >>> table = parts.table(renderer.render())  # an xarray Dataset: pixels, mean_radiance per region
+        >>> int(table["pixels"].sel(region="target")) == int((parts.ids >= 0).sum())
+        True
     """
 
     ids: np.ndarray

@@ -215,15 +215,30 @@ def kernel_log() -> Iterator[dict[str, float]]:
 
 
 class Renderer:
-    """A scene loaded into Mitsuba once; renders deterministic radiance images (h, w, 3).
+    """Only the pixels whose samples can reach the target's silhouette are traced, the rest of the image
+    is black; ``crop=False`` traces the whole film, for vertices that will move (the traced pixels are
+    fixed when the scene is loaded). Load once and render many times: reloading scenes leaks memory in
+    Mitsuba (mitsuba3#1890); change values in place with :meth:`set_values`. Each kind of pass is
+    traced at its first render and replayed after until vertices move (:attr:`geometry` counts the
+    moves).
 
-    Only the pixels whose samples can reach the target's silhouette are traced (:func:`target_mask`,
-    within the film window around it, :func:`target_window`), the rest of the image is black;
-    ``crop=False`` traces the whole film, for vertices that will move (the window and the mask are
-    fixed when the scene is loaded). :attr:`traced` is the mask over the window. Load once and render many times: reloading scenes
-    leaks memory in Mitsuba (mitsuba3#1890); change values in place with :meth:`set_values`. Each
-    kind of pass is traced at its first render and replayed after until vertices move (:attr:`frozen`,
-    :class:`~spacefit.rendering.frozen.FrozenPasses`; :attr:`geometry` counts the moves).
+    Args:
+        scene: the scene (:class:`Scene`).
+        variant: a Mitsuba variant; None: the scene's ``render.variant``.
+        crop: trace only the pixels near the target.
+
+    Raises:
+        InputError: ``scene`` is not a :class:`Scene`, or the render would not fit in memory.
+
+    Example:
+        >>> import spacefit as sf
+        >>> renderer = sf.Renderer(sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4}))
+        >>> before = renderer.render()
+        >>> renderer.set_values({"parts.legs.kd": 0.5})
+        >>> renderer.current_scene.parts["legs"].material
+        Lambert(kd=0.5)
+        >>> bool(renderer.render().sum() > before.sum())  # brighter legs
+        True
     """
 
     def __init__(self, scene: Scene | Assembly, variant: str | None = None, crop: bool = True) -> None:
@@ -263,11 +278,9 @@ class Renderer:
     @in_variant
     @float64  # the pose and the W-M heights in float64, rounded to float32 only where Mitsuba takes them
     def set_values(self, values: Mapping[str, float]) -> None:
-        """Set values by name in the loaded scene, without reloading it: parameter names
-        (:mod:`spacefit.scene.parameters`, e.g. ``{"parts.panels.alpha_x": 0.1, "sun.elevation_deg": 30}``)
-        or the scene-file keys they spell another way (``sun.direction``, ``target.attitude_deg``,
-        :func:`spacefit.scene.overrides.as_parameters`). Each value is checked as
-        :func:`~spacefit.scene.toml.load_scene` checks it, with the same message, before anything is
+        """Set values by name in the loaded scene, without reloading it: parameter names (:func:`available_parameters`, e.g. ``{"parts.panels.alpha_x": 0.1, "sun.elevation_deg": 30}``)
+        or the scene-file keys they spell another way (``sun.direction``, ``target.attitude_deg``). Each value is checked as
+        :func:`load_scene` checks it, with the same message, before anything is
         set. Values set earlier stay: setting one sun angle keeps the other. :attr:`current_scene`
         is the scene the renderer now renders.
 
@@ -372,8 +385,28 @@ class Renderer:
 
 
 def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray:
-    """Render a scene's radiance image (W m^-2 sr^-1, (height, width, 3) float32). Mitsuba's
-    variant is the caller's again after (:func:`~spacefit.rendering.backend.variant_scope`)."""
+    """Render a scene's radiance image (W m^-2 sr^-1, (height, width, 3) float32). Mitsuba's variant
+    is the caller's again after (the API page's notes for integrators). To render one scene many
+    times with other values, load it once in a :class:`Renderer`.
+
+    Args:
+        scene: the scene (:func:`default_scene`, :func:`load_scene`).
+        progress: called with (samples done, samples in all) as the render goes on; None: silent.
+
+    Returns:
+        The radiance image; black where no ray meets the target.
+
+    Raises:
+        InputError: ``scene`` is not a :class:`Scene` (a path, say: :func:`load_scene` reads files),
+            or the render would not fit in memory.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> image = sf.render(scene)
+        >>> image.shape, image.dtype
+        ((48, 48, 3), dtype('float32'))
+    """
     with variant_scope(check_scene(scene).render.variant):
         return Renderer(scene).render(progress=progress)
 

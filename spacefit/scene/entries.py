@@ -88,8 +88,14 @@ class Parameter:
         scene_fields: the scene-file fields it replaces (default: its own).
         scale: the size of a change that matters, in its unit, for a parameter whose value may be
             near 0 (angles, shifts): a standard error is judged against the larger of it and the
-            value ("poorly determined", :mod:`spacefit.fitting.uncertainty`); 0: against the value.
+            value ("poorly determined" in :meth:`FitResult.uncertainty`); 0: against the value.
         label: what it is in a few words, for axes and tables (:func:`label`; without the part or unit).
+
+    Example:
+        >>> import spacefit as sf
+        >>> kd = sf.PARAMETERS["parts.P.kd"]
+        >>> kd.unit, kd.label, kd.bounds.lo, kd.bounds.hi
+        ('1', 'albedo kd', 0.0, 1.0)
     """
 
     pattern: str

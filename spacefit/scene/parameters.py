@@ -186,6 +186,16 @@ _OTHERS = (
       for axis, where in (("x", "columns, rightwards"), ("y", "rows, downwards"))),
 )
 # Read live: the material entries are the registered models' (:func:`material_entries`).
+#: The registry of free parameters: each name pattern (``parts.P.alpha_x`` stands for every part P
+#: whose material has it) to its :class:`Parameter`: unit, valid range, how it is read from and set
+#: in a scene, its finite-difference step. :func:`available_parameters` lists a scene's names,
+#: :func:`parameter_table` the whole registry.
+#:
+#: Example:
+#:     >>> import spacefit as sf
+#:     >>> p = sf.PARAMETERS["wrinkles.G"]
+#:     >>> p.unit, p.bounds.lo
+#:     ('m', 0.0)
 PARAMETERS: Mapping[str, Parameter] = Derived(lambda: {p.pattern: p for p in (*_SCENE, *material_entries().values(), *_OTHERS)})
 
 
@@ -270,7 +280,29 @@ def _materials(scene: SceneLike) -> dict[str, Material]:
 
 
 def available(scene: SceneLike) -> list[str]:
-    """Every parameter name that can be freed (or swept) in ``scene``, in registry order."""
+    """Every parameter name that can be freed (or swept) in ``scene``, in registry order.
+
+    A part's parameters are named per part (``parts.panels.alpha_x``) and only for the parts whose
+    material has them; the wrinkles' only where the scene has wrinkles. Each name's unit and valid
+    range are in :data:`PARAMETERS` and :func:`parameter_table`.
+
+    Args:
+        scene: the scene (:class:`Scene`).
+
+    Returns:
+        The names, as ``sf.fit(free=...)``, ``sf.jacobian`` and ``sf.sweep`` take them.
+
+    Raises:
+        InputError: ``scene`` is not a :class:`Scene`.
+
+    Example:
+        >>> import spacefit as sf
+        >>> names = sf.available_parameters(sf.default_scene())
+        >>> names[:4]
+        ['wrinkles.D', 'wrinkles.G', 'wrinkles.rms_m', 'parts.body.eta']
+        >>> "parts.legs.kd" in names
+        True
+    """
     materials = _materials(check_scene(scene))
     names = []
     for p in PARAMETERS.values():
@@ -344,7 +376,18 @@ def fd_step(scene: SceneLike, name: str) -> float:
 
 
 def parameter_table() -> str:
-    """The registry as a Markdown table (the documentation's list of free parameters is this text, written at build time)."""
+    """The registry of free parameters (:data:`PARAMETERS`) as a Markdown table: each pattern's unit,
+    valid range, how its Jacobian column is computed and what it sets. The documentation's list of
+    free parameters is this text, written at build time.
+
+    Returns:
+        The table, one row per registry entry, rows joined by newlines.
+
+    Example:
+        >>> import spacefit as sf
+        >>> print(sf.parameter_table().splitlines()[2])
+        | `wrinkles.D` | 1 | (2, 3) | central differences, step 0.02 1 | W-M fractal dimension (eq. 2-1): vertex positions of every wrinkled part |
+    """
     rows = ["| name | unit | valid range | Jacobian column | sets |", "|---|---|---|---|---|"]
     for p in PARAMETERS.values():
         column = "forward-mode AD" if not p.fd_step else (

@@ -1,6 +1,6 @@
 """The whole scene: the sections of :mod:`spacefit.scene.sections` joined and checked together.
 
-What :func:`~spacefit.scene.toml.load_scene` reads and the sidecar of every render records. Changing
+What :func:`load_scene` reads and the sidecar of every render records. Changing
 values by name is the override language's (:mod:`spacefit.scene.overrides`, which
 :meth:`Scene.with_values` calls); a scene's short text and HTML are :mod:`spacefit.display`'s.
 """
@@ -25,15 +25,32 @@ from spacefit.scene.optics import check_optics, fov_pitch_mm
 
 @dataclass(frozen=True)
 class Scene:
-    """A whole scene: what :func:`~spacefit.scene.toml.load_scene` reads and the sidecar of every render
+    """A whole scene: what :func:`load_scene` reads and the sidecar of every render
     records. Checked on construction, each section by itself and here what joins them.
 
-    The built-in lander's parts may be any of its own (:func:`~spacefit.scene.sections.default_parts`: body, panels, legs),
+    The built-in lander's parts may be any of its own (body, panels, legs),
     and parts of their own (a ``file`` or a ``shape``); they are held in the order a scene file
     reads them: the lander's, in its order, then the others, in theirs. Files (``target.mesh``,
     ``target.quaternions``, a part's ``file``, a measured table's ``source``) are held as absolute paths, a relative one
     resolved against the working folder, as a scene file's against its folder: ``to_toml()``
     names the same files wherever it is read.
+
+    Attributes:
+        render, camera, sun, target, wrinkles: the scene file's sections (:class:`RenderSettings`,
+            :class:`CameraSettings`, :class:`SunSettings`, :class:`TargetSettings`, :class:`WrinkleSettings`).
+        parts: the parts by name (:class:`PartSettings`).
+
+    Raises:
+        InputError: a value out of range (naming it as a scene-file key), a part the target does not
+            have, or sections that contradict each other.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.Scene(render=sf.RenderSettings(resolution=(64, 64)))
+        >>> scene.with_values({"sun.elevation_deg": 30, "parts.legs.kd": 0.5}).parts["legs"].material
+        Lambert(kd=0.5)
+        >>> sf.load_scene(None) == sf.Scene()
+        True
     """
 
     render: RenderSettings = field(default_factory=RenderSettings)
@@ -97,7 +114,7 @@ class Scene:
         return out
 
     def to_toml(self) -> str:
-        """The scene as TOML text, loadable by :func:`~spacefit.scene.toml.load_scene` to an equal scene.
+        """The scene as TOML text, loadable by :func:`load_scene` to an equal scene.
         A material that its written values do not give again is refused, naming its part: a measured
         table (whose file states its ``source`` and ``scale``) read with a ``floor`` or made from arrays."""
         for name, part in self.parts.items():
@@ -110,8 +127,7 @@ class Scene:
 
     def with_values(self, values: Mapping[str, Any]) -> Scene:
         """A checked copy with values replaced by name: scene-file keys (``camera.position_m``,
-        ``parts.panels.alpha_x``) or parameter names (``sun.elevation_deg``); see
-        :func:`spacefit.scene.overrides.with_values`."""
+        ``parts.panels.alpha_x``) or parameter names (``sun.elevation_deg``) (:func:`available_parameters`)."""
         return with_values(self, values)
 
 

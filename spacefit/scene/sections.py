@@ -4,7 +4,7 @@ A section coerces what a TOML file or Python gives (lists to tuples, integers to
 number belongs) and checks every value before it exists, naming ``section.key``, the value and the
 allowed range (:func:`spacefit.errors.check_range`): ``RenderSettings(spp=-1)`` raises at once. A
 part's material is a :mod:`spacefit.materials` object from the start. The whole scene that joins
-them is :class:`spacefit.scene.schema.Scene`; what the layers below it read of a scene is
+them is :class:`Scene`; what the layers below it read of a scene is
 :class:`SceneLike` (the parameter registry and the override language sit under the ``Scene`` class,
 whose ``with_values`` is theirs). Reading a file is :mod:`spacefit.scene.toml`; changing values by
 name is :mod:`spacefit.scene.overrides`.
@@ -109,13 +109,35 @@ class RenderSettings(Section):
     their samples traced on all threads, splatted on one). On CUDA images agree to that rounding only.
 
     ``sampler`` is Mitsuba's: ``multijitter`` (the default) stratifies each pixel's samples on a
-    jittered grid; at equal samples it gave the lowest error of the five in both views of
-    ``experiments/forward_pareto.py --methods`` (0.12 against ``independent``'s 0.27 at 16 spp in the
-    default view: ``independent`` needs about 5x the samples), tied with ``orthogonal``, which takes fewer
-    counts. Each is unbiased and one seed gives one image. A count of samples that ``stratified``,
+    jittered grid, the lowest error at equal samples of the five measured (tied with ``orthogonal``,
+    which takes fewer counts; the performance page). Each is unbiased and one seed gives one image. A
+    count of samples that ``stratified``,
     ``ldsampler`` or ``orthogonal`` would round (:data:`SAMPLE_COUNTS`) is refused, here and at each
     render; ``multijitter`` renders one it would round as passes of counts it takes
     (:func:`split_sample_count`). None is rounded silently.
+
+    Attributes:
+        resolution: (width, height) px, each >= 1.
+        spp: samples per pixel, in [1, 65536].
+        depth: the trace depth (bounces after the first hit), >= 1.
+        seed: the sampler's seed, >= 0.
+        variant: Mitsuba variant, or ``"auto"`` (CUDA where there is a GPU, else LLVM).
+        filter: Mitsuba's reconstruction filter (``"tent"``, ``"box"``, ``"gaussian"``).
+        deterministic: add samples in one order (bitwise-identical images on the CPU).
+        sampler: Mitsuba's sampler.
+
+    Raises:
+        InputError: a value outside its range, naming it as a scene-file key (``render.spp``).
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.default_scene().render.spp
+        20
+        >>> try:
+        ...     sf.RenderSettings(spp=0)
+        ... except sf.InputError as err:
+        ...     print(err)
+        `render.spp` must be in [1, 65536], got 0.
     """
 
     resolution: tuple[int, int] = (600, 600)
@@ -158,6 +180,28 @@ class CameraSettings(Section):
     change of resolution keeps the field and scales the pixels. A scene file's ``[camera]`` (or one
     ``with_values`` call) gives one of the two; setting one later (``with_values``, ``--set``)
     replaces the other, and ``to_toml`` writes the one that sets the field.
+
+    Attributes:
+        focal_length_mm: focal length (mm), > 0.
+        pixel_pitch_mm: the pixels' side (mm), > 0.
+        fov_deg: horizontal field of view (deg), 0 (set by the pitch) or in (0, 180).
+        principal_offset_px: the principal point's offset (px).
+        position_m: the pinhole's position in the world (m).
+        attitude_deg: the camera's attitude angles (deg), used without ``look_at_m``.
+        look_at_m: a world point (m) the camera looks at, or empty.
+        up: the world direction that is image up with ``look_at_m``.
+        roll_deg: turn about the optical axis (deg).
+
+    Raises:
+        InputError: a value outside its range, naming it as a scene-file key (``camera.focal_length_mm``).
+
+    Example:
+        >>> import spacefit as sf
+        >>> camera = sf.CameraSettings(position_m=(0, 0, 50), look_at_m=(0, 0, 0))
+        >>> camera.position_m
+        (0.0, 0.0, 50.0)
+        >>> sf.default_scene().with_values({"camera.position_m": [0, 0, 50]}).camera.position_m
+        (0.0, 0.0, 50.0)
     """
 
     focal_length_mm: float = 7000.0
@@ -190,7 +234,26 @@ class CameraSettings(Section):
 
 @dataclass(frozen=True)
 class SunSettings(Section):
-    """One distant sun: irradiance on a surface facing it (W m^-2) and direction of travel."""
+    """One distant sun: irradiance on a surface facing it (W m^-2) and direction of travel.
+
+    Scene files may give the direction as ``elevation_deg`` and ``azimuth_deg`` in the target's frame
+    instead (the parameters ``sun.elevation_deg`` and ``sun.azimuth_deg``).
+
+    Attributes:
+        irradiance_w_m2: irradiance (W m^-2) on a surface facing the sun, > 0.
+        direction: the direction the light travels (world frame, any length but 0).
+
+    Raises:
+        InputError: a value outside its range, naming it (``sun.irradiance_w_m2``).
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.SunSettings()
+        SunSettings(irradiance_w_m2=5.0, direction=(0.0, 0.0, -1.0))
+        >>> scene = sf.default_scene().with_values({"sun.elevation_deg": 30})
+        >>> [round(x, 3) for x in scene.sun.direction]
+        [-0.866, -0.0, -0.5]
+    """
 
     irradiance_w_m2: float = 5.0
     direction: Vec3 = (0.0, 0.0, -1.0)
@@ -213,11 +276,34 @@ class TargetSettings(Section):
     """Target pose and geometry source: ``"builtin"`` (the lander), a mesh file whose groups are the
     parts, or ``"none"`` (:data:`NO_MESH`): only the parts given, each a primitive or a file of its own.
 
-    ``attitude`` is the body's attitude law (:mod:`spacefit.geometry.attitude`): ``"fixed"`` (the
+    ``attitude`` is the body's attitude law (:class:`NadirSun`, :class:`SunPointing`, :class:`QuaternionTable`): ``"fixed"`` (the
     default) at ``attitude_deg``; ``"nadir_sun"`` (body -z to ``nadir``, +y towards the sun as far as
     allowed) and ``"sun"`` (body +z to the sun, +x towards ``nadir`` as far as allowed), ``nadir`` the
     world direction towards the Earth's centre and the sun the scene's; ``"table"``, the file
-    ``quaternions`` (``time_utc,qw,qx,qy,qz``) at ``time_utc``. ``attitude_deg`` counts for ``"fixed"`` only."""
+    ``quaternions`` (``time_utc,qw,qx,qy,qz``) at ``time_utc``. ``attitude_deg`` counts for ``"fixed"`` only.
+
+    Attributes:
+        position_m: the body's origin in the world (m).
+        attitude_deg: the body's attitude angles (deg) for ``attitude = "fixed"``.
+        mesh: ``"builtin"``, a mesh file (OBJ, PLY) or ``"none"``.
+        attitude: ``"fixed"``, ``"nadir_sun"``, ``"sun"`` or ``"table"``.
+        nadir: the world direction towards the Earth's centre (``"nadir_sun"``, ``"sun"``).
+        quaternions: the CSV file of ``"table"``.
+        time_utc: the time (ISO 8601 UTC) the ``"table"`` is read at.
+
+    Raises:
+        InputError: a value outside its range or an unknown law, naming it (``target.attitude``).
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.TargetSettings(attitude_deg=(0, 0, 30)).attitude_deg
+        (0.0, 0.0, 30.0)
+        >>> try:
+        ...     sf.TargetSettings(attitude="spin")
+        ... except sf.InputError as err:
+        ...     print(err)
+        `target.attitude` must be one of 'fixed', 'nadir_sun', 'sun', 'table'; got 'spin'.
+    """
 
     position_m: Vec3 = (0.0, 0.0, 0.0)
     attitude_deg: Vec3 = (90.0, 0.0, 0.0)
@@ -296,7 +382,7 @@ class WrinkleSettings(Section):
     an rms height of 0.27 m on a 1.4 m body and an rms slope of 37 (spikes like hair; the body
     folds over itself), and no common unit for all lengths changes the slope. The default G is
     1e-5 m, the thesis's "10" read as micrometres with L and Ls in metres: rms height 4.3 mm, rms
-    slope 0.59, inside :data:`spacefit.geometry.wrinkle.MLI_SLOPE_RANGE` (crumpled foil). The literal
+    slope 0.59, inside :data:`MLI_SLOPE_RANGE` (crumpled foil). The literal
     reading is kept as the scene ``data/scenes/thesis-literal.toml`` (docs/how-to/materials.md).
 
     ``spacing_m`` is the refinement density: the distance between the sample points that carry
@@ -304,12 +390,36 @@ class WrinkleSettings(Section):
 
     ``model`` chooses how wrinkles are rendered: ``"geometry"`` displaces a refined mesh, the
     thesis's way; ``"effective"`` keeps the flat mesh and widens the part's microfacet roughness by
-    the wrinkles' slopes (:func:`spacefit.scene.lod.effective_material`); ``"auto"`` (default)
+    the wrinkles' slopes; ``"auto"`` (default)
     takes the effective model, cheaper and far less noisy, where a pixel at the part spans at least
     ``lod_footprint`` times the largest wrinkle (L) and the wrinkles are gentle enough for a
     roughness, and the geometry otherwise. The default ``lod_footprint`` is where the level of
-    detail study measured the effective model within :data:`spacefit.scene.lod.LOD_TOLERANCE` of
+    detail study measured the effective model within 15 % of
     the geometry (docs/how-to/lod.md). Fits render the geometry for ``"auto"``.
+
+    Attributes:
+        enabled: whether any part is wrinkled.
+        parts: the wrinkled parts.
+        D: fractal dimension, in (2, 3).
+        G: height scale (m), > 0.
+        gamma: the frequencies' ratio, > 1.
+        M: the number of ridge directions, >= 1.
+        L, Ls: the longest and the cut-off wavelength (m), 0 < Ls < L.
+        seed: the random phases' seed.
+        spacing_m: the refinement density (m), > 0.
+        model: ``"geometry"``, ``"effective"`` or ``"auto"``.
+        lod_footprint: the pixel footprint, in units of L, above which ``"auto"`` takes the effective model.
+
+    Raises:
+        InputError: a value outside its range, naming it (``wrinkles.D``).
+
+    Example:
+        >>> import spacefit as sf
+        >>> w = sf.default_scene().wrinkles
+        >>> w.D, w.G
+        (2.3, 1e-05)
+        >>> f"{sf.wm_rms(w.D, w.G, gamma=w.gamma, M=w.M, L=w.L, Ls=w.Ls):.2g} m"
+        '0.0043 m'
     """
 
     enabled: bool = True
@@ -338,9 +448,27 @@ class WrinkleSettings(Section):
 
 @dataclass(frozen=True)
 class PartSettings:
-    """A part: its material (a :mod:`spacefit.materials` object), for a part of its own a mesh file or a
-    primitive (:class:`~spacefit.geometry.primitives.Primitive`), and its articulation law in the body
-    (:mod:`spacefit.geometry.attitude`; fixed by default)."""
+    """A part: its material (:class:`Conductor`, :class:`Lambert`, ... or a :data:`PRESETS` name), for a part of its own a mesh file or a
+    primitive (a box, cylinder, ... table in the scene file), and its articulation law in the body
+    (:class:`SunTracking`, :class:`AxisAngle`; fixed by default).
+
+    Attributes:
+        material: the part's material object.
+        file: a mesh file (OBJ, PLY) of a part of its own, or empty.
+        shape: a primitive shape of a part of its own, or None.
+        articulation: how the part turns in the body.
+
+    Raises:
+        InputError: both a file and a shape, or a bad material or articulation.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.default_scene().parts["legs"].material
+        Lambert(kd=0.2)
+        >>> scene = sf.default_scene().with_values({"parts.legs.kd": 0.5})
+        >>> scene.parts["legs"].material
+        Lambert(kd=0.5)
+    """
 
     material: Material
     file: str = ""
@@ -393,15 +521,23 @@ SECTIONS: Mapping[str, type[Section]] = {
 
 @runtime_checkable
 class SceneLike(Protocol):
-    """A whole scene as the layers under :class:`spacefit.scene.schema.Scene` read it: its sections,
+    """A whole scene as the layers under :class:`Scene` read it: its sections,
     its parts, and a checked copy with values set by name (the ``Scene`` class is the one implementation)."""
 
-    render: RenderSettings
-    camera: CameraSettings
-    sun: SunSettings
-    target: TargetSettings
-    wrinkles: WrinkleSettings
-    parts: Mapping[str, PartSettings]
+    # Read-only members (properties): the frozen Scene's attributes cannot be set, which a plain
+    # attribute in a Protocol would demand (mypy refused sf.available_parameters(scene) for it).
+    @property
+    def render(self) -> RenderSettings: ...
+    @property
+    def camera(self) -> CameraSettings: ...
+    @property
+    def sun(self) -> SunSettings: ...
+    @property
+    def target(self) -> TargetSettings: ...
+    @property
+    def wrinkles(self) -> WrinkleSettings: ...
+    @property
+    def parts(self) -> Mapping[str, PartSettings]: ...
 
     def with_values(self, values: Mapping[str, Any]) -> SceneLike:
         """A checked copy with values replaced by name."""
@@ -416,7 +552,7 @@ def sun_followers(scene: SceneLike) -> list[str]:
 
 
 def check_scene(scene: object, name: str = "scene") -> SceneLike:
-    """Raise :class:`InputTypeError` unless ``scene`` is a scene (:class:`spacefit.scene.schema.Scene`)."""
+    """Raise :class:`InputTypeError` unless ``scene`` is a scene (:class:`Scene`)."""
     if not isinstance(scene, SceneLike):
         raise InputTypeError(f"`{name}` must be {A_SCENE}, got {quote(scene)}.")
     return scene

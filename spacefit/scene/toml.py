@@ -1,9 +1,9 @@
-"""Reading scene files: TOML text to a checked :class:`~spacefit.scene.schema.Scene` (whose module
+"""Reading scene files: TOML text to a checked :class:`Scene` (whose module
 docstring gives the defaults, the units and the sun's conventions).
 
 A part's articulation keys (``articulation``, ``axis``, ``angle_deg``, ``pivot_m``,
 :func:`spacefit.geometry.attitude.pop_articulation`) pivot by default about a primitive's
-``position_m``. A part's ``material`` names a preset (:data:`spacefit.materials.PRESETS`, the other keys of its
+``position_m``. A part's ``material`` names a preset (:data:`PRESETS`, the other keys of its
 table replacing the preset's values) or a model (``"conductor"``, ``"mirror"``, ``"lambert"``, with
 every value given, as :meth:`Scene.to_toml` writes it); it becomes a material object here, when
 the file is read. A section may also give parameter names (``[sun] elevation_deg = 30``,
@@ -151,10 +151,33 @@ def scene_from_dict(data: Mapping[str, Any], base_dir: str | Path = ".") -> Scen
 def load_scene(path: str | Path | None = None, overrides: Overrides = ()) -> Scene:
     """Load a scene TOML file (or the defaults when ``path`` is None) and apply overrides.
 
-    ``overrides``: a mapping of names (scene-file keys or parameter names,
-    :mod:`spacefit.scene.overrides`) to Python values (``{"camera.position_m": [0, 0, 50],
+    ``overrides``: a mapping of names (scene-file keys or parameter names, :func:`available_parameters`) to Python values (``{"camera.position_m": [0, 0, 50],
     "parts.panels.alpha_x": 0.1, "sun.elevation_deg": 30}``), or ``"key=value"`` strings with the
     value in TOML syntax, as on the command line (``--set``).
+
+    Args:
+        path: a scene TOML file; None: the default scene (:func:`default_scene`).
+        overrides: values by scene-file key or parameter name, or ``"key=value"`` strings.
+
+    Returns:
+        The checked :class:`Scene`; its relative file names resolved against the file's folder.
+
+    Raises:
+        InputError: a missing or malformed file, an unknown key (the message suggests the nearest),
+            a value out of range.
+
+    Example:
+        >>> import spacefit as sf
+        >>> with open("lander.toml", "w") as f:
+        ...     _ = f.write(sf.default_scene().to_toml())
+        >>> scene = sf.load_scene("lander.toml", {"render.spp": 8, "sun.elevation_deg": 30})
+        >>> scene.render.spp
+        8
+        >>> try:
+        ...     sf.load_scene(None, {"render.sp": 8})
+        ... except sf.InputError as err:
+        ...     print(err)
+        unknown scene key `render.sp`; valid keys here: resolution, spp, depth, seed, variant, filter, deterministic, sampler. Did you mean `render.spp`?
     """
     data = read_scene_dict(path) if path is not None else {}
     base = Path(path).parent if path is not None else Path.cwd()
@@ -162,5 +185,21 @@ def load_scene(path: str | Path | None = None, overrides: Overrides = ()) -> Sce
 
 
 def default_scene() -> Scene:
-    """The default scene: the thesis's Table 4-2 (its lander, camera, sun and wrinkles, G read as micrometres: 1e-5 m)."""
+    """The default scene: the thesis's Table 4-2 (its lander, camera, sun and wrinkles, G read as micrometres: 1e-5 m).
+
+    The same scene as ``sf.Scene()`` and ``sf.load_scene(None)``: a lunar lander of three parts
+    (``body`` in wrinkled MLI, ``panels``, ``legs``) 70 m in front of a 600 x 600 px camera, lit by a
+    sun of 5 W m^-2. Change it with :meth:`Scene.with_values` or :func:`load_scene`'s overrides.
+
+    Returns:
+        The default :class:`Scene`.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene()
+        >>> scene
+        Scene(600x600 px, 20 spp; camera at (0, 0, 70) m; sun 5 W m^-2; parts body (conductor), panels (conductor), legs (lambert); wrinkles D 2.3 G 1e-05 m on body)
+        >>> scene.with_values({"render.resolution": [64, 64]}).render.resolution
+        (64, 64)
+    """
     return Scene()

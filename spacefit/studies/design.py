@@ -15,7 +15,7 @@ member the fit has not seen (a new night, a new satellite), the members' mean wi
 added to the parameters' covariance: the spread s^2 of the fitted members' values about their mean
 plus the mean's own variance, so that a per-member nuisance widens the interval of an unseen member
 as much as it varied between the seen ones. The interval is
-:func:`~spacefit.fitting.prediction.predictive_intervals`'s, the observation's error with the parameters'
+:func:`predictive_intervals`'s, the observation's error with the parameters'
 errors, in magnitudes.
 """
 
@@ -47,12 +47,23 @@ SCALE = "image.scale"
 class DesignMember(ValueObservation):
     """One light curve of a design fit: ``curve``'s parameters, shared, except ``own`` (registered
     names, ``target.attitude_x_deg``, :data:`SCALE`), which are member ``index``'s alone
-    (``target.attitude_x_deg@<index>``); :data:`SCALE` scales its irradiance (module docstring).
+    (``target.attitude_x_deg@<index>``); :data:`SCALE` scales its irradiance (the guide "BRDF tables and light curves as observations").
 
     Attributes:
         curve: the member's light curve (its plates, observations, sun, bounds, Earth).
         index: the member's number, k of its own names' ``@k``.
         own: the parameters that are the member's own.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plates = sf.PlateLightCurve([sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))], curve)
+        >>> sf.DesignMember(plates, 1, ("target.attitude_x_deg",)).own
+        ('target.attitude_x_deg',)
     """
 
     curve: PlateLightCurve
@@ -116,12 +127,33 @@ def design_names(free: Sequence[str], own: Sequence[str], members: int) -> list[
 
 
 def fit_design(curves: Sequence[PlateLightCurve], free: Sequence[str], own: Sequence[str] = (), **options: Any) -> FitResult:
-    """Fit light curves of one design jointly with :func:`spacefit.fit`: the ``free`` values shared
+    """Fit light curves of one design jointly with :func:`fit`: the ``free`` values shared
     by every curve and the ``own`` ones each curve's (``<name>@k``, k the curve's place in
-    ``curves``; :class:`DesignMember`). ``options``: :func:`spacefit.fit`'s keywords.
+    ``curves``; :class:`DesignMember`). ``options``: :func:`fit`'s keywords.
 
     Raises:
         InputError: no curve; a name both shared and own; an unknown name (listing the valid ones).
+
+    Args:
+        curves: the members' light curves (:class:`PlateLightCurve`), one design.
+        free: the shared parameters.
+        own: the parameters each member has its own value of.
+        options: :func:`fit`'s keywords (``max_steps``, ``solver``, ...).
+
+    Returns:
+        The :class:`FitResult`; a member's own values are named ``<name>@k``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plates = sf.PlateLightCurve([sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))], curve)
+        >>> result = sf.fit_design([plates, plates], ["parts.panel.kd"])
+        >>> result.names, result.status.value
+        (('parts.panel.kd',), 'converged')
     """
     members = design_members(curves, own)
     shared = check_name_list("free", free) if free else ()
@@ -148,6 +180,18 @@ class MagnitudePrediction:
         sigma: (n,) their predictive standard errors (mag).
         sigma_parameters, sigma_noise: (n,) the parameters' and the observations' shares (mag).
         noise: where the observations' error came from: ``"stated"`` or ``"training residuals"``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plates = sf.PlateLightCurve([sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))], curve)
+        >>> prediction = sf.predict_design(sf.fit_design([plates, plates], ["parts.panel.kd"]), plates, curve, members=2)
+        >>> bool((prediction.sigma >= prediction.sigma_noise).all())  # the parameters' share adds
+        True
     """
 
     rows: np.ndarray
@@ -187,12 +231,37 @@ def predict_design(result: FitResult, curve: PlateLightCurve, observations: Ligh
     """Predicted magnitudes of ``observations`` (outside the Earth's shadow) by a design fit's result
     (:func:`fit_design` of ``members`` curves with per-member ``own`` names) for the design of
     ``curve`` (its plates, sun, Earth; its observations replaced), with their predictive errors
-    (module docstring): as ``member``'s, or (None) as a member the fit has not seen. ``noise_mag``:
+    (the guide "BRDF tables and light curves as observations"): as ``member``'s, or (None) as a member the fit has not seen. ``noise_mag``:
     the observations' error (mag) where they state none, e.g. :func:`design_noise_mag` of the fit.
 
     Raises:
         InputError: ``member`` out of range; ``own`` names not the fit's; no ``noise_mag`` for
             observations without stated errors.
+
+    Args:
+        result: the :func:`fit_design` result.
+        curve: a light curve of the design (its plates, sun and Earth).
+        observations: the geometry to predict at.
+        member: the member predicted as, or None for an unseen one.
+        own: the fit's own names.
+        members: the number of members the fit had.
+        noise_mag: the observations' error (mag) where they state none.
+
+    Returns:
+        A :class:`MagnitudePrediction`.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plates = sf.PlateLightCurve([sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))], curve)
+        >>> result = sf.fit_design([plates, plates], ["parts.panel.kd"])
+        >>> prediction = sf.predict_design(result, plates, curve, members=2)
+        >>> prediction.noise, prediction.magnitude.shape
+        ('stated', (3,))
     """
     check_type("result", result, FitResult, "an sf.FitResult (of sf.fit_design)")
     check_type("curve", curve, PlateLightCurve, "an sf.PlateLightCurve")
@@ -224,5 +293,30 @@ def predict_design(result: FitResult, curve: PlateLightCurve, observations: Ligh
 
 def design_noise_mag(result: FitResult, curves: Sequence[PlateLightCurve], own: Sequence[str] = (), estimator: str = "rms") -> float:
     """The observations' error (mag) estimated from a design fit's residuals over its degrees of
-    freedom (:func:`~spacefit.fitting.prediction.residual_noise`: ``"rms"`` or ``"central68"``)."""
+    freedom (:func:`residual_noise`: ``"rms"`` or ``"central68"``).
+
+    Args:
+        result: the :func:`fit_design` result.
+        curves: its light curves, in the fit's order.
+        own: the fit's own names.
+        estimator: ``"rms"`` or ``"central68"``.
+
+    Returns:
+        The error (mag).
+
+    Raises:
+        InputError: an unknown ``estimator``, no more values than free parameters.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plates = sf.PlateLightCurve([sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))], curve)
+        >>> result = sf.fit_design([plates, plates], ["parts.panel.kd"])
+        >>> round(sf.design_noise_mag(result, [plates, plates]), 3)
+        0.09
+    """
     return residual_noise(design_members(curves, own), result, estimator) / LN_PER_MAGNITUDE

@@ -62,7 +62,22 @@ class Earth:
     """The Earth for Earthshine, a sunlit sphere with a Phong-type surface; ``ks = 0`` (the default) is Lambert.
 
     A sphere of ``radius_m`` whose surface reflects the sun with the BRDF
-    ``kd / pi + ks (n + 2) / (2 pi) max(r·w, 0)^n`` (module docstring); ``ks = 0`` is a Lambert surface of albedo ``kd``."""
+    ``kd / pi + ks (n + 2) / (2 pi) max(r·w, 0)^n`` (the guide "BRDF tables and light curves as observations"); ``ks = 0`` is a Lambert surface of albedo ``kd``.
+
+    Args:
+        kd: the diffuse albedo, in [0, 1].
+        ks: the specular share, >= 0 (kd + ks <= 1).
+        n: the Phong exponent, >= 0.
+        radius_m: the sphere's radius (m).
+
+    Raises:
+        InputError: a value out of range.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.Earth()
+        Earth(kd=0.3, ks=0.0, n=1.0, radius_m=6371000.0)
+    """
 
     kd: float = 0.3
     ks: float = 0.0
@@ -104,6 +119,12 @@ class EarthshineSources:
         weights: (n, m) each node's irradiance at the target on a surface facing it, per unit solar
             irradiance (f_E (N . s) (N . w) dA / D^2; 0 at unused nodes).
         solid_angles: (n, m) each node's solid angle seen from the target (sr; 0 at unused nodes).
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> sources = sf.earthshine_sources(np.array([[0.0, 0.0, -(6371e3 + 550e3)]]), sun=np.array([[1.0, 0.0, 0.0]]))
+        >>> float(sources.irradiance(np.array([0.0, 0.0, -1.0]))[0]) > 0  # per unit solar irradiance, facing the Earth
+        True
     """
 
     directions: np.ndarray
@@ -134,14 +155,23 @@ def _perpendicular(c: np.ndarray) -> np.ndarray:
 
 
 def earthshine_sources(earth_m: np.ndarray, sun: np.ndarray, earth: Earth = Earth(), points: int = DEFAULT_POINTS) -> EarthshineSources:
-    """The lit, visible Earth seen from targets (module docstring): ``earth_m`` (n, 3) the Earth's centre
-    from each target (m), ``sun`` (n, 3) directions towards the sun, both in the targets' frame (for
-    :func:`~spacefit.studies.observing.nadir_sun_frame`, the frame of a light curve's ``sun`` and
+    """The lit, visible Earth seen from targets (the guide "BRDF tables and light curves as observations"): ``earth_m`` (n, 3) the Earth's centre
+    from each target (m), ``sun`` (n, 3) directions towards the sun, both in the targets' frame (for :class:`NadirSun`, the frame of a light curve's ``sun`` and
     ``observer``, the Earth's centre is (0, 0, -(R + height))); ``points`` Gauss-Legendre nodes per
     dimension and piece of the lit cap.
 
     Raises:
         InputError: a target on or inside the Earth, shapes that disagree, a zero sun direction.
+
+    Returns:
+        The :class:`EarthshineSources`.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> below = np.array([[0.0, 0.0, -(6371e3 + 550e3)]])  # the Earth's centre, 550 km under the target
+        >>> sources = sf.earthshine_sources(below, sun=np.array([[1.0, 0.0, 0.0]]))
+        >>> sources.directions.shape
+        (1, 3072, 3)
     """
     check_type("earth", earth, Earth, "an sf.Earth")
     check_count("points", points, 2, 1000, optional=False)
@@ -200,11 +230,37 @@ Reflection = Callable[[jax.Array, jax.Array], jax.Array]
 @float64
 def earthshine_irradiance(reflect: Reflection, sources: EarthshineSources, observer: np.ndarray, range_m: np.ndarray,
                           sun_irradiance_w_m2: float = 1360.0) -> jax.Array:
-    """(n,) the irradiance at the observers (W m^-2) of the Earthshine a target reflects (module
-    docstring): ``reflect`` the target's reflection (:data:`Reflection`; for plates
-    ``lambda wi, wo: plates_irradiance(plates, wi, wo, np.ones(len(wi)), 1.0, values)``), ``sources``
-    the Earth seen from it (:func:`earthshine_sources`, same frame), ``observer`` (n, 3) directions
-    towards the observer, ``range_m`` (n,) its distance. Differentiable in what ``reflect`` closes over."""
+    """The irradiance at the observers (W m^-2) of the Earthshine a target reflects: the sunlit Earth's
+    quadrature nodes (``sources``) each light the target, whose reflection sends part of it to the
+    observer (the guide "BRDF tables and light curves as observations"). Differentiable in what
+    ``reflect`` closes over.
+
+    Args:
+        reflect: the target's reflection, ``(wi, wo) -> (k,)``: for (k, 3) unit directions towards the
+            light and the observer in the target's frame, sum over its surfaces of area x BRDF x
+            ``|n . wi| |n . wo|`` (m^2 sr^-1; JAX-traceable).
+        sources: the Earth seen from the target (:func:`earthshine_sources`, same frame).
+        observer: (n, 3) directions towards the observer.
+        range_m: (n,) the observer's distance (m).
+        sun_irradiance_w_m2: the sun's irradiance at the target (W m^-2).
+
+    Returns:
+        (n,) irradiance (W m^-2).
+
+    Raises:
+        InputError: shapes that disagree with ``sources``, a zero direction, a non-positive range.
+
+    Example:
+        A 10 m^2 white plate facing the Earth, seen from 550 km below:
+
+        >>> import jax.numpy as jnp, numpy as np, spacefit as sf
+        >>> sources = sf.earthshine_sources(np.array([[0.0, 0.0, -(6371e3 + 550e3)]]), sun=np.array([[1.0, 0.0, 0.0]]))
+        >>> def plate(wi, wo):  # Lambert, albedo 0.3, normal -z, lit and seen from below only
+        ...     return 10.0 * 0.3 / np.pi * jnp.abs(wi[:, 2] * wo[:, 2]) * (wi[:, 2] < 0) * (wo[:, 2] < 0)
+        >>> E = sf.earthshine_irradiance(plate, sources, observer=np.array([[0.0, 0.0, -1.0]]), range_m=np.array([550e3]))
+        >>> f"{float(E[0]):.2g} W m^-2"
+        '3.2e-11 W m^-2'
+    """
     check_type("sources", sources, EarthshineSources, "an sf.EarthshineSources (sf.earthshine_sources)")
     check_range("sun_irradiance_w_m2", sun_irradiance_w_m2, 0.0, lo_open=True, unit="W m^-2")
     n, m = sources.weights.shape

@@ -1,7 +1,7 @@
 """Light curves: what a ground telescope sees of an unresolved target, from sweeps of renders.
 
 The irradiance at the camera's pinhole is the sum over the image of radiance times each pixel's
-solid angle (:func:`spacefit.geometry.frames.pixel_solid_angles`), W m^-2, radiance being the mean
+solid angle (:func:`pixel_solid_angles`), W m^-2, radiance being the mean
 of the RGB channels (grey materials: the reflectance in the band is taken equal to it). It is
 rendered at the scene's camera range and rescaled to the observer's range by the inverse square law,
 E_obs = E (d_rendered / d_obs)^2, exact for an unresolved target (Mitsuba traces in float32, so a far
@@ -25,7 +25,7 @@ the observer.
 
 Monte Carlo errors: with ``seeds`` (two or more), each point's irradiance is the mean of the seeds'
 renders and carries its standard error, the seeds' standard deviation over sqrt(seeds)
-(:func:`spacefit.studies.sensitivity.mean_and_error`). The magnitude's error follows by the delta
+(:func:`sensitivity.mean_and_error`). The magnitude's error follows by the delta
 method, sigma_m = 2.5 / ln 10 * sigma_E / E (about 1.086 sigma_E / E); where sigma_E / E is large
 that linearisation fails, so :meth:`LightCurve.magnitude_interval` gives the asymmetric interval
 m(E + sigma_E), m(E - sigma_E) (the faint side infinite when sigma_E >= E), which the figure draws.
@@ -127,6 +127,13 @@ class LightCurve:
         rendered_range_m, observer_range_m: camera range rendered and observer range (m).
         sun_irradiance_w_m2: the sun's irradiance at the target.
         dataset: the sweep's Dataset, with ``irradiance_observer``, ``magnitude`` and their ``_se`` added.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> curve = sf.light_curve(scene, phase_deg=[10, 40], quiet=True)
+        >>> [round(float(a), 6) for a in curve.phase_angle_deg]
+        [10.0, 40.0]
     """
 
     against: str
@@ -254,12 +261,26 @@ def light_curve(
     """The light curve of ``scene``'s target against one of: the solar phase angle ``phase_deg`` (the sun
     turns about the target from the observer's direction), the attitude angle about ``axis``
     (``attitude_deg``), or time ``times_s`` under a spin of ``spin_rate_deg_s`` about ``axis`` from the
-    scene's attitude. ``sun`` / ``observer``: directions towards them (module docstring), else the
+    scene's attitude. ``sun`` / ``observer``: directions towards them (the Studies guide), else the
     scene's; ``observer_range_m``: the observer's distance (default: the rendered one). ``band`` and
     ``sun_magnitude`` (default: :data:`SUN_MAGNITUDES`) give the magnitudes. ``seeds`` averages
-    renders of these seeds, two or more giving each point's Monte Carlo standard error (module
-    docstring); ``cluster`` where its renders run (:mod:`spacefit.executors`; ``workers`` / ``scheduler``: its
-    deprecated spellings). The rest is :func:`spacefit.studies.sweep.sweep`'s."""
+    renders of these seeds, two or more giving each point's Monte Carlo standard error (the Studies guide); ``cluster`` where its renders run (as :func:`sweep` takes it; ``workers`` / ``scheduler``: its
+    deprecated spellings). The rest is :func:`sweep`'s.
+
+    Returns:
+        A :class:`LightCurve`.
+
+    Raises:
+        InputError: none or more than one of ``phase_deg``, ``attitude_deg``, ``times_s``; an unknown
+            band or axis; a value the scene refuses.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> curve = sf.light_curve(scene, phase_deg=[10, 40], quiet=True)
+        >>> curve.magnitude.shape
+        (2,)
+    """
     check_scene(scene)
     cluster = cluster_of(cluster, workers, scheduler)
     given = [n for n, v in (("phase_deg", phase_deg), ("attitude_deg", attitude_deg), ("times_s", times_s)) if v is not None]
@@ -360,7 +381,26 @@ def light_curve_convergence(scene: Scene, *, tolerance: float = 0.01, **kwargs: 
     """Render the light curve (:func:`light_curve`, its keyword arguments) at the scene's resolution and
     spp, at twice the resolution and at four times the spp, and compare: a point target needs few
     pixels, and this says whether the scene's are enough (the irradiance of the points that are lit
-    at the scene's settings; a dark point's change is not relative)."""
+    at the scene's settings; a dark point's change is not relative).
+
+    Args:
+        scene: the scene.
+        tolerance: the relative change of irradiance allowed.
+        kwargs: :func:`light_curve`'s keywords (``phase_deg=[...]``, ...).
+
+    Returns:
+        The changes in pixels and in samples, and ``converged``.
+
+    Raises:
+        InputError: a ``tolerance`` not > 0, or what :func:`light_curve` refuses.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> check = sf.light_curve_convergence(scene, phase_deg=[10, 40], quiet=True)
+        >>> check.tolerance
+        0.01
+    """
     check_scene(scene)
     check_range("tolerance", tolerance, 0.0, lo_open=True)
     base = light_curve(scene, **kwargs)

@@ -47,7 +47,13 @@ def is_point_column(name: str) -> bool:
 
 @dataclass(frozen=True)
 class LightCurveFiles:
-    """A light-curve file (module docstring) and the scene file of its target.
+    """A light-curve file and the scene file of its target, what ``spacefit fit-light-curve`` fits.
+
+    The file is a point table (CSV, ECSV or a FITS table: a ``magnitude`` column, optionally
+    ``magnitude_sigma`` (mag), and each point's geometry as scene values in the scene's vocabulary
+    and units, ``sun.elevation_deg``, ``target.attitude_z_deg``, ...), or any light-curve file
+    :func:`read_light_curve` reads, each lit observation then rendered at its geometry with the
+    scene's camera.
 
     Attributes:
         curve: the light-curve file.
@@ -57,6 +63,15 @@ class LightCurveFiles:
         site: the observer, for a file whose geometry is seen from a site.
         sigma_mag: the magnitudes' error (mag) where the file gives none (None: unknown).
         seed: the renders' seed.
+
+    Raises:
+        InputError: a bad option value (the files themselves are read when the fit runs).
+
+    Example:
+        >>> import spacefit as sf
+        >>> files = sf.LightCurveFiles(curve="curve.csv", scene="lander.toml", sigma_mag=0.05)
+        >>> files.band is None  # the file's band, else V
+        True
     """
 
     curve: str | Path

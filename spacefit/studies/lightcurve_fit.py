@@ -57,10 +57,22 @@ class RenderedLightCurve(LightCurveKind):
             ``{"camera.position_m": [x, y, z], "sun.direction": [x, y, z]}``), every point setting the same ones.
         magnitude: the observed magnitudes.
         magnitude_sigma: their errors (mag; one for all, or one each), or None: unknown.
-        band: the band (:data:`~spacefit.studies.lightcurve.SUN_MAGNITUDES`).
+        band: the band (``V`` or ``AB532``).
         sun_magnitude: the sun's magnitude in it (None: the band's).
         observer_range_m: the observer's range (None: each point's camera's).
         seed: the renders' seed (independent ones: ``seed + 1000 j``).
+
+    Raises:
+        InputError: points that set unknown keys, magnitudes and points of different counts, a bad
+            error or band.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> curve = sf.RenderedLightCurve(scene, points=[{"sun.elevation_deg": 80}, {"sun.elevation_deg": 50}],
+        ...                               magnitude=[5.0, 5.3], magnitude_sigma=0.05)
+        >>> "parts.legs.kd" in curve.parameters()  # what sf.fit([curve], free) may free
+        True
     """
 
     scene: Scene
@@ -115,7 +127,7 @@ class RenderedLightCurve(LightCurveKind):
         return tuple(sorted({key for p in self.points for key in p}))
 
     def parameters(self) -> tuple[str, ...]:
-        """Every parameter of the scene (:func:`~spacefit.scene.parameters.available`) but those the points
+        """Every parameter of the scene (:func:`available_parameters`) but those the points
         set (named, or moved by a vector they set) and the image nuisances (an irradiance has no pixels)."""
         names = [n for n in available(self.scene) if n not in self.geometry and n not in IMAGE]
         return tuple(n for n in names if len({scene_value(s, n) for s in self.scenes}) == 1)
@@ -125,7 +137,7 @@ class RenderedLightCurve(LightCurveKind):
         return scene_value(self.scene, name)
 
     def block(self, free: tuple[str, ...]) -> Block:
-        """ln E of each point's render against the magnitudes' errors (module docstring)."""
+        """ln E of each point's render against the magnitudes' errors (the guide "BRDF tables and light curves as observations")."""
         known = tuple(n for n in free if n in self.parameters())
         index = np.asarray([free.index(n) for n in known], dtype=int)
         steps = tuple(fd_step(self.scene, n) for n in known)
@@ -157,8 +169,8 @@ class RenderedLightCurve(LightCurveKind):
 
     def size(self, free: Sequence[str], *, allow_large: bool = False) -> tuple[str, int] | None:
         """The fit's size in words and its estimated peak memory (bytes): its points are the frames of one
-        batch (:func:`~spacefit.rendering.memory.check_fit_memory`, which refuses a fit this machine
-        cannot hold unless ``allow_large``), each seeing the free parameters it depends on."""
+        batch (the memory check of an image fit, which refuses a fit this machine cannot hold unless
+        ``allow_large``), each seeing the free parameters it depends on."""
         intrinsics, own = assemble(self.scene).intrinsics, self.parameters()
         columns = sum(name in own for name in free)
         estimate = check_fit_memory(len(self.scenes), intrinsics.width, intrinsics.height, columns, self.scene.render.spp,
@@ -197,11 +209,39 @@ def fit_light_curve(
 ) -> FitResult:
     """Fit the registered parameters ``free`` of a rendered target (materials, attitude angles, ...)
     to an observed light curve (:class:`RenderedLightCurve` of these arguments) with
-    :func:`spacefit.fit`, from the scene's values or ``start``'s. Its size (points, pixels, estimated
+    :func:`fit`, from the scene's values or ``start``'s. Its size (points, pixels, estimated
     memory: :meth:`RenderedLightCurve.size`) is said as an image fit's is, and a fit above the memory
     available is refused unless ``allow_large``. ``progress``: called with (step, max_steps) after
     each step (default: a progress display on stderr, none with ``quiet``); ``resume``: the fit's
-    checkpoint plumbing (:class:`~spacefit.fitting.resume.Resume`), as :func:`spacefit.fit` takes it."""
+    checkpoint plumbing (:class:`Resume`), as :func:`fit` takes it.
+
+    Args:
+        scene: the scene of the target, at the start values.
+        free: registered parameter names.
+        points: per observation, the scene values of its geometry (``sun.elevation_deg``, ...).
+        magnitude: the observed magnitudes.
+        magnitude_sigma: their errors (mag): one for all, one each, or None (unknown).
+        band: the magnitudes' band, ``V`` or ``AB532``.
+        sun_magnitude: the sun's magnitude in ``band`` (None: the band's).
+        observer_range_m: the observer's distance (m; None: the camera's).
+        seed: the renders' seed.
+        max_steps: the solver's step limit.
+        start: start values by name (physical units); None: the scene's.
+        allow_large: run a fit above the memory available.
+
+    Returns:
+        The :class:`FitResult`.
+
+    Raises:
+        InputError: what :class:`RenderedLightCurve` and :func:`fit` refuse.
+
+    Example:
+        Not run by the tests (a rendered light curve's fit takes minutes)::
+
+            scene = sf.load_scene("lander.toml")
+            points = [{"sun.elevation_deg": e} for e in (80, 60, 40)]
+            result = sf.fit_light_curve(scene, ["parts.panels.alpha"], points, [5.0, 5.3, 5.9], 0.05)
+    """
     check_count("max_steps", max_steps, optional=False)
     curve = RenderedLightCurve(scene, points, magnitude, magnitude_sigma, band, sun_magnitude, observer_range_m, seed)
     if progress is None and not quiet:

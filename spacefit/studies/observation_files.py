@@ -53,7 +53,13 @@ SCORE_BANDS = {"v": "V", "johnson v": "V", "bessel v": "V", "johnson cousins v":
 @dataclass(frozen=True)
 class RefusedRow:
     """A row a light-curve reader did not use: its number (1: the first data row), the column and the
-    value that refused it, and why."""
+    value that refused it, and why.
+
+    Example:
+        >>> import spacefit as sf
+        >>> print(sf.RefusedRow(row=3, column="mag", value="x", reason="not a number"))
+        row 3: mag 'x': not a number
+    """
 
     row: int
     column: str

@@ -22,8 +22,8 @@ target's frame.
   first keyword ``CCSDS_TDM_VERS``; the geometry from its AZEL angles and range seen from ``site``, or
   from an ``orbit``.
 
-Given an ``orbit`` (:class:`~spacefit.studies.orbit.Orbit`, a TLE or OMM), the geometry is computed
-from it, the site and the time instead, offline (:func:`~spacefit.studies.orbit.pass_geometry`),
+Given an ``orbit`` (:class:`Orbit`, a TLE or OMM), the geometry is computed
+from it, the site and the time instead, offline (:func:`pass_geometry`),
 and checked against the file's where it gives any (SatChecker's columns, an MMT-9 track's distance
 and phase angle, a TDM's angles and range: :data:`ORBIT_TOLERANCE`). Rows whose time cannot be right
 (not ISO 8601, before ``launch_utc``, in the future), and SCORE rows, MMT-9 points and TDM ``MAG``
@@ -85,7 +85,17 @@ class LightCurveObservations:
         source: where they came from.
         refused: the file's rows not used, with the reason (:class:`RefusedRow`).
         earth_m: (n, 3) the Earth's centre seen from the target, in its frame (m; what Earthshine,
-            :mod:`spacefit.studies.earthshine`, needs), or None where the file gives no position.
+            :func:`earthshine_irradiance`, needs), or None where the file gives no position.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> curve.magnitude
+        array([5. , 5.2, 5.5])
     """
 
     magnitude: np.ndarray
@@ -173,11 +183,10 @@ def nadir_sun_frame(position_m: np.ndarray, sun: np.ndarray) -> np.ndarray:
 
 def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | None = None, format: str | None = None,
                      orbit: Orbit | None = None, launch_utc: str | None = None, now_utc: str | None = None) -> LightCurveObservations:
-    """Read measured magnitudes from a file in one of the formats of the module docstring (found from
+    """Read measured magnitudes from a file in one of the formats the guide "BRDF tables and light curves as observations" describes (found from
     the file, or ``format``: ``general``, ``pomenis``, ``score``, ``ecsv``, ``mmt9``, ``tdm``). ``site``
     is the observer where the geometry is seen from one (a SCORE file gives each row's; an MMT-9
-    track's default is MMT-9's); ``band`` names the magnitudes' band (one of
-    :data:`~spacefit.studies.lightcurve.SUN_MAGNITUDES`; a SCORE file's or MMT-9 track's from its
+    track's default is MMT-9's); ``band`` names the magnitudes' band (``V`` or ``AB532``; a SCORE file's or MMT-9 track's from its
     filters, a TDM's ``V``). ``orbit`` computes the geometry from a TLE or OMM instead (an MMT-9
     track needs one); rows before ``launch_utc`` or after ``now_utc`` (default: now) are refused,
     with a warning.
@@ -187,6 +196,28 @@ def read_light_curve(path: str | Path, *, site: Site | None = None, band: str | 
             column (keyword) and the value: missing columns or metadata, unreadable values, an unknown
             filter or time system, a missing site, band or orbit.
         OSError: the file cannot be read.
+
+    Args:
+        path: the file.
+        site: the observer (:class:`Site`), where the geometry is computed.
+        band: the magnitudes' band where the file does not say.
+        format: the file's format; None: found from the file.
+        orbit: the satellite's :class:`Orbit`, for geometry from its elements.
+        launch_utc, now_utc: rows outside these times are refused.
+
+    Returns:
+        The :class:`LightCurveObservations`; rows refused are in its ``refused``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=np.array(['2024-01-01T00:00:00', '2024-01-01T00:00:10', '2024-01-01T00:00:20']), source="example")
+        >>> back = sf.read_light_curve(sf.write_light_curve(curve, "curve.ecsv"))
+        >>> back.band, back.refused
+        ('V', ())
     """
     read_text_rows("path", path, "light curve")  # a text file, else a one-line error
     path = Path(path)
@@ -351,6 +382,24 @@ def write_light_curve(observations: LightCurveObservations, path: str | Path) ->
 
     Raises:
         InputError: observations without times.
+
+    Args:
+        observations: the observations (with times).
+        path: the ``.ecsv`` file to write.
+
+    Returns:
+        The file's path.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=np.array(['2024-01-01T00:00:00', '2024-01-01T00:00:10', '2024-01-01T00:00:20']), source="example")
+        >>> path = sf.write_light_curve(curve, "curve.ecsv")
+        >>> sf.read_light_curve(path).magnitude
+        array([5. , 5.2, 5.5])
     """
     check_type("observations", observations, LightCurveObservations, "sf.LightCurveObservations")
     if observations.time_utc is None:

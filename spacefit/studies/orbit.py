@@ -34,7 +34,21 @@ EARTH_RADIUS_M = 6378.0e3
 
 @dataclass(frozen=True)
 class Site:
-    """An observer on the Earth: geodetic latitude and longitude (deg, east positive), height (m)."""
+    """An observer on the Earth: geodetic latitude and longitude (deg, east positive), height (m).
+
+    Args:
+        latitude_deg: geodetic latitude (deg), in [-90, 90].
+        longitude_deg: longitude (deg, east positive), in [-180, 360].
+        height_m: height above the WGS84 ellipsoid (m).
+
+    Raises:
+        InputError: a value out of range, naming it.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.Site(latitude_deg=52.0, longitude_deg=4.4)
+        Site(latitude_deg=52.0, longitude_deg=4.4, height_m=0.0)
+    """
 
     latitude_deg: float
     longitude_deg: float
@@ -128,7 +142,18 @@ def in_earth_shadow(position_m: np.ndarray, sun: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Orbit:
-    """A satellite's mean elements for SGP4, from a TLE (:meth:`from_tle`) or an OMM (:meth:`from_omm`)."""
+    """A satellite's mean elements for SGP4, from a TLE (:meth:`from_tle`) or an OMM (:meth:`from_omm`).
+
+    Example:
+        >>> with open("iss.tle", "w") as f:  # illustrative elements
+        ...     print("ISS (ZARYA)", file=f)
+        ...     print("1 25544U 98067A   24001.50000000  .00016717  00000-0  10270-3 0  9993", file=f)
+        ...     print("2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.49815308432561", file=f)
+        >>> import spacefit as sf
+        >>> tle = "iss.tle"
+        >>> sf.Orbit.from_tle(tle).name
+        'ISS (ZARYA)'
+    """
 
     satrec: Any
     name: str = ""
@@ -196,9 +221,20 @@ class PassGeometry:
         range_m: the site's distance to it; height_m: its height above the WGS84 ellipsoid.
         phase_deg: the angle at the satellite between the sun and the observer.
         sun_altitude_deg, sun_azimuth_deg: the sun's, from the site.
-        in_shadow: the satellite in the Earth's shadow (module docstring).
+        in_shadow: the satellite in the Earth's shadow (the guide "BRDF tables and light curves as observations").
         position_m, sun, towards_observer: (n, 3) in the Earth-fixed ITRS frame: the satellite from the
             Earth's centre, and unit vectors from it towards the sun and towards the observer.
+
+    Example:
+        >>> import spacefit as sf
+        >>> with open("iss.tle", "w") as f:  # illustrative elements
+        ...     print("ISS (ZARYA)", file=f)
+        ...     print("1 25544U 98067A   24001.50000000  .00016717  00000-0  10270-3 0  9993", file=f)
+        ...     print("2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.49815308432561", file=f)
+        >>> tle = "iss.tle"
+        >>> geometry = sf.pass_geometry(sf.Orbit.from_tle(tle), sf.Site(52.0, 4.4), ["2024-01-01T18:00:00"])
+        >>> geometry.phase_deg.shape
+        (1,)
     """
 
     altitude_deg: np.ndarray
@@ -223,10 +259,29 @@ def enu_rows(site: Site) -> np.ndarray:
 
 
 def pass_geometry(orbit: Orbit, site: Site, times_utc: Sequence[str]) -> PassGeometry:
-    """``orbit``'s satellite seen from ``site`` at ``times_utc`` (ISO 8601), offline (module docstring).
+    """``orbit``'s satellite seen from ``site`` at ``times_utc`` (ISO 8601), offline (the guide "BRDF tables and light curves as observations").
 
     Raises:
         InputError: a time that is not ISO 8601, or one SGP4 cannot propagate to (the orbit decayed, ...).
+
+    Args:
+        orbit: the satellite's :class:`Orbit`.
+        site: the observer's :class:`Site`.
+        times_utc: ISO 8601 UTC times.
+
+    Returns:
+        A :class:`PassGeometry`, one value per time.
+
+    Example:
+        >>> import spacefit as sf
+        >>> with open("iss.tle", "w") as f:  # illustrative elements
+        ...     print("ISS (ZARYA)", file=f)
+        ...     print("1 25544U 98067A   24001.50000000  .00016717  00000-0  10270-3 0  9993", file=f)
+        ...     print("2 25544  51.6416 247.4627 0006703 130.5360 325.0288 15.49815308432561", file=f)
+        >>> tle = "iss.tle"
+        >>> geometry = sf.pass_geometry(sf.Orbit.from_tle(tle), sf.Site(52.0, 4.4), ["2024-01-01T18:00:00", "2024-01-01T18:01:00"])
+        >>> geometry.altitude_deg.shape, bool(geometry.range_m.min() > 4e5)
+        ((2,), True)
     """
     from astropy import units as u  # astropy: heavy, loaded when geometry is computed
     from astropy.coordinates import ITRS, TEME, CartesianRepresentation, EarthLocation, get_sun

@@ -7,21 +7,21 @@ spacefit material. The irradiance at an observer at distance d is
 
 f_k the plate's BRDF (:func:`spacefit.materials.brdf.brdf`, Mitsuba's evaluation, both sides
 alike as the renderer's ``twosided``, 0 where sun and observer are on opposite sides; a measured
-table's too, :class:`~spacefit.materials.tabulated.TabulatedBRDF`), wi and wo the
+table's too, :class:`TabulatedBRDF`), wi and wo the
 directions towards the sun and the observer: the renderer's integrated irradiance of the same
 plates for a point target (no plate shadowing or lighting another, one bounce; the test renders
 the two-plate satellite and compares). A target in the Earth's shadow is dark.
 
 Observed magnitudes of such a target are an observation (:class:`PlateLightCurve`) that
-:func:`spacefit.fit` fits, alone or jointly with images of the same parts: its parameters are the
+:func:`fit` fits, alone or jointly with images of the same parts: its parameters are the
 registered ones of the plates' materials (``parts.array.kd``, ``parts.chassis.alpha`` for both
 roughnesses, ``parts.array.scale`` a table's factor) and the target's attitude angles;
 :func:`fit_plates` is the convenience that fits it alone.
 
-Given an :class:`~spacefit.studies.earthshine.Earth`, the irradiance is the sun's plus Earthshine's:
-the same plates lit by the sunlit Earth (:func:`~spacefit.studies.earthshine.earthshine_sources`
+Given an :class:`Earth`, the irradiance is the sun's plus Earthshine's:
+the same plates lit by the sunlit Earth (:func:`earthshine_sources`
 once per set of observations, from their ``earth_m``, the sphere at the observing geometry's radius
-:data:`~spacefit.studies.orbit.EARTH_RADIUS_M`; :func:`~spacefit.studies.earthshine.earthshine_irradiance`
+:data:`~spacefit.studies.orbit.EARTH_RADIUS_M`; :func:`earthshine_irradiance`
 with the plates' BRDF at the fitted values and attitude). Without one the model is the sun's alone.
 """
 
@@ -64,7 +64,17 @@ class Plate:
     (target frame) is (a face of) a sun-tracking part: for each observation its normal and tangent are
     turned about that axis by the turn that makes the part's ``tracking_normal`` (default: the plate's
     own normal) face the sun as closely as the turn allows
-    (:func:`spacefit.geometry.attitude.tracking_rotation`; unturned with the sun along the axis)."""
+    (as :class:`SunTracking` turns a part; unturned with the sun along the axis).
+
+    Raises:
+        InputError: a non-positive area, a zero normal or tangent, a material without a finite BRDF.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> plate = sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))
+        >>> plate.area_m2, plate.normal
+        (10.0, (0.0, 0.0, 1.0))
+    """
 
     name: str
     area_m2: float
@@ -169,12 +179,33 @@ def plates_irradiance(plates: Sequence[Plate], sun: np.ndarray, observer: np.nda
 def predict_magnitudes(plates: Sequence[Plate], observations: LightCurveObservations, sun_irradiance_w_m2: float = 1360.0, *,
                        earth: Earth | None = None, shares: bool = False) -> np.ndarray | tuple[np.ndarray, np.ndarray]:
     """The plates' magnitudes in the observations' band at their geometry (inf in the Earth's shadow or
-    unlit), lit by the sun and, given an ``earth``, by Earthshine (module docstring). With ``shares``
+    unlit), lit by the sun and, given an ``earth``, by Earthshine (the guide "BRDF tables and light curves as observations"). With ``shares``
     also each magnitude's Earthshine share of the irradiance, E_earthshine / (E_sun + E_earthshine)
     (nan where dark).
 
     Raises:
         InputError: an ``earth`` for observations without the Earth's position (``earth_m`` None).
+
+    Args:
+        plates: the target's plates.
+        observations: the geometry (and band) to predict at.
+        sun_irradiance_w_m2: the sun's irradiance at the target (W m^-2).
+        earth: the Earth for Earthshine, or None.
+        shares: also return the Earthshine shares.
+
+    Returns:
+        (n,) magnitudes, and with ``shares`` the (n,) shares.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plate = sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))
+        >>> np.round(sf.predict_magnitudes([plate], curve), 2)
+        array([3.38, 3.6 , 4.06])
     """
     plates = _check_plates(plates)
     _check_observations(observations)
@@ -291,17 +322,15 @@ def plate_parameters(plates: Sequence[Plate]) -> tuple[str, ...]:
 
 @dataclass(frozen=True, eq=False)
 class PlateLightCurve(LightCurveKind):
-    """Observed magnitudes of a target of flat plates, the light-curve kind of observation
-    (:mod:`spacefit.fitting.observations`) whose model is :func:`plates_irradiance`.
+    """Observed magnitudes of a target of flat plates, the light-curve kind of observation :func:`fit` fits whose model is :func:`plates_irradiance`.
 
     Its parameters are the registered ones of each plate's material, ``parts.<plate>.<field>``
-    (``alpha`` for both roughnesses; a :class:`~spacefit.materials.tabulated.TabulatedBRDF`'s
+    (``alpha`` for both roughnesses; a :class:`TabulatedBRDF`'s
     ``scale``), and the target's attitude angles ``target.attitude_x_deg`` (``_y_``, ``_z_``: a
-    rotation of all the plates from their given normals, at 0 unless free,
-    :func:`spacefit.geometry.frames.attitude_matrix`). The residual is the magnitude's,
+    rotation of all the plates from their given normals, at 0 unless free, as ``target.attitude_deg``). The residual is the magnitude's,
     (m_model - m_obs) / sigma_m, as ln(E_model / E_obs) / (0.4 ln 10 sigma_m); without stated
     errors the errors are scaled by the residuals. Observations in the Earth's shadow are left out.
-    Given an ``earth``, the model adds Earthshine (module docstring) and the report says its share.
+    Given an ``earth``, the model adds Earthshine (the guide "BRDF tables and light curves as observations") and the report says its share.
 
     Attributes:
         plates: the target's plates (none named ``target``; those of one name share a material: one part's).
@@ -310,6 +339,24 @@ class PlateLightCurve(LightCurveKind):
         bounds: narrower (low, high) ranges of some parameters (``{"parts.chassis.eta": (1.0, 100.0)}``:
             a dielectric's physical range) within their registered ones; the plates' values must lie inside.
         earth: the Earth lighting the target too (Earthshine; the observations must carry ``earth_m``), or None.
+
+    Raises:
+        InputError: a plate named ``target``, plates of one name with different materials, bounds
+            outside the registered ranges or not holding the plates' values, an ``earth`` without the
+            Earth's positions.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plates = sf.PlateLightCurve([sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))], curve)
+        >>> plates.parameters()
+        ('parts.panel.kd', 'target.attitude_x_deg', 'target.attitude_y_deg', 'target.attitude_z_deg')
+        >>> sf.fit([plates], ["parts.panel.kd"]).status.value
+        'converged'
     """
 
     plates: Sequence[Plate]
@@ -407,9 +454,37 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
                max_steps: int = 200, earth: Earth | None = None) -> FitResult:
     """Fit the plates' registered values ``free`` (``parts.<plate>.<field>``, ``target.attitude_z_deg``;
     :class:`PlateLightCurve`) to the observed magnitudes outside the Earth's shadow with
-    :func:`spacefit.fit`, from the plates' values. ``bounds`` narrows a free value's range within its
+    :func:`fit`, from the plates' values. ``bounds`` narrows a free value's range within its
     registered one (:attr:`PlateLightCurve.bounds`); the start must lie inside. ``earth`` adds
-    Earthshine to the model (:attr:`PlateLightCurve.earth`)."""
+    Earthshine to the model (:attr:`PlateLightCurve.earth`).
+
+    Args:
+        plates: the target's plates.
+        observations: the observed magnitudes.
+        free: parameter names (``parts.<plate>.<field>``, ``target.attitude_x_deg``, ...).
+        bounds: narrower ranges by name.
+        sun_irradiance_w_m2: the sun's irradiance at the target (W m^-2).
+        max_steps: the solver's step limit.
+        earth: the Earth for Earthshine, or None.
+
+    Returns:
+        The :class:`FitResult`.
+
+    Raises:
+        InputError: a name the plates cannot free, a start outside ``bounds``.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plate = sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))
+        >>> result = sf.fit_plates([plate], curve, ["parts.panel.kd"])
+        >>> result.status.value, sf.fitted_plates([plate], result)[0].material.kd < 0.3  # fainter than predicted
+        ('converged', True)
+    """
     check_type("bounds", bounds, (Mapping, type(None)), "a dict of (low, high) ranges by free name, or None")
     names = list(check_name_list("free", free))
     for name in bounds or {}:
@@ -421,7 +496,27 @@ def fit_plates(plates: Sequence[Plate], observations: LightCurveObservations, fr
 
 def fitted_plates(plates: Sequence[Plate], fit: FitResult) -> list[Plate]:
     """The plates with a :func:`fit_plates` fit's values in their materials and, where it freed the
-    attitude, their normals, tangents and tracking axes and normals turned by it."""
+    attitude, their normals, tangents and tracking axes and normals turned by it.
+
+    Args:
+        plates: the plates the fit started from.
+        fit: the :func:`fit_plates` result.
+
+    Returns:
+        New plates.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> phase = np.radians([20.0, 40.0, 60.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2, 5.5]), magnitude_sigma=np.full(3, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (3, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(3, 1.0e6), in_shadow=np.zeros(3, bool), time_utc=None, source="example")
+        >>> plate = sf.Plate("panel", area_m2=10.0, normal=(0, 0, 1), material=sf.Lambert(kd=0.3))
+        >>> fitted = sf.fitted_plates([plate], sf.fit_plates([plate], curve, ["parts.panel.kd"]))
+        >>> type(fitted[0].material).__name__
+        'Lambert'
+    """
     plates = _check_plates(plates)
     check_type("fit", fit, FitResult, "an sf.FitResult (of sf.fit_plates)")
     for name in fit.names:

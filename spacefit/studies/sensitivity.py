@@ -88,9 +88,16 @@ class Sensitivity:
         regions: each part, then ``target`` (all parts); ``pixels`` whose centre sees each.
         mean_radiance: (regions,) W m^-2 sr^-1.
         d_mean_radiance, d_mean_radiance_se: (n, regions) derivative of each region's mean radiance.
-        sensitivity, sensitivity_se: (n, regions) normalised sensitivities (module docstring),
+        sensitivity, sensitivity_se: (n, regions) normalised sensitivities (the Studies guide),
             in ``normalised_units``.
         t: the Student t factor of the confidence interval (``t * se``).
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> s = sf.sensitivity(scene, ["parts.legs.kd"], seeds=2, quiet=True)
+        >>> s.to_dataset()["derivative"].dims  # the derivative image of each parameter
+        ('parameter', 'y', 'x', 'channel')
     """
 
     names: tuple[str, ...]
@@ -271,7 +278,29 @@ def sensitivity(
     to the registered parameters ``names`` (``sf.available_parameters(scene)``), at the scene's values
     or ``at`` (parameter names or scene-file keys, as :meth:`Scene.with_values` takes them), each
     from ``seeds`` independent estimates (>= 2) with its standard error. ``spp`` / ``spp_grad``: samples per pixel of the primal and finite
-    difference renders / of the AD renders (default: the scene's)."""
+    difference renders / of the AD renders (default: the scene's).
+
+    Args:
+        scene: the scene.
+        names: registered parameter names.
+        at: values (parameter names or scene-file keys) replacing the scene's.
+        seeds: independent estimates of each derivative, >= 2.
+        spp, spp_grad: samples per pixel (None: the scene's).
+        quiet: no progress bar.
+
+    Returns:
+        A :class:`Sensitivity`.
+
+    Raises:
+        InputError: a name the scene cannot free, ``seeds`` < 2.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> s = sf.sensitivity(scene, ["parts.legs.kd"], seeds=2, quiet=True)
+        >>> s.names
+        ('parts.legs.kd',)
+    """
     # here: the fitting and rendering stack imports JAX and Mitsuba (seconds), which a sweep without derivatives never needs
     from spacefit.fitting.problem import fit_scene
     from spacefit.rendering.derivatives import jacobians

@@ -216,7 +216,16 @@ def _fsync(path: Path) -> None:
 class StoreReport:
     """What :func:`verify_store` found: counts of points, the done points whose data failed their
     checksum (or whose flag is unreadable), the variables missing from the store and the coordinates
-    whose values are not those recorded when it was made."""
+    whose values are not those recorded when it was made.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> _ = sf.sweep(scene, {"sun.elevation_deg": [30, 60]}, store="sweep.zarr", quiet=True)
+        >>> report = sf.verify_store("sweep.zarr")
+        >>> report.points, report.verified, report.damaged
+        (2, 2, False)
+    """
 
     points: int
     done: int
@@ -347,6 +356,16 @@ def verify_store(store: str | Path) -> StoreReport:
     Raises:
         InputError: ``store`` is not a spacefit sweep store, or one of its metadata files is damaged
             (named).
+
+    Args:
+        store: the sweep's Zarr folder.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> _ = sf.sweep(scene, {"sun.elevation_deg": [30, 60]}, store="sweep.zarr", quiet=True)
+        >>> print(sf.verify_store("sweep.zarr"))
+        2 points: 2 done, 2 verified, 0 failed their checksum, 0 to compute
     """
     import zarr  # here: only a sweep's store needs Zarr (slow to import)
 

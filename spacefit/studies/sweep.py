@@ -118,22 +118,21 @@ def sweep(
 
     Args:
         scene: the scene every point starts from.
-        axes: the swept values (module docstring): key -> list, or axis name -> {key: list} (zipped).
+        axes: the swept values (the Studies guide): key -> list, or axis name -> {key: list} (zipped).
         store: a Zarr folder written point by point (None: in memory). An existing store of the
-            same sweep is completed, not recomputed. It is locked while the sweep runs
-            (:mod:`spacefit.locks`): a store another process writes is refused, naming it.
+            same sweep is completed, not recomputed. It is locked while the sweep runs: a store another process writes is refused, naming it.
         images: store each point's radiance image (W m^-2 sr^-1) too.
         derivatives: registered parameters whose derivatives of each region's mean radiance to
             store at every point, with their Monte Carlo standard errors (:func:`sf.sensitivity`).
         derivative_seeds: independent seeds of each derivative (>= 2).
         overwrite: replace a store that holds another sweep.
-        cluster: where the points render (:mod:`spacefit.executors`): None, this process; an int N, a new
+        cluster: where the points render: None, this process; an int N, a new
             local dask.distributed cluster of N worker processes; a scheduler address (``tcp://host:8786``);
             a ``distributed.Client`` (left open).
         max_renders_per_worker: restart a dask worker after this many renders (Mitsuba leaks).
         allow_large: run a sweep of more than :data:`MAX_POINTS` points, or whose store may not fit
             on its disk (:func:`check_estimate`; the size is printed first unless ``quiet``).
-        stall_s: on dask, stop with :class:`~spacefit.executors.ClusterError` when no point
+        stall_s: on dask, stop with :class:`ClusterError` when no point
             finishes for this long (s); a point whose worker dies is retried twice, then named the same way.
         quiet: no size estimate, no progress bar.
         workers, scheduler: deprecated spellings of ``cluster`` (an int, an address).
@@ -146,6 +145,19 @@ def sweep(
     checksums compared first: those that fail are computed again (a warning says how many). The
     mesh files are checked before each point is marked done and hashed again at the end: a changed
     one raises InputError naming it, the points rendered after the change not marked done.
+
+    Raises:
+        InputError: an unknown key or a value the scene refuses (before any render), a store that
+            holds another sweep (without ``overwrite``) or that another process writes, a sweep too
+            large without ``allow_large``.
+        ClusterError: on dask, a point whose worker died three times, or no point finished in ``stall_s``.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> ds = sf.sweep(scene, {"sun.elevation_deg": [30, 60]}, store="sweep.zarr", quiet=True)
+        >>> ds["mean_radiance"].sel(region="target").shape  # one value per point
+        (2,)
     """
     import xarray as xr  # here: only a sweep's store needs xarray (slow to import)
 
@@ -198,7 +210,24 @@ def read_sweep_file(path: str | Path, overrides: Sequence[str] = ()) -> tuple[Sc
     thesis's scene, with ``overrides`` as ``--set`` gives them), an ``[axes]`` table as :func:`sweep`
     takes it, and options (``images``, ``derivatives``, ``derivative_seeds``, ``max_renders_per_worker``, ``stall_s``).
 
-    Returns ``(scene, axes, options)``: ``sf.sweep(scene, axes, store=..., **options)`` runs it.
+    Args:
+        path: the sweep TOML file.
+        overrides: ``"key=value"`` scene overrides (TOML values), as ``--set`` gives them.
+
+    Returns:
+        ``(scene, axes, options)``: ``sf.sweep(scene, axes, store=..., **options)`` runs it.
+
+    Raises:
+        InputError: a missing or malformed file, an unknown option, a scene the overrides break.
+
+    Example:
+        >>> import spacefit as sf
+        >>> with open("sweep.toml", "w") as f:
+        ...     print('[axes]', file=f)
+        ...     print('"sun.elevation_deg" = [30, 60]', file=f)
+        >>> scene, axes, options = sf.read_sweep_file("sweep.toml", ["render.spp=4"])
+        >>> axes, scene.render.spp
+        ({'sun.elevation_deg': [30, 60]}, 4)
     """
     data = read_scene_dict(path)  # the same checks and messages as a scene file's
     for key in data:

@@ -2,7 +2,7 @@
 
 :func:`target_plates` turns the parts of a scene, as :func:`~spacefit.scene.assembly.assemble` loads
 them (a mesh file's groups, a part's own file, the primitives of :mod:`spacefit.geometry.primitives`),
-into :class:`~spacefit.studies.plates.Plate` s in the target's body frame: each part's triangles
+into :class:`Plate` s in the target's body frame: each part's triangles
 grouped by normal (and by tangent where its material is anisotropic), their areas summed. A box
 gives its six faces, a plate primitive one plate, a cylinder its facets and its two caps. Each plate carries its part's name (the plates of one
 part share its parameters, ``parts.<part>.<field>``), the material the renderer gives the part, and
@@ -120,7 +120,7 @@ def part_plates(name: str, part: PartMesh, material: Material) -> list[Plate]:
 
 def target_plates(scene: Scene) -> tuple[Plate, ...]:
     """The flat plates of ``scene``'s target in its body frame, derived from its parts as the renderer
-    assembles them (module docstring): per part, its triangles grouped by normal (and tangent,
+    assembles them (the guide "BRDF tables and light curves as observations"): per part, its triangles grouped by normal (and tangent,
     :func:`part_plates`), with the part's name, the material the renderer gives it and Mitsuba's
     tangent; a closed part's plates one-sided, an open part's two-sided. A wrinkled part gives its
     flat base. A sun-tracking part's plates carry its axis and normal (``tracking_axis``,
@@ -128,6 +128,18 @@ def target_plates(scene: Scene) -> tuple[Plate, ...]:
 
     Raises:
         InputError: a part whose material has no BRDF towards an observer (a mirror), naming it.
+
+    Args:
+        scene: the scene.
+
+    Returns:
+        The plates (:class:`Plate`), for :class:`PlateLightCurve` and :func:`predict_magnitudes`.
+
+    Example:
+        >>> import spacefit as sf
+        >>> plates = sf.target_plates(sf.default_scene())
+        >>> sorted({p.name for p in plates})
+        ['body', 'legs', 'panels']
     """
     check_scene(scene)
     assembly = assemble(scene)
@@ -172,7 +184,7 @@ def plate_notes(scene: Scene) -> tuple[str, ...]:
 
 @dataclass(frozen=True)
 class PlatesVsRender:
-    """The plates' light curve (:func:`target_plates`, :func:`~spacefit.studies.plates.plates_irradiance`)
+    """The plates' light curve (:func:`target_plates`)
     against the path tracer's of the same target at the same points.
 
     Attributes:
@@ -181,6 +193,13 @@ class PlatesVsRender:
         plates_w_m2, rendered_w_m2: the irradiance at the scene's camera (W m^-2), each point.
         depth, spp: the path tracer's bounces (``render.depth``) and samples per pixel.
         notes: what the plates leave out (:func:`plate_notes`).
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> comparison = sf.compare_plates_to_render(scene, phase_deg=[10, 40])
+        >>> comparison.rendered_w_m2.shape, comparison.plates_w_m2.shape
+        ((2,), (2,))
     """
 
     points: tuple[Mapping[str, float], ...]
@@ -285,14 +304,36 @@ def compare_plates_to_render(scene: Scene, *, phase_deg: Sequence[float] | None 
                              points: Sequence[Mapping[str, float]] | None = None, range_m: float | None = None,
                              quiet: bool = True, cluster: Cluster | None = None) -> PlatesVsRender:
     """The plates' light curve of ``scene``'s target (:func:`target_plates`) against the path tracer's
-    (:func:`~spacefit.studies.sweep.sweep`: the image's radiance x pixel solid angle summed, as
-    :func:`~spacefit.studies.lightcurve.light_curve` has it), both at the scene's camera with the scene's
+    (:func:`sweep`: the image's radiance x pixel solid angle summed, as
+    :func:`light_curve` has it), both at the scene's camera with the scene's
     sun irradiance, at either the solar phase angles ``phase_deg`` (the sun turning about the target
-    from the camera's direction, :func:`~spacefit.studies.lightcurve.phase_plane_sun`) or ``points``,
+    from the camera's direction) or ``points``,
     each a dict of scene values (``{"target.attitude_z_deg": 30.0}``), every one setting the same keys.
     ``range_m`` moves the camera there first (:func:`at_range`): a camera near a specular target sees
-    its glint from a spread of directions, the plates from one. ``cluster``: where the renders run
-    (:mod:`spacefit.executors`: None, this process; N local workers; a scheduler address; a dask Client)."""
+    its glint from a spread of directions, the plates from one.
+
+    Args:
+        scene: the scene.
+        phase_deg: solar phase angles (deg), or ``points``: scene values per point.
+        range_m: the observer's distance for the magnitudes (m); None: the camera's.
+        quiet: no progress bar.
+        cluster: where the renders run: None, this process; N local workers; a scheduler address; a
+            dask Client.
+
+    Returns:
+        A :class:`PlatesVsRender`.
+
+    Raises:
+        InputError: neither or both of ``phase_deg`` and ``points``, a value the scene refuses, a part
+            without a BRDF towards an observer.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> comparison = sf.compare_plates_to_render(scene, phase_deg=[10, 40])
+        >>> comparison.phase_deg
+        array([10., 40.])
+    """
     cluster = cluster_of(cluster)
     scene = body_fixed(check_scene(scene))  # type: ignore[arg-type]
     if range_m is not None:
@@ -388,8 +429,8 @@ def rendered_light_curve(scene: Scene, observations: LightCurveObservations, *, 
 @dataclass(frozen=True, eq=False)
 class ChosenLightCurve(LightCurveKind):
     """A light curve fitted with the model :func:`choose_light_curve_model` chose: it is the ``chosen``
-    observation (a :class:`~spacefit.studies.plates.PlateLightCurve` or a
-    :class:`~spacefit.studies.lightcurve_fit.RenderedLightCurve`) in every way, and its report adds
+    observation (a :class:`PlateLightCurve` or a
+    :class:`RenderedLightCurve`) in every way, and its report adds
     which it is and why (:attr:`reason`).
 
     Attributes:
@@ -397,6 +438,18 @@ class ChosenLightCurve(LightCurveKind):
         comparison: the plates against the path tracer at a sample of the observations' geometry.
         noise_mag: the observations' noise the difference was held to (mag).
         reason: the choice in words.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> phase = np.radians([20.0, 40.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2]), magnitude_sigma=np.full(2, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (2, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(2, 1.0e6), in_shadow=np.zeros(2, bool), time_utc=None, source="example")
+        >>> chosen = sf.choose_light_curve_model(scene, curve, samples=2)
+        >>> bool(chosen.reason)  # the choice in words
+        True
     """
 
     chosen: PlateLightCurve | RenderedLightCurve
@@ -436,9 +489,9 @@ class ChosenLightCurve(LightCurveKind):
 def choose_light_curve_model(scene: Scene, observations: LightCurveObservations, *, samples: int = 8,
                              sigma_mag: float | None = None, quiet: bool = True, cluster: Cluster | None = None) -> ChosenLightCurve:
     """The light-curve observation of ``observations`` of ``scene``'s target to fit: the flat plates
-    (:class:`~spacefit.studies.plates.PlateLightCurve` of :func:`target_plates`, the scene's sun
+    (:class:`PlateLightCurve` of :func:`target_plates`, the scene's sun
     irradiance) where their difference from the path tracer is below the observations' noise, else
-    the path tracer (:class:`~spacefit.studies.lightcurve_fit.RenderedLightCurve`).
+    the path tracer (:class:`RenderedLightCurve`).
 
     The difference is measured (:func:`compare_plates_to_render`) at ``samples`` of the lit
     observations' geometries, spread over their phase angles, with the scene's camera (the target's
@@ -450,8 +503,31 @@ def choose_light_curve_model(scene: Scene, observations: LightCurveObservations,
     target); its attitude angles are the points' geometry, so it cannot free them as the plates can.
     ``cluster``: where the comparison's renders run (:func:`compare_plates_to_render`'s).
 
+    Args:
+        scene: the scene of the target (its parts, camera and render settings).
+        observations: the measured magnitudes and their geometry.
+        samples: the number of geometries the plates are compared with the path tracer at.
+        sigma_mag: the observations' noise (mag) where they state none.
+        quiet: no progress bar.
+        cluster: where the comparison's renders run, as :func:`compare_plates_to_render` takes it.
+
+    Returns:
+        A :class:`ChosenLightCurve`, for ``sf.fit([chosen], free)``.
+
     Raises:
         InputError: observations without errors and no ``sigma_mag``, or none lit.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> phase = np.radians([20.0, 40.0])  # the sun overhead, the observer tilted away
+        >>> curve = sf.LightCurveObservations(
+        ...     magnitude=np.array([5.0, 5.2]), magnitude_sigma=np.full(2, 0.05), band="V",
+        ...     sun=np.tile([0.0, 0.0, 1.0], (2, 1)), observer=np.stack([np.sin(phase), 0 * phase, np.cos(phase)], axis=1),
+        ...     range_m=np.full(2, 1.0e6), in_shadow=np.zeros(2, bool), time_utc=None, source="example")
+        >>> chosen = sf.choose_light_curve_model(scene, curve, samples=2)
+        >>> type(chosen.chosen).__name__ in ("PlateLightCurve", "RenderedLightCurve")
+        True
     """
     cluster = cluster_of(cluster)
     scene = body_fixed(check_scene(scene))  # type: ignore[arg-type]

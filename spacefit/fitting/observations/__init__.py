@@ -5,7 +5,7 @@ values it predicts its data, in their unit; it says which registered parameters
 (:mod:`spacefit.scene.parameters`) it depends on and its own value of each (a fit's default start);
 its residuals are (model - data) / sigma, or ln(model / data) / sigma_rel for data spanning
 decades, sigma known or not; the fit's one goodness of fit, covariance, verdict and report
-(:func:`spacefit.fit`) take them as they take an image's pixels; its part of the fit's report and its
+(:func:`fit`) take them as they take an image's pixels; its part of the fit's report and its
 figure are its own (:class:`~spacefit.fitting.observations.base.Reported`: ``report``, ``plot``).
 
 The kinds and their homes:

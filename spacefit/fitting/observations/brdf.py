@@ -1,6 +1,6 @@
-"""The BRDF-table kind of observation: a measured table (:class:`~spacefit.materials.measured.BRDFTable`)
-of one part's material, predicted by a material model (:data:`~spacefit.fitting.brdf_table.BRDF_MODELS`),
-and the conveniences that fit it with :func:`spacefit.fit` and choose the smallest model that fits.
+"""The BRDF-table kind of observation: a measured table (:class:`BRDFTable`)
+of one part's material, predicted by a material model (:data:`BRDF_MODELS`),
+and the conveniences that fit it with :func:`fit` and choose the smallest model that fits.
 
 The model's values are the part's registered parameters: a table measuring part ``chassis`` fits
 ``parts.chassis.eta``, ``parts.chassis.alpha`` (:mod:`spacefit.scene.parameters`, whose bounds they
@@ -37,11 +37,25 @@ class BRDFTableObservation(ValueObservation):
 
     Attributes:
         table: the measured values.
-        model: a name in :data:`~spacefit.fitting.brdf_table.BRDF_MODELS`.
+        model: a name in :data:`BRDF_MODELS`.
         part: the part whose material the table measures: its parameters are ``parts.<part>.<field>``.
         relative_error: each value's relative error where the table states none (None: unknown).
         values: the model's values by field (``{"k": 0.0}``), what a fit holds them at when they
-            are not free and its default start (otherwise :data:`~spacefit.fitting.brdf_table.DEFAULT_START`).
+            are not free and its default start (otherwise the model's own start, :class:`MaterialModel`).
+
+    Raises:
+        InputError: an unknown model, or values of fields the model does not have.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> observation = sf.BRDFTableObservation(table, "lambert", part="paint")
+        >>> result = sf.fit([observation], ["parts.paint.kd"])
+        >>> round(result.values["parts.paint.kd"], 3)
+        0.3
     """
 
     table: BRDFTable
@@ -72,12 +86,12 @@ class BRDFTableObservation(ValueObservation):
         return tuple(self.name_of(f) for f in BRDF_MODELS[self.model].parameters)
 
     def start(self, name: str) -> float:
-        """The model's value of ``name``: :attr:`values`'s, else :data:`~spacefit.fitting.brdf_table.DEFAULT_START`'s."""
+        """The model's value of ``name``: :attr:`values`'s, else the model's own start."""
         key = name.rsplit(".", 1)[-1]
         return float(self.values.get(key, DEFAULT_START[key]))
 
     def block(self, free: tuple[str, ...]) -> Block:
-        """ln(model / data) against the relative errors (module docstring)."""
+        """ln(model / data) against the relative errors."""
         m, table = BRDF_MODELS[self.model], self.table
         sigma = table.sigma / table.value if table.sigma is not None else self.relative_error
         data = MeasuredValues(table.value, sigma, True, BRDF_UNIT, f"BRDF table {table.source}")
@@ -101,11 +115,38 @@ class BRDFTableObservation(ValueObservation):
 def fit_brdf_table(table: BRDFTable, model: str = "lambert+ggx", *, relative_error: float | None = None,
                    start: dict[str, float] | None = None, fixed: dict[str, float] | None = None,
                    max_steps: int = 200, part: str = "sample") -> FitResult:
-    """Fit the material model ``model`` (:data:`~spacefit.fitting.brdf_table.BRDF_MODELS`) of part
-    ``part`` to a measured table with :func:`spacefit.fit` (module docstring): every field of the
+    """Fit the material model ``model`` (:data:`BRDF_MODELS`) of part
+    ``part`` to a measured table with :func:`fit`: every field of the
     model is free (``parts.<part>.<field>``) but those ``fixed`` holds at given values (``{"k": 0.0}``:
     a dielectric's Fresnel factor, for a coated surface whose eta and k the table cannot separate;
-    the result's ``extras["fixed"]`` records them); ``start``: start values by field."""
+    the result's ``extras["fixed"]`` records them); ``start``: start values by field.
+
+    Args:
+        table: the measured table.
+        model: a name in :data:`BRDF_MODELS`.
+        relative_error: each value's relative error where the table states none; None: unknown
+            (the fit then has no chi^2 verdict).
+        start: start values by field; default the model's.
+        fixed: values by field held fixed.
+        max_steps: the solver's step limit.
+        part: the part name the parameters carry (``parts.<part>.<field>``).
+
+    Returns:
+        The :class:`FitResult`: values, standard errors, status and a chi^2 verdict against the errors.
+
+    Raises:
+        InputError: an unknown model, a field the model does not have, a value out of range.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> result = sf.fit_brdf_table(table, "lambert")
+        >>> result.status.value, round(result.values["parts.sample.kd"], 3)
+        ('converged', 0.3)
+    """
     check_count("max_steps", max_steps, optional=False)
     for name, given in (("start", start), ("fixed", fixed)):
         check_type(name, given, (dict, type(None)), "a dict of parameter values by name, or None")
@@ -122,7 +163,29 @@ def fit_brdf_table(table: BRDFTable, model: str = "lambert+ggx", *, relative_err
 
 
 def fitted_material(model: str, fit: FitResult) -> Material:
-    """The material of a :func:`fit_brdf_table` fit of ``model``: its estimates and fixed values."""
+    """The material of a :func:`fit_brdf_table` fit of ``model``: its estimates and fixed values.
+
+    Args:
+        model: the model name the fit was made with.
+        fit: the :func:`fit_brdf_table` result.
+
+    Returns:
+        The material (:class:`Lambert`, :class:`Conductor`, :class:`DiffuseConductor`, ...), for a
+        scene's part.
+
+    Raises:
+        InputError: an unknown model, or a fit of another model.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> material = sf.fitted_material("lambert", sf.fit_brdf_table(table, "lambert"))
+        >>> type(material).__name__, round(material.kd, 3)
+        ('Lambert', 0.3)
+    """
     check_choice("model", model, BRDF_MODELS)
     check_type("fit", fit, FitResult, "an sf.FitResult (of sf.fit_brdf_table)")
     values = {name.rsplit(".", 1)[-1]: v for name, v in {**fit.values, **fit.extras.get("fixed", {})}.items()}
@@ -166,7 +229,31 @@ def compare_brdf_models(table: BRDFTable, models: Sequence[str] = ("lambert", "g
                                                                   "lambert+ggx_aniso"), *,
                         relative_error: float | None = None, fixed: dict[str, float] | None = None) -> ModelComparison:
     """Fit each of ``models`` (ordered by their number of parameters; ``fixed`` values held in those that
-    have them) and choose the smallest that is no misfit (:func:`smallest_adequate`)."""
+    have them) and choose the smallest that is no misfit (:func:`smallest_adequate`).
+
+    Args:
+        table: the measured table.
+        models: names in :data:`BRDF_MODELS`.
+        relative_error: each value's relative error where the table states none.
+        fixed: values by field held fixed where a model has the field.
+
+    Returns:
+        The fits by model name (``fits``), the smallest adequate one's name (``chosen``; None if every
+        one is a misfit) and ``table()``, one line per model.
+
+    Raises:
+        InputError: an unknown model.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> zenith = np.radians([10.0, 30.0, 50.0, 70.0])  # the light's; the detector looks down the normal
+        >>> wi = np.stack([np.sin(zenith), 0 * zenith, np.cos(zenith)], axis=1)
+        >>> wo = np.tile([0.0, 0.0, 1.0], (4, 1))
+        >>> table = sf.BRDFTable(wi=wi, wo=wo, value=np.full(4, 0.3 / np.pi), sigma=np.full(4, 0.002), source="white paint")
+        >>> comparison = sf.compare_brdf_models(table, ["lambert", "lambert+ggx"])
+        >>> comparison.chosen
+        'lambert'
+    """
     check_type("table", table, BRDFTable, "an sf.BRDFTable (sf.read_brdf_table)")
     for name in check_name_list("models", models):
         check_choice("models", name, BRDF_MODELS)

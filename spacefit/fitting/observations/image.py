@@ -36,24 +36,36 @@ class Observation:
 
     ``sigma``: the reference's noise standard deviation (scalar or per pixel), or None.
     ``sensor``: the camera that measured it, if known: the reference is then in DN (as
-    :func:`~spacefit.imageio.read_image` gives it), the model is the sensor's
-    :func:`~spacefit.formation.expected_dn` of the render, each pixel is weighted by its predicted
-    Poisson-Gaussian noise (:func:`~spacefit.formation.noise_variance_dn` at the model's DN, held fixed in derivatives),
+    :func:`read_image` gives it), the model is the sensor's
+    :func:`expected_dn` of the render, each pixel is weighted by its predicted
+    Poisson-Gaussian noise (:func:`noise_variance_dn` at the model's DN, held fixed in derivatives),
     saturated pixels are left out, and the standard errors are the noise model's (J^T W J)^-1
     instead of the sandwich. ``sigma`` must then be None.
     ``mask``: which values to fit, (h, w) or (h, w, channels) bool, True = use (None: all). The
     residuals of the others are 0 in every loss and they count for nothing (not in the degrees of
     freedom, not in the noise floor); they may hold anything, NaN included.
     ``sensor_sources``: where each sensor value came from (field -> "header KEY", "sensor file",
-    ...; :func:`~spacefit.imageio.sensor_of`), None for a sensor given whole.
+    ...; :func:`sensor_of`), None for a sensor given whole.
     ``notes``: what a report should say about the file (e.g. a row order it did not state).
     ``flat``: with a sensor, a flat-field map ((h, w) or (h, w, channels), > 0) multiplying the
-    expected signal above the bias (:func:`~spacefit.formation.expected_dn`); None: uniform.
+    expected signal above the bias (:func:`expected_dn`); None: uniform.
     ``render_spp``: the samples per pixel a simulated reference was rendered with, whose Monte Carlo
-    noise the goodness of fit then expects (:mod:`~spacefit.fitting.goodness`); None: a real
+    noise the goodness of fit then expects (the goodness of fit, :attr:`FitResult.goodness`); None: a real
     observation, without render noise.
     :meth:`from_file` reads all of these from an image file (``render_spp`` from a FITS ``RENDSPP``
     card or a spacefit sidecar).
+
+    Raises:
+        InputError: a scene that is not a :class:`Scene`, a reference that is not a real array, a
+            sigma or mask of another shape, a mask that leaves nothing, ``sigma`` given with a
+            ``sensor`` or ``flat`` without one; :func:`fit` checks the reference's size against the scene.
+
+    Example:
+        >>> import numpy as np, spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48]})
+        >>> observation = sf.Observation(scene, np.zeros((48, 48, 3)), sigma=0.01)  # sf.fit([observation], free)
+        >>> observation.sigma
+        0.01
     """
 
     scene: Scene
@@ -90,14 +102,14 @@ class Observation:
         sensor_file: str | Path | None = None, sensor_defaults: str | None = None, row_order: str | None = None,
         flat: str | Path | np.ndarray | None = None,
     ) -> Observation:
-        """The observation in an image file (EXR, FITS, PNG, TIFF; :func:`~spacefit.imageio.read_image`,
+        """The observation in an image file (EXR, FITS, PNG, TIFF; :func:`read_image`,
         which takes ``unit``, ``response``, ``mask``, ``sigma`` and ``row_order``), with its
         usable-pixel mask (saturated, transparent and user-masked pixels left out).
 
         Radiance is fitted as radiance (``sigma`` its noise). DN are fitted with their sensor
-        (:func:`~spacefit.imageio.sensor_of`): ``sensor`` as given (an sf.Sensor), or the file's own
+        (:func:`sensor_of`): ``sensor`` as given (an sf.Sensor), or the file's own
         values (FITS header keywords, spacefit sidecar) replaced by those of the sensor file
-        ``sensor_file`` (:func:`~spacefit.sensor.read_sensor_file`) and then of a mapping ``sensor``;
+        ``sensor_file`` (:func:`read_sensor_file`) and then of a mapping ``sensor``;
         a value the fit needs that none gives is refused unless ``sensor_defaults="illustrative"``.
         The sources are kept in ``sensor_sources``. ``flat``: a flat-field map of a DN image, an
         array or an image file (FITS, or PNG / TIFF read as linear), multiplying the expected
@@ -130,11 +142,11 @@ class Observation:
 
     def report(self, result: FitResult, entries: Sequence[int]) -> list[str]:
         """Its chi^2 per value (the noise known) or mean r^2 over the render noise, by part
-        (:attr:`~spacefit.fitting.result.FitResult.parts`; :class:`~spacefit.fitting.observations.base.Reported`)."""
+        (:attr:`FitResult.parts`)."""
         return [line for k in entries for line in part_lines(result, k)]
 
     def plot(self, result: FitResult, entries: Sequence[int], *, ax: AxesArg = None, fig: FigureArg = None) -> np.ndarray:
-        """Its residual image, reference - model (:func:`~spacefit.fitting.plots.residual_panel`), into
+        """Its residual image, reference - model (the residual panel of :func:`plot_comparison`), into
         ``ax`` (one Axes) or ``fig``; where the fit has none (a failed solve), the panel says so."""
         from spacefit.fitting.plots import residual_panel  # deferred: matplotlib, which only figures need
         from spacefit.plotting import panels  # deferred: matplotlib, which only figures need

@@ -1,13 +1,13 @@
-"""The pass kind of observation: the frames of a pass (:class:`~spacefit.fitting.passes.Pass`) with
-each frame's image, fitted as one observation of :func:`spacefit.fit`.
+"""The pass kind of observation: the frames of a pass (:class:`Pass`) with
+each frame's image, fitted as one observation of :func:`fit`.
 
 The fit's set-up (:func:`spacefit.fitting.problem.setup`) expands a :class:`PassObservation` into its
 frames' images, in order, after the images given before it, and frees for each frame its own value
 of each of :attr:`PassObservation.per_frame` (``target.attitude_x_deg`` -> the structured names
 ``Name("target.attitude_x_deg", k)`` of the frames' observation indices k,
 :class:`~spacefit.scene.names.Name`). The fit is the same, bit for bit, as one of the frames' images
-given as a list with those names free. Its report is its frame table (:func:`~spacefit.fitting.pass_report.frame_table`),
-its figure :func:`~spacefit.fitting.pass_report.plot_frames`.
+given as a list with those names free. Its report is its frame table (:func:`frame_table`),
+its figure :func:`plot_frames`.
 """
 
 from __future__ import annotations
@@ -41,8 +41,16 @@ class PassObservation:
     Attributes:
         frames: the pass (its frames' files, times and values).
         images: each frame's image and scene (:meth:`read` makes them from the frames' files).
-        per_frame: the parameters each frame has its own value of (:meth:`~spacefit.fitting.passes.Pass.per_frame`
+        per_frame: the parameters each frame has its own value of (:meth:`Pass.per_frame`
             checks them), freed per frame by the fit.
+
+    Example:
+        >>> import spacefit as sf
+        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
+        >>> _ = sf.simulate_pass(scene, sf.arc_pass(2), "pass", spp=4)
+        >>> observation = sf.PassObservation.read("pass/frames.csv", scene, per_frame=["target.attitude_x_deg"])
+        >>> type(observation).__name__  # sf.fit([observation], free) frees each frame's attitude too
+        'PassObservation'
     """
 
     frames: Pass
@@ -63,10 +71,8 @@ class PassObservation:
 
     @classmethod
     def read(cls, frames: Pass | str | Path, scene: Scene, per_frame: Sequence[str] = (), **options: Any) -> PassObservation:
-        """The pass ``frames`` (or the frame table file it is read from, :meth:`Pass.read
-        <spacefit.fitting.passes.Pass.read>`) with each frame's image read from its file in its scene
-        (``scene`` with the frame's values) by :meth:`Observation.from_file
-        <spacefit.fitting.observations.image.Observation.from_file>`, which takes ``options``; a
+        """The pass ``frames`` (or the frame table file it is read from, :meth:`Pass.read`) with each frame's image read from its file in its scene
+        (``scene`` with the frame's values) by :meth:`Observation.from_file`, which takes ``options``; a
         frame's mask and sensor values are the table's."""
         frames = frames if isinstance(frames, Pass) else Pass.read(frames)
         images = []
@@ -86,7 +92,7 @@ class PassObservation:
         return [Name(name, first + k) for name in self.per_frame for k in range(len(self.frames))]
 
     def report(self, result: FitResult, entries: Sequence[int]) -> list[str]:
-        """One line per frame (:func:`~spacefit.fitting.pass_report.frame_table`): its time, its
+        """One line per frame (:func:`frame_table`): its time, its
         chi^2 / dof and its own values with their standard errors."""
         lines = [f"  pass of {len(self.frames)} frames (observations {entries[0]} to {entries[-1]}):"]
         for row in frame_table(result, self.frames, entries=entries):
@@ -97,5 +103,5 @@ class PassObservation:
         return lines
 
     def plot(self, result: FitResult, entries: Sequence[int], *, ax: AxesArg = None, fig: FigureArg = None) -> np.ndarray:
-        """Its frames' own values and chi^2 / dof against time (:func:`~spacefit.fitting.pass_report.plot_frames`)."""
+        """Its frames' own values and chi^2 / dof against time (:func:`plot_frames`)."""
         return plot_frames(frame_table(result, self.frames, entries=entries), ax=ax, fig=fig)
