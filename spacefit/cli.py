@@ -153,7 +153,7 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     c.add_argument("curve", metavar="CURVE",
                    help="light-curve file: a point table (.csv, .ecsv, .fits: magnitude, optionally magnitude_sigma, and each "
                         "point's geometry as scene values, e.g. target.attitude_z_deg, sun.elevation_deg, camera.position_m.x, .y, "
-                        ".z; docs/guide/brdf-tables.md), or any light curve sf.read_light_curve reads (geometry in the target's "
+                        ".z; docs/how-to/brdf-tables.md), or any light curve sf.read_light_curve reads (geometry in the target's "
                         "frame, or seen from --site)")
     c.add_argument("--scene", required=True, metavar="SCENE.toml", help="scene of the target; its values are the start")
     c.add_argument("--free", required=True, metavar="NAME[,NAME...]", help=_free_help(command))

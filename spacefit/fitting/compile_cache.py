@@ -9,7 +9,7 @@ the floors on what is written): JAX opens its cache once per process and has no 
 
 JAX writes no entry for a program that calls back into Python (``jax.pure_callback``): the solver's step,
 the Jacobian and the residuals, whose renders are such callbacks, are compiled in every process (about
-5 of the 6 s, measured in docs/performance.md); the cache holds the fit's other programs (about 60 of 90).
+5 of the 6 s, measured in docs/measurements/performance.md); the cache holds the fit's other programs (about 60 of 90).
 
 A stale entry cannot be used: JAX names each entry by a hash of the program itself (its StableHLO), the
 jax and jaxlib versions, the backend and device kind and the compile options, so changed code, another
