@@ -21,6 +21,7 @@ from scipy import ndimage
 
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
+from spacefit.fitting.pixel_grid import systematic_step
 from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, setup
 from spacefit.precision import float64
 from spacefit.scene.parameters import parameter
@@ -32,7 +33,13 @@ CORRELATION_WARN = 0.95
 REL_STDERR_WARN = 0.2
 
 
-def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+def jacobians(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The residuals' Jacobians at ``x`` (physical units) with the fit's seeds and with independent ones (forward mode)."""
+    return tuple(np.asarray(jax.jacfwd(f)(jnp.asarray(x)), dtype=float) for f in (problem.residual_x, problem.residual_x_independent))
+
+
+def covariance(problem: Problem, x: np.ndarray,
+               jacobian_pair: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """Covariance of the estimate at ``x`` (physical units), the loss, the eigenvalues of the
     Fisher information (J^T J) / s^2 under uniform noise, and the correction that takes the fit's
     ``x`` to the estimate the covariance is of (0 but with the noise known).
@@ -65,10 +72,11 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
     the unbiased estimating equation 0.5 (J1^T r_alt + J2^T r) = 0 (each Jacobian against the other
     seed's residuals), one Gauss-Newton step from ``x`` (the returned correction); it averages the
     two seeds' render and Jacobian noise, so those two terms enter the covariance at half weight.
+
+    ``jacobian_pair``: the two Jacobians at ``x`` where the caller has them (:func:`jacobians`).
     """
     r = np.asarray(problem.residual_x(jnp.asarray(x)), dtype=float)
-    J1 = np.asarray(jax.jacfwd(problem.residual_x)(jnp.asarray(x)), dtype=float)
-    J2 = np.asarray(jax.jacfwd(problem.residual_x_independent)(jnp.asarray(x)), dtype=float)
+    J1, J2 = jacobian_pair if jacobian_pair is not None else jacobians(problem, x)
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(J1)) and np.all(np.isfinite(J2))):
         n = len(x)
         return np.full((n, n), np.nan), math.nan, np.full(n, np.nan), np.zeros(n)
@@ -213,14 +221,23 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     """User-facing values, their covariance, the loss and extras at solver values ``x``: the
     values are ``x`` moved by :func:`covariance`'s correction for the render noise's bias (where
     ``correct`` and it keeps every value in its range; extras ``noise_bias_correction``, solver
-    coordinates). A fit that never moved passes ``correct=False``: its values are its start."""
-    cov, loss_value, fisher, correction = covariance(s.problem, x)
+    coordinates). A fit that never moved passes ``correct=False``: its values are its start. With
+    a blur width free, the pixel grid's model error (:mod:`spacefit.fitting.pixel_grid`, one render
+    at 4x the resolution) is carried in the covariance as ``delta delta^T``, ``delta`` (extras
+    ``pixel_grid_error``, solver coordinates) the step from the fit's model to the finer one."""
+    pair = jacobians(s.problem, x)
+    cov, loss_value, fisher, correction = covariance(s.problem, x, pair)
     if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
         x = x + correction
     else:
         correction = np.zeros(len(x))
     extras: dict[str, Any] = {"fisher_eigenvalues": fisher.tolist(),
                               "noise_bias_correction": dict(zip(s.solver_params.names, correction.tolist()))}
+    grid = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
+    if grid is not None:  # the pixel grid's model error of a free blur, carried (spacefit.fitting.pixel_grid)
+        delta = systematic_step(*pair, np.concatenate([grid, np.zeros(pair[0].shape[0] - grid.size)]))
+        cov = cov + np.outer(delta, delta)
+        extras["pixel_grid_error"] = dict(zip(s.solver_params.names, delta.tolist()))
     if s.rms_index is not None:
         i = s.rms_index
         extras.update({"wrinkles.rms_m": float(x[i]), "wrinkles.rms_m.stderr": float(np.sqrt(cov[i, i]))})
