@@ -222,9 +222,10 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     values are ``x`` moved by :func:`covariance`'s correction for the render noise's bias (where
     ``correct`` and it keeps every value in its range; extras ``noise_bias_correction``, solver
     coordinates). A fit that never moved passes ``correct=False``: its values are its start. With
-    a blur width free, the pixel grid's model error (:mod:`spacefit.fitting.pixel_grid`, one render
-    at 4x the resolution) is carried in the covariance as ``delta delta^T``, ``delta`` (extras
-    ``pixel_grid_error``, solver coordinates) the step from the fit's model to the finer one."""
+    a blur width free, the values take the step ``delta`` from the fit's model on the pixel grid to
+    one made at 4x the resolution (:mod:`spacefit.fitting.pixel_grid`; extras ``pixel_grid_error``,
+    solver coordinates; skipped where it would leave a range), and the covariance carries
+    ``delta delta^T``: what remains of the grid's error is taken as at most the step itself."""
     pair = jacobians(s.problem, x)
     cov, loss_value, fisher, correction = covariance(s.problem, x, pair)
     if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
@@ -234,9 +235,11 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     extras: dict[str, Any] = {"fisher_eigenvalues": fisher.tolist(),
                               "noise_bias_correction": dict(zip(s.solver_params.names, correction.tolist()))}
     grid = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
-    if grid is not None:  # the pixel grid's model error of a free blur, carried (spacefit.fitting.pixel_grid)
+    if grid is not None:  # the pixel grid's model error of a free blur: stepped over and carried (spacefit.fitting.pixel_grid)
         delta = systematic_step(*pair, np.concatenate([grid, np.zeros(pair[0].shape[0] - grid.size)]))
         cov = cov + np.outer(delta, delta)
+        if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + delta)):
+            x = x + delta
         extras["pixel_grid_error"] = dict(zip(s.solver_params.names, delta.tolist()))
     if s.rms_index is not None:
         i = s.rms_index
