@@ -26,7 +26,9 @@ render seed, so that the render noise of the fit is part of what the errors must
   S >= 4), binned S x S to the sensor's pixels (the detector integrates over its pixel), then exposed
   through the sensor. The fits render with the box filter (a detector's pixel response: the default
   tent filter adds 1/12 px^2 of blur, the PSF width then comes out sqrt(0.8^2 - 1/12) = 0.75 px)
-  and their own seeds; the results go to ``nuisances_supersampled/``;
+  and their own seeds; the results go to ``nuisances_supersampled/``. Each row also holds the
+  fit's pixel-grid step (``pixel_grid_error``, :mod:`spacefit.fitting.pixel_grid`) and its standard
+  error without the carried step (``statistical_stderr``, ``covered_statistical``);
 * ``--linearised``: the nuisance study without fits, each exposure's estimate one Gauss-Newton step
   from the truth: the fit's own minimum of 0.5 |r|^2 (with the errors of a fit that stops there)
   against the two-seed estimate spacefit reports, to tell a bias of the estimate from a scale of
