@@ -23,9 +23,10 @@ a 0.8 px Gaussian applied at 4 to 8 times the resolution, then binned) the blur 
 0.767 px at 32 px, 0.804 at 48 px, 0.771 at 96 px; with the model made at 2x, 0.806, 0.794,
 0.797; at 4x, 0.8005 (32 px).
 
-**Measured and carried.** At a fit's result, for each image whose blur (``image.blur_sigma_px``)
-is free, :func:`fine_and_grid_models` renders the fitted scene once at :data:`SUPERSAMPLE` times
-the resolution per axis with the box filter, and forms its model twice from that one render: the
+**Measured and carried.** At a fit's result (the pixel loss), for each image whose blur
+(``image.blur_sigma_px``) is free, :func:`grid_error_models` renders the fitted scene once at
+:data:`SUPERSAMPLE` times the resolution per axis with the box filter, and
+:func:`fine_and_grid_models` forms its model twice from that one render: the
 blur, the shift and the sensor's PSF applied at the fine scale and then the pixel's response
 (the box or tent of the fit's filter, :func:`response_matrix`), and the fit's own model on the
 pixel grid of the same render's pixel response. The two share every sample, so their difference

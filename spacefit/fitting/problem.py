@@ -171,7 +171,8 @@ def _problem(
         return with_blocks(image_residual_of(models[:n_images]), models[n_images:])
 
     spps = tuple(spp or o.scene.render.spp for o in observations)
-    blurred = [nuisance_index(free.names, "image.blur_sigma_px", k) is not None for k in range(len(observations))]
+    # the pixel loss's residuals are the pixels', which the pixel grid's change is laid out as
+    blurred = [loss == "pixel" and nuisance_index(free.names, "image.blur_sigma_px", k) is not None for k in range(len(observations))]
 
     def pixel_grid(x: np.ndarray) -> np.ndarray | None:
         """The images' residuals with each free blur's model made at 4x the resolution, less the fit's

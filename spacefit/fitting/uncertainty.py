@@ -222,7 +222,7 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     values are ``x`` moved by :func:`covariance`'s correction for the render noise's bias (where
     ``correct`` and it keeps every value in its range; extras ``noise_bias_correction``, solver
     coordinates). A fit that never moved passes ``correct=False``: its values are its start. With
-    a blur width free, the values take the step ``delta`` from the fit's model on the pixel grid to
+    a blur width free (the pixel loss), the values take the step ``delta`` from the fit's model on the pixel grid to
     one made at 4x the resolution (:mod:`spacefit.fitting.pixel_grid`; extras ``pixel_grid_error``,
     solver coordinates; skipped where it would leave a range), and the covariance carries
     ``delta delta^T``: what remains of the grid's error is taken as at most the step itself."""
