@@ -18,6 +18,17 @@ render seed, so that the render noise of the fit is part of what the errors must
   its own, only diffraction); fits start from the scene's pose, no shift and the PSF's default start.
   ``coverage_table.md`` says per parameter whether its errors are calibrated, and if not, whether the
   estimates are biased (mean z) or the errors too small (rms z); no error chart;
+* ``--supersample S`` (with the nuisances free): observations made as issue 34's hidden ones were, not
+  by the fit's own image model: the truth rendered with the box filter at S times the resolution per
+  axis (the same samples per sensor pixel, ``--truth-spp / S^2`` per fine pixel), blurred by the
+  continuous Gaussian (0.8 px) and shifted at the fine scale, where the pixel grid aliases nothing
+  (the Gaussian's transfer at the fine Nyquist frequency S / 2 cycles per px is below 1e-12 for
+  S >= 4), binned S x S to the sensor's pixels (the detector integrates over its pixel), then exposed
+  through the sensor. The fits render with the box filter (a detector's pixel response: the default
+  tent filter adds 1/12 px^2 of blur, the PSF width then comes out sqrt(0.8^2 - 1/12) = 0.75 px)
+  and their own seeds; the results go to ``nuisances_supersampled/``. Each row also holds the
+  fit's pixel-grid step (``pixel_grid_error``, :mod:`spacefit.fitting.pixel_grid`) and its standard
+  error without the carried step (``statistical_stderr``, ``covered_statistical``);
 * ``--linearised``: the nuisance study without fits, each exposure's estimate one Gauss-Newton step
   from the truth: the fit's own minimum of 0.5 |r|^2 (with the errors of a fit that stops there)
   against the two-seed estimate spacefit reports, to tell a bias of the estimate from a scale of
@@ -72,10 +83,11 @@ NUISANCE_TRUTH = {"target.attitude_x_deg": 0.3, "target.attitude_z_deg": -0.2, "
 CALIBRATED = (ONE_SIGMA - 0.1, ONE_SIGMA + 0.1)
 
 
-def case_at(size: int, spp: int) -> sf.Case:
-    """The panels case at ``size`` px with the same field of view, fits at ``spp``."""
-    return sf.load_case(CASE).with_values({"render.resolution": [size, size], "camera.pixel_pitch_mm": 18.75 * 128 / size,
-                                           "render.spp": spp})
+def case_at(size: int, spp: int, pixel_filter: str | None = None) -> sf.Case:
+    """The panels case at ``size`` px with the same field of view, fits at ``spp``, with the case's
+    pixel filter or ``pixel_filter``."""
+    values = {"render.resolution": [size, size], "camera.pixel_pitch_mm": 18.75 * 128 / size, "render.spp": spp}
+    return sf.load_case(CASE).with_values({**values, **({"render.filter": pixel_filter} if pixel_filter else {})})
 
 
 def sensor_for(truth: np.ndarray, scene: sf.Scene, peak_electrons: float, psf_sigma_px: float) -> sf.Sensor:
@@ -85,16 +97,31 @@ def sensor_for(truth: np.ndarray, scene: sf.Scene, peak_electrons: float, psf_si
     return sf.Sensor(exposure_time_s=peak_electrons / per_second, psf_sigma_px=psf_sigma_px, full_well_electrons=None, bit_depth=16)
 
 
-def truth_image(case: sf.Case, truth_spp: int, nuisances: bool) -> np.ndarray:
+def truth_image(case: sf.Case, truth_spp: int, nuisances: bool, supersample: int = 1) -> np.ndarray:
     """The case's truth rendered at ``truth_spp``; with ``nuisances``, at the turned pose of
     :data:`NUISANCE_TRUTH` and then blurred and shifted by the fit's image model (its Fourier
-    ringing, at most 0.05 % of the brightest pixel, clipped at 0: radiance is never negative)."""
+    ringing, at most 0.05 % of the brightest pixel, clipped at 0: radiance is never negative).
+    With ``supersample`` S > 1 (and ``nuisances``): rendered with the box filter at S times the
+    resolution and ``truth_spp / S^2`` samples per fine pixel, blurred and shifted there (the widths
+    and shifts times S), and binned S x S: the sensor's pixels integrate the blurred image."""
+    pose = {n: v for n, v in NUISANCE_TRUTH.items() if n.startswith("target.")}
+    image = [n for n in NUISANCE_TRUTH if n not in pose]
+    if supersample > 1:
+        if not nuisances:
+            raise ValueError("--supersample makes the observations of the nuisance study (--free nuisances)")
+        w, h = case.truth_scene.render.resolution
+        pitch = case.truth_scene.camera.pixel_pitch_mm
+        fine = case.truth_scene.with_values({"render.resolution": [supersample * w, supersample * h], "render.filter": "box",
+                                             "camera.pixel_pitch_mm": pitch / supersample,
+                                             "render.spp": max(1, truth_spp // supersample**2)})
+        render = np.asarray(sf.render(scene_with_values(fine, pose)), dtype=float)
+        blurred = image_model(image)(jnp.asarray(render), supersample * jnp.asarray([NUISANCE_TRUTH[n] for n in image]), 0)
+        binned = np.asarray(blurred, dtype=float).reshape(h, supersample, w, supersample, -1).mean(axis=(1, 3))
+        return np.maximum(binned, 0.0)
     scene = case.truth_scene.with_values({"render.spp": truth_spp})
     if not nuisances:
         return np.asarray(sf.render(scene), dtype=float)
-    pose = {n: v for n, v in NUISANCE_TRUTH.items() if n.startswith("target.")}
     render = np.asarray(sf.render(scene_with_values(scene, pose)), dtype=float)
-    image = [n for n in NUISANCE_TRUTH if n not in pose]
     model = image_model(image)
     return np.maximum(np.asarray(model(jnp.asarray(render), jnp.asarray([NUISANCE_TRUTH[n] for n in image]), 0), dtype=float), 0.0)
 
@@ -113,11 +140,15 @@ def realisations(case: sf.Case, truth: np.ndarray, sensor: sf.Sensor, count: int
         dn = sf.observe(truth, sensor, intrinsics, seed).astype(float)
         result = sf.fit(sf.Observation(scene, dn, sensor=sensor), list(truths), start=start,
                         render=sf.FitRender(seed=2 * seed + 101, seed_grad=2 * seed + 102))
+        grid = result.extras.get("pixel_grid_error", {})
         for name, true in truths.items():
             value, stderr = result.values[name], result.stderr[name]
+            statistical = float(np.sqrt(max(stderr**2 - grid.get(name, 0.0) ** 2, 0.0)))  # without the pixel grid's carried error
             rows.append({"seed": seed, "psf_sigma_px": sensor.psf_sigma_px, "exposure_time_s": sensor.exposure_time_s,
                          "parameter": name, "truth": true, "value": value, "stderr": stderr, "z": (value - true) / stderr,
-                         "covered": bool(abs(value - true) <= stderr), "steps": result.steps, "status": result.status.name})
+                         "covered": bool(abs(value - true) <= stderr), "pixel_grid_error": grid.get(name, 0.0),
+                         "statistical_stderr": statistical, "covered_statistical": bool(abs(value - true) <= statistical),
+                         "steps": result.steps, "status": result.status.name})
         print(f"seed {seed}, sigma {sensor.psf_sigma_px:g} px: {result.status.name}, {result.wall_time_s:.1f} s", flush=True)
     return rows
 
@@ -190,16 +221,19 @@ def linearised(case: sf.Case, truth: np.ndarray, sensor: sf.Sensor, count: int, 
 
 
 def run_coverage(out: Path, *, size: int, spp: int, truth_spp: int, realisations_count: int,
-                 chart_realisations: int, nuisances: bool = False) -> tuple[list[dict[str, object]], list[dict[str, object]]]:
+                 chart_realisations: int, nuisances: bool = False,
+                 supersample: int = 1, first_seed: int = 1) -> tuple[list[dict[str, object]], list[dict[str, object]]]:
     """The coverage study (high noise: 2000 electrons in the brightest glint; the sensor's PSF 1 px,
     or with ``nuisances`` free, none of its own but the blur of :data:`NUISANCE_TRUTH`) and, without
-    ``nuisances``, the error chart; writes the CSVs, the table and the PNG."""
+    ``nuisances``, the error chart; writes the CSVs, the table and the PNG. ``supersample`` > 1: the
+    observations made at that many times the resolution and the fits rendered with the box filter
+    (:func:`truth_image`)."""
     out.mkdir(parents=True, exist_ok=True)
-    case = case_at(size, spp)
-    truth = truth_image(case, truth_spp, nuisances)
+    case = case_at(size, spp, "box" if supersample > 1 else None)
+    truth = truth_image(case, truth_spp, nuisances, supersample)
     rows = []
     coverage_sensor = sensor_for(truth, case.scene(), NOISE_LEVELS["high"], 0.0 if nuisances else 1.0)
-    for row in realisations(case, truth, coverage_sensor, realisations_count, first_seed=1, nuisances=nuisances):
+    for row in realisations(case, truth, coverage_sensor, realisations_count, first_seed=first_seed, nuisances=nuisances):
         rows.append({**row, "study": "coverage", "noise": "high"})
     if not nuisances:
         plain = truth_image(case, truth_spp, False)
@@ -289,11 +323,16 @@ def main() -> None:
     parser.add_argument("--free", choices=("materials", "nuisances"), default="materials",
                         help="free the materials only, or the nuisances too (pose, shift, PSF width; no chart)")
     parser.add_argument("--realisations", type=int, help="exposures for the coverage (default 10, --full 50)")
+    parser.add_argument("--supersample", type=int, default=1,
+                        help="with --free nuisances: observations made at this many times the resolution, blurred "
+                             "there and binned (as issue 34's hidden ones); the fits render with the box filter")
+    parser.add_argument("--first-seed", type=int, default=1, help="the first exposure's noise seed (the fits' seeds follow from it)")
     parser.add_argument("--linearised", action="store_true",
                         help="the nuisance study linearised at the truth, fit minimum against the two-seed estimate (no fits)")
     args = parser.parse_args()
     nuisances = args.free == "nuisances" or args.linearised
-    out = args.out or Path(__file__).parent / "results" / "coverage" / ("nuisances" if nuisances else "")
+    folder = ("nuisances_supersampled" if args.supersample > 1 else "nuisances") if nuisances else ""
+    out = args.out or Path(__file__).parent / "results" / "coverage" / folder
     count = args.realisations or (50 if args.full else 10)
     if args.linearised:
         run_linearised(out, size=args.size, spp=args.spp, truth_spp=args.truth_spp, count=count)
@@ -301,7 +340,8 @@ def main() -> None:
             print(study, (out / f"linearised_{study}.md").read_text(), sep="\n")
         return
     coverage, chart = run_coverage(out, size=args.size, spp=args.spp, truth_spp=args.truth_spp, realisations_count=count,
-                                   chart_realisations=5 if args.full else 2, nuisances=nuisances)
+                                   chart_realisations=5 if args.full else 2, nuisances=nuisances, supersample=args.supersample,
+                                   first_seed=args.first_seed)
     print((out / "coverage_table.md").read_text())
     for row in chart:
         print(row)

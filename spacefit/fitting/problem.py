@@ -25,10 +25,11 @@ import numpy as np
 from spacefit.errors import InputError, InputTypeError, check_choice, check_name_list, quote
 from spacefit.executors import Executor
 from spacefit.fitting.frames import FrameSpec, InProcess, batched_renders, frame_part_image, run_frames, share_views
-from spacefit.fitting.nuisance import image_model as image_model_of
+from spacefit.fitting.nuisance import image_model as image_model_of, nuisance_index
 from spacefit.fitting.observations.base import Block, Reported, Sequenced, ValueObservation
 from spacefit.fitting.observations.image import Observation, check_reference, image_residual, in_unit_of
 from spacefit.fitting.params import Bijection, FreeParameters, bijection
+from spacefit.fitting.pixel_grid import grid_error_models
 from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.derivatives import check_seeds, check_spp
 from spacefit.rendering.memory import LARGE_FIT_BYTES, check_fit_memory, describe_fit
@@ -83,6 +84,9 @@ class Problem:
     reference_spp: tuple[int | None, ...] = ()  # per image, its reference's (Observation.render_spp)
     blocks: tuple[Block, ...] = ()  # the value observations' residual blocks, after the images' pixels
     dark: tuple[float, ...] = ()  # per image, its model of no light in its unit (a sensor's bias, DN; 0 for radiance)
+    # physical x -> the change of the images' residuals from the fit's model to one made at 4x the
+    # resolution (spacefit.fitting.pixel_grid), or None where no image's blur width is free
+    pixel_grid: Callable[[np.ndarray], np.ndarray | None] | None = None
 
     @property
     def rendered(self) -> bool:
@@ -178,6 +182,21 @@ def _problem(
         return with_blocks(image_residual_of(models[:n_images]), models[n_images:])
 
     spps = tuple(spp or o.scene.render.spp for o in observations)
+    # the pixel loss's residuals are the pixels', which the pixel grid's change is laid out as
+    blurred = [loss == "pixel" and nuisance_index(free.names, "image.blur_sigma_px", k) is not None for k in range(len(observations))]
+
+    def pixel_grid(x: np.ndarray) -> np.ndarray | None:
+        """The images' residuals with each free blur's model made at 4x the resolution, less the fit's
+        (0 for the other images; :mod:`spacefit.fitting.pixel_grid`); None: no free blur, or a filter it does not model."""
+        values = {n: float(v) for n, v in zip(free.names, x) if Name(n).parameter in image_names}
+        out = []
+        for k, obs in enumerate(observations):
+            models = None
+            if blurred[k]:
+                scene = scene_with_values(obs.scene, values, observation=k).with_values({"render.spp": spps[k]})
+                models = grid_error_models(obs, scene, x, k, free.names, references[k].shape[-1], image_model, to_units[k])
+            out.append(np.zeros(references[k].size) if models is None else np.asarray(residuals[k](models[0]) - residuals[k](models[1]), dtype=float))
+        return np.concatenate(out) if any(np.any(o != 0) for o in out) else None
 
     def resampled(factor: int) -> Problem:
         finer = [dataclasses.replace(o, scene=o.scene.with_values({"render.spp": factor * n})) for o, n in zip(observations, spps)]
@@ -187,7 +206,8 @@ def _problem(
     return Problem(free, lambda x: residual_at(x, main, 0), lambda x: residual_at(x, independent, 1), reverse,
                    lambda x: models_seeded(x, 0), part_images, references, models_seeded, residual_of, resampled,
                    lambda x: residual_at(x, main, 0, 2), lambda x: residual_at(x, independent, 1, 2), all(o.sensor is not None for o in observations) and all(b.noise_known for b in blocks), tuple(spread),
-                   tuple(units), tuple(used_pixels), spps, tuple(o.render_spp for o in observations), tuple(blocks), tuple(dark))
+                   tuple(units), tuple(used_pixels), spps, tuple(o.render_spp for o in observations), tuple(blocks), tuple(dark),
+                   pixel_grid if any(blurred) else None)
 
 
 def _seen(free: FreeParameters, k: int, image_names: frozenset[str]) -> tuple[tuple[str, ...], np.ndarray]:

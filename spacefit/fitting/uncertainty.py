@@ -12,6 +12,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import jax
@@ -32,7 +33,65 @@ CORRELATION_WARN = 0.95
 REL_STDERR_WARN = 0.2
 
 
-def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
+@dataclass(frozen=True)
+class Linearisation:
+    """A problem's residuals at x with the fit's seeds (``r``) and with independent ones (``r_alt``),
+    and their Jacobians as linear maps (``J1``, ``J2``: a direction of x to the residuals' change) with
+    their transposes (``J1T``, ``J2T``): the products the errors need are formed a few columns at a
+    time (:func:`~spacefit.fitting.normal_equations.by_columns`), no rows x columns matrix held."""
+
+    x: jax.Array
+    r: np.ndarray
+    r_alt: np.ndarray
+    J1: Callable[[jax.Array], jax.Array]
+    J2: Callable[[jax.Array], jax.Array]
+    J1T: Callable[[jax.Array], jax.Array]
+    J2T: Callable[[jax.Array], jax.Array]
+
+    def columns(self, fn: Callable[[jax.Array], jax.Array]) -> np.ndarray:
+        """The n x n matrix whose column j is ``fn(e_j)``."""
+        return np.asarray(by_columns(fn, len(self.x), self.x.dtype, chunk_for(self.r.size)), dtype=float)
+
+    def cross(self, weight: Callable[[jax.Array], jax.Array]) -> np.ndarray:
+        """sym(J1^T W J2) for a symmetric linear map W of the residuals."""
+        m = self.columns(lambda e: self.J1T(weight(self.J2(e))))
+        return 0.5 * (m + m.T)
+
+    @cached_property
+    def information(self) -> np.ndarray:
+        """sym(J1^T J2): J^T J estimated free of the Jacobians' own Monte Carlo noise."""
+        return self.cross(lambda v: v)
+
+    def step(self, difference: np.ndarray) -> np.ndarray:
+        """The Gauss-Newton step -(J^T J)^+ J^T d that a change ``d`` of the residuals moves the estimate
+        by, with J^T J as :attr:`information` and J^T as (J1 + J2)^T / 2; 0 in directions it leaves
+        undetermined, and for a non-finite ``d``."""
+        if not np.all(np.isfinite(difference)):
+            return np.zeros(len(self.x))
+        d = jnp.asarray(difference)
+        return -_pseudo_inverse(self.information)[0] @ (0.5 * (np.asarray(self.J1T(d)) + np.asarray(self.J2T(d))))
+
+
+def linearise(problem: Problem, x: np.ndarray) -> Linearisation:
+    """The problem's :class:`Linearisation` at ``x`` (physical units): one Jacobian render per seed."""
+    xj = jnp.asarray(x)
+    r, J1 = jax.linearize(problem.residual_x, xj)
+    r_alt, J2 = jax.linearize(problem.residual_x_independent, xj)
+    # the transposes take the residuals' dtype (float32 renders: J^T v sums in float32, ~1e-6 relative)
+    J1T, J2T = ((lambda v, t=jax.linear_transpose(J, xj), dtype=r.dtype: t(v.astype(dtype))[0]) for J in (J1, J2))
+    return Linearisation(xj, np.asarray(r, dtype=float), np.asarray(r_alt, dtype=float), J1, J2, J1T, J2T)
+
+
+def _pseudo_inverse(information: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The pseudo-inverse of J^T J (eigenvalues not clearly positive left out), its eigenvalues, its
+    eigenvectors and which eigenvalues were left out."""
+    eigval, eigvec = np.linalg.eigh(information)
+    tiny = eigval <= 1e-9 * max(np.abs(eigval).max(), 1e-300)
+    return (eigvec[:, ~tiny] / eigval[~tiny]) @ eigvec[:, ~tiny].T, eigval, eigvec, tiny
+
+
+def covariance(problem: Problem, x: np.ndarray,
+               lin: Linearisation | None = None) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """Covariance of the estimate at ``x`` (physical units), the loss, the eigenvalues of the
     Fisher information (J^T J) / s^2 under uniform noise, and the correction that takes the fit's
     ``x`` to the estimate the covariance is of (0 but with the noise known).
@@ -65,32 +124,23 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
     the unbiased estimating equation 0.5 (J1^T r_alt + J2^T r) = 0 (each Jacobian against the other
     seed's residuals), one Gauss-Newton step from ``x`` (the returned correction); it averages the
     two seeds' render and Jacobian noise, so those two terms enter the covariance at half weight.
-    """
-    xj = jnp.asarray(x)
-    r, J1 = jax.linearize(problem.residual_x, xj)
-    r_alt, J2 = jax.linearize(problem.residual_x_independent, xj)
-    # the transposes take the residuals' dtype (float32 renders: J^T v sums in float32, ~1e-6 relative)
-    J1T, J2T = ((lambda v, t=jax.linear_transpose(J, xj), dtype=r.dtype: t(v.astype(dtype))[0]) for J in (J1, J2))
-    r, r_alt = np.asarray(r, dtype=float), np.asarray(r_alt, dtype=float)
-    n, chunk = len(x), chunk_for(r.size)
 
-    def cross(weight: Callable[[jax.Array], jax.Array]) -> np.ndarray:  # sym(J1^T W J2), W symmetric
-        m = np.asarray(by_columns(lambda e: J1T(weight(J2(e))), n, xj.dtype, chunk), dtype=float)
-        return 0.5 * (m + m.T)
+    ``lin``: the problem's :func:`linearise` at ``x`` where the caller has it.
+    """
+    lin = linearise(problem, x) if lin is None else lin
+    r, r_alt, J1, J2, J1T, J2T, n = lin.r, lin.r_alt, lin.J1, lin.J2, lin.J1T, lin.J2T, len(x)
 
     def meat(w: np.ndarray) -> np.ndarray:
-        return _psd_part(cross(lambda v: jnp.asarray(w) * v))
+        return _psd_part(lin.cross(lambda v: jnp.asarray(w) * v))
 
-    eigval, eigvec = np.linalg.eigh(ones := cross(lambda v: v))
-    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(ones))):
+    if not (np.all(np.isfinite(r)) and np.all(np.isfinite(lin.information))):
         return np.full((n, n), np.nan), math.nan, np.full(n, np.nan), np.zeros(n)
+    bread, eigval, eigvec, tiny = _pseudo_inverse(lin.information)
     # a row no parameter moves shows as 0 in J1 times a random direction (with probability 1)
-    probe = np.asarray(J1(jnp.asarray(np.random.default_rng(0).normal(size=n), dtype=xj.dtype)), dtype=float)
+    probe = np.asarray(J1(jnp.asarray(np.random.default_rng(0).normal(size=n), dtype=lin.x.dtype)), dtype=float)
     informative = int(((probe != 0) | (r != 0)).sum())
     dof = max(informative - len(x), 1)
     s2 = float(r @ r) / dof
-    tiny = eigval <= 1e-9 * max(np.abs(eigval).max(), 1e-300)
-    bread = (eigvec[:, ~tiny] / eigval[~tiny]) @ eigvec[:, ~tiny].T
     if problem.noise_known:
         # the observation's noise, (J^T J)^-1, plus the fit's own render noise, per residual
         # (r - r_alt)^2 / 2 from the two seeds, through the sandwich, plus the noise of the
@@ -102,8 +152,8 @@ def covariance(problem: Problem, x: np.ndarray) -> tuple[np.ndarray, float, np.n
             v = r2 * (J1(e) - J2(e))
             return J1T(v) - J2T(v)
 
-        jacobian_noise = 0.5 * np.asarray(by_columns(jacobian_noise_column, n, xj.dtype, chunk), dtype=float)
-        noise = render_meat(cross, (r - r_alt) / math.sqrt(2.0), problem, x) + jacobian_noise
+        jacobian_noise = 0.5 * lin.columns(jacobian_noise_column)
+        noise = render_meat(lin.cross, (r - r_alt) / math.sqrt(2.0), problem, x) + jacobian_noise
         cov, s2 = bread + 0.5 * bread @ noise @ bread, 1.0
         correction = -bread @ (0.5 * (np.asarray(J1T(jnp.asarray(r_alt))) + np.asarray(J2T(jnp.asarray(r)))))
     else:
@@ -232,14 +282,26 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     """User-facing values, their covariance, the loss and extras at solver values ``x``: the
     values are ``x`` moved by :func:`covariance`'s correction for the render noise's bias (where
     ``correct`` and it keeps every value in its range; extras ``noise_bias_correction``, solver
-    coordinates). A fit that never moved passes ``correct=False``: its values are its start."""
-    cov, loss_value, fisher, correction = covariance(s.problem, x)
+    coordinates). A fit that never moved passes ``correct=False``: its values are its start. With
+    a blur width free (the pixel loss), the values take the step ``delta`` from the fit's model on the pixel grid to
+    one made at 4x the resolution (:mod:`spacefit.fitting.pixel_grid`; extras ``pixel_grid_error``,
+    solver coordinates; skipped where it would leave a range), and the covariance carries
+    ``delta delta^T``: what remains of the grid's error is taken as at most the step itself."""
+    lin = linearise(s.problem, x)
+    cov, loss_value, fisher, correction = covariance(s.problem, x, lin)
     if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
         x = x + correction
     else:
         correction = np.zeros(len(x))
     extras: dict[str, Any] = {"fisher_eigenvalues": fisher.tolist(),
                               "noise_bias_correction": dict(zip(s.solver_params.names, correction.tolist()))}
+    grid = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
+    if grid is not None:  # the pixel grid's model error of a free blur: stepped over and carried (spacefit.fitting.pixel_grid)
+        delta = lin.step(np.concatenate([grid, np.zeros(lin.r.size - grid.size)]))
+        cov = cov + np.outer(delta, delta)
+        if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + delta)):
+            x = x + delta
+        extras["pixel_grid_error"] = dict(zip(s.solver_params.names, delta.tolist()))
     if s.rms_index is not None:
         i = s.rms_index
         extras.update({"wrinkles.rms_m": float(x[i]), "wrinkles.rms_m.stderr": float(np.sqrt(cov[i, i]))})

@@ -1,0 +1,157 @@
+"""The pixel grid's model error of a fitted blur: measured at the result with one supersampled
+render, carried in the standard errors (issue 34).
+
+**The pixel-integrated blur.** A detector pixel k integrates the focal-plane image over its area:
+``D_k = (L * G * P)(k)``, L the radiance, G the continuous PSF, P the pixel's response (the box
+of one pixel) and ``*`` convolution. A render with Mitsuba's box filter gives the pixel-integrated
+radiance ``R_k = (L * P)(k)``, so the observation is ``D_k = ((L * P) * G)(k)``: the continuous
+PSF acting on the pixel-integrated image, whose Fourier transform on the pixel grid is
+``R^(f) G^(f)`` for every frequency the grid carries (|f| < 1/2 cycle per px, below Nyquist),
+``G^(f) = exp(-2 pi^2 sigma^2 f^2)`` for a Gaussian: :func:`spacefit.formation.fourier_filter`
+with :func:`spacefit.formation.gaussian_transfer`, the fit's blur. Integrating the PSF over the
+pixel again (the kernel ``c_m = Phi((m + 1/2) / sigma) - Phi((m - 1/2) / sigma)``, differences
+of the normal CDF) would be ``G * P * P``: its variance ``sigma^2 + 1/12`` px^2 per axis, one box
+too many (measured on a supersampled panels render at 48 px: a 0.8 px PSF fitted as 0.74 px).
+
+**What the grid cannot carry.** ``R`` holds the pixel-integrated image only at the pixel centres:
+its content above the grid's Nyquist frequency (the edges and glints a pixel does not resolve)
+folds to below, ``R^(f) = sum_n A(f + n)`` with ``A = (L * P)^``, and the model blurs the folded
+parts by ``G^(f)`` where the true image blurs them by ``G^(f + n)`` (Bracewell, "The Fourier
+Transform and Its Applications", 3rd ed., ch. 10, sampling and aliasing). No kernel on the pixel
+grid is exact: the error depends on the scene below the pixel. On the panels case (noise-free,
+a 0.8 px Gaussian applied at 4 to 8 times the resolution, then binned) the blur fitted at 1x is
+0.767 px at 32 px, 0.804 at 48 px, 0.771 at 96 px; with the model made at 2x, 0.806, 0.794,
+0.797; at 4x, 0.8005 (32 px).
+
+**Measured and carried.** At a fit's result (the pixel loss), for each image whose blur
+(``image.blur_sigma_px``) is free, :func:`grid_error_models` renders the fitted scene once at
+:data:`SUPERSAMPLE` times the resolution per axis with the box filter, and
+:func:`fine_and_grid_models` forms its model twice from that one render: the
+blur, the shift and the sensor's PSF applied at the fine scale and then the pixel's response
+(the box or tent of the fit's filter, :func:`response_matrix`), and the fit's own model on the
+pixel grid of the same render's pixel response. The two share every sample, so their difference
+is the grid's model error, not render noise. Its effect on the estimate is one Gauss-Newton step,
+``delta = -(J^T J)^-1 J^T (r_fine - r_grid)``: the values take it (the finer model's estimate) and
+the covariance carries ``delta delta^T`` (:func:`spacefit.fitting.uncertainty.estimate`), a bound
+on what remains: the finer model's own error (noise-free, 0.0005 px of the 0.036 at 32 px) and
+the step's linearisation (measured in the coverage study at 48 px: 0.003 px of 0.021 left over,
+docs/validation.md). The pixel's response is taken
+as the render filter's: a detector that integrates over its pixel is modelled with
+``render.filter = "box"`` (the default tent adds 1/12 px^2 of blur to the model, which a fitted
+PSF width absorbs: 0.75 px for 0.8).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float
+
+from spacefit.fitting.nuisance import ImageModel, nuisance_index
+from spacefit.fitting.observations.image import Observation, in_unit_of
+from spacefit.formation import fourier_filter, psf_transfer
+from spacefit.geometry.frames import Intrinsics
+from spacefit.psf import psf_reach_px
+from spacefit.rendering.renderer import render
+from spacefit.scene.schema import Scene
+from spacefit.sensor import Sensor
+
+SUPERSAMPLE = 4
+"""Fine pixels per sensor pixel and axis of the render that measures the grid's model error (a 0.8 px Gaussian's
+transfer at the fine grid's Nyquist frequency, 2 cycles per px, is 1e-22: nothing aliases there)."""
+RESPONSES = {"box": lambda t: (np.abs(t) <= 0.5).astype(float), "tent": lambda t: np.clip(1.0 - np.abs(t), 0.0, None)}
+"""A pixel's response across one axis (t in px from its centre) for each render filter the check models."""
+MOVES = ("image.blur_sigma_px", "image.shift_x_px", "image.shift_y_px")
+"""The image nuisances in px, which scale with the resolution."""
+STEPS_PER_FINE_PX = 16  # quadrature points per fine pixel in :func:`response_matrix`
+
+
+def response_matrix(size: int, factor: int, pixel_filter: str) -> Float[np.ndarray, "n m"]:
+    """(size, size * factor): row j averages a fine axis (``factor`` fine px per px) with the
+    response of ``pixel_filter`` centred on pixel j, each fine pixel's weight its integral over
+    the fine pixel; rows sum to 1 (the response cut at the image's edge)."""
+    t = (np.arange(size * factor * STEPS_PER_FINE_PX) + 0.5) / (factor * STEPS_PER_FINE_PX)  # px from the image's edge
+    weights = RESPONSES[pixel_filter](t[None, :] - (np.arange(size)[:, None] + 0.5))
+    fine = weights.reshape(size, size * factor, STEPS_PER_FINE_PX).sum(axis=-1)
+    return fine / fine.sum(axis=1, keepdims=True)
+
+
+def supersampled(scene: Scene, factor: int) -> Scene:
+    """``scene`` at ``factor`` times the resolution per axis, the same field of view and principal
+    point, with the box filter and as many samples per sensor pixel as its own (at least one per
+    fine pixel): a render of about the fit's own cost and memory."""
+    w, h = scene.render.resolution
+    cam = scene.camera
+    values = {"render.resolution": [factor * w, factor * h], "render.filter": "box", "render.spp": max(1, scene.render.spp // factor**2),
+              "camera.principal_offset_px": [factor * c for c in cam.principal_offset_px]}
+    if not cam.fov_deg:  # a field of view sets the pitch from the width
+        values["camera.pixel_pitch_mm"] = cam.pixel_pitch_mm / factor
+    return scene.with_values(values)
+
+
+def fine_optics(sensor: Sensor | None, intrinsics: Intrinsics, factor: int, channels: int) -> Callable[[Array], Array]:
+    """The sensor's PSF (its Gaussian and Airy pattern, :func:`~spacefit.formation.psf_transfer`) on
+    the grid of ``factor`` times the resolution of ``intrinsics``; none without a sensor."""
+    if sensor is None:
+        return lambda image: image
+    fine_sensor = dataclasses.replace(sensor, psf_sigma_px=factor * sensor.psf_sigma_px)
+    fine = dataclasses.replace(intrinsics, width=factor * intrinsics.width, height=factor * intrinsics.height,
+                               pixel_pitch=intrinsics.pixel_pitch / factor)
+    waves = fine_sensor.wavelengths(channels)
+    transfers = [psf_transfer(fine_sensor, fine, w) for w in waves]
+    pad = max(psf_reach_px(fine_sensor, fine, w) for w in waves)
+    if pad == 0:
+        return lambda image: image
+    return lambda image: fourier_filter(image, lambda fy, fx: jnp.concatenate([t(fy, fx) for t in transfers], axis=-1), pad)
+
+
+def without_psf(sensor: Sensor | None) -> Sensor | None:
+    """``sensor`` with no PSF of its own (its blur applied elsewhere)."""
+    return None if sensor is None else dataclasses.replace(sensor, psf_sigma_px=0.0, diffraction=False)
+
+
+def fine_and_grid_models(fine: Float[Array, "H W c"], pixel_filter: str, x: Float[np.ndarray, " n"], k: int, image_model: ImageModel,
+                         fine_units: Callable[[Array], Array], grid_units: Callable[[Array], Array], optics: Callable[[Array], Array],
+                         moves: Sequence[int | None], factor: int = SUPERSAMPLE) -> tuple[Array, Array]:
+    """Observation k's model at ``x`` made twice from ``fine``, a box-filtered render at ``factor``
+    times the resolution per axis: the image nuisances and ``optics`` (the sensor's PSF) at the
+    fine scale then the response of a pixel of ``pixel_filter`` (:func:`response_matrix`) and
+    ``fine_units``; and the fit's own, the pixel response first, then the nuisances on the pixel
+    grid and ``grid_units`` (with the sensor's PSF). ``moves``: the indices in ``x`` of the blur
+    width and the two shifts (None: not free), which are ``factor`` times larger in fine px."""
+    h, w = fine.shape[0] // factor, fine.shape[1] // factor
+    rows, cols = (jnp.asarray(response_matrix(n, factor, pixel_filter)) for n in (h, w))
+    respond = lambda image: jnp.einsum("iy,yxc,jx->ijc", rows, image, cols)  # noqa: E731
+    x = jnp.asarray(x, dtype=float)
+    x_fine = x
+    for i in moves:
+        if i is not None:
+            x_fine = x_fine.at[i].multiply(factor)
+    image = jnp.asarray(fine, dtype=float)
+    return fine_units(respond(optics(image_model(image, x_fine, k)))), grid_units(image_model(respond(image), x, k))
+
+
+def grid_error_models(obs: Observation, scene: Scene, x: Float[np.ndarray, " n"], k: int, names: Sequence[str], channels: int,
+                      image_model: ImageModel, grid_units: Callable[[Array], Array]) -> tuple[Array, Array] | None:
+    """:func:`fine_and_grid_models` of image observation k (``obs``; ``scene`` its scene at the
+    fitted values, ``channels`` its reference's) at the free values ``x`` (``names``;
+    ``grid_units`` the fit's own unit of its model), from one render of ``scene`` at
+    :data:`SUPERSAMPLE` times the resolution; None for a pixel filter :data:`RESPONSES` lacks."""
+    if scene.render.filter not in RESPONSES:
+        return None
+    intrinsics = Intrinsics.from_scene(scene)
+    fine_units = in_unit_of(dataclasses.replace(obs, sensor=without_psf(obs.sensor)), channels, intrinsics)
+    fine = np.asarray(render(supersampled(scene, SUPERSAMPLE)), dtype=float)
+    return fine_and_grid_models(fine, scene.render.filter, x, k, image_model, fine_units, grid_units,
+                                fine_optics(obs.sensor, intrinsics, SUPERSAMPLE, channels), [nuisance_index(names, n, k) for n in MOVES])
+
+
+def grid_notes(errors: dict[str, float], stderr: dict[str, float]) -> list[str]:
+    """A line for each parameter whose pixel-grid step (``errors``, of :meth:`spacefit.fitting.uncertainty.Linearisation.step`) is
+    more than half its standard error ``stderr`` (which carries it)."""
+    return [f"{name}: the pixel grid's model error, {d:+.3g} (the fit's model against one made at {SUPERSAMPLE}x the resolution "
+            "at the result), is added to its value and carried in its standard error; fit at a finer resolution to shrink it."
+            for name, d in errors.items() if name in stderr and abs(d) > 0.5 * stderr[name]]

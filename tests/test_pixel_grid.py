@@ -1,0 +1,62 @@
+"""The pixel grid's model error of a fitted blur (spacefit.fitting.pixel_grid): the pixel's
+response, the fine and grid models made from one render, the step it moves the estimate by."""
+
+from types import SimpleNamespace
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from spacefit.fitting.nuisance import image_model
+from spacefit.fitting.pixel_grid import MOVES, fine_and_grid_models, response_matrix
+from spacefit.fitting.uncertainty import linearise
+
+FACTOR = 4
+NAMES = [*MOVES, "image.scale"]
+X = np.array([0.8, 0.3, -0.2, 1.5])  # blur (px), shift x and y (px), scale
+
+
+def test_a_box_pixel_averages_its_own_fine_pixels_and_a_tent_weighs_its_neighbours_by_their_overlap():
+    box = response_matrix(5, FACTOR, "box")
+    np.testing.assert_array_equal(box, np.kron(np.eye(5), np.full(FACTOR, 1.0 / FACTOR)))
+    tent = response_matrix(5, 2, "tent")  # fine px centred at +-0.25 and +-0.75 px: the tent's integrals over each, 3/8 and 1/8
+    np.testing.assert_allclose(tent[2], [0, 0, 0, 0.125, 0.375, 0.375, 0.125, 0, 0, 0], atol=1e-12)
+    np.testing.assert_allclose(tent.sum(axis=1), 1.0)
+
+
+def _models(fine: np.ndarray, pixel_filter: str = "box") -> tuple[np.ndarray, np.ndarray]:
+    same = lambda image: image  # noqa: E731
+    truth, grid = fine_and_grid_models(jnp.asarray(fine), pixel_filter, X, 0, image_model(NAMES), same, same, same,
+                                       [NAMES.index(n) for n in MOVES], FACTOR)
+    return np.asarray(truth), np.asarray(grid)
+
+
+def test_a_resolved_image_has_no_pixel_grid_error_and_a_point_has_one():
+    """A blob of 2 px rms is resolved by the grid: blurred, shifted and scaled at the fine scale then
+    integrated over each pixel, it is what the fit's model makes of its pixel-integrated render
+    (so the blur and shifts scale to the fine pixels right); a point of light within one pixel is not."""
+    v, u = (np.mgrid[0 : 16 * FACTOR, 0 : 16 * FACTOR] + 0.5) / FACTOR
+    blob = np.exp(-((u - 7.3) ** 2 + (v - 8.6) ** 2) / (2 * 2.0**2))[..., None] * np.ones(3)
+    truth, grid = _models(blob)
+    assert truth.shape == (16, 16, 3) and np.abs(truth - grid).max() < 1e-4 * truth.max()  # float32's FFT round-off
+    point = np.zeros_like(blob)
+    point[8 * FACTOR + 1, 7 * FACTOR + 2] = 1.0
+    truth, grid = _models(point)
+    assert np.abs(truth - grid).max() > 0.05 * truth.max()
+
+
+def systematic_step(J1: np.ndarray, J2: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """The covariance's step for a change d of residuals whose Jacobians are J1 and J2 (linear residuals)."""
+    problem = SimpleNamespace(residual_x=lambda x: jnp.asarray(J1) @ x, residual_x_independent=lambda x: jnp.asarray(J2) @ x)
+    with jax.enable_x64(True):
+        return linearise(problem, np.zeros(J1.shape[1])).step(d)
+
+
+def test_the_systematic_step_is_the_least_squares_step_of_the_residuals_change():
+    rng = np.random.default_rng(3)
+    J, d = rng.normal(size=(40, 3)), rng.normal(size=40)
+    np.testing.assert_allclose(systematic_step(J, J, d), -np.linalg.lstsq(J, d, rcond=None)[0], rtol=1e-9)
+    noise = 0.1 * rng.normal(size=J.shape)  # two seeds' Jacobians: J^T J as sym(J1^T J2), J^T as their mean
+    J1, J2 = J + noise, J - noise
+    expected = -np.linalg.solve(0.5 * (J1.T @ J2 + J2.T @ J1), J.T @ d)
+    np.testing.assert_allclose(systematic_step(J1, J2, d), expected, rtol=1e-9)
