@@ -23,7 +23,7 @@ DOCS = Path(__file__).resolve().parents[1] / "docs"
 
 def api_reference_names() -> tuple[set[str], set[str]]:
     """The names in the first column of the API reference's table, and those its autosummary documents."""
-    text = (DOCS / "api.md").read_text()
+    text = (DOCS / "reference" / "api.md").read_text()
     table = set(re.findall(r"^\| `sf\.(\w+)`", text, flags=re.MULTILINE))
     documented = set(re.findall(r"^   (\w+)$", text.split(".. autosummary::", 1)[1], flags=re.MULTILINE))
     return table, documented

@@ -35,10 +35,11 @@ def chunk_for(rows: int) -> int:
 
 
 def by_columns(fn: Callable[[Array], Array], n: int, dtype: Any, chunk: int) -> Array:
-    """The matrix whose column j is ``fn(e_j)``, e_j the j-th of the ``n`` unit vectors, ``chunk`` at a time."""
-    blocks = -(-n // chunk)
-    basis = jnp.eye(blocks * chunk, n, dtype=dtype).reshape(blocks, chunk, n)
-    return jax.lax.map(jax.vmap(fn), basis).reshape(blocks * chunk, -1)[:n].T
+    """The matrix whose column j is ``fn(e_j)``, e_j the j-th of the ``n`` unit vectors, ``chunk`` at a
+    time: one vmapped call per chunk, run as it comes (op by op where called outside a compiled
+    program, as the covariance is; a scan of the same, compiled, took XLA minutes on a pass)."""
+    basis = jnp.eye(n, dtype=dtype)
+    return jnp.concatenate([jax.vmap(fn)(basis[i:i + chunk]) for i in range(0, n, chunk)]).T
 
 
 def gram(operator: lx.AbstractLinearOperator, chunk: int | None = None) -> Array:
@@ -51,7 +52,11 @@ def gram(operator: lx.AbstractLinearOperator, chunk: int | None = None) -> Array
         image = operator.mv(lxi.unravel_solution(e, packed))
         return lxi.ravel_vector(transposed.mv(image), lxi.transpose_packed_structures(packed))
 
-    g = by_columns(column, operator.in_size(), dtype, chunk or chunk_for(operator.out_size()))
+    # inside the solver's compiled step: one loop body, not a copy per chunk
+    n, chunk = operator.in_size(), chunk or chunk_for(operator.out_size())
+    blocks = -(-n // chunk)
+    basis = jnp.eye(blocks * chunk, n, dtype=dtype).reshape(blocks, chunk, n)
+    g = jax.lax.map(jax.vmap(column), basis).reshape(blocks * chunk, n)[:n]
     return 0.5 * (g + g.T)
 
 

@@ -99,7 +99,8 @@ def write_fit_report(
         if result.scene is not None:
             (stage / "fit.toml").write_text(result.scene.to_toml(), encoding="utf-8")
         _save(plot_convergence(result), stage / "convergence.png")
-        if result.images:  # images' figures; a table's or a light curve's is its observation<i>.png
+        if any(isinstance(o, Observation) for o in result.observations):  # images' figures (an interrupted fit's too,
+            # its residuals not computed); a table's or a light curve's is its observation<i>.png
             _save(plot_comparison(result, references), stage / "comparison.png")
             write_residuals(stage / "residuals.fits", result)
             _save(plot_residuals(result), stage / "residuals.png")
