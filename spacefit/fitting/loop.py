@@ -140,7 +140,7 @@ def fit(
             (:mod:`spacefit.fitting.frames`): None, in this process, observation by observation; an
             int N, a new local dask cluster of N worker processes; a scheduler address; a
             ``distributed.Client``. The status is the same and the values within 1e-3 of their
-            standard errors (measured the same bit for bit in every case but one: docs/guide/dask.md).
+            standard errors (measured the same bit for bit in every case but one: docs/measurements/performance.md).
 
     The result's :attr:`~FitResult.status` is a verdict (:class:`Status`): no step that lowered
     the loss (:attr:`Status.NO_PROGRESS`), a parameter at a bound (:attr:`Status.AT_BOUND`) and

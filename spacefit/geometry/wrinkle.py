@@ -39,7 +39,7 @@ _CORNER_SIDES = np.array([[True, False, True], [True, True, False], [False, True
 # that look like crumpled MLI foil: from about 11 deg (gentler reads as a flat sheet with a
 # ripple) to 45 deg (steeper starts to fold the body over itself: the default body's fold
 # fraction is 0.45 % at rms slope 2.3, 7.6 % at the thesis's literal 37). A stated modelling
-# choice: no published slope statistics of crumpled MLI or foil were found (docs/how-to/materials.md).
+# choice: no published slope statistics of crumpled MLI or foil were found (docs/explanation/wrinkles.md).
 MLI_SLOPE_RANGE = (0.2, 1.0)
 # Fraction of a wrinkled part's faces folded over (:func:`fold_fraction`) above which assembly warns.
 FOLD_WARN_FRACTION = 0.01
