@@ -96,7 +96,7 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
                         "'W m-2 sr-1') or DN; .png / .tif DN (give --response unless spacefit wrote them)")
     f.add_argument("--pass", dest="frames", metavar="FRAMES.csv|.ecsv|.fits",
                    help="fit a pass: a frame table (file, time, each frame's sun, camera, target attitude, sensor values; "
-                        "docs/how-to/pass.md) in place of REFERENCE; --scene is the pass's one scene")
+                        "docs/reference/passes.md) in place of REFERENCE; --scene is the pass's one scene")
     f.add_argument("--per-frame", metavar="NAME[,NAME...]",
                    help="with --pass: parameters each frame has its own of, e.g. target.attitude_x_deg,image.scale")
     f.add_argument("--large", action="store_true", help="run a fit (a pass of many frames) whose estimated memory, said "
@@ -153,7 +153,7 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     c.add_argument("curve", metavar="CURVE",
                    help="light-curve file: a point table (.csv, .ecsv, .fits: magnitude, optionally magnitude_sigma, and each "
                         "point's geometry as scene values, e.g. target.attitude_z_deg, sun.elevation_deg, camera.position_m.x, .y, "
-                        ".z; docs/how-to/brdf-tables.md), or any light curve sf.read_light_curve reads (geometry in the target's "
+                        ".z; docs/reference/light-curves.md), or any light curve sf.read_light_curve reads (geometry in the target's "
                         "frame, or seen from --site)")
     c.add_argument("--scene", required=True, metavar="SCENE.toml", help="scene of the target; its values are the start")
     c.add_argument("--free", required=True, metavar="NAME[,NAME...]", help=_free_help(command))
@@ -173,7 +173,7 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
     s = sub.add_parser("sweep", parents=[overrides], help="render a sweep of scene values into a resumable Zarr store",
                        description="Render a scene at every point of a sweep file's axes into a Zarr store, point by "
                                    "point; rerun the same command to finish an interrupted sweep. --set applies to the scene.")
-    s.add_argument("sweep", metavar="SWEEP.toml", help="sweep file: scene, [axes], options (docs/how-to/studies.md); "
+    s.add_argument("sweep", metavar="SWEEP.toml", help="sweep file: scene, [axes], options (docs/reference/sweeps.md); "
                                                        "with --verify, the store to check")
     s.add_argument("--out", metavar="STORE", help="Zarr store folder (new, or this sweep's to finish it)")
     s.add_argument("--verify", action="store_true",

@@ -51,7 +51,7 @@ def test_mypy_passes_the_readme_examples_and_catches_a_misuse(tmp_path):
     pages = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
     blocks = [b for page in pages for b in re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.DOTALL)]
     for page in pages:  # an executed page's code cells run in turn, as one script
-        cells = re.findall(r"```\{code-cell\} ipython3\n(?::tags:.*\n)?(.*?)```", page.read_text(), flags=re.DOTALL)
+        cells = re.findall(r"```\{code-cell\} ipython3\n(?::tags:[^\n]*\n)?(.*?)```", page.read_text(), flags=re.DOTALL)
         blocks += ["\n".join(cells)] if cells else []
     assert len(blocks) >= 1
     for i, block in enumerate(blocks):

@@ -32,7 +32,7 @@ at k times the fit's samples, not the mean of 2k at the fit's: measured on the p
 32 px at the truth (a calibrated sensor, v 3.5 at 8 spp; 2026-11-25, load average 7 to 8), the mean
 of 16 renders at 8 spp put chi^2 / dof 0.10 above its expectation (3 spreads), two renders at 128
 spp 0.004 above it; a render's Monte Carlo error at few samples is long-tailed (its mean square
-scattered by several tenths between seeds at 16 spp, a few hundredths at 64). Figures of the pass: docs/how-to/pass.md and
+scattered by several tenths between seeds at 16 spp, a few hundredths at 64). Figures of the pass: docs/measurements/validation.md and
 ``experiments/pass_misfit.py``.
 
 Where the judged model's own render noise is still larger than the data's noise (v above

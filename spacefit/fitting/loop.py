@@ -154,7 +154,7 @@ def fit(
         cluster: where the observations' renders and Jacobian columns run, as one batch per step: None, in this process, observation by observation; an
             int N, a new local dask cluster of N worker processes; a scheduler address; a
             ``distributed.Client``. The status is the same and the values within 1e-3 of their
-            standard errors (measured the same bit for bit in every case but one: docs/how-to/dask.md).
+            standard errors (measured the same bit for bit in every case but one: docs/measurements/performance.md).
 
     The result's :attr:`~FitResult.status` is a verdict (:class:`Status`): no step that lowered
     the loss (:attr:`Status.NO_PROGRESS`), a parameter at a bound (:attr:`Status.AT_BOUND`) and

@@ -39,7 +39,7 @@ _CORNER_SIDES = np.array([[True, False, True], [True, True, False], [False, True
 #: crumpled MLI foil, (low, high): from about 11 deg (gentler reads as a flat sheet with a ripple)
 #: to 45 deg (steeper starts to fold the body over itself: the default body's fold fraction is
 #: 0.45 % at rms slope 2.3, 7.6 % at the thesis's literal 37). A stated modelling choice: no
-#: published slope statistics of crumpled MLI or foil were found (the Materials guide).
+#: published slope statistics of crumpled MLI or foil were found (docs/explanation/wrinkles.md).
 #:
 #: Example:
 #:     >>> import spacefit as sf

@@ -182,7 +182,7 @@ def fold_notes(folds: Mapping[str, float], w: WrinkleSettings) -> list[str]:
     """A note for each part whose fold fraction exceeds :data:`~spacefit.geometry.wrinkle.FOLD_WARN_FRACTION`."""
     return [f"part {name!r}: {100 * fraction:.1f} % of its wrinkled faces fold over (turned more than 90 deg from "
             f"the surface under them; wrinkles.G = {w.G:g} m, D = {w.D:g}): wrinkles this steep fold the part over "
-            "itself at its edges, unlike crumpled MLI foil (docs/how-to/materials.md)."
+            "itself at its edges, unlike crumpled MLI foil (docs/explanation/wrinkles.md)."
             for name, fraction in folds.items() if fraction > FOLD_WARN_FRACTION]
 
 

@@ -383,7 +383,7 @@ class WrinkleSettings(Section):
     folds over itself), and no common unit for all lengths changes the slope. The default G is
     1e-5 m, the thesis's "10" read as micrometres with L and Ls in metres: rms height 4.3 mm, rms
     slope 0.59, inside :data:`MLI_SLOPE_RANGE` (crumpled foil). The literal
-    reading is kept as the scene ``data/scenes/thesis-literal.toml`` (docs/how-to/materials.md).
+    reading is kept as the scene ``data/scenes/thesis-literal.toml`` (docs/explanation/wrinkles.md).
 
     ``spacing_m`` is the refinement density: the distance between the sample points that carry
     heights (the thesis's sampling grid inside each triangle).
@@ -395,7 +395,7 @@ class WrinkleSettings(Section):
     ``lod_footprint`` times the largest wrinkle (L) and the wrinkles are gentle enough for a
     roughness, and the geometry otherwise. The default ``lod_footprint`` is where the level of
     detail study measured the effective model within 15 % of
-    the geometry (docs/how-to/lod.md). Fits render the geometry for ``"auto"``.
+    the geometry (docs/explanation/level-of-detail.md). Fits render the geometry for ``"auto"``.
 
     Attributes:
         enabled: whether any part is wrinkled.
