@@ -44,7 +44,7 @@ class FitResult:
         warnings: identifiability and convergence warnings, in words.
         history: one entry per step: the point the step evaluated (step 1 evaluates the start;
             the accepted point of the last step is ``values``), its loss (the one the solver descends: with a
-            sensor, the quasi-deviance: docs/how-to/fitting.md), ``accepted`` (the step
+            sensor, the quasi-deviance: docs/explanation/uncertainty.md), ``accepted`` (the step
             evaluated another point than the best so far and lowered its loss: accepted losses never rise), ``loss_noise`` (the loss's
             Monte Carlo noise at the best point so far, the Fitting guide's stop rule),
             time_s since the start.
