@@ -77,8 +77,8 @@ def refused(folder: Path, call: Callable[[], object], words: str) -> tuple[str, 
 
 
 def command(folder: Path, args: list[str], code: int, words: str) -> tuple[str, str]:
-    """A command line that must exit ``code`` with one line containing ``words`` on stderr (2: a
-    refusal that changes nothing)."""
+    """A command line that must exit ``code`` saying ``words`` (on stderr or stdout), every file of
+    ``folder`` that was there before unchanged; a refusal (exit 2) in one line that writes nothing."""
     before = snapshot(folder)
     err, out = io.StringIO(), io.StringIO()
     try:
@@ -88,17 +88,18 @@ def command(folder: Path, args: list[str], code: int, words: str) -> tuple[str, 
         got = e.code
     except Exception as e:  # noqa: BLE001
         return CRASH, f"{type(e).__name__}: {e}"
-    text = err.getvalue().strip()
-    if "Traceback" in text:
-        return CRASH, text.splitlines()[-1]
-    changed = compare(before, snapshot(folder)) if code == 2 else None
+    errors, said = err.getvalue().strip(), (err.getvalue() + out.getvalue()).strip()
+    if "Traceback" in errors:
+        return CRASH, errors.splitlines()[-1]
+    changed = compare(before, snapshot(folder))
     if changed == LOSS:
-        return LOSS, text
+        return LOSS, said
     if got == 0 and code != 0:
-        return WRONG, f"exit 0: {out.getvalue().strip()[-200:]}"
+        return WRONG, f"exit 0: {said[-200:]}"
     if got != code:
-        return CRASH, f"exit {got}: {text[-200:]}"
-    return (OK if words in text and len(text.splitlines()) <= 1 and not changed else UNCLEAR), text or out.getvalue().strip()[-200:]
+        return CRASH, f"exit {got}: {said[-200:]}"
+    refusal_kept = code != 2 or (len(errors.splitlines()) <= 1 and not changed)
+    return (OK if words in said and refusal_kept else UNCLEAR), said.splitlines()[-1] if said else ""
 
 
 def sweep_store(folder: Path) -> Path:
@@ -106,23 +107,6 @@ def sweep_store(folder: Path) -> Path:
     store = folder / "store.zarr"
     sf.sweep(sf.default_scene().with_values(TINY), {"parts.legs.kd": [0.3, 0.6], "render.seed": [1, 2]}, store=store, quiet=True)
     return store
-
-
-def verify(store: Path, code: int, words: str) -> tuple[str, str]:
-    """``spacefit sweep STORE --verify`` must exit ``code`` saying ``words``; the store itself unchanged."""
-    before = snapshot(store)
-    err, out = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
-        try:
-            got = main(["sweep", str(store), "--verify"])
-        except Exception as e:  # noqa: BLE001
-            return CRASH, f"{type(e).__name__}: {e}"
-    text = (err.getvalue() + out.getvalue()).strip()
-    if compare(before, snapshot(store)) == LOSS:
-        return LOSS, text
-    if got == 0:
-        return WRONG, text
-    return (OK if got == code and words in text and "Traceback" not in text else CRASH), text.splitlines()[-1] if text else ""
 
 
 # --- the cases ------------------------------------------------------------------------------------------
@@ -222,8 +206,9 @@ def store_damage(kind: str) -> Callable[[Path], tuple[str, str]]:
         else:  # a .zarray that is not UTF-8
             path = store / "mean_radiance" / ".zarray"
             path.write_bytes(b"\xff\xfe" + path.read_bytes()[2:])
-            return verify(store, 2, "is damaged")
-        return verify(store, DAMAGED, "failed their checksum" if kind == "points swapped" else "damaged coordinates")
+            return command(store, ["sweep", str(store), "--verify"], 2, "is damaged")
+        return command(store, ["sweep", str(store), "--verify"], DAMAGED,
+                       "failed their checksum" if kind == "points swapped" else "damaged coordinates")
     return case
 
 
