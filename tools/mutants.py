@@ -427,14 +427,14 @@ def copy_checkout(dest: Path) -> None:
             shutil.copy2(ROOT / name, dest / name)
 
 
-def run_tests(tree: Path, tests: tuple[str, ...]) -> tuple[int | None, str]:
-    """pytest's exit code (None on timeout) and the first failing test, run in the copy."""
+def run_tests(tree: Path, tests: tuple[str, ...], timeout_s: float = TIMEOUT_S) -> tuple[int | None, str]:
+    """pytest's exit code (None on timeout after ``timeout_s``) and the first failing test, run in the copy."""
     env = {**os.environ, "PYTHONPATH": str(tree), "PYTHONDONTWRITEBYTECODE": "1"}
     cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *tests]
     try:
-        out = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, timeout=TIMEOUT_S)
+        out = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, timeout=timeout_s)
     except subprocess.TimeoutExpired:
-        return None, f"timeout after {TIMEOUT_S} s"
+        return None, f"timeout after {timeout_s:.0f} s"
     failed = [line.split(" ", 1)[1].split(" - ")[0] for line in out.stdout.splitlines() if line.startswith(("FAILED ", "ERROR "))]
     return out.returncode, failed[0] if failed else out.stdout.strip().splitlines()[-1] if out.stdout.strip() else ""
 
@@ -459,7 +459,8 @@ def main() -> int:
         copy_checkout(tree)
         if not args.no_baseline:
             targets = tuple(dict.fromkeys(t for m in mutants for t in m.tests))
-            code, first = run_tests(tree, targets)
+            # every mutant's tests at once: the budget of one mutant per ten of them
+            code, first = run_tests(tree, targets, TIMEOUT_S * max(1, len(mutants) / 10))
             if code != 0:
                 print(f"the targeted tests fail without any mutant ({first}); fix them first", file=sys.stderr)
                 return 2
