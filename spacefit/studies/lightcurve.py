@@ -52,6 +52,7 @@ from spacefit.scene.parameters import scene_value
 from spacefit.scene.conversions import sun_angles_deg, sun_direction
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
+from spacefit.studies.lightcurve_sizing import DEFAULT_SEEDS, PILOT_SPP, pilot_seeds, sample_counts
 from spacefit.studies.sensitivity import mean_and_error
 from spacefit.studies.sweep import sweep
 
@@ -110,6 +111,18 @@ def phase_angles_deg(scene: Scene, dataset: Any) -> np.ndarray:
     az = dataset["sun.azimuth_deg"].values if "sun.azimuth_deg" in dataset.coords else scene_value(scene, "sun.azimuth_deg")
     towards = -np.asarray(sun_direction(el, az), dtype=float)
     return np.degrees(np.arccos(np.clip(np.tensordot(v, towards, axes=1), -1.0, 1.0)))
+
+
+def sized(scene: Scene, axes: dict[str, Any], against: str, x: np.ndarray, precision: float, seeds: list[int],
+          cluster: Cluster | None) -> dict[str, list[Any]]:
+    """The light curve's axis ``against`` with each point's ``render.spp`` zipped in, sized to ``precision``
+    with ``seeds`` from a pilot sweep of the same points (:mod:`spacefit.studies.lightcurve_sizing`)."""
+    points = dict(axes[against])
+    pilot = sweep(scene.with_values({"render.spp": PILOT_SPP}), {against: points, SEED_AXIS: pilot_seeds(seeds)},
+                  quiet=True, cluster=cluster)
+    irradiance = pilot.irradiance.sel(region="target").transpose(SEED_AXIS, against).values
+    labels = [f"{against} = {v:g}" for v in x]
+    return {**points, "render.spp": sample_counts(irradiance, precision, len(seeds), scene.render.sampler, labels)}
 
 
 @dataclass(frozen=True)
@@ -253,6 +266,7 @@ def light_curve(
     sun_magnitude: float | None = None,
     store: str | Path | None = None,
     seeds: Sequence[int] | None = None,
+    precision: float | None = None,
     quiet: bool = False,
     cluster: Cluster | None = None,
     workers: int | None = None,
@@ -264,15 +278,21 @@ def light_curve(
     scene's attitude. ``sun`` / ``observer``: directions towards them (the Studies guide), else the
     scene's; ``observer_range_m``: the observer's distance (default: the rendered one). ``band`` and
     ``sun_magnitude`` (default: :data:`SUN_MAGNITUDES`) give the magnitudes. ``seeds`` averages
-    renders of these seeds, two or more giving each point's Monte Carlo standard error (the Studies guide); ``cluster`` where its renders run (as :func:`sweep` takes it; ``workers`` / ``scheduler``: its
-    deprecated spellings). The rest is :func:`sweep`'s.
+    renders of these seeds, two or more giving each point's Monte Carlo standard error (the Studies guide).
+    ``precision``: the relative standard error each point's irradiance must reach (0.005: 0.5 %, about
+    5.4 mmag): each point gets its own samples per pixel, sized from a pilot's measure of its own error
+    (:mod:`spacefit.studies.lightcurve_sizing`; ``seeds`` default to four there), in place of the scene's
+    ``render.spp``; the dataset's ``render.spp`` coordinate holds them. ``cluster`` where its renders run
+    (as :func:`sweep` takes it; ``workers`` / ``scheduler``: its deprecated spellings). The rest is
+    :func:`sweep`'s.
 
     Returns:
         A :class:`LightCurve`.
 
     Raises:
         InputError: none or more than one of ``phase_deg``, ``attitude_deg``, ``times_s``; an unknown
-            band or axis; a value the scene refuses.
+            band or axis; a value the scene refuses; a ``precision`` not in (0, 1), or with fewer than two
+            seeds, or that a point cannot reach within ``MAX_SPP`` samples per pixel.
 
     Example:
         >>> import spacefit as sf
@@ -310,17 +330,24 @@ def light_curve(
         against, axes = "phase_angle_deg", {"phase_angle_deg": phase_plane_sun(scene, x)}
     elif attitude_deg is not None:
         x = check_vector("attitude_deg", attitude_deg, None)
-        against, axes = key, {key: x.tolist()}
+        against, axes = key, {key: {key: x.tolist()}}
     else:
         check_range("spin_rate_deg_s", spin_rate_deg_s if spin_rate_deg_s is not None else math.nan, unit="deg s^-1")
         x = check_vector("times_s", times_s, None)
         start = scene.target.attitude_deg["xyz".index(axis)]
         against, axes = "time_s", {"time_s": {key: (start + spin_rate_deg_s * x).tolist()}}
+    if precision is not None:
+        check_range("precision", precision, 0.0, 1.0, lo_open=True, hi_open=True)
+        seeds = DEFAULT_SEEDS if seeds is None else seeds
     if seeds is not None:
         check_vector("seeds", seeds, None)
         for s in seeds:
             check_count("seeds", s, 0, optional=False)
+        if precision is not None and len(seeds) < 2:
+            raise InputError(f"`precision` needs two or more `seeds` to measure each point's error, got {list(seeds)}.")
         axes[SEED_AXIS] = list(seeds)
+    if precision is not None:
+        axes[against] = sized(scene, axes, against, x, float(precision), list(seeds), cluster)
     ds = sweep(scene, axes, store=store, quiet=quiet, cluster=cluster)
     if against in ds.dims:
         ds = ds.assign_coords({against: (against, x, {"units": against.rsplit("_", 1)[1]})})
