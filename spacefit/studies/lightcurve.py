@@ -52,7 +52,8 @@ from spacefit.scene.parameters import scene_value
 from spacefit.scene.conversions import sun_angles_deg, sun_direction
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
-from spacefit.studies.lightcurve_sizing import DEFAULT_SEEDS, PILOT_SPP, pilot_seeds, sample_counts
+from spacefit.studies.axes import in_place_names
+from spacefit.studies.lightcurve_sizing import DEFAULT_SEEDS, precise_sweep
 from spacefit.studies.sensitivity import mean_and_error
 from spacefit.studies.sweep import sweep
 
@@ -111,18 +112,6 @@ def phase_angles_deg(scene: Scene, dataset: Any) -> np.ndarray:
     az = dataset["sun.azimuth_deg"].values if "sun.azimuth_deg" in dataset.coords else scene_value(scene, "sun.azimuth_deg")
     towards = -np.asarray(sun_direction(el, az), dtype=float)
     return np.degrees(np.arccos(np.clip(np.tensordot(v, towards, axes=1), -1.0, 1.0)))
-
-
-def sized(scene: Scene, axes: dict[str, Any], against: str, x: np.ndarray, precision: float, seeds: list[int],
-          cluster: Cluster | None) -> dict[str, list[Any]]:
-    """The light curve's axis ``against`` with each point's ``render.spp`` zipped in, sized to ``precision``
-    with ``seeds`` from a pilot sweep of the same points (:mod:`spacefit.studies.lightcurve_sizing`)."""
-    points = dict(axes[against])
-    pilot = sweep(scene.with_values({"render.spp": PILOT_SPP}), {against: points, SEED_AXIS: pilot_seeds(seeds)},
-                  quiet=True, cluster=cluster)
-    irradiance = pilot.irradiance.sel(region="target").transpose(SEED_AXIS, against).values
-    labels = [f"{against} = {v:g}" for v in x]
-    return {**points, "render.spp": sample_counts(irradiance, precision, len(seeds), scene.render.sampler, labels)}
 
 
 @dataclass(frozen=True)
@@ -280,9 +269,10 @@ def light_curve(
     ``sun_magnitude`` (default: :data:`SUN_MAGNITUDES`) give the magnitudes. ``seeds`` averages
     renders of these seeds, two or more giving each point's Monte Carlo standard error (the Studies guide).
     ``precision``: the relative standard error each point's irradiance must reach (0.005: 0.5 %, about
-    5.4 mmag): each point gets its own samples per pixel, sized from a pilot's measure of its own error
-    (:mod:`spacefit.studies.lightcurve_sizing`; ``seeds`` default to four there), in place of the scene's
-    ``render.spp``; the dataset's ``render.spp`` coordinate holds them. ``cluster`` where its renders run
+    5.4 mmag), for ``phase_deg`` rendered in this process: each point gets the samples its own error asks
+    for, pixel by pixel, measured by pilots (the Studies guide; ``seeds`` default to
+    four there), in place of the scene's ``render.spp``; the dataset holds ``irradiance`` by seed and the
+    ``samples`` each point traced. ``cluster`` where its renders run
     (as :func:`sweep` takes it; ``workers`` / ``scheduler``: its deprecated spellings). The rest is
     :func:`sweep`'s.
 
@@ -292,7 +282,7 @@ def light_curve(
     Raises:
         InputError: none or more than one of ``phase_deg``, ``attitude_deg``, ``times_s``; an unknown
             band or axis; a value the scene refuses; a ``precision`` not in (0, 1), or with fewer than two
-            seeds, or that a point cannot reach within ``MAX_SPP`` samples per pixel.
+            seeds, or with ``attitude_deg``, ``times_s``, a ``store``, a ``cluster`` or a sun that parts follow.
 
     Example:
         >>> import spacefit as sf
@@ -346,9 +336,15 @@ def light_curve(
         if precision is not None and len(seeds) < 2:
             raise InputError(f"`precision` needs two or more `seeds` to measure each point's error, got {list(seeds)}.")
         axes[SEED_AXIS] = list(seeds)
-    if precision is not None:
-        axes[against] = sized(scene, axes, against, x, float(precision), list(seeds), cluster)
-    ds = sweep(scene, axes, store=store, quiet=quiet, cluster=cluster)
+    if precision is None:
+        ds = sweep(scene, axes, store=store, quiet=quiet, cluster=cluster)
+    else:
+        points = axes[against]
+        if phase_deg is None or store is not None or cluster is not None or not set(points) <= in_place_names(scene):
+            raise InputError("`precision` sizes a light curve over `phase_deg`, rendered in this process, of a scene whose "
+                             "sun turns alone (no part or body follows it): give phase_deg, no store or cluster, or "
+                             "size the samples yourself with `seeds` and `render.spp`.")
+        ds = precise_sweep(scene, against, points, list(seeds), float(precision))
     if against in ds.dims:
         ds = ds.assign_coords({against: (against, x, {"units": against.rsplit("_", 1)[1]})})
     irradiance = ds.irradiance.sel(region="target")
