@@ -2,7 +2,7 @@
 
 A point's irradiance is the sum over pixels of solid angle times mean radiance (the box estimator of
 :mod:`spacefit.rendering.flux`), and its Monte Carlo error lives in few pixels: on the default lander at
-120 deg of phase, 28 of 4834 traced pixels (the glints of a few facets) held 90 % of it, at 20 deg 1414.
+120 deg of phase, 29 of 4834 traced pixels (the glints of a few facets) held 90 % of it, at 20 deg 1415.
 One sample count for every pixel, and for every point, set by the worst, spends most of the samples where
 the estimate was precise long before. So each point is rendered in three steps:
 
