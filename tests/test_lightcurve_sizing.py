@@ -83,6 +83,9 @@ def test_a_precision_is_refused_out_of_range_with_one_seed_or_off_its_path(spher
             sf.light_curve(sphere, phase_deg=[10.0], precision=bad, quiet=True)
     with pytest.raises(sf.InputError, match=r"`precision` needs two or more `seeds`"):
         sf.light_curve(sphere, phase_deg=[10.0], precision=0.01, seeds=[3], quiet=True)
+    with pytest.raises(sf.InputError, match=r"the point sun.elevation_deg = \S+, sun.azimuth_deg = \S+ needs [\d,]+ samples a seed "
+                                            r"for `precision` = 1e-06 with 4 seeds \(more than 16,777,216\)"):
+        sf.light_curve(sphere, phase_deg=[10.0], precision=1e-6, quiet=True)
     for other in ({"attitude_deg": [0.0]}, {"phase_deg": [10.0], "store": tmp_path / "lc.zarr"}, {"phase_deg": [10.0], "cluster": 2}):
         with pytest.raises(sf.InputError, match=r"`precision` sizes a light curve over `phase_deg`"):
             sf.light_curve(sphere, precision=0.01, quiet=True, **other)

@@ -31,7 +31,9 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from spacefit.errors import InputError
 from spacefit.geometry.frames import pixel_solid_angles
+from spacefit.rendering.memory import MAX_SAMPLES_PER_PASS
 from spacefit.scene.schema import Scene
 from spacefit.studies.axes import units
 
@@ -65,10 +67,11 @@ def pilot_seeds(seeds: Sequence[int], count: int = 2) -> list[int]:
 
 def variance_margin(replicates: int, confidence: float = CONFIDENCE) -> float:
     """The factor by which a variance measured from ``replicates`` independent values is multiplied to
-    bound the true one from above with one-sided ``confidence``: (n - 1) / chi2 quantile(1 - confidence, n - 1)."""
-    from scipy.stats import chi2  # here: SciPy's statistics take 0.4 s to import, which a light curve without a precision never needs
+    bound the true one from above with one-sided ``confidence``: (n - 1) / chi2 quantile(1 - confidence, n - 1),
+    the quantile 2 P^-1(k / 2, q) of k degrees of freedom (P the regularised lower incomplete gamma function)."""
+    from scipy.special import gammaincinv  # here: only a light curve at a precision needs SciPy; scipy.stats imports 0.3 s more than this
 
-    return float((replicates - 1) / chi2.ppf(1.0 - confidence, replicates - 1))
+    return float((replicates - 1) / (2.0 * gammaincinv((replicates - 1) / 2.0, 1.0 - confidence)))
 
 
 def allocation(omega: np.ndarray, spread: np.ndarray) -> np.ndarray:
@@ -93,10 +96,15 @@ def replicate_irradiance(renderer: Renderer, pixels: np.ndarray, omega: np.ndarr
     return np.bincount(np.repeat(np.arange(replicates), per.sum()), weights=weights, minlength=replicates)
 
 
-def point_irradiance(renderer: Renderer, pixels: np.ndarray, omega: np.ndarray, precision: float, seeds: Sequence[int]
-                     ) -> tuple[np.ndarray, int]:
+def point_irradiance(renderer: Renderer, pixels: np.ndarray, omega: np.ndarray, precision: float, seeds: Sequence[int],
+                     label: str = "") -> tuple[np.ndarray, int]:
     """A point's irradiance (W m^-2) by each of ``seeds``, sized to ``precision`` (module docstring), and the
-    samples its seeds traced in all."""
+    samples its seeds traced in all.
+
+    Raises:
+        InputError: a seed would trace more than ``MAX_SAMPLES_PER_PASS`` samples (one pass's memory),
+            naming the point by ``label``.
+    """
     from spacefit.rendering.flux import pixel_radiance  # here: Mitsuba takes seconds to import
 
     first, second = pilot_seeds(seeds)
@@ -106,6 +114,10 @@ def point_irradiance(renderer: Renderer, pixels: np.ndarray, omega: np.ndarray, 
     mean, variance = measured.mean(), measured.var(ddof=1)
     copies = 1 if mean <= 0 or variance == 0 else max(1, math.ceil(variance_margin(REPLICATES) * variance
                                                                    / (len(seeds) * (precision * mean) ** 2)))
+    if groups.sum() * copies * GROUP_SPP > MAX_SAMPLES_PER_PASS:
+        raise InputError(f"the point {label} needs {groups.sum() * copies * GROUP_SPP:,} samples a seed for `precision` = "
+                         f"{precision:g} with {len(seeds)} seeds (more than {MAX_SAMPLES_PER_PASS:,}): ask a coarser precision "
+                         "or more seeds.")
     values = np.array([replicate_irradiance(renderer, pixels, omega, groups, copies, 1, s)[0] for s in seeds])
     return values, int(groups.sum() * copies * GROUP_SPP * len(seeds))
 
@@ -126,7 +138,8 @@ def precise_sweep(scene: Scene, against: str, points: Mapping[str, list[float]],
     samples = np.zeros(size, dtype=np.int64)
     for i in range(size):
         renderer.set_values({k: v[i] for k, v in points.items()})
-        irradiance[i, :, 0], samples[i] = point_irradiance(renderer, pixels, omega, precision, seeds)
+        label = ", ".join(f"{k} = {v[i]:g}" for k, v in points.items())
+        irradiance[i, :, 0], samples[i] = point_irradiance(renderer, pixels, omega, precision, seeds, label)
     coords = {k: (against, np.asarray(v), {"units": units(k)}) for k, v in points.items()}
     return xr.Dataset({"irradiance": ((against, "render.seed", "region"), irradiance,
                                       {"units": "W m^-2", "description": "box estimate at the pinhole, each seed's"}),
