@@ -58,7 +58,9 @@ def main() -> None:
     own = curve.irradiance_se_w_m2 / curve.irradiance_w_m2
     print(f"24-point light curve at {TARGET_PRECISION:.1%} a point: {wall:.1f} s a call (target {TARGET_S:g} s: "
           f"{'met' if wall <= TARGET_S else 'NOT met'}), {cpu:.1f} s CPU; load {load:.1f} before, {os.getloadavg()[0]:.1f} after")
-    print(f"samples traced a point (its seeds together): {', '.join(map(str, traced))}; in all {int(traced.sum()):,}")
+    pilots = curve.dataset["pilot_samples"].values
+    print(f"samples traced a point (its seeds together): {', '.join(map(str, traced))}; in all {int(traced.sum()):,}, and "
+          f"{int(pilots.sum()):,} by the pilots ({int(pilots.min()):,} to {int(pilots.max()):,} a point)")
     print(f"the call's own errors (from its {SEEDS} seeds): worst point {own.max():.2%}, median {np.median(own):.2%}")
     means, variances = [curve.irradiance_w_m2], [curve.irradiance_se_w_m2**2]
     for r in range(args.repeats):

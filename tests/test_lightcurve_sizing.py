@@ -12,7 +12,7 @@ from scipy.stats import chi2
 import spacefit as sf
 from spacefit.geometry.frames import pixel_solid_angles
 from spacefit.studies.lightcurve import phase_plane_sun
-from spacefit.studies.lightcurve_sizing import allocation, pilot_seeds, point_irradiance, replicate_irradiance, variance_margin
+from spacefit.studies.lightcurve_sizing import PILOT_SPP, allocation, pilot_seeds, point_irradiance, replicate_irradiance, variance_margin
 
 
 @pytest.fixture
@@ -72,9 +72,9 @@ def test_a_light_curve_at_a_precision_reports_each_points_seeds_and_their_errors
     renderer = sf.Renderer(sphere)
     renderer.set_values({k: v[1] for k, v in phase_plane_sun(sphere, np.array(phase)).items()})
     pixels, omega = traced(renderer)
-    values, count = point_irradiance(renderer, pixels, omega, 0.01, [0, 1, 2, 3])
+    values, count, pilots = point_irradiance(renderer, pixels, omega, 0.01, [0, 1, 2, 3])
     np.testing.assert_array_equal(values, per_seed[1])
-    assert count == samples[1]
+    assert count == samples[1] and pilots == curve.dataset["pilot_samples"].values[1] > len(pixels) * PILOT_SPP
 
 
 def test_a_precision_is_refused_out_of_range_with_one_seed_or_off_its_path(sphere, tmp_path):

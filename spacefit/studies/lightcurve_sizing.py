@@ -97,9 +97,9 @@ def replicate_irradiance(renderer: Renderer, pixels: np.ndarray, omega: np.ndarr
 
 
 def point_irradiance(renderer: Renderer, pixels: np.ndarray, omega: np.ndarray, precision: float, seeds: Sequence[int],
-                     label: str = "") -> tuple[np.ndarray, int]:
-    """A point's irradiance (W m^-2) by each of ``seeds``, sized to ``precision`` (module docstring), and the
-    samples its seeds traced in all.
+                     label: str = "") -> tuple[np.ndarray, int, int]:
+    """A point's irradiance (W m^-2) by each of ``seeds``, sized to ``precision`` (module docstring), the
+    samples its seeds traced in all, and those its pilots traced.
 
     Raises:
         InputError: a seed would trace more than ``MAX_SAMPLES_PER_PASS`` samples (one pass's memory),
@@ -119,13 +119,14 @@ def point_irradiance(renderer: Renderer, pixels: np.ndarray, omega: np.ndarray, 
                          f"{precision:g} with {len(seeds)} seeds (more than {MAX_SAMPLES_PER_PASS:,}): ask a coarser precision "
                          "or more seeds.")
     values = np.array([replicate_irradiance(renderer, pixels, omega, groups, copies, 1, s)[0] for s in seeds])
-    return values, int(groups.sum() * copies * GROUP_SPP * len(seeds))
+    pilots = len(pixels) * PILOT_SPP + int(groups.sum()) * GROUP_SPP * REPLICATES
+    return values, int(groups.sum() * copies * GROUP_SPP * len(seeds)), pilots
 
 
 def precise_sweep(scene: Scene, against: str, points: Mapping[str, list[float]], seeds: Sequence[int], precision: float) -> Any:
     """The light curve's points (``points``: registered parameters set in place, one list each along
     ``against``) sized to ``precision``, as a Dataset like a sweep's: ``irradiance`` (W m^-2) of region
-    ``target`` by point and seed, and ``samples`` traced by point."""
+    ``target`` by point and seed, and the ``samples`` and ``pilot_samples`` traced by point."""
     import xarray as xr  # here: xarray takes a second to import
 
     from spacefit.rendering.renderer import Renderer  # here: Mitsuba takes seconds to import
@@ -136,13 +137,15 @@ def precise_sweep(scene: Scene, against: str, points: Mapping[str, list[float]],
     size = len(next(iter(points.values())))
     irradiance = np.zeros((size, len(seeds), 1))
     samples = np.zeros(size, dtype=np.int64)
+    pilots = np.zeros(size, dtype=np.int64)
     for i in range(size):
         renderer.set_values({k: v[i] for k, v in points.items()})
         label = ", ".join(f"{k} = {v[i]:g}" for k, v in points.items())
-        irradiance[i, :, 0], samples[i] = point_irradiance(renderer, pixels, omega, precision, seeds, label)
+        irradiance[i, :, 0], samples[i], pilots[i] = point_irradiance(renderer, pixels, omega, precision, seeds, label)
     coords = {k: (against, np.asarray(v), {"units": units(k)}) for k, v in points.items()}
     return xr.Dataset({"irradiance": ((against, "render.seed", "region"), irradiance,
                                       {"units": "W m^-2", "description": "box estimate at the pinhole, each seed's"}),
-                       "samples": ((against,), samples, {"description": f"samples traced by the seeds, sized to {precision:g}"})},
+                       "samples": ((against,), samples, {"description": f"samples traced by the seeds, sized to {precision:g}"}),
+                       "pilot_samples": ((against,), pilots, {"description": "samples traced by the pilots that sized them"})},
                       coords={**coords, "render.seed": list(seeds), "region": ["target"]},
                       attrs={"precision": precision, "scene_toml": scene.to_toml()})
