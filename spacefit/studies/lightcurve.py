@@ -272,7 +272,7 @@ def light_curve(
     5.4 mmag), for ``phase_deg`` rendered in this process: each point gets the samples its own error asks
     for, pixel by pixel, measured by pilots (the Studies guide; ``seeds`` default to
     four there), in place of the scene's ``render.spp``; the dataset holds ``irradiance`` by seed and the
-    ``samples`` each point traced. ``cluster`` where its renders run
+    ``samples`` its seeds and ``pilot_samples`` its pilots traced by point. ``cluster`` where its renders run
     (as :func:`sweep` takes it; ``workers`` / ``scheduler``: its deprecated spellings). The rest is
     :func:`sweep`'s.
 
