@@ -237,3 +237,21 @@ def test_every_cluster_argument_refuses_what_is_not_a_cluster_in_one_line(name, 
     with pytest.raises(sf.InputError, match=message) as err:
         WITH_CLUSTER[name](cluster)
     assert len(str(err.value).splitlines()) == 1 and not (tmp_path / "never-written").exists()
+
+
+def test_a_points_summaries_are_those_of_its_whole_film(tmp_path):
+    """The summaries are taken over the rendered window only (black outside it): the same irradiance,
+    pixels and mean radiance as over the whole film, which the stored image is."""
+    scene = sphere_scene(tmp_path).with_values({"render.resolution": [64, 48]})
+    ds = sf.sweep(scene, {"sun.elevation_deg": [30.0, 60.0], "render.seed": [1, 2]}, images=True, quiet=True).load()
+    renderer = sf.Renderer(scene)
+    assert renderer.window[2] * renderer.window[3] < 64 * 48  # the window is a part of the film
+    parts, omega = renderer.part_image(), sf.pixel_solid_angles(renderer.assembly.intrinsics)
+    for elevation in (30.0, 60.0):
+        for seed in (1, 2):
+            point = ds.sel({"sun.elevation_deg": elevation, "render.seed": seed})
+            film = point.radiance.values
+            whole = worker.summaries(film, parts, omega, list(point.region.values))
+            np.testing.assert_allclose(point.irradiance.values, whole["irradiance"], rtol=1e-12)
+            np.testing.assert_array_equal(point.pixels.values, whole["pixels"])
+            np.testing.assert_allclose(point.mean_radiance.values, whole["mean_radiance"], rtol=1e-12)

@@ -52,6 +52,8 @@ from spacefit.scene.parameters import scene_value
 from spacefit.scene.conversions import sun_angles_deg, sun_direction
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
+from spacefit.studies.axes import in_place_names
+from spacefit.studies.lightcurve_sizing import DEFAULT_SEEDS, precise_sweep
 from spacefit.studies.sensitivity import mean_and_error
 from spacefit.studies.sweep import sweep
 
@@ -253,6 +255,7 @@ def light_curve(
     sun_magnitude: float | None = None,
     store: str | Path | None = None,
     seeds: Sequence[int] | None = None,
+    precision: float | None = None,
     quiet: bool = False,
     cluster: Cluster | None = None,
     workers: int | None = None,
@@ -264,15 +267,22 @@ def light_curve(
     scene's attitude. ``sun`` / ``observer``: directions towards them (the Studies guide), else the
     scene's; ``observer_range_m``: the observer's distance (default: the rendered one). ``band`` and
     ``sun_magnitude`` (default: :data:`SUN_MAGNITUDES`) give the magnitudes. ``seeds`` averages
-    renders of these seeds, two or more giving each point's Monte Carlo standard error (the Studies guide); ``cluster`` where its renders run (as :func:`sweep` takes it; ``workers`` / ``scheduler``: its
-    deprecated spellings). The rest is :func:`sweep`'s.
+    renders of these seeds, two or more giving each point's Monte Carlo standard error (the Studies guide).
+    ``precision``: the relative standard error each point's irradiance must reach (0.005: 0.5 %, about
+    5.4 mmag), for ``phase_deg`` rendered in this process: each point gets the samples its own error asks
+    for, pixel by pixel, measured by pilots (the Studies guide; ``seeds`` default to
+    four there), in place of the scene's ``render.spp``; the dataset holds ``irradiance`` by seed and the
+    ``samples`` its seeds and ``pilot_samples`` its pilots traced by point. ``cluster`` where its renders run
+    (as :func:`sweep` takes it; ``workers`` / ``scheduler``: its deprecated spellings). The rest is
+    :func:`sweep`'s.
 
     Returns:
         A :class:`LightCurve`.
 
     Raises:
         InputError: none or more than one of ``phase_deg``, ``attitude_deg``, ``times_s``; an unknown
-            band or axis; a value the scene refuses.
+            band or axis; a value the scene refuses; a ``precision`` not in (0, 1), or with fewer than two
+            seeds, or with ``attitude_deg``, ``times_s``, a ``store``, a ``cluster`` or a sun that parts follow.
 
     Example:
         >>> import spacefit as sf
@@ -310,18 +320,31 @@ def light_curve(
         against, axes = "phase_angle_deg", {"phase_angle_deg": phase_plane_sun(scene, x)}
     elif attitude_deg is not None:
         x = check_vector("attitude_deg", attitude_deg, None)
-        against, axes = key, {key: x.tolist()}
+        against, axes = key, {key: {key: x.tolist()}}
     else:
         check_range("spin_rate_deg_s", spin_rate_deg_s if spin_rate_deg_s is not None else math.nan, unit="deg s^-1")
         x = check_vector("times_s", times_s, None)
         start = scene.target.attitude_deg["xyz".index(axis)]
         against, axes = "time_s", {"time_s": {key: (start + spin_rate_deg_s * x).tolist()}}
+    if precision is not None:
+        check_range("precision", precision, 0.0, 1.0, lo_open=True, hi_open=True)
+        seeds = DEFAULT_SEEDS if seeds is None else seeds
     if seeds is not None:
         check_vector("seeds", seeds, None)
         for s in seeds:
             check_count("seeds", s, 0, optional=False)
+        if precision is not None and len(seeds) < 2:
+            raise InputError(f"`precision` needs two or more `seeds` to measure each point's error, got {list(seeds)}.")
         axes[SEED_AXIS] = list(seeds)
-    ds = sweep(scene, axes, store=store, quiet=quiet, cluster=cluster)
+    if precision is None:
+        ds = sweep(scene, axes, store=store, quiet=quiet, cluster=cluster)
+    else:
+        points = axes[against]
+        if phase_deg is None or store is not None or cluster is not None or not set(points) <= in_place_names(scene):
+            raise InputError("`precision` sizes a light curve over `phase_deg`, rendered in this process, of a scene whose "
+                             "sun turns alone (no part or body follows it): give phase_deg, no store or cluster, or "
+                             "size the samples yourself with `seeds` and `render.spp`.")
+        ds = precise_sweep(scene, against, points, list(seeds), float(precision))
     if against in ds.dims:
         ds = ds.assign_coords({against: (against, x, {"units": against.rsplit("_", 1)[1]})})
     irradiance = ds.irradiance.sel(region="target")

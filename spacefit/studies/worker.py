@@ -15,17 +15,21 @@ import functools
 import tomllib
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from spacefit.digests import status
 from spacefit.errors import InputError
 from spacefit.geometry.frames import pixel_solid_angles
+from spacefit.rendering.parts import PartImage
 from spacefit.scene.parameters import scene_with_values
 from spacefit.scene.schema import Scene
 from spacefit.scene.toml import scene_from_dict
 from spacefit.studies.sensitivity import TARGET, point_summaries, sensitivity
+
+if TYPE_CHECKING:  # types only: Mitsuba takes seconds to import
+    from spacefit.rendering.renderer import Renderer
 
 
 @dataclass(frozen=True)
@@ -57,12 +61,15 @@ class Task:
 
 
 class _Loaded:
-    """The process's loaded scene: (scene TOML, crop) -> renderer, its pixels' solid angles, part image."""
+    """The process's loaded scene: (scene TOML, crop) -> renderer, its rendered window's pixels' solid
+    angles and part image (outside the window the image is black and sees no part), and the values last
+    set in place."""
 
     key: tuple[Any, ...] | None = None
     renderer = None
     solid_angles: np.ndarray | None = None
     part_image = None
+    in_place: tuple[tuple[str, float], ...] = ()
     renders = 0
 
 
@@ -99,10 +106,16 @@ def loaded(task: Task) -> type[_Loaded]:
     if _Loaded.key != key:
         _Loaded.key, _Loaded.renderer = None, None  # drop the old scene before loading the new one
         renderer = Renderer(scene, crop=task.crop)
-        _Loaded.key, _Loaded.renderer = key, renderer
-        _Loaded.solid_angles = pixel_solid_angles(renderer.assembly.intrinsics)
-        _Loaded.part_image = renderer.part_image()
+        _Loaded.key, _Loaded.renderer, _Loaded.in_place = key, renderer, ()
+        _Loaded.solid_angles = renderer.to_window(pixel_solid_angles(renderer.assembly.intrinsics))
+        _Loaded.part_image = window_parts(renderer)
     return _Loaded
+
+
+def window_parts(renderer: Renderer) -> PartImage:
+    """The renderer's part image over its rendered window (:meth:`~spacefit.rendering.renderer.Renderer.to_window`)."""
+    parts = renderer.part_image()
+    return PartImage(renderer.to_window(parts.ids), parts.names)
 
 
 def render_count() -> int:
@@ -115,14 +128,16 @@ def run_task(task: Task) -> dict[str, np.ndarray]:
     when asked; the derivative summaries of :func:`spacefit.studies.sensitivity.point_summaries`)."""
     state = loaded(task)
     renderer = state.renderer
-    if task.in_place:
+    if task.in_place and task.in_place != state.in_place:  # a point's seeds follow one another: set once
         renderer.set_values(dict(task.in_place))
+        state.in_place = task.in_place
         if not task.crop:  # the swept values move vertices: which part each pixel sees changes
-            state.part_image = renderer.part_image()
+            state.part_image = window_parts(renderer)
     radiance = renderer.render(spp=task.spp, seed=task.seed)
     state.renders += 1
     scene = renderer.assembly.scene
-    out = summaries(radiance, state.part_image, state.solid_angles, task.regions)
+    # summed over the rendered window only: black outside it, where no pixel sees a part
+    out = summaries(renderer.to_window(radiance), state.part_image, state.solid_angles, task.regions)
     if task.images:
         out["radiance"] = radiance
     if task.derivatives:
