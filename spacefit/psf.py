@@ -7,7 +7,6 @@ import math
 from typing import TYPE_CHECKING
 
 import numpy as np
-from scipy import optimize, special
 
 from spacefit.geometry.frames import Intrinsics
 from spacefit.sensor import Sensor
@@ -20,6 +19,13 @@ AIRY_FIRST_ZERO = 3.8317059702075125
 """First zero of the Bessel function J1: the Airy pattern's first dark ring is at x = pi D theta / lambda = 3.8317, theta = 1.21967 lambda / D."""
 PSF_ENERGY = 0.99
 """The Airy kernel reaches out to the radius that encloses this fraction of the energy (then it is normalised)."""
+AIRY_RADIUS_X = 64.02354017718858
+"""x = pi D theta / lambda within which the Airy pattern holds :data:`PSF_ENERGY` of its energy: the root of
+1 - J0(x)^2 - J1(x)^2 = 0.99 (Rayleigh 1881), written out (SciPy's root finder and Bessel functions cost a fit 0.3 s
+of imports; tests/test_sensor.py solves it again)."""
+AIRY_RMS_X = 4.52385485717649
+"""The rms width per axis, in x, of the Airy pattern within :data:`AIRY_RADIUS_X` X: ``X sqrt((J1^2 - J0 J2) /
+(2 (1 - J0^2 - J1^2)))`` at X (from the integral of x J1(x)^2, Watson 1944, 5.11); tests/test_sensor.py computes it again."""
 GAUSSIAN_RADIUS_SIGMA = 5.0
 """The Gaussian kernel reaches out to this many sigma (2.9e-7 of its energy lies beyond, per axis)."""
 
@@ -31,15 +37,12 @@ def airy_psf(theta_rad: Float[np.ndarray, "..."], wavelength_m: float, aperture_
     Its first zero is at theta = 1.21967 lambda / D. References: Airy (1835); Born & Wolf,
     "Principles of Optics", section 8.5.2.
     """
+    from scipy import special  # here: SciPy's import (0.3 s) is only this density's, which a fit never evaluates
+
     x = np.pi * aperture_diameter_m * np.abs(np.asarray(theta_rad, dtype=float)) / wavelength_m
     safe = np.where(x == 0.0, 1.0, x)  # 2 J1(x) / x -> 1 as x -> 0
     amplitude = np.where(x == 0.0, 1.0, 2.0 * special.j1(safe) / safe)
     return np.pi * aperture_diameter_m**2 / (4.0 * wavelength_m**2) * amplitude**2
-
-
-def _airy_radius(fraction: float) -> float:
-    """x = pi D theta / lambda within which the Airy pattern holds ``fraction`` of its energy (1 - J0^2 - J1^2, Rayleigh 1881)."""
-    return optimize.brentq(lambda x: 1.0 - special.j0(x) ** 2 - special.j1(x) ** 2 - fraction, 1e-6, 1e6)
 
 
 def _airy_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> float:
@@ -63,20 +66,15 @@ def diffraction_cutoff_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: 
 
 def psf_reach_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> int:
     """How far (px) the PSF reaches: 5 sigma of the Gaussian plus the radius holding 99 % of the Airy pattern's energy."""
-    airy = _airy_radius(PSF_ENERGY) * _airy_px(sensor, intrinsics, wavelength_m) if sensor.diffraction else 0.0
+    airy = AIRY_RADIUS_X * _airy_px(sensor, intrinsics, wavelength_m) if sensor.diffraction else 0.0
     return math.ceil(GAUSSIAN_RADIUS_SIGMA * sensor.psf_sigma_px + airy)
 
 
 def psf_rms_px(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> float:
     """The rms width (px, per axis) of the widest channel's PSF: sqrt(sigma^2 + a^2), a the Airy
-    pattern's within the radius X that holds 99 % of its energy: ``a^2 = X^2 (J1^2 - J0 J2) /
-    (2 (1 - J0^2 - J1^2))`` at X, in px (from the integral of x J1(x)^2, Watson 1944, 5.11)."""
+    pattern's within the radius that holds 99 % of its energy (:data:`AIRY_RMS_X`), in px."""
     widths = []
     for wavelength in sensor.wavelengths(channels):
-        airy = 0.0
-        if sensor.diffraction:
-            x = _airy_radius(PSF_ENERGY)
-            j0, j1, j2 = (special.jv(n, x) for n in (0, 1, 2))
-            airy = _airy_px(sensor, intrinsics, wavelength) * x * math.sqrt((j1**2 - j0 * j2) / (2.0 * (1.0 - j0**2 - j1**2)))
+        airy = _airy_px(sensor, intrinsics, wavelength) * AIRY_RMS_X if sensor.diffraction else 0.0
         widths.append(math.hypot(sensor.psf_sigma_px, airy))
     return max(widths)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from scipy import constants, integrate, special
+from scipy import constants, integrate, optimize, special
 
 from spacefit.errors import InputError
 from spacefit.formation import distort_image, expected_dn, expected_electrons, noise_variance_dn, observe
@@ -14,7 +14,7 @@ from spacefit.geometry.distortion import Distortion, distort, undistort
 from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
 from spacefit.formation import choose_exposure
 from spacefit.sensor import Sensor, quantise, saturated_mask
-from spacefit.psf import airy_psf, airy_transfer, psf_reach_px, psf_rms_px
+from spacefit.psf import AIRY_RADIUS_X, AIRY_RMS_X, PSF_ENERGY, airy_psf, airy_transfer, psf_reach_px, psf_rms_px
 
 THESIS = Intrinsics(7.0, 4e-3, 601, 601)  # Table 4-2's optics; odd size puts a pixel centre on the axis
 SHARP = dict(diffraction=False, psf_sigma_px=0.0)
@@ -298,6 +298,15 @@ def test_choose_exposure_refuses_bad_input(kwargs, words):
     with pytest.raises(InputError) as err:
         choose_exposure(**args)
     assert words in str(err.value)
+
+
+def test_the_airy_radius_and_rms_width_solve_their_equations():
+    """The radius holding PSF_ENERGY of the Airy pattern's energy, 1 - J0^2 - J1^2 = PSF_ENERGY (Rayleigh), and the
+    rms width within it, X sqrt((J1^2 - J0 J2) / (2 (1 - J0^2 - J1^2))) (Watson 5.11), as psf.py writes them out."""
+    x = optimize.brentq(lambda x: 1.0 - special.j0(x) ** 2 - special.j1(x) ** 2 - PSF_ENERGY, 1e-6, 1e6)
+    j0, j1, j2 = (special.jv(n, x) for n in (0, 1, 2))
+    assert AIRY_RADIUS_X == pytest.approx(x, rel=1e-12)
+    assert AIRY_RMS_X == pytest.approx(x * np.sqrt((j1**2 - j0 * j2) / (2.0 * (1.0 - j0**2 - j1**2))), rel=1e-12)
 
 
 def test_the_psf_reaches_five_sigma_and_its_widths_add_in_quadrature():

@@ -9,7 +9,9 @@ the floors on what is written): JAX opens its cache once per process and has no 
 
 JAX writes no entry for a program that calls back into Python (``jax.pure_callback``): the solver's step,
 the Jacobian and the residuals, whose renders are such callbacks, are compiled in every process (about
-5 of the 6 s, measured in docs/measurements/performance.md); the cache holds the fit's other programs (about 60 of 90).
+5 of the 6 s, measured in docs/measurements/performance.md): the step and the renders' own programs are compiled
+with LLVM's optimisations off (:data:`CALLBACK_COMPILER_OPTIONS`; the residuals' program is traced inside
+others too, where JAX takes no options); the cache holds the fit's other programs (about 60 of 90).
 
 A stale entry cannot be used: JAX names each entry by a hash of the program itself (its StableHLO), the
 jax and jaxlib versions, the backend and device kind and the compile options, so changed code, another
@@ -24,7 +26,9 @@ References:
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import jax
 
@@ -34,6 +38,18 @@ ENV = "SPACEFIT_JAX_CACHE_DIR"
 # Programs that compile faster than this are not written. JAX's default, 1 s, would leave out every cacheable
 # program of a fit on the CPU (0.01-0.07 s each); reading an entry back takes about a quarter of compiling it.
 MIN_COMPILE_S = 0.0
+# XLA's options for the programs that call back into Python for their renders (``jax.pure_callback``):
+# JAX's cache refuses them, so every process compiles them, and each runs a few times a fit, its time
+# mostly the renders'. LLVM's optimisations off (level 0, default 2): the solver's step compiled in
+# 2.9 s of CPU in place of 4.1 s and ran 0.04 s slower a call (0.26 s, load 12; performance.md).
+# JAX takes compiler options on a top-level jit only (one called from Python, not traced inside another).
+CALLBACK_COMPILER_OPTIONS = {"xla_backend_optimization_level": 0}
+
+
+def jit_calling_back(fn: Callable[..., Any], **jit_kwargs: Any) -> Callable[..., Any]:
+    """``jax.jit(fn)`` for a function that calls back into Python for its renders, compiled with
+    :data:`CALLBACK_COMPILER_OPTIONS`."""
+    return jax.jit(fn, compiler_options=CALLBACK_COMPILER_OPTIONS, **jit_kwargs)
 
 
 def compile_cache_dir() -> Path | None:

@@ -32,6 +32,7 @@ import numpy as np
 
 from spacefit import executors
 from spacefit.executors import Cluster, Executor, executor_of
+from spacefit.fitting.compile_cache import jit_calling_back
 from spacefit.precision import float64
 from spacefit.rendering.bridge import seeded_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
@@ -207,7 +208,7 @@ class Loaded:
                 out = image(y, seeds, view)
                 return out, out
 
-            self.compiled[name] = jax.jit(image if kind == "primal" else jax.jacfwd(twice, has_aux=True))
+            self.compiled[name] = jit_calling_back(image if kind == "primal" else jax.jacfwd(twice, has_aux=True))
         compiled = self.compiled[name]
         return lambda x, seeds: compiled(x, seeds, view)
 

@@ -23,6 +23,7 @@ import numpy as np
 import optimistix as optx
 
 from spacefit.errors import InputTypeError, check_choice, check_range, quote
+from spacefit.fitting.compile_cache import CALLBACK_COMPILER_OPTIONS, jit_calling_back
 from spacefit.fitting.normal_equations import NormalEquations
 
 # Residuals of an unconstrained vector u.
@@ -273,7 +274,7 @@ def _optimistix(solver: Solver, residual_u: ResidualFn, u: jax.Array, max_steps:
     tags: frozenset = frozenset()
     try:
         state = solver.init(fn, u, None, {}, f_struct, None, tags)
-        step = eqx.filter_jit(solver.step)
+        step = eqx.filter_jit(solver.step, compiler_options=CALLBACK_COMPILER_OPTIONS)  # its renders call back
         terminate = eqx.filter_jit(solver.terminate)
         result = optx.RESULTS.nonlinear_max_steps_reached
         k = 0
@@ -309,7 +310,7 @@ def _adam(solver: Adam, residual_u: ResidualFn, u: jax.Array, max_steps: int,
 
     import optax  # here: its import (0.2-0.6 s, with chex) is only Adam's, not the least-squares solvers' of every default fit
 
-    value_and_grad = jax.jit(jax.value_and_grad(loss_u))
+    value_and_grad = jit_calling_back(jax.value_and_grad(loss_u))
     opt = optax.adam(optax.cosine_decay_schedule(solver.learning_rate, max_steps))
     opt_state = opt.init(u)
     still = 0
