@@ -75,27 +75,43 @@ def unpack(applied: Array, owners: Sequence[int], transposed: Array | None = Non
     return jnp.where(own_block, taken, jnp.where(shared[:, None], shared_rows, 0.0))
 
 
+def batched(directions: np.ndarray, chunk: int, size: int | None = None) -> np.ndarray:
+    """``directions`` (m, n) as (batches, size, n), the last batch filled up with zero directions: ``size``
+    the fewest at most ``chunk`` that take them in as few batches (9 in 2 of 5, not 8 and 1), so that
+    every batch of a product has one shape (op by op, each shape compiles each op again)."""
+    if size is None:
+        size = -(-len(directions) // -(-len(directions) // chunk))
+    padded = np.zeros((-(-len(directions) // size) * size, directions.shape[1]))
+    padded[:len(directions)] = directions
+    return padded.reshape(-1, size, directions.shape[1])
+
+
 def by_columns(fn: Callable[[Array], Array], n: int, dtype: Any, chunk: int, owners: Sequence[int] | None = None,
                transposed: Callable[[Array], Array] | None = None) -> Array:
     """The n x n matrix M whose column j is ``fn(e_j)``, e_j the j-th of the ``n`` unit vectors, for
     ``fn`` a linear map that joins no two owners' columns (:func:`unpack`; ``owners`` None: every
-    column shared), applied to :func:`probes`' directions ``chunk`` at a time; ``transposed``: M^T's
-    map (None: M is symmetric). One vmapped call per chunk, run as it comes (op by op where called
-    outside a compiled program, as the covariance is; a scan of the same, compiled, took XLA
-    minutes on a pass)."""
+    column shared), applied to :func:`probes`' directions in :func:`batched` batches of at most
+    ``chunk``; ``transposed``: M^T's map (None: M is symmetric). One vmapped call per batch, run as it
+    comes (op by op where called outside a compiled program, as the covariance is; a scan of the
+    same, compiled, took XLA minutes on a pass)."""
     owners = (-1,) * n if owners is None else owners
     basis, _ = probes(owners)
-    applied = jnp.concatenate([jax.vmap(fn)(jnp.asarray(basis[i:i + chunk], dtype=dtype)) for i in range(0, len(basis), chunk)])
+    batches = batched(basis, chunk)
+
+    def apply(fn: Callable[[Array], Array], batches: np.ndarray, count: int) -> Array:
+        return jnp.concatenate([jax.vmap(fn)(jnp.asarray(batch, dtype=dtype)) for batch in batches])[:count]
+
+    applied = apply(fn, batches, len(basis))
     shared = np.eye(n)[np.asarray(owners) < 0]
     if transposed is None or len(shared) == len(basis):
         return unpack(applied, owners)
-    back = jnp.concatenate([jax.vmap(transposed)(jnp.asarray(shared[i:i + chunk], dtype=dtype)) for i in range(0, len(shared), chunk)])
-    return unpack(applied, owners, back)
+    return unpack(applied, owners, apply(transposed, batched(shared, chunk, batches.shape[1]), len(shared)))
 
 
 def gram(operator: lx.AbstractLinearOperator, chunk: int | None = None, owners: Sequence[int] | None = None) -> Array:
     """J^T J of a linear operator J, applied to :func:`probes`' directions of the columns' ``owners``
-    (None: every column shared), ``chunk`` at a time (default :func:`chunk_for` its rows)."""
+    (None: every column shared) in :func:`batched` batches of at most ``chunk`` (default
+    :func:`chunk_for` its rows)."""
     packed = lxi.pack_structures(operator)
     transposed = operator.transpose()
     dtype = jnp.result_type(*[leaf.dtype for leaf in jax.tree_util.tree_leaves(operator.in_structure())])
@@ -104,14 +120,12 @@ def gram(operator: lx.AbstractLinearOperator, chunk: int | None = None, owners: 
         image = operator.mv(lxi.unravel_solution(e, packed))
         return lxi.ravel_vector(transposed.mv(image), lxi.transpose_packed_structures(packed))
 
-    # inside the solver's compiled step: one loop body, not a copy per chunk
-    n, chunk = operator.in_size(), chunk or chunk_for(operator.out_size())
+    n = operator.in_size()
     owners = (-1,) * n if owners is None else owners
     basis, _ = probes(owners)
-    blocks = -(-len(basis) // chunk)
-    padded = np.zeros((blocks * chunk, n))
-    padded[:len(basis)] = basis
-    applied = jax.lax.map(jax.vmap(column), jnp.asarray(padded, dtype=dtype).reshape(blocks, chunk, n)).reshape(blocks * chunk, n)
+    batches = batched(basis, chunk or chunk_for(operator.out_size()))
+    # inside the solver's compiled step: one loop body, not a copy per batch
+    applied = jax.lax.map(jax.vmap(column), jnp.asarray(batches, dtype=dtype)).reshape(-1, n)
     g = unpack(applied[:len(basis)], owners)
     return 0.5 * (g + g.T)
 
