@@ -221,9 +221,10 @@ def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progr
         return _result(s, steps.ended(resume.ended, u), steps, solver_name(engine), loss)
     if resume.history:
         steps.resumed(resume.history, u)
+    told = with_owners(engine, column_owners(fp, problem.blocks))  # a pass's frames' own columns grouped
     try:
         with deferred_interrupts() as interrupts:
-            outcome = steps.run(drive(with_owners(engine, column_owners(fp, problem.blocks)), residual_u, u, max_steps, problem.loss_u_reverse), interrupts)
+            outcome = steps.run(drive(told, residual_u, u, max_steps, problem.loss_u_reverse), interrupts)
     except KeyboardInterrupt as signal:
         best = steps.best_u if steps.best_u is not None else u
         outcome = Outcome(Status.TERMINATED if isinstance(signal, Terminated) else Status.INTERRUPTED, best, len(steps.history))
