@@ -517,3 +517,36 @@ def test_a_fit_too_large_for_the_machine_is_refused_with_its_estimate_and_nothin
                  "--per-frame", "target.attitude_x_deg", "--spp", "8", "--out", str(tmp_path / "fit")])
     assert code == 2 and capsys.readouterr().err.strip() == f"spacefit: error: {message}"
     assert [p.name for p in tmp_path.iterdir()] == ["scene.toml"]
+
+
+@pytest.mark.slow
+def test_a_pass_s_normal_equations_and_errors_apply_one_direction_per_kind_of_own_value():
+    """Three frames, the legs' albedo and the blur shared, each frame's attitude and shift its own: J^T J of the
+    solver's damped operator and every product of the covariance, applied to 2 + 2 directions
+    (normal_equations.probes), equal those applied to the 8 columns one by one."""
+    import lineax as lx  # here: only this test builds the solver's operator itself
+
+    from spacefit.fitting.normal_equations import gram
+    from spacefit.fitting.uncertainty import covariance, linearise
+
+    specs = tiny_frames(3)
+    obs = [sf.Observation(spec.scene, sf.render(spec.scene.with_values({"render.spp": 4})), sigma=0.02) for spec in specs]
+    free = ["parts.legs.kd", "image.blur_sigma_px", *sf.Pass.from_columns({"file": ["a", "b", "c"], "time": [0, 1, 2]}).per_frame(
+        ["target.attitude_x_deg", "image.shift_x_px"])]
+    s = problem.setup(obs, free, start={"parts.legs.kd": 0.4, "image.blur_sigma_px": 0.5}, render=sf.FitRender(spp=2))
+    owners = problem.column_owners(s.solver_params, s.problem.blocks)
+    assert owners == (-1, -1, 0, 1, 2, 0, 1, 2)
+    lin = linearise(s.problem, s.x0)
+    alone = dataclasses.replace(lin, owners=None)
+    damped = lx.FunctionLinearOperator(lambda v: (lin.J1(v), 0.3 * v), jax.ShapeDtypeStruct((len(free),), lin.x.dtype))
+    # the renders' float32 sums, J^T v, round one way or the other: to 1e-9 of the largest entry here
+    want = gram(damped)
+    np.testing.assert_allclose(gram(damped, owners=owners), want, rtol=0.0, atol=1e-7 * np.abs(want).max())
+    # the noise known: the information, the render noise's (a weight joining neighbouring pixels) and the Jacobian noise's products
+    p = dataclasses.replace(s.problem, noise_known=True)
+    (cov, loss, fisher, correction), want = covariance(p, s.x0, lin), covariance(p, s.x0, alone)
+    stderr = np.sqrt(np.diag(want[0]))
+    assert np.all(np.abs(cov - want[0]) <= 1e-6 * np.outer(stderr, stderr))
+    assert np.all(np.abs(correction - want[3]) <= 1e-6 * stderr)
+    np.testing.assert_allclose(fisher, want[2], rtol=1e-6)
+    assert loss == want[1]

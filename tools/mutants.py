@@ -164,6 +164,10 @@ MUTANTS = (
     # ... and its compiled functions, each frame's view an operand: one program per loaded scene, not one per frame
     Mutant("frames-compile-a-program-each", "spacefit/fitting/frames.py", "name = (stage, spec.fd_steps, kind)",
            "name = (key, spec.fd_steps, kind)", ("tests/test_pass.py::test_the_frames_of_a_pass_compile_once_not_once_per_frame",)),
+    # ... and its normal equations, one direction per kind of own value: a shared row of an own column from the shared column
+    Mutant("own-column-shared-row-from-the-mixed-direction", "spacefit/fitting/normal_equations.py",
+           "jnp.where(shared[:, None], shared_rows, 0.0)", "jnp.where(shared[:, None], taken, 0.0)",
+           ("tests/test_normal_equations.py::test_gram_of_frames_own_columns_is_the_dense_product",)),
     Mutant("logistic-inverse-width", "spacefit/fitting/params.py", "p = (x - self.lo) / (self.hi - self.lo)\n        return jnp.log(p)",
            "p = (x - self.lo) / self.hi\n        return jnp.log(p)", (PROPERTIES,)),
     Mutant("sun-to-world-towards-the-sun", "spacefit/scene/conversions.py", 'return -xp.stack([xp.cos(el) * xp.cos(az)',

@@ -27,10 +27,10 @@ from spacefit.fitting.judging import judged_goodness, part_goodness, part_rows, 
 from spacefit.fitting.observations.base import Sequenced, ValueObservation
 from spacefit.fitting.observations.image import Observation
 from spacefit.fitting.pixel_grid import grid_notes
-from spacefit.fitting.problem import FitRender, Setup, setup
+from spacefit.fitting.problem import FitRender, Setup, column_owners, setup
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.resume import Resume
-from spacefit.fitting.solvers import Outcome, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name
+from spacefit.fitting.solvers import Outcome, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name, with_owners
 from spacefit.fitting.stopping import REJECTED_PATIENCE, REJECTED_RTOL, NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
@@ -221,9 +221,10 @@ def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progr
         return _result(s, steps.ended(resume.ended, u), steps, solver_name(engine), loss)
     if resume.history:
         steps.resumed(resume.history, u)
+    told = with_owners(engine, column_owners(fp, problem.blocks))  # a pass's frames' own columns grouped
     try:
         with deferred_interrupts() as interrupts:
-            outcome = steps.run(drive(engine, residual_u, u, max_steps, problem.loss_u_reverse), interrupts)
+            outcome = steps.run(drive(told, residual_u, u, max_steps, problem.loss_u_reverse), interrupts)
     except KeyboardInterrupt as signal:
         best = steps.best_u if steps.best_u is not None else u
         outcome = Outcome(Status.TERMINATED if isinstance(signal, Terminated) else Status.INTERRUPTED, best, len(steps.history))

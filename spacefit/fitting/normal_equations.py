@@ -4,16 +4,23 @@ A joint fit's Jacobian has a row per pixel of every frame and a column per free 
 own values included, so held whole it grows as frames^2: the 12-frame, 64-parameter pass held
 0.3 GB per copy at 128 x 128 px, and a dense QR keeps several. :class:`NormalEquations` is a lineax
 solver for the solvers' linearised (damped) Jacobian operator that never holds it: it applies the
-operator and its transpose to ``chunk`` unit vectors at a time and keeps only J^T J (columns^2),
-then solves J^T J dx = J^T b by a symmetric eigendecomposition, the pseudo-inverse where J^T J is
+operator and its transpose to a few directions at a time and keeps only J^T J (columns^2), then
+solves J^T J dx = J^T b by a symmetric eigendecomposition, the pseudo-inverse where J^T J is
 singular (the minimum-norm step of an undetermined direction, as the SVD gives). Forming J^T J
 squares the condition number, harmless in float64 for the fits' conditioning (measured against QR
 in tests/test_normal_equations.py).
+
+A frame's own values (its attitude, its shift) move its own pixels only, so the own columns of
+different frames are structurally orthogonal: one direction carries the same kind of own value
+of every frame at once (:func:`probes`), and J^T J is read back from the products
+(:func:`unpack`). Each product applies every frame's linearised model once; applied column by
+column, a pass of F frames with p own values each applied it F x p times for the own columns
+alone (the 12-frame pass: 9 directions against 64 columns; 100 frames: 9 against 504).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import equinox as eqx
@@ -21,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import lineax as lx
 import lineax.internal as lxi
+import numpy as np
 from jaxtyping import Array, PyTree
 
 # Columns applied at once: at most this many, and at most CHUNK_ELEMENTS values of rows-long vectors
@@ -34,16 +42,83 @@ def chunk_for(rows: int) -> int:
     return max(1, min(MAX_CHUNK, CHUNK_ELEMENTS // max(rows, 1)))
 
 
-def by_columns(fn: Callable[[Array], Array], n: int, dtype: Any, chunk: int) -> Array:
-    """The matrix whose column j is ``fn(e_j)``, e_j the j-th of the ``n`` unit vectors, ``chunk`` at a
-    time: one vmapped call per chunk, run as it comes (op by op where called outside a compiled
-    program, as the covariance is; a scan of the same, compiled, took XLA minutes on a pass)."""
-    basis = jnp.eye(n, dtype=dtype)
-    return jnp.concatenate([jax.vmap(fn)(basis[i:i + chunk]) for i in range(0, n, chunk)]).T
+def probes(owners: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
+    """The directions a product is applied to, given each column's owner (``owners[j]``: the
+    observation whose residuals alone column j moves, -1 for a column that moves several), and
+    which of them carries each column: a shared column alone (its unit vector), and the j-th own
+    column of every owner together (Curtis, Powell & Reid 1974's grouping of structurally
+    orthogonal columns), so that a joint fit of F frames applies a product to shared + per-frame
+    directions, not to shared + F x per-frame columns. Returns the (m, n) directions and, per
+    column, its direction's index."""
+    owners = np.asarray(owners, dtype=int)
+    shared = np.flatnonzero(owners < 0)
+    probe_of = np.zeros(owners.size, dtype=int)
+    probe_of[shared] = np.arange(shared.size)
+    for owner in np.unique(owners[owners >= 0]):
+        own = np.flatnonzero(owners == owner)
+        probe_of[own] = shared.size + np.arange(own.size)
+    basis = np.zeros((int(probe_of.max(initial=-1)) + 1, owners.size))
+    basis[probe_of, np.arange(owners.size)] = 1.0
+    return basis, probe_of
 
 
-def gram(operator: lx.AbstractLinearOperator, chunk: int | None = None) -> Array:
-    """J^T J of a linear operator J, ``chunk`` columns at a time (default :func:`chunk_for` its rows)."""
+def unpack(applied: Array, owners: Sequence[int], transposed: Array | None = None) -> Array:
+    """The n x n matrix M from its products with :func:`probes`' directions (``applied``: (m, n),
+    row p M times direction p), for an M that joins no two owners' columns (M[i, j] = 0 where i and
+    j are columns of different owners: J^T W J with W joining no two observations' residuals). A
+    direction of one owner's columns gives their rows of that owner and of the shared columns
+    mixed over the owners, so a shared row of an own column is taken from the shared column's
+    product with M^T: ``transposed`` (row s: M^T times the s-th shared column's unit vector; None:
+    M is symmetric, and M's own products give it)."""
+    owners = np.asarray(owners, dtype=int)
+    _, probe_of = probes(owners)
+    shared = owners < 0
+    taken = applied[probe_of].T  # taken[i, j]: row i of M times column j's direction
+    if transposed is None:
+        shared_rows = taken.T
+    else:
+        shared_rows = jnp.zeros_like(taken).at[np.flatnonzero(shared)].set(transposed)
+    own_block = shared[None, :] | (owners[:, None] == owners[None, :])
+    return jnp.where(own_block, taken, jnp.where(shared[:, None], shared_rows, 0.0))
+
+
+def batched(directions: np.ndarray, chunk: int, size: int | None = None) -> np.ndarray:
+    """``directions`` (m, n) as (batches, size, n), the last batch filled up with zero directions: ``size``
+    the fewest at most ``chunk`` that take them in as few batches (9 in 2 of 5, not 8 and 1), so that
+    every batch of a product has one shape (op by op, each shape compiles each op again)."""
+    if size is None:
+        size = -(-len(directions) // -(-len(directions) // chunk))
+    padded = np.zeros((-(-len(directions) // size) * size, directions.shape[1]))
+    padded[:len(directions)] = directions
+    return padded.reshape(-1, size, directions.shape[1])
+
+
+def by_columns(fn: Callable[[Array], Array], n: int, dtype: Any, chunk: int, owners: Sequence[int] | None = None,
+               transposed: Callable[[Array], Array] | None = None) -> Array:
+    """The n x n matrix M whose column j is ``fn(e_j)``, e_j the j-th of the ``n`` unit vectors, for
+    ``fn`` a linear map that joins no two owners' columns (:func:`unpack`; ``owners`` None: every
+    column shared), applied to :func:`probes`' directions in :func:`batched` batches of at most
+    ``chunk``; ``transposed``: M^T's map (None: M is symmetric). One vmapped call per batch, run as it
+    comes (op by op where called outside a compiled program, as the covariance is; a scan of the
+    same, compiled, took XLA minutes on a pass)."""
+    owners = (-1,) * n if owners is None else owners
+    basis, _ = probes(owners)
+    batches = batched(basis, chunk)
+
+    def apply(fn: Callable[[Array], Array], batches: np.ndarray, count: int) -> Array:
+        return jnp.concatenate([jax.vmap(fn)(jnp.asarray(batch, dtype=dtype)) for batch in batches])[:count]
+
+    applied = apply(fn, batches, len(basis))
+    shared = np.eye(n)[np.asarray(owners) < 0]
+    if transposed is None or len(shared) == len(basis):
+        return unpack(applied, owners)
+    return unpack(applied, owners, apply(transposed, batched(shared, chunk, batches.shape[1]), len(shared)))
+
+
+def gram(operator: lx.AbstractLinearOperator, chunk: int | None = None, owners: Sequence[int] | None = None) -> Array:
+    """J^T J of a linear operator J, applied to :func:`probes`' directions of the columns' ``owners``
+    (None: every column shared) in :func:`batched` batches of at most ``chunk`` (default
+    :func:`chunk_for` its rows)."""
     packed = lxi.pack_structures(operator)
     transposed = operator.transpose()
     dtype = jnp.result_type(*[leaf.dtype for leaf in jax.tree_util.tree_leaves(operator.in_structure())])
@@ -52,11 +127,13 @@ def gram(operator: lx.AbstractLinearOperator, chunk: int | None = None) -> Array
         image = operator.mv(lxi.unravel_solution(e, packed))
         return lxi.ravel_vector(transposed.mv(image), lxi.transpose_packed_structures(packed))
 
-    # inside the solver's compiled step: one loop body, not a copy per chunk
-    n, chunk = operator.in_size(), chunk or chunk_for(operator.out_size())
-    blocks = -(-n // chunk)
-    basis = jnp.eye(blocks * chunk, n, dtype=dtype).reshape(blocks, chunk, n)
-    g = jax.lax.map(jax.vmap(column), basis).reshape(blocks * chunk, n)[:n]
+    n = operator.in_size()
+    owners = (-1,) * n if owners is None else owners
+    basis, _ = probes(owners)
+    batches = batched(basis, chunk or chunk_for(operator.out_size()))
+    # inside the solver's compiled step: one loop body, not a copy per batch
+    applied = jax.lax.map(jax.vmap(column), jnp.asarray(batches, dtype=dtype)).reshape(-1, n)
+    g = unpack(applied[:len(basis)], owners)
     return 0.5 * (g + g.T)
 
 
@@ -65,16 +142,19 @@ class NormalEquations(lx.AbstractLinearSolver):
 
     Attributes:
         chunk: Jacobian columns applied at once (None: :func:`chunk_for` the operator's rows).
+        owners: per column of the operator, the observation whose residuals alone it moves, -1 for a
+            shared column (:func:`probes`; None: every column shared).
         rcond: eigenvalues of J^T J below ``rcond`` times the largest count as zero (default: machine
             epsilon times the number of columns, J^T J's own round-off).
     """
 
     chunk: int | None = eqx.field(static=True, default=None)
+    owners: tuple[int, ...] | None = eqx.field(static=True, default=None)
     rcond: float | None = None
 
     def init(self, operator: lx.AbstractLinearOperator, options: dict[str, Any]) -> Any:
         del options
-        values, vectors = jnp.linalg.eigh(gram(operator, self.chunk))
+        values, vectors = jnp.linalg.eigh(gram(operator, self.chunk, self.owners))
         return (values, vectors), operator.transpose(), lxi.pack_structures(operator)
 
     def compute(self, state: Any, vector: PyTree[Array], options: dict[str, Any]) -> tuple[PyTree[Array], lx.RESULTS, dict[str, Any]]:

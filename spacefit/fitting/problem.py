@@ -99,6 +99,16 @@ class Problem:
         return sum(ref.size for ref in self.references)
 
 
+def column_owners(free: FreeParameters, blocks: Sequence[Block]) -> tuple[int, ...] | None:
+    """Per free value, the image whose residuals alone it moves (its own value, ``image.scale@k``,
+    which no value observation knows), -1 for the others; None where every value is shared. The
+    normal equations of a joint fit apply their products to one direction for every image's own
+    value of one kind (:func:`~spacefit.fitting.normal_equations.probes`)."""
+    known = {n for block in blocks for n in block.known}
+    owners = tuple(-1 if Name(n).observation is None or n in known else Name(n).observation for n in free.names)
+    return owners if any(o >= 0 for o in owners) else None
+
+
 def _problem(
     observations: Sequence[Observation], free: FreeParameters, loss: str, spp: int | None, spp_grad: int | None,
     seed: int, seed_grad: int, integrator: str, executor: Executor | None = None, blocks: Sequence[Block] = (),

@@ -11,6 +11,7 @@ evaluation (the point, its loss and residuals) and returns an :class:`Outcome` w
 
 from __future__ import annotations
 
+import dataclasses
 import enum
 from collections.abc import Callable, Generator
 from dataclasses import dataclass
@@ -153,6 +154,16 @@ def make_solver(solver: str | Solver) -> Solver:
         raise InputTypeError(f"`solver` must be a name ({', '.join(SOLVERS)}), an optimistix least-squares solver or "
                              f"minimiser, or sf.Adam, got {quote(solver)}.")
     return solver
+
+
+def with_owners(solver: Solver, owners: tuple[int, ...] | None) -> Solver:
+    """``solver`` with each of its :class:`NormalEquations` told which observation's residuals alone
+    each column moves (:func:`~spacefit.fitting.problem.column_owners`): a joint fit's J^T J then costs
+    a product per shared value and per kind of own value, not per value. Other linear solvers as they are."""
+    def told(leaf: Any) -> Any:
+        return dataclasses.replace(leaf, owners=owners) if isinstance(leaf, NormalEquations) else leaf
+
+    return jax.tree_util.tree_map(told, solver, is_leaf=lambda leaf: isinstance(leaf, NormalEquations))
 
 
 def solver_name(solver: Solver) -> str:

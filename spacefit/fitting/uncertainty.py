@@ -22,7 +22,7 @@ import numpy as np
 from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, setup
+from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, column_owners, setup
 from spacefit.precision import float64
 from spacefit.scene.parameters import parameter
 
@@ -47,14 +47,17 @@ class Linearisation:
     J2: Callable[[jax.Array], jax.Array]
     J1T: Callable[[jax.Array], jax.Array]
     J2T: Callable[[jax.Array], jax.Array]
+    owners: tuple[int, ...] | None = None  # per value, the image whose residuals alone it moves (column_owners)
 
-    def columns(self, fn: Callable[[jax.Array], jax.Array]) -> np.ndarray:
-        """The n x n matrix whose column j is ``fn(e_j)``."""
-        return np.asarray(by_columns(fn, len(self.x), self.x.dtype, chunk_for(self.r.size)), dtype=float)
+    def columns(self, fn: Callable[[jax.Array], jax.Array], transposed: Callable[[jax.Array], jax.Array] | None = None) -> np.ndarray:
+        """The n x n matrix M whose column j is ``fn(e_j)``, for a map J^T W J that joins no two images'
+        residuals in W, applied to one direction per shared value and one per kind of own value
+        (:func:`~spacefit.fitting.normal_equations.by_columns`); ``transposed``: M^T's map (None: M is symmetric)."""
+        return np.asarray(by_columns(fn, len(self.x), self.x.dtype, chunk_for(self.r.size), self.owners, transposed), dtype=float)
 
     def cross(self, weight: Callable[[jax.Array], jax.Array]) -> np.ndarray:
-        """sym(J1^T W J2) for a symmetric linear map W of the residuals."""
-        m = self.columns(lambda e: self.J1T(weight(self.J2(e))))
+        """sym(J1^T W J2) for a symmetric linear map W of the residuals that joins no two images' residuals."""
+        m = self.columns(lambda e: self.J1T(weight(self.J2(e))), lambda e: self.J2T(weight(self.J1(e))))
         return 0.5 * (m + m.T)
 
     @cached_property
@@ -79,7 +82,8 @@ def linearise(problem: Problem, x: np.ndarray) -> Linearisation:
     r_alt, J2 = jax.linearize(problem.residual_x_independent, xj)
     # the transposes take the residuals' dtype (float32 renders: J^T v sums in float32, ~1e-6 relative)
     J1T, J2T = ((lambda v, t=jax.linear_transpose(J, xj), dtype=r.dtype: t(v.astype(dtype))[0]) for J in (J1, J2))
-    return Linearisation(xj, np.asarray(r, dtype=float), np.asarray(r_alt, dtype=float), J1, J2, J1T, J2T)
+    return Linearisation(xj, np.asarray(r, dtype=float), np.asarray(r_alt, dtype=float), J1, J2, J1T, J2T,
+                         column_owners(problem.free, problem.blocks))
 
 
 def _pseudo_inverse(information: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
