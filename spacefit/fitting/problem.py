@@ -84,9 +84,10 @@ class Problem:
     reference_spp: tuple[int | None, ...] = ()  # per image, its reference's (Observation.render_spp)
     blocks: tuple[Block, ...] = ()  # the value observations' residual blocks, after the images' pixels
     dark: tuple[float, ...] = ()  # per image, its model of no light in its unit (a sensor's bias, DN; 0 for radiance)
-    # physical x -> the change of the images' residuals from the fit's model to one made at 4x the
-    # resolution (spacefit.fitting.pixel_grid), or None where no image's blur width is free
-    pixel_grid: Callable[[np.ndarray], np.ndarray | None] | None = None
+    # physical x -> (y -> the change of the images' residuals from the fit's model to those made at 4x and 2x the
+    # resolution, from one render at x, the image nuisances y's: spacefit.fitting.pixel_grid), or None where no
+    # image's blur width is free
+    pixel_grid: Callable[[np.ndarray], Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None] | None = None
 
     @property
     def rendered(self) -> bool:
@@ -185,18 +186,29 @@ def _problem(
     # the pixel loss's residuals are the pixels', which the pixel grid's change is laid out as
     blurred = [loss == "pixel" and nuisance_index(free.names, "image.blur_sigma_px", k) is not None for k in range(len(observations))]
 
-    def pixel_grid(x: np.ndarray) -> np.ndarray | None:
-        """The images' residuals with each free blur's model made at 4x the resolution, less the fit's
-        (0 for the other images; :mod:`spacefit.fitting.pixel_grid`); None: no free blur, or a filter it does not model."""
+    def pixel_grid(x: np.ndarray) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
+        """``y ->`` the images' residuals with each free blur's model made at 4x and at 2x the resolution, each
+        less the fit's own (0 for the other images), from one render at ``x``, the image nuisances ``y``'s
+        (:mod:`spacefit.fitting.pixel_grid`); None: no free blur, or a filter it does not model."""
         values = {n: float(v) for n, v in zip(free.names, x) if Name(n).parameter in image_names}
-        out = []
-        for k, obs in enumerate(observations):
-            models = None
-            if blurred[k]:
-                scene = scene_with_values(obs.scene, values, observation=k).with_values({"render.spp": spps[k]})
-                models = grid_error_models(obs, scene, x, k, free.names, references[k].shape[-1], image_model, to_units[k])
-            out.append(np.zeros(references[k].size) if models is None else np.asarray(residuals[k](models[0]) - residuals[k](models[1]), dtype=float))
-        return np.concatenate(out) if any(np.any(o != 0) for o in out) else None
+        made = [grid_error_models(obs, scene_with_values(obs.scene, values, observation=k).with_values({"render.spp": spps[k]}),
+                                  x, k, free.names, references[k].shape[-1], image_model, to_units[k]) if blurred[k] else None
+                for k, obs in enumerate(observations)]
+        if not any(m is not None for m in made):
+            return None
+
+        def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+            parts = []
+            for k, models in enumerate(made):
+                if models is None:
+                    parts.append((np.zeros(references[k].size),) * 2)
+                    continue
+                finest, coarser, grid = models(y)
+                own = residuals[k](grid)
+                parts.append(tuple(np.asarray(residuals[k](m) - own, dtype=float) for m in (finest, coarser)))
+            return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+
+        return differences
 
     def resampled(factor: int) -> Problem:
         finer = [dataclasses.replace(o, scene=o.scene.with_values({"render.spp": factor * n})) for o, n in zip(observations, spps)]
