@@ -1,5 +1,5 @@
 """The pixel grid's model error of a fitted blur: measured at the result with one supersampled
-render, carried in the standard errors (issue 34).
+render, stepped over, what remains bounded and carried in the standard errors (issue 34).
 
 **The pixel-integrated blur.** A detector pixel k integrates the focal-plane image over its area:
 ``D_k = (L * G * P)(k)``, L the radiance, G the continuous PSF, P the pixel's response (the box
@@ -25,17 +25,51 @@ a 0.8 px Gaussian applied at 4 to 8 times the resolution, then binned) the blur 
 
 **Measured and carried.** At a fit's result (the pixel loss), for each image whose blur
 (``image.blur_sigma_px``) is free, :func:`grid_error_models` renders the fitted scene once at
-:data:`SUPERSAMPLE` times the resolution per axis with the box filter, and
-:func:`fine_and_grid_models` forms its model twice from that one render: the
-blur, the shift and the sensor's PSF applied at the fine scale and then the pixel's response
-(the box or tent of the fit's filter, :func:`response_matrix`), and the fit's own model on the
-pixel grid of the same render's pixel response. The two share every sample, so their difference
-is the grid's model error, not render noise. Its effect on the estimate is one Gauss-Newton step,
-``delta = -(J^T J)^-1 J^T (r_fine - r_grid)``: the values take it (the finer model's estimate) and
-the covariance carries ``delta delta^T`` (:func:`spacefit.fitting.uncertainty.estimate`), a bound
-on what remains: the finer model's own error (noise-free, 0.0005 px of the 0.036 at 32 px) and
-the step's linearisation (measured in the coverage study at 48 px: 0.003 px of 0.021 left over,
-docs/validation.md). The pixel's response is taken
+:data:`SUPERSAMPLE` times the resolution per axis with the box filter, bins it to :data:`COARSER`
+times (the box-filtered render at 2x, the same samples), and :func:`fine_and_grid_models` forms
+from them the model at 4x and at 2x (the blur, the shift and the sensor's PSF applied at the fine
+scale and then the pixel's response, the box or tent of the fit's filter, :func:`response_matrix`)
+and the fit's own model on the pixel grid of the same render's pixel response. They share every
+sample, so their differences are the grid's model error, not render noise; the image nuisances act
+on the one render, so the models follow the values ``y`` without another render.
+
+*The step.* The finer model's estimate is where ``J^T r_4(x*) = 0``; with the fit's model linear
+about its own estimate x (``J^T r_grid(x) = 0``), ``r_4(y) = r_grid(y) + d_4(y)`` gives the fixed
+point ``x* = x + step(d_4(x*))``, ``step(d) = -(J^T J)^-1 J^T d``: :func:`grid_step` iterates it
+(each iteration an FFT at the fine scale and a product with the Jacobian, no render). One step,
+``step(d_4(x))``, overshoots: at the fit's too-narrow blur the grid passes more of what aliases,
+so ``d_4`` is larger there than at the answer (noise-free, 32 px below: +0.0362 px where the 4x
+model's own minimum is +0.0344; the fixed point +0.0341; in the coverage study at 48 px, where the
+steps are 0.021 px, the one step left the blur 0.0027 px wide, 1.2 of its statistical errors).
+
+*What remains.* Write e(S) for the error of the model made at S x (fitted minus truth). If it
+falls as S^-p, e(2) = 2^p e(4), and the step from the 2x model to the 4x one,
+``step(d_4 - d_2) = e(2) - e(4)`` to first order, is (2^p - 1) e(4): for p = 2, e(4) is a third of
+it (:data:`REMAINDER_RATIO`). The covariance carries ``b b^T``, ``b = step(d_4 - d_2) / 3`` at x*
+(the two models' difference ``d_4 - d_2``: the 2x and 4x models, the fit's own cancels), in the
+values' coordinates, one shared systematic direction. Measured (``experiments/pixel_grid_remainder.py``:
+the panels case noise-free, box filter, the truth rendered at 8x, blurred by 0.8 px and shifted by
+(0.4, -0.25) px there and binned; the blur, shifts and scale fitted with the model made at 1x, 2x
+and 4x from the same render; 2026-11-28, load 5.5):
+
+=========  ==========  ==========  ==========  ======================
+32 px      e(1)        e(2)        e(4)        e(4) / (e(2) - e(4))
+=========  ==========  ==========  ==========  ======================
+blur       -0.03392    +0.00634    +0.00049    +0.08
+shift x    -0.00025    -0.00091    -0.00030    +0.49
+shift y    +0.00661    -0.00034    +0.00006    -0.15
+48 px
+blur       +0.00369    -0.00731    -0.00078    +0.12
+shift x    -0.00501    +0.00115    -0.00017    -0.13
+shift y    +0.00484    +0.00082    +0.00007    +0.10
+=========  ==========  ==========  ==========  ======================
+
+(px). The error falls faster than 1/S^2 for the blur (a Gaussian's transfer, not a power, cuts what
+aliases) and a third bounds it with room (0.08 and 0.12 of the difference); only the 32 px shift x
+is above it, 0.0003 px where the bound gives 0.0002 (the excess a fortieth of a shift's statistical
+error in the coverage study). The
+one step from the 1x estimate at 48 px was already at its fixed point (-0.00451 either way, the
+4x model's minimum -0.00447). The pixel's response is taken
 as the render filter's: a detector that integrates over its pixel is modelled with
 ``render.filter = "box"`` (the default tent adds 1/12 px^2 of blur to the model, which a fitted
 PSF width absorbs: 0.75 px for 0.8).
