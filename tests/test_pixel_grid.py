@@ -73,16 +73,17 @@ def test_the_grid_step_is_the_fixed_point_of_the_step_and_carries_a_third_of_the
     assert np.abs(np.linalg.eigvals(S @ A)).max() < 0.2  # a contraction: 8 iterations reach 1e-8
     calls = []
 
-    def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         calls.append(y)
-        return A @ y + a, A @ y + c
+        return A @ y + a, A @ y + c, y[0] * a
 
-    delta, remainder = grid_step(differences, lambda d: S @ d, x, np.full(3, 1e-12))
+    delta, remainder, noise = grid_step(differences, lambda d: S @ d, x, np.full(3, 1e-12))
     np.testing.assert_allclose(delta, np.linalg.solve(np.eye(3) - S @ A, S @ (A @ x + a)), rtol=0, atol=1e-7)
     np.testing.assert_allclose(remainder, REMAINDER_RATIO * S @ (a - c), rtol=1e-9)
+    np.testing.assert_allclose(noise, calls[-1][0] * a, rtol=1e-12)  # the render noise's draw at the last values
     assert REMAINDER_RATIO == 1.0 / 3.0 and len(calls) == FIXED_POINT_STEPS
     calls.clear()
-    delta, _ = grid_step(differences, lambda d: S @ d, x, np.full(3, 1e3))  # a step within a hundredth of the errors: not iterated
+    delta, _, _ = grid_step(differences, lambda d: S @ d, x, np.full(3, 1e3))  # a step within a hundredth of the errors: not iterated
     np.testing.assert_allclose(delta, S @ (A @ x + a), rtol=1e-12)
     assert len(calls) == 1
 

@@ -186,36 +186,38 @@ def binned(image: Float[Array, "H W c"], by: int) -> Float[Array, "h w c"]:
 
 
 def grid_error_models(obs: Observation, scene: Scene, x: Float[np.ndarray, " n"], k: int, names: Sequence[str], channels: int,
-                      image_model: ImageModel, grid_units: Callable[[Array], Array]) -> Callable[[np.ndarray], tuple[Array, Array, Array]] | None:
+                      image_model: ImageModel, grid_units: Callable[[Array], Array],
+                      seeds: Sequence[int]) -> Callable[[np.ndarray], list[tuple[Array, Array, Array]]] | None:
     """Image observation k's (``obs``; ``scene`` its scene at the values ``x``, ``channels`` its
-    reference's) models from one render of ``scene`` at :data:`SUPERSAMPLE` times the resolution,
-    as a function of the free values ``y`` (``names``; the render stays ``x``'s, the image
-    nuisances are ``y``'s): the model made at :data:`SUPERSAMPLE`, the one made at :data:`COARSER`
-    (the render binned) and the fit's own on the pixel grid (``grid_units`` its unit), by
-    :func:`fine_and_grid_models`; None for a pixel filter :data:`RESPONSES` lacks."""
+    reference's) models from a render of ``scene`` at :data:`SUPERSAMPLE` times the resolution per
+    seed of ``seeds``, as a function of the free values ``y`` (``names``; the renders stay ``x``'s,
+    the image nuisances are ``y``'s): per render, the model made at :data:`SUPERSAMPLE`, the one made
+    at :data:`COARSER` (the render binned) and the fit's own on the pixel grid (``grid_units`` its
+    unit), by :func:`fine_and_grid_models`; None for a pixel filter :data:`RESPONSES` lacks."""
     if scene.render.filter not in RESPONSES:
         return None
     intrinsics = Intrinsics.from_scene(scene)
     fine_units = in_unit_of(dataclasses.replace(obs, sensor=without_psf(obs.sensor)), channels, intrinsics)
-    fine = jnp.asarray(np.asarray(render(supersampled(scene, SUPERSAMPLE)), dtype=float))
-    coarser = binned(fine, SUPERSAMPLE // COARSER)
+    fine = [jnp.asarray(np.asarray(render(supersampled(scene, SUPERSAMPLE).with_values({"render.seed": seed})), dtype=float))
+            for seed in seeds]
     moves = [nuisance_index(names, n, k) for n in MOVES]
     optics = {f: fine_optics(obs.sensor, intrinsics, f, channels) for f in (SUPERSAMPLE, COARSER)}
 
-    def models(y: np.ndarray) -> tuple[Array, Array, Array]:
-        finest, grid = fine_and_grid_models(fine, scene.render.filter, y, k, image_model, fine_units, grid_units, optics[SUPERSAMPLE], moves)
-        return finest, fine_and_grid_models(coarser, scene.render.filter, y, k, image_model, fine_units, grid_units, optics[COARSER],
-                                            moves, COARSER)[0], grid
+    def made(image: Array, y: np.ndarray) -> tuple[Array, Array, Array]:
+        finest, grid = fine_and_grid_models(image, scene.render.filter, y, k, image_model, fine_units, grid_units, optics[SUPERSAMPLE], moves)
+        return finest, fine_and_grid_models(binned(image, SUPERSAMPLE // COARSER), scene.render.filter, y, k, image_model, fine_units,
+                                            grid_units, optics[COARSER], moves, COARSER)[0], grid
 
-    return models
+    return lambda y: [made(image, y) for image in fine]
 
 
-def grid_step(differences: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]], step: Callable[[np.ndarray], np.ndarray],
-              x: Float[np.ndarray, " n"], stderr: Float[np.ndarray, " n"]) -> tuple[np.ndarray, np.ndarray]:
-    """The step ``delta`` from the fit's estimate ``x`` to the model made at :data:`SUPERSAMPLE`'s, and
-    the bound on what remains of the grid's error after it (both in x's coordinates).
-    ``differences(y)``: the residuals' change from the fit's model to the one made at
-    :data:`SUPERSAMPLE` and to the one made at :data:`COARSER` at the values ``y``; ``step(d)``: the
+def grid_step(differences: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]], step: Callable[[np.ndarray], np.ndarray],
+              x: Float[np.ndarray, " n"], stderr: Float[np.ndarray, " n"]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The step ``delta`` from the fit's estimate ``x`` to the model made at :data:`SUPERSAMPLE`'s, the
+    bound on what remains of the grid's error after it (both in x's coordinates) and one draw of
+    the render noise of the residuals' change at ``x + delta``. ``differences(y)``: the residuals'
+    change from the fit's model to the one made at :data:`SUPERSAMPLE` and to the one made at
+    :data:`COARSER` at the values ``y``, and a draw of the first's render noise; ``step(d)``: the
     Gauss-Newton step of a change ``d`` of the residuals. ``delta`` is the fixed point
     ``x + delta = x + step(d(x + delta))``, iterated from ``step(d(x))`` until it moves by less than
     :data:`FIXED_POINT_TOLERANCE` of a standard error ``stderr`` (at most :data:`FIXED_POINT_STEPS`
@@ -223,11 +225,11 @@ def grid_step(differences: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]]
     step from the model made at :data:`COARSER` to the one made at :data:`SUPERSAMPLE`."""
     delta = np.zeros(len(x))
     for _ in range(FIXED_POINT_STEPS):
-        fine, coarser = differences(x + delta)
+        fine, coarser, noise = differences(x + delta)
         moved, delta = delta, step(fine)
         if np.all(np.abs(delta - moved) <= FIXED_POINT_TOLERANCE * stderr):
             break
-    return delta, REMAINDER_RATIO * step(fine - coarser)
+    return delta, REMAINDER_RATIO * step(fine - coarser), noise
 
 
 def grid_notes(errors: dict[str, float], stderr: dict[str, float]) -> list[str]:

@@ -13,6 +13,7 @@ its render in JAX (:mod:`spacefit.fitting.nuisance`).
 from __future__ import annotations
 
 import dataclasses
+import math
 import warnings
 from contextvars import ContextVar
 from collections.abc import Callable, Mapping, Sequence
@@ -47,6 +48,8 @@ from spacefit.scene.conversions import G_of, rms_of
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
 # Seed offset of the second, independent Jacobian used for the standard errors.
 INDEPENDENT_SEED_OFFSET = 1000
+# the pixel grid's renders at 4x the resolution take the fit's seed plus this, and that plus INDEPENDENT_SEED_OFFSET
+PIXEL_GRID_SEED_OFFSET = 500
 
 
 @dataclass
@@ -85,9 +88,9 @@ class Problem:
     blocks: tuple[Block, ...] = ()  # the value observations' residual blocks, after the images' pixels
     dark: tuple[float, ...] = ()  # per image, its model of no light in its unit (a sensor's bias, DN; 0 for radiance)
     # physical x -> (y -> the change of the images' residuals from the fit's model to those made at 4x and 2x the
-    # resolution, from one render at x, the image nuisances y's: spacefit.fitting.pixel_grid), or None where no
-    # image's blur width is free
-    pixel_grid: Callable[[np.ndarray], Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None] | None = None
+    # resolution, from two renders at x, the image nuisances y's, and a draw of its render noise:
+    # spacefit.fitting.pixel_grid), or None where no image's blur width is free
+    pixel_grid: Callable[[np.ndarray], Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None] | None = None
 
     @property
     def rendered(self) -> bool:
@@ -186,27 +189,32 @@ def _problem(
     # the pixel loss's residuals are the pixels', which the pixel grid's change is laid out as
     blurred = [loss == "pixel" and nuisance_index(free.names, "image.blur_sigma_px", k) is not None for k in range(len(observations))]
 
-    def pixel_grid(x: np.ndarray) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray]] | None:
+    def pixel_grid(x: np.ndarray) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
         """``y ->`` the images' residuals with each free blur's model made at 4x and at 2x the resolution, each
-        less the fit's own (0 for the other images), from one render at ``x``, the image nuisances ``y``'s
-        (:mod:`spacefit.fitting.pixel_grid`); None: no free blur, or a filter it does not model."""
+        less the fit's own (0 for the other images), from two renders at ``x`` with independent seeds (the
+        changes their mean), the image nuisances ``y``'s, and a draw of the first change's render noise (the
+        two renders' difference over sqrt 2) (:mod:`spacefit.fitting.pixel_grid`); None: no free blur, or a
+        filter it does not model."""
         values = {n: float(v) for n, v in zip(free.names, x) if Name(n).parameter in image_names}
+        seeds = (seed + PIXEL_GRID_SEED_OFFSET, seed + PIXEL_GRID_SEED_OFFSET + INDEPENDENT_SEED_OFFSET)
         made = [grid_error_models(obs, scene_with_values(obs.scene, values, observation=k).with_values({"render.spp": spps[k]}),
-                                  x, k, free.names, references[k].shape[-1], image_model, to_units[k]) if blurred[k] else None
+                                  x, k, free.names, references[k].shape[-1], image_model, to_units[k], seeds) if blurred[k] else None
                 for k, obs in enumerate(observations)]
         if not any(m is not None for m in made):
             return None
 
-        def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             parts = []
             for k, models in enumerate(made):
                 if models is None:
-                    parts.append((np.zeros(references[k].size),) * 2)
+                    parts.append(np.zeros((3, references[k].size)))
                     continue
-                finest, coarser, grid = models(y)
-                own = residuals[k](grid)
-                parts.append(tuple(np.asarray(residuals[k](m) - own, dtype=float) for m in (finest, coarser)))
-            return np.concatenate([p[0] for p in parts]), np.concatenate([p[1] for p in parts])
+                (finest, coarser, grid), (finest_b, coarser_b, grid_b) = models(y)
+                own, own_b = residuals[k](grid), residuals[k](grid_b)
+                fine_a, fine_b = residuals[k](finest) - own, residuals[k](finest_b) - own_b
+                parts.append(np.asarray([0.5 * (fine_a + fine_b), 0.5 * (residuals[k](coarser) - own + residuals[k](coarser_b) - own_b),
+                                         (fine_a - fine_b) / math.sqrt(2.0)], dtype=float))
+            return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
 
         return differences
 

@@ -300,9 +300,11 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     differences = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
     if differences is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
         padding = np.zeros(lin.r.size - s.problem.pixels)
-        delta, remainder = grid_step(lambda y: tuple(np.concatenate([d, padding]) for d in differences(y)), lin.step, x,
-                                     np.sqrt(np.diag(cov)))
-        cov = cov + np.outer(remainder, remainder)
+        delta, remainder, noise = grid_step(lambda y: tuple(np.concatenate([d, padding]) for d in differences(y)), lin.step, x,
+                                            np.sqrt(np.diag(cov)))
+        # the step's render noise: the mean of two renders' changes, through the sandwich as the fit's own render noise
+        bread = _pseudo_inverse(lin.information)[0]
+        cov = cov + np.outer(remainder, remainder) + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread
         if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + delta)):
             x = x + delta
         extras["pixel_grid_error"] = dict(zip(s.solver_params.names, delta.tolist()))
