@@ -288,7 +288,8 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     one made at 4x the resolution (:func:`~spacefit.fitting.pixel_grid.grid_step`; extras ``pixel_grid_error``,
     solver coordinates; skipped where it would leave a range), and the covariance carries ``b b^T``, ``b``
     the bound on what remains of the grid's error after it (a third of the step from the model made at 2x
-    to the one made at 4x; extras ``pixel_grid_remainder``, its magnitude)."""
+    to the one made at 4x; extras ``pixel_grid_remainder``, its magnitude), and the step's render noise
+    (two renders at 4x, their change's difference through :func:`render_meat` at half weight)."""
     lin = linearise(s.problem, x)
     cov, loss_value, fisher, correction = covariance(s.problem, x, lin)
     if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
