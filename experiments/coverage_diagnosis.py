@@ -11,10 +11,13 @@ truth, sensor and seeds' rule), all eight parameters free:
   (``2 s + 101``, ``2 s + 102``, as the study seeds a fit): the shipped estimate
   (:func:`spacefit.fitting.uncertainty.estimate`) per pair, its scatter against the covariance's
   render and Jacobian noise part (``sqrt(stderr^2 - bread)``);
+* ``exposures``: the study's exposures (seeds 11, 12, ...) each with its fit's render seeds: the
+  shipped estimate linearised at the truth, against the fits' values in the study's ``coverage.csv``
+  (what the fits add: their stopping and non-linearity);
 * ``fine``: one exposure and render seed pair, ``--count`` seeds of the scene (which the pixel
   grid's renders at 4x took before they took the fit's): the pixel grid's step per seed.
 
-Run: ``.venv/bin/python experiments/coverage_diagnosis.py photon|render|fine [--count N]``
+Run: ``.venv/bin/python experiments/coverage_diagnosis.py photon|render|exposures|fine [--count N]``
 (``photon`` about a minute, the others about 20 s per estimate on a quiet machine).
 """
 
@@ -40,7 +43,8 @@ from spacefit.scene.assembly import assemble
 @float64
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("source", choices=("photon", "render", "fine"))
+    parser.add_argument("source", choices=("photon", "render", "exposures", "fine"))
+    parser.add_argument("--first-exposure", type=int, default=1000, help="photon: the first exposure's noise seed")
     parser.add_argument("--count", type=int, default=None, help="draws (default: photon 400, else 12)")
     args = parser.parse_args()
     count = args.count or (400 if args.source == "photon" else 12)
@@ -67,7 +71,7 @@ def main() -> None:
         model = s.problem.renders_x(jnp.asarray(s.x0))[0]
         steps = []
         for k in range(count):
-            obs = sf.Observation(scene, sf.observe(truth, sensor, intrinsics, 1000 + k).astype(float), sensor=sensor)
+            obs = sf.Observation(scene, sf.observe(truth, sensor, intrinsics, args.first_exposure + k).astype(float), sensor=sensor)
             ref, used = check_reference(obs, 0)
             r = jnp.asarray(np.asarray(image_residual(obs, ref, used, "pixel")(model), dtype=float))
             steps.append(-bread @ (0.5 * (np.asarray(lin.J1T(r)) + np.asarray(lin.J2T(r)))))
@@ -75,14 +79,20 @@ def main() -> None:
     else:
         values, parts = [], []
         for k in range(count):
-            s = problem(exposure, seed=11 + k) if args.source == "render" else problem(exposure, scene_seed=1000 + 7 * k)
+            if args.source == "fine":
+                s = problem(exposure, scene_seed=1000 + 7 * k)
+            else:
+                s = problem(exposure if args.source == "render" else sf.observe(truth, sensor, intrinsics, 11 + k).astype(float), seed=11 + k)
             x, cov, _, extras = estimate(s, s.x0)
             bread = _pseudo_inverse(linearise(s.problem, s.x0).information)[0]
-            values.append(x if args.source == "render" else [extras["pixel_grid_error"][n] for n in names])
+            values.append([extras["pixel_grid_error"][n] for n in names] if args.source == "fine" else x)
             parts.append(np.sqrt(np.clip(np.diag(cov) - np.diag(bread), 0.0, None)) if args.source == "render" else np.sqrt(np.diag(cov)))
             print(f"draw {k}: " + ", ".join(f"{n} {v:+.4g}" for n, v in zip(names, values[-1])), flush=True)
         spread, predicted = np.std(values, axis=0, ddof=1), np.mean(parts, axis=0)
-    label = {"photon": "the bread", "render": "the covariance's render and Jacobian part", "fine": "the standard error"}[args.source]
+    if args.source == "exposures":  # the scatter about the truth (rms error), not about the mean
+        spread = np.sqrt(np.mean((np.asarray(values) - np.array(list(truths.values()))) ** 2, axis=0))
+    label = {"photon": "the bread", "render": "the covariance's render and Jacobian part", "exposures": "the mean standard error",
+             "fine": "the standard error"}[args.source]
     print(f"{args.source}: {count} draws; per parameter the scatter, {label}, their ratio")
     for n, a, b in zip(names, spread, predicted):
         print(f"  {n}: {a:.4g}  {b:.4g}  {a / b:.3f}")
