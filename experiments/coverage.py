@@ -27,8 +27,9 @@ render seed, so that the render noise of the fit is part of what the errors must
   through the sensor. The fits render with the box filter (a detector's pixel response: the default
   tent filter adds 1/12 px^2 of blur, the PSF width then comes out sqrt(0.8^2 - 1/12) = 0.75 px)
   and their own seeds; the results go to ``nuisances_supersampled/``. Each row also holds the
-  fit's pixel-grid step (``pixel_grid_error``, :mod:`spacefit.fitting.pixel_grid`) and its standard
-  error without the carried step (``statistical_stderr``, ``covered_statistical``);
+  fit's pixel-grid step (``pixel_grid_error``, :mod:`spacefit.fitting.pixel_grid`), the bound on what
+  remains of it that the standard error carries (``pixel_grid_remainder``) and the standard error
+  without it (``statistical_stderr``, ``covered_statistical``);
 * ``--linearised``: the nuisance study without fits, each exposure's estimate one Gauss-Newton step
   from the truth: the fit's own minimum of 0.5 |r|^2 (with the errors of a fit that stops there)
   against the two-seed estimate spacefit reports, to tell a bias of the estimate from a scale of
@@ -141,12 +142,14 @@ def realisations(case: sf.Case, truth: np.ndarray, sensor: sf.Sensor, count: int
         result = sf.fit(sf.Observation(scene, dn, sensor=sensor), list(truths), start=start,
                         render=sf.FitRender(seed=2 * seed + 101, seed_grad=2 * seed + 102))
         grid = result.extras.get("pixel_grid_error", {})
+        remainder = result.extras.get("pixel_grid_remainder", {})
         for name, true in truths.items():
             value, stderr = result.values[name], result.stderr[name]
-            statistical = float(np.sqrt(max(stderr**2 - grid.get(name, 0.0) ** 2, 0.0)))  # without the pixel grid's carried error
+            statistical = float(np.sqrt(max(stderr**2 - remainder.get(name, 0.0) ** 2, 0.0)))  # without the pixel grid's carried remainder
             rows.append({"seed": seed, "psf_sigma_px": sensor.psf_sigma_px, "exposure_time_s": sensor.exposure_time_s,
                          "parameter": name, "truth": true, "value": value, "stderr": stderr, "z": (value - true) / stderr,
                          "covered": bool(abs(value - true) <= stderr), "pixel_grid_error": grid.get(name, 0.0),
+                         "pixel_grid_remainder": remainder.get(name, 0.0),
                          "statistical_stderr": statistical, "covered_statistical": bool(abs(value - true) <= statistical),
                          "steps": result.steps, "status": result.status.name})
         print(f"seed {seed}, sigma {sensor.psf_sigma_px:g} px: {result.status.name}, {result.wall_time_s:.1f} s", flush=True)

@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.fitting.nuisance import image_model
-from spacefit.fitting.pixel_grid import MOVES, fine_and_grid_models, response_matrix
+from spacefit.fitting.pixel_grid import FIXED_POINT_STEPS, MOVES, REMAINDER_RATIO, binned, fine_and_grid_models, grid_step, response_matrix
 from spacefit.fitting.uncertainty import linearise
 
 FACTOR = 4
@@ -60,3 +60,35 @@ def test_the_systematic_step_is_the_least_squares_step_of_the_residuals_change()
     J1, J2 = J + noise, J - noise
     expected = -np.linalg.solve(0.5 * (J1.T @ J2 + J2.T @ J1), J.T @ d)
     np.testing.assert_allclose(systematic_step(J1, J2, d), expected, rtol=1e-9)
+
+
+def test_the_grid_step_is_the_fixed_point_of_the_step_and_carries_a_third_of_the_coarser_models_step():
+    """Residual changes linear in the values, d_S(y) = A y + a and d_C(y) = A y + c, with a linear
+    step S d = -(J^T J)^-1 J^T d: the fixed point delta = S d_S(x + delta) is (I - S A)^-1 S (A x + a),
+    and the bound what remains is a third of S (a - c), the step from the coarser model to the finer."""
+    rng = np.random.default_rng(5)
+    J, A = rng.normal(size=(40, 3)), 0.3 * rng.normal(size=(40, 3))
+    a, c, x = rng.normal(size=40), rng.normal(size=40), np.array([0.8, 0.1, -0.2])
+    S = -np.linalg.solve(J.T @ J, J.T)
+    assert np.abs(np.linalg.eigvals(S @ A)).max() < 0.2  # a contraction: 8 iterations reach 1e-8
+    calls = []
+
+    def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        calls.append(y)
+        return A @ y + a, A @ y + c, y[0] * a
+
+    delta, remainder, noise = grid_step(differences, lambda d: S @ d, x, np.full(3, 1e-12))
+    np.testing.assert_allclose(delta, np.linalg.solve(np.eye(3) - S @ A, S @ (A @ x + a)), rtol=0, atol=1e-7)
+    np.testing.assert_allclose(remainder, REMAINDER_RATIO * S @ (a - c), rtol=1e-9)
+    np.testing.assert_allclose(noise, calls[-1][0] * a, rtol=1e-12)  # the render noise's draw at the last values
+    assert REMAINDER_RATIO == 1.0 / 3.0 and len(calls) == FIXED_POINT_STEPS
+    calls.clear()
+    delta, _, _ = grid_step(differences, lambda d: S @ d, x, np.full(3, 1e3))  # a step within a hundredth of the errors: not iterated
+    np.testing.assert_allclose(delta, S @ (A @ x + a), rtol=1e-12)
+    assert len(calls) == 1
+
+
+def test_a_box_render_binned_is_the_box_render_at_the_coarser_resolution():
+    fine = np.random.default_rng(2).random((8, 12, 3))
+    np.testing.assert_allclose(np.asarray(binned(jnp.asarray(fine), 2))[1, 2], fine[2:4, 4:6].mean(axis=(0, 1)), rtol=1e-6)
+    assert binned(jnp.asarray(fine), 4).shape == (2, 3, 3)

@@ -1,5 +1,5 @@
 """The pixel grid's model error of a fitted blur: measured at the result with one supersampled
-render, carried in the standard errors (issue 34).
+render, stepped over, what remains bounded and carried in the standard errors (issue 34).
 
 **The pixel-integrated blur.** A detector pixel k integrates the focal-plane image over its area:
 ``D_k = (L * G * P)(k)``, L the radiance, G the continuous PSF, P the pixel's response (the box
@@ -24,18 +24,63 @@ a 0.8 px Gaussian applied at 4 to 8 times the resolution, then binned) the blur 
 0.797; at 4x, 0.8005 (32 px).
 
 **Measured and carried.** At a fit's result (the pixel loss), for each image whose blur
-(``image.blur_sigma_px``) is free, :func:`grid_error_models` renders the fitted scene once at
-:data:`SUPERSAMPLE` times the resolution per axis with the box filter, and
-:func:`fine_and_grid_models` forms its model twice from that one render: the
-blur, the shift and the sensor's PSF applied at the fine scale and then the pixel's response
-(the box or tent of the fit's filter, :func:`response_matrix`), and the fit's own model on the
-pixel grid of the same render's pixel response. The two share every sample, so their difference
-is the grid's model error, not render noise. Its effect on the estimate is one Gauss-Newton step,
-``delta = -(J^T J)^-1 J^T (r_fine - r_grid)``: the values take it (the finer model's estimate) and
-the covariance carries ``delta delta^T`` (:func:`spacefit.fitting.uncertainty.estimate`), a bound
-on what remains: the finer model's own error (noise-free, 0.0005 px of the 0.036 at 32 px) and
-the step's linearisation (measured in the coverage study at 48 px: 0.003 px of 0.021 left over,
-docs/validation.md). The pixel's response is taken
+(``image.blur_sigma_px``) is free, :func:`grid_error_models` renders the fitted scene at
+:data:`SUPERSAMPLE` times the resolution per axis with the box filter (the fit's samples per sensor
+pixel), twice with independent seeds (the fit's own plus an offset), bins each to :data:`COARSER`
+times (the box-filtered render at 2x, the same samples), and :func:`fine_and_grid_models` forms
+from them the model at 4x and at 2x (the blur, the shift and the sensor's PSF applied at the fine
+scale and then the pixel's response, the box or tent of the fit's filter, :func:`response_matrix`)
+and the fit's own model on the pixel grid of the same render's pixel response. The image nuisances
+act on the renders, so the models follow the values ``y`` without another render.
+
+*Its render noise.* The fine and grid models of one render share its samples, but not their
+noise's fate: the render noise above the grid's Nyquist frequency, which the fine model blurs
+away, the grid's model folds to below it, so each render's change ``d_4`` carries a share of the
+render noise (measured at 48 px, the coverage study's case at the truth, 8 seeds of one render:
+the step's scatter 0.0015 px for the blur, 0.6 of its statistical error; shift y 0.0012 px, 0.4;
+attitude z 0.0055 deg, 0.2; the materials 0.02 to 0.06). With the scene's one seed every fit had
+drawn the same noise, a bias shared by every exposure (the blur's mean z -0.61 over 20). The two
+renders' mean change is stepped over, and its render noise carried as the fit's own is
+(:func:`spacefit.fitting.uncertainty.render_meat` of the draw ``(d_a - d_b) / sqrt 2``, through the
+sandwich at half weight: the mean of two).
+
+*The step.* The finer model's estimate is where ``J^T r_4(x*) = 0``; with the fit's model linear
+about its own estimate x (``J^T r_grid(x) = 0``), ``r_4(y) = r_grid(y) + d_4(y)`` gives the fixed
+point ``x* = x + step(d_4(x*))``, ``step(d) = -(J^T J)^-1 J^T d``: :func:`grid_step` iterates it
+(each iteration an FFT at the fine scale and a product with the Jacobian, no render). One step,
+``step(d_4(x))``, overshoots: at the fit's too-narrow blur the grid passes more of what aliases,
+so ``d_4`` is larger there than at the answer (noise-free, 32 px below: +0.0362 px where the 4x
+model's own minimum is +0.0344; the fixed point +0.0341; in the coverage study at 48 px, where the
+steps are 0.021 px, the one step left the blur 0.0027 px wide, 1.2 of its statistical errors).
+
+*What remains.* Write e(S) for the error of the model made at S x (fitted minus truth). If it
+falls as S^-p, e(2) = 2^p e(4), and the step from the 2x model to the 4x one,
+``step(d_4 - d_2) = e(2) - e(4)`` to first order, is (2^p - 1) e(4): for p = 2, e(4) is a third of
+it (:data:`REMAINDER_RATIO`). The covariance carries ``b b^T``, ``b = step(d_4 - d_2) / 3`` at x*
+(the two models' difference ``d_4 - d_2``: the 2x and 4x models, the fit's own cancels), in the
+values' coordinates, one shared systematic direction. Measured (``experiments/pixel_grid_remainder.py``:
+the panels case noise-free, box filter, the truth rendered at 8x, blurred by 0.8 px and shifted by
+(0.4, -0.25) px there and binned; the blur, shifts and scale fitted with the model made at 1x, 2x
+and 4x from the same render; 2026-11-28, load 5.5):
+
+=========  ==========  ==========  ==========  ======================
+32 px      e(1)        e(2)        e(4)        e(4) / (e(2) - e(4))
+=========  ==========  ==========  ==========  ======================
+blur       -0.03392    +0.00634    +0.00049    +0.08
+shift x    -0.00025    -0.00091    -0.00030    +0.49
+shift y    +0.00661    -0.00034    +0.00006    -0.15
+48 px
+blur       +0.00369    -0.00731    -0.00078    +0.12
+shift x    -0.00501    +0.00115    -0.00017    -0.13
+shift y    +0.00484    +0.00082    +0.00007    +0.10
+=========  ==========  ==========  ==========  ======================
+
+(px). The error falls faster than 1/S^2 for the blur (a Gaussian's transfer, not a power, cuts what
+aliases) and a third bounds it with room (0.08 and 0.12 of the difference); only the 32 px shift x
+is above it, 0.0003 px where the bound gives 0.0002 (the excess a fortieth of a shift's statistical
+error in the coverage study). The
+one step from the 1x estimate at 48 px was already at its fixed point (-0.00451 either way, the
+4x model's minimum -0.00447). The pixel's response is taken
 as the render filter's: a detector that integrates over its pixel is modelled with
 ``render.filter = "box"`` (the default tent adds 1/12 px^2 of blur to the model, which a fitted
 PSF width absorbs: 0.75 px for 0.8).
@@ -64,6 +109,16 @@ SUPERSAMPLE = 4
 transfer at the fine grid's Nyquist frequency, 2 cycles per px, is 1e-22: nothing aliases there)."""
 RESPONSES = {"box": lambda t: (np.abs(t) <= 0.5).astype(float), "tent": lambda t: np.clip(1.0 - np.abs(t), 0.0, None)}
 """A pixel's response across one axis (t in px from its centre) for each render filter the check models."""
+COARSER = 2
+"""Fine pixels per sensor pixel and axis of the second model (the :data:`SUPERSAMPLE` render binned), whose step to the
+finer model's bounds what remains after it."""
+REMAINDER_RATIO = 1.0 / 3.0
+"""What remains of the grid's error after the model made at :data:`SUPERSAMPLE`, per the difference of its step and the
+:data:`COARSER` model's: e(4) = (e(2) - e(4)) / 3 for an error falling as 1/S^2 (measured to fall faster: module docstring)."""
+FIXED_POINT_STEPS = 8
+"""At most this many evaluations of the step's fixed point (:func:`grid_step`)."""
+FIXED_POINT_TOLERANCE = 0.01
+"""The step's fixed point is taken as reached when an iteration moves every value by less than this many standard errors."""
 MOVES = ("image.blur_sigma_px", "image.shift_x_px", "image.shift_y_px")
 """The image nuisances in px, which scale with the resolution."""
 STEPS_PER_FINE_PX = 16  # quadrature points per fine pixel in :func:`response_matrix`
@@ -134,24 +189,64 @@ def fine_and_grid_models(fine: Float[Array, "H W c"], pixel_filter: str, x: Floa
     return fine_units(respond(optics(image_model(image, x_fine, k)))), grid_units(image_model(respond(image), x, k))
 
 
+def binned(image: Float[Array, "H W c"], by: int) -> Float[Array, "h w c"]:
+    """``image`` averaged over blocks of ``by`` x ``by`` pixels: a box-filtered render at ``by`` times
+    the resolution made the box-filtered render at 1x (the same samples)."""
+    h, w, c = image.shape
+    return image.reshape(h // by, by, w // by, by, c).mean(axis=(1, 3))
+
+
 def grid_error_models(obs: Observation, scene: Scene, x: Float[np.ndarray, " n"], k: int, names: Sequence[str], channels: int,
-                      image_model: ImageModel, grid_units: Callable[[Array], Array]) -> tuple[Array, Array] | None:
-    """:func:`fine_and_grid_models` of image observation k (``obs``; ``scene`` its scene at the
-    fitted values, ``channels`` its reference's) at the free values ``x`` (``names``;
-    ``grid_units`` the fit's own unit of its model), from one render of ``scene`` at
-    :data:`SUPERSAMPLE` times the resolution; None for a pixel filter :data:`RESPONSES` lacks."""
+                      image_model: ImageModel, grid_units: Callable[[Array], Array],
+                      seeds: Sequence[int]) -> Callable[[np.ndarray], list[tuple[Array, Array, Array]]] | None:
+    """Image observation k's (``obs``; ``scene`` its scene at the values ``x``, ``channels`` its
+    reference's) models from a render of ``scene`` at :data:`SUPERSAMPLE` times the resolution per
+    seed of ``seeds``, as a function of the free values ``y`` (``names``; the renders stay ``x``'s,
+    the image nuisances are ``y``'s): per render, the model made at :data:`SUPERSAMPLE`, the one made
+    at :data:`COARSER` (the render binned) and the fit's own on the pixel grid (``grid_units`` its
+    unit), by :func:`fine_and_grid_models`; None for a pixel filter :data:`RESPONSES` lacks."""
     if scene.render.filter not in RESPONSES:
         return None
     intrinsics = Intrinsics.from_scene(scene)
     fine_units = in_unit_of(dataclasses.replace(obs, sensor=without_psf(obs.sensor)), channels, intrinsics)
-    fine = np.asarray(render(supersampled(scene, SUPERSAMPLE)), dtype=float)
-    return fine_and_grid_models(fine, scene.render.filter, x, k, image_model, fine_units, grid_units,
-                                fine_optics(obs.sensor, intrinsics, SUPERSAMPLE, channels), [nuisance_index(names, n, k) for n in MOVES])
+    fine = [jnp.asarray(np.asarray(render(supersampled(scene, SUPERSAMPLE).with_values({"render.seed": seed})), dtype=float))
+            for seed in seeds]
+    moves = [nuisance_index(names, n, k) for n in MOVES]
+    optics = {f: fine_optics(obs.sensor, intrinsics, f, channels) for f in (SUPERSAMPLE, COARSER)}
+
+    def made(image: Array, y: np.ndarray) -> tuple[Array, Array, Array]:
+        finest, grid = fine_and_grid_models(image, scene.render.filter, y, k, image_model, fine_units, grid_units, optics[SUPERSAMPLE], moves)
+        return finest, fine_and_grid_models(binned(image, SUPERSAMPLE // COARSER), scene.render.filter, y, k, image_model, fine_units,
+                                            grid_units, optics[COARSER], moves, COARSER)[0], grid
+
+    return lambda y: [made(image, y) for image in fine]
+
+
+def grid_step(differences: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]], step: Callable[[np.ndarray], np.ndarray],
+              x: Float[np.ndarray, " n"], stderr: Float[np.ndarray, " n"]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The step ``delta`` from the fit's estimate ``x`` to the model made at :data:`SUPERSAMPLE`'s, the
+    bound on what remains of the grid's error after it (both in x's coordinates) and one draw of
+    the render noise of the residuals' change at ``x + delta``. ``differences(y)``: the residuals'
+    change from the fit's model to the one made at :data:`SUPERSAMPLE` and to the one made at
+    :data:`COARSER` at the values ``y``, and a draw of the first's render noise; ``step(d)``: the
+    Gauss-Newton step of a change ``d`` of the residuals. ``delta`` is the fixed point
+    ``x + delta = x + step(d(x + delta))``, iterated from ``step(d(x))`` until it moves by less than
+    :data:`FIXED_POINT_TOLERANCE` of a standard error ``stderr`` (at most :data:`FIXED_POINT_STEPS`
+    times); the bound is :data:`REMAINDER_RATIO` times ``step(d_S - d_C)`` at ``x + delta``, the
+    step from the model made at :data:`COARSER` to the one made at :data:`SUPERSAMPLE`."""
+    delta = np.zeros(len(x))
+    for _ in range(FIXED_POINT_STEPS):
+        fine, coarser, noise = differences(x + delta)
+        moved, delta = delta, step(fine)
+        if np.all(np.abs(delta - moved) <= FIXED_POINT_TOLERANCE * stderr):
+            break
+    return delta, REMAINDER_RATIO * step(fine - coarser), noise
 
 
 def grid_notes(errors: dict[str, float], stderr: dict[str, float]) -> list[str]:
-    """A line for each parameter whose pixel-grid step (``errors``, of :meth:`spacefit.fitting.uncertainty.Linearisation.step`) is
-    more than half its standard error ``stderr`` (which carries it)."""
+    """A line for each parameter whose pixel-grid step (``errors``, of :func:`grid_step`) is more than
+    half its standard error ``stderr`` (which carries the bound on what remains of it)."""
     return [f"{name}: the pixel grid's model error, {d:+.3g} (the fit's model against one made at {SUPERSAMPLE}x the resolution "
-            "at the result), is added to its value and carried in its standard error; fit at a finer resolution to shrink it."
+            f"at the result), is added to its value; what may remain of it (the step from a model made at {COARSER}x to the "
+            f"{SUPERSAMPLE}x one, a third) is carried in its standard error; fit at a finer resolution to shrink it."
             for name, d in errors.items() if name in stderr and abs(d) > 0.5 * stderr[name]]

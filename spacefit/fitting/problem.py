@@ -13,6 +13,7 @@ its render in JAX (:mod:`spacefit.fitting.nuisance`).
 from __future__ import annotations
 
 import dataclasses
+import math
 import warnings
 from contextvars import ContextVar
 from collections.abc import Callable, Mapping, Sequence
@@ -47,6 +48,8 @@ from spacefit.scene.conversions import G_of, rms_of
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
 # Seed offset of the second, independent Jacobian used for the standard errors.
 INDEPENDENT_SEED_OFFSET = 1000
+# the pixel grid's renders at 4x the resolution take the fit's seed plus this, and that plus INDEPENDENT_SEED_OFFSET
+PIXEL_GRID_SEED_OFFSET = 500
 
 
 @dataclass
@@ -84,9 +87,10 @@ class Problem:
     reference_spp: tuple[int | None, ...] = ()  # per image, its reference's (Observation.render_spp)
     blocks: tuple[Block, ...] = ()  # the value observations' residual blocks, after the images' pixels
     dark: tuple[float, ...] = ()  # per image, its model of no light in its unit (a sensor's bias, DN; 0 for radiance)
-    # physical x -> the change of the images' residuals from the fit's model to one made at 4x the
-    # resolution (spacefit.fitting.pixel_grid), or None where no image's blur width is free
-    pixel_grid: Callable[[np.ndarray], np.ndarray | None] | None = None
+    # physical x -> (y -> the change of the images' residuals from the fit's model to those made at 4x and 2x the
+    # resolution, from two renders at x, the image nuisances y's, and a draw of its render noise:
+    # spacefit.fitting.pixel_grid), or None where no image's blur width is free
+    pixel_grid: Callable[[np.ndarray], Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None] | None = None
 
     @property
     def rendered(self) -> bool:
@@ -195,18 +199,34 @@ def _problem(
     # the pixel loss's residuals are the pixels', which the pixel grid's change is laid out as
     blurred = [loss == "pixel" and nuisance_index(free.names, "image.blur_sigma_px", k) is not None for k in range(len(observations))]
 
-    def pixel_grid(x: np.ndarray) -> np.ndarray | None:
-        """The images' residuals with each free blur's model made at 4x the resolution, less the fit's
-        (0 for the other images; :mod:`spacefit.fitting.pixel_grid`); None: no free blur, or a filter it does not model."""
+    def pixel_grid(x: np.ndarray) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
+        """``y ->`` the images' residuals with each free blur's model made at 4x and at 2x the resolution, each
+        less the fit's own (0 for the other images), from two renders at ``x`` with independent seeds (the
+        changes their mean), the image nuisances ``y``'s, and a draw of the first change's render noise (the
+        two renders' difference over sqrt 2) (:mod:`spacefit.fitting.pixel_grid`); None: no free blur, or a
+        filter it does not model."""
         values = {n: float(v) for n, v in zip(free.names, x) if Name(n).parameter in image_names}
-        out = []
-        for k, obs in enumerate(observations):
-            models = None
-            if blurred[k]:
-                scene = scene_with_values(obs.scene, values, observation=k).with_values({"render.spp": spps[k]})
-                models = grid_error_models(obs, scene, x, k, free.names, references[k].shape[-1], image_model, to_units[k])
-            out.append(np.zeros(references[k].size) if models is None else np.asarray(residuals[k](models[0]) - residuals[k](models[1]), dtype=float))
-        return np.concatenate(out) if any(np.any(o != 0) for o in out) else None
+        seeds = (seed + PIXEL_GRID_SEED_OFFSET, seed + PIXEL_GRID_SEED_OFFSET + INDEPENDENT_SEED_OFFSET)
+        made = [grid_error_models(obs, scene_with_values(obs.scene, values, observation=k).with_values({"render.spp": spps[k]}),
+                                  x, k, free.names, references[k].shape[-1], image_model, to_units[k], seeds) if blurred[k] else None
+                for k, obs in enumerate(observations)]
+        if not any(m is not None for m in made):
+            return None
+
+        def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            parts = []
+            for k, models in enumerate(made):
+                if models is None:
+                    parts.append(np.zeros((3, references[k].size)))
+                    continue
+                (finest, coarser, grid), (finest_b, coarser_b, grid_b) = models(y)
+                own, own_b = residuals[k](grid), residuals[k](grid_b)
+                fine_a, fine_b = residuals[k](finest) - own, residuals[k](finest_b) - own_b
+                parts.append(np.asarray([0.5 * (fine_a + fine_b), 0.5 * (residuals[k](coarser) - own + residuals[k](coarser_b) - own_b),
+                                         (fine_a - fine_b) / math.sqrt(2.0)], dtype=float))
+            return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
+
+        return differences
 
     def resampled(factor: int) -> Problem:
         finer = [dataclasses.replace(o, scene=o.scene.with_values({"render.spp": factor * n})) for o, n in zip(observations, spps)]

@@ -22,6 +22,7 @@ import numpy as np
 from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
+from spacefit.fitting.pixel_grid import grid_step
 from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, column_owners, setup
 from spacefit.precision import float64
 from spacefit.scene.parameters import parameter
@@ -288,9 +289,11 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     ``correct`` and it keeps every value in its range; extras ``noise_bias_correction``, solver
     coordinates). A fit that never moved passes ``correct=False``: its values are its start. With
     a blur width free (the pixel loss), the values take the step ``delta`` from the fit's model on the pixel grid to
-    one made at 4x the resolution (:mod:`spacefit.fitting.pixel_grid`; extras ``pixel_grid_error``,
-    solver coordinates; skipped where it would leave a range), and the covariance carries
-    ``delta delta^T``: what remains of the grid's error is taken as at most the step itself."""
+    one made at 4x the resolution (:func:`~spacefit.fitting.pixel_grid.grid_step`; extras ``pixel_grid_error``,
+    solver coordinates; skipped where it would leave a range), and the covariance carries ``b b^T``, ``b``
+    the bound on what remains of the grid's error after it (a third of the step from the model made at 2x
+    to the one made at 4x; extras ``pixel_grid_remainder``, its magnitude), and the step's render noise
+    (two renders at 4x, their change's difference through :func:`render_meat` at half weight)."""
     lin = linearise(s.problem, x)
     cov, loss_value, fisher, correction = covariance(s.problem, x, lin)
     if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
@@ -299,13 +302,18 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
         correction = np.zeros(len(x))
     extras: dict[str, Any] = {"fisher_eigenvalues": fisher.tolist(),
                               "noise_bias_correction": dict(zip(s.solver_params.names, correction.tolist()))}
-    grid = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
-    if grid is not None:  # the pixel grid's model error of a free blur: stepped over and carried (spacefit.fitting.pixel_grid)
-        delta = lin.step(np.concatenate([grid, np.zeros(lin.r.size - grid.size)]))
-        cov = cov + np.outer(delta, delta)
+    differences = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
+    if differences is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
+        padding = np.zeros(lin.r.size - s.problem.pixels)
+        delta, remainder, noise = grid_step(lambda y: tuple(np.concatenate([d, padding]) for d in differences(y)), lin.step, x,
+                                            np.sqrt(np.diag(cov)))
+        # the step's render noise: the mean of two renders' changes, through the sandwich as the fit's own render noise
+        bread = _pseudo_inverse(lin.information)[0]
+        cov = cov + np.outer(remainder, remainder) + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread
         if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + delta)):
             x = x + delta
         extras["pixel_grid_error"] = dict(zip(s.solver_params.names, delta.tolist()))
+        extras["pixel_grid_remainder"] = dict(zip(s.solver_params.names, np.abs(remainder).tolist()))
     if s.rms_index is not None:
         i = s.rms_index
         extras.update({"wrinkles.rms_m": float(x[i]), "wrinkles.rms_m.stderr": float(np.sqrt(cov[i, i]))})
