@@ -122,10 +122,10 @@ from spacefit.studies.orbit import Orbit as Orbit
 from spacefit.studies.orbit import PassGeometry as PassGeometry
 from spacefit.studies.orbit import Site as Site
 from spacefit.studies.orbit import pass_geometry as pass_geometry
+from spacefit.studies.plate_fit import PlateLightCurve as PlateLightCurve
+from spacefit.studies.plate_fit import fit_plates as fit_plates
+from spacefit.studies.plate_fit import fitted_plates as fitted_plates
 from spacefit.studies.plates import Plate as Plate
-from spacefit.studies.plates import PlateLightCurve as PlateLightCurve
-from spacefit.studies.plates import fit_plates as fit_plates
-from spacefit.studies.plates import fitted_plates as fitted_plates
 from spacefit.studies.plates import predict_magnitudes as predict_magnitudes
 from spacefit.studies.sensitivity import Sensitivity as Sensitivity
 from spacefit.studies.sensitivity import sensitivity as sensitivity

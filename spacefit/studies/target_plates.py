@@ -53,7 +53,8 @@ from spacefit.studies.lightcurve import phase_plane_sun
 from spacefit.studies.lightcurve_fit import RenderedLightCurve
 from spacefit.studies.lightcurve_kind import LightCurveKind
 from spacefit.studies.observing import LightCurveObservations
-from spacefit.studies.plates import Plate, PlateLightCurve, plates_irradiance
+from spacefit.studies.plate_fit import PlateLightCurve
+from spacefit.studies.plates import Plate, plates_irradiance
 from spacefit.studies.sweep import sweep
 
 # Triangles whose unit normals and tangents differ by less than this (1 - cos) are one plate's.
