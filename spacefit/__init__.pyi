@@ -45,11 +45,11 @@ from spacefit.formation import distort_image as distort_image
 from spacefit.formation import expected_dn as expected_dn
 from spacefit.formation import noise_variance_dn as noise_variance_dn
 from spacefit.formation import observe as observe
-from spacefit.geometry.attitude import AxisAngle as AxisAngle
+from spacefit.geometry.articulation import AxisAngle as AxisAngle
+from spacefit.geometry.articulation import SunTracking as SunTracking
 from spacefit.geometry.attitude import NadirSun as NadirSun
 from spacefit.geometry.attitude import QuaternionTable as QuaternionTable
 from spacefit.geometry.attitude import SunPointing as SunPointing
-from spacefit.geometry.attitude import SunTracking as SunTracking
 from spacefit.geometry.distortion import Distortion as Distortion
 from spacefit.geometry.frames import Intrinsics as Intrinsics
 from spacefit.geometry.frames import pixel_solid_angles as pixel_solid_angles

@@ -18,7 +18,7 @@ from hypothesis import strategies as st
 from helpers import write_sphere_obj
 
 import spacefit as sf
-from spacefit.geometry.attitude import AxisAngle, Fixed
+from spacefit.geometry.articulation import AxisAngle, Fixed
 from spacefit.geometry.primitives import Primitive
 from spacefit.materials import PRESETS, Conductor, Lambert, TabulatedBRDF
 from spacefit.materials.measured import read_brdf_table

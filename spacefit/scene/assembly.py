@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spacefit.errors import InputError, check_direction
-from spacefit.geometry.attitude import Fixed
+from spacefit.geometry.articulation import Fixed
 from spacefit.geometry.cache import cached
 from spacefit.geometry.frames import CameraFrame, Intrinsics, object_to_world, project
 from spacefit.geometry.mesh import PartMesh, load_grouped, load_part, validate_part

@@ -30,10 +30,11 @@ import numpy as np
 
 from spacefit.errors import (A_SCENE, InputError, InputTypeError, check_choice, check_direction, check_flag, check_path, check_range, check_vector,
                              closest, inside, quote)
-from spacefit.geometry.attitude import (ATTITUDES, PARALLEL_SINE, Articulation, AxisAngle, Fixed, FixedAttitude, NadirSun, QuaternionTable, SunPointing,
-                                        SunTracking, utc_seconds)
+from spacefit.geometry.articulation import Articulation, AxisAngle, Fixed, SunTracking
+from spacefit.geometry.attitude import ATTITUDES, FixedAttitude, NadirSun, QuaternionTable, SunPointing, utc_seconds
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.geometry.primitives import Primitive
+from spacefit.geometry.rotations import PARALLEL_SINE
 from spacefit.geometry.wm import check_wm_params
 from spacefit.materials import MODELS, PRESETS, Material
 from spacefit.scene.sampling import SAMPLERS, check_sample_count
@@ -489,7 +490,7 @@ class PartSettings:
             raise InputError(f"a part takes a `file` or a `shape`, not both; got file {self.file!r} and shape "
                              f"{self.shape.shape!r}.")
         if not isinstance(self.articulation, (Fixed, SunTracking, AxisAngle)):
-            raise InputTypeError(f"`articulation` must be a spacefit.geometry.attitude law (Fixed, SunTracking, AxisAngle), "
+            raise InputTypeError(f"`articulation` must be a spacefit.geometry.articulation law (Fixed, SunTracking, AxisAngle), "
                                  f"got {quote(self.articulation)}.")
         if isinstance(self.articulation, SunTracking):
             self.articulation.check_normal(self.reference_normal(), "the part's normal (its +z in the body)")

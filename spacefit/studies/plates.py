@@ -32,8 +32,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import InputError, check_direction, check_range, check_type, check_vector, quote
-from spacefit.geometry.attitude import SunTracking, tracking_rotation
+from spacefit.geometry.articulation import SunTracking
 from spacefit.geometry.frames import attitude_matrix
+from spacefit.geometry.rotations import tracking_rotation
 from spacefit.materials import Material, MaterialModel
 from spacefit.materials.brdf import brdf
 from spacefit.precision import float64

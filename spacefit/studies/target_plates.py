@@ -41,7 +41,7 @@ from spacefit.executors import Cluster, cluster_of
 from spacefit.fitting.observations.base import Block
 from spacefit.fitting.params import Bijection
 from spacefit.fitting.result import FitResult
-from spacefit.geometry.attitude import SunTracking
+from spacefit.geometry.articulation import SunTracking
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.geometry.mesh import PartMesh, _trimesh
 from spacefit.materials import Material
