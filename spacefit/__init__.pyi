@@ -89,11 +89,11 @@ from spacefit.scene.parameters import available as available_parameters
 from spacefit.scene.parameters import parameter_table as parameter_table
 from spacefit.scene.schema import Scene as Scene
 from spacefit.scene.sections import CameraSettings as CameraSettings
-from spacefit.scene.sections import PartSettings as PartSettings
 from spacefit.scene.sections import RenderSettings as RenderSettings
 from spacefit.scene.sections import SunSettings as SunSettings
-from spacefit.scene.sections import TargetSettings as TargetSettings
 from spacefit.scene.sections import WrinkleSettings as WrinkleSettings
+from spacefit.scene.target import PartSettings as PartSettings
+from spacefit.scene.target import TargetSettings as TargetSettings
 from spacefit.scene.toml import default_scene as default_scene
 from spacefit.scene.toml import load_scene as load_scene
 from spacefit.sensor import Sensor as Sensor

@@ -24,7 +24,8 @@ from spacefit.geometry.primitives import pop_primitive
 from spacefit.materials import MODELS, make_material
 from spacefit.scene.overrides import Overrides, apply_overrides, check_sun_forms, section_keys, unknown_key, with_values
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import BUILTIN, DEFAULT_PRESETS, MESHLESS, SECTIONS, PartSettings, TargetSettings
+from spacefit.scene.sections import SECTIONS
+from spacefit.scene.target import BUILTIN, DEFAULT_PRESETS, MESHLESS, PartSettings, TargetSettings
 from spacefit.scene.optics import check_pitch_with_fov
 
 

@@ -48,7 +48,8 @@ from spacefit.materials import Material
 from spacefit.scene.assembly import assemble, body_to_world
 from spacefit.scene.conversions import sun_angles_deg
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import MAX_COORDINATE_M, check_scene, deg2rad
+from spacefit.scene.checks import MAX_COORDINATE_M, deg2rad
+from spacefit.scene.sections import check_scene
 from spacefit.studies.lightcurve import phase_plane_sun
 from spacefit.studies.lightcurve_fit import RenderedLightCurve
 from spacefit.studies.lightcurve_kind import LightCurveKind
