@@ -127,16 +127,16 @@ from spacefit.studies.plate_fit import fit_plates as fit_plates
 from spacefit.studies.plate_fit import fitted_plates as fitted_plates
 from spacefit.studies.plates import Plate as Plate
 from spacefit.studies.plates import predict_magnitudes as predict_magnitudes
+from spacefit.studies.plates_vs_render import ChosenLightCurve as ChosenLightCurve
+from spacefit.studies.plates_vs_render import PlatesVsRender as PlatesVsRender
+from spacefit.studies.plates_vs_render import choose_light_curve_model as choose_light_curve_model
+from spacefit.studies.plates_vs_render import compare_plates_to_render as compare_plates_to_render
 from spacefit.studies.sensitivity import Sensitivity as Sensitivity
 from spacefit.studies.sensitivity import sensitivity as sensitivity
 from spacefit.studies.store import StoreReport as StoreReport
 from spacefit.studies.store import verify_store as verify_store
 from spacefit.studies.sweep import read_sweep_file as read_sweep_file
 from spacefit.studies.sweep import sweep as sweep
-from spacefit.studies.target_plates import ChosenLightCurve as ChosenLightCurve
-from spacefit.studies.target_plates import PlatesVsRender as PlatesVsRender
-from spacefit.studies.target_plates import choose_light_curve_model as choose_light_curve_model
-from spacefit.studies.target_plates import compare_plates_to_render as compare_plates_to_render
 from spacefit.studies.target_plates import target_plates as target_plates
 
 __version__: str = '0.1.0'
