@@ -66,7 +66,8 @@ from spacefit.materials.measured import read_brdf_table
 from spacefit.materials.tabulated import TabulatedBRDF
 from spacefit.studies.design import design_noise_mag, predict_design
 from spacefit.studies.observing import LightCurveObservations, Site, read_light_curve, sun_directions_enu
-from spacefit.studies.plates import Plate, PlateLightCurve, predict_magnitudes
+from spacefit.studies.plate_fit import PlateLightCurve
+from spacefit.studies.plates import Plate, predict_magnitudes
 
 ROOT = Path(__file__).resolve().parents[1]
 DATA = ROOT / "data" / "starlink-v1p5"

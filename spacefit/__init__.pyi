@@ -45,11 +45,11 @@ from spacefit.formation import distort_image as distort_image
 from spacefit.formation import expected_dn as expected_dn
 from spacefit.formation import noise_variance_dn as noise_variance_dn
 from spacefit.formation import observe as observe
-from spacefit.geometry.attitude import AxisAngle as AxisAngle
+from spacefit.geometry.articulation import AxisAngle as AxisAngle
+from spacefit.geometry.articulation import SunTracking as SunTracking
 from spacefit.geometry.attitude import NadirSun as NadirSun
 from spacefit.geometry.attitude import QuaternionTable as QuaternionTable
 from spacefit.geometry.attitude import SunPointing as SunPointing
-from spacefit.geometry.attitude import SunTracking as SunTracking
 from spacefit.geometry.distortion import Distortion as Distortion
 from spacefit.geometry.frames import Intrinsics as Intrinsics
 from spacefit.geometry.frames import pixel_solid_angles as pixel_solid_angles
@@ -89,11 +89,11 @@ from spacefit.scene.parameters import available as available_parameters
 from spacefit.scene.parameters import parameter_table as parameter_table
 from spacefit.scene.schema import Scene as Scene
 from spacefit.scene.sections import CameraSettings as CameraSettings
-from spacefit.scene.sections import PartSettings as PartSettings
 from spacefit.scene.sections import RenderSettings as RenderSettings
 from spacefit.scene.sections import SunSettings as SunSettings
-from spacefit.scene.sections import TargetSettings as TargetSettings
 from spacefit.scene.sections import WrinkleSettings as WrinkleSettings
+from spacefit.scene.target import PartSettings as PartSettings
+from spacefit.scene.target import TargetSettings as TargetSettings
 from spacefit.scene.toml import default_scene as default_scene
 from spacefit.scene.toml import load_scene as load_scene
 from spacefit.sensor import Sensor as Sensor
@@ -122,21 +122,21 @@ from spacefit.studies.orbit import Orbit as Orbit
 from spacefit.studies.orbit import PassGeometry as PassGeometry
 from spacefit.studies.orbit import Site as Site
 from spacefit.studies.orbit import pass_geometry as pass_geometry
+from spacefit.studies.plate_fit import PlateLightCurve as PlateLightCurve
+from spacefit.studies.plate_fit import fit_plates as fit_plates
+from spacefit.studies.plate_fit import fitted_plates as fitted_plates
 from spacefit.studies.plates import Plate as Plate
-from spacefit.studies.plates import PlateLightCurve as PlateLightCurve
-from spacefit.studies.plates import fit_plates as fit_plates
-from spacefit.studies.plates import fitted_plates as fitted_plates
 from spacefit.studies.plates import predict_magnitudes as predict_magnitudes
+from spacefit.studies.plates_vs_render import ChosenLightCurve as ChosenLightCurve
+from spacefit.studies.plates_vs_render import PlatesVsRender as PlatesVsRender
+from spacefit.studies.plates_vs_render import choose_light_curve_model as choose_light_curve_model
+from spacefit.studies.plates_vs_render import compare_plates_to_render as compare_plates_to_render
 from spacefit.studies.sensitivity import Sensitivity as Sensitivity
 from spacefit.studies.sensitivity import sensitivity as sensitivity
 from spacefit.studies.store import StoreReport as StoreReport
 from spacefit.studies.store import verify_store as verify_store
 from spacefit.studies.sweep import read_sweep_file as read_sweep_file
 from spacefit.studies.sweep import sweep as sweep
-from spacefit.studies.target_plates import ChosenLightCurve as ChosenLightCurve
-from spacefit.studies.target_plates import PlatesVsRender as PlatesVsRender
-from spacefit.studies.target_plates import choose_light_curve_model as choose_light_curve_model
-from spacefit.studies.target_plates import compare_plates_to_render as compare_plates_to_render
 from spacefit.studies.target_plates import target_plates as target_plates
 
 __version__: str = '0.1.0'

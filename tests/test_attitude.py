@@ -1,4 +1,4 @@
-"""Articulation and attitude laws (spacefit.geometry.attitude): a sun-tracking part's normal against
+"""Articulation and attitude laws (spacefit.geometry.articulation, .attitude, .rotations): a sun-tracking part's normal against
 geometry, the body's attitude laws against hand-built frames, the quaternion table's interpolation and
 refusals, the scene keys and their errors, and renders of a tracked array lit face-on."""
 
@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 
 import spacefit as sf
-from spacefit.geometry.attitude import (AxisAngle, Fixed, FixedAttitude, NadirSun, QuaternionTable, SunPointing, SunTracking,
-                                        axis_rotation, quaternion_matrix, tracking_rotation)
+from spacefit.geometry.articulation import AxisAngle, Fixed, SunTracking
+from spacefit.geometry.attitude import FixedAttitude, NadirSun, QuaternionTable, SunPointing
+from spacefit.geometry.rotations import axis_rotation, quaternion_matrix, tracking_rotation
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.materials import Lambert
 from spacefit.precision import float64

@@ -17,7 +17,8 @@ from spacefit.geometry.frames import attitude_matrix
 from spacefit.materials import Conductor, DiffuseConductor, Lambert, material_table
 from spacefit.studies.observing import (EARTH_RADIUS_M, LightCurveObservations, Site, in_earth_shadow, magnitude_of,
                                         read_light_curve)
-from spacefit.studies.plates import Plate, fit_plates, plates_irradiance, predict_magnitudes
+from spacefit.studies.plate_fit import fit_plates
+from spacefit.studies.plates import Plate, plates_irradiance, predict_magnitudes
 
 DATA = Path(__file__).resolve().parents[1] / "data" / "starlink-v1p5"
 MOUNT_LEMMON = Site(32.4434, -110.7881, 2791.0)

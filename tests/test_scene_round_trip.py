@@ -18,12 +18,12 @@ from hypothesis import strategies as st
 from helpers import write_sphere_obj
 
 import spacefit as sf
-from spacefit.geometry.attitude import AxisAngle, Fixed
+from spacefit.geometry.articulation import AxisAngle, Fixed
 from spacefit.geometry.primitives import Primitive
 from spacefit.materials import PRESETS, Conductor, Lambert, TabulatedBRDF
 from spacefit.materials.measured import read_brdf_table
 from spacefit.scene.parameters import parameter, scene_value, scene_with_values
-from spacefit.scene.sections import DEFAULT_PRESETS, PartSettings, TargetSettings
+from spacefit.scene.target import DEFAULT_PRESETS, PartSettings, TargetSettings
 from spacefit.scene.toml import load_scene, scene_from_dict
 from spacefit.studies import worker
 from spacefit.studies.worker import Task

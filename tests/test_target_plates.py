@@ -19,10 +19,12 @@ from spacefit.geometry.frames import attitude_matrix
 from spacefit.geometry.primitives import CYLINDER_SECTIONS
 from spacefit.scene.toml import scene_from_dict
 from spacefit.studies.observing import LightCurveObservations
-from spacefit.studies.plates import PlateLightCurve, plates_irradiance
+from spacefit.studies.plate_fit import PlateLightCurve
+from spacefit.studies.plates import plates_irradiance
 from spacefit.studies.lightcurve import SUN_MAGNITUDES
 from spacefit.studies.lightcurve_fit import RenderedLightCurve
-from spacefit.studies.target_plates import _body_geometry, at_range, attitude_angles_deg, observation_points, plate_notes
+from spacefit.studies.plates_vs_render import _body_geometry, at_range
+from spacefit.studies.target_plates import attitude_angles_deg, observation_points, plate_notes
 
 E = 5.0
 ANISOTROPIC = {"material": "panel_thesis", "alpha_x": 0.5, "alpha_y": 0.1}

@@ -4,7 +4,7 @@ A model is a frozen dataclass deriving from :class:`MaterialModel`. Its :data:`~
 (:class:`Field`) are the one home of each value's unit, range, start, label and whether it may be
 RGB: construction checks them, and the parameter table (``parts.P.<field>``,
 :mod:`spacefit.scene.parameters`), the BRDF-table fits (:mod:`spacefit.fitting.brdf_table`) and the
-flat plates' fits (:mod:`spacefit.studies.plates`) take their bounds from them. Its
+flat plates' fits (:mod:`spacefit.studies.plate_fit`) take their bounds from them. Its
 :meth:`~MaterialModel.f_r` is its BRDF in JAX under the paper's names, for one grey channel and
 front-side directions; :meth:`~MaterialModel.evaluate` wraps it the way the renderer wraps every
 BSDF (Mitsuba's ``twosided``) and averages the RGB channels. :meth:`~MaterialModel.effective` is its

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spacefit.errors import InputError, check_direction
-from spacefit.geometry.attitude import Fixed
+from spacefit.geometry.articulation import Fixed
 from spacefit.geometry.cache import cached
 from spacefit.geometry.frames import CameraFrame, Intrinsics, object_to_world, project
 from spacefit.geometry.mesh import PartMesh, load_grouped, load_part, validate_part
@@ -33,7 +33,9 @@ from spacefit.geometry.wm import wm_n_max, wm_phases
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION, Refinement, displace, fold_fraction, refine
 from spacefit.materials import Material
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import NEAR_CLIP_M, NO_MESH, PartSettings, WrinkleSettings, check_scene, deg2rad
+from spacefit.scene.checks import deg2rad
+from spacefit.scene.sections import NEAR_CLIP_M, WrinkleSettings, check_scene
+from spacefit.scene.target import NO_MESH, PartSettings
 from spacefit.scene.lod import LodChoice, choose_model
 
 if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s), which a render does not need
@@ -240,7 +242,7 @@ def check_part_names(mesh: str, groups: Mapping[str, PartMesh], parts: Mapping[s
 
 def body_to_world(scene: Scene) -> Float[np.ndarray, "4 4"]:
     """The homogeneous body-to-world matrix of the scene's target: its position and the rotation of its
-    attitude law (``target.attitude``, :meth:`~spacefit.scene.sections.TargetSettings.rotation`) for the
+    attitude law (``target.attitude``, :meth:`~spacefit.scene.target.TargetSettings.rotation`) for the
     scene's sun."""
     target = scene.target
     if target.attitude == "fixed":

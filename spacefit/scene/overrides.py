@@ -21,12 +21,13 @@ from typing import Any
 import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_direction, check_path, check_vector, closest, inside, quote
-from spacefit.geometry.attitude import ARTICULATION_KEYS, pop_articulation
+from spacefit.geometry.articulation import ARTICULATION_KEYS, pop_articulation
 from spacefit.geometry.primitives import pop_primitive
 from spacefit.materials import MODELS, make_material, with_material_values
 from spacefit.scene.parameters import ATTITUDE, PARAMETERS, is_image, scene_keys, scene_with_values
 from spacefit.scene.conversions import VERTICAL_SUN, sun_angles_deg
-from spacefit.scene.sections import SECTIONS, PartSettings, SceneLike, unknown_part
+from spacefit.scene.sections import SECTIONS, SceneLike, unknown_part
+from spacefit.scene.target import PartSettings
 from spacefit.scene.optics import check_pitch_with_fov
 
 Overrides = Mapping[str, Any] | Sequence[str] | str

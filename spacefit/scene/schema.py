@@ -19,7 +19,9 @@ from spacefit.display import scene_html, scene_repr
 from spacefit.errors import InputError, InputTypeError, check_choice, check_direction, quote
 from spacefit.materials import Material, make_material, material_table
 from spacefit.scene.overrides import with_values
-from spacefit.scene.sections import BUILTIN, DEFAULT_PRESETS, MESHLESS, SECTIONS, CameraSettings, PartSettings, RenderSettings, SunSettings, TargetSettings, WrinkleSettings, default_parts, plain
+from spacefit.scene.checks import plain
+from spacefit.scene.sections import SECTIONS, CameraSettings, RenderSettings, SunSettings, WrinkleSettings
+from spacefit.scene.target import BUILTIN, DEFAULT_PRESETS, MESHLESS, PartSettings, TargetSettings, default_parts
 from spacefit.scene.optics import check_optics, fov_pitch_mm
 
 

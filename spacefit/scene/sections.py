@@ -3,8 +3,9 @@
 A section coerces what a TOML file or Python gives (lists to tuples, integers to floats where a
 number belongs) and checks every value before it exists, naming ``section.key``, the value and the
 allowed range (:func:`spacefit.errors.check_range`): ``RenderSettings(spp=-1)`` raises at once. A
-part's material is a :mod:`spacefit.materials` object from the start. The whole scene that joins
-them is :class:`Scene`; what the layers below it read of a scene is
+part's material is a :mod:`spacefit.materials` object from the start. The base and its checks are
+:mod:`spacefit.scene.checks`; the target's sections (its pose, its parts) :mod:`spacefit.scene.target`.
+The whole scene that joins them is :class:`Scene`; what the layers below it read of a scene is
 :class:`SceneLike` (the parameter registry and the override language sit under the ``Scene`` class,
 whose ``with_values`` is theirs). Reading a file is :mod:`spacefit.scene.toml`; changing values by
 name is :mod:`spacefit.scene.overrides`.
@@ -20,26 +21,16 @@ total solar irradiance at 1 au, 1361 W m^-2 (Kopp & Lean 2011).
 
 from __future__ import annotations
 
-import dataclasses
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, ClassVar, Protocol, runtime_checkable
+from typing import Any, ClassVar, Protocol, runtime_checkable
 
-import numpy as np
-
-from spacefit.errors import (A_SCENE, InputError, InputTypeError, check_choice, check_direction, check_flag, check_path, check_range, check_vector,
-                             closest, inside, quote)
-from spacefit.geometry.attitude import (ATTITUDES, PARALLEL_SINE, Articulation, AxisAngle, Fixed, FixedAttitude, NadirSun, QuaternionTable, SunPointing,
-                                        SunTracking, utc_seconds)
-from spacefit.geometry.frames import attitude_matrix
-from spacefit.geometry.primitives import Primitive
+from spacefit.errors import A_SCENE, InputError, InputTypeError, check_choice, check_direction, check_range, check_vector, closest, quote
+from spacefit.geometry.articulation import SunTracking
 from spacefit.geometry.wm import check_wm_params
-from spacefit.materials import MODELS, PRESETS, Material
+from spacefit.scene.checks import MAX_COORDINATE_M, Section, Vec3, check_int, check_position
 from spacefit.scene.sampling import SAMPLERS, check_sample_count
-
-if TYPE_CHECKING:  # annotations only: jaxtyping's Array imports JAX (0.6 s)
-    from jaxtyping import Float
+from spacefit.scene.target import PartSettings, TargetSettings
 
 SOLAR_IRRADIANCE_W_M2 = 1361.0
 # The differentiable variants: the bridge needs AD (scalar variants cannot render a Jacobian).
@@ -49,14 +40,9 @@ VARIANTS = ("auto", "llvm_ad_rgb", "cuda_ad_rgb")
 FILTER_RADIUS_PX = {"tent": 1.0, "box": 0.5, "gaussian": 2.0}
 FILTERS = tuple(FILTER_RADIUS_PX)
 WRINKLE_MODELS = ("auto", "geometry", "effective")
-Vec3 = tuple[float, float, float]
 # Radiance is float32 (at most 3.4e38) and a glint's BRDF can reach 1e6 or more: irradiances above
 # this overflow it (1e39 rendered inf / NaN). The physical sun at 1 au is 1361 W m^-2.
 MAX_IRRADIANCE_W_M2 = 1e20
-# Mitsuba traces in float32 (7 significant digits): beyond 100 km from the origin a position is
-# coarser than 1 cm and a metre-sized target is no longer resolved; the observer of a far target is
-# rendered near and rescaled (light curves), or seen with a long focal length.
-MAX_COORDINATE_M = 1e5
 # The camera's clipping distances (m): the near one is Mitsuba's default; the far one passes every
 # distance within MAX_COORDINATE_M on each axis (Mitsuba's default, 1e4 m, rendered a target seen
 # from 20 km with a long lens black).
@@ -66,33 +52,12 @@ FAR_CLIP_M = 4.0 * MAX_COORDINATE_M
 # renders are not split into passes, so there the product with the pixels is bounded too
 # (:func:`spacefit.rendering.memory.check_memory`).
 MAX_SPP = 1 << 16
-# `target.mesh` of a target built only from its parts' primitives and files.
-NO_MESH = "none"
-# The values of `target.mesh` of the built-in lander, and those that name no file: the lander and no mesh.
-BUILTIN = ("builtin", "")
-MESHLESS = (*BUILTIN, NO_MESH)
 # Seeds are Mitsuba's (uint32): a fit adds offsets to its seeds, so they stay below 2^31.
 MAX_SEED = 2**31 - 1
 # Mitsuba's perspective camera takes a horizontal field of view in [0, 180] deg (180, or a focal
 # length of 1e-200 mm, raises inside it); a pinhole's image grows as tan(fov / 2), and near 180 deg
 # float32 rays lose the pixels at the edge. The vertical field of view is held to the same bound.
 MAX_FOV_DEG = 179.0
-
-
-class Section:
-    """A scene-file section: coerced to its fields' types and checked on construction."""
-
-    SECTION: ClassVar[str] = ""
-
-    def __post_init__(self) -> None:
-        for f in dataclasses.fields(self):  # type: ignore[arg-type]
-            default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
-            value = _coerce(f"{self.SECTION}.{f.name}", getattr(self, f.name), default)
-            object.__setattr__(self, f.name, value)
-        self.check()
-
-    def check(self) -> None:
-        """Check the coerced values (each section's own ranges)."""
 
 
 @dataclass(frozen=True)
@@ -154,10 +119,10 @@ class RenderSettings(Section):
     def check(self) -> None:
         """Check this section's values (:class:`Section`)."""
         for i, axis in enumerate(("width", "height")):
-            _check_int(f"render.resolution ({axis})", self.resolution[i], 1, 16384)
-        _check_int("render.spp", self.spp, 1, MAX_SPP)
-        _check_int("render.depth", self.depth, 1, 64)
-        _check_int("render.seed", self.seed, 0, MAX_SEED)
+            check_int(f"render.resolution ({axis})", self.resolution[i], 1, 16384)
+        check_int("render.spp", self.spp, 1, MAX_SPP)
+        check_int("render.depth", self.depth, 1, 64)
+        check_int("render.seed", self.seed, 0, MAX_SEED)
         check_choice("render.variant", self.variant, VARIANTS)
         check_choice("render.filter", self.filter, FILTERS)
         check_choice("render.sampler", self.sampler, SAMPLERS)
@@ -272,109 +237,6 @@ class SunSettings(Section):
 
 
 @dataclass(frozen=True)
-class TargetSettings(Section):
-    """Target pose and geometry source: ``"builtin"`` (the lander), a mesh file whose groups are the
-    parts, or ``"none"`` (:data:`NO_MESH`): only the parts given, each a primitive or a file of its own.
-
-    ``attitude`` is the body's attitude law (:class:`NadirSun`, :class:`SunPointing`, :class:`QuaternionTable`): ``"fixed"`` (the
-    default) at ``attitude_deg``; ``"nadir_sun"`` (body -z to ``nadir``, +y towards the sun as far as
-    allowed) and ``"sun"`` (body +z to the sun, +x towards ``nadir`` as far as allowed), ``nadir`` the
-    world direction towards the Earth's centre and the sun the scene's; ``"table"``, the file
-    ``quaternions`` (``time_utc,qw,qx,qy,qz``) at ``time_utc``. ``attitude_deg`` counts for ``"fixed"`` only.
-
-    Attributes:
-        position_m: the body's origin in the world (m).
-        attitude_deg: the body's attitude angles (deg) for ``attitude = "fixed"``.
-        mesh: ``"builtin"``, a mesh file (OBJ, PLY) or ``"none"``.
-        attitude: ``"fixed"``, ``"nadir_sun"``, ``"sun"`` or ``"table"``.
-        nadir: the world direction towards the Earth's centre (``"nadir_sun"``, ``"sun"``).
-        quaternions: the CSV file of ``"table"``.
-        time_utc: the time (ISO 8601 UTC) the ``"table"`` is read at.
-
-    Raises:
-        InputError: a value outside its range or an unknown law, naming it (``target.attitude``).
-
-    Example:
-        >>> import spacefit as sf
-        >>> sf.TargetSettings(attitude_deg=(0, 0, 30)).attitude_deg
-        (0.0, 0.0, 30.0)
-        >>> try:
-        ...     sf.TargetSettings(attitude="spin")
-        ... except sf.InputError as err:
-        ...     print(err)
-        `target.attitude` must be one of 'fixed', 'nadir_sun', 'sun', 'table'; got 'spin'.
-    """
-
-    position_m: Vec3 = (0.0, 0.0, 0.0)
-    attitude_deg: Vec3 = (90.0, 0.0, 0.0)
-    mesh: str = "builtin"
-    attitude: str = "fixed"
-    nadir: tuple[float, ...] = ()
-    quaternions: str = ""
-    time_utc: str = ""
-
-    SECTION: ClassVar[str] = "target"
-    # What each attitude law takes besides the scene's sun.
-    TAKES: ClassVar[dict[str, tuple[str, ...]]] = {"fixed": (), "nadir_sun": ("nadir",), "sun": ("nadir",),
-                                                   "table": ("quaternions", "time_utc")}
-
-    def check(self) -> None:
-        """Check this section's values (:class:`Section`)."""
-        check_position("target.position_m", self.position_m)
-        check_vector("target.attitude_deg", self.attitude_deg)
-        check_choice("target.attitude", self.attitude, ATTITUDES)
-        takes = self.TAKES[self.attitude]
-        for key in ("nadir", "quaternions", "time_utc"):
-            value = getattr(self, key)
-            if key in takes and not value:
-                raise InputError(f"`target.{key}` is missing: `target.attitude` = {self.attitude!r} takes "
-                                 f"{' and '.join(takes)}.")
-            if key not in takes and value:
-                raise InputError(f"`target.{key}` = {quote(plain(value))} is not used by `target.attitude` = {self.attitude!r} "
-                                 f"(it takes {' and '.join(takes) or 'attitude_deg'}).")
-        default = TargetSettings.__dataclass_fields__["attitude_deg"].default
-        if self.attitude != "fixed" and tuple(self.attitude_deg) != default:
-            raise InputError(f"`target.attitude_deg` = {quote(plain(self.attitude_deg))} is not used by `target.attitude` = "
-                             f"{self.attitude!r}, which sets the attitude; give `attitude = \"fixed\"` to place the body by angles.")
-        if self.nadir:
-            check_direction("target.nadir", self.nadir)
-            object.__setattr__(self, "nadir", tuple(float(v) for v in self.nadir))
-        if self.quaternions:
-            check_path("target.quaternions", self.quaternions)
-        if self.time_utc:
-            utc_seconds("target.time_utc", self.time_utc)
-
-    def attitude_law(self) -> FixedAttitude | NadirSun | SunPointing | QuaternionTable:
-        """The body's attitude law (a quaternion table is read here)."""
-        if self.attitude == "nadir_sun":
-            return NadirSun()
-        if self.attitude == "sun":
-            return SunPointing()
-        if self.attitude == "table":
-            with inside("target"):
-                return QuaternionTable.read(self.quaternions)
-        return FixedAttitude(self.attitude_deg)
-
-    def rotation(self, sun: Float[np.ndarray, "3"]) -> Float[np.ndarray, "3 3"]:
-        """The body-to-world rotation of the attitude law, ``sun`` the world direction towards the sun.
-
-        Raises:
-            InputError: the sun along ``target.nadir`` (nadir_sun, sun), a time outside the quaternion table."""
-        law = self.attitude_law()
-        if isinstance(law, (NadirSun, SunPointing)):
-            nadir = check_direction("target.nadir", self.nadir)
-            if np.linalg.norm(np.cross(nadir, sun)) < PARALLEL_SINE:
-                raise InputError(f"`target.nadir` {list(self.nadir)} is along the sun's direction (`sun.direction` "
-                                 f"{np.round(-np.asarray(sun), 6).tolist()}): with the sun at the target's zenith or nadir "
-                                 f"`target.attitude` = {self.attitude!r} is undefined.")
-            return law.rotation(nadir, sun)
-        if isinstance(law, QuaternionTable):
-            with inside("target"):
-                return law.rotation(self.time_utc)
-        return law.rotation()
-
-
-@dataclass(frozen=True)
 class WrinkleSettings(Section):
     """W-M wrinkles (thesis eq. 2-1, section 2.2) on the named parts; lengths in metres.
 
@@ -440,74 +302,10 @@ class WrinkleSettings(Section):
     def check(self) -> None:
         """Check this section's values (:class:`Section`)."""
         check_wm_params(self.D, self.G, self.gamma, self.M, self.L, self.Ls)
-        _check_int("wrinkles.seed", self.seed, 0, MAX_SEED)
+        check_int("wrinkles.seed", self.seed, 0, MAX_SEED)
         check_range("wrinkles.spacing_m", self.spacing_m, 0.0, lo_open=True, unit="m")
         check_choice("wrinkles.model", self.model, WRINKLE_MODELS)
         check_range("wrinkles.lod_footprint", self.lod_footprint, 0.0, lo_open=True)
-
-
-@dataclass(frozen=True)
-class PartSettings:
-    """A part: its material (:class:`Conductor`, :class:`Lambert`, ... or a :data:`PRESETS` name), for a part of its own a mesh file or a
-    primitive (a box, cylinder, ... table in the scene file), and its articulation law in the body
-    (:class:`SunTracking`, :class:`AxisAngle`; fixed by default).
-
-    Attributes:
-        material: the part's material object.
-        file: a mesh file (OBJ, PLY) of a part of its own, or empty.
-        shape: a primitive shape of a part of its own, or None.
-        articulation: how the part turns in the body.
-
-    Raises:
-        InputError: both a file and a shape, or a bad material or articulation.
-
-    Example:
-        >>> import spacefit as sf
-        >>> sf.default_scene().parts["legs"].material
-        Lambert(kd=0.2)
-        >>> scene = sf.default_scene().with_values({"parts.legs.kd": 0.5})
-        >>> scene.parts["legs"].material
-        Lambert(kd=0.5)
-    """
-
-    material: Material
-    file: str = ""
-    shape: Primitive | None = None
-    articulation: Articulation = Fixed()
-
-    def __post_init__(self) -> None:
-        if not isinstance(self.material, tuple(MODELS.values())):
-            raise InputTypeError(f"`material` must be a spacefit material (sf.materials.Conductor, Mirror, Lambert; a "
-                                 f"scene file names a preset), got {quote(self.material)}.")
-        if not isinstance(self.file, str):
-            raise InputTypeError(f"`file` must be a path string, got {quote(self.file)}.")
-        if self.file:
-            check_path("file", self.file)
-        if self.shape is not None and not isinstance(self.shape, Primitive):
-            raise InputTypeError(f"`shape` must be a spacefit.geometry.primitives.Primitive, got {quote(self.shape)}.")
-        if self.shape is not None and self.file:
-            raise InputError(f"a part takes a `file` or a `shape`, not both; got file {self.file!r} and shape "
-                             f"{self.shape.shape!r}.")
-        if not isinstance(self.articulation, (Fixed, SunTracking, AxisAngle)):
-            raise InputTypeError(f"`articulation` must be a spacefit.geometry.attitude law (Fixed, SunTracking, AxisAngle), "
-                                 f"got {quote(self.articulation)}.")
-        if isinstance(self.articulation, SunTracking):
-            self.articulation.check_normal(self.reference_normal(), "the part's normal (its +z in the body)")
-
-    def reference_normal(self) -> Float[np.ndarray, "3"]:
-        """The normal a sun-tracking part turns towards the sun: the part's own +z in the body frame (a
-        plate's normal; a box's +z face; body +z for a mesh group or file)."""
-        if self.shape is None:
-            return np.array([0.0, 0.0, 1.0])
-        return attitude_matrix(np.radians(self.shape.attitude_deg))[:, 2]
-
-
-# The built-in lander's parts and their presets (thesis Table 4-2).
-DEFAULT_PRESETS = {"body": "mli_thesis", "panels": "panel_thesis", "legs": "white_paint"}
-
-
-def default_parts() -> dict[str, PartSettings]:
-    return {name: PartSettings(PRESETS[preset]) for name, preset in DEFAULT_PRESETS.items()}
 
 
 SECTIONS: Mapping[str, type[Section]] = {
@@ -566,55 +364,3 @@ def unknown_part(key: str, parts: Sequence[str]) -> InputError:
     return InputError(f"unknown scene key `{key}`: `{path[1]}` is not a part of the scene (parts: {', '.join(parts)}).{hint}")
 
 
-def check_position(name: str, value: Sequence[float]) -> None:
-    """Check a position (m): 3 finite numbers, each within :data:`MAX_COORDINATE_M` of the origin."""
-    v = check_vector(name, value)
-    if np.abs(v).max() > MAX_COORDINATE_M:
-        raise InputError(f"`{name}` must lie within {MAX_COORDINATE_M:g} m of the origin on each axis (float32 "
-                         f"tracing), got {quote(list(value))}; render far targets near and rescale, or lengthen the focal length.")
-
-
-def deg2rad(values: Sequence[float]) -> tuple[float, ...]:
-    """Degrees (user-facing) to radians (everything inside)."""
-    return tuple(math.radians(v) for v in values)
-
-
-def plain(value: Any) -> Any:
-    """A value as TOML writes it: tuples as lists."""
-    return list(value) if isinstance(value, tuple) else value
-
-
-def _check_int(name: str, value: Any, lo: int, hi: int) -> int:
-    if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-        raise InputTypeError(f"`{name}` must be an integer in [{lo}, {hi}], got {quote(value)}.")
-    return int(check_range(name, value, lo, hi))
-
-
-_NUMBER = (int, float, np.integer, np.floating)
-
-
-def _coerce(name: str, value: Any, default: Any) -> Any:
-    """Convert a TOML or Python value to the type of the field's default (numbers, vectors, strings)."""
-    if isinstance(default, bool):
-        return check_flag(name, value)
-    if isinstance(default, int):
-        return int(value) if isinstance(value, np.integer) else value  # range and integrality: each section's check
-    if isinstance(default, float):
-        if isinstance(value, (bool, np.bool_)) or not isinstance(value, _NUMBER):
-            raise InputTypeError(f"`{name}` must be a number, got {quote(value)}.")
-        return float(value)
-    if isinstance(default, str):
-        if not isinstance(value, str):
-            raise InputTypeError(f"`{name}` must be a string, got {quote(value)}.")
-        return value
-    if isinstance(value, np.ndarray):
-        value = value.tolist()
-    if not isinstance(value, (list, tuple)):
-        raise InputTypeError(f"`{name}` must be a list, got {quote(value)}.")
-    if default and isinstance(default[0], str):
-        return tuple(str(v) for v in value)
-    if default and len(value) != len(default):
-        raise InputError(f"`{name}` must have {len(default)} entries, got {list(value)}.")
-    if not all(isinstance(v, _NUMBER) and not isinstance(v, (bool, np.bool_)) for v in value):
-        raise InputError(f"`{name}` must hold numbers, got {list(value)}.")
-    return tuple(v if isinstance(d, int) and not isinstance(d, bool) else float(v) for v, d in zip(value, default or value))

@@ -2,7 +2,7 @@
 docstring gives the defaults, the units and the sun's conventions).
 
 A part's articulation keys (``articulation``, ``axis``, ``angle_deg``, ``pivot_m``,
-:func:`spacefit.geometry.attitude.pop_articulation`) pivot by default about a primitive's
+:func:`spacefit.geometry.articulation.pop_articulation`) pivot by default about a primitive's
 ``position_m``. A part's ``material`` names a preset (:data:`PRESETS`, the other keys of its
 table replacing the preset's values) or a model (``"conductor"``, ``"mirror"``, ``"lambert"``, with
 every value given, as :meth:`Scene.to_toml` writes it); it becomes a material object here, when
@@ -18,13 +18,14 @@ from pathlib import Path
 from typing import Any
 
 from spacefit.errors import InputError, InputTypeError, check_path, inside, quote
-from spacefit.geometry.attitude import pop_articulation
+from spacefit.geometry.articulation import pop_articulation
 from spacefit.geometry.mesh import load_grouped
 from spacefit.geometry.primitives import pop_primitive
 from spacefit.materials import MODELS, make_material
 from spacefit.scene.overrides import Overrides, apply_overrides, check_sun_forms, section_keys, unknown_key, with_values
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import BUILTIN, DEFAULT_PRESETS, MESHLESS, SECTIONS, PartSettings, TargetSettings
+from spacefit.scene.sections import SECTIONS
+from spacefit.scene.target import BUILTIN, DEFAULT_PRESETS, MESHLESS, PartSettings, TargetSettings
 from spacefit.scene.optics import check_pitch_with_fov
 
 

@@ -37,7 +37,7 @@ from spacefit.fitting.prediction import Prediction, covariance_of, predictive_in
 from spacefit.fitting.result import FitResult
 from spacefit.scene.names import Name
 from spacefit.studies.observing import LN_PER_MAGNITUDE, LightCurveObservations
-from spacefit.studies.plates import PlateLightCurve
+from spacefit.studies.plate_fit import PlateLightCurve
 
 # A member's exposure scale: its model's irradiance times it (default 1).
 SCALE = "image.scale"
