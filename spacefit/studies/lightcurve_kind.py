@@ -1,4 +1,4 @@
-"""What the light-curve kinds of observation share (:class:`~spacefit.studies.plates.PlateLightCurve`,
+"""What the light-curve kinds of observation share (:class:`~spacefit.studies.plate_fit.PlateLightCurve`,
 :class:`~spacefit.studies.lightcurve_fit.RenderedLightCurve`): their models are irradiances at the
 observer, W m^-2, which their report and figure show as the magnitudes they were observed in,
 m = m_sun - 2.5 log10(E / E_sun)."""

@@ -15,7 +15,7 @@ The kinds and their homes:
 * a pass, its frames' images with per-frame values: :class:`spacefit.fitting.observations.passes.PassObservation`
   (``sf.PassObservation``; the frame table is :mod:`spacefit.fitting.passes`);
 * a measured BRDF table and a material model of one part: :mod:`spacefit.fitting.observations.brdf`;
-* a light curve predicted by flat plates: :class:`spacefit.studies.plates.PlateLightCurve`;
+* a light curve predicted by flat plates: :class:`spacefit.studies.plate_fit.PlateLightCurve`;
 * a light curve predicted by the path tracer: :class:`spacefit.studies.lightcurve_fit.RenderedLightCurve`.
 
 A new kind (a spectral band, a polarimetric value) subclasses
