@@ -83,21 +83,23 @@ def test_gram_of_frames_own_columns_is_the_dense_product():
 
 
 @float64
-def test_by_columns_of_frames_own_columns_is_the_dense_product_symmetric_or_not():
-    """J1^T W J2 with W joining no two frames' rows: from M's and M^T's maps, and a symmetric one from its own."""
+@pytest.mark.parametrize("owners", [OWNERS, (0, 0, 1, 1, 2, 2)], ids=["shared-and-own", "all-own"])
+def test_by_columns_of_frames_own_columns_is_the_dense_product_symmetric_or_not(owners):
+    """J1^T W J2 with W joining no two frames' rows: from M's and M^T's maps, and a symmetric one from
+    its own; also where no column is shared (two images' own PSF widths and shifts only)."""
     chunk = 3
     rng = np.random.default_rng(3)
-    J1, J2 = frames_jacobian(rng, OWNERS, ROWS), frames_jacobian(rng, OWNERS, ROWS)
+    J1, J2 = frames_jacobian(rng, owners, ROWS), frames_jacobian(rng, owners, ROWS)
     blocks = [rng.normal(size=(m, m)) for m in ROWS]
     W = jax.scipy.linalg.block_diag(*(b + b.T for b in blocks))
-    n = len(OWNERS)
+    n = len(owners)
 
     def product(A: np.ndarray, B: np.ndarray):
         return lambda e: jnp.asarray(A).T @ (W @ (jnp.asarray(B) @ e))
 
-    got = by_columns(product(J1, J2), n, jnp.float64, chunk, OWNERS, product(J2, J1))
+    got = by_columns(product(J1, J2), n, jnp.float64, chunk, owners, product(J2, J1))
     np.testing.assert_allclose(got, J1.T @ W @ J2, rtol=1e-11, atol=1e-11)
-    np.testing.assert_allclose(by_columns(product(J1, J1), n, jnp.float64, chunk, OWNERS), J1.T @ W @ J1, rtol=1e-11, atol=1e-11)
+    np.testing.assert_allclose(by_columns(product(J1, J1), n, jnp.float64, chunk, owners), J1.T @ W @ J1, rtol=1e-11, atol=1e-11)
     np.testing.assert_allclose(by_columns(product(J1, J2), n, jnp.float64, chunk), J1.T @ W @ J2, rtol=1e-11, atol=1e-11)
 
 

@@ -110,7 +110,7 @@ def by_columns(fn: Callable[[Array], Array], n: int, dtype: Any, chunk: int, own
 
     applied = apply(fn, batches, len(basis))
     shared = np.eye(n)[np.asarray(owners) < 0]
-    if transposed is None or len(shared) == len(basis):
+    if transposed is None or len(shared) in (0, len(basis)):  # no shared row of an own column to read, or no own column
         return unpack(applied, owners)
     return unpack(applied, owners, apply(transposed, batched(shared, chunk, batches.shape[1]), len(shared)))
 
