@@ -296,8 +296,15 @@ def client():
 
 
 def same_fit(a: sf.FitResult, b: sf.FitResult) -> None:
-    assert a.values == b.values and a.stderr == b.stderr and a.status is b.status
-    assert [h["loss"] for h in a.history] == [h["loss"] for h in b.history]
+    """The guarantee of a fit on dask (docs/reference/passes.md, "Fits on dask"): the in-process fit's
+    status, its values within 1e-3 of their standard errors, the same steps taken (every step's loss
+    within 1e-9 relative: the workers' JAX sums may round apart, seen at 1e-11 in one trial step)."""
+    assert a.status is b.status
+    for name, value in b.values.items():
+        assert abs(a.values[name] - value) <= 1e-3 * b.stderr[name], name
+        assert a.stderr[name] == pytest.approx(b.stderr[name], rel=1e-3), name
+    assert [h["accepted"] for h in a.history] == [h["accepted"] for h in b.history]
+    np.testing.assert_allclose([h["loss"] for h in a.history], [h["loss"] for h in b.history], rtol=1e-9)
 
 
 @pytest.mark.slow
