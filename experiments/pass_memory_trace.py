@@ -47,6 +47,7 @@ class Sampler(threading.Thread):
 def analyse_steps() -> None:
     """Print the compiled solver step's XLA memory analysis (its arguments, outputs and temporaries) at its first call."""
     import equinox as eqx
+    import jax
 
     from spacefit.fitting import solvers
 
@@ -61,9 +62,21 @@ def analyse_steps() -> None:
             def call(*args):  # type: ignore[no-untyped-def]
                 if not done and getattr(fn, "__name__", "") == "step":
                     done.append(1)
-                    m = jitted.lower(*args).compile().compiled.memory_analysis()
-                    print(f"  compiled step: temporaries {m.temp_size_in_bytes / 2**20:.1f} MiB, arguments "
-                          f"{m.argument_size_in_bytes / 2**20:.1f}, outputs {m.output_size_in_bytes / 2**20:.1f}; RSS {rss_mib():.0f}", flush=True)
+                    before = rss_mib()
+                    lowered = jitted.lower(*args)
+                    traced = rss_mib()
+                    m = lowered.compile().compiled.memory_analysis()
+                    print(f"  compiled step: RSS {before:.0f} before tracing, {traced:.0f} traced and lowered, {rss_mib():.0f} compiled; "
+                          f"temporaries {m.temp_size_in_bytes / 2**20:.1f} MiB, arguments {m.argument_size_in_bytes / 2**20:.1f}, "
+                          f"outputs {m.output_size_in_bytes / 2**20:.1f}", flush=True)
+                    groups: dict[str, list[float]] = {}
+                    for path, leaf in jax.tree_util.tree_flatten_with_path(args[4])[0]:
+                        key = jax.tree_util.keystr(path).split(".consts")[0]
+                        group = groups.setdefault(f"{key} {getattr(leaf, 'dtype', '')}", [0, 0.0])
+                        group[0] += 1
+                        group[1] += getattr(leaf, "nbytes", 0) / 2**20
+                    for key, (count, mib) in sorted(groups.items(), key=lambda t: -t[1][1])[:8]:
+                        print(f"    state{key}: {count} arrays, {mib:.1f} MiB")
                 return jitted(*args)
             return call
 
