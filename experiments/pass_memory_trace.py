@@ -4,7 +4,11 @@ process's resident memory sampled every 20 ms and read at the edges of each batc
 side: :func:`spacefit.fitting.frames.run_frames`), so that what grows inside the renders is told from what
 grows in the compiled JAX step around them. Prints the peak RSS, the peak inside render batches and
 outside them, and the loaded scenes and frozen recordings held at the end.
-Run: ``python experiments/pass_memory_trace.py [SIZE_PX] [FRAMES] [STEPS]`` (default 64 px, 4 frames, 2 steps).
+With ``ANALYSE=1`` the solver's step is compiled once more at its first call to print XLA's memory analysis
+of it (temporaries, arguments, outputs), RSS before and after its tracing and compilation, and its state's
+arrays by kind (this second compilation raises the peak). Figures: docs/measurements/performance.md,
+"A pass's memory".
+Run: ``[ANALYSE=1] python experiments/pass_memory_trace.py [SIZE_PX] [FRAMES] [STEPS]`` (default 64 px, 4 frames, 2 steps).
 """
 
 from __future__ import annotations
@@ -117,6 +121,7 @@ def main() -> None:
         print(f"  {name}: RSS {before:.0f} -> {after:.0f} MiB (peak outside renders so far {jax_peak:.0f})")
     print(f"steps {result.steps}; peak RSS: set-up {sampler.peaks.get('setup', 0):.0f}, in renders {sampler.peaks.get('render', 0):.0f}, "
           f"in JAX {sampler.peaks.get('jax', 0):.0f} MiB; scenes, frames held: {frames_module.loaded_count()}; load {os.getloadavg()[0]:.1f}")
+    print("values: " + ", ".join(f"{k} {v!r}" for k, v in result.values.items() if "@" not in k or k.endswith("@0")))
 
 
 if __name__ == "__main__":
