@@ -13,6 +13,7 @@ its render in JAX (:mod:`spacefit.fitting.nuisance`).
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 import warnings
 from contextvars import ContextVar
@@ -151,12 +152,20 @@ def _problem(
     def stack(images: Callable[[jax.Array], Sequence[jax.Array]]) -> Callable[[jax.Array], tuple[list[jax.Array], jax.Array, jax.Array]]:
         """x -> each image's model, the stacked residuals and the stacked residuals a solver descends."""
         def both(x: jax.Array) -> tuple[list[jax.Array], jax.Array, jax.Array]:
-            models = [to_units[k](image_model(image, x, k)) for k, image in enumerate(images(x))]
-            if not models:
-                return models, jnp.zeros(0), jnp.zeros(0)
-            return (models, jnp.concatenate([res(model) for res, model in zip(residuals, models)]),
-                    jnp.concatenate([res(model) for res, model in zip(descents, models)]))
+            out = [frame_model(image, x, k) for k, image in enumerate(images(x))]
+            if not out:
+                return [], jnp.zeros(0), jnp.zeros(0)
+            return [o[0] for o in out], jnp.concatenate([o[1] for o in out]), jnp.concatenate([o[2] for o in out])
         return both
+
+    # one image's model and residuals from its render, recomputed where linearised (jax.checkpoint): a
+    # linearisation kept every intermediate of the image model and the sensor's (76 image-sized float64
+    # arrays a frame, 26 MiB at 128 x 128 px) for each of the solver's two copies of it, where it now keeps
+    # the render and the free values (docs/measurements/performance.md, "A pass's memory")
+    @functools.partial(jax.checkpoint, static_argnums=(2,))
+    def frame_model(image: jax.Array, x: jax.Array, k: int) -> tuple[jax.Array, jax.Array, jax.Array]:
+        model = to_units[k](image_model(image, x, k))
+        return model, residuals[k](model), descents[k](model)
 
     # compiled once per fit, the seeds an operand: one program for the model images and residuals at the
     # fit's seeds and at the independent ones (evaluated op by op, the image model's FFTs and the
