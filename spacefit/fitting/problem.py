@@ -158,14 +158,18 @@ def _problem(
             return [o[0] for o in out], jnp.concatenate([o[1] for o in out]), jnp.concatenate([o[2] for o in out])
         return both
 
-    # one image's model and residuals from its render, recomputed where linearised (jax.checkpoint): a
-    # linearisation kept every intermediate of the image model and the sensor's (76 image-sized float64
-    # arrays a frame, 26 MiB at 128 x 128 px) for each of the solver's two copies of it, where it now keeps
-    # the render and the free values (docs/measurements/performance.md, "A pass's memory")
-    @functools.partial(jax.checkpoint, static_argnums=(2,))
     def frame_model(image: jax.Array, x: jax.Array, k: int) -> tuple[jax.Array, jax.Array, jax.Array]:
+        """One image's model and its residuals (those judged and those descended) from its render."""
         model = to_units[k](image_model(image, x, k))
         return model, residuals[k](model), descents[k](model)
+
+    if len(observations) > 1:
+        # a joint fit's images recomputed where linearised (jax.checkpoint): a linearisation kept every
+        # intermediate of the image model and the sensor's (76 image-sized float64 arrays a frame, 26 MiB
+        # at 128 x 128 px) for each of the solver's two copies of it, where it now keeps the render and the
+        # free values; 22 % more CPU on a 12-frame pass (docs/measurements/performance.md, "A pass's
+        # memory"), so one image, whose memory is no concern, is not recomputed
+        frame_model = functools.partial(jax.checkpoint, static_argnums=(2,))(frame_model)
 
     # compiled once per fit, the seeds an operand: one program for the model images and residuals at the
     # fit's seeds and at the independent ones (evaluated op by op, the image model's FFTs and the
