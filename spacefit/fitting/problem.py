@@ -13,7 +13,6 @@ its render in JAX (:mod:`spacefit.fitting.nuisance`).
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 import warnings
 from contextvars import ContextVar
@@ -169,7 +168,7 @@ def _problem(
         # at 128 x 128 px) for each of the solver's two copies of it, where it now keeps the render and the
         # free values; 22 % more CPU on a 12-frame pass (docs/measurements/performance.md, "A pass's
         # memory"), so one image, whose memory is no concern, is not recomputed
-        frame_model = functools.partial(jax.checkpoint, static_argnums=(2,))(frame_model)
+        frame_model = jax.checkpoint(frame_model, static_argnums=(2,))
 
     # compiled once per fit, the seeds an operand: one program for the model images and residuals at the
     # fit's seeds and at the independent ones (evaluated op by op, the image model's FFTs and the
