@@ -310,7 +310,7 @@ MUTANTS = (
     # interruptions as promised (issue 20): Ctrl-C during a render, worker deaths, a resumed fit that had ended
     Mutant("render-in-the-main-thread", "spacefit/interrupts.py",
            "    if threading.current_thread() is not threading.main_thread():\n        return work(stop)\n    box",
-           "    if True:\n        return work(stop)\n    box", ("tests/test_interrupts.py::test_a_long_render_stops_within_the_bound",)),
+           "    if True:\n        return work(stop)\n    box", ("tests/test_interrupts.py::test_a_signal_stops_the_waiting_caller_and_tells_the_work_to_end",)),
     Mutant("worker-deaths-not-retried", "spacefit/studies/cluster.py", "if lost >= retries:", "if lost >= 0:",
            ("tests/test_interrupts.py::test_a_point_whose_worker_dies_is_retried_then_named",)),
     Mutant("ended-fit-solved-again", "spacefit/fitting/loop.py", "    if resume.ended is not None:\n", "    if False:\n",
