@@ -237,7 +237,6 @@ def film_for_fit(curve: RenderedLightCurve, free: Sequence[str], start: Mapping[
     width = curve.scene.render.resolution[0]
     if curve.magnitude_sigma is None or curve.film_px is not None:
         return curve
-    sigma = np.asarray(curve.magnitude_sigma, float) / MAGNITUDE_PER_LN
     known = tuple(n for n in free if n in curve.parameters())
     x = jnp.asarray([(start or {}).get(n, curve.start(n)) for n in known], dtype=jnp.float64)
     widths = sorted({math.ceil(width / 2**k) for k in range(1, 16) if math.ceil(width / 2**k) >= MIN_FILM_PX})
@@ -246,7 +245,7 @@ def film_for_fit(curve: RenderedLightCurve, free: Sequence[str], start: Mapping[
         block = coarse.block(known)
         first, second = (np.asarray(block.model(x, j)) for j in (0, 1))
         noise = np.abs(first - second) / np.sqrt(2.0) / (0.5 * (first + second))
-        if np.sqrt(np.mean((noise / sigma) ** 2)) <= RENDER_NOISE_SHARE:
+        if np.sqrt(np.mean((noise / block.data.sigma) ** 2)) <= RENDER_NOISE_SHARE:  # sigma: ln E's
             return coarse
     return curve
 
