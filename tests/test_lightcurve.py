@@ -270,7 +270,7 @@ def test_the_300_px_lander_rendered_by_cycles_is_fitted_to_the_truth():
     Blender Cycles with 0.05 mag noise (data/lightcurve-cycles-300, experiments/lightcurve_300.py), each
     point's sun a vector: legs kd, body alpha_x and panels eta fitted from 1.15 x the truth on the film the
     errors allow finish within range, every value within 3 standard errors of the truth (measured: 0.192
-    +- 0.014, 0.1408 +- 0.0014, 4.0 +- 2.6; 3 steps, 219 s at load 17 on the shared 2 cores)."""
+    +- 0.014, 0.1408 +- 0.0014, 4.0 +- 2.6; 3 steps; 241 s at load 15 to 19 on the shared 2 cores, 0.85 GB peak)."""
     from spacefit.studies.lightcurve_files import LightCurveFiles
 
     folder = Path(__file__).resolve().parents[1] / "data" / "lightcurve-cycles-300"
