@@ -38,8 +38,10 @@ render seed, so that the render noise of the fit is part of what the errors must
 * error chart: the rms error (relative) of each parameter over ``--chart-realisations`` exposures,
   for each PSF width and noise level, beside the mean reported standard error.
 
-Writes ``coverage.csv`` (one row per fit), ``coverage_summary.csv``, ``coverage_table.md`` and
-``coverage.png`` to ``--out``. Run: ``.venv/bin/python experiments/coverage.py [--full] [--free nuisances]``:
+Writes ``coverage.csv`` (one row per fit, saved after each fit: a run into a folder that holds some
+fits only those it lacks), ``coverage_summary.csv``, ``coverage_table.md`` (each coverage with its 95 %
+binomial interval) and ``coverage.png`` to ``--out``; ``--pool DIR ...`` tables several runs' exposures
+together (``coverage_pooled.md``). Run: ``.venv/bin/python experiments/coverage.py [--full] [--free nuisances]``:
 by default 10 exposures for the coverage and 2 per chart point (about 5 minutes on 2 cores); ``--full``:
 50 and 5 (about 20 minutes on a quiet machine), the results in ``experiments/results/coverage/``
 (``experiments/results/coverage/nuisances/`` with the nuisances free; ``--realisations`` overrides the count). A fit takes 8 to 18 s at 48 px, 32 spp, mostly JAX's
