@@ -22,10 +22,10 @@ import numpy as np
 from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.pixel_grid import grid_step
+from spacefit.fitting.pixel_grid import grid_feedback, grid_step
 from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, column_owners, setup
 from spacefit.precision import float64
-from spacefit.scene.parameters import parameter
+from spacefit.scene.parameters import is_image, parameter
 
 # |correlation| above which two parameters are reported as not separately determined.
 CORRELATION_WARN = 0.95
@@ -293,7 +293,9 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     solver coordinates; skipped where it would leave a range), and the covariance carries ``b b^T``, ``b``
     the bound on what remains of the grid's error after it (a third of the step from the model made at 2x
     to the one made at 4x; extras ``pixel_grid_remainder``, its magnitude), and the step's render noise
-    (two renders at 4x, their change's difference through :func:`render_meat` at half weight)."""
+    (two renders at 4x, their change's difference through :func:`render_meat` at half weight); the
+    covariance of the step's fixed point is the fit's through ``(I - D)^-1``, ``D`` how the step moves
+    with the image nuisances it is taken at (:func:`~spacefit.fitting.pixel_grid.grid_feedback`)."""
     lin = linearise(s.problem, x)
     cov, loss_value, fisher, correction = covariance(s.problem, x, lin)
     if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
@@ -305,11 +307,16 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     differences = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
     if differences is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
         padding = np.zeros(lin.r.size - s.problem.pixels)
-        delta, remainder, noise = grid_step(lambda y: tuple(np.concatenate([d, padding]) for d in differences(y)), lin.step, x,
-                                            np.sqrt(np.diag(cov)))
+        padded = lambda y: tuple(np.concatenate([d, padding]) for d in differences(y))  # noqa: E731
+        stderr = np.sqrt(np.diag(cov))
+        delta, remainder, noise = grid_step(padded, lin.step, x, stderr)
         # the step's render noise: the mean of two renders' changes, through the sandwich as the fit's own render noise
         bread = _pseudo_inverse(lin.information)[0]
-        cov = cov + np.outer(remainder, remainder) + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread
+        cov = cov + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread
+        # the step moves with the image nuisances it is taken at: the fixed point's estimate moves by (I - D)^-1 per the fit's
+        feedback = np.linalg.inv(np.eye(len(x)) - grid_feedback(padded, lin.step, x + delta,
+                                                                [i for i, n in enumerate(s.solver_params.names) if is_image(n)], stderr))
+        cov = feedback @ cov @ feedback.T + np.outer(remainder, remainder)
         if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + delta)):
             x = x + delta
         extras["pixel_grid_error"] = dict(zip(s.solver_params.names, delta.tolist()))
