@@ -296,25 +296,40 @@ def _threaded(fn: Callable[..., Any], spec: FrameSpec, key: str, *args: Any) -> 
         return fn(spec, key, *args)
 
 
+def frame_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Sequence[np.ndarray], x: np.ndarray, seeds: np.ndarray,
+                  jacobian: bool) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...] | None]:
+    """Every frame's image, frame k's at ``x[indices[k]]``, for the seeds ``seeds``
+    (:func:`~spacefit.rendering.bridge.seeds_array`), and with ``jacobian`` each one's Jacobian
+    columns (h, w, 3, n_k) (None without): one batch on ``executor``."""
+    x, seeds = np.asarray(x), np.asarray(seeds)  # JAX may hand a callback its own arrays (each index of one compiles)
+    if not jacobian:
+        return tuple(run_frames(executor, frame_primal, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs))), None
+    out = run_frames(executor, frame_jacobian, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs),
+                     [int(seeds[1])] * len(specs))
+    return tuple(img for img, _ in out), tuple(J for _, J in out)
+
+
+def _tangents(jacobians: Sequence[jax.Array], t: jax.Array, indices: Sequence[np.ndarray]) -> tuple[jax.Array, ...]:
+    """Each frame's image change along the free values' change ``t``: its Jacobian columns times its share of ``t``."""
+    return tuple(J @ t[idx].astype(jnp.float32) for J, idx in zip(jacobians, indices))
+
+
 def batched_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Sequence[np.ndarray],
                     shapes: Sequence[tuple[int, int, int]]) -> Callable[[jax.Array, jax.Array], tuple[jax.Array, ...]]:
     """Every frame's image as one JAX function of the fit's free values x and the seeds
     (:func:`~spacefit.rendering.bridge.seeds_array`; an operand, so that one compiled program serves
     the fit's seeds and the independent ones): frame k renders ``x[indices[k]]``. Its derivative is
     each frame's materialised Jacobian times the tangent, as
-    :func:`~spacefit.rendering.bridge.render_params`'s, with all frames' Jacobians in one batch."""
+    :func:`~spacefit.rendering.bridge.render_params`'s, with all frames' Jacobians in one batch.
+    A program that calls it calls back into Python (:func:`given_renders` takes the renders as operands)."""
     images = tuple(jax.ShapeDtypeStruct(shape, jnp.float32) for shape in shapes)
     columns = tuple(jax.ShapeDtypeStruct((*shape, len(idx)), jnp.float32) for shape, idx in zip(shapes, indices))
 
     def primal_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[np.ndarray, ...]:
-        x, seeds = np.asarray(x), np.asarray(seeds)  # JAX may hand a callback its own arrays (each index of one compiles)
-        return tuple(run_frames(executor, frame_primal, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs)))
+        return frame_renders(executor, specs, indices, x, seeds, False)[0]
 
-    def jacobian_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
-        x, seeds = np.asarray(x), np.asarray(seeds)
-        out = run_frames(executor, frame_jacobian, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs),
-                           [int(seeds[1])] * len(specs))
-        return tuple(img for img, _ in out), tuple(J for _, J in out)
+    def jacobian_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...] | None]:
+        return frame_renders(executor, specs, indices, x, seeds, True)
 
     @jax.custom_jvp
     def render(x: jax.Array, seeds: jax.Array) -> tuple[jax.Array, ...]:
@@ -324,6 +339,23 @@ def batched_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Seq
     def render_jvp(primals: tuple[jax.Array, jax.Array], tangents: tuple[jax.Array, jax.Array]) -> tuple[Any, Any]:
         (x, seeds), (t, _) = primals, tangents
         imgs, Js = jax.pure_callback(jacobian_cb, (images, columns), x, seeds, vmap_method="sequential")
-        return imgs, tuple(J @ t[idx].astype(jnp.float32) for J, idx in zip(Js, indices))
+        return imgs, _tangents(Js, t, indices)
 
     return render
+
+
+def given_renders(indices: Sequence[np.ndarray]) -> Callable[[jax.Array, Sequence[jax.Array], Sequence[jax.Array] | None], tuple[jax.Array, ...]]:
+    """``(x, images, jacobians) -> images``: :func:`batched_renders`'s function with its renders made
+    beforehand (:func:`frame_renders` at x) and handed in as operands, so that a program that calls it
+    calls nothing back and JAX's cache can keep it; its derivative in x is each frame's Jacobian
+    times the tangent, as :func:`batched_renders`'s (``jacobians`` None: not differentiable)."""
+    @jax.custom_jvp
+    def given(x: jax.Array, images: Sequence[jax.Array], jacobians: Sequence[jax.Array] | None) -> tuple[jax.Array, ...]:
+        return tuple(images)
+
+    @given.defjvp
+    def given_jvp(primals: tuple[Any, Any, Any], tangents: tuple[Any, Any, Any]) -> tuple[Any, Any]:
+        (_, images, jacobians), (t, _, _) = primals, tangents
+        return tuple(images), _tangents(jacobians, t, indices)
+
+    return given

@@ -30,7 +30,9 @@ from spacefit.fitting.pixel_grid import grid_notes
 from spacefit.fitting.problem import FitRender, Setup, column_owners, setup
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.resume import Resume
-from spacefit.fitting.solvers import Outcome, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name, with_owners
+from spacefit.fitting.outside import DESCENT
+from spacefit.fitting.solvers import (Outcome, RenderedFirst, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name,
+                                      with_owners)
 from spacefit.fitting.stopping import REJECTED_PATIENCE, REJECTED_RTOL, NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
@@ -224,13 +226,25 @@ def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progr
     told = with_owners(engine, column_owners(fp, problem.blocks))  # a pass's frames' own columns grouped
     try:
         with deferred_interrupts() as interrupts:
-            outcome = steps.run(drive(told, residual_u, u, max_steps, problem.loss_u_reverse), interrupts)
+            outcome = steps.run(drive(told, residual_u, u, max_steps, problem.loss_u_reverse, _rendered_first(s)), interrupts)
     except KeyboardInterrupt as signal:
         best = steps.best_u if steps.best_u is not None else u
         outcome = Outcome(Status.TERMINATED if isinstance(signal, Terminated) else Status.INTERRUPTED, best, len(steps.history))
     if resume.on_end is not None and not outcome.status.interrupted:
         resume.on_end(steps.ending(outcome))
     return _result(s, outcome, steps, solver_name(engine), loss)
+
+
+def _rendered_first(s: Setup) -> RenderedFirst | None:
+    """The solver's residuals with their renders made before each step (:mod:`spacefit.fitting.outside`), where the problem has them."""
+    fp, outside = s.solver_params, s.problem.outside
+    if outside is None:
+        return None
+
+    def residual(u: jax.Array, rendered: Any) -> jax.Array:
+        return outside.evaluate(fp.to_physical(u), *rendered)[DESCENT].astype(u.dtype)  # as residual_u's
+
+    return RenderedFirst(lambda u: outside.render(np.asarray(fp.to_physical(u)), 0, True), residual)
 
 
 class _Steps:
@@ -280,8 +294,8 @@ class _Steps:
         if accepted:
             self.best_u, self.best_loss = step.u, step.loss
             if self.noise_stop:
-                r = step.residuals if step.residuals is not None else np.asarray(problem.descent_x(x_solver))
-                self.floor.set_noise(loss_noise(r, np.asarray(problem.descent_x_independent(x_solver))))
+                r = step.residuals if step.residuals is not None else np.asarray(problem.descent_at(x_solver, 0))
+                self.floor.set_noise(loss_noise(r, np.asarray(problem.descent_at(x_solver, 1))))
         x = np.asarray(s.to_user(x_solver))
         self.history.append({"step": k, "loss": step.loss, "accepted": accepted, "loss_noise": self.floor.noise,
                              "values": dict(zip(s.user.names, x.tolist())), "time_s": time.perf_counter() - self.t0})

@@ -25,10 +25,12 @@ import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_choice, check_name_list, quote
 from spacefit.executors import Executor
-from spacefit.fitting.frames import FrameSpec, InProcess, batched_renders, frame_part_image, run_frames, share_views
+from spacefit.fitting.frames import (FrameSpec, InProcess, batched_renders, frame_part_image, frame_renders, given_renders, run_frames,
+                                     share_views)
 from spacefit.fitting.nuisance import image_model as image_model_of, nuisance_index
 from spacefit.fitting.observations.base import Block, Reported, Sequenced, ValueObservation
 from spacefit.fitting.observations.image import Observation, check_reference, image_residual, in_unit_of
+from spacefit.fitting.outside import DESCENT, Outside, Rendered
 from spacefit.fitting.params import Bijection, FreeParameters, bijection
 from spacefit.fitting.pixel_grid import grid_error_models
 from spacefit.rendering.bridge import seeds_array
@@ -91,11 +93,26 @@ class Problem:
     # resolution, from two renders at x, the image nuisances y's, and a draw of its render noise:
     # spacefit.fitting.pixel_grid), or None where no image's blur width is free
     pixel_grid: Callable[[np.ndarray], Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None] | None = None
+    # the renders made first and handed to programs that call nothing back (spacefit.fitting.outside); None where a
+    # value observation is rendered (its own callbacks)
+    outside: Outside | None = None
 
     @property
     def rendered(self) -> bool:
         """Whether a model is rendered (Monte Carlo): an image, or a rendered value observation."""
         return bool(self.references) or any(b.rendered for b in self.blocks)
+
+    def descent_at(self, x: jax.Array, j: int) -> jax.Array:
+        """The residuals a solver descends at ``x`` (concrete) with the j-th seeds (0 or 1)."""
+        if self.outside is not None:
+            return self.outside.residuals(x, j, DESCENT)
+        return (self.descent_x, self.descent_x_independent)[j](x)
+
+    def linearised(self, x: jax.Array, j: int) -> tuple[jax.Array, Callable[[jax.Array], jax.Array]]:
+        """The stacked residuals at ``x`` (concrete) with the j-th seeds (0 or 1) and their tangent map (``jax.linearize``)."""
+        if self.outside is not None:
+            return self.outside.linearised(x, j)
+        return jax.linearize((self.residual_x, self.residual_x_independent)[j], x)
 
     @property
     def pixels(self) -> int:
@@ -192,9 +209,28 @@ def _problem(
             x = free.to_physical(u)
             return 0.5 * jnp.sum(with_blocks(stack(frames)(x)[2], block_models(x, 0)) ** 2)
 
+    def seeds_of(j: int) -> jax.Array:
+        return seeds_array(seed + j * INDEPENDENT_SEED_OFFSET, seed_grad + j * INDEPENDENT_SEED_OFFSET)
+
+    outside = None
+    if not any(b.rendered for b in blocks):
+        given = given_renders(indices)
+
+        def render_outside(x: np.ndarray, j: int, jacobian: bool) -> Rendered:
+            return frame_renders(executor, specs, indices, x, np.asarray(seeds_of(j)), jacobian) if specs else ((), None)
+
+        def evaluate(x: jax.Array, images: Sequence[jax.Array], jacobians: Sequence[jax.Array] | None) -> tuple[
+                list[jax.Array], jax.Array, jax.Array]:
+            models, r, descended = stack(lambda y: given(y, images, jacobians))(x)
+            others = block_models(x, 0)  # none rendered: the seeds change none
+            return [*models, *others], with_blocks(r, others), with_blocks(descended, others)
+
+        outside = Outside(render_outside, jax.jit(evaluate))
+
     def models_seeded(x: jax.Array, j: int) -> list[jax.Array]:
-        seeds = seeds_array(seed + j * INDEPENDENT_SEED_OFFSET, seed_grad + j * INDEPENDENT_SEED_OFFSET)
-        return [*models_residuals(x, seeds)[0], *block_models(x, j)]
+        if outside is not None:
+            return outside.models(x, j)
+        return [*models_residuals(x, seeds_of(j))[0], *block_models(x, j)]
 
     def residual_at(x: jax.Array, seeds: jax.Array, j: int, kind: int = 1) -> jax.Array:
         """The stacked residuals (``kind`` 1; 2: those a solver descends) at the j-th seeds ``seeds``."""
@@ -249,7 +285,7 @@ def _problem(
                    lambda x: models_seeded(x, 0), part_images, references, models_seeded, residual_of, resampled,
                    lambda x: residual_at(x, main, 0, 2), lambda x: residual_at(x, independent, 1, 2), all(o.sensor is not None for o in observations) and all(b.noise_known for b in blocks), tuple(spread),
                    tuple(units), tuple(used_pixels), spps, tuple(o.render_spp for o in observations), tuple(blocks), tuple(dark),
-                   pixel_grid if any(blurred) else None)
+                   pixel_grid if any(blurred) else None, outside)
 
 
 def _seen(free: FreeParameters, k: int, image_names: frozenset[str]) -> tuple[tuple[str, ...], np.ndarray]:

@@ -79,8 +79,8 @@ class Linearisation:
 def linearise(problem: Problem, x: np.ndarray) -> Linearisation:
     """The problem's :class:`Linearisation` at ``x`` (physical units): one Jacobian render per seed."""
     xj = jnp.asarray(x)
-    r, J1 = jax.linearize(problem.residual_x, xj)
-    r_alt, J2 = jax.linearize(problem.residual_x_independent, xj)
+    r, J1 = problem.linearised(xj, 0)
+    r_alt, J2 = problem.linearised(xj, 1)
     # the transposes take the residuals' dtype (float32 renders: J^T v sums in float32, ~1e-6 relative)
     J1T, J2T = ((lambda v, t=jax.linear_transpose(J, xj), dtype=r.dtype: t(v.astype(dtype))[0]) for J in (J1, J2))
     return Linearisation(xj, np.asarray(r, dtype=float), np.asarray(r_alt, dtype=float), J1, J2, J1T, J2T,
