@@ -32,9 +32,8 @@ import numpy as np
 
 from spacefit import executors
 from spacefit.executors import Cluster, Executor, executor_of
-from spacefit.fitting.compile_cache import jit_calling_back
 from spacefit.precision import float64
-from spacefit.rendering.bridge import seeded_render_params, seeds_array
+from spacefit.rendering.bridge import outside_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
 from spacefit.rendering.renderer import render_threads
 from spacefit.rendering.parts import PartImage
@@ -159,7 +158,7 @@ class Loaded:
     max_scenes: int = MAX_SCENES
     stages: OrderedDict[str, Stage] = field(default_factory=OrderedDict)
     chains: dict[str, tuple[str, RenderChain, View]] = field(default_factory=dict)
-    compiled: dict[tuple[str, tuple[float, ...], str], Callable[..., Any]] = field(default_factory=dict)
+    compiled: dict[tuple[str, tuple[float, ...]], tuple[Callable[..., Any], Callable[..., Any]]] = field(default_factory=dict)
     jacobians: dict[str, tuple[bytes, tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
 
     def chain(self, spec: FrameSpec, key: str) -> RenderChain:
@@ -194,22 +193,17 @@ class Loaded:
         self.jacobians = {key: v for key, v in self.jacobians.items() if key not in gone}
 
     def function(self, spec: FrameSpec, key: str, kind: str) -> Callable[[jax.Array, jax.Array], Any]:
-        """The frame's image (``kind`` "primal") or its Jacobian and image ("jacobian") as a function
-        of its values and seeds (:func:`~spacefit.rendering.bridge.seeds_array`): one program jitted
-        per loaded scene, finite-difference steps and kind, the seeds and the frame's view its operands
-        (a new closure each step would compile each step, a closure per frame each frame)."""
+        """The frame's image (``kind`` "primal") or its image and Jacobian ("jacobian") as a function
+        of its values and seeds (:func:`~spacefit.rendering.bridge.seeds_array`), rendered outside JAX
+        (:func:`~spacefit.rendering.bridge.outside_render_params`): one pair of programs per loaded scene and
+        finite-difference steps, the seeds and the frame's view their operands (a new closure each step
+        would compile each step, a closure per frame each frame)."""
         chain = self.chain(spec, key)  # loads it, or marks its scene as recently used
         stage, _, view = self.chains[key]
-        name = (stage, spec.fd_steps, kind)
+        name = (stage, spec.fd_steps)
         if name not in self.compiled:
-            image = seeded_render_params(chain.drjit, self.stages[stage].values, spec.fd_steps)
-
-            def twice(y: jax.Array, seeds: jax.Array, view: View) -> tuple[jax.Array, jax.Array]:
-                out = image(y, seeds, view)
-                return out, out
-
-            self.compiled[name] = jit_calling_back(image if kind == "primal" else jax.jacfwd(twice, has_aux=True))
-        compiled = self.compiled[name]
+            self.compiled[name] = outside_render_params(chain.drjit, self.stages[stage].values, spec.fd_steps)
+        compiled = self.compiled[name][kind == "jacobian"]
         return lambda x, seeds: compiled(x, seeds, view)
 
 
@@ -252,7 +246,7 @@ def frame_jacobian(spec: FrameSpec, key: str, x: np.ndarray, seed: int, seed_gra
     last = loaded.jacobians.get(key)
     if last is not None and last[0] == point:  # a solver's last linearisation, asked again by the standard errors
         return last[1]
-    J, img = loaded.function(spec, key, "jacobian")(jnp.asarray(x, dtype=jnp.float64), seeds_array(seed, seed_grad))
+    img, J = loaded.function(spec, key, "jacobian")(jnp.asarray(x, dtype=jnp.float64), seeds_array(seed, seed_grad))
     out = np.asarray(img, dtype=np.float32), np.asarray(J, dtype=np.float32)
     loaded.jacobians[key] = (point, out)
     return out
