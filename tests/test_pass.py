@@ -14,7 +14,7 @@ from astropy.table import Table
 
 import spacefit as sf
 from spacefit.fitting.frames import FrameSpec, InProcess, Loaded, frame_jacobian, frame_part_image, frame_primal, run_frames, share_views
-from spacefit.fitting import problem
+from spacefit.fitting import problem, residuals
 from spacefit.fitting.problem import images_memory
 from spacefit.rendering import memory
 from spacefit.rendering.memory import describe_fit, fit_memory
@@ -541,7 +541,7 @@ def test_a_pass_s_normal_equations_and_errors_apply_one_direction_per_kind_of_ow
     free = ["parts.legs.kd", "image.blur_sigma_px", *sf.Pass.from_columns({"file": ["a", "b", "c"], "time": [0, 1, 2]}).per_frame(
         ["target.attitude_x_deg", "image.shift_x_px"])]
     s = problem.setup(obs, free, start={"parts.legs.kd": 0.4, "image.blur_sigma_px": 0.5}, render=sf.FitRender(spp=2))
-    owners = problem.column_owners(s.solver_params, s.problem.blocks)
+    owners = residuals.column_owners(s.solver_params, s.problem.blocks)
     assert owners == (-1, -1, 0, 1, 2, 0, 1, 2)
     lin = linearise(s.problem, s.x0)
     alone = dataclasses.replace(lin, owners=None)

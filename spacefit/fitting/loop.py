@@ -27,7 +27,8 @@ from spacefit.fitting.judging import judged_goodness, part_goodness, part_rows, 
 from spacefit.fitting.observations.base import Sequenced, ValueObservation
 from spacefit.fitting.observations.image import Observation
 from spacefit.fitting.pixel_grid import grid_notes
-from spacefit.fitting.problem import FitRender, Setup, column_owners, setup
+from spacefit.fitting.problem import FitRender, Setup, setup
+from spacefit.fitting.residuals import column_owners
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.resume import Resume
 from spacefit.fitting.outside import DESCENT

@@ -158,7 +158,7 @@ def make_solver(solver: str | Solver) -> Solver:
 
 def with_owners(solver: Solver, owners: tuple[int, ...] | None) -> Solver:
     """``solver`` with each of its :class:`NormalEquations` told which observation's residuals alone
-    each column moves (:func:`~spacefit.fitting.problem.column_owners`): a joint fit's J^T J then costs
+    each column moves (:func:`~spacefit.fitting.residuals.column_owners`): a joint fit's J^T J then costs
     a product per shared value and per kind of own value, not per value. Other linear solvers as they are."""
     def told(leaf: Any) -> Any:
         return dataclasses.replace(leaf, owners=owners) if isinstance(leaf, NormalEquations) else leaf

@@ -23,7 +23,8 @@ from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
 from spacefit.fitting.pixel_grid import grid_step
-from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, column_owners, setup
+from spacefit.fitting.problem import FitRender, Observation, Setup, setup
+from spacefit.fitting.residuals import Problem, column_owners
 from spacefit.precision import float64
 from spacefit.scene.parameters import parameter
 
