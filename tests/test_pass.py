@@ -233,7 +233,7 @@ def test_the_frames_of_a_pass_compile_once_not_once_per_frame():
         jax.monitoring.unregister_event_duration_listener(listen)
     assert compiled == []
     assert kernels["launched"] > 0 and kernels["new"] == 0
-    assert len(loaded.compiled) == 2  # one primal and one Jacobian program for the three frames
+    assert len(loaded.compiled) == 1  # one pair of programs (image, Jacobian) for the three frames
     (image, J), primal = together[1]
     alone = Loaded()
     assert np.array_equal(frame_jacobian(specs[2], specs[2].key, x, 3, 4, alone)[1], J)
