@@ -128,7 +128,7 @@ MUTANTS = (
            ("tests/test_wm.py",)),
     Mutant("wm-G-from-rms-exponent", WM, "** (1.0 / (D - 2.0))", "** (D - 2.0)", (PROPERTIES,)),
     # the JAX / Dr.Jit seam and the parameters
-    Mutant("fd-column-one-sided-step", BRIDGE, "(up - down) / (2.0 * steps[j])", "(up - down) / steps[j]",
+    Mutant("fd-column-one-sided-step", BRIDGE, "(up - down) / (2.0 * self.steps[j])", "(up - down) / self.steps[j]",
            ("tests/test_bridge.py::test_jacobian_columns_match_finite_differences",)),
     Mutant("forward-derivative-with-primal-seed", BRIDGE,
            "{k: t[..., j] for k, t in tangents.items()}, seed_grad))", "{k: t[..., j] for k, t in tangents.items()}, seed))",
@@ -162,8 +162,8 @@ MUTANTS = (
            "while len(self.stages) >= self.max_scenes:", "while len(self.stages) > self.max_scenes:",
            ("tests/test_pass.py::test_a_process_keeps_at_most_max_scenes_loaded_dropping_the_least_recently_used",)),
     # ... and its compiled functions, each frame's view an operand: one program per loaded scene, not one per frame
-    Mutant("frames-compile-a-program-each", "spacefit/fitting/frames.py", "name = (stage, spec.fd_steps, kind)",
-           "name = (key, spec.fd_steps, kind)", ("tests/test_pass.py::test_the_frames_of_a_pass_compile_once_not_once_per_frame",)),
+    Mutant("frames-compile-a-program-each", "spacefit/fitting/frames.py", "name = (stage, spec.fd_steps)",
+           "name = (key, spec.fd_steps)", ("tests/test_pass.py::test_the_frames_of_a_pass_compile_once_not_once_per_frame",)),
     # ... and its normal equations, one direction per kind of own value: a shared row of an own column from the shared column
     Mutant("own-column-shared-row-from-the-mixed-direction", "spacefit/fitting/normal_equations.py",
            "jnp.where(shared[:, None], shared_rows, 0.0)", "jnp.where(shared[:, None], taken, 0.0)",
@@ -266,7 +266,7 @@ MUTANTS = (
     Mutant("pixel-grid-whole-step-carried", "spacefit/fitting/pixel_grid.py", "return delta, REMAINDER_RATIO * step(fine - coarser)",
            "return delta, step(fine)",
            ("tests/test_pixel_grid.py::test_the_grid_step_is_the_fixed_point_of_the_step_and_carries_a_third_of_the_coarser_models_step",)),
-    Mutant("render-noise-spread-without-sensor-psf", "spacefit/fitting/problem.py",
+    Mutant("render-noise-spread-without-sensor-psf", "spacefit/fitting/residuals.py",
            "blur = 0.0 if obs.sensor is None else psf_rms_px(", "blur = 0.0 if True else psf_rms_px(", (PLUMBING,)),
     Mutant("light-curve-first-seed-only", "spacefit/studies/lightcurve.py", "mean, se = mean_and_error(samples) if",
            "mean, se = (samples[0], mean_and_error(samples)[1]) if", ("tests/test_lightcurve.py",)),
