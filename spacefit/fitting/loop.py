@@ -227,7 +227,7 @@ def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progr
     told = with_owners(engine, column_owners(fp, problem.blocks))  # a pass's frames' own columns grouped
     try:
         with deferred_interrupts() as interrupts:
-            outcome = steps.run(drive(told, residual_u, u, max_steps, problem.loss_u_reverse, _rendered_first(s)), interrupts)
+            outcome = steps.run(drive(told, residual_u, u, max_steps, problem.loss_u_reverse, _rendered_first(s, steps)), interrupts)
     except KeyboardInterrupt as signal:
         best = steps.best_u if steps.best_u is not None else u
         outcome = Outcome(Status.TERMINATED if isinstance(signal, Terminated) else Status.INTERRUPTED, best, len(steps.history))
@@ -236,16 +236,24 @@ def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progr
     return _result(s, outcome, steps, solver_name(engine), loss)
 
 
-def _rendered_first(s: Setup) -> RenderedFirst | None:
-    """The solver's residuals with their renders made before each step (:mod:`spacefit.fitting.outside`), where the problem has them."""
+def _rendered_first(s: Setup, steps: _Steps | None = None) -> RenderedFirst | None:
+    """The solver's residuals with their renders made before each step (:mod:`spacefit.fitting.outside`), where the
+    problem has them; each step's renders told to ``steps`` (:meth:`_Steps.rendered`)."""
     fp, outside = s.solver_params, s.problem.outside
     if outside is None:
         return None
 
+    def render(u: jax.Array) -> Any:
+        x = np.asarray(fp.to_physical(u))
+        rendered = outside.render(x, 0, True)
+        if steps is not None:
+            steps.rendered(x, rendered)
+        return rendered
+
     def residual(u: jax.Array, rendered: Any) -> jax.Array:
         return outside.evaluate(fp.to_physical(u), *rendered)[DESCENT].astype(u.dtype)  # as residual_u's
 
-    return RenderedFirst(lambda u: outside.render(np.asarray(fp.to_physical(u)), 0, True), residual)
+    return RenderedFirst(render, residual)
 
 
 class _Steps:
@@ -262,6 +270,11 @@ class _Steps:
         self.reported_again = False  # the record of an ended solve (:meth:`ended`), not a solve
         self.restarted = False  # an interrupted solve goes on (:meth:`resumed`): its first step evaluates its best point again
         self.t0 = time.perf_counter()
+        self.last: tuple[np.ndarray, Any] | None = None  # the last step's point and renders (rendered first)
+
+    def rendered(self, x: np.ndarray, rendered: Any) -> None:
+        """The renders with their Jacobian (the fit's seeds) made at ``x`` for the step to be recorded next."""
+        self.last = (x, rendered)
 
     def run(self, driver: Generator[Step, None, Outcome], interrupts: Any) -> Outcome:
         """Record the driver's steps until it ends or a stop of this record's own."""
@@ -294,6 +307,9 @@ class _Steps:
         accepted = not self.restarted and self.floor.record(step.loss, new_point=not same)
         if accepted:
             self.best_u, self.best_loss = step.u, step.loss
+            if self.last is not None and np.array_equal(self.last[0], x_solver):  # the errors linearise here with these renders
+                x_rendered, rendered = self.last
+                problem.outside.keep(x_rendered, 0, rendered)
             if self.noise_stop:
                 r = step.residuals if step.residuals is not None else np.asarray(problem.descent_at(x_solver, 0))
                 self.floor.set_noise(loss_noise(r, np.asarray(problem.descent_at(x_solver, 1))))

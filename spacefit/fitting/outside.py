@@ -9,12 +9,15 @@ least-squares step, the noise floor or the standard errors evaluate is known bef
 only), so the renders are made first, at that point (:attr:`Outside.render`), and handed to a program
 that holds no callback (:attr:`Outside.evaluate`, through :func:`~spacefit.fitting.frames.given_renders`):
 the same images and the same Jacobian columns times the tangent, and a program JAX's cache keeps.
+The solver's renders of its best point are kept (:meth:`Outside.keep`): the standard errors linearise
+there again with the fit's seeds, the same renders (a fit that ends on rejected trial steps rendered
+others since).
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import jax
 import numpy as np
@@ -40,6 +43,17 @@ class Outside:
 
     render: Callable[[np.ndarray, int, bool], Rendered]
     evaluate: Evaluate
+    kept: dict[tuple[bytes, int], Rendered] = field(default_factory=dict)  # one point's renders with their Jacobian (keep)
+
+    def keep(self, x: np.ndarray, j: int, rendered: Rendered) -> None:
+        """Keep ``rendered``, the renders with their Jacobian at ``x`` with the j-th seeds, in place of those kept before."""
+        self.kept.clear()
+        self.kept[(np.asarray(x, dtype=np.float64).tobytes(), j)] = rendered
+
+    def linearisable(self, x: np.ndarray, j: int) -> Rendered:
+        """The renders with their Jacobian at ``x`` with the j-th seeds: those kept where they are ``x``'s, else made."""
+        kept = self.kept.get((np.asarray(x, dtype=np.float64).tobytes(), j))
+        return kept if kept is not None else self.render(np.asarray(x), j, True)
 
     def models(self, x: jax.Array, j: int) -> list[jax.Array]:
         """Each observation's model at ``x`` (concrete) with the j-th seeds."""
@@ -51,5 +65,5 @@ class Outside:
 
     def linearised(self, x: jax.Array, j: int) -> tuple[jax.Array, Callable[[jax.Array], jax.Array]]:
         """``jax.linearize`` of the stacked residuals at ``x`` (concrete) with the j-th seeds: their value and tangent map."""
-        images, jacobians = self.render(np.asarray(x), j, True)
+        images, jacobians = self.linearisable(np.asarray(x), j)
         return jax.linearize(lambda y: self.evaluate(y, images, jacobians)[RESIDUALS], x)
