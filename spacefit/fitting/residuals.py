@@ -14,6 +14,7 @@ The set-up that checks the inputs and builds the problem is :mod:`spacefit.fitti
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -255,17 +256,17 @@ def build_problem(
         if not any(m is not None for m in made):
             return None
 
+        @functools.partial(jax.jit, static_argnums=0)  # one program, not one per operation
+        def changes(k: int, a: tuple[jax.Array, ...], b: tuple[jax.Array, ...]) -> jax.Array:
+            (finest, coarser, grid), (finest_b, coarser_b, grid_b) = a, b
+            own, own_b = residuals[k](grid), residuals[k](grid_b)
+            fine_a, fine_b = residuals[k](finest) - own, residuals[k](finest_b) - own_b
+            return jnp.stack([0.5 * (fine_a + fine_b), 0.5 * (residuals[k](coarser) - own + residuals[k](coarser_b) - own_b),
+                              (fine_a - fine_b) / math.sqrt(2.0)])
+
         def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            parts = []
-            for k, models in enumerate(made):
-                if models is None:
-                    parts.append(np.zeros((3, references[k].size)))
-                    continue
-                (finest, coarser, grid), (finest_b, coarser_b, grid_b) = models(y)
-                own, own_b = residuals[k](grid), residuals[k](grid_b)
-                fine_a, fine_b = residuals[k](finest) - own, residuals[k](finest_b) - own_b
-                parts.append(np.asarray([0.5 * (fine_a + fine_b), 0.5 * (residuals[k](coarser) - own + residuals[k](coarser_b) - own_b),
-                                         (fine_a - fine_b) / math.sqrt(2.0)], dtype=float))
+            parts = [np.zeros((3, references[k].size)) if models is None else np.asarray(changes(k, *models(y)), dtype=float)
+                     for k, models in enumerate(made)]
             return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
 
         return differences
