@@ -305,19 +305,33 @@ def _optimistix(solver: Solver, residual_u: ResidualFn, u: jax.Array, max_steps:
         state = solver.init(fn, u, None, {}, f_struct, None, tags)
         step = eqx.filter_jit(solver.step, compiler_options=CALLBACK_COMPILER_OPTIONS)  # its renders call back
         terminate = eqx.filter_jit(solver.terminate)
-        result = optx.RESULTS.nonlinear_max_steps_reached
-        k = 0
-        for k in range(1, max_steps + 1):
+
+        def advance(k: int, u: jax.Array) -> Step:
+            nonlocal state
             u, state, _ = step(fn, u, None, {}, state, tags)
-            yield seen.step(u)
-            if not np.all(np.isfinite(np.asarray(u))):
-                return Outcome(Status.NONFINITE, u, k)
-            done, res = terminate(fn, u, None, {}, state, tags)
-            if bool(done):
-                result = res
-                break
+            return seen.step(u)
+
+        return (yield from _stepped(advance, lambda u: terminate(fn, u, None, {}, state, tags), u, max_steps))
     finally:
         held.clear()
+
+
+def _stepped(advance: Callable[[int, jax.Array], Step], terminate: Callable[[jax.Array], tuple[jax.Array, Any]], u: jax.Array,
+             max_steps: int) -> Driver:
+    """An optimistix solver's steps: ``advance(k, u)`` takes step k from ``u`` and says it, until the
+    solver's ``terminate(u)``, a non-finite point or ``max_steps``."""
+    result = optx.RESULTS.nonlinear_max_steps_reached
+    k = 0
+    for k in range(1, max_steps + 1):
+        taken = advance(k, u)
+        u = taken.iterate
+        yield taken
+        if not np.all(np.isfinite(np.asarray(u))):
+            return Outcome(Status.NONFINITE, u, k)
+        done, res = terminate(u)
+        if bool(done):
+            result = res
+            break
     return Outcome(_status(result), u, k)
 
 
@@ -338,24 +352,19 @@ def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: j
         args = given.render(u)
         state = solver.init(fn, u, args, {}, jax.eval_shape(held[0], u, args), None, tags)
         step, terminate, evaluate = eqx.filter_jit(solver.step), eqx.filter_jit(solver.terminate), jax.jit(evaluated)
-        result = optx.RESULTS.nonlinear_max_steps_reached
-        k = 0
-        for k in range(1, max_steps + 1):
+
+        def advance(k: int, u: jax.Array) -> Step:
+            nonlocal state, args
             trial = state.y_eval
             if k > 1:
                 args = given.render(trial)
             r, value = evaluate(trial, args)
             u, state, _ = step(fn, u, args, {}, state, tags)
-            yield Step(np.asarray(trial), float(value), np.asarray(r), iterate=u)
-            if not np.all(np.isfinite(np.asarray(u))):
-                return Outcome(Status.NONFINITE, u, k)
-            done, res = terminate(fn, u, args, {}, state, tags)
-            if bool(done):
-                result = res
-                break
+            return Step(np.asarray(trial), float(value), np.asarray(r), iterate=u)
+
+        return (yield from _stepped(advance, lambda u: terminate(fn, u, args, {}, state, tags), u, max_steps))
     finally:
         held.clear()
-    return Outcome(_status(result), u, k)
 
 
 def _adam(solver: Adam, residual_u: ResidualFn, u: jax.Array, max_steps: int,
