@@ -212,7 +212,7 @@ def build_problem(
         given = given_renders(indices)
 
         def render_outside(x: np.ndarray, j: int, jacobian: bool) -> Rendered:
-            return frame_renders(executor, specs, indices, x, np.asarray(seeds_of(j)), jacobian) if specs else ((), None)
+            return frame_renders(executor, specs, indices, x, np.asarray(seeds_of(j)), jacobian) if specs else ((), () if jacobian else None)
 
         def evaluate(x: jax.Array, images: Sequence[jax.Array], jacobians: Sequence[jax.Array] | None) -> tuple[
                 list[jax.Array], jax.Array, jax.Array]:
