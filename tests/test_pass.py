@@ -480,7 +480,7 @@ def test_a_frames_cached_jacobian_is_keyed_by_its_seeds_too():
     from types import SimpleNamespace
 
     def function(spec, key, kind):
-        return lambda x, seeds: (np.full((1, 1, 3, 1), float(seeds[0])), np.full((1, 1, 3), float(seeds[1])))
+        return lambda x, seeds: (np.full((1, 1, 3), float(seeds[1])), np.full((1, 1, 3, 1), float(seeds[0])))  # image, Jacobian
 
     loaded, spec = SimpleNamespace(jacobians={}, function=function), SimpleNamespace(names=("parts.legs.kd",))
     x = np.array([0.3])
