@@ -15,7 +15,7 @@ from helpers import small_scene, write_sphere_obj
 
 import spacefit as sf
 from spacefit.cli import main
-from spacefit.fitting.problem import check_reference
+from spacefit.fitting.observations.image import check_reference
 from spacefit.imageio import read_image, sensor_of, sidecar_path
 from spacefit.sensor import read_sensor_file
 from spacefit.studies.axes import axis_lengths, parse_axes

@@ -120,11 +120,13 @@ def _args(case: Path, out: Path, *extra: str, reference: str = "a.exr") -> list[
             "--out", str(out), "--max-steps", "3", "--quiet", *extra]
 
 
-# `spacefit fit` as the program, with JAX's persistent-cache hits counted as they happen (on stderr: the fit ends the
-# process at once, atexit handlers included).
+# `spacefit fit` as the program, with JAX's persistent-cache hits and its programs compiled or read back counted as they
+# happen (on stderr: the fit ends the process at once, atexit handlers included).
 COUNT_HITS = ("import runpy, sys\n"
               "from jax._src import monitoring\n"
               "monitoring.register_event_listener(lambda event, **kw: event.endswith('/cache_hits') and print('cache hit', file=sys.stderr))\n"
+              "monitoring.register_event_duration_secs_listener(lambda event, s, **kw: event.endswith('/backend_compile_duration') and "
+              "print('program', file=sys.stderr))\n"
               "sys.argv[0] = 'spacefit'\n"
               "runpy.run_module('spacefit.cli', run_name='__main__')\n")
 
@@ -132,7 +134,8 @@ COUNT_HITS = ("import runpy, sys\n"
 @pytest.mark.slow  # two fit processes: 15-20 s on a quiet machine
 def test_the_fit_program_ends_at_once_with_its_report_and_reads_jax_s_programs_from_the_disk(case, tmp_path):
     """Two `spacefit fit` processes sharing a JAX cache folder: the first writes the programs it compiled, the
-    second reads them back and writes none; each ends at once (os._exit) with its report whole and its exit
+    second reads them back, compiles none but the one compiled twice (no program calls back into Python for its
+    renders: spacefit.fitting.outside; 5 did) and writes none; each ends at once (os._exit) with its report whole and its exit
     code the report's verdict, and leaves no lock or stage."""
     runs = []
     for k in range(2):
@@ -145,6 +148,7 @@ def test_the_fit_program_ends_at_once_with_its_report_and_reads_jax_s_programs_f
         assert sorted(os.listdir(out)) == REPORT and "parts.sphere.kd" in run.stdout
         runs.append((run.stderr.count("cache hit"), sorted(p.name for p in (tmp_path / "jax").iterdir())))
     (first, written), (second, read) = runs
+    assert run.stderr.count("program") <= second + 1  # the second process's programs from the disk (one may be compiled twice)
     assert len(written) >= 10 and read == written
     assert second >= first + len(written) - 1  # every program written is read back (one may be compiled twice in a process)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["jax", "run0", "run1"]

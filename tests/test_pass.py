@@ -14,7 +14,7 @@ from astropy.table import Table
 
 import spacefit as sf
 from spacefit.fitting.frames import FrameSpec, InProcess, Loaded, frame_jacobian, frame_part_image, frame_primal, run_frames, share_views
-from spacefit.fitting import problem
+from spacefit.fitting import problem, residuals
 from spacefit.fitting.problem import images_memory
 from spacefit.rendering import memory
 from spacefit.rendering.memory import describe_fit, fit_memory
@@ -233,7 +233,7 @@ def test_the_frames_of_a_pass_compile_once_not_once_per_frame():
         jax.monitoring.unregister_event_duration_listener(listen)
     assert compiled == []
     assert kernels["launched"] > 0 and kernels["new"] == 0
-    assert len(loaded.compiled) == 2  # one primal and one Jacobian program for the three frames
+    assert len(loaded.compiled) == 1  # one pair of programs (image, Jacobian) for the three frames
     (image, J), primal = together[1]
     alone = Loaded()
     assert np.array_equal(frame_jacobian(specs[2], specs[2].key, x, 3, 4, alone)[1], J)
@@ -480,7 +480,7 @@ def test_a_frames_cached_jacobian_is_keyed_by_its_seeds_too():
     from types import SimpleNamespace
 
     def function(spec, key, kind):
-        return lambda x, seeds: (np.full((1, 1, 3, 1), float(seeds[0])), np.full((1, 1, 3), float(seeds[1])))
+        return lambda x, seeds: (np.full((1, 1, 3), float(seeds[1])), np.full((1, 1, 3, 1), float(seeds[0])))  # image, Jacobian
 
     loaded, spec = SimpleNamespace(jacobians={}, function=function), SimpleNamespace(names=("parts.legs.kd",))
     x = np.array([0.3])
@@ -541,7 +541,7 @@ def test_a_pass_s_normal_equations_and_errors_apply_one_direction_per_kind_of_ow
     free = ["parts.legs.kd", "image.blur_sigma_px", *sf.Pass.from_columns({"file": ["a", "b", "c"], "time": [0, 1, 2]}).per_frame(
         ["target.attitude_x_deg", "image.shift_x_px"])]
     s = problem.setup(obs, free, start={"parts.legs.kd": 0.4, "image.blur_sigma_px": 0.5}, render=sf.FitRender(spp=2))
-    owners = problem.column_owners(s.solver_params, s.problem.blocks)
+    owners = residuals.column_owners(s.solver_params, s.problem.blocks)
     assert owners == (-1, -1, 0, 1, 2, 0, 1, 2)
     lin = linearise(s.problem, s.x0)
     alone = dataclasses.replace(lin, owners=None)

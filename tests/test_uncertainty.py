@@ -42,6 +42,10 @@ class LinearProblem:
         """The residuals laid out as the references' pixels (Problem.pixels)."""
         return sum(int(np.size(ref)) for ref in self.references)
 
+    def linearised(self, x, j):
+        """The j-th residual function's value and tangent map at x (Problem.linearised)."""
+        return jax.linearize((self.residual_x, self.residual_x_independent)[j], x)
+
 
 def linear(A, b, A2=None, b2=None, noise_known=False) -> LinearProblem:
     A2, b2 = (A, b) if A2 is None else (A2, b2)

@@ -7,11 +7,13 @@ persistent compilation cache at ``$SPACEFIT_JAX_CACHE_DIR`` (default: ``jax`` in
 This is the one piece of JAX's configuration a fit changes for the whole process (its cache folder and
 the floors on what is written): JAX opens its cache once per process and has no scoped setting for it.
 
-JAX writes no entry for a program that calls back into Python (``jax.pure_callback``): the solver's step,
-the Jacobian and the residuals, whose renders are such callbacks, are compiled in every process (about
-5 of the 6 s, measured in docs/measurements/performance.md): the step and the renders' own programs are compiled
-with LLVM's optimisations off (:data:`CALLBACK_COMPILER_OPTIONS`; the residuals' program is traced inside
-others too, where JAX takes no options); the cache holds the fit's other programs (about 60 of 90).
+JAX writes no entry for a program that calls back into Python (``jax.pure_callback``). An image fit's
+renders are made before the programs that take them (:mod:`spacefit.fitting.outside`; the solver's step of the
+Gauss-Newton family, the noise floor's residuals, the standard errors' tangents, the frames' scene values), so a
+second process reads every program of the 8-parameter observation fit from the cache (222 of 222, measured in
+docs/measurements/performance.md). What still calls back (Adam's and BFGS's steps, a rendered light curve's
+model, a residual function traced whole, e.g. by ``jax.jacfwd``) is compiled in every process, Adam's with
+LLVM's optimisations off (:data:`CALLBACK_COMPILER_OPTIONS`), as are the other solvers' steps that call back.
 
 A stale entry cannot be used: JAX names each entry by a hash of the program itself (its StableHLO), the
 jax and jaxlib versions, the backend and device kind and the compile options, so changed code, another
@@ -40,8 +42,8 @@ ENV = "SPACEFIT_JAX_CACHE_DIR"
 MIN_COMPILE_S = 0.0
 # XLA's options for the programs that call back into Python for their renders (``jax.pure_callback``):
 # JAX's cache refuses them, so every process compiles them, and each runs a few times a fit, its time
-# mostly the renders'. LLVM's optimisations off (level 0, default 2): the solver's step compiled in
-# 2.9 s of CPU in place of 4.1 s and ran 0.04 s slower a call (0.26 s, load 12; performance.md).
+# mostly the renders'. LLVM's optimisations off (level 0, default 2): the solver's step, when it called back,
+# compiled in 2.9 s of CPU in place of 4.1 s and ran 0.04 s slower a call (0.26 s, load 12; performance.md).
 # JAX takes compiler options on a top-level jit only (one called from Python, not traced inside another).
 CALLBACK_COMPILER_OPTIONS = {"xla_backend_optimization_level": 0}
 

@@ -32,9 +32,8 @@ import numpy as np
 
 from spacefit import executors
 from spacefit.executors import Cluster, Executor, executor_of
-from spacefit.fitting.compile_cache import jit_calling_back
 from spacefit.precision import float64
-from spacefit.rendering.bridge import seeded_render_params, seeds_array
+from spacefit.rendering.bridge import outside_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
 from spacefit.rendering.renderer import render_threads
 from spacefit.rendering.parts import PartImage
@@ -159,7 +158,7 @@ class Loaded:
     max_scenes: int = MAX_SCENES
     stages: OrderedDict[str, Stage] = field(default_factory=OrderedDict)
     chains: dict[str, tuple[str, RenderChain, View]] = field(default_factory=dict)
-    compiled: dict[tuple[str, tuple[float, ...], str], Callable[..., Any]] = field(default_factory=dict)
+    compiled: dict[tuple[str, tuple[float, ...]], tuple[Callable[..., Any], Callable[..., Any]]] = field(default_factory=dict)
     jacobians: dict[str, tuple[bytes, tuple[np.ndarray, np.ndarray]]] = field(default_factory=dict)
 
     def chain(self, spec: FrameSpec, key: str) -> RenderChain:
@@ -194,22 +193,17 @@ class Loaded:
         self.jacobians = {key: v for key, v in self.jacobians.items() if key not in gone}
 
     def function(self, spec: FrameSpec, key: str, kind: str) -> Callable[[jax.Array, jax.Array], Any]:
-        """The frame's image (``kind`` "primal") or its Jacobian and image ("jacobian") as a function
-        of its values and seeds (:func:`~spacefit.rendering.bridge.seeds_array`): one program jitted
-        per loaded scene, finite-difference steps and kind, the seeds and the frame's view its operands
-        (a new closure each step would compile each step, a closure per frame each frame)."""
+        """The frame's image (``kind`` "primal") or its image and Jacobian ("jacobian") as a function
+        of its values and seeds (:func:`~spacefit.rendering.bridge.seeds_array`), rendered outside JAX
+        (:func:`~spacefit.rendering.bridge.outside_render_params`): one pair of programs per loaded scene and
+        finite-difference steps, the seeds and the frame's view their operands (a new closure each step
+        would compile each step, a closure per frame each frame)."""
         chain = self.chain(spec, key)  # loads it, or marks its scene as recently used
         stage, _, view = self.chains[key]
-        name = (stage, spec.fd_steps, kind)
+        name = (stage, spec.fd_steps)
         if name not in self.compiled:
-            image = seeded_render_params(chain.drjit, self.stages[stage].values, spec.fd_steps)
-
-            def twice(y: jax.Array, seeds: jax.Array, view: View) -> tuple[jax.Array, jax.Array]:
-                out = image(y, seeds, view)
-                return out, out
-
-            self.compiled[name] = jit_calling_back(image if kind == "primal" else jax.jacfwd(twice, has_aux=True))
-        compiled = self.compiled[name]
+            self.compiled[name] = outside_render_params(chain.drjit, self.stages[stage].values, spec.fd_steps)
+        compiled = self.compiled[name][kind == "jacobian"]
         return lambda x, seeds: compiled(x, seeds, view)
 
 
@@ -252,7 +246,7 @@ def frame_jacobian(spec: FrameSpec, key: str, x: np.ndarray, seed: int, seed_gra
     last = loaded.jacobians.get(key)
     if last is not None and last[0] == point:  # a solver's last linearisation, asked again by the standard errors
         return last[1]
-    J, img = loaded.function(spec, key, "jacobian")(jnp.asarray(x, dtype=jnp.float64), seeds_array(seed, seed_grad))
+    img, J = loaded.function(spec, key, "jacobian")(jnp.asarray(x, dtype=jnp.float64), seeds_array(seed, seed_grad))
     out = np.asarray(img, dtype=np.float32), np.asarray(J, dtype=np.float32)
     loaded.jacobians[key] = (point, out)
     return out
@@ -296,25 +290,40 @@ def _threaded(fn: Callable[..., Any], spec: FrameSpec, key: str, *args: Any) -> 
         return fn(spec, key, *args)
 
 
+def frame_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Sequence[np.ndarray], x: np.ndarray, seeds: np.ndarray,
+                  jacobian: bool) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...] | None]:
+    """Every frame's image, frame k's at ``x[indices[k]]``, for the seeds ``seeds``
+    (:func:`~spacefit.rendering.bridge.seeds_array`), and with ``jacobian`` each one's Jacobian
+    columns (h, w, 3, n_k) (None without): one batch on ``executor``."""
+    x, seeds = np.asarray(x), np.asarray(seeds)  # JAX may hand a callback its own arrays (each index of one compiles)
+    if not jacobian:
+        return tuple(run_frames(executor, frame_primal, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs))), None
+    out = run_frames(executor, frame_jacobian, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs),
+                     [int(seeds[1])] * len(specs))
+    return tuple(img for img, _ in out), tuple(J for _, J in out)
+
+
+def _tangents(jacobians: Sequence[jax.Array], t: jax.Array, indices: Sequence[np.ndarray]) -> tuple[jax.Array, ...]:
+    """Each frame's image change along the free values' change ``t``: its Jacobian columns times its share of ``t``."""
+    return tuple(J @ t[idx].astype(jnp.float32) for J, idx in zip(jacobians, indices))
+
+
 def batched_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Sequence[np.ndarray],
                     shapes: Sequence[tuple[int, int, int]]) -> Callable[[jax.Array, jax.Array], tuple[jax.Array, ...]]:
     """Every frame's image as one JAX function of the fit's free values x and the seeds
     (:func:`~spacefit.rendering.bridge.seeds_array`; an operand, so that one compiled program serves
     the fit's seeds and the independent ones): frame k renders ``x[indices[k]]``. Its derivative is
     each frame's materialised Jacobian times the tangent, as
-    :func:`~spacefit.rendering.bridge.render_params`'s, with all frames' Jacobians in one batch."""
+    :func:`~spacefit.rendering.bridge.render_params`'s, with all frames' Jacobians in one batch.
+    A program that calls it calls back into Python (:func:`given_renders` takes the renders as operands)."""
     images = tuple(jax.ShapeDtypeStruct(shape, jnp.float32) for shape in shapes)
     columns = tuple(jax.ShapeDtypeStruct((*shape, len(idx)), jnp.float32) for shape, idx in zip(shapes, indices))
 
     def primal_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[np.ndarray, ...]:
-        x, seeds = np.asarray(x), np.asarray(seeds)  # JAX may hand a callback its own arrays (each index of one compiles)
-        return tuple(run_frames(executor, frame_primal, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs)))
+        return frame_renders(executor, specs, indices, x, seeds, False)[0]
 
-    def jacobian_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
-        x, seeds = np.asarray(x), np.asarray(seeds)
-        out = run_frames(executor, frame_jacobian, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs),
-                           [int(seeds[1])] * len(specs))
-        return tuple(img for img, _ in out), tuple(J for _, J in out)
+    def jacobian_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...] | None]:
+        return frame_renders(executor, specs, indices, x, seeds, True)
 
     # Evaluated eagerly (not traced: jax.block_until_ready passes tracers through), each callback is waited
     # for before the caller dispatches work on its outputs. The callbacks render through JAX themselves
@@ -329,6 +338,23 @@ def batched_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Seq
     def render_jvp(primals: tuple[jax.Array, jax.Array], tangents: tuple[jax.Array, jax.Array]) -> tuple[Any, Any]:
         (x, seeds), (t, _) = primals, tangents
         imgs, Js = jax.block_until_ready(jax.pure_callback(jacobian_cb, (images, columns), x, seeds, vmap_method="sequential"))
-        return imgs, tuple(J @ t[idx].astype(jnp.float32) for J, idx in zip(Js, indices))
+        return imgs, _tangents(Js, t, indices)
 
     return render
+
+
+def given_renders(indices: Sequence[np.ndarray]) -> Callable[[jax.Array, Sequence[jax.Array], Sequence[jax.Array] | None], tuple[jax.Array, ...]]:
+    """``(x, images, jacobians) -> images``: :func:`batched_renders`'s function with its renders made
+    beforehand (:func:`frame_renders` at x) and handed in as operands, so that a program that calls it
+    calls nothing back and JAX's cache can keep it; its derivative in x is each frame's Jacobian
+    times the tangent, as :func:`batched_renders`'s (``jacobians`` None: not differentiable)."""
+    @jax.custom_jvp
+    def given(x: jax.Array, images: Sequence[jax.Array], jacobians: Sequence[jax.Array] | None) -> tuple[jax.Array, ...]:
+        return tuple(images)
+
+    @given.defjvp
+    def given_jvp(primals: tuple[Any, Any, Any], tangents: tuple[Any, Any, Any]) -> tuple[Any, Any]:
+        (_, images, jacobians), (t, _, _) = primals, tangents
+        return tuple(images), _tangents(jacobians, t, indices)
+
+    return given

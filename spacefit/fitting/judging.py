@@ -12,7 +12,8 @@ import numpy as np
 
 from spacefit.errors import InputError
 from spacefit.fitting.goodness import Goodness, goodness, part_chi2, verdict_factor
-from spacefit.fitting.problem import Problem, Setup
+from spacefit.fitting.problem import Setup
+from spacefit.fitting.residuals import Problem
 from spacefit.rendering.memory import check_memory
 from spacefit.rendering.parts import PartImage
 from spacefit.scene.names import Name
@@ -64,7 +65,7 @@ def judged_goodness(s: Setup, x: jax.Array, loss: str) -> tuple[Goodness, np.nda
 
 def _signal(problem: Problem, models: list[jax.Array]) -> np.ndarray:
     """Per residual, the models' signal in the residuals' unit: each model less its model of no light
-    (:attr:`~spacefit.fitting.problem.Problem.dark`; a value observation's 0), weighted as the residuals
+    (:attr:`~spacefit.fitting.residuals.Problem.dark`; a value observation's 0), weighted as the residuals
     are (their derivative along it: s_i / sigma_i with the noise known), for :attr:`~spacefit.fitting.goodness.Goodness.detectable`."""
     dark = [*problem.dark, *(0.0 for _ in models[len(problem.dark):])]
     return np.asarray(jax.jvp(problem.residual_of, (models,), ([m - d for m, d in zip(models, dark)],))[1], dtype=float)

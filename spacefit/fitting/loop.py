@@ -27,10 +27,13 @@ from spacefit.fitting.judging import judged_goodness, part_goodness, part_rows, 
 from spacefit.fitting.observations.base import Sequenced, ValueObservation
 from spacefit.fitting.observations.image import Observation
 from spacefit.fitting.pixel_grid import grid_notes
-from spacefit.fitting.problem import FitRender, Setup, column_owners, setup
+from spacefit.fitting.problem import FitRender, Setup, setup
+from spacefit.fitting.residuals import column_owners
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.resume import Resume
-from spacefit.fitting.solvers import Outcome, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name, with_owners
+from spacefit.fitting.outside import DESCENT
+from spacefit.fitting.solvers import (Outcome, RenderedFirst, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name,
+                                      with_owners)
 from spacefit.fitting.stopping import REJECTED_PATIENCE, REJECTED_RTOL, NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
@@ -224,13 +227,33 @@ def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progr
     told = with_owners(engine, column_owners(fp, problem.blocks))  # a pass's frames' own columns grouped
     try:
         with deferred_interrupts() as interrupts:
-            outcome = steps.run(drive(told, residual_u, u, max_steps, problem.loss_u_reverse), interrupts)
+            outcome = steps.run(drive(told, residual_u, u, max_steps, problem.loss_u_reverse, _rendered_first(s, steps)), interrupts)
     except KeyboardInterrupt as signal:
         best = steps.best_u if steps.best_u is not None else u
         outcome = Outcome(Status.TERMINATED if isinstance(signal, Terminated) else Status.INTERRUPTED, best, len(steps.history))
     if resume.on_end is not None and not outcome.status.interrupted:
         resume.on_end(steps.ending(outcome))
     return _result(s, outcome, steps, solver_name(engine), loss)
+
+
+def _rendered_first(s: Setup, steps: _Steps | None = None) -> RenderedFirst | None:
+    """The solver's residuals with their renders made before each step (:mod:`spacefit.fitting.outside`), where the
+    problem has them; each step's renders told to ``steps`` (:meth:`_Steps.rendered`)."""
+    fp, outside = s.solver_params, s.problem.outside
+    if outside is None:
+        return None
+
+    def render(u: jax.Array) -> Any:
+        x = np.asarray(fp.to_physical(u))
+        rendered = outside.render(x, 0, True)
+        if steps is not None:
+            steps.rendered(x, rendered)
+        return rendered
+
+    def residual(u: jax.Array, rendered: Any) -> jax.Array:
+        return outside.evaluate(fp.to_physical(u), *rendered)[DESCENT].astype(u.dtype)  # as residual_u's
+
+    return RenderedFirst(render, residual)
 
 
 class _Steps:
@@ -247,6 +270,11 @@ class _Steps:
         self.reported_again = False  # the record of an ended solve (:meth:`ended`), not a solve
         self.restarted = False  # an interrupted solve goes on (:meth:`resumed`): its first step evaluates its best point again
         self.t0 = time.perf_counter()
+        self.last: tuple[np.ndarray, Any] | None = None  # the last step's point and renders (rendered first)
+
+    def rendered(self, x: np.ndarray, rendered: Any) -> None:
+        """The renders with their Jacobian (the fit's seeds) made at ``x`` for the step to be recorded next."""
+        self.last = (x, rendered)
 
     def run(self, driver: Generator[Step, None, Outcome], interrupts: Any) -> Outcome:
         """Record the driver's steps until it ends or a stop of this record's own."""
@@ -279,9 +307,12 @@ class _Steps:
         accepted = not self.restarted and self.floor.record(step.loss, new_point=not same)
         if accepted:
             self.best_u, self.best_loss = step.u, step.loss
+            if self.last is not None and np.array_equal(self.last[0], x_solver):  # the errors linearise here with these renders
+                x_rendered, rendered = self.last
+                problem.outside.keep(x_rendered, 0, rendered)
             if self.noise_stop:
-                r = step.residuals if step.residuals is not None else np.asarray(problem.descent_x(x_solver))
-                self.floor.set_noise(loss_noise(r, np.asarray(problem.descent_x_independent(x_solver))))
+                r = step.residuals if step.residuals is not None else np.asarray(problem.descent_at(x_solver, 0))
+                self.floor.set_noise(loss_noise(r, np.asarray(problem.descent_at(x_solver, 1))))
         x = np.asarray(s.to_user(x_solver))
         self.history.append({"step": k, "loss": step.loss, "accepted": accepted, "loss_noise": self.floor.noise,
                              "values": dict(zip(s.user.names, x.tolist())), "time_s": time.perf_counter() - self.t0})

@@ -100,6 +100,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Sequence
 
+import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -223,6 +224,7 @@ def grid_error_models(obs: Observation, scene: Scene, x: Float[np.ndarray, " n"]
     moves = [nuisance_index(names, n, k) for n in MOVES]
     optics = {f: fine_optics(obs.sensor, intrinsics, f, channels) for f in (SUPERSAMPLE, COARSER)}
 
+    @jax.jit  # one program for both renders (operands), not some 150 of single operations evaluated one by one
     def made(image: Array, y: np.ndarray) -> tuple[Array, Array, Array]:
         finest, grid = fine_and_grid_models(image, scene.render.filter, y, k, image_model, fine_units, grid_units, optics[SUPERSAMPLE], moves)
         return finest, fine_and_grid_models(binned(image, SUPERSAMPLE // COARSER), scene.render.filter, y, k, image_model, fine_units,

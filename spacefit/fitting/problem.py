@@ -1,263 +1,36 @@
-"""A fitting problem's set-up: observations checked, scenes assembled and loaded, residuals built.
+"""A fitting problem's set-up: observations checked, scenes assembled and loaded, the residuals built.
 
 The observations are images (:mod:`spacefit.fitting.observations.image`) and value observations
-(tables, light curves: :mod:`spacefit.fitting.observations.base`), whose residual blocks follow the
-images' pixels. Nothing is rendered here: every input is checked first (:func:`setup`), so that a bad one is
-refused before any work. Every render of a solve uses the same seed (common random numbers), so
-the objective is a deterministic function; derivative renders use another seed. In a joint fit
-each observation's renderer sees the free values that are its own (``target.attitude_z_deg@k``)
-or shared (:meth:`~spacefit.fitting.params.FreeParameters.rendered`); the image nuisances act on
-its render in JAX (:mod:`spacefit.fitting.nuisance`).
+(tables, light curves: :mod:`spacefit.fitting.observations.base`). Nothing is rendered here: every input is
+checked first (:func:`setup`), so that a bad one is refused before any work; the residuals are
+:mod:`spacefit.fitting.residuals`'.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import math
 import warnings
 from contextvars import ContextVar
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_choice, check_name_list, quote
 from spacefit.executors import Executor
-from spacefit.fitting.frames import FrameSpec, InProcess, batched_renders, frame_part_image, run_frames, share_views
-from spacefit.fitting.nuisance import image_model as image_model_of, nuisance_index
-from spacefit.fitting.observations.base import Block, Reported, Sequenced, ValueObservation
-from spacefit.fitting.observations.image import Observation, check_reference, image_residual, in_unit_of
+from spacefit.fitting.observations.base import Reported, Sequenced, ValueObservation
+from spacefit.fitting.observations.image import Observation
 from spacefit.fitting.params import Bijection, FreeParameters, bijection
-from spacefit.fitting.pixel_grid import grid_error_models
-from spacefit.rendering.bridge import seeds_array
+from spacefit.fitting.residuals import Problem, build_problem
 from spacefit.rendering.derivatives import check_seeds, check_spp
 from spacefit.rendering.memory import LARGE_FIT_BYTES, check_fit_memory, describe_fit
-from spacefit.rendering.parts import PartImage
-from spacefit.scene.assembly import assemble
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import FILTER_RADIUS_PX
-from spacefit.sensor import saturated_mask
-from spacefit.psf import psf_rms_px
-from spacefit.units import DN_UNIT, RADIANCE_UNIT
 from spacefit.scene.names import Name
 from spacefit.scene.parameters import GEOMETRY, available, check_names, fd_step, scene_value, scene_with_values
 from spacefit.scene.conversions import G_of, rms_of
 
 INTEGRATORS = ("prb", "direct_projective", "prb_projective")
-# Seed offset of the second, independent Jacobian used for the standard errors.
-INDEPENDENT_SEED_OFFSET = 1000
-# the pixel grid's renders at 4x the resolution take the fit's seed plus this, and that plus INDEPENDENT_SEED_OFFSET
-PIXEL_GRID_SEED_OFFSET = 500
-
-
-@dataclass
-class Problem:
-    """The residuals of a set of observations as JAX functions of the physical free values x: the
-    images' pixels first, then each value observation's block (:mod:`spacefit.fitting.observations`).
-    The per-observation fields below are the images'; ``blocks`` holds the others."""
-
-    free: FreeParameters
-    residual_x: Callable[[jax.Array], jax.Array]  # physical x -> stacked residuals (J by forward mode)
-    residual_x_independent: Callable[[jax.Array], jax.Array]  # the same with independent seeds
-    loss_u_reverse: Callable[[jax.Array], jax.Array] | None  # unconstrained u -> the descended loss (reverse mode)
-    renders_x: Callable[[jax.Array], list[jax.Array]]  # each observation's model in its data's unit
-    part_images: list[PartImage]  # which part each pixel of each image sees
-    references: list[np.ndarray]  # the checked references, (h, w, 3) or (h, w, 1) float32, 0 where not used
-    # (x, j) -> each observation's model (images, then blocks) at the j-th seeds (0 the fit's, 1 the
-    # independent ones, more further independent ones: the goodness of fit's verdict render,
-    # spacefit.fitting.goodness) ...
-    models_seeded: Callable[[jax.Array, int], list[jax.Array]]
-    # ... the stacked residuals of given models (the noise sigma taken at them) ...
-    residual_of: Callable[[list[jax.Array]], jax.Array]
-    # ... and factor -> the same problem rendered with factor times the samples per pixel (the verdict render)
-    resampled: Callable[[int], Problem]
-    # physical x -> the residuals a solver descends, at the fit's seeds and at the independent ones: residual_x's
-    # but for a sensor's noise, its quasi-deviance's (spacefit.fitting.losses)
-    descent_x: Callable[[jax.Array], jax.Array]
-    descent_x_independent: Callable[[jax.Array], jax.Array]
-    noise_known: bool = False  # every residual is divided by its predicted or stated noise (a sensor per image)
-    # per image, how far (px) its render noise spreads before the residuals: the pixel
-    # filter's radius and the rms width of the sensor's PSF (0 without a sensor)
-    noise_spread_px: tuple[tuple[float, float], ...] = ()
-    units: tuple[str, ...] = ()  # per image, the unit of its reference and model image (radiance or DN)
-    used: tuple[np.ndarray, ...] = ()  # per image, (h, w) bool: the pixels fitted in every channel
-    spp: tuple[int, ...] = ()  # per image, the samples per pixel of its primal renders
-    reference_spp: tuple[int | None, ...] = ()  # per image, its reference's (Observation.render_spp)
-    blocks: tuple[Block, ...] = ()  # the value observations' residual blocks, after the images' pixels
-    dark: tuple[float, ...] = ()  # per image, its model of no light in its unit (a sensor's bias, DN; 0 for radiance)
-    # physical x -> (y -> the change of the images' residuals from the fit's model to those made at 4x and 2x the
-    # resolution, from two renders at x, the image nuisances y's, and a draw of its render noise:
-    # spacefit.fitting.pixel_grid), or None where no image's blur width is free
-    pixel_grid: Callable[[np.ndarray], Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None] | None = None
-
-    @property
-    def rendered(self) -> bool:
-        """Whether a model is rendered (Monte Carlo): an image, or a rendered value observation."""
-        return bool(self.references) or any(b.rendered for b in self.blocks)
-
-    @property
-    def pixels(self) -> int:
-        """How many of the stacked residuals are the images' (the blocks' follow)."""
-        return sum(ref.size for ref in self.references)
-
-
-def column_owners(free: FreeParameters, blocks: Sequence[Block]) -> tuple[int, ...] | None:
-    """Per free value, the image whose residuals alone it moves (its own value, ``image.scale@k``,
-    which no value observation knows), -1 for the others; None where every value is shared. The
-    normal equations of a joint fit apply their products to one direction for every image's own
-    value of one kind (:func:`~spacefit.fitting.normal_equations.probes`)."""
-    known = {n for block in blocks for n in block.known}
-    owners = tuple(-1 if Name(n).observation is None or n in known else Name(n).observation for n in free.names)
-    return owners if any(o >= 0 for o in owners) else None
-
-
-def _problem(
-    observations: Sequence[Observation], free: FreeParameters, loss: str, spp: int | None, spp_grad: int | None,
-    seed: int, seed_grad: int, integrator: str, executor: Executor | None = None, blocks: Sequence[Block] = (),
-    image_names: frozenset[str] = frozenset(),
-) -> Problem:
-    residuals, descents, references, spread, to_units, units, used_pixels, specs, shapes, dark = [], [], [], [], [], [], [], [], [], []
-    # the image nuisances act on the render in JAX; each renderer sees the other parameters it knows
-    # (``image_names``), an observation's own pose (``target.attitude_z_deg@k``) in place of the shared
-    # one; every observation's render of a step runs in one batch (spacefit.fitting.frames)
-    executor = InProcess() if executor is None else executor
-    image_model = image_model_of(free.names)
-    rendered = [_seen(free, k, image_names) for k in range(len(observations))]
-    for i, obs in enumerate(observations):
-        rendered_names, steps = rendered[i][0], free.fd_steps[rendered[i][1]]
-        ref, used = check_reference(obs, i)
-        scene = obs.scene
-        assembly = assemble(scene)
-        specs.append(FrameSpec(scene, tuple(rendered_names), tuple(float(v) for v in steps), spp, spp_grad, integrator))
-        shapes.append((assembly.intrinsics.height, assembly.intrinsics.width, 3))
-        if obs.sensor is not None:
-            used = used & ~saturated_mask(ref, obs.sensor)  # a saturated value says only "at least this bright"
-        residuals.append(image_residual(obs, ref, used, loss))
-        descents.append(image_residual(obs, ref, used, loss, descent=True))
-        to_units.append(in_unit_of(obs, ref.shape[-1], assembly.intrinsics))
-        units.append(RADIANCE_UNIT if obs.sensor is None else DN_UNIT)
-        dark.append(0.0 if obs.sensor is None else float(obs.sensor.bias_dn))
-        references.append(ref)
-        used_pixels.append(np.all(used, axis=-1))
-        blur = 0.0 if obs.sensor is None else psf_rms_px(obs.sensor, assembly.intrinsics, ref.shape[-1])
-        spread.append((FILTER_RADIUS_PX[scene.render.filter], blur))
-    specs = share_views(specs)  # a pass's frames share a loaded scene
-    indices = [r[1] for r in rendered]
-    images = batched_renders(executor, specs, indices, shapes) if specs else (lambda x, seeds: [])
-    part_images = run_frames(executor, frame_part_image, specs) if specs else []
-
-    def stack(images: Callable[[jax.Array], Sequence[jax.Array]]) -> Callable[[jax.Array], tuple[list[jax.Array], jax.Array, jax.Array]]:
-        """x -> each image's model, the stacked residuals and the stacked residuals a solver descends."""
-        def both(x: jax.Array) -> tuple[list[jax.Array], jax.Array, jax.Array]:
-            out = [frame_model(image, x, k) for k, image in enumerate(images(x))]
-            if not out:
-                return [], jnp.zeros(0), jnp.zeros(0)
-            return [o[0] for o in out], jnp.concatenate([o[1] for o in out]), jnp.concatenate([o[2] for o in out])
-        return both
-
-    def frame_model(image: jax.Array, x: jax.Array, k: int) -> tuple[jax.Array, jax.Array, jax.Array]:
-        """One image's model and its residuals (those judged and those descended) from its render."""
-        model = to_units[k](image_model(image, x, k))
-        return model, residuals[k](model), descents[k](model)
-
-    if len(observations) > 1:
-        # a joint fit's images recomputed where linearised (jax.checkpoint): a linearisation kept every
-        # intermediate of the image model and the sensor's (76 image-sized float64 arrays a frame, 26 MiB
-        # at 128 x 128 px) for each of the solver's two copies of it, where it now keeps the render and the
-        # free values; 22 % more CPU on a 12-frame pass (docs/measurements/performance.md, "A pass's
-        # memory"), so one image, whose memory is no concern, is not recomputed
-        frame_model = jax.checkpoint(frame_model, static_argnums=(2,))
-
-    # compiled once per fit, the seeds an operand: one program for the model images and residuals at the
-    # fit's seeds and at the independent ones (evaluated op by op, the image model's FFTs and the
-    # residuals compiled some 170 small XLA programs per fit, 15 s of a 128 x 128 fit's 75 s on 2 cores)
-    models_residuals = jax.jit(lambda x, seeds: stack(lambda y: images(y, seeds))(x))
-    main, independent = seeds_array(seed, seed_grad), seeds_array(seed + INDEPENDENT_SEED_OFFSET, seed_grad + INDEPENDENT_SEED_OFFSET)
-
-    def block_models(x: jax.Array, j: int) -> list[jax.Array]:
-        return [b.model(x, j) for b in blocks]
-
-    def with_blocks(image_residuals: jax.Array, models: Sequence[jax.Array]) -> jax.Array:
-        """The images' residuals followed by each block's, of its model in ``models``."""
-        return jnp.concatenate([image_residuals, *(b.residual(m) for b, m in zip(blocks, models))])
-
-    reverse = None
-    if not np.any(free.fd_steps > 0) and isinstance(executor, InProcess):  # one Dr.Jit backward pass per observation
-        renders_v = [executor.chain(spec).reverse(seed, seed_grad) for spec in specs]
-
-        def reverse(u: jax.Array) -> jax.Array:
-            frames = lambda x: [render(x[indices[k]]) for k, render in enumerate(renders_v)]  # noqa: E731
-            x = free.to_physical(u)
-            return 0.5 * jnp.sum(with_blocks(stack(frames)(x)[2], block_models(x, 0)) ** 2)
-
-    def models_seeded(x: jax.Array, j: int) -> list[jax.Array]:
-        seeds = seeds_array(seed + j * INDEPENDENT_SEED_OFFSET, seed_grad + j * INDEPENDENT_SEED_OFFSET)
-        return [*models_residuals(x, seeds)[0], *block_models(x, j)]
-
-    def residual_at(x: jax.Array, seeds: jax.Array, j: int, kind: int = 1) -> jax.Array:
-        """The stacked residuals (``kind`` 1; 2: those a solver descends) at the j-th seeds ``seeds``."""
-        return with_blocks(models_residuals(x, seeds)[kind], block_models(x, j))
-
-    n_images = len(observations)
-    image_residual_of = jax.jit(lambda models: jnp.concatenate([res(model) for res, model in zip(residuals, models)]) if models
-                                else jnp.zeros(0))
-
-    def residual_of(models: list[jax.Array]) -> jax.Array:
-        return with_blocks(image_residual_of(models[:n_images]), models[n_images:])
-
-    spps = tuple(spp or o.scene.render.spp for o in observations)
-    # the pixel loss's residuals are the pixels', which the pixel grid's change is laid out as
-    blurred = [loss == "pixel" and nuisance_index(free.names, "image.blur_sigma_px", k) is not None for k in range(len(observations))]
-
-    def pixel_grid(x: np.ndarray) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
-        """``y ->`` the images' residuals with each free blur's model made at 4x and at 2x the resolution, each
-        less the fit's own (0 for the other images), from two renders at ``x`` with independent seeds (the
-        changes their mean), the image nuisances ``y``'s, and a draw of the first change's render noise (the
-        two renders' difference over sqrt 2) (:mod:`spacefit.fitting.pixel_grid`); None: no free blur, or a
-        filter it does not model."""
-        values = {n: float(v) for n, v in zip(free.names, x) if Name(n).parameter in image_names}
-        seeds = (seed + PIXEL_GRID_SEED_OFFSET, seed + PIXEL_GRID_SEED_OFFSET + INDEPENDENT_SEED_OFFSET)
-        made = [grid_error_models(obs, scene_with_values(obs.scene, values, observation=k).with_values({"render.spp": spps[k]}),
-                                  x, k, free.names, references[k].shape[-1], image_model, to_units[k], seeds) if blurred[k] else None
-                for k, obs in enumerate(observations)]
-        if not any(m is not None for m in made):
-            return None
-
-        def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            parts = []
-            for k, models in enumerate(made):
-                if models is None:
-                    parts.append(np.zeros((3, references[k].size)))
-                    continue
-                (finest, coarser, grid), (finest_b, coarser_b, grid_b) = models(y)
-                own, own_b = residuals[k](grid), residuals[k](grid_b)
-                fine_a, fine_b = residuals[k](finest) - own, residuals[k](finest_b) - own_b
-                parts.append(np.asarray([0.5 * (fine_a + fine_b), 0.5 * (residuals[k](coarser) - own + residuals[k](coarser_b) - own_b),
-                                         (fine_a - fine_b) / math.sqrt(2.0)], dtype=float))
-            return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
-
-        return differences
-
-    def resampled(factor: int) -> Problem:
-        finer = [dataclasses.replace(o, scene=o.scene.with_values({"render.spp": factor * n})) for o, n in zip(observations, spps)]
-        finer_blocks = [b if b.resampled is None else b.resampled(factor) for b in blocks]
-        return _problem(finer, free, loss, None, None, seed, seed_grad, integrator, executor, finer_blocks, image_names)
-
-    return Problem(free, lambda x: residual_at(x, main, 0), lambda x: residual_at(x, independent, 1), reverse,
-                   lambda x: models_seeded(x, 0), part_images, references, models_seeded, residual_of, resampled,
-                   lambda x: residual_at(x, main, 0, 2), lambda x: residual_at(x, independent, 1, 2), all(o.sensor is not None for o in observations) and all(b.noise_known for b in blocks), tuple(spread),
-                   tuple(units), tuple(used_pixels), spps, tuple(o.render_spp for o in observations), tuple(blocks), tuple(dark),
-                   pixel_grid if any(blurred) else None)
-
-
-def _seen(free: FreeParameters, k: int, image_names: frozenset[str]) -> tuple[tuple[str, ...], np.ndarray]:
-    """What image k's renderer sees (:meth:`~spacefit.fitting.params.FreeParameters.rendered`), less
-    the free values only other kinds of observation know (a tabulated BRDF's factor)."""
-    names, indices = free.rendered(k)
-    keep = [i for i, name in enumerate(names) if name in image_names]
-    return tuple(names[i] for i in keep), indices[keep]
 
 
 @dataclass
@@ -416,7 +189,7 @@ def setup(
         wrinkles = np.array([n in GEOMETRY for n in solver_params.names])
         solver_params = dataclasses.replace(solver_params, fd_steps=np.where(wrinkles, 0.0, solver_params.fd_steps))
     blocks = [o.block(solver_params.names) for o in others]
-    problem = _problem(observations, solver_params, loss, render.spp, render.spp_grad, render.seed, render.seed_grad,
+    problem = build_problem(observations, solver_params, loss, render.spp, render.spp_grad, render.seed, render.seed_grad,
                        render.integrator, executor, blocks, image_names)
     noise_given = all(o.sensor is not None or o.sigma is not None for o in observations) and all(b.noise_known for b in blocks)
     return Setup(user, solver_params, x0_user, x0, to_user, problem, rms_index, given, noise_given, image_names, layout)

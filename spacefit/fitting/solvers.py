@@ -158,7 +158,7 @@ def make_solver(solver: str | Solver) -> Solver:
 
 def with_owners(solver: Solver, owners: tuple[int, ...] | None) -> Solver:
     """``solver`` with each of its :class:`NormalEquations` told which observation's residuals alone
-    each column moves (:func:`~spacefit.fitting.problem.column_owners`): a joint fit's J^T J then costs
+    each column moves (:func:`~spacefit.fitting.residuals.column_owners`): a joint fit's J^T J then costs
     a product per shared value and per kind of own value, not per value. Other linear solvers as they are."""
     def told(leaf: Any) -> Any:
         return dataclasses.replace(leaf, owners=owners) if isinstance(leaf, NormalEquations) else leaf
@@ -209,6 +209,20 @@ class Outcome:
 Driver = Generator[Step, None, Outcome]
 
 
+@dataclass(frozen=True)
+class RenderedFirst:
+    """Residuals whose renders are made before the solver's compiled step runs
+    (:mod:`spacefit.fitting.outside`), so that the step calls nothing back and JAX's cache keeps it.
+
+    Attributes:
+        render: unconstrained u (concrete) -> the renders at u, the step's operands.
+        residual: (u, renders) -> the residuals at u from renders made at u: a function with no callback.
+    """
+
+    render: Callable[[jax.Array], Any]
+    residual: Callable[[jax.Array, Any], jax.Array]
+
+
 class _Evaluations:
     """The last point a compiled solver step evaluated, taken out with ``jax.debug.callback``: the
     solvers evaluate trial points inside their compiled steps and return only the accepted ones."""
@@ -234,11 +248,15 @@ class _Evaluations:
 
 
 def drive(solver: Solver, residual_u: ResidualFn, u: jax.Array, max_steps: int,
-          loss_u_reverse: Callable[[jax.Array], jax.Array] | None) -> Driver:
+          loss_u_reverse: Callable[[jax.Array], jax.Array] | None, rendered_first: RenderedFirst | None = None) -> Driver:
     """Step ``solver`` from ``u`` for at most ``max_steps`` steps, yielding each :class:`Step`.
-    ``loss_u_reverse``: the loss by reverse mode, which Adam uses where given."""
+    ``loss_u_reverse``: the loss by reverse mode, which Adam uses where given. ``rendered_first``: the
+    same residuals with their renders made before each step, which the Gauss-Newton family
+    (``lm``, ``gn``, ``dogleg``) steps on (its step evaluates its function at its state's trial point only)."""
     if isinstance(solver, Adam):
         return _adam(solver, residual_u, u, max_steps, loss_u_reverse)
+    if rendered_first is not None and isinstance(solver, optx.AbstractGaussNewton):
+        return _rendered_first(solver, rendered_first, u, max_steps)
     return _optimistix(solver, residual_u, u, max_steps)
 
 
@@ -287,20 +305,66 @@ def _optimistix(solver: Solver, residual_u: ResidualFn, u: jax.Array, max_steps:
         state = solver.init(fn, u, None, {}, f_struct, None, tags)
         step = eqx.filter_jit(solver.step, compiler_options=CALLBACK_COMPILER_OPTIONS)  # its renders call back
         terminate = eqx.filter_jit(solver.terminate)
-        result = optx.RESULTS.nonlinear_max_steps_reached
-        k = 0
-        for k in range(1, max_steps + 1):
+
+        def advance(k: int, u: jax.Array) -> Step:
+            nonlocal state
             u, state, _ = step(fn, u, None, {}, state, tags)
-            yield seen.step(u)
-            if not np.all(np.isfinite(np.asarray(u))):
-                return Outcome(Status.NONFINITE, u, k)
-            done, res = terminate(fn, u, None, {}, state, tags)
-            if bool(done):
-                result = res
-                break
+            return seen.step(u)
+
+        return (yield from _stepped(advance, lambda u: terminate(fn, u, None, {}, state, tags), u, max_steps))
     finally:
         held.clear()
+
+
+def _stepped(advance: Callable[[int, jax.Array], Step], terminate: Callable[[jax.Array], tuple[jax.Array, Any]], u: jax.Array,
+             max_steps: int) -> Driver:
+    """An optimistix solver's steps: ``advance(k, u)`` takes step k from ``u`` and says it, until the
+    solver's ``terminate(u)``, a non-finite point or ``max_steps``."""
+    result = optx.RESULTS.nonlinear_max_steps_reached
+    k = 0
+    for k in range(1, max_steps + 1):
+        taken = advance(k, u)
+        u = taken.iterate
+        yield taken
+        if not np.all(np.isfinite(np.asarray(u))):
+            return Outcome(Status.NONFINITE, u, k)
+        done, res = terminate(u)
+        if bool(done):
+            result = res
+            break
     return Outcome(_status(result), u, k)
+
+
+def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: jax.Array, max_steps: int) -> Driver:
+    """Step a Gauss-Newton-family solver with the renders made before each step at its trial point
+    (its state's ``y_eval``), handed to the compiled step as its ``args``: no program calls back."""
+    held = [given.residual]  # dropped when the solve ends (as :func:`_optimistix`'s)
+
+    def fn(y: jax.Array, args: Any) -> tuple[jax.Array, None]:
+        return held[0](y, args), None
+
+    def evaluated(y: jax.Array, args: Any) -> tuple[jax.Array, jax.Array]:
+        r = held[0](y, args)
+        return r, 0.5 * jnp.sum(r**2)
+
+    tags: frozenset = frozenset()
+    try:
+        args = given.render(u)
+        state = solver.init(fn, u, args, {}, jax.eval_shape(held[0], u, args), None, tags)
+        step, terminate, evaluate = eqx.filter_jit(solver.step), eqx.filter_jit(solver.terminate), jax.jit(evaluated)
+
+        def advance(k: int, u: jax.Array) -> Step:
+            nonlocal state, args
+            trial = state.y_eval
+            if k > 1:
+                args = given.render(trial)
+            r, value = evaluate(trial, args)
+            u, state, _ = step(fn, u, args, {}, state, tags)
+            return Step(np.asarray(trial), float(value), np.asarray(r), iterate=u)
+
+        return (yield from _stepped(advance, lambda u: terminate(fn, u, args, {}, state, tags), u, max_steps))
+    finally:
+        held.clear()
 
 
 def _adam(solver: Adam, residual_u: ResidualFn, u: jax.Array, max_steps: int,

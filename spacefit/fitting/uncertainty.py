@@ -23,7 +23,8 @@ from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
 from spacefit.fitting.pixel_grid import grid_feedback, grid_step
-from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, column_owners, setup
+from spacefit.fitting.problem import FitRender, Observation, Setup, setup
+from spacefit.fitting.residuals import Problem, column_owners
 from spacefit.precision import float64
 from spacefit.scene.parameters import is_image, parameter
 
@@ -79,8 +80,8 @@ class Linearisation:
 def linearise(problem: Problem, x: np.ndarray) -> Linearisation:
     """The problem's :class:`Linearisation` at ``x`` (physical units): one Jacobian render per seed."""
     xj = jnp.asarray(x)
-    r, J1 = jax.linearize(problem.residual_x, xj)
-    r_alt, J2 = jax.linearize(problem.residual_x_independent, xj)
+    r, J1 = problem.linearised(xj, 0)
+    r_alt, J2 = problem.linearised(xj, 1)
     # the transposes take the residuals' dtype (float32 renders: J^T v sums in float32, ~1e-6 relative)
     J1T, J2T = ((lambda v, t=jax.linear_transpose(J, xj), dtype=r.dtype: t(v.astype(dtype))[0]) for J in (J1, J2))
     return Linearisation(xj, np.asarray(r, dtype=float), np.asarray(r_alt, dtype=float), J1, J2, J1T, J2T,

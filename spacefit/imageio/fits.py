@@ -128,6 +128,8 @@ def header_sensor(header: fits.Header, data: np.ndarray, path: Path) -> dict[str
 
 def _wcs_row_order(header: fits.Header) -> str | None:
     """The row order a celestial WCS implies by its parity (see the module), or None without one."""
+    if "CTYPE1" not in header and "CTYPE2" not in header:  # no type for either axis: no celestial WCS (astropy.wcs not imported)
+        return None
     from astropy.wcs import WCS, FITSFixedWarning  # deferred: astropy.wcs takes 0.7 s; only a FITS header with a WCS needs it
 
     with warnings.catch_warnings():

@@ -29,6 +29,7 @@ from __future__ import annotations
 import hashlib
 from collections.abc import Callable, Collection, Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -277,48 +278,92 @@ def seeded_render_params(
         fd_steps: (n,) step of a central finite difference for each parameter, or 0 to take the
             column from a Dr.Jit forward-mode render (the integrator's derivative).
     """
-    steps = np.asarray(fd_steps, dtype=float)
-    n = len(steps)
+    renders = _Renders(scene, fd_steps)
     image = jax.ShapeDtypeStruct(scene.shape, jnp.float32)
-    jac = jax.ShapeDtypeStruct((*scene.shape, n), jnp.float32)
-
-    # A callback may be handed JAX arrays: it indexes them as NumPy's (an index of a JAX array
-    # compiles an XLA program, per shape and per calling thread's settings).
-    def primal_cb(values: dict[str, np.ndarray], seeds: np.ndarray) -> np.ndarray:
-        return scene.primal(values, int(np.asarray(seeds)[0]))
-
-    fd = [j for j in range(n) if steps[j] > 0]
-
-    def jacobian_cb(values, tangents, plus, minus, seeds) -> tuple[np.ndarray, np.ndarray]:
-        seed, seed_grad = (int(s) for s in np.asarray(seeds))
-        tangents = {k: np.asarray(t) for k, t in tangents.items()}
-        img = scene.primal(values, seed)
-        cols = []
-        for j in range(n):
-            if j in plus:
-                up, down = scene.render_primal(plus[j], seed), scene.render_primal(minus[j], seed)
-                cols.append((up - down) / (2.0 * steps[j]))
-            else:
-                cols.append(scene.forward(values, {k: t[..., j] for k, t in tangents.items()}, seed_grad))
-        return img, np.stack(cols, axis=-1).astype(np.float32)
+    jac = jax.ShapeDtypeStruct((*scene.shape, renders.n), jnp.float32)
+    inputs = _jacobian_inputs(values_of, renders.steps)
 
     @jax.custom_jvp
     def render(x: Array, seeds: Array, *view: object) -> Array:
-        return jax.pure_callback(primal_cb, image, _flat(values_of(x, *view)), seeds, vmap_method="sequential")
+        return jax.pure_callback(renders.primal, image, _flat(values_of(x, *view)), seeds, vmap_method="sequential")
 
     @render.defjvp
     def render_jvp(primals: tuple[Array, ...], tangents: tuple[Array, ...]) -> tuple[Array, Array]:
         (x, seeds, *view), t = primals, tangents[0]
+        img, J = jax.pure_callback(renders.jacobian, (image, jac), *inputs(x, *view), seeds, vmap_method="sequential")
+        return img, J @ t.astype(jnp.float32)
 
+    return render
+
+
+def outside_render_params(
+    scene: DrJitScene,
+    values_of: Callable[..., dict[str, Array]],
+    fd_steps: Float[np.ndarray, " n"],
+) -> tuple[Callable[..., np.ndarray], Callable[..., tuple[np.ndarray, np.ndarray]]]:
+    """:func:`seeded_render_params`'s image, and its image with its Jacobian (h, w, 3, n), as Python
+    functions ``(x, seeds, *view)`` that render outside JAX: the scene values (and their derivatives,
+    the finite differences' points) come from compiled programs that call nothing back, so JAX's
+    cache keeps them, and the renders run after them. The same images and columns as
+    :func:`seeded_render_params`'s and its Jacobian's, from the same values."""
+    renders = _Renders(scene, fd_steps)
+    values = jax.jit(lambda x, *view: _flat(values_of(x, *view)))
+    inputs = jax.jit(_jacobian_inputs(values_of, renders.steps))
+
+    def image(x: Array, seeds: Array, *view: object) -> np.ndarray:
+        return renders.primal(values(x, *view), seeds)
+
+    def jacobian(x: Array, seeds: Array, *view: object) -> tuple[np.ndarray, np.ndarray]:
+        return renders.jacobian(*inputs(x, *view), seeds)
+
+    return image, jacobian
+
+
+class _Renders:
+    """A scene's image and its Jacobian columns from scene values: the Dr.Jit renders that
+    :func:`seeded_render_params` calls back into and :func:`outside_render_params` calls."""
+
+    def __init__(self, scene: DrJitScene, fd_steps: Float[np.ndarray, " n"]) -> None:
+        self.scene, self.steps = scene, np.asarray(fd_steps, dtype=float)
+        self.n = len(self.steps)
+
+    # A callback may be handed JAX arrays: it indexes them as NumPy's (an index of a JAX array
+    # compiles an XLA program, per shape and per calling thread's settings).
+    def primal(self, values: dict[str, np.ndarray], seeds: np.ndarray) -> np.ndarray:
+        """The image for the seeds' first."""
+        return self.scene.primal(values, int(np.asarray(seeds)[0]))
+
+    def jacobian(self, values: dict[str, np.ndarray], tangents: dict[str, np.ndarray], plus: dict[int, dict[str, np.ndarray]],
+                 minus: dict[int, dict[str, np.ndarray]], seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The image and its Jacobian: column j a central difference of the renders at ``plus[j]`` and
+        ``minus[j]`` (the seeds' first), or a forward-mode render along ``tangents``' j-th (the second)."""
+        seed, seed_grad = (int(s) for s in np.asarray(seeds))
+        tangents = {k: np.asarray(t) for k, t in tangents.items()}
+        img = self.scene.primal(values, seed)
+        cols = []
+        for j in range(self.n):
+            if j in plus:
+                up, down = self.scene.render_primal(plus[j], seed), self.scene.render_primal(minus[j], seed)
+                cols.append((up - down) / (2.0 * self.steps[j]))
+            else:
+                cols.append(self.scene.forward(values, {k: t[..., j] for k, t in tangents.items()}, seed_grad))
+        return img, np.stack(cols, axis=-1).astype(np.float32)
+
+
+def _jacobian_inputs(values_of: Callable[..., dict[str, Array]], steps: np.ndarray) -> Callable[..., tuple[Any, ...]]:
+    """``(x, *view) ->`` what :meth:`_Renders.jacobian` takes but the seeds: the scene values at x, their
+    derivatives in x (a column per free value), and the values a step up and down each finite
+    difference's value."""
+    n, fd = len(steps), [j for j in range(len(steps)) if steps[j] > 0]
+
+    def inputs(x: Array, *view: object) -> tuple[Any, ...]:
         def values_at(y: Array) -> dict[str, Array]:
             return values_of(y, *view)
 
-        values = _flat(values_at(x))
         tangent_cols = {k: jnp.reshape(v, (-1, n)).astype(jnp.float32) for k, v in jax.jacfwd(values_at)(x).items()}
         eye = jnp.eye(n, dtype=x.dtype) * jnp.asarray(steps, dtype=x.dtype)
         plus = {j: _flat(values_at(x + eye[j])) for j in fd}
         minus = {j: _flat(values_at(x - eye[j])) for j in fd}
-        img, J = jax.pure_callback(jacobian_cb, (image, jac), values, tangent_cols, plus, minus, seeds, vmap_method="sequential")
-        return img, J @ t.astype(jnp.float32)
+        return _flat(values_at(x)), tangent_cols, plus, minus
 
-    return render
+    return inputs

@@ -35,7 +35,7 @@ from spacefit.fitting.loop import fit
 from spacefit.fitting.resume import Resume
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.observations.base import Block, MeasuredValues
-from spacefit.fitting.problem import INDEPENDENT_SEED_OFFSET
+from spacefit.fitting.residuals import INDEPENDENT_SEED_OFFSET
 from spacefit.geometry.frames import pixel_solid_angles
 from spacefit.precision import float64
 from spacefit.progress import Progress, ProgressCallback

@@ -1,0 +1,69 @@
+"""A problem's residuals from renders made before JAX's programs run, so that no program calls back.
+
+A fit's images are Dr.Jit renders, which a JAX program can only reach by calling back into Python
+(``jax.pure_callback``, :func:`~spacefit.fitting.frames.batched_renders`), and JAX's persistent cache
+keeps no program that calls back: every process compiled the solver's step, the residuals and their
+tangents anew (about 2.5 s of the 8-parameter observation fit's process, issue 33). Every point a
+least-squares step, the noise floor or the standard errors evaluate is known before its program runs
+(optimistix's Gauss-Newton family evaluates its function at the trial point ``y_eval`` of its state
+only), so the renders are made first, at that point (:attr:`Outside.render`), and handed to a program
+that holds no callback (:attr:`Outside.evaluate`, through :func:`~spacefit.fitting.frames.given_renders`):
+the same images and the same Jacobian columns times the tangent, and a program JAX's cache keeps.
+The solver's renders of its best point are kept (:meth:`Outside.keep`): the standard errors linearise
+there again with the fit's seeds, the same renders (a fit that ends on rejected trial steps rendered
+others since).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import jax
+import numpy as np
+
+# A frame's images and, where linearised, its Jacobian columns (None: not rendered), as NumPy arrays.
+Rendered = tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...] | None]
+# (x, images, jacobians) -> each observation's model, the stacked residuals and those a solver descends.
+Evaluate = Callable[[jax.Array, Sequence[np.ndarray], Sequence[np.ndarray] | None], tuple[list[jax.Array], jax.Array, jax.Array]]
+
+RESIDUALS, DESCENT = 1, 2  # which residuals of :attr:`Outside.evaluate`'s output
+
+
+@dataclass(frozen=True)
+class Outside:
+    """A problem's renders at a point and its models and residuals from them.
+
+    Attributes:
+        render: (physical x, seed index j, with the Jacobian) -> the frames' renders at x with the j-th
+            seeds (0 the fit's, 1 the independent ones; :mod:`spacefit.fitting.problem`), outside JAX.
+        evaluate: (x, images, jacobians) -> each observation's model, the stacked residuals and those a
+            solver descends, a compiled program with no callback, differentiable in x where ``jacobians`` are given.
+    """
+
+    render: Callable[[np.ndarray, int, bool], Rendered]
+    evaluate: Evaluate
+    kept: dict[tuple[bytes, int], Rendered] = field(default_factory=dict)  # one point's renders with their Jacobian (keep)
+
+    def keep(self, x: np.ndarray, j: int, rendered: Rendered) -> None:
+        """Keep ``rendered``, the renders with their Jacobian at ``x`` with the j-th seeds, in place of those kept before."""
+        self.kept.clear()
+        self.kept[(np.asarray(x, dtype=np.float64).tobytes(), j)] = rendered
+
+    def linearisable(self, x: np.ndarray, j: int) -> Rendered:
+        """The renders with their Jacobian at ``x`` with the j-th seeds: those kept where they are ``x``'s, else made."""
+        kept = self.kept.get((np.asarray(x, dtype=np.float64).tobytes(), j))
+        return kept if kept is not None else self.render(np.asarray(x), j, True)
+
+    def models(self, x: jax.Array, j: int) -> list[jax.Array]:
+        """Each observation's model at ``x`` (concrete) with the j-th seeds."""
+        return self.evaluate(x, *self.render(np.asarray(x), j, False))[0]
+
+    def residuals(self, x: jax.Array, j: int, kind: int = RESIDUALS) -> jax.Array:
+        """The stacked residuals (``kind`` :data:`RESIDUALS`; :data:`DESCENT`: those a solver descends) at ``x`` (concrete) with the j-th seeds."""
+        return self.evaluate(x, *self.render(np.asarray(x), j, False))[kind]
+
+    def linearised(self, x: jax.Array, j: int) -> tuple[jax.Array, Callable[[jax.Array], jax.Array]]:
+        """``jax.linearize`` of the stacked residuals at ``x`` (concrete) with the j-th seeds: their value and tangent map."""
+        images, jacobians = self.linearisable(np.asarray(x), j)
+        return jax.linearize(lambda y: self.evaluate(y, images, jacobians)[RESIDUALS], x)

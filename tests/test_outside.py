@@ -1,0 +1,68 @@
+"""Renders made before JAX's programs run (spacefit.fitting.outside): the same residuals, tangents and solver steps as
+the programs that call back into Python for them."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import spacefit as sf
+from spacefit.fitting.loop import _rendered_first
+from spacefit.fitting.solvers import drive, make_solver
+from spacefit.precision import float64
+from spacefit.fitting.problem import setup
+
+# the panels case at 32 x 32 px, 8 spp: a material (forward-mode column), an attitude (finite differences) and the
+# PSF width and a shift (image nuisances) free
+SMALL = {"render.resolution": [32, 32], "camera.pixel_pitch_mm": 75.0, "render.spp": 8}
+FREE = ["parts.panels.alpha_x", "parts.legs.kd", "target.attitude_x_deg", "image.blur_sigma_px", "image.shift_x_px"]
+START = {"parts.panels.alpha_x": 0.18, "parts.legs.kd": 0.6, "target.attitude_x_deg": 0.4, "image.blur_sigma_px": 0.6,
+         "image.shift_x_px": 0.2}
+
+
+@pytest.fixture(scope="module")
+def small():
+    case = sf.load_case("panels").with_values(SMALL)
+    reference = np.asarray(sf.render(case.truth_scene.with_values({"render.spp": 64})))
+    return float64(lambda: setup(sf.Observation(case.scene(), reference, sigma=0.01), FREE, start=START))()
+
+
+def close(a, b) -> None:
+    """Equal but for the rounding of the image model compiled in another program."""
+    a, b = np.asarray(a, dtype=float), np.asarray(b, dtype=float)
+    np.testing.assert_allclose(a, b, rtol=1e-5, atol=1e-5 * np.abs(b).max())
+
+
+@pytest.mark.slow  # 4 Jacobian renders and 2 primal renders at 32 x 32 px, programs compiled: about 15 s at load 10
+@float64
+def test_renders_made_first_give_the_callbacks_residuals_and_tangents(small):
+    problem, x = small.problem, jnp.asarray(small.x0)
+    assert problem.outside is not None
+    for j, residuals in enumerate((problem.residual_x, problem.residual_x_independent)):
+        r, J = problem.linearised(x, j)
+        r_cb, J_cb = jax.linearize(residuals, x)
+        close(r, r_cb)
+        for e in np.eye(len(x)):
+            close(J(jnp.asarray(e)), J_cb(jnp.asarray(e)))
+    close(problem.descent_at(x, 1), problem.descent_x_independent(x))
+
+
+@pytest.mark.slow  # two solves of 4 steps at 32 x 32 px, their steps compiled: about 30 s at load 10
+@float64
+def test_the_solver_steps_the_same_on_renders_made_first(small):
+    """Levenberg-Marquardt from the start, 4 steps: stepped on renders made before each step, it evaluates the
+    same trial points with the same losses as stepped on the renders its compiled step calls back for."""
+    fp, problem = small.solver_params, small.problem
+    u = jnp.asarray(fp.to_unconstrained(jnp.asarray(small.x0)))
+
+    def residual_u(y: jax.Array) -> jax.Array:
+        return problem.descent_x(fp.to_physical(y)).astype(y.dtype)
+
+    solves = [list(drive(make_solver("lm"), residual_u, u, 4, None, rendered_first)) for rendered_first in (None, _rendered_first(small))]
+    assert [len(s) for s in solves] == [4, 4]
+    for called_back, first in zip(*solves):
+        np.testing.assert_allclose(first.u, called_back.u, rtol=1e-5, atol=1e-7)  # the rounding of two programs
+        assert first.loss == pytest.approx(called_back.loss, rel=1e-6)
+    assert solves[1][-1].loss < 0.5 * solves[1][0].loss  # the solve moved: the comparison is of steps taken
