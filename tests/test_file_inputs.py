@@ -217,6 +217,8 @@ def test_arange_of_integers_gives_integers():
     assert axes[1].values == {"sun.elevation_deg": [10.0, 12.5, 15.0, 17.5]}
     with pytest.raises(sf.InputError, match=r"`axes\['render.spp'\].arange` must be a number, not a string: got '4'"):
         parse_axes(sf.default_scene(), {"render.spp": {"arange": [1, "4", 1]}})
+    with pytest.raises(sf.InputError, match=r"`axes\['camera.attitude_deg'\]` must be a list of values, each a number, a string or"):
+        parse_axes(sf.default_scene(), {"camera.attitude_deg": [(None, None, [])]})  # ragged (the slow fuzz test's find)
 
 
 def test_linspace_of_integers_gives_integers_where_every_value_is_whole():
