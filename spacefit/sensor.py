@@ -62,6 +62,9 @@ if TYPE_CHECKING:
 MAX_EXPOSURE_S = 86400.0
 """The longest exposure a sensor takes (one day): longer is a unit slip (ms or us read as s); at 1e300 s a fit's
 expected DN overflowed and the fit went NaN."""
+MAX_PSF_SIGMA_PX = 100.0
+"""The widest Gaussian PSF a sensor has (sigma, px): wider spreads a point over thousands of pixels, and the
+image padded by its 5-sigma reach for the Fourier blur grows with it (at 1e300 px XLA aborted the process)."""
 PLANCK_J_S = 6.62607015e-34
 """The Planck constant, J s (exact in the SI since 2019; SciPy's constants module costs a fit 0.2 s of imports)."""
 LIGHT_M_S = 299792458.0
@@ -91,7 +94,7 @@ class Sensor:
         full_well_electrons: charge a pixel holds (electrons), > 0; None: the ADC saturates first.
         bit_depth: the ADC's bits, 1 to 32: DN in [0, 2^bits - 1].
         psf_sigma_px: sigma (px) of a continuous Gaussian blur on the focal plane besides
-            diffraction, before the pixel integrates it (the optical convention), >= 0 (0: none).
+            diffraction, before the pixel integrates it (the optical convention), in [0, 100] (0: none).
         diffraction: whether to blur with the aperture's Airy pattern.
         radiometric_scale_dn_per_w_m2_sr: a calibrated camera's DN per W m^-2 sr^-1 (> 0), used in
             place of exposure x aperture x QE / photon energy x gain; None: not calibrated.
@@ -141,7 +144,7 @@ class Sensor:
         check("quantum_efficiency", 0.0, 1.0, lo_open=True)
         check("gain_dn_per_electron", 0.0, lo_open=True, unit="DN per electron")
         check("read_noise_electrons", 0.0, unit="electrons")
-        check("psf_sigma_px", 0.0, unit="px")
+        check("psf_sigma_px", 0.0, MAX_PSF_SIGMA_PX, unit="px")
         check_range("Sensor.bias_dn", self.bias_dn, 0.0, self.adc_max_dn, hi_open=True, unit="DN")
         if self.full_well_electrons is not None:
             check("full_well_electrons", 0.0, lo_open=True, unit="electrons")

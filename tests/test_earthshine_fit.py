@@ -153,6 +153,18 @@ def test_an_earth_is_refused_for_observations_without_the_earths_position():
                                earth_m=np.zeros((3, 3)))
 
 
+def test_observations_take_one_time_a_row_as_an_array():
+    """A ragged or short `time_utc` is refused (a ragged one raised NumPy's ValueError: the slow fuzz
+    test's find); a list of times is kept as an array, so that a subset picks its rows."""
+    towards, range_m = below(3)
+    sun, shadow, iso = elevated([10.0, 20.0, 30.0]), np.zeros(3, bool), "2024-01-01T00:00:00"
+    for times in ([None, [], "t"], [iso] * 2):
+        with pytest.raises(InputError, match=r"`time_utc` must be None or 3 times"):
+            LightCurveObservations(np.zeros(3), None, "AB532", sun, towards, range_m, shadow, times, "x")
+    listed = LightCurveObservations(np.zeros(3), None, "AB532", sun, towards, range_m, shadow, [iso] * 3, "x")
+    assert listed.subset(np.array([0, 2])).time_utc.tolist() == [iso, iso]
+
+
 def test_the_readers_give_the_earths_centre_below_the_target(tmp_path):
     """From a site's altitude, azimuth and height the Earth's centre is straight below the target (its
     frame's -z) at R + height; the ECSV round trip keeps it and a target-frame file without it has none."""

@@ -16,6 +16,7 @@ from helpers import small_scene, write_sphere_obj
 import spacefit as sf
 from spacefit.cli import main
 from spacefit.fitting.observations.image import check_reference
+from spacefit.fitting.problem import setup
 from spacefit.imageio import read_image, sensor_of, sidecar_path
 from spacefit.sensor import read_sensor_file
 from spacefit.studies.axes import axis_lengths, parse_axes
@@ -82,6 +83,15 @@ def test_a_python_reference_of_other_than_1_or_3_channels_is_refused(case):
     scene = sf.load_scene(case / "scene.toml")
     with pytest.raises(sf.InputError, match=r"reference 0 has shape \(32, 32, 5\).*1 \(grey\) or 3 \(RGB\)"):
         check_reference(sf.Observation(scene, np.ones((32, 32, 5))), 0)
+
+
+@pytest.mark.parametrize("reference", [[], np.ones(32)])
+def test_a_reference_that_is_no_image_is_refused_by_the_fit_naming_its_shape(case, reference):
+    """An empty list or a 1-D array passes `sf.Observation` (a real array) and is refused by the fit's set-up
+    with the shape it has, not an AttributeError from the memory estimate made before (the slow fuzz test's find)."""
+    scene = sf.load_scene(case / "scene.toml")
+    with pytest.raises(sf.InputError, match=rf"reference 0 has shape \({len(reference)},\), but its scene renders \(height, width\) = \(32, 32\)"):
+        setup(sf.Observation(scene, reference), ["parts.sphere.kd"])
 
 
 def test_tiff_samples_an_unmarked_fourth_is_refused_an_unassociated_alpha_is_a_mask(tmp_path):
@@ -207,6 +217,8 @@ def test_arange_of_integers_gives_integers():
     assert axes[1].values == {"sun.elevation_deg": [10.0, 12.5, 15.0, 17.5]}
     with pytest.raises(sf.InputError, match=r"`axes\['render.spp'\].arange` must be a number, not a string: got '4'"):
         parse_axes(sf.default_scene(), {"render.spp": {"arange": [1, "4", 1]}})
+    with pytest.raises(sf.InputError, match=r"`axes\['camera.attitude_deg'\]` must be a list of values, each a number, a string or"):
+        parse_axes(sf.default_scene(), {"camera.attitude_deg": [(None, None, [])]})  # ragged (the slow fuzz test's find)
 
 
 def test_linspace_of_integers_gives_integers_where_every_value_is_whole():

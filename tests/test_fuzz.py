@@ -502,15 +502,16 @@ def check_fit_light_curve(plate: dict[str, Any], data: st.DataObject) -> None:
 def check_new_constructors(plate: dict[str, Any], data: st.DataObject) -> None:
     """sf.DiffuseConductor, sf.BRDFTable and sf.LightCurveObservations built from random values: refused or usable."""
     cls = data.draw(st.sampled_from([sf.DiffuseConductor, sf.BRDFTable, sf.LightCurveObservations]))
-    good = {sf.DiffuseConductor: (0.2, 1.5, 1.0, 0.1, 0.2, "ggx"),
+    goods = {sf.DiffuseConductor: (0.2, 1.5, 1.0, 0.1, 0.2, "ggx"),
             sf.BRDFTable: (np.array([[0.0, 0.0, 1.0]] * 3), np.array([[0.6, 0.0, 0.8]] * 3), np.ones(3), None, "x"),
             sf.LightCurveObservations: (np.ones(2), None, "V", np.array([[0.0, 0.0, 1.0]] * 2), np.array([[0.0, 0.6, 0.8]] * 2),
-                                        np.ones(2), np.zeros(2, bool), None, "x")}[cls]
+                                        np.ones(2), np.zeros(2, bool), None, "x")}
+    good = goods[cls]
     bad = data.draw(st.lists(st.integers(0, len(good) - 1), min_size=1, max_size=2, unique=True))
     args = [data.draw(st.one_of(ARRAYS, JUNK)) if i in bad else v for i, v in enumerate(good)]
     made = outcome(lambda: cls(*args))
     if made is not None and cls is sf.DiffuseConductor:
-        result = outcome(lambda: sf.predict_magnitudes([sf.Plate("p", 1.0, (0.0, 0.0, 1.0), made)], sf.LightCurveObservations(*good)))
+        result = outcome(lambda: sf.predict_magnitudes([sf.Plate("p", 1.0, (0.0, 0.0, 1.0), made)], sf.LightCurveObservations(*goods[sf.LightCurveObservations])))
         assert result is None or not np.any(np.isnan(result))
     elif made is not None and cls is sf.BRDFTable:
         fit = outcome(lambda: sf.fit_brdf_table(made, "lambert", relative_error=0.1, max_steps=2))

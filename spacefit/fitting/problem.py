@@ -210,8 +210,9 @@ def images_memory(images: Sequence[Observation], free: Sequence[str], image_name
     """A fit's size in words and its estimated peak memory (bytes) from its images (count, largest size),
     the free parameters each one's renderer sees (``free``'s names in ``image_names``: the shared ones and its
     share of the ``@k`` ones) and ``spp`` (None: the first scene's), :func:`~spacefit.rendering.memory.check_fit_memory`,
-    which refuses one this machine cannot hold unless ``allow_large``."""
-    height, width = max(o.reference.shape[0] for o in images), max(o.reference.shape[1] for o in images)
+    which refuses one this machine cannot hold unless ``allow_large``. The size is each scene's render
+    resolution: the references are checked against it later (:func:`check_reference`), so they may not be images yet."""
+    width, height = (max(o.scene.render.resolution[k] for o in images) for k in (0, 1))
     seen = [Name(n) for n in free if Name(n).parameter in image_names]
     columns = sum(n.observation is None for n in seen) + -(-sum(n.observation is not None for n in seen) // len(images))
     estimate = check_fit_memory(len(images), width, height, columns, spp or images[0].scene.render.spp, allow_large=allow_large)

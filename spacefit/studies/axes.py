@@ -80,7 +80,11 @@ def _values(key: str, spec: Any) -> list[Any]:
                          f"{{arange = [start, stop, step]}}, got {quote(dict(spec))}.{hint}")
     if isinstance(spec, (str, bytes)) or not isinstance(spec, Sequence | np.ndarray) or len(spec) == 0:
         raise InputError(f"`axes[{key!r}]` must be a non-empty list of values, got {quote(spec)}.")
-    return [np.asarray(v).tolist() for v in spec]
+    try:
+        return [np.asarray(v).tolist() for v in spec]
+    except (TypeError, ValueError, RecursionError, OverflowError):  # a ragged value: [1, [2, 3]]
+        raise InputError(f"`axes[{key!r}]` must be a list of values, each a number, a string or a list of numbers, "
+                         f"got {quote(spec)}.") from None
 
 
 def _zipped(spec: Any) -> bool:

@@ -136,8 +136,8 @@ class LightCurveObservations:
             if fields["earth_m"].shape[1:] != (3,) or np.any(np.linalg.norm(fields["earth_m"], axis=1) <= EARTH_RADIUS_M):
                 raise InputError(f"`earth_m` must be None or ({n}, 3) positions of the Earth's centre, each farther than its "
                                  f"radius {EARTH_RADIUS_M:g} m, got {quote(self.earth_m)}.")
-        if self.time_utc is not None and np.shape(self.time_utc) != (n,):
-            raise InputError(f"`time_utc` must be None or {n} times, got {quote(self.time_utc)}.")
+        if self.time_utc is not None:
+            fields["time_utc"] = _times(self.time_utc, n)
         for name, value in fields.items():
             object.__setattr__(self, name, value)
 
@@ -150,6 +150,17 @@ class LightCurveObservations:
         return LightCurveObservations(self.magnitude[rows], pick(self.magnitude_sigma), self.band, self.sun[rows], self.observer[rows],
                                       self.range_m[rows], self.in_shadow[rows], pick(self.time_utc), self.source, self.refused,
                                       pick(self.earth_m))
+
+
+def _times(value: object, n: int) -> np.ndarray:
+    """``value`` as an array of ``n`` times (ISO 8601 strings as the files give them)."""
+    try:
+        times = np.asarray(value)
+    except (TypeError, ValueError, RecursionError, OverflowError):  # ragged: [None, []]
+        times = None
+    if times is None or times.shape != (n,):
+        raise InputError(f"`time_utc` must be None or {n} times, got {quote(value)}.")
+    return times
 
 
 def _finite(name: str, value: object, ndim: int, n: int | None = None) -> np.ndarray:
