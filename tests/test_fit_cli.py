@@ -155,18 +155,19 @@ def test_the_fit_program_ends_at_once_with_its_report_and_reads_jax_s_programs_f
 
 
 def test_jax_s_cache_folder_follows_the_environment_and_a_folder_the_process_chose(monkeypatch, tmp_path):
-    monkeypatch.delenv(JAX_CACHE_ENV, raising=False)
-    monkeypatch.setenv(SPACEFIT_CACHE_ENV, str(tmp_path))
-    assert compile_cache_dir() == tmp_path / "jax"
-    monkeypatch.setenv(SPACEFIT_CACHE_ENV, "off")
-    assert compile_cache_dir() is None
-    monkeypatch.setenv(JAX_CACHE_ENV, str(tmp_path / "mine"))
-    assert compile_cache_dir() == tmp_path / "mine"
-    monkeypatch.setenv(JAX_CACHE_ENV, "OFF")
-    assert compile_cache_dir() is None and use_compile_cache() is None
-    before = jax.config.jax_compilation_cache_dir
-    jax.config.update("jax_compilation_cache_dir", str(tmp_path / "chosen"))  # e.g. JAX_COMPILATION_CACHE_DIR
+    before = jax.config.jax_compilation_cache_dir  # the suite's own folder, once an earlier test has fitted
+    jax.config.update("jax_compilation_cache_dir", None)
     try:
+        monkeypatch.delenv(JAX_CACHE_ENV, raising=False)
+        monkeypatch.setenv(SPACEFIT_CACHE_ENV, str(tmp_path))
+        assert compile_cache_dir() == tmp_path / "jax"
+        monkeypatch.setenv(SPACEFIT_CACHE_ENV, "off")
+        assert compile_cache_dir() is None
+        monkeypatch.setenv(JAX_CACHE_ENV, str(tmp_path / "mine"))
+        assert compile_cache_dir() == tmp_path / "mine"
+        monkeypatch.setenv(JAX_CACHE_ENV, "OFF")
+        assert compile_cache_dir() is None and use_compile_cache() is None
+        jax.config.update("jax_compilation_cache_dir", str(tmp_path / "chosen"))  # e.g. JAX_COMPILATION_CACHE_DIR
         monkeypatch.setenv(JAX_CACHE_ENV, str(tmp_path / "mine"))
         assert use_compile_cache() == tmp_path / "chosen" and jax.config.jax_compilation_cache_dir == str(tmp_path / "chosen")
     finally:
