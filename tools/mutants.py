@@ -368,8 +368,8 @@ MUTANTS = (
            ("tests/test_docs.py",)),
     # issue 34's survivors, each now caught by a test of its own (their files moved since: the verdict's
     # plumbing is judging.py, the value observations' s^2 uncertainty.py, the light curve's sigma lightcurve_fit.py)
-    Mutant("image-scale-divides", "spacefit/fitting/nuisance.py", 'image = x[index["image.scale"]] * image',
-           'image = image / x[index["image.scale"]]', ("tests/test_nuisance.py::test_the_image_scale_multiplies_the_render",)),
+    Mutant("image-scale-divides", "spacefit/fitting/nuisance.py", 'image = values["image.scale"] * image',
+           'image = image / values["image.scale"]', ("tests/test_nuisance.py::test_the_image_scale_multiplies_the_render",)),
     Mutant("neighbour-correlation-over-rows", "spacefit/fitting/goodness.py", ".reshape(shape).mean(axis=-1)", ".reshape(shape).mean(axis=0)",
            ("tests/test_goodness.py::test_the_neighbour_correlation_is_taken_over_each_pixels_channel_mean",)),
     Mutant("misfit-at-three-sigma", "spacefit/fitting/goodness.py", "MISFIT_SIGMAS = 5.0", "MISFIT_SIGMAS = 3.0",

@@ -296,25 +296,43 @@ def _threaded(fn: Callable[..., Any], spec: FrameSpec, key: str, *args: Any) -> 
         return fn(spec, key, *args)
 
 
+def render_runs(shapes: Sequence[tuple[int, int, int]], indices: Sequence[np.ndarray]) -> list[range]:
+    """The frames as runs of consecutive frames whose renders stack: one image shape and one count of
+    free values seen (Jacobian columns) in each run (a pass's frames: one run)."""
+    runs: list[range] = []
+    for k, (shape, idx) in enumerate(zip(shapes, indices)):
+        if runs and (tuple(shapes[runs[-1].start]), len(indices[runs[-1].start])) == (tuple(shape), len(idx)):
+            runs[-1] = range(runs[-1].start, k + 1)
+        else:
+            runs.append(range(k, k + 1))
+    return runs
+
+
 def batched_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Sequence[np.ndarray],
                     shapes: Sequence[tuple[int, int, int]]) -> Callable[[jax.Array, jax.Array], tuple[jax.Array, ...]]:
     """Every frame's image as one JAX function of the fit's free values x and the seeds
     (:func:`~spacefit.rendering.bridge.seeds_array`; an operand, so that one compiled program serves
-    the fit's seeds and the independent ones): frame k renders ``x[indices[k]]``. Its derivative is
-    each frame's materialised Jacobian times the tangent, as
-    :func:`~spacefit.rendering.bridge.render_params`'s, with all frames' Jacobians in one batch."""
-    images = tuple(jax.ShapeDtypeStruct(shape, jnp.float32) for shape in shapes)
-    columns = tuple(jax.ShapeDtypeStruct((*shape, len(idx)), jnp.float32) for shape, idx in zip(shapes, indices))
+    the fit's seeds and the independent ones): frame k renders ``x[indices[k]]``; the images come
+    stacked, one (frames, h, w, 3) array per :func:`render_runs` run. Its derivative is each frame's
+    materialised Jacobian times the tangent, as :func:`~spacefit.rendering.bridge.render_params`'s, with
+    all frames' Jacobians in one batch and one product per run, whatever its frames."""
+    runs = render_runs(shapes, indices)
+    images = tuple(jax.ShapeDtypeStruct((len(run), *shapes[run.start]), jnp.float32) for run in runs)
+    columns = tuple(jax.ShapeDtypeStruct((len(run), *shapes[run.start], len(indices[run.start])), jnp.float32) for run in runs)
+    seen = [np.stack([indices[k] for k in run]) for run in runs]
+
+    def stacked(per_frame: Sequence[np.ndarray]) -> tuple[np.ndarray, ...]:
+        return tuple(np.stack([per_frame[k] for k in run]) for run in runs)
 
     def primal_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[np.ndarray, ...]:
         x, seeds = np.asarray(x), np.asarray(seeds)  # JAX may hand a callback its own arrays (each index of one compiles)
-        return tuple(run_frames(executor, frame_primal, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs)))
+        return stacked(run_frames(executor, frame_primal, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs)))
 
     def jacobian_cb(x: np.ndarray, seeds: np.ndarray) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...]]:
         x, seeds = np.asarray(x), np.asarray(seeds)
         out = run_frames(executor, frame_jacobian, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs),
                            [int(seeds[1])] * len(specs))
-        return tuple(img for img, _ in out), tuple(J for _, J in out)
+        return stacked([img for img, _ in out]), stacked([J for _, J in out])
 
     @jax.custom_jvp
     def render(x: jax.Array, seeds: jax.Array) -> tuple[jax.Array, ...]:
@@ -324,6 +342,6 @@ def batched_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Seq
     def render_jvp(primals: tuple[jax.Array, jax.Array], tangents: tuple[jax.Array, jax.Array]) -> tuple[Any, Any]:
         (x, seeds), (t, _) = primals, tangents
         imgs, Js = jax.pure_callback(jacobian_cb, (images, columns), x, seeds, vmap_method="sequential")
-        return imgs, tuple(J @ t[idx].astype(jnp.float32) for J, idx in zip(Js, indices))
+        return imgs, tuple(jnp.einsum("f...n,fn->f...", J, t[idx].astype(jnp.float32)) for J, idx in zip(Js, seen))
 
     return render
