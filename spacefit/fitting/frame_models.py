@@ -81,7 +81,7 @@ def batches(models: Sequence[FrameModel], values: Sequence[np.ndarray], runs: Se
             continue
         traced = [jax.make_jaxpr(models[k])(jax.ShapeDtypeStruct(shapes[k], jnp.float32),
                                             jax.ShapeDtypeStruct(values[k].shape, dtype)) for k in run]
-        keys = [(str(t.jaxpr), [(np.shape(c), np.result_type(c)) for c in t.consts]) for t in traced]
+        keys = [(str(t.jaxpr), [(np.shape(c), np.asarray(c).dtype) for c in t.consts]) for t in traced]
         start = 0
         for end in range(1, len(run) + 1):
             if end < len(run) and keys[end] == keys[start]:
