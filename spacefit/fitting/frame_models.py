@@ -58,8 +58,10 @@ class Batch:
         frames: the images, in the fit's order.
         run: the render run they are in (:func:`~spacefit.fitting.frames.render_runs`), from ``offset``.
         values: (images, p) where each one's nuisance values are in the free values.
-        program: the first image's model traced, its arrays ``consts``; None: one image, its own function.
-        consts: each of the program's arrays stacked over the images.
+        program: the first image's model traced; None: one image, its own function.
+        own: the program's arrays that differ between the images, each stacked (images, ...), once.
+        common: those every image shares.
+        consts: per array of ``program``, where it is: (True, i) ``own[i]``, (False, i) ``common[i]``.
     """
 
     frames: range
@@ -67,7 +69,9 @@ class Batch:
     offset: int
     values: np.ndarray
     program: ClosedJaxpr | None = None
-    consts: tuple[np.ndarray, ...] = ()
+    own: tuple[np.ndarray, ...] = ()
+    common: tuple[np.ndarray, ...] = ()
+    consts: tuple[tuple[bool, int], ...] = ()
 
 
 def batches(models: Sequence[FrameModel], values: Sequence[np.ndarray], runs: Sequence[range],
@@ -87,11 +91,31 @@ def batches(models: Sequence[FrameModel], values: Sequence[np.ndarray], runs: Se
             if end < len(run) and keys[end] == keys[start]:
                 continue
             frames, alike = run[start:end], traced[start:end]
-            consts = tuple(np.stack([np.asarray(t.consts[i]) for t in alike]) for i in range(len(alike[0].consts)))
-            out.append(Batch(frames, r, start, np.stack([values[k] for k in frames]), alike[0] if len(frames) > 1 else None,
-                             consts if len(frames) > 1 else ()))
+            indices = np.stack([values[k] for k in frames])
+            out.append(Batch(frames, r, start, indices, alike[0], *_arrays(alike)) if len(frames) > 1 else Batch(frames, r, start, indices))
             start = end
     return out
+
+
+def _arrays(alike: Sequence[ClosedJaxpr]) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...], tuple[tuple[bool, int], ...]]:
+    """The arrays of one program traced for several images (:attr:`Batch.own`, :attr:`Batch.common`,
+    :attr:`Batch.consts`): those equal in every image kept once (a padded frequency grid), those that
+    differ stacked, and a stack equal to another (a reference that both residual functions hold) kept once."""
+    own: list[np.ndarray] = []
+    common: list[np.ndarray] = []
+    where = []
+    for i, var in enumerate(alike[0].jaxpr.constvars):
+        each = [np.asarray(t.consts[i], dtype=var.aval.dtype) for t in alike]
+        if all(np.array_equal(a, each[0]) for a in each[1:]):
+            where.append((False, len(common)))
+            common.append(each[0])
+            continue
+        stacked = np.stack(each)
+        same = next((j for j, o in enumerate(own) if o.dtype == stacked.dtype and np.array_equal(o, stacked)), len(own))
+        if same == len(own):
+            own.append(stacked)
+        where.append((True, same))
+    return tuple(own), tuple(common), tuple(where)
 
 
 class FrameModels:
@@ -128,11 +152,16 @@ class FrameModels:
                 out.append([o[None] for o in one(renders[0], values[0])])
                 continue
 
-            def each(args: tuple[Array, Array, tuple[Array, ...]], program: ClosedJaxpr = batch.program) -> list[Array]:
-                render, value, consts = args
-                return jaxpr_as_fun(ClosedJaxpr(program.jaxpr, list(consts)))(render, value)
+            def each(args: tuple[Array, Array, tuple[Array, ...]], batch: Batch = batch) -> list[Array]:
+                render, value, own = args
+                consts = [own[i] if is_own else batch.common[i] for is_own, i in batch.consts]
+                return jaxpr_as_fun(ClosedJaxpr(batch.program.jaxpr, consts))(render, value)
 
-            out.append(jax.lax.map(jax.checkpoint(each) if self.recompute else each, (renders, values, batch.consts)))
+            # the frames' own arrays as operands, from the host: held as constants, each compiled program of the fit
+            # (the step, the residuals, the covariance's products) would hold a copy of them, more while compiling
+            own = jax.pure_callback(lambda batch=batch: batch.own, tuple(jax.ShapeDtypeStruct(a.shape, a.dtype) for a in batch.own),
+                                    vmap_method="sequential")
+            out.append(jax.lax.map(jax.checkpoint(each) if self.recompute else each, (renders, values, own)))
         if not out:
             return [], jnp.zeros(0), jnp.zeros(0)
         return [o[0] for o in out], jnp.concatenate([o[1].reshape(-1) for o in out]), jnp.concatenate([o[2].reshape(-1) for o in out])
