@@ -152,7 +152,7 @@ MUTANTS = (
            "[cell(cols[parts[c]][i]) for c in COMPONENTS]", "[cell(cols[parts[c]][i]) for c in reversed(COMPONENTS)]",
            ("tests/test_pass.py::test_each_frames_scene_equals_one_built_by_hand",)),
     Mutant("frame-jacobian-on-another-frame", "spacefit/fitting/frames.py",
-           "for J, idx in zip(Js, indices))", "for J, idx in zip(Js, indices[::-1]))",
+           "for J, idx in zip(Js, seen))", "for J, idx in zip(Js, [s[::-1] for s in seen]))",
            ("tests/test_nuisance.py::test_per_observation_pose_columns_match_finite_differences_and_act_on_their_own_observation",)),
     # a pass's frames share a process's loaded scene: each sets its own camera and sun; the loaded scenes are bounded
     Mutant("frame-on-shared-scene-keeps-the-last-view", "spacefit/fitting/frames.py",
