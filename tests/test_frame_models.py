@@ -84,5 +84,5 @@ def test_a_joint_fit_s_step_holds_one_frames_model_whatever_the_frames(loss):
         s = problem.setup(obs, free, loss=loss, render=sf.FitRender(spp=2))
         x = jnp.asarray(s.x0)
         sizes.append((equations(jax.make_jaxpr(s.problem.residual_x)(x).jaxpr),
-                      equations(jax.make_jaxpr(lambda v: jax.linearize(s.problem.residual_x, x)[1](v))(x).jaxpr)))
+                      equations(jax.make_jaxpr(lambda v, s=s, x=x: jax.linearize(s.problem.residual_x, x)[1](v))(x).jaxpr)))
     assert sizes[0] == sizes[1]

@@ -7,7 +7,8 @@ refused before any work. Every render of a solve uses the same seed (common rand
 the objective is a deterministic function; derivative renders use another seed. In a joint fit
 each observation's renderer sees the free values that are its own (``target.attitude_z_deg@k``)
 or shared (:meth:`~spacefit.fitting.params.FreeParameters.rendered`); the image nuisances act on
-its render in JAX (:mod:`spacefit.fitting.nuisance`).
+its render in JAX (:mod:`spacefit.fitting.nuisance`), the frames of a joint fit alike as one
+program whatever their count (:mod:`spacefit.fitting.frame_models`).
 """
 
 from __future__ import annotations
