@@ -38,8 +38,10 @@ render seed, so that the render noise of the fit is part of what the errors must
 * error chart: the rms error (relative) of each parameter over ``--chart-realisations`` exposures,
   for each PSF width and noise level, beside the mean reported standard error.
 
-Writes ``coverage.csv`` (one row per fit), ``coverage_summary.csv``, ``coverage_table.md`` and
-``coverage.png`` to ``--out``. Run: ``.venv/bin/python experiments/coverage.py [--full] [--free nuisances]``:
+Writes ``coverage.csv`` (one row per fit, saved after each fit: a run into a folder that holds some
+fits only those it lacks), ``coverage_summary.csv``, ``coverage_table.md`` (each coverage with its 95 %
+binomial interval) and ``coverage.png`` to ``--out``; ``--pool DIR ...`` tables several runs' exposures
+together (``coverage_pooled.md``). Run: ``.venv/bin/python experiments/coverage.py [--full] [--free nuisances]``:
 by default 10 exposures for the coverage and 2 per chart point (about 5 minutes on 2 cores); ``--full``:
 50 and 5 (about 20 minutes on a quiet machine), the results in ``experiments/results/coverage/``
 (``experiments/results/coverage/nuisances/`` with the nuisances free; ``--realisations`` overrides the count). A fit takes 8 to 18 s at 48 px, 32 spp, mostly JAX's
@@ -50,6 +52,9 @@ reduced, linearised study is ``tests/test_noise_model.py``.
 from __future__ import annotations
 
 import argparse
+import csv
+import os
+from collections.abc import Callable
 from pathlib import Path
 
 import jax
@@ -128,16 +133,20 @@ def truth_image(case: sf.Case, truth_spp: int, nuisances: bool, supersample: int
 
 
 def realisations(case: sf.Case, truth: np.ndarray, sensor: sf.Sensor, count: int, first_seed: int,
-                 nuisances: bool = False) -> list[dict[str, object]]:
+                 nuisances: bool = False, done: list[dict[str, object]] = (),
+                 saved: Callable[[list[dict[str, object]]], None] = lambda rows: None) -> list[dict[str, object]]:
     """Fit ``count`` simulated exposures of ``truth`` (with the nuisances of :data:`NUISANCE_TRUTH`
-    free if ``nuisances``); one row per fit and parameter."""
+    free if ``nuisances``); one row per fit and parameter. Seeds with rows in ``done`` (a run's saved
+    rows) are not fitted again, their rows kept; ``saved`` is called with the rows after each fit."""
     scene = case.scene()
     intrinsics = assemble(scene).intrinsics
     start = {n: START_FACTOR * v for n, v in case.truth.items()}
     truths = {**case.truth, **(NUISANCE_TRUTH if nuisances else {})}
-    rows = []
-    for k in range(count):
-        seed = first_seed + k
+    seeds = range(first_seed, first_seed + count)
+    rows = [r for r in done if int(r["seed"]) in seeds]
+    for seed in seeds:
+        if any(int(r["seed"]) == seed for r in rows):
+            continue
         dn = sf.observe(truth, sensor, intrinsics, seed).astype(float)
         result = sf.fit(sf.Observation(scene, dn, sensor=sensor), list(truths), start=start,
                         render=sf.FitRender(seed=2 * seed + 101, seed_grad=2 * seed + 102))
@@ -152,8 +161,31 @@ def realisations(case: sf.Case, truth: np.ndarray, sensor: sf.Sensor, count: int
                          "pixel_grid_remainder": remainder.get(name, 0.0),
                          "statistical_stderr": statistical, "covered_statistical": bool(abs(value - true) <= statistical),
                          "steps": result.steps, "status": result.status.name})
-        print(f"seed {seed}, sigma {sensor.psf_sigma_px:g} px: {result.status.name}, {result.wall_time_s:.1f} s", flush=True)
+        print(f"seed {seed}, sigma {sensor.psf_sigma_px:g} px: {result.status.name}, {result.wall_time_s:.1f} s, "
+              f"load {os.getloadavg()[0]:.1f}", flush=True)
+        saved(rows)
     return rows
+
+
+def read_rows(path: Path) -> list[dict[str, object]]:
+    """The rows of a ``coverage.csv`` as :func:`realisations` made them (numbers as floats, flags as bools)."""
+    def value(text: str) -> object:
+        if text in ("True", "False"):
+            return text == "True"
+        try:
+            return float(text)
+        except ValueError:
+            return text
+    with open(path, newline="") as f:
+        return [{k: value(v) for k, v in row.items()} for row in csv.DictReader(f)]
+
+
+def wilson(covered: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """The Wilson score interval (95 % for ``z`` 1.96) of a binomial proportion, ``covered`` of ``n``
+    (Wilson 1927, J. Am. Stat. Assoc. 22(158)): where the true coverage lies given the exposures drawn."""
+    p, z2 = covered / n, z * z / n
+    centre, half = (p + z2 / 2) / (1 + z2), z * np.sqrt(p * (1 - p) / n + z2 / (4 * n)) / (1 + z2)
+    return float(centre - half), float(centre + half)
 
 
 def summarise(rows: list[dict[str, object]], key: tuple[str, ...]) -> list[dict[str, object]]:
@@ -167,8 +199,10 @@ def summarise(rows: list[dict[str, object]], key: tuple[str, ...]) -> list[dict[
         truth = float(items[0]["truth"])
         errors = np.array([float(r["value"]) - truth for r in items])
         z = np.array([float(r["z"]) for r in items])
+        covered = int(sum(bool(r["covered"]) for r in items))
+        low, high = wilson(covered, len(items))
         out.append({**dict(zip((*key, "parameter"), group)), "n": len(items),
-                    "coverage": float(np.mean([r["covered"] for r in items])),
+                    "coverage": covered / len(items), "coverage_low": low, "coverage_high": high,
                     "rms_error_rel": float(np.sqrt(np.mean(errors**2)) / abs(truth)),
                     "mean_stderr_rel": float(np.mean([float(r["stderr"]) for r in items]) / abs(truth)),
                     "mean_z": float(np.mean(z)), "rms_z": float(np.sqrt(np.mean(z**2)))})
@@ -230,14 +264,17 @@ def run_coverage(out: Path, *, size: int, spp: int, truth_spp: int, realisations
     or with ``nuisances`` free, none of its own but the blur of :data:`NUISANCE_TRUTH`) and, without
     ``nuisances``, the error chart; writes the CSVs, the table and the PNG. ``supersample`` > 1: the
     observations made at that many times the resolution and the fits rendered with the box filter
-    (:func:`truth_image`)."""
+    (:func:`truth_image`). The coverage's rows are saved after each fit; a run into a folder that holds
+    some (``coverage.csv``) fits only the seeds they lack."""
     out.mkdir(parents=True, exist_ok=True)
     case = case_at(size, spp, "box" if supersample > 1 else None)
     truth = truth_image(case, truth_spp, nuisances, supersample)
-    rows = []
     coverage_sensor = sensor_for(truth, case.scene(), NOISE_LEVELS["high"], 0.0 if nuisances else 1.0)
-    for row in realisations(case, truth, coverage_sensor, realisations_count, first_seed=first_seed, nuisances=nuisances):
-        rows.append({**row, "study": "coverage", "noise": "high"})
+    done = read_rows(out / "coverage.csv") if (out / "coverage.csv").exists() else []
+    saved = lambda rows: write_csv(out / "coverage.csv", [{**r, "study": "coverage", "noise": "high"} for r in rows])  # noqa: E731
+    rows = [{**row, "study": "coverage", "noise": "high"}
+            for row in realisations(case, truth, coverage_sensor, realisations_count, first_seed=first_seed, nuisances=nuisances,
+                                    done=[r for r in done if r["study"] == "coverage"], saved=saved)]
     if not nuisances:
         plain = truth_image(case, truth_spp, False)
         for noise, peak in NOISE_LEVELS.items():
@@ -265,11 +302,12 @@ def run_linearised(out: Path, *, size: int, spp: int, truth_spp: int, count: int
 
 def table(rows: list[dict[str, object]], coverage: list[dict[str, object]]) -> str:
     """The per-parameter coverage of :func:`summarise` as a Markdown table, with :func:`verdict`."""
-    lines = ["| parameter | truth | exposures | 1-sigma coverage | mean z | rms z | rms error | mean stderr | verdict |",
+    lines = ["| parameter | truth | exposures | 1-sigma coverage [95 % interval] | mean z | rms z | rms error | mean stderr | verdict |",
              "|---|---|---|---|---|---|---|---|---|"]
     for r in coverage:
         truth = float(next(x["truth"] for x in rows if x["parameter"] == r["parameter"]))
-        lines.append(f"| {r['parameter']} | {truth:g} | {r['n']} | {100 * r['coverage']:.0f} % | {r['mean_z']:+.2f} | {r['rms_z']:.2f} | "
+        lines.append(f"| {r['parameter']} | {truth:g} | {r['n']} | {100 * r['coverage']:.0f} % [{100 * r['coverage_low']:.0f}, "
+                     f"{100 * r['coverage_high']:.0f}] | {r['mean_z']:+.2f} | {r['rms_z']:.2f} | "
                      f"{r['rms_error_rel'] * abs(truth):.3g} | {r['mean_stderr_rel'] * abs(truth):.3g} | {verdict(r)} |")
     return "\n".join(lines) + "\n"
 
@@ -285,6 +323,21 @@ def write_summary(out: Path, rows: list[dict[str, object]]) -> tuple[list[dict[s
     (out / "coverage_table.md").write_text(table([r for r in rows if r["study"] == "coverage"], coverage))
     _chart(out / "coverage.png", chart, coverage)
     return coverage, chart
+
+
+def pool(folders: list[Path], out: Path) -> str:
+    """The coverage table of the exposures of several runs' ``coverage.csv`` together (a seed fitted in
+    two runs counted once, from the first), written to ``out/coverage_pooled.md`` with the runs named."""
+    rows, seen = [], set()
+    for folder in folders:
+        mine = [r for r in read_rows(folder / "coverage.csv") if r["study"] == "coverage" and int(r["seed"]) not in seen]
+        seen |= {int(r["seed"]) for r in mine}
+        rows += mine
+    text = table(rows, summarise(rows, ("noise", "psf_sigma_px")))
+    text += f"\nPooled: {', '.join(str(f) for f in folders)}; seeds {min(seen)} to {max(seen)}, {len(seen)} exposures.\n"
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "coverage_pooled.md").write_text(text)
+    return text
 
 
 def _chart(path: Path, chart: list[dict[str, object]], coverage: list[dict[str, object]]) -> None:
@@ -332,7 +385,13 @@ def main() -> None:
     parser.add_argument("--first-seed", type=int, default=1, help="the first exposure's noise seed (the fits' seeds follow from it)")
     parser.add_argument("--linearised", action="store_true",
                         help="the nuisance study linearised at the truth, fit minimum against the two-seed estimate (no fits)")
+    parser.add_argument("--pool", type=Path, nargs="+", metavar="DIR",
+                        help="no fits: the coverage of the exposures in these runs' coverage.csv together (each seed once), "
+                             "its table written to --out as coverage_pooled.md")
     args = parser.parse_args()
+    if args.pool:
+        print(pool(args.pool, args.out or args.pool[0]))
+        return
     nuisances = args.free == "nuisances" or args.linearised
     folder = ("nuisances_supersampled" if args.supersample > 1 else "nuisances") if nuisances else ""
     out = args.out or Path(__file__).parent / "results" / "coverage" / folder

@@ -15,9 +15,15 @@ truth, sensor and seeds' rule), all eight parameters free:
   shipped estimate linearised at the truth, against the fits' values in the study's ``coverage.csv``
   (what the fits add: their stopping and non-linearity);
 * ``fine``: one exposure and render seed pair, ``--count`` seeds of the scene (which the pixel
-  grid's renders at 4x took before they took the fit's): the pixel grid's step per seed.
+  grid's renders at 4x took before they took the fit's): the pixel grid's step per seed;
+* ``feedback``: the study's exposures (seeds 11, 12, ...) linearised at the truth, each standard
+  error with the pixel grid's step taken as a constant (as the fits of ``--rescore`` had it) and
+  through its feedback ``(I - D)^-1`` (:func:`spacefit.fitting.pixel_grid.grid_feedback`, as
+  :func:`spacefit.fitting.uncertainty.estimate` now does): their ratio per parameter; with
+  ``--rescore DIR ...``, those runs' ``coverage.csv`` scored again with each standard error times
+  the mean ratio (the statistical part and the carried remainder as the fits had them).
 
-Run: ``.venv/bin/python experiments/coverage_diagnosis.py photon|render|exposures|fine [--count N]``
+Run: ``.venv/bin/python experiments/coverage_diagnosis.py photon|render|exposures|fine|feedback [--count N]``
 (``photon`` about a minute, the others about 20 s per estimate on a quiet machine).
 """
 
@@ -26,10 +32,12 @@ from __future__ import annotations
 import argparse
 import os
 import subprocess
+from pathlib import Path
+from unittest import mock
 
 import jax.numpy as jnp
 import numpy as np
-from coverage import NOISE_LEVELS, NUISANCE_TRUTH, case_at, sensor_for, truth_image
+from coverage import NOISE_LEVELS, NUISANCE_TRUTH, case_at, read_rows, sensor_for, summarise, table, truth_image
 from studyio import machine
 
 import spacefit as sf
@@ -43,9 +51,10 @@ from spacefit.scene.assembly import assemble
 @float64
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("source", choices=("photon", "render", "exposures", "fine"))
+    parser.add_argument("source", choices=("photon", "render", "exposures", "fine", "feedback"))
     parser.add_argument("--first-exposure", type=int, default=1000, help="photon: the first exposure's noise seed")
     parser.add_argument("--count", type=int, default=None, help="draws (default: photon 400, else 12)")
+    parser.add_argument("--rescore", type=Path, nargs="+", metavar="DIR", help="feedback: these runs' coverage.csv scored again")
     args = parser.parse_args()
     count = args.count or (400 if args.source == "photon" else 12)
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
@@ -64,6 +73,18 @@ def main() -> None:
                      render=sf.FitRender(seed=2 * seed + 101, seed_grad=2 * seed + 102))
 
     exposure = sf.observe(truth, sensor, intrinsics, 11).astype(float)
+    if args.source == "feedback":
+        ratios = [feedback_ratio(problem(sf.observe(truth, sensor, intrinsics, 11 + k).astype(float), seed=11 + k)) for k in range(count)]
+        print(f"feedback: {count} exposures; per parameter the standard error through (I - D)^-1 over the one with a constant step")
+        for n, r in zip(names, np.transpose(ratios)):
+            print(f"  {n}: mean {np.mean(r):.3f}, {np.min(r):.3f} to {np.max(r):.3f}")
+        if args.rescore:
+            factor = dict(zip(names, np.mean(ratios, axis=0)))
+            rows = [r for folder in args.rescore for r in read_rows(folder / "coverage.csv") if r["study"] == "coverage"]
+            rows = [{**r, "stderr": r["stderr"] * factor[r["parameter"]], "z": r["z"] / factor[r["parameter"]],
+                     "covered": abs(r["value"] - r["truth"]) <= r["stderr"] * factor[r["parameter"]]} for r in rows]
+            print(table(rows, summarise(rows, ("noise", "psf_sigma_px"))))
+        return
     if args.source == "photon":
         s = problem(exposure, seed=11)
         lin = linearise(s.problem, s.x0)
@@ -96,6 +117,16 @@ def main() -> None:
     print(f"{args.source}: {count} draws; per parameter the scatter, {label}, their ratio")
     for n, a, b in zip(names, spread, predicted):
         print(f"  {n}: {a:.4g}  {b:.4g}  {a / b:.3f}")
+
+
+def feedback_ratio(s: object) -> np.ndarray:
+    """Per parameter, the standard error of :func:`~spacefit.fitting.uncertainty.estimate` at the set-up's
+    start over the same with the pixel grid's step taken as a constant (its feedback D set to 0; the
+    same seeds, so the same renders)."""
+    constant = lambda differences, step, at, columns, stderr: np.zeros((len(at), len(at)))  # noqa: E731
+    with mock.patch("spacefit.fitting.uncertainty.grid_feedback", constant):
+        before = np.diag(estimate(s, s.x0)[1])
+    return np.sqrt(np.diag(estimate(s, s.x0)[1]) / before)
 
 
 if __name__ == "__main__":

@@ -169,6 +169,8 @@ def _parser(command: str | None = "fit") -> argparse.ArgumentParser:
                    help="the observer (deg, deg, m) of a light curve whose geometry is seen from a site")
     c.add_argument("--large", action="store_true", help="run a fit whose estimated memory, said before it starts, is more than "
                    "this machine has available")
+    c.add_argument("--film-px", type=int, metavar="N", help="render the points on a film N px wide over the scene's field of view "
+                   "(default: the coarsest the magnitudes' errors allow, said with the fit's size; the scene's width: its own film)")
     c.add_argument("--quiet", action="store_true", help="no progress output (the fitted values are still printed)")
     s = sub.add_parser("sweep", parents=[overrides], help="render a sweep of scene values into a resumable Zarr store",
                        description="Render a scene at every point of a sweep file's axes into a Zarr store, point by "
@@ -303,7 +305,8 @@ def _fit_light_curve(args: argparse.Namespace) -> int:
                             sigma_mag=args.sigma_mag)
     free = [name.strip() for name in args.free.split(",")]
     result = fit_light_curve_to_folder(files, free, args.out, max_steps=args.max_steps, start=_start_values(args.start) or None,
-                                       allow_large=args.large, quiet=args.quiet, overwrite=args.overwrite, resume=args.resume)
+                                       allow_large=args.large, quiet=args.quiet, overwrite=args.overwrite, resume=args.resume,
+                                       film_px=args.film_px)
     return _verdict(result, args.out)
 
 

@@ -279,11 +279,13 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
 @holding_lock("out_dir")
 def fit_light_curve_to_folder(files: LightCurveFiles, free: Sequence[str], out_dir: str | Path, *, max_steps: int = 50,
                               start: Mapping[str, float] | None = None, allow_large: bool = False, quiet: bool = False,
-                              overwrite: bool = False, resume: bool = False) -> FitResult:
+                              overwrite: bool = False, resume: bool = False, film_px: int | None = None) -> FitResult:
     """Fit the ``free`` parameters of a rendered target to a light-curve file (:func:`fit_light_curve`);
     write its report (fit.json, fit.toml, uncertainty.json, convergence.png, observation0.png: the
     magnitudes against the model's, ...) to ``out_dir``, as :func:`fit_to_folder` does an image fit's:
-    holding the folder's lock, every input checked before rendering, its size said first, progress,
+    holding the folder's lock, every input checked before rendering, the points' film chosen
+    (``film_px``, else the coarsest the magnitudes' errors allow, as :func:`fit_light_curve` chooses it;
+    recorded in fit.json's inputs), its size said first, progress,
     a checkpoint after every step (``resume``: continue it, with the same files, free parameters and
     options but ``max_steps`` and ``start``), and nothing left behind on an error.
 
@@ -295,6 +297,8 @@ def fit_light_curve_to_folder(files: LightCurveFiles, free: Sequence[str], out_d
         quiet: no progress display or messages on stderr.
         overwrite: replace a previous light-curve fit report in ``out_dir``.
         resume: continue the interrupted fit whose checkpoint is in ``out_dir``.
+        film_px: the width (px) of the points' film over the scene's field of view (None: the coarsest
+            their errors allow; the scene's width: its own film).
 
     Returns:
         The fit's result.
@@ -307,13 +311,16 @@ def fit_light_curve_to_folder(files: LightCurveFiles, free: Sequence[str], out_d
     """
     from spacefit.fitting.loop import fit  # deferred: the fitting stack (JAX, optimistix: 1.5 s), which renders never need
     from spacefit.studies.lightcurve_files import LightCurveFiles
+    from spacefit.studies.lightcurve_fit import film_for_fit
 
     check_type("files", files, LightCurveFiles, "an sf.LightCurveFiles(curve, scene, ...)")
     prepare_output(check_path("out_dir", out_dir), "light-curve-fit", overwrite=overwrite, resume=resume, inputs=files.files)
     t0 = time.perf_counter()
     curve = files.load()
+    curve = film_for_fit(curve if film_px is None else dataclasses.replace(curve, film_px=film_px), free, start)
     t_read = time.perf_counter() - t0
-    inputs = {**files.record(), "free": list(free), "options": {"max_steps": max_steps, "start": start, "allow_large": allow_large}}
+    inputs = {**files.record(), "free": list(free), "film_px": curve.film_px,
+              "options": {"max_steps": max_steps, "start": start, "allow_large": allow_large}}
 
     def solve(resumed: dict[str, Any], progress: ProgressCallback, plumbing: Resume) -> FitResult:
         given = {"max_steps": max_steps, "start": start, **resumed}

@@ -91,15 +91,16 @@ def turning(count: int) -> list[dict[str, float]]:
 
 @float64
 def irradiances(scene: Scene, free: tuple[str, ...], points: list[dict[str, Any]], x: list[float], seed: int = 1,
-                observer_range_m: float | None = None) -> np.ndarray:
-    """The light-curve model's irradiance (W m^-2) of ``points`` at the free values ``x`` (seed index 0)."""
+                observer_range_m: float | None = None, film_px: int | None = None, j: int = 0) -> np.ndarray:
+    """The light-curve model's irradiance (W m^-2) of ``points`` at the free values ``x`` (seed index ``j``;
+    ``film_px``: the points' film, :class:`~spacefit.studies.lightcurve_fit.RenderedLightCurve`'s)."""
     # here: the fitting stack (JAX), which the other helpers' tests never need
     import jax.numpy as jnp
 
     from spacefit.studies.lightcurve_fit import RenderedLightCurve
 
-    curve = RenderedLightCurve(scene, points, np.zeros(len(points)), 0.05, observer_range_m=observer_range_m, seed=seed)
-    return np.asarray(curve.block(free).model(jnp.asarray(x, dtype=jnp.float64), 0))
+    curve = RenderedLightCurve(scene, points, np.zeros(len(points)), 0.05, observer_range_m=observer_range_m, seed=seed, film_px=film_px)
+    return np.asarray(curve.block(free).model(jnp.asarray(x, dtype=jnp.float64), j))
 
 
 def observed(scene: Scene, free: tuple[str, ...], points: list[dict[str, Any]], sigma: float) -> np.ndarray:

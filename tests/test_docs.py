@@ -249,9 +249,10 @@ def chromium() -> str:
     return path
 
 
-def browse(page: Path, *args: str) -> subprocess.CompletedProcess:
+def browse(page: Path, shot: Path) -> subprocess.CompletedProcess:
+    """One headless Chromium opening ``page``: its screenshot written to ``shot``, the DOM after its scripts ran on stdout."""
     return subprocess.run([chromium(), "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--window-size=1280,1100",
-                           *args, page.as_uri()], capture_output=True, text=True, timeout=120)
+                           f"--screenshot={shot}", "--dump-dom", page.as_uri()], capture_output=True, text=True, timeout=120)
 
 
 def dark_box(pixels: np.ndarray) -> tuple[int, int, int, int]:
@@ -269,7 +270,7 @@ def test_front_page_in_a_browser_shows_the_render_and_the_navigation(site, tmp_p
     """Chromium opens the built index page: its screenshot holds the rendered picture (the same image as the
     build's render, by correlation) and the DOM after scripts ran has the navigation to the guide's pages."""
     shot = tmp_path / "index.png"
-    done = browse(site / "index.html", f"--screenshot={shot}")
+    done = browse(site / "index.html", shot)
     assert shot.exists(), done.stderr[-2000:]
     pixels = np.asarray(Image.open(shot).convert("RGB"), dtype=float)
     top, bottom, left, right = dark_box(pixels)
@@ -282,7 +283,7 @@ def test_front_page_in_a_browser_shows_the_render_and_the_navigation(site, tmp_p
     header = pixels[:top].mean(axis=-1)
     assert (header < 128).mean() > 0.002, "no text above the picture"
 
-    dom = browse(site / "index.html", "--dump-dom").stdout
+    dom = done.stdout
     nav = dom.split('class="bd-header', 1)[1].split("</nav>", 1)[0]
     for label, page in SECTIONS:
         assert re.search(rf'href="{re.escape(page)}"[^>]*>\s*{re.escape(label)}', nav), label
@@ -300,11 +301,11 @@ def test_a_page_of_each_kind_in_a_browser_has_its_navigation(site, page, sidebar
     tmp folder to be looked at) shows a page with text and, where the page draws, its figures."""
     folder = tmp_path_factory.mktemp("screenshots")
     shot = folder / (page.replace("/", "_").removesuffix(".html") + ".png")
-    done = browse(site / page, f"--screenshot={shot}")
+    done = browse(site / page, shot)
     assert shot.exists(), done.stderr[-2000:]
     pixels = np.asarray(Image.open(shot).convert("L"), dtype=float)
     assert (pixels < 128).mean() > 0.01, f"{page}: the screenshot shows almost nothing"
-    dom = browse(site / page, "--dump-dom").stdout
+    dom = done.stdout
     header = dom.split('class="bd-header', 1)[1].split("</nav>", 1)[0]
     for label, target in SECTIONS:
         relative = os.path.relpath(target, os.path.dirname(page) or ".")

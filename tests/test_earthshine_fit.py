@@ -110,26 +110,30 @@ def simulated():
     return [sf.Plate("base", 3.0, TILTED, sf.Lambert(0.25))], observations(exact.sun, towards, range_m, magnitude + noise, sigma=0.02)
 
 
-def test_a_fit_with_earthshine_recovers_the_albedo_that_one_without_misses(simulated):
+@pytest.fixture(scope="module")
+def fits(simulated):
+    """The simulated light curve's kd fitted with Earthshine and without, once for the tests that read them."""
     start, obs = simulated
-    with_earth = sf.fit_plates(start, obs, ["parts.base.kd"], earth=sf.Earth())
-    without = sf.fit_plates(start, obs, ["parts.base.kd"])
+    return sf.fit_plates(start, obs, ["parts.base.kd"], earth=sf.Earth()), sf.fit_plates(start, obs, ["parts.base.kd"])
+
+
+def test_a_fit_with_earthshine_recovers_the_albedo_that_one_without_misses(fits):
+    with_earth, without = fits
     kd, err = with_earth.values["parts.base.kd"], with_earth.stderr["parts.base.kd"]
     assert abs(kd - 0.4) < 3 * err and with_earth.status is not sf.Status.MISFIT
     # the Earth's light taken for the plate's: biased bright, and the phase curve's shape missed
     assert without.values["parts.base.kd"] - 0.4 > 10 * err and without.status is sf.Status.MISFIT
 
 
-def test_the_report_says_whether_earthshine_was_included_and_its_share(simulated):
+def test_the_report_says_whether_earthshine_was_included_and_its_share(simulated, fits):
     plates, obs = simulated
-    result = sf.fit_plates(plates, obs, ["parts.base.kd"], earth=sf.Earth(), max_steps=3)
+    result, plain = fits
     curve = result.observations[0]
     _, share = sf.predict_magnitudes(sf.fitted_plates(plates, result), obs, earth=sf.Earth(), shares=True)
     line = curve.report(result, result.entries[0])[-1]
     assert line == (f"    Earthshine: included (Lambert Earth, albedo 0.3), share median {100 * np.median(share):.3g} %, "
                     f"max {100 * np.max(share):.3g} %")
     assert line in sf.format_result(result)
-    plain = sf.fit_plates(plates, obs, ["parts.base.kd"], max_steps=3)
     assert plain.observations[0].report(plain, plain.entries[0])[-1] == "    Earthshine: not included"
     assert VEGETATION.describe() == "Phong-type Earth, kd 0.53, ks 0.28, n 7.31"
 

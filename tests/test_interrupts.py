@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -19,6 +20,7 @@ from helpers import write_sphere_fit_case
 import spacefit as sf
 from spacefit.cli import INTERRUPTED, TERMINATED, main
 from spacefit.executors import ClusterError
+from spacefit.interrupts import run_interruptibly
 from spacefit.studies.cluster import run_on_dask
 from spacefit.studies.worker import Task
 
@@ -49,6 +51,28 @@ def test_a_long_render_stops_within_the_bound(tmp_path, sig, code, word):
     assert err.strip().splitlines()[-1] == f"spacefit: {word}; nothing half-written was left behind"
     assert "Traceback" not in err and "winding down" not in err  # Mitsuba's own warning is not printed
     assert not out.exists() or not any(out.iterdir())
+
+
+def test_a_signal_stops_the_waiting_caller_and_tells_the_work_to_end():
+    """Called from the main thread, the work runs in a thread of its own; a SIGINT raises in the caller
+    while the work, told through ``stop``, ends on its own."""
+    seen = {}
+
+    def work(stop):
+        seen["thread"] = threading.current_thread()
+        seen["stopped"] = stop.wait(30.0)
+        return "done"
+
+    threading.Timer(0.3, os.kill, (os.getpid(), signal.SIGINT)).start()
+    t0 = time.monotonic()
+    with pytest.raises(KeyboardInterrupt):
+        run_interruptibly(work)
+    assert time.monotonic() - t0 < 5.0
+    deadline = time.monotonic() + 5.0
+    while "stopped" not in seen and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert seen["thread"] is not threading.main_thread()
+    assert seen["stopped"] is True
 
 
 def signal_state(pid: int) -> dict[str, str]:

@@ -46,11 +46,14 @@ def observations(tmp_path_factory: pytest.TempPathFactory) -> tuple[sf.Observati
     return image, curve(exact + 0.05 * rng.standard_normal(n), START_KD)
 
 
-def test_an_image_and_a_light_curve_share_a_part_and_their_information_adds(observations):
-    image, light_curve = observations
-    free = ["parts.plate.kd"]
-    alone = [sf.fit(obs, free, max_steps=20) for obs in (image, light_curve)]
-    joint = sf.fit([image, light_curve], free, max_steps=20)
+@pytest.fixture(scope="module")
+def joint(observations: tuple[sf.Observation, sf.PlateLightCurve]) -> sf.FitResult:
+    """The image and the light curve fitted together (kd free), once for the tests that read it."""
+    return sf.fit(list(observations), ["parts.plate.kd"], max_steps=20)
+
+
+def test_an_image_and_a_light_curve_share_a_part_and_their_information_adds(observations, joint):
+    alone = [sf.fit(obs, ["parts.plate.kd"], max_steps=20) for obs in observations]
     for result in (*alone, joint):
         assert result.success and not result.goodness.misfit, sf.format_result(result)
         kd, error = result.values["parts.plate.kd"], result.stderr["parts.plate.kd"]
@@ -105,14 +108,12 @@ def test_a_new_kind_is_fitted_with_the_closed_form_least_squares_errors(sigma):
     assert result.goodness.noise_known == (sigma is not None) and result.success, sf.format_result(result)
 
 
-def test_a_joint_fit_writes_its_folder_with_each_kind_in_its_own_figure(observations, tmp_path):
+def test_a_joint_fit_writes_its_folder_with_each_kind_in_its_own_figure(observations, joint, tmp_path):
     """The report of an image and a light curve: the image's residuals in residuals.fits / .png (one
     extension, the image's), the light curve's observed and predicted magnitudes in observation1.png."""
     from astropy.io import fits
 
-    image, light_curve = observations
-    joint = sf.fit([image, light_curve], ["parts.plate.kd"], max_steps=20)
-    out = sf.write_fit_report(tmp_path / "fit", joint, [image.reference])
+    out = sf.write_fit_report(tmp_path / "fit", joint, [observations[0].reference])
     assert {"fit.json", "uncertainty.json", "residuals.fits", "residuals.png", "comparison.png", "observation1.png"} <= {
         p.name for p in out.iterdir()}
     with fits.open(out / "residuals.fits") as hdus:

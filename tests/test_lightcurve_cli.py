@@ -136,6 +136,7 @@ def quick(tmp_path_factory) -> Path:
     ("curve.csv", ("--band", "R"), "band"),
     ("curve.csv", ("--free", "parts.nose.kd"), "parts.nose.kd"),
     ("curve.csv", ("--free", "target.attitude_z_deg"), "target.attitude_z_deg"),
+    ("curve.csv", ("--film-px", "0"), "`film_px` must be an integer >= 1, got 0"),
 ])
 def test_bad_light_curve_inputs_exit_2_in_one_line_and_leave_nothing(quick, tmp_path, capsys, curve, extra, message):
     out = tmp_path / "out"
@@ -161,6 +162,21 @@ def test_light_curve_files_read_a_point_tables_scene_values(quick):
     np.testing.assert_array_equal(curve.magnitude_sigma, [SIGMA_MAG] * 3)
     assert sf.LightCurveFiles(quick / "nosigma.csv", quick / "scene.toml").load().magnitude_sigma is None
     assert scene_value(curve.scene, "parts.legs.kd") == TRUTH
+
+
+def test_a_point_tables_camera_is_a_vector_as_its_sun(tmp_path):
+    """Each point's camera position and sun direction given as vectors by components: each point's
+    scene has them, the camera's range differing from point to point."""
+    scene = lander(8, 4)
+    rows = ["magnitude,magnitude_sigma,camera.position_m.x,camera.position_m.y,camera.position_m.z,sun.direction.x,sun.direction.y,"
+            "sun.direction.z", "10.0,0.05,0.0,10.0,70.0,0.0,-0.5,-1.0", "10.5,0.05,5.0,0.0,90.0,0.3,0.0,-1.0"]
+    (tmp_path / "curve.csv").write_text("\n".join(rows) + "\n")
+    (tmp_path / "scene.toml").write_text(scene.to_toml())
+    curve = sf.LightCurveFiles(tmp_path / "curve.csv", tmp_path / "scene.toml").load()
+    assert curve.geometry == ("camera.position_m", "sun.direction")
+    assert [s.camera.position_m for s in curve.scenes] == [(0.0, 10.0, 70.0), (5.0, 0.0, 90.0)]
+    sun = np.asarray(curve.scenes[1].sun.direction)
+    np.testing.assert_allclose(sun / np.linalg.norm(sun), np.array([0.3, 0.0, -1.0]) / np.hypot(0.3, 1.0))
 
 
 def test_light_curve_files_take_an_observers_file_in_the_targets_frame(quick, tmp_path):

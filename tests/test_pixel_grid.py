@@ -8,7 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.fitting.nuisance import image_model
-from spacefit.fitting.pixel_grid import FIXED_POINT_STEPS, MOVES, REMAINDER_RATIO, binned, fine_and_grid_models, grid_step, response_matrix
+from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, MOVES, REMAINDER_RATIO, binned, fine_and_grid_models, grid_feedback, grid_step,
+                                         response_matrix)
 from spacefit.fitting.uncertainty import linearise
 
 FACTOR = 4
@@ -87,6 +88,26 @@ def test_the_grid_step_is_the_fixed_point_of_the_step_and_carries_a_third_of_the
     delta, _, _ = grid_step(differences, lambda d: S @ d, x, np.full(3, 1e3))  # a step within a hundredth of the errors: not iterated
     np.testing.assert_allclose(delta, S @ (A @ x + a), rtol=1e-12)
     assert len(calls) == 1
+
+
+def test_the_fixed_point_moves_with_the_fits_estimate_by_the_inverse_of_one_less_the_steps_feedback():
+    """With d_S(y) = A y + a and S d = -(J^T J)^-1 J^T d, the fixed point x* = x + delta(x) moves by
+    (I - S A)^-1 per change of x: grid_feedback's D is S A in the columns it is given (0 in the
+    others), so that (I - D)^-1 C (I - D)^-T is the fixed point's covariance where x's is C."""
+    rng = np.random.default_rng(7)
+    J, A = rng.normal(size=(40, 3)), 0.3 * rng.normal(size=(40, 3))
+    a = rng.normal(size=40)
+    S = -np.linalg.solve(J.T @ J, J.T)
+    differences = lambda y: (A @ y + a, A @ y, 0.0 * a)  # noqa: E731
+    x, stderr = np.array([0.8, 0.1, -0.2]), np.array([0.01, 0.02, 0.03])
+    D = grid_feedback(differences, lambda d: S @ d, x, [1, 2], stderr)
+    np.testing.assert_allclose(D[:, 1:], (S @ A)[:, 1:], rtol=1e-9, atol=1e-12)
+    assert not D[:, 0].any()
+    D = grid_feedback(differences, lambda d: S @ d, x, [0, 1, 2], stderr)
+    fixed_point = lambda y: y + grid_step(differences, lambda d: S @ d, y, np.full(3, 1e-12))[0]  # noqa: E731
+    moved = np.stack([(fixed_point(x + h) - fixed_point(x - h)) / 2e-3 for h in 1e-3 * np.eye(3)], axis=1)
+    np.testing.assert_allclose(np.linalg.inv(np.eye(3) - D), moved, rtol=0, atol=1e-6)
+    assert np.abs(moved - np.eye(3)).max() > 0.05  # the feedback is not negligible here: a constant step would be wrong
 
 
 def test_a_box_render_binned_is_the_box_render_at_the_coarser_resolution():

@@ -203,7 +203,9 @@ def test_rows_with_nothing_in_them_do_not_count(heteroscedastic):
 
 def test_two_jacobians_enter_as_their_symmetrised_cross_product(heteroscedastic):
     """Monte Carlo noise in a Jacobian would add to J^T J as if it were information; the covariance
-    uses sym(J1^T W J2) of two independently seeded Jacobians, whose noise does not correlate."""
+    uses sym(J1^T W J2) of two independently seeded Jacobians, whose noise does not correlate. Without a
+    known noise too the estimate is the two-seed equation's root, one step c from x_hat, its meat the
+    mean residual there, r + (A + A2) c / 2, and the Jacobians' difference E adds B E^T diag(r^2) E B / 4."""
     A, x_hat, r = heteroscedastic
     A2 = A + 0.1 * np.random.default_rng(5).normal(size=A.shape)
     n, p = A.shape
@@ -211,12 +213,20 @@ def test_two_jacobians_enter_as_their_symmetrised_cross_product(heteroscedastic)
     def sym(W):
         return 0.5 * (A.T @ W @ A2 + A2.T @ W @ A)
 
-    meat = sym(np.diag(r**2 * n / (n - p)))
-    assert np.all(np.linalg.eigvalsh(meat) > 0)  # so no clipping of the meat's eigenvalues applies
     bread = np.linalg.inv(sym(np.eye(n)))
+    step = -bread @ (0.5 * (A.T @ r + A2.T @ r))
+    mean = r + 0.5 * (A + A2) @ step
+    meat = sym(np.diag(mean**2 * n / (n - p)))
+    assert np.all(np.linalg.eigvalsh(meat) > 0)  # so no clipping of the meat's eigenvalues applies
+    E = A - A2
     with jax.enable_x64(True):
-        cov, *_ = covariance(linear(A, A @ x_hat - r, A2, A2 @ x_hat - r), x_hat)
-    np.testing.assert_allclose(cov, bread @ meat @ bread, rtol=1e-9)
+        cov, _, _, correction = covariance(linear(A, A @ x_hat - r, A2, A2 @ x_hat - r), x_hat)
+    np.testing.assert_allclose(correction, step, rtol=1e-9)
+    assert np.abs(step).max() > 1e-3 * np.abs(x_hat).max()  # the step is not 0: the test can tell
+    expected = bread @ (meat + 0.25 * E.T @ np.diag(r**2) @ E) @ bread
+    np.testing.assert_allclose(cov, expected, rtol=1e-9)
+    # the mean residual at the root, not the fit's own: another matrix
+    assert not np.allclose(bread @ (sym(np.diag(r**2 * n / (n - p))) + 0.25 * E.T @ np.diag(r**2) @ E) @ bread, expected, rtol=1e-3)
 
 
 def test_a_parameter_nothing_constrains_gets_infinite_error_and_leaves_the_others(heteroscedastic):
@@ -300,12 +310,12 @@ def test_poorly_determined_is_judged_against_the_parameters_own_scale():
 
 
 def test_a_value_observation_without_errors_has_its_noise_from_s2_over_n_minus_p():
-    """A table of 10 values without errors, 2 parameters known: each value's weight in the sandwich is
-    sum r^2 / (10 - 2); with errors stated, 1."""
-    from spacefit.fitting.uncertainty import _unknown_noise_weights
+    """A table of 10 values without errors, 2 parameters known: each value's noise draw in the sandwich is
+    the root of sum r^2 / (10 - 2); with errors stated, 1."""
+    from spacefit.fitting.uncertainty import _unknown_noise_draw
 
     r = np.arange(1.0, 11.0)
-    for known, expected in ((False, np.full(10, r @ r / 8.0)), (True, np.ones(10))):
+    for known, expected in ((False, np.full(10, np.sqrt(r @ r / 8.0))), (True, np.ones(10))):
         block = SimpleNamespace(data=SimpleNamespace(value=r), known=("a", "b"), noise_known=known)
         problem = SimpleNamespace(pixels=0, blocks=(block,))
-        np.testing.assert_allclose(_unknown_noise_weights(problem, r, 10, 8), expected)
+        np.testing.assert_allclose(_unknown_noise_draw(problem, np.zeros(10), r, 10, 8), expected)

@@ -334,14 +334,19 @@ def batched_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Seq
                            [int(seeds[1])] * len(specs))
         return stacked([img for img, _ in out]), stacked([J for _, J in out])
 
+    # Evaluated eagerly (not traced: jax.block_until_ready passes tracers through), each callback is waited
+    # for before the caller dispatches work on its outputs. The callbacks render through JAX themselves
+    # (each frame's bridge function), and XLA's CPU client runs a bounded number of computations at once:
+    # the reductions queued on a light curve's 24 images took every slot, the callback's own renders
+    # waited for one, and the fit hung in its verdict (issue 34; both threads in xla::Semaphore::Acquire).
     @jax.custom_jvp
     def render(x: jax.Array, seeds: jax.Array) -> tuple[jax.Array, ...]:
-        return jax.pure_callback(primal_cb, images, x, seeds, vmap_method="sequential")
+        return jax.block_until_ready(jax.pure_callback(primal_cb, images, x, seeds, vmap_method="sequential"))
 
     @render.defjvp
     def render_jvp(primals: tuple[jax.Array, jax.Array], tangents: tuple[jax.Array, jax.Array]) -> tuple[Any, Any]:
         (x, seeds), (t, _) = primals, tangents
-        imgs, Js = jax.pure_callback(jacobian_cb, (images, columns), x, seeds, vmap_method="sequential")
+        imgs, Js = jax.block_until_ready(jax.pure_callback(jacobian_cb, (images, columns), x, seeds, vmap_method="sequential"))
         return imgs, tuple(jnp.einsum("f...n,fn->f...", J, t[idx].astype(jnp.float32)) for J, idx in zip(Js, seen))
 
     return render

@@ -22,7 +22,7 @@ from spacefit.errors import check_choice, check_count, check_type
 from spacefit.executors import Cluster
 from spacefit.fitting.compile_cache import use_compile_cache
 from spacefit.fitting.frames import frame_executor
-from spacefit.fitting.goodness import Goodness
+from spacefit.fitting.goodness import STANDS_OUT, TRIM, Goodness, standing_out
 from spacefit.fitting.judging import judged_goodness, part_goodness, part_rows, per_observation
 from spacefit.fitting.observations.base import Sequenced, ValueObservation
 from spacefit.fitting.observations.image import Observation
@@ -413,13 +413,20 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
 
 def _own_misfits(s: Setup, own: Sequence[Goodness]) -> list[str]:
     """A warning per observation whose own residuals are a misfit (:func:`~spacefit.fitting.judging.per_observation`),
-    named by its frame where it is a pass's: a pooled verdict within range can hold a frame that is not."""
-    out = []
+    or, without a known noise, stand out from the others' (:func:`~spacefit.fitting.goodness.standing_out`), named by
+    its frame where it is a pass's: a pooled verdict within range can hold a frame that is not."""
+    out, apart = [], standing_out(own)
     for observation, entries in s.layout:
         for j, k in enumerate(entries):
+            name = f"frame {j} of the pass (observation {k})" if isinstance(observation, Sequenced) else f"observation {k}"
             if k < len(own) and own[k].misfit:
-                name = f"frame {j} of the pass (observation {k})" if isinstance(observation, Sequenced) else f"observation {k}"
                 out.append(f"{name} is a misfit on its own: chi^2/dof {own[k].chi2_dof:.3f} above its limit {own[k].limit:.3f}.")
+            if k in apart:
+                out.append(f"{name}'s residuals stand out from the others': their mean square over its render noise's "
+                           f"({own[k].robust_spread:.3g}, the largest {100 * TRIM:g} % left out) is {apart[k]:.3g} times the other "
+                           f"observations' median (above {STANDS_OUT:g}); with the noise unknown (estimated from {own[k].basis}) this "
+                           "may be a model error of its own (a pose, a blur, a gain), and the standard errors of what it "
+                           "determines may be understated.")
     return out
 
 

@@ -53,6 +53,15 @@ so ``d_4`` is larger there than at the answer (noise-free, 32 px below: +0.0362 
 model's own minimum is +0.0344; the fixed point +0.0341; in the coverage study at 48 px, where the
 steps are 0.021 px, the one step left the blur 0.0027 px wide, 1.2 of its statistical errors).
 
+*Its feedback.* The step is taken at the fixed point and moves with it: a fit whose blur came out
+wide has less of the grid's error to step over. With ``D = d step(d_4(y)) / dy`` at x*, the fixed
+point moves by ``(I - D)^-1`` per change of the fit's estimate, so its covariance is the fit's through
+that map (:func:`grid_feedback`: the columns of the image nuisances, on which ``d_4`` depends without
+another render, by central differences). Measured in the coverage study (48 px, 55 fits): the blur's
+error after the step scattered 1.32 times its error before it (0.00287 and 0.00217 px), ``D`` 0.16 for
+the blur at one exposure (its error 1.19 times the fit's); the rendered parameters' columns (the pose,
+the materials: d_4 moves with the render too) are not taken (a render at 4x per column and sign).
+
 *What remains.* Write e(S) for the error of the model made at S x (fitted minus truth). If it
 falls as S^-p, e(2) = 2^p e(4), and the step from the 2x model to the 4x one,
 ``step(d_4 - d_2) = e(2) - e(4)`` to first order, is (2^p - 1) e(4): for p = 2, e(4) is a third of
@@ -242,6 +251,23 @@ def grid_step(differences: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, 
         if np.all(np.abs(delta - moved) <= FIXED_POINT_TOLERANCE * stderr):
             break
     return delta, REMAINDER_RATIO * step(fine - coarser), noise
+
+
+def grid_feedback(differences: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]], step: Callable[[np.ndarray], np.ndarray],
+                  at: Float[np.ndarray, " n"], columns: Sequence[int], stderr: Float[np.ndarray, " n"]) -> np.ndarray:
+    """How the step of :func:`grid_step` moves with the values it is taken at: ``D = d step(d_S(y)) / dy`` at
+    ``at`` (the fixed point), n x n, its ``columns`` (the image nuisances, on which ``differences`` depends
+    without another render) by central differences of half a standard error ``stderr``, the others 0.
+    The fixed point ``x* = x + step(d_S(x*))`` moves by ``(I - D)^-1`` per change of the fit's estimate x,
+    so the finer model's estimate has the covariance ``(I - D)^-1 C (I - D)^-T`` where the fit's has C:
+    the step's feedback, which a step taken as a constant leaves out (measured in the coverage study:
+    the blur's error 1.2 times its pre-step error, ``D`` 0.16 for the blur)."""
+    D = np.zeros((len(at), len(at)))
+    for j in columns:
+        h = np.zeros(len(at))
+        h[j] = 0.5 * stderr[j]
+        D[:, j] = step(differences(at + h)[0] - differences(at - h)[0]) / (2.0 * h[j])
+    return D
 
 
 def grid_notes(errors: dict[str, float], stderr: dict[str, float]) -> list[str]:

@@ -22,10 +22,10 @@ import numpy as np
 from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.pixel_grid import grid_step
+from spacefit.fitting.pixel_grid import grid_feedback, grid_step
 from spacefit.fitting.problem import FitRender, Observation, Problem, Setup, column_owners, setup
 from spacefit.precision import float64
-from spacefit.scene.parameters import parameter
+from spacefit.scene.parameters import is_image, parameter
 
 # |correlation| above which two parameters are reported as not separately determined.
 CORRELATION_WARN = 0.95
@@ -99,7 +99,7 @@ def covariance(problem: Problem, x: np.ndarray,
                lin: Linearisation | None = None) -> tuple[np.ndarray, float, np.ndarray, np.ndarray]:
     """Covariance of the estimate at ``x`` (physical units), the loss, the eigenvalues of the
     Fisher information (J^T J) / s^2 under uniform noise, and the correction that takes the fit's
-    ``x`` to the estimate the covariance is of (0 but with the noise known).
+    ``x`` to the estimate the covariance is of (0 where a direction is undetermined).
 
     The covariance is the heteroscedasticity-consistent "sandwich" (White 1980, with the HC1
     small-sample factor), (J^T J)^-1 J^T diag(r^2) J (J^T J)^-1: glints make the image noise
@@ -125,19 +125,26 @@ def covariance(problem: Problem, x: np.ndarray,
     The fit's minimum of 0.5 |r|^2 is biased: the loss's expectation holds the render noise's own
     variance, which the parameters change (a wider PSF smooths the render noise away, so the PSF
     width came out 0.8 of its standard error too wide, README), and the noisy Jacobian the fit
-    steers by shares the render's seed. With the noise known the estimate is therefore the root of
-    the unbiased estimating equation 0.5 (J1^T r_alt + J2^T r) = 0 (each Jacobian against the other
-    seed's residuals), one Gauss-Newton step from ``x`` (the returned correction); it averages the
-    two seeds' render and Jacobian noise, so those two terms enter the covariance at half weight.
+    steers by shares the render's seed. The estimate is therefore the root of the unbiased
+    estimating equation 0.5 (J1^T r_alt + J2^T r) = 0 (each Jacobian against the other seed's
+    residuals), one Gauss-Newton step from ``x`` (the returned correction); it averages the two
+    seeds' render and Jacobian noise, so those two terms enter the covariance at half weight.
+
+    Without a known noise the same estimate holds (the bias is the model's render noise, whatever the
+    data's), and the meat is :func:`render_meat` of the two seeds' mean residual at that root,
+    (r + r_alt) / 2 + (J1 + J2) c / 2 (with the HC1 factor): its variance per value is the data's
+    noise plus half the fit's render noise, the terms of the equation's variance, and their
+    correlation between neighbouring pixels is counted as the render noise's is. Measured on two views
+    of the panels case (references at 256 spp, fits at 64, 16 seeds; docs/measurements/validation.md):
+    the fit's own minimum with the per-residual r^2 meat put the values' rms error at 2.3 to 7.8 of
+    their standard errors, one render's firefly pulling an attitude 8 standard errors off. A value
+    observation's values count alone (:func:`_unknown_noise_draw`). The Jacobian's noise enters as
+    with the noise known.
 
     ``lin``: the problem's :func:`linearise` at ``x`` where the caller has it.
     """
     lin = linearise(problem, x) if lin is None else lin
     r, r_alt, J1, J2, J1T, J2T, n = lin.r, lin.r_alt, lin.J1, lin.J2, lin.J1T, lin.J2T, len(x)
-
-    def meat(w: np.ndarray) -> np.ndarray:
-        return _psd_part(lin.cross(lambda v: jnp.asarray(w) * v))
-
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(lin.information))):
         return np.full((n, n), np.nan), math.nan, np.full(n, np.nan), np.zeros(n)
     bread, eigval, eigvec, tiny = _pseudo_inverse(lin.information)
@@ -146,23 +153,27 @@ def covariance(problem: Problem, x: np.ndarray,
     informative = int(((probe != 0) | (r != 0)).sum())
     dof = max(informative - len(x), 1)
     s2 = float(r @ r) / dof
+    # the fit stops where J^T r = 0 for its noisy J, off by (J^T J)^-1 dJ^T r, whose covariance per
+    # row is r^2 (J1 - J2)(J1 - J2)^T / 2
+    r2 = jnp.asarray(r**2)
+
+    def jacobian_noise_column(e: jax.Array) -> jax.Array:
+        v = r2 * (J1(e) - J2(e))
+        return J1T(v) - J2T(v)
+
+    jacobian_noise = 0.5 * lin.columns(jacobian_noise_column)
+    correction = -bread @ (0.5 * (np.asarray(J1T(jnp.asarray(r_alt))) + np.asarray(J2T(jnp.asarray(r)))))
     if problem.noise_known:
         # the observation's noise, (J^T J)^-1, plus the fit's own render noise, per residual
-        # (r - r_alt)^2 / 2 from the two seeds, through the sandwich, plus the noise of the
-        # Jacobian the fit steered by: it stops where J^T r = 0 for its noisy J, off by
-        # (J^T J)^-1 dJ^T r, whose covariance per row is r^2 (J1 - J2)(J1 - J2)^T / 2
-        r2 = jnp.asarray(r**2)
-
-        def jacobian_noise_column(e: jax.Array) -> jax.Array:
-            v = r2 * (J1(e) - J2(e))
-            return J1T(v) - J2T(v)
-
-        jacobian_noise = 0.5 * lin.columns(jacobian_noise_column)
+        # (r - r_alt)^2 / 2 from the two seeds, and the Jacobian's, both at half weight
         noise = render_meat(lin.cross, (r - r_alt) / math.sqrt(2.0), problem, x) + jacobian_noise
         cov, s2 = bread + 0.5 * bread @ noise @ bread, 1.0
-        correction = -bread @ (0.5 * (np.asarray(J1T(jnp.asarray(r_alt))) + np.asarray(J2T(jnp.asarray(r)))))
     else:
-        cov, correction = bread @ meat(_unknown_noise_weights(problem, r, informative, dof)) @ bread, np.zeros(len(x))
+        # the data's noise and half the render noise: the two seeds' mean residual at the root
+        step = jnp.asarray(correction, dtype=lin.x.dtype)
+        mean = 0.5 * (r + r_alt + np.asarray(J1(step), dtype=float) + np.asarray(J2(step), dtype=float))
+        meat = render_meat(lin.cross, _unknown_noise_draw(problem, mean, r, informative, dof), problem, x)
+        cov = bread @ (meat + 0.5 * jacobian_noise) @ bread
     if tiny.any():
         touched = np.any(np.abs(eigvec[:, tiny]) > 1e-6, axis=1)
         cov[touched, :] = np.inf
@@ -171,20 +182,21 @@ def covariance(problem: Problem, x: np.ndarray,
     return cov, 0.5 * float(r @ r), np.clip(eigval, 0.0, None) / s2, correction
 
 
-def _unknown_noise_weights(problem: Problem, r: np.ndarray, informative: int, dof: int) -> np.ndarray:
-    """Per residual, its variance in the sandwich's meat where the noise is not known: an image's
-    pixel its own r^2 (heteroscedastic: glints), with the HC1 factor ``informative / dof``; a value observation's
-    value 1 where its errors are stated, else its block's mean square r^2 over its degrees of freedom
-    (the errors then scale as s^2 (J^T J)^-1: one unknown noise level per table)."""
-    w, offset = r**2 * informative / dof, problem.pixels
+def _unknown_noise_draw(problem: Problem, mean: np.ndarray, r: np.ndarray, informative: int, dof: int) -> np.ndarray:
+    """Per residual, a draw of its noise for the sandwich's meat where the noise is not known: an image's
+    pixel the two seeds' ``mean`` residual (heteroscedastic: glints), with the HC1 factor ``informative / dof``
+    on its square; a value observation's value 1 where its errors are stated, else the root of its block's
+    sum of squares of the fit's residuals ``r`` over its degrees of freedom (the errors then scale as
+    s^2 (J^T J)^-1: one unknown noise level per table)."""
+    d, offset = mean * math.sqrt(informative / dof), problem.pixels
     for block in problem.blocks:
         rows = slice(offset, offset + block.data.value.size)
         offset = rows.stop
         if block.noise_known:
-            w[rows] = 1.0
+            d[rows] = 1.0
         else:
-            w[rows] = float(r[rows] @ r[rows]) / max(rows.stop - rows.start - len(block.known), 1)
-    return w
+            d[rows] = math.sqrt(float(r[rows] @ r[rows]) / max(rows.stop - rows.start - len(block.known), 1))
+    return d
 
 
 def render_meat(cross: Callable[[Callable[[jax.Array], jax.Array]], np.ndarray], d: np.ndarray, problem: Problem,
@@ -293,7 +305,9 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     solver coordinates; skipped where it would leave a range), and the covariance carries ``b b^T``, ``b``
     the bound on what remains of the grid's error after it (a third of the step from the model made at 2x
     to the one made at 4x; extras ``pixel_grid_remainder``, its magnitude), and the step's render noise
-    (two renders at 4x, their change's difference through :func:`render_meat` at half weight)."""
+    (two renders at 4x, their change's difference through :func:`render_meat` at half weight); the
+    covariance of the step's fixed point is the fit's through ``(I - D)^-1``, ``D`` how the step moves
+    with the image nuisances it is taken at (:func:`~spacefit.fitting.pixel_grid.grid_feedback`)."""
     lin = linearise(s.problem, x)
     cov, loss_value, fisher, correction = covariance(s.problem, x, lin)
     if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
@@ -305,11 +319,16 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     differences = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
     if differences is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
         padding = np.zeros(lin.r.size - s.problem.pixels)
-        delta, remainder, noise = grid_step(lambda y: tuple(np.concatenate([d, padding]) for d in differences(y)), lin.step, x,
-                                            np.sqrt(np.diag(cov)))
+        padded = lambda y: tuple(np.concatenate([d, padding]) for d in differences(y))  # noqa: E731
+        stderr = np.sqrt(np.diag(cov))
+        delta, remainder, noise = grid_step(padded, lin.step, x, stderr)
         # the step's render noise: the mean of two renders' changes, through the sandwich as the fit's own render noise
         bread = _pseudo_inverse(lin.information)[0]
-        cov = cov + np.outer(remainder, remainder) + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread
+        cov = cov + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread
+        # the step moves with the image nuisances it is taken at: the fixed point's estimate moves by (I - D)^-1 per the fit's
+        feedback = np.linalg.inv(np.eye(len(x)) - grid_feedback(padded, lin.step, x + delta,
+                                                                [i for i, n in enumerate(s.solver_params.names) if is_image(n)], stderr))
+        cov = feedback @ cov @ feedback.T + np.outer(remainder, remainder)
         if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + delta)):
             x = x + delta
         extras["pixel_grid_error"] = dict(zip(s.solver_params.names, delta.tolist()))

@@ -9,6 +9,11 @@ sun and target pose, given as any scene values of them). The points are the fram
 own view, rendered one after another, their Jacobian columns the bridge's. The model is rendered:
 its render noise, measured from renders with independent seeds, enters the fit's goodness and its
 errors as an image's does (:func:`spacefit.fitting.uncertainty.covariance`).
+
+A point's irradiance is a flux: any film over the same field of view estimates it without bias (a
+film's pixels sum to the integral of radiance over solid angle, :mod:`spacefit.rendering.flux`), and
+its render noise falls with the samples traced, not with the pixels. So a fit renders the points on
+the coarsest film its magnitudes' errors allow (:func:`film_for_fit`), at the scene's samples per pixel.
 """
 
 from __future__ import annotations
@@ -18,6 +23,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import dataclasses
+import math
 
 import jax
 import jax.numpy as jnp
@@ -31,6 +37,7 @@ from spacefit.fitting.result import FitResult
 from spacefit.fitting.observations.base import Block, MeasuredValues
 from spacefit.fitting.problem import INDEPENDENT_SEED_OFFSET
 from spacefit.geometry.frames import pixel_solid_angles
+from spacefit.precision import float64
 from spacefit.progress import Progress, ProgressCallback
 from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.memory import check_fit_memory, describe_fit
@@ -40,6 +47,13 @@ from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
 from spacefit.studies.lightcurve import MAGNITUDE_PER_LN, SUN_MAGNITUDES
 from spacefit.studies.lightcurve_kind import LightCurveKind
+
+# The fit's film (film_for_fit): the coarsest of the scene's width halved k times, none under MIN_FILM_PX, whose
+# render noise at the start (two seeds) is at most RENDER_NOISE_SHARE of the magnitudes' errors (rms over the points):
+# the model's noise adds a quarter of the data's variance, which the fit's errors and goodness count (its verdict renders
+# at 2 x the samples: spacefit.fitting.goodness.verdict_factor).
+MIN_FILM_PX = 16
+RENDER_NOISE_SHARE = 0.5
 
 # What a point may set: its camera, sun and target pose, as registered parameters or scene-file values
 # (the values a frame sets on a loaded scene it shares, spacefit.fitting.frames).
@@ -61,6 +75,8 @@ class RenderedLightCurve(LightCurveKind):
         sun_magnitude: the sun's magnitude in it (None: the band's).
         observer_range_m: the observer's range (None: each point's camera's).
         seed: the renders' seed (independent ones: ``seed + 1000 j``).
+        film_px: the width (px) of the film the points are rendered on, over the scene's field of
+            view (its height and pixel pitch scaled with it), or None: the scene's own film.
 
     Raises:
         InputError: points that set unknown keys, magnitudes and points of different counts, a bad
@@ -83,7 +99,8 @@ class RenderedLightCurve(LightCurveKind):
     sun_magnitude: float | None = None
     observer_range_m: float | None = None
     seed: int = 1
-    scenes: tuple[Scene, ...] = field(init=False, repr=False)  # each point's scene: the target's with its geometry
+    film_px: int | None = None
+    scenes: tuple[Scene, ...] = field(init=False, repr=False)  # each point's scene: the target's with its geometry, on the film
 
     def __post_init__(self) -> None:
         check_scene(self.scene)
@@ -91,6 +108,8 @@ class RenderedLightCurve(LightCurveKind):
         if self.sun_magnitude is not None:
             check_range("sun_magnitude", self.sun_magnitude)
         check_count("seed", self.seed, 0, optional=False)
+        check_count("film_px", self.film_px, 1)
+        film = on_film(self.scene, self.film_px)
         magnitude = check_vector("magnitude", self.magnitude, None)
         points = self.points
         if isinstance(points, (str, bytes, Mapping)) or not isinstance(points, Sequence):
@@ -105,7 +124,7 @@ class RenderedLightCurve(LightCurveKind):
                 if key not in POINT_KEYS:
                     raise InputError(f"`points[{i}]` sets {key!r}, which is not a point's geometry; a point sets any of {list(POINT_KEYS)}.")
             try:
-                scenes.append(self.scene.with_values(dict(p)))
+                scenes.append(film.with_values(dict(p)))
                 assemble(scenes[-1])  # the point's view checked: its camera sees the target
             except InputError as err:
                 raise type(err)(f"`points[{i}]`: {err}") from None
@@ -144,7 +163,7 @@ class RenderedLightCurve(LightCurveKind):
         specs = share_views([FrameSpec(scene, known, steps, None, None, "prb") for scene in self.scenes])
         if len({repr(scene.to_dict()["target"]) for scene in self.scenes}) > 1:  # the points turn or move the target
             specs = [dataclasses.replace(spec, view_pose=True) for spec in specs]
-        intrinsics = assemble(self.scene).intrinsics
+        intrinsics = assemble(self.scenes[0]).intrinsics
         shape = (intrinsics.height, intrinsics.width, 3)
         # each point's rescaling from its camera's range to the observer's
         ranges = np.array([np.linalg.norm(np.subtract(s.camera.position_m, s.target.position_m)) for s in self.scenes])
@@ -171,11 +190,15 @@ class RenderedLightCurve(LightCurveKind):
         """The fit's size in words and its estimated peak memory (bytes): its points are the frames of one
         batch (the memory check of an image fit, which refuses a fit this machine cannot hold unless
         ``allow_large``), each seeing the free parameters it depends on."""
-        intrinsics, own = assemble(self.scene).intrinsics, self.parameters()
+        intrinsics, own = assemble(self.scenes[0]).intrinsics, self.parameters()
         columns = sum(name in own for name in free)
         estimate = check_fit_memory(len(self.scenes), intrinsics.width, intrinsics.height, columns, self.scene.render.spp,
                                     allow_large=allow_large)
-        return describe_fit(len(self.scenes), intrinsics.width, intrinsics.height, estimate), estimate
+        words = describe_fit(len(self.scenes), intrinsics.width, intrinsics.height, estimate)
+        width, height = self.scene.render.resolution
+        if (intrinsics.width, intrinsics.height) != (width, height):
+            words += f" (the points rendered over the field of view of the scene's {width} x {height} px film: a flux needs no finer one)"
+        return words, estimate
 
     def zero_point(self) -> tuple[float, float]:
         """The sun's magnitude in the band (:attr:`sun_magnitude` or the band's) and the scene sun's irradiance."""
@@ -189,6 +212,44 @@ class RenderedLightCurve(LightCurveKind):
         return np.arange(count, dtype=float), "point"
 
 
+def on_film(scene: Scene, width: int | None) -> Scene:
+    """``scene`` on a film ``width`` px wide over the same field of view (None: ``scene``): the height, the
+    pixel pitch (or, with ``camera.fov_deg`` given, nothing else) and the principal point's offset scaled."""
+    if width is None or width == scene.render.resolution[0]:
+        return scene
+    w, h = scene.render.resolution
+    ratio = width / w
+    values: dict[str, Any] = {"render.resolution": [width, max(1, round(h * ratio))],
+                              "camera.principal_offset_px": [o * ratio for o in scene.camera.principal_offset_px]}
+    if scene.camera.fov_deg == 0.0:
+        values["camera.pixel_pitch_mm"] = scene.camera.pixel_pitch_mm / ratio
+    return scene.with_values(values)
+
+
+@float64
+def film_for_fit(curve: RenderedLightCurve, free: Sequence[str], start: Mapping[str, float] | None = None) -> RenderedLightCurve:
+    """``curve`` on the coarsest film of :data:`MIN_FILM_PX` px or more, the scene's width halved k times,
+    whose render noise is at most :data:`RENDER_NOISE_SHARE` of the magnitudes' errors: each candidate's
+    points rendered at the start values (the scene's, or ``start``'s) with two independent seeds, the
+    noise of one render taken as their difference over sqrt 2, relative, rms over the points against
+    each point's error in ln E. ``curve`` itself where none is, where its errors are unknown or where it
+    already sets ``film_px``. Renders only the candidates tried, cheapest first (primal renders)."""
+    width = curve.scene.render.resolution[0]
+    if curve.magnitude_sigma is None or curve.film_px is not None:
+        return curve
+    known = tuple(n for n in free if n in curve.parameters())
+    x = jnp.asarray([(start or {}).get(n, curve.start(n)) for n in known], dtype=jnp.float64)
+    widths = sorted({math.ceil(width / 2**k) for k in range(1, 16) if math.ceil(width / 2**k) >= MIN_FILM_PX})
+    for candidate in widths:
+        coarse = dataclasses.replace(curve, film_px=candidate)
+        block = coarse.block(known)
+        first, second = (np.asarray(block.model(x, j)) for j in (0, 1))
+        noise = np.abs(first - second) / np.sqrt(2.0) / (0.5 * (first + second))
+        if np.sqrt(np.mean((noise / block.data.sigma) ** 2)) <= RENDER_NOISE_SHARE:  # sigma: ln E's
+            return coarse
+    return curve
+
+
 def fit_light_curve(
     scene: Scene,
     free: Sequence[str],
@@ -200,6 +261,7 @@ def fit_light_curve(
     sun_magnitude: float | None = None,
     observer_range_m: float | None = None,
     seed: int = 1,
+    film_px: int | None = None,
     max_steps: int = 50,
     start: Mapping[str, float] | None = None,
     allow_large: bool = False,
@@ -211,7 +273,9 @@ def fit_light_curve(
     to an observed light curve (:class:`RenderedLightCurve` of these arguments) with
     :func:`fit`, from the scene's values or ``start``'s. Its size (points, pixels, estimated
     memory: :meth:`RenderedLightCurve.size`) is said as an image fit's is, and a fit above the memory
-    available is refused unless ``allow_large``. ``progress``: called with (step, max_steps) after
+    available is refused unless ``allow_large``. The points are rendered on the coarsest film over the
+    scene's field of view whose render noise at the start is at most half the magnitudes' errors (a
+    flux needs no finer one: docs/reference/light-curves.md; its size said with the fit's), or on ``film_px``'s. ``progress``: called with (step, max_steps) after
     each step (default: a progress display on stderr, none with ``quiet``); ``resume``: the fit's
     checkpoint plumbing (:class:`Resume`), as :func:`fit` takes it.
 
@@ -225,6 +289,8 @@ def fit_light_curve(
         sun_magnitude: the sun's magnitude in ``band`` (None: the band's).
         observer_range_m: the observer's distance (m; None: the camera's).
         seed: the renders' seed.
+        film_px: the width (px) of the points' film over the scene's field of view (None: the coarsest
+            the magnitudes' errors allow; the scene's width: the scene's own film).
         max_steps: the solver's step limit.
         start: start values by name (physical units); None: the scene's.
         allow_large: run a fit above the memory available.
@@ -243,7 +309,8 @@ def fit_light_curve(
             result = sf.fit_light_curve(scene, ["parts.panels.alpha"], points, [5.0, 5.3, 5.9], 0.05)
     """
     check_count("max_steps", max_steps, optional=False)
-    curve = RenderedLightCurve(scene, points, magnitude, magnitude_sigma, band, sun_magnitude, observer_range_m, seed)
+    curve = RenderedLightCurve(scene, points, magnitude, magnitude_sigma, band, sun_magnitude, observer_range_m, seed, film_px)
+    curve = film_for_fit(curve, free, start)
     if progress is None and not quiet:
         progress = Progress(f"light-curve fit {', '.join(check_name_list('free', free))}")
     return fit(curve, free, max_steps=max_steps, start=start, allow_large=allow_large, progress=progress, resume=resume)
