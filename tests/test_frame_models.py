@@ -73,7 +73,8 @@ def equations(jaxpr: jax.extend.core.Jaxpr) -> int:
 @float64
 def test_a_joint_fit_s_step_holds_one_frames_model_whatever_the_frames(loss):
     """A pass of 2 and of 5 frames (the blur shared, each frame's attitude, shift and scale its own): its
-    residuals and their linearisation trace to programs of the same size, one frame's model in each."""
+    residuals and their linearisation trace to programs of the same size, one frame's model in each, those
+    that call back for the renders and those that take them made first (spacefit.fitting.outside), stacked."""
     sizes = []
     for n in (2, 5):
         base = sf.load_scene("spacefit/synthetic/panels.toml", {"render.resolution": [12, 12], "camera.pixel_pitch_mm": 200.0})
@@ -83,6 +84,10 @@ def test_a_joint_fit_s_step_holds_one_frames_model_whatever_the_frames(loss):
         free = ["parts.legs.kd", "image.blur_sigma_px", *frames.per_frame(["target.attitude_x_deg", "image.shift_x_px", "image.scale"])]
         s = problem.setup(obs, free, loss=loss, render=sf.FitRender(spp=2))
         x = jnp.asarray(s.x0)
+        images, jacobians = s.problem.outside.render(np.asarray(x), 0, True)
+        assert [i.shape for i in images] == [(n, 12, 12, 3)]  # one run, the frames stacked
+        evaluate = s.problem.outside.evaluate
         sizes.append((equations(jax.make_jaxpr(s.problem.residual_x)(x).jaxpr),
-                      equations(jax.make_jaxpr(lambda v, s=s, x=x: jax.linearize(s.problem.residual_x, x)[1](v))(x).jaxpr)))
+                      equations(jax.make_jaxpr(lambda v, s=s, x=x: jax.linearize(s.problem.residual_x, x)[1](v))(x).jaxpr),
+                      equations(jax.make_jaxpr(lambda y, i, J, f=evaluate: jax.linearize(lambda z: f(z, i, J)[1], y)[1](y))(x, images, jacobians).jaxpr)))
     assert sizes[0] == sizes[1]

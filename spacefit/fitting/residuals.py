@@ -202,9 +202,14 @@ def build_problem(
                 list[jax.Array], jax.Array, jax.Array]:
             stacked, r, descended = models(given(x, images, jacobians), x)
             others = block_models(x, 0)  # none rendered: the seeds change none
-            return [*FrameModels.each(stacked), *others], with_blocks(r, others), with_blocks(descended, others)
+            return [*stacked, *others], with_blocks(r, others), with_blocks(descended, others)
 
-        outside = Outside(render_outside, jax.jit(evaluate))
+        def each(out: list[jax.Array]) -> list[jax.Array]:
+            """evaluate's models, each batch's stacked, the blocks' after them, one per observation."""
+            batches = len(out) - len(blocks)
+            return [*FrameModels.each(out[:batches]), *out[batches:]]
+
+        outside = Outside(render_outside, jax.jit(evaluate), each)
 
     def models_seeded(x: jax.Array, j: int) -> list[jax.Array]:
         if outside is not None:
