@@ -3,7 +3,8 @@ materials and the PSF width shared, 5 own values a frame) at a small size and a 
 process's resident memory sampled every 20 ms and read at the edges of each batch of renders (the Dr.Jit
 side: :func:`spacefit.fitting.frames.run_frames`), so that what grows inside the renders is told from what
 grows in the compiled JAX step around them. Prints the peak RSS, the peak inside render batches and
-outside them, and the loaded scenes and frozen recordings held at the end.
+outside them (the solve), and after the solve in the covariance, the pixel grid's renders and step, and the
+goodness of fit (the phases a render batch inside them counts as "render"), and the loaded scenes held at the end.
 With ``ANALYSE=1`` the solver's step is compiled once more at its first call to print XLA's memory analysis
 of it (temporaries, arguments, outputs), RSS before and after its tracing and compilation, and its state's
 arrays by kind (this second compilation raises the peak). Figures: docs/measurements/performance.md,
@@ -87,6 +88,24 @@ def analyse_steps() -> None:
     solvers.eqx = Proxy()
 
 
+def phases(sampler: Sampler) -> None:
+    """Mark the phases after the solve: the covariance, the pixel grid's 4x renders and step, the goodness of fit."""
+    from spacefit.fitting import loop, residuals
+
+    def marked(fn, phase, after=None):  # type: ignore[no-untyped-def]
+        def call(*args, **kwargs):  # type: ignore[no-untyped-def]
+            sampler.phase = phase
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                sampler.phase = after or sampler.phase
+        return call
+
+    loop.estimate = marked(loop.estimate, "covariance", "after")
+    residuals.grid_error_models = marked(residuals.grid_error_models, "pixel grid")
+    loop.judged_goodness = marked(loop.judged_goodness, "goodness", "after")
+
+
 def main() -> None:
     size, n, steps = (int(a) for a in (sys.argv[1:] + ["64", "4", "2"][len(sys.argv) - 1:])[:3])
     sampler = Sampler()
@@ -94,14 +113,15 @@ def main() -> None:
     run_frames = frames_module.run_frames
 
     def traced(executor, fn, specs, *args):  # type: ignore[no-untyped-def]
-        before = rss_mib()
+        before, phase = rss_mib(), sampler.phase
         sampler.phase = "render"
         out = run_frames(executor, fn, specs, *args)
         sampler.events.append((fn.__name__, before, rss_mib(), sampler.peaks.get("jax", 0.0)))
-        sampler.phase = "jax"
+        sampler.phase = phase
         return out
 
     frames_module.run_frames = traced
+    phases(sampler)
     if os.environ.get("ANALYSE"):
         analyse_steps()
     with tempfile.TemporaryDirectory() as tmp:
@@ -120,7 +140,9 @@ def main() -> None:
     for name, before, after, jax_peak in sampler.events:
         print(f"  {name}: RSS {before:.0f} -> {after:.0f} MiB (peak outside renders so far {jax_peak:.0f})")
     print(f"steps {result.steps}; peak RSS: set-up {sampler.peaks.get('setup', 0):.0f}, in renders {sampler.peaks.get('render', 0):.0f}, "
-          f"in JAX {sampler.peaks.get('jax', 0):.0f} MiB; scenes, frames held: {frames_module.loaded_count()}; load {os.getloadavg()[0]:.1f}")
+          f"in JAX {sampler.peaks.get('jax', 0):.0f} MiB; after the solve: "
+          + ", ".join(f"{p} {sampler.peaks[p]:.0f}" for p in ("covariance", "pixel grid", "goodness", "after") if p in sampler.peaks)
+          + f" MiB; scenes, frames held: {frames_module.loaded_count()}; load {os.getloadavg()[0]:.1f}")
     print("values: " + ", ".join(f"{k} {v!r}" for k, v in result.values.items() if "@" not in k or k.endswith("@0")))
 
 

@@ -16,7 +16,7 @@ rendered (:mod:`spacefit.rendering.values`, central differences with common rand
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import jax.numpy as jnp
 import numpy as np
@@ -64,20 +64,30 @@ def nuisance_index(names: Sequence[str], name: str, k: int) -> int | None:
     return None
 
 
+def nuisance_indices(names: Sequence[str], k: int) -> dict[str, int]:
+    """Where observation k's free image nuisances are in the free ``names``, by registered name
+    (:func:`nuisance_index`), in the order of :data:`~spacefit.scene.parameters.IMAGE`."""
+    return {n: i for n in IMAGE if (i := nuisance_index(names, n, k)) is not None}
+
+
+def with_nuisances(image: Float[Array, "h w c"], values: Mapping[str, Float[Array, ""]]) -> Float[Array, "h w c"]:
+    """``image`` with the image nuisances ``values`` (registered name -> value) applied, those absent left out."""
+    moves = ("image.blur_sigma_px", "image.shift_x_px", "image.shift_y_px")
+    if any(n in values for n in moves):
+        image = blur_and_shift(image, *(values[n] if n in values else 0.0 for n in moves))
+    if "image.scale" in values:
+        image = values["image.scale"] * image
+    if "image.offset_w_m2_sr" in values:
+        image = image + values["image.offset_w_m2_sr"]
+    return image
+
+
 def image_model(names: Sequence[str]) -> ImageModel:
     """``model(render, x, k)``: observation k's render with the image nuisances of the full vector
     ``x`` of the free parameters ``names`` applied (a per-observation value, ``image.scale@k``, where
     free, else the shared one)."""
 
     def model(image: Float[Array, "h w c"], x: Float[Array, " n"], k: int) -> Float[Array, "h w c"]:
-        index = {n: i for n in IMAGE if (i := nuisance_index(names, n, k)) is not None}
-        moves = ("image.blur_sigma_px", "image.shift_x_px", "image.shift_y_px")
-        if any(n in index for n in moves):
-            image = blur_and_shift(image, *(x[index[n]] if n in index else 0.0 for n in moves))
-        if "image.scale" in index:
-            image = x[index["image.scale"]] * image
-        if "image.offset_w_m2_sr" in index:
-            image = image + x[index["image.offset_w_m2_sr"]]
-        return image
+        return with_nuisances(image, {n: x[i] for n, i in nuisance_indices(names, k).items()})
 
     return model

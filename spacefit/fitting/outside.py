@@ -24,7 +24,8 @@ import numpy as np
 
 # A frame's images and, where linearised, its Jacobian columns (None: not rendered), as NumPy arrays.
 Rendered = tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...] | None]
-# (x, images, jacobians) -> each observation's model, the stacked residuals and those a solver descends.
+# (x, images, jacobians) -> the observations' models (as :attr:`Outside.each` splits them), the stacked residuals and
+# those a solver descends.
 Evaluate = Callable[[jax.Array, Sequence[np.ndarray], Sequence[np.ndarray] | None], tuple[list[jax.Array], jax.Array, jax.Array]]
 
 RESIDUALS, DESCENT = 1, 2  # which residuals of :attr:`Outside.evaluate`'s output
@@ -37,12 +38,15 @@ class Outside:
     Attributes:
         render: (physical x, seed index j, with the Jacobian) -> the frames' renders at x with the j-th
             seeds (0 the fit's, 1 the independent ones; :mod:`spacefit.fitting.problem`), outside JAX.
-        evaluate: (x, images, jacobians) -> each observation's model, the stacked residuals and those a
+        evaluate: (x, images, jacobians) -> the observations' models, the stacked residuals and those a
             solver descends, a compiled program with no callback, differentiable in x where ``jacobians`` are given.
+        each: evaluate's models -> each observation's, split outside the program (a pass's frames' models come
+            stacked, :mod:`spacefit.fitting.frame_models`: split inside, the program grew by each frame).
     """
 
     render: Callable[[np.ndarray, int, bool], Rendered]
     evaluate: Evaluate
+    each: Callable[[list[jax.Array]], list[jax.Array]] = list
     kept: dict[tuple[bytes, int], Rendered] = field(default_factory=dict)  # one point's renders with their Jacobian (keep)
 
     def keep(self, x: np.ndarray, j: int, rendered: Rendered) -> None:
@@ -57,7 +61,7 @@ class Outside:
 
     def models(self, x: jax.Array, j: int) -> list[jax.Array]:
         """Each observation's model at ``x`` (concrete) with the j-th seeds."""
-        return self.evaluate(x, *self.render(np.asarray(x), j, False))[0]
+        return self.each(self.evaluate(x, *self.render(np.asarray(x), j, False))[0])
 
     def residuals(self, x: jax.Array, j: int, kind: int = RESIDUALS) -> jax.Array:
         """The stacked residuals (``kind`` :data:`RESIDUALS`; :data:`DESCENT`: those a solver descends) at ``x`` (concrete) with the j-th seeds."""

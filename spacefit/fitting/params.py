@@ -11,7 +11,7 @@ renderer sees (its own ``target.attitude_z_deg@k`` in place of a shared one).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import jax
@@ -65,11 +65,21 @@ class FreeParameters:
 
     def to_physical(self, u: Float[Array, " n"]) -> Float[Array, " n"]:
         """Unconstrained vector -> physical values."""
-        return jnp.stack([b.forward(u[i]) for i, b in enumerate(self.bijections)])
+        return self._mapped(Bijection.forward, jnp.asarray(u))
 
     def to_unconstrained(self, x: Float[Array, " n"]) -> Float[Array, " n"]:
         """Physical values -> unconstrained vector."""
-        return jnp.stack([b.inverse(jnp.asarray(x[i])) for i, b in enumerate(self.bijections)])
+        return self._mapped(Bijection.inverse, jnp.asarray(x))
+
+    def _mapped(self, fn: Callable[[Bijection, Array], Array], v: Float[Array, " n"]) -> Float[Array, " n"]:
+        """``fn(b_i, v_i)`` for each value, one call per distinct bijection on all its values at once: value by
+        value, a pass's program (a solver's step) grew by each frame's own values' maps (5 a frame)."""
+        groups: dict[Bijection, list[int]] = {}
+        for i, b in enumerate(self.bijections):
+            groups.setdefault(b, []).append(i)
+        order = np.concatenate([np.asarray(indices) for indices in groups.values()])
+        mapped = jnp.concatenate([fn(b, v[np.asarray(indices)]) for b, indices in groups.items()])
+        return mapped if np.array_equal(order, np.arange(order.size)) else mapped[np.argsort(order)]
 
     def check_start(self, x: Sequence[float]) -> None:
         """Raise if a start value lies outside (or on the edge of) its parameter's valid range."""

@@ -6,7 +6,8 @@ images' pixels. Every render of a solve uses the same seed (common random number
 is a deterministic function; derivative renders use another seed. In a joint fit each observation's
 renderer sees the free values that are its own (``target.attitude_z_deg@k``) or shared
 (:meth:`~spacefit.fitting.params.FreeParameters.rendered`); the image nuisances act on its render in
-JAX (:mod:`spacefit.fitting.nuisance`). The renders are callbacks into Python inside a program
+JAX (:mod:`spacefit.fitting.nuisance`), the frames of a joint fit alike as one program whatever their
+count (:mod:`spacefit.fitting.frame_models`). The renders are callbacks into Python inside a program
 (:func:`~spacefit.fitting.frames.batched_renders`), or made before it (:mod:`spacefit.fitting.outside`).
 The set-up that checks the inputs and builds the problem is :mod:`spacefit.fitting.problem`.
 """
@@ -24,8 +25,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.executors import Executor
-from spacefit.fitting.frames import (FrameSpec, InProcess, batched_renders, frame_part_image, frame_renders, given_renders, run_frames,
-                                     share_views)
+from spacefit.fitting.frame_models import FrameModels, frame_model
+from spacefit.fitting.frames import (FrameSpec, InProcess, batched_renders, frame_part_image, frame_renders, given_renders, render_runs,
+                                     run_frames, share_views)
 from spacefit.fitting.nuisance import image_model as image_model_of, nuisance_index
 from spacefit.fitting.observations.base import Block
 from spacefit.fitting.observations.image import Observation, check_reference, image_residual, in_unit_of
@@ -157,35 +159,17 @@ def build_problem(
         spread.append((FILTER_RADIUS_PX[scene.render.filter], blur))
     specs = share_views(specs)  # a pass's frames share a loaded scene
     indices = [r[1] for r in rendered]
-    images = batched_renders(executor, specs, indices, shapes) if specs else (lambda x, seeds: [])
+    images = batched_renders(executor, specs, indices, shapes) if specs else (lambda x, seeds: ())
     part_images = run_frames(executor, frame_part_image, specs) if specs else []
 
-    def stack(images: Callable[[jax.Array], Sequence[jax.Array]]) -> Callable[[jax.Array], tuple[list[jax.Array], jax.Array, jax.Array]]:
-        """x -> each image's model, the stacked residuals and the stacked residuals a solver descends."""
-        def both(x: jax.Array) -> tuple[list[jax.Array], jax.Array, jax.Array]:
-            out = [frame_model(image, x, k) for k, image in enumerate(images(x))]
-            if not out:
-                return [], jnp.zeros(0), jnp.zeros(0)
-            return [o[0] for o in out], jnp.concatenate([o[1] for o in out]), jnp.concatenate([o[2] for o in out])
-        return both
-
-    def frame_model(image: jax.Array, x: jax.Array, k: int) -> tuple[jax.Array, jax.Array, jax.Array]:
-        """One image's model and its residuals (those judged and those descended) from its render."""
-        model = to_units[k](image_model(image, x, k))
-        return model, residuals[k](model), descents[k](model)
-
-    if len(observations) > 1:
-        # a joint fit's images recomputed where linearised (jax.checkpoint): a linearisation kept every
-        # intermediate of the image model and the sensor's (76 image-sized float64 arrays a frame, 26 MiB
-        # at 128 x 128 px) for each of the solver's two copies of it, where it now keeps the render and the
-        # free values; 22 % more CPU on a 12-frame pass (docs/measurements/performance.md, "A pass's
-        # memory"), so one image, whose memory is no concern, is not recomputed
-        frame_model = jax.checkpoint(frame_model, static_argnums=(2,))
-
-    # compiled once per fit, the seeds an operand: one program for the model images and residuals at the
-    # fit's seeds and at the independent ones (evaluated op by op, the image model's FFTs and the
-    # residuals compiled some 170 small XLA programs per fit, 15 s of a 128 x 128 fit's 75 s on 2 cores)
-    models_residuals = jax.jit(lambda x, seeds: stack(lambda y: images(y, seeds))(x))
+    # the images' models and residuals, the frames alike (a pass's) as one program (spacefit.fitting.frame_models),
+    # compiled once per fit with the seeds an operand: one program at the fit's seeds and at the independent ones
+    # (evaluated op by op, the image model's FFTs and the residuals compiled some 170 small XLA programs per fit,
+    # 15 s of a 128 x 128 fit's 75 s on 2 cores)
+    made = [frame_model(free.names, k, to_units[k], residuals[k], descents[k]) for k in range(len(observations))]
+    runs = render_runs(shapes, indices)
+    models = FrameModels([m for m, _ in made], [v for _, v in made], runs, shapes, recompute=len(observations) > 1)
+    models_residuals = jax.jit(lambda x, seeds: models(images(x, seeds), x))
     main, independent = seeds_array(seed, seed_grad), seeds_array(seed + INDEPENDENT_SEED_OFFSET, seed_grad + INDEPENDENT_SEED_OFFSET)
 
     def block_models(x: jax.Array, j: int) -> list[jax.Array]:
@@ -200,32 +184,37 @@ def build_problem(
         renders_v = [executor.chain(spec).reverse(seed, seed_grad) for spec in specs]
 
         def reverse(u: jax.Array) -> jax.Array:
-            frames = lambda x: [render(x[indices[k]]) for k, render in enumerate(renders_v)]  # noqa: E731
             x = free.to_physical(u)
-            return 0.5 * jnp.sum(with_blocks(stack(frames)(x)[2], block_models(x, 0)) ** 2)
+            frames = [jnp.stack([renders_v[k](x[indices[k]]) for k in run]) for run in runs]
+            return 0.5 * jnp.sum(with_blocks(models(frames, x)[2], block_models(x, 0)) ** 2)
 
     def seeds_of(j: int) -> jax.Array:
         return seeds_array(seed + j * INDEPENDENT_SEED_OFFSET, seed_grad + j * INDEPENDENT_SEED_OFFSET)
 
     outside = None
     if not any(b.rendered for b in blocks):
-        given = given_renders(indices)
+        given = given_renders(indices, runs)
 
         def render_outside(x: np.ndarray, j: int, jacobian: bool) -> Rendered:
-            return frame_renders(executor, specs, indices, x, np.asarray(seeds_of(j)), jacobian) if specs else ((), () if jacobian else None)
+            return frame_renders(executor, specs, indices, runs, x, np.asarray(seeds_of(j)), jacobian) if specs else ((), () if jacobian else None)
 
         def evaluate(x: jax.Array, images: Sequence[jax.Array], jacobians: Sequence[jax.Array] | None) -> tuple[
                 list[jax.Array], jax.Array, jax.Array]:
-            models, r, descended = stack(lambda y: given(y, images, jacobians))(x)
+            stacked, r, descended = models(given(x, images, jacobians), x)
             others = block_models(x, 0)  # none rendered: the seeds change none
-            return [*models, *others], with_blocks(r, others), with_blocks(descended, others)
+            return [*stacked, *others], with_blocks(r, others), with_blocks(descended, others)
 
-        outside = Outside(render_outside, jax.jit(evaluate))
+        def each(out: list[jax.Array]) -> list[jax.Array]:
+            """evaluate's models, each batch's stacked, the blocks' after them, one per observation."""
+            batches = len(out) - len(blocks)
+            return [*FrameModels.each(out[:batches]), *out[batches:]]
+
+        outside = Outside(render_outside, jax.jit(evaluate), each)
 
     def models_seeded(x: jax.Array, j: int) -> list[jax.Array]:
         if outside is not None:
             return outside.models(x, j)
-        return [*models_residuals(x, seeds_of(j))[0], *block_models(x, j)]
+        return [*FrameModels.each(models_residuals(x, seeds_of(j))[0]), *block_models(x, j)]
 
     def residual_at(x: jax.Array, seeds: jax.Array, j: int, kind: int = 1) -> jax.Array:
         """The stacked residuals (``kind`` 1; 2: those a solver descends) at the j-th seeds ``seeds``."""

@@ -176,8 +176,8 @@ class RenderedLightCurve(LightCurveKind):
 
         def model(x: jax.Array, j: int) -> jax.Array:
             seed = self.seed + j * INDEPENDENT_SEED_OFFSET
-            rendered = images(x, seeds_array(seed, seed + 1))
-            return scale * jnp.stack([jnp.sum(jnp.mean(image.astype(x.dtype), axis=-1) * omega) for image in rendered])
+            runs = images(x, seeds_array(seed, seed + 1))  # the points' images stacked (one run: one shape)
+            return scale * jnp.concatenate([jnp.sum(jnp.mean(run.astype(x.dtype), axis=-1) * omega, axis=(1, 2)) for run in runs])
 
         spp = self.scene.render.spp
 
