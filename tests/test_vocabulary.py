@@ -76,6 +76,21 @@ def test_materials_are_objects_when_a_file_is_read(tmp_path):
     assert "`parts.body.kd` is missing" in message(lambda: sf.load_scene(path))
 
 
+def test_an_override_of_a_tie_or_its_field_replaces_the_files_values_the_other_way(tmp_path):
+    """``alpha`` given over a file's alpha_x and alpha_y sets both; ``alpha_x`` given over a file's
+    ``alpha`` keeps the file's value for alpha_y; both given at once are refused."""
+    written = tmp_path / "written.toml"
+    written.write_text('[parts.body]\nmaterial = "conductor"\neta = 0.18\nk = 0.01\nalpha_x = 0.14\nalpha_y = 0.12\n')
+    body = sf.load_scene(written, ["parts.body.alpha=0.2"]).parts["body"].material
+    assert (body.alpha_x, body.alpha_y) == (0.2, 0.2)
+    tied = tmp_path / "tied.toml"
+    tied.write_text('[parts.body]\nmaterial = "conductor"\neta = 0.18\nk = 0.01\nalpha = 0.3\n')
+    body = sf.load_scene(tied, ["parts.body.alpha_x=0.1"]).parts["body"].material
+    assert (body.alpha_x, body.alpha_y) == (0.1, 0.3)
+    with pytest.raises(sf.InputError, match=r"`parts.body.alpha` sets alpha_x and alpha_y; do not give them as well"):
+        sf.load_scene(tied, ["parts.body.alpha_x=0.1", "parts.body.alpha=0.2"])
+
+
 @pytest.mark.parametrize("path", sorted(DATA.glob("*/*.toml")), ids=lambda p: p.name)
 def test_scene_files_read_back_to_an_equal_scene(tmp_path, path):
     if path.name == "cases.toml":

@@ -106,7 +106,26 @@ def apply_overrides(data: dict[str, Any], overrides: Overrides) -> dict[str, Any
     for key, other in (("camera.fov_deg", "camera.pixel_pitch_mm"), ("camera.pixel_pitch_mm", "camera.fov_deg")):
         if key in given and other not in given and isinstance(out.get("camera"), dict):
             out["camera"].pop(other.split(".")[1], None)  # the field set again the other way replaces the file's
+    for path, _ in items:
+        table = out.get("parts", {}).get(path[1]) if len(path) == 3 and path[0] == "parts" else None
+        if isinstance(table, dict):
+            _retie(table, path[1], path[2], given)
     return out
+
+
+def _retie(table: dict[str, Any], part: str, key: str, given: set[str]) -> None:
+    """A part's tie (``alpha``) or one of its fields (``alpha_x``) given as an override replaces the file's
+    values the other way: the file's tied fields dropped, or the file's tie spread over its fields first."""
+    for model in MODELS.values():
+        for tie, (tied, _, _) in model.ties.items():
+            if key == tie:
+                for name in tied:
+                    if f"parts.{part}.{name}" not in given:
+                        table.pop(name, None)
+            elif key in tied and tie in table and f"parts.{part}.{tie}" not in given:
+                value = table.pop(tie)
+                for name in tied:
+                    table.setdefault(name, value)
 
 
 def section_keys(section: str) -> list[str]:
