@@ -282,3 +282,10 @@ def test_the_300_px_lander_rendered_by_cycles_is_fitted_to_the_truth():
     assert fit.success and fit.goodness.judged and not fit.goodness.misfit, sf.format_result(fit)
     for name, value in truth.items():
         assert abs(fit.values[name] - value) < 3 * fit.stderr[name], sf.format_result(fit)
+
+
+def test_a_light_curve_fit_names_free_when_it_is_not_a_list_of_names():
+    """``free`` is checked before any render (the slow fuzz test's find: None reached the film's choice as a TypeError)."""
+    scene = sf.load_case("panels").truth_scene
+    with pytest.raises(sf.InputError, match=r"`free` must be a list of names, got None"):
+        sf.fit_light_curve(scene, None, [{"target.attitude_z_deg": 0.0}], [1.0], 0.01)

@@ -309,8 +309,9 @@ def fit_light_curve(
             result = sf.fit_light_curve(scene, ["parts.panels.alpha"], points, [5.0, 5.3, 5.9], 0.05)
     """
     check_count("max_steps", max_steps, optional=False)
+    free = check_name_list("free", free)
     curve = RenderedLightCurve(scene, points, magnitude, magnitude_sigma, band, sun_magnitude, observer_range_m, seed, film_px)
     curve = film_for_fit(curve, free, start)
     if progress is None and not quiet:
-        progress = Progress(f"light-curve fit {', '.join(check_name_list('free', free))}")
+        progress = Progress(f"light-curve fit {', '.join(free)}")
     return fit(curve, free, max_steps=max_steps, start=start, allow_large=allow_large, progress=progress, resume=resume)
