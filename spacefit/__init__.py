@@ -104,7 +104,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "EarthshineSources": ("spacefit.studies.earthshine", "EarthshineSources"),
     "earthshine_sources": ("spacefit.studies.earthshine", "earthshine_sources"),
     "earthshine_irradiance": ("spacefit.studies.earthshine", "earthshine_irradiance"),
-    "light_curve_convergence": ("spacefit.studies.lightcurve", "light_curve_convergence"),
+    "light_curve_convergence": ("spacefit.studies.lightcurve_convergence", "light_curve_convergence"),
     "fit_light_curve": ("spacefit.studies.lightcurve_fit", "fit_light_curve"),
     "Mirror": ("spacefit.materials", "Mirror"),
     "PRESETS": ("spacefit.materials.registry", "PRESETS"),
