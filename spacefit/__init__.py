@@ -86,7 +86,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "pass_geometry": ("spacefit.studies.orbit", "pass_geometry"),
     "RefusedRow": ("spacefit.studies.observation_files", "RefusedRow"),
     "write_light_curve": ("spacefit.studies.observing", "write_light_curve"),
-    "LightCurveObservations": ("spacefit.studies.observing", "LightCurveObservations"),
+    "LightCurveObservations": ("spacefit.studies.lightcurve_observations", "LightCurveObservations"),
     "read_light_curve": ("spacefit.studies.observing", "read_light_curve"),
     "Plate": ("spacefit.studies.plates", "Plate"),
     "predict_magnitudes": ("spacefit.studies.plates", "predict_magnitudes"),

@@ -114,8 +114,8 @@ from spacefit.studies.lightcurve_convergence import light_curve_convergence as l
 from spacefit.studies.lightcurve_files import LightCurveFiles as LightCurveFiles
 from spacefit.studies.lightcurve_fit import RenderedLightCurve as RenderedLightCurve
 from spacefit.studies.lightcurve_fit import fit_light_curve as fit_light_curve
+from spacefit.studies.lightcurve_observations import LightCurveObservations as LightCurveObservations
 from spacefit.studies.observation_files import RefusedRow as RefusedRow
-from spacefit.studies.observing import LightCurveObservations as LightCurveObservations
 from spacefit.studies.observing import read_light_curve as read_light_curve
 from spacefit.studies.observing import write_light_curve as write_light_curve
 from spacefit.studies.orbit import Orbit as Orbit

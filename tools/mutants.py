@@ -350,7 +350,7 @@ MUTANTS = (
     Mutant("value-observation-errors-not-scaled", COVARIANCE,
            "d[rows] = math.sqrt(float(r[rows] @ r[rows]) / max(rows.stop - rows.start - len(block.known), 1))", "d[rows] = 1.0",
            ("tests/test_joint_fit.py",)),
-    Mutant("light-curve-sun-directions-not-normalised", "spacefit/studies/observing.py", "fields[name] = unit",
+    Mutant("light-curve-sun-directions-not-normalised", "spacefit/studies/lightcurve_observations.py", "fields[name] = unit",
            "fields[name] = v", ("tests/test_observed_lightcurves.py",)),
     Mutant("tabulated-offset-unsigned", "spacefit/materials/tabulated.py", "return jnp.where(jnp.sum(delta * beta0, axis=-1) < 0, -d, d)",
            "return d", ("tests/test_brdf_tables.py",)),
