@@ -231,7 +231,7 @@ MUTANTS = (
     # one vocabulary, checked everywhere (issue 18 item 7)
     Mutant("set-values-unchecked", RENDERER, "scene = scene_with_values(self.current_scene, given)  # refused",
            "scene = self.current_scene  # refused", ("tests/test_vocabulary.py",)),
-    Mutant("sun-elevation-resets-the-azimuth", "spacefit/scene/parameters.py",
+    Mutant("sun-elevation-resets-the-azimuth", "spacefit/scene/registered.py",
            "angles = (values.get(n, get(scene, n)) for n in names)", "angles = (values.get(n, 0.0) for n in names)",
            ("tests/test_vocabulary.py",)),
     Mutant("part-typo-without-suggestion", "spacefit/scene/sections.py", "close = closest(path[1], parts)", "close = None",
