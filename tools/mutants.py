@@ -231,7 +231,7 @@ MUTANTS = (
     # one vocabulary, checked everywhere (issue 18 item 7)
     Mutant("set-values-unchecked", RENDERER, "scene = scene_with_values(self.current_scene, given)  # refused",
            "scene = self.current_scene  # refused", ("tests/test_vocabulary.py",)),
-    Mutant("sun-elevation-resets-the-azimuth", "spacefit/scene/parameters.py",
+    Mutant("sun-elevation-resets-the-azimuth", "spacefit/scene/registered.py",
            "angles = (values.get(n, get(scene, n)) for n in names)", "angles = (values.get(n, 0.0) for n in names)",
            ("tests/test_vocabulary.py",)),
     Mutant("part-typo-without-suggestion", "spacefit/scene/sections.py", "close = closest(path[1], parts)", "close = None",
@@ -350,7 +350,7 @@ MUTANTS = (
     Mutant("value-observation-errors-not-scaled", COVARIANCE,
            "d[rows] = math.sqrt(float(r[rows] @ r[rows]) / max(rows.stop - rows.start - len(block.known), 1))", "d[rows] = 1.0",
            ("tests/test_joint_fit.py",)),
-    Mutant("light-curve-sun-directions-not-normalised", "spacefit/studies/observing.py", "fields[name] = unit",
+    Mutant("light-curve-sun-directions-not-normalised", "spacefit/studies/lightcurve_observations.py", "fields[name] = unit",
            "fields[name] = v", ("tests/test_observed_lightcurves.py",)),
     Mutant("tabulated-offset-unsigned", "spacefit/materials/tabulated.py", "return jnp.where(jnp.sum(delta * beta0, axis=-1) < 0, -d, d)",
            "return d", ("tests/test_brdf_tables.py",)),
