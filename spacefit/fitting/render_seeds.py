@@ -2,7 +2,7 @@
 
 A fit's estimate is the root of its two renders' estimating equation (:func:`~spacefit.fitting.uncertainty.covariance`),
 so each render's Monte Carlo noise moves it, by the Gauss-Newton step that render's residuals take with the fit's
-Jacobian. Where the noise is unknown, the error carries that through the sandwich of the residuals, a model of the
+Jacobian. Where no noise is given (no sensor, no ``sigma``), the error carries that through the sandwich of the residuals, a model of the
 render noise whose own estimate is poor where the noise is long-tailed (a path that finds a glint holds a pixel many
 times its neighbours' noise, a firefly): on two views of the panels case one value of 80 was 5.1 of its standard
 errors off, from the fit's own 64 spp renders (the same references fitted with other seeds: 1.3;
