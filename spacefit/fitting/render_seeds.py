@@ -28,8 +28,8 @@ from spacefit.fitting.residuals import Problem
 # The seed indices of the check's fresh renders (Problem.models_seeded's j: the fit's seeds plus j times
 # spacefit.fitting.residuals.INDEPENDENT_SEED_OFFSET; 0 and 1 are the fit's own).
 FRESH = (2, 3, 4, 5)
-# A value whose standard error the check widened by more than this factor is named in a warning (chosen from the
-# check's spread without a firefly: docs/measurements/validation.md).
+# A value whose standard error the check widened by more than this factor is named in a warning: where the error is
+# right and all render noise, one value in 370 (P(chi^2_1 > 9)); one of 120 in docs/measurements/validation.md's study.
 SEED_WIDENED_WARN = 3.0
 
 
