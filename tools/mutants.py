@@ -199,6 +199,15 @@ MUTANTS = (
            ("tests/test_goodness.py::test_without_a_known_noise_an_observation_whose_residuals_stand_out_is_named",)),
     Mutant("stand-out-at-five", "spacefit/fitting/goodness.py", "STANDS_OUT = 3.0", "STANDS_OUT = 5.0",
            ("tests/test_goodness.py::test_without_a_known_noise_an_observation_whose_residuals_stand_out_is_named",)),
+    # the render-seed check (issue 34): the fit's own renders' error measured against fresh seeds, its excess carried
+    Mutant("render-seed-shift-of-one-own-render", "spacefit/fitting/render_seeds.py",
+           "return step(sum(fresh) / len(fresh) - 0.5 * (own[0] + own[1]))", "return step(sum(fresh) / len(fresh) - own[1])",
+           ("tests/test_render_seeds.py",)),
+    Mutant("render-seed-excess-not-carried", COVARIANCE, "cov = cov + np.diag(seed_excess(shift, np.diag(modelled)))", "cov = cov",
+           ("tests/test_render_seeds.py",)),
+    Mutant("render-seed-excess-over-the-whole-error", "spacefit/fitting/render_seeds.py",
+           "return np.maximum(0.0, shift**2 / (1.0 + 2.0 / len(FRESH)) - modelled)",
+           "return np.maximum(0.0, shift**2 / (1.0 + 2.0 / len(FRESH)) - 4.0 * modelled)", ("tests/test_render_seeds.py",)),
     Mutant("poorly-determined-against-the-value", COVARIANCE, "max(abs(values[i]), parameter(name).scale, 1e-12)",
            "max(abs(values[i]), 1e-12)", (UNCERTAINTY,)),
     # observations from files (issue 10): masks and grey images
