@@ -350,7 +350,8 @@ def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: j
     tags: frozenset = frozenset()
     try:
         args = given.render(u)
-        state = solver.init(fn, u, args, {}, jax.eval_shape(held[0], u, args), None, tags)
+        # one program: optimistix's init, run op by op, made some 24 single-operation programs, each traced and lowered per process
+        state = eqx.filter_jit(solver.init)(fn, u, args, {}, jax.eval_shape(held[0], u, args), None, tags)
         step, terminate, evaluate = eqx.filter_jit(solver.step), eqx.filter_jit(solver.terminate), jax.jit(evaluated)
 
         def advance(k: int, u: jax.Array) -> Step:
