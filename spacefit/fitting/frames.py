@@ -221,7 +221,8 @@ def frame_part_image(spec: FrameSpec, key: str, loaded: Loaded | None = None) ->
     """Which part each pixel of the frame sees at its scene's values (loading its scene)."""
     chain = (loaded or _LOADED).chain(spec, key)
     x = jnp.asarray([scene_value(spec.scene, n) for n in spec.names], dtype=jnp.float64)
-    chain.renderer.set_params({name: np.asarray(value) for name, value in chain.values_of(x).items()})
+    # one program: run operation by operation, the scene values made some 20 single-operation programs per frame
+    chain.renderer.set_params({name: np.asarray(value) for name, value in jax.jit(chain.values_of)(x).items()})
     return chain.renderer.part_image()
 
 

@@ -111,8 +111,13 @@ def by_columns(fn: Callable[[Array], Array], n: int, dtype: Any, chunk: int, own
     applied = apply(fn, batches, len(basis))
     shared = np.eye(n)[np.asarray(owners) < 0]
     if transposed is None or len(shared) in (0, len(basis)):  # no shared row of an own column to read, or no own column
-        return unpack(applied, owners)
-    return unpack(applied, owners, apply(transposed, batched(shared, chunk, batches.shape[1]), len(shared)))
+        return _unpacked(applied, tuple(owners))
+    return _unpacked(applied, tuple(owners), apply(transposed, batched(shared, chunk, batches.shape[1]), len(shared)))
+
+
+# one program: run operation by operation (by_columns's products are), the unpacking made some 10 single-operation
+# programs per fit, each traced and lowered in every process
+_unpacked = jax.jit(unpack, static_argnums=1)
 
 
 def gram(operator: lx.AbstractLinearOperator, chunk: int | None = None, owners: Sequence[int] | None = None) -> Array:

@@ -10,6 +10,7 @@ renderer sees (its own ``target.attitude_z_deg@k`` in place of a shared one).
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -49,6 +50,20 @@ class Bijection(Bounds):
         return jnp.log(p) - jnp.log1p(-p)
 
 
+# one program per map and set of bijections: called on values (not inside a traced program), the maps ran operation by
+# operation, some 40 single-operation programs per fit, each traced and lowered in every process
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _mapped(fn: Callable[[Bijection, Array], Array], bijections: tuple[Bijection, ...], v: Float[Array, " n"]) -> Float[Array, " n"]:
+    """``fn(b_i, v_i)`` for each value, one call per distinct bijection on all its values at once: value by
+    value, a pass's program (a solver's step) grew by each frame's own values' maps (5 a frame)."""
+    groups: dict[Bijection, list[int]] = {}
+    for i, b in enumerate(bijections):
+        groups.setdefault(b, []).append(i)
+    order = np.concatenate([np.asarray(indices) for indices in groups.values()])
+    mapped = jnp.concatenate([fn(b, v[np.asarray(indices)]) for b, indices in groups.items()])
+    return mapped if np.array_equal(order, np.arange(order.size)) else mapped[np.argsort(order)]
+
+
 def bijection(name: str) -> Bijection:
     """The solver's coordinate of parameter ``name``: a bijection onto its registered bounds."""
     bounds = parameter(name).bounds
@@ -65,21 +80,11 @@ class FreeParameters:
 
     def to_physical(self, u: Float[Array, " n"]) -> Float[Array, " n"]:
         """Unconstrained vector -> physical values."""
-        return self._mapped(Bijection.forward, jnp.asarray(u))
+        return _mapped(Bijection.forward, self.bijections, jnp.asarray(u))
 
     def to_unconstrained(self, x: Float[Array, " n"]) -> Float[Array, " n"]:
         """Physical values -> unconstrained vector."""
-        return self._mapped(Bijection.inverse, jnp.asarray(x))
-
-    def _mapped(self, fn: Callable[[Bijection, Array], Array], v: Float[Array, " n"]) -> Float[Array, " n"]:
-        """``fn(b_i, v_i)`` for each value, one call per distinct bijection on all its values at once: value by
-        value, a pass's program (a solver's step) grew by each frame's own values' maps (5 a frame)."""
-        groups: dict[Bijection, list[int]] = {}
-        for i, b in enumerate(self.bijections):
-            groups.setdefault(b, []).append(i)
-        order = np.concatenate([np.asarray(indices) for indices in groups.values()])
-        mapped = jnp.concatenate([fn(b, v[np.asarray(indices)]) for b, indices in groups.items()])
-        return mapped if np.array_equal(order, np.arange(order.size)) else mapped[np.argsort(order)]
+        return _mapped(Bijection.inverse, self.bijections, jnp.asarray(x))
 
     def check_start(self, x: Sequence[float]) -> None:
         """Raise if a start value lies outside (or on the edge of) its parameter's valid range."""

@@ -350,15 +350,17 @@ def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: j
     tags: frozenset = frozenset()
     try:
         args = given.render(u)
-        state = solver.init(fn, u, args, {}, jax.eval_shape(held[0], u, args), None, tags)
         step, terminate, evaluate = eqx.filter_jit(solver.step), eqx.filter_jit(solver.terminate), jax.jit(evaluated)
+        first = evaluate(u, args)  # the first step's (its trial point is u), and the residuals' shape without another trace
+        # one program: optimistix's init, run op by op, made some 24 single-operation programs, each traced and lowered per process
+        state = eqx.filter_jit(solver.init)(fn, u, args, {}, jax.ShapeDtypeStruct(first[0].shape, first[0].dtype), None, tags)
 
         def advance(k: int, u: jax.Array) -> Step:
             nonlocal state, args
             trial = state.y_eval
             if k > 1:
                 args = given.render(trial)
-            r, value = evaluate(trial, args)
+            r, value = first if k == 1 else evaluate(trial, args)
             u, state, _ = step(fn, u, args, {}, state, tags)
             return Step(np.asarray(trial), float(value), np.asarray(r), iterate=u)
 

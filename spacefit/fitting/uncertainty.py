@@ -9,6 +9,7 @@ References:
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -218,20 +219,24 @@ def render_meat(cross: Callable[[Callable[[jax.Array], jax.Array]], np.ndarray],
     laid_out = problem.pixels if problem.pixels + sum(b.data.value.size for b in problem.blocks) == d.size else 0
     images = shapes if laid_out else []
     sizes = [2 * noise_reach_px(problem, x, k) + 1 for k in range(len(images))]
-    dj = jnp.asarray(d)
+    dj, shaped = jnp.asarray(d), tuple(tuple(shape) for shape in images)
+    return _psd_part(cross(lambda v: _near_weighted(shaped, tuple(sizes), dj, v)))
 
-    def weight(v: jax.Array) -> jax.Array:
-        parts, offset = [], 0
-        for shape, size in zip(images, sizes):
-            rows = slice(offset, offset + int(np.prod(shape)))
-            offset = rows.stop
-            per_pixel = (dj[rows] * v[rows]).reshape(shape).sum(axis=2)
-            reach = (size - 1) // 2
-            near = jax.lax.reduce_window(per_pixel, 0.0, jax.lax.add, (size, size), (1, 1), ((reach, reach), (reach, reach)))
-            parts.append(dj[rows] * jnp.repeat(near.reshape(-1), shape[2]))
-        return jnp.concatenate([*parts, dj[offset:] ** 2 * v[offset:]])
 
-    return _psd_part(cross(weight))
+# one program, its draw an operand: run operation by operation (the products are), some 12 single-operation programs per fit
+@functools.partial(jax.jit, static_argnums=(0, 1))
+def _near_weighted(images: tuple[tuple[int, ...], ...], sizes: tuple[int, ...], d: jax.Array, v: jax.Array) -> jax.Array:
+    """:func:`render_meat`'s W v: per image (its ``images`` shape, laid out first in order), ``d`` times the box sum over
+    ``sizes`` px of the per-pixel sums of ``d * v``; after the images, ``d^2 v``."""
+    parts, offset = [], 0
+    for shape, size in zip(images, sizes):
+        rows = slice(offset, offset + int(np.prod(shape)))
+        offset = rows.stop
+        per_pixel = (d[rows] * v[rows]).reshape(shape).sum(axis=2)
+        reach = (size - 1) // 2
+        near = jax.lax.reduce_window(per_pixel, 0.0, jax.lax.add, (size, size), (1, 1), ((reach, reach), (reach, reach)))
+        parts.append(d[rows] * jnp.repeat(near.reshape(-1), shape[2]))
+    return jnp.concatenate([*parts, d[offset:] ** 2 * v[offset:]])
 
 
 def noise_reach_px(problem: Problem, x: np.ndarray, k: int) -> int:
