@@ -6,6 +6,8 @@ from spacefit.cases import load_case as load_case
 from spacefit.errors import InputError as InputError
 from spacefit.executors import ClusterError as ClusterError
 from spacefit.fitting.brdf_table import BRDF_MODELS as BRDF_MODELS
+from spacefit.fitting.identifiability import Identifiability as Identifiability
+from spacefit.fitting.identifiability import identifiability as identifiability
 from spacefit.fitting.loop import FitOptions as FitOptions
 from spacefit.fitting.loop import fit as fit
 from spacefit.fitting.losses import LOSSES as LOSSES
@@ -38,8 +40,6 @@ from spacefit.fitting.saved import read_fit as read_fit
 from spacefit.fitting.solvers import Adam as Adam
 from spacefit.fitting.solvers import SOLVERS as SOLVERS
 from spacefit.fitting.solvers import Status as Status
-from spacefit.fitting.uncertainty import Identifiability as Identifiability
-from spacefit.fitting.uncertainty import identifiability as identifiability
 from spacefit.formation import choose_exposure as choose_exposure
 from spacefit.formation import distort_image as distort_image
 from spacefit.formation import expected_dn as expected_dn

@@ -1,4 +1,4 @@
-"""How far to trust a fit: the sandwich covariance, the delta method, warnings, identifiability.
+"""How far to trust a fit: the sandwich covariance, the delta method, warnings.
 
 References:
     White, H. (1980), "A heteroskedasticity-consistent covariance matrix estimator and a direct
@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import functools
 import math
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
@@ -24,10 +24,9 @@ from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
 from spacefit.fitting.pixel_grid import grid_feedback, grid_step
-from spacefit.fitting.problem import FitRender, Observation, Setup, setup
+from spacefit.fitting.problem import Setup
 from spacefit.fitting.render_seeds import seed_excess, seed_shift
 from spacefit.fitting.residuals import Problem, column_owners
-from spacefit.precision import float64
 from spacefit.scene.parameters import is_image, parameter
 
 # |correlation| above which two parameters are reported as not separately determined.
@@ -361,80 +360,3 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
         extras.update({"wrinkles.rms_m": float(x[i]), "wrinkles.rms_m.stderr": float(np.sqrt(cov[i, i]))})
         cov = map_covariance(np.asarray(jax.jacfwd(s.to_user)(jnp.asarray(x))), cov)
     return np.asarray(s.to_user(jnp.asarray(x)), dtype=float), cov, loss_value, extras
-
-
-@dataclass(frozen=True)
-class Identifiability:
-    """What a set of observations can tell about the free parameters at given values.
-
-    Attributes:
-        names: free parameter names.
-        stderr: standard error each would have (physical units; inf where undetermined).
-        correlation: (n, n) correlation of the estimates.
-        fisher_eigenvalues: eigenvalues of the Fisher information in the solver's coordinates
-            (their square roots are the noise-weighted Jacobian's singular values); 0 marks a
-            direction nothing constrains.
-        extras: derived quantities, e.g. the rms height's standard error when D and G are free.
-
-    Example:
-        >>> import spacefit as sf
-        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
-        >>> observation = sf.Observation(scene, sf.render(scene), sigma=0.01)
-        >>> what = sf.identifiability([observation], ["parts.legs.kd"], {"parts.legs.kd": 0.2})
-        >>> what.names, what.correlation.shape
-        (('parts.legs.kd',), (1, 1))
-    """
-
-    names: tuple[str, ...]
-    stderr: dict[str, float]
-    correlation: np.ndarray
-    fisher_eigenvalues: np.ndarray
-    extras: dict[str, Any]
-
-
-@float64
-def identifiability(
-    observations: Observation | Sequence[Observation],
-    free: Sequence[str],
-    at: Mapping[str, float],
-    *,
-    loss: str = "pixel",
-    spp: int | None = None,
-    seed: int = 1,
-    seed_grad: int = 2,
-    wrinkle_coordinates: str = "rms",
-) -> Identifiability:
-    """Standard errors and Fisher information of ``free`` parameters at the values ``at``, no fit.
-
-    With references rendered at ``at`` (and their noise ``sigma``), this predicts how well a fit
-    could determine each parameter from these observations.
-
-    Args:
-        observations: the observations (their references and noise), as :func:`fit` takes them.
-        free: the parameters.
-        at: the values to evaluate at (physical units), by name.
-        loss: one of :data:`LOSSES`.
-        spp: samples per pixel of the renders (None: the scene's).
-        seed, seed_grad: the primal's and the derivatives' seeds.
-        wrinkle_coordinates: ``"rms"`` (solve in D and the rms height) or ``"G"`` (in D and G).
-
-    Returns:
-        An :class:`Identifiability`.
-
-    Raises:
-        InputError: any bad input, as :func:`fit` refuses it.
-
-    Example:
-        >>> import spacefit as sf
-        >>> scene = sf.default_scene().with_values({"render.resolution": [48, 48], "camera.pixel_pitch_mm": 50, "render.spp": 4})
-        >>> observation = sf.Observation(scene, sf.render(scene), sigma=0.01)
-        >>> what = sf.identifiability([observation], ["parts.legs.kd"], {"parts.legs.kd": 0.2})
-        >>> bool(0 < what.stderr["parts.legs.kd"] < 0.2)
-        True
-    """
-    s = setup(observations, free, start=at, loss=loss, render=FitRender(spp=spp, seed=seed, seed_grad=seed_grad),
-              wrinkle_coordinates=wrinkle_coordinates)
-    _, cov, _, extras = estimate(s, s.x0)
-    stderr, corr = stderr_corr(cov)
-    return Identifiability(s.user.names, dict(zip(s.user.names, stderr.tolist())), corr,
-                           np.asarray(extras.pop("fisher_eigenvalues")), extras)
