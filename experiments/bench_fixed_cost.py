@@ -8,25 +8,29 @@ as before freezing), in turn in one process. Measured two ways:
   included) less the run time of the Dr.Jit kernels it launched, from Dr.Jit's kernel history. Dr.Jit's
   flags are per thread and the renders run on the process's one Dr.Jit thread
   (:func:`~spacefit.rendering.backend.on_drjit_thread`), so the history is switched on and read there;
-  on the LLVM backend an entry's ``execution_time`` is its task's run time on the thread pool (ms),
-  which reading the history waits for. Kernels that overlap Python work would make this a lower bound.
+  on the LLVM backend an entry's ``execution_time`` is its task's run time on the thread pool, from its
+  first work unit's start to its last one's end (ms), which reading the history waits for.
 - **zero work**: the same frozen call at 5, 10, 17 and 32 spp (each two multijitter passes, as 32 is:
-  30 + 2), a straight line through the median wall times against spp, read at 0 spp: what a call
-  costs whatever its samples, kernel work per pixel (the film's development) included, so an upper
-  bound of the first.
+  30 + 2), a straight line through the median times against spp, read at 0 spp: what a call costs
+  whatever its samples (the film's development, a per-pixel kernel, included). In wall time, and in
+  the process's CPU time (all threads), which a loaded machine does not inflate as it does wall time:
+  the work of the Python thread counts once, like its quiet wall time, the pool's (and its waiting
+  workers' spinning) in full, so an upper bound of the quiet fixed cost.
 
-Prints the machine, its load average and the commit. Run: ``.venv/bin/python experiments/bench_fixed_cost.py [--calls N]``.
+On a loaded machine a call's wall time also counts its waits for a core (between kernels, at each
+wake-up of a thread); the quiet figure is the one to compare with the target. Prints the machine, its
+load average and the commit. Run: ``.venv/bin/python experiments/bench_fixed_cost.py [--calls N]``.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
-import resource
 import statistics
 import subprocess
 import time
 from collections.abc import Callable
+from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
@@ -42,6 +46,15 @@ from spacefit.scene.sampling import split_sample_count
 TARGET_MS = 5.0
 SPP = 32
 LINE_SPP = (5, 10, 17, 32)  # two multijitter passes each, as SPP
+KINDS = ("primal", "derivative")
+
+
+class Call(NamedTuple):
+    """One timed render, ms: wall time on the calling thread, the process's CPU time, its kernels' run time."""
+
+    wall: float
+    cpu: float
+    kernels: float
 
 
 @on_drjit_thread
@@ -59,39 +72,27 @@ def history_stop() -> float:
     return ms
 
 
-def timed(call: Callable[[], object]) -> tuple[float, float]:
-    """Wall time of ``call()`` on this thread and the summed run time of the Dr.Jit kernels it launched, ms."""
-    history_start()
-    t0 = time.perf_counter()
+def timed(call: Callable[[], object], history: bool) -> Call:
+    """``call()`` timed; its kernels' run time from the kernel history if ``history``, else NaN."""
+    if history:
+        history_start()
+    t0, c0 = time.perf_counter(), time.process_time()
     call()
-    wall = (time.perf_counter() - t0) * 1e3
-    return wall, history_stop()
+    wall, cpu = (time.perf_counter() - t0) * 1e3, (time.process_time() - c0) * 1e3
+    return Call(wall, cpu, history_stop() if history else float("nan"))
 
 
-def calls(scene: DrJitScene, x0: np.ndarray, values_of: Callable, kind: str, n: int, history: bool = True) -> list[tuple[float, float]]:
-    """``n`` timed renders of ``kind`` (``primal`` or ``derivative``) at material values 1 % apart
-    (wall, kernels ms; kernels NaN without the ``history``)."""
+def calls(scene: DrJitScene, x0: np.ndarray, values_of: Callable, kind: str, n: int, history: bool = True) -> list[Call]:
+    """``n`` timed renders of ``kind`` (``primal`` or ``derivative``) at material values 1 % apart."""
     out = []
     for i in range(n):
         values = {k: np.asarray(v) for k, v in values_of(jnp.asarray(x0 * (1.0 + 0.01 * i))).items()}
         key = next(iter(values))
         if kind == "primal":
-            call = lambda: scene.render_primal(values, 100 + i)  # noqa: B023, E731  (called at once)
+            out.append(timed(lambda: scene.render_primal(values, 100 + i), history))  # noqa: B023  (called at once)
         else:
-            call = lambda: scene.forward(values, {key: np.ones_like(values[key])}, 200 + i)  # noqa: B023, E731
-        if history:
-            out.append(timed(call))
-        else:
-            t0 = time.perf_counter()
-            call()
-            out.append(((time.perf_counter() - t0) * 1e3, float("nan")))
+            out.append(timed(lambda: scene.forward(values, {key: np.ones_like(values[key])}, 200 + i), history))  # noqa: B023
     return out
-
-
-def cpu_s() -> float:
-    """CPU time of this process so far (user + system, all threads), s."""
-    r = resource.getrusage(resource.RUSAGE_SELF)
-    return r.ru_utime + r.ru_stime
 
 
 def commit() -> str:
@@ -102,7 +103,7 @@ def commit() -> str:
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--calls", type=int, default=15, help="timed calls of each kind and mode, after 3 unmeasured")
+    p.add_argument("--calls", type=int, default=15, help="timed calls of each kind, mode and spp, after 3 unmeasured")
     p.add_argument("--rounds", type=int, default=2, help="rounds of frozen and traced in turn")
     args = p.parse_args()
     assert all(len(split_sample_count("multijitter", n)) == len(split_sample_count("multijitter", SPP)) for n in LINE_SPP)
@@ -114,38 +115,35 @@ def main() -> None:
           f"{args.calls} calls of each, {args.rounds} rounds in turn")
     chains = {"frozen": render_chain(scene, names), "traced": render_chain(scene, names)}
     chains["traced"].renderer.frozen = FrozenPasses(enabled=False)
-    rows: dict[tuple[str, str], list[tuple[float, float]]] = {}
-    cpu0, wall0 = cpu_s(), time.perf_counter()
+    rows: dict[tuple[str, str], list[Call]] = {}
     for _ in range(args.rounds):
-        for kind in ("primal", "derivative"):
+        for kind in KINDS:
             for mode, chain in chains.items():
                 calls(chain.drjit, x0, chain.values_of, kind, 3)  # the first traces and compiles, the next record
                 rows.setdefault((kind, mode), []).extend(calls(chain.drjit, x0, chain.values_of, kind, args.calls))
-    print(f"(CPU {cpu_s() - cpu0:.1f} s in {time.perf_counter() - wall0:.1f} s wall for these calls)")
-    print(f"{'render':<11} {'mode':<7} {'wall ms':>8} {'kernels ms':>10} {'fixed ms':>9} {'least':>6}  (medians; fixed = wall - kernels "
-          "per call; least: the call with the least, the one a loaded machine delayed least)")
+    print(f"{'render':<11} {'mode':<7} {'wall ms':>8} {'CPU ms':>7} {'kernels ms':>10} {'fixed ms':>9} {'least':>6}  (medians; "
+          "fixed = wall - kernels per call; least: the call with the least, the one a loaded machine delayed least)")
     fixed = {}
     for (kind, mode), samples in rows.items():
-        walls, kernels = zip(*samples)
-        fixed[kind, mode] = statistics.median(w - k for w, k in samples)
-        print(f"{kind:<11} {mode:<7} {statistics.median(walls):>8.1f} {statistics.median(kernels):>10.1f} {fixed[kind, mode]:>9.1f} "
-              f"{min(w - k for w, k in samples):>6.1f}")
-    frozen = chains["frozen"]
-    line = {}
-    for kind in ("primal", "derivative"):
-        walls = []
+        fixed[kind, mode] = statistics.median(c.wall - c.kernels for c in samples)
+        print(f"{kind:<11} {mode:<7} {statistics.median(c.wall for c in samples):>8.1f} {statistics.median(c.cpu for c in samples):>7.1f} "
+              f"{statistics.median(c.kernels for c in samples):>10.1f} {fixed[kind, mode]:>9.1f} {min(c.wall - c.kernels for c in samples):>6.1f}")
+    frozen, line = chains["frozen"], {}
+    for kind in KINDS:
+        medians = []
         for spp in LINE_SPP:
             ds = DrJitScene(frozen.renderer, spp, spp)  # the same loaded scene and recordings, another sample count
             calls(ds, x0, frozen.values_of, kind, 3, history=False)
-            walls.append(statistics.median(w for w, _ in calls(ds, x0, frozen.values_of, kind, args.calls, history=False)))
-        slope, intercept = np.polyfit(LINE_SPP, walls, 1)
-        line[kind] = intercept
-        print(f"{kind:<11} frozen wall ms at {', '.join(f'{s} spp {w:.1f}' for s, w in zip(LINE_SPP, walls))}: "
-              f"{slope:.2f} ms per spp, {intercept:.1f} ms at 0 spp")
-    for kind in ("primal", "derivative"):
+            samples = calls(ds, x0, frozen.values_of, kind, args.calls, history=False)
+            medians.append((statistics.median(c.wall for c in samples), statistics.median(c.cpu for c in samples)))
+        (wall_slope, wall0), (cpu_slope, cpu0) = (np.polyfit(LINE_SPP, column, 1) for column in zip(*medians))
+        line[kind] = wall0, cpu0
+        print(f"{kind:<11} frozen, median wall / CPU ms at {', '.join(f'{s} spp {w:.1f} / {c:.1f}' for s, (w, c) in zip(LINE_SPP, medians))}: "
+              f"per spp {wall_slope:.2f} / {cpu_slope:.2f}, at 0 spp {wall0:.1f} / {cpu0:.1f}")
+    for kind in KINDS:
         f = fixed[kind, "frozen"]
         print(f"per-call fixed cost, {kind}: {f:.1f} ms frozen (target {TARGET_MS:.0f} ms: {'met' if f <= TARGET_MS else 'NOT met'}; "
-              f"zero-work line {line[kind]:.1f} ms), {fixed[kind, 'traced']:.1f} ms traced")
+              f"zero-work line {line[kind][0]:.1f} ms wall, {line[kind][1]:.1f} ms CPU), {fixed[kind, 'traced']:.1f} ms traced")
     print(f"load average at the end {os.getloadavg()[0]:.1f}")
 
 
