@@ -50,11 +50,13 @@ KINDS = ("primal", "derivative")
 
 
 class Call(NamedTuple):
-    """One timed render, ms: wall time on the calling thread, the process's CPU time, its kernels' run time."""
+    """One timed render, ms: wall time on the calling thread, the process's CPU time, its kernels' run time,
+    the Dr.Jit thread's CPU time."""
 
     wall: float
     cpu: float
     kernels: float
+    thread: float
 
 
 @on_drjit_thread
@@ -72,14 +74,22 @@ def history_stop() -> float:
     return ms
 
 
+@on_drjit_thread
+def thread_cpu_ms() -> float:
+    """The Dr.Jit thread's CPU time so far, ms."""
+    return time.thread_time() * 1e3
+
+
 def timed(call: Callable[[], object], history: bool) -> Call:
     """``call()`` timed; its kernels' run time from the kernel history if ``history``, else NaN."""
     if history:
         history_start()
+    thread = thread_cpu_ms()
     t0, c0 = time.perf_counter(), time.process_time()
     call()
     wall, cpu = (time.perf_counter() - t0) * 1e3, (time.process_time() - c0) * 1e3
-    return Call(wall, cpu, history_stop() if history else float("nan"))
+    thread = thread_cpu_ms() - thread
+    return Call(wall, cpu, history_stop() if history else float("nan"), thread)
 
 
 def calls(scene: DrJitScene, x0: np.ndarray, values_of: Callable, kind: str, n: int, history: bool = True) -> list[Call]:
@@ -136,11 +146,11 @@ def main() -> None:
             ds = DrJitScene(frozen.renderer, spp, spp)  # the same loaded scene and recordings, another sample count
             calls(ds, x0, frozen.values_of, kind, 3, history=False)
             samples = calls(ds, x0, frozen.values_of, kind, args.calls, history=False)
-            medians.append((statistics.median(c.wall for c in samples), statistics.median(c.cpu for c in samples)))
-        (wall_slope, wall0), (cpu_slope, cpu0) = (np.polyfit(LINE_SPP, column, 1) for column in zip(*medians))
+            medians.append(tuple(statistics.median([getattr(c, f) for c in samples]) for f in ("wall", "cpu", "thread")))
+        (wall_slope, wall0), (cpu_slope, cpu0), (thread_slope, thread0) = (np.polyfit(LINE_SPP, column, 1) for column in zip(*medians))
         line[kind] = wall0, cpu0
-        print(f"{kind:<11} frozen, median wall / CPU ms at {', '.join(f'{s} spp {w:.1f} / {c:.1f}' for s, (w, c) in zip(LINE_SPP, medians))}: "
-              f"per spp {wall_slope:.2f} / {cpu_slope:.2f}, at 0 spp {wall0:.1f} / {cpu0:.1f}")
+        print(f"{kind:<11} frozen, median wall / CPU / thread ms at {', '.join(f'{s} spp {w:.1f} / {c:.1f} / {t:.1f}' for s, (w, c, t) in zip(LINE_SPP, medians))}: "
+              f"per spp {wall_slope:.2f} / {cpu_slope:.2f} / {thread_slope:.2f}, at 0 spp {wall0:.1f} / {cpu0:.1f} / {thread0:.1f}")
     load = max(load, os.getloadavg()[0])
     for kind in KINDS:
         f = fixed[kind, "frozen"]
