@@ -12,10 +12,10 @@ as before freezing), in turn in one process. Measured two ways:
   first work unit's start to its last one's end (ms), which reading the history waits for.
 - **zero work**: the same frozen call at 5, 10, 17 and 32 spp (each two multijitter passes, as 32 is:
   30 + 2), a straight line through the median times against spp, read at 0 spp: what a call costs
-  whatever its samples (the film's development, a per-pixel kernel, included). In wall time, and in
-  the process's CPU time (all threads), which a loaded machine does not inflate as it does wall time:
-  the work of the Python thread counts once, like its quiet wall time, the pool's (and its waiting
-  workers' spinning) in full, so an upper bound of the quiet fixed cost.
+  whatever its samples (the film's development, a per-pixel kernel, included). In wall time, in the
+  process's CPU time (all threads) and in the Dr.Jit thread's, which a loaded machine does not
+  inflate as it does wall time (the Dr.Jit thread also runs its share of the kernels' work units, whose
+  per-spp part goes into the slope). ``profile_frozen_call.py`` splits a call's CPU time step by step.
 
 On a loaded machine a call's wall time also counts its waits for a core (between kernels, at each
 wake-up of a thread); the quiet figure is the one to compare with the target. Prints the machine, its
@@ -149,7 +149,7 @@ def main() -> None:
             medians.append(tuple(statistics.median([getattr(c, f) for c in samples]) for f in ("wall", "cpu", "thread")))
         (wall_slope, wall0), (cpu_slope, cpu0), (thread_slope, thread0) = (np.polyfit(LINE_SPP, column, 1) for column in zip(*medians))
         line[kind] = wall0, cpu0
-        print(f"{kind:<11} frozen, median wall / CPU / thread ms at {', '.join(f'{s} spp {w:.1f} / {c:.1f} / {t:.1f}' for s, (w, c, t) in zip(LINE_SPP, medians))}: "
+        print(f"{kind:<11} frozen, median wall / process CPU / Dr.Jit thread CPU ms at {', '.join(f'{s} spp {w:.1f} / {c:.1f} / {t:.1f}' for s, (w, c, t) in zip(LINE_SPP, medians))}: "
               f"per spp {wall_slope:.2f} / {cpu_slope:.2f} / {thread_slope:.2f}, at 0 spp {wall0:.1f} / {cpu0:.1f} / {thread0:.1f}")
     load = max(load, os.getloadavg()[0])
     for kind in KINDS:
