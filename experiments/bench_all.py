@@ -23,7 +23,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from studyio import machine
+from studyio import commit, machine
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parent
@@ -188,8 +188,7 @@ def main() -> None:
     p.add_argument("--long-fit-steps", type=int, default=500)
     p.add_argument("--start-up", action="store_true", help="the main job and a notebook's first render only (a minute)")
     args = p.parse_args()
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
-    print(f"machine: {machine()}, commit {commit}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
+    print(f"machine: {machine()}, commit {commit()}, {time.strftime('%Y-%m-%d %H:%M UTC', time.gmtime())}, "
           f"load average {os.getloadavg()[0]:.1f}")
     main_job(args.repeats)
     first_render(args.repeats)

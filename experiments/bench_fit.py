@@ -18,7 +18,7 @@ import spacefit as sf
 from spacefit import SOLVERS, Adam, Observation, fit
 from spacefit.fitting.nuisance import image_model
 from spacefit.scene.assembly import assemble
-from spacefit.sensor import electrons_per_radiance
+from spacefit.detector import electrons_per_radiance
 
 CASES = {name: sf.load_case(name) for name in ("materials", "wrinkles_128")}
 # The observed fit's truths away from the scene's pose and the image model's defaults (deg, px), as in

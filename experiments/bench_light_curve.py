@@ -15,12 +15,10 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 import time
-from pathlib import Path
 
 import numpy as np
-from studyio import machine
+from studyio import commit, machine
 
 import spacefit as sf
 
@@ -28,12 +26,6 @@ PHASES_DEG = np.linspace(5.0, 120.0, 24)
 TARGET_PRECISION = 0.005
 TARGET_S = 10.0
 SEEDS = 4
-
-
-def commit() -> str:
-    """The checkout's commit (short hash)."""
-    root = Path(__file__).resolve().parents[1]
-    return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=root, capture_output=True, text=True).stdout.strip() or "unknown"
 
 
 def call(scene: sf.Scene, first_seed: int) -> tuple[sf.LightCurve, float, float]:

@@ -73,7 +73,7 @@ from spacefit.fitting.uncertainty import covariance  # noqa: E402
 from spacefit.precision import float64  # noqa: E402
 from spacefit.scene.assembly import assemble  # noqa: E402
 from spacefit.scene.parameters import scene_with_values  # noqa: E402
-from spacefit.sensor import electrons_per_radiance  # noqa: E402
+from spacefit.detector import electrons_per_radiance  # noqa: E402
 
 CASE = "panels"
 START_FACTOR = 1.2

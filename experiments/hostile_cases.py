@@ -35,6 +35,7 @@ from pathlib import Path
 import mitsuba as mi
 import numpy as np
 from astropy.io import fits
+from studyio import commit
 
 import spacefit as sf
 from spacefit.cli import DAMAGED, main
@@ -317,8 +318,7 @@ def run_cases() -> Counter:
 
 
 def main_() -> int:
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    print(f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, commit {commit}, {platform.processor() or platform.machine()}, "
+    print(f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, commit {commit()}, {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}", flush=True)
     counts = run_cases()
     print(f"{sum(counts.values())} cases: " + ", ".join(f"{k} {counts[k]}" for k in (OK, LOSS, WRONG, CRASH, UNCLEAR)))

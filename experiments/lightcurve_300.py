@@ -34,7 +34,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from studyio import machine
+from studyio import commit, machine
 
 ROOT = Path(__file__).resolve().parent.parent
 DATA = ROOT / "data" / "lightcurve-cycles-300"  # the light curve and its truth (make)
@@ -58,10 +58,6 @@ def turning(count: int) -> list[dict[str, float]]:
     """``count`` points of the lander turned about z once, the sun's elevation swinging 10 to 50 deg."""
     angles = np.linspace(0.0, 360.0, count, endpoint=False)
     return [{"target.attitude_z_deg": float(a), "sun.elevation_deg": 30.0 + 20.0 * math.sin(math.radians(a))} for a in angles]
-
-
-def commit() -> str:
-    return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
 
 
 def make(cycles_spp: int) -> None:

@@ -19,12 +19,11 @@ from __future__ import annotations
 
 import argparse
 import os
-import subprocess
 
 import jax
 import jax.numpy as jnp
 import numpy as np
-from studyio import machine
+from studyio import commit, machine
 
 import spacefit as sf
 from spacefit.fitting.nuisance import blur_and_shift
@@ -85,8 +84,7 @@ def main() -> None:
     parser.add_argument("--spp", type=int, default=16, help="samples per fine pixel of the 8x render")
     args = parser.parse_args()
     jax.config.update("jax_enable_x64", True)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    print(f"{machine()}, load {os.getloadavg()[0]:.1f}, commit {commit}")
+    print(f"{machine()}, load {os.getloadavg()[0]:.1f}, commit {commit()}")
     for size in args.sizes:
         measure(size, args.spp)
 

@@ -22,11 +22,10 @@ from __future__ import annotations
 
 import argparse
 import datetime
-import subprocess
 import time
 from pathlib import Path
 
-from studyio import machine
+from studyio import commit, machine
 
 import spacefit as sf
 
@@ -65,8 +64,7 @@ def main() -> None:
     parser.add_argument("--range-m", type=float, default=10000.0)
     parser.add_argument("--phases", type=float, nargs="+", default=[0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 90.0, 105.0, 120.0, 135.0, 150.0])
     args = parser.parse_args()
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True).stdout.strip()
-    print(f"machine: {machine()}; date: {datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC; commit {commit}")
+    print(f"machine: {machine()}; date: {datetime.datetime.now(datetime.UTC):%Y-%m-%d %H:%M} UTC; commit {commit()}")
     print(f"command: .venv/bin/python experiments/plates_vs_render.py --resolution {args.resolution} --spp {args.spp} "
           f"--range-m {args.range_m:g} --phases {' '.join(f'{p:g}' for p in args.phases)}")
     summary = []

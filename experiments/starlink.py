@@ -65,7 +65,8 @@ from spacefit.materials import MaterialModel
 from spacefit.materials.measured import read_brdf_table
 from spacefit.materials.tabulated import TabulatedBRDF
 from spacefit.studies.design import design_noise_mag, predict_design
-from spacefit.studies.observing import LightCurveObservations, Site, read_light_curve, sun_directions_enu
+from spacefit.studies.lightcurve_observations import LightCurveObservations
+from spacefit.studies.observing import Site, read_light_curve, sun_directions_enu
 from spacefit.studies.plate_fit import PlateLightCurve
 from spacefit.studies.plates import Plate, predict_magnitudes
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import os
+import subprocess
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -39,3 +40,9 @@ def machine() -> str:
     cpu = next((line.split(":", 1)[1].strip() for line in Path("/proc/cpuinfo").read_text().splitlines()
                 if line.startswith("model name")), "unknown CPU")
     return f"{cpu}, {os.cpu_count()} cores"
+
+
+def commit() -> str:
+    """The checkout's short commit hash ("unknown" outside a git checkout), for benchmark output."""
+    run = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=Path(__file__).parent, capture_output=True, text=True)
+    return run.stdout.strip() or "unknown"

@@ -36,6 +36,7 @@ from test_nuisance import POSE_ERRORS_DEG, two_observations  # noqa: E402  (the 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--realisations", type=int, default=16)
+    parser.add_argument("--first", type=int, default=0, help="the first realisation's index")
     parser.add_argument("--out", type=Path, default=None, help="JSON of every realisation, written as they come")
     args = parser.parse_args()
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
@@ -46,7 +47,7 @@ def main() -> None:
     truth = {**case.truth, **{f"target.attitude_z_deg@{k}": s.target.attitude_deg[2] + e
                               for k, (s, e) in enumerate(zip(scenes, POSE_ERRORS_DEG))}}
     rows = []
-    for i in range(args.realisations):
+    for i in range(args.first, args.first + args.realisations):
         references = [t.with_values({"target.attitude_deg": [*t.target.attitude_deg[:2], t.target.attitude_deg[2] + e],
                                      "render.seed": 100 + i}) for t, e in zip(two_observations(256), POSE_ERRORS_DEG)]
         observations = [sf.Observation(s, np.asarray(sf.render(t), float)) for s, t in zip(scenes, references)]
@@ -54,11 +55,14 @@ def main() -> None:
         result = sf.fit(observations, free, start=case.start, render=sf.FitRender(seed=1000 + 2 * i, seed_grad=1001 + 2 * i))
         z = {n: (result.values[n] - truth[n]) / result.stderr[n] for n in free}
         apart = [w.split("'")[0] for w in result.warnings if "stand out" in w]
+        seeded = [w.split(" ")[0] for w in result.warnings if "render seed" in w]
+        shift = {n: result.extras["render_seed_shift"][n] / result.stderr[n] for n in free}
         rows.append({"realisation": i, "status": result.status.value, "values": result.values, "stderr": result.stderr, "z": z,
                      "robust_spread": [g.robust_spread for g in result.observation_goodness], "standing_out": apart,
-                     "time_s": time.perf_counter() - t0})
-        print(i, " ".join(f"{v:+.2f}" for v in z.values()), [round(g.robust_spread, 2) for g in result.observation_goodness], apart,
-              f"{rows[-1]['time_s']:.0f} s", flush=True)
+                     "seed_shift_se": shift, "widened": result.extras["render_seed_widened"], "seed_warned": seeded, "time_s": time.perf_counter() - t0})
+        print(i, " ".join(f"{v:+.2f}" for v in z.values()), "seed shifts", " ".join(f"{v:+.2f}" for v in shift.values()), "widened",
+              " ".join(f"{v:.2f}" for v in result.extras["render_seed_widened"].values()),
+              [round(g.robust_spread, 2) for g in result.observation_goodness], apart, seeded, f"{rows[-1]['time_s']:.0f} s", flush=True)
         if args.out is not None:
             args.out.write_text(json.dumps(rows, indent=1))
     zs = np.array([[r["z"][n] for n in free] for r in rows])
@@ -66,6 +70,12 @@ def main() -> None:
         print(f"{name}: rms z {np.sqrt(np.mean(zs[:, j] ** 2)):.2f}, 1-sigma coverage {np.mean(np.abs(zs[:, j]) < 1):.0%}, "
               f"beyond 3 sigma {int(np.sum(np.abs(zs[:, j]) > 3))}")
     print(f"named as standing out: {sum(bool(r['standing_out']) for r in rows)} of {len(rows)}")
+    beyond = [(r["realisation"], n) for r in rows for n in free if abs(r["z"][n]) > 3]
+    warned = [(i, n) for i, n in beyond if n in next(r for r in rows if r["realisation"] == i)["seed_warned"]]
+    largest = " ".join(f"{max(abs(v) for v in r['seed_shift_se'].values()):.2f}" for r in rows)
+    print(f"render-seed check: {sum(bool(r['seed_warned']) for r in rows)} of {len(rows)} fits warned "
+          f"({sum(len(r['seed_warned']) for r in rows)} values); beyond 3 sigma {len(beyond)}, of them warned {len(warned)}; "
+          f"largest |shift| / stderr per fit: {largest}")
 
 
 if __name__ == "__main__":

@@ -110,12 +110,12 @@ from spacefit.studies.earthshine import earthshine_irradiance as earthshine_irra
 from spacefit.studies.earthshine import earthshine_sources as earthshine_sources
 from spacefit.studies.lightcurve import LightCurve as LightCurve
 from spacefit.studies.lightcurve import light_curve as light_curve
-from spacefit.studies.lightcurve import light_curve_convergence as light_curve_convergence
+from spacefit.studies.lightcurve_convergence import light_curve_convergence as light_curve_convergence
 from spacefit.studies.lightcurve_files import LightCurveFiles as LightCurveFiles
 from spacefit.studies.lightcurve_fit import RenderedLightCurve as RenderedLightCurve
 from spacefit.studies.lightcurve_fit import fit_light_curve as fit_light_curve
+from spacefit.studies.lightcurve_observations import LightCurveObservations as LightCurveObservations
 from spacefit.studies.observation_files import RefusedRow as RefusedRow
-from spacefit.studies.observing import LightCurveObservations as LightCurveObservations
 from spacefit.studies.observing import read_light_curve as read_light_curve
 from spacefit.studies.observing import write_light_curve as write_light_curve
 from spacefit.studies.orbit import Orbit as Orbit

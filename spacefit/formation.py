@@ -31,7 +31,8 @@ from jaxtyping import Array, Bool, Float
 from spacefit.errors import InputError, check_array, check_count, check_range, check_type
 from spacefit.geometry.distortion import Distortion, undistort
 from spacefit.geometry.frames import Intrinsics
-from spacefit.sensor import Sensor, check_flat, electrons_per_radiance, quantise, target_pixels, warn_if_saturated
+from spacefit.detector import electrons_per_radiance, quantise, target_pixels, warn_if_saturated
+from spacefit.sensor import Sensor, check_flat
 from spacefit.psf import airy_transfer, diffraction_cutoff_px, psf_reach_px
 
 

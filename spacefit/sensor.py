@@ -30,10 +30,12 @@ numbers (DN) in this order:
    Gaussian read noise (electrons rms), ``DN = bias + gain * electrons``, rounding to the nearest
    integer and the ADC's range [0, 2^bits - 1].
 
-This module is NumPy only (reading a FITS file needs no JAX): the :class:`Sensor`, its units, the
-per-pixel factors of steps 1 and 2, the flat field's check, quantising and :func:`saturated_mask`, which marks the pixels where
-the linear model does not hold. The PSF of step 3 (the Airy pattern, its transfer function, the PSF's
-reach and width) is :mod:`spacefit.psf`'s. The image formation itself is in JAX, in
+This module is NumPy only (reading a FITS file needs no JAX): the :class:`Sensor`, its units, its
+fields as files and options give them (:func:`check_fields`, :func:`read_sensor_file`) and those a
+measurement needs (:func:`used_fields`, :func:`missing_for_measurement`), the flat field's check and
+:func:`saturated_mask`, which marks the pixels where the linear model does not hold. The per-pixel
+factors of steps 1 and 2 and quantising are :mod:`spacefit.detector`'s; the PSF of step 3 (the Airy
+pattern, its transfer function, the PSF's reach and width) is :mod:`spacefit.psf`'s. The image formation itself is in JAX, in
 :mod:`spacefit.formation`: ``expected_dn`` (steps 1 to 3 in DN, the noise-free mean, linear
 in the radiance, which a fit differentiates), ``noise_variance_dn`` (the Poisson-Gaussian variance of
 step 4, Janesick 2007, "Photon Transfer", ch. 2) and ``observe`` (a simulated exposure).
@@ -45,7 +47,6 @@ import dataclasses
 import json
 import math
 import tomllib
-import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
@@ -54,7 +55,6 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from spacefit.errors import InputError, InputTypeError, check_array, check_choice, check_flag, check_path, check_range, check_type, quote
-from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
 
 if TYPE_CHECKING:
     from jaxtyping import Bool, Float
@@ -65,14 +65,8 @@ expected DN overflowed and the fit went NaN."""
 MAX_PSF_SIGMA_PX = 100.0
 """The widest Gaussian PSF a sensor has (sigma, px): wider spreads a point over thousands of pixels, and the
 image padded by its 5-sigma reach for the Fourier blur grows with it (at 1e300 px XLA aborted the process)."""
-PLANCK_J_S = 6.62607015e-34
-"""The Planck constant, J s (exact in the SI since 2019; SciPy's constants module costs a fit 0.2 s of imports)."""
-LIGHT_M_S = 299792458.0
-"""The speed of light in vacuum, m/s (exact in the SI)."""
 SATURATION_MARGIN_READ_SIGMA = 3.0
 """A pixel within this many read-noise sigmas of the full well's DN counts as saturated."""
-SATURATED_WARNING_FRACTION = 1e-3
-""":func:`~spacefit.formation.observe` warns when more than this fraction of the target's pixels saturate."""
 
 
 @dataclass(frozen=True)
@@ -315,39 +309,6 @@ def read_sensor_file(path: str | Path) -> dict[str, Any]:
     return dict(fields)
 
 
-def pixel_etendue(sensor: Sensor, intrinsics: Intrinsics) -> Float[np.ndarray, "h w"]:
-    """Etendue ``A cos(theta) Omega`` (m^2 sr) of each pixel through the aperture.
-
-    Omega from :func:`~spacefit.geometry.frames.pixel_solid_angles` (cos^3 off axis), times the
-    aperture's area seen along the pixel's centre ray: together the cos^4 law. Without
-    :attr:`Sensor.vignetted`, every pixel's is that of a pixel centred on the axis.
-    """
-    f, p = intrinsics.focal_length, intrinsics.pixel_pitch
-    if not sensor.vignetted:
-        on_axis = pixel_solid_angles(Intrinsics(f, p, 1, 1))[0, 0]
-        return np.full((intrinsics.height, intrinsics.width), sensor.aperture_area_m2 * on_axis)
-    u0, v0 = intrinsics.principal_point
-    x = (np.arange(intrinsics.width) + 0.5 - u0) * p
-    y = (np.arange(intrinsics.height) + 0.5 - v0) * p
-    cos_theta = f / np.sqrt(x[None, :] ** 2 + y[:, None] ** 2 + f**2)
-    return sensor.aperture_area_m2 * cos_theta * pixel_solid_angles(intrinsics)
-
-
-def electrons_per_radiance(sensor: Sensor, intrinsics: Intrinsics, channels: int) -> Float[np.ndarray, "h w c"]:
-    """Mean photo-electrons per W m^-2 sr^-1 of each pixel and channel, before the PSF.
-
-    ``QE t A cos(theta) Omega lambda / (h c)``, single wavelength per channel; for a calibrated
-    camera, its radiometric scale over its gain (times the cos^4 fall-off relative to the axis if
-    :attr:`Sensor.vignetted`).
-    """
-    if sensor.calibrated:
-        shading = pixel_etendue(sensor, intrinsics) / pixel_etendue(dataclasses.replace(sensor, vignetting=False), intrinsics)
-        per_dn = sensor.radiometric_scale_dn_per_w_m2_sr / sensor.gain_dn_per_electron
-        return np.repeat(per_dn * shading[..., None], channels, axis=-1)
-    photon_energy = PLANCK_J_S * LIGHT_M_S / np.asarray(sensor.wavelengths(channels))
-    return (sensor.quantum_efficiency * sensor.exposure_time_s * pixel_etendue(sensor, intrinsics))[..., None] / photon_energy
-
-
 def check_flat(flat: Any, shape: tuple[int, ...], where: str = "`flat`") -> np.ndarray:
     """A flat-field map checked against an image of ``shape`` (h, w, c): (h, w) or (h, w, c or 1),
     finite and > 0; returned as (h, w, 1 or c) float64."""
@@ -359,16 +320,6 @@ def check_flat(flat: Any, shape: tuple[int, ...], where: str = "`flat`") -> np.n
     if bad:
         raise InputError(f"{where} must be finite and > 0 (the detector's relative response); {bad} values are not.")
     return f
-
-
-def quantise(dn: Float[np.ndarray, "..."], sensor: Sensor) -> np.ndarray:
-    """Round DN to the nearest integer (halves to even) and clip to the ADC's [0, 2^bits - 1].
-
-    Returns:
-        the same shape as uint16 (bit_depth <= 16) or uint32.
-    """
-    dtype = np.uint16 if sensor.bit_depth <= 16 else np.uint32
-    return np.clip(np.rint(np.asarray(dn, dtype=float)), 0, sensor.adc_max_dn).astype(dtype)
 
 
 def saturated_mask(dn: Float[np.ndarray, "..."], sensor: Sensor) -> Bool[np.ndarray, "..."]:
@@ -390,27 +341,3 @@ def saturated_mask(dn: Float[np.ndarray, "..."], sensor: Sensor) -> Bool[np.ndar
     """
     check_type("sensor", sensor, Sensor, "an sf.Sensor")
     return check_array("dn", dn) >= sensor.saturation_dn
-
-
-def target_pixels(radiance: Float[np.ndarray, "h w c"], target: Bool[np.ndarray, "h w"] | None = None) -> Bool[np.ndarray, "h w"]:
-    """The target's pixels: ``target`` when given (checked against the image), else those of
-    ``radiance`` brighter than 0 in any channel (the target against black space)."""
-    radiance = check_array("radiance", radiance)
-    if target is None:
-        return np.asarray(radiance.max(axis=-1) > 0.0)
-    mask = np.asarray(target)
-    if mask.dtype != bool or mask.shape != radiance.shape[:2]:
-        raise InputError(f"`target` must be a boolean (height, width) = {radiance.shape[:2]} mask, got {mask.dtype} {mask.shape}.")
-    return mask
-
-
-def warn_if_saturated(dn: np.ndarray, radiance: Float[np.ndarray, "h w c"], sensor: Sensor) -> None:
-    """Warn when more than :data:`SATURATED_WARNING_FRACTION` of the target's pixels (:func:`target_pixels`)
-    saturate in an observation ``dn`` of ``radiance``: a fit leaves them out, and their mean is clipped."""
-    mask = target_pixels(radiance)
-    saturated = int(np.count_nonzero(saturated_mask(dn, sensor).any(axis=-1) & mask))
-    if saturated > SATURATED_WARNING_FRACTION * np.count_nonzero(mask):
-        warnings.warn(f"{saturated} of the target's {np.count_nonzero(mask)} pixels ({100 * saturated / np.count_nonzero(mask):.3g} %, "
-                      f"more than {100 * SATURATED_WARNING_FRACTION:g} %) saturate at {sensor.saturation_dn:g} DN: their DN is clipped. "
-                      "Shorten `Sensor.exposure_time_s`; sf.choose_exposure(radiance, sensor, intrinsics) picks one.",
-                      UserWarning, stacklevel=3)

@@ -13,7 +13,7 @@ import spacefit as sf
 from spacefit.errors import InputError
 from spacefit.scene.names import Name
 from spacefit.studies.design import DesignMember, design_noise_mag, fit_design, predict_design
-from spacefit.studies.observing import LightCurveObservations, magnitude_of
+from spacefit.studies.lightcurve_observations import LightCurveObservations, magnitude_of
 
 HEIGHT_M = 550e3
 TRUTH = {"parts.chassis.kd": 0.30, "parts.array.kd": 0.08, "parts.array.alpha": 0.15}

@@ -13,7 +13,7 @@ import pytest
 
 import spacefit as sf
 from spacefit.errors import InputError
-from spacefit.studies.observing import LightCurveObservations, irradiance_of, magnitude_of
+from spacefit.studies.lightcurve_observations import LightCurveObservations, irradiance_of, magnitude_of
 from spacefit.studies.earthshine import VEGETATION
 from spacefit.studies.orbit import EARTH_RADIUS_M, in_earth_shadow
 from spacefit.studies.plates import plates_irradiance

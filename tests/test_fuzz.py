@@ -441,7 +441,7 @@ def two_plates() -> list[Any]:
 
 def check_plates(plate: dict[str, Any], data: st.DataObject) -> None:
     """sf.Site, sf.Plate, sf.predict_magnitudes, sf.fit_plates and sf.fitted_plates with random arguments."""
-    from spacefit.studies.observing import LightCurveObservations
+    from spacefit.studies.lightcurve_observations import LightCurveObservations
 
     n = 6
     angle = np.linspace(0.2, 1.2, n)

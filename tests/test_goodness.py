@@ -467,3 +467,6 @@ def test_a_view_with_a_model_error_of_its_own_is_named_when_the_noise_is_unknown
     standing = [w for w in result.warnings if "stand out" in w]
     assert len(standing) == 1 and standing[0].startswith("observation 1's residuals stand out"), result.warnings
     assert "may be understated" in standing[0]
+    # the render-seed check ran (spacefit.fitting.render_seeds) and, the model error common to every render, names nothing
+    assert set(result.extras["render_seed_widened"]) == {"parts.legs.kd"}
+    assert not [w for w in result.warnings if "render seed" in w], result.warnings

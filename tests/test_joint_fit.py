@@ -12,7 +12,7 @@ from helpers import small_scene, write_plate_obj
 
 import spacefit as sf
 from spacefit.fitting.observations.base import Block, MeasuredValues, ValueObservation
-from spacefit.studies.observing import LightCurveObservations
+from spacefit.studies.lightcurve_observations import LightCurveObservations
 
 TRUE_KD, START_KD = 0.3, 0.2
 

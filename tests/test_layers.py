@@ -25,7 +25,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("spacefit.geometry",),
     ("spacefit.materials",),
     ("spacefit.scene", "spacefit.display", "spacefit.plotting"),
-    ("spacefit.sensor", "spacefit.psf", "spacefit.formation"),
+    ("spacefit.sensor", "spacefit.detector", "spacefit.psf", "spacefit.formation"),
     ("spacefit.rendering",),
     ("spacefit.imageio", "spacefit.cases"),
     ("spacefit.fitting",),

@@ -132,7 +132,7 @@ def test_convergence_in_pixels_and_samples_is_checked(tmp_path):
     changes it fourfold: not converged."""
     from helpers import write_plate_obj
 
-    from spacefit.studies.lightcurve import light_curve_convergence
+    from spacefit.studies.lightcurve_convergence import light_curve_convergence
 
     scene = small_scene(write_plate_obj(tmp_path / "plate.obj"), {"material": "lambert", "kd": 0.5},
                         render={"spp": 4, "resolution": [16, 16], "filter": "box"},

@@ -11,7 +11,7 @@ import pytest
 import spacefit as sf
 from spacefit.scene.names import Name
 from spacefit.studies.lightcurve import SUN_MAGNITUDES
-from spacefit.studies.observing import LightCurveObservations
+from spacefit.studies.lightcurve_observations import LightCurveObservations
 
 OPTIONS = {"start": {"parts.legs.kd": 0.4}, "render": sf.FitRender(spp=4), "max_steps": 2}
 

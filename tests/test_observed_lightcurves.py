@@ -15,8 +15,8 @@ import spacefit as sf
 from spacefit.errors import InputError
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.materials import Conductor, DiffuseConductor, Lambert, material_table
-from spacefit.studies.observing import (EARTH_RADIUS_M, LightCurveObservations, Site, in_earth_shadow, magnitude_of,
-                                        read_light_curve)
+from spacefit.studies.lightcurve_observations import LightCurveObservations, magnitude_of
+from spacefit.studies.observing import EARTH_RADIUS_M, Site, in_earth_shadow, read_light_curve
 from spacefit.studies.plate_fit import fit_plates
 from spacefit.studies.plates import Plate, plates_irradiance, predict_magnitudes
 

@@ -13,7 +13,8 @@ from spacefit.formation import distort_image, expected_dn, expected_electrons, n
 from spacefit.geometry.distortion import Distortion, distort, undistort
 from spacefit.geometry.frames import Intrinsics, pixel_solid_angles
 from spacefit.formation import choose_exposure
-from spacefit.sensor import Sensor, quantise, saturated_mask
+from spacefit.detector import quantise
+from spacefit.sensor import Sensor, saturated_mask
 from spacefit.psf import AIRY_RADIUS_X, AIRY_RMS_X, PSF_ENERGY, airy_psf, airy_transfer, psf_reach_px, psf_rms_px
 
 THESIS = Intrinsics(7.0, 4e-3, 601, 601)  # Table 4-2's optics; odd size puts a pixel centre on the axis

@@ -18,7 +18,7 @@ from spacefit.errors import InputError
 from spacefit.geometry.frames import attitude_matrix
 from spacefit.geometry.primitives import CYLINDER_SECTIONS
 from spacefit.scene.toml import scene_from_dict
-from spacefit.studies.observing import LightCurveObservations
+from spacefit.studies.lightcurve_observations import LightCurveObservations
 from spacefit.studies.plate_fit import PlateLightCurve
 from spacefit.studies.plates import plates_irradiance
 from spacefit.studies.lightcurve import SUN_MAGNITUDES

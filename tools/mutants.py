@@ -199,6 +199,15 @@ MUTANTS = (
            ("tests/test_goodness.py::test_without_a_known_noise_an_observation_whose_residuals_stand_out_is_named",)),
     Mutant("stand-out-at-five", "spacefit/fitting/goodness.py", "STANDS_OUT = 3.0", "STANDS_OUT = 5.0",
            ("tests/test_goodness.py::test_without_a_known_noise_an_observation_whose_residuals_stand_out_is_named",)),
+    # the render-seed check (issue 34): the fit's own renders' error measured against fresh seeds, its excess carried
+    Mutant("render-seed-shift-of-one-own-render", "spacefit/fitting/render_seeds.py",
+           "return step(sum(fresh) / len(fresh) - 0.5 * (own[0] + own[1]))", "return step(sum(fresh) / len(fresh) - own[1])",
+           ("tests/test_render_seeds.py",)),
+    Mutant("render-seed-excess-not-carried", COVARIANCE, "cov = cov + np.diag(seed_excess(shift, np.diag(modelled)))", "cov = cov",
+           ("tests/test_render_seeds.py",)),
+    Mutant("render-seed-excess-over-the-whole-error", "spacefit/fitting/render_seeds.py",
+           "return np.maximum(0.0, shift**2 / (1.0 + 2.0 / len(FRESH)) - modelled)",
+           "return np.maximum(0.0, shift**2 / (1.0 + 2.0 / len(FRESH)) - 4.0 * modelled)", ("tests/test_render_seeds.py",)),
     Mutant("poorly-determined-against-the-value", COVARIANCE, "max(abs(values[i]), parameter(name).scale, 1e-12)",
            "max(abs(values[i]), 1e-12)", (UNCERTAINTY,)),
     # observations from files (issue 10): masks and grey images
@@ -231,7 +240,7 @@ MUTANTS = (
     # one vocabulary, checked everywhere (issue 18 item 7)
     Mutant("set-values-unchecked", RENDERER, "scene = scene_with_values(self.current_scene, given)  # refused",
            "scene = self.current_scene  # refused", ("tests/test_vocabulary.py",)),
-    Mutant("sun-elevation-resets-the-azimuth", "spacefit/scene/parameters.py",
+    Mutant("sun-elevation-resets-the-azimuth", "spacefit/scene/registered.py",
            "angles = (values.get(n, get(scene, n)) for n in names)", "angles = (values.get(n, 0.0) for n in names)",
            ("tests/test_vocabulary.py",)),
     Mutant("part-typo-without-suggestion", "spacefit/scene/sections.py", "close = closest(path[1], parts)", "close = None",
@@ -350,7 +359,7 @@ MUTANTS = (
     Mutant("value-observation-errors-not-scaled", COVARIANCE,
            "d[rows] = math.sqrt(float(r[rows] @ r[rows]) / max(rows.stop - rows.start - len(block.known), 1))", "d[rows] = 1.0",
            ("tests/test_joint_fit.py",)),
-    Mutant("light-curve-sun-directions-not-normalised", "spacefit/studies/observing.py", "fields[name] = unit",
+    Mutant("light-curve-sun-directions-not-normalised", "spacefit/studies/lightcurve_observations.py", "fields[name] = unit",
            "fields[name] = v", ("tests/test_observed_lightcurves.py",)),
     Mutant("tabulated-offset-unsigned", "spacefit/materials/tabulated.py", "return jnp.where(jnp.sum(delta * beta0, axis=-1) < 0, -d, d)",
            "return d", ("tests/test_brdf_tables.py",)),

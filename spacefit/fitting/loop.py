@@ -28,6 +28,7 @@ from spacefit.fitting.observations.base import Sequenced, ValueObservation
 from spacefit.fitting.observations.image import Observation
 from spacefit.fitting.pixel_grid import grid_notes
 from spacefit.fitting.problem import FitRender, Setup, setup
+from spacefit.fitting.render_seeds import seed_notes
 from spacefit.fitting.residuals import column_owners
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.resume import Resume
@@ -401,7 +402,9 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
     elif np.all(np.isfinite(x_user)):
         x_user, cov, loss_value, extras = estimate(s, x, correct=steps.moved)
         stderr, corr = stderr_corr(cov)
-        warnings = warnings_for(s.user, x_user, stderr, corr) + grid_notes(extras.get("pixel_grid_error", {}), dict(zip(s.user.names, stderr)))
+        named_stderr = dict(zip(s.user.names, stderr))
+        warnings = (warnings_for(s.user, x_user, stderr, corr) + grid_notes(extras.get("pixel_grid_error", {}), named_stderr)
+                    + seed_notes(extras.get("render_seed_shift", {}), extras.get("render_seed_widened", {}), named_stderr))
         quality, r, noise, renders, signal = judged_goodness(s, jnp.asarray(x), loss)
         residuals = [*(np.where(used[..., None], ref - render, np.nan) for ref, render, used in zip(problem.references, renders, problem.used)),
                      *(b.data.value - render for b, render in zip(problem.blocks, renders[len(problem.references):]))]

@@ -24,7 +24,8 @@ from jaxtyping import Array, Float
 
 from spacefit.formation import fourier_filter, gaussian_transfer
 from spacefit.scene.names import Name
-from spacefit.scene.parameters import IMAGE, PSF_SIGMA_MAX_PX
+from spacefit.scene.parameters import IMAGE
+from spacefit.scene.registered import PSF_SIGMA_MAX_PX
 from spacefit.psf import GAUSSIAN_RADIUS_SIGMA
 
 # Black sky added round the image before the blur and shift, px: 5 sigma of the widest blur a fit

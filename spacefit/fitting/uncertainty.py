@@ -24,6 +24,7 @@ from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
 from spacefit.fitting.pixel_grid import grid_feedback, grid_step
 from spacefit.fitting.problem import FitRender, Observation, Setup, setup
+from spacefit.fitting.render_seeds import seed_excess, seed_shift
 from spacefit.fitting.residuals import Problem, column_owners
 from spacefit.precision import float64
 from spacefit.scene.parameters import is_image, parameter
@@ -308,7 +309,11 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     to the one made at 4x; extras ``pixel_grid_remainder``, its magnitude), and the step's render noise
     (two renders at 4x, their change's difference through :func:`render_meat` at half weight); the
     covariance of the step's fixed point is the fit's through ``(I - D)^-1``, ``D`` how the step moves
-    with the image nuisances it is taken at (:func:`~spacefit.fitting.pixel_grid.grid_feedback`)."""
+    with the image nuisances it is taken at (:func:`~spacefit.fitting.pixel_grid.grid_feedback`). Where no noise is given
+    (no sensor or ``sigma``: the residuals are the noise's basis) and the fit moved, the render-seed check (:mod:`spacefit.fitting.render_seeds`)
+    adds to each value's variance what fresh renders measure of its own renders' error beyond the render noise the
+    sandwich carries (extras ``render_seed_shift``, the step to the fresh renders, and ``render_seed_widened``, the
+    factor each standard error grew by; user coordinates)."""
     lin = linearise(s.problem, x)
     cov, loss_value, fisher, correction = covariance(s.problem, x, lin)
     if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
@@ -334,6 +339,18 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
             x = x + delta
         extras["pixel_grid_error"] = dict(zip(s.solver_params.names, delta.tolist()))
         extras["pixel_grid_remainder"] = dict(zip(s.solver_params.names, np.abs(remainder).tolist()))
+    if correct and s.problem.rendered and not s.noise_given:  # the render-seed check (spacefit.fitting.render_seeds)
+        shift = seed_shift(s.problem, lin.x, (lin.r, lin.r_alt), lin.step)
+        # the render noise the error carries: the meat's half of the render noise's (the mean residual's share)
+        bread = _pseudo_inverse(lin.information)[0]
+        modelled = 0.5 * bread @ render_meat(lin.cross, (lin.r - lin.r_alt) / math.sqrt(2.0), s.problem, x) @ bread
+        T = np.asarray(jax.jacfwd(s.to_user)(jnp.asarray(x)))
+        before = np.sqrt(np.diag(map_covariance(T, cov)))
+        cov = cov + np.diag(seed_excess(shift, np.diag(modelled)))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            widened = np.sqrt(np.diag(map_covariance(T, cov))) / before
+        extras["render_seed_shift"] = dict(zip(s.user.names, (T @ shift).tolist()))
+        extras["render_seed_widened"] = dict(zip(s.user.names, widened.tolist()))
     if s.rms_index is not None:
         i = s.rms_index
         extras.update({"wrinkles.rms_m": float(x[i]), "wrinkles.rms_m.stderr": float(np.sqrt(cov[i, i]))})

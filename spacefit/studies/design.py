@@ -36,7 +36,7 @@ from spacefit.fitting.params import Bijection, bijection
 from spacefit.fitting.prediction import Prediction, covariance_of, predictive_intervals, residual_noise
 from spacefit.fitting.result import FitResult
 from spacefit.scene.names import Name
-from spacefit.studies.observing import LN_PER_MAGNITUDE, LightCurveObservations
+from spacefit.studies.lightcurve_observations import LN_PER_MAGNITUDE, LightCurveObservations
 from spacefit.studies.plate_fit import PlateLightCurve
 
 # A member's exposure scale: its model's irradiance times it (default 1).

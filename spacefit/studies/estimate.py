@@ -17,7 +17,7 @@ from spacefit.errors import InputError
 from spacefit.rendering import memory as render_memory
 from spacefit.scene.schema import Scene
 from spacefit.studies.axes import AxesSpec, axis_lengths
-from spacefit.studies.store import CHECKSUM, point_variables
+from spacefit.studies.store_layout import CHECKSUM, point_variables
 
 # A sweep of more points is refused unless allow_large: a store holds a file per point and variable.
 MAX_POINTS = 1_000_000

@@ -30,7 +30,8 @@ from spacefit.errors import InputError, check_count, check_path, check_range, ch
 from spacefit.fitting.passes import COMPONENTS, VECTOR_KEYS, cell, scene_columns, table_column
 from spacefit.scene.toml import load_scene
 from spacefit.studies.lightcurve_fit import POINT_KEYS, RenderedLightCurve
-from spacefit.studies.observing import LightCurveObservations, read_light_curve
+from spacefit.studies.lightcurve_observations import LightCurveObservations
+from spacefit.studies.observing import read_light_curve
 from spacefit.studies.orbit import Site
 from spacefit.studies.target_plates import rendered_light_curve
 

@@ -27,7 +27,7 @@ from spacefit.materials.registry import with_material_values
 from spacefit.studies.earthshine import Earth, EarthshineSources
 from spacefit.studies.lightcurve import SUN_MAGNITUDES
 from spacefit.studies.lightcurve_kind import LightCurveKind
-from spacefit.studies.observing import LN_PER_MAGNITUDE, LightCurveObservations, irradiance_of
+from spacefit.studies.lightcurve_observations import LN_PER_MAGNITUDE, LightCurveObservations, irradiance_of
 from spacefit.studies.plates import (ATTITUDE, TARGET, Plate, check_earth, check_observations, check_plates, earthshine_of, plates_light,
                                      target_rotation)
 

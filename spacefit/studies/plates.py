@@ -39,7 +39,7 @@ from spacefit.materials import Material, MaterialModel
 from spacefit.materials.brdf import brdf
 from spacefit.precision import float64
 from spacefit.studies.earthshine import EARTH_MEAN_RADIUS_M, Earth, EarthshineSources, earthshine_irradiance, earthshine_sources
-from spacefit.studies.observing import LightCurveObservations, magnitude_of
+from spacefit.studies.lightcurve_observations import LightCurveObservations, magnitude_of
 from spacefit.studies.orbit import EARTH_RADIUS_M
 
 # The target's attitude angles a fit may free ("target.attitude_x_deg").

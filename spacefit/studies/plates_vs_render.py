@@ -28,7 +28,7 @@ from spacefit.scene.sections import check_scene
 from spacefit.studies.lightcurve import phase_plane_sun
 from spacefit.studies.lightcurve_fit import RenderedLightCurve
 from spacefit.studies.lightcurve_kind import LightCurveKind
-from spacefit.studies.observing import LightCurveObservations
+from spacefit.studies.lightcurve_observations import LightCurveObservations
 from spacefit.studies.plate_fit import PlateLightCurve
 from spacefit.studies.plates import plates_irradiance
 from spacefit.studies.sweep import sweep

@@ -49,7 +49,8 @@ from spacefit.executors import Cluster, cluster_of
 from spacefit.studies.axes import Axis, AxesSpec, in_place_names, parse_axes, parsed_seeds
 from spacefit.studies.cluster import STALL_S, run_on_dask
 from spacefit.studies.estimate import check_estimate, estimate
-from spacefit.studies.store import STORE_FORMAT, open_store, pending, repair, template, write_point
+from spacefit.studies.store import STORE_FORMAT, open_store, pending, repair, write_point
+from spacefit.studies.store_layout import template
 from spacefit.studies import worker
 from spacefit.studies.worker import Task
 

@@ -46,7 +46,7 @@ from spacefit.scene.conversions import sun_angles_deg
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import check_scene
 from spacefit.studies.lightcurve_fit import RenderedLightCurve
-from spacefit.studies.observing import LightCurveObservations
+from spacefit.studies.lightcurve_observations import LightCurveObservations
 from spacefit.studies.plates import Plate
 
 # Triangles whose unit normals and tangents differ by less than this (1 - cos) are one plate's.
