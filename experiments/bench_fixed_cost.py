@@ -27,14 +27,13 @@ from __future__ import annotations
 import argparse
 import os
 import statistics
-import subprocess
 import time
 from collections.abc import Callable
 from typing import NamedTuple
 
 import jax.numpy as jnp
 import numpy as np
-from studyio import machine
+from studyio import commit, machine
 
 import spacefit as sf
 from spacefit.rendering.backend import dr, on_drjit_thread
@@ -103,12 +102,6 @@ def calls(scene: DrJitScene, x0: np.ndarray, values_of: Callable, kind: str, n: 
         else:
             out.append(timed(lambda: scene.forward(values, {key: np.ones_like(values[key])}, 200 + i), history))  # noqa: B023
     return out
-
-
-def commit() -> str:
-    """The checkout's commit (short hash), or 'unknown' outside git."""
-    run = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=os.path.dirname(__file__), capture_output=True, text=True)
-    return run.stdout.strip() or "unknown"
 
 
 def main() -> None:

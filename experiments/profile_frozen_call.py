@@ -18,7 +18,7 @@ from collections.abc import Callable
 
 import jax.numpy as jnp
 import numpy as np
-from studyio import machine
+from studyio import commit, machine
 
 import spacefit as sf
 from spacefit.rendering.backend import dr, mi, on_drjit_thread, variant_scope
@@ -130,7 +130,7 @@ def main() -> None:
     ds = chain.drjit
     values = [{k: np.asarray(v) for k, v in chain.values_of(jnp.asarray(x0 * (1.0 + 0.01 * i))).items()} for i in range(args.calls + 5)]
     key = next(iter(values[0]))
-    print(f"machine: {machine()}, {dr.thread_count()} Dr.Jit threads, load average {os.getloadavg()[0]:.1f}")
+    print(f"machine: {machine()}, {dr.thread_count()} Dr.Jit threads, load average {os.getloadavg()[0]:.1f}, commit {commit()}")
     kinds: dict[str, tuple[Callable[..., np.ndarray], Callable[[dict, int], np.ndarray]]] = {
         "primal": (lambda v, s, step: primal(ds, v, s, step), lambda v, s: ds.render_primal(v, s)),
         "derivative": (lambda v, s, step: column(ds, v, key, s, step), lambda v, s: ds.forward(v, {key: np.ones_like(v[key])}, s)),
