@@ -1,6 +1,6 @@
 """Every speed figure in one run (``make bench``): the main job's wall time cold and warm, a notebook's
 first render (a fresh process: what it waits for), the per-call fixed cost of a fit's frozen renders
-(issue 33's 5 ms), issue 33's other targets (the whole `spacefit fit` process of the 8-parameter observation
+(issue 33's 5 ms; measured, and estimated step by step in CPU time), issue 33's other targets (the whole `spacefit fit` process of the 8-parameter observation
 fit, the 12-frame pass, the 24-point light curve, a render in a long-running process), forward renders at equal error against plain Mitsuba, the fit of an observation of a sensor (issue 23: 8 parameters at 128 x 128, 32 spp), the
 fits' solve times and accuracy, peak memory, and Dr.Jit kernel compilations over a long fit, and
 where a CUDA GPU is usable, the default forward render and the panels fit on it against the CPU
@@ -196,6 +196,9 @@ def main() -> None:
         return
     wall, peak, text = child([sys.executable, str(HERE / "bench_fixed_cost.py")], {"PYTHONPATH": str(ROOT)})
     print(f"\n## per-call fixed cost of a fit's renders (bench_fixed_cost.py; {wall:.0f} s; {load()} at the end)\n{text.strip()}")
+    wall, peak, text = child([sys.executable, str(HERE / "profile_frozen_call.py")], {"PYTHONPATH": str(ROOT)})
+    print(f"\n## a frozen call's steps, CPU time outside the kernels whatever the load (profile_frozen_call.py; {wall:.0f} s; "
+          f"{load()} at the end)\n{text.strip()}")
     for script, what in ISSUE_33:
         wall, peak, text = child([sys.executable, str(HERE / script), *(["--full"] if args.full and script == "bench_pass.py" else [])],
                                  {"PYTHONPATH": str(ROOT)})

@@ -81,8 +81,15 @@ def test_what_cannot_be_replayed_is_traced_anew(scene):
             fresh.drjit.render_primal(values(fresh, x0), 3)  # sets the same values, unfrozen
             np.testing.assert_array_equal(other_spp, fresh.renderer.radiance(16, 3))
         np.testing.assert_array_equal(other_key, column(fresh, values(fresh, x0), keys[-1], 4))
-    small = render_chain(load_scene(None, [*CASE[1:], "render.resolution=[40, 40]"]), MATERIALS)  # another film
-    assert small.drjit.render_primal(values(small, x0), 3).shape == (40, 40, 3)
+    recorded = renderer.frozen.recordings
+    small = render_chain(load_scene(None, [*CASE[1:], "render.resolution=[40, 40]"]), MATERIALS)  # another film: recordings of its own
+    got = [small.drjit.render_primal(values(small, x0), 3) for _ in range(3)]  # unfrozen, recorded, replayed
+    assert small.renderer.frozen.recordings > 0 and renderer.frozen.recordings == recorded
+    small.renderer.frozen = FrozenPasses(enabled=False)
+    want = small.drjit.render_primal(values(small, x0), 3)
+    assert want.shape == (40, 40, 3) and np.any(want != 0)
+    for image in got:
+        np.testing.assert_array_equal(image, want)
 
 
 def test_moved_vertices_are_never_replayed(scene):
