@@ -6,7 +6,9 @@ truth, sensor and seeds' rule), all eight parameters free:
 
 * ``photon``: one linearisation (render seeds 123, 124) and ``--count`` exposures: the two-seed
   estimator's step ``-(J^T J)^-1 J^T r`` of each exposure's residuals at the fixed model; its
-  scatter per parameter against the covariance's photon part ``sqrt((J^T J)^-1)`` (the bread);
+  scatter per parameter against the covariance's photon part ``sqrt((J^T J)^-1)`` (the bread), and
+  its kurtosis (a fixed linear map of independent pixel noises whose fourth cumulants are those of
+  Poisson counts, positive, and of Gaussian read noise, 0: at least 3 but for the draws);
 * ``render``: one exposure (seed 11) and ``--count`` pairs of the fit's render seeds
   (``2 s + 101``, ``2 s + 102``, as the study seeds a fit): the shipped estimate
   (:func:`spacefit.fitting.uncertainty.estimate`) per pair, its scatter against the covariance's
@@ -27,9 +29,10 @@ truth, sensor and seeds' rule), all eight parameters free:
   what the fit adds (its render and Jacobian noise, the pixel grid's step, its stopping): per parameter the
   slope of the fit's error on the photon step (1 for a fit that is linear in the data; below 1 for one that
   stops short of its minimum), their correlation, the photon steps' scatter and the remainder's against
-  the bread, what the covariance carries beyond the bread, the remainder's correlation with the photon
-  step's size, and the kurtosis of the fits' z-scores, of the photon steps and of the remainder
-  (3 for a normal distribution; a flat top below);
+  the bread (the remainder holds the fit's render and Jacobian noise, which ``render`` measures against
+  what the covariance carries, and the fixed linearisation's Jacobian noise), the remainder's correlation
+  with the photon step's size, and the kurtosis of the fits' z-scores, of the photon steps and of the
+  remainder (3 for a normal distribution; a flat top below);
 * ``fit-root``: ``--count`` study fits (exposures from ``--first-exposure``), and at each fit's end point the
   two-seed correction it took (``c1``) and the corrections that would follow at the corrected point and
   after (``c2``, ``c3``), over the standard error: how far one Gauss-Newton step leaves the estimate from
@@ -126,6 +129,7 @@ def main() -> None:
             print(decomposition(names, [[fits[seed][n] for n in names] for seed in seeds], np.asarray(steps), bread))
             return
         spread, predicted = np.std(steps, axis=0, ddof=1), np.sqrt(np.diag(bread))
+        shape = stats.kurtosis(steps, axis=0, fisher=False)  # at least 3: a fixed linear map of independent Poisson and read noises
     else:
         values, parts = [], []
         for k in range(count):
@@ -143,26 +147,26 @@ def main() -> None:
         spread = np.sqrt(np.mean((np.asarray(values) - np.array(list(truths.values()))) ** 2, axis=0))
     label = {"photon": "the bread", "render": "the covariance's render and Jacobian part", "exposures": "the mean standard error",
              "fine": "the standard error"}[args.source]
-    print(f"{args.source}: {count} draws; per parameter the scatter, {label}, their ratio")
-    for n, a, b in zip(names, spread, predicted):
-        print(f"  {n}: {a:.4g}  {b:.4g}  {a / b:.3f}")
+    print(f"{args.source}: {count} draws; per parameter the scatter, {label}, their ratio"
+          + (", the steps' kurtosis" if args.source == "photon" else ""))
+    for j, (n, a, b) in enumerate(zip(names, spread, predicted)):
+        print(f"  {n}: {a:.4g}  {b:.4g}  {a / b:.3f}" + (f"  {shape[j]:.2f}" if args.source == "photon" else ""))
 
 
 def decomposition(names: list[str], fits: list[list[dict[str, object]]], steps: np.ndarray, bread: np.ndarray) -> str:
     """The ``decompose`` table: ``fits`` per exposure and parameter (rows of ``coverage.csv``), ``steps`` the
     photon steps of the same exposures (exposures x parameters), ``bread`` the photon part's covariance."""
     lines = [f"decompose: {len(fits)} exposures; the fits' error against the photon step of the same exposure",
-             "| parameter | slope | correlation | photon scatter / bread | remainder / bread | carried beyond the bread / bread "
-             "| corr(remainder, abs(photon)) | kurtosis: fits' z | photon | remainder |", "|---|---|---|---|---|---|---|---|---|---|"]
+             "| parameter | slope | correlation | photon scatter / bread | remainder / bread "
+             "| corr(remainder, abs(photon)) | kurtosis: fits' z | photon | remainder |", "|---|---|---|---|---|---|---|---|---|"]
     for j, name in enumerate(names):
         error = np.array([float(f[j]["value"]) - float(f[j]["truth"]) for f in fits])
         z = np.array([float(f[j]["z"]) for f in fits])
         photon, sd = steps[:, j], math.sqrt(bread[j, j])
         slope = float(np.polyfit(photon, error, 1)[0])
         remainder = error - slope * photon
-        beyond = math.sqrt(max(np.mean([float(f[j]["stderr"]) ** 2 for f in fits]) - bread[j, j], 0.0))
         lines.append(f"| {name} | {slope:.3f} | {np.corrcoef(photon, error)[0, 1]:.3f} | {np.std(photon, ddof=1) / sd:.3f} | "
-                     f"{np.std(remainder, ddof=1) / sd:.3f} | {beyond / sd:.3f} | "
+                     f"{np.std(remainder, ddof=1) / sd:.3f} | "
                      f"{np.corrcoef(remainder, np.abs(photon - photon.mean()))[0, 1]:+.2f} | {stats.kurtosis(z, fisher=False):.2f} | "
                      f"{stats.kurtosis(photon, fisher=False):.2f} | {stats.kurtosis(remainder, fisher=False):.2f} |")
     return "\n".join(lines)
