@@ -321,6 +321,36 @@ def test_a_reduced_pass_recovers_each_frames_attitude(small_pass):
     assert [r["target.attitude_x_deg"] for r in rows] == [result.values[f"target.attitude_x_deg@{k}"] for k in range(3)]
 
 
+def test_the_pixel_grids_feedback_makes_a_frames_models_again_for_its_own_and_the_shared_values_only(small_pass, monkeypatch):
+    """The pixel grid's changes of a pass with the blur shared and each frame's shift its own: over the feedback's
+    central differences each frame's fine models are made for its own and the shared value's differences (and once
+    again at the fixed point), not for every other frame's too, and each change is the one made afresh."""
+    from collections import Counter
+
+    from spacefit.fitting.pixel_grid import grid_feedback
+
+    obs = small_pass[0]
+    made = []
+    real = residuals.grid_error_models
+
+    def counted(observation, scene, x, k, *args):
+        models = real(observation, scene, x, k, *args)
+        return lambda y: (made.append(k), models(y))[1]
+
+    monkeypatch.setattr(residuals, "grid_error_models", counted)
+    free = ["parts.legs.kd", "image.blur_sigma_px", *[f"image.shift_x_px@{k}" for k in range(3)]]
+    s = problem.setup(obs, free, start={"parts.legs.kd": 0.5, "image.blur_sigma_px": 0.6}, render=sf.FitRender(spp=4))
+    x, columns = np.asarray(s.x0, dtype=float), [1, 2, 3, 4]
+    differences = s.problem.pixel_grid(x)
+    grid_feedback(differences, lambda d: np.full(len(x), d.sum()), x, columns, np.full(len(x), 0.2))
+    assert sorted(Counter(made).values()) == [5, 5, 6]  # blur +-, own +-, at x before and after the own (8 each made afresh)
+    h = np.zeros(len(x))
+    h[3] = 0.1
+    kept = differences(x + h)
+    afresh = s.problem.pixel_grid(x)(x + h)
+    assert all(np.array_equal(a, b) for a, b in zip(kept, afresh)) and np.any(kept[0] != 0)
+
+
 @pytest.fixture(scope="module")
 def client():
     from spacefit.executors import connect

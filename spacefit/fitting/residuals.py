@@ -17,7 +17,6 @@ from __future__ import annotations
 import dataclasses
 import functools
 import math
-from collections import OrderedDict
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -50,9 +49,6 @@ from spacefit.scene.parameters import scene_with_values
 INDEPENDENT_SEED_OFFSET = 1000
 # the pixel grid's renders at 4x the resolution take the fit's seed plus this, and that plus INDEPENDENT_SEED_OFFSET
 PIXEL_GRID_SEED_OFFSET = 500
-# the pixel grid's changes of an image kept per image (the values they were made at, most recent last): the
-# feedback's central differences in one of its own values and those at the fixed point
-KEPT_CHANGES = 3
 
 
 @dataclass
@@ -258,19 +254,16 @@ def build_problem(
                               (fine_a - fine_b) / math.sqrt(2.0)])
 
         # image k's changes read only its own values and the shared ones: the feedback's differences in another
-        # image's own value (grid_feedback) find it at the values it was last made at, not made again
+        # image's own value (grid_feedback) find it at the values it was last made at, and take those changes again
         owners = column_owners(free, blocks) or (-1,) * len(free.names)
         read = [np.flatnonzero([o in (-1, k) for o in owners]) for k in range(len(observations))]
-        kept: list[OrderedDict[bytes, np.ndarray]] = [OrderedDict() for _ in observations]
+        last: list[tuple[bytes, np.ndarray] | None] = [None] * len(observations)
 
         def image_changes(k: int, y: np.ndarray) -> np.ndarray:
-            key, last = np.asarray(y, dtype=np.float64)[read[k]].tobytes(), kept[k]
-            if key not in last:
-                last[key] = np.asarray(changes(k, *made[k](y)), dtype=float)
-                while len(last) > KEPT_CHANGES:
-                    last.popitem(last=False)
-            last.move_to_end(key)
-            return last[key]
+            key = np.asarray(y, dtype=np.float64)[read[k]].tobytes()
+            if last[k] is None or last[k][0] != key:
+                last[k] = (key, np.asarray(changes(k, *made[k](y)), dtype=float))
+            return last[k][1]
 
         def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             parts = [np.zeros((3, references[k].size)) if models is None else image_changes(k, y) for k, models in enumerate(made)]
