@@ -1,8 +1,10 @@
 """Where a pass fit's time and memory go: :mod:`bench_pass`'s fit of ``--frames`` frames in this process, with
-the wall time of its frames' Jacobian and primal renders, of its set-up, solve, covariance (``estimate``, its
-Jacobian renders included) and goodness of fit, the time JAX reports for tracing and XLA compilation, and the
-peak resident memory in each of those phases (sampled every 50 ms). Figures in docs/measurements/performance.md
-("A frame's own values: one product per kind, not per frame").
+the wall and CPU time of its frames' Jacobian and primal renders, of its set-up, solve, covariance (``estimate``, its
+Jacobian renders included; within it the second linearisation, the products of the sandwich, the pixel grid's 4x
+renders, its step's fixed point and its feedback, and the Gauss-Newton steps they take) and goodness of fit, the time
+JAX reports for tracing and XLA compilation, and the peak resident memory in each phase (sampled every 50 ms).
+Figures in docs/measurements/performance.md ("A frame's own values: one product per kind, not per frame", "A pass on
+every core").
 Run: ``.venv/bin/python experiments/profile_pass.py [--size PX] [--frames N]``.
 """
 
@@ -10,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import resource
 import subprocess
 import tempfile
 import threading
@@ -28,6 +31,15 @@ from studyio import machine
 import spacefit as sf
 import spacefit.fitting.frames as frames
 import spacefit.fitting.loop as loop
+import spacefit.fitting.pixel_grid as pixel_grid
+import spacefit.fitting.residuals as residuals
+import spacefit.fitting.uncertainty as uncertainty
+
+
+def cpu_s() -> float:
+    """This process's CPU time so far (all its threads), s."""
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
 
 
 class Profile:
@@ -36,6 +48,7 @@ class Profile:
     def __init__(self) -> None:
         self.phase = "start"
         self.walls: dict[str, float] = defaultdict(float)
+        self.cpus: dict[str, float] = defaultdict(float)
         self.calls: dict[str, int] = defaultdict(int)
         self.peaks: dict[str, float] = defaultdict(float)
         threading.Thread(target=self._sample, daemon=True).start()
@@ -55,12 +68,13 @@ class Profile:
     def timed(self, name: str, fn: Callable[..., Any], phase: bool = False) -> Callable[..., Any]:
         """``fn`` timed under ``name`` (and, with ``phase``, its memory counted as that phase's)."""
         def wrapped(*args: Any, **kwargs: Any) -> Any:
-            before, t0 = self.phase, time.perf_counter()
+            before, t0, c0 = self.phase, time.perf_counter(), cpu_s()
             self.phase = name if phase else before
             try:
                 return fn(*args, **kwargs)
             finally:
                 self.walls[name] += time.perf_counter() - t0
+                self.cpus[name] += cpu_s() - c0
                 self.calls[name] += 1
                 self.phase = before
         return wrapped
@@ -81,18 +95,27 @@ def main() -> None:
     loop._solve = profile.timed("solve (covariance and goodness included)", loop._solve, phase=True)
     loop.estimate = profile.timed("covariance", loop.estimate, phase=True)
     loop.judged_goodness = profile.timed("goodness of fit", loop.judged_goodness, phase=True)
+    uncertainty.linearise = profile.timed("covariance: linearisations", uncertainty.linearise, phase=True)
+    uncertainty.Linearisation.columns = profile.timed("covariance: sandwich products", uncertainty.Linearisation.columns, phase=True)
+    uncertainty.grid_step = profile.timed("covariance: pixel grid's fixed point", uncertainty.grid_step, phase=True)
+    uncertainty.grid_feedback = profile.timed("covariance: pixel grid's feedback", uncertainty.grid_feedback, phase=True)
+    uncertainty.Linearisation.step = profile.timed("covariance: Gauss-Newton steps", uncertainty.Linearisation.step)
+    residuals.grid_error_models = profile.timed("covariance: pixel grid's 4x renders", residuals.grid_error_models, phase=True)
+    pixel_grid.Renderer.render = profile.timed("pixel grid's renders alone", pixel_grid.Renderer.render)
     rng = np.random.default_rng(3)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "pass"
         errors = [{"target.attitude_x_deg": float(a), "target.attitude_z_deg": float(b)} for a, b in rng.uniform(-0.3, 0.3, (args.frames, 2))]
         sf.simulate_pass(base(args.size), sf.arc_pass(args.frames), folder, errors=errors, sensor=SENSOR, spp=SIMULATE_SPP)
         profile.phase = "fit"
-        t0, c0 = time.perf_counter(), time.process_time()
+        t0, c0 = time.perf_counter(), cpu_s()
         fit_frames(folder, args.size, args.frames)
-        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-    print(f"fit: {wall:.1f} s wall, {cpu:.1f} s CPU; load {os.getloadavg()[0]:.1f}")
+        wall, cpu = time.perf_counter() - t0, cpu_s() - c0
+    print(f"fit: {wall:.1f} s wall, {cpu:.1f} s CPU, peak {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB; "
+          f"load {os.getloadavg()[0]:.1f}")
     for name in sorted(profile.walls, key=lambda k: -profile.walls[k]):
-        print(f"  {name}: {profile.walls[name]:.1f} s wall in {profile.calls[name]} calls")
+        cpu_part = f", {profile.cpus[name]:.1f} s CPU" if name in profile.cpus else ""  # JAX's events: wall only
+        print(f"  {name}: {profile.walls[name]:.1f} s wall{cpu_part} in {profile.calls[name]} calls")
     for name, peak in profile.peaks.items():
         print(f"  peak memory during {name}: {peak:.0f} MiB")
 

@@ -153,9 +153,9 @@ def test_a_frames_pose_jacobian_column_matches_central_differences():
     assert np.linalg.norm(col) == pytest.approx(np.linalg.norm(fd), rel=0.1)
 
 
-def tiny_frames(n: int, spp: int = 2) -> list[FrameSpec]:
-    """n frames of the arc at 12 x 12 px, each frame's attitude about x free."""
-    base = sf.load_scene("spacefit/synthetic/panels.toml", {"render.resolution": [12, 12], "camera.pixel_pitch_mm": 200.0})
+def tiny_frames(n: int, spp: int = 2, size: int = 12) -> list[FrameSpec]:
+    """n frames of the arc at ``size`` x ``size`` px (12: tiny), each frame's attitude about x free."""
+    base = sf.load_scene("spacefit/synthetic/panels.toml", {"render.resolution": [size, size], "camera.pixel_pitch_mm": 2400.0 / size})
     scenes = sf.Pass.from_columns({"file": [f"f{k}.exr" for k in range(n)], "time": list(range(n)), **columns_of(sf.arc_pass(n))}).scenes(base)
     return [FrameSpec(s, ("parts.legs.kd", "target.attitude_x_deg"), (0.0, 0.5), spp, spp, "prb", shared_view=True) for s in scenes]
 
@@ -183,6 +183,40 @@ def test_the_frames_of_a_pass_share_one_loaded_scene_and_render_as_on_their_own(
     assert share_views([plain, plain]) == [plain, plain]  # observations of one scene keep their own, cropped
     for spec in specs[::-1]:
         assert np.array_equal(frame_part_image(spec, spec.key, shared).ids, frame_part_image(spec, spec.key, Loaded()).ids)
+
+
+def test_a_pass_s_renders_trace_on_every_thread_and_equal_the_one_thread_renders_bit_for_bit(monkeypatch):
+    """A batch of frames' images and Jacobians (a forward-mode and a finite-difference column) traces its samples on
+    all of Dr.Jit's threads, and equals bit for bit the same batch with every kernel on one thread."""
+    from spacefit.rendering import frozen
+    from spacefit.rendering.backend import dr
+
+    seen = []  # the threads each pass's samples were traced on (its first calls run in Python: unfrozen, recorded)
+
+    def counted(samples):
+        def traced(*args):
+            seen.append(dr.thread_count())
+            return samples(*args)
+        return traced
+
+    for name in ("camera_samples", "derivative_samples"):
+        monkeypatch.setattr(frozen, name, counted(getattr(frozen, name)))
+    specs, x = tiny_frames(2, spp=16, size=48), [np.array([0.5, 0.1])] * 2  # 36864 samples a pass: several blocks of work
+    threads = dr.thread_count()
+    dr.sync_thread()
+    dr.set_thread_count(max(threads, 2))
+    try:
+        spread = run_frames(InProcess(), frame_jacobian, specs, x, [3, 3], [4, 4])
+        dr.sync_thread()
+        dr.set_thread_count(1)
+        whole = run_frames(InProcess(), frame_jacobian, specs, x, [3, 3], [4, 4])
+    finally:
+        dr.sync_thread()
+        dr.set_thread_count(threads)
+    assert len(seen) > 4 and min(seen[:len(seen) // 2]) >= 2 and max(seen[len(seen) // 2:]) == 1
+    for (image, J), (image_one, J_one) in zip(spread, whole):
+        assert np.all(np.any(J != 0, axis=(0, 1, 2))) and image.max() > 0
+        assert np.array_equal(image, image_one) and np.array_equal(J, J_one)
 
 
 def test_a_caller_s_own_mitsuba_variant_changes_no_frame_and_is_kept():
@@ -285,6 +319,36 @@ def test_a_reduced_pass_recovers_each_frames_attitude(small_pass):
     rows = sf.frame_table(result, sf.Pass.read(small_pass[4] / "frames.csv"))
     assert [r["time_s"] for r in rows] == [0.0, 10.0, 20.0]
     assert [r["target.attitude_x_deg"] for r in rows] == [result.values[f"target.attitude_x_deg@{k}"] for k in range(3)]
+
+
+def test_the_pixel_grids_feedback_makes_a_frames_models_again_for_its_own_and_the_shared_values_only(small_pass, monkeypatch):
+    """The pixel grid's changes of a pass with the blur shared and each frame's shift its own: over the feedback's
+    central differences each frame's fine models are made for its own and the shared value's differences (and once
+    again at the fixed point), not for every other frame's too, and each change is the one made afresh."""
+    from collections import Counter
+
+    from spacefit.fitting.pixel_grid import grid_feedback
+
+    obs = small_pass[0]
+    made = []
+    real = residuals.grid_error_models
+
+    def counted(observation, scene, x, k, *args):
+        models = real(observation, scene, x, k, *args)
+        return lambda y: (made.append(k), models(y))[1]
+
+    monkeypatch.setattr(residuals, "grid_error_models", counted)
+    free = ["parts.legs.kd", "image.blur_sigma_px", *[f"image.shift_x_px@{k}" for k in range(3)]]
+    s = problem.setup(obs, free, start={"parts.legs.kd": 0.5, "image.blur_sigma_px": 0.6}, render=sf.FitRender(spp=4))
+    x, columns = np.asarray(s.x0, dtype=float), [1, 2, 3, 4]
+    differences = s.problem.pixel_grid(x)
+    grid_feedback(differences, lambda d: np.full(len(x), d.sum()), x, columns, np.full(len(x), 0.2))
+    assert sorted(Counter(made).values()) == [5, 5, 6]  # blur +-, own +-, at x before and after the own (8 each made afresh)
+    h = np.zeros(len(x))
+    h[3] = 0.1
+    kept = differences(x + h)
+    afresh = s.problem.pixel_grid(x)(x + h)
+    assert all(np.array_equal(a, b) for a, b in zip(kept, afresh)) and np.any(kept[0] != 0)
 
 
 @pytest.fixture(scope="module")

@@ -286,6 +286,9 @@ MUTANTS = (
     Mutant("pixel-grid-feedback-one-sided", "spacefit/fitting/pixel_grid.py", "D[:, j] = step(differences(at + h)[0] - differences(at - h)[0]) / (2.0 * h[j])",
            "D[:, j] = step(differences(at + h)[0] - differences(at - h)[0]) / h[j]",
            ("tests/test_pixel_grid.py::test_the_fixed_point_moves_with_the_fits_estimate_by_the_inverse_of_one_less_the_steps_feedback",)),
+    # ... an image's changes made again where a value it reads moves: its own and the shared ones
+    Mutant("pixel-grid-changes-kept-past-a-shared-value", "spacefit/fitting/residuals.py", "o in (-1, k) for o in owners", "o == k for o in owners",
+           ("tests/test_pass.py::test_the_pixel_grids_feedback_makes_a_frames_models_again_for_its_own_and_the_shared_values_only",)),
     Mutant("render-noise-spread-without-sensor-psf", "spacefit/fitting/residuals.py",
            "blur = 0.0 if obs.sensor is None else psf_rms_px(", "blur = 0.0 if True else psf_rms_px(", (PLUMBING,)),
     Mutant("light-curve-first-seed-only", "spacefit/studies/lightcurve.py", "mean, se = mean_and_error(samples) if",

@@ -35,7 +35,6 @@ from spacefit.executors import Cluster, Executor, executor_of
 from spacefit.precision import float64
 from spacefit.rendering.bridge import outside_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
-from spacefit.rendering.renderer import render_threads
 from spacefit.rendering.parts import PartImage
 from spacefit.rendering.values import View, scene_view, view_values_fn
 from spacefit.scene.assembly import Assembly, assemble
@@ -275,20 +274,14 @@ def frame_executor(cluster: Cluster | None) -> Executor:
 
 
 def run_frames(executor: Executor, fn: Callable[..., Any], specs: Sequence[FrameSpec], *per_frame: Sequence[Any]) -> list[Any]:
-    """``[fn(spec_k, key_k, *args_k) for each frame k]`` in frame order on ``executor``. Deterministic
-    scenes render on one thread anyway: in this process the batch sets that once (resizing Dr.Jit's
-    pool for each render cost 40 % of a step), on dask once per task."""
+    """``[fn(spec_k, key_k, *args_k) for each frame k]`` in frame order on ``executor``. Each render traces
+    its samples on all of Dr.Jit's threads and, when deterministic, splats them on one, in their order
+    (:meth:`~spacefit.rendering.renderer.Renderer.radiance`, :meth:`~spacefit.rendering.bridge.DrJitScene.forward`):
+    a frame's image and Jacobian are those of a render wholly on one thread, bit for bit."""
     keys = [spec.key for spec in specs]
     if isinstance(executor, InProcess):
-        with render_threads(all(spec.scene.render.deterministic for spec in specs)):
-            return executor.map(functools.partial(fn, loaded=executor.loaded), keys, specs, keys, *per_frame)
-    return executor.map(functools.partial(_threaded, fn), keys, specs, keys, *per_frame)
-
-
-def _threaded(fn: Callable[..., Any], spec: FrameSpec, key: str, *args: Any) -> Any:
-    """``fn`` for one frame on a dask worker, with the frame's render threads."""
-    with render_threads(spec.scene.render.deterministic):
-        return fn(spec, key, *args)
+        return executor.map(functools.partial(fn, loaded=executor.loaded), keys, specs, keys, *per_frame)
+    return executor.map(fn, keys, specs, keys, *per_frame)
 
 
 def render_runs(shapes: Sequence[tuple[int, int, int]], indices: Sequence[np.ndarray]) -> list[range]:

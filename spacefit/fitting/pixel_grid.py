@@ -110,7 +110,7 @@ from spacefit.fitting.observations.image import Observation, in_unit_of
 from spacefit.formation import fourier_filter, psf_transfer
 from spacefit.geometry.frames import Intrinsics
 from spacefit.psf import psf_reach_px
-from spacefit.rendering.renderer import render
+from spacefit.rendering.renderer import Renderer
 from spacefit.scene.schema import Scene
 from spacefit.sensor import Sensor
 
@@ -220,7 +220,9 @@ def grid_error_models(obs: Observation, scene: Scene, x: Float[np.ndarray, " n"]
     intrinsics = Intrinsics.from_scene(scene)
     fine_units = in_unit_of(dataclasses.replace(obs, sensor=without_psf(obs.sensor)), channels, intrinsics)
     # kept as rendered (float32) while every image's are held, widened where used: 3 MiB less a 128 x 128 px image's render
-    fine = [np.asarray(render(supersampled(scene, SUPERSAMPLE).with_values({"render.seed": seed})), dtype=np.float32) for seed in seeds]
+    # one loaded scene for the seeds' renders (each load costs a scene's set-up, and Mitsuba keeps some of its memory: mitsuba3#1890)
+    renderer = Renderer(supersampled(scene, SUPERSAMPLE))
+    fine = [np.asarray(renderer.render(seed=seed), dtype=np.float32) for seed in seeds]
     moves = [nuisance_index(names, n, k) for n in MOVES]
     optics = {f: fine_optics(obs.sensor, intrinsics, f, channels) for f in (SUPERSAMPLE, COARSER)}
 

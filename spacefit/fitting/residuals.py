@@ -253,9 +253,20 @@ def build_problem(
             return jnp.stack([0.5 * (fine_a + fine_b), 0.5 * (residuals[k](coarser) - own + residuals[k](coarser_b) - own_b),
                               (fine_a - fine_b) / math.sqrt(2.0)])
 
+        # image k's changes read only its own values and the shared ones: the feedback's differences in another
+        # image's own value (grid_feedback) find it at the values it was last made at, and take those changes again
+        owners = column_owners(free, blocks) or (-1,) * len(free.names)
+        read = [np.flatnonzero([o in (-1, k) for o in owners]) for k in range(len(observations))]
+        last: list[tuple[bytes, np.ndarray] | None] = [None] * len(observations)
+
+        def image_changes(k: int, y: np.ndarray) -> np.ndarray:
+            key = np.asarray(y, dtype=np.float64)[read[k]].tobytes()
+            if last[k] is None or last[k][0] != key:
+                last[k] = (key, np.asarray(changes(k, *made[k](y)), dtype=float))
+            return last[k][1]
+
         def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            parts = [np.zeros((3, references[k].size)) if models is None else np.asarray(changes(k, *models(y)), dtype=float)
-                     for k, models in enumerate(made)]
+            parts = [np.zeros((3, references[k].size)) if models is None else image_changes(k, y) for k, models in enumerate(made)]
             return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
 
         return differences
