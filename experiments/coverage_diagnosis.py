@@ -48,7 +48,6 @@ from __future__ import annotations
 import argparse
 import math
 import os
-import subprocess
 from collections.abc import Callable
 from pathlib import Path
 from unittest import mock
@@ -57,7 +56,7 @@ import jax.numpy as jnp
 import numpy as np
 from scipy import stats
 from coverage import NOISE_LEVELS, NUISANCE_TRUTH, START_FACTOR, case_at, read_rows, sensor_for, summarise, table, truth_image
-from studyio import machine
+from studyio import commit, machine
 
 import spacefit as sf
 import spacefit.fitting.loop as fit_loop
@@ -78,8 +77,7 @@ def main() -> None:
     parser.add_argument("--rows", type=Path, nargs="+", metavar="DIR", help="decompose: these runs' coverage.csv (each seed once)")
     args = parser.parse_args()
     count = args.count or (400 if args.source == "photon" else 12)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    print(f"{machine()}, load {os.getloadavg()[0]:.1f}, commit {commit}", flush=True)
+    print(f"{machine()}, load {os.getloadavg()[0]:.1f}, commit {commit()}", flush=True)
     case = case_at(48, 32, "box")
     truth = truth_image(case, 4096, True, 4)
     scene = case.scene()

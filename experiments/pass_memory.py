@@ -19,6 +19,7 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+from studyio import commit
 
 import spacefit as sf
 
@@ -43,8 +44,7 @@ def fit_peak(folder: Path, size: int, n: int) -> None:
 def main() -> None:
     size = int(sys.argv[1]) if len(sys.argv) > 1 else 64
     counts = [int(a) for a in sys.argv[2:]] or [2, 4, 8, 16]
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    print(f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, commit {commit}, {platform.processor() or platform.machine()}, "
+    print(f"{datetime.datetime.now(datetime.timezone.utc):%Y-%m-%d %H:%M} UTC, commit {commit()}, {platform.processor() or platform.machine()}, "
           f"{os.cpu_count()} CPUs, load {os.getloadavg()[0]:.1f}; {size} x {size} px, {FIT_SPP} spp, {FIT_STEPS} steps", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "pass"

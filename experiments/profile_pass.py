@@ -13,7 +13,6 @@ from __future__ import annotations
 import argparse
 import os
 import resource
-import subprocess
 import tempfile
 import threading
 import time
@@ -26,7 +25,7 @@ import jax
 import numpy as np
 import psutil
 from bench_pass import SENSOR, SIMULATE_SPP, base, fit_frames
-from studyio import machine
+from studyio import commit, machine
 
 import spacefit as sf
 import spacefit.fitting.frames as frames
@@ -85,8 +84,7 @@ def main() -> None:
     p.add_argument("--size", type=int, default=64, help="frame width and height, px")
     p.add_argument("--frames", type=int, default=12, help="frames fitted")
     args = p.parse_args()
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    print(f"machine: {machine()}; commit {commit}; {args.size} x {args.size} px, {args.frames} frames; load {os.getloadavg()[0]:.1f}",
+    print(f"machine: {machine()}; commit {commit()}; {args.size} x {args.size} px, {args.frames} frames; load {os.getloadavg()[0]:.1f}",
           flush=True)
     profile = Profile()
     frames.frame_jacobian = profile.timed("frames' Jacobian renders", frames.frame_jacobian)

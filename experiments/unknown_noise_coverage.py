@@ -19,13 +19,12 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
-from studyio import machine
+from studyio import commit, machine
 
 import spacefit as sf
 
@@ -39,8 +38,7 @@ def main() -> None:
     parser.add_argument("--first", type=int, default=0, help="the first realisation's index")
     parser.add_argument("--out", type=Path, default=None, help="JSON of every realisation, written as they come")
     args = parser.parse_args()
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True).stdout.strip()
-    print(f"{machine()}, load {os.getloadavg()[0]:.1f}, commit {commit}", flush=True)
+    print(f"{machine()}, load {os.getloadavg()[0]:.1f}, commit {commit()}", flush=True)
     case = sf.load_case("panels")
     free = [*case.free, "target.attitude_z_deg@0", "target.attitude_z_deg@1"]
     scenes = two_observations(64)
