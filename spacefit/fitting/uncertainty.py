@@ -332,12 +332,15 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
         padded = lambda y: tuple(np.concatenate([d, padding]) for d in differences(y))  # noqa: E731
         stderr = np.sqrt(np.diag(cov))
         delta, remainder, noise = grid_step(padded, lin.step, x, stderr)
-        # the step's render noise: the mean of two renders' changes, through the sandwich as the fit's own render noise
-        bread = _pseudo_inverse(lin.information)[0]
-        cov = cov + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread
         # the step moves with the image nuisances it is taken at: the fixed point's estimate moves by (I - D)^-1 per the fit's
         feedback = np.linalg.inv(np.eye(len(x)) - grid_feedback(padded, lin.step, x + delta,
                                                                 [i for i, n in enumerate(s.solver_params.names) if is_image(n)], stderr))
+        # the models at 4x (each image's renders and compiled programs: 25 MiB a 128 x 128 px frame) dropped before the
+        # products below, whose intermediates would come on top of them
+        del differences, padded
+        # the step's render noise: the mean of two renders' changes, through the sandwich as the fit's own render noise
+        bread = _pseudo_inverse(lin.information)[0]
+        cov = cov + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread
         cov = feedback @ cov @ feedback.T + np.outer(remainder, remainder)
         if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + delta)):
             x = x + delta
