@@ -32,11 +32,10 @@ import numpy as np
 from jaxtyping import Array, PyTree
 
 # Columns applied at once: at most this many, and at most CHUNK_ELEMENTS values of rows-long vectors
-# (2^21 float64: 16 MiB) at a time, one column at the least. Each op of a product holds its own
-# rows x chunk intermediates (the covariance's run op by op, some 8 at once): with 2^24 (128 MiB) a
-# 48-frame pass of 128 x 128 px applied 5 columns at once, 94 MiB a vector.
+# (2^24 float64: 128 MiB) at a time. Fewer (2^21: a 48-frame pass of 128 x 128 px a column at a time, 19 MiB a
+# vector) did not lower that pass's peak (docs/measurements/performance.md, "A pass's memory: programs and the allocator").
 MAX_CHUNK = 8
-CHUNK_ELEMENTS = 1 << 21
+CHUNK_ELEMENTS = 1 << 24
 
 
 def chunk_for(rows: int) -> int:
