@@ -54,7 +54,7 @@ def analyse_steps() -> None:
     import equinox as eqx
     import jax
 
-    from spacefit.fitting import solvers
+    from spacefit.fitting import drivers
 
     class Proxy:
         def __getattr__(self, name):  # type: ignore[no-untyped-def]
@@ -85,7 +85,7 @@ def analyse_steps() -> None:
                 return jitted(*args)
             return call
 
-    solvers.eqx = Proxy()
+    drivers.eqx = Proxy()
 
 
 def phases(sampler: Sampler) -> None:

@@ -18,7 +18,7 @@ from spacefit.formation import expected_dn, noise_variance_dn
 from spacefit.fitting.goodness import MAX_JUDGED_RENDER_NOISE, REFERENCE_RENDER_NOISE, RESIDUALS, MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
 from spacefit.fitting.goodness import _neighbours
 from spacefit.fitting.judging import _mean_and_noise, affordable, judged_goodness, per_observation
-from spacefit.fitting.loop import verdict
+from spacefit.fitting.status import verdict
 from spacefit.fitting.problem import setup
 from spacefit.fitting.stopping import REJECTED_PATIENCE
 from spacefit.scene.sections import MAX_SPP

@@ -302,14 +302,14 @@ MUTANTS = (
            "point_checksum([v[local] for v, _ in data], index) == stored[local]", "True", ("tests/test_store_integrity.py",)),
     Mutant("sweep-marks-done-after-a-mesh-edit", "spacefit/studies/sweep.py",
            "if watch is not None and (edited := watch.check()):", "if False:", ("tests/test_store_integrity.py",)),
-    # the fit's verdicts (spacefit/fitting/goodness.py, loop.py)
+    # the fit's verdicts (spacefit/fitting/goodness.py, status.py, loop.py)
     Mutant("misfit-threshold-flipped", "spacefit/fitting/goodness.py", "bool(chi2_dof > limit)", "bool(chi2_dof < limit)",
            ("tests/test_goodness.py",)),
     Mutant("no-progress-start-corrected", "spacefit/fitting/loop.py", "estimate(s, x, correct=steps.moved)", "estimate(s, x)",
            ("tests/test_fit_cli.py",)),
     Mutant("rounding-decrease-accepted", "spacefit/fitting/stopping.py", "loss < below)", "loss < self.best)",
            ("tests/test_stopping.py",)),
-    Mutant("no-progress-check-removed", "spacefit/fitting/loop.py", "    if not moved:\n        return Status.NO_PROGRESS\n", "",
+    Mutant("no-progress-check-removed", "spacefit/fitting/status.py", "    if not moved:\n        return Status.NO_PROGRESS\n", "",
            ("tests/test_goodness.py",)),
     Mutant("dof-miscounted", "spacefit/fitting/goodness.py", "dof = max(values - n_free, 1)", "dof = max(values, 1)",
            ("tests/test_goodness.py",)),

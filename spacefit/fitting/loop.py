@@ -33,8 +33,9 @@ from spacefit.fitting.residuals import column_owners
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.resume import Resume
 from spacefit.fitting.outside import DESCENT
-from spacefit.fitting.solvers import (Outcome, RenderedFirst, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name,
-                                      with_owners)
+from spacefit.fitting.drivers import Outcome, RenderedFirst, Step, drive
+from spacefit.fitting.solvers import Solver, is_least_squares, make_solver, solver_name, with_owners
+from spacefit.fitting.status import Status, verdict
 from spacefit.fitting.stopping import REJECTED_PATIENCE, REJECTED_RTOL, NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
@@ -364,24 +365,6 @@ class _Steps:
 def _number(value: float | None) -> float:
     """A number of a history read back from JSON, where NaN is null."""
     return math.nan if value is None else float(value)
-
-
-def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool, unjudged: bool = False) -> Status:
-    """The fit's status from the solver's: a solve that ended without failing is
-    :attr:`Status.NO_PROGRESS` if no step lowered the loss, else :attr:`Status.AT_BOUND` if a
-    parameter ended at a bound, else :attr:`Status.UNJUDGED` if its residuals could not be judged
-    (``unjudged``), else :attr:`Status.MISFIT` if the residuals exceed the noise."""
-    if status not in (Status.CONVERGED, Status.NOISE_FLOOR, Status.NO_BETTER_POINT, Status.MAX_STEPS):
-        return status
-    if not moved:
-        return Status.NO_PROGRESS
-    if at_bound:
-        return Status.AT_BOUND
-    if unjudged:
-        return Status.UNJUDGED
-    if misfit:
-        return Status.MISFIT
-    return status
 
 
 def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -> FitResult:
