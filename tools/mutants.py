@@ -302,10 +302,10 @@ MUTANTS = (
            "point_checksum([v[local] for v, _ in data], index) == stored[local]", "True", ("tests/test_store_integrity.py",)),
     Mutant("sweep-marks-done-after-a-mesh-edit", "spacefit/studies/sweep.py",
            "if watch is not None and (edited := watch.check()):", "if False:", ("tests/test_store_integrity.py",)),
-    # the fit's verdicts (spacefit/fitting/goodness.py, status.py, loop.py)
+    # the fit's verdicts (spacefit/fitting/goodness.py, status.py, conclusion.py)
     Mutant("misfit-threshold-flipped", "spacefit/fitting/goodness.py", "bool(chi2_dof > limit)", "bool(chi2_dof < limit)",
            ("tests/test_goodness.py",)),
-    Mutant("no-progress-start-corrected", "spacefit/fitting/loop.py", "estimate(s, x, correct=steps.moved)", "estimate(s, x)",
+    Mutant("no-progress-start-corrected", "spacefit/fitting/conclusion.py", "estimate(s, x, correct=steps.moved)", "estimate(s, x)",
            ("tests/test_fit_cli.py",)),
     Mutant("rounding-decrease-accepted", "spacefit/fitting/stopping.py", "loss < below)", "loss < self.best)",
            ("tests/test_stopping.py",)),
