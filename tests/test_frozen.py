@@ -11,7 +11,9 @@ import pytest
 from spacefit.rendering.backend import dr, mi, variant_scope
 from spacefit.rendering.derivatives import render_chain
 from spacefit.rendering.frozen import FrozenPasses
-from spacefit.rendering.renderer import errors_only, render_threads, to_value
+from spacefit.rendering.drjit_values import to_value
+from spacefit.rendering.logs import errors_only
+from spacefit.rendering.sample_passes import render_threads
 from spacefit.scene.parameters import scene_value
 from spacefit.scene.toml import load_scene
 

@@ -25,7 +25,7 @@ What a pass's samples are a function of:
 Only the samples are frozen: each sample's value is computed on all of Dr.Jit's threads, the same
 whichever thread computes it, and its splatting into the film, where neighbours' samples add into
 the same pixels, is left to the caller, on one thread when the render is deterministic
-(:func:`~spacefit.rendering.renderer.render_threads`: Dr.Jit does not record a change of its
+(:func:`~spacefit.rendering.sample_passes.render_threads`: Dr.Jit does not record a change of its
 thread count, so a frozen splat could not be made to run on one).
 """
 
