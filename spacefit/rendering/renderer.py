@@ -129,8 +129,8 @@ class Renderer:
     @in_variant
     def set_params(self, values: Mapping[str, np.ndarray], grad: Collection[str] = ()) -> None:
         """Set Mitsuba scene values by traverse key (``'panels.bsdf.brdf_0.alpha_u.value'``,
-        ``'body.vertex_positions'``; a frame by :func:`~spacefit.rendering.drjit_values.to_value`'s numbers), those named in ``grad`` attached
-        to Dr.Jit's AD graph (those :func:`~spacefit.rendering.drjit_values.differentiable`), the others detached, in the scene's variant
+        ``'body.vertex_positions'``; a frame by :func:`to_value`'s numbers), those named in ``grad`` attached
+        to Dr.Jit's AD graph (those :func:`differentiable`), the others detached, in the scene's variant
         whatever variant the caller has set. Setting vertex positions rebuilds the ray-tracing
         acceleration structure and counts up :attr:`geometry`."""
         for key, value in values.items():
