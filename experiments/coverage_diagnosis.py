@@ -59,7 +59,7 @@ from coverage import NOISE_LEVELS, NUISANCE_TRUTH, START_FACTOR, case_at, read_r
 from studyio import commit, machine
 
 import spacefit as sf
-import spacefit.fitting.loop as fit_loop
+import spacefit.fitting.conclusion as conclusion
 from spacefit.fitting.observations.image import check_reference, image_residual
 from spacefit.fitting.problem import setup
 from spacefit.fitting.uncertainty import _pseudo_inverse, covariance, estimate, linearise
@@ -175,7 +175,7 @@ def fit_root(case: sf.Case, sensor: sf.Sensor, truths: dict[str, float], exposur
     ``c1`` (the one the fit took), ``c2`` and ``c3`` (at the point each previous one leads to), over the
     fit's standard errors, printed per parameter."""
     caught: dict[str, object] = {}
-    shipped = fit_loop.estimate
+    shipped = conclusion.estimate
 
     def spy(s: object, x: np.ndarray, correct: bool = True) -> tuple:
         caught["s"], caught["x"] = s, np.asarray(x)
@@ -183,7 +183,7 @@ def fit_root(case: sf.Case, sensor: sf.Sensor, truths: dict[str, float], exposur
 
     start = {n: START_FACTOR * v for n, v in case.truth.items()}
     for seed in seeds:
-        with mock.patch.object(fit_loop, "estimate", spy):
+        with mock.patch.object(conclusion, "estimate", spy):
             result = sf.fit(sf.Observation(case.scene(), exposure(seed), sensor=sensor), list(truths), start=start,
                             render=sf.FitRender(seed=2 * seed + 101, seed_grad=2 * seed + 102))
         s, x = caught["s"], caught["x"]

@@ -19,7 +19,7 @@ from spacefit.fitting.problem import images_memory
 from spacefit.precision import float64
 from spacefit.rendering import memory
 from spacefit.rendering.memory import describe_fit, fit_memory
-from spacefit.rendering.renderer import kernel_log
+from spacefit.rendering.logs import kernel_log
 from spacefit.scene.assembly import assemble
 
 # The panels case at 32 x 32 px (75 mm pixels: the 128 px field of view).

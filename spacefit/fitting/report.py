@@ -19,7 +19,7 @@
   ``residuals.png``, its picture (:func:`~spacefit.fitting.plots.plot_residuals`).
 
 :func:`read_fit` reads the folder back into its :class:`FitResult` (without
-the renders). The summary's (:func:`format_result`) first line is the verdict, :class:`~spacefit.fitting.solvers.Status`;
+the renders). The summary's (:func:`format_result`) first line is the verdict, :class:`~spacefit.fitting.status.Status`;
 the second the goodness of fit (:mod:`spacefit.fitting.goodness`).
 """
 
@@ -39,7 +39,7 @@ from spacefit.errors import InputTypeError, check_flag, check_name_list, check_p
 from spacefit.fitting.observations.image import Observation
 from spacefit.fitting.observations.passes import PassObservation
 from spacefit.fitting.result import FitResult
-from spacefit.fitting.solvers import Status
+from spacefit.fitting.status import Status
 from spacefit.fitting.pass_report import frame_panels, frame_table, plot_frames, write_frame_table
 from spacefit.fitting.plots import plot_comparison, plot_convergence, plot_residuals
 from spacefit.locks import holding_lock

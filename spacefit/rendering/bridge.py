@@ -38,7 +38,10 @@ from jaxtyping import Array, Float
 
 from spacefit.rendering.backend import dr, in_variant, mi, on_drjit_thread
 from spacefit.rendering.frozen import splat
-from spacefit.rendering.renderer import Renderer, differentiable, errors_only, pass_seed, render_threads, to_value
+from spacefit.rendering.drjit_values import differentiable, to_value
+from spacefit.rendering.logs import errors_only
+from spacefit.rendering.renderer import Renderer
+from spacefit.rendering.sample_passes import pass_seed, render_threads
 from spacefit.scene.sampling import split_sample_count
 
 SceneValues = Mapping[str, Array]
