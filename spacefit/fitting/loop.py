@@ -38,7 +38,7 @@ from spacefit.fitting.solvers import (Outcome, RenderedFirst, Solver, Status, St
 from spacefit.fitting.stopping import REJECTED_PATIENCE, REJECTED_RTOL, NoiseFloor, loss_noise
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
-from spacefit.precision import float64
+from spacefit.precision import float64, on_device
 from spacefit.progress import ProgressCallback
 from spacefit.scene.schema import Scene
 from spacefit.scene.names import Name
@@ -220,7 +220,7 @@ def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progr
 
     # a model without Monte Carlo noise (closed-form value observations only) has no noise floor to stop at
     steps = _Steps(s, stop == "noise" and is_least_squares(engine) and problem.rendered, max_steps, progress, resume.on_step)
-    u = jnp.asarray(fp.to_unconstrained(jnp.asarray(s.x0)))
+    u = jnp.asarray(fp.to_unconstrained(on_device(s.x0, np.float64)))
     if resume.ended is not None:
         return _result(s, steps.ended(resume.ended, u), steps, solver_name(engine), loss)
     if resume.history:

@@ -1,12 +1,12 @@
 """Modules a fit needs only at its end, imported on a thread of their own while it solves.
 
-A fit's report (:mod:`spacefit.fitting.report`) draws its figures with matplotlib: its modules take a fit
-process 0.3 s of CPU to import (docs/measurements/performance.md), and nothing of the solve needs them. The
-solve leaves a core idle most of the time (its renders run on one thread, JAX's programs on one, and the
-process's Python waits on them without the interpreter's lock), so :func:`preload` imports them meanwhile,
-and the report waits for them (``.result()``) only where it would have imported them. Only modules of that
-kind go here: what the solve itself imports (JAX's, Mitsuba's, the files' readers) shares modules with them
-and is imported first, before the thread starts.
+A fit's report (:mod:`spacefit.fitting.report`) draws its figures with matplotlib: its modules cost the main
+thread of the 8-parameter observation fit's process 0.35 s of CPU (load 12; docs/measurements/performance.md),
+and nothing of the solve needs them. The solve's main thread mostly waits, without the interpreter's lock, on
+the Dr.Jit thread's renders and XLA's programs, so :func:`preload` imports them meanwhile, and the report waits
+for them (``.result()``) only where it would have imported them. Only modules of that kind go here: what the
+solve imports (JAX's, Mitsuba's, the files' readers) shares modules with them and is imported before the thread
+starts, so that no two threads import one module's dependencies in opposite orders.
 """
 
 from __future__ import annotations
