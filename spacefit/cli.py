@@ -260,7 +260,7 @@ def _sensor_values(items: Sequence[str]) -> dict[str, object]:
 def _fit(args: argparse.Namespace) -> int:
     """Run ``spacefit fit``; exit code 0 when the fit succeeded, else the verdict's (:func:`exit_code`)."""
     # deferred: the fitting stack imports JAX and optimistix (1.5 s), which render never needs
-    _load("spacefit.fitting.loop", "spacefit.fitting.observation_files", "spacefit.fitting.problem")  # the report's: preloaded by the fit
+    _load("spacefit.fitting.loop", "spacefit.fitting.observation_files", "spacefit.fitting.problem", "spacefit.fitting.report")
     from spacefit.fitting.loop import FitOptions  # here: JAX and optimistix, which render never needs
     from spacefit.fitting.observation_files import ObservationFiles
     from spacefit.fitting.problem import FitRender
@@ -297,7 +297,7 @@ def _fit(args: argparse.Namespace) -> int:
 def _fit_light_curve(args: argparse.Namespace) -> int:
     """Run ``spacefit fit-light-curve``; exit code 0 when the fit succeeded, else the verdict's (:func:`exit_code`)."""
     # deferred: the fitting stack imports JAX and optimistix (1.5 s), which render never needs
-    _load("spacefit.fitting.loop", "spacefit.studies.lightcurve_files")  # the report's: preloaded by the fit
+    _load("spacefit.fitting.loop", "spacefit.studies.lightcurve_files", "spacefit.fitting.report")
     from spacefit.pipeline import fit_light_curve_to_folder  # here: with the light-curve readers (astropy, JAX) loaded above
     from spacefit.studies.lightcurve_files import LightCurveFiles
 

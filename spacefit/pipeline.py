@@ -19,7 +19,6 @@ import numpy as np
 from spacefit.digests import changed, digests
 from spacefit.errors import InputError, check_choice, check_path, check_type
 from spacefit.executors import Cluster, cluster_of
-from spacefit.fitting.preload import preload
 from spacefit.fitting.resume import Resume
 from spacefit.geometry.mesh import export_stl
 from spacefit.geometry.wrinkle import FOLD_WARN_FRACTION
@@ -341,8 +340,8 @@ def _checkpointed_fit(out_dir: str | Path, solve: Callable[[dict[str, Any], Prog
     records and the checkpoint compares on ``resume``; ``read``: the files whose SHA-256 it keeps.
     On an error nothing of this run stays (an interruption keeps the checkpoint)."""
     from spacefit.fitting.problem import SAY_SIZE  # deferred: the fitting stack, which renders never need
+    from spacefit.fitting.report import write_fit_report
 
-    report_modules = preload("spacefit.fitting.report")  # matplotlib's (0.3 s), imported while the fit solves
     display, last = Progress(label), [0, 0]
 
     def progress(step: int, total: int) -> None:
@@ -374,9 +373,6 @@ def _checkpointed_fit(out_dir: str | Path, solve: Callable[[dict[str, Any], Prog
         if not quiet and last[0] < last[1]:
             display(last[0], last[0])  # the solve stopped before its step limit: end the display there
         timings = {"read_inputs": t_read, "setup": t_fit - result.wall_time_s}
-        report_modules.result()
-        from spacefit.fitting.report import write_fit_report  # loaded by then: preload's
-
         write_fit_report(out_dir, result, references, inputs=inputs, timings_s=timings)
     except Exception:
         # an error, not an interruption: nothing of this run stays (an interruption keeps the checkpoint)

@@ -14,7 +14,6 @@ import pytest
 
 import spacefit as sf
 from spacefit import cli
-from spacefit.fitting.preload import preload
 from spacefit.geometry import cache
 from spacefit.output import srgb_decode, srgb_encode
 from spacefit.scene import assembly as assembly_module
@@ -209,22 +208,6 @@ def test_the_fit_command_s_modules_import_none_of_the_stacks_a_default_fit_does_
     run = subprocess.run([sys.executable, "-c", script], env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"},
                          capture_output=True, text=True, check=True)
     assert run.stdout.strip() == "[]", run.stdout + run.stderr
-
-
-def test_preloaded_modules_load_on_a_thread_of_their_own_and_their_error_is_raised_where_awaited(tmp_path, monkeypatch):
-    """A fit's report modules load on a thread while it solves (spacefit.fitting.preload): done in order when awaited,
-    and an import that fails raises its own error in the caller that awaits it, not in the thread."""
-    (tmp_path / "probe_first.py").write_text("import threading\nTHREAD = threading.current_thread().name\n")
-    (tmp_path / "probe_second.py").write_text("import probe_first\nSEEN = probe_first.THREAD\n")
-    (tmp_path / "probe_broken.py").write_text("raise ValueError('probe_broken cannot load')\n")
-    monkeypatch.syspath_prepend(str(tmp_path))
-    for name in ("probe_first", "probe_second", "probe_broken"):
-        monkeypatch.delitem(sys.modules, name, raising=False)
-    assert preload("probe_first", "probe_second").result(timeout=30) is None
-    assert sys.modules["probe_second"].SEEN == "spacefit-preload" != threading.current_thread().name
-    with pytest.raises(ValueError, match="probe_broken cannot load"):
-        preload("probe_broken").result(timeout=30)
-    assert "probe_broken" not in sys.modules
 
 
 def test_the_render_program_ends_at_once_with_its_folder_written_and_its_messages_out(tmp_path):
