@@ -32,7 +32,7 @@ import numpy as np
 
 from spacefit import executors
 from spacefit.executors import Cluster, Executor, executor_of
-from spacefit.precision import float64
+from spacefit.precision import float64, on_device
 from spacefit.rendering.bridge import outside_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
 from spacefit.rendering.parts import PartImage
@@ -219,7 +219,7 @@ def loaded_count() -> tuple[int, int]:
 def frame_part_image(spec: FrameSpec, key: str, loaded: Loaded | None = None) -> PartImage:
     """Which part each pixel of the frame sees at its scene's values (loading its scene)."""
     chain = (loaded or _LOADED).chain(spec, key)
-    x = jnp.asarray([scene_value(spec.scene, n) for n in spec.names], dtype=jnp.float64)
+    x = on_device([scene_value(spec.scene, n) for n in spec.names], np.float64)
     # one program: run operation by operation, the scene values made some 20 single-operation programs per frame
     chain.renderer.set_params({name: np.asarray(value) for name, value in jax.jit(chain.values_of)(x).items()})
     return chain.renderer.part_image()

@@ -34,7 +34,7 @@ from spacefit.fitting.solve_record import SolveRecord
 from spacefit.fitting.solvers import Solver, is_least_squares, make_solver, solver_name, with_owners
 from spacefit.fitting.status import Status
 from spacefit.interrupts import Terminated, deferred_interrupts
-from spacefit.precision import float64
+from spacefit.precision import float64, on_device
 from spacefit.progress import ProgressCallback
 
 DEFAULT_MAX_STEPS = 50
@@ -210,7 +210,7 @@ def _solve(s: Setup, engine: Solver, max_steps: int, stop: str, loss: str, progr
 
     # a model without Monte Carlo noise (closed-form value observations only) has no noise floor to stop at
     steps = SolveRecord(s, stop == "noise" and is_least_squares(engine) and problem.rendered, max_steps, progress, resume.on_step)
-    u = jnp.asarray(fp.to_unconstrained(jnp.asarray(s.x0)))
+    u = jnp.asarray(fp.to_unconstrained(on_device(s.x0, np.float64)))
     if resume.ended is not None:
         return conclude(s, steps.ended(resume.ended, u), steps, solver_name(engine), loss)
     if resume.history:

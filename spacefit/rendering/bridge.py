@@ -36,6 +36,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from spacefit.precision import on_device
 from spacefit.rendering.backend import dr, in_variant, mi, on_drjit_thread
 from spacefit.rendering.frozen import splat
 from spacefit.rendering.drjit_values import differentiable, to_value
@@ -246,7 +247,7 @@ def render_values(scene: DrJitScene, seed: int, seed_grad: int) -> Callable[[Sce
 
 def seeds_array(seed: int, seed_grad: int) -> Array:
     """A (seed, seed_grad) pair as the operand :func:`seeded_render_params` takes (uint32: Mitsuba's seeds)."""
-    return jnp.asarray([seed, seed_grad], dtype=jnp.uint32)
+    return on_device([seed, seed_grad], np.uint32)
 
 
 def render_params(
