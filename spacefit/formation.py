@@ -57,8 +57,9 @@ def _check_radiance(radiance: Any, sensor: Sensor, intrinsics: Intrinsics) -> No
 
 def gaussian_transfer(sigma_px: Float[Array, ""], fy: Float[Array, "..."], fx: Float[Array, "..."]) -> Float[Array, "..."]:
     """The Fourier transform of a continuous 2-D Gaussian of ``sigma_px`` at frequencies (cycles
-    per px) fy, fx: ``exp(-2 pi^2 sigma^2 (fx^2 + fy^2))``. JAX, differentiable in sigma."""
-    return jnp.exp(-2.0 * jnp.pi**2 * sigma_px**2 * (fx**2 + fy**2))
+    per px) fy, fx: ``exp(-2 pi^2 sigma^2 (fx^2 + fy^2))``. JAX, differentiable in sigma; formed in
+    the program that traces it (NumPy's broadcast of fy and fx would be a constant of the image's size in it)."""
+    return jnp.exp(-2.0 * jnp.pi**2 * sigma_px**2 * (jnp.square(fx) + jnp.square(fy)))
 
 
 def fourier_filter(image: Float[Array, "h w c"], transfer: Callable[[np.ndarray, np.ndarray], Array], pad: int) -> Float[Array, "h w c"]:
@@ -84,7 +85,7 @@ def psf_transfer(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) ->
         gauss = gaussian_transfer(sensor.psf_sigma_px, fy, fx)
         if not sensor.diffraction:
             return gauss
-        return gauss * airy_transfer(np.hypot(fx, fy) / cutoff)
+        return gauss * airy_transfer(jnp.hypot(fx, fy) / cutoff, jnp)  # computed in the program: no constant of the image's size
 
     return transfer
 

@@ -47,7 +47,8 @@ sandwich at half weight: the mean of two).
 *The step.* The finer model's estimate is where ``J^T r_4(x*) = 0``; with the fit's model linear
 about its own estimate x (``J^T r_grid(x) = 0``), ``r_4(y) = r_grid(y) + d_4(y)`` gives the fixed
 point ``x* = x + step(d_4(x*))``, ``step(d) = -(J^T J)^-1 J^T d``: :func:`grid_step` iterates it
-(each iteration an FFT at the fine scale and a product with the Jacobian, no render). One step,
+(each iteration the model made at 4x alone, FFTs at the fine scale, and a product with the Jacobian, no
+render; the model made at 2x, the render noise's draw and the feedback once, at x*). One step,
 ``step(d_4(x))``, overshoots: at the fit's too-narrow blur the grid passes more of what aliases,
 so ``d_4`` is larger there than at the answer (noise-free, 32 px below: +0.0362 px where the 4x
 model's own minimum is +0.0344; the fixed point +0.0341; in the coverage study at 48 px, where the
@@ -56,8 +57,9 @@ steps are 0.021 px, the one step left the blur 0.0027 px wide, 1.2 of its statis
 *Its feedback.* The step is taken at the fixed point and moves with it: a fit whose blur came out
 wide has less of the grid's error to step over. With ``D = d step(d_4(y)) / dy`` at x*, the fixed
 point moves by ``(I - D)^-1`` per change of the fit's estimate, so its covariance is the fit's through
-that map (:func:`grid_feedback`: the columns of the image nuisances, on which ``d_4`` depends without
-another render, by central differences). Measured in the coverage study (48 px, 55 fits): the blur's
+that map (:func:`grid_step`: the columns of the image nuisances, on which ``d_4`` depends without
+another render, by JAX's forward-mode derivatives of the models, ``jax.jvp``, all columns in one program
+with the values' model at x*; each image's in the values it reads, its own and the shared ones). Measured in the coverage study (48 px, 55 fits): the blur's
 error after the step scattered 1.32 times its error before it (0.00287 and 0.00217 px), ``D`` 0.16 for
 the blur at one exposure (its error 1.19 times the fit's); the rendered parameters' columns (the pose,
 the materials: d_4 moves with the render too) are not taken (a render at 4x per column and sign).
@@ -98,9 +100,9 @@ PSF width absorbs: 0.75 px for 0.8).
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Callable, Sequence
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -206,15 +208,24 @@ def binned(image: Float[Array, "H W c"], by: int) -> Float[Array, "h w c"]:
     return image.reshape(h // by, by, w // by, by, c).mean(axis=(1, 3))
 
 
+@dataclasses.dataclass(frozen=True)
+class GridModels:
+    """Image observation k's renders at :data:`SUPERSAMPLE` times the resolution (float32, as rendered) and its
+    models made from one of them at the free values ``y`` (:func:`fine_and_grid_models`): ``fine(render, y)``,
+    the model made at :data:`SUPERSAMPLE` and the fit's own on the pixel grid; ``coarser(render, y)``, the model
+    made at :data:`COARSER` (the render binned). Both are JAX functions, for the caller's programs to trace."""
+
+    renders: Float[Array, "renders H W 3"]
+    fine: Callable[[Array, Array], tuple[Array, Array]]
+    coarser: Callable[[Array, Array], Array]
+
+
 def grid_error_models(obs: Observation, scene: Scene, x: Float[np.ndarray, " n"], k: int, names: Sequence[str], channels: int,
-                      image_model: ImageModel, grid_units: Callable[[Array], Array],
-                      seeds: Sequence[int]) -> Callable[[np.ndarray], list[tuple[Array, Array, Array]]] | None:
+                      image_model: ImageModel, grid_units: Callable[[Array], Array], seeds: Sequence[int]) -> GridModels | None:
     """Image observation k's (``obs``; ``scene`` its scene at the values ``x``, ``channels`` its
-    reference's) models from a render of ``scene`` at :data:`SUPERSAMPLE` times the resolution per
-    seed of ``seeds``, as a function of the free values ``y`` (``names``; the renders stay ``x``'s,
-    the image nuisances are ``y``'s): per render, the model made at :data:`SUPERSAMPLE`, the one made
-    at :data:`COARSER` (the render binned) and the fit's own on the pixel grid (``grid_units`` its
-    unit), by :func:`fine_and_grid_models`; None for a pixel filter :data:`RESPONSES` lacks."""
+    reference's) :class:`GridModels` from a render of ``scene`` at :data:`SUPERSAMPLE` times the resolution per
+    seed of ``seeds``, as functions of the free values ``y`` (``names``; the renders stay ``x``'s, the image
+    nuisances are ``y``'s), the fit's own model in ``grid_units``; None for a pixel filter :data:`RESPONSES` lacks."""
     if scene.render.filter not in RESPONSES:
         return None
     intrinsics = Intrinsics.from_scene(scene)
@@ -222,56 +233,59 @@ def grid_error_models(obs: Observation, scene: Scene, x: Float[np.ndarray, " n"]
     # kept as rendered (float32) while every image's are held, widened where used: 3 MiB less a 128 x 128 px image's render
     # one loaded scene for the seeds' renders (each load costs a scene's set-up, and Mitsuba keeps some of its memory: mitsuba3#1890)
     renderer = Renderer(supersampled(scene, SUPERSAMPLE))
-    fine = [np.asarray(renderer.render(seed=seed), dtype=np.float32) for seed in seeds]
+    renders = jnp.stack([np.asarray(renderer.render(seed=seed), dtype=np.float32) for seed in seeds])
     moves = [nuisance_index(names, n, k) for n in MOVES]
     optics = {f: fine_optics(obs.sensor, intrinsics, f, channels) for f in (SUPERSAMPLE, COARSER)}
 
-    @jax.jit  # one program for both renders (operands), not some 150 of single operations evaluated one by one
-    def made(image: Float[Array, "h w 3"], y: np.ndarray) -> tuple[Array, Array, Array]:
-        image = image.astype(float)  # handed in as rendered (float32), widened here
-        finest, grid = fine_and_grid_models(image, scene.render.filter, y, k, image_model, fine_units, grid_units, optics[SUPERSAMPLE], moves)
-        return finest, fine_and_grid_models(binned(image, SUPERSAMPLE // COARSER), scene.render.filter, y, k, image_model, fine_units,
-                                            grid_units, optics[COARSER], moves, COARSER)[0], grid
+    def fine(render: Float[Array, "H W 3"], y: Array) -> tuple[Array, Array]:
+        return fine_and_grid_models(render.astype(float), scene.render.filter, y, k, image_model, fine_units, grid_units,
+                                    optics[SUPERSAMPLE], moves)
 
-    return lambda y: [made(image, y) for image in fine]
+    def coarser(render: Float[Array, "H W 3"], y: Array) -> Array:
+        return fine_and_grid_models(binned(render.astype(float), SUPERSAMPLE // COARSER), scene.render.filter, y, k, image_model,
+                                    fine_units, grid_units, optics[COARSER], moves, COARSER)[0]
+
+    return GridModels(renders, fine, coarser)
 
 
-def grid_step(differences: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]], step: Callable[[np.ndarray], np.ndarray],
-              x: Float[np.ndarray, " n"], stderr: Float[np.ndarray, " n"]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+@dataclasses.dataclass(frozen=True)
+class GridChanges:
+    """The residuals' changes from the fit's models on the pixel grid to the finer ones, as functions of the free
+    values ``y`` (the renders fixed): ``fine(y)``, (renders, rows), each render's change to the model made at
+    :data:`SUPERSAMPLE`; ``settled(y, columns)``, the same, the renders' mean change to the model made at
+    :data:`COARSER` (rows) and the derivatives of the renders' mean change to the model made at :data:`SUPERSAMPLE`
+    in each of the free values ``columns`` (len(columns), rows; forward mode, no render)."""
+
+    fine: Callable[[np.ndarray], np.ndarray]
+    settled: Callable[[np.ndarray, Sequence[int]], tuple[np.ndarray, np.ndarray, np.ndarray]]
+
+
+def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x: Float[np.ndarray, " n"], stderr: Float[np.ndarray, " n"],
+              columns: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The step ``delta`` from the fit's estimate ``x`` to the model made at :data:`SUPERSAMPLE`'s, the
-    bound on what remains of the grid's error after it (both in x's coordinates) and one draw of
-    the render noise of the residuals' change at ``x + delta``. ``differences(y)``: the residuals'
-    change from the fit's model to the one made at :data:`SUPERSAMPLE` and to the one made at
-    :data:`COARSER` at the values ``y``, and a draw of the first's render noise; ``step(d)``: the
-    Gauss-Newton step of a change ``d`` of the residuals. ``delta`` is the fixed point
-    ``x + delta = x + step(d(x + delta))``, iterated from ``step(d(x))`` until it moves by less than
-    :data:`FIXED_POINT_TOLERANCE` of a standard error ``stderr`` (at most :data:`FIXED_POINT_STEPS`
-    times); the bound is :data:`REMAINDER_RATIO` times ``step(d_S - d_C)`` at ``x + delta``, the
-    step from the model made at :data:`COARSER` to the one made at :data:`SUPERSAMPLE`."""
+    bound on what remains of the grid's error after it (both in x's coordinates), one draw of
+    the render noise of the residuals' change and the step's feedback ``D``, all at ``x + delta``. ``changes``: the
+    residuals' changes from the fit's model to the finer ones (:class:`GridChanges`, the renders' mean ``d_S`` to
+    the one made at :data:`SUPERSAMPLE`); ``step(d)``: the Gauss-Newton step of a change ``d`` of the residuals.
+    ``delta`` is the fixed point ``x + delta = x + step(d_S(x + delta))``, iterated from ``step(d_S(x))`` until it
+    moves by less than :data:`FIXED_POINT_TOLERANCE` of a standard error ``stderr`` (at most :data:`FIXED_POINT_STEPS`
+    times); the bound is :data:`REMAINDER_RATIO` times ``step(d_S - d_C)``, the step from the model made at
+    :data:`COARSER` to the one made at :data:`SUPERSAMPLE`; the draw is the two renders' changes' difference over
+    sqrt 2. ``D = d step(d_S(y)) / dy``, n x n, in its ``columns`` (the image nuisances, on which ``d_S`` depends
+    without another render; the others 0): the fixed point ``x* = x + step(d_S(x*))`` moves by ``(I - D)^-1`` per
+    change of the fit's estimate x, so the finer model's estimate has the covariance ``(I - D)^-1 C (I - D)^-T``
+    where the fit's has C: the step's feedback, which a step taken as a constant leaves out (measured in the
+    coverage study: the blur's error 1.2 times its pre-step error, ``D`` 0.16 for the blur)."""
     delta = np.zeros(len(x))
     for _ in range(FIXED_POINT_STEPS):
-        fine, coarser, noise = differences(x + delta)
-        moved, delta = delta, step(fine)
+        moved, delta = delta, step(changes.fine(x + delta).mean(axis=0))
         if np.all(np.abs(delta - moved) <= FIXED_POINT_TOLERANCE * stderr):
             break
-    return delta, REMAINDER_RATIO * step(fine - coarser), noise
-
-
-def grid_feedback(differences: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]], step: Callable[[np.ndarray], np.ndarray],
-                  at: Float[np.ndarray, " n"], columns: Sequence[int], stderr: Float[np.ndarray, " n"]) -> np.ndarray:
-    """How the step of :func:`grid_step` moves with the values it is taken at: ``D = d step(d_S(y)) / dy`` at
-    ``at`` (the fixed point), n x n, its ``columns`` (the image nuisances, on which ``differences`` depends
-    without another render) by central differences of half a standard error ``stderr``, the others 0.
-    The fixed point ``x* = x + step(d_S(x*))`` moves by ``(I - D)^-1`` per change of the fit's estimate x,
-    so the finer model's estimate has the covariance ``(I - D)^-1 C (I - D)^-T`` where the fit's has C:
-    the step's feedback, which a step taken as a constant leaves out (measured in the coverage study:
-    the blur's error 1.2 times its pre-step error, ``D`` 0.16 for the blur)."""
-    D = np.zeros((len(at), len(at)))
-    for j in columns:
-        h = np.zeros(len(at))
-        h[j] = 0.5 * stderr[j]
-        D[:, j] = step(differences(at + h)[0] - differences(at - h)[0]) / (2.0 * h[j])
-    return D
+    each, coarser, derivatives = changes.settled(x + delta, columns)
+    feedback = np.zeros((len(x), len(x)))
+    for j, derivative in zip(columns, derivatives):
+        feedback[:, j] = step(derivative)
+    return delta, REMAINDER_RATIO * step(each.mean(axis=0) - coarser), (each[0] - each[1]) / math.sqrt(2.0), feedback
 
 
 def grid_notes(errors: dict[str, float], stderr: dict[str, float]) -> list[str]:

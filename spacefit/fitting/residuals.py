@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -33,7 +32,7 @@ from spacefit.fitting.observations.base import Block
 from spacefit.fitting.observations.image import Observation, check_reference, image_residual, in_unit_of
 from spacefit.fitting.outside import DESCENT, Outside, Rendered
 from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.pixel_grid import grid_error_models
+from spacefit.fitting.pixel_grid import GridChanges, grid_error_models
 from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import assemble
@@ -86,10 +85,10 @@ class Problem:
     reference_spp: tuple[int | None, ...] = ()  # per image, its reference's (Observation.render_spp)
     blocks: tuple[Block, ...] = ()  # the value observations' residual blocks, after the images' pixels
     dark: tuple[float, ...] = ()  # per image, its model of no light in its unit (a sensor's bias, DN; 0 for radiance)
-    # physical x -> (y -> the change of the images' residuals from the fit's model to those made at 4x and 2x the
-    # resolution, from two renders at x, the image nuisances y's, and a draw of its render noise:
-    # spacefit.fitting.pixel_grid), or None where no image's blur width is free
-    pixel_grid: Callable[[np.ndarray], Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None] | None = None
+    # physical x -> the changes of the images' residuals from the fit's model to those made at 4x and 2x the
+    # resolution, from two renders at x, as functions of the image nuisances (spacefit.fitting.pixel_grid.GridChanges),
+    # or None where no image's blur width is free
+    pixel_grid: Callable[[np.ndarray], GridChanges | None] | None = None
     # the renders made first and handed to programs that call nothing back (spacefit.fitting.outside); None where a
     # value observation is rendered (its own callbacks)
     outside: Outside | None = None
@@ -231,12 +230,11 @@ def build_problem(
     # the pixel loss's residuals are the pixels', which the pixel grid's change is laid out as
     blurred = [loss == "pixel" and nuisance_index(free.names, "image.blur_sigma_px", k) is not None for k in range(len(observations))]
 
-    def pixel_grid(x: np.ndarray) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
-        """``y ->`` the images' residuals with each free blur's model made at 4x and at 2x the resolution, each
-        less the fit's own (0 for the other images), from two renders at ``x`` with independent seeds (the
-        changes their mean), the image nuisances ``y``'s, and a draw of the first change's render noise (the
-        two renders' difference over sqrt 2) (:mod:`spacefit.fitting.pixel_grid`); None: no free blur, or a
-        filter it does not model."""
+    def pixel_grid(x: np.ndarray) -> GridChanges | None:
+        """The images' residuals' changes from the fit's model to those made at 4x and at 2x the resolution, from two
+        renders at ``x`` with independent seeds, as functions of the image nuisances (:class:`GridChanges`; 0 for the
+        images whose blur is not free) (:mod:`spacefit.fitting.pixel_grid`); None: no free blur, or a filter it does
+        not model."""
         values = {n: float(v) for n, v in zip(free.names, x) if Name(n).parameter in image_names}
         seeds = (seed + PIXEL_GRID_SEED_OFFSET, seed + PIXEL_GRID_SEED_OFFSET + INDEPENDENT_SEED_OFFSET)
         made = [grid_error_models(obs, scene_with_values(obs.scene, values, observation=k).with_values({"render.spp": spps[k]}),
@@ -245,31 +243,49 @@ def build_problem(
         if not any(m is not None for m in made):
             return None
 
-        @functools.partial(jax.jit, static_argnums=0)  # one program, not one per operation
-        def changes(k: int, a: tuple[jax.Array, ...], b: tuple[jax.Array, ...]) -> jax.Array:
-            (finest, coarser, grid), (finest_b, coarser_b, grid_b) = a, b
-            own, own_b = residuals[k](grid), residuals[k](grid_b)
-            fine_a, fine_b = residuals[k](finest) - own, residuals[k](finest_b) - own_b
-            return jnp.stack([0.5 * (fine_a + fine_b), 0.5 * (residuals[k](coarser) - own + residuals[k](coarser_b) - own_b),
-                              (fine_a - fine_b) / math.sqrt(2.0)])
+        def fine_changes(k: int, renders: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+            """Per render of image k (stacked), its residuals with the model made at 4x less those with the fit's own,
+            and the latter."""
+            finest, grid = jax.vmap(made[k].fine, in_axes=(0, None))(renders, y)
+            own = jax.vmap(residuals[k])(grid)
+            return jax.vmap(residuals[k])(finest) - own, own
 
-        # image k's changes read only its own values and the shared ones: the feedback's differences in another
-        # image's own value (grid_feedback) find it at the values it was last made at, and take those changes again
+        fine_program = jax.jit(lambda k, renders, y: fine_changes(k, renders, y)[0], static_argnums=0)  # one program, not one per operation
+
+        @functools.partial(jax.jit, static_argnums=0)
+        def settled_program(k: int, renders: jax.Array, y: jax.Array, directions: jax.Array) -> tuple[jax.Array, ...]:
+            if directions.shape[0]:  # the derivatives in forward mode, the directions' columns at once: the primal is shared
+                (each, own), (derivatives, _) = jax.vmap(lambda t: jax.jvp(lambda v: fine_changes(k, renders, v), (y,), (t,)),
+                                                         out_axes=(None, 0))(directions)
+            else:
+                (each, own), derivatives = fine_changes(k, renders, y), jnp.zeros((0, len(renders), references[k].size))
+            coarser = jax.vmap(residuals[k])(jax.vmap(made[k].coarser, in_axes=(0, None))(renders, y)) - own
+            return each, coarser.mean(axis=0), derivatives.mean(axis=1)
+
+        # image k's changes read only its own values and the shared ones: the derivatives in another image's own are 0
         owners = column_owners(free, blocks) or (-1,) * len(free.names)
-        read = [np.flatnonzero([o in (-1, k) for o in owners]) for k in range(len(observations))]
-        last: list[tuple[bytes, np.ndarray] | None] = [None] * len(observations)
+        read = [{j for j, o in enumerate(owners) if o in (-1, k)} for k in range(len(observations))]
 
-        def image_changes(k: int, y: np.ndarray) -> np.ndarray:
-            key = np.asarray(y, dtype=np.float64)[read[k]].tobytes()
-            if last[k] is None or last[k][0] != key:
-                last[k] = (key, np.asarray(changes(k, *made[k](y)), dtype=float))
-            return last[k][1]
+        def fine(y: np.ndarray) -> np.ndarray:
+            return np.concatenate([np.zeros((2, references[k].size)) if m is None else np.asarray(fine_program(k, m.renders, jnp.asarray(y)), dtype=float)
+                                   for k, m in enumerate(made)], axis=1)
 
-        def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            parts = [np.zeros((3, references[k].size)) if models is None else image_changes(k, y) for k, models in enumerate(made)]
-            return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
+        def settled(y: np.ndarray, columns: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            parts = []
+            for k, m in enumerate(made):
+                size = references[k].size
+                if m is None:
+                    parts.append((np.zeros((2, size)), np.zeros(size), np.zeros((len(columns), size))))
+                    continue
+                own = [i for i, j in enumerate(columns) if j in read[k]]
+                each, coarser, own_derivatives = (np.asarray(p, dtype=float) for p in settled_program(
+                    k, m.renders, jnp.asarray(y), jnp.eye(len(y))[np.asarray([columns[i] for i in own], dtype=int)]))
+                derivatives = np.zeros((len(columns), size))
+                derivatives[own] = own_derivatives
+                parts.append((each, coarser, derivatives))
+            return tuple(np.concatenate(p, axis=-1) for p in zip(*parts))
 
-        return differences
+        return GridChanges(fine, settled)
 
     def resampled(factor: int) -> Problem:
         finer = [dataclasses.replace(o, scene=o.scene.with_values({"render.spp": factor * n})) for o, n in zip(observations, spps)]
