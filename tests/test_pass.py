@@ -321,10 +321,15 @@ def test_a_reduced_pass_recovers_each_frames_attitude(small_pass):
     assert [r["target.attitude_x_deg"] for r in rows] == [result.values[f"target.attitude_x_deg@{k}"] for k in range(3)]
 
 
-def test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_values(small_pass):
+def test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_values(small_pass, monkeypatch):
     """The pixel grid's changes of a pass with the blur shared and each frame's shift its own: the feedback's
     derivatives (forward mode) in each value are the central differences of the changes to the finer model, in the
-    rows of every frame for the shared blur and of its own frame alone for a frame's shift."""
+    rows of every frame for the shared blur and of its own frame alone for a frame's shift; the three frames alike
+    share their two programs."""
+    from spacefit.fitting.frame_models import AlikePrograms
+
+    made: list[AlikePrograms] = []
+    monkeypatch.setattr(residuals, "AlikePrograms", lambda: made.append(AlikePrograms()) or made[-1])
     obs = small_pass[0]
     free = ["parts.legs.kd", "image.blur_sigma_px", *[f"image.shift_x_px@{k}" for k in range(3)]]
     s = problem.setup(obs, free, start={"parts.legs.kd": 0.5, "image.blur_sigma_px": 0.6}, render=sf.FitRender(spp=4))
@@ -341,6 +346,7 @@ def test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_v
             np.testing.assert_allclose(derivatives[i], central, rtol=0, atol=1e-5 * np.abs(central).max())
             touched = [bool(np.abs(derivatives[i][frame == k]).max() > 0) for k in range(3)]
             assert touched == ([True] * 3 if j == 1 else [k == j - 2 for k in range(3)]), j
+    assert len(made[0]._traced) == 6 and len(made[0]._programs) == 2  # each frame's two programs traced, compiled once
 
 
 @pytest.fixture(scope="module")

@@ -233,8 +233,8 @@ MUTANTS = (
            ("tests/test_file_inputs.py",)),
     Mutant("vignetting-applied-when-off", "spacefit/sensor.py",
            "return (not self.calibrated) if self.vignetting is None else self.vignetting", "return True", ("tests/test_sensor.py",)),
-    Mutant("psf-integrated-over-the-pixel-again", "spacefit/formation.py", "sigma_px**2 * (jnp.square(fx) + jnp.square(fy)))",
-           "sigma_px**2 * (jnp.square(fx) + jnp.square(fy))) * jnp.sinc(fx) * jnp.sinc(fy)",
+    Mutant("psf-integrated-over-the-pixel-again", "spacefit/formation.py", "sigma_px**2 * (fx**2 + fy**2))",
+           "sigma_px**2 * (fx**2 + fy**2)) * jnp.sinc(fx) * jnp.sinc(fy)",
            ("tests/test_sensor.py", "tests/test_nuisance.py::test_blur_is_the_sensors_continuous_gaussian_and_keeps_the_light")),
     # back faces, closed meshes and folded wrinkles (issues 11 and 13)
     # one vocabulary, checked everywhere (issue 18 item 7)
@@ -287,7 +287,7 @@ MUTANTS = (
            "feedback[j, :] = step(derivative)",
            ("tests/test_pixel_grid.py::test_the_fixed_point_moves_with_the_fits_estimate_by_the_inverse_of_one_less_the_steps_feedback",)),
     # ... an image's derivatives taken in the values it reads: its own and the shared ones
-    Mutant("pixel-grid-changes-kept-past-a-shared-value", "spacefit/fitting/residuals.py", "if o in (-1, k)}", "if o == k}",
+    Mutant("pixel-grid-changes-kept-past-a-shared-value", "spacefit/fitting/residuals.py", "o in (-1, k) for o in owners", "o == k for o in owners",
            ("tests/test_pass.py::test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_values",)),
     Mutant("render-noise-spread-without-sensor-psf", "spacefit/fitting/residuals.py",
            "blur = 0.0 if obs.sensor is None else psf_rms_px(", "blur = 0.0 if True else psf_rms_px(", (PLUMBING,)),

@@ -95,6 +95,18 @@ one step from the 1x estimate at 48 px was already at its fixed point (-0.00451 
 as the render filter's: a detector that integrates over its pixel is modelled with
 ``render.filter = "box"`` (the default tent adds 1/12 px^2 of blur to the model, which a fitted
 PSF width absorbs: 0.75 px for 0.8).
+
+*Its cost.* The models at the fine scales are made on black sky padded to sizes the FFT is fast for
+(:func:`~spacefit.formation.fast_pad`: a padded 128 x 128 px image at 4x is 576 and 560 px, not 568 and
+556 = 4 x 139), and the sensor's PSF there by the real FFT (a real, even transfer), its transfer formed in
+the program (no constant of the padded image's size); both change the models by round-off alone, the
+fine blur's transfer having fallen to nothing at the pads (e^-50 at the fine Nyquist frequency for a
+0.8 px blur). The fit's own model on the pixel grid is made as in the fit. Each image's two programs
+(the changes to the 4x model, for the fixed point's iterations; and at x* those, the change to the 2x
+model and the derivatives) take the image's renders and values as operands and its other arrays (the
+reference, the mask) too, so that a pass's frames alike share them
+(:class:`~spacefit.fitting.frame_models.AlikePrograms`): compiled once, not once a frame. Measured
+in docs/measurements/performance.md, "The pixel grid's cost".
 """
 
 from __future__ import annotations
@@ -107,9 +119,10 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
-from spacefit.fitting.nuisance import ImageModel, nuisance_index
+from spacefit.fitting.nuisance import PAD_PX, ImageModel, nuisance_index
+from spacefit.fitting.nuisance import image_model as nuisance_model
 from spacefit.fitting.observations.image import Observation, in_unit_of
-from spacefit.formation import fourier_filter, psf_transfer
+from spacefit.formation import fast_pad, fourier_filter, psf_transfer
 from spacefit.geometry.frames import Intrinsics
 from spacefit.psf import psf_reach_px
 from spacefit.rendering.renderer import Renderer
@@ -161,7 +174,8 @@ def supersampled(scene: Scene, factor: int) -> Scene:
 
 def fine_optics(sensor: Sensor | None, intrinsics: Intrinsics, factor: int, channels: int) -> Callable[[Array], Array]:
     """The sensor's PSF (its Gaussian and Airy pattern, :func:`~spacefit.formation.psf_transfer`) on
-    the grid of ``factor`` times the resolution of ``intrinsics``; none without a sensor."""
+    the grid of ``factor`` times the resolution of ``intrinsics``, padded to a fast size
+    (:func:`~spacefit.formation.fast_pad`) and by the real FFT; none without a sensor."""
     if sensor is None:
         return lambda image: image
     fine_sensor = dataclasses.replace(sensor, psf_sigma_px=factor * sensor.psf_sigma_px)
@@ -172,7 +186,10 @@ def fine_optics(sensor: Sensor | None, intrinsics: Intrinsics, factor: int, chan
     pad = max(psf_reach_px(fine_sensor, fine, w) for w in waves)
     if pad == 0:
         return lambda image: image
-    return lambda image: fourier_filter(image, lambda fy, fx: jnp.concatenate([t(fy, fx) for t in transfers], axis=-1), pad)
+    pad = fast_pad((fine.height, fine.width), pad)
+    # JAX's frequencies: the transfer formed in the program (NumPy's would be constants of the padded image's size in it)
+    transfer = lambda fy, fx: jnp.concatenate([t(jnp.asarray(fy), jnp.asarray(fx)) for t in transfers], axis=-1)  # noqa: E731
+    return lambda image: fourier_filter(image, transfer, pad, even=True)
 
 
 def without_psf(sensor: Sensor | None) -> Sensor | None:
@@ -182,14 +199,19 @@ def without_psf(sensor: Sensor | None) -> Sensor | None:
 
 def fine_and_grid_models(fine: Float[Array, "H W c"], pixel_filter: str, x: Float[np.ndarray, " n"], k: int, image_model: ImageModel,
                          fine_units: Callable[[Array], Array], grid_units: Callable[[Array], Array], optics: Callable[[Array], Array],
-                         moves: Sequence[int | None], factor: int = SUPERSAMPLE) -> tuple[Array, Array]:
+                         moves: Sequence[int | None], factor: int = SUPERSAMPLE, names: Sequence[str] | None = None) -> tuple[Array, Array]:
     """Observation k's model at ``x`` made twice from ``fine``, a box-filtered render at ``factor``
     times the resolution per axis: the image nuisances and ``optics`` (the sensor's PSF) at the
     fine scale then the response of a pixel of ``pixel_filter`` (:func:`response_matrix`) and
     ``fine_units``; and the fit's own, the pixel response first, then the nuisances on the pixel
     grid and ``grid_units`` (with the sensor's PSF). ``moves``: the indices in ``x`` of the blur
-    width and the two shifts (None: not free), which are ``factor`` times larger in fine px."""
+    width and the two shifts (None: not free), which are ``factor`` times larger in fine px. ``names``: the
+    free parameters', whose image model (:func:`~spacefit.fitting.nuisance.image_model`) acts at the fine scale
+    on black sky padded to a fast size (:func:`~spacefit.formation.fast_pad`: a blur of 0.5 px is 2 fine px at
+    4x, whose transfer at the fine Nyquist frequency is 3e-9, so that the wider pad changes nothing but the
+    round-off, and the FFT of a 128 x 128 image at 4x is twice as fast); None: ``image_model`` there too."""
     h, w = fine.shape[0] // factor, fine.shape[1] // factor
+    fine_model = nuisance_model(names, fast_pad(fine.shape, PAD_PX)) if names is not None else image_model
     rows, cols = (jnp.asarray(response_matrix(n, factor, pixel_filter)) for n in (h, w))
     respond = lambda image: jnp.einsum("iy,yxc,jx->ijc", rows, image, cols)  # noqa: E731
     x = jnp.asarray(x, dtype=float)
@@ -198,7 +220,7 @@ def fine_and_grid_models(fine: Float[Array, "H W c"], pixel_filter: str, x: Floa
         if i is not None:
             x_fine = x_fine.at[i].multiply(factor)
     image = jnp.asarray(fine, dtype=float)
-    return fine_units(respond(optics(image_model(image, x_fine, k)))), grid_units(image_model(respond(image), x, k))
+    return fine_units(respond(optics(fine_model(image, x_fine, k)))), grid_units(image_model(respond(image), x, k))
 
 
 def binned(image: Float[Array, "H W c"], by: int) -> Float[Array, "h w c"]:
@@ -239,11 +261,11 @@ def grid_error_models(obs: Observation, scene: Scene, x: Float[np.ndarray, " n"]
 
     def fine(render: Float[Array, "H W 3"], y: Array) -> tuple[Array, Array]:
         return fine_and_grid_models(render.astype(float), scene.render.filter, y, k, image_model, fine_units, grid_units,
-                                    optics[SUPERSAMPLE], moves)
+                                    optics[SUPERSAMPLE], moves, names=names)
 
     def coarser(render: Float[Array, "H W 3"], y: Array) -> Array:
         return fine_and_grid_models(binned(render.astype(float), SUPERSAMPLE // COARSER), scene.render.filter, y, k, image_model,
-                                    fine_units, grid_units, optics[COARSER], moves, COARSER)[0]
+                                    fine_units, grid_units, optics[COARSER], moves, COARSER, names)[0]
 
     return GridModels(renders, fine, coarser)
 

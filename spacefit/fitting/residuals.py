@@ -15,7 +15,6 @@ The set-up that checks the inputs and builds the problem is :mod:`spacefit.fitti
 from __future__ import annotations
 
 import dataclasses
-import functools
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -24,7 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.executors import Executor
-from spacefit.fitting.frame_models import FrameModels, frame_model
+from spacefit.fitting.frame_models import AlikePrograms, FrameModels, frame_model
 from spacefit.fitting.frames import (FrameSpec, InProcess, batched_renders, frame_part_image, frame_renders, given_renders, render_runs,
                                      run_frames, share_views)
 from spacefit.fitting.nuisance import image_model as image_model_of, nuisance_index
@@ -136,7 +135,6 @@ def build_problem(
     # (``image_names``), an observation's own pose (``target.attitude_z_deg@k``) in place of the shared
     # one; every observation's render of a step runs in one batch (spacefit.fitting.frames)
     executor = InProcess() if executor is None else executor
-    image_model = image_model_of(free.names)
     rendered = [_seen(free, k, image_names) for k in range(len(observations))]
     for i, obs in enumerate(observations):
         rendered_names, steps = rendered[i][0], free.fd_steps[rendered[i][1]]
@@ -237,23 +235,25 @@ def build_problem(
         not model."""
         values = {n: float(v) for n, v in zip(free.names, x) if Name(n).parameter in image_names}
         seeds = (seed + PIXEL_GRID_SEED_OFFSET, seed + PIXEL_GRID_SEED_OFFSET + INDEPENDENT_SEED_OFFSET)
+        # image k's changes read only its own values and the shared ones (``read[k]``, in x's order): its models are made
+        # as functions of those alone, so that a pass's frames alike trace alike; the derivatives in another image's own are 0
+        owners = column_owners(free, blocks) or (-1,) * len(free.names)
+        read = [np.flatnonzero([o in (-1, k) for o in owners]) for k in range(len(observations))]
+        names = [[free.names[j] for j in read[k]] for k in range(len(observations))]
         made = [grid_error_models(obs, scene_with_values(obs.scene, values, observation=k).with_values({"render.spp": spps[k]}),
-                                  x, k, free.names, references[k].shape[-1], image_model, to_units[k], seeds) if blurred[k] else None
-                for k, obs in enumerate(observations)]
+                                  x[read[k]], k, names[k], references[k].shape[-1], image_model_of(names[k]), to_units[k], seeds)
+                if blurred[k] else None for k, obs in enumerate(observations)]
         if not any(m is not None for m in made):
             return None
 
         def fine_changes(k: int, renders: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
             """Per render of image k (stacked), its residuals with the model made at 4x less those with the fit's own,
-            and the latter."""
+            and the latter, at the values it reads ``y``."""
             finest, grid = jax.vmap(made[k].fine, in_axes=(0, None))(renders, y)
             own = jax.vmap(residuals[k])(grid)
             return jax.vmap(residuals[k])(finest) - own, own
 
-        fine_program = jax.jit(lambda k, renders, y: fine_changes(k, renders, y)[0], static_argnums=0)  # one program, not one per operation
-
-        @functools.partial(jax.jit, static_argnums=0)
-        def settled_program(k: int, renders: jax.Array, y: jax.Array, directions: jax.Array) -> tuple[jax.Array, ...]:
+        def settled_changes(k: int, renders: jax.Array, y: jax.Array, directions: jax.Array) -> tuple[jax.Array, ...]:
             if directions.shape[0]:  # the derivatives in forward mode, the directions' columns at once: the primal is shared
                 (each, own), (derivatives, _) = jax.vmap(lambda t: jax.jvp(lambda v: fine_changes(k, renders, v), (y,), (t,)),
                                                          out_axes=(None, 0))(directions)
@@ -262,13 +262,13 @@ def build_problem(
             coarser = jax.vmap(residuals[k])(jax.vmap(made[k].coarser, in_axes=(0, None))(renders, y)) - own
             return each, coarser.mean(axis=0), derivatives.mean(axis=1)
 
-        # image k's changes read only its own values and the shared ones: the derivatives in another image's own are 0
-        owners = column_owners(free, blocks) or (-1,) * len(free.names)
-        read = [{j for j, o in enumerate(owners) if o in (-1, k)} for k in range(len(observations))]
+        programs = AlikePrograms()  # one program each, not one per operation; a pass's frames alike share it
+        y_of = lambda k, y: jnp.asarray(np.asarray(y)[read[k]])  # noqa: E731
 
         def fine(y: np.ndarray) -> np.ndarray:
-            return np.concatenate([np.zeros((2, references[k].size)) if m is None else np.asarray(fine_program(k, m.renders, jnp.asarray(y)), dtype=float)
-                                   for k, m in enumerate(made)], axis=1)
+            return np.concatenate([np.zeros((2, references[k].size)) if m is None else np.asarray(
+                programs((fine_changes, k), lambda *a, k=k: fine_changes(k, *a)[0], m.renders, y_of(k, y))[0], dtype=float)
+                for k, m in enumerate(made)], axis=1)
 
         def settled(y: np.ndarray, columns: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             parts = []
@@ -278,8 +278,9 @@ def build_problem(
                     parts.append((np.zeros((2, size)), np.zeros(size), np.zeros((len(columns), size))))
                     continue
                 own = [i for i, j in enumerate(columns) if j in read[k]]
-                each, coarser, own_derivatives = (np.asarray(p, dtype=float) for p in settled_program(
-                    k, m.renders, jnp.asarray(y), jnp.eye(len(y))[np.asarray([columns[i] for i in own], dtype=int)]))
+                directions = jnp.eye(len(read[k]))[np.searchsorted(read[k], [columns[i] for i in own]).astype(int)]
+                each, coarser, own_derivatives = (np.asarray(p, dtype=float) for p in programs(
+                    (settled_changes, k, len(own)), lambda *a, k=k: settled_changes(k, *a), m.renders, y_of(k, y), directions))
                 derivatives = np.zeros((len(columns), size))
                 derivatives[own] = own_derivatives
                 parts.append((each, coarser, derivatives))
