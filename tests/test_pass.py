@@ -329,7 +329,7 @@ def test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_v
     from spacefit.fitting.frame_models import AlikePrograms
 
     made: list[AlikePrograms] = []
-    monkeypatch.setattr(residuals, "AlikePrograms", lambda: made.append(AlikePrograms()) or made[-1])
+    monkeypatch.setattr(residuals, "AlikePrograms", lambda share: made.append(AlikePrograms(share)) or made[-1])
     obs = small_pass[0]
     free = ["parts.legs.kd", "image.blur_sigma_px", *[f"image.shift_x_px@{k}" for k in range(3)]]
     s = problem.setup(obs, free, start={"parts.legs.kd": 0.5, "image.blur_sigma_px": 0.6}, render=sf.FitRender(spp=4))

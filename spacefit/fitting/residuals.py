@@ -262,7 +262,7 @@ def build_problem(
             coarser = jax.vmap(residuals[k])(jax.vmap(made[k].coarser, in_axes=(0, None))(renders, y)) - own
             return each, coarser.mean(axis=0), derivatives.mean(axis=1)
 
-        programs = AlikePrograms()  # one program each, not one per operation; a pass's frames alike share it
+        programs = AlikePrograms(sum(m is not None for m in made) > 1)  # one program each, not one per operation; a pass's frames share it
         y_of = lambda k, y: jnp.asarray(np.asarray(y)[read[k]])  # noqa: E731
 
         def fine(y: np.ndarray) -> np.ndarray:
