@@ -246,28 +246,33 @@ def build_problem(
         if not any(m is not None for m in made):
             return None
 
-        def fine_changes(k: int, renders: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
-            """Per render of image k (stacked), its residuals with the model made at 4x less those with the fit's own,
-            and the latter, at the values it reads ``y``."""
-            finest, grid = jax.vmap(made[k].fine, in_axes=(0, None))(renders, y)
-            own = jax.vmap(residuals[k])(grid)
-            return jax.vmap(residuals[k])(finest) - own, own
+        def render_changes(k: int, render: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+            """Image k's residuals with the model made at 4x from one ``render`` less those with the fit's own, and the
+            latter, at the values it reads ``y``."""
+            finest, grid = made[k].fine(render, y)
+            own = residuals[k](grid)
+            return residuals[k](finest) - own, own
+
+        # the renders one after the other (jax.lax.map), not batched: a batch held both renders' temporaries at 4x at once
+        def fine_changes(k: int, renders: jax.Array, y: jax.Array) -> jax.Array:
+            return jax.lax.map(lambda render: render_changes(k, render, y)[0], renders)
 
         def settled_changes(k: int, renders: jax.Array, y: jax.Array, directions: jax.Array) -> tuple[jax.Array, ...]:
-            if directions.shape[0]:  # the derivatives in forward mode, the directions' columns at once: the primal is shared
-                (each, own), (derivatives, _) = jax.vmap(lambda t: jax.jvp(lambda v: fine_changes(k, renders, v), (y,), (t,)),
-                                                         out_axes=(None, 0))(directions)
-            else:
-                (each, own), derivatives = fine_changes(k, renders, y), jnp.zeros((0, len(renders), references[k].size))
-            coarser = jax.vmap(residuals[k])(jax.vmap(made[k].coarser, in_axes=(0, None))(renders, y)) - own
-            return each, coarser.mean(axis=0), derivatives.mean(axis=1)
+            def settled_one(render: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+                # the derivatives in forward mode, one direction after another (the primal made once)
+                (each, own), tangent = jax.linearize(lambda v: render_changes(k, render, v), y)
+                derivatives = jax.lax.map(lambda t: tangent(t)[0], directions)
+                return each, residuals[k](made[k].coarser(render, y)) - own, derivatives
+
+            each, coarser, derivatives = jax.lax.map(settled_one, renders)
+            return each, coarser.mean(axis=0), derivatives.mean(axis=0)
 
         programs = AlikePrograms(sum(m is not None for m in made) > 1)  # one program each, not one per operation; a pass's frames share it
         y_of = lambda k, y: jnp.asarray(np.asarray(y)[read[k]])  # noqa: E731
 
         def fine(y: np.ndarray) -> np.ndarray:
             return np.concatenate([np.zeros((2, references[k].size)) if m is None else np.asarray(
-                programs((fine_changes, k), lambda *a, k=k: fine_changes(k, *a)[0], m.renders, y_of(k, y))[0], dtype=float)
+                programs((fine_changes, k), lambda *a, k=k: fine_changes(k, *a), m.renders, y_of(k, y))[0], dtype=float)
                 for k, m in enumerate(made)], axis=1)
 
         def settled(y: np.ndarray, columns: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
