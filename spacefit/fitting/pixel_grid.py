@@ -58,8 +58,9 @@ steps are 0.021 px, the one step left the blur 0.0027 px wide, 1.2 of its statis
 wide has less of the grid's error to step over. With ``D = d step(d_4(y)) / dy`` at x*, the fixed
 point moves by ``(I - D)^-1`` per change of the fit's estimate, so its covariance is the fit's through
 that map (:func:`grid_step`: the columns of the image nuisances, on which ``d_4`` depends without
-another render, by JAX's forward-mode derivatives of the models, ``jax.jvp``, all columns in one program
-with the values' model at x*; each image's in the values it reads, its own and the shared ones). Measured in the coverage study (48 px, 55 fits): the blur's
+another render, by JAX's forward-mode derivatives of the models, ``jax.linearize``, in one program with
+the models at x*; each image's in the values it reads, its own and the shared ones). Measured in the
+coverage study (48 px, 55 fits): the blur's
 error after the step scattered 1.32 times its error before it (0.00287 and 0.00217 px), ``D`` 0.16 for
 the blur at one exposure (its error 1.19 times the fit's); the rendered parameters' columns (the pose,
 the materials: d_4 moves with the render too) are not taken (a render at 4x per column and sign).
