@@ -23,7 +23,7 @@ import numpy as np
 from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.pixel_grid import grid_feedback, grid_step
+from spacefit.fitting.pixel_grid import grid_step
 from spacefit.fitting.problem import Setup
 from spacefit.fitting.render_seeds import seed_excess, seed_shift
 from spacefit.fitting.residuals import Problem, column_owners
@@ -313,7 +313,7 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     to the one made at 4x; extras ``pixel_grid_remainder``, its magnitude), and the step's render noise
     (two renders at 4x, their change's difference through :func:`render_meat` at half weight); the
     covariance of the step's fixed point is the fit's through ``(I - D)^-1``, ``D`` how the step moves
-    with the image nuisances it is taken at (:func:`~spacefit.fitting.pixel_grid.grid_feedback`). Where no noise is given
+    with the image nuisances it is taken at (also :func:`~spacefit.fitting.pixel_grid.grid_step`). Where no noise is given
     (no sensor or ``sigma``: the residuals are the noise's basis) and the fit moved, the render-seed check (:mod:`spacefit.fitting.render_seeds`)
     adds to each value's variance what fresh renders measure of its own renders' error beyond the render noise the
     sandwich carries (extras ``render_seed_shift``, the step to the fresh renders, and ``render_seed_widened``, the
@@ -326,19 +326,17 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
         correction = np.zeros(len(x))
     extras: dict[str, Any] = {"fisher_eigenvalues": fisher.tolist(),
                               "noise_bias_correction": dict(zip(s.solver_params.names, correction.tolist()))}
-    differences = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
-    if differences is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
+    changes = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
+    if changes is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
         padding = np.zeros(lin.r.size - s.problem.pixels)
-        padded = lambda y: tuple(np.concatenate([d, padding]) for d in differences(y))  # noqa: E731
-        stderr = np.sqrt(np.diag(cov))
-        delta, remainder, noise = grid_step(padded, lin.step, x, stderr)
+        columns = [i for i, n in enumerate(s.solver_params.names) if is_image(n)]
+        delta, remainder, noise, feedback = grid_step(changes, lambda d: lin.step(np.concatenate([d, padding])), x, np.sqrt(np.diag(cov)), columns)
         # the step's render noise: the mean of two renders' changes, through the sandwich as the fit's own render noise
         bread = _pseudo_inverse(lin.information)[0]
         cov = cov + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread
         # the step moves with the image nuisances it is taken at: the fixed point's estimate moves by (I - D)^-1 per the fit's
-        feedback = np.linalg.inv(np.eye(len(x)) - grid_feedback(padded, lin.step, x + delta,
-                                                                [i for i, n in enumerate(s.solver_params.names) if is_image(n)], stderr))
-        cov = feedback @ cov @ feedback.T + np.outer(remainder, remainder)
+        moves = np.linalg.inv(np.eye(len(x)) - feedback)
+        cov = moves @ cov @ moves.T + np.outer(remainder, remainder)
         if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + delta)):
             x = x + delta
         extras["pixel_grid_error"] = dict(zip(s.solver_params.names, delta.tolist()))
