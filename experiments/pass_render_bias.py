@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 from bench_pass import MATERIALS, PER_FRAME, SENSOR, base
+from coverage import read_rows
 from pass_coverage import frame_truths, reference
 from studyio import commit, machine, write_csv
 
@@ -48,15 +49,19 @@ def main() -> None:
     p.add_argument("--truth-spp", type=int, default=4096)
     p.add_argument("--spp", type=int, nargs="+", default=[16, 64])
     p.add_argument("--count", type=int, default=8)
+    p.add_argument("--first-draw", type=int, default=0, help="the first draw's index (its seeds: 5001 + 2 k and 5002 + 2 k)")
     p.add_argument("--out", type=Path, required=True)
     args = p.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     print(f"machine: {machine()}; commit {commit()}; {args.frames} frames at {args.size} px, references {args.truth_spp} spp, "
           f"noise-free; load {os.getloadavg()[0]:.1f}", flush=True)
     obs, truths = observations(args.size, args.frames, args.truth_spp)
-    rows = []
+    path = args.out / "render_bias.csv"
+    rows = read_rows(path) if path.exists() else []
     for spp in args.spp:
-        for k in range(args.count):
+        for k in range(args.first_draw, args.first_draw + args.count):
+            if any(int(r["spp"]) == spp and int(r["draw"]) == k for r in rows):
+                continue
             t0 = time.perf_counter()
             s = setup(obs, list(truths), start=truths, render=sf.FitRender(spp=spp, seed=2 * k + 5001, seed_grad=2 * k + 5002))
             cov, _, _, correction = covariance(s.problem, s.x0)
@@ -67,11 +72,11 @@ def main() -> None:
             kd = rows[-1] if rows[-1]["parameter"] == "parts.legs.kd" else next(r for r in rows[::-1] if r["parameter"] == "parts.legs.kd")
             print(f"spp {spp}, draw {k}: kd change {kd['change']:+.5f} (stderr {kd['stderr']:.5f}), {time.perf_counter() - t0:.1f} s; "
                   f"load {os.getloadavg()[0]:.1f}", flush=True)
-            write_csv(args.out / "render_bias.csv", rows)
+            write_csv(path, rows)
     for spp in args.spp:
         for name in MATERIALS:
-            c = np.array([r["change"] for r in rows if r["spp"] == spp and r["parameter"] == name])
-            se = np.mean([r["stderr"] for r in rows if r["spp"] == spp and r["parameter"] == name])
+            c = np.array([float(r["change"]) for r in rows if int(r["spp"]) == spp and r["parameter"] == name])
+            se = np.mean([float(r["stderr"]) for r in rows if int(r["spp"]) == spp and r["parameter"] == name])
             print(f"spp {spp:4d} {name}: mean change {c.mean():+.6f} +- {c.std(ddof=1) / np.sqrt(len(c)):.6f} ({len(c)} draws; "
                   f"{c.mean() / se:+.2f} of the mean stderr {se:.5f})")
 

@@ -27,6 +27,7 @@ from spacefit.fitting.pixel_grid import grid_feedback, grid_step
 from spacefit.fitting.problem import Setup
 from spacefit.fitting.render_seeds import seed_excess, seed_shift
 from spacefit.fitting.residuals import Problem, column_owners
+from spacefit.scene.entries import Bounds
 from spacefit.scene.parameters import is_image, parameter
 
 # |correlation| above which two parameters are reported as not separately determined.
@@ -34,6 +35,8 @@ CORRELATION_WARN = 0.95
 # Standard error, relative to the larger of the value and the parameter's own scale
 # (:attr:`~spacefit.scene.entries.Parameter.scale`), above which it is reported as poorly determined.
 REL_STDERR_WARN = 0.2
+# |correlation| at or above which a parameter near a bound of its range is named beside it (:func:`near_bound`).
+NEAR_BOUND_CORRELATION = 0.3
 
 
 @dataclass(frozen=True)
@@ -275,6 +278,16 @@ def stderr_corr(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return stderr, corr
 
 
+def near_bound(bounds: Bounds, value: float, stderr: float) -> str | None:
+    """"lower" or "upper" where ``value`` lies within one standard error ``stderr`` of that finite bound of
+    ``bounds`` (a :class:`~spacefit.scene.entries.Bounds`): there its 1-sigma interval reaches out of the range,
+    and the delta method's normal error does not describe an estimate that cannot cross the bound (a PSF width
+    whose truth is 0: 0.027 +- 0.066 px in a 12-frame pass, docs/measurements/validation.md)."""
+    if value - bounds.lo < stderr:
+        return "lower"
+    return "upper" if bounds.hi - value < stderr else None
+
+
 def warnings_for(params: FreeParameters, values: np.ndarray, stderr: np.ndarray, corr: np.ndarray) -> list[str]:
     out = []
     names = params.names
@@ -283,7 +296,7 @@ def warnings_for(params: FreeParameters, values: np.ndarray, stderr: np.ndarray,
             out.append(f"{name} = {value:.4g} is at the {side} bound of its range {b.describe()}: the solver pushed "
                        "it there, so neither it nor its standard error is an estimate; the model may not be able "
                        "to match the images (another start, or another free parameter?).")
-    for i, name in enumerate(names):
+    for i, (name, b) in enumerate(zip(names, params.bijections)):
         if np.isnan(stderr[i]):
             continue  # no error estimate at all: reported by the caller
         if not np.isfinite(stderr[i]):
@@ -291,6 +304,14 @@ def warnings_for(params: FreeParameters, values: np.ndarray, stderr: np.ndarray,
         elif stderr[i] > REL_STDERR_WARN * (scale := max(abs(values[i]), parameter(name).scale, 1e-12)):
             out.append(f"{name} is poorly determined: standard error {stderr[i]:.3g} on {values[i]:.4g} "
                        f"(more than {REL_STDERR_WARN:g} x {scale:.3g}, the larger of its value and its scale).")
+        if np.isfinite(stderr[i]) and not b.at_bound(float(values[i])) and (side := near_bound(b, float(values[i]), float(stderr[i]))):
+            bound = b.lo if side == "lower" else b.hi
+            linked = [f"{names[j]} ({corr[i, j]:+.2f})" for j in range(len(names)) if j != i and abs(corr[i, j]) >= NEAR_BOUND_CORRELATION]
+            out.append(f"{name} = {values[i]:.4g} +- {stderr[i]:.2g} lies within one standard error of the {side} bound "
+                       f"{bound:g} of its range: its interval is cut there, so it is not a normal error (the estimate "
+                       "cannot fall beyond the bound, so it is biased away from it)"
+                       + (f"; the errors of the parameters correlated with it, {', '.join(linked)}, take it as normal and "
+                          "may be understated." if linked else "."))
     for i in range(len(names)):
         for j in range(i + 1, len(names)):
             if abs(corr[i, j]) > CORRELATION_WARN:
