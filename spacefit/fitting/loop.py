@@ -36,6 +36,7 @@ from spacefit.fitting.outside import DESCENT
 from spacefit.fitting.solvers import (Outcome, RenderedFirst, Solver, Status, Step, drive, is_least_squares, make_solver, solver_name,
                                       with_owners)
 from spacefit.fitting.stopping import REJECTED_PATIENCE, REJECTED_RTOL, NoiseFloor, loss_noise
+from spacefit.fitting.noise_weight import weight_bias_notes
 from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
 from spacefit.interrupts import Terminated, deferred_interrupts
 from spacefit.precision import float64
@@ -404,7 +405,8 @@ def _result(s: Setup, outcome: Outcome, steps: _Steps, solver: str, loss: str) -
         stderr, corr = stderr_corr(cov)
         named_stderr = dict(zip(s.user.names, stderr))
         warnings = (warnings_for(s.user, x_user, stderr, corr) + grid_notes(extras.get("pixel_grid_error", {}), named_stderr)
-                    + seed_notes(extras.get("render_seed_shift", {}), extras.get("render_seed_widened", {}), named_stderr))
+                    + seed_notes(extras.get("render_seed_shift", {}), extras.get("render_seed_widened", {}), named_stderr)
+                    + weight_bias_notes(extras.get("noise_weight_bias", {}), named_stderr))
         quality, r, noise, renders, signal = judged_goodness(s, jnp.asarray(x), loss)
         residuals = [*(np.where(used[..., None], ref - render, np.nan) for ref, render, used in zip(problem.references, renders, problem.used)),
                      *(b.data.value - render for b, render in zip(problem.blocks, renders[len(problem.references):]))]

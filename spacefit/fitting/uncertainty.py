@@ -20,6 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from spacefit.fitting.noise_weight import weight_bias
 from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
@@ -338,7 +339,8 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     (no sensor or ``sigma``: the residuals are the noise's basis) and the fit moved, the render-seed check (:mod:`spacefit.fitting.render_seeds`)
     adds to each value's variance what fresh renders measure of its own renders' error beyond the render noise the
     sandwich carries (extras ``render_seed_shift``, the step to the fresh renders, and ``render_seed_widened``, the
-    factor each standard error grew by; user coordinates)."""
+    factor each standard error grew by; user coordinates). With a sensor, extras ``noise_weight_bias``: the bias its noise
+    weights, taken at the fit's noisy renders, leave in each value (:mod:`spacefit.fitting.noise_weight`; user units)."""
     lin = linearise(s.problem, x)
     cov, loss_value, fisher, correction = covariance(s.problem, x, lin)
     if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
@@ -347,6 +349,8 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
         correction = np.zeros(len(x))
     extras: dict[str, Any] = {"fisher_eigenvalues": fisher.tolist(),
                               "noise_bias_correction": dict(zip(s.solver_params.names, correction.tolist()))}
+    if (bias := weight_bias(s.problem, lin.r, lin.r_alt, lin.step)) is not None and correct:  # flagged, not subtracted
+        extras["noise_weight_bias"] = dict(zip(s.user.names, (np.asarray(jax.jacfwd(s.to_user)(jnp.asarray(x))) @ bias).tolist()))
     differences = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
     if differences is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
         padding = np.zeros(lin.r.size - s.problem.pixels)
