@@ -3,7 +3,8 @@ truth, its references noise-free (the expected DN of one render at ``--truth-spp
 ``--count`` pairs of render seeds at each of ``--spp``: each draw's estimate is the root of the two-seed estimating
 equation one Gauss-Newton step from the truth (:func:`spacefit.fitting.uncertainty.covariance`'s correction), so its
 mean over the draws is the estimator's bias from the fit's own render noise (the references' noise is one draw, the
-same at every spp). Prints per spp and material the mean change (+- its standard error) and the mean standard error
+same at every spp), beside the noise weight's bias that :func:`spacefit.fitting.noise_weight.weight_bias` predicts
+(``weight_bias``). Prints per spp and material the mean change (+- its standard error) and the mean standard error
 the fit reports; writes ``render_bias.csv`` to ``--out``. Run:
 ``nice -n 10 .venv/bin/python experiments/pass_render_bias.py --out DIR``.
 """
@@ -23,7 +24,8 @@ from studyio import commit, machine, write_csv
 
 import spacefit as sf
 from spacefit.fitting.problem import setup
-from spacefit.fitting.uncertainty import covariance
+from spacefit.fitting.noise_weight import weight_bias
+from spacefit.fitting.uncertainty import covariance, linearise
 from spacefit.formation import expected_dn
 from spacefit.scene.assembly import assemble
 from spacefit.scene.parameters import scene_value
@@ -64,13 +66,17 @@ def main() -> None:
                 continue
             t0 = time.perf_counter()
             s = setup(obs, list(truths), start=truths, render=sf.FitRender(spp=spp, seed=2 * k + 5001, seed_grad=2 * k + 5002))
-            cov, _, _, correction = covariance(s.problem, s.x0)
+            lin = linearise(s.problem, s.x0)
+            cov, _, _, correction = covariance(s.problem, s.x0, lin)
             stderr = np.sqrt(np.diag(cov))
+            bias = weight_bias(s.problem, lin.r, lin.r_alt, lin.step)
             for i, name in enumerate(s.solver_params.names):
                 if name in MATERIALS:
-                    rows.append({"spp": spp, "draw": k, "parameter": name, "change": float(correction[i]), "stderr": float(stderr[i])})
+                    rows.append({"spp": spp, "draw": k, "parameter": name, "change": float(correction[i]), "stderr": float(stderr[i]),
+                                 "weight_bias": float(bias[i])})
             kd = rows[-1] if rows[-1]["parameter"] == "parts.legs.kd" else next(r for r in rows[::-1] if r["parameter"] == "parts.legs.kd")
-            print(f"spp {spp}, draw {k}: kd change {kd['change']:+.5f} (stderr {kd['stderr']:.5f}), {time.perf_counter() - t0:.1f} s; "
+            print(f"spp {spp}, draw {k}: kd change {kd['change']:+.5f} (stderr {kd['stderr']:.5f}; the weight's bias "
+                  f"{kd['weight_bias']:+.5f}), {time.perf_counter() - t0:.1f} s; "
                   f"load {os.getloadavg()[0]:.1f}", flush=True)
             write_csv(path, rows)
     for spp in args.spp:
