@@ -141,7 +141,8 @@ def main() -> None:
     args = p.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "fits.csv"
-    rows = read_rows(path) if path.exists() else []
+    # rows saved before the column fit_spp was made at this run's (a folder holds one count of samples)
+    rows = [{"variant": r["variant"], "fit_spp": r.get("fit_spp", args.fit_spp), **r} for r in read_rows(path)] if path.exists() else []
     print(f"machine: {machine()}; commit {commit()}; {args.variant}: {args.frames} frames at {args.size} px, fit {args.fit_spp} spp, "
           f"references {args.truth_spp} spp; load {os.getloadavg()[0]:.1f}", flush=True)
     for seed in range(args.first_seed, args.first_seed + args.realisations):
