@@ -18,6 +18,7 @@ import numpy as np
 from spacefit.fitting.drivers import Outcome
 from spacefit.fitting.goodness import STANDS_OUT, TRIM, Goodness, standing_out
 from spacefit.fitting.judging import judged_goodness, part_goodness, part_rows, per_observation
+from spacefit.fitting.noise_weight import weight_bias_notes
 from spacefit.fitting.observations.base import Sequenced
 from spacefit.fitting.pixel_grid import grid_notes
 from spacefit.fitting.problem import Setup
@@ -52,7 +53,8 @@ def conclude(s: Setup, outcome: Outcome, steps: SolveRecord, solver: str, loss: 
         stderr, corr = stderr_corr(cov)
         named_stderr = dict(zip(s.user.names, stderr))
         warnings = (warnings_for(s.user, x_user, stderr, corr) + grid_notes(extras.get("pixel_grid_error", {}), named_stderr)
-                    + seed_notes(extras.get("render_seed_shift", {}), extras.get("render_seed_widened", {}), named_stderr))
+                    + seed_notes(extras.get("render_seed_shift", {}), extras.get("render_seed_widened", {}), named_stderr)
+                    + weight_bias_notes(extras.get("noise_weight_bias", {}), named_stderr))
         quality, r, noise, renders, signal = judged_goodness(s, jnp.asarray(x), loss)
         residuals = [*(np.where(used[..., None], ref - render, np.nan) for ref, render, used in zip(problem.references, renders, problem.used)),
                      *(b.data.value - render for b, render in zip(problem.blocks, renders[len(problem.references):]))]

@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.executors import Executor
+from spacefit.formation import noise_variance_terms
 from spacefit.fitting.frame_models import AlikePrograms, FrameModels, frame_model
 from spacefit.fitting.frames import (FrameSpec, InProcess, batched_renders, frame_part_image, frame_renders, given_renders, render_runs,
                                      run_frames, share_views)
@@ -91,6 +92,8 @@ class Problem:
     # the renders made first and handed to programs that call nothing back (spacefit.fitting.outside); None where a
     # value observation is rendered (its own callbacks)
     outside: Outside | None = None
+    # per image, its sensor's noise variance as (floor, slope, offset) in DN (formation.noise_variance_terms); None without one
+    noise_terms: tuple[tuple[float, float, float] | None, ...] = ()
 
     @property
     def rendered(self) -> bool:
@@ -302,7 +305,8 @@ def build_problem(
                    lambda x: models_seeded(x, 0), part_images, references, models_seeded, residual_of, resampled,
                    lambda x: residual_at(x, main, 0, 2), lambda x: residual_at(x, independent, 1, 2), all(o.sensor is not None for o in observations) and all(b.noise_known for b in blocks), tuple(spread),
                    tuple(units), tuple(used_pixels), spps, tuple(o.render_spp for o in observations), tuple(blocks), tuple(dark),
-                   pixel_grid if any(blurred) else None, outside)
+                   pixel_grid if any(blurred) else None, outside,
+                   tuple(None if o.sensor is None else noise_variance_terms(o.sensor) for o in observations))
 
 
 def _seen(free: FreeParameters, k: int, image_names: frozenset[str]) -> tuple[tuple[str, ...], np.ndarray]:
