@@ -33,7 +33,7 @@ ROOT = HERE.parent
 LONG_FIT = """
 import resource
 import spacefit as sf
-from spacefit.rendering.renderer import kernel_log
+from spacefit.rendering.logs import kernel_log
 case = sf.load_case("panels")
 scene = case.truth_scene.with_values({"render.resolution": [64, 64], "camera.pixel_pitch_mm": 37.5, "render.spp": 8})
 reference = sf.Renderer(scene).render(seed=7)
@@ -80,7 +80,8 @@ t0 = time.perf_counter()
 import spacefit as sf
 t1 = time.perf_counter()
 from spacefit.rendering.backend import variant_scope
-from spacefit.rendering.renderer import Renderer, kernel_log
+from spacefit.rendering.logs import kernel_log
+from spacefit.rendering.renderer import Renderer
 t2 = time.perf_counter()
 scene = sf.load_scene(None)
 with variant_scope(scene.render.variant):

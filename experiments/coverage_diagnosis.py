@@ -20,7 +20,7 @@ truth, sensor and seeds' rule), all eight parameters free:
   grid's renders at 4x took before they took the fit's): the pixel grid's step per seed;
 * ``feedback``: the study's exposures (seeds 11, 12, ...) linearised at the truth, each standard
   error with the pixel grid's step taken as a constant (as the fits of ``--rescore`` had it) and
-  through its feedback ``(I - D)^-1`` (:func:`spacefit.fitting.pixel_grid.grid_feedback`, as
+  through its feedback ``(I - D)^-1`` (:func:`spacefit.fitting.pixel_grid.grid_step`, as
   :func:`spacefit.fitting.uncertainty.estimate` now does): their ratio per parameter; with
   ``--rescore DIR ...``, those runs' ``coverage.csv`` scored again with each standard error times
   the mean ratio (the statistical part and the carried remainder as the fits had them);
@@ -59,10 +59,10 @@ from coverage import NOISE_LEVELS, NUISANCE_TRUTH, START_FACTOR, case_at, read_r
 from studyio import commit, machine
 
 import spacefit as sf
-import spacefit.fitting.loop as fit_loop
+import spacefit.fitting.conclusion as conclusion
 from spacefit.fitting.observations.image import check_reference, image_residual
 from spacefit.fitting.problem import setup
-from spacefit.fitting.uncertainty import _pseudo_inverse, covariance, estimate, linearise
+from spacefit.fitting.uncertainty import _pseudo_inverse, covariance, estimate, grid_step, linearise
 from spacefit.precision import float64
 from spacefit.scene.assembly import assemble
 
@@ -175,7 +175,7 @@ def fit_root(case: sf.Case, sensor: sf.Sensor, truths: dict[str, float], exposur
     ``c1`` (the one the fit took), ``c2`` and ``c3`` (at the point each previous one leads to), over the
     fit's standard errors, printed per parameter."""
     caught: dict[str, object] = {}
-    shipped = fit_loop.estimate
+    shipped = conclusion.estimate
 
     def spy(s: object, x: np.ndarray, correct: bool = True) -> tuple:
         caught["s"], caught["x"] = s, np.asarray(x)
@@ -183,7 +183,7 @@ def fit_root(case: sf.Case, sensor: sf.Sensor, truths: dict[str, float], exposur
 
     start = {n: START_FACTOR * v for n, v in case.truth.items()}
     for seed in seeds:
-        with mock.patch.object(fit_loop, "estimate", spy):
+        with mock.patch.object(conclusion, "estimate", spy):
             result = sf.fit(sf.Observation(case.scene(), exposure(seed), sensor=sensor), list(truths), start=start,
                             render=sf.FitRender(seed=2 * seed + 101, seed_grad=2 * seed + 102))
         s, x = caught["s"], caught["x"]
@@ -201,8 +201,11 @@ def feedback_ratio(s: object) -> np.ndarray:
     """Per parameter, the standard error of :func:`~spacefit.fitting.uncertainty.estimate` at the set-up's
     start over the same with the pixel grid's step taken as a constant (its feedback D set to 0; the
     same seeds, so the same renders)."""
-    constant = lambda differences, step, at, columns, stderr: np.zeros((len(at), len(at)))  # noqa: E731
-    with mock.patch("spacefit.fitting.uncertainty.grid_feedback", constant):
+    def constant(*args: object) -> tuple[np.ndarray, ...]:
+        delta, remainder, noise, feedback = grid_step(*args)
+        return delta, remainder, noise, np.zeros_like(feedback)
+
+    with mock.patch("spacefit.fitting.uncertainty.grid_step", constant):
         before = np.diag(estimate(s, s.x0)[1])
     return np.sqrt(np.diag(estimate(s, s.x0)[1]) / before)
 

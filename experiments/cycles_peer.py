@@ -2,7 +2,7 @@
 
 * **Like for like**: the same box filter in both (no neighbour-correlating splat), Cycles given the same
   window (spacefit's film window, as Cycles' render border), spacefit with its default sampler and its
-  silhouette mask (:func:`spacefit.rendering.renderer.target_mask`, which Cycles has no equivalent of).
+  silhouette mask (:func:`spacefit.rendering.window.target_mask`, which Cycles has no equivalent of).
 * **Pipeline**: each as it renders by default: spacefit's tent filter (splatted: it lowers the per-pixel
   error by correlating neighbours), its mask and default sampler; Cycles on the whole film with the
   Gaussian of the tent's standard deviation (:data:`spacefit.rendering.cycles.CYCLES_FILTERS`;

@@ -54,7 +54,7 @@ def analyse_steps() -> None:
     import equinox as eqx
     import jax
 
-    from spacefit.fitting import solvers
+    from spacefit.fitting import drivers
 
     class Proxy:
         def __getattr__(self, name):  # type: ignore[no-untyped-def]
@@ -85,12 +85,12 @@ def analyse_steps() -> None:
                 return jitted(*args)
             return call
 
-    solvers.eqx = Proxy()
+    drivers.eqx = Proxy()
 
 
 def phases(sampler: Sampler) -> None:
     """Mark the phases after the solve: the covariance, the pixel grid's 4x renders and step, the goodness of fit."""
-    from spacefit.fitting import loop, residuals
+    from spacefit.fitting import conclusion, residuals
 
     def marked(fn, phase, after=None):  # type: ignore[no-untyped-def]
         def call(*args, **kwargs):  # type: ignore[no-untyped-def]
@@ -101,9 +101,9 @@ def phases(sampler: Sampler) -> None:
                 sampler.phase = after or sampler.phase
         return call
 
-    loop.estimate = marked(loop.estimate, "covariance", "after")
+    conclusion.estimate = marked(conclusion.estimate, "covariance", "after")
     residuals.grid_error_models = marked(residuals.grid_error_models, "pixel grid")
-    loop.judged_goodness = marked(loop.judged_goodness, "goodness", "after")
+    conclusion.judged_goodness = marked(conclusion.judged_goodness, "goodness", "after")
 
 
 def main() -> None:

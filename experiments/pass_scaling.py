@@ -33,7 +33,7 @@ import spacefit as sf
 from spacefit.fitting.frames import InProcess, executor_of, loaded_count
 from spacefit.fitting.problem import setup
 from spacefit.precision import float64
-from spacefit.rendering.renderer import kernel_log
+from spacefit.rendering.logs import kernel_log
 
 # JAX's events (jax.monitoring) of one compilation: trace, lowering, XLA compilation.
 COMPILE_EVENTS = ("/jax/core/compile/jaxpr_trace_duration", "/jax/core/compile/jaxpr_to_mlir_module_duration",

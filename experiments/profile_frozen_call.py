@@ -24,7 +24,9 @@ import spacefit as sf
 from spacefit.rendering.backend import dr, mi, on_drjit_thread, variant_scope
 from spacefit.rendering.bridge import DrJitScene
 from spacefit.rendering.derivatives import render_chain
-from spacefit.rendering.renderer import errors_only, pass_seeds, render_threads, to_value
+from spacefit.rendering.drjit_values import to_value
+from spacefit.rendering.logs import errors_only
+from spacefit.rendering.sample_passes import pass_seeds, render_threads
 
 SPP = 32
 

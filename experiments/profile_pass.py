@@ -28,6 +28,7 @@ from bench_pass import SENSOR, SIMULATE_SPP, base, fit_frames
 from studyio import commit, machine
 
 import spacefit as sf
+import spacefit.fitting.conclusion as conclusion
 import spacefit.fitting.frames as frames
 import spacefit.fitting.loop as loop
 import spacefit.fitting.pixel_grid as pixel_grid
@@ -91,12 +92,11 @@ def main() -> None:
     frames.frame_primal = profile.timed("frames' primal renders", frames.frame_primal)
     loop.setup = profile.timed("set-up", loop.setup, phase=True)
     loop._solve = profile.timed("solve (covariance and goodness included)", loop._solve, phase=True)
-    loop.estimate = profile.timed("covariance", loop.estimate, phase=True)
-    loop.judged_goodness = profile.timed("goodness of fit", loop.judged_goodness, phase=True)
+    conclusion.estimate = profile.timed("covariance", conclusion.estimate, phase=True)
+    conclusion.judged_goodness = profile.timed("goodness of fit", conclusion.judged_goodness, phase=True)
     uncertainty.linearise = profile.timed("covariance: linearisations", uncertainty.linearise, phase=True)
     uncertainty.Linearisation.columns = profile.timed("covariance: sandwich products", uncertainty.Linearisation.columns, phase=True)
-    uncertainty.grid_step = profile.timed("covariance: pixel grid's fixed point", uncertainty.grid_step, phase=True)
-    uncertainty.grid_feedback = profile.timed("covariance: pixel grid's feedback", uncertainty.grid_feedback, phase=True)
+    uncertainty.grid_step = profile.timed("covariance: pixel grid's fixed point and feedback", uncertainty.grid_step, phase=True)
     uncertainty.Linearisation.step = profile.timed("covariance: Gauss-Newton steps", uncertainty.Linearisation.step)
     residuals.grid_error_models = profile.timed("covariance: pixel grid's 4x renders", residuals.grid_error_models, phase=True)
     pixel_grid.Renderer.render = profile.timed("pixel grid's renders alone", pixel_grid.Renderer.render)

@@ -43,7 +43,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "read_fit": ("spacefit.fitting.saved", "read_fit"),
     "Adam": ("spacefit.fitting.solvers", "Adam"),
     "SOLVERS": ("spacefit.fitting.solvers", "SOLVERS"),
-    "Status": ("spacefit.fitting.solvers", "Status"),
+    "Status": ("spacefit.fitting.status", "Status"),
     "Identifiability": ("spacefit.fitting.identifiability", "Identifiability"),
     "identifiability": ("spacefit.fitting.identifiability", "identifiability"),
     "Distortion": ("spacefit.geometry.distortion", "Distortion"),

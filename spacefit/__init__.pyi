@@ -39,7 +39,7 @@ from spacefit.fitting.resume import Resume as Resume
 from spacefit.fitting.saved import read_fit as read_fit
 from spacefit.fitting.solvers import Adam as Adam
 from spacefit.fitting.solvers import SOLVERS as SOLVERS
-from spacefit.fitting.solvers import Status as Status
+from spacefit.fitting.status import Status as Status
 from spacefit.formation import choose_exposure as choose_exposure
 from spacefit.formation import distort_image as distort_image
 from spacefit.formation import expected_dn as expected_dn

@@ -29,7 +29,7 @@ with deferred_interrupts() as _STARTUP:
 
 if TYPE_CHECKING:
     from spacefit.fitting.result import FitResult
-    from spacefit.fitting.solvers import Status
+    from spacefit.fitting.status import Status
     from spacefit.studies.orbit import Site
 
 # Exit codes of `spacefit fit` that is not a success (its report is written in each case).
@@ -343,7 +343,7 @@ def _verdict(result: FitResult, out: str) -> int:
 def exit_code(status: Status) -> int:
     """The exit code of a fit that ended with ``status``: 0 for a success, else NO_PROGRESS, MISFIT,
     AT_BOUND, UNJUDGED, INTERRUPTED, TERMINATED, or NOT_CONVERGED for the solver's other endings."""
-    from spacefit.fitting.solvers import Status  # deferred: it imports JAX (0.6 s), which render never needs
+    from spacefit.fitting.status import Status  # deferred, as this module's other fitting imports: render never needs them
 
     if status.success:
         return 0

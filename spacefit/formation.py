@@ -61,30 +61,60 @@ def gaussian_transfer(sigma_px: Float[Array, ""], fy: Float[Array, "..."], fx: F
     return jnp.exp(-2.0 * jnp.pi**2 * sigma_px**2 * (fx**2 + fy**2))
 
 
-def fourier_filter(image: Float[Array, "h w c"], transfer: Callable[[np.ndarray, np.ndarray], Array], pad: int) -> Float[Array, "h w c"]:
+FFT_FACTORS = (2, 3, 5, 7)
+"""The prime factors of the sizes the FFT is fast for (a padded 128 x 128 image at 4x, 556 px = 4 x 139, took
+2.5 times as long per transform as 560 = 2^4 x 5 x 7)."""
+
+
+def fast_pad(shape: tuple[int, ...], pad: int) -> int:
+    """The least pad >= ``pad`` (px, on every side) that makes each of ``shape``'s first two sizes padded a product of
+    :data:`FFT_FACTORS`: for :func:`fourier_filter` where a wider band of black sky changes nothing but the round-off
+    (a kernel that has fallen to nothing by ``pad``)."""
+    def smooth(n: int) -> bool:
+        for f in FFT_FACTORS:
+            while n % f == 0:
+                n //= f
+        return n == 1
+
+    while not all(smooth(n + 2 * pad) for n in shape[:2]):
+        pad += 1
+    return pad
+
+
+def fourier_filter(image: Float[Array, "h w c"], transfer: Callable[[np.ndarray, np.ndarray], Array], pad: int,
+                   even: bool = False) -> Float[Array, "h w c"]:
     """``image`` multiplied in Fourier space by ``transfer(fy, fx)`` (frequencies in cycles per px,
     shaped (H, 1, 1) and (1, W, 1); the result broadcasts against (H, W, channels)), after
     ``pad`` px of black sky on every side so that nothing wraps round: a convolution with a kernel
     that reaches ``pad`` px at most, no light entering from outside. The fit's blur and shift
-    (:mod:`spacefit.fitting.nuisance`) and the sensor's PSF share it."""
+    (:mod:`spacefit.fitting.nuisance`) and the sensor's PSF share it. ``even``: the transfer is real and
+    even, ``T(-f) = T(f)`` (a symmetric kernel's, a PSF's), applied by the real FFT: half the work, the same
+    result to the round-off (which the FFTs' own differs by: kept off where an image's exact values matter,
+    a simulated observation's draws)."""
     h, w = image.shape[:2]
     padded = jnp.pad(image, ((pad, pad), (pad, pad), (0, 0)))
     fy = np.fft.fftfreq(padded.shape[0])[:, None, None]  # NumPy: known while JAX traces, for NumPy transfers too
     fx = np.fft.fftfreq(padded.shape[1])[None, :, None]
-    filtered = jnp.real(jnp.fft.ifft2(jnp.fft.fft2(padded, axes=(0, 1)) * transfer(fy, fx), axes=(0, 1)))
+    if not even:
+        filtered = jnp.real(jnp.fft.ifft2(jnp.fft.fft2(padded, axes=(0, 1)) * transfer(fy, fx), axes=(0, 1)))
+    else:
+        filtered = jnp.fft.irfft2(jnp.fft.rfft2(padded, axes=(0, 1)) * transfer(fy, np.fft.rfftfreq(padded.shape[1])[None, :, None]),
+                                  s=padded.shape[:2], axes=(0, 1))
     return filtered[pad : pad + h, pad : pad + w]
 
 
 def psf_transfer(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> Callable[[np.ndarray, np.ndarray], Array]:
     """The PSF's transfer function ``(fy, fx) -> T`` (cycles per px) at one wavelength: the
-    continuous Gaussian's times, with diffraction, the circular pupil's MTF (:func:`~spacefit.psf.airy_transfer`)."""
+    continuous Gaussian's times, with diffraction, the circular pupil's MTF (:func:`~spacefit.psf.airy_transfer`);
+    NumPy's or JAX's as the frequencies are."""
     cutoff = diffraction_cutoff_px(sensor, intrinsics, wavelength_m)  # D / lambda in cycles per px
 
     def transfer(fy: np.ndarray, fx: np.ndarray) -> Array:
         gauss = gaussian_transfer(sensor.psf_sigma_px, fy, fx)
         if not sensor.diffraction:
             return gauss
-        return gauss * airy_transfer(np.hypot(fx, fy) / cutoff)
+        xp = np if isinstance(fx, np.ndarray) else jnp  # JAX's frequencies: formed in the program, no constant of the image's size
+        return gauss * airy_transfer(xp.hypot(fx, fy) / cutoff, xp)
 
     return transfer
 

@@ -28,7 +28,8 @@ from spacefit.output import prepare_output, staged_output, versions, write_json,
 from spacefit.progress import Progress, ProgressCallback
 from spacefit.rendering.exr import write_exr
 from spacefit.rendering.png import write_png
-from spacefit.rendering.renderer import Renderer, errors_only, kernel_log
+from spacefit.rendering.logs import errors_only, kernel_log
+from spacefit.rendering.renderer import Renderer
 from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import Assembly, assemble, fold_notes
 from spacefit.scene.overrides import parse_override

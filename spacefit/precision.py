@@ -9,7 +9,12 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import ParamSpec, TypeVar
+from typing import TYPE_CHECKING, Any, ParamSpec, TypeVar
+
+import numpy as np
+
+if TYPE_CHECKING:
+    from jax import Array
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -26,3 +31,14 @@ def float64(fn: Callable[P, R]) -> Callable[P, R]:
             return fn(*args, **kwargs)
 
     return wrapped
+
+
+def on_device(values: Any, dtype: np.dtype | type) -> Array:
+    """``values`` (an array, a sequence of numbers) as a JAX array of ``dtype``, converted by NumPy. JAX (0.10)
+    makes a program of one operation for ``jnp.asarray`` of a NumPy array without a dtype or of one to convert,
+    traced, lowered and read from its cache in every process (8 to 11 ms of CPU each, a warm fit's set-up three of
+    them; docs/measurements/performance.md); a NumPy array of the dtype asked is only copied. The same values:
+    both round to nearest, bit for bit (subnormals and overflow too)."""
+    import jax.numpy as jnp  # on first call: as float64's
+
+    return jnp.asarray(np.asarray(values, dtype=dtype), dtype=dtype)

@@ -4,7 +4,7 @@ pixels (NumPy; the image a sensor forms with it is :mod:`spacefit.formation`'s).
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -50,12 +50,13 @@ def _airy_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> flo
     return wavelength_m / (np.pi * sensor.aperture_diameter_m * intrinsics.pixel_pitch / intrinsics.focal_length)
 
 
-def airy_transfer(rho: Float[np.ndarray, "..."]) -> Float[np.ndarray, "..."]:
+def airy_transfer(rho: Float[np.ndarray, "..."], xp: Any = np) -> Float[np.ndarray, "..."]:
     """The MTF of a diffraction-limited circular pupil at ``rho`` = frequency / cut-off (D / lambda
     cycles per radian): ``(2 / pi) (acos rho - rho sqrt(1 - rho^2))``, 0 beyond 1 (Goodman,
-    "Introduction to Fourier Optics", 3rd ed., eq. 6-32): the Fourier transform of :func:`airy_psf`."""
-    r = np.clip(np.abs(np.asarray(rho, dtype=float)), 0.0, 1.0)
-    return 2.0 / np.pi * (np.arccos(r) - r * np.sqrt(1.0 - r**2))
+    "Introduction to Fourier Optics", 3rd ed., eq. 6-32): the Fourier transform of :func:`airy_psf`.
+    ``xp``: the array module, NumPy or ``jax.numpy`` (a program's transfer computed as it runs, not held as a constant)."""
+    r = xp.clip(xp.abs(xp.asarray(rho, dtype=float)), 0.0, 1.0)
+    return 2.0 / np.pi * (xp.arccos(r) - r * xp.sqrt(1.0 - r**2))
 
 
 def diffraction_cutoff_px(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> float:

@@ -61,6 +61,8 @@ def test_sensitivity_error_is_that_of_its_independent_estimates(tmp_path):
 
 
 class FixedBijection:
+    lo, hi = -np.inf, np.inf
+
     def at_bound(self, value: float) -> None:
         return None
 

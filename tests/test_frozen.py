@@ -1,6 +1,7 @@
 """Frozen renders (spacefit.rendering.frozen): a replayed pass equals a freshly traced one bit for bit,
 whatever it cannot replay (sample count, differentiated set, moved vertices, another film) is traced
-anew, and the derivative render traced on every thread equals the one-thread render."""
+anew, the derivative render traced on every thread equals the one-thread render, and a render that
+kernel_log counts records and replays as one it does not."""
 
 from __future__ import annotations
 
@@ -8,10 +9,13 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
-from spacefit.rendering.backend import dr, mi, variant_scope
+from spacefit.rendering.backend import dr, mi, on_drjit_thread, variant_scope
 from spacefit.rendering.derivatives import render_chain
+from spacefit.rendering.drjit_values import to_value
 from spacefit.rendering.frozen import FrozenPasses
-from spacefit.rendering.renderer import errors_only, render_threads, to_value
+from spacefit.rendering.logs import errors_only, kernel_log
+from spacefit.rendering.renderer import Renderer
+from spacefit.rendering.sample_passes import render_threads
 from spacefit.scene.parameters import scene_value
 from spacefit.scene.toml import load_scene
 
@@ -132,3 +136,28 @@ def test_derivative_render_on_every_thread_equals_one_thread(scene):
         assert np.any(one != 0)
         for image in threads:
             np.testing.assert_array_equal(image, one)
+
+
+
+def test_kernel_log_counts_the_drjit_threads_kernels_and_leaves_the_recordings_as_they_are():
+    """A render on the process's Dr.Jit thread inside kernel_log is counted, the kernels its pass
+    compiles as it records among them, and a frozen pass records and replays inside the block as
+    outside it, on either thread (Dr.Jit keys a recording on the calling thread's flags, the kernel
+    history's among them: switched on, a render on this thread recorded its pass again)."""
+    scene = load_scene(None, ["render.resolution=[32, 32]", "camera.pixel_pitch_mm=75.0", "render.depth=1", "render.spp=4"])
+    with variant_scope(scene.render.variant):
+        renderer = Renderer(scene)
+        on_thread = on_drjit_thread(renderer.render)
+        on_thread(seed=1)  # a new geometry's first render: traced, not recorded
+        with kernel_log() as recording:
+            first = on_thread(seed=2)  # records its pass
+        on_thread(seed=3)  # records it again, the seed opaque
+        recordings = renderer.frozen.recordings
+        with kernel_log() as replay:
+            on_thread(seed=4)
+        with kernel_log():
+            here = renderer.render(seed=2)
+        on_thread(seed=5)
+    assert renderer.frozen.recordings == recordings
+    assert np.array_equal(here, first)
+    assert recording["generated"] > replay["generated"] > 0 and recording["compile_s"] > 0

@@ -18,7 +18,7 @@ from spacefit.formation import expected_dn, noise_variance_dn
 from spacefit.fitting.goodness import MAX_JUDGED_RENDER_NOISE, REFERENCE_RENDER_NOISE, RESIDUALS, MAX_VERDICT_FACTOR, MISFIT_FLOOR, MISFIT_SIGMAS, VERDICT_RENDER_NOISE, goodness, part_chi2, verdict_factor
 from spacefit.fitting.goodness import _neighbours
 from spacefit.fitting.judging import _mean_and_noise, affordable, judged_goodness, per_observation
-from spacefit.fitting.loop import verdict
+from spacefit.fitting.status import verdict
 from spacefit.fitting.problem import setup
 from spacefit.fitting.stopping import REJECTED_PATIENCE
 from spacefit.scene.sections import MAX_SPP
@@ -418,7 +418,7 @@ def test_the_verdict_states_the_smallest_effect_it_could_see_and_one_just_above_
 def test_a_frame_that_misfits_on_its_own_is_named_by_frame():
     """A pooled verdict within range can hold a frame that is not: each observation's own misfit is a warning
     naming it, by its frame in a pass."""
-    from spacefit.fitting.loop import _own_misfits
+    from spacefit.fitting.conclusion import _own_misfits
 
     passed, failed = (goodness(*residuals(misfit=m), n_free=1, noise_known=True) for m in (0.0, 0.6))
     frames = SimpleNamespace(images=[None] * 3, names=lambda first: [], report=lambda *a: [], plot=lambda *a, **k: None)

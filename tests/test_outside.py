@@ -10,7 +10,8 @@ import pytest
 
 import spacefit as sf
 from spacefit.fitting.loop import _rendered_first
-from spacefit.fitting.solvers import drive, make_solver
+from spacefit.fitting.drivers import drive
+from spacefit.fitting.solvers import make_solver
 from spacefit.precision import float64
 from spacefit.fitting.problem import setup
 

@@ -19,7 +19,7 @@ from spacefit.fitting.problem import images_memory
 from spacefit.precision import float64
 from spacefit.rendering import memory
 from spacefit.rendering.memory import describe_fit, fit_memory
-from spacefit.rendering.renderer import kernel_log
+from spacefit.rendering.logs import kernel_log
 from spacefit.scene.assembly import assemble
 
 # The panels case at 32 x 32 px (75 mm pixels: the 128 px field of view).
@@ -324,34 +324,32 @@ def test_a_reduced_pass_recovers_each_frames_attitude(small_pass):
     assert [r["target.attitude_x_deg"] for r in rows] == [result.values[f"target.attitude_x_deg@{k}"] for k in range(3)]
 
 
-def test_the_pixel_grids_feedback_makes_a_frames_models_again_for_its_own_and_the_shared_values_only(small_pass, monkeypatch):
-    """The pixel grid's changes of a pass with the blur shared and each frame's shift its own: over the feedback's
-    central differences each frame's fine models are made for its own and the shared value's differences (and once
-    again at the fixed point), not for every other frame's too, and each change is the one made afresh."""
-    from collections import Counter
+def test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_values(small_pass, monkeypatch):
+    """The pixel grid's changes of a pass with the blur shared and each frame's shift its own: the feedback's
+    derivatives (forward mode) in each value are the central differences of the changes to the finer model, in the
+    rows of every frame for the shared blur and of its own frame alone for a frame's shift; the three frames alike
+    share their two programs."""
+    from spacefit.fitting.frame_models import AlikePrograms
 
-    from spacefit.fitting.pixel_grid import grid_feedback
-
+    made: list[AlikePrograms] = []
+    monkeypatch.setattr(residuals, "AlikePrograms", lambda share: made.append(AlikePrograms(share)) or made[-1])
     obs = small_pass[0]
-    made = []
-    real = residuals.grid_error_models
-
-    def counted(observation, scene, x, k, *args):
-        models = real(observation, scene, x, k, *args)
-        return lambda y: (made.append(k), models(y))[1]
-
-    monkeypatch.setattr(residuals, "grid_error_models", counted)
     free = ["parts.legs.kd", "image.blur_sigma_px", *[f"image.shift_x_px@{k}" for k in range(3)]]
     s = problem.setup(obs, free, start={"parts.legs.kd": 0.5, "image.blur_sigma_px": 0.6}, render=sf.FitRender(spp=4))
     x, columns = np.asarray(s.x0, dtype=float), [1, 2, 3, 4]
-    differences = s.problem.pixel_grid(x)
-    grid_feedback(differences, lambda d: np.full(len(x), d.sum()), x, columns, np.full(len(x), 0.2))
-    assert sorted(Counter(made).values()) == [5, 5, 6]  # blur +-, own +-, at x before and after the own (8 each made afresh)
-    h = np.zeros(len(x))
-    h[3] = 0.1
-    kept = differences(x + h)
-    afresh = s.problem.pixel_grid(x)(x + h)
-    assert all(np.array_equal(a, b) for a, b in zip(kept, afresh)) and np.any(kept[0] != 0)
+    with jax.enable_x64(True):
+        changes = s.problem.pixel_grid(x)
+        each, _, derivatives = changes.settled(x, columns)
+        np.testing.assert_allclose(each, changes.fine(x), rtol=1e-12, atol=1e-12)
+        frame = np.repeat(np.arange(3), [ref.size for ref in s.problem.references])
+        for i, j in enumerate(columns):
+            h = np.zeros(len(x))
+            h[j] = 1e-4
+            central = (changes.fine(x + h) - changes.fine(x - h)).mean(axis=0) / 2e-4
+            np.testing.assert_allclose(derivatives[i], central, rtol=0, atol=1e-5 * np.abs(central).max())
+            touched = [bool(np.abs(derivatives[i][frame == k]).max() > 0) for k in range(3)]
+            assert touched == ([True] * 3 if j == 1 else [k == j - 2 for k in range(3)]), j
+    assert len(made[0]._traced) == 6 and len(made[0]._programs) == 2  # each frame's two programs traced, compiled once
 
 
 @pytest.fixture(scope="module")

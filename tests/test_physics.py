@@ -19,9 +19,9 @@ def unit(v):
 @pytest.mark.parametrize(("theta_deg", "passes"), [(0.0, 1), (40.0, 1), (70.0, 1), (40.0, 4)])
 def test_lambert_plate_matches_kd_E_cos_over_pi(tmp_path, monkeypatch, theta_deg, passes):
     """Also with the samples split into passes (as big renders are), which must not bias."""
-    import spacefit.rendering.renderer as renderer
+    import spacefit.rendering.sample_passes as sample_passes
 
-    monkeypatch.setattr(renderer, "MAX_SAMPLES_PER_PASS", renderer.MAX_SAMPLES_PER_PASS if passes == 1 else 32 * 32 * 4)
+    monkeypatch.setattr(sample_passes, "MAX_SAMPLES_PER_PASS", sample_passes.MAX_SAMPLES_PER_PASS if passes == 1 else 32 * 32 * 4)
     kd = 0.5
     th = np.radians(theta_deg)
     sun = [np.sin(th), 0.0, -np.cos(th)]

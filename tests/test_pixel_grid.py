@@ -8,7 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.fitting.nuisance import image_model
-from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, MOVES, REMAINDER_RATIO, binned, fine_and_grid_models, grid_feedback, grid_step,
+from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, MOVES, REMAINDER_RATIO, GridChanges, binned, fine_and_grid_models, grid_step,
                                          response_matrix)
 from spacefit.fitting.uncertainty import linearise
 
@@ -64,47 +64,53 @@ def test_the_systematic_step_is_the_least_squares_step_of_the_residuals_change()
     np.testing.assert_allclose(systematic_step(J1, J2, d), expected, rtol=1e-9)
 
 
+def linear_changes(A: np.ndarray, a: np.ndarray, c: np.ndarray, calls: list[np.ndarray] | None = None) -> GridChanges:
+    """Residual changes linear in the values: each render's d_S(y) = A y + a +- y[0] a / 10 (their mean A y + a),
+    d_C(y) = A y + c, the derivatives of d_S the columns of A; ``calls``: the values each is evaluated at."""
+    def fine(y: np.ndarray) -> np.ndarray:
+        (calls if calls is not None else []).append(y)
+        return np.stack([A @ y + a + 0.1 * y[0] * a, A @ y + a - 0.1 * y[0] * a])
+
+    return GridChanges(fine, lambda y, columns: (fine(y), A @ y + c, A[:, list(columns)].T))
+
+
 def test_the_grid_step_is_the_fixed_point_of_the_step_and_carries_a_third_of_the_coarser_models_step():
     """Residual changes linear in the values, d_S(y) = A y + a and d_C(y) = A y + c, with a linear
     step S d = -(J^T J)^-1 J^T d: the fixed point delta = S d_S(x + delta) is (I - S A)^-1 S (A x + a),
-    and the bound what remains is a third of S (a - c), the step from the coarser model to the finer."""
+    the bound what remains is a third of S (a - c), the step from the coarser model to the finer, and the
+    render noise's draw the two renders' changes' difference over sqrt 2, all at the fixed point."""
     rng = np.random.default_rng(5)
     J, A = rng.normal(size=(40, 3)), 0.3 * rng.normal(size=(40, 3))
     a, c, x = rng.normal(size=40), rng.normal(size=40), np.array([0.8, 0.1, -0.2])
     S = -np.linalg.solve(J.T @ J, J.T)
     assert np.abs(np.linalg.eigvals(S @ A)).max() < 0.2  # a contraction: 8 iterations reach 1e-8
-    calls = []
-
-    def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        calls.append(y)
-        return A @ y + a, A @ y + c, y[0] * a
-
-    delta, remainder, noise = grid_step(differences, lambda d: S @ d, x, np.full(3, 1e-12))
+    calls: list[np.ndarray] = []
+    delta, remainder, noise, D = grid_step(linear_changes(A, a, c, calls), lambda d: S @ d, x, np.full(3, 1e-12), [])
     np.testing.assert_allclose(delta, np.linalg.solve(np.eye(3) - S @ A, S @ (A @ x + a)), rtol=0, atol=1e-7)
     np.testing.assert_allclose(remainder, REMAINDER_RATIO * S @ (a - c), rtol=1e-9)
-    np.testing.assert_allclose(noise, calls[-1][0] * a, rtol=1e-12)  # the render noise's draw at the last values
-    assert REMAINDER_RATIO == 1.0 / 3.0 and len(calls) == FIXED_POINT_STEPS
+    np.testing.assert_allclose(noise, 0.2 * (x + delta)[0] * a / np.sqrt(2.0), rtol=1e-12)  # the draw at the fixed point
+    assert REMAINDER_RATIO == 1.0 / 3.0 and len(calls) == FIXED_POINT_STEPS + 1 and not D.any()
     calls.clear()
-    delta, _, _ = grid_step(differences, lambda d: S @ d, x, np.full(3, 1e3))  # a step within a hundredth of the errors: not iterated
+    delta, *_ = grid_step(linear_changes(A, a, c, calls), lambda d: S @ d, x, np.full(3, 1e3), [])  # within a hundredth of the errors
     np.testing.assert_allclose(delta, S @ (A @ x + a), rtol=1e-12)
-    assert len(calls) == 1
+    assert len(calls) == 2  # the one step, then its values settled
 
 
 def test_the_fixed_point_moves_with_the_fits_estimate_by_the_inverse_of_one_less_the_steps_feedback():
     """With d_S(y) = A y + a and S d = -(J^T J)^-1 J^T d, the fixed point x* = x + delta(x) moves by
-    (I - S A)^-1 per change of x: grid_feedback's D is S A in the columns it is given (0 in the
+    (I - S A)^-1 per change of x: grid_step's feedback D is S A in the columns it is given (0 in the
     others), so that (I - D)^-1 C (I - D)^-T is the fixed point's covariance where x's is C."""
     rng = np.random.default_rng(7)
     J, A = rng.normal(size=(40, 3)), 0.3 * rng.normal(size=(40, 3))
     a = rng.normal(size=40)
     S = -np.linalg.solve(J.T @ J, J.T)
-    differences = lambda y: (A @ y + a, A @ y, 0.0 * a)  # noqa: E731
-    x, stderr = np.array([0.8, 0.1, -0.2]), np.array([0.01, 0.02, 0.03])
-    D = grid_feedback(differences, lambda d: S @ d, x, [1, 2], stderr)
+    changes = linear_changes(A, a, 0.0 * a)
+    x, stderr = np.array([0.8, 0.1, -0.2]), np.full(3, 1e-12)
+    D = grid_step(changes, lambda d: S @ d, x, stderr, [1, 2])[3]
     np.testing.assert_allclose(D[:, 1:], (S @ A)[:, 1:], rtol=1e-9, atol=1e-12)
     assert not D[:, 0].any()
-    D = grid_feedback(differences, lambda d: S @ d, x, [0, 1, 2], stderr)
-    fixed_point = lambda y: y + grid_step(differences, lambda d: S @ d, y, np.full(3, 1e-12))[0]  # noqa: E731
+    D = grid_step(changes, lambda d: S @ d, x, stderr, [0, 1, 2])[3]
+    fixed_point = lambda y: y + grid_step(changes, lambda d: S @ d, y, stderr, [])[0]  # noqa: E731
     moved = np.stack([(fixed_point(x + h) - fixed_point(x - h)) / 2e-3 for h in 1e-3 * np.eye(3)], axis=1)
     np.testing.assert_allclose(np.linalg.inv(np.eye(3) - D), moved, rtol=0, atol=1e-6)
     assert np.abs(moved - np.eye(3)).max() > 0.05  # the feedback is not negligible here: a constant step would be wrong

@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 import spacefit as sf
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.plots import plot_residuals
-from spacefit.fitting.solvers import Status
+from spacefit.fitting.status import Status
 from spacefit.display import html_table
 from spacefit.plotting import axis_label, target_box, unit_label
 from spacefit.scene.parameters import PARAMETERS

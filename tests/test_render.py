@@ -39,16 +39,16 @@ def test_same_seed_same_image_other_seed_other_noise(small_renderer):
 def test_a_deterministic_render_is_the_render_wholly_on_one_thread_bit_for_bit(small_renderer, monkeypatch):
     """It traces its samples on all of Dr.Jit's threads and adds them into the film on one, in their order: the
     image of a render whose every kernel runs on one thread, over several passes and samplers."""
-    from spacefit.rendering import renderer
+    from spacefit.rendering import sample_passes
     from spacefit.rendering.backend import dr
 
-    monkeypatch.setattr(renderer, "MAX_SAMPLES_PER_PASS", 64 * 16)  # several passes
+    monkeypatch.setattr(sample_passes, "MAX_SAMPLES_PER_PASS", 64 * 16)  # several passes
     threads = dr.thread_count()
     dr.set_thread_count(max(threads, 2))
     try:
         for scene in (small_renderer, Renderer(assemble(load_scene(None, SMALL + ["render.sampler='independent'"])))):
             spread = scene.render(seed=5, spp=16)
-            with renderer.render_threads(True):
+            with sample_passes.render_threads(True):
                 assert dr.thread_count() == 1
                 whole = scene.render(seed=5, spp=16)
             assert np.array_equal(spread, whole) and spread.max() > 0
@@ -244,7 +244,7 @@ def test_part_image_of_the_window_equals_the_whole_films():
 
 def test_a_renders_pass_seeds_are_not_another_seeds():
     """Pass i of seed s is not pass 0 of seed s + i: renders of neighbouring seeds share no pass."""
-    from spacefit.rendering.renderer import pass_seed
+    from spacefit.rendering.sample_passes import pass_seed
 
     for seed in (0, 1, 7, 1000):
         assert pass_seed(seed, 0) == seed

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import spacefit as sf
-from spacefit.rendering.renderer import pass_seeds
+from spacefit.rendering.sample_passes import pass_seeds
 from spacefit.scene.sections import RenderSettings
 from spacefit.scene.sampling import split_sample_count
 

@@ -323,3 +323,23 @@ def test_a_value_observation_without_errors_has_its_noise_from_s2_over_n_minus_p
         block = SimpleNamespace(data=SimpleNamespace(value=r), known=("a", "b"), noise_known=known)
         problem = SimpleNamespace(pixels=0, blocks=(block,))
         np.testing.assert_allclose(_unknown_noise_draw(problem, np.zeros(10), r, 10, 8), expected)
+
+
+def test_a_value_within_two_standard_errors_of_a_bound_is_flagged_with_its_correlated_parameters():
+    """A blur of 0.03 +- 0.04 px (its range (0, 4) px) reaches out of its range at 2 sigma: the warning names the lower
+    bound and the parameters correlated with it at |rho| >= 0.3 (kd at -0.5, not alpha_x at 0.1), beside "poorly
+    determined"; kd at 0.97 +- 0.02 is flagged at its upper bound 1; 0.05 +- 0.02 px and kd 0.95 +- 0.02 are not."""
+    names = ["image.blur_sigma_px", "parts.legs.kd", "parts.panels.alpha_x"]
+    params = free_parameters(sf.load_case("panels").scene(), names, 1)
+    corr = np.array([[1.0, -0.5, 0.1], [-0.5, 1.0, 0.0], [0.1, 0.0, 1.0]])
+
+    def near(values, stderr):
+        return [m for m in warnings_for(params, np.array(values), np.array(stderr), corr) if "standard errors of the" in m]
+
+    assert near([0.03, 0.5, 0.15], [0.04, 0.005, 0.001]) == [
+        "image.blur_sigma_px = 0.03 +- 0.04 lies within 2 standard errors of the lower bound 0 of its range: its interval "
+        "is cut there, so it is not a normal error (the estimate cannot fall beyond the bound, so it is biased away from it); "
+        "the errors of the parameters correlated with it, parts.legs.kd (-0.50), take it as normal and may be understated."]
+    assert [m.split(" lies")[0] + m[m.index("bound 1"):][:7] for m in near([1.0, 0.97, 0.15], [0.01, 0.02, 0.001])] == [
+        "parts.legs.kd = 0.97 +- 0.02bound 1"]
+    assert near([0.05, 0.95, 0.15], [0.02, 0.02, 0.001]) == []

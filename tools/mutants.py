@@ -27,6 +27,7 @@ ROOT = Path(__file__).resolve().parents[1]
 COVARIANCE = "spacefit/fitting/uncertainty.py"
 FRAMES = "spacefit/geometry/frames.py"
 RENDERER = "spacefit/rendering/renderer.py"
+MITSUBA_SCENE = "spacefit/rendering/mitsuba_scene.py"
 MITSUBA_MATERIALS = "spacefit/rendering/materials.py"
 BRIDGE = "spacefit/rendering/bridge.py"
 WM = "spacefit/geometry/wm.py"
@@ -105,7 +106,7 @@ MUTANTS = (
            (CONVENTIONS,)),
     Mutant("pixel-pitch-in-microns", "spacefit/geometry/frames.py", "c.pixel_pitch_mm * 1e-3", "c.pixel_pitch_mm * 1e-6",
            (CONVENTIONS,)),
-    Mutant("mitsuba-principal-point-sign", RENDERER, '"principal_point_offset_x": -intr.principal_offset[0]',
+    Mutant("mitsuba-principal-point-sign", MITSUBA_SCENE, '"principal_point_offset_x": -intr.principal_offset[0]',
            '"principal_point_offset_x": intr.principal_offset[0]', (CONVENTIONS,)),
     # materials and the renderer's BSDFs (thesis section 2.3)
     Mutant("alpha-u-v-swapped", MITSUBA_MATERIALS, '"alpha_u": m.alpha_x, "alpha_v": m.alpha_y,',
@@ -115,7 +116,7 @@ MUTANTS = (
            '"eta": _spectrum(m.eta), "k": 0.0}\n', (PHYSICS, PROPERTIES)),
     Mutant("kd-over-pi-twice", MITSUBA_MATERIALS, '{"type": "diffuse", "reflectance": {"type": "rgb", "value": _rgb_list(m.kd)}}',
            '{"type": "diffuse", "reflectance": {"type": "rgb", "value": [v / 3.141592653589793 for v in _rgb_list(m.kd)]}}', (PHYSICS,)),
-    Mutant("path-depth-off-by-one", RENDERER, "max_depth = s.render.depth + 1", "max_depth = s.render.depth", (PHYSICS,)),
+    Mutant("path-depth-off-by-one", MITSUBA_SCENE, "max_depth = s.render.depth + 1", "max_depth = s.render.depth", (PHYSICS,)),
     Mutant("default-distribution-beckmann", "spacefit/materials/conductor.py",
            'distribution: str = "ggx"\n\n    def __post_init__(self) -> None:', 'distribution: str = "beckmann"\n\n    def __post_init__(self) -> None:',
            (PHYSICS, PROPERTIES)),
@@ -280,15 +281,15 @@ MUTANTS = (
     Mutant("pixel-grid-step-not-iterated", "spacefit/fitting/pixel_grid.py", "for _ in range(FIXED_POINT_STEPS):",
            "for _ in range(1):",
            ("tests/test_pixel_grid.py::test_the_grid_step_is_the_fixed_point_of_the_step_and_carries_a_third_of_the_coarser_models_step",)),
-    Mutant("pixel-grid-whole-step-carried", "spacefit/fitting/pixel_grid.py", "return delta, REMAINDER_RATIO * step(fine - coarser)",
-           "return delta, step(fine)",
+    Mutant("pixel-grid-whole-step-carried", "spacefit/fitting/pixel_grid.py", "REMAINDER_RATIO * step(each.mean(axis=0) - coarser)",
+           "step(each.mean(axis=0))",
            ("tests/test_pixel_grid.py::test_the_grid_step_is_the_fixed_point_of_the_step_and_carries_a_third_of_the_coarser_models_step",)),
-    Mutant("pixel-grid-feedback-one-sided", "spacefit/fitting/pixel_grid.py", "D[:, j] = step(differences(at + h)[0] - differences(at - h)[0]) / (2.0 * h[j])",
-           "D[:, j] = step(differences(at + h)[0] - differences(at - h)[0]) / h[j]",
+    Mutant("pixel-grid-feedback-transposed", "spacefit/fitting/pixel_grid.py", "feedback[:, j] = step(derivative)",
+           "feedback[j, :] = step(derivative)",
            ("tests/test_pixel_grid.py::test_the_fixed_point_moves_with_the_fits_estimate_by_the_inverse_of_one_less_the_steps_feedback",)),
-    # ... an image's changes made again where a value it reads moves: its own and the shared ones
+    # ... an image's derivatives taken in the values it reads: its own and the shared ones
     Mutant("pixel-grid-changes-kept-past-a-shared-value", "spacefit/fitting/residuals.py", "o in (-1, k) for o in owners", "o == k for o in owners",
-           ("tests/test_pass.py::test_the_pixel_grids_feedback_makes_a_frames_models_again_for_its_own_and_the_shared_values_only",)),
+           ("tests/test_pass.py::test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_values",)),
     Mutant("render-noise-spread-without-sensor-psf", "spacefit/fitting/residuals.py",
            "blur = 0.0 if obs.sensor is None else psf_rms_px(", "blur = 0.0 if True else psf_rms_px(", (PLUMBING,)),
     Mutant("light-curve-first-seed-only", "spacefit/studies/lightcurve.py", "mean, se = mean_and_error(samples) if",
@@ -302,14 +303,14 @@ MUTANTS = (
            "point_checksum([v[local] for v, _ in data], index) == stored[local]", "True", ("tests/test_store_integrity.py",)),
     Mutant("sweep-marks-done-after-a-mesh-edit", "spacefit/studies/sweep.py",
            "if watch is not None and (edited := watch.check()):", "if False:", ("tests/test_store_integrity.py",)),
-    # the fit's verdicts (spacefit/fitting/goodness.py, loop.py)
+    # the fit's verdicts (spacefit/fitting/goodness.py, status.py, conclusion.py)
     Mutant("misfit-threshold-flipped", "spacefit/fitting/goodness.py", "bool(chi2_dof > limit)", "bool(chi2_dof < limit)",
            ("tests/test_goodness.py",)),
-    Mutant("no-progress-start-corrected", "spacefit/fitting/loop.py", "estimate(s, x, correct=steps.moved)", "estimate(s, x)",
+    Mutant("no-progress-start-corrected", "spacefit/fitting/conclusion.py", "estimate(s, x, correct=steps.moved)", "estimate(s, x)",
            ("tests/test_fit_cli.py",)),
     Mutant("rounding-decrease-accepted", "spacefit/fitting/stopping.py", "loss < below)", "loss < self.best)",
            ("tests/test_stopping.py",)),
-    Mutant("no-progress-check-removed", "spacefit/fitting/loop.py", "    if not moved:\n        return Status.NO_PROGRESS\n", "",
+    Mutant("no-progress-check-removed", "spacefit/fitting/status.py", "    if not moved:\n        return Status.NO_PROGRESS\n", "",
            ("tests/test_goodness.py",)),
     Mutant("dof-miscounted", "spacefit/fitting/goodness.py", "dof = max(values - n_free, 1)", "dof = max(values, 1)",
            ("tests/test_goodness.py",)),
@@ -341,7 +342,7 @@ MUTANTS = (
     # every error in the user's terms (issue 20): the camera's derived quantities, the far clip, the fit's seeds
     Mutant("field-of-view-unchecked", "spacefit/scene/optics.py", "        if fov > MAX_FOV_DEG:", "        if fov > 180.0:",
            ("tests/test_reliability.py",)),
-    Mutant("mitsuba-default-far-clip", RENDERER, '        "far_clip": FAR_CLIP_M,\n', "", ("tests/test_reliability.py",)),
+    Mutant("mitsuba-default-far-clip", MITSUBA_SCENE, '        "far_clip": FAR_CLIP_M,\n', "", ("tests/test_reliability.py",)),
     Mutant("negative-fit-seed-passes", "spacefit/rendering/derivatives.py",
            "check_count(name, value, 0, MAX_SEED,", "check_count(name, value, -(2**40), MAX_SEED,", ("tests/test_reliability.py",)),
     # BRDF tables and light curves as observations (issue 22)
@@ -445,7 +446,7 @@ MUTANTS = (
            ("tests/test_sensor.py::test_the_psf_reaches_five_sigma_and_its_widths_add_in_quadrature",)),
     Mutant("light-curve-sigma-times-1086", "spacefit/studies/lightcurve_fit.py", "float) / MAGNITUDE_PER_LN", "float) * MAGNITUDE_PER_LN",
            ("tests/test_lightcurve.py::test_a_magnitudes_error_is_ln_es_over_1086",)),
-    Mutant("pass-seeds-seed-plus-i", RENDERER, "return (seed + i * 0x9E3779B1) % (1 << 32)", "return (seed + i) % (1 << 32)",
+    Mutant("pass-seeds-seed-plus-i", "spacefit/rendering/sample_passes.py", "return (seed + i * 0x9E3779B1) % (1 << 32)", "return (seed + i) % (1 << 32)",
            ("tests/test_render.py::test_a_renders_pass_seeds_are_not_another_seeds",)),
 )
 

@@ -85,7 +85,7 @@ def batches(models: Sequence[FrameModel], values: Sequence[np.ndarray], runs: Se
             continue
         traced = [jax.make_jaxpr(models[k])(jax.ShapeDtypeStruct(shapes[k], jnp.float32),
                                             jax.ShapeDtypeStruct(values[k].shape, dtype)) for k in run]
-        keys = [(str(t.jaxpr), [(np.shape(c), np.asarray(c).dtype) for c in t.consts]) for t in traced]
+        keys = [traced_alike(t) for t in traced]
         start = 0
         for end in range(1, len(run) + 1):
             if end < len(run) and keys[end] == keys[start]:
@@ -95,6 +95,38 @@ def batches(models: Sequence[FrameModel], values: Sequence[np.ndarray], runs: Se
             out.append(Batch(frames, r, start, indices, alike[0], *_arrays(alike)) if len(frames) > 1 else Batch(frames, r, start, indices))
             start = end
     return out
+
+
+def traced_alike(traced: ClosedJaxpr) -> tuple[str, tuple[tuple[tuple[int, ...], np.dtype], ...]]:
+    """What makes two traced programs one program but for their arrays: their printed form (literals included) and
+    the arrays' shapes and dtypes."""
+    return str(traced.jaxpr), tuple((np.shape(c), np.asarray(c).dtype) for c in traced.consts)
+
+
+class AlikePrograms:
+    """Functions compiled once for every caller whose function traces alike (:func:`traced_alike`: a pass's frames'
+    pixel grid, whose programs differ in their arrays alone, the reference, the mask, a sensor's factors), each
+    traced once per key and its arrays handed to the shared program as operands. ``share`` False (one caller of a
+    kind, an image fitted alone): each key's function compiled as it is, not traced twice nor printed."""
+
+    def __init__(self, share: bool = True) -> None:
+        self.share = share
+        self._programs: dict[tuple[str, tuple[tuple[tuple[int, ...], np.dtype], ...]], Callable[..., list[Array]]] = {}
+        self._traced: dict[object, tuple[Callable[..., object], list[Array] | None]] = {}
+
+    def __call__(self, key: object, fn: Callable[..., object], *args: Array) -> list[Array]:
+        """``fn(*args)``'s outputs, flattened, by the program of its kind: traced for ``key`` (an image's and the
+        shapes', which must not change between calls with one key) on its first call."""
+        if key not in self._traced and not self.share:
+            self._traced[key] = (jax.jit(fn), None)
+        elif key not in self._traced:
+            traced = jax.make_jaxpr(fn)(*args)
+            kind = traced_alike(traced)
+            if kind not in self._programs:
+                self._programs[kind] = jax.jit(lambda consts, *a, jaxpr=traced.jaxpr: jaxpr_as_fun(ClosedJaxpr(jaxpr, consts))(*a))
+            self._traced[key] = (self._programs[kind], [jnp.asarray(c) for c in traced.consts])
+        program, consts = self._traced[key]
+        return jax.tree.leaves(program(*args)) if consts is None else program(consts, *args)
 
 
 def _arrays(alike: Sequence[ClosedJaxpr]) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...], tuple[tuple[bool, int], ...]]:

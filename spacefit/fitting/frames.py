@@ -32,7 +32,7 @@ import numpy as np
 
 from spacefit import executors
 from spacefit.executors import Cluster, Executor, executor_of
-from spacefit.precision import float64
+from spacefit.precision import float64, on_device
 from spacefit.rendering.bridge import outside_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
 from spacefit.rendering.parts import PartImage
@@ -227,7 +227,7 @@ def frame_part_image(spec: FrameSpec, key: str, loaded: Loaded | None = None) ->
     loaded = loaded or _LOADED
     chain = loaded.chain(spec, key)
     stage, _, view = loaded.chains[key]
-    x = jnp.asarray([scene_value(spec.scene, n) for n in spec.names], dtype=jnp.float64)
+    x = on_device([scene_value(spec.scene, n) for n in spec.names], np.float64)
     # one program per loaded scene, the frame's view an operand: run operation by operation, the scene values made
     # some 20 single-operation programs per frame
     chain.renderer.set_params({name: np.asarray(value) for name, value in loaded.stages[stage].compiled_values(x, view).items()})

@@ -40,7 +40,7 @@ Where the judged model's own render noise is still larger than the data's noise 
 verdict render could not take more), chi^2 / dof's expectation is mostly that render noise, measured
 from two renders, and a misfit far larger than the data's noise hides inside it (an 8-point light
 curve judged 5691 "within the expected range" of 1 + 1771): the goodness says it cannot judge, and
-the fit's status says so (:attr:`~spacefit.fitting.solvers.Status.UNJUDGED`).
+the fit's status says so (:attr:`~spacefit.fitting.status.Status.UNJUDGED`).
 
 A misfit means the model or its nuisances miss something (a pose, a blur, a shift, a material):
 the error bars, which assume a correct model, are then too small.

@@ -79,7 +79,7 @@ def _reference_ratio(spp: int, reference_spp: int | None) -> float:
 
 def affordable(problem: Problem, factor: int) -> bool:
     """Whether every observation's whole film rendered at ``factor`` times its samples per pixel in one
-    wavefront (a fit's render) fits this machine (:func:`~spacefit.rendering.renderer.check_memory`):
+    wavefront (a fit's render) fits this machine (:func:`~spacefit.rendering.memory.check_memory`):
     a verdict render takes fewer samples rather than lose the fit's result."""
     try:
         for ref, spp in zip(problem.references, problem.spp):

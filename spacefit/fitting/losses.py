@@ -34,6 +34,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from spacefit.errors import InputError, check_choice
+from spacefit.precision import on_device
 
 Residual = Callable[[Float[Array, "h w 3"]], Float[Array, " m"]]
 #: The losses ``sf.fit(loss=...)`` takes: ``pixel`` compares images pixel by pixel, divided by the
@@ -147,8 +148,8 @@ def residual_fn(reference: Float[np.ndarray, "h w 3"], loss: str = "pixel",
             module's docstring) in place of the weighted differences; the same otherwise.
     """
     check_choice("loss", loss, LOSSES)
-    ref = jnp.asarray(reference, dtype=jnp.float32)
-    keep = 1.0 if mask is None else jnp.asarray(np.broadcast_to(mask, ref.shape), dtype=jnp.float32)
+    ref = on_device(reference, np.float32)
+    keep = 1.0 if mask is None else on_device(np.broadcast_to(mask, ref.shape), np.float32)
 
     def weight(image: Array) -> Array | float:
         return 1.0

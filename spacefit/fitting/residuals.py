@@ -15,8 +15,6 @@ The set-up that checks the inputs and builds the problem is :mod:`spacefit.fitti
 from __future__ import annotations
 
 import dataclasses
-import functools
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -25,7 +23,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.executors import Executor
-from spacefit.fitting.frame_models import FrameModels, frame_model
+from spacefit.formation import noise_variance_terms
+from spacefit.fitting.frame_models import AlikePrograms, FrameModels, frame_model
 from spacefit.fitting.frames import (FrameSpec, InProcess, batched_renders, frame_part_image, frame_renders, given_renders, render_runs,
                                      run_frames, share_views)
 from spacefit.fitting.nuisance import image_model as image_model_of, nuisance_index
@@ -33,7 +32,7 @@ from spacefit.fitting.observations.base import Block
 from spacefit.fitting.observations.image import Observation, check_reference, image_residual, in_unit_of
 from spacefit.fitting.outside import DESCENT, Outside, Rendered
 from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.pixel_grid import grid_error_models
+from spacefit.fitting.pixel_grid import GridChanges, grid_error_models
 from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import assemble
@@ -86,13 +85,15 @@ class Problem:
     reference_spp: tuple[int | None, ...] = ()  # per image, its reference's (Observation.render_spp)
     blocks: tuple[Block, ...] = ()  # the value observations' residual blocks, after the images' pixels
     dark: tuple[float, ...] = ()  # per image, its model of no light in its unit (a sensor's bias, DN; 0 for radiance)
-    # physical x -> (y -> the change of the images' residuals from the fit's model to those made at 4x and 2x the
-    # resolution, from two renders at x, the image nuisances y's, and a draw of its render noise:
-    # spacefit.fitting.pixel_grid), or None where no image's blur width is free
-    pixel_grid: Callable[[np.ndarray], Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None] | None = None
+    # physical x -> the changes of the images' residuals from the fit's model to those made at 4x and 2x the
+    # resolution, from two renders at x, as functions of the image nuisances (spacefit.fitting.pixel_grid.GridChanges),
+    # or None where no image's blur width is free
+    pixel_grid: Callable[[np.ndarray], GridChanges | None] | None = None
     # the renders made first and handed to programs that call nothing back (spacefit.fitting.outside); None where a
     # value observation is rendered (its own callbacks)
     outside: Outside | None = None
+    # per image, its sensor's noise variance as (floor, slope, offset) in DN (formation.noise_variance_terms); None without one
+    noise_terms: tuple[tuple[float, float, float] | None, ...] = ()
 
     @property
     def rendered(self) -> bool:
@@ -137,7 +138,6 @@ def build_problem(
     # (``image_names``), an observation's own pose (``target.attitude_z_deg@k``) in place of the shared
     # one; every observation's render of a step runs in one batch (spacefit.fitting.frames)
     executor = InProcess() if executor is None else executor
-    image_model = image_model_of(free.names)
     rendered = [_seen(free, k, image_names) for k in range(len(observations))]
     for i, obs in enumerate(observations):
         rendered_names, steps = rendered[i][0], free.fd_steps[rendered[i][1]]
@@ -231,45 +231,70 @@ def build_problem(
     # the pixel loss's residuals are the pixels', which the pixel grid's change is laid out as
     blurred = [loss == "pixel" and nuisance_index(free.names, "image.blur_sigma_px", k) is not None for k in range(len(observations))]
 
-    def pixel_grid(x: np.ndarray) -> Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, np.ndarray]] | None:
-        """``y ->`` the images' residuals with each free blur's model made at 4x and at 2x the resolution, each
-        less the fit's own (0 for the other images), from two renders at ``x`` with independent seeds (the
-        changes their mean), the image nuisances ``y``'s, and a draw of the first change's render noise (the
-        two renders' difference over sqrt 2) (:mod:`spacefit.fitting.pixel_grid`); None: no free blur, or a
-        filter it does not model."""
+    def pixel_grid(x: np.ndarray) -> GridChanges | None:
+        """The images' residuals' changes from the fit's model to those made at 4x and at 2x the resolution, from two
+        renders at ``x`` with independent seeds, as functions of the image nuisances (:class:`GridChanges`; 0 for the
+        images whose blur is not free) (:mod:`spacefit.fitting.pixel_grid`); None: no free blur, or a filter it does
+        not model."""
         values = {n: float(v) for n, v in zip(free.names, x) if Name(n).parameter in image_names}
         seeds = (seed + PIXEL_GRID_SEED_OFFSET, seed + PIXEL_GRID_SEED_OFFSET + INDEPENDENT_SEED_OFFSET)
+        # image k's changes read only its own values and the shared ones (``read[k]``, in x's order): its models are made
+        # as functions of those alone, so that a pass's frames alike trace alike; the derivatives in another image's own are 0
+        owners = column_owners(free, blocks) or (-1,) * len(free.names)
+        read = [np.flatnonzero([o in (-1, k) for o in owners]) for k in range(len(observations))]
+        names = [[free.names[j] for j in read[k]] for k in range(len(observations))]
         made = [grid_error_models(obs, scene_with_values(obs.scene, values, observation=k).with_values({"render.spp": spps[k]}),
-                                  x, k, free.names, references[k].shape[-1], image_model, to_units[k], seeds) if blurred[k] else None
-                for k, obs in enumerate(observations)]
+                                  x[read[k]], k, names[k], references[k].shape[-1], image_model_of(names[k]), to_units[k], seeds)
+                if blurred[k] else None for k, obs in enumerate(observations)]
         if not any(m is not None for m in made):
             return None
 
-        @functools.partial(jax.jit, static_argnums=0)  # one program, not one per operation
-        def changes(k: int, a: tuple[jax.Array, ...], b: tuple[jax.Array, ...]) -> jax.Array:
-            (finest, coarser, grid), (finest_b, coarser_b, grid_b) = a, b
-            own, own_b = residuals[k](grid), residuals[k](grid_b)
-            fine_a, fine_b = residuals[k](finest) - own, residuals[k](finest_b) - own_b
-            return jnp.stack([0.5 * (fine_a + fine_b), 0.5 * (residuals[k](coarser) - own + residuals[k](coarser_b) - own_b),
-                              (fine_a - fine_b) / math.sqrt(2.0)])
+        def render_changes(k: int, render: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
+            """Image k's residuals with the model made at 4x from one ``render`` less those with the fit's own, and the
+            latter, at the values it reads ``y``."""
+            finest, grid = made[k].fine(render, y)
+            own = residuals[k](grid)
+            return residuals[k](finest) - own, own
 
-        # image k's changes read only its own values and the shared ones: the feedback's differences in another
-        # image's own value (grid_feedback) find it at the values it was last made at, and take those changes again
-        owners = column_owners(free, blocks) or (-1,) * len(free.names)
-        read = [np.flatnonzero([o in (-1, k) for o in owners]) for k in range(len(observations))]
-        last: list[tuple[bytes, np.ndarray] | None] = [None] * len(observations)
+        # the renders one after the other (jax.lax.map), not batched: a batch held both renders' temporaries at 4x at once
+        def fine_changes(k: int, renders: jax.Array, y: jax.Array) -> jax.Array:
+            return jax.lax.map(lambda render: render_changes(k, render, y)[0], renders)
 
-        def image_changes(k: int, y: np.ndarray) -> np.ndarray:
-            key = np.asarray(y, dtype=np.float64)[read[k]].tobytes()
-            if last[k] is None or last[k][0] != key:
-                last[k] = (key, np.asarray(changes(k, *made[k](y)), dtype=float))
-            return last[k][1]
+        def settled_changes(k: int, renders: jax.Array, y: jax.Array, directions: jax.Array) -> tuple[jax.Array, ...]:
+            def settled_one(render: jax.Array) -> tuple[jax.Array, jax.Array, jax.Array]:
+                # the derivatives in forward mode, one direction after another (the primal made once)
+                (each, own), tangent = jax.linearize(lambda v: render_changes(k, render, v), y)
+                derivatives = jax.lax.map(lambda t: tangent(t)[0], directions)
+                return each, residuals[k](made[k].coarser(render, y)) - own, derivatives
 
-        def differences(y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            parts = [np.zeros((3, references[k].size)) if models is None else image_changes(k, y) for k, models in enumerate(made)]
-            return tuple(np.concatenate([p[i] for p in parts]) for i in range(3))
+            each, coarser, derivatives = jax.lax.map(settled_one, renders)
+            return each, coarser.mean(axis=0), derivatives.mean(axis=0)
 
-        return differences
+        programs = AlikePrograms(sum(m is not None for m in made) > 1)  # one program each, not one per operation; a pass's frames share it
+        y_of = lambda k, y: jnp.asarray(np.asarray(y)[read[k]])  # noqa: E731
+
+        def fine(y: np.ndarray) -> np.ndarray:
+            return np.concatenate([np.zeros((2, references[k].size)) if m is None else np.asarray(
+                programs((fine_changes, k), lambda *a, k=k: fine_changes(k, *a), m.renders, y_of(k, y))[0], dtype=float)
+                for k, m in enumerate(made)], axis=1)
+
+        def settled(y: np.ndarray, columns: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+            parts = []
+            for k, m in enumerate(made):
+                size = references[k].size
+                if m is None:
+                    parts.append((np.zeros((2, size)), np.zeros(size), np.zeros((len(columns), size))))
+                    continue
+                own = [i for i, j in enumerate(columns) if j in read[k]]
+                directions = jnp.eye(len(read[k]))[np.searchsorted(read[k], [columns[i] for i in own]).astype(int)]
+                each, coarser, own_derivatives = (np.asarray(p, dtype=float) for p in programs(
+                    (settled_changes, k, len(own)), lambda *a, k=k: settled_changes(k, *a), m.renders, y_of(k, y), directions))
+                derivatives = np.zeros((len(columns), size))
+                derivatives[own] = own_derivatives
+                parts.append((each, coarser, derivatives))
+            return tuple(np.concatenate(p, axis=-1) for p in zip(*parts))
+
+        return GridChanges(fine, settled)
 
     def resampled(factor: int) -> Problem:
         finer = [dataclasses.replace(o, scene=o.scene.with_values({"render.spp": factor * n})) for o, n in zip(observations, spps)]
@@ -280,7 +305,8 @@ def build_problem(
                    lambda x: models_seeded(x, 0), part_images, references, models_seeded, residual_of, resampled,
                    lambda x: residual_at(x, main, 0, 2), lambda x: residual_at(x, independent, 1, 2), all(o.sensor is not None for o in observations) and all(b.noise_known for b in blocks), tuple(spread),
                    tuple(units), tuple(used_pixels), spps, tuple(o.render_spp for o in observations), tuple(blocks), tuple(dark),
-                   pixel_grid if any(blurred) else None, outside)
+                   pixel_grid if any(blurred) else None, outside,
+                   tuple(None if o.sensor is None else noise_variance_terms(o.sensor) for o in observations))
 
 
 def _seen(free: FreeParameters, k: int, image_names: frozenset[str]) -> tuple[tuple[str, ...], np.ndarray]:

@@ -15,8 +15,8 @@ import numpy as np
 from spacefit.display import fit_html
 from spacefit.errors import InputError
 from spacefit.fitting.goodness import Goodness
-from spacefit.fitting.solvers import Status
-from spacefit.rendering.renderer import mitsuba_scene_dict
+from spacefit.fitting.status import Status
+from spacefit.rendering.mitsuba_scene import mitsuba_scene_dict
 from spacefit.scene.parameters import is_nuisance, parameter
 from spacefit.scene.schema import Scene
 from spacefit.units import DN_UNIT, RADIANCE_UNIT

@@ -7,14 +7,14 @@ by half the residuals' render variance (for any direction, the covariance being 
 :func:`loss_noise` estimates it from the residuals of one point rendered with two independent
 seeds. :class:`NoiseFloor` watches the steps of a solve: a step is *accepted* when it lowers the
 best loss so far (so accepted losses never rise), and the solve stops
-(:attr:`~spacefit.fitting.solvers.Status.NOISE_FLOOR`) as soon as
+(:attr:`~spacefit.fitting.status.Status.NOISE_FLOOR`) as soon as
 
 * the decrease the next step can be expected to bring, the last accepted decrease scaled by the
   ratio of the last two (a converging solver's decreases shrink), is below :data:`NOISE_FACTOR`
   times that noise, or
 * a step is rejected by less than that: the solver is chasing noise;
 
-and, with :attr:`~spacefit.fitting.solvers.Status.NO_BETTER_POINT`, when the solver keeps trying
+and, with :attr:`~spacefit.fitting.status.Status.NO_BETTER_POINT`, when the solver keeps trying
 points no better than the best (measured on a 128 x 128 fit with a sensor: 14 of 19 steps rejected,
 each by 0.1 to 6 in loss against a noise of 0.02, about 20 s after the optimum), as soon as
 
@@ -29,7 +29,7 @@ each by 0.1 to 6 in loss against a noise of 0.02, about 20 s after the optimum),
   itself again (a trial step too small to move it) is such a rejected step.
 
 Either says "no better point nearby", not "the residuals are at the noise": the fit's verdict
-(:func:`~spacefit.fitting.loop.verdict`) still calls a fit whose residuals exceed the noise a misfit.
+(:func:`~spacefit.fitting.status.verdict`) still calls a fit whose residuals exceed the noise a misfit.
 
 The loss is 0.5 sum r^2 (dimensionless when the residuals are divided by a noise sigma, else
 (W m^-2 sr^-1)^2).

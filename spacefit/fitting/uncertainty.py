@@ -20,13 +20,15 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from spacefit.fitting.noise_weight import weight_bias
 from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.pixel_grid import grid_feedback, grid_step
+from spacefit.fitting.pixel_grid import grid_step
 from spacefit.fitting.problem import Setup
 from spacefit.fitting.render_seeds import seed_excess, seed_shift
 from spacefit.fitting.residuals import Problem, column_owners
+from spacefit.scene.entries import Bounds
 from spacefit.scene.parameters import is_image, parameter
 
 # |correlation| above which two parameters are reported as not separately determined.
@@ -34,6 +36,10 @@ CORRELATION_WARN = 0.95
 # Standard error, relative to the larger of the value and the parameter's own scale
 # (:attr:`~spacefit.scene.entries.Parameter.scale`), above which it is reported as poorly determined.
 REL_STDERR_WARN = 0.2
+# |correlation| at or above which a parameter near a bound of its range is named beside it (:func:`near_bound`).
+NEAR_BOUND_CORRELATION = 0.3
+# A value within this many standard errors of a finite bound of its range is near it (:func:`near_bound`).
+NEAR_BOUND_STDERRS = 2.0
 
 
 @dataclass(frozen=True)
@@ -275,6 +281,16 @@ def stderr_corr(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return stderr, corr
 
 
+def near_bound(bounds: Bounds, value: float, stderr: float) -> str | None:
+    """"lower" or "upper" where ``value`` lies within :data:`NEAR_BOUND_STDERRS` standard errors ``stderr`` of that
+    finite bound of ``bounds``: there its 95 % interval reaches out of the range, and the delta method's normal error
+    does not describe an estimate that cannot cross the bound (a blur whose truth is 0, at its bound: 0.030 +- 0.046 px
+    on average over 24 fits of a pass, every one above it; docs/measurements/validation.md)."""
+    if value - bounds.lo < NEAR_BOUND_STDERRS * stderr:
+        return "lower"
+    return "upper" if bounds.hi - value < NEAR_BOUND_STDERRS * stderr else None
+
+
 def warnings_for(params: FreeParameters, values: np.ndarray, stderr: np.ndarray, corr: np.ndarray) -> list[str]:
     out = []
     names = params.names
@@ -283,7 +299,7 @@ def warnings_for(params: FreeParameters, values: np.ndarray, stderr: np.ndarray,
             out.append(f"{name} = {value:.4g} is at the {side} bound of its range {b.describe()}: the solver pushed "
                        "it there, so neither it nor its standard error is an estimate; the model may not be able "
                        "to match the images (another start, or another free parameter?).")
-    for i, name in enumerate(names):
+    for i, (name, b) in enumerate(zip(names, params.bijections)):
         if np.isnan(stderr[i]):
             continue  # no error estimate at all: reported by the caller
         if not np.isfinite(stderr[i]):
@@ -291,6 +307,14 @@ def warnings_for(params: FreeParameters, values: np.ndarray, stderr: np.ndarray,
         elif stderr[i] > REL_STDERR_WARN * (scale := max(abs(values[i]), parameter(name).scale, 1e-12)):
             out.append(f"{name} is poorly determined: standard error {stderr[i]:.3g} on {values[i]:.4g} "
                        f"(more than {REL_STDERR_WARN:g} x {scale:.3g}, the larger of its value and its scale).")
+        if np.isfinite(stderr[i]) and not b.at_bound(float(values[i])) and (side := near_bound(b, float(values[i]), float(stderr[i]))):
+            bound = b.lo if side == "lower" else b.hi
+            linked = [f"{names[j]} ({corr[i, j]:+.2f})" for j in range(len(names)) if j != i and abs(corr[i, j]) >= NEAR_BOUND_CORRELATION]
+            out.append(f"{name} = {values[i]:.4g} +- {stderr[i]:.2g} lies within {NEAR_BOUND_STDERRS:g} standard errors of the {side} bound "
+                       f"{bound:g} of its range: its interval is cut there, so it is not a normal error (the estimate "
+                       "cannot fall beyond the bound, so it is biased away from it)"
+                       + (f"; the errors of the parameters correlated with it, {', '.join(linked)}, take it as normal and "
+                          "may be understated." if linked else "."))
     for i in range(len(names)):
         for j in range(i + 1, len(names)):
             if abs(corr[i, j]) > CORRELATION_WARN:
@@ -313,11 +337,12 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     to the one made at 4x; extras ``pixel_grid_remainder``, its magnitude), and the step's render noise
     (two renders at 4x, their change's difference through :func:`render_meat` at half weight); the
     covariance of the step's fixed point is the fit's through ``(I - D)^-1``, ``D`` how the step moves
-    with the image nuisances it is taken at (:func:`~spacefit.fitting.pixel_grid.grid_feedback`). Where no noise is given
+    with the image nuisances it is taken at (also :func:`~spacefit.fitting.pixel_grid.grid_step`). Where no noise is given
     (no sensor or ``sigma``: the residuals are the noise's basis) and the fit moved, the render-seed check (:mod:`spacefit.fitting.render_seeds`)
     adds to each value's variance what fresh renders measure of its own renders' error beyond the render noise the
     sandwich carries (extras ``render_seed_shift``, the step to the fresh renders, and ``render_seed_widened``, the
-    factor each standard error grew by; user coordinates)."""
+    factor each standard error grew by; user coordinates). With a sensor, extras ``noise_weight_bias``: the bias its noise
+    weights, taken at the fit's noisy renders, leave in each value (:mod:`spacefit.fitting.noise_weight`; user units)."""
     lin = linearise(s.problem, x)
     cov, loss_value, fisher, correction = covariance(s.problem, x, lin)
     if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + correction)):
@@ -326,22 +351,22 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
         correction = np.zeros(len(x))
     extras: dict[str, Any] = {"fisher_eigenvalues": fisher.tolist(),
                               "noise_bias_correction": dict(zip(s.solver_params.names, correction.tolist()))}
-    differences = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
-    if differences is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
+    if (bias := weight_bias(s.problem, lin.r, lin.r_alt, lin.step)) is not None and correct:  # flagged, not subtracted
+        extras["noise_weight_bias"] = dict(zip(s.user.names, (np.asarray(jax.jacfwd(s.to_user)(jnp.asarray(x))) @ bias).tolist()))
+    changes = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
+    if changes is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
         padding = np.zeros(lin.r.size - s.problem.pixels)
-        padded = lambda y: tuple(np.concatenate([d, padding]) for d in differences(y))  # noqa: E731
-        stderr = np.sqrt(np.diag(cov))
-        delta, remainder, noise = grid_step(padded, lin.step, x, stderr)
-        # the step moves with the image nuisances it is taken at: the fixed point's estimate moves by (I - D)^-1 per the fit's
-        feedback = np.linalg.inv(np.eye(len(x)) - grid_feedback(padded, lin.step, x + delta,
-                                                                [i for i, n in enumerate(s.solver_params.names) if is_image(n)], stderr))
-        # the models at 4x (each image's renders and compiled programs: 25 MiB a 128 x 128 px frame) dropped before the
-        # products below, whose intermediates would come on top of them
-        del differences, padded
+        columns = [i for i, n in enumerate(s.solver_params.names) if is_image(n)]
+        delta, remainder, noise, feedback = grid_step(changes, lambda d: lin.step(np.concatenate([d, padding])), x, np.sqrt(np.diag(cov)), columns)
+        # the models at 4x (each image's renders at 4x, 6.3 MiB a 128 x 128 px frame) dropped before the products below,
+        # whose intermediates would come on top of them
+        del changes
         # the step's render noise: the mean of two renders' changes, through the sandwich as the fit's own render noise
         bread = _pseudo_inverse(lin.information)[0]
         cov = cov + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread
-        cov = feedback @ cov @ feedback.T + np.outer(remainder, remainder)
+        # the step moves with the image nuisances it is taken at: the fixed point's estimate moves by (I - D)^-1 per the fit's
+        moves = np.linalg.inv(np.eye(len(x)) - feedback)
+        cov = moves @ cov @ moves.T + np.outer(remainder, remainder)
         if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + delta)):
             x = x + delta
         extras["pixel_grid_error"] = dict(zip(s.solver_params.names, delta.tolist()))

@@ -36,9 +36,13 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from spacefit.precision import on_device
 from spacefit.rendering.backend import dr, in_variant, mi, on_drjit_thread
 from spacefit.rendering.frozen import splat
-from spacefit.rendering.renderer import Renderer, differentiable, errors_only, pass_seed, render_threads, to_value
+from spacefit.rendering.drjit_values import differentiable, to_value
+from spacefit.rendering.logs import errors_only
+from spacefit.rendering.renderer import Renderer
+from spacefit.rendering.sample_passes import pass_seed, render_threads
 from spacefit.scene.sampling import split_sample_count
 
 SceneValues = Mapping[str, Array]
@@ -243,7 +247,7 @@ def render_values(scene: DrJitScene, seed: int, seed_grad: int) -> Callable[[Sce
 
 def seeds_array(seed: int, seed_grad: int) -> Array:
     """A (seed, seed_grad) pair as the operand :func:`seeded_render_params` takes (uint32: Mitsuba's seeds)."""
-    return jnp.asarray([seed, seed_grad], dtype=jnp.uint32)
+    return on_device([seed, seed_grad], np.uint32)
 
 
 def render_params(

@@ -86,7 +86,7 @@ def material_description(material: Material, has_uv: bool) -> dict[str, object]:
 def export_view(assembly: Assembly, folder: Path) -> dict[str, object]:
     """Write each part's PLY (world coordinates, m; the float32 vertices Mitsuba gets) and ``scene.json``
     (camera, sun, render settings with spacefit's window, materials) to ``folder``; returns the JSON's content."""
-    from spacefit.rendering.renderer import target_window  # deferred: Blender's Python, which imports this module, has no Mitsuba
+    from spacefit.rendering.window import target_window  # deferred: Blender's Python, which imports this module, has no JAX
     from spacefit.scene.sections import FAR_CLIP_M, NEAR_CLIP_M
 
     folder.mkdir(parents=True, exist_ok=True)

@@ -18,7 +18,7 @@ import numpy as np
 from spacefit.rendering.backend import dr, mi, variant_scope
 from spacefit.rendering.frozen import camera_samples
 from spacefit.rendering.memory import MAX_SAMPLES_PER_PASS
-from spacefit.rendering.renderer import pass_seed
+from spacefit.rendering.sample_passes import pass_seed
 
 if TYPE_CHECKING:
     from spacefit.rendering.renderer import Renderer

@@ -25,12 +25,19 @@ What a pass's samples are a function of:
 Only the samples are frozen: each sample's value is computed on all of Dr.Jit's threads, the same
 whichever thread computes it, and its splatting into the film, where neighbours' samples add into
 the same pixels, is left to the caller, on one thread when the render is deterministic
-(:func:`~spacefit.rendering.renderer.render_threads`: Dr.Jit does not record a change of its
+(:func:`~spacefit.rendering.sample_passes.render_threads`: Dr.Jit does not record a change of its
 thread count, so a frozen splat could not be made to run on one).
+
+Dr.Jit also keys a recording on the calling thread's flags, the kernel history's among them
+(:func:`~spacefit.rendering.logs.kernel_log` switches it on): a pass is called with the history off,
+so that a render counted records and replays as one not counted, and records with the history as its
+caller had it, its samples evaluated inside, so that the kernels compiled for it are counted.
 """
 
 from __future__ import annotations
 
+import functools
+import threading
 from collections.abc import Callable
 
 from spacefit.rendering.backend import dr, mi
@@ -39,6 +46,8 @@ from spacefit.rendering.backend import dr, mi
 # and pixel ranges) times its differentiated sets (one per forward-mode column); more means a caller
 # keeps changing a Python value it should pass as a Dr.Jit one.
 WARN_AFTER = 64
+# The kernel history's flag of the thread that called a frozen pass, which it records with.
+_caller = threading.local()
 
 
 def camera_samples(scene: "mi.Scene", pixels: "mi.UInt32", seed: "mi.UInt32", spp: int, start: int, count: int,
@@ -79,6 +88,30 @@ def derivative_samples(scene: "mi.Scene", integrator: "mi.SamplingIntegrator", s
         return position, derivative * weight
 
 
+def _recorded(samples: Callable[..., tuple]) -> Callable[..., tuple]:
+    """``samples`` as a pass records it: with its caller's kernel history flag, its samples evaluated."""
+
+    @functools.wraps(samples)
+    def record(*args: object) -> tuple:
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, getattr(_caller, "history", False)):
+            out = samples(*args)
+            dr.eval(out)
+            return out
+
+    return record
+
+
+def _history_off(frozen: Callable[..., tuple]) -> Callable[..., tuple]:
+    """``frozen`` called with the kernel history off, its caller's flag kept for :func:`_recorded`."""
+
+    def call(*args: object) -> tuple:
+        _caller.history = bool(dr.flag(dr.JitFlag.KernelHistory))
+        with dr.scoped_set_flag(dr.JitFlag.KernelHistory, False):
+            return frozen(*args)
+
+    return call
+
+
 class FrozenPasses:
     """One loaded scene's frozen passes: :func:`camera_samples` and :func:`derivative_samples`, each
     recorded per key and replayed after (see the module's notes), for one geometry at a time.
@@ -97,14 +130,15 @@ class FrozenPasses:
         self._drop()
 
     def _drop(self) -> None:
-        self.camera = dr.freeze(camera_samples, warn_after=WARN_AFTER, enabled=self.enabled)
-        self.derivative = dr.freeze(derivative_samples, warn_after=WARN_AFTER, enabled=self.enabled)
+        self.camera = dr.freeze(_recorded(camera_samples), warn_after=WARN_AFTER, enabled=self.enabled)
+        self.derivative = dr.freeze(_recorded(derivative_samples), warn_after=WARN_AFTER, enabled=self.enabled)
+        self._calls = _history_off(self.camera), _history_off(self.derivative)
 
     def functions(self, geometry: int) -> tuple[Callable[..., tuple], Callable[..., tuple]]:
         """The (camera, derivative) pass functions for the scene's ``geometry``: the frozen ones while it
         is the one of the last call, the plain ones at the first call of a new one."""
         if geometry == self.geometry:
-            return self.camera, self.derivative
+            return self._calls
         self.geometry = geometry
         self._drop()
         return camera_samples, derivative_samples

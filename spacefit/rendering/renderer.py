@@ -1,217 +1,38 @@
-"""Mitsuba 3 scene built from an :class:`~spacefit.scene.assembly.Assembly`, loaded once.
+"""The renderer: a Mitsuba 3 scene built from an :class:`~spacefit.scene.assembly.Assembly`
+(:mod:`spacefit.rendering.mitsuba_scene`), loaded once and rendered many times, values set in place.
 
-Radiance is in W m^-2 sr^-1 per RGB channel: the sun's irradiance is the same in each channel, so a
-Lambert part with kd 0.2 facing a sun of 5 W m^-2 reads 0.2 * 5 / pi in every channel.
+It traces the pixels near the target (:mod:`spacefit.rendering.window`) in passes
+(:mod:`spacefit.rendering.sample_passes`), each recorded once and replayed (:mod:`spacefit.rendering.frozen`).
+Radiance is in W m^-2 sr^-1 per RGB channel.
 """
 
 from __future__ import annotations
 
-import math
-from collections.abc import Collection, Iterator, Mapping
+from collections.abc import Collection, Mapping
 from concurrent.futures import ThreadPoolExecutor
-from contextlib import contextmanager
 
 import numpy as np
 
 from spacefit.errors import check_count
-from spacefit.geometry.frames import project
-from spacefit.materials import Material
 from spacefit.precision import float64
 from spacefit.progress import ProgressCallback
 from spacefit.rendering.backend import dr, in_variant, mi, resolve_variant, variant_scope
+from spacefit.rendering.drjit_values import differentiable, to_value
 from spacefit.rendering.frozen import FrozenPasses, splat
-from spacefit.rendering.materials import bsdf_dict
-from spacefit.rendering.memory import MAX_SAMPLES_PER_PASS, check_memory
+from spacefit.rendering.memory import check_memory
+from spacefit.rendering.mitsuba_scene import scene_dict
 from spacefit.rendering.parts import PartImage
+from spacefit.rendering.sample_passes import pass_seeds, render_threads
+from spacefit.rendering.window import target_mask, target_window
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.overrides import as_parameters
 from spacefit.scene.parameters import ATTITUDE, GEOMETRY, POSITION, SUN_ANGLES, scene_value, scene_with_values
-from spacefit.rendering.silhouette import traced_pixels
+from spacefit.scene.sampling import check_sample_count
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import FAR_CLIP_M, FILTER_RADIUS_PX, MAX_SEED, MAX_SPP, NEAR_CLIP_M, check_scene
-from spacefit.scene.sampling import check_sample_count, split_sample_count
+from spacefit.scene.sections import MAX_SEED, MAX_SPP, check_scene
 
 # Mitsuba mesh values whose update rebuilds the scene's ray-tracing acceleration structure.
 REBUILDS = (".vertex_positions", ".faces")
-
-# Pixels around the target's projected box that its light can still reach: the tent filter's
-# radius (1 px) and one for rounding.
-CROP_MARGIN_PX = 2
-
-
-def mesh_object(name: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray | None, material: Material) -> "mi.Mesh":
-    """A flat-shaded Mitsuba mesh with its BSDF; uv (if any) fixes the tangent along dp/du."""
-    props = mi.Properties()
-    props["bsdf"] = mi.load_dict(bsdf_dict(material))
-    mesh = mi.Mesh(name, len(vertices), len(faces), props, has_vertex_normals=False, has_vertex_texcoords=uv is not None)
-    params = mi.traverse(mesh)
-    params["vertex_positions"] = mi.Float(np.ravel(vertices).astype(np.float32))
-    params["faces"] = mi.UInt32(np.ravel(faces).astype(np.uint32))
-    if uv is not None:
-        params["vertex_texcoords"] = mi.Float(np.ravel(uv).astype(np.float32))
-    params.update()
-    return mesh
-
-
-def target_window(assembly: Assembly, vertices: Mapping[str, np.ndarray]) -> tuple[int, int, int, int]:
-    """The film window (x0, y0, width, height), px, outside which the image is black: the projected
-    box of every vertex of the target (world ``vertices`` per part, m), widened by
-    :data:`CROP_MARGIN_PX` and clipped to the film. In black space nothing else is lit. The whole
-    film when a vertex lies behind the camera, where the projected box means nothing."""
-    intr = assembly.intrinsics
-    uv, depth = project(np.concatenate(list(vertices.values())), assembly.camera, intr)
-    size = np.array([intr.width, intr.height])
-    if not np.all(depth > 0):
-        return 0, 0, intr.width, intr.height
-    lo = np.clip(np.floor([u.min() for u in uv.T]) - CROP_MARGIN_PX, 0, size - 1).astype(int)  # by column: 50x faster
-    hi = np.clip(np.ceil([u.max() for u in uv.T]) + CROP_MARGIN_PX, lo + 1, size).astype(int)
-    return int(lo[0]), int(lo[1]), int(hi[0] - lo[0]), int(hi[1] - lo[1])
-
-
-def target_mask(assembly: Assembly, vertices: Mapping[str, np.ndarray], window: tuple[int, int, int, int]) -> np.ndarray:
-    """(height, width) bool over the film ``window``: the pixels a render traces, those whose samples
-    can reach a pixel the target lights (:func:`spacefit.rendering.silhouette.traced_pixels`: its
-    projected triangles, world ``vertices`` per part, m, dilated twice by the filter's reach). The whole
-    window when a vertex lies behind the camera."""
-    x0, y0, w, h = window
-    uv, depth = project(np.concatenate(list(vertices.values())), assembly.camera, assembly.intrinsics)
-    if not np.all(depth > 0):
-        return np.ones((h, w), dtype=bool)
-    starts = np.cumsum([0, *(len(points) for points in vertices.values())])
-    faces = np.concatenate([assembly.faces(name) + start for name, start in zip(vertices, starts)])
-    return traced_pixels(uv - [x0, y0], faces, w, h, FILTER_RADIUS_PX[assembly.scene.render.filter])[0]
-
-
-def scene_dict(assembly: Assembly, vertices: Mapping[str, np.ndarray], window: tuple[int, int, int, int]) -> dict:
-    """The Mitsuba scene dictionary: path tracer, pinhole camera, tent-filtered film rendering the
-    pixel ``window`` (x0, y0, width, height) of the image, sun, and the parts at world ``vertices`` (m)."""
-    s = assembly.scene
-    cam, intr = assembly.camera, assembly.intrinsics
-    # Mitsuba's principal point offset is a fraction of the film, positive towards -u / -v.
-    sensor = {
-        "type": "perspective",
-        "fov": math.degrees(intr.fov_x),
-        "fov_axis": "x",
-        "near_clip": NEAR_CLIP_M,
-        "far_clip": FAR_CLIP_M,
-        "principal_point_offset_x": -intr.principal_offset[0] / intr.width,
-        "principal_point_offset_y": -intr.principal_offset[1] / intr.height,
-        "to_world": mi.ScalarTransform4f(cam.mitsuba_to_world()),
-        "sampler": {"type": s.render.sampler, "sample_count": split_sample_count(s.render.sampler, s.render.spp)[0]},
-        "film": {
-            "type": "hdrfilm",
-            "width": intr.width,
-            "height": intr.height,
-            "pixel_format": "rgb",
-            "rfilter": {"type": s.render.filter},
-            "crop_offset_x": window[0],
-            "crop_offset_y": window[1],
-            "crop_width": window[2],
-            "crop_height": window[3],
-        },
-    }
-    max_depth = s.render.depth + 1
-    d = {
-        "type": "scene",
-        # Russian roulette off: every path runs to the stated depth, as in the thesis's tracer.
-        "integrator": {"type": "path", "max_depth": max_depth, "rr_depth": max_depth + 1},
-        "sensor": sensor,
-        "sun": {"type": "directional", "direction": assembly.sun_direction.tolist(), "irradiance": s.sun.irradiance_w_m2},
-    }
-    for name, part in assembly.parts.items():
-        uv = None if name in assembly.refinements else part.uv
-        d[name] = mesh_object(name, vertices[name], assembly.faces(name), uv, assembly.materials[name])
-    return d
-
-
-def mitsuba_scene_dict(scene: Scene) -> dict:
-    """The Mitsuba scene dictionary of ``scene`` (the whole film): the integrator, camera, film and
-    sun as dictionaries, each part an ``mi.Mesh`` with its BSDF. The meshes belong to the variant the
-    scene renders with (``llvm_ad_rgb``, ``cuda_ad_rgb`` on a GPU): load the dictionary in it,
-    ``with mi.variant_context("llvm_ad_rgb"): mi.load_dict(d)``."""
-    assembly = assemble(check_scene(scene))
-    intr = assembly.intrinsics
-    with variant_scope(scene.render.variant):
-        return scene_dict(assembly, assembly.scene_vertices, (0, 0, intr.width, intr.height))
-
-
-def pass_seed(seed: int, i: int) -> int:
-    """The seed of pass ``i`` of a render seeded ``seed`` (pass 0 keeps it)."""
-    return (seed + i * 0x9E3779B1) % (1 << 32)
-
-
-def pass_seeds(seed: int, spp: int, pixels: int, sampler: str = "independent") -> list[tuple[int, int, int, int]]:
-    """Split a render of ``pixels`` pixels at ``spp`` into passes: the counts the sampler takes
-    (:func:`~spacefit.scene.schema.split_sample_count`), each over pixel ranges of at most
-    :data:`MAX_SAMPLES_PER_PASS` samples (one pixel at least), a pixel's samples of one count in one
-    pass so that a stratifying sampler keeps its pattern: (seed, spp, first pixel, pixels) each."""
-    passes = []
-    for count in split_sample_count(sampler, spp):
-        n = max(1, math.ceil(pixels / max(1, MAX_SAMPLES_PER_PASS // count)))
-        sizes = [pixels // n + (i < pixels % n) for i in range(n)]
-        passes += [(count, int(start), size) for start, size in zip(np.cumsum([0, *sizes[:-1]]), sizes)]
-    return [(pass_seed(seed, i), count, start, size) for i, (count, start, size) in enumerate(passes)]
-
-
-@contextmanager
-def render_threads(deterministic: bool) -> Iterator[None]:
-    """Render on one thread when ``deterministic``: the film then adds samples in a fixed order.
-
-    Parallel renders differ by float32 rounding (about 1e-7 relative) from call to call, which
-    also breaks common random numbers for finite differences of small effects.
-    """
-    threads = dr.thread_count()
-    resize = deterministic and threads > 1
-    if resize:
-        # Kernels run asynchronously on the LLVM backend: resizing the thread pool under a running one
-        # crashed (SIGSEGV in set_thread_count) on a loaded machine, and one queued would run on the new size.
-        dr.sync_thread()
-        dr.set_thread_count(1)
-    try:
-        yield
-    finally:
-        if resize:
-            dr.sync_thread()
-            dr.set_thread_count(threads)
-
-
-@contextmanager
-def errors_only() -> Iterator[None]:
-    """Mitsuba logs only errors inside the block. Its SIGINT handler logs "Received interrupt signal,
-    winding down.." as a warning, though a wavefront render does not wind down: the signal is the
-    caller's to report (:func:`spacefit.interrupts.run_interruptibly`). The logger is one for all
-    threads, so the block's own warnings are dropped too: keep it to the render call."""
-    logger = mi.logger()
-    level = logger.log_level()
-    logger.set_log_level(mi.LogLevel.Error)
-    try:
-        yield
-    finally:
-        logger.set_log_level(level)
-
-
-@contextmanager
-def kernel_log() -> Iterator[dict[str, float]]:
-    """Count the Dr.Jit kernels launched inside the block; the yielded dict is filled on exit.
-
-    Keys: ``launched`` (JIT kernels), ``new`` (not in Dr.Jit's in-memory cache: compiled, or read
-    from its on-disk one, ``~/.drjit``), ``compiled`` (in neither), all over the process's threads
-    (a JAX callback may render on one of XLA's), and ``compile_s`` (wall time of code generation
-    and compilation of this thread's kernels: Dr.Jit's kernel history is per thread, s). A kernel
-    recompiled at every call of a loop shows as ``new`` growing with the calls (``compiled`` too
-    while the disk cache lacks it).
-    """
-    stats: dict[str, float] = {}
-    dr.kernel_history_clear()
-    launched, read, compiled = dr.detail.launch_stats()  # since the process started: launches, disk-cache reads, compilations
-    with dr.scoped_set_flag(dr.JitFlag.KernelHistory, True):
-        try:
-            yield stats
-        finally:
-            jit = [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
-            now = dr.detail.launch_stats()
-            stats.update(launched=now[0] - launched, new=now[1] - read + now[2] - compiled, compiled=now[2] - compiled,
-                         compile_s=sum(k.get("codegen_time", 0.0) + k.get("backend_time", 0.0) for k in jit) / 1e3)
 
 
 class Renderer:
@@ -375,7 +196,7 @@ class Renderer:
 
         The samples are traced on all of Dr.Jit's threads, each sample's value its own; only the
         splatting, where neighbours' samples add into the same pixels, runs on one thread when
-        ``deterministic`` (:func:`render_threads`), in the samples' order: the image is the one a
+        ``deterministic`` (:func:`~spacefit.rendering.sample_passes.render_threads`), in the samples' order: the image is the one a
         render wholly on one thread gives, bit for bit, in 0.54 to 0.62x its time on 2 cores."""
         camera, _ = self.frozen.functions(self.geometry)
         position, rgb = camera(self.scene, self._pixels, mi.UInt32(seed), spp, start, count, self.window[2])
@@ -409,32 +230,3 @@ def render(scene: Scene, progress: ProgressCallback | None = None) -> np.ndarray
     """
     with variant_scope(check_scene(scene).render.variant):
         return Renderer(scene).render(progress=progress)
-
-
-def differentiable(value: object) -> bool:
-    """Whether AD differentiates a scene value: a frame (the sun's, the camera's) is set whole, its
-    Jacobian columns come from finite differences."""
-    return not isinstance(value, mi.AffineTransform4f)
-
-
-def to_value(template: object, value: np.ndarray) -> object:
-    """A Dr.Jit value of the type of ``template`` (a scene parameter) from a float array, opaque
-    (evaluated, not a literal): the frozen passes (:mod:`spacefit.rendering.frozen`) take it as an
-    operand and replay, where a literal would be compiled into their kernels and retraced at each change.
-
-    A transform is given whole (16 numbers, the camera's :meth:`~spacefit.geometry.frames.CameraFrame.mitsuba_to_world`)
-    or, for a distant light's frame, by the direction its +z axis points along (3 numbers).
-    """
-    value = np.asarray(value, dtype=np.float32).ravel()
-    if isinstance(template, mi.AffineTransform4f) and value.size == 16:
-        result = mi.AffineTransform4f(value.reshape(4, 4))
-    elif isinstance(template, mi.AffineTransform4f):
-        d = value / np.linalg.norm(value)
-        up = [0.0, 1.0, 0.0] if abs(d[1]) < 0.9 else [1.0, 0.0, 0.0]
-        result = mi.AffineTransform4f(mi.ScalarTransform4f().look_at(origin=[0, 0, 0], target=d.tolist(), up=up))
-    elif isinstance(template, mi.Color3f):
-        result = mi.Color3f(*(mi.Float(value[i % len(value)]) for i in range(3)))
-    else:
-        result = type(template)(value)
-    dr.make_opaque(result)
-    return result

@@ -11,6 +11,7 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 from spacefit.errors import InputError
+from spacefit.fitting.status import Status
 
 if TYPE_CHECKING:
     from spacefit.fitting.result import FitResult
@@ -84,8 +85,6 @@ def classify(
         if not math.isfinite(value) or (value == 0 and name not in ABSOLUTE_TOLERANCE):
             raise InputError(f"truth of {name} must be finite (and non-zero for a relative tolerance), got {value!r}.")
     tol = tolerances(result.names, tolerance)
-
-    from spacefit.fitting.solvers import Status  # deferred: it imports JAX, loaded already by whoever holds a FitResult
 
     values = {n: float(result.values[n]) for n in result.names}
     finite = all(math.isfinite(v) for v in values.values()) and math.isfinite(result.loss)

@@ -1,0 +1,77 @@
+"""How a fit ended: :class:`Status`, the solver's own ending and the verdict :func:`verdict` makes of it.
+
+A solver's driver (:mod:`spacefit.fitting.drivers`) ends with one of the solver's endings; the fit
+(:mod:`spacefit.fitting.loop`) then judges a solve that did not fail (no progress, a bound, the
+residuals against the noise) and reports the verdict as its status, never text to parse.
+"""
+
+from __future__ import annotations
+
+import enum
+
+
+class Status(enum.Enum):
+    """How a fit ended. ``value`` is the words a report prints on its first line.
+
+    The solver's own endings (converged, noise floor, step limit, failures, signals), and four
+    verdicts on a solve that ended without a failure, in this order of precedence:
+    :attr:`NO_PROGRESS` (no step lowered the loss: the start is returned), :attr:`AT_BOUND` (a
+    parameter ended at a bound of its range), :attr:`UNJUDGED` (the noise is known but the model's
+    own render noise is too large to judge its residuals) and :attr:`MISFIT` (the residuals exceed the noise, :attr:`FitResult.goodness`). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
+    :attr:`NO_BETTER_POINT` (``sf.fit(stop=...)``) are a success, and only where the
+    verdicts leave them: a solve stopped there whose residuals exceed the noise is a :attr:`MISFIT`.
+
+    Example:
+        >>> import spacefit as sf
+        >>> sf.Status.CONVERGED.success, sf.Status.MISFIT.success
+        (True, False)
+        >>> sf.Status.CONVERGED.value
+        'converged'
+    """
+
+    CONVERGED = "converged"
+    NOISE_FLOOR = "converged: the expected decrease of the loss is below its Monte Carlo noise"
+    NO_BETTER_POINT = ("converged: the solver's trial steps found no lower loss (successive rejected steps within the "
+                       "loss's Monte Carlo noise of each other, or within a relative 1e-3 of the best)")
+    MAX_STEPS = "stopped: maximum number of steps reached"
+    NO_PROGRESS = "failed: no step lowered the loss; the values are the start"
+    AT_BOUND = "failed: a parameter is at a bound of its range; neither it nor its error is an estimate"
+    MISFIT = "misfit: the residuals exceed the noise; the model or its nuisances miss something, the error bars are too small"
+    UNJUDGED = ("not judged: the model's own render noise is above the data's noise, so chi^2 cannot tell a misfit; "
+                "render with more samples")
+    DIVERGED = "failed: the solve diverged"
+    NONFINITE = "failed: the loss or a parameter became NaN"
+    FAILED = "failed: the solver reported an error"
+    INTERRUPTED = "stopped: interrupted (the best point so far is reported, without errors)"
+    TERMINATED = "stopped: terminated by SIGTERM (the best point so far is reported, without errors)"
+
+    @property
+    def success(self) -> bool:
+        """Whether the fit converged to an estimate that its data do not contradict."""
+        return self in (Status.CONVERGED, Status.NOISE_FLOOR, Status.NO_BETTER_POINT)
+
+    @property
+    def interrupted(self) -> bool:
+        """Whether a signal (Ctrl-C or SIGTERM) stopped the solve."""
+        return self in (Status.INTERRUPTED, Status.TERMINATED)
+
+    def __str__(self) -> str:
+        return self.value
+
+
+def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool, unjudged: bool = False) -> Status:
+    """The fit's status from the solver's: a solve that ended without failing is
+    :attr:`Status.NO_PROGRESS` if no step lowered the loss, else :attr:`Status.AT_BOUND` if a
+    parameter ended at a bound, else :attr:`Status.UNJUDGED` if its residuals could not be judged
+    (``unjudged``), else :attr:`Status.MISFIT` if the residuals exceed the noise."""
+    if status not in (Status.CONVERGED, Status.NOISE_FLOOR, Status.NO_BETTER_POINT, Status.MAX_STEPS):
+        return status
+    if not moved:
+        return Status.NO_PROGRESS
+    if at_bound:
+        return Status.AT_BOUND
+    if unjudged:
+        return Status.UNJUDGED
+    if misfit:
+        return Status.MISFIT
+    return status
