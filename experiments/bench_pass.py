@@ -5,7 +5,8 @@ the PSF width shared, each frame's attitude about x and z, shift and scale its o
 wall time, CPU time and peak memory (``ru_maxrss``) are printed; with two counts or more, the memory's growth
 per frame (least-squares slope). Targets (quiet, 2 cores): 12 frames at 128 x 128 in at most 60 s wall and
 1 GB peak, growing at most 20 MB per added 128 x 128 frame (measured at 12, 48 and 100 frames: ``--full``).
-Run: ``.venv/bin/python experiments/bench_pass.py [--size PX] [--frames N ...] [--full]``.
+``--max-steps`` and ``--spp`` shorten a long run (the peak is in the standard errors after the last step).
+Run: ``.venv/bin/python experiments/bench_pass.py [--size PX] [--frames N ...] [--full] [--max-steps N] [--spp N]``.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from studyio import machine
+from studyio import commit, machine
 
 import spacefit as sf
 
@@ -36,12 +37,13 @@ def base(size: int) -> sf.Scene:
     return sf.load_case("panels").truth_scene.with_values({"render.resolution": [size, size], "camera.pixel_pitch_mm": 37.5 * 128 / size})
 
 
-def fit_frames(folder: Path, size: int, n: int) -> None:
-    """Fit the first ``n`` frames of the pass in ``folder``; print the step count and the free parameters' count."""
+def fit_frames(folder: Path, size: int, n: int, max_steps: int = MAX_STEPS, spp: int = FIT_SPP) -> None:
+    """Fit the first ``n`` frames of the pass in ``folder`` (at most ``max_steps`` steps at ``spp``); print the step count and
+    the free parameters' count."""
     frames = sf.Pass.read(folder / "frames.csv")
     obs = [sf.Observation.from_file(f.file, s) for f, s in list(zip(frames.frames, frames.scenes(base(size))))[:n]]
     free = [*MATERIALS, "image.blur_sigma_px", *[f"{name}@{k}" for k in range(n) for name in PER_FRAME]]
-    result = sf.fit(obs, free, start=START, render=sf.FitRender(spp=FIT_SPP), max_steps=MAX_STEPS)
+    result = sf.fit(obs, free, start=START, render=sf.FitRender(spp=spp), max_steps=max_steps)
     errors = ", ".join(f"{k.split('.')[-1]} {result.values[k] / v - 1:+.1%}" for k, v in MATERIALS.items())
     print(f"{len(free)} parameters, {result.steps} steps [{result.status.name}]; materials {errors}")
 
@@ -51,10 +53,12 @@ def main() -> None:
     p.add_argument("--size", type=int, default=64, help="frame width and height, px (the target's: 128, --full)")
     p.add_argument("--frames", type=int, nargs="+", default=[12], help="counts of frames fitted, each in its own process")
     p.add_argument("--full", action="store_true", help="the targets' run: 128 x 128 px, 12, 48 and 100 frames")
+    p.add_argument("--max-steps", type=int, default=MAX_STEPS, help="the fit's steps at most")
+    p.add_argument("--spp", type=int, default=FIT_SPP, help="the fit's samples per pixel")
     args = p.parse_args()
     size, counts = (128, [12, 48, 100]) if args.full else (args.size, args.frames)
-    print(f"machine: {machine()}; {size} x {size} px, {FIT_SPP} spp, LM, at most {MAX_STEPS} steps; load {os.getloadavg()[0]:.1f}",
-          flush=True)
+    print(f"machine: {machine()}; commit {commit()}; {size} x {size} px, {args.spp} spp, LM, at most {args.max_steps} steps; "
+          f"load {os.getloadavg()[0]:.1f}", flush=True)
     rng = np.random.default_rng(3)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "pass"
@@ -63,7 +67,8 @@ def main() -> None:
         peaks = []
         for n in counts:
             t0 = time.perf_counter()
-            proc = subprocess.Popen([sys.executable, __file__, "--one", str(folder), str(size), str(n)], stdout=subprocess.PIPE,
+            proc = subprocess.Popen([sys.executable, __file__, "--one", str(folder), str(size), str(n), str(args.max_steps), str(args.spp)],
+                                    stdout=subprocess.PIPE,
                                     stderr=subprocess.STDOUT, text=True)
             out = proc.stdout.read()
             _, status, usage = os.wait4(proc.pid, 0)
@@ -80,6 +85,6 @@ def main() -> None:
 
 if __name__ == "__main__":
     if sys.argv[1:2] == ["--one"]:
-        fit_frames(Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]))
+        fit_frames(Path(sys.argv[2]), *(int(a) for a in sys.argv[3:]))
     else:
         main()

@@ -248,12 +248,13 @@ XLA_COMPILE = "/jax/core/compile/backend_compile_duration"
 def test_the_frames_of_a_pass_compile_once_not_once_per_frame():
     """Three frames of a pass on one loaded scene: the first compiles its JAX programs and Dr.Jit
     kernels; the second and third (their own camera, sun and attitude: data, not code) compile
-    neither, and render as each would alone."""
+    neither for their images, Jacobians and part images, and render as each would alone."""
     specs = tiny_frames(3)
     x = np.array([0.5, 0.1])
     loaded = Loaded()
     frame_jacobian(specs[0], specs[0].key, x, 3, 4, loaded)
     frame_primal(specs[0], specs[0].key, x, 5, loaded)
+    frame_part_image(specs[0], specs[0].key, loaded)
     compiled: list[str] = []
 
     def listen(event: str, seconds: float, **_: object) -> None:
@@ -264,6 +265,7 @@ def test_the_frames_of_a_pass_compile_once_not_once_per_frame():
     try:
         with kernel_log() as kernels:
             together = [(frame_jacobian(s, s.key, x, 3, 4, loaded), frame_primal(s, s.key, x, 5, loaded)) for s in specs[1:]]
+            parts = [frame_part_image(s, s.key, loaded) for s in specs[1:]]
     finally:
         jax.monitoring.unregister_event_duration_listener(listen)
     assert compiled == []
@@ -274,6 +276,7 @@ def test_the_frames_of_a_pass_compile_once_not_once_per_frame():
     assert np.array_equal(frame_jacobian(specs[2], specs[2].key, x, 3, 4, alone)[1], J)
     assert np.array_equal(frame_primal(specs[2], specs[2].key, x, 5, alone), primal)
     assert not np.array_equal(together[0][1], primal)  # the frames do differ
+    assert np.array_equal(parts[1].ids, frame_part_image(specs[2], specs[2].key, alone).ids)
 
 
 def test_a_process_keeps_at_most_max_scenes_loaded_dropping_the_least_recently_used():
@@ -587,6 +590,35 @@ def test_a_fit_too_large_for_the_machine_is_refused_with_its_estimate_and_nothin
                  "--per-frame", "target.attitude_x_deg", "--spp", "8", "--out", str(tmp_path / "fit")])
     assert code == 2 and capsys.readouterr().err.strip() == f"spacefit: error: {message}"
     assert [p.name for p in tmp_path.iterdir()] == ["scene.toml"]
+
+
+@pytest.mark.slow
+@float64
+def test_a_pass_s_covariance_streamed_a_direction_at_a_time_equals_it_in_batches(monkeypatch):
+    """The covariance's products of a three-frame pass (the legs' albedo and the blur shared, each frame's attitude
+    and shift its own: 4 directions) applied one direction at a time (normal_equations.CHUNK_ELEMENTS below a
+    vector's rows, as a long pass's are) equal those applied in one batch, to the float32 renders' rounding."""
+    from spacefit.fitting import normal_equations
+    from spacefit.fitting.uncertainty import covariance, linearise
+
+    specs = tiny_frames(3)
+    obs = [sf.Observation(spec.scene, sf.render(spec.scene.with_values({"render.spp": 4})), sigma=0.02) for spec in specs]
+    free = ["parts.legs.kd", "image.blur_sigma_px", *sf.Pass.from_columns({"file": ["a", "b", "c"], "time": [0, 1, 2]}).per_frame(
+        ["target.attitude_x_deg", "image.shift_x_px"])]
+    s = problem.setup(obs, free, start={"parts.legs.kd": 0.4, "image.blur_sigma_px": 0.5}, render=sf.FitRender(spp=2))
+    p = dataclasses.replace(s.problem, noise_known=True)
+    lin = linearise(p, s.x0)
+    assert normal_equations.chunk_for(lin.r.size) == normal_equations.MAX_CHUNK
+    batched = covariance(p, s.x0, lin)
+    monkeypatch.setattr(normal_equations, "CHUNK_ELEMENTS", lin.r.size - 1)
+    assert normal_equations.chunk_for(lin.r.size) == 1
+    cov, loss, fisher, correction = covariance(p, s.x0, linearise(p, s.x0))
+    stderr = np.sqrt(np.diag(batched[0]))
+    # the renders' float32 sums, J^T v, round one way or the other by the batch: up to 1.3e-6 of a covariance here
+    assert np.all(np.abs(cov - batched[0]) <= 1e-5 * np.outer(stderr, stderr))
+    assert np.all(np.abs(correction - batched[3]) <= 1e-5 * stderr)
+    np.testing.assert_allclose(fisher, batched[2], rtol=1e-5)
+    assert loss == batched[1]
 
 
 @pytest.mark.slow

@@ -138,6 +138,12 @@ class Stage:
     chain: RenderChain
     values: Callable[[jax.Array, View], dict[str, jax.Array]]
 
+    @cached_property
+    def compiled_values(self) -> Callable[[jax.Array, View], dict[str, jax.Array]]:
+        """:attr:`values` as one program for every frame on the scene, the view an operand (a program per frame
+        held one compiled executable a frame for the fit's life: about 2.5 MiB a frame of a pass)."""
+        return jax.jit(self.values)
+
 
 @dataclass
 class Loaded:
@@ -218,10 +224,13 @@ def loaded_count() -> tuple[int, int]:
 @float64
 def frame_part_image(spec: FrameSpec, key: str, loaded: Loaded | None = None) -> PartImage:
     """Which part each pixel of the frame sees at its scene's values (loading its scene)."""
-    chain = (loaded or _LOADED).chain(spec, key)
+    loaded = loaded or _LOADED
+    chain = loaded.chain(spec, key)
+    stage, _, view = loaded.chains[key]
     x = on_device([scene_value(spec.scene, n) for n in spec.names], np.float64)
-    # one program: run operation by operation, the scene values made some 20 single-operation programs per frame
-    chain.renderer.set_params({name: np.asarray(value) for name, value in jax.jit(chain.values_of)(x).items()})
+    # one program per loaded scene, the frame's view an operand: run operation by operation, the scene values made
+    # some 20 single-operation programs per frame
+    chain.renderer.set_params({name: np.asarray(value) for name, value in loaded.stages[stage].compiled_values(x, view).items()})
     return chain.renderer.part_image()
 
 

@@ -1,0 +1,112 @@
+"""Where a pass fit's native memory goes, phase by phase (issue 33): :mod:`bench_pass`'s fit (the panels case, 3
+materials and the PSF width shared, 5 own values a frame) with, at the edges of the set-up, each batch of frame
+renders, the covariance's linearisation, products, the pixel grid's fixed point and feedback and the goodness of fit:
+the resident memory (and its peak since the edge before, sampled every 20 ms), glibc's heap in use, held free and
+mapped (``mallinfo2``: memory freed but kept by the allocator shows as "free"), the XLA programs compiled so far and
+the bytes of JAX's live arrays. A fit's memory is native (XLA's programs and buffers, Dr.Jit, the allocator's held
+pages): neither JAX's live arrays nor Python's own allocations reach 100 MiB. Linux with glibc only.
+Figures: docs/measurements/performance.md, "A pass's memory: programs and the allocator".
+Run: ``python experiments/pass_memory_phases.py SIZE_PX FRAMES [MAX_STEPS]`` (default 12 steps, as bench_pass).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+import resource
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+import psutil
+from bench_pass import MAX_STEPS, SENSOR, base, fit_frames
+from studyio import commit, machine
+
+import spacefit as sf
+import spacefit.fitting.frames as frames
+import spacefit.fitting.loop as loop
+import spacefit.fitting.uncertainty as uncertainty
+
+
+class MallInfo2(ctypes.Structure):
+    """glibc's ``struct mallinfo2`` (bytes)."""
+
+    _fields_ = [(name, ctypes.c_size_t) for name in ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks",
+                                                      "fordblks", "keepcost")]
+
+
+class Phases:
+    """RSS (and its sampled peak between edges), glibc's heap and XLA's compilations, printed at each phase's edges."""
+
+    def __init__(self) -> None:
+        self.process, self.compiles, self.peak, self.t0 = psutil.Process(), 0, 0.0, time.perf_counter()
+        self.libc = ctypes.CDLL("libc.so.6")
+        self.libc.mallinfo2.restype = MallInfo2
+        jax.monitoring.register_event_duration_secs_listener(self._event)
+        threading.Thread(target=self._sample, daemon=True).start()
+
+    def _event(self, event: str, duration: float, **_: Any) -> None:
+        self.compiles += event.endswith("backend_compile_duration")
+
+    def rss(self) -> float:
+        return self.process.memory_info().rss / 2**20
+
+    def _sample(self) -> None:
+        while True:
+            self.peak = max(self.peak, self.rss())
+            time.sleep(0.02)
+
+    def show(self, name: str) -> None:
+        """One line: the edge's name, RSS and its peak since the edge before, the heap, the compilations, JAX's live arrays (MiB)."""
+        m, rss = self.libc.mallinfo2(), self.rss()
+        live = sum(a.nbytes for a in jax.live_arrays()) / 2**20
+        print(f"[{time.perf_counter() - self.t0:6.1f} s] {name:26s} RSS {rss:5.0f} (peak since {max(self.peak, rss):5.0f}), heap in use "
+              f"{m.uordblks / 2**20:5.0f}, held free {m.fordblks / 2**20:5.0f}, mapped {m.hblkhd / 2**20:4.0f}; {self.compiles:3d} XLA programs; "
+              f"live JAX arrays {live:4.0f}", flush=True)
+        self.peak = rss
+
+    def marked(self, name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
+        """``fn`` with its edges shown."""
+        def wrapped(*args: Any, **kwargs: Any) -> Any:
+            self.show(f"{name} <")
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                self.show(f"{name} >")
+        return wrapped
+
+
+def main() -> None:
+    size, n = int(sys.argv[1]), int(sys.argv[2])
+    steps = int(sys.argv[3]) if len(sys.argv) > 3 else MAX_STEPS
+    print(f"machine: {machine()}; commit {commit()}; {size} x {size} px, {n} frames, at most {steps} steps; load {os.getloadavg()[0]:.1f}",
+          flush=True)
+    phases = Phases()
+    loop.setup = phases.marked("set-up", loop.setup)
+    loop.estimate = phases.marked("covariance", loop.estimate)
+    loop.judged_goodness = phases.marked("goodness of fit", loop.judged_goodness)
+    uncertainty.linearise = phases.marked("linearisation", uncertainty.linearise)
+    uncertainty.Linearisation.columns = phases.marked("products", uncertainty.Linearisation.columns)
+    uncertainty.grid_step = phases.marked("pixel grid's fixed point", uncertainty.grid_step)
+    uncertainty.grid_feedback = phases.marked("pixel grid's feedback", uncertainty.grid_feedback)
+    run_frames = frames.run_frames
+    frames.run_frames = lambda executor, fn, specs, *args: phases.marked(f"  {fn.__name__}", run_frames)(executor, fn, specs, *args)
+    rng = np.random.default_rng(3)
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "pass"
+        errors = [{"target.attitude_x_deg": float(a), "target.attitude_z_deg": float(b)} for a, b in rng.uniform(-0.3, 0.3, (n, 2))]
+        sf.simulate_pass(base(size), sf.arc_pass(n), folder, errors=errors, sensor=SENSOR, spp=64)
+        phases.show("simulated")
+        fit_frames(folder, size, n, steps)
+    phases.show("end")
+    print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MiB; load {os.getloadavg()[0]:.1f}")
+
+
+if __name__ == "__main__":
+    main()
