@@ -25,12 +25,15 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
+from spacefit.fitting.losses import AffineVariance
 from spacefit.fitting.residuals import Problem
+from spacefit.precision import float64
 
 WEIGHT_BIAS_WARN = 0.5
 """A value's weight bias (:func:`weight_bias`) above this many of its standard errors is warned of."""
 
 
+@float64
 def expected_residuals(problem: Problem, r: np.ndarray, r_alt: np.ndarray) -> np.ndarray | None:
     """Per residual, ``-g Var(e) / (2 sigma^3)`` in the residuals' unit (of the noise): ``Var(e) / sigma^2`` as the two
     seeds' difference squared, ``((r - r_alt) / sqrt 2)^2``, sigma and g at the data (the references), g 0 at or below
@@ -46,10 +49,10 @@ def expected_residuals(problem: Problem, r: np.ndarray, r_alt: np.ndarray) -> np
         offset = rows.stop
         if t is None:
             continue
-        floor, slope, dark = t
+        variance = AffineVariance(*t)
         y = np.ravel(ref).astype(float)
-        sigma = np.sqrt(floor + slope * np.maximum(y - dark, 0.0))
-        out[rows] = -np.where(y > dark, slope, 0.0) * 0.5 * (r[rows] - r_alt[rows]) ** 2 / (2.0 * sigma)
+        sigma = np.asarray(variance.sigma(y), dtype=float)
+        out[rows] = -np.where(y > variance.offset, variance.slope, 0.0) * 0.5 * (r[rows] - r_alt[rows]) ** 2 / (2.0 * sigma)
     return out
 
 
