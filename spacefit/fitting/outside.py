@@ -17,7 +17,9 @@ others since).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Any
 
 import jax
 import numpy as np
@@ -31,6 +33,17 @@ Evaluate = Callable[[jax.Array, Sequence[np.ndarray], Sequence[np.ndarray] | Non
 RESIDUALS, DESCENT = 1, 2  # which residuals of :attr:`Outside.evaluate`'s output
 
 
+def started(fn: Callable[..., Any], *args: Any) -> Future:
+    """``fn(*args)`` begun on a thread of its own, which ends with it: renders made while the calling thread traces and
+    compiles JAX's programs (the renders run on the Dr.Jit thread, :func:`~spacefit.rendering.backend.on_drjit_thread`).
+    Nothing run so may import or parse code: CPython 3.11's parse trees are not safe across threads (performance.md)."""
+    pool = ThreadPoolExecutor(1, "spacefit-render-ahead")
+    try:
+        return pool.submit(fn, *args)
+    finally:
+        pool.shutdown(wait=False)
+
+
 @dataclass(frozen=True)
 class Outside:
     """A problem's renders at a point and its models and residuals from them.
@@ -40,24 +53,39 @@ class Outside:
             seeds (0 the fit's, 1 the independent ones; :mod:`spacefit.fitting.problem`), outside JAX.
         evaluate: (x, images, jacobians) -> the observations' models, the stacked residuals and those a
             solver descends, a compiled program with no callback, differentiable in x where ``jacobians`` are given.
+        blank: (with the Jacobian) -> zeros in the shapes and dtypes of :attr:`render`'s renders, which a program
+            is traced and compiled on while the renders are made (:mod:`spacefit.fitting.drivers`).
         each: evaluate's models -> each observation's, split outside the program (a pass's frames' models come
             stacked, :mod:`spacefit.fitting.frame_models`: split inside, the program grew by each frame).
     """
 
     render: Callable[[np.ndarray, int, bool], Rendered]
     evaluate: Evaluate
+    blank: Callable[[bool], Rendered]
     each: Callable[[list[jax.Array]], list[jax.Array]] = list
     kept: dict[tuple[bytes, int], Rendered] = field(default_factory=dict)  # one point's renders with their Jacobian (keep)
+    ahead: dict[tuple[bytes, int], Future] = field(default_factory=dict)  # renders with their Jacobian being made (render_ahead)
 
     def keep(self, x: np.ndarray, j: int, rendered: Rendered) -> None:
         """Keep ``rendered``, the renders with their Jacobian at ``x`` with the j-th seeds, in place of those kept before."""
         self.kept.clear()
         self.kept[(np.asarray(x, dtype=np.float64).tobytes(), j)] = rendered
 
+    def render_ahead(self, x: np.ndarray, j: int) -> None:
+        """Begin the renders with their Jacobian at ``x`` with the j-th seeds on a thread of their own (:func:`started`),
+        for :meth:`linearisable` to take, unless kept."""
+        key = (np.asarray(x, dtype=np.float64).tobytes(), j)
+        if key not in self.kept and key not in self.ahead:
+            self.ahead[key] = started(self.render, np.array(x), j, True)
+
     def linearisable(self, x: np.ndarray, j: int) -> Rendered:
-        """The renders with their Jacobian at ``x`` with the j-th seeds: those kept where they are ``x``'s, else made."""
-        kept = self.kept.get((np.asarray(x, dtype=np.float64).tobytes(), j))
-        return kept if kept is not None else self.render(np.asarray(x), j, True)
+        """The renders with their Jacobian at ``x`` with the j-th seeds: those kept where they are ``x``'s, or begun
+        (:meth:`render_ahead`), else made."""
+        key = (np.asarray(x, dtype=np.float64).tobytes(), j)
+        kept, pending = self.kept.get(key), self.ahead.pop(key, None)
+        if kept is not None:
+            return kept
+        return pending.result() if pending is not None else self.render(np.asarray(x), j, True)
 
     def models(self, x: jax.Array, j: int) -> list[jax.Array]:
         """Each observation's model at ``x`` (concrete) with the j-th seeds."""
