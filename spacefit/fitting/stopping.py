@@ -22,7 +22,8 @@ each by 0.1 to 6 in loss against a noise of 0.02, about 20 s after the optimum),
   what it tried: its trial points look alike to the data), or
 * the solver's next trial point is the rejected one again (within :data:`RETRY_RTOL` of the rejected step's
   length from it, and so, the loss being smooth, a loss within the loss's noise of the rejected one: the first
-  rule, known before the point is rendered; measured on the same fit: a Levenberg-Marquardt step whose damping
+  rule, known before the point is rendered; measured on the 8-parameter observation fit of
+  ``experiments/bench_fit_process.py``: a Levenberg-Marquardt step whose damping
   rose after a rejection moved its trial point by 5e-7 of the rejected step, the losses 2e-9 apart), or
 * :data:`REJECTED_PATIENCE` steps in a row are rejected, each by less than :data:`REJECTED_RTOL` of
   the best loss (a relative change the estimates cannot feel). This one applies from the start too:
