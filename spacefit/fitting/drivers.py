@@ -9,7 +9,6 @@ records the steps and may stop the solve.
 from __future__ import annotations
 
 from collections.abc import Callable, Generator
-from concurrent.futures import Future, wait
 from dataclasses import dataclass
 from typing import Any
 
@@ -67,15 +66,10 @@ class RenderedFirst:
     Attributes:
         render: unconstrained u (concrete) -> the renders at u, the step's operands.
         residual: (u, renders) -> the residuals at u from renders made at u: a function with no callback.
-        start: u (concrete) -> the renders at u being made on a thread of their own (as ``render``'s).
-        blank: () -> renders in the shapes and dtypes of ``render``'s, on which the first step's programs are
-            traced and compiled while its renders are made.
     """
 
     render: Callable[[jax.Array], Any]
     residual: Callable[[jax.Array, Any], jax.Array]
-    start: Callable[[jax.Array], Future]
-    blank: Callable[[], Any]
 
 
 class _Evaluations:
@@ -204,24 +198,11 @@ def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: j
 
     tags: frozenset = frozenset()
     try:
+        args = given.render(u)
         step, terminate, evaluate = eqx.filter_jit(solver.step), eqx.filter_jit(solver.terminate), jax.jit(evaluated)
-        # The first step's programs are traced, lowered and compiled (read from JAX's cache) here while its renders are
-        # made on the Dr.Jit thread: they need the renders' shapes alone. optimistix's init reads its args' shapes alone.
-        pending = given.start(u)
-        try:
-            blank = given.blank()
-            lowered = evaluate.lower(u, blank)
-            lowered.compile()
-            f_struct = jax.ShapeDtypeStruct(lowered.out_info[0].shape, lowered.out_info[0].dtype)
-            # one program: optimistix's init, run op by op, made some 24 single-operation programs, each traced and lowered per process
-            state = eqx.filter_jit(solver.init)(fn, u, blank, {}, f_struct, None, tags)
-            step.lower(fn, u, blank, {}, state, tags).compile()
-            terminate.lower(fn, u, blank, {}, state, tags).compile()
-            del blank
-        finally:
-            wait([pending])
-        args = pending.result()
-        first = evaluate(u, args)  # the first step's (its trial point is u)
+        first = evaluate(u, args)  # the first step's (its trial point is u), and the residuals' shape without another trace
+        # one program: optimistix's init, run op by op, made some 24 single-operation programs, each traced and lowered per process
+        state = eqx.filter_jit(solver.init)(fn, u, args, {}, jax.ShapeDtypeStruct(first[0].shape, first[0].dtype), None, tags)
 
         def advance(k: int, u: jax.Array) -> Step:
             nonlocal state, args

@@ -9,7 +9,6 @@ the solve, which :mod:`spacefit.fitting.solve_record` records step by step and
 from __future__ import annotations
 
 import dataclasses
-from concurrent.futures import Future
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -26,7 +25,7 @@ from spacefit.fitting.drivers import Outcome, RenderedFirst, drive
 from spacefit.fitting.frames import frame_executor
 from spacefit.fitting.observations.base import Sequenced, ValueObservation
 from spacefit.fitting.observations.image import Observation
-from spacefit.fitting.outside import DESCENT, started
+from spacefit.fitting.outside import DESCENT
 from spacefit.fitting.problem import FitRender, Setup, setup
 from spacefit.fitting.residuals import column_owners
 from spacefit.fitting.result import FitResult
@@ -235,19 +234,14 @@ def _rendered_first(s: Setup, steps: SolveRecord | None = None) -> RenderedFirst
     if outside is None:
         return None
 
-    def rendered_at(x: np.ndarray) -> Any:
+    def render(u: jax.Array) -> Any:
+        x = np.asarray(fp.to_physical(u))
         rendered = outside.render(x, 0, True)
         if steps is not None:
             steps.rendered(x, rendered)
         return rendered
 
-    def render(u: jax.Array) -> Any:
-        return rendered_at(np.asarray(fp.to_physical(u)))
-
-    def start(u: jax.Array) -> Future:
-        return started(rendered_at, np.asarray(fp.to_physical(u)))  # x here: JAX's 64-bit mode is the calling thread's
-
     def residual(u: jax.Array, rendered: Any) -> jax.Array:
         return outside.evaluate(fp.to_physical(u), *rendered)[DESCENT].astype(u.dtype)  # as residual_u's
 
-    return RenderedFirst(render, residual, start, lambda: outside.blank(True))
+    return RenderedFirst(render, residual)

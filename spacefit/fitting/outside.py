@@ -33,9 +33,9 @@ Evaluate = Callable[[jax.Array, Sequence[np.ndarray], Sequence[np.ndarray] | Non
 RESIDUALS, DESCENT = 1, 2  # which residuals of :attr:`Outside.evaluate`'s output
 
 
-def started(fn: Callable[..., Any], *args: Any) -> Future:
-    """``fn(*args)`` begun on a thread of its own, which ends with it: renders made while the calling thread traces and
-    compiles JAX's programs (the renders run on the Dr.Jit thread, :func:`~spacefit.rendering.backend.on_drjit_thread`).
+def _started(fn: Callable[..., Any], *args: Any) -> Future:
+    """``fn(*args)`` begun on a thread of its own, which ends with it: renders made while the calling thread traces JAX's
+    programs (the renders run on the Dr.Jit thread, :func:`~spacefit.rendering.backend.on_drjit_thread`).
     Nothing run so may import or parse code: CPython 3.11's parse trees are not safe across threads (performance.md)."""
     pool = ThreadPoolExecutor(1, "spacefit-render-ahead")
     try:
@@ -53,15 +53,12 @@ class Outside:
             seeds (0 the fit's, 1 the independent ones; :mod:`spacefit.fitting.problem`), outside JAX.
         evaluate: (x, images, jacobians) -> the observations' models, the stacked residuals and those a
             solver descends, a compiled program with no callback, differentiable in x where ``jacobians`` are given.
-        blank: (with the Jacobian) -> zeros in the shapes and dtypes of :attr:`render`'s renders, which a program
-            is traced and compiled on while the renders are made (:mod:`spacefit.fitting.drivers`).
         each: evaluate's models -> each observation's, split outside the program (a pass's frames' models come
             stacked, :mod:`spacefit.fitting.frame_models`: split inside, the program grew by each frame).
     """
 
     render: Callable[[np.ndarray, int, bool], Rendered]
     evaluate: Evaluate
-    blank: Callable[[bool], Rendered]
     each: Callable[[list[jax.Array]], list[jax.Array]] = list
     kept: dict[tuple[bytes, int], Rendered] = field(default_factory=dict)  # one point's renders with their Jacobian (keep)
     ahead: dict[tuple[bytes, int], Future] = field(default_factory=dict)  # renders with their Jacobian being made (render_ahead)
@@ -72,11 +69,11 @@ class Outside:
         self.kept[(np.asarray(x, dtype=np.float64).tobytes(), j)] = rendered
 
     def render_ahead(self, x: np.ndarray, j: int) -> None:
-        """Begin the renders with their Jacobian at ``x`` with the j-th seeds on a thread of their own (:func:`started`),
+        """Begin the renders with their Jacobian at ``x`` with the j-th seeds on a thread of their own (:func:`_started`),
         for :meth:`linearisable` to take, unless kept."""
         key = (np.asarray(x, dtype=np.float64).tobytes(), j)
         if key not in self.kept and key not in self.ahead:
-            self.ahead[key] = started(self.render, np.array(x), j, True)
+            self.ahead[key] = _started(self.render, np.array(x), j, True)
 
     def linearisable(self, x: np.ndarray, j: int) -> Rendered:
         """The renders with their Jacobian at ``x`` with the j-th seeds: those kept where they are ``x``'s, or begun

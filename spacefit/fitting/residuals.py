@@ -209,12 +209,7 @@ def build_problem(
             batches = len(out) - len(blocks)
             return [*FrameModels.each(out[:batches]), *out[batches:]]
 
-        def blank(jacobian: bool) -> Rendered:
-            """Zeros as render_outside's renders (float32, stacked per run): not written, so not in memory."""
-            images = tuple(np.zeros((len(run), *shapes[run.start]), np.float32) for run in runs)
-            return images, tuple(np.zeros((*i.shape, len(indices[run.start])), np.float32) for i, run in zip(images, runs)) if jacobian else None
-
-        outside = Outside(render_outside, jax.jit(evaluate), blank, each)
+        outside = Outside(render_outside, jax.jit(evaluate), each)
 
     def models_seeded(x: jax.Array, j: int) -> list[jax.Array]:
         if outside is not None:
