@@ -87,8 +87,6 @@ class Linearisation:
 def linearise(problem: Problem, x: np.ndarray) -> Linearisation:
     """The problem's :class:`Linearisation` at ``x`` (physical units): one Jacobian render per seed."""
     xj = jnp.asarray(x)
-    if problem.outside is not None:  # the independent seeds' renders made while the fit's seeds' tangents are traced
-        problem.outside.render_ahead(np.asarray(x), 1)
     r, J1 = problem.linearised(xj, 0)
     r_alt, J2 = problem.linearised(xj, 1)
     # the transposes take the residuals' dtype (float32 renders: J^T v sums in float32, ~1e-6 relative)
