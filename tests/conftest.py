@@ -11,7 +11,16 @@ import tempfile
 
 import pytest
 
-import spacefit as sf
+# XLA compiles the tests' programs with LLVM's optimisations off (level 0), as spacefit already compiles its
+# programs that call back into Python (spacefit.fitting.compile_cache.CALLBACK_COMPILER_OPTIONS): most of a test's
+# fit is compiling its programs once, not running them. Set before JAX starts its CPU backend, so the test
+# processes, the commands they start and the docs build's kernels inherit it; a level in the caller's XLA_FLAGS
+# (e.g. --xla_backend_optimization_level=2, XLA's own) is kept.
+XLA_LEVEL = "--xla_backend_optimization_level"
+if XLA_LEVEL not in os.environ.get("XLA_FLAGS", ""):
+    os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {XLA_LEVEL}=0".strip()
+
+import spacefit as sf  # noqa: E402
 from spacefit.fitting.compile_cache import ENV as JAX_CACHE_ENV
 
 # Hermetic: no test reads or writes the user's cache of JAX's compiled programs (the tests of that cache give
