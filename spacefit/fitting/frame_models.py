@@ -59,7 +59,7 @@ class Batch:
         run: the render run they are in (:func:`~spacefit.fitting.frames.render_runs`), from ``offset``.
         values: (images, p) where each one's nuisance values are in the free values.
         program: the first image's model traced; None: one image, its own function.
-        own: the program's arrays that differ between the images, each stacked (images, ...), once.
+        own: the program's arrays that differ between the images, each stacked (images, ...), once, on the device.
         common: those every image shares.
         consts: per array of ``program``, where it is: (True, i) ``own[i]``, (False, i) ``common[i]``.
     """
@@ -69,7 +69,7 @@ class Batch:
     offset: int
     values: np.ndarray
     program: ClosedJaxpr | None = None
-    own: tuple[np.ndarray, ...] = ()
+    own: tuple[Array, ...] = ()
     common: tuple[np.ndarray, ...] = ()
     consts: tuple[tuple[bool, int], ...] = ()
 
@@ -92,7 +92,12 @@ def batches(models: Sequence[FrameModel], values: Sequence[np.ndarray], runs: Se
                 continue
             frames, alike = run[start:end], traced[start:end]
             indices = np.stack([values[k] for k in frames])
-            out.append(Batch(frames, r, start, indices, alike[0], *_arrays(alike)) if len(frames) > 1 else Batch(frames, r, start, indices))
+            if len(frames) == 1:
+                out.append(Batch(frames, r, start, indices))
+            else:
+                own, common, consts = _arrays(alike)
+                # on the device once: handed to each call of a program as its operands (FrameModels.operands), not copied each time
+                out.append(Batch(frames, r, start, indices, alike[0], tuple(jnp.asarray(a) for a in own), common, consts))
             start = end
     return out
 
@@ -170,11 +175,18 @@ class FrameModels:
             self._batches[dtype] = batches(self.models, self.values, self.runs, self.shapes, dtype)
         return self._batches[dtype]
 
-    def __call__(self, rendered: Sequence[Array], x: Array) -> tuple[list[Array], Array, Array]:
+    def operands(self, dtype: np.dtype) -> tuple[tuple[Array, ...], ...]:
+        """Each batch's own arrays (:attr:`Batch.own`) for values of ``dtype``, for a caller that hands them to
+        :meth:`__call__` as operands of its program."""
+        return tuple(batch.own for batch in self.batches(np.dtype(dtype)))
+
+    def __call__(self, rendered: Sequence[Array], x: Array, operands: Sequence[tuple[Array, ...]] | None = None) -> tuple[
+            list[Array], Array, Array]:
         """Each batch's model images stacked, (images, h, w, c), and every image's residuals in order, those
-        judged and those descended, from ``rendered`` (each run's renders stacked) and the free values ``x``."""
+        judged and those descended, from ``rendered`` (each run's renders stacked) and the free values ``x``;
+        ``operands``: :meth:`operands`, arguments of the caller's program (None: from the host by a callback)."""
         out = []
-        for batch in self.batches(np.dtype(x.dtype)):
+        for b, batch in enumerate(self.batches(np.dtype(x.dtype))):
             renders, values = rendered[batch.run], x[batch.values]
             if len(batch.frames) < renders.shape[0]:
                 renders = renders[batch.offset:batch.offset + len(batch.frames)]
@@ -189,10 +201,12 @@ class FrameModels:
                 consts = [own[i] if is_own else batch.common[i] for is_own, i in batch.consts]
                 return jaxpr_as_fun(ClosedJaxpr(batch.program.jaxpr, consts))(render, value)
 
-            # the frames' own arrays as operands, from the host: held as constants, each compiled program of the fit
-            # (the step, the residuals, the covariance's products) would hold a copy of them, more while compiling
-            own = jax.pure_callback(lambda batch=batch: batch.own, tuple(jax.ShapeDtypeStruct(a.shape, a.dtype) for a in batch.own),
-                                    vmap_method="sequential")
+            # the frames' own arrays as operands: held as constants, each compiled program of the fit (the step, the residuals,
+            # the covariance's products) would hold a copy of them, more while compiling. The caller's arguments where it
+            # hands them in; else from the host by a callback, which JAX's persistent cache refuses (the program compiles
+            # in every process: the 12-frame pass's solver step, 2.5 to 5 s of CPU)
+            own = operands[b] if operands is not None else jax.pure_callback(
+                lambda batch=batch: batch.own, tuple(jax.ShapeDtypeStruct(a.shape, a.dtype) for a in batch.own), vmap_method="sequential")
             out.append(jax.lax.map(jax.checkpoint(each) if self.recompute else each, (renders, values, own)))
         if not out:
             return [], jnp.zeros(0), jnp.zeros(0)

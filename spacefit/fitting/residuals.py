@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -198,9 +199,9 @@ def build_problem(
         def render_outside(x: np.ndarray, j: int, jacobian: bool) -> Rendered:
             return frame_renders(executor, specs, indices, runs, x, np.asarray(seeds_of(j)), jacobian) if specs else ((), () if jacobian else None)
 
-        def evaluate(x: jax.Array, images: Sequence[jax.Array], jacobians: Sequence[jax.Array] | None) -> tuple[
+        def evaluate(x: jax.Array, images: Sequence[jax.Array], jacobians: Sequence[jax.Array] | None, operands: Any) -> tuple[
                 list[jax.Array], jax.Array, jax.Array]:
-            stacked, r, descended = models(given(x, images, jacobians), x)
+            stacked, r, descended = models(given(x, images, jacobians), x, operands)
             others = block_models(x, 0)  # none rendered: the seeds change none
             return [*stacked, *others], with_blocks(r, others), with_blocks(descended, others)
 
@@ -209,7 +210,7 @@ def build_problem(
             batches = len(out) - len(blocks)
             return [*FrameModels.each(out[:batches]), *out[batches:]]
 
-        outside = Outside(render_outside, jax.jit(evaluate), each)
+        outside = Outside(render_outside, jax.jit(evaluate), each, models.operands)
 
     def models_seeded(x: jax.Array, j: int) -> list[jax.Array]:
         if outside is not None:
