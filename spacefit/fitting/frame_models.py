@@ -23,7 +23,9 @@ not its memory).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import TypeVar
 
 import jax
 import jax.numpy as jnp
@@ -33,6 +35,7 @@ from jaxtyping import Array, Float
 
 from spacefit.fitting.nuisance import nuisance_indices, with_nuisances
 
+T = TypeVar("T")
 # (render (h, w, 3) float32, the image's nuisance values (p,)) -> (model, residuals, descended residuals)
 FrameModel = Callable[[Float[Array, "h w 3"], Float[Array, " p"]], tuple[Array, Array, Array]]
 
@@ -132,6 +135,30 @@ class AlikePrograms:
             self._traced[key] = (self._programs[kind], [jnp.asarray(c) for c in traced.consts])
         program, consts = self._traced[key]
         return jax.tree.leaves(program(*args)) if consts is None else program(consts, *args)
+
+
+# How many programs :func:`concurrently` runs at once: XLA runs the programs that one thread dispatches one after another,
+# each mostly on one core (its FFTs partly on a second), so that a pass's frames' models at 4x the resolution (the pixel
+# grid's fixed point), dispatched from one thread, left the second core idle. Each running program holds its own
+# temporaries: two at once, not one a core, however many cores.
+PROGRAM_THREADS = 2
+
+
+def concurrently(calls: Sequence[Callable[[], T]]) -> list[T]:
+    """``[call() for call in calls]``, each an image's program (:class:`AlikePrograms`): the first in this thread (it
+    traces and compiles what the others share), the others :data:`PROGRAM_THREADS` at a time on threads of their own,
+    in this thread's 64-bit mode (a thread's own: ``jax.enable_x64``); the same results, in order."""
+    if len(calls) < 3:
+        return [call() for call in calls]
+    x64 = bool(jax.config.jax_enable_x64)
+
+    def run(call: Callable[[], T]) -> T:
+        with jax.enable_x64(x64):
+            return call()
+
+    first = calls[0]()
+    with ThreadPoolExecutor(PROGRAM_THREADS, thread_name_prefix="spacefit-programs") as pool:
+        return [first, *pool.map(run, calls[1:])]
 
 
 def _arrays(alike: Sequence[ClosedJaxpr]) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...], tuple[tuple[bool, int], ...]]:

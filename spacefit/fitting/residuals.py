@@ -25,7 +25,7 @@ import numpy as np
 
 from spacefit.executors import Executor
 from spacefit.formation import noise_variance_terms
-from spacefit.fitting.frame_models import AlikePrograms, FrameModels, frame_model
+from spacefit.fitting.frame_models import AlikePrograms, FrameModels, concurrently, frame_model
 from spacefit.fitting.frames import (FrameSpec, InProcess, batched_renders, frame_part_image, frame_renders, given_renders, render_runs,
                                      run_frames, share_views)
 from spacefit.fitting.nuisance import image_model as image_model_of, nuisance_index
@@ -275,9 +275,10 @@ def build_problem(
         y_of = lambda k, y: jnp.asarray(np.asarray(y)[read[k]])  # noqa: E731
 
         def fine(y: np.ndarray) -> np.ndarray:
-            return np.concatenate([np.zeros((2, references[k].size)) if m is None else np.asarray(
+            # the images' programs two at a time (concurrently): each runs mostly on one core
+            return np.concatenate(concurrently([lambda k=k, m=m: np.zeros((2, references[k].size)) if m is None else np.asarray(
                 programs((fine_changes, k), lambda *a, k=k: fine_changes(k, *a), m.renders, y_of(k, y))[0], dtype=float)
-                for k, m in enumerate(made)], axis=1)
+                for k, m in enumerate(made)]), axis=1)
 
         def settled(y: np.ndarray, columns: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
             parts = []
