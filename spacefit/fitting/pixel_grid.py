@@ -106,7 +106,8 @@ fine blur's transfer having fallen to nothing at the pads (e^-50 at the fine Nyq
 (the changes to the 4x model, for the fixed point's iterations; and at x* those, the change to the 2x
 model and the derivatives) take the image's renders and values as operands and its other arrays (the
 reference, the mask) too, so that a pass's frames alike share them
-(:class:`~spacefit.fitting.frame_models.AlikePrograms`): compiled once, not once a frame. Measured
+(:class:`~spacefit.fitting.frame_models.AlikePrograms`): compiled once, not once a frame, and run two at a time
+(:func:`~spacefit.fitting.frame_models.concurrently`; so are the feedback's steps). Measured
 in docs/measurements/performance.md, "The pixel grid's cost".
 """
 
