@@ -156,7 +156,7 @@ def _render(scene: Scene, timings: dict[str, float], stop: threading.Event,
             display(done, total)
 
     t0 = time.perf_counter()
-    with kernel_log() as kernels, errors_only():  # in this thread: Dr.Jit's flags are per thread
+    with kernel_log() as kernels, errors_only():  # the render runs on this thread, whose kernels the log counts
         radiance = renderer.render(progress=progress)
     timings["render"] = time.perf_counter() - t0
     return assembly, renderer, radiance, kernels

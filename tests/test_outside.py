@@ -67,3 +67,20 @@ def test_the_solver_steps_the_same_on_renders_made_first(small):
         np.testing.assert_allclose(first.u, called_back.u, rtol=1e-5, atol=1e-7)  # the rounding of two programs
         assert first.loss == pytest.approx(called_back.loss, rel=1e-6)
     assert solves[1][-1].loss < 0.5 * solves[1][0].loss  # the solve moved: the comparison is of steps taken
+
+
+@pytest.mark.slow  # two Jacobian renders at 32 x 32 px
+@float64
+def test_renders_begun_ahead_are_the_renders_made_in_turn(small):
+    """``render_ahead``'s renders, made on a thread while the caller works, are those ``linearisable`` makes in turn, bit
+    for bit, and are taken once."""
+    outside, x = small.problem.outside, np.asarray(small.x0)
+    outside.render_ahead(x, 1)
+    assert len(outside.ahead) == 1
+    ahead = outside.linearisable(x, 1)
+    assert not outside.ahead
+    outside.linearisable(1.01 * x, 1)  # another point: the frames' last Jacobian (frames.frame_jacobian) no longer x's
+    in_turn = outside.linearisable(x, 1)
+    for a, b in zip(jax.tree.leaves(ahead), jax.tree.leaves(in_turn), strict=True):
+        assert a is not b
+        np.testing.assert_array_equal(a, b)

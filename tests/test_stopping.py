@@ -13,7 +13,7 @@ import spacefit as sf
 from spacefit.fitting.problem import setup
 from spacefit.precision import float64
 from spacefit.scene.assembly import assemble
-from spacefit.fitting.stopping import NOISE_FACTOR, REJECTED_PATIENCE, ROUNDING, NoiseFloor, loss_noise
+from spacefit.fitting.stopping import NOISE_FACTOR, REJECTED_PATIENCE, RETRY_RTOL, ROUNDING, NoiseFloor, loss_noise
 
 # The panels case at 64 x 64 px (same field of view), 16 spp: a fit takes a few seconds.
 TINY = {"render.resolution": [64, 64], "camera.pixel_pitch_mm": 37.5, "render.spp": 16}
@@ -113,6 +113,21 @@ def test_successive_rejected_steps_within_the_noise_stop_the_solve():
     assert not floor.reached(26610.47, accepted=floor.record(26610.47)) and not floor.no_better_point()  # one rejection: go on
     assert not floor.record(26610.49) and floor.no_better_point()  # its successor changed the loss by less than the noise
     assert floor.record(26600.0) and not floor.no_better_point()  # an accepted step starts the count again
+
+
+def test_a_rejected_point_about_to_be_tried_again_stops_the_solve():
+    """The measured tail of the 8-parameter observation fit: rejected by 9.6 in loss against a noise of 0.004, the next
+    trial point 5e-7 of the rejected step from it (its loss, once rendered, 2e-9 from the rejected one's)."""
+    floor = NoiseFloor()
+    assert not floor.retried(1.0, 0.0, 12.0)  # nothing accepted yet
+    assert floor.record(24637.26) and floor.record(24175.84)
+    assert not floor.retried(1.0, 0.0, 24185.40)  # no noise yet
+    floor.set_noise(0.0038)
+    assert not floor.record(24185.40)
+    assert floor.retried(1e-3, 5e-10, 24185.40)
+    assert not floor.retried(1e-3, 2 * RETRY_RTOL * 1e-3, 24185.40)  # another point: render it
+    assert not floor.retried(1e-3, 0.5 * RETRY_RTOL * 1e-3, 24175.84 + 1e3)  # near, but its loss may move by the noise
+    assert not floor.retried(0.0, 0.0, 24185.40)  # the best point itself: the rule of new_point
 
 
 def test_consecutive_rejections_below_the_relative_tolerance_stop_the_solve():

@@ -35,12 +35,15 @@ class Step:
         loss: its loss, 0.5 sum r^2.
         residuals: its residuals (None where only the loss was evaluated: Adam's reverse mode).
         iterate: the solver's point after the step (the accepted point so far).
+        next_u: the point the solver evaluates next, where known before it is rendered (the Gauss-Newton family's
+            trial point, :func:`_rendered_first`); None where not.
     """
 
     u: np.ndarray
     loss: float
     residuals: np.ndarray | None
     iterate: jax.Array
+    next_u: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -208,7 +211,7 @@ def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: j
                 args = given.render(trial)
             r, value = first if k == 1 else evaluate(trial, args)
             u, state, _ = step(fn, u, args, {}, state, tags)
-            return Step(np.asarray(trial), float(value), np.asarray(r), iterate=u)
+            return Step(np.asarray(trial), float(value), np.asarray(r), iterate=u, next_u=np.asarray(state.y_eval))
 
         return (yield from _stepped(advance, lambda u: terminate(fn, u, args, {}, state, tags), u, max_steps))
     finally:

@@ -19,6 +19,7 @@ others since).
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -32,6 +33,17 @@ Rendered = tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...] | None]
 Evaluate = Callable[[jax.Array, Sequence[np.ndarray], Sequence[np.ndarray] | None, Any], tuple[list[jax.Array], jax.Array, jax.Array]]
 
 RESIDUALS, DESCENT = 1, 2  # which residuals of :attr:`Outside.evaluate`'s output
+
+
+def _started(fn: Callable[..., Any], *args: Any) -> Future:
+    """``fn(*args)`` begun on a thread of its own, which ends with it: renders made while the calling thread traces JAX's
+    programs (the renders run on the Dr.Jit thread, :func:`~spacefit.rendering.backend.on_drjit_thread`).
+    Nothing run so may import or parse code: CPython 3.11's parse trees are not safe across threads (performance.md)."""
+    pool = ThreadPoolExecutor(1, "spacefit-render-ahead")
+    try:
+        return pool.submit(fn, *args)
+    finally:
+        pool.shutdown(wait=False)
 
 
 @dataclass(frozen=True)
@@ -54,16 +66,28 @@ class Outside:
     each: Callable[[list[jax.Array]], list[jax.Array]] = list
     operands: Callable[[np.dtype], Any] = lambda dtype: None
     kept: dict[tuple[bytes, int], Rendered] = field(default_factory=dict)  # one point's renders with their Jacobian (keep)
+    ahead: dict[tuple[bytes, int], Future] = field(default_factory=dict)  # renders with their Jacobian being made (render_ahead)
 
     def keep(self, x: np.ndarray, j: int, rendered: Rendered) -> None:
         """Keep ``rendered``, the renders with their Jacobian at ``x`` with the j-th seeds, in place of those kept before."""
         self.kept.clear()
         self.kept[(np.asarray(x, dtype=np.float64).tobytes(), j)] = rendered
 
+    def render_ahead(self, x: np.ndarray, j: int) -> None:
+        """Begin the renders with their Jacobian at ``x`` with the j-th seeds on a thread of their own (:func:`_started`),
+        for :meth:`linearisable` to take, unless kept."""
+        key = (np.asarray(x, dtype=np.float64).tobytes(), j)
+        if key not in self.kept and key not in self.ahead:
+            self.ahead[key] = _started(self.render, np.array(x), j, True)
+
     def linearisable(self, x: np.ndarray, j: int) -> Rendered:
-        """The renders with their Jacobian at ``x`` with the j-th seeds: those kept where they are ``x``'s, else made."""
-        kept = self.kept.get((np.asarray(x, dtype=np.float64).tobytes(), j))
-        return kept if kept is not None else self.render(np.asarray(x), j, True)
+        """The renders with their Jacobian at ``x`` with the j-th seeds: those kept where they are ``x``'s, or begun
+        (:meth:`render_ahead`), else made."""
+        key = (np.asarray(x, dtype=np.float64).tobytes(), j)
+        kept, pending = self.kept.get(key), self.ahead.pop(key, None)
+        if kept is not None:
+            return kept
+        return pending.result() if pending is not None else self.render(np.asarray(x), j, True)
 
     def models(self, x: jax.Array, j: int) -> list[jax.Array]:
         """Each observation's model at ``x`` (concrete) with the j-th seeds."""

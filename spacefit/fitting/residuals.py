@@ -108,8 +108,13 @@ class Problem:
         return (self.descent_x, self.descent_x_independent)[j](x)
 
     def linearised(self, x: jax.Array, j: int) -> tuple[jax.Array, Callable[[jax.Array], jax.Array]]:
-        """The stacked residuals at ``x`` (concrete) with the j-th seeds (0 or 1) and their tangent map (``jax.linearize``)."""
+        """The stacked residuals at ``x`` (concrete) with the j-th seeds (0 or 1) and their tangent map (``jax.linearize``).
+        With the fit's seeds (j 0), the independent seeds' renders at ``x`` begin on a thread of their own while these
+        tangents are traced (:meth:`~spacefit.fitting.outside.Outside.render_ahead`): the standard errors ask for both
+        (:func:`~spacefit.fitting.uncertainty.linearise`)."""
         if self.outside is not None:
+            if j == 0:
+                self.outside.render_ahead(np.asarray(x), 1)
             return self.outside.linearised(x, j)
         return jax.linearize((self.residual_x, self.residual_x_independent)[j], x)
 

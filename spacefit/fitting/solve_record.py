@@ -97,7 +97,13 @@ class SolveRecord:
             return None
         if self.floor.reached(step.loss, accepted):
             return Status.NOISE_FLOOR
-        return Status.NO_BETTER_POINT if self.floor.no_better_point() else None
+        if self.floor.no_better_point():
+            return Status.NO_BETTER_POINT
+        # the solver about to evaluate the point it was just rejected at again (known before it is rendered)
+        retry = not accepted and step.next_u is not None and self.best_u is not None
+        if retry and self.floor.retried(float(np.linalg.norm(step.u - self.best_u)), float(np.linalg.norm(step.next_u - step.u)), step.loss):
+            return Status.NO_BETTER_POINT
+        return None
 
     def resumed(self, history: Sequence[Mapping[str, Any]], u: jax.Array) -> None:
         """Go on with the interrupted solve whose steps were ``history`` and whose best point is ``u``:

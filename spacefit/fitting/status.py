@@ -31,8 +31,9 @@ class Status(enum.Enum):
 
     CONVERGED = "converged"
     NOISE_FLOOR = "converged: the expected decrease of the loss is below its Monte Carlo noise"
-    NO_BETTER_POINT = ("converged: the solver's trial steps found no lower loss (successive rejected steps within the "
-                       "loss's Monte Carlo noise of each other, or within a relative 1e-3 of the best)")
+    NO_BETTER_POINT = ("converged: the solver's trial steps found no lower loss (successive rejected steps, or a rejected "
+                       "point about to be tried again, within the loss's Monte Carlo noise of each other, or within a relative "
+                       "1e-3 of the best)")
     MAX_STEPS = "stopped: maximum number of steps reached"
     NO_PROGRESS = "failed: no step lowered the loss; the values are the start"
     AT_BOUND = "failed: a parameter is at a bound of its range; neither it nor its error is an estimate"

@@ -20,6 +20,11 @@ each by 0.1 to 6 in loss against a noise of 0.02, about 20 s after the optimum),
 
 * two successive rejected steps' losses differ by less than the loss's noise (the solver re-tries
   what it tried: its trial points look alike to the data), or
+* the solver's next trial point is the rejected one again (within :data:`RETRY_RTOL` of the rejected step's
+  length from it, and so, the loss being smooth, a loss within the loss's noise of the rejected one: the first
+  rule, known before the point is rendered; measured on the 8-parameter observation fit of
+  ``experiments/bench_fit_process.py``: a Levenberg-Marquardt step whose damping
+  rose after a rejection moved its trial point by 5e-7 of the rejected step, the losses 2e-9 apart), or
 * :data:`REJECTED_PATIENCE` steps in a row are rejected, each by less than :data:`REJECTED_RTOL` of
   the best loss (a relative change the estimates cannot feel). This one applies from the start too:
   a solver whose smallest trial steps raise the loss (its direction does not descend it here: a start
@@ -53,6 +58,8 @@ ROUNDING = 1e-6
 # REJECTED_RTOL of the best loss.
 REJECTED_PATIENCE = 3
 REJECTED_RTOL = 1e-3
+# A trial point within this fraction of the rejected step's length from the rejected point is that point again.
+RETRY_RTOL = 1e-4
 
 
 def loss_noise(r: np.ndarray, r_alt: np.ndarray) -> float:
@@ -118,6 +125,16 @@ class NoiseFloor:
         if accepted:
             return self.predicted_decrease() < threshold
         return math.isfinite(loss) and loss - self.best < threshold
+
+    def retried(self, moved: float, apart: float, loss: float) -> bool:
+        """Whether the solver's next trial point is the rejected one of ``loss`` again: ``apart`` from it, the rejected
+        step ``moved`` from the best point (lengths in one coordinate system), within :data:`RETRY_RTOL` of that, and its
+        loss expected within the loss's noise of ``loss`` (the rejected step's change of the loss times apart / moved):
+        what :meth:`no_better_point` would stop at once that point were evaluated. Only after the solve has moved."""
+        if not (self.decreases and math.isfinite(self.noise) and math.isfinite(loss) and moved > 0.0):
+            return False
+        ratio = apart / moved
+        return ratio <= RETRY_RTOL and ratio * abs(loss - self.best) < self.noise
 
     def no_better_point(self) -> bool:
         """Whether the rejected steps since the last accepted one say that there is no better point
