@@ -12,6 +12,7 @@ Run: ``python experiments/pass_memory_phases.py SIZE_PX FRAMES [MAX_STEPS]`` (de
 from __future__ import annotations
 
 import ctypes
+import importlib
 import os
 import resource
 import sys
@@ -89,12 +90,15 @@ def main() -> None:
           flush=True)
     phases = Phases()
     loop.setup = phases.marked("set-up", loop.setup)
-    loop.estimate = phases.marked("covariance", loop.estimate)
-    loop.judged_goodness = phases.marked("goodness of fit", loop.judged_goodness)
+    # the conclusion's home: loop.py at 51b17e1, conclusion.py since its split
+    concluding = loop if hasattr(loop, "estimate") else importlib.import_module("spacefit.fitting.conclusion")
+    concluding.estimate = phases.marked("covariance", concluding.estimate)
+    concluding.judged_goodness = phases.marked("goodness of fit", concluding.judged_goodness)
     uncertainty.linearise = phases.marked("linearisation", uncertainty.linearise)
     uncertainty.Linearisation.columns = phases.marked("products", uncertainty.Linearisation.columns)
     uncertainty.grid_step = phases.marked("pixel grid's fixed point", uncertainty.grid_step)
-    uncertainty.grid_feedback = phases.marked("pixel grid's feedback", uncertainty.grid_feedback)
+    if hasattr(uncertainty, "grid_feedback"):  # a commit before the feedback was taken inside grid_step (51b17e1)
+        uncertainty.grid_feedback = phases.marked("pixel grid's feedback", uncertainty.grid_feedback)
     run_frames = frames.run_frames
     frames.run_frames = lambda executor, fn, specs, *args: phases.marked(f"  {fn.__name__}", run_frames)(executor, fn, specs, *args)
     rng = np.random.default_rng(3)

@@ -6,10 +6,11 @@ from types import SimpleNamespace
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 from spacefit.fitting.nuisance import image_model
-from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, MOVES, REMAINDER_RATIO, GridChanges, binned, fine_and_grid_models, grid_step,
-                                         response_matrix)
+from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, MOVES, REMAINDER_RATIO, GridChanges, ImageColumns, binned, fine_and_grid_models,
+                                         grid_step, response_matrix)
 from spacefit.fitting.uncertainty import linearise
 
 FACTOR = 4
@@ -94,6 +95,20 @@ def test_the_grid_step_is_the_fixed_point_of_the_step_and_carries_a_third_of_the
     delta, *_ = grid_step(linear_changes(A, a, c, calls), lambda d: S @ d, x, np.full(3, 1e3), [])  # within a hundredth of the errors
     np.testing.assert_allclose(delta, S @ (A @ x + a), rtol=1e-12)
     assert len(calls) == 2  # the one step, then its values settled
+
+
+def test_image_columns_read_as_the_matrix_of_their_blocks_with_zeros_elsewhere():
+    """Three images of 2, 3 and 4 rows, four columns: image 0 has columns 0 and 2, image 1 none, image 2 columns 2
+    and 3; each column read (by index, from the end, in order) is the dense matrix's, and none past the last."""
+    rng = np.random.default_rng(2)
+    blocks = [([0, 2], rng.normal(size=(2, 2))), ([], np.zeros((0, 3))), ([2, 3], rng.normal(size=(2, 4)))]
+    dense = np.zeros((4, 9))
+    dense[[0, 2], 0:2] = blocks[0][1]
+    dense[[2, 3], 5:9] = blocks[2][1]
+    columns = ImageColumns(4, [2, 3, 4], blocks)
+    assert len(columns) == 4 and np.array_equal(np.stack(list(columns)), dense) and np.array_equal(columns[-1], dense[3])
+    with pytest.raises(IndexError):
+        columns[4]
 
 
 def test_the_fixed_point_moves_with_the_fits_estimate_by_the_inverse_of_one_less_the_steps_feedback():

@@ -273,16 +273,40 @@ def grid_error_models(obs: Observation, scene: Scene, x: Float[np.ndarray, " n"]
     return GridModels(renders, fine, coarser)
 
 
+class ImageColumns(Sequence[np.ndarray]):
+    """The columns of a (columns, rows) matrix whose rows are images' (``sizes`` each, in order), held as each image's
+    block: ``blocks[k]`` = (the columns it has, their rows in image k, (len, sizes[k])), 0 in the others; a column made
+    whole when read. Held whole, the pixel grid's derivatives of a pass (a column per image nuisance, a row per pixel of
+    every frame) grew as frames^2: 2.7 GB at 48 frames of 128 x 128 px, 5 own values a frame."""
+
+    def __init__(self, count: int, sizes: Sequence[int], blocks: Sequence[tuple[Sequence[int], np.ndarray]]) -> None:
+        self.count, self.blocks = count, [(list(columns), rows) for columns, rows in blocks]
+        self.offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(int)
+
+    def __len__(self) -> int:
+        return self.count
+
+    def __getitem__(self, i: int) -> np.ndarray:  # type: ignore[override]
+        if not -self.count <= i < self.count:
+            raise IndexError(f"column {i} of {self.count}")
+        i %= self.count
+        out = np.zeros(self.offsets[-1])
+        for start, stop, (columns, rows) in zip(self.offsets[:-1], self.offsets[1:], self.blocks):
+            if i in columns:
+                out[start:stop] = rows[columns.index(i)]
+        return out
+
+
 @dataclasses.dataclass(frozen=True)
 class GridChanges:
     """The residuals' changes from the fit's models on the pixel grid to the finer ones, as functions of the free
     values ``y`` (the renders fixed): ``fine(y)``, (renders, rows), each render's change to the model made at
     :data:`SUPERSAMPLE`; ``settled(y, columns)``, the same, the renders' mean change to the model made at
     :data:`COARSER` (rows) and the derivatives of the renders' mean change to the model made at :data:`SUPERSAMPLE`
-    in each of the free values ``columns`` (len(columns), rows; forward mode, no render)."""
+    in each of the free values ``columns`` (len(columns) of rows, :class:`ImageColumns`; forward mode, no render)."""
 
     fine: Callable[[np.ndarray], np.ndarray]
-    settled: Callable[[np.ndarray, Sequence[int]], tuple[np.ndarray, np.ndarray, np.ndarray]]
+    settled: Callable[[np.ndarray, Sequence[int]], tuple[np.ndarray, np.ndarray, Sequence[np.ndarray]]]
 
 
 def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x: Float[np.ndarray, " n"], stderr: Float[np.ndarray, " n"],

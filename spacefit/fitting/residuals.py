@@ -33,7 +33,7 @@ from spacefit.fitting.observations.base import Block
 from spacefit.fitting.observations.image import Observation, check_reference, image_residual, in_unit_of
 from spacefit.fitting.outside import DESCENT, Outside, Rendered
 from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.pixel_grid import GridChanges, grid_error_models
+from spacefit.fitting.pixel_grid import GridChanges, ImageColumns, grid_error_models
 from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import assemble
@@ -285,21 +285,23 @@ def build_problem(
                 programs((fine_changes, k), lambda *a, k=k: fine_changes(k, *a), m.renders, y_of(k, y))[0], dtype=float)
                 for k, m in enumerate(made)]), axis=1)
 
-        def settled(y: np.ndarray, columns: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-            parts = []
+        def settled(y: np.ndarray, columns: Sequence[int]) -> tuple[np.ndarray, np.ndarray, ImageColumns]:
+            parts, blocks = [], []
             for k, m in enumerate(made):
                 size = references[k].size
                 if m is None:
-                    parts.append((np.zeros((2, size)), np.zeros(size), np.zeros((len(columns), size))))
+                    parts.append((np.zeros((2, size)), np.zeros(size)))
+                    blocks.append(((), np.zeros((0, size))))
                     continue
                 own = [i for i, j in enumerate(columns) if j in read[k]]
                 directions = jnp.eye(len(read[k]))[np.searchsorted(read[k], [columns[i] for i in own]).astype(int)]
                 each, coarser, own_derivatives = (np.asarray(p, dtype=float) for p in programs(
                     (settled_changes, k, len(own)), lambda *a, k=k: settled_changes(k, *a), m.renders, y_of(k, y), directions))
-                derivatives = np.zeros((len(columns), size))
-                derivatives[own] = own_derivatives
-                parts.append((each, coarser, derivatives))
-            return tuple(np.concatenate(p, axis=-1) for p in zip(*parts))
+                parts.append((each, coarser))
+                blocks.append((own, own_derivatives))
+            each, coarser = (np.concatenate(p, axis=-1) for p in zip(*parts))
+            # each image's derivatives in its own columns, a column made whole when read (held whole: frames^2)
+            return each, coarser, ImageColumns(len(columns), [r.size for r in references], blocks)
 
         return GridChanges(fine, settled)
 

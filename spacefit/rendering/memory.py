@@ -51,17 +51,21 @@ def check_memory(width: int, height: int, window_pixels: int, spp: int, split: b
     return estimate
 
 
-# A fit's memory besides the rendering's, fitted (rounded up) to the peak RSS of pass fits, each frame
-# with 2 free columns (experiments/pass_memory.py; docs/measurements/reliability.md, "Memory per frame"): the
-# process with JAX, Mitsuba and a loaded scene (634 MiB at 64 px, 681 MiB at 128 px, intercepts); per
-# frame a fixed part (its programs' share, scene values and records: 3.5 MiB) and 222 B per pixel for
-# its image and each column (reference, weights, rendered image, Jacobian columns as the solver's
-# linearisation holds them), from the growth of 6.1 MiB per frame at 64 x 64 px (16 to 48 frames) and
-# 13.9 MiB at 128 x 128 px (12 to 48). The Jacobian is never held whole (fitting/normal_equations.py):
-# held whole, rows of every frame by the columns of every frame, it grew as frames^2.
-FIT_BASE_BYTES = 700 * 2**20
+# A fit's memory besides the rendering's, fitted (rounded up, 3 to 8 % above each peak) to the peak RSS of issue 33's
+# 64-parameter pass (experiments/bench_pass.py: 3 materials and the PSF width shared, 5 own values a frame, so
+# 9 columns; each frame's image model, sensor and pixel grid; LM at 16 spp) at 12, 24 and 48 frames of 64 x 64 px
+# (883, 1010, 1265 MiB) and 128 x 128 px (1162, 1491, 2240 MiB), commit 1022e7d, stored in
+# experiments/results/pass_memory/bench_pass_*.txt (docs/measurements/performance.md, "A regression in memory at
+# 48 frames"): the process with JAX, Mitsuba, a loaded scene and the solver's and covariance's programs (the
+# intercepts 756 and 788 MiB), per frame a fixed part (its programs' share, scene values and records) and 180 B per
+# pixel for its image and each column (reference, renders, Jacobian columns, the pixel grid's renders at 4x), from
+# the growth of 10.6 MiB a frame at 64 x 64 px and 30.1 MiB at 128 x 128 px. The 2-column pass of
+# docs/measurements/reliability.md ("Memory per frame") it puts 6 to 30 % above its peaks. The Jacobian is never
+# held whole (fitting/normal_equations.py): held whole, rows of every frame by the columns of every frame, it grew as
+# frames^2, as the pixel grid's derivatives held whole did (4928 MiB at 48 frames of 128 x 128 px).
+FIT_BASE_BYTES = 820 * 2**20
 FIT_FRAME_BYTES = 4 * 2**20
-FIT_FRAME_PIXEL_COLUMN_BYTES = 240
+FIT_FRAME_PIXEL_COLUMN_BYTES = 180
 # A fit estimated above this states its size before it starts (a warning; ``spacefit fit`` says every pass's).
 LARGE_FIT_BYTES = 2**30
 
