@@ -23,6 +23,7 @@ not its memory).
 from __future__ import annotations
 
 import hashlib
+import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -125,6 +126,7 @@ class AlikePrograms:
         self._programs: dict[tuple[str, tuple[tuple[tuple[int, ...], np.dtype], ...]], Callable[..., list[Array]]] = {}
         self._traced: dict[object, tuple[Callable[..., object], list[Array] | None]] = {}
         self._held: dict[tuple[tuple[int, ...], str, bytes], Array] = {}
+        self._holding = threading.Lock()  # keys traced first on concurrently's threads: each array still held once
 
     def __call__(self, key: object, fn: Callable[..., object], *args: Array) -> list[Array]:
         """``fn(*args)``'s outputs, flattened, by the program of its kind: traced for ``key`` (an image's and the
@@ -144,9 +146,10 @@ class AlikePrograms:
         """``array`` on the device, the one held already where an equal one is (same shape, dtype and bytes)."""
         host = np.asarray(array)
         key = (host.shape, host.dtype.str, hashlib.blake2b(host.tobytes(), digest_size=16).digest())
-        held = self._held.get(key)
-        if held is None or not np.array_equal(np.asarray(held), host):
-            held = self._held[key] = jnp.asarray(host)
+        with self._holding:
+            held = self._held.get(key)
+            if held is None or not np.array_equal(np.asarray(held), host):
+                held = self._held[key] = jnp.asarray(host)
         return held
 
 
