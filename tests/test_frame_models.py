@@ -4,6 +4,8 @@ their count, each batch's models, residuals and derivatives equal its frames' ow
 
 from __future__ import annotations
 
+import threading
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -11,7 +13,7 @@ import pytest
 
 import spacefit as sf
 from spacefit.fitting import problem
-from spacefit.fitting.frame_models import FrameModels, frame_model
+from spacefit.fitting.frame_models import FrameModels, concurrently, frame_model
 from spacefit.fitting.frames import render_runs
 from spacefit.fitting.losses import AffineVariance, residual_fn
 from spacefit.precision import float64
@@ -86,8 +88,21 @@ def test_a_joint_fit_s_step_holds_one_frames_model_whatever_the_frames(loss):
         x = jnp.asarray(s.x0)
         images, jacobians = s.problem.outside.render(np.asarray(x), 0, True)
         assert [i.shape for i in images] == [(n, 12, 12, 3)]  # one run, the frames stacked
-        evaluate = s.problem.outside.evaluate
+        evaluate, operands = s.problem.outside.evaluate, s.problem.outside.operands(x.dtype)
+        # the frames' own arrays are the program's operands: it calls nothing back, so JAX's persistent cache keeps it
+        assert "callback" not in str(jax.make_jaxpr(evaluate)(x, images, jacobians, operands))
         sizes.append((equations(jax.make_jaxpr(s.problem.residual_x)(x).jaxpr),
                       equations(jax.make_jaxpr(lambda v, s=s, x=x: jax.linearize(s.problem.residual_x, x)[1](v))(x).jaxpr),
-                      equations(jax.make_jaxpr(lambda y, i, J, f=evaluate: jax.linearize(lambda z: f(z, i, J)[1], y)[1](y))(x, images, jacobians).jaxpr)))
+                      equations(jax.make_jaxpr(lambda y, i, J, o, f=evaluate: jax.linearize(lambda z: f(z, i, J, o)[1], y)[1](y))(
+                          x, images, jacobians, operands).jaxpr)))
     assert sizes[0] == sizes[1]
+
+
+@float64
+def test_the_images_programs_run_on_threads_in_order_in_the_callers_64_bit_mode():
+    """concurrently: the first call here, the others on threads of their own, their results in the calls' order, each
+    in the caller's 64-bit mode (a thread's own: float32 there would run other programs)."""
+    calls = [lambda k=k: (threading.current_thread().name, jnp.asarray(np.float64(k) / 3).dtype, k) for k in range(5)]
+    out = concurrently(calls)
+    assert [k for *_, k in out] == list(range(5)) and all(dtype == jnp.float64 for _, dtype, _ in out)
+    assert out[0][0] == threading.current_thread().name and all(name.startswith("spacefit-programs") for name, *_ in out[1:])

@@ -284,8 +284,8 @@ MUTANTS = (
     Mutant("pixel-grid-whole-step-carried", "spacefit/fitting/pixel_grid.py", "REMAINDER_RATIO * step(each.mean(axis=0) - coarser)",
            "step(each.mean(axis=0))",
            ("tests/test_pixel_grid.py::test_the_grid_step_is_the_fixed_point_of_the_step_and_carries_a_third_of_the_coarser_models_step",)),
-    Mutant("pixel-grid-feedback-transposed", "spacefit/fitting/pixel_grid.py", "feedback[:, j] = step(derivative)",
-           "feedback[j, :] = step(derivative)",
+    Mutant("pixel-grid-feedback-transposed", "spacefit/fitting/pixel_grid.py", "feedback[:, j] = moved",
+           "feedback[j, :] = moved",
            ("tests/test_pixel_grid.py::test_the_fixed_point_moves_with_the_fits_estimate_by_the_inverse_of_one_less_the_steps_feedback",)),
     # ... an image's derivatives taken in the values it reads: its own and the shared ones
     Mutant("pixel-grid-changes-kept-past-a-shared-value", "spacefit/fitting/residuals.py", "o in (-1, k) for o in owners", "o == k for o in owners",

@@ -11,9 +11,11 @@ JAX writes no entry for a program that calls back into Python (``jax.pure_callba
 renders are made before the programs that take them (:mod:`spacefit.fitting.outside`; the solver's step of the
 Gauss-Newton family, the noise floor's residuals, the standard errors' tangents, the frames' scene values), so a
 second process reads every program of the 8-parameter observation fit from the cache (222 of 222, measured in
-docs/measurements/performance.md). What still calls back (Adam's and BFGS's steps, a rendered light curve's
-model, a residual function traced whole, e.g. by ``jax.jacfwd``) is compiled in every process, Adam's with
-LLVM's optimisations off (:data:`CALLBACK_COMPILER_OPTIONS`), as are the other solvers' steps that call back.
+docs/measurements/performance.md), and a pass's step too: its frames' own arrays (references, masks) are its operands
+(:meth:`~spacefit.fitting.frame_models.FrameModels.operands`), not fetched by a callback. What still calls back (Adam's
+and BFGS's steps, a rendered light curve's model, a residual function traced whole, e.g. by ``jax.jacfwd``) is
+compiled in every process, Adam's with LLVM's optimisations off (:data:`CALLBACK_COMPILER_OPTIONS`), as are the other
+solvers' steps that call back.
 
 A stale entry cannot be used: JAX names each entry by a hash of the program itself (its StableHLO), the
 jax and jaxlib versions, the backend and device kind and the compile options, so changed code, another

@@ -23,8 +23,11 @@ not its memory).
 from __future__ import annotations
 
 import hashlib
+import threading
 from collections.abc import Callable, Sequence
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import TypeVar
 
 import jax
 import jax.numpy as jnp
@@ -34,6 +37,7 @@ from jaxtyping import Array, Float
 
 from spacefit.fitting.nuisance import nuisance_indices, with_nuisances
 
+T = TypeVar("T")
 # (render (h, w, 3) float32, the image's nuisance values (p,)) -> (model, residuals, descended residuals)
 FrameModel = Callable[[Float[Array, "h w 3"], Float[Array, " p"]], tuple[Array, Array, Array]]
 
@@ -60,7 +64,7 @@ class Batch:
         run: the render run they are in (:func:`~spacefit.fitting.frames.render_runs`), from ``offset``.
         values: (images, p) where each one's nuisance values are in the free values.
         program: the first image's model traced; None: one image, its own function.
-        own: the program's arrays that differ between the images, each stacked (images, ...), once.
+        own: the program's arrays that differ between the images, each stacked (images, ...), once, on the device.
         common: those every image shares.
         consts: per array of ``program``, where it is: (True, i) ``own[i]``, (False, i) ``common[i]``.
     """
@@ -70,7 +74,7 @@ class Batch:
     offset: int
     values: np.ndarray
     program: ClosedJaxpr | None = None
-    own: tuple[np.ndarray, ...] = ()
+    own: tuple[Array, ...] = ()
     common: tuple[np.ndarray, ...] = ()
     consts: tuple[tuple[bool, int], ...] = ()
 
@@ -93,7 +97,12 @@ def batches(models: Sequence[FrameModel], values: Sequence[np.ndarray], runs: Se
                 continue
             frames, alike = run[start:end], traced[start:end]
             indices = np.stack([values[k] for k in frames])
-            out.append(Batch(frames, r, start, indices, alike[0], *_arrays(alike)) if len(frames) > 1 else Batch(frames, r, start, indices))
+            if len(frames) == 1:
+                out.append(Batch(frames, r, start, indices))
+            else:
+                own, common, consts = _arrays(alike)
+                # on the device once: handed to each call of a program as its operands (FrameModels.operands), not copied each time
+                out.append(Batch(frames, r, start, indices, alike[0], tuple(jnp.asarray(a) for a in own), common, consts))
             start = end
     return out
 
@@ -117,6 +126,7 @@ class AlikePrograms:
         self._programs: dict[tuple[str, tuple[tuple[tuple[int, ...], np.dtype], ...]], Callable[..., list[Array]]] = {}
         self._traced: dict[object, tuple[Callable[..., object], list[Array] | None]] = {}
         self._held: dict[tuple[tuple[int, ...], str, bytes], Array] = {}
+        self._holding = threading.Lock()  # keys traced first on concurrently's threads: each array still held once
 
     def __call__(self, key: object, fn: Callable[..., object], *args: Array) -> list[Array]:
         """``fn(*args)``'s outputs, flattened, by the program of its kind: traced for ``key`` (an image's and the
@@ -136,10 +146,35 @@ class AlikePrograms:
         """``array`` on the device, the one held already where an equal one is (same shape, dtype and bytes)."""
         host = np.asarray(array)
         key = (host.shape, host.dtype.str, hashlib.blake2b(host.tobytes(), digest_size=16).digest())
-        held = self._held.get(key)
-        if held is None or not np.array_equal(np.asarray(held), host):
-            held = self._held[key] = jnp.asarray(host)
+        with self._holding:
+            held = self._held.get(key)
+            if held is None or not np.array_equal(np.asarray(held), host):
+                held = self._held[key] = jnp.asarray(host)
         return held
+
+
+# How many programs :func:`concurrently` runs at once: XLA runs the programs that one thread dispatches one after another,
+# each mostly on one core (its FFTs partly on a second), so that a pass's frames' models at 4x the resolution (the pixel
+# grid's fixed point), dispatched from one thread, left the second core idle. Each running program holds its own
+# temporaries: two at once, not one a core, however many cores.
+PROGRAM_THREADS = 2
+
+
+def concurrently(calls: Sequence[Callable[[], T]]) -> list[T]:
+    """``[call() for call in calls]``, each an image's program (:class:`AlikePrograms`): the first in this thread (it
+    traces and compiles what the others share), the others :data:`PROGRAM_THREADS` at a time on threads of their own,
+    in this thread's 64-bit mode (a thread's own: ``jax.enable_x64``); the same results, in order."""
+    if len(calls) < 3:
+        return [call() for call in calls]
+    x64 = bool(jax.config.jax_enable_x64)
+
+    def run(call: Callable[[], T]) -> T:
+        with jax.enable_x64(x64):
+            return call()
+
+    first = calls[0]()
+    with ThreadPoolExecutor(PROGRAM_THREADS, thread_name_prefix="spacefit-programs") as pool:
+        return [first, *pool.map(run, calls[1:])]
 
 
 def _arrays(alike: Sequence[ClosedJaxpr]) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...], tuple[tuple[bool, int], ...]]:
@@ -183,11 +218,18 @@ class FrameModels:
             self._batches[dtype] = batches(self.models, self.values, self.runs, self.shapes, dtype)
         return self._batches[dtype]
 
-    def __call__(self, rendered: Sequence[Array], x: Array) -> tuple[list[Array], Array, Array]:
+    def operands(self, dtype: np.dtype) -> tuple[tuple[Array, ...], ...]:
+        """Each batch's own arrays (:attr:`Batch.own`) for values of ``dtype``, for a caller that hands them to
+        :meth:`__call__` as operands of its program."""
+        return tuple(batch.own for batch in self.batches(np.dtype(dtype)))
+
+    def __call__(self, rendered: Sequence[Array], x: Array, operands: Sequence[tuple[Array, ...]] | None = None) -> tuple[
+            list[Array], Array, Array]:
         """Each batch's model images stacked, (images, h, w, c), and every image's residuals in order, those
-        judged and those descended, from ``rendered`` (each run's renders stacked) and the free values ``x``."""
+        judged and those descended, from ``rendered`` (each run's renders stacked) and the free values ``x``;
+        ``operands``: :meth:`operands`, arguments of the caller's program (None: from the host by a callback)."""
         out = []
-        for batch in self.batches(np.dtype(x.dtype)):
+        for b, batch in enumerate(self.batches(np.dtype(x.dtype))):
             renders, values = rendered[batch.run], x[batch.values]
             if len(batch.frames) < renders.shape[0]:
                 renders = renders[batch.offset:batch.offset + len(batch.frames)]
@@ -202,10 +244,12 @@ class FrameModels:
                 consts = [own[i] if is_own else batch.common[i] for is_own, i in batch.consts]
                 return jaxpr_as_fun(ClosedJaxpr(batch.program.jaxpr, consts))(render, value)
 
-            # the frames' own arrays as operands, from the host: held as constants, each compiled program of the fit
-            # (the step, the residuals, the covariance's products) would hold a copy of them, more while compiling
-            own = jax.pure_callback(lambda batch=batch: batch.own, tuple(jax.ShapeDtypeStruct(a.shape, a.dtype) for a in batch.own),
-                                    vmap_method="sequential")
+            # the frames' own arrays as operands: held as constants, each compiled program of the fit (the step, the residuals,
+            # the covariance's products) would hold a copy of them, more while compiling. The caller's arguments where it
+            # hands them in; else from the host by a callback, which JAX's persistent cache refuses (the program compiles
+            # in every process: the 12-frame pass's solver step, 13.5 s of wall at load 12 at 64 px)
+            own = operands[b] if operands is not None else jax.pure_callback(
+                lambda batch=batch: batch.own, tuple(jax.ShapeDtypeStruct(a.shape, a.dtype) for a in batch.own), vmap_method="sequential")
             out.append(jax.lax.map(jax.checkpoint(each) if self.recompute else each, (renders, values, own)))
         if not out:
             return [], jnp.zeros(0), jnp.zeros(0)

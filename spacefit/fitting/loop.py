@@ -239,7 +239,7 @@ def _rendered_first(s: Setup, steps: SolveRecord | None = None) -> RenderedFirst
         rendered = outside.render(x, 0, True)
         if steps is not None:
             steps.rendered(x, rendered)
-        return rendered
+        return (*rendered, outside.operands(x.dtype))  # the step's operands: the renders and the frames' own arrays
 
     def residual(u: jax.Array, rendered: Any) -> jax.Array:
         return outside.evaluate(fp.to_physical(u), *rendered)[DESCENT].astype(u.dtype)  # as residual_u's

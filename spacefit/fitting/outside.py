@@ -8,7 +8,9 @@ least-squares step, the noise floor or the standard errors evaluate is known bef
 (optimistix's Gauss-Newton family evaluates its function at the trial point ``y_eval`` of its state
 only), so the renders are made first, at that point (:attr:`Outside.render`), and handed to a program
 that holds no callback (:attr:`Outside.evaluate`, through :func:`~spacefit.fitting.frames.given_renders`):
-the same images and the same Jacobian columns times the tangent, and a program JAX's cache keeps.
+the same images and the same Jacobian columns times the tangent, and a program JAX's cache keeps. The arrays a
+pass's frames' models hold (their references, masks: :meth:`~spacefit.fitting.frame_models.FrameModels.operands`)
+are its operands too (:attr:`Outside.operands`), not fetched by a callback.
 The solver's renders of its best point are kept (:meth:`Outside.keep`): the standard errors linearise
 there again with the fit's seeds, the same renders (a fit that ends on rejected trial steps rendered
 others since).
@@ -26,9 +28,9 @@ import numpy as np
 
 # A frame's images and, where linearised, its Jacobian columns (None: not rendered), as NumPy arrays.
 Rendered = tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...] | None]
-# (x, images, jacobians) -> the observations' models (as :attr:`Outside.each` splits them), the stacked residuals and
-# those a solver descends.
-Evaluate = Callable[[jax.Array, Sequence[np.ndarray], Sequence[np.ndarray] | None], tuple[list[jax.Array], jax.Array, jax.Array]]
+# (x, images, jacobians, operands) -> the observations' models (as :attr:`Outside.each` splits them), the stacked residuals
+# and those a solver descends.
+Evaluate = Callable[[jax.Array, Sequence[np.ndarray], Sequence[np.ndarray] | None, Any], tuple[list[jax.Array], jax.Array, jax.Array]]
 
 RESIDUALS, DESCENT = 1, 2  # which residuals of :attr:`Outside.evaluate`'s output
 
@@ -51,15 +53,18 @@ class Outside:
     Attributes:
         render: (physical x, seed index j, with the Jacobian) -> the frames' renders at x with the j-th
             seeds (0 the fit's, 1 the independent ones; :mod:`spacefit.fitting.problem`), outside JAX.
-        evaluate: (x, images, jacobians) -> the observations' models, the stacked residuals and those a
+        evaluate: (x, images, jacobians, operands) -> the observations' models, the stacked residuals and those a
             solver descends, a compiled program with no callback, differentiable in x where ``jacobians`` are given.
         each: evaluate's models -> each observation's, split outside the program (a pass's frames' models come
             stacked, :mod:`spacefit.fitting.frame_models`: split inside, the program grew by each frame).
+        operands: the dtype of x -> evaluate's ``operands`` (the same arrays at every call, on the device): a program that
+            calls evaluate takes them as its own operands (a solver's step: beside the renders), not as constants.
     """
 
     render: Callable[[np.ndarray, int, bool], Rendered]
     evaluate: Evaluate
     each: Callable[[list[jax.Array]], list[jax.Array]] = list
+    operands: Callable[[np.dtype], Any] = lambda dtype: None
     kept: dict[tuple[bytes, int], Rendered] = field(default_factory=dict)  # one point's renders with their Jacobian (keep)
     ahead: dict[tuple[bytes, int], Future] = field(default_factory=dict)  # renders with their Jacobian being made (render_ahead)
 
@@ -86,13 +91,14 @@ class Outside:
 
     def models(self, x: jax.Array, j: int) -> list[jax.Array]:
         """Each observation's model at ``x`` (concrete) with the j-th seeds."""
-        return self.each(self.evaluate(x, *self.render(np.asarray(x), j, False))[0])
+        return self.each(self.evaluate(x, *self.render(np.asarray(x), j, False), self.operands(x.dtype))[0])
 
     def residuals(self, x: jax.Array, j: int, kind: int = RESIDUALS) -> jax.Array:
         """The stacked residuals (``kind`` :data:`RESIDUALS`; :data:`DESCENT`: those a solver descends) at ``x`` (concrete) with the j-th seeds."""
-        return self.evaluate(x, *self.render(np.asarray(x), j, False))[kind]
+        return self.evaluate(x, *self.render(np.asarray(x), j, False), self.operands(x.dtype))[kind]
 
     def linearised(self, x: jax.Array, j: int) -> tuple[jax.Array, Callable[[jax.Array], jax.Array]]:
         """``jax.linearize`` of the stacked residuals at ``x`` (concrete) with the j-th seeds: their value and tangent map."""
         images, jacobians = self.linearisable(np.asarray(x), j)
-        return jax.linearize(lambda y: self.evaluate(y, images, jacobians)[RESIDUALS], x)
+        operands = self.operands(x.dtype)
+        return jax.linearize(lambda y: self.evaluate(y, images, jacobians, operands)[RESIDUALS], x)

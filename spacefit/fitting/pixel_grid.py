@@ -106,7 +106,8 @@ fine blur's transfer having fallen to nothing at the pads (e^-50 at the fine Nyq
 (the changes to the 4x model, for the fixed point's iterations; and at x* those, the change to the 2x
 model and the derivatives) take the image's renders and values as operands and its other arrays (the
 reference, the mask) too, so that a pass's frames alike share them
-(:class:`~spacefit.fitting.frame_models.AlikePrograms`): compiled once, not once a frame. Measured
+(:class:`~spacefit.fitting.frame_models.AlikePrograms`): compiled once, not once a frame, and run two at a time
+(:func:`~spacefit.fitting.frame_models.concurrently`; so are the feedback's steps). Measured
 in docs/measurements/performance.md, "The pixel grid's cost".
 """
 
@@ -120,6 +121,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from spacefit.fitting.frame_models import concurrently
 from spacefit.fitting.nuisance import PAD_PX, ImageModel, nuisance_index
 from spacefit.fitting.nuisance import image_model as nuisance_model
 from spacefit.fitting.observations.image import Observation, in_unit_of
@@ -330,8 +332,9 @@ def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x:
             break
     each, coarser, derivatives = changes.settled(x + delta, columns)
     feedback = np.zeros((len(x), len(x)))
-    for j, derivative in zip(columns, derivatives):
-        feedback[:, j] = step(derivative)
+    # the columns' steps two at a time (each mostly on one core), each column read as its step starts
+    for j, moved in zip(columns, concurrently([lambda i=i: step(derivatives[i]) for i in range(len(columns))])):
+        feedback[:, j] = moved
     return delta, REMAINDER_RATIO * step(each.mean(axis=0) - coarser), (each[0] - each[1]) / math.sqrt(2.0), feedback
 
 

@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -24,7 +25,7 @@ import numpy as np
 
 from spacefit.executors import Executor
 from spacefit.formation import noise_variance_terms
-from spacefit.fitting.frame_models import AlikePrograms, FrameModels, frame_model
+from spacefit.fitting.frame_models import AlikePrograms, FrameModels, concurrently, frame_model
 from spacefit.fitting.frames import (FrameSpec, InProcess, batched_renders, frame_part_image, frame_renders, given_renders, render_runs,
                                      run_frames, share_views)
 from spacefit.fitting.nuisance import image_model as image_model_of, nuisance_index
@@ -203,9 +204,9 @@ def build_problem(
         def render_outside(x: np.ndarray, j: int, jacobian: bool) -> Rendered:
             return frame_renders(executor, specs, indices, runs, x, np.asarray(seeds_of(j)), jacobian) if specs else ((), () if jacobian else None)
 
-        def evaluate(x: jax.Array, images: Sequence[jax.Array], jacobians: Sequence[jax.Array] | None) -> tuple[
+        def evaluate(x: jax.Array, images: Sequence[jax.Array], jacobians: Sequence[jax.Array] | None, operands: Any) -> tuple[
                 list[jax.Array], jax.Array, jax.Array]:
-            stacked, r, descended = models(given(x, images, jacobians), x)
+            stacked, r, descended = models(given(x, images, jacobians), x, operands)
             others = block_models(x, 0)  # none rendered: the seeds change none
             return [*stacked, *others], with_blocks(r, others), with_blocks(descended, others)
 
@@ -214,7 +215,7 @@ def build_problem(
             batches = len(out) - len(blocks)
             return [*FrameModels.each(out[:batches]), *out[batches:]]
 
-        outside = Outside(render_outside, jax.jit(evaluate), each)
+        outside = Outside(render_outside, jax.jit(evaluate), each, models.operands)
 
     def models_seeded(x: jax.Array, j: int) -> list[jax.Array]:
         if outside is not None:
@@ -279,9 +280,10 @@ def build_problem(
         y_of = lambda k, y: jnp.asarray(np.asarray(y)[read[k]])  # noqa: E731
 
         def fine(y: np.ndarray) -> np.ndarray:
-            return np.concatenate([np.zeros((2, references[k].size)) if m is None else np.asarray(
+            # the images' programs two at a time (concurrently): each runs mostly on one core
+            return np.concatenate(concurrently([lambda k=k, m=m: np.zeros((2, references[k].size)) if m is None else np.asarray(
                 programs((fine_changes, k), lambda *a, k=k: fine_changes(k, *a), m.renders, y_of(k, y))[0], dtype=float)
-                for k, m in enumerate(made)], axis=1)
+                for k, m in enumerate(made)]), axis=1)
 
         def settled(y: np.ndarray, columns: Sequence[int]) -> tuple[np.ndarray, np.ndarray, ImageColumns]:
             parts, blocks = [], []
