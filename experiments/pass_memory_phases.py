@@ -5,7 +5,7 @@ the resident memory (and its peak since the edge before, sampled every 20 ms), g
 mapped (``mallinfo2``: memory freed but kept by the allocator shows as "free"), the XLA programs compiled so far and
 the bytes of JAX's live arrays. A fit's memory is native (XLA's programs and buffers, Dr.Jit, the allocator's held
 pages): neither JAX's live arrays nor Python's own allocations reach 100 MiB. Linux with glibc only.
-Figures: docs/measurements/performance.md, "A pass's memory: programs and the allocator".
+Figures: docs/measurements/performance-history.md, "A pass's memory: programs and the allocator".
 Run: ``python experiments/pass_memory_phases.py SIZE_PX FRAMES [MAX_STEPS]`` (default 12 steps, as bench_pass).
 """
 

@@ -7,7 +7,7 @@ outside them (the solve), and after the solve in the covariance, the pixel grid'
 goodness of fit (the phases a render batch inside them counts as "render"), and the loaded scenes held at the end.
 With ``ANALYSE=1`` the solver's step is compiled once more at its first call to print XLA's memory analysis
 of it (temporaries, arguments, outputs), RSS before and after its tracing and compilation, and its state's
-arrays by kind (this second compilation raises the peak). Figures: docs/measurements/performance.md,
+arrays by kind (this second compilation raises the peak). Figures: docs/measurements/performance-history.md,
 "A pass's memory".
 Run: ``[ANALYSE=1] python experiments/pass_memory_trace.py [SIZE_PX] [FRAMES] [STEPS]`` (default 64 px, 4 frames, 2 steps).
 """

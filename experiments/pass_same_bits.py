@@ -3,7 +3,7 @@ the PSF width shared, 5 own values a frame, each frame's pixel grid) simulated a
 8 spp, its values, standard errors and the pixel grid's step and remainder written to a JSON file; given the file of
 another checkout's run, each figure's largest relative difference from it printed ("bit for bit" where none).
 Run in each checkout (``PYTHONPATH`` its own): ``python experiments/pass_same_bits.py SIZE_PX FRAMES OUT.json [OTHER.json]``.
-Figures: docs/measurements/performance.md, "A regression in memory at 48 frames".
+Figures: docs/measurements/performance-history.md, "A regression in memory at 48 frames".
 """
 
 from __future__ import annotations

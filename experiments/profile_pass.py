@@ -3,7 +3,7 @@ the wall and CPU time of its frames' Jacobian and primal renders, of its set-up,
 Jacobian renders included; within it the second linearisation, the products of the sandwich, the pixel grid's 4x
 renders, its step's fixed point and its feedback, and the Gauss-Newton steps they take) and goodness of fit, the time
 JAX reports for tracing and XLA compilation, and the peak resident memory in each phase (sampled every 50 ms).
-Figures in docs/measurements/performance.md ("A frame's own values: one product per kind, not per frame", "A pass on
+Figures in docs/measurements/performance-history.md ("A frame's own values: one product per kind, not per frame", "A pass on
 every core").
 Run: ``.venv/bin/python experiments/profile_pass.py [--size PX] [--frames N]``.
 """

@@ -591,7 +591,7 @@ def bench_peaks() -> list[tuple[int, int, float]]:
 def test_a_fits_memory_estimate_is_at_or_above_the_measured_peaks_of_the_bench_pass_within_a_fifth():
     """The estimate against issue 33's 64-parameter pass as measured (12, 24 and 48 frames at 64 and 128 px, each in
     a fresh process): never below a peak, and at most a fifth above it (the peaks scatter with the allocator's state
-    by some 15 %: docs/measurements/performance.md, "A regression in memory at 48 frames")."""
+    by some 15 %: docs/measurements/performance-history.md, "A regression in memory at 48 frames")."""
     peaks = bench_peaks()
     assert {(size, n) for size, n, _ in peaks} >= {(s, n) for s in (64, 128) for n in (12, 24, 48)}
     for size, n, peak in peaks:

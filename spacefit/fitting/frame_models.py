@@ -6,7 +6,7 @@ those a solver descends (:mod:`spacefit.fitting.observations.image`): a :data:`F
 render and the nuisances' values. Traced image by image into a solver's compiled step, a pass of F
 frames put F copies of that model in the step's program (its normal equations apply each one
 linearised and transposed), and XLA's compilation of the step held about 100 MiB a frame
-(docs/measurements/performance.md, "A pass's memory"). The frames whose models are one program holding
+(docs/measurements/performance-history.md, "A pass's memory"). The frames whose models are one program holding
 other arrays (their reference, mask, a sensor's per-pixel factors: a pass's frames) are evaluated as
 one :class:`Batch`: the program traced once (:func:`jax.make_jaxpr`, two frames' programs equal where
 their printed forms are, literals included), its arrays stacked over the frames and run frame after

@@ -108,7 +108,7 @@ model and the derivatives) take the image's renders and values as operands and i
 reference, the mask) too, so that a pass's frames alike share them
 (:class:`~spacefit.fitting.frame_models.AlikePrograms`): compiled once, not once a frame, and run two at a time
 (:func:`~spacefit.fitting.frame_models.concurrently`; so are the feedback's steps). Measured
-in docs/measurements/performance.md, "The pixel grid's cost".
+in docs/measurements/performance-history.md, "The pixel grid's cost".
 """
 
 from __future__ import annotations

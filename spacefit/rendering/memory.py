@@ -57,7 +57,7 @@ def check_memory(width: int, height: int, window_pixels: int, spp: int, split: b
 # grid; LM at 16 spp) at 12, 24 and 48 frames of 64 x 64 px (883, 1010, 1265 MiB) and 128 x 128 px (1162, 1491,
 # 2240 MiB) at commit 1022e7d, and at 12 and 48 frames of 128 x 128 px (1020 to 1104 MiB in four runs, 2396 MiB; the
 # pixel grid's programs two at a time) at 66d85a4, stored in experiments/results/pass_memory/bench_pass_*.txt
-# (docs/measurements/performance.md, "A regression in memory at 48 frames" and "Quiet figures after the eighth
+# (docs/measurements/performance-history.md, "A regression in memory at 48 frames" and "Quiet figures after the eighth
 # session's merges"): the process with JAX, Mitsuba, a loaded scene and the solver's and covariance's programs,
 # per frame a fixed part (its programs' share, scene values and records) and 200 B per pixel for its image and each
 # column (reference, renders, Jacobian columns, the pixel grid's renders at 4x), from the growth of 10.6 MiB a frame
