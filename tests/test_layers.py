@@ -30,7 +30,7 @@ FLOORS: tuple[tuple[str, ...], ...] = (
     ("spacefit.imageio", "spacefit.cases"),
     ("spacefit.fitting",),
     ("spacefit.studies",),
-    ("spacefit.pipeline", "spacefit.cli", "spacefit"),
+    ("spacefit.render_job", "spacefit.pipeline", "spacefit.cli_parser", "spacefit.cli", "spacefit"),
 )
 
 
