@@ -111,7 +111,7 @@ _EXPORTS: dict[str, tuple[str, str]] = {
     "fit_to_folder": ("spacefit.pipeline", "fit_to_folder"),
     "fit_light_curve_to_folder": ("spacefit.pipeline", "fit_light_curve_to_folder"),
     "LightCurveFiles": ("spacefit.studies.lightcurve_files", "LightCurveFiles"),
-    "render_to_folder": ("spacefit.pipeline", "render_to_folder"),
+    "render_to_folder": ("spacefit.render_job", "render_to_folder"),
     "Jacobian": ("spacefit.rendering.derivatives", "Jacobian"),
     "jacobian": ("spacefit.rendering.derivatives", "jacobian"),
     "render_function": ("spacefit.rendering.derivatives", "render_function"),

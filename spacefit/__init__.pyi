@@ -74,7 +74,7 @@ from spacefit.materials.registry import PRESETS as PRESETS
 from spacefit.materials.tabulated import TabulatedBRDF as TabulatedBRDF
 from spacefit.pipeline import fit_light_curve_to_folder as fit_light_curve_to_folder
 from spacefit.pipeline import fit_to_folder as fit_to_folder
-from spacefit.pipeline import render_to_folder as render_to_folder
+from spacefit.render_job import render_to_folder as render_to_folder
 from spacefit.rendering.derivatives import Jacobian as Jacobian
 from spacefit.rendering.derivatives import jacobian as jacobian
 from spacefit.rendering.derivatives import render_function as render_function

@@ -1,19 +1,20 @@
-"""How results show in Jupyter (``_repr_html_``) and a scene's short repr: HTML tables of the same
-cells as the text tables, every value with its unit and error, escaped.
+"""How results show in Jupyter (``_repr_html_``): HTML tables of the same cells as the text tables, every value
+with its unit and error, escaped, in the parameter registry's words.
 
-The classes' ``_repr_html_`` methods call these (:class:`~spacefit.scene.schema.Scene`,
-:class:`~spacefit.fitting.result.FitResult`, :class:`~spacefit.studies.sensitivity.Sensitivity`,
-:class:`~spacefit.studies.lightcurve.LightCurve`), which sit above it: each function reads its object by
-attribute (typed ``Any``) and imports none of them; nothing here imports more than the parameter registry.
+The classes' ``_repr_html_`` methods call these (:class:`~spacefit.fitting.result.FitResult`,
+:class:`~spacefit.studies.sensitivity.Sensitivity`, :class:`~spacefit.studies.lightcurve.LightCurve`), which sit
+above it: each function reads its object by attribute (typed ``Any``) and imports none of them; nothing here imports
+more than the parameter registry. A :class:`~spacefit.scene.schema.Scene`, below the registry's words, shows itself.
 """
 
 from __future__ import annotations
 
 import html
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any
 
 from spacefit.errors import InputError
+from spacefit.html_tables import html_table
 from spacefit.scene.parameters import label, parameter
 
 # A value's unit where it is dimensionless, in tables: none.
@@ -27,43 +28,9 @@ def describe(name: str) -> tuple[str, str]:
     return QUANTITIES[name] if name in QUANTITIES else (label(name), parameter(name).unit)
 
 
-def html_table(header: Sequence[str], rows: Sequence[Sequence[Any]], caption: str = "") -> str:
-    """An HTML table of ``rows`` (cells as text, escaped) under ``header``, with a ``caption``."""
-    cap = f"<caption style='text-align:left'>{html.escape(caption)}</caption>" if caption else ""
-    head = "".join(f"<th style='text-align:left'>{html.escape(h)}</th>" for h in header)
-    body = "".join("<tr>" + "".join(f"<td style='text-align:left'>{html.escape(str(c))}</td>" for c in row) + "</tr>"
-                   for row in rows)
-    return f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
-
-
 def unit_text(unit: str) -> str:
     """A unit as a table shows it: "" for a dimensionless one."""
     return "" if unit == DIMENSIONLESS else unit
-
-
-def _vector(v: Sequence[float]) -> str:
-    return "(" + ", ".join(f"{x:g}" for x in v) + ")"
-
-
-def scene_repr(scene: Any) -> str:
-    """One short line: the film, the camera, the sun, the parts and their materials, the wrinkles."""
-    r, c = scene.render, scene.camera
-    parts = ", ".join(f"{name} ({p.material.__class__.__name__.lower()})" for name, p in scene.parts.items())
-    wrinkles = f"wrinkles D {scene.wrinkles.D:g} G {scene.wrinkles.G:g} m on {', '.join(scene.wrinkles.parts)}" \
-        if scene.wrinkles.enabled else "no wrinkles"
-    return (f"Scene({r.resolution[0]}x{r.resolution[1]} px, {r.spp} spp; camera at {_vector(c.position_m)} m; "
-            f"sun {scene.sun.irradiance_w_m2:g} W m^-2; parts {parts}; {wrinkles})")
-
-
-def scene_html(scene: Any) -> str:
-    """The scene's repr line, then each section's values (``Scene.to_dict``) in a table."""
-    rows = []
-    for section, values in scene.to_dict().items():
-        items = values.items() if section != "parts" else (  # a lander's part it lacks is `parts.NAME = false`
-            row for part, t in values.items() for row in (((f"{part}.{k}", v) for k, v in t.items()) if isinstance(t, dict) else [(part, t)]))
-        rows += [(section, key, _vector(v) if isinstance(v, list) and all(isinstance(x, float) for x in v) else v)
-                 for key, v in items]
-    return f"<p>{html.escape(scene_repr(scene))}</p>" + html_table(("section", "key", "value"), rows)
 
 
 def fit_html(result: Any) -> str:

@@ -1,5 +1,6 @@
 """Progress displays for long work: a small one on stderr (renders, fits), and :func:`progress_bar`
-(sweeps, sensitivity runs): tqdm with time left in terminals and notebooks, periodic lines in logs."""
+(sweeps, sensitivity runs): tqdm with time left in terminals and notebooks, periodic lines in logs; and a job's
+messages beside them (:func:`say`)."""
 
 from __future__ import annotations
 
@@ -10,6 +11,12 @@ from collections.abc import Callable
 from typing import Any
 
 ProgressCallback = Callable[[int, int], None]
+
+
+def say(message: str, quiet: bool) -> None:
+    """Print ``message`` on stderr at once, unless ``quiet``: what a job says beside its progress display."""
+    if not quiet:
+        print(message, file=sys.stderr, flush=True)
 
 
 class Progress:

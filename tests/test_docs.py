@@ -228,10 +228,10 @@ def searchable_names(html: Path) -> set[str]:
 
 def test_cli_reference_is_the_parser(site):
     """The command-line page is generated from the parser: every sub-command and option is on it."""
-    from spacefit.cli import _parser
+    from spacefit.cli_parser import parser
 
     page = (site / "reference" / "cli.html").read_text()
-    commands = next(a for a in _parser()._actions if a.dest == "command").choices
+    commands = next(a for a in parser()._actions if a.dest == "command").choices
     assert set(commands) >= {"render", "fit", "sweep"}
     for name, sub in commands.items():
         assert f'id="spacefit-{name}"' in page, name

@@ -21,16 +21,17 @@ PACKAGE = Path(__file__).resolve().parent.parent / "spacefit"
 FLOORS: tuple[tuple[str, ...], ...] = (
     ("spacefit.errors", "spacefit.units", "spacefit.precision", "spacefit.interrupts", "spacefit.progress",
      "spacefit.versions", "spacefit.locks", "spacefit.output", "spacefit.digests", "spacefit.executors",
-     "spacefit.timescales"),
+     "spacefit.timescales", "spacefit.html_tables"),
     ("spacefit.geometry",),
     ("spacefit.materials",),
-    ("spacefit.scene", "spacefit.display", "spacefit.plotting"),
+    ("spacefit.scene",),
+    ("spacefit.display", "spacefit.plotting"),  # in the registry's words: above the scene (a Scene shows itself)
     ("spacefit.sensor", "spacefit.detector", "spacefit.psf", "spacefit.formation"),
     ("spacefit.rendering",),
     ("spacefit.imageio", "spacefit.cases"),
     ("spacefit.fitting",),
     ("spacefit.studies",),
-    ("spacefit.pipeline", "spacefit.cli", "spacefit"),
+    ("spacefit.render_job", "spacefit.pipeline", "spacefit.cli_parser", "spacefit.cli", "spacefit"),
 )
 
 

@@ -13,7 +13,7 @@ from spacefit.errors import InputError
 from spacefit import Observation, fit
 from spacefit.fitting.problem import fit_scene as _fit_scene
 from spacefit.materials import Conductor, Lambert
-from spacefit.pipeline import render_to_folder
+from spacefit.render_job import render_to_folder
 from spacefit.rendering.renderer import Renderer
 from spacefit.scene.assembly import assemble
 from spacefit.scene.toml import load_scene

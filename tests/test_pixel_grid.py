@@ -50,7 +50,7 @@ def test_a_resolved_image_has_no_pixel_grid_error_and_a_point_has_one():
 def systematic_step(J1: np.ndarray, J2: np.ndarray, d: np.ndarray) -> np.ndarray:
     """The covariance's step for a change d of residuals whose Jacobians are J1 and J2 (linear residuals)."""
     problem = SimpleNamespace(linearised=lambda x, j: jax.linearize(lambda y: jnp.asarray((J1, J2)[j]) @ y, x),
-                              free=SimpleNamespace(names=("a", "b")), blocks=())
+                              render_ahead=lambda x, j: None, free=SimpleNamespace(names=("a", "b")), blocks=())
     with jax.enable_x64(True):
         return linearise(problem, np.zeros(J1.shape[1])).step(d)
 

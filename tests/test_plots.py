@@ -17,7 +17,7 @@ import spacefit as sf
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.plots import plot_residuals
 from spacefit.fitting.status import Status
-from spacefit.display import html_table
+from spacefit.html_tables import html_table
 from spacefit.plotting import axis_label, target_box, unit_label
 from spacefit.scene.parameters import PARAMETERS
 from spacefit.studies.lightcurve import LightCurve

@@ -136,15 +136,15 @@ def test_output_path_that_is_a_file(tmp_path, capsys):
 
 
 def test_error_inside_writing_removes_partial_output(tmp_path, monkeypatch):
-    import spacefit.pipeline as pipeline
+    import spacefit.render_job as render_job
 
     def broken(path, image):
         raise OSError("disk full")
 
-    monkeypatch.setattr(pipeline, "write_exr", broken)
+    monkeypatch.setattr(render_job, "write_exr", broken)
     out = tmp_path / "run"
     with pytest.raises(OSError):
-        pipeline.render_to_folder(load_scene(None, SMALL), out, quiet=True)
+        render_job.render_to_folder(load_scene(None, SMALL), out, quiet=True)
     assert not out.exists()
 
 
@@ -153,12 +153,12 @@ def test_a_failed_preview_leaves_nothing_though_the_exr_was_written_meanwhile(tm
     removes the whole stage, and names the file."""
     import errno
 
-    import spacefit.pipeline as pipeline
+    import spacefit.render_job as render_job
 
     def full(path, rgb8):
         raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(path))
 
-    monkeypatch.setattr(pipeline, "write_png", full)
+    monkeypatch.setattr(render_job, "write_png", full)
     out = tmp_path / "run"
     assert main(["render", "--out", str(out), "--quiet"] + [a for s in SMALL for a in ("--set", s)]) == 1
     assert not out.exists() and list(tmp_path.iterdir()) == []

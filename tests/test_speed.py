@@ -153,7 +153,7 @@ def test_every_public_name_resolves_and_is_listed():
 
 def test_a_cached_render_imports_neither_jax_nor_the_fitting_or_plotting_stacks(tmp_path):
     script = (
-        "import sys, spacefit, spacefit.cli, spacefit.pipeline\n"
+        "import sys, spacefit, spacefit.cli, spacefit.render_job\n"
         "from spacefit.rendering.renderer import Renderer\n"
         f"Renderer(spacefit.load_scene(None, {SMALL!r})).render()\n"
         "heavy = ('jax', 'jaxtyping', 'optimistix', 'matplotlib', 'colour', 'trimesh', 'scipy')\n"
@@ -199,8 +199,8 @@ def test_the_fit_command_s_modules_import_none_of_the_stacks_a_default_fit_does_
     """What `spacefit fit` imports before it fits (cli.main's and _fit's modules, the files' readers, a FITS
     observation read with its ROWORDER) and what writing its report imports: none of NOT_FOR_A_FIT."""
     path = tmp_path / "obs.fits"
-    script = ("import sys, numpy, spacefit.cli, spacefit.pipeline, spacefit.scene.toml, spacefit.fitting.loop, spacefit.fitting.problem, "
-              "spacefit.fitting.observation_files, spacefit.fitting.report, spacefit.imageio.reading\n"
+    script = ("import sys, numpy, spacefit.cli, spacefit.render_job, spacefit.pipeline, spacefit.scene.toml, spacefit.fitting.loop, "
+              "spacefit.fitting.problem, spacefit.fitting.observation_files, spacefit.fitting.report, spacefit.imageio.reading\n"
               "from astropy.io import fits\n"
               f"fits.PrimaryHDU(numpy.zeros((4, 4), numpy.uint16), fits.Header({{'ROWORDER': 'TOP-DOWN'}})).writeto({str(path)!r})\n"
               f"spacefit.imageio.reading.read_image({str(path)!r})\n"

@@ -18,7 +18,7 @@ import pytest
 import spacefit as sf
 from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.params import free_parameters
-from spacefit.fitting.uncertainty import covariance, map_covariance, warnings_for
+from spacefit.fitting.uncertainty import covariance, linearise, map_covariance, warnings_for
 from spacefit.geometry.wm import wm_G_from_rms
 
 N, P = 12, 3  # few rows, so that the small-sample factor n / (n - p) = 4/3 is far from 1
@@ -41,6 +41,9 @@ class LinearProblem:
     def pixels(self) -> int:
         """The residuals laid out as the references' pixels (Problem.pixels)."""
         return sum(int(np.size(ref)) for ref in self.references)
+
+    def render_ahead(self, x, j):
+        """Nothing rendered (Problem.render_ahead without renders made first)."""
 
     def linearised(self, x, j):
         """The j-th residual function's value and tangent map at x (Problem.linearised)."""
@@ -231,6 +234,26 @@ def test_two_jacobians_enter_as_their_symmetrised_cross_product(heteroscedastic)
     np.testing.assert_allclose(cov, expected, rtol=1e-9)
     # the mean residual at the root, not the fit's own: another matrix
     assert not np.allclose(bread @ (sym(np.diag(r**2 * n / (n - p))) + 0.25 * E.T @ np.diag(r**2) @ E) @ bread, expected, rtol=1e-3)
+
+
+def test_linearise_begins_the_independent_seeds_renders_before_it_traces_the_fit_s():
+    """The independent seeds' renders are asked for first (Problem.render_ahead: they run while the fit's seeds'
+    tangents are traced), then each seed's linearisation, the fit's first."""
+    asked = []
+
+    class Recording(LinearProblem):
+        def render_ahead(self, x, j):
+            asked.append(("render_ahead", j))
+
+        def linearised(self, x, j):
+            asked.append(("linearised", j))
+            return super().linearised(x, j)
+
+    with jax.enable_x64(True):
+        lin = linearise(Recording(lambda x: 2.0 * x, lambda x: 3.0 * x), np.ones(2))
+    assert asked == [("render_ahead", 1), ("linearised", 0), ("linearised", 1)]
+    np.testing.assert_array_equal(lin.r, [2.0, 2.0])
+    np.testing.assert_array_equal(lin.r_alt, [3.0, 3.0])
 
 
 def test_a_parameter_nothing_constrains_gets_infinite_error_and_leaves_the_others(heteroscedastic):

@@ -107,14 +107,18 @@ class Problem:
             return self.outside.residuals(x, j, DESCENT)
         return (self.descent_x, self.descent_x_independent)[j](x)
 
-    def linearised(self, x: jax.Array, j: int) -> tuple[jax.Array, Callable[[jax.Array], jax.Array]]:
-        """The stacked residuals at ``x`` (concrete) with the j-th seeds (0 or 1) and their tangent map (``jax.linearize``).
-        With the fit's seeds (j 0), the independent seeds' renders at ``x`` begin on a thread of their own while these
-        tangents are traced (:meth:`~spacefit.fitting.outside.Outside.render_ahead`): the standard errors ask for both
-        (:func:`~spacefit.fitting.uncertainty.linearise`)."""
+    def render_ahead(self, x: jax.Array, j: int) -> None:
+        """Begin the renders with their Jacobian at ``x`` (concrete) with the j-th seeds on a thread of their own, for
+        :meth:`linearised` to take (:meth:`~spacefit.fitting.outside.Outside.render_ahead`); nothing where the renders
+        are callbacks (no :attr:`outside`): the standard errors begin the independent seeds' while the fit's seeds'
+        tangents are traced (:func:`~spacefit.fitting.uncertainty.linearise`)."""
         if self.outside is not None:
-            if j == 0:
-                self.outside.render_ahead(np.asarray(x), 1)
+            self.outside.render_ahead(np.asarray(x), j)
+
+    def linearised(self, x: jax.Array, j: int) -> tuple[jax.Array, Callable[[jax.Array], jax.Array]]:
+        """The stacked residuals at ``x`` (concrete) with the j-th seeds (0 or 1) and their tangent map (``jax.linearize``),
+        of the renders begun by :meth:`render_ahead` where they were."""
+        if self.outside is not None:
             return self.outside.linearised(x, j)
         return jax.linearize((self.residual_x, self.residual_x_independent)[j], x)
 

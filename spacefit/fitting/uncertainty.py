@@ -85,8 +85,10 @@ class Linearisation:
 
 
 def linearise(problem: Problem, x: np.ndarray) -> Linearisation:
-    """The problem's :class:`Linearisation` at ``x`` (physical units): one Jacobian render per seed."""
+    """The problem's :class:`Linearisation` at ``x`` (physical units): one Jacobian render per seed, the independent
+    seeds' begun while the fit's seeds' tangents are traced (:meth:`~spacefit.fitting.residuals.Problem.render_ahead`)."""
     xj = jnp.asarray(x)
+    problem.render_ahead(xj, 1)
     r, J1 = problem.linearised(xj, 0)
     r_alt, J2 = problem.linearised(xj, 1)
     # the transposes take the residuals' dtype (float32 renders: J^T v sums in float32, ~1e-6 relative)

@@ -2,21 +2,22 @@
 
 What :func:`load_scene` reads and the sidecar of every render records. Changing
 values by name is the override language's (:mod:`spacefit.scene.overrides`, which
-:meth:`Scene.with_values` calls); a scene's short text and HTML are :mod:`spacefit.display`'s.
+:meth:`Scene.with_values` calls). A scene shows itself: one short line (its repr) and, in Jupyter, a table of its values.
 """
 
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping
+import html
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import tomli_w
 
-from spacefit.display import scene_html, scene_repr
 from spacefit.errors import InputError, InputTypeError, check_choice, check_direction, quote
+from spacefit.html_tables import html_table
 from spacefit.materials import Material, make_material, material_table
 from spacefit.scene.overrides import with_values
 from spacefit.scene.checks import plain
@@ -89,11 +90,23 @@ class Scene:
             self.target.rotation(-check_direction("sun.direction", self.sun.direction))
 
     def __repr__(self) -> str:
-        """One short line (:func:`spacefit.display.scene_repr`); ``to_toml()`` gives every value."""
-        return scene_repr(self)
+        """One short line: the film, the camera, the sun, the parts and their materials, the wrinkles; ``to_toml()``
+        gives every value."""
+        r, c, w = self.render, self.camera, self.wrinkles
+        parts = ", ".join(f"{name} ({p.material.__class__.__name__.lower()})" for name, p in self.parts.items())
+        wrinkles = f"wrinkles D {w.D:g} G {w.G:g} m on {', '.join(w.parts)}" if w.enabled else "no wrinkles"
+        return (f"Scene({r.resolution[0]}x{r.resolution[1]} px, {r.spp} spp; camera at {_vector(c.position_m)} m; "
+                f"sun {self.sun.irradiance_w_m2:g} W m^-2; parts {parts}; {wrinkles})")
 
     def _repr_html_(self) -> str:
-        return scene_html(self)
+        """The repr line, then each section's values (:meth:`to_dict`) in a table."""
+        rows = []
+        for section, values in self.to_dict().items():
+            items = values.items() if section != "parts" else (  # a lander's part it lacks is `parts.NAME = false`
+                row for part, t in values.items() for row in (((f"{part}.{k}", v) for k, v in t.items()) if isinstance(t, dict) else [(part, t)]))
+            rows += [(section, key, _vector(v) if isinstance(v, list) and all(isinstance(x, float) for x in v) else v)
+                     for key, v in items]
+        return f"<p>{html.escape(repr(self))}</p>" + html_table(("section", "key", "value"), rows)
 
     def mesh_files(self) -> list[str]:
         """The mesh files the scene reads (none for the built-in lander)."""
@@ -160,3 +173,8 @@ def _check_written(where: str, material: Material) -> None:
         found = f"cannot be read ({again})" if isinstance(again, InputError) else "give another table"
         raise InputError(f"`{where}` cannot be written to a scene file, which states its {states}: these {found} (a table "
                          f"read with a floor, or made from arrays); write the table it renders to a file and give that file as `source`.")
+
+
+def _vector(v: Sequence[float]) -> str:
+    """A vector as a scene's repr shows it: ``(x, y, z)``."""
+    return "(" + ", ".join(f"{x:g}" for x in v) + ")"
