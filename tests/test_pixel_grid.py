@@ -201,3 +201,49 @@ def test_a_box_render_binned_is_the_box_render_at_the_coarser_resolution():
     fine = np.random.default_rng(2).random((8, 12, 3))
     np.testing.assert_allclose(np.asarray(binned(jnp.asarray(fine), 2))[1, 2], fine[2:4, 4:6].mean(axis=(0, 1)), rtol=1e-6)
     assert binned(jnp.asarray(fine), 4).shape == (2, 3, 3)
+
+
+@pytest.mark.slow
+def test_a_small_pass_s_accelerated_step_is_its_long_plain_iterations_and_a_cut_budget_is_flagged(tmp_path, monkeypatch):
+    """Three frames of the panels case at 32 x 32 px through a sensor, the blur shared and each frame's shifts free:
+    the fit's accelerated step is within a hundredth of a standard error of 60 plain iterations' fixed point from the
+    same renders, in fewer evaluations than the plain iteration needs to move less than that, and the distance it
+    measures at its end is the true one (to first order); with its budget cut to 2 evaluations the fit is UNSETTLED and its warnings
+    name each value left short with its distance in standard errors."""
+    import spacefit as sf
+    from spacefit.fitting import pixel_grid, uncertainty
+
+    base = sf.load_case("panels").truth_scene.with_values({"render.resolution": [32, 32], "camera.pixel_pitch_mm": 150.0})
+    sensor = sf.Sensor(radiometric_scale_dn_per_w_m2_sr=500.0, gain_dn_per_electron=0.5, bias_dn=100.0, read_noise_electrons=5.0,
+                       bit_depth=16, full_well_electrons=None, diffraction=False, psf_sigma_px=0.0)
+    frames = sf.simulate_pass(base, sf.arc_pass(3), tmp_path / "pass", sensor=sensor, spp=64)
+    obs = [sf.Observation.from_file(f.file, s) for f, s in zip(frames.frames, frames.scenes(base))]
+    free = ["parts.legs.kd", "image.blur_sigma_px", *frames.per_frame(["image.shift_x_px", "image.shift_y_px"])]
+    seen: list[tuple] = []
+    real = uncertainty.grid_step
+    monkeypatch.setattr(uncertainty, "grid_step", lambda *args: seen.append((args, real(*args))) or seen[-1][1])
+    monkeypatch.setattr(pixel_grid, "FIXED_POINT_STEPS", 2)
+    result = sf.fit(obs, free, start={"parts.legs.kd": 0.45}, render=sf.FitRender(spp=8), max_steps=8)
+    (changes, step, x, stderr, columns), cut = seen[-1]
+    short = result.extras["pixel_grid_short"]
+    far = {name: s for name, s in short.items() if abs(s) > FIXED_POINT_TOLERANCE}
+    assert result.status is Status.UNSETTLED and cut.evaluations == 2 and far
+    np.testing.assert_allclose(list(short.values()), cut.short / stderr, rtol=1e-12)
+    assert result.warnings[0] == f"the fit did not succeed ({Status.UNSETTLED})."
+    assert [w for w in result.warnings if "did not settle" in w] == [
+        f"{name}: the pixel grid's step did not settle in 2 evaluations of the model made at 4x: its fixed point is {s:+.2g} standard "
+        "errors from the value (the tolerance 0.01); the value and its error are taken where the iterations stopped."
+        for name, s in far.items()]
+    monkeypatch.undo()
+    with jax.enable_x64(True):  # as the fit's programs were traced
+        grid = grid_step(changes, step, x, stderr, columns)
+        long, evaluations = np.zeros(len(x)), []
+        for _ in range(60):
+            moved, long = long, step(changes.fine(x + long).mean(axis=0))
+            evaluations.append(np.abs((long - moved) / stderr).max())
+    plain_evaluations = next(k for k, m in enumerate(evaluations, 1) if m <= FIXED_POINT_TOLERANCE)
+    assert evaluations[-1] < 1e-6 and grid.evaluations < plain_evaluations
+    assert np.abs((grid.delta - long) / stderr).max() < FIXED_POINT_TOLERANCE
+    np.testing.assert_allclose(grid.short / stderr, (long - grid.delta) / stderr, rtol=0, atol=0.1 * FIXED_POINT_TOLERANCE)
+    # the cut step's distance, 0.2 of a standard error at most, to first order: measured within 0.3 of it (0.26 the worst)
+    np.testing.assert_allclose(cut.short / stderr, (long - cut.delta) / stderr, rtol=0.3, atol=0.1 * FIXED_POINT_TOLERANCE)

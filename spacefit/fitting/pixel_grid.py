@@ -146,7 +146,8 @@ REMAINDER_RATIO = 1.0 / 3.0
 FIXED_POINT_STEPS = 8
 """At most this many evaluations of the step's fixed point (:func:`grid_step`)."""
 FIXED_POINT_TOLERANCE = 0.01
-"""The step's fixed point is taken as reached when an iteration moves every value by less than this many standard errors."""
+"""The step's fixed point is taken as reached when the estimate of every value's distance to it (:func:`accelerated`'s step)
+is within this many standard errors; a value measured further from it at the end is flagged (:func:`unsettled_notes`)."""
 MOVES = ("image.blur_sigma_px", "image.shift_x_px", "image.shift_y_px")
 """The image nuisances in px, which scale with the resolution."""
 STEPS_PER_FINE_PX = 16  # quadrature points per fine pixel in :func:`response_matrix`
