@@ -54,6 +54,17 @@ so ``d_4`` is larger there than at the answer (noise-free, 32 px below: +0.0362 
 model's own minimum is +0.0344; the fixed point +0.0341; in the coverage study at 48 px, where the
 steps are 0.021 px, the one step left the blur 0.0027 px wide, 1.2 of its statistical errors).
 
+*Its iterations.* The plain iteration contracts as ``D`` (below) does, each value at its own rate: on the 12-frame pass of
+``experiments/bench_pass.py`` up to 0.68 (the shifts y of its last frames, stepped by 4 of their standard errors), so
+that 8 iterations left them 0.17 of a standard error short at 128 px (0.03 at 64 px), unflagged; 14 (10) iterations
+bring the move under a hundredth of one, and still leave 0.016 (0.013). Anderson's acceleration
+(:mod:`spacefit.fitting.fixed_point`) took 7 (6) evaluations and ended 0.0011 (0.0017) of a standard error from a
+long plain iteration's fixed point; the single image of ``experiments/bench_fit_process.py`` (a step of a third of a
+standard error) 2, as before. Fitting a least-squares combination per frame, or per value, stalls at 0.02 on the 64 px
+pass's ``D`` (the shared blur couples the frames). What remains is measured at the end with ``D`` (Newton's step, to
+first order: 0.0015 where the long iteration gives 0.0011 at 128 px) and a value further than a hundredth of a standard
+error is flagged (:attr:`~spacefit.fitting.status.Status.UNSETTLED`). Measured: experiments/results/pixel_grid/.
+
 *Its feedback.* The step is taken at the fixed point and moves with it: a fit whose blur came out
 wide has less of the grid's error to step over. With ``D = d step(d_4(y)) / dy`` at x*, the fixed
 point moves by ``(I - D)^-1`` per change of the fit's estimate, so its covariance is the fit's through
@@ -121,6 +132,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from spacefit.fitting.fixed_point import anderson
 from spacefit.fitting.frame_models import concurrently
 from spacefit.fitting.nuisance import PAD_PX, ImageModel, nuisance_index
 from spacefit.fitting.nuisance import image_model as nuisance_model
@@ -146,7 +158,7 @@ REMAINDER_RATIO = 1.0 / 3.0
 FIXED_POINT_STEPS = 8
 """At most this many evaluations of the step's fixed point (:func:`grid_step`)."""
 FIXED_POINT_TOLERANCE = 0.01
-"""The step's fixed point is taken as reached when the estimate of every value's distance to it (:func:`accelerated`'s step)
+"""The step's fixed point is taken as reached when the estimate of every value's distance to it (:func:`~spacefit.fitting.fixed_point.anderson`'s step)
 is within this many standard errors; a value measured further from it at the end is flagged (:func:`unsettled_notes`)."""
 MOVES = ("image.blur_sigma_px", "image.shift_x_px", "image.shift_y_px")
 """The image nuisances in px, which scale with the resolution."""
@@ -310,31 +322,6 @@ class GridChanges:
     settled: Callable[[np.ndarray, Sequence[int]], tuple[np.ndarray, np.ndarray, Sequence[np.ndarray]]]
 
 
-def accelerated(g: Callable[[np.ndarray], np.ndarray], scale: Float[np.ndarray, " n"]) -> tuple[np.ndarray, int]:
-    """The fixed point ``y = g(y)`` from 0 by Anderson's acceleration (Walker & Ni 2011, "Anderson acceleration for
-    fixed-point iterations", SIAM J. Numer. Anal. 49(4): its Type II, every earlier iterate kept, no damping) on
-    ``y / scale``: with ``f_k = g(y_k) - y_k`` and ``dF``, ``dG`` the differences of the successive ``f`` and ``g``,
-    ``y_(k+1) = g(y_k) - dG gamma``, ``gamma`` minimising ``|f_k - dF gamma|``. Its step ``y_(k+1) - y_k`` is a
-    multisecant Newton step, ``(I - g')^-1 f_k`` with ``g'`` known along the differences (Fang & Saad 2009, "Two
-    classes of multisecant methods for nonlinear acceleration", Numer. Linear Algebra Appl. 16(3)): an estimate of
-    ``y_k``'s distance to the fixed point (the plain iteration's move ``f_k`` is 1 - rho of that distance for a
-    contraction of rate rho: 0.32 of it at 0.68). Stops where that step, taken from the second evaluation on (the first has no difference), is within
-    :data:`FIXED_POINT_TOLERANCE` in every value, or after :data:`FIXED_POINT_STEPS` evaluations; returns ``y_(k+1)``
-    and the evaluations. A linear ``g`` in n values is solved in at most n + 1 (GMRES's iterates: Walker & Ni, sec. 2)."""
-    y, fs, gs = np.zeros(len(scale)), [], []
-    while len(gs) < FIXED_POINT_STEPS:
-        gs.append(g(y * scale) / scale)
-        fs.append(gs[-1] - y)
-        if len(gs) == 1:
-            y = gs[0]
-            continue
-        dF, dG = np.diff(fs, axis=0).T, np.diff(gs, axis=0).T
-        moved, y = y, gs[-1] - dG @ np.linalg.lstsq(dF, fs[-1], rcond=None)[0]
-        if np.all(np.abs(y - moved) <= FIXED_POINT_TOLERANCE):
-            break
-    return y * scale, len(gs)
-
-
 @dataclasses.dataclass(frozen=True)
 class GridStep:
     """The pixel grid's step of :func:`grid_step`, in the fit's values' coordinates: ``delta``, from the fit's estimate
@@ -358,10 +345,10 @@ def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x:
     the render noise of the residuals' change and the step's feedback ``D``, all at ``x + delta`` (:class:`GridStep`).
     ``changes``: the residuals' changes from the fit's model to the finer ones (:class:`GridChanges`, the renders' mean
     ``d_S`` to the one made at :data:`SUPERSAMPLE`); ``step(d)``: the Gauss-Newton step of a change ``d`` of the residuals.
-    ``delta`` is the fixed point ``x + delta = x + step(d_S(x + delta))``, accelerated (:func:`accelerated`, on the
-    values in standard errors ``stderr``; the plain iteration contracts by 0.68 an iteration on a 12-frame pass); what
-    it leaves, ``short``, is measured at ``x + delta`` with ``D``: a value more than :data:`FIXED_POINT_TOLERANCE` of
-    a standard error short is flagged (:func:`unsettled_notes`). The bound is :data:`REMAINDER_RATIO` times
+    ``delta`` is the fixed point ``x + delta = x + step(d_S(x + delta))`` by Anderson's acceleration
+    (:func:`~spacefit.fitting.fixed_point.anderson`) in standard errors ``stderr``; what it leaves, ``short``, is
+    measured at ``x + delta`` with ``D``, a value more than :data:`FIXED_POINT_TOLERANCE` short flagged
+    (:func:`unsettled_notes`). The bound is :data:`REMAINDER_RATIO` times
     ``step(d_S - d_C)``, the step from the model made at :data:`COARSER` to the one made at :data:`SUPERSAMPLE`; the
     draw is the two renders' changes' difference over sqrt 2. ``D = d step(d_S(y)) / dy``, n x n, in its ``columns``
     (the image nuisances, on which ``d_S`` depends without another render; the others 0): the fixed point
@@ -370,13 +357,15 @@ def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x:
     taken as a constant leaves out (measured in the coverage study: the blur's error 1.2 times its pre-step error,
     ``D`` 0.16 for the blur)."""
     # a value without a standard error (no information in the pixels: its step 0) in its own units
-    delta, evaluations = accelerated(lambda y: step(changes.fine(x + y).mean(axis=0)), np.where(stderr > 0, stderr, 1.0))
+    delta, evaluations = anderson(lambda y: step(changes.fine(x + y).mean(axis=0)), np.where(stderr > 0, stderr, 1.0), FIXED_POINT_STEPS,
+                                  FIXED_POINT_TOLERANCE)
     each, coarser, derivatives = changes.settled(x + delta, columns)
     feedback = np.zeros((len(x), len(x)))
     # the columns' steps two at a time (each mostly on one core), each column read as its step starts
     for j, moved in zip(columns, concurrently([lambda i=i: step(derivatives[i]) for i in range(len(columns))])):
         feedback[:, j] = moved
-    short = np.linalg.solve(np.eye(len(x)) - feedback, step(each.mean(axis=0)) - delta)  # one Newton step, D exact
+    # the distance left, Newton's step: D is the whole derivative of the step's map (which reads the image nuisances alone)
+    short = np.linalg.solve(np.eye(len(x)) - feedback, step(each.mean(axis=0)) - delta)
     return GridStep(delta, REMAINDER_RATIO * step(each.mean(axis=0) - coarser), (each[0] - each[1]) / math.sqrt(2.0), feedback, short,
                     evaluations)
 
