@@ -105,7 +105,7 @@ def main() -> None:
               "fit_cpu_s": fit_cpu, "fit_wall_s": fit_wall, "peak_mib_with_simulation": peak, "grid_cpu_s": seen["cpu"],
               "grid_wall_s": seen["wall"], "evaluations": len(points), "moves_se": moves, "names": names, "x": x.tolist(),
               "stderr": stderr.tolist(), "delta": delta.tolist(), "points": [(p - x).tolist() for p in points], "values": result.values, "value_stderr": result.stderr,
-              "feedback": seen["feedback"].tolist(), "short_se": None if seen["short"] is None else (seen["short"] / stderr).tolist(),
+              "feedback": seen["feedback"].tolist(), "short_se": None if seen["short"] is None else seen["short"].tolist(),
               "unsettled": [w for w in result.warnings if "did not settle" in w]}
     print(f"{result.status.name}, {result.steps} steps; fit {fit_cpu:.1f} s CPU, {fit_wall:.1f} s wall; the pixel grid's phase "
           f"{seen['cpu']:.1f} s CPU, {seen['wall']:.1f} s wall, {len(points)} evaluations at 4x; moves (standard errors) "

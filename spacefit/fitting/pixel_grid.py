@@ -326,9 +326,10 @@ class GridChanges:
 class GridStep:
     """The pixel grid's step of :func:`grid_step`, in the fit's values' coordinates: ``delta``, from the fit's estimate
     to the model made at :data:`SUPERSAMPLE`'s; ``remainder``, the bound on what remains of the grid's error after it;
-    ``noise``, one draw of the render noise of the residuals' change; ``feedback``, ``D`` (n x n); ``short``, the
-    distance from ``x + delta`` to the fixed point, ``(I - D)^-1 (step(d_S(x + delta)) - delta)`` (first order); and
-    ``evaluations``, the changes to the model made at :data:`SUPERSAMPLE` its iterations took."""
+    ``noise``, one draw of the render noise of the residuals' change; ``feedback``, ``D`` (n x n); ``short``, each
+    value's distance from ``x + delta`` to the fixed point, ``(I - D)^-1 (step(d_S(x + delta)) - delta)`` (first order),
+    in the standard errors the iterations were scaled by; and ``evaluations``, the changes to the model made at
+    :data:`SUPERSAMPLE` its iterations took."""
 
     delta: np.ndarray
     remainder: np.ndarray
@@ -347,7 +348,7 @@ def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x:
     ``d_S`` to the one made at :data:`SUPERSAMPLE`); ``step(d)``: the Gauss-Newton step of a change ``d`` of the residuals.
     ``delta`` is the fixed point ``x + delta = x + step(d_S(x + delta))`` by Anderson's acceleration
     (:func:`~spacefit.fitting.fixed_point.anderson`) in standard errors ``stderr``; what it leaves, ``short``, is
-    measured at ``x + delta`` with ``D``, a value more than :data:`FIXED_POINT_TOLERANCE` short flagged
+    measured at ``x + delta`` with ``D`` (in standard errors), a value more than :data:`FIXED_POINT_TOLERANCE` short flagged
     (:func:`unsettled_notes`). The bound is :data:`REMAINDER_RATIO` times
     ``step(d_S - d_C)``, the step from the model made at :data:`COARSER` to the one made at :data:`SUPERSAMPLE`; the
     draw is the two renders' changes' difference over sqrt 2. ``D = d step(d_S(y)) / dy``, n x n, in its ``columns``
@@ -356,9 +357,8 @@ def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x:
     estimate has the covariance ``(I - D)^-1 C (I - D)^-T`` where the fit's has C: the step's feedback, which a step
     taken as a constant leaves out (measured in the coverage study: the blur's error 1.2 times its pre-step error,
     ``D`` 0.16 for the blur)."""
-    # a value without a standard error (no information in the pixels: its step 0) in its own units
-    delta, evaluations = anderson(lambda y: step(changes.fine(x + y).mean(axis=0)), np.where(stderr > 0, stderr, 1.0), FIXED_POINT_STEPS,
-                                  FIXED_POINT_TOLERANCE)
+    scale = np.where(stderr > 0, stderr, 1.0)  # a value without a standard error (no information in the pixels: its step 0) in its units
+    delta, evaluations = anderson(lambda y: step(changes.fine(x + y).mean(axis=0)), scale, FIXED_POINT_STEPS, FIXED_POINT_TOLERANCE)
     each, coarser, derivatives = changes.settled(x + delta, columns)
     feedback = np.zeros((len(x), len(x)))
     # the columns' steps two at a time (each mostly on one core), each column read as its step starts
@@ -366,8 +366,8 @@ def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x:
         feedback[:, j] = moved
     # the distance left, Newton's step: D is the whole derivative of the step's map (which reads the image nuisances alone)
     short = np.linalg.solve(np.eye(len(x)) - feedback, step(each.mean(axis=0)) - delta)
-    return GridStep(delta, REMAINDER_RATIO * step(each.mean(axis=0) - coarser), (each[0] - each[1]) / math.sqrt(2.0), feedback, short,
-                    evaluations)
+    return GridStep(delta, REMAINDER_RATIO * step(each.mean(axis=0) - coarser), (each[0] - each[1]) / math.sqrt(2.0), feedback,
+                    short / scale, evaluations)
 
 
 def grid_notes(errors: dict[str, float], stderr: dict[str, float]) -> list[str]:
@@ -381,8 +381,8 @@ def grid_notes(errors: dict[str, float], stderr: dict[str, float]) -> list[str]:
 
 def unsettled_notes(short: dict[str, float]) -> list[str]:
     """A line for each value whose distance to the pixel grid's fixed point after its step (``short``, in standard
-    errors: :attr:`GridStep.short` over the errors the iterations were scaled by) is more than :data:`FIXED_POINT_TOLERANCE`;
-    the fit's status is then :attr:`~spacefit.fitting.status.Status.UNSETTLED`."""
+    errors: :attr:`GridStep.short`) is more than :data:`FIXED_POINT_TOLERANCE`; the fit's status is then
+    :attr:`~spacefit.fitting.status.Status.UNSETTLED`."""
     return [f"{name}: the pixel grid's step did not settle in {FIXED_POINT_STEPS} evaluations of the model made at {SUPERSAMPLE}x: "
             f"its fixed point is {s:+.2g} standard errors from the value (the tolerance {FIXED_POINT_TOLERANCE:g}); the value and "
             "its error are taken where the iterations stopped."
