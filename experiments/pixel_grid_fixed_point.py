@@ -1,7 +1,7 @@
 """The pixel grid's fixed point (:func:`spacefit.fitting.pixel_grid.grid_step`) on a fit: how many changes to the model
 made at 4x its iterations took, the CPU and wall time of the pixel grid's phase (its iterations, the settled models and
-the feedback's steps), the whole fit's, each evaluated point's largest move from the last in standard errors, and where the step
-ended against the fixed point of a long plain iteration from the same renders (``--long N``: up to N steps, until every
+the feedback's steps), the whole fit's, the fit's peak memory (Linux's VmHWM, reset after the simulation) before and
+after that phase, each evaluated point's largest move from the last in standard errors, and where the step ended against the fixed point of a long plain iteration from the same renders (``--long N``: up to N steps, until every
 value moves by less than 1e-4 of a standard error).
 
 Cases: ``pass SIZE FRAMES`` (:mod:`bench_pass`'s pass: simulated at 256 spp, fitted at 16 spp, 12 LM steps at most) and
@@ -39,6 +39,17 @@ def cpu() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+def high_water_mib() -> float:
+    """This process's peak resident memory since the last :func:`reset_high_water` (Linux's VmHWM), MiB."""
+    line = next(line for line in Path("/proc/self/status").read_text().splitlines() if line.startswith("VmHWM:"))
+    return int(line.split()[1]) / 1024
+
+
+def reset_high_water() -> None:
+    """Start :func:`high_water_mib` afresh from the present resident memory (Linux's clear_refs, 5)."""
+    Path("/proc/self/clear_refs").write_text("5")
+
+
 def fit_pass(size: int, n: int, folder: Path) -> tuple[sf.FitResult, float, float]:
     """:mod:`bench_pass`'s pass of ``n`` frames of ``size`` px fitted: the result, its CPU and wall seconds."""
     rng = np.random.default_rng(3)
@@ -47,6 +58,7 @@ def fit_pass(size: int, n: int, folder: Path) -> tuple[sf.FitResult, float, floa
     obs = [sf.Observation.from_file(f.file, s) for f, s in zip(frames.frames, frames.scenes(base(size)))]
     free = [*MATERIALS, "image.blur_sigma_px", *[f"{name}@{k}" for k in range(n) for name in PER_FRAME]]
     c0, t0 = cpu(), time.perf_counter()
+    reset_high_water()  # the simulation's peak left out
     result = sf.fit(obs, free, start=START, render=sf.FitRender(spp=FIT_SPP), max_steps=MAX_STEPS)
     return result, cpu() - c0, time.perf_counter() - t0
 
@@ -56,6 +68,7 @@ def fit_single() -> tuple[sf.FitResult, float, float]:
     case, obs, truths, start = observed()
     obs = sf.Observation(obs.scene, np.rint(obs.reference).astype(np.uint16).astype(float), sensor=obs.sensor)
     c0, t0 = cpu(), time.perf_counter()
+    reset_high_water()  # the simulation's peak left out
     result = sf.fit(obs, list(truths), start=start)
     return result, cpu() - c0, time.perf_counter() - t0
 
@@ -86,9 +99,9 @@ def main() -> None:
     def recorded(changes: GridChanges, step: object, x: np.ndarray, stderr: np.ndarray, columns: object) -> object:
         points: list[np.ndarray] = []
         counted = GridChanges(lambda y: points.append(np.array(y)) or changes.fine(y), changes.settled)
-        c0, t0 = cpu(), time.perf_counter()
+        c0, t0, before = cpu(), time.perf_counter(), high_water_mib()
         out = real(counted, step, x, stderr, columns)
-        seen.update(changes=changes, step=step, x=np.array(x), stderr=np.array(stderr), cpu=cpu() - c0, wall=time.perf_counter() - t0,
+        seen.update(peak_before_grid_mib=before, peak_after_grid_mib=high_water_mib(), changes=changes, step=step, x=np.array(x), stderr=np.array(stderr), cpu=cpu() - c0, wall=time.perf_counter() - t0,
                     points=points, delta=np.array(out.delta if hasattr(out, "delta") else out[0]),
                     short=None if not hasattr(out, "short") else np.array(out.short),
                     feedback=np.array(out.feedback if hasattr(out, "feedback") else out[3]))
@@ -97,17 +110,19 @@ def main() -> None:
     uncertainty.grid_step = recorded
     with tempfile.TemporaryDirectory() as tmp:
         result, fit_cpu, fit_wall = fit_pass(int(args.case[1]), int(args.case[2]), Path(tmp)) if args.case[0] == "pass" else fit_single()
-    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    peak = high_water_mib()
     x, stderr, delta, points = seen["x"], seen["stderr"], seen["delta"], seen["points"]
     moves = [float(np.abs((b - a) / stderr).max()) for a, b in zip(points, points[1:])]
     names = list(result.extras["pixel_grid_error"])
     record = {"commit": commit(), "source": str(Path(sf.__file__).parent), "case": args.case, "load": os.getloadavg()[0], "status": result.status.name, "steps": result.steps,
-              "fit_cpu_s": fit_cpu, "fit_wall_s": fit_wall, "peak_mib_with_simulation": peak, "grid_cpu_s": seen["cpu"],
+              "fit_cpu_s": fit_cpu, "fit_wall_s": fit_wall, "fit_peak_mib": peak, "peak_before_grid_mib": seen["peak_before_grid_mib"],
+              "peak_after_grid_mib": seen["peak_after_grid_mib"], "grid_cpu_s": seen["cpu"],
               "grid_wall_s": seen["wall"], "evaluations": len(points), "moves_se": moves, "names": names, "x": x.tolist(),
               "stderr": stderr.tolist(), "delta": delta.tolist(), "points": [(p - x).tolist() for p in points], "values": result.values, "value_stderr": result.stderr,
               "feedback": seen["feedback"].tolist(), "short_se": None if seen["short"] is None else seen["short"].tolist(),
               "unsettled": [w for w in result.warnings if "did not settle" in w]}
-    print(f"{result.status.name}, {result.steps} steps; fit {fit_cpu:.1f} s CPU, {fit_wall:.1f} s wall; the pixel grid's phase "
+    print(f"{result.status.name}, {result.steps} steps; fit {fit_cpu:.1f} s CPU, {fit_wall:.1f} s wall, peak {peak:.0f} MiB (before the "
+          f"pixel grid's phase {seen['peak_before_grid_mib']:.0f}, after it {seen['peak_after_grid_mib']:.0f}); the pixel grid's phase "
           f"{seen['cpu']:.1f} s CPU, {seen['wall']:.1f} s wall, {len(points)} evaluations at 4x; moves (standard errors) "
           + ", ".join(f"{m:.3g}" for m in moves), flush=True)
     if args.long:
