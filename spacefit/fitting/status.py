@@ -18,8 +18,8 @@ class Status(enum.Enum):
     :attr:`NO_PROGRESS` (no step lowered the loss: the start is returned), :attr:`AT_BOUND` (a
     parameter ended at a bound of its range), :attr:`UNJUDGED` (the noise is known but the model's
     own render noise is too large to judge its residuals), :attr:`MISFIT` (the residuals exceed the noise, :attr:`FitResult.goodness`)
-    and :attr:`UNSETTLED` (the pixel grid's step short of its fixed point, :mod:`spacefit.fitting.pixel_grid`; not over
-    :attr:`MAX_STEPS`, the solver's own shortfall). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
+    and :attr:`UNSETTLED` (with a blur free, the step to the model made at 4x the resolution short of its fixed point;
+    not over :attr:`MAX_STEPS`, the solver's own shortfall). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
     :attr:`NO_BETTER_POINT` (``sf.fit(stop=...)``) are a success, and only where the
     verdicts leave them: a solve stopped there whose residuals exceed the noise is a :attr:`MISFIT`.
 
