@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from spacefit.cli import NOT_CONVERGED, exit_code
 from spacefit.fitting.nuisance import image_model
 from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, FIXED_POINT_TOLERANCE, MOVES, REMAINDER_RATIO, GridChanges, ImageColumns, binned,
                                          fine_and_grid_models, grid_step, response_matrix, unsettled_notes)
@@ -145,7 +146,7 @@ def test_a_fixed_point_not_reached_in_its_evaluations_is_flagged_with_each_value
     """Twelve values contracting at rates from -0.9 to 0.95 (the plain iteration needs 45 evaluations): the eight
     accelerated ones leave values short; the distance measured at the end is the true one, each value beyond the
     tolerance is named with it in standard errors, and the fit's verdict is UNSETTLED (not over the solver's own
-    MAX_STEPS, under a MISFIT)."""
+    MAX_STEPS, under a MISFIT; exit 3, as the solver's shortfalls)."""
     changes, S, x, fixed_point, se = contraction(list(np.linspace(-0.9, 0.95, 12)), 1)
     grid = grid_step(changes, lambda d: S @ d, x, np.full(12, se), range(12))
     np.testing.assert_allclose(grid.short, (fixed_point - grid.delta) / se, rtol=0, atol=1e-9)
@@ -158,6 +159,7 @@ def test_a_fixed_point_not_reached_in_its_evaluations_is_flagged_with_each_value
                         "taken where the iterations stopped.")
     assert [n.split(":")[0] for n in notes[1:]] == far
     assert verdict(Status.CONVERGED, True, False, False, False, bool(notes)) is Status.UNSETTLED and not Status.UNSETTLED.success
+    assert exit_code(Status.UNSETTLED) == NOT_CONVERGED  # exit 3, docs/reference/fits.md
     assert verdict(Status.MAX_STEPS, True, False, False, False, True) is Status.MAX_STEPS
     assert verdict(Status.CONVERGED, True, False, True, False, True) is Status.MISFIT
     assert verdict(Status.CONVERGED, True, False, False, False, bool(unsettled_notes({"a": 0.0099}))) is Status.CONVERGED
