@@ -46,6 +46,7 @@ Run: ``.venv/bin/python experiments/coverage_diagnosis.py photon|render|exposure
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 from collections.abc import Callable
@@ -61,6 +62,7 @@ from studyio import commit, machine
 import spacefit as sf
 import spacefit.fitting.conclusion as conclusion
 from spacefit.fitting.observations.image import check_reference, image_residual
+from spacefit.fitting.pixel_grid import GridStep
 from spacefit.fitting.problem import setup
 from spacefit.fitting.uncertainty import _pseudo_inverse, covariance, estimate, grid_step, linearise
 from spacefit.precision import float64
@@ -201,9 +203,9 @@ def feedback_ratio(s: object) -> np.ndarray:
     """Per parameter, the standard error of :func:`~spacefit.fitting.uncertainty.estimate` at the set-up's
     start over the same with the pixel grid's step taken as a constant (its feedback D set to 0; the
     same seeds, so the same renders)."""
-    def constant(*args: object) -> tuple[np.ndarray, ...]:
-        delta, remainder, noise, feedback = grid_step(*args)
-        return delta, remainder, noise, np.zeros_like(feedback)
+    def constant(*args: object) -> GridStep:
+        step = grid_step(*args)
+        return dataclasses.replace(step, feedback=np.zeros_like(step.feedback))
 
     with mock.patch("spacefit.fitting.uncertainty.grid_step", constant):
         before = np.diag(estimate(s, s.x0)[1])

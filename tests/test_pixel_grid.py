@@ -8,9 +8,11 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 
+from spacefit.cli import NOT_CONVERGED, exit_code
 from spacefit.fitting.nuisance import image_model
-from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, MOVES, REMAINDER_RATIO, GridChanges, ImageColumns, binned, fine_and_grid_models,
-                                         grid_step, response_matrix)
+from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, FIXED_POINT_TOLERANCE, MOVES, REMAINDER_RATIO, GridChanges, ImageColumns, binned,
+                                         fine_and_grid_models, grid_step, response_matrix, unsettled_notes)
+from spacefit.fitting.status import Status, verdict
 from spacefit.fitting.uncertainty import linearise
 
 FACTOR = 4
@@ -84,17 +86,83 @@ def test_the_grid_step_is_the_fixed_point_of_the_step_and_carries_a_third_of_the
     J, A = rng.normal(size=(40, 3)), 0.3 * rng.normal(size=(40, 3))
     a, c, x = rng.normal(size=40), rng.normal(size=40), np.array([0.8, 0.1, -0.2])
     S = -np.linalg.solve(J.T @ J, J.T)
-    assert np.abs(np.linalg.eigvals(S @ A)).max() < 0.2  # a contraction: 8 iterations reach 1e-8
+    assert np.abs(np.linalg.eigvals(S @ A)).max() < 0.2  # a contraction
+    fixed_point = np.linalg.solve(np.eye(3) - S @ A, S @ (A @ x + a))
     calls: list[np.ndarray] = []
-    delta, remainder, noise, D = grid_step(linear_changes(A, a, c, calls), lambda d: S @ d, x, np.full(3, 1e-12), [])
-    np.testing.assert_allclose(delta, np.linalg.solve(np.eye(3) - S @ A, S @ (A @ x + a)), rtol=0, atol=1e-7)
-    np.testing.assert_allclose(remainder, REMAINDER_RATIO * S @ (a - c), rtol=1e-9)
-    np.testing.assert_allclose(noise, 0.2 * (x + delta)[0] * a / np.sqrt(2.0), rtol=1e-12)  # the draw at the fixed point
-    assert REMAINDER_RATIO == 1.0 / 3.0 and len(calls) == FIXED_POINT_STEPS + 1 and not D.any()
+    grid = grid_step(linear_changes(A, a, c, calls), lambda d: S @ d, x, np.full(3, 1e-12), [])
+    np.testing.assert_allclose(grid.delta, fixed_point, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(grid.remainder, REMAINDER_RATIO * S @ (a - c), rtol=1e-9)
+    np.testing.assert_allclose(grid.noise, 0.2 * (x + grid.delta)[0] * a / np.sqrt(2.0), rtol=1e-12)  # the draw at the fixed point
+    # 3 values, linear: 4 evaluations reach it (GMRES's), the fifth's step within a hundredth of 1e-12
+    assert REMAINDER_RATIO == 1.0 / 3.0 and grid.evaluations == 5 and len(calls) == 6 and not grid.feedback.any()
     calls.clear()
-    delta, *_ = grid_step(linear_changes(A, a, c, calls), lambda d: S @ d, x, np.full(3, 1e3), [])  # within a hundredth of the errors
-    np.testing.assert_allclose(delta, S @ (A @ x + a), rtol=1e-12)
-    assert len(calls) == 2  # the one step, then its values settled
+    grid = grid_step(linear_changes(A, a, c, calls), lambda d: S @ d, x, np.full(3, 1e3), [])  # within a hundredth of the errors
+    assert np.abs(grid.delta - fixed_point).max() < 1e-2 * 1e3 and np.abs(grid.delta - S @ (A @ x + a)).max() > 1e-6
+    assert len(calls) == 3  # the one step, the secant step from it within a hundredth of the errors, then its values settled
+
+
+def contraction(rates: list[float], seed: int) -> tuple[GridChanges, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Changes d_S(y) = A y + a whose step's fixed-point map S A has eigenvalues ``rates`` (A = -J T, T = Q diag(rates) Q^-1,
+    Q not orthogonal): the changes, S, x, the fixed point's delta, and the first plain step's largest value (a standard error)."""
+    rng = np.random.default_rng(seed)
+    n = len(rates)
+    J, Q = rng.normal(size=(60, n)), np.eye(n) + 0.3 * rng.normal(size=(n, n))
+    T = Q @ np.diag(rates) @ np.linalg.inv(Q)
+    A, a, x = -J @ T, rng.normal(size=60), rng.normal(size=n)
+    S = -np.linalg.solve(J.T @ J, J.T)
+    return linear_changes(A, a, 0.0 * a), S, x, np.linalg.solve(np.eye(n) - T, S @ (A @ x + a)), np.abs(S @ (A @ x + a)).max()
+
+
+def plain(changes: GridChanges, S: np.ndarray, x: np.ndarray, stderr: np.ndarray, steps: int) -> tuple[np.ndarray, int]:
+    """The plain iteration delta = S d_S(x + delta) from 0 until it moves every value by at most a hundredth of ``stderr``
+    (the stop rule before the acceleration), or ``steps`` times: delta and the evaluations."""
+    delta, evaluations, moved = np.zeros(len(x)), 0, np.inf
+    while evaluations < steps and np.any(np.abs(moved) > FIXED_POINT_TOLERANCE * stderr):
+        stepped = S @ changes.fine(x + delta).mean(axis=0)
+        moved, delta, evaluations = stepped - delta, stepped, evaluations + 1
+    return delta, evaluations
+
+
+def test_the_accelerated_fixed_point_is_the_long_plain_iterations_in_fewer_evaluations():
+    """A fixed-point map of six values contracting at rates up to 0.7 (a 12-frame pass's slowest, 0.68): the plain
+    iteration stopped at 8 evaluations leaves values more than 0.1 of a standard error short, and stopped where its last
+    move is below a hundredth of one (after more than 8) still leaves them beyond that hundredth (short by up to 0.7 / 0.3
+    of the move); Anderson's acceleration reaches the 60-step iteration's fixed point within the tolerance in at most
+    n + 1 = 7 (GMRES's), and the distance it measures at its end (with D) is the true one."""
+    changes, S, x, fixed_point, se = contraction([0.7, 0.6, 0.5, 0.3, 0.1, -0.2], 2)
+    stderr = np.full(6, se)
+    long, _ = plain(changes, S, x, stderr * 1e-20, 60)
+    np.testing.assert_allclose(long, fixed_point, rtol=0, atol=1e-8 * se)
+    capped, _ = plain(changes, S, x, stderr, FIXED_POINT_STEPS)
+    settled, evaluations = plain(changes, S, x, stderr, 60)
+    assert np.abs(capped - long).max() > 10 * FIXED_POINT_TOLERANCE * se
+    assert evaluations > FIXED_POINT_STEPS and np.abs(settled - long).max() > FIXED_POINT_TOLERANCE * se
+    grid = grid_step(changes, lambda d: S @ d, x, stderr, range(6))
+    assert grid.evaluations <= 7 and np.abs(grid.delta - long).max() < FIXED_POINT_TOLERANCE * se
+    np.testing.assert_allclose(grid.short, (fixed_point - grid.delta) / se, rtol=0, atol=1e-12)
+
+
+def test_a_fixed_point_not_reached_in_its_evaluations_is_flagged_with_each_values_distance():
+    """Twelve values contracting at rates from -0.9 to 0.95 (the plain iteration needs 45 evaluations): the eight
+    accelerated ones leave values short; the distance measured at the end is the true one, each value beyond the
+    tolerance is named with it in standard errors, and the fit's verdict is UNSETTLED (not over the solver's own
+    MAX_STEPS, under a MISFIT; exit 3, as the solver's shortfalls)."""
+    changes, S, x, fixed_point, se = contraction(list(np.linspace(-0.9, 0.95, 12)), 1)
+    grid = grid_step(changes, lambda d: S @ d, x, np.full(12, se), range(12))
+    np.testing.assert_allclose(grid.short, (fixed_point - grid.delta) / se, rtol=0, atol=1e-9)
+    short = dict(zip([f"v{i}" for i in range(12)], grid.short))
+    far = [name for name, s in short.items() if abs(s) > FIXED_POINT_TOLERANCE]
+    assert grid.evaluations == FIXED_POINT_STEPS and 0 < len(far) <= 12
+    notes = unsettled_notes({"image.shift_y_px@10": -0.183, "image.shift_y_px@11": 0.004, **short})
+    assert notes[0] == ("image.shift_y_px@10: the pixel grid's step did not settle in 8 evaluations of the model made at 4x: its "
+                        "fixed point is -0.18 standard errors from the value (the tolerance 0.01); the value and its error are "
+                        "taken where the iterations stopped.")
+    assert [n.split(":")[0] for n in notes[1:]] == far
+    assert verdict(Status.CONVERGED, True, False, False, False, bool(notes)) is Status.UNSETTLED and not Status.UNSETTLED.success
+    assert exit_code(Status.UNSETTLED) == NOT_CONVERGED  # exit 3, docs/reference/fits.md
+    assert verdict(Status.MAX_STEPS, True, False, False, False, True) is Status.MAX_STEPS
+    assert verdict(Status.CONVERGED, True, False, True, False, True) is Status.MISFIT
+    assert verdict(Status.CONVERGED, True, False, False, False, bool(unsettled_notes({"a": 0.0099}))) is Status.CONVERGED
 
 
 def test_image_columns_read_as_the_matrix_of_their_blocks_with_zeros_elsewhere():
@@ -121,11 +189,11 @@ def test_the_fixed_point_moves_with_the_fits_estimate_by_the_inverse_of_one_less
     S = -np.linalg.solve(J.T @ J, J.T)
     changes = linear_changes(A, a, 0.0 * a)
     x, stderr = np.array([0.8, 0.1, -0.2]), np.full(3, 1e-12)
-    D = grid_step(changes, lambda d: S @ d, x, stderr, [1, 2])[3]
+    D = grid_step(changes, lambda d: S @ d, x, stderr, [1, 2]).feedback
     np.testing.assert_allclose(D[:, 1:], (S @ A)[:, 1:], rtol=1e-9, atol=1e-12)
     assert not D[:, 0].any()
-    D = grid_step(changes, lambda d: S @ d, x, stderr, [0, 1, 2])[3]
-    fixed_point = lambda y: y + grid_step(changes, lambda d: S @ d, y, stderr, [])[0]  # noqa: E731
+    D = grid_step(changes, lambda d: S @ d, x, stderr, [0, 1, 2]).feedback
+    fixed_point = lambda y: y + grid_step(changes, lambda d: S @ d, y, stderr, []).delta  # noqa: E731
     moved = np.stack([(fixed_point(x + h) - fixed_point(x - h)) / 2e-3 for h in 1e-3 * np.eye(3)], axis=1)
     np.testing.assert_allclose(np.linalg.inv(np.eye(3) - D), moved, rtol=0, atol=1e-6)
     assert np.abs(moved - np.eye(3)).max() > 0.05  # the feedback is not negligible here: a constant step would be wrong
@@ -135,3 +203,49 @@ def test_a_box_render_binned_is_the_box_render_at_the_coarser_resolution():
     fine = np.random.default_rng(2).random((8, 12, 3))
     np.testing.assert_allclose(np.asarray(binned(jnp.asarray(fine), 2))[1, 2], fine[2:4, 4:6].mean(axis=(0, 1)), rtol=1e-6)
     assert binned(jnp.asarray(fine), 4).shape == (2, 3, 3)
+
+
+@pytest.mark.slow
+def test_a_small_pass_s_accelerated_step_is_its_long_plain_iterations_and_a_cut_budget_is_flagged(tmp_path, monkeypatch):
+    """Three frames of the panels case at 32 x 32 px through a sensor, the blur shared and each frame's shifts free:
+    the fit's accelerated step is within a hundredth of a standard error of 60 plain iterations' fixed point from the
+    same renders, in fewer evaluations than the plain iteration needs to move less than that, and the distance it
+    measures at its end is the true one (to first order); with its budget cut to 2 evaluations the fit is UNSETTLED and its warnings
+    name each value left short with its distance in standard errors."""
+    import spacefit as sf
+    from spacefit.fitting import pixel_grid, uncertainty
+
+    base = sf.load_case("panels").truth_scene.with_values({"render.resolution": [32, 32], "camera.pixel_pitch_mm": 150.0})
+    sensor = sf.Sensor(radiometric_scale_dn_per_w_m2_sr=500.0, gain_dn_per_electron=0.5, bias_dn=100.0, read_noise_electrons=5.0,
+                       bit_depth=16, full_well_electrons=None, diffraction=False, psf_sigma_px=0.0)
+    frames = sf.simulate_pass(base, sf.arc_pass(3), tmp_path / "pass", sensor=sensor, spp=64)
+    obs = [sf.Observation.from_file(f.file, s) for f, s in zip(frames.frames, frames.scenes(base))]
+    free = ["parts.legs.kd", "image.blur_sigma_px", *frames.per_frame(["image.shift_x_px", "image.shift_y_px"])]
+    seen: list[tuple] = []
+    real = uncertainty.grid_step
+    monkeypatch.setattr(uncertainty, "grid_step", lambda *args: seen.append((args, real(*args))) or seen[-1][1])
+    monkeypatch.setattr(pixel_grid, "FIXED_POINT_STEPS", 2)
+    result = sf.fit(obs, free, start={"parts.legs.kd": 0.45}, render=sf.FitRender(spp=8), max_steps=8)
+    (changes, step, x, stderr, columns), cut = seen[-1]
+    short = result.extras["pixel_grid_short"]
+    far = {name: s for name, s in short.items() if abs(s) > FIXED_POINT_TOLERANCE}
+    assert result.status is Status.UNSETTLED and cut.evaluations == 2 and far
+    np.testing.assert_allclose(list(short.values()), cut.short, rtol=1e-12)
+    assert result.warnings[0] == f"the fit did not succeed ({Status.UNSETTLED})."
+    assert [w for w in result.warnings if "did not settle" in w] == [
+        f"{name}: the pixel grid's step did not settle in 2 evaluations of the model made at 4x: its fixed point is {s:+.2g} standard "
+        "errors from the value (the tolerance 0.01); the value and its error are taken where the iterations stopped."
+        for name, s in far.items()]
+    monkeypatch.undo()
+    with jax.enable_x64(True):  # as the fit's programs were traced
+        grid = grid_step(changes, step, x, stderr, columns)
+        long, evaluations = np.zeros(len(x)), []
+        for _ in range(60):
+            moved, long = long, step(changes.fine(x + long).mean(axis=0))
+            evaluations.append(np.abs((long - moved) / stderr).max())
+    plain_evaluations = next(k for k, m in enumerate(evaluations, 1) if m <= FIXED_POINT_TOLERANCE)
+    assert evaluations[-1] < 1e-6 and grid.evaluations < plain_evaluations
+    assert np.abs((grid.delta - long) / stderr).max() < FIXED_POINT_TOLERANCE
+    np.testing.assert_allclose(grid.short, (long - grid.delta) / stderr, rtol=0, atol=0.1 * FIXED_POINT_TOLERANCE)
+    # the cut step's distance, 0.2 of a standard error at most, to first order: measured within 0.3 of it (0.26 the worst)
+    np.testing.assert_allclose(cut.short, (long - cut.delta) / stderr, rtol=0.3, atol=0.1 * FIXED_POINT_TOLERANCE)

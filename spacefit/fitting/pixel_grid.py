@@ -54,6 +54,17 @@ so ``d_4`` is larger there than at the answer (noise-free, 32 px below: +0.0362 
 model's own minimum is +0.0344; the fixed point +0.0341; in the coverage study at 48 px, where the
 steps are 0.021 px, the one step left the blur 0.0027 px wide, 1.2 of its statistical errors).
 
+*Its iterations.* The plain iteration contracts as ``D`` (below) does, each value at its own rate: on the 12-frame pass of
+``experiments/bench_pass.py`` up to 0.68 (the shifts y of its last frames, stepped by 4 of their standard errors), so
+that 8 iterations left them 0.17 of a standard error short at 128 px (0.03 at 64 px), unflagged; 14 (10) iterations
+bring the move under a hundredth of one, and still leave 0.016 (0.013). Anderson's acceleration
+(:mod:`spacefit.fitting.fixed_point`) took 7 (6) evaluations and ended 0.0011 (0.0017) of a standard error from a
+long plain iteration's fixed point; the single image of ``experiments/bench_fit_process.py`` (a step of a third of a
+standard error) 2, as before. Fitting a least-squares combination per frame, or per value, stalls at 0.02 on the 64 px
+pass's ``D`` (the shared blur couples the frames). What remains is measured at the end with ``D`` (Newton's step, to
+first order: 0.0015 where the long iteration gives 0.0011 at 128 px) and a value further than a hundredth of a standard
+error is flagged (:attr:`~spacefit.fitting.status.Status.UNSETTLED`). Measured: experiments/results/pixel_grid/.
+
 *Its feedback.* The step is taken at the fixed point and moves with it: a fit whose blur came out
 wide has less of the grid's error to step over. With ``D = d step(d_4(y)) / dy`` at x*, the fixed
 point moves by ``(I - D)^-1`` per change of the fit's estimate, so its covariance is the fit's through
@@ -121,6 +132,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
 
+from spacefit.fitting.fixed_point import anderson
 from spacefit.fitting.frame_models import concurrently
 from spacefit.fitting.nuisance import PAD_PX, ImageModel, nuisance_index
 from spacefit.fitting.nuisance import image_model as nuisance_model
@@ -146,7 +158,8 @@ REMAINDER_RATIO = 1.0 / 3.0
 FIXED_POINT_STEPS = 8
 """At most this many evaluations of the step's fixed point (:func:`grid_step`)."""
 FIXED_POINT_TOLERANCE = 0.01
-"""The step's fixed point is taken as reached when an iteration moves every value by less than this many standard errors."""
+"""The step's fixed point is taken as reached when the estimate of every value's distance to it (:func:`~spacefit.fitting.fixed_point.anderson`'s step)
+is within this many standard errors; a value measured further from it at the end is flagged (:func:`unsettled_notes`)."""
 MOVES = ("image.blur_sigma_px", "image.shift_x_px", "image.shift_y_px")
 """The image nuisances in px, which scale with the resolution."""
 STEPS_PER_FINE_PX = 16  # quadrature points per fine pixel in :func:`response_matrix`
@@ -309,33 +322,52 @@ class GridChanges:
     settled: Callable[[np.ndarray, Sequence[int]], tuple[np.ndarray, np.ndarray, Sequence[np.ndarray]]]
 
 
+@dataclasses.dataclass(frozen=True)
+class GridStep:
+    """The pixel grid's step of :func:`grid_step`, in the fit's values' coordinates: ``delta``, from the fit's estimate
+    to the model made at :data:`SUPERSAMPLE`'s; ``remainder``, the bound on what remains of the grid's error after it;
+    ``noise``, one draw of the render noise of the residuals' change; ``feedback``, ``D`` (n x n); ``short``, each
+    value's distance from ``x + delta`` to the fixed point, ``(I - D)^-1 (step(d_S(x + delta)) - delta)`` (first order),
+    in the standard errors the iterations were scaled by; and ``evaluations``, the changes to the model made at
+    :data:`SUPERSAMPLE` its iterations took."""
+
+    delta: np.ndarray
+    remainder: np.ndarray
+    noise: np.ndarray
+    feedback: np.ndarray
+    short: np.ndarray
+    evaluations: int
+
+
 def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x: Float[np.ndarray, " n"], stderr: Float[np.ndarray, " n"],
-              columns: Sequence[int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+              columns: Sequence[int]) -> GridStep:
     """The step ``delta`` from the fit's estimate ``x`` to the model made at :data:`SUPERSAMPLE`'s, the
     bound on what remains of the grid's error after it (both in x's coordinates), one draw of
-    the render noise of the residuals' change and the step's feedback ``D``, all at ``x + delta``. ``changes``: the
-    residuals' changes from the fit's model to the finer ones (:class:`GridChanges`, the renders' mean ``d_S`` to
-    the one made at :data:`SUPERSAMPLE`); ``step(d)``: the Gauss-Newton step of a change ``d`` of the residuals.
-    ``delta`` is the fixed point ``x + delta = x + step(d_S(x + delta))``, iterated from ``step(d_S(x))`` until it
-    moves by less than :data:`FIXED_POINT_TOLERANCE` of a standard error ``stderr`` (at most :data:`FIXED_POINT_STEPS`
-    times); the bound is :data:`REMAINDER_RATIO` times ``step(d_S - d_C)``, the step from the model made at
-    :data:`COARSER` to the one made at :data:`SUPERSAMPLE`; the draw is the two renders' changes' difference over
-    sqrt 2. ``D = d step(d_S(y)) / dy``, n x n, in its ``columns`` (the image nuisances, on which ``d_S`` depends
-    without another render; the others 0): the fixed point ``x* = x + step(d_S(x*))`` moves by ``(I - D)^-1`` per
-    change of the fit's estimate x, so the finer model's estimate has the covariance ``(I - D)^-1 C (I - D)^-T``
-    where the fit's has C: the step's feedback, which a step taken as a constant leaves out (measured in the
-    coverage study: the blur's error 1.2 times its pre-step error, ``D`` 0.16 for the blur)."""
-    delta = np.zeros(len(x))
-    for _ in range(FIXED_POINT_STEPS):
-        moved, delta = delta, step(changes.fine(x + delta).mean(axis=0))
-        if np.all(np.abs(delta - moved) <= FIXED_POINT_TOLERANCE * stderr):
-            break
+    the render noise of the residuals' change and the step's feedback ``D``, all at ``x + delta`` (:class:`GridStep`).
+    ``changes``: the residuals' changes from the fit's model to the finer ones (:class:`GridChanges`, the renders' mean
+    ``d_S`` to the one made at :data:`SUPERSAMPLE`); ``step(d)``: the Gauss-Newton step of a change ``d`` of the residuals.
+    ``delta`` is the fixed point ``x + delta = x + step(d_S(x + delta))`` by Anderson's acceleration
+    (:func:`~spacefit.fitting.fixed_point.anderson`) in standard errors ``stderr``; what it leaves, ``short``, is
+    measured at ``x + delta`` with ``D`` (in standard errors), a value more than :data:`FIXED_POINT_TOLERANCE` short flagged
+    (:func:`unsettled_notes`). The bound is :data:`REMAINDER_RATIO` times
+    ``step(d_S - d_C)``, the step from the model made at :data:`COARSER` to the one made at :data:`SUPERSAMPLE`; the
+    draw is the two renders' changes' difference over sqrt 2. ``D = d step(d_S(y)) / dy``, n x n, in its ``columns``
+    (the image nuisances, on which ``d_S`` depends without another render; the others 0): the fixed point
+    ``x* = x + step(d_S(x*))`` moves by ``(I - D)^-1`` per change of the fit's estimate x, so the finer model's
+    estimate has the covariance ``(I - D)^-1 C (I - D)^-T`` where the fit's has C: the step's feedback, which a step
+    taken as a constant leaves out (measured in the coverage study: the blur's error 1.2 times its pre-step error,
+    ``D`` 0.16 for the blur)."""
+    scale = np.where(stderr > 0, stderr, 1.0)  # a value without a standard error (no information in the pixels: its step 0) in its units
+    delta, evaluations = anderson(lambda y: step(changes.fine(x + y).mean(axis=0)), scale, FIXED_POINT_STEPS, FIXED_POINT_TOLERANCE)
     each, coarser, derivatives = changes.settled(x + delta, columns)
     feedback = np.zeros((len(x), len(x)))
     # the columns' steps two at a time (each mostly on one core), each column read as its step starts
     for j, moved in zip(columns, concurrently([lambda i=i: step(derivatives[i]) for i in range(len(columns))])):
         feedback[:, j] = moved
-    return delta, REMAINDER_RATIO * step(each.mean(axis=0) - coarser), (each[0] - each[1]) / math.sqrt(2.0), feedback
+    # the distance left, Newton's step: D is the whole derivative of the step's map (which reads the image nuisances alone)
+    short = np.linalg.solve(np.eye(len(x)) - feedback, step(each.mean(axis=0)) - delta)
+    return GridStep(delta, REMAINDER_RATIO * step(each.mean(axis=0) - coarser), (each[0] - each[1]) / math.sqrt(2.0), feedback,
+                    short / scale, evaluations)
 
 
 def grid_notes(errors: dict[str, float], stderr: dict[str, float]) -> list[str]:
@@ -345,3 +377,13 @@ def grid_notes(errors: dict[str, float], stderr: dict[str, float]) -> list[str]:
             f"at the result), is added to its value; what may remain of it (the step from a model made at {COARSER}x to the "
             f"{SUPERSAMPLE}x one, a third) is carried in its standard error; fit at a finer resolution to shrink it."
             for name, d in errors.items() if name in stderr and abs(d) > 0.5 * stderr[name]]
+
+
+def unsettled_notes(short: dict[str, float]) -> list[str]:
+    """A line for each value whose distance to the pixel grid's fixed point after its step (``short``, in standard
+    errors: :attr:`GridStep.short`) is more than :data:`FIXED_POINT_TOLERANCE`; the fit's status is then
+    :attr:`~spacefit.fitting.status.Status.UNSETTLED`."""
+    return [f"{name}: the pixel grid's step did not settle in {FIXED_POINT_STEPS} evaluations of the model made at {SUPERSAMPLE}x: "
+            f"its fixed point is {s:+.2g} standard errors from the value (the tolerance {FIXED_POINT_TOLERANCE:g}); the value and "
+            "its error are taken where the iterations stopped."
+            for name, s in short.items() if abs(s) > FIXED_POINT_TOLERANCE]

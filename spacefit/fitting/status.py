@@ -13,11 +13,13 @@ import enum
 class Status(enum.Enum):
     """How a fit ended. ``value`` is the words a report prints on its first line.
 
-    The solver's own endings (converged, noise floor, step limit, failures, signals), and four
+    The solver's own endings (converged, noise floor, step limit, failures, signals), and five
     verdicts on a solve that ended without a failure, in this order of precedence:
     :attr:`NO_PROGRESS` (no step lowered the loss: the start is returned), :attr:`AT_BOUND` (a
     parameter ended at a bound of its range), :attr:`UNJUDGED` (the noise is known but the model's
-    own render noise is too large to judge its residuals) and :attr:`MISFIT` (the residuals exceed the noise, :attr:`FitResult.goodness`). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
+    own render noise is too large to judge its residuals), :attr:`MISFIT` (the residuals exceed the noise, :attr:`FitResult.goodness`)
+    and :attr:`UNSETTLED` (with a blur free, the step to the model made at 4x the resolution short of its fixed point;
+    not over :attr:`MAX_STEPS`, the solver's own shortfall). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
     :attr:`NO_BETTER_POINT` (``sf.fit(stop=...)``) are a success, and only where the
     verdicts leave them: a solve stopped there whose residuals exceed the noise is a :attr:`MISFIT`.
 
@@ -40,6 +42,8 @@ class Status(enum.Enum):
     MISFIT = "misfit: the residuals exceed the noise; the model or its nuisances miss something, the error bars are too small"
     UNJUDGED = ("not judged: the model's own render noise is above the data's noise, so chi^2 cannot tell a misfit; "
                 "render with more samples")
+    UNSETTLED = ("not settled: the pixel grid's step to a model made at a finer resolution stopped short of its fixed point; "
+                 "the values it moves are short of it by more than its tolerance (the warnings name them)")
     DIVERGED = "failed: the solve diverged"
     NONFINITE = "failed: the loss or a parameter became NaN"
     FAILED = "failed: the solver reported an error"
@@ -60,11 +64,13 @@ class Status(enum.Enum):
         return self.value
 
 
-def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool, unjudged: bool = False) -> Status:
+def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool, unjudged: bool = False, unsettled: bool = False) -> Status:
     """The fit's status from the solver's: a solve that ended without failing is
     :attr:`Status.NO_PROGRESS` if no step lowered the loss, else :attr:`Status.AT_BOUND` if a
     parameter ended at a bound, else :attr:`Status.UNJUDGED` if its residuals could not be judged
-    (``unjudged``), else :attr:`Status.MISFIT` if the residuals exceed the noise."""
+    (``unjudged``), else :attr:`Status.MISFIT` if the residuals exceed the noise, else, one that
+    did not stop at its step limit, :attr:`Status.UNSETTLED` if the pixel grid's step stopped short of its fixed
+    point (``unsettled``)."""
     if status not in (Status.CONVERGED, Status.NOISE_FLOOR, Status.NO_BETTER_POINT, Status.MAX_STEPS):
         return status
     if not moved:
@@ -75,4 +81,6 @@ def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool, unjudged:
         return Status.UNJUDGED
     if misfit:
         return Status.MISFIT
+    if unsettled and status is not Status.MAX_STEPS:
+        return Status.UNSETTLED
     return status

@@ -334,7 +334,9 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     coordinates). A fit that never moved passes ``correct=False``: its values are its start. With
     a blur width free (the pixel loss), the values take the step ``delta`` from the fit's model on the pixel grid to
     one made at 4x the resolution (:func:`~spacefit.fitting.pixel_grid.grid_step`; extras ``pixel_grid_error``,
-    solver coordinates; skipped where it would leave a range), and the covariance carries ``b b^T``, ``b``
+    solver coordinates; skipped where it would leave a range; ``pixel_grid_evaluations``, its fixed point's iterations,
+    and where taken ``pixel_grid_short``, each value's distance to the fixed point in standard errors), and the
+    covariance carries ``b b^T``, ``b``
     the bound on what remains of the grid's error after it (a third of the step from the model made at 2x
     to the one made at 4x; extras ``pixel_grid_remainder``, its magnitude), and the step's render noise
     (two renders at 4x, their change's difference through :func:`render_meat` at half weight); the
@@ -359,7 +361,8 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     if changes is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
         padding = np.zeros(lin.r.size - s.problem.pixels)
         columns = [i for i, n in enumerate(s.solver_params.names) if is_image(n)]
-        delta, remainder, noise, feedback = grid_step(changes, lambda d: lin.step(np.concatenate([d, padding])), x, np.sqrt(np.diag(cov)), columns)
+        grid = grid_step(changes, lambda d: lin.step(np.concatenate([d, padding])), x, np.sqrt(np.diag(cov)), columns)
+        delta, remainder, noise, feedback = grid.delta, grid.remainder, grid.noise, grid.feedback
         # the models at 4x (each image's renders at 4x, 6.3 MiB a 128 x 128 px frame) dropped before the products below,
         # whose intermediates would come on top of them
         del changes
@@ -371,8 +374,10 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
         cov = moves @ cov @ moves.T + np.outer(remainder, remainder)
         if correct and all(b.contains(float(v)) for b, v in zip(s.solver_params.bijections, x + delta)):
             x = x + delta
+            extras["pixel_grid_short"] = dict(zip(s.solver_params.names, grid.short.tolist()))
         extras["pixel_grid_error"] = dict(zip(s.solver_params.names, delta.tolist()))
         extras["pixel_grid_remainder"] = dict(zip(s.solver_params.names, np.abs(remainder).tolist()))
+        extras["pixel_grid_evaluations"] = grid.evaluations
     if correct and s.problem.rendered and not s.noise_given:  # the render-seed check (spacefit.fitting.render_seeds)
         shift = seed_shift(s.problem, lin.x, (lin.r, lin.r_alt), lin.step)
         # the render noise the error carries: the meat's half of the render noise's (the mean residual's share)
