@@ -187,7 +187,8 @@ def _verdict(result: FitResult, out: str) -> int:
 
 def exit_code(status: Status) -> int:
     """The exit code of a fit that ended with ``status``: 0 for a success, else NO_PROGRESS, MISFIT,
-    AT_BOUND, UNJUDGED, INTERRUPTED, TERMINATED, or NOT_CONVERGED for the solver's other endings."""
+    AT_BOUND, UNJUDGED, INTERRUPTED, TERMINATED, or NOT_CONVERGED for the solver's other endings and for
+    UNSETTLED (the pixel grid's step short of its fixed point)."""
     from spacefit.fitting.status import Status  # deferred, as this module's other fitting imports: render never needs them
 
     if status.success:
