@@ -51,8 +51,9 @@ class Outside:
     """A problem's renders at a point and its models and residuals from them.
 
     Attributes:
-        render: (physical x, seed index j, with the Jacobian) -> the frames' renders at x with the j-th
-            seeds (0 the fit's, 1 the independent ones; :mod:`spacefit.fitting.problem`), outside JAX.
+        render: (physical x, seed index j, with the Jacobian[, the images at x made before]) -> the frames' renders at x
+            with the j-th seeds (0 the fit's, 1 the independent ones; :mod:`spacefit.fitting.problem`), outside JAX; given
+            the images (its own without the Jacobian), the Jacobian columns alone are rendered, beside them.
         evaluate: (x, images, jacobians, operands) -> the observations' models, the stacked residuals and those a
             solver descends, a compiled program with no callback, differentiable in x where ``jacobians`` are given.
         each: evaluate's models -> each observation's, split outside the program (a pass's frames' models come
@@ -61,7 +62,7 @@ class Outside:
             calls evaluate takes them as its own operands (a solver's step: beside the renders), not as constants.
     """
 
-    render: Callable[[np.ndarray, int, bool], Rendered]
+    render: Callable[..., Rendered]
     evaluate: Evaluate
     each: Callable[[list[jax.Array]], list[jax.Array]] = list
     operands: Callable[[np.dtype], Any] = lambda dtype: None
