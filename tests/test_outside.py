@@ -149,3 +149,17 @@ def test_a_trial_stepped_on_its_images_alone_and_accepted_is_stepped_again_on_it
     monkeypatch.setattr(drivers, "_rejects_above", lambda solver: True)
     _assert_same_steps(_stepped(small, "gn", 6, _rendered_first(small)), reference)
     assert jacobian_renders == [False, True, True, True, True, True]
+
+
+@pytest.mark.slow  # three primal renders at 32 x 32 px
+@float64
+def test_images_begun_ahead_are_the_images_made_in_turn(small):
+    """``render_images_ahead``'s images, made on a thread while the caller works, are those ``residuals`` renders in turn,
+    bit for bit, and are taken once; a point begun after another replaces it."""
+    outside, x = small.problem.outside, np.asarray(small.x0)
+    outside.render_images_ahead(1.01 * x, 1)
+    outside.render_images_ahead(x, 1)
+    assert len(outside.images_ahead) == 1
+    ahead = outside.residuals(jnp.asarray(x), 1)
+    assert not outside.images_ahead
+    np.testing.assert_array_equal(ahead, outside.residuals(jnp.asarray(x), 1))

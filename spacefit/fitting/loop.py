@@ -250,7 +250,12 @@ def _rendered_first(s: Setup, steps: SolveRecord | None = None) -> RenderedFirst
         return rendered(u, jacobian)
 
     def linearised(u: jax.Array, operands: Any) -> Any:
-        return rendered(u, True, operands[0])
+        with_columns = rendered(u, True, operands[0])
+        if steps is not None and steps.noise_stop:
+            # the point the solver is about to accept: the noise floor's record renders it with the independent seeds
+            # next (SolveRecord.record), begun while the solver's step runs
+            outside.render_images_ahead(np.asarray(fp.to_physical(u)), 1)
+        return with_columns
 
     def residual(u: jax.Array, renders: Any) -> jax.Array:
         return outside.evaluate(fp.to_physical(u), *renders)[DESCENT].astype(u.dtype)  # as residual_u's
