@@ -113,9 +113,9 @@ def jacobian_renders(monkeypatch):
     calls: list[bool] = []
     render = frames.frame_jacobian
 
-    def counted(spec, key, x, seed, seed_grad, image=None, **kwargs):
+    def counted(spec, key, x, seed, seed_grad, loaded=None, image=None):
         calls.append(image is not None)
-        return render(spec, key, x, seed, seed_grad, image, **kwargs)
+        return render(spec, key, x, seed, seed_grad, loaded, image)
 
     monkeypatch.setattr(frames, "frame_jacobian", counted)
     return calls

@@ -244,8 +244,8 @@ def frame_primal(spec: FrameSpec, key: str, x: np.ndarray, seed: int, loaded: Lo
 
 
 @float64
-def frame_jacobian(spec: FrameSpec, key: str, x: np.ndarray, seed: int, seed_grad: int, image: np.ndarray | None = None,
-                   loaded: Loaded | None = None) -> tuple[np.ndarray, np.ndarray]:
+def frame_jacobian(spec: FrameSpec, key: str, x: np.ndarray, seed: int, seed_grad: int, loaded: Loaded | None = None,
+                   image: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The frame's image and Jacobian (h, w, 3, n) at ``x``: one call of the bridge's Jacobian
     callback (:func:`~spacefit.rendering.bridge.render_params`), as a fit's linearisation makes it.
     ``image``: the frame's image at ``x`` for ``seed``, rendered before (:func:`frame_primal`'s): the columns alone are rendered."""
@@ -257,10 +257,17 @@ def frame_jacobian(spec: FrameSpec, key: str, x: np.ndarray, seed: int, seed_gra
     last = loaded.jacobians.get(key)
     if last is not None and last[0] == point:  # a solver's last linearisation, asked again by the standard errors
         return last[1]
-    img, J = loaded.function(spec, key, "jacobian")(jnp.asarray(x, dtype=jnp.float64), seeds_array(seed, seed_grad), image=image)
+    made_before = {} if image is None else {"image": image}
+    img, J = loaded.function(spec, key, "jacobian")(jnp.asarray(x, dtype=jnp.float64), seeds_array(seed, seed_grad), **made_before)
     out = np.asarray(img, dtype=np.float32), np.asarray(J, dtype=np.float32)
     loaded.jacobians[key] = (point, out)
     return out
+
+
+def frame_columns(spec: FrameSpec, key: str, x: np.ndarray, seed: int, seed_grad: int, image: np.ndarray,
+                  loaded: Loaded | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`frame_jacobian` beside the frame's ``image`` at ``x`` for ``seed``, rendered before: its columns alone rendered."""
+    return frame_jacobian(spec, key, x, seed, seed_grad, loaded, image)
 
 
 class InProcess(executors.InProcess):
@@ -323,9 +330,11 @@ def frame_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Seque
     x, seeds = np.asarray(x), np.asarray(seeds)  # JAX may hand a callback its own arrays (each index of one compiles)
     if not jacobian:
         return _stacked(run_frames(executor, frame_primal, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs)), runs), None
-    made = [None] * len(specs) if images is None else [images[i][k - run.start] for i, run in enumerate(runs) for k in run]
-    out = run_frames(executor, frame_jacobian, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs),
-                     [int(seeds[1])] * len(specs), made)
+    per_frame = [[x[idx] for idx in indices], [int(seeds[0])] * len(specs), [int(seeds[1])] * len(specs)]
+    if images is None:
+        out = run_frames(executor, frame_jacobian, specs, *per_frame)
+    else:
+        out = run_frames(executor, frame_columns, specs, *per_frame, [images[i][k - run.start] for i, run in enumerate(runs) for k in run])
     return _stacked([img for img, _ in out], runs) if images is None else images, _stacked([J for _, J in out], runs)
 
 
