@@ -246,9 +246,6 @@ def _rendered_first(s: Setup, steps: SolveRecord | None = None) -> RenderedFirst
             made = (made[0], tuple(np.zeros(shape, dtype) for shape, dtype in columns))
         return (*made, outside.operands(x.dtype))  # the step's operands: the renders and the frames' own arrays
 
-    def render(u: jax.Array, jacobian: bool) -> Any:
-        return rendered(u, jacobian)
-
     def linearised(u: jax.Array, operands: Any) -> Any:
         with_columns = rendered(u, True, operands[0])
         if steps is not None and steps.noise_stop:
@@ -260,4 +257,4 @@ def _rendered_first(s: Setup, steps: SolveRecord | None = None) -> RenderedFirst
     def residual(u: jax.Array, renders: Any) -> jax.Array:
         return outside.evaluate(fp.to_physical(u), *renders)[DESCENT].astype(u.dtype)  # as residual_u's
 
-    return RenderedFirst(render, linearised, residual)
+    return RenderedFirst(rendered, linearised, residual)
