@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 import spacefit as sf
+from spacefit.fitting import drivers, frames
 from spacefit.fitting.loop import _rendered_first
-from spacefit.fitting.drivers import drive
+from spacefit.fitting.drivers import RenderedFirst, Step, drive
 from spacefit.fitting.solvers import make_solver
 from spacefit.precision import float64
 from spacefit.fitting.problem import setup
@@ -84,3 +85,81 @@ def test_renders_begun_ahead_are_the_renders_made_in_turn(small):
     for a, b in zip(jax.tree.leaves(ahead), jax.tree.leaves(in_turn), strict=True):
         assert a is not b
         np.testing.assert_array_equal(a, b)
+
+
+def _stepped(small, solver: str, max_steps: int, rendered_first: RenderedFirst) -> list[Step]:
+    """The steps of ``solver`` from the start of ``small`` on ``rendered_first``'s renders."""
+    u = jnp.asarray(small.solver_params.to_unconstrained(jnp.asarray(small.x0)))
+    return list(drive(make_solver(solver), None, u, max_steps, None, rendered_first))
+
+
+def _every_trial_linearised(given: RenderedFirst) -> RenderedFirst:
+    """``given`` rendering every trial point's Jacobian with its images (the driver's renders before rejected trials
+    were stepped on their images alone)."""
+    return RenderedFirst(lambda u, jacobian: given.render(u, True), lambda u, operands: operands, given.residual)
+
+
+def _assert_same_steps(steps: list[Step], reference: list[Step]) -> None:
+    assert len(steps) == len(reference)
+    for a, b in zip(steps, reference):
+        for got, expected in [(a.u, b.u), (a.residuals, b.residuals), (a.iterate, b.iterate), (a.next_u, b.next_u)]:
+            np.testing.assert_array_equal(np.asarray(got), np.asarray(expected))
+        assert a.loss == b.loss
+
+
+@pytest.fixture
+def jacobian_renders(monkeypatch):
+    """Per Jacobian render of a frame (frames.frame_jacobian), whether its image was given (rendered before)."""
+    calls: list[bool] = []
+    render = frames.frame_jacobian
+
+    def counted(spec, key, x, seed, seed_grad, loaded=None, image=None):
+        calls.append(image is not None)
+        return render(spec, key, x, seed, seed_grad, loaded, image)
+
+    monkeypatch.setattr(frames, "frame_jacobian", counted)
+    return calls
+
+
+@pytest.mark.slow  # two solves of 7 steps at 32 x 32 px: about 20 s at load 7
+@float64
+def test_a_trial_rejected_on_its_loss_renders_no_jacobian_and_steps_the_same_bits(small, jacobian_renders):
+    """Levenberg-Marquardt from the start, 7 steps, the last two rejected (their losses above the best): stepped on their
+    images alone, zeros in their Jacobian's place, the solver's states are those stepped on their Jacobians, bit for
+    bit, and no Jacobian is rendered for them; an accepted trial's columns are rendered beside its images."""
+    reference = _stepped(small, "lm", 7, _every_trial_linearised(_rendered_first(small)))
+    assert len(jacobian_renders) == 7
+    jacobian_renders.clear()
+    steps = _stepped(small, "lm", 7, _rendered_first(small))
+    _assert_same_steps(steps, reference)
+    rejected = [k for k in range(1, 7) if steps[k].loss > min(s.loss for s in steps[:k])]
+    assert rejected == [5, 6]
+    assert jacobian_renders == [False, True, True, True, True]  # the start's with its image, then the accepted trials'
+
+
+@pytest.mark.slow  # two solves of 6 steps at 32 x 32 px: about 15 s at load 7
+@float64
+def test_a_trial_stepped_on_its_images_alone_and_accepted_is_stepped_again_on_its_jacobian(small, jacobian_renders, monkeypatch):
+    """Gauss-Newton accepts every step, a rise of the loss too: told that it rejects on the loss as a trust region does,
+    the driver steps its rising trial on its images alone, sees the step accept it, and steps it again on its Jacobian:
+    the same states bit for bit as stepped on every trial's Jacobian."""
+    reference = _stepped(small, "gn", 6, _every_trial_linearised(_rendered_first(small)))
+    assert reference[-1].loss > reference[-2].loss  # the last trial's loss rose: the driver steps it without its Jacobian first
+    jacobian_renders.clear()
+    monkeypatch.setattr(drivers, "_rejects_above", lambda solver: True)
+    _assert_same_steps(_stepped(small, "gn", 6, _rendered_first(small)), reference)
+    assert jacobian_renders == [False, True, True, True, True, True]
+
+
+@pytest.mark.slow  # three primal renders at 32 x 32 px
+@float64
+def test_images_begun_ahead_are_the_images_made_in_turn(small):
+    """``render_images_ahead``'s images, made on a thread while the caller works, are those ``residuals`` renders in turn,
+    bit for bit, and are taken once; a point begun after another replaces it."""
+    outside, x = small.problem.outside, np.asarray(small.x0)
+    outside.render_images_ahead(1.01 * x, 1)
+    outside.render_images_ahead(x, 1)
+    assert len(outside.images_ahead) == 1
+    ahead = outside.residuals(jnp.asarray(x), 1)
+    assert not outside.images_ahead
+    np.testing.assert_array_equal(ahead, outside.residuals(jnp.asarray(x), 1))

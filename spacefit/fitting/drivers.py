@@ -8,6 +8,7 @@ records the steps and may stop the solve.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Generator
 from dataclasses import dataclass
 from typing import Any
@@ -64,11 +65,15 @@ class RenderedFirst:
     (:mod:`spacefit.fitting.outside`), so that the step calls nothing back and JAX's cache keeps it.
 
     Attributes:
-        render: unconstrained u (concrete) -> the renders at u, the step's operands.
+        render: (unconstrained u (concrete), with the Jacobian) -> the renders at u, the step's operands; without the
+            Jacobian, zeros hold its columns' place (a step that rejects u reads none of them).
+        linearised: (u, ``render(u, False)``'s operands) -> ``render(u, True)``'s: the Jacobian's columns rendered beside
+            the images made.
         residual: (u, renders) -> the residuals at u from renders made at u: a function with no callback.
     """
 
-    render: Callable[[jax.Array], Any]
+    render: Callable[[jax.Array, bool], Any]
+    linearised: Callable[[jax.Array, Any], Any]
     residual: Callable[[jax.Array, Any], jax.Array]
 
 
@@ -184,10 +189,31 @@ def _stepped(advance: Callable[[int, jax.Array], Step], terminate: Callable[[jax
     return Outcome(_status(result), u, k)
 
 
+def _rejects_above(solver: optx.AbstractGaussNewton) -> bool:
+    """Whether the solver rejects a trial point whose loss is above its last accepted point's on that alone: its search a
+    trust region (optimistix's ``ClassicalTrustRegion``, ``LinearTrustRegion``), which accepts a point where the loss
+    changed by at most ``low_cutoff`` times the change its model predicts (never a rise for the Gauss-Newton family's
+    descent directions), with ``low_cutoff`` >= 0. Not Gauss-Newton's (its every step accepted)."""
+    search = solver.search
+    return isinstance(search, (optx.ClassicalTrustRegion, optx.LinearTrustRegion)) and float(search.low_cutoff) >= 0.0
+
+
+def _accepts(after: Any, before: Any) -> bool:
+    """Whether the Gauss-Newton-family step from state ``before`` to ``after`` accepted its trial point."""
+    return bool(after.num_accepted_steps > before.num_accepted_steps)
+
+
 def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: jax.Array, max_steps: int) -> Driver:
     """Step a Gauss-Newton-family solver with the renders made before each step at its trial point
-    (its state's ``y_eval``), handed to the compiled step as its ``args``: no program calls back."""
+    (its state's ``y_eval``), handed to the compiled step as its ``args``: no program calls back.
+
+    A trial point's Jacobian is read only where the step accepts it (optimistix's ``AbstractGaussNewton.step``: a rejected
+    step keeps its state's, whatever the trial's), so where the solver rejects on the loss alone (:func:`_rejects_above`)
+    a trial whose loss is above the last accepted point's is stepped on its images, zeros in its Jacobian's place: the
+    same state bit for bit, without the Jacobian's render (a pass's: every frame's). Should that step accept the point
+    after all (a rounding tie), it is stepped again from the same state on the point's Jacobian."""
     held = [given.residual]  # dropped when the solve ends (as :func:`_optimistix`'s)
+    on_loss = _rejects_above(solver)
 
     def fn(y: jax.Array, args: Any) -> tuple[jax.Array, None]:
         return held[0](y, args), None
@@ -198,19 +224,32 @@ def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: j
 
     tags: frozenset = frozenset()
     try:
-        args = given.render(u)
+        args = given.render(u, True)
         step, terminate, evaluate = eqx.filter_jit(solver.step), eqx.filter_jit(solver.terminate), jax.jit(evaluated)
         first = evaluate(u, args)  # the first step's (its trial point is u), and the residuals' shape without another trace
         # one program: optimistix's init, run op by op, made some 24 single-operation programs, each traced and lowered per process
         state = eqx.filter_jit(solver.init)(fn, u, args, {}, jax.ShapeDtypeStruct(first[0].shape, first[0].dtype), None, tags)
+        accepted_loss = math.inf  # the loss of the solver's last accepted point (the first step accepts its own)
 
         def advance(k: int, u: jax.Array) -> Step:
-            nonlocal state, args
+            nonlocal state, args, accepted_loss
             trial = state.y_eval
-            if k > 1:
-                args = given.render(trial)
-            r, value = first if k == 1 else evaluate(trial, args)
-            u, state, _ = step(fn, u, args, {}, state, tags)
+            if k == 1 or not on_loss:
+                if k > 1:
+                    args = given.render(trial, True)
+                r, value = first if k == 1 else evaluate(trial, args)
+                taken = step(fn, u, args, {}, state, tags)
+            else:
+                args = given.render(trial, False)
+                r, value = evaluate(trial, args)
+                taken = step(fn, u, args, {}, state, tags) if float(value) > accepted_loss else None
+                if taken is None or _accepts(taken[1], state):
+                    args = given.linearised(trial, args)
+                    taken = step(fn, u, args, {}, state, tags)
+            u, after, _ = taken
+            if _accepts(after, state):
+                accepted_loss = float(value)
+            state = after
             return Step(np.asarray(trial), float(value), np.asarray(r), iterate=u, next_u=np.asarray(state.y_eval))
 
         return (yield from _stepped(advance, lambda u: terminate(fn, u, args, {}, state, tags), u, max_steps))

@@ -202,14 +202,15 @@ class Loaded:
         of its values and seeds (:func:`~spacefit.rendering.bridge.seeds_array`), rendered outside JAX
         (:func:`~spacefit.rendering.bridge.outside_render_params`): one pair of programs per loaded scene and
         finite-difference steps, the seeds and the frame's view their operands (a new closure each step
-        would compile each step, a closure per frame each frame)."""
+        would compile each step, a closure per frame each frame). The Jacobian's function takes the image made before as
+        ``image=`` (:func:`frame_jacobian`)."""
         chain = self.chain(spec, key)  # loads it, or marks its scene as recently used
         stage, _, view = self.chains[key]
         name = (stage, spec.fd_steps)
         if name not in self.compiled:
             self.compiled[name] = outside_render_params(chain.drjit, self.stages[stage].values, spec.fd_steps)
         compiled = self.compiled[name][kind == "jacobian"]
-        return lambda x, seeds: compiled(x, seeds, view)
+        return lambda x, seeds, **image: compiled(x, seeds, view, **image)
 
 
 # This process's loaded scenes: a dask worker keeps its frames' between tasks.
@@ -243,22 +244,30 @@ def frame_primal(spec: FrameSpec, key: str, x: np.ndarray, seed: int, loaded: Lo
 
 
 @float64
-def frame_jacobian(spec: FrameSpec, key: str, x: np.ndarray, seed: int, seed_grad: int,
-                   loaded: Loaded | None = None) -> tuple[np.ndarray, np.ndarray]:
+def frame_jacobian(spec: FrameSpec, key: str, x: np.ndarray, seed: int, seed_grad: int, loaded: Loaded | None = None,
+                   image: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """The frame's image and Jacobian (h, w, 3, n) at ``x``: one call of the bridge's Jacobian
-    callback (:func:`~spacefit.rendering.bridge.render_params`), as a fit's linearisation makes it."""
+    callback (:func:`~spacefit.rendering.bridge.render_params`), as a fit's linearisation makes it.
+    ``image``: the frame's image at ``x`` for ``seed``, rendered before (:func:`frame_primal`'s): the columns alone are rendered."""
     if not spec.names:  # the frame's renderer sees no free value (its image nuisances act in JAX): no column
-        img = frame_primal(spec, key, x, seed, loaded)
+        img = frame_primal(spec, key, x, seed, loaded) if image is None else image
         return img, np.zeros((*img.shape, 0), np.float32)
     loaded = loaded or _LOADED
     point = np.asarray([seed, seed_grad], dtype=np.float64).tobytes() + np.asarray(x, dtype=np.float64).tobytes()
     last = loaded.jacobians.get(key)
     if last is not None and last[0] == point:  # a solver's last linearisation, asked again by the standard errors
         return last[1]
-    img, J = loaded.function(spec, key, "jacobian")(jnp.asarray(x, dtype=jnp.float64), seeds_array(seed, seed_grad))
+    made_before = {} if image is None else {"image": image}
+    img, J = loaded.function(spec, key, "jacobian")(jnp.asarray(x, dtype=jnp.float64), seeds_array(seed, seed_grad), **made_before)
     out = np.asarray(img, dtype=np.float32), np.asarray(J, dtype=np.float32)
     loaded.jacobians[key] = (point, out)
     return out
+
+
+def frame_columns(spec: FrameSpec, key: str, x: np.ndarray, seed: int, seed_grad: int, image: np.ndarray,
+                  loaded: Loaded | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`frame_jacobian` beside the frame's ``image`` at ``x`` for ``seed``, rendered before: its columns alone rendered."""
+    return frame_jacobian(spec, key, x, seed, seed_grad, loaded, image)
 
 
 class InProcess(executors.InProcess):
@@ -311,17 +320,22 @@ def _stacked(per_frame: Sequence[np.ndarray], runs: Sequence[range]) -> tuple[np
 
 
 def frame_renders(executor: Executor, specs: Sequence[FrameSpec], indices: Sequence[np.ndarray], runs: Sequence[range], x: np.ndarray,
-                  seeds: np.ndarray, jacobian: bool) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...] | None]:
+                  seeds: np.ndarray, jacobian: bool, images: tuple[np.ndarray, ...] | None = None) -> tuple[
+                      tuple[np.ndarray, ...], tuple[np.ndarray, ...] | None]:
     """Every frame's image, frame k's at ``x[indices[k]]``, for the seeds ``seeds``
     (:func:`~spacefit.rendering.bridge.seeds_array`), stacked per run of ``runs`` (:func:`render_runs`;
     (frames, h, w, 3) each), and with ``jacobian`` each run's Jacobian columns (frames, h, w, 3, n)
-    (None without): one batch on ``executor``."""
+    (None without): one batch on ``executor``. ``images``: the images at x for these seeds, made before (this
+    function's without ``jacobian``): with ``jacobian``, the columns alone are rendered, beside them."""
     x, seeds = np.asarray(x), np.asarray(seeds)  # JAX may hand a callback its own arrays (each index of one compiles)
     if not jacobian:
         return _stacked(run_frames(executor, frame_primal, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs)), runs), None
-    out = run_frames(executor, frame_jacobian, specs, [x[idx] for idx in indices], [int(seeds[0])] * len(specs),
-                     [int(seeds[1])] * len(specs))
-    return _stacked([img for img, _ in out], runs), _stacked([J for _, J in out], runs)
+    per_frame = [[x[idx] for idx in indices], [int(seeds[0])] * len(specs), [int(seeds[1])] * len(specs)]
+    if images is None:
+        out = run_frames(executor, frame_jacobian, specs, *per_frame)
+    else:
+        out = run_frames(executor, frame_columns, specs, *per_frame, [images[i][k - run.start] for i, run in enumerate(runs) for k in run])
+    return _stacked([img for img, _ in out], runs) if images is None else images, _stacked([J for _, J in out], runs)
 
 
 def _run_indices(indices: Sequence[np.ndarray], runs: Sequence[range]) -> list[np.ndarray]:

@@ -233,15 +233,28 @@ def _rendered_first(s: Setup, steps: SolveRecord | None = None) -> RenderedFirst
     fp, outside = s.solver_params, s.problem.outside
     if outside is None:
         return None
+    columns: list[tuple[tuple[int, ...], np.dtype]] = []  # the Jacobian columns' shapes, from the renders made with them
 
-    def render(u: jax.Array) -> Any:
+    def rendered(u: jax.Array, jacobian: bool, images: tuple[np.ndarray, ...] | None = None) -> Any:
         x = np.asarray(fp.to_physical(u))
-        rendered = outside.render(x, 0, True)
-        if steps is not None:
-            steps.rendered(x, rendered)
-        return (*rendered, outside.operands(x.dtype))  # the step's operands: the renders and the frames' own arrays
+        made = outside.render(x, 0, jacobian, images)
+        if jacobian:
+            columns[:] = [(c.shape, c.dtype) for c in made[1]]
+            if steps is not None:
+                steps.rendered(x, made)
+        else:
+            made = (made[0], tuple(np.zeros(shape, dtype) for shape, dtype in columns))
+        return (*made, outside.operands(x.dtype))  # the step's operands: the renders and the frames' own arrays
 
-    def residual(u: jax.Array, rendered: Any) -> jax.Array:
-        return outside.evaluate(fp.to_physical(u), *rendered)[DESCENT].astype(u.dtype)  # as residual_u's
+    def linearised(u: jax.Array, operands: Any) -> Any:
+        with_columns = rendered(u, True, operands[0])
+        if steps is not None and steps.noise_stop:
+            # the point the solver is about to accept: the noise floor's record renders it with the independent seeds
+            # next (SolveRecord.record), begun while the solver's step runs
+            outside.render_images_ahead(np.asarray(fp.to_physical(u)), 1)
+        return with_columns
 
-    return RenderedFirst(render, residual)
+    def residual(u: jax.Array, renders: Any) -> jax.Array:
+        return outside.evaluate(fp.to_physical(u), *renders)[DESCENT].astype(u.dtype)  # as residual_u's
+
+    return RenderedFirst(rendered, linearised, residual)

@@ -13,7 +13,9 @@ pass's frames' models hold (their references, masks: :meth:`~spacefit.fitting.fr
 are its operands too (:attr:`Outside.operands`), not fetched by a callback.
 The solver's renders of its best point are kept (:meth:`Outside.keep`): the standard errors linearise
 there again with the fit's seeds, the same renders (a fit that ends on rejected trial steps rendered
-others since).
+others since). Renders a caller will ask for next may begin on a thread of their own while it works
+(:meth:`Outside.render_ahead`, :meth:`Outside.render_images_ahead`): the same renders, made while the Dr.Jit
+thread would idle.
 """
 
 from __future__ import annotations
@@ -51,8 +53,9 @@ class Outside:
     """A problem's renders at a point and its models and residuals from them.
 
     Attributes:
-        render: (physical x, seed index j, with the Jacobian) -> the frames' renders at x with the j-th
-            seeds (0 the fit's, 1 the independent ones; :mod:`spacefit.fitting.problem`), outside JAX.
+        render: (physical x, seed index j, with the Jacobian[, the images at x made before]) -> the frames' renders at x
+            with the j-th seeds (0 the fit's, 1 the independent ones; :mod:`spacefit.fitting.problem`), outside JAX; given
+            the images (its own without the Jacobian), the Jacobian columns alone are rendered, beside them.
         evaluate: (x, images, jacobians, operands) -> the observations' models, the stacked residuals and those a
             solver descends, a compiled program with no callback, differentiable in x where ``jacobians`` are given.
         each: evaluate's models -> each observation's, split outside the program (a pass's frames' models come
@@ -61,12 +64,13 @@ class Outside:
             calls evaluate takes them as its own operands (a solver's step: beside the renders), not as constants.
     """
 
-    render: Callable[[np.ndarray, int, bool], Rendered]
+    render: Callable[..., Rendered]
     evaluate: Evaluate
     each: Callable[[list[jax.Array]], list[jax.Array]] = list
     operands: Callable[[np.dtype], Any] = lambda dtype: None
     kept: dict[tuple[bytes, int], Rendered] = field(default_factory=dict)  # one point's renders with their Jacobian (keep)
     ahead: dict[tuple[bytes, int], Future] = field(default_factory=dict)  # renders with their Jacobian being made (render_ahead)
+    images_ahead: dict[tuple[bytes, int], Future] = field(default_factory=dict)  # one point's images being made (render_images_ahead)
 
     def keep(self, x: np.ndarray, j: int, rendered: Rendered) -> None:
         """Keep ``rendered``, the renders with their Jacobian at ``x`` with the j-th seeds, in place of those kept before."""
@@ -89,13 +93,26 @@ class Outside:
             return kept
         return pending.result() if pending is not None else self.render(np.asarray(x), j, True)
 
+    def render_images_ahead(self, x: np.ndarray, j: int) -> None:
+        """Begin the images (no Jacobian) at ``x`` with the j-th seeds on a thread of their own (:func:`_started`), for
+        :meth:`models` and :meth:`residuals` to take, in place of any begun before and not taken."""
+        key = (np.asarray(x, dtype=np.float64).tobytes(), j)
+        if key not in self.images_ahead:
+            self.images_ahead.clear()
+            self.images_ahead[key] = _started(self.render, np.array(x), j, False)
+
+    def images(self, x: np.ndarray, j: int) -> Rendered:
+        """The images (no Jacobian) at ``x`` with the j-th seeds: those begun (:meth:`render_images_ahead`), else made."""
+        pending = self.images_ahead.pop((np.asarray(x, dtype=np.float64).tobytes(), j), None)
+        return pending.result() if pending is not None else self.render(np.asarray(x), j, False)
+
     def models(self, x: jax.Array, j: int) -> list[jax.Array]:
         """Each observation's model at ``x`` (concrete) with the j-th seeds."""
-        return self.each(self.evaluate(x, *self.render(np.asarray(x), j, False), self.operands(x.dtype))[0])
+        return self.each(self.evaluate(x, *self.images(np.asarray(x), j), self.operands(x.dtype))[0])
 
     def residuals(self, x: jax.Array, j: int, kind: int = RESIDUALS) -> jax.Array:
         """The stacked residuals (``kind`` :data:`RESIDUALS`; :data:`DESCENT`: those a solver descends) at ``x`` (concrete) with the j-th seeds."""
-        return self.evaluate(x, *self.render(np.asarray(x), j, False), self.operands(x.dtype))[kind]
+        return self.evaluate(x, *self.images(np.asarray(x), j), self.operands(x.dtype))[kind]
 
     def linearised(self, x: jax.Array, j: int) -> tuple[jax.Array, Callable[[jax.Array], jax.Array]]:
         """``jax.linearize`` of the stacked residuals at ``x`` (concrete) with the j-th seeds: their value and tangent map."""

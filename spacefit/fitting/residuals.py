@@ -205,8 +205,9 @@ def build_problem(
     if not any(b.rendered for b in blocks):
         given = given_renders(indices, runs)
 
-        def render_outside(x: np.ndarray, j: int, jacobian: bool) -> Rendered:
-            return frame_renders(executor, specs, indices, runs, x, np.asarray(seeds_of(j)), jacobian) if specs else ((), () if jacobian else None)
+        def render_outside(x: np.ndarray, j: int, jacobian: bool, images: tuple[np.ndarray, ...] | None = None) -> Rendered:
+            return (frame_renders(executor, specs, indices, runs, x, np.asarray(seeds_of(j)), jacobian, images) if specs
+                    else ((), () if jacobian else None))
 
         def evaluate(x: jax.Array, images: Sequence[jax.Array], jacobians: Sequence[jax.Array] | None, operands: Any) -> tuple[
                 list[jax.Array], jax.Array, jax.Array]:

@@ -309,7 +309,8 @@ def outside_render_params(
     functions ``(x, seeds, *view)`` that render outside JAX: the scene values (and their derivatives,
     the finite differences' points) come from compiled programs that call nothing back, so JAX's
     cache keeps them, and the renders run after them. The same images and columns as
-    :func:`seeded_render_params`'s and its Jacobian's, from the same values."""
+    :func:`seeded_render_params`'s and its Jacobian's, from the same values. The Jacobian's ``image=``: the
+    image at x for these seeds, rendered before (the first function's): the columns alone are rendered."""
     renders = _Renders(scene, fd_steps)
     values = jax.jit(lambda x, *view: _flat(values_of(x, *view)))
     inputs = jax.jit(_jacobian_inputs(values_of, renders.steps))
@@ -317,8 +318,8 @@ def outside_render_params(
     def image(x: Array, seeds: Array, *view: object) -> np.ndarray:
         return renders.primal(values(x, *view), seeds)
 
-    def jacobian(x: Array, seeds: Array, *view: object) -> tuple[np.ndarray, np.ndarray]:
-        return renders.jacobian(*inputs(x, *view), seeds)
+    def jacobian(x: Array, seeds: Array, *view: object, image: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        return renders.jacobian(*inputs(x, *view), seeds, image)
 
     return image, jacobian
 
@@ -338,12 +339,13 @@ class _Renders:
         return self.scene.primal(values, int(np.asarray(seeds)[0]))
 
     def jacobian(self, values: dict[str, np.ndarray], tangents: dict[str, np.ndarray], plus: dict[int, dict[str, np.ndarray]],
-                 minus: dict[int, dict[str, np.ndarray]], seeds: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+                 minus: dict[int, dict[str, np.ndarray]], seeds: np.ndarray, image: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """The image and its Jacobian: column j a central difference of the renders at ``plus[j]`` and
-        ``minus[j]`` (the seeds' first), or a forward-mode render along ``tangents``' j-th (the second)."""
+        ``minus[j]`` (the seeds' first), or a forward-mode render along ``tangents``' j-th (the second).
+        ``image``: the image at ``values`` for the seeds' first, rendered before (:meth:`primal`'s), not rendered again."""
         seed, seed_grad = (int(s) for s in np.asarray(seeds))
         tangents = {k: np.asarray(t) for k, t in tangents.items()}
-        img = self.scene.primal(values, seed)
+        img = self.scene.primal(values, seed) if image is None else image
         cols = []
         for j in range(self.n):
             if j in plus:
