@@ -77,8 +77,10 @@ def test_the_fine_models_black_sky_covers_its_blur_and_shift_at_the_fine_scale_a
         truth, wrapped = np.asarray(truth), np.asarray(wrapped)
         assert np.abs(wrapped - truth)[:, :2].max() > 1e-5 * truth.max()  # at the opposite edge
         np.testing.assert_allclose(model(edge, wide, None), truth, rtol=0, atol=1e-13 * truth.max())
-        with pytest.raises(jax.errors.JaxRuntimeError, match="wrap round"):
-            jax.jit(lambda x: model(edge, x, fits_pad))(wide)
+        assert np.isnan(np.asarray(jax.jit(lambda x: model(edge, x, fits_pad))(wide))).all()  # past its pad: refused
+        refused = GridChanges(lambda y: np.stack([np.asarray(model(edge, y, fits_pad)).ravel()] * 2), lambda y, columns: None)
+        with pytest.raises(RuntimeError, match="not finite"):  # the fixed point's iterations stop there
+            grid_step(refused, lambda d: np.zeros(len(wide)), wide, np.ones(len(wide)), [])
         centred = np.exp(-((u - 7.7) ** 2 + (v - 8.6) ** 2) / (2 * 0.5**2))[..., None] * np.ones(3)
         np.testing.assert_array_equal(model(centred, X, None), unchecked(centred, X, fits_pad))
 

@@ -125,11 +125,9 @@ in docs/measurements/performance-history.md, "The pixel grid's cost".
 from __future__ import annotations
 
 import dataclasses
-import functools
 import math
 from collections.abc import Callable, Sequence
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
@@ -229,14 +227,6 @@ def fine_pad(shape: tuple[int, ...], x: Float[np.ndarray, " n"], moves: Sequence
     return fast_pad(shape, max(PAD_PX, math.ceil(factor * (float(reach_px(jnp.asarray(x, dtype=float), moves)) + PAD_MARGIN_PX))))
 
 
-def _check_reach(reach: np.ndarray, pad: int) -> None:
-    """Raise where the fine model's blur and shift reach (fine px) past its black sky ``pad``: a value of the fixed
-    point's iterations that moved further than :data:`PAD_MARGIN_PX` from where the pad was sized (the model would wrap)."""
-    if float(reach) > pad:
-        raise ValueError(f"the pixel grid's fine model: the blur and shift reach {float(reach):.1f} fine px, past its "
-                         f"black sky of {pad} (sized at the fit's result with {PAD_MARGIN_PX:g} px to spare): light would wrap round")
-
-
 def without_psf(sensor: Sensor | None) -> Sensor | None:
     """``sensor`` with no PSF of its own (its blur applied elsewhere)."""
     return None if sensor is None else dataclasses.replace(sensor, psf_sigma_px=0.0, diffraction=False)
@@ -253,9 +243,9 @@ def fine_and_grid_models(fine: Float[Array, "H W c"], pixel_filter: str, x: Floa
     grid and ``grid_units`` (with the sensor's PSF). ``moves``: the indices in ``x`` of the blur
     width and the two shifts (None: not free), which are ``factor`` times larger in fine px. ``names``: the
     free parameters', whose image model (:func:`~spacefit.fitting.nuisance.image_model`) acts at the fine scale
-    on ``pad`` fine px of black sky (a fast size; None: :func:`fine_pad` at ``x``, which must then be concrete), and
-    fails (a runtime error of JAX's) where the blur's and shifts' reach at ``x`` (:func:`reach_px`) exceeds it: light
-    would wrap round the FFT's period; None: ``image_model`` there too."""
+    on ``pad`` fine px of black sky (a fast size; None: :func:`fine_pad` at ``x``, which must then be concrete), the
+    model all NaN where the blur's and shifts' reach at ``x`` (:func:`reach_px`) exceeds it (light would wrap round the
+    FFT's period); None: ``image_model`` there too."""
     h, w = fine.shape[0] // factor, fine.shape[1] // factor
     if names is not None:
         pad = fine_pad(fine.shape, x, moves, factor) if pad is None else pad
@@ -269,10 +259,11 @@ def fine_and_grid_models(fine: Float[Array, "H W c"], pixel_filter: str, x: Floa
     for i in moves:
         if i is not None:
             x_fine = x_fine.at[i].multiply(factor)
-    if names is not None:
-        jax.debug.callback(functools.partial(_check_reach, pad=pad), reach_px(x_fine, moves))
     image = jnp.asarray(fine, dtype=float)
-    return fine_units(respond(optics(fine_model(image, x_fine, k)))), grid_units(image_model(respond(image), x, k))
+    finer = fine_units(respond(optics(fine_model(image, x_fine, k))))
+    if names is not None:  # past its black sky it would wrap round: NaN, which grid_step refuses (no host callback: cached)
+        finer = jnp.where(reach_px(x_fine, moves) > pad, jnp.nan, finer)
+    return finer, grid_units(image_model(respond(image), x, k))
 
 
 def binned(image: Float[Array, "H W c"], by: int) -> Float[Array, "h w c"]:
@@ -377,6 +368,16 @@ class GridStep:
     evaluations: int
 
 
+def finite(changes: np.ndarray, y: Float[np.ndarray, " n"]) -> np.ndarray:
+    """``changes`` (the residuals' changes at the values ``y``), raising where one is not finite: a value whose blur and
+    shift reach past the fine models' black sky (sized at the fit's result, :func:`fine_pad`), which would wrap round."""
+    if not np.all(np.isfinite(changes)):
+        raise RuntimeError(f"the pixel grid's change to a finer model is not finite at the values {np.round(y, 4).tolist()}: "
+                           f"a blur or shift moved further than {PAD_MARGIN_PX:g} px from the fit's result, past the black sky "
+                           "its finer models were sized for (spacefit.fitting.pixel_grid.fine_pad), or a render is not finite")
+    return changes
+
+
 def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x: Float[np.ndarray, " n"], stderr: Float[np.ndarray, " n"],
               columns: Sequence[int]) -> GridStep:
     """The step ``delta`` from the fit's estimate ``x`` to the model made at :data:`SUPERSAMPLE`'s, the
@@ -396,8 +397,11 @@ def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x:
     taken as a constant leaves out (measured in the coverage study: the blur's error 1.2 times its pre-step error,
     ``D`` 0.16 for the blur)."""
     scale = np.where(stderr > 0, stderr, 1.0)  # a value without a standard error (no information in the pixels: its step 0) in its units
-    delta, evaluations = anderson(lambda y: step(changes.fine(x + y).mean(axis=0)), scale, FIXED_POINT_STEPS, FIXED_POINT_TOLERANCE)
+    delta, evaluations = anderson(lambda y: step(finite(changes.fine(x + y), x + y).mean(axis=0)), scale, FIXED_POINT_STEPS,
+                                  FIXED_POINT_TOLERANCE)
     each, coarser, derivatives = changes.settled(x + delta, columns)
+    finite(each, x + delta)
+    finite(coarser, x + delta)
     feedback = np.zeros((len(x), len(x)))
     # the columns' steps two at a time (each mostly on one core), each column read as its step starts
     for j, moved in zip(columns, concurrently([lambda i=i: step(derivatives[i]) for i in range(len(columns))])):
