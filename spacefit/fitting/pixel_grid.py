@@ -120,6 +120,17 @@ reference, the mask) too, so that a pass's frames alike share them
 (:class:`~spacefit.fitting.frame_models.AlikePrograms`): compiled once, not once a frame, and run two at a time
 (:func:`~spacefit.fitting.frame_models.concurrently`; so are the feedback's steps). Measured
 in docs/measurements/performance-history.md, "The pixel grid's cost".
+
+*Its black sky.* The blur and shifts are ``factor`` times larger in fine px, and so is the black sky they need lest
+light wrap round the FFT's period: the fine models are padded (:func:`fine_pad`) by ``factor`` times their reach at the
+fit's result (5 sigma of the blur and the larger shift, :func:`reach_px`) and :data:`PAD_MARGIN_PX` more for the fixed
+point's moves (hundredths of a px), or by the fit's pad (:data:`~spacefit.fitting.nuisance.PAD_PX`, 28) where that is
+wider: a 0.8 px blur shifted up to 3 px keeps a 128 px image's 32 fine px at 4x, its models and cost as they were. The
+fit's pad taken as fine px had covered a reach of 7 px at 4x, and what wraps, past twice the pad, was read by ``d_4``
+as the grid's error (16 px at 4x, light at an edge: a 3 px blur shifted 2 px out of the image put 1e-4 of the peak at
+the opposite edge, a 4 px blur 9e-4; a 2 px blur nothing above the round-off). A value the iterations move past the
+pad makes the model NaN, which :func:`grid_step` refuses with an error naming the values, rather than wrap. The sensor's
+PSF at the fine scale (:func:`fine_optics`) is sized there already (its width and Airy radius in fine px).
 """
 
 from __future__ import annotations
