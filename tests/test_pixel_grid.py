@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 from spacefit.cli import NOT_CONVERGED, exit_code
-from spacefit.fitting.nuisance import image_model
+from spacefit.fitting.nuisance import PAD_PX, image_model
 from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, FIXED_POINT_TOLERANCE, MOVES, REMAINDER_RATIO, GridChanges, ImageColumns, binned,
                                          fine_and_grid_models, grid_step, response_matrix, unsettled_notes)
+from spacefit.formation import fast_pad
 from spacefit.fitting.status import Status, verdict
 from spacefit.fitting.uncertainty import linearise
 
@@ -47,6 +48,42 @@ def test_a_resolved_image_has_no_pixel_grid_error_and_a_point_has_one():
     point[8 * FACTOR + 1, 7 * FACTOR + 2] = 1.0
     truth, grid = _models(point)
     assert np.abs(truth - grid).max() > 0.05 * truth.max()
+
+
+def test_the_fine_models_black_sky_covers_its_blur_and_shift_at_the_fine_scale_and_a_reach_past_it_fails():
+    """A wide blur of light at the image's edge: with the fit's pad (28 px) taken as fine px, the model made at 4x
+    wraps light round to the opposite edge (the FFT is circular); the pad sized at the fine scale for the values is the
+    ample pad's model to round-off. A centred target with a 0.8 px blur keeps the fit's pad: its model unchanged."""
+    same = lambda image: image  # noqa: E731
+    moves = [NAMES.index(n) for n in MOVES]
+
+    def model(fine: np.ndarray, x: np.ndarray, pad: int | None) -> jax.Array:
+        """The model made at 4x on ``pad`` fine px of black sky (None: sized for x), its reach checked."""
+        return fine_and_grid_models(jnp.asarray(fine), "box", x, 0, image_model(NAMES), same, same, same, moves, FACTOR, NAMES, pad)[0]
+
+    def unchecked(fine: np.ndarray, x: np.ndarray, pad: int) -> jax.Array:
+        """The same on ``pad`` as given (names None: the image model's own pad), as before the pad was sized at 4x."""
+        return fine_and_grid_models(jnp.asarray(fine), "box", x, 0, image_model(NAMES, pad), same, same, same, moves, FACTOR)[0]
+
+    with jax.enable_x64(True):  # float64: the wrap against the FFT's round-off
+        size = 16
+        shape = (size * FACTOR, size * FACTOR)
+        v, u = (np.mgrid[0 : shape[0], 0 : shape[1]] + 0.5) / FACTOR
+        fits_pad, ample = fast_pad(shape, PAD_PX), fast_pad(shape, FACTOR * PAD_PX)
+        edge = np.exp(-((u - size + 0.5) ** 2 + (v - 8.2) ** 2) / (2 * 0.5**2))[..., None] * np.ones(3)
+        wide = np.array([3.0, 2.0, -0.2, 1.5])  # blur 3 px, shifted 2 px out of the image: 17 px, 68 fine px, past twice its pad
+        truth = model(edge, wide, ample)
+        wrapped = unchecked(edge, wide, fits_pad)
+        truth, wrapped = np.asarray(truth), np.asarray(wrapped)
+        assert np.abs(wrapped - truth)[:, :2].max() > 1e-5 * truth.max()  # at the opposite edge
+        np.testing.assert_allclose(model(edge, wide, None), truth, rtol=0, atol=1e-13 * truth.max())
+        past = np.asarray(model(edge, wide, fits_pad))
+        assert np.isnan(past).all()  # past its pad: refused
+        refused = GridChanges(lambda y: np.stack([past.ravel()] * 2), lambda y, columns: None)
+        with pytest.raises(RuntimeError, match="not finite"):  # the fixed point's iterations stop there
+            grid_step(refused, lambda d: np.zeros(len(wide)), wide, np.ones(len(wide)), [])
+        centred = np.exp(-((u - 7.7) ** 2 + (v - 8.6) ** 2) / (2 * 0.5**2))[..., None] * np.ones(3)
+        np.testing.assert_array_equal(model(centred, X, None), unchecked(centred, X, fits_pad))
 
 
 def systematic_step(J1: np.ndarray, J2: np.ndarray, d: np.ndarray) -> np.ndarray:

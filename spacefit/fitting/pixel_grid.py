@@ -120,6 +120,17 @@ reference, the mask) too, so that a pass's frames alike share them
 (:class:`~spacefit.fitting.frame_models.AlikePrograms`): compiled once, not once a frame, and run two at a time
 (:func:`~spacefit.fitting.frame_models.concurrently`; so are the feedback's steps). Measured
 in docs/measurements/performance-history.md, "The pixel grid's cost".
+
+*Its black sky.* The blur and shifts are ``factor`` times larger in fine px, and so is the black sky they need lest
+light wrap round the FFT's period: the fine models are padded (:func:`fine_pad`) by ``factor`` times their reach at the
+fit's result (5 sigma of the blur and the larger shift, :func:`reach_px`) and :data:`PAD_MARGIN_PX` more for the fixed
+point's moves (hundredths of a px), or by the fit's pad (:data:`~spacefit.fitting.nuisance.PAD_PX`, 28) where that is
+wider: a 0.8 px blur shifted up to 3 px keeps a 128 px image's 32 fine px at 4x, its models and cost as they were. The
+fit's pad taken as fine px had covered a reach of 7 px at 4x, and what wraps, past twice the pad, was read by ``d_4``
+as the grid's error (16 px at 4x, light at an edge: a 3 px blur shifted 2 px out of the image put 1e-4 of the peak at
+the opposite edge, a 4 px blur 9e-4; a 2 px blur nothing above the round-off). A value the iterations move past the
+pad makes the model NaN, which :func:`grid_step` refuses with an error naming the values, rather than wrap. The sensor's
+PSF at the fine scale (:func:`fine_optics`) is sized there already (its width and Airy radius in fine px).
 """
 
 from __future__ import annotations
@@ -139,7 +150,7 @@ from spacefit.fitting.nuisance import image_model as nuisance_model
 from spacefit.fitting.observations.image import Observation, in_unit_of
 from spacefit.formation import fast_pad, fourier_filter, psf_transfer
 from spacefit.geometry.frames import Intrinsics
-from spacefit.psf import psf_reach_px
+from spacefit.psf import GAUSSIAN_RADIUS_SIGMA, psf_reach_px
 from spacefit.rendering.renderer import Renderer
 from spacefit.scene.schema import Scene
 from spacefit.sensor import Sensor
@@ -162,6 +173,9 @@ FIXED_POINT_TOLERANCE = 0.01
 is within this many standard errors; a value measured further from it at the end is flagged (:func:`unsettled_notes`)."""
 MOVES = ("image.blur_sigma_px", "image.shift_x_px", "image.shift_y_px")
 """The image nuisances in px, which scale with the resolution."""
+PAD_MARGIN_PX = 1.0
+"""px (sensor) added to the blur's and shifts' reach at the fit's result when the fine models' black sky is sized
+(:func:`fine_pad`): the fixed point's iterations move the values by hundredths of a px."""
 STEPS_PER_FINE_PX = 16  # quadrature points per fine pixel in :func:`response_matrix`
 
 
@@ -208,6 +222,22 @@ def fine_optics(sensor: Sensor | None, intrinsics: Intrinsics, factor: int, chan
     return lambda image: fourier_filter(image, transfer, pad, even=True)
 
 
+def reach_px(y: Float[Array, " n"], moves: Sequence[int | None]) -> Float[Array, ""]:
+    """How far (px of ``y``'s scale) the blur and shift of the values ``y`` carry light: 5 sigma of the blur (the
+    fit's pad's own measure, :data:`~spacefit.fitting.nuisance.PAD_PX`) and the larger shift; ``moves`` their indices in ``y``
+    (None: not free, 0)."""
+    sigma, dx, dy = (jnp.abs(y[i]) if i is not None else 0.0 for i in moves)
+    return GAUSSIAN_RADIUS_SIGMA * sigma + jnp.maximum(dx, dy)
+
+
+def fine_pad(shape: tuple[int, ...], x: Float[np.ndarray, " n"], moves: Sequence[int | None], factor: int) -> int:
+    """The black sky (fine px on every side, a fast size: :func:`~spacefit.formation.fast_pad`) round a render of
+    ``shape`` at ``factor`` times the resolution for the image nuisances at values near ``x`` (px): ``factor`` times
+    their reach at ``x`` (:func:`reach_px`) and :data:`PAD_MARGIN_PX`, or the fit's pad
+    (:data:`~spacefit.fitting.nuisance.PAD_PX`) where that is wider."""
+    return fast_pad(shape, max(PAD_PX, math.ceil(factor * (float(reach_px(jnp.asarray(x, dtype=float), moves)) + PAD_MARGIN_PX))))
+
+
 def without_psf(sensor: Sensor | None) -> Sensor | None:
     """``sensor`` with no PSF of its own (its blur applied elsewhere)."""
     return None if sensor is None else dataclasses.replace(sensor, psf_sigma_px=0.0, diffraction=False)
@@ -215,7 +245,8 @@ def without_psf(sensor: Sensor | None) -> Sensor | None:
 
 def fine_and_grid_models(fine: Float[Array, "H W c"], pixel_filter: str, x: Float[np.ndarray, " n"], k: int, image_model: ImageModel,
                          fine_units: Callable[[Array], Array], grid_units: Callable[[Array], Array], optics: Callable[[Array], Array],
-                         moves: Sequence[int | None], factor: int = SUPERSAMPLE, names: Sequence[str] | None = None) -> tuple[Array, Array]:
+                         moves: Sequence[int | None], factor: int = SUPERSAMPLE, names: Sequence[str] | None = None,
+                         pad: int | None = None) -> tuple[Array, Array]:
     """Observation k's model at ``x`` made twice from ``fine``, a box-filtered render at ``factor``
     times the resolution per axis: the image nuisances and ``optics`` (the sensor's PSF) at the
     fine scale then the response of a pixel of ``pixel_filter`` (:func:`response_matrix`) and
@@ -223,11 +254,15 @@ def fine_and_grid_models(fine: Float[Array, "H W c"], pixel_filter: str, x: Floa
     grid and ``grid_units`` (with the sensor's PSF). ``moves``: the indices in ``x`` of the blur
     width and the two shifts (None: not free), which are ``factor`` times larger in fine px. ``names``: the
     free parameters', whose image model (:func:`~spacefit.fitting.nuisance.image_model`) acts at the fine scale
-    on black sky padded to a fast size (:func:`~spacefit.formation.fast_pad`: a blur of 0.5 px is 2 fine px at
-    4x, whose transfer at the fine Nyquist frequency is 3e-9, so that the wider pad changes nothing but the
-    round-off, and the FFT of a 128 x 128 image at 4x is twice as fast); None: ``image_model`` there too."""
+    on ``pad`` fine px of black sky (a fast size; None: :func:`fine_pad` at ``x``, which must then be concrete), the
+    model all NaN where the blur's and shifts' reach at ``x`` (:func:`reach_px`) exceeds it (light would wrap round the
+    FFT's period); None: ``image_model`` there too."""
     h, w = fine.shape[0] // factor, fine.shape[1] // factor
-    fine_model = nuisance_model(names, fast_pad(fine.shape, PAD_PX)) if names is not None else image_model
+    if names is not None:
+        pad = fine_pad(fine.shape, x, moves, factor) if pad is None else pad
+        fine_model = nuisance_model(names, pad)
+    else:
+        fine_model = image_model
     rows, cols = (jnp.asarray(response_matrix(n, factor, pixel_filter)) for n in (h, w))
     respond = lambda image: jnp.einsum("iy,yxc,jx->ijc", rows, image, cols)  # noqa: E731
     x = jnp.asarray(x, dtype=float)
@@ -236,7 +271,10 @@ def fine_and_grid_models(fine: Float[Array, "H W c"], pixel_filter: str, x: Floa
         if i is not None:
             x_fine = x_fine.at[i].multiply(factor)
     image = jnp.asarray(fine, dtype=float)
-    return fine_units(respond(optics(fine_model(image, x_fine, k)))), grid_units(image_model(respond(image), x, k))
+    finer = fine_units(respond(optics(fine_model(image, x_fine, k))))
+    if names is not None:  # past its black sky it would wrap round: NaN, which grid_step refuses (no host callback: cached)
+        finer = jnp.where(reach_px(x_fine, moves) > pad, jnp.nan, finer)
+    return finer, grid_units(image_model(respond(image), x, k))
 
 
 def binned(image: Float[Array, "H W c"], by: int) -> Float[Array, "h w c"]:
@@ -274,14 +312,16 @@ def grid_error_models(obs: Observation, scene: Scene, x: Float[np.ndarray, " n"]
     renders = jnp.stack([np.asarray(renderer.render(seed=seed), dtype=np.float32) for seed in seeds])
     moves = [nuisance_index(names, n, k) for n in MOVES]
     optics = {f: fine_optics(obs.sensor, intrinsics, f, channels) for f in (SUPERSAMPLE, COARSER)}
+    # the black sky sized at x (static shapes), for the values y near it that the fixed point's iterations try
+    pads = {f: fine_pad((f * intrinsics.height, f * intrinsics.width), x, moves, f) for f in (SUPERSAMPLE, COARSER)}
 
     def fine(render: Float[Array, "H W 3"], y: Array) -> tuple[Array, Array]:
         return fine_and_grid_models(render.astype(float), scene.render.filter, y, k, image_model, fine_units, grid_units,
-                                    optics[SUPERSAMPLE], moves, names=names)
+                                    optics[SUPERSAMPLE], moves, names=names, pad=pads[SUPERSAMPLE])
 
     def coarser(render: Float[Array, "H W 3"], y: Array) -> Array:
         return fine_and_grid_models(binned(render.astype(float), SUPERSAMPLE // COARSER), scene.render.filter, y, k, image_model,
-                                    fine_units, grid_units, optics[COARSER], moves, COARSER, names)[0]
+                                    fine_units, grid_units, optics[COARSER], moves, COARSER, names, pads[COARSER])[0]
 
     return GridModels(renders, fine, coarser)
 
@@ -339,6 +379,16 @@ class GridStep:
     evaluations: int
 
 
+def finite(changes: np.ndarray, y: Float[np.ndarray, " n"]) -> np.ndarray:
+    """``changes`` (the residuals' changes at the values ``y``), raising where one is not finite: a value whose blur and
+    shift reach past the fine models' black sky (sized at the fit's result, :func:`fine_pad`), which would wrap round."""
+    if not np.all(np.isfinite(changes)):
+        raise RuntimeError(f"the pixel grid's change to a finer model is not finite at the values {np.round(y, 4).tolist()}: "
+                           f"a blur or shift moved further than {PAD_MARGIN_PX:g} px from the fit's result, past the black sky "
+                           "its finer models were sized for (spacefit.fitting.pixel_grid.fine_pad), or a render is not finite")
+    return changes
+
+
 def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x: Float[np.ndarray, " n"], stderr: Float[np.ndarray, " n"],
               columns: Sequence[int]) -> GridStep:
     """The step ``delta`` from the fit's estimate ``x`` to the model made at :data:`SUPERSAMPLE`'s, the
@@ -358,8 +408,11 @@ def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x:
     taken as a constant leaves out (measured in the coverage study: the blur's error 1.2 times its pre-step error,
     ``D`` 0.16 for the blur)."""
     scale = np.where(stderr > 0, stderr, 1.0)  # a value without a standard error (no information in the pixels: its step 0) in its units
-    delta, evaluations = anderson(lambda y: step(changes.fine(x + y).mean(axis=0)), scale, FIXED_POINT_STEPS, FIXED_POINT_TOLERANCE)
+    delta, evaluations = anderson(lambda y: step(finite(changes.fine(x + y), x + y).mean(axis=0)), scale, FIXED_POINT_STEPS,
+                                  FIXED_POINT_TOLERANCE)
     each, coarser, derivatives = changes.settled(x + delta, columns)
+    finite(each, x + delta)
+    finite(coarser, x + delta)
     feedback = np.zeros((len(x), len(x)))
     # the columns' steps two at a time (each mostly on one core), each column read as its step starts
     for j, moved in zip(columns, concurrently([lambda i=i: step(derivatives[i]) for i in range(len(columns))])):
