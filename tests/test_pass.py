@@ -4,7 +4,9 @@ pass with per-frame attitude errors."""
 
 from __future__ import annotations
 
+import ctypes
 import dataclasses
+import os
 import re
 from pathlib import Path
 
@@ -597,6 +599,26 @@ def test_a_fits_memory_estimate_is_at_or_above_the_measured_peaks_of_the_bench_p
     for size, n, peak in peaks:
         ratio = fit_memory(n, size * size, BENCH_COLUMNS, BENCH_SPP) / 2**20 / peak
         assert 1.0 <= ratio <= 1.2, (size, n, peak, ratio)
+
+
+@pytest.mark.skipif(not hasattr(ctypes.CDLL(None), "malloc_trim"), reason="glibc's malloc_trim")
+def test_the_freed_pages_a_fit_s_phases_leave_in_the_c_heap_are_handed_back_to_the_system():
+    """64 MiB freed in 64 KiB blocks (below glibc's mmap threshold: kept in the heap, under a block still in use) stay
+    resident until :func:`~spacefit.rendering.memory.release_freed_memory` hands them back."""
+    libc = ctypes.CDLL(None)
+    libc.malloc.restype, libc.free.argtypes = ctypes.c_void_p, [ctypes.c_void_p]
+    resident = lambda: int(Path("/proc/self/statm").read_text().split()[1]) * os.sysconf("SC_PAGE_SIZE")  # noqa: E731
+    blocks = [libc.malloc(1 << 16) for _ in range(1024)]
+    for block in blocks:
+        ctypes.memset(block, 1, 1 << 16)
+    above = libc.malloc(1 << 16)
+    for block in blocks:
+        libc.free(block)
+    held = resident()
+    memory.release_freed_memory()
+    handed_back = held - resident()
+    libc.free(above)
+    assert handed_back >= 60 * 2**20
 
 
 def test_a_fit_too_large_for_the_machine_is_refused_with_its_estimate_and_nothing_written(small_pass, tmp_path, monkeypatch, capsys):
