@@ -31,13 +31,13 @@ import lineax.internal as lxi
 import numpy as np
 from jaxtyping import Array, PyTree
 
-# Columns applied at once: at most this many, and at most CHUNK_ELEMENTS values of rows-long vectors (2^22 float64:
-# 32 MiB) at a time. A product's programs hold some 5 such vectors of temporaries and output: at 2^24 a 48-frame pass
-# of 128 x 128 px applied its 9 directions 5 at a time and its covariance's products rose 650 MiB above their start
-# (290 MiB at 12 frames); at 2^22 it applies them one at a time, and 12 frames of 128 x 128 px still 5 at a time
-# (experiments/results/pass_memory/).
+# Columns applied at once: at most this many, and at most CHUNK_ELEMENTS values of rows-long vectors
+# (2^24 float64: 128 MiB) at a time. Fewer (2^21: a 48-frame pass of 128 x 128 px a column at a time, 19 MiB a
+# vector) did not lower that pass's peak (docs/measurements/performance.md, "A pass's memory: programs and the allocator"),
+# nor a product's own: one covariance product of 24 frames of 128 x 128 px rose 300 MiB above its start 5 and 3 directions
+# at a time, 500 MiB one at a time (experiments/results/pass_memory/products_chunk_128px_24frames.txt).
 MAX_CHUNK = 8
-CHUNK_ELEMENTS = 1 << 22
+CHUNK_ELEMENTS = 1 << 24
 
 
 def chunk_for(rows: int) -> int:
