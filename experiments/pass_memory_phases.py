@@ -9,7 +9,8 @@ Figures: docs/measurements/performance.md, "A pass's memory: programs and the al
 The pixel grid's phase shows each evaluation of its changes at 4x, its settled changes and its feedback. With
 ``ANALYSE=1``, XLA's memory analysis of each pixel-grid program (compiled once more for it); with ``TRIM=major``
 (``TRIM=all``: at the render batches' edges too) glibc's ``malloc_trim`` at each edge, with ``TRIM=major,drjit`` Dr.Jit's
-malloc cache flushed there too. Figures also in experiments/results/pass_memory/.
+malloc cache flushed there too, with ``TRIM=major,clear`` JAX's compiled programs dropped before the pixel grid's
+fixed point and the goodness of fit. Figures also in experiments/results/pass_memory/.
 Run: ``[ANALYSE=1] [TRIM=...] python experiments/pass_memory_phases.py SIZE_PX FRAMES [MAX_STEPS]`` (default 12 steps, as bench_pass).
 """
 
@@ -85,6 +86,8 @@ class Phases:
         if TRIM and (TRIM == "all" or not name.startswith("  ")):
             if "drjit" in TRIM:
                 on_drjit_thread(dr.flush_malloc_cache)()
+            if "clear" in TRIM and name in ("pixel grid's fixed point <", "goodness of fit <"):
+                jax.clear_caches()
             self.libc.malloc_trim(0)
 
     def marked(self, name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -122,7 +125,16 @@ def main() -> None:
     print(f"machine: {machine()}; commit {commit()}; {size} x {size} px, {n} frames, at most {steps} steps; load {os.getloadavg()[0]:.1f}",
           flush=True)
     phases = Phases()
-    loop.setup = phases.marked("set-up", loop.setup)
+    setup = phases.marked("set-up", loop.setup)
+
+    def marked_setup(*args: Any, **kwargs: Any) -> Any:
+        s = setup(*args, **kwargs)
+        if s.problem.pixel_grid is not None:
+            s.problem.pixel_grid = phases.marked("pixel grid's renders", s.problem.pixel_grid)
+        return s
+
+    loop.setup = marked_setup
+    uncertainty.weight_bias = phases.marked("noise weights' bias", uncertainty.weight_bias)
     # the conclusion's home: loop.py at 51b17e1, conclusion.py since its split
     concluding = loop if hasattr(loop, "estimate") else importlib.import_module("spacefit.fitting.conclusion")
     concluding.estimate = phases.marked("covariance", concluding.estimate)
