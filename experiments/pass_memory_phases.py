@@ -6,7 +6,12 @@ mapped (``mallinfo2``: memory freed but kept by the allocator shows as "free"), 
 the bytes of JAX's live arrays. A fit's memory is native (XLA's programs and buffers, Dr.Jit, the allocator's held
 pages): neither JAX's live arrays nor Python's own allocations reach 100 MiB. Linux with glibc only.
 Figures: docs/measurements/performance-history.md, "A pass's memory: programs and the allocator".
-Run: ``python experiments/pass_memory_phases.py SIZE_PX FRAMES [MAX_STEPS]`` (default 12 steps, as bench_pass).
+The pixel grid's phase shows each evaluation of its changes at 4x, its settled changes and its feedback. With
+``ANALYSE=1``, XLA's memory analysis of each pixel-grid program (compiled once more for it); with ``TRIM=major``
+(``TRIM=all``: at the render batches' edges too) glibc's ``malloc_trim`` at each edge, with ``TRIM=major,drjit`` Dr.Jit's
+malloc cache flushed there too, with ``TRIM=major,clear`` JAX's compiled programs dropped before the pixel grid's
+fixed point and the goodness of fit. Figures also in experiments/results/pass_memory/.
+Run: ``[ANALYSE=1] [TRIM=...] python experiments/pass_memory_phases.py SIZE_PX FRAMES [MAX_STEPS]`` (default 12 steps, as bench_pass).
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+import drjit as dr
 import jax
 import numpy as np
 import psutil
@@ -30,9 +36,15 @@ from bench_pass import MAX_STEPS, SENSOR, base, fit_frames
 from studyio import commit, machine
 
 import spacefit as sf
+import spacefit.fitting.frame_models as frame_models
 import spacefit.fitting.frames as frames
 import spacefit.fitting.loop as loop
+import spacefit.fitting.pixel_grid as pixel_grid
 import spacefit.fitting.uncertainty as uncertainty
+from spacefit.rendering.backend import on_drjit_thread
+
+
+TRIM = os.environ.get("TRIM", "")
 
 
 class MallInfo2(ctypes.Structure):
@@ -71,6 +83,12 @@ class Phases:
               f"{m.uordblks / 2**20:5.0f}, held free {m.fordblks / 2**20:5.0f}, mapped {m.hblkhd / 2**20:4.0f}; {self.compiles:3d} XLA programs; "
               f"live JAX arrays {live:4.0f}", flush=True)
         self.peak = rss
+        if TRIM and (TRIM == "all" or not name.startswith("  ")):
+            if "drjit" in TRIM:
+                on_drjit_thread(dr.flush_malloc_cache)()
+            if "clear" in TRIM and name in ("pixel grid's fixed point <", "goodness of fit <"):
+                jax.clear_caches()
+            self.libc.malloc_trim(0)
 
     def marked(self, name: str, fn: Callable[..., Any]) -> Callable[..., Any]:
         """``fn`` with its edges shown."""
@@ -83,24 +101,57 @@ class Phases:
         return wrapped
 
 
+def analyse_alike_programs() -> None:
+    """Print XLA's memory analysis of each program of :class:`~spacefit.fitting.frame_models.AlikePrograms` (the pixel
+    grid's) at its first call (compiled once more for it)."""
+    call, seen = frame_models.AlikePrograms.__call__, set()
+
+    def analysed(self: Any, key: object, fn: Callable[..., object], *args: Any) -> Any:
+        out = call(self, key, fn, *args)
+        program, consts = self._traced[key]
+        if id(program) not in seen:
+            seen.add(id(program))
+            m = (program.lower(*args) if consts is None else program.lower(consts, *args)).compile().memory_analysis()
+            print(f"  program {getattr(key[0], '__name__', key[0])}: temporaries {m.temp_size_in_bytes / 2**20:.1f}, arguments "
+                  f"{m.argument_size_in_bytes / 2**20:.1f}, outputs {m.output_size_in_bytes / 2**20:.1f} MiB", flush=True)
+        return out
+
+    frame_models.AlikePrograms.__call__ = analysed
+
+
 def main() -> None:
     size, n = int(sys.argv[1]), int(sys.argv[2])
     steps = int(sys.argv[3]) if len(sys.argv) > 3 else MAX_STEPS
     print(f"machine: {machine()}; commit {commit()}; {size} x {size} px, {n} frames, at most {steps} steps; load {os.getloadavg()[0]:.1f}",
           flush=True)
     phases = Phases()
-    loop.setup = phases.marked("set-up", loop.setup)
+    setup = phases.marked("set-up", loop.setup)
+
+    def marked_setup(*args: Any, **kwargs: Any) -> Any:
+        s = setup(*args, **kwargs)
+        if s.problem.pixel_grid is not None:
+            s.problem.pixel_grid = phases.marked("pixel grid's renders", s.problem.pixel_grid)
+        return s
+
+    loop.setup = marked_setup
+    uncertainty.weight_bias = phases.marked("noise weights' bias", uncertainty.weight_bias)
     # the conclusion's home: loop.py at 51b17e1, conclusion.py since its split
     concluding = loop if hasattr(loop, "estimate") else importlib.import_module("spacefit.fitting.conclusion")
     concluding.estimate = phases.marked("covariance", concluding.estimate)
     concluding.judged_goodness = phases.marked("goodness of fit", concluding.judged_goodness)
     uncertainty.linearise = phases.marked("linearisation", uncertainty.linearise)
     uncertainty.Linearisation.columns = phases.marked("products", uncertainty.Linearisation.columns)
-    uncertainty.grid_step = phases.marked("pixel grid's fixed point", uncertainty.grid_step)
+    grid_step = phases.marked("pixel grid's fixed point", uncertainty.grid_step)
+    # inside it: each evaluation of the changes at 4x, the settled changes and derivatives, the feedback's steps
+    uncertainty.grid_step = lambda changes, *args: grid_step(pixel_grid.GridChanges(phases.marked("  changes at 4x", changes.fine),
+                                                                                   phases.marked("  settled", changes.settled)), *args)
+    pixel_grid.concurrently = phases.marked("  feedback", pixel_grid.concurrently)
     if hasattr(uncertainty, "grid_feedback"):  # a commit before the feedback was taken inside grid_step (51b17e1)
         uncertainty.grid_feedback = phases.marked("pixel grid's feedback", uncertainty.grid_feedback)
     run_frames = frames.run_frames
     frames.run_frames = lambda executor, fn, specs, *args: phases.marked(f"  {fn.__name__}", run_frames)(executor, fn, specs, *args)
+    if os.environ.get("ANALYSE"):
+        analyse_alike_programs()
     rng = np.random.default_rng(3)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "pass"

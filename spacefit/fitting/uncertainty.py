@@ -28,6 +28,7 @@ from spacefit.fitting.pixel_grid import grid_step
 from spacefit.fitting.problem import Setup
 from spacefit.fitting.render_seeds import seed_excess, seed_shift
 from spacefit.fitting.residuals import Problem, column_owners
+from spacefit.rendering.memory import release_freed_memory
 from spacefit.scene.entries import Bounds
 from spacefit.scene.parameters import is_image, parameter
 
@@ -62,7 +63,9 @@ class Linearisation:
         """The n x n matrix M whose column j is ``fn(e_j)``, for a map J^T W J that joins no two images'
         residuals in W, applied to one direction per shared value and one per kind of own value
         (:func:`~spacefit.fitting.normal_equations.by_columns`); ``transposed``: M^T's map (None: M is symmetric)."""
-        return np.asarray(by_columns(fn, len(self.x), self.x.dtype, chunk_for(self.r.size), self.owners, transposed), dtype=float)
+        m = np.asarray(by_columns(fn, len(self.x), self.x.dtype, chunk_for(self.r.size), self.owners, transposed), dtype=float)
+        release_freed_memory()  # the pages the products' threads freed (rows-long vectors, a pass's 20 to 130 MiB each)
+        return m
 
     def cross(self, weight: Callable[[jax.Array], jax.Array]) -> np.ndarray:
         """sym(J1^T W J2) for a symmetric linear map W of the residuals that joins no two images' residuals."""
@@ -364,8 +367,9 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
         grid = grid_step(changes, lambda d: lin.step(np.concatenate([d, padding])), x, np.sqrt(np.diag(cov)), columns)
         delta, remainder, noise, feedback = grid.delta, grid.remainder, grid.noise, grid.feedback
         # the models at 4x (each image's renders at 4x, 6.3 MiB a 128 x 128 px frame) dropped before the products below,
-        # whose intermediates would come on top of them
+        # whose intermediates would come on top of them, and the pages their programs' threads freed handed back
         del changes
+        release_freed_memory()
         # the step's render noise: the mean of two renders' changes, through the sandwich as the fit's own render noise
         bread = _pseudo_inverse(lin.information)[0]
         cov = cov + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread

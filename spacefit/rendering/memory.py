@@ -1,8 +1,12 @@
-"""How much memory a render needs, and a refusal, before it starts, of one this machine cannot hold."""
+"""How much memory a render needs, and a refusal, before it starts, of one this machine cannot hold; and the
+freed memory a long fit's phases leave held, handed back between them."""
 
 from __future__ import annotations
 
+import ctypes
+import functools
 import os
+from collections.abc import Callable
 
 from spacefit.errors import InputError
 
@@ -51,23 +55,23 @@ def check_memory(width: int, height: int, window_pixels: int, spp: int, split: b
     return estimate
 
 
-# A fit's memory besides the rendering's, fitted (2.5 to 18 % above each peak; the peaks of one run scatter by up to
-# 14 % with the allocator's state) to the peak RSS of issue 33's 64-parameter pass (experiments/bench_pass.py: 3
-# materials and the PSF width shared, 5 own values a frame, so 9 columns; each frame's image model, sensor and pixel
-# grid; LM at 16 spp) at 12, 24 and 48 frames of 64 x 64 px (883, 1010, 1265 MiB) and 128 x 128 px (1162, 1491,
-# 2240 MiB) at commit 1022e7d, and at 12 and 48 frames of 128 x 128 px (1020 to 1104 MiB in four runs, 2396 MiB; the
-# pixel grid's programs two at a time) at 66d85a4, stored in experiments/results/pass_memory/bench_pass_*.txt
-# (docs/measurements/performance-history.md, "A regression in memory at 48 frames" and "Quiet figures after the eighth
-# session's merges"): the process with JAX, Mitsuba, a loaded scene and the solver's and covariance's programs,
-# per frame a fixed part (its programs' share, scene values and records) and 200 B per pixel for its image and each
-# column (reference, renders, Jacobian columns, the pixel grid's renders at 4x), from the growth of 10.6 MiB a frame
-# at 64 x 64 px and 30 to 37 MiB at 128 x 128 px. The 2-column pass of docs/measurements/reliability.md ("Memory per
-# frame") it puts above its peaks. The Jacobian is never held whole (fitting/normal_equations.py): held whole, rows
-# of every frame by the columns of every frame, it grew as frames^2, as the pixel grid's derivatives held whole did
-# (4928 MiB at 48 frames of 128 x 128 px).
-FIT_BASE_BYTES = 760 * 2**20
-FIT_FRAME_BYTES = 4 * 2**20
-FIT_FRAME_PIXEL_COLUMN_BYTES = 200
+# A fit's memory besides the rendering's, fitted (2 to 15 % above each peak; the peaks of one run scatter by up to 14 %
+# with the allocator's state) to the peak RSS of issue 33's 64-parameter pass (experiments/bench_pass.py: 3 materials and
+# the PSF width shared, 5 own values a frame, so 9 columns; each frame's image model, sensor and pixel grid; LM at 16 spp)
+# at 12 and 48 frames of 128 x 128 px (920 and 1841 MiB) with the C heap's freed pages handed back between the phases
+# (release_freed_memory, below), and at 12, 24 and 48 frames of 64 x 64 px at commit 1022e7d, before that (883, 1010,
+# 1265 MiB: above the code's own), stored in experiments/results/pass_memory/ (tests/test_pass.py's CALIBRATION): the
+# process with JAX, Mitsuba, a loaded scene and the solver's and covariance's programs, per frame a fixed part (its
+# programs' share, scene values and records, the rows-long vectors of the covariance's products, which grow with the
+# frames' pixels less than in proportion) and 100 B per pixel for its image and each column (reference, renders,
+# Jacobian columns, the pixel grid's renders at 4x), from the growth of 10.6 MiB a frame at 64 x 64 px and 25.6 MiB at
+# 128 x 128 px. It puts the 2-column pass of docs/measurements/reliability.md ("Memory per frame") 6 to 37 % above its
+# peaks, and a 100-frame pass of 128 x 128 px (2 steps at 4 spp) 7 % above its peak (3386 MiB for 3176). The Jacobian
+# is never held whole (fitting/normal_equations.py): held whole, rows of every frame by the columns of every frame, it
+# grew as frames^2, as the pixel grid's derivatives held whole did (4928 MiB at 48 frames of 128 x 128 px).
+FIT_BASE_BYTES = 720 * 2**20
+FIT_FRAME_BYTES = 11 * 2**20
+FIT_FRAME_PIXEL_COLUMN_BYTES = 100
 # A fit estimated above this states its size before it starts (a warning; ``spacefit fit`` says every pass's).
 LARGE_FIT_BYTES = 2**30
 
@@ -95,3 +99,24 @@ def check_fit_memory(frames: int, width: int, height: int, columns: int, spp: in
         raise InputError(f"{describe_fit(frames, width, height, estimate)} (estimate) and this machine has {limit / 2**30:.2f} GiB "
                          "available; fit fewer frames or fewer pixels, or pass allow_large=True (--large) to run it.")
     return estimate
+
+
+@functools.cache
+def _malloc_trim() -> Callable[[int], int] | None:
+    """glibc's ``malloc_trim`` (None where the C library has none: musl, macOS, Windows)."""
+    try:
+        return ctypes.CDLL(None).malloc_trim
+    except (AttributeError, OSError):
+        return None
+
+
+def release_freed_memory() -> None:
+    """Hand back to the system the pages of the C heap that are freed but held (glibc's ``malloc_trim(0)``; nothing
+    where there is none). glibc keeps what a thread frees in that thread's arena for its own later use, and XLA's
+    and Dr.Jit's threads each have one: between a joint fit's phases (the solve, the covariance's products, the pixel
+    grid's programs) 0.3 to 0.6 GB of a 48-frame pass of 128 x 128 px lay freed in arenas that the next phase's
+    threads do not reuse (docs/measurements/performance-history.md, "A pass's memory: programs and the allocator"). Changes
+    no setting of the allocator; a call costs some milliseconds, and the pages handed back fault in again when reused."""
+    trim = _malloc_trim()
+    if trim is not None:
+        trim(0)
