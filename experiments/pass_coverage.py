@@ -12,7 +12,7 @@ Variants (``--variant``), the same seeds in each:
 * ``fixed``: the same references, the blur not free (its default, no blur: the truth);
 * ``inside``: the blur's truth ``--blur`` px (0.5), inside its range: each reference rendered at 4x with the box
   filter (``--truth-spp / 16`` per fine pixel), blurred at the fine scale by the fit's own image model, then each
-  pixel's tent response (:func:`spacefit.fitting.pixel_grid.response_matrix`), as the pixel-grid check models it.
+  pixel's tent response (:func:`spacefit.fitting.fine_models.response_matrix`), as the pixel-grid check models it.
 
 Writes ``fits.csv`` (one row per fit and parameter, saved after each fit; a run into a folder that holds some fits only
 those it lacks) and ``summary_<variant>.md`` to ``--out``. Run:
@@ -35,7 +35,7 @@ from studyio import commit, machine, write_csv
 
 import spacefit as sf
 from spacefit.fitting.nuisance import image_model
-from spacefit.fitting.pixel_grid import SUPERSAMPLE, response_matrix, supersampled
+from spacefit.fitting.fine_models import SUPERSAMPLE, response_matrix, supersampled
 from spacefit.scene.assembly import assemble
 from spacefit.scene.parameters import scene_value
 

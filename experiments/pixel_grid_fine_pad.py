@@ -1,4 +1,4 @@
-"""The pixel grid's fine models' black sky (spacefit.fitting.pixel_grid.fine_pad): light at an image's edge (a 0.5 px
+"""The pixel grid's fine models' black sky (spacefit.fitting.fine_models.fine_pad): light at an image's edge (a 0.5 px
 spot, 16 and 32 px images, the model made at 4x) blurred and shifted out of the image, the model on the fit's pad taken
 as fine px (28; what the models had before), on the pad sized at 4x for the values, and on an ample one (4 x 28 fine px):
 the largest difference from the ample pad's model, per the model's peak, in float64; and a centred spot with a 0.8 px
@@ -15,7 +15,7 @@ import numpy as np
 from studyio import commit, machine
 
 from spacefit.fitting.nuisance import PAD_PX, image_model
-from spacefit.fitting.pixel_grid import MOVES, fine_and_grid_models, fine_pad
+from spacefit.fitting.fine_models import MOVES, fine_and_grid_models, fine_pad
 from spacefit.formation import fast_pad
 
 FACTOR = 4

@@ -29,9 +29,9 @@ from studyio import commit, machine
 
 import spacefit as sf
 import spacefit.fitting.conclusion as conclusion
+import spacefit.fitting.fine_models as fine_models
 import spacefit.fitting.frames as frames
 import spacefit.fitting.loop as loop
-import spacefit.fitting.pixel_grid as pixel_grid
 import spacefit.fitting.residuals as residuals
 import spacefit.fitting.uncertainty as uncertainty
 
@@ -99,7 +99,7 @@ def main() -> None:
     uncertainty.grid_step = profile.timed("covariance: pixel grid's fixed point and feedback", uncertainty.grid_step, phase=True)
     uncertainty.Linearisation.step = profile.timed("covariance: Gauss-Newton steps", uncertainty.Linearisation.step)
     residuals.grid_error_models = profile.timed("covariance: pixel grid's 4x renders", residuals.grid_error_models, phase=True)
-    pixel_grid.Renderer.render = profile.timed("pixel grid's renders alone", pixel_grid.Renderer.render)
+    fine_models.Renderer.render = profile.timed("pixel grid's renders alone", fine_models.Renderer.render)
     rng = np.random.default_rng(3)
     with tempfile.TemporaryDirectory() as tmp:
         folder = Path(tmp) / "pass"

@@ -10,8 +10,9 @@ import pytest
 
 from spacefit.cli import NOT_CONVERGED, exit_code
 from spacefit.fitting.nuisance import PAD_PX, image_model
-from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, FIXED_POINT_TOLERANCE, MOVES, REMAINDER_RATIO, GridChanges, ImageColumns, binned,
-                                         fine_and_grid_models, grid_step, response_matrix, unsettled_notes)
+from spacefit.fitting.fine_models import MOVES, binned, fine_and_grid_models, response_matrix
+from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, FIXED_POINT_TOLERANCE, REMAINDER_RATIO, GridChanges, ImageColumns, grid_step,
+                                         unsettled_notes)
 from spacefit.formation import fast_pad
 from spacefit.fitting.status import Status, verdict
 from spacefit.fitting.uncertainty import linearise

@@ -33,7 +33,8 @@ from spacefit.fitting.observations.base import Block
 from spacefit.fitting.observations.image import Observation, check_reference, image_residual, in_unit_of
 from spacefit.fitting.outside import DESCENT, Outside, Rendered
 from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.pixel_grid import GridChanges, ImageColumns, grid_error_models
+from spacefit.fitting.fine_models import grid_error_models
+from spacefit.fitting.pixel_grid import GridChanges, ImageColumns
 from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import assemble
