@@ -37,6 +37,11 @@ Evaluate = Callable[[jax.Array, Sequence[np.ndarray], Sequence[np.ndarray] | Non
 RESIDUALS, DESCENT = 1, 2  # which residuals of :attr:`Outside.evaluate`'s output
 
 
+def _key(x: np.ndarray, j: int) -> tuple[bytes, int]:
+    """The key of the renders at ``x`` with the j-th seeds: x's float64 bytes and j."""
+    return np.asarray(x, dtype=np.float64).tobytes(), j
+
+
 def _started(fn: Callable[..., Any], *args: Any) -> Future:
     """``fn(*args)`` begun on a thread of its own, which ends with it: renders made while the calling thread traces JAX's
     programs (the renders run on the Dr.Jit thread, :func:`~spacefit.rendering.backend.on_drjit_thread`).
@@ -75,19 +80,19 @@ class Outside:
     def keep(self, x: np.ndarray, j: int, rendered: Rendered) -> None:
         """Keep ``rendered``, the renders with their Jacobian at ``x`` with the j-th seeds, in place of those kept before."""
         self.kept.clear()
-        self.kept[(np.asarray(x, dtype=np.float64).tobytes(), j)] = rendered
+        self.kept[_key(x, j)] = rendered
 
     def render_ahead(self, x: np.ndarray, j: int) -> None:
         """Begin the renders with their Jacobian at ``x`` with the j-th seeds on a thread of their own (:func:`_started`),
         for :meth:`linearisable` to take, unless kept."""
-        key = (np.asarray(x, dtype=np.float64).tobytes(), j)
+        key = _key(x, j)
         if key not in self.kept and key not in self.ahead:
             self.ahead[key] = _started(self.render, np.array(x), j, True)
 
     def linearisable(self, x: np.ndarray, j: int) -> Rendered:
         """The renders with their Jacobian at ``x`` with the j-th seeds: those kept where they are ``x``'s, or begun
         (:meth:`render_ahead`), else made."""
-        key = (np.asarray(x, dtype=np.float64).tobytes(), j)
+        key = _key(x, j)
         kept, pending = self.kept.get(key), self.ahead.pop(key, None)
         if kept is not None:
             return kept
@@ -96,14 +101,14 @@ class Outside:
     def render_images_ahead(self, x: np.ndarray, j: int) -> None:
         """Begin the images (no Jacobian) at ``x`` with the j-th seeds on a thread of their own (:func:`_started`), for
         :meth:`models` and :meth:`residuals` to take, in place of any begun before and not taken."""
-        key = (np.asarray(x, dtype=np.float64).tobytes(), j)
+        key = _key(x, j)
         if key not in self.images_ahead:
             self.images_ahead.clear()
             self.images_ahead[key] = _started(self.render, np.array(x), j, False)
 
     def images(self, x: np.ndarray, j: int) -> Rendered:
         """The images (no Jacobian) at ``x`` with the j-th seeds: those begun (:meth:`render_images_ahead`), else made."""
-        pending = self.images_ahead.pop((np.asarray(x, dtype=np.float64).tobytes(), j), None)
+        pending = self.images_ahead.pop(_key(x, j), None)
         return pending.result() if pending is not None else self.render(np.asarray(x), j, False)
 
     def models(self, x: jax.Array, j: int) -> list[jax.Array]:
