@@ -35,6 +35,7 @@ from spacefit.executors import Cluster, Executor, executor_of
 from spacefit.precision import float64, on_device
 from spacefit.rendering.bridge import outside_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
+from spacefit.rendering.memory import release_freed_memory
 from spacefit.rendering.parts import PartImage
 from spacefit.rendering.values import View, scene_view, view_values_fn
 from spacefit.scene.assembly import Assembly, assemble
@@ -297,9 +298,14 @@ def run_frames(executor: Executor, fn: Callable[..., Any], specs: Sequence[Frame
     (:meth:`~spacefit.rendering.renderer.Renderer.radiance`, :meth:`~spacefit.rendering.bridge.DrJitScene.forward`):
     a frame's image and Jacobian are those of a render wholly on one thread, bit for bit."""
     keys = [spec.key for spec in specs]
-    if isinstance(executor, InProcess):
-        return executor.map(functools.partial(fn, loaded=executor.loaded), keys, specs, keys, *per_frame)
-    return executor.map(fn, keys, specs, keys, *per_frame)
+    joint = len(specs) > 1
+    if joint:
+        release_freed_memory()  # what the step before freed, held in its threads' arenas, which the renders' threads do not reuse
+    local = isinstance(executor, InProcess)
+    out = executor.map(functools.partial(fn, loaded=executor.loaded) if local else fn, keys, specs, keys, *per_frame)
+    if joint:
+        release_freed_memory()  # and what the renders freed, before the step that takes them
+    return out
 
 
 def render_runs(shapes: Sequence[tuple[int, int, int]], indices: Sequence[np.ndarray]) -> list[range]:
