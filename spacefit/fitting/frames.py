@@ -296,15 +296,18 @@ def run_frames(executor: Executor, fn: Callable[..., Any], specs: Sequence[Frame
     """``[fn(spec_k, key_k, *args_k) for each frame k]`` in frame order on ``executor``. Each render traces
     its samples on all of Dr.Jit's threads and, when deterministic, splats them on one, in their order
     (:meth:`~spacefit.rendering.renderer.Renderer.radiance`, :meth:`~spacefit.rendering.bridge.DrJitScene.forward`):
-    a frame's image and Jacobian are those of a render wholly on one thread, bit for bit."""
+    a frame's image and Jacobian are those of a render wholly on one thread, bit for bit. Several frames (a pass): the
+    C heap's freed pages handed back before and after (:func:`~spacefit.rendering.memory.release_freed_memory`), those
+    the solver's step freed on XLA's threads and those the renders freed on Dr.Jit's, which the other's threads do not
+    reuse: kept, they lay under each step's peak."""
     keys = [spec.key for spec in specs]
     joint = len(specs) > 1
     if joint:
-        release_freed_memory()  # what the step before freed, held in its threads' arenas, which the renders' threads do not reuse
+        release_freed_memory()
     local = isinstance(executor, InProcess)
     out = executor.map(functools.partial(fn, loaded=executor.loaded) if local else fn, keys, specs, keys, *per_frame)
     if joint:
-        release_freed_memory()  # and what the renders freed, before the step that takes them
+        release_freed_memory()
     return out
 
 
