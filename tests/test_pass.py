@@ -582,7 +582,7 @@ BENCH_COLUMNS, BENCH_SPP = 9, 16  # experiments/bench_pass.py's pass: a frame's 
 # the runs of experiments/bench_pass.py stored in experiments/results/pass_memory/ that the estimate's constants are fitted
 # to (spacefit/rendering/memory.py): the code's own at 128 x 128 px, and at 64 x 64 px an earlier commit's, whose peaks the
 # C heap's pages handed back between the phases can only lower (the others there: earlier code, higher peaks)
-CALIBRATION = ("bench_pass_64px.txt", "bench_pass_128px_ad0af01.txt")
+CALIBRATION = ("bench_pass_64px.txt", "bench_pass_128px_ad0af01.txt", "bench_pass_128px_2c682df.txt")
 
 
 def bench_peaks() -> list[tuple[int, int, float]]:
