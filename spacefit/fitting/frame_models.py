@@ -36,6 +36,7 @@ from jax.extend.core import ClosedJaxpr, jaxpr_as_fun
 from jaxtyping import Array, Float
 
 from spacefit.fitting.nuisance import nuisance_indices, with_nuisances
+from spacefit.precision import on_device
 
 T = TypeVar("T")
 # (render (h, w, 3) float32, the image's nuisance values (p,)) -> (model, residuals, descended residuals)
@@ -102,7 +103,7 @@ def batches(models: Sequence[FrameModel], values: Sequence[np.ndarray], runs: Se
             else:
                 own, common, consts = _arrays(alike)
                 # on the device once: handed to each call of a program as its operands (FrameModels.operands), not copied each time
-                out.append(Batch(frames, r, start, indices, alike[0], tuple(jnp.asarray(a) for a in own), common, consts))
+                out.append(Batch(frames, r, start, indices, alike[0], tuple(on_device(a, a.dtype) for a in own), common, consts))
             start = end
     return out
 
@@ -149,7 +150,7 @@ class AlikePrograms:
         with self._holding:
             held = self._held.get(key)
             if held is None or not np.array_equal(np.asarray(held), host):
-                held = self._held[key] = jnp.asarray(host)
+                held = self._held[key] = on_device(host, host.dtype)
         return held
 
 

@@ -28,6 +28,7 @@ from spacefit.fitting.pixel_grid import grid_step
 from spacefit.fitting.problem import Setup
 from spacefit.fitting.render_seeds import seed_excess, seed_shift
 from spacefit.fitting.residuals import Problem, column_owners
+from spacefit.precision import on_device
 from spacefit.rendering.memory import release_freed_memory
 from spacefit.scene.entries import Bounds
 from spacefit.scene.parameters import is_image, parameter
@@ -83,14 +84,14 @@ class Linearisation:
         undetermined, and for a non-finite ``d``."""
         if not np.all(np.isfinite(difference)):
             return np.zeros(len(self.x))
-        d = jnp.asarray(difference)
+        d = on_device(difference, np.float64)
         return -_pseudo_inverse(self.information)[0] @ (0.5 * (np.asarray(self.J1T(d)) + np.asarray(self.J2T(d))))
 
 
 def linearise(problem: Problem, x: np.ndarray) -> Linearisation:
     """The problem's :class:`Linearisation` at ``x`` (physical units): one Jacobian render per seed, the independent
     seeds' begun while the fit's seeds' tangents are traced (:meth:`~spacefit.fitting.residuals.Problem.render_ahead`)."""
-    xj = jnp.asarray(x)
+    xj = on_device(x, np.float64)
     problem.render_ahead(xj, 1)
     r, J1 = problem.linearised(xj, 0)
     r_alt, J2 = problem.linearised(xj, 1)
@@ -168,14 +169,14 @@ def covariance(problem: Problem, x: np.ndarray,
     s2 = float(r @ r) / dof
     # the fit stops where J^T r = 0 for its noisy J, off by (J^T J)^-1 dJ^T r, whose covariance per
     # row is r^2 (J1 - J2)(J1 - J2)^T / 2
-    r2 = jnp.asarray(r**2)
+    r2 = on_device(r**2, np.float64)
 
     def jacobian_noise_column(e: jax.Array) -> jax.Array:
-        v = r2 * (J1(e) - J2(e))
+        v = _weighted_difference(r2, J1(e), J2(e))
         return J1T(v) - J2T(v)
 
     jacobian_noise = 0.5 * lin.columns(jacobian_noise_column)
-    correction = -bread @ (0.5 * (np.asarray(J1T(jnp.asarray(r_alt))) + np.asarray(J2T(jnp.asarray(r)))))
+    correction = -bread @ (0.5 * (np.asarray(J1T(on_device(r_alt, np.float64))) + np.asarray(J2T(on_device(r, np.float64)))))
     if problem.noise_known:
         # the observation's noise, (J^T J)^-1, plus the fit's own render noise, per residual
         # (r - r_alt)^2 / 2 from the two seeds, and the Jacobian's, both at half weight
@@ -193,6 +194,13 @@ def covariance(problem: Problem, x: np.ndarray,
         cov[:, touched] = np.inf
         correction = np.zeros(len(x))  # a step in the determined directions alone would move the undetermined
     return cov, 0.5 * float(r @ r), np.clip(eigval, 0.0, None) / s2, correction
+
+
+# one program: run operation by operation (the products are), two single-operation programs
+@jax.jit
+def _weighted_difference(w: jax.Array, a: jax.Array, b: jax.Array) -> jax.Array:
+    """``w * (a - b)``."""
+    return w * (a - b)
 
 
 def _unknown_noise_draw(problem: Problem, mean: np.ndarray, r: np.ndarray, informative: int, dof: int) -> np.ndarray:
@@ -229,7 +237,7 @@ def render_meat(cross: Callable[[Callable[[jax.Array], jax.Array]], np.ndarray],
     laid_out = problem.pixels if problem.pixels + sum(b.data.value.size for b in problem.blocks) == d.size else 0
     images = shapes if laid_out else []
     sizes = [2 * noise_reach_px(problem, x, k) + 1 for k in range(len(images))]
-    dj, shaped = jnp.asarray(d), tuple(tuple(shape) for shape in images)
+    dj, shaped = on_device(d, np.float64), tuple(tuple(shape) for shape in images)
     return _psd_part(cross(lambda v: _near_weighted(shaped, tuple(sizes), dj, v)))
 
 
@@ -359,7 +367,7 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     extras: dict[str, Any] = {"fisher_eigenvalues": fisher.tolist(),
                               "noise_bias_correction": dict(zip(s.solver_params.names, correction.tolist()))}
     if (bias := weight_bias(s.problem, lin.r, lin.r_alt, lin.step)) is not None and correct:  # flagged, not subtracted
-        extras["noise_weight_bias"] = dict(zip(s.user.names, (np.asarray(jax.jacfwd(s.to_user)(jnp.asarray(x))) @ bias).tolist()))
+        extras["noise_weight_bias"] = dict(zip(s.user.names, (s.user_jacobian(x) @ bias).tolist()))
     changes = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
     if changes is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
         padding = np.zeros(lin.r.size - s.problem.pixels)
@@ -387,7 +395,7 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
         # the render noise the error carries: the meat's half of the render noise's (the mean residual's share)
         bread = _pseudo_inverse(lin.information)[0]
         modelled = 0.5 * bread @ render_meat(lin.cross, (lin.r - lin.r_alt) / math.sqrt(2.0), s.problem, x) @ bread
-        T = np.asarray(jax.jacfwd(s.to_user)(jnp.asarray(x)))
+        T = s.user_jacobian(x)
         before = np.sqrt(np.diag(map_covariance(T, cov)))
         cov = cov + np.diag(seed_excess(shift, np.diag(modelled)))
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -397,5 +405,5 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     if s.rms_index is not None:
         i = s.rms_index
         extras.update({"wrinkles.rms_m": float(x[i]), "wrinkles.rms_m.stderr": float(np.sqrt(cov[i, i]))})
-        cov = map_covariance(np.asarray(jax.jacfwd(s.to_user)(jnp.asarray(x))), cov)
-    return np.asarray(s.to_user(jnp.asarray(x)), dtype=float), cov, loss_value, extras
+        cov = map_covariance(s.user_jacobian(x), cov)
+    return np.asarray(s.to_user(on_device(x, np.float64)), dtype=float), cov, loss_value, extras
