@@ -295,6 +295,13 @@ MUTANTS = (
     Mutant("pixel-grid-feedback-transposed", "spacefit/fitting/pixel_grid.py", "feedback[:, j] = moved",
            "feedback[j, :] = moved",
            ("tests/test_pixel_grid.py::test_the_fixed_point_moves_with_the_fits_estimate_by_the_inverse_of_one_less_the_steps_feedback",)),
+    # ... its iterations past the finer models' black sky: a flagged result (UNSTEPPED, the values and reach named), not a traceback
+    Mutant("pixel-grid-past-black-sky-raised", COVARIANCE, "except PastBlackSky as past:", "except ArithmeticError as past:",
+           ("tests/test_fit_cli.py::test_a_pixel_grid_step_past_its_black_sky_is_flagged_with_the_fits_own_values_and_errors",)),
+    Mutant("pixel-grid-unstepped-not-a-verdict", "spacefit/fitting/status.py", "    if unstepped:\n", "    if False:\n",
+           ("tests/test_pixel_grid.py::test_a_step_past_the_black_sky_records_each_images_values_and_reach_and_the_fit_is_unstepped",)),
+    Mutant("pixel-grid-black-sky-reach-not-its-growth", "spacefit/fitting/pixel_grid.py", "r[1] - r[0] > PAD_MARGIN_PX", "r[1] > PAD_MARGIN_PX",
+           ("tests/test_pixel_grid.py::test_a_step_past_the_black_sky_records_each_images_values_and_reach_and_the_fit_is_unstepped",)),
     # ... an image's derivatives taken in the values it reads: its own and the shared ones
     Mutant("pixel-grid-changes-kept-past-a-shared-value", "spacefit/fitting/residuals.py", "o in (-1, k) for o in owners", "o == k for o in owners",
            ("tests/test_pass.py::test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_values",)),

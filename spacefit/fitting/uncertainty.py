@@ -24,7 +24,7 @@ from spacefit.fitting.noise_weight import weight_bias
 from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
 from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.pixel_grid import grid_step
+from spacefit.fitting.pixel_grid import PastBlackSky, grid_step, past_black_sky
 from spacefit.fitting.problem import Setup
 from spacefit.fitting.render_seeds import seed_excess, seed_shift
 from spacefit.fitting.residuals import Problem, column_owners
@@ -338,7 +338,9 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     a blur width free (the pixel loss), the values take the step ``delta`` from the fit's model on the pixel grid to
     one made at 4x the resolution (:func:`~spacefit.fitting.pixel_grid.grid_step`; extras ``pixel_grid_error``,
     solver coordinates; skipped where it would leave a range; ``pixel_grid_evaluations``, its fixed point's iterations,
-    and where taken ``pixel_grid_short``, each value's distance to the fixed point in standard errors), and the
+    and where taken ``pixel_grid_short``, each value's distance to the fixed point in standard errors; none of them, and
+    the values and covariance the fit's on the pixel grid, where its iterations reach past the finer models' black sky:
+    extras ``pixel_grid_past_black_sky``, :func:`~spacefit.fitting.pixel_grid.past_black_sky`), and the
     covariance carries ``b b^T``, ``b``
     the bound on what remains of the grid's error after it (a third of the step from the model made at 2x
     to the one made at 4x; extras ``pixel_grid_remainder``, its magnitude), and the step's render noise
@@ -361,15 +363,20 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     if (bias := weight_bias(s.problem, lin.r, lin.r_alt, lin.step)) is not None and correct:  # flagged, not subtracted
         extras["noise_weight_bias"] = dict(zip(s.user.names, (np.asarray(jax.jacfwd(s.to_user)(jnp.asarray(x))) @ bias).tolist()))
     changes = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
+    grid = None
     if changes is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
         padding = np.zeros(lin.r.size - s.problem.pixels)
         columns = [i for i, n in enumerate(s.solver_params.names) if is_image(n)]
-        grid = grid_step(changes, lambda d: lin.step(np.concatenate([d, padding])), x, np.sqrt(np.diag(cov)), columns)
-        delta, remainder, noise, feedback = grid.delta, grid.remainder, grid.noise, grid.feedback
+        try:
+            grid = grid_step(changes, lambda d: lin.step(np.concatenate([d, padding])), x, np.sqrt(np.diag(cov)), columns)
+        except PastBlackSky as past:  # no step: the values and errors the fit's on the pixel grid, flagged (Status.UNSTEPPED)
+            extras["pixel_grid_past_black_sky"] = past_black_sky(s.solver_params.names, x, past.tried, len(s.problem.references))
         # the models at 4x (each image's renders at 4x, 6.3 MiB a 128 x 128 px frame) dropped before the products below,
         # whose intermediates would come on top of them, and the pages their programs' threads freed handed back
         del changes
         release_freed_memory()
+    if grid is not None:
+        delta, remainder, noise, feedback = grid.delta, grid.remainder, grid.noise, grid.feedback
         # the step's render noise: the mean of two renders' changes, through the sandwich as the fit's own render noise
         bread = _pseudo_inverse(lin.information)[0]
         cov = cov + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread
