@@ -295,6 +295,12 @@ MUTANTS = (
     Mutant("pixel-grid-feedback-transposed", "spacefit/fitting/pixel_grid.py", "feedback[:, j] = moved",
            "feedback[j, :] = moved",
            ("tests/test_pixel_grid.py::test_the_fixed_point_moves_with_the_fits_estimate_by_the_inverse_of_one_less_the_steps_feedback",)),
+    # a joint fit's batched renders, evaluated eagerly, wait for their callback: work queued on their images held every
+    # XLA CPU slot the callback's own renders needed (a light-curve fit hung in its verdict)
+    Mutant("batched-render-not-waited-for", "spacefit/fitting/frames.py",
+           "return jax.block_until_ready(jax.pure_callback(primal_cb, images, x, seeds, vmap_method=\"sequential\"))",
+           "return jax.pure_callback(primal_cb, images, x, seeds, vmap_method=\"sequential\")",
+           ("tests/test_frames.py::test_batched_renders_evaluated_eagerly_wait_for_their_callback_before_work_is_queued_on_them",)),
     # ... its iterations past the finer models' black sky: a flagged result (UNSTEPPED, the values and reach named), not a traceback
     Mutant("pixel-grid-past-black-sky-raised", COVARIANCE, "except PastBlackSky as past:", "except ArithmeticError as past:",
            ("tests/test_fit_cli.py::test_a_pixel_grid_step_past_its_black_sky_is_flagged_with_the_fits_own_values_and_errors",)),
