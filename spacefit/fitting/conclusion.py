@@ -28,7 +28,8 @@ from spacefit.fitting.result import FitResult
 from spacefit.fitting.solve_record import SolveRecord
 from spacefit.fitting.status import Status, verdict
 from spacefit.fitting.stopping import REJECTED_PATIENCE, REJECTED_RTOL
-from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
+from spacefit.fitting.uncertainty import estimate, stderr_corr
+from spacefit.fitting.value_warnings import warnings_for
 from spacefit.rendering.memory import release_freed_memory
 from spacefit.scene.names import Name
 from spacefit.scene.parameters import scene_with_values

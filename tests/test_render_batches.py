@@ -1,4 +1,4 @@
-"""A joint fit's batched renders (spacefit.fitting.frames): evaluated eagerly, they wait for their callback."""
+"""A joint fit's batched renders (spacefit.fitting.render_batches): evaluated eagerly, they wait for their callback."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from spacefit.fitting.frames import batched_renders
+from spacefit.fitting.render_batches import batched_renders
 
 
 class Renders:
