@@ -17,9 +17,9 @@ class Status(enum.Enum):
     verdicts on a solve that ended without a failure, in this order of precedence:
     :attr:`NO_PROGRESS` (no step lowered the loss: the start is returned), :attr:`AT_BOUND` (a
     parameter ended at a bound of its range), :attr:`UNJUDGED` (the noise is known but the model's
-    own render noise is too large to judge its residuals), :attr:`MISFIT` (the residuals exceed the noise, :attr:`FitResult.goodness`)
+    own render noise is too large to judge its residuals), :attr:`MISFIT` (the residuals exceed the noise, :attr:`FitResult.goodness`),
     :attr:`UNSTEPPED` (with a blur free, the step to the model made at 4x the resolution not taken: its iterations moved
-    a blur or shift past the black sky its finer models were sized for) and :attr:`UNSETTLED` (that step short of its
+    a blur or shift past the black sky its finer models were sized for, or a render at 4x is not finite) and :attr:`UNSETTLED` (that step short of its
     fixed point); neither over :attr:`MAX_STEPS`, the solver's own shortfall. Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
     :attr:`NO_BETTER_POINT` (``sf.fit(stop=...)``) are a success, and only where the
     verdicts leave them: a solve stopped there whose residuals exceed the noise is a :attr:`MISFIT`.
@@ -46,8 +46,8 @@ class Status(enum.Enum):
     UNSETTLED = ("not settled: the pixel grid's step to a model made at a finer resolution stopped short of its fixed point; "
                  "the values it moves are short of it by more than its tolerance (the warnings name them)")
     UNSTEPPED = ("not stepped: the pixel grid's step to a model made at a finer resolution moved a blur or shift past the black "
-                 "sky its finer models were sized for; the values and their errors are the fit's on the pixel grid, without the "
-                 "step (the warnings name the values and their reach)")
+                 "sky its finer models were sized for (or a render at that resolution is not finite); the values and their "
+                 "errors are the fit's on the pixel grid, without the step (the warnings name the values and their reach)")
     DIVERGED = "failed: the solve diverged"
     NONFINITE = "failed: the loss or a parameter became NaN"
     FAILED = "failed: the solver reported an error"
