@@ -11,8 +11,9 @@ wider: a 0.8 px blur shifted up to 3 px keeps a 128 px image's 32 fine px at 4x,
 fit's pad taken as fine px had covered a reach of 7 px at 4x, and what wraps, past twice the pad, was read by ``d_4``
 as the grid's error (16 px at 4x, light at an edge: a 3 px blur shifted 2 px out of the image put 1e-4 of the peak at
 the opposite edge, a 4 px blur 9e-4; a 2 px blur nothing above the round-off). A value the iterations move past the
-pad makes the model NaN, which :func:`~spacefit.fitting.pixel_grid.grid_step` refuses with an error naming the values, rather than wrap. The sensor's
-PSF at the fine scale (:func:`fine_optics`) is sized there already (its width and Airy radius in fine px).
+pad makes the model NaN rather than wrap, where :func:`~spacefit.fitting.pixel_grid.grid_step` stops
+(:class:`~spacefit.fitting.pixel_grid.PastBlackSky`): the fit takes no step and says so
+(:attr:`~spacefit.fitting.status.Status.UNSTEPPED`, the values and their reach in its warning). The sensor's PSF at the fine scale (:func:`fine_optics`) is sized there already (its width and Airy radius in fine px).
 """
 
 from __future__ import annotations
@@ -146,7 +147,7 @@ def fine_and_grid_models(fine: Float[Array, "H W c"], pixel_filter: str, x: Floa
             x_fine = x_fine.at[i].multiply(factor)
     image = jnp.asarray(fine, dtype=float)
     finer = fine_units(respond(optics(fine_model(image, x_fine, k))))
-    if names is not None:  # past its black sky it would wrap round: NaN, which grid_step refuses (no host callback: cached)
+    if names is not None:  # past its black sky it would wrap round: NaN, where grid_step stops (no host callback: cached)
         finer = jnp.where(reach_px(x_fine, moves) > pad, jnp.nan, finer)
     return finer, grid_units(image_model(respond(image), x, k))
 

@@ -62,7 +62,7 @@ class Batch:
 
     Attributes:
         frames: the images, in the fit's order.
-        run: the render run they are in (:func:`~spacefit.fitting.frames.render_runs`), from ``offset``.
+        run: the render run they are in (:func:`~spacefit.fitting.render_batches.render_runs`), from ``offset``.
         values: (images, p) where each one's nuisance values are in the free values.
         program: the first image's model traced; None: one image, its own function.
         own: the program's arrays that differ between the images, each stacked (images, ...), once, on the device.
@@ -204,7 +204,7 @@ class FrameModels:
 
     Args:
         models, values: each image's model and where its nuisance values are in x (:func:`frame_model`).
-        runs, shapes: the render runs (:func:`~spacefit.fitting.frames.render_runs`) and each image's render shape.
+        runs, shapes: the render runs (:func:`~spacefit.fitting.render_batches.render_runs`) and each image's render shape.
         recompute: recompute each model where linearised (a joint fit: the module's docstring).
     """
 

@@ -1,13 +1,13 @@
 """A problem's residuals from renders made before JAX's programs run, so that no program calls back.
 
 A fit's images are Dr.Jit renders, which a JAX program can only reach by calling back into Python
-(``jax.pure_callback``, :func:`~spacefit.fitting.frames.batched_renders`), and JAX's persistent cache
+(``jax.pure_callback``, :func:`~spacefit.fitting.render_batches.batched_renders`), and JAX's persistent cache
 keeps no program that calls back: every process compiled the solver's step, the residuals and their
 tangents anew (about 2.5 s of the 8-parameter observation fit's process, issue 33). Every point a
 least-squares step, the noise floor or the standard errors evaluate is known before its program runs
 (optimistix's Gauss-Newton family evaluates its function at the trial point ``y_eval`` of its state
 only), so the renders are made first, at that point (:attr:`Outside.render`), and handed to a program
-that holds no callback (:attr:`Outside.evaluate`, through :func:`~spacefit.fitting.frames.given_renders`):
+that holds no callback (:attr:`Outside.evaluate`, through :func:`~spacefit.fitting.render_batches.given_renders`):
 the same images and the same Jacobian columns times the tangent, and a program JAX's cache keeps. The arrays a
 pass's frames' models hold (their references, masks: :meth:`~spacefit.fitting.frame_models.FrameModels.operands`)
 are its operands too (:attr:`Outside.operands`), not fetched by a callback.

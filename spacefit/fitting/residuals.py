@@ -8,7 +8,7 @@ renderer sees the free values that are its own (``target.attitude_z_deg@k``) or 
 (:meth:`~spacefit.fitting.params.FreeParameters.rendered`); the image nuisances act on its render in
 JAX (:mod:`spacefit.fitting.nuisance`), the frames of a joint fit alike as one program whatever their
 count (:mod:`spacefit.fitting.frame_models`). The renders are callbacks into Python inside a program
-(:func:`~spacefit.fitting.frames.batched_renders`), or made before it (:mod:`spacefit.fitting.outside`).
+(:func:`~spacefit.fitting.render_batches.batched_renders`), or made before it (:mod:`spacefit.fitting.outside`).
 The set-up that checks the inputs and builds the problem is :mod:`spacefit.fitting.problem`.
 """
 
@@ -26,8 +26,7 @@ import numpy as np
 from spacefit.executors import Executor
 from spacefit.formation import noise_variance_terms
 from spacefit.fitting.frame_models import AlikePrograms, FrameModels, concurrently, frame_model
-from spacefit.fitting.frames import (FrameSpec, InProcess, batched_renders, frame_part_image, frame_renders, given_renders, render_runs,
-                                     run_frames, share_views)
+from spacefit.fitting.frames import FrameSpec, InProcess, frame_part_image, run_frames, share_views
 from spacefit.fitting.nuisance import image_model as image_model_of, nuisance_index
 from spacefit.fitting.observations.base import Block
 from spacefit.fitting.observations.image import Observation, check_reference, image_residual, in_unit_of
@@ -35,6 +34,7 @@ from spacefit.fitting.outside import DESCENT, Outside, Rendered
 from spacefit.fitting.params import FreeParameters
 from spacefit.fitting.fine_models import grid_error_models
 from spacefit.fitting.pixel_grid import GridChanges, ImageColumns
+from spacefit.fitting.render_batches import batched_renders, frame_renders, given_renders, render_runs
 from spacefit.precision import on_device
 from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.parts import PartImage
