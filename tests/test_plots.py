@@ -220,6 +220,11 @@ def test_convergence_overlays_truths_and_the_standard_error():
     assert truth[0].get_ydata()[0] == 0.3
     band = [p for p in angle.patches if p.get_label().startswith("fit +- 1 standard error")]
     assert band and band[0].get_extents().height > 0
+    # the column's legend once, in its first panel, saying what the band and the (second panel's) truth are
+    assert [t.get_text() for t in kd.get_legend().get_texts()] == ["fit +- 1 standard error", "truth"]
+    assert angle.get_legend() is None
+    # the steps numbered once, under the column (the panels share them)
+    assert [p.xaxis.get_tick_params()["labelbottom"] for p in (kd, angle)] == [False, True]
     with pytest.raises(sf.InputError, match="truths"):
         sf.plot_convergence(fit_result(), truths={"wrinkles.D": 2.5})
     with pytest.raises(sf.InputError, match="truths"):

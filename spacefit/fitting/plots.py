@@ -137,7 +137,8 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
     """The loss per step (log axis; accepted steps joined, rejected trials as crosses, the loss's
     Monte Carlo noise as a band above the best loss) and, one panel each, every parameter's value
     per step in its unit, with the fitted value's one-standard-error band and, where ``truths``
-    gives it (parameter name -> value, in the parameter's unit), the true value as a dashed line;
+    gives it (parameter name -> value, in the parameter's unit), the true value as a dashed line
+    (their legend once, in the first parameter's panel);
     into ``ax`` (the loss's, then one per parameter) or ``fig``.
 
     Returns:
@@ -194,8 +195,11 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
         if name in truths:
             panel.axhline(truths[name], color="k", ls="--", lw=1.0, label="truth")
         panel.set_ylabel(axis_label(name), fontsize=7)
-        if name in truths or np.isfinite(stderr):
-            panel.legend(fontsize=6, loc="best")
+        if ax is None:  # its own column, sharing the steps: numbered once, under it
+            panel.tick_params(labelbottom=panel is axes[-1])
+    column = {label: handle for panel in axes[1:] for handle, label in zip(*panel.get_legend_handles_labels())}
+    if column:  # the band's and the truth's meaning once, in the column's first panel: every panel's would say the same
+        axes[1].legend(column.values(), column.keys(), fontsize=6, loc="best")
     axes[-1].set_xlabel("step")
     for panel in axes:
         panel.xaxis.set_major_locator(MaxNLocator(integer=True))
