@@ -18,7 +18,7 @@ from spacefit.fitting.result import FitResult
 from spacefit.fitting.plots import plot_residuals
 from spacefit.fitting.status import Status
 from spacefit.html_tables import html_table
-from spacefit.plotting import axis_label, target_box, unit_label
+from spacefit.plotting import PlainLogFormatter, axis_label, target_box, unit_label
 from spacefit.scene.parameters import PARAMETERS
 from spacefit.studies.lightcurve import LightCurve
 from spacefit.studies.sensitivity import Sensitivity
@@ -229,6 +229,16 @@ def test_convergence_overlays_truths_and_the_standard_error():
         sf.plot_convergence(fit_result(), truths={"wrinkles.D": 2.5})
     with pytest.raises(sf.InputError, match="truths"):
         sf.plot_convergence(fit_result(), truths={"parts.body.kd": math.nan})
+
+
+def test_log_axes_are_labelled_as_matplotlib_labels_them_in_plain_text():
+    formatter = PlainLogFormatter()
+    assert [formatter(x) for x in (1e5, 3e4, 2e-4, 1.0, -2e3)] == ["10⁵", "3×10⁴", "2×10⁻⁴", "10⁰", "−2×10³"]
+    assert PlainLogFormatter(labelOnlyBase=True)(2e4) == ""  # asked for the decades alone
+    loss = sf.plot_convergence(fit_result())[0]
+    FigureCanvasAgg(loss.figure).draw()
+    labels = [t.get_text() for t in [*loss.yaxis.get_ticklabels(), *loss.yaxis.get_ticklabels(minor=True)] if t.get_text()]
+    assert labels and not any("$" in text for text in labels)
 
 
 def test_light_curve_error_bars_only_where_errors_are_known():

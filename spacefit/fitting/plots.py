@@ -20,7 +20,7 @@ from matplotlib.ticker import MaxNLocator
 from spacefit.errors import check_choice, check_range
 from spacefit.fitting.result import FitResult
 from spacefit.output import PREVIEW_PERCENTILE, preview_scale, to_srgb8
-from spacefit.plotting import AxesArg, FigureArg, axis_label, cropped, image_box, panels, show_image, unit_label
+from spacefit.plotting import AxesArg, FigureArg, axis_label, cropped, image_box, log_scale, panels, show_image, unit_label
 from spacefit.units import RADIANCE_UNIT
 
 
@@ -175,9 +175,10 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
     steps = np.array([h["step"] for h in history])
     losses = np.array([h["loss"] for h in history], dtype=float)
     accepted = np.array([h.get("accepted", True) for h in history], dtype=bool)
-    ax_loss.semilogy(steps[accepted], losses[accepted], "o-", ms=3, label="accepted")
+    log_scale(ax_loss)
+    ax_loss.plot(steps[accepted], losses[accepted], "o-", ms=3, label="accepted")
     if (~accepted).any():
-        ax_loss.semilogy(steps[~accepted], losses[~accepted], "x", color="C3", ms=5, label="rejected")
+        ax_loss.plot(steps[~accepted], losses[~accepted], "x", color="C3", ms=5, label="rejected")
     noise = np.array([h.get("loss_noise", np.nan) for h in history], dtype=float)
     if np.isfinite(noise).any():
         best = np.minimum.accumulate(np.where(np.isfinite(losses), losses, np.inf))
