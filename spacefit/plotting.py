@@ -47,9 +47,9 @@ SUPERSCRIPTS = str.maketrans("0123456789-", "⁰¹²³⁴⁵⁶⁷⁸⁹⁻")
 
 
 def unit_label(unit: str) -> str:
-    """A unit as axis text, powers as superscripts (``W m^-2 sr^-1`` -> ``W m$^{-2}$ sr$^{-1}$``); ""
-    for a dimensionless one ("1")."""
-    return "" if unit in ("1", "") else re.sub(r"\^(-?\d+)", r"$^{\1}$", unit)
+    """A unit as axis text, powers as Unicode superscripts (``W m^-2 sr^-1`` -> ``W m⁻² sr⁻¹``: plain text, which
+    matplotlib draws without its mathtext parser); "" for a dimensionless one ("1")."""
+    return "" if unit in ("1", "") else re.sub(r"\^(-?\d+)", lambda power: power[1].translate(SUPERSCRIPTS), unit)
 
 
 def with_unit(words: str, unit: str) -> str:

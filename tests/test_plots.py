@@ -192,9 +192,9 @@ def test_images_are_cropped_to_the_target_unless_asked_for_the_whole_film():
 def test_axes_are_labelled_in_words_with_units():
     assert axis_label("target.attitude_z_deg") == "target attitude about z (deg)"
     assert axis_label("parts.panels.kd") == "albedo kd of panels"  # dimensionless: no "(1)"
-    assert axis_label("image.offset_w_m2_sr@1") == "image offset, observation 1 (W m$^{-2}$ sr$^{-1}$)"
+    assert axis_label("image.offset_w_m2_sr@1") == "image offset, observation 1 (W m⁻² sr⁻¹)"
     assert axis_label("phase_angle_deg") == "solar phase angle (deg)"
-    assert unit_label("1") == "" and unit_label("W m^-2") == "W m$^{-2}$"
+    assert unit_label("1") == "" and unit_label("W m^-2") == "W m⁻²"
     assert all(p.label for p in PARAMETERS.values())  # every registered parameter has its words
     convergence = sf.plot_convergence(fit_result())
     assert [ax.get_ylabel() for ax in convergence[1:]] == ["albedo kd of body", "target attitude about z (deg)"]
@@ -204,8 +204,8 @@ def test_axes_are_labelled_in_words_with_units():
     assert frames[0].get_ylabel() == "target attitude about z (deg)" and frames[-1].get_xlabel() == "time since the first frame (s)"
     sens = sensitivity().figure()
     colorbars = [ax.get_ylabel() for ax in sens[0].figure.axes if ax not in list(sens)]
-    assert "W m$^{-2}$ sr$^{-1}$ per deg" in colorbars and not any("per 1" in c for c in colorbars)
-    assert "W m$^{-2}$ sr$^{-1}$" in sf.plot_comparison(fit_result(), [film()])[0, 0].get_title()
+    assert "W m⁻² sr⁻¹ per deg" in colorbars and not any("per 1" in c for c in colorbars)
+    assert "W m⁻² sr⁻¹" in sf.plot_comparison(fit_result(), [film()])[0, 0].get_title()
     dn = sf.plot_comparison(fit_result("DN"), [film()])
     assert "(DN)" in [ax.get_ylabel() for ax in dn[0, 0].figure.axes][-1]
     texts = [ax.get_xlabel() + ax.get_ylabel() for ax in [*convergence, *lc, *frames, *sens]]
