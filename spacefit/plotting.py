@@ -19,6 +19,7 @@ module, which only the figure functions load.
 from __future__ import annotations
 
 import re
+import textwrap
 from collections.abc import Callable, Sequence
 from typing import Any, TypeAlias
 
@@ -80,6 +81,13 @@ def log_scale(ax: Axes) -> None:
     ax.set_yscale("log")
     ax.yaxis.set_major_formatter(PlainLogFormatter())
     ax.yaxis.set_minor_formatter(PlainLogFormatter())
+
+
+def suptitle(figure: Figure | SubFigure, text: str, fontsize: float) -> None:
+    """``figure``'s title, ``text`` in lines that fit its width (a character taken as 0.6 of ``fontsize`` wide):
+    a fit's verdict runs to 250 characters, which one line would cut off at both sides."""
+    characters = figure.bbox.width / figure.dpi * 72 / (0.6 * fontsize)
+    figure.suptitle(textwrap.fill(text, max(int(characters), 20)), fontsize=fontsize)
 
 
 def target_box(images: Sequence[np.ndarray], margin: float = TARGET_MARGIN) -> tuple[int, int, int, int]:

@@ -5,6 +5,7 @@ with exact zeros; rich HTML reprs. All on results made by hand (no render): fast
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -229,6 +230,19 @@ def test_convergence_overlays_truths_and_the_standard_error():
         sf.plot_convergence(fit_result(), truths={"wrinkles.D": 2.5})
     with pytest.raises(sf.InputError, match="truths"):
         sf.plot_convergence(fit_result(), truths={"parts.body.kd": math.nan})
+
+
+@pytest.mark.parametrize("plot", [lambda r: sf.plot_comparison(r, [film()]), plot_residuals])
+def test_a_long_verdict_is_drawn_whole_in_the_figure_s_title(plot):
+    result = dataclasses.replace(fit_result(), status=Status.NO_BETTER_POINT)  # its words: 250 characters
+    figure = plot(result).flat[0].figure
+    canvas = FigureCanvasAgg(figure)
+    canvas.draw()
+    title = figure.get_suptitle()
+    assert title.replace("\n", " ").endswith(str(Status.NO_BETTER_POINT)) and "\n" in title
+    inside = figure.bbox.expanded(1.001, 1.001)  # within the rounding of a pixel
+    box = next(t for t in figure.texts if t.get_text() == title).get_window_extent(canvas.get_renderer())
+    assert inside.x0 <= box.x0 and box.x1 <= inside.x1 and box.y1 <= inside.y1
 
 
 def test_log_axes_are_labelled_as_matplotlib_labels_them_in_plain_text():

@@ -20,7 +20,8 @@ from matplotlib.ticker import MaxNLocator
 from spacefit.errors import check_choice, check_range
 from spacefit.fitting.result import FitResult
 from spacefit.output import PREVIEW_PERCENTILE, preview_scale, to_srgb8
-from spacefit.plotting import AxesArg, FigureArg, axis_label, cropped, image_box, log_scale, panels, show_image, unit_label
+from spacefit.plotting import (AxesArg, FigureArg, axis_label, cropped, image_box, log_scale, panels, show_image, suptitle,
+                               unit_label)
 from spacefit.units import RADIANCE_UNIT
 
 
@@ -73,7 +74,7 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
             panel.set_xticks([])
             panel.set_yticks([])
     if ax is None:
-        axes[0, 0].figure.suptitle(f"{result.solver}, {result.loss_name} loss: {result.status}", fontsize=10)
+        suptitle(axes[0, 0].figure, f"{result.solver}, {result.loss_name} loss: {result.status}", 10)
     return axes
 
 
@@ -95,7 +96,7 @@ def plot_residuals(result: FitResult, *, ax: AxesArg = None, fig: FigureArg = No
     if not images:
         axes[0].text(0.5, 0.5, "no residuals: the fit has no render", ha="center", va="center", transform=axes[0].transAxes)
     if ax is None:
-        axes[0].figure.suptitle(f"{result.status}", fontsize=9)
+        suptitle(axes[0].figure, f"{result.status}", 9)
     return axes
 
 
