@@ -83,11 +83,16 @@ def log_scale(ax: Axes) -> None:
     ax.yaxis.set_minor_formatter(PlainLogFormatter())
 
 
+def wrapped(text: str, length_px: float, dpi: float, fontsize: float) -> str:
+    """``text`` in lines that fit ``length_px`` pixels at ``dpi`` and ``fontsize`` points (a character taken as
+    0.6 of the size wide; at least 12 characters a line)."""
+    return textwrap.fill(text, max(int(length_px / dpi * 72 / (0.6 * fontsize)), 12))
+
+
 def suptitle(figure: Figure | SubFigure, text: str, fontsize: float) -> None:
-    """``figure``'s title, ``text`` in lines that fit its width (a character taken as 0.6 of ``fontsize`` wide):
-    a fit's verdict runs to 250 characters, which one line would cut off at both sides."""
-    characters = figure.bbox.width / figure.dpi * 72 / (0.6 * fontsize)
-    figure.suptitle(textwrap.fill(text, max(int(characters), 20)), fontsize=fontsize)
+    """``figure``'s title, ``text`` in lines that fit its width: a fit's verdict runs to 250 characters, which one
+    line would cut off at both sides."""
+    figure.suptitle(wrapped(text, figure.bbox.width, figure.dpi, fontsize), fontsize=fontsize)
 
 
 def target_box(images: Sequence[np.ndarray], margin: float = TARGET_MARGIN) -> tuple[int, int, int, int]:

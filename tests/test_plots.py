@@ -198,7 +198,7 @@ def test_axes_are_labelled_in_words_with_units():
     assert unit_label("1") == "" and unit_label("W m^-2") == "W m⁻²"
     assert all(p.label for p in PARAMETERS.values())  # every registered parameter has its words
     convergence = sf.plot_convergence(fit_result())
-    assert [ax.get_ylabel() for ax in convergence[1:]] == ["albedo kd of body", "target attitude about z (deg)"]
+    assert [ax.get_ylabel().replace("\n", " ") for ax in convergence[1:]] == ["albedo kd of body", "target attitude about z (deg)"]
     lc = light_curve().figure()
     assert lc[0].get_xlabel() == "solar phase angle (deg)" and "(W m$^{-2}$)" in lc[0].get_ylabel() and "(mag" in lc[1].get_ylabel()
     frames = sf.plot_frames(frame_rows())
@@ -224,6 +224,10 @@ def test_convergence_overlays_truths_and_the_standard_error():
     # the column's legend once, in its first panel, saying what the band and the (second panel's) truth are
     assert [t.get_text() for t in kd.get_legend().get_texts()] == ["fit +- 1 standard error", "truth"]
     assert angle.get_legend() is None
+    canvas = FigureCanvasAgg(kd.figure)
+    canvas.draw()
+    for panel in (kd, angle):  # each parameter's words within its panel's height, not into its neighbours'
+        assert panel.yaxis.label.get_window_extent(canvas.get_renderer()).height <= panel.get_window_extent().height
     # the steps numbered once, under the column (the panels share them)
     assert [p.xaxis.get_tick_params()["labelbottom"] for p in (kd, angle)] == [False, True]
     with pytest.raises(sf.InputError, match="truths"):

@@ -21,7 +21,7 @@ from spacefit.errors import check_choice, check_range
 from spacefit.fitting.result import FitResult
 from spacefit.output import PREVIEW_PERCENTILE, preview_scale, to_srgb8
 from spacefit.plotting import (AxesArg, FigureArg, axis_label, cropped, image_box, log_scale, panels, show_image, suptitle,
-                               unit_label)
+                               unit_label, wrapped)
 from spacefit.units import RADIANCE_UNIT
 
 
@@ -196,7 +196,8 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
         panel.axhline(final, color=f"C{i}", lw=0.8)
         if name in truths:
             panel.axhline(truths[name], color="k", ls="--", lw=1.0, label="truth")
-        panel.set_ylabel(axis_label(name), fontsize=7)
+        # in lines as long as the panel is high (before the layout, which makes it higher): one line ran into its neighbours'
+        panel.set_ylabel(wrapped(axis_label(name), panel.get_window_extent().height, panel.figure.dpi, 7), fontsize=7)
         if ax is None:  # its own column, sharing the steps: numbered once, under it
             panel.tick_params(labelbottom=panel is axes[-1])
     column = {label: handle for panel in axes[1:] for handle, label in zip(*panel.get_legend_handles_labels())}
