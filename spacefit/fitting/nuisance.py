@@ -41,9 +41,6 @@ def blur_and_shift(image: Float[Array, "h w c"], sigma_px: Float[Array, ""], dx_
     px (+x rightwards, +y downwards), per channel, on black sky (``pad`` px on every side): no light enters from outside."""
 
     def transfer(fy: np.ndarray, fx: np.ndarray) -> Array:
-        # JAX's frequencies: fx^2 + fy^2 formed in the program, not held in it as a constant of the padded image's size
-        # (at 4x the resolution, the pixel grid's, 2.5 MiB that each of its programs lowered, wrote and read back)
-        fy, fx = jnp.asarray(fy), jnp.asarray(fx)
         return gaussian_transfer(sigma_px, fy, fx) * jnp.exp(-2j * jnp.pi * (fx * dx_px + fy * dy_px))
 
     return fourier_filter(image, transfer, pad)
