@@ -18,12 +18,11 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from bench_fit_process import write_inputs
+from bench_fit_process import loaded_inputs
 from studyio import commit, machine
 
 from spacefit.fitting.compile_cache import use_compile_cache
 from spacefit.fitting.loop import _rendered_first
-from spacefit.fitting.observation_files import ObservationFiles
 from spacefit.fitting.problem import setup
 from spacefit.fitting.residuals import column_owners
 from spacefit.fitting.solvers import make_solver, with_owners
@@ -42,10 +41,7 @@ def main() -> None:
     jax.config.update("jax_enable_x64", True)  # as sf.fit runs
     print(f"machine: {machine()}; commit {commit()}; JAX cache {use_compile_cache()}; load {os.getloadavg()[0]:.1f}")
     with tempfile.TemporaryDirectory() as tmp:
-        args = write_inputs(Path(tmp))
-        free = args[args.index("--free") + 1].split(",")
-        start = {a.split("=")[0]: float(a.split("=")[1]) for before, a in zip(args, args[1:]) if before == "--start"}
-        loaded = ObservationFiles([args[0]], [args[2]]).load()
+        loaded, free, start = loaded_inputs(Path(tmp))
         s = setup(loaded, free, start=start)
         grid_setup = setup(loaded, free, start={n: TRUTH.get(n, v) for n, v in zip(free, np.asarray(s.x0))})
     fp, given = s.solver_params, _rendered_first(s)
