@@ -24,6 +24,7 @@ from studyio import machine
 
 import spacefit as sf
 from spacefit.fitting.compile_cache import ENV as JAX_CACHE_ENV
+from spacefit.fitting.observation_files import ObservationFiles
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -35,6 +36,15 @@ def write_inputs(folder: Path) -> list[str]:
     (folder / "scene.toml").write_text(case.scene().to_toml())
     return [str(folder / "obs.fits"), "--scene", str(folder / "scene.toml"), "--free", ",".join(truths),
             *[a for n, v in start.items() for a in ("--start", f"{n}={v!r}")], "--quiet", "--overwrite"]
+
+
+def loaded_inputs(folder: Path) -> tuple[list, list[str], dict[str, float]]:
+    """The fit's inputs written in ``folder`` (:func:`write_inputs`) and read back as ``spacefit fit`` reads them: the
+    observations, the free parameters and the start values, for a benchmark of its programs in one process."""
+    args = write_inputs(folder)
+    free = args[args.index("--free") + 1].split(",")
+    start = {a.split("=")[0]: float(a.split("=")[1]) for before, a in zip(args, args[1:]) if before == "--start"}
+    return ObservationFiles([args[0]], [args[2]]).load(), free, start
 
 
 def run_fit(args: list[str], out: Path, cache: str) -> tuple[float, float, float, int]:

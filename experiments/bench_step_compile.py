@@ -17,10 +17,9 @@ from pathlib import Path
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from bench_fit_process import write_inputs
+from bench_fit_process import loaded_inputs
 from studyio import machine
 
-from spacefit.fitting.observation_files import ObservationFiles
 from spacefit.fitting.problem import setup
 from spacefit.fitting.solvers import make_solver
 
@@ -29,11 +28,8 @@ def main() -> None:
     jax.config.update("jax_enable_x64", True)  # as sf.fit runs
     print(f"machine: {machine()}; load {os.getloadavg()[0]:.1f}")
     with tempfile.TemporaryDirectory() as tmp:
-        args = write_inputs(Path(tmp))
-        free = args[args.index("--free") + 1].split(",")
-        start = {a.split("=")[0]: float(a.split("=")[1]) for before, a in zip(args, args[1:]) if before == "--start"}
-        files = ObservationFiles([args[0]], [args[2]])
-        s = setup(files.load(), free, start=start)
+        observations, free, start = loaded_inputs(Path(tmp))
+        s = setup(observations, free, start=start)
     fp, problem = s.solver_params, s.problem
 
     def fn(y: jax.Array, _: object) -> tuple[jax.Array, None]:

@@ -173,12 +173,13 @@ def _site(text: str | None) -> Site | None:
 def _verdict(result: FitResult, out: str) -> int:
     """Print a fit's result and say where its report is; its exit code (:func:`exit_code`)."""
     from spacefit.fitting.report import format_result  # deferred: loaded with the fit
+    from spacefit.fitting.status import Status
 
     print(format_result(result))
     code = exit_code(result.status)
     if result.status.interrupted:
         print(f"spacefit: interrupted; the best point so far is in {out} (continue with --resume)", file=sys.stderr)
-    elif code == NOT_CONVERGED:
+    elif code == NOT_CONVERGED and result.status not in (Status.UNSETTLED, Status.UNSTEPPED):  # a solve that converged
         print(f"spacefit: the fit did not converge ({result.status}); its report is in {out}", file=sys.stderr)
     elif code:
         print(f"spacefit: {result.status}; its report is in {out}", file=sys.stderr)
@@ -188,7 +189,7 @@ def _verdict(result: FitResult, out: str) -> int:
 def exit_code(status: Status) -> int:
     """The exit code of a fit that ended with ``status``: 0 for a success, else NO_PROGRESS, MISFIT,
     AT_BOUND, UNJUDGED, INTERRUPTED, TERMINATED, or NOT_CONVERGED for the solver's other endings and for
-    UNSETTLED (the pixel grid's step short of its fixed point)."""
+    UNSETTLED and UNSTEPPED (the pixel grid's step short of its fixed point, or not taken)."""
     from spacefit.fitting.status import Status  # deferred, as this module's other fitting imports: render never needs them
 
     if status.success:

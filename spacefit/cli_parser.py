@@ -8,7 +8,7 @@ import argparse
 from spacefit.scene.parameters import PARAMETERS
 
 # Exit codes of `spacefit fit` that is not a success (its report is written in each case).
-NOT_CONVERGED = 3  # the solver stopped without converging (step limit, divergence, NaN)
+NOT_CONVERGED = 3  # the solver stopped without converging (step limit, divergence, NaN), or the pixel grid's step did not settle
 NO_PROGRESS = 4  # no step lowered the loss: the values are the start
 MISFIT = 5  # the residuals exceed the noise: the model or its nuisances miss something
 AT_BOUND = 6  # a parameter ended at a bound of its range
@@ -17,7 +17,8 @@ INTERRUPTED = 130  # 128 + SIGINT, as shells report Ctrl-C
 TERMINATED = 143  # 128 + SIGTERM
 # The commands that fit, and what their exit codes say.
 FITS = ("fit", "fit-light-curve")
-FIT_EXIT_CODES = (f"0 converged, 1 file system error, 2 bad input, {NOT_CONVERGED} not converged, {NO_PROGRESS} no progress (no "
+FIT_EXIT_CODES = (f"0 converged, 1 file system error, 2 bad input, {NOT_CONVERGED} not converged (or the pixel grid's step not settled or "
+                  f"not taken), {NO_PROGRESS} no progress (no "
                   f"step lowered the loss), {MISFIT} misfit (chi^2/dof beyond its expected range: the model misses something), "
                   f"{AT_BOUND} a parameter at a bound, {UNJUDGED} not judged (the model's render noise above the data's: render "
                   f"with more samples), {INTERRUPTED} Ctrl-C, {TERMINATED} SIGTERM; the report is written for 0, 3 to 6 and 9.")

@@ -70,7 +70,7 @@ class FixedBijection:
 @pytest.mark.parametrize(("rho", "warned"), [(-0.99, "(-0.990)"), (0.99, "(+0.990)"), (-0.9, None), (0.9, None)])
 def test_correlation_warning_for_either_sign(rho, warned):
     """|rho| > 0.95 warns, a strong anticorrelation as much as a correlation, with its sign."""
-    from spacefit.fitting.uncertainty import warnings_for
+    from spacefit.fitting.value_warnings import warnings_for
 
     params = SimpleNamespace(names=("parts.a.kd", "parts.b.kd"), bijections=(FixedBijection(), FixedBijection()))
     out = warnings_for(params, np.array([0.5, 0.5]), np.array([0.01, 0.01]), np.array([[1.0, rho], [rho, 1.0]]))

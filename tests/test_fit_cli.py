@@ -362,3 +362,45 @@ def test_checkpoint_resumes_with_another_solver_and_refuses_another_loss(tmp_pat
     for other in (sf.FitOptions(loss="stats", render=sf.FitRender(spp=2)), sf.FitOptions(render=sf.FitRender(spp=4))):
         with pytest.raises(sf.InputError, match="was made with other options"):
             Checkpoint(tmp_path / "checkpoint.json", inputs(other)).resume(10)
+
+
+def test_a_pixel_grid_step_past_its_black_sky_is_flagged_with_the_fits_own_values_and_errors(case, tmp_path, capsys, monkeypatch):
+    """The sphere blurred by 1 px, its blur free: the pixel grid's fixed point tries the blur 3 px wider (its iterations
+    forced there), past the black sky the finer models were sized for at the result (its reach and 1 px). The fit ends
+    UNSTEPPED (exit 3, not "did not converge") with its whole report: its values the solve's (with the render noise's
+    correction alone, no pixel-grid step), standard errors, a warning naming the values tried and their reach, and
+    fit.json recording them."""
+    from scipy.ndimage import gaussian_filter
+
+    from spacefit.fitting import pixel_grid
+
+    write_exr(tmp_path / "blurred.exr", gaussian_filter(read_exr(case / "a.exr"), (1.0, 1.0, 0.0)))
+    out = tmp_path / "run"
+    real = pixel_grid.anderson
+    push = np.array([0.0, 3.0])  # the blur, px
+    monkeypatch.setattr(pixel_grid, "anderson", lambda g, scale, *rest: real(lambda y: g(y + push), scale, *rest))
+    assert main(["fit", str(tmp_path / "blurred.exr"), "--scene", str(case / "a.toml"), "--free", "parts.sphere.kd,image.blur_sigma_px",
+                 "--max-steps", "8", "--spp", "4", "--quiet", "--out", str(out)]) == NOT_CONVERGED
+    assert sorted(os.listdir(out)) == REPORT
+    printed = capsys.readouterr()
+    assert printed.out.startswith(f"{sf.Status.UNSTEPPED} (lm on the pixel loss")
+    assert printed.err == f"spacefit: {sf.Status.UNSTEPPED}; its report is in {out}\n"
+    report = json.loads((out / "fit.json").read_text())
+    assert report["status"] == sf.Status.UNSTEPPED.value and report["success"] is False
+    extras = report["extras"]
+    assert not {"pixel_grid_error", "pixel_grid_short", "pixel_grid_remainder"} & set(extras)
+    solved = [h for h in report["history"] if h["accepted"]][-1]["values"]
+    for name, value in report["values"].items():
+        assert value == pytest.approx(solved[name] + extras["noise_bias_correction"][name], rel=1e-12, abs=1e-15)
+        assert 0 < report["stderr"][name] < 0.05 * value
+    blur = report["values"]["image.blur_sigma_px"]
+    assert abs(blur - 1.0) < 0.05
+    past = extras["pixel_grid_past_black_sky"]
+    assert past["values"] == {"image.blur_sigma_px": [pytest.approx(blur), pytest.approx(blur + 3.0)]}
+    assert past["reach_px"] == [[pytest.approx(5 * blur), pytest.approx(5 * (blur + 3.0))]]
+    assert [w for w in report["warnings"] if "black sky" in w and "not stepped" not in w] == [
+        f"the pixel grid's step to the model made at 4x was not taken: its fixed point's iterations tried image.blur_sigma_px "
+        f"{blur + 3.0:.4g} ({blur:.4g} at the result); there image 0's reach {5 * (blur + 3.0):.3g} px ({5 * blur:.3g} px at the "
+        "result): past the black sky its finer models were sized for (the reach at the result and 1 px; the reach is 5 sigma of the "
+        "blur and the larger shift). The values and their standard errors are the fit's on the pixel grid, without the step, and "
+        "carry neither the grid's model error nor a bound on it; fit at a finer resolution, or with the blur fixed."]

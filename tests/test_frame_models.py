@@ -14,7 +14,7 @@ import pytest
 import spacefit as sf
 from spacefit.fitting import problem
 from spacefit.fitting.frame_models import FrameModels, concurrently, frame_model
-from spacefit.fitting.frames import render_runs
+from spacefit.fitting.render_batches import render_runs
 from spacefit.fitting.losses import AffineVariance, residual_fn
 from spacefit.precision import float64
 

@@ -51,6 +51,21 @@ def test_gram_is_the_dense_product_and_the_solve_the_pseudo_inverse(chunk):
     np.testing.assert_allclose(np.concatenate([np.asarray(got[0]), np.asarray(got[1])]), want, rtol=1e-8, atol=1e-10)
 
 
+@float64
+def test_a_float32_jacobians_normal_equations_sum_in_float64():
+    """An image's Jacobian is rendered in float32, its tangent J t formed in float32 (the fits' renders'): J^T J and
+    J^T b, from J's columns, sum the rows in float64 (J^T applied to a float32 cotangent summed in float32, 1e-6 off)."""
+    rng = np.random.default_rng(4)
+    J = rng.normal(size=(100_000, 3)).astype(np.float32)
+    operator = lx.FunctionLinearOperator(lambda v: (jnp.asarray(J) @ v.astype(jnp.float32)).astype(jnp.float64),
+                                         jax.ShapeDtypeStruct((3,), jnp.float64))
+    dense = J.astype(float).T @ J.astype(float)
+    np.testing.assert_allclose(gram(operator), dense, rtol=1e-13)
+    b = rng.normal(size=J.shape[0])
+    got = lx.linear_solve(operator, jnp.asarray(b), NormalEquations()).value
+    np.testing.assert_allclose(got, np.linalg.solve(dense, J.astype(float).T @ b), rtol=1e-10)
+
+
 def frames_jacobian(rng: np.random.Generator, owners: tuple[int, ...], rows: tuple[int, ...]) -> np.ndarray:
     """A random Jacobian of frames of ``rows`` residuals each whose own columns (``owners[j]`` >= 0) move
     only their frame's rows."""

@@ -11,8 +11,8 @@ import pytest
 from spacefit.cli import NOT_CONVERGED, exit_code
 from spacefit.fitting.nuisance import PAD_PX, image_model
 from spacefit.fitting.fine_models import MOVES, binned, fine_and_grid_models, response_matrix
-from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, FIXED_POINT_TOLERANCE, REMAINDER_RATIO, GridChanges, ImageColumns, grid_step,
-                                         unsettled_notes)
+from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, FIXED_POINT_TOLERANCE, REMAINDER_RATIO, GridChanges, ImageColumns, PastBlackSky,
+                                         black_sky_notes, grid_step, past_black_sky, unsettled_notes)
 from spacefit.formation import fast_pad
 from spacefit.fitting.status import Status, verdict
 from spacefit.fitting.uncertainty import linearise
@@ -81,8 +81,9 @@ def test_the_fine_models_black_sky_covers_its_blur_and_shift_at_the_fine_scale_a
         past = np.asarray(model(edge, wide, fits_pad))
         assert np.isnan(past).all()  # past its pad: refused
         refused = GridChanges(lambda y: np.stack([past.ravel()] * 2), lambda y, columns: None)
-        with pytest.raises(RuntimeError, match="not finite"):  # the fixed point's iterations stop there
+        with pytest.raises(PastBlackSky, match="not finite at the values") as refusal:  # the fixed point's iterations stop there
             grid_step(refused, lambda d: np.zeros(len(wide)), wide, np.ones(len(wide)), [])
+        np.testing.assert_array_equal(refusal.value.tried, wide)
         centred = np.exp(-((u - 7.7) ** 2 + (v - 8.6) ** 2) / (2 * 0.5**2))[..., None] * np.ones(3)
         np.testing.assert_array_equal(model(centred, X, None), unchecked(centred, X, fits_pad))
 
@@ -241,6 +242,31 @@ def test_a_box_render_binned_is_the_box_render_at_the_coarser_resolution():
     fine = np.random.default_rng(2).random((8, 12, 3))
     np.testing.assert_allclose(np.asarray(binned(jnp.asarray(fine), 2))[1, 2], fine[2:4, 4:6].mean(axis=(0, 1)), rtol=1e-6)
     assert binned(jnp.asarray(fine), 4).shape == (2, 3, 3)
+
+
+def test_a_step_past_the_black_sky_records_each_images_values_and_reach_and_the_fit_is_unstepped():
+    """Two frames, the blur shared, frame 1's shift x its own, frame 0's not free: the record holds the blur and the free
+    shift at the result and where tried, and each frame's reach (5 sigma and the larger shift); the warning names the
+    frame whose reach grew past its black sky (more than 1 px), or, none grown, a render not finite. The verdict is
+    UNSTEPPED (exit 3) under a MISFIT, not over the solver's MAX_STEPS, and before UNSETTLED."""
+    names = ["parts.legs.kd", "image.blur_sigma_px", "image.shift_x_px@1"]
+    x, tried = np.array([0.5, 0.8, 0.3]), np.array([0.49, 0.9, -1.2])
+    past = past_black_sky(names, x, tried, 2)
+    assert past == {"values": {"image.blur_sigma_px": [0.8, 0.9], "image.shift_x_px@1": [0.3, -1.2]},
+                    "reach_px": [[pytest.approx(4.0), pytest.approx(4.5)], [pytest.approx(4.3), pytest.approx(5.7)]]}
+    assert black_sky_notes(past) == [
+        "the pixel grid's step to the model made at 4x was not taken: its fixed point's iterations tried image.blur_sigma_px 0.9 "
+        "(0.8 at the result), image.shift_x_px@1 -1.2 (0.3 at the result); there image 1's reach 5.7 px (4.3 px at the result): "
+        "past the black sky its finer models were sized for (the reach at the result and 1 px; the reach is 5 sigma of the blur "
+        "and the larger shift). The values and their standard errors are the fit's on the pixel grid, without the step, and carry "
+        "neither the grid's model error nor a bound on it; fit at a finer resolution, or with the blur fixed."]
+    assert "a render at 4x is not finite" in black_sky_notes(past_black_sky(names, x, x, 2))[0]
+    assert black_sky_notes(None) == [] and past_black_sky(["parts.legs.kd"], x[:1], x[:1], 1) == {"values": {}, "reach_px": [None]}
+    assert verdict(Status.CONVERGED, True, False, False, False, False, True) is Status.UNSTEPPED and not Status.UNSTEPPED.success
+    assert verdict(Status.CONVERGED, True, False, False, False, True, True) is Status.UNSTEPPED
+    assert verdict(Status.CONVERGED, True, False, True, False, False, True) is Status.MISFIT
+    assert verdict(Status.MAX_STEPS, True, False, False, False, False, True) is Status.MAX_STEPS
+    assert exit_code(Status.UNSTEPPED) == NOT_CONVERGED  # exit 3, docs/reference/fits.md
 
 
 @pytest.mark.slow

@@ -5,6 +5,7 @@ with exact zeros; rich HTML reprs. All on results made by hand (no render): fast
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -18,7 +19,7 @@ from spacefit.fitting.result import FitResult
 from spacefit.fitting.plots import plot_residuals
 from spacefit.fitting.status import Status
 from spacefit.html_tables import html_table
-from spacefit.plotting import axis_label, target_box, unit_label
+from spacefit.plotting import PlainLogFormatter, axis_label, target_box, unit_label
 from spacefit.scene.parameters import PARAMETERS
 from spacefit.studies.lightcurve import LightCurve
 from spacefit.studies.sensitivity import Sensitivity
@@ -192,20 +193,20 @@ def test_images_are_cropped_to_the_target_unless_asked_for_the_whole_film():
 def test_axes_are_labelled_in_words_with_units():
     assert axis_label("target.attitude_z_deg") == "target attitude about z (deg)"
     assert axis_label("parts.panels.kd") == "albedo kd of panels"  # dimensionless: no "(1)"
-    assert axis_label("image.offset_w_m2_sr@1") == "image offset, observation 1 (W m$^{-2}$ sr$^{-1}$)"
+    assert axis_label("image.offset_w_m2_sr@1") == "image offset, observation 1 (W m⁻² sr⁻¹)"
     assert axis_label("phase_angle_deg") == "solar phase angle (deg)"
-    assert unit_label("1") == "" and unit_label("W m^-2") == "W m$^{-2}$"
+    assert unit_label("1") == "" and unit_label("W m^-2") == "W m⁻²"
     assert all(p.label for p in PARAMETERS.values())  # every registered parameter has its words
     convergence = sf.plot_convergence(fit_result())
-    assert [ax.get_ylabel() for ax in convergence[1:]] == ["albedo kd of body", "target attitude about z (deg)"]
+    assert [ax.get_ylabel().replace("\n", " ") for ax in convergence[1:]] == ["albedo kd of body", "target attitude about z (deg)"]
     lc = light_curve().figure()
     assert lc[0].get_xlabel() == "solar phase angle (deg)" and "(W m$^{-2}$)" in lc[0].get_ylabel() and "(mag" in lc[1].get_ylabel()
     frames = sf.plot_frames(frame_rows())
     assert frames[0].get_ylabel() == "target attitude about z (deg)" and frames[-1].get_xlabel() == "time since the first frame (s)"
     sens = sensitivity().figure()
     colorbars = [ax.get_ylabel() for ax in sens[0].figure.axes if ax not in list(sens)]
-    assert "W m$^{-2}$ sr$^{-1}$ per deg" in colorbars and not any("per 1" in c for c in colorbars)
-    assert "W m$^{-2}$ sr$^{-1}$" in sf.plot_comparison(fit_result(), [film()])[0, 0].get_title()
+    assert "W m⁻² sr⁻¹ per deg" in colorbars and not any("per 1" in c for c in colorbars)
+    assert "W m⁻² sr⁻¹" in sf.plot_comparison(fit_result(), [film()])[0, 0].get_title()
     dn = sf.plot_comparison(fit_result("DN"), [film()])
     assert "(DN)" in [ax.get_ylabel() for ax in dn[0, 0].figure.axes][-1]
     texts = [ax.get_xlabel() + ax.get_ylabel() for ax in [*convergence, *lc, *frames, *sens]]
@@ -220,10 +221,42 @@ def test_convergence_overlays_truths_and_the_standard_error():
     assert truth[0].get_ydata()[0] == 0.3
     band = [p for p in angle.patches if p.get_label().startswith("fit +- 1 standard error")]
     assert band and band[0].get_extents().height > 0
+    # the column's legend once, in its first panel, saying what the band and the (second panel's) truth are
+    assert [t.get_text() for t in kd.get_legend().get_texts()] == ["fit +- 1 standard error", "truth"]
+    assert angle.get_legend() is None
+    canvas = FigureCanvasAgg(kd.figure)
+    canvas.draw()
+    for panel in (kd, angle):  # each parameter's words within its panel's height, not into its neighbours'
+        assert panel.yaxis.label.get_window_extent(canvas.get_renderer()).height <= panel.get_window_extent().height
+    # the steps numbered once, under the column (the panels share them)
+    assert [p.xaxis.get_tick_params()["labelbottom"] for p in (kd, angle)] == [False, True]
     with pytest.raises(sf.InputError, match="truths"):
         sf.plot_convergence(fit_result(), truths={"wrinkles.D": 2.5})
     with pytest.raises(sf.InputError, match="truths"):
         sf.plot_convergence(fit_result(), truths={"parts.body.kd": math.nan})
+
+
+@pytest.mark.parametrize("plot", [lambda r: sf.plot_comparison(r, [film()]), plot_residuals])
+def test_a_long_verdict_is_drawn_whole_in_the_figure_s_title(plot):
+    result = dataclasses.replace(fit_result(), status=Status.NO_BETTER_POINT)  # its words: 250 characters
+    figure = plot(result).flat[0].figure
+    canvas = FigureCanvasAgg(figure)
+    canvas.draw()
+    title = figure.get_suptitle()
+    assert title.replace("\n", " ").endswith(str(Status.NO_BETTER_POINT)) and "\n" in title
+    inside = figure.bbox.expanded(1.001, 1.001)  # within the rounding of a pixel
+    box = next(t for t in figure.texts if t.get_text() == title).get_window_extent(canvas.get_renderer())
+    assert inside.x0 <= box.x0 and box.x1 <= inside.x1 and box.y1 <= inside.y1
+
+
+def test_log_axes_are_labelled_as_matplotlib_labels_them_in_plain_text():
+    formatter = PlainLogFormatter()
+    assert [formatter(x) for x in (1e5, 3e4, 2e-4, 1.0, -2e3)] == ["10⁵", "3×10⁴", "2×10⁻⁴", "10⁰", "−2×10³"]
+    assert PlainLogFormatter(labelOnlyBase=True)(2e4) == ""  # asked for the decades alone
+    loss = sf.plot_convergence(fit_result())[0]
+    FigureCanvasAgg(loss.figure).draw()
+    labels = [t.get_text() for t in [*loss.yaxis.get_ticklabels(), *loss.yaxis.get_ticklabels(minor=True)] if t.get_text()]
+    assert labels and not any("$" in text for text in labels)
 
 
 def test_light_curve_error_bars_only_where_errors_are_known():

@@ -18,7 +18,8 @@ import pytest
 import spacefit as sf
 from spacefit.fitting.losses import residual_fn
 from spacefit.fitting.params import free_parameters
-from spacefit.fitting.uncertainty import covariance, linearise, map_covariance, warnings_for
+from spacefit.fitting.uncertainty import covariance, linearise, map_covariance
+from spacefit.fitting.value_warnings import warnings_for
 from spacefit.geometry.wm import wm_G_from_rms
 
 N, P = 12, 3  # few rows, so that the small-sample factor n / (n - p) = 4/3 is far from 1

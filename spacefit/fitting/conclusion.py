@@ -13,7 +13,6 @@ import time
 from collections.abc import Mapping, Sequence
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from spacefit.fitting.drivers import Outcome
@@ -21,14 +20,16 @@ from spacefit.fitting.goodness import STANDS_OUT, TRIM, Goodness, standing_out
 from spacefit.fitting.judging import judged_goodness, part_goodness, part_rows, per_observation
 from spacefit.fitting.noise_weight import weight_bias_notes
 from spacefit.fitting.observations.base import Sequenced
-from spacefit.fitting.pixel_grid import grid_notes, unsettled_notes
+from spacefit.fitting.pixel_grid import black_sky_notes, grid_notes, unsettled_notes
 from spacefit.fitting.problem import Setup
 from spacefit.fitting.render_seeds import seed_notes
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.solve_record import SolveRecord
 from spacefit.fitting.status import Status, verdict
 from spacefit.fitting.stopping import REJECTED_PATIENCE, REJECTED_RTOL
-from spacefit.fitting.uncertainty import estimate, stderr_corr, warnings_for
+from spacefit.fitting.uncertainty import estimate, stderr_corr
+from spacefit.fitting.value_warnings import warnings_for
+from spacefit.precision import on_device
 from spacefit.rendering.memory import release_freed_memory
 from spacefit.scene.names import Name
 from spacefit.scene.parameters import scene_with_values
@@ -42,7 +43,7 @@ def conclude(s: Setup, outcome: Outcome, steps: SolveRecord, solver: str, loss: 
     # solve reported again (``fit(resume=Resume(ended=...))``) its start, which is its end (not rounded through ``u``)
     x = np.asarray(s.solver_params.to_physical(outcome.u) if steps.moved and not steps.reported_again else s.x0, dtype=float)
     n = len(x)
-    x_user = np.asarray(s.to_user(jnp.asarray(x)), dtype=float)
+    x_user = np.asarray(s.to_user(on_device(x, np.float64)), dtype=float)
     stderr, corr, loss_value, extras, residuals, quality = np.full(n, np.nan), np.eye(n), math.nan, {}, [], None
     renders: list[np.ndarray] = []
     own_quality: list[Goodness] = []
@@ -64,10 +65,11 @@ def conclude(s: Setup, outcome: Outcome, steps: SolveRecord, solver: str, loss: 
         stderr, corr = stderr_corr(cov)
         named_stderr = dict(zip(s.user.names, stderr))
         unsettled = unsettled_notes(extras.get("pixel_grid_short", {}))
-        warnings = (warnings_for(s.user, x_user, stderr, corr) + grid_notes(extras.get("pixel_grid_error", {}), named_stderr) + unsettled
+        unstepped = black_sky_notes(extras.get("pixel_grid_past_black_sky"))
+        warnings = (warnings_for(s.user, x_user, stderr, corr) + grid_notes(extras.get("pixel_grid_error", {}), named_stderr) + unsettled + unstepped
                     + seed_notes(extras.get("render_seed_shift", {}), extras.get("render_seed_widened", {}), named_stderr)
                     + weight_bias_notes(extras.get("noise_weight_bias", {}), named_stderr))
-        quality, r, noise, renders, signal = judged_goodness(s, jnp.asarray(x), loss)
+        quality, r, noise, renders, signal = judged_goodness(s, on_device(x, np.float64), loss)
         residuals = [*(np.where(used[..., None], ref - render, np.nan) for ref, render, used in zip(problem.references, renders, problem.used)),
                      *(b.data.value - render for b, render in zip(problem.blocks, renders[len(problem.references):]))]
         if loss == "pixel":
@@ -76,7 +78,7 @@ def conclude(s: Setup, outcome: Outcome, steps: SolveRecord, solver: str, loss: 
         at_bound = any(b.at_bound(float(v)) for b, v in zip(s.user.bijections, x_user))
         pixels = loss == "pixel"
         status = verdict(status, steps.moved, at_bound, quality.misfit and pixels, quality.noise_known and not quality.judged and pixels,
-                         bool(unsettled))
+                         bool(unsettled), bool(unstepped))
         if not math.isfinite(loss_value):
             status = Status.NONFINITE
             warnings.insert(0, "the render or its Jacobian at the result is not finite (NaN); no errors are reported.")

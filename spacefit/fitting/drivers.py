@@ -200,7 +200,7 @@ def _rejects_above(solver: optx.AbstractGaussNewton) -> bool:
 
 def _accepts(after: Any, before: Any) -> bool:
     """Whether the Gauss-Newton-family step from state ``before`` to ``after`` accepted its trial point."""
-    return bool(after.num_accepted_steps > before.num_accepted_steps)
+    return int(after.num_accepted_steps) > int(before.num_accepted_steps)
 
 
 def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: jax.Array, max_steps: int) -> Driver:

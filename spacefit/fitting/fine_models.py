@@ -11,8 +11,9 @@ wider: a 0.8 px blur shifted up to 3 px keeps a 128 px image's 32 fine px at 4x,
 fit's pad taken as fine px had covered a reach of 7 px at 4x, and what wraps, past twice the pad, was read by ``d_4``
 as the grid's error (16 px at 4x, light at an edge: a 3 px blur shifted 2 px out of the image put 1e-4 of the peak at
 the opposite edge, a 4 px blur 9e-4; a 2 px blur nothing above the round-off). A value the iterations move past the
-pad makes the model NaN, which :func:`~spacefit.fitting.pixel_grid.grid_step` refuses with an error naming the values, rather than wrap. The sensor's
-PSF at the fine scale (:func:`fine_optics`) is sized there already (its width and Airy radius in fine px).
+pad makes the model NaN rather than wrap, where :func:`~spacefit.fitting.pixel_grid.grid_step` stops
+(:class:`~spacefit.fitting.pixel_grid.PastBlackSky`): the fit takes no step and says so
+(:attr:`~spacefit.fitting.status.Status.UNSTEPPED`, the values and their reach in its warning). The sensor's PSF at the fine scale (:func:`fine_optics`) is sized there already (its width and Airy radius in fine px).
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ from spacefit.fitting.nuisance import image_model as nuisance_model
 from spacefit.fitting.observations.image import Observation, in_unit_of
 from spacefit.formation import fast_pad, fourier_filter, psf_transfer
 from spacefit.geometry.frames import Intrinsics
+from spacefit.precision import on_device
 from spacefit.psf import GAUSSIAN_RADIUS_SIGMA, psf_reach_px
 from spacefit.rendering.renderer import Renderer
 from spacefit.scene.schema import Scene
@@ -97,9 +99,10 @@ def fine_optics(sensor: Sensor | None, intrinsics: Intrinsics, factor: int, chan
 def reach_px(y: Float[Array, " n"], moves: Sequence[int | None]) -> Float[Array, ""]:
     """How far (px of ``y``'s scale) the blur and shift of the values ``y`` carry light: 5 sigma of the blur (the
     fit's pad's own measure, :data:`~spacefit.fitting.nuisance.PAD_PX`) and the larger shift; ``moves`` their indices in ``y``
-    (None: not free, 0)."""
-    sigma, dx, dy = (jnp.abs(y[i]) if i is not None else 0.0 for i in moves)
-    return GAUSSIAN_RADIUS_SIGMA * sigma + jnp.maximum(dx, dy)
+    (None: not free, 0); NumPy's for a NumPy array (no program)."""
+    xp = np if isinstance(y, np.ndarray) else jnp
+    sigma, dx, dy = (xp.abs(y[i]) if i is not None else 0.0 for i in moves)
+    return GAUSSIAN_RADIUS_SIGMA * sigma + xp.maximum(dx, dy)
 
 
 def fine_pad(shape: tuple[int, ...], x: Float[np.ndarray, " n"], moves: Sequence[int | None], factor: int) -> int:
@@ -107,7 +110,7 @@ def fine_pad(shape: tuple[int, ...], x: Float[np.ndarray, " n"], moves: Sequence
     ``shape`` at ``factor`` times the resolution for the image nuisances at values near ``x`` (px): ``factor`` times
     their reach at ``x`` (:func:`reach_px`) and :data:`PAD_MARGIN_PX`, or the fit's pad
     (:data:`~spacefit.fitting.nuisance.PAD_PX`) where that is wider."""
-    return fast_pad(shape, max(PAD_PX, math.ceil(factor * (float(reach_px(jnp.asarray(x, dtype=float), moves)) + PAD_MARGIN_PX))))
+    return fast_pad(shape, max(PAD_PX, math.ceil(factor * (float(reach_px(np.asarray(x, dtype=float), moves)) + PAD_MARGIN_PX))))
 
 
 def without_psf(sensor: Sensor | None) -> Sensor | None:
@@ -144,7 +147,7 @@ def fine_and_grid_models(fine: Float[Array, "H W c"], pixel_filter: str, x: Floa
             x_fine = x_fine.at[i].multiply(factor)
     image = jnp.asarray(fine, dtype=float)
     finer = fine_units(respond(optics(fine_model(image, x_fine, k))))
-    if names is not None:  # past its black sky it would wrap round: NaN, which grid_step refuses (no host callback: cached)
+    if names is not None:  # past its black sky it would wrap round: NaN, where grid_step stops (no host callback: cached)
         finer = jnp.where(reach_px(x_fine, moves) > pad, jnp.nan, finer)
     return finer, grid_units(image_model(respond(image), x, k))
 
@@ -181,7 +184,7 @@ def grid_error_models(obs: Observation, scene: Scene, x: Float[np.ndarray, " n"]
     # kept as rendered (float32) while every image's are held, widened where used: 3 MiB less a 128 x 128 px image's render
     # one loaded scene for the seeds' renders (each load costs a scene's set-up, and Mitsuba keeps some of its memory: mitsuba3#1890)
     renderer = Renderer(supersampled(scene, SUPERSAMPLE))
-    renders = jnp.stack([np.asarray(renderer.render(seed=seed), dtype=np.float32) for seed in seeds])
+    renders = on_device([np.asarray(renderer.render(seed=seed), dtype=np.float32) for seed in seeds], np.float32)
     moves = [nuisance_index(names, n, k) for n in MOVES]
     optics = {f: fine_optics(obs.sensor, intrinsics, f, channels) for f in (SUPERSAMPLE, COARSER)}
     # the black sky sized at x (static shapes), for the values y near it that the fixed point's iterations try

@@ -36,6 +36,7 @@ from jax.extend.core import ClosedJaxpr, jaxpr_as_fun
 from jaxtyping import Array, Float
 
 from spacefit.fitting.nuisance import nuisance_indices, with_nuisances
+from spacefit.precision import on_device
 
 T = TypeVar("T")
 # (render (h, w, 3) float32, the image's nuisance values (p,)) -> (model, residuals, descended residuals)
@@ -61,7 +62,7 @@ class Batch:
 
     Attributes:
         frames: the images, in the fit's order.
-        run: the render run they are in (:func:`~spacefit.fitting.frames.render_runs`), from ``offset``.
+        run: the render run they are in (:func:`~spacefit.fitting.render_batches.render_runs`), from ``offset``.
         values: (images, p) where each one's nuisance values are in the free values.
         program: the first image's model traced; None: one image, its own function.
         own: the program's arrays that differ between the images, each stacked (images, ...), once, on the device.
@@ -102,7 +103,7 @@ def batches(models: Sequence[FrameModel], values: Sequence[np.ndarray], runs: Se
             else:
                 own, common, consts = _arrays(alike)
                 # on the device once: handed to each call of a program as its operands (FrameModels.operands), not copied each time
-                out.append(Batch(frames, r, start, indices, alike[0], tuple(jnp.asarray(a) for a in own), common, consts))
+                out.append(Batch(frames, r, start, indices, alike[0], tuple(on_device(a, a.dtype) for a in own), common, consts))
             start = end
     return out
 
@@ -149,7 +150,7 @@ class AlikePrograms:
         with self._holding:
             held = self._held.get(key)
             if held is None or not np.array_equal(np.asarray(held), host):
-                held = self._held[key] = jnp.asarray(host)
+                held = self._held[key] = on_device(host, host.dtype)
         return held
 
 
@@ -203,7 +204,7 @@ class FrameModels:
 
     Args:
         models, values: each image's model and where its nuisance values are in x (:func:`frame_model`).
-        runs, shapes: the render runs (:func:`~spacefit.fitting.frames.render_runs`) and each image's render shape.
+        runs, shapes: the render runs (:func:`~spacefit.fitting.render_batches.render_runs`) and each image's render shape.
         recompute: recompute each model where linearised (a joint fit: the module's docstring).
     """
 

@@ -101,8 +101,9 @@ class AffineVariance:
     offset: float
 
     def sigma(self, mu: Array) -> Array:
-        """The noise's standard deviation at the mean ``mu``."""
-        return jnp.sqrt(self.floor + self.slope * jnp.maximum(mu - self.offset, 0.0))
+        """The noise's standard deviation at the mean ``mu`` (NumPy's for a NumPy array: no program)."""
+        xp = np if isinstance(mu, np.ndarray) else jnp
+        return xp.sqrt(self.floor + self.slope * xp.maximum(mu - self.offset, 0.0))
 
     def deviance_residual(self, mu: Array, y: Array) -> Array:
         """sign(mu - y) sqrt(2 D), D = int_y^mu (t - y) / V(t) dt, the quasi-deviance of the mean ``mu`` for the value

@@ -1,13 +1,13 @@
 """A problem's residuals from renders made before JAX's programs run, so that no program calls back.
 
 A fit's images are Dr.Jit renders, which a JAX program can only reach by calling back into Python
-(``jax.pure_callback``, :func:`~spacefit.fitting.frames.batched_renders`), and JAX's persistent cache
+(``jax.pure_callback``, :func:`~spacefit.fitting.render_batches.batched_renders`), and JAX's persistent cache
 keeps no program that calls back: every process compiled the solver's step, the residuals and their
 tangents anew (about 2.5 s of the 8-parameter observation fit's process, issue 33). Every point a
 least-squares step, the noise floor or the standard errors evaluate is known before its program runs
 (optimistix's Gauss-Newton family evaluates its function at the trial point ``y_eval`` of its state
 only), so the renders are made first, at that point (:attr:`Outside.render`), and handed to a program
-that holds no callback (:attr:`Outside.evaluate`, through :func:`~spacefit.fitting.frames.given_renders`):
+that holds no callback (:attr:`Outside.evaluate`, through :func:`~spacefit.fitting.render_batches.given_renders`):
 the same images and the same Jacobian columns times the tangent, and a program JAX's cache keeps. The arrays a
 pass's frames' models hold (their references, masks: :meth:`~spacefit.fitting.frame_models.FrameModels.operands`)
 are its operands too (:attr:`Outside.operands`), not fetched by a callback.
@@ -63,7 +63,7 @@ class Outside:
             the images (its own without the Jacobian), the Jacobian columns alone are rendered, beside them.
         evaluate: (x, images, jacobians, operands) -> the observations' models, the stacked residuals and those a
             solver descends, a compiled program with no callback, differentiable in x where ``jacobians`` are given.
-        each: evaluate's models -> each observation's, split outside the program (a pass's frames' models come
+        each: evaluate's models, on the host, -> each observation's, split outside the program (a pass's frames' models come
             stacked, :mod:`spacefit.fitting.frame_models`: split inside, the program grew by each frame).
         operands: the dtype of x -> evaluate's ``operands`` (the same arrays at every call, on the device): a program that
             calls evaluate takes them as its own operands (a solver's step: beside the renders), not as constants.
@@ -71,7 +71,7 @@ class Outside:
 
     render: Callable[..., Rendered]
     evaluate: Evaluate
-    each: Callable[[list[jax.Array]], list[jax.Array]] = list
+    each: Callable[[list[np.ndarray]], list[np.ndarray]] = list
     operands: Callable[[np.dtype], Any] = lambda dtype: None
     kept: dict[tuple[bytes, int], Rendered] = field(default_factory=dict)  # one point's renders with their Jacobian (keep)
     ahead: dict[tuple[bytes, int], Future] = field(default_factory=dict)  # renders with their Jacobian being made (render_ahead)
@@ -111,9 +111,10 @@ class Outside:
         pending = self.images_ahead.pop(_key(x, j), None)
         return pending.result() if pending is not None else self.render(np.asarray(x), j, False)
 
-    def models(self, x: jax.Array, j: int) -> list[jax.Array]:
-        """Each observation's model at ``x`` (concrete) with the j-th seeds."""
-        return self.each(self.evaluate(x, *self.images(np.asarray(x), j), self.operands(x.dtype))[0])
+    def models(self, x: jax.Array, j: int) -> list[np.ndarray]:
+        """Each observation's model at ``x`` (concrete) with the j-th seeds, split on the host (JAX's split of a stacked
+        batch is a program of its own)."""
+        return self.each([np.asarray(m) for m in self.evaluate(x, *self.images(np.asarray(x), j), self.operands(x.dtype))[0]])
 
     def residuals(self, x: jax.Array, j: int, kind: int = RESIDUALS) -> jax.Array:
         """The stacked residuals (``kind`` :data:`RESIDUALS`; :data:`DESCENT`: those a solver descends) at ``x`` (concrete) with the j-th seeds."""

@@ -130,13 +130,16 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections.abc import Callable, Sequence
+from typing import Any
 
+import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Float
 
-from spacefit.fitting.fine_models import COARSER, PAD_MARGIN_PX, SUPERSAMPLE
+from spacefit.fitting.fine_models import COARSER, MOVES, PAD_MARGIN_PX, SUPERSAMPLE, reach_px
 from spacefit.fitting.fixed_point import anderson
 from spacefit.fitting.frame_models import concurrently
+from spacefit.fitting.nuisance import nuisance_index
 
 REMAINDER_RATIO = 1.0 / 3.0
 """What remains of the grid's error after the model made at :data:`~spacefit.fitting.fine_models.SUPERSAMPLE`, per the difference of its step and the
@@ -201,13 +204,22 @@ class GridStep:
     evaluations: int
 
 
+class PastBlackSky(Exception):
+    """The pixel grid's change to a finer model not finite at the values ``tried`` (solver coordinates): a blur or shift
+    moved past the black sky the finer models were sized for at the fit's result
+    (:func:`~spacefit.fitting.fine_models.fine_pad`), where light would wrap round, or a render is not finite.
+    :func:`grid_step` stops there; the fit takes no step, records :func:`past_black_sky` and is
+    :attr:`~spacefit.fitting.status.Status.UNSTEPPED`."""
+
+    def __init__(self, tried: Float[np.ndarray, " n"]) -> None:
+        super().__init__(f"the pixel grid's change to a finer model is not finite at the values {np.round(tried, 4).tolist()}")
+        self.tried = tried
+
+
 def finite(changes: np.ndarray, y: Float[np.ndarray, " n"]) -> np.ndarray:
-    """``changes`` (the residuals' changes at the values ``y``), raising where one is not finite: a value whose blur and
-    shift reach past the fine models' black sky (sized at the fit's result, :func:`~spacefit.fitting.fine_models.fine_pad`), which would wrap round."""
+    """``changes`` (the residuals' changes at the values ``y``), raising :class:`PastBlackSky` where one is not finite."""
     if not np.all(np.isfinite(changes)):
-        raise RuntimeError(f"the pixel grid's change to a finer model is not finite at the values {np.round(y, 4).tolist()}: "
-                           f"a blur or shift moved further than {PAD_MARGIN_PX:g} px from the fit's result, past the black sky "
-                           "its finer models were sized for (spacefit.fitting.fine_models.fine_pad), or a render is not finite")
+        raise PastBlackSky(y)
     return changes
 
 
@@ -221,7 +233,8 @@ def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x:
     ``delta`` is the fixed point ``x + delta = x + step(d_S(x + delta))`` by Anderson's acceleration
     (:func:`~spacefit.fitting.fixed_point.anderson`) in standard errors ``stderr``; what it leaves, ``short``, is
     measured at ``x + delta`` with ``D`` (in standard errors), a value more than :data:`FIXED_POINT_TOLERANCE` short flagged
-    (:func:`unsettled_notes`). The bound is :data:`REMAINDER_RATIO` times
+    (:func:`unsettled_notes`); a change not finite at the values tried, past the finer models' black sky, raises
+    :class:`PastBlackSky`. The bound is :data:`REMAINDER_RATIO` times
     ``step(d_S - d_C)``, the step from the model made at :data:`~spacefit.fitting.fine_models.COARSER` to the one made at :data:`~spacefit.fitting.fine_models.SUPERSAMPLE`; the
     draw is the two renders' changes' difference over sqrt 2. ``D = d step(d_S(y)) / dy``, n x n, in its ``columns``
     (the image nuisances, on which ``d_S`` depends without another render; the others 0): the fixed point
@@ -262,3 +275,37 @@ def unsettled_notes(short: dict[str, float]) -> list[str]:
             f"its fixed point is {s:+.2g} standard errors from the value (the tolerance {FIXED_POINT_TOLERANCE:g}); the value and "
             "its error are taken where the iterations stopped."
             for name, s in short.items() if abs(s) > FIXED_POINT_TOLERANCE]
+
+
+def past_black_sky(names: Sequence[str], x: Float[np.ndarray, " n"], tried: Float[np.ndarray, " n"], images: int) -> dict[str, Any]:
+    """What a fit records where :func:`grid_step` stopped at :class:`PastBlackSky` (extras ``pixel_grid_past_black_sky``):
+    ``values``, each free blur and shift (``names``, solver coordinates) of the ``images`` whose blur is free, at the
+    fit's result ``x`` and at the values ``tried``; ``reach_px``, per image, their reach
+    (:func:`~spacefit.fitting.fine_models.reach_px`: 5 sigma of the blur and the larger shift, px) at both, None where
+    the blur is not free."""
+    values, reach = {}, []
+    for k in range(images):
+        moves = [nuisance_index(names, n, k) for n in MOVES]
+        free = moves[0] is not None
+        values.update({names[i]: [float(x[i]), float(tried[i])] for i in moves if i is not None and free})
+        reach.append([float(reach_px(jnp.asarray(v, dtype=float), moves)) for v in (x, tried)] if free else None)
+    return {"values": values, "reach_px": reach}
+
+
+def black_sky_notes(past: dict[str, Any] | None) -> list[str]:
+    """The warning of a fit whose pixel-grid step was not taken (``past``, :func:`past_black_sky`'s record; none without
+    one): the values tried and each image whose reach grew past its finer models' black sky (sized for the reach at the
+    result and :data:`~spacefit.fitting.fine_models.PAD_MARGIN_PX`), or, none grown, a render at
+    :data:`~spacefit.fitting.fine_models.SUPERSAMPLE`x not finite; the fit's status is then
+    :attr:`~spacefit.fitting.status.Status.UNSTEPPED`."""
+    if not past:
+        return []
+    tried = ", ".join(f"{name} {v[1]:.4g} ({v[0]:.4g} at the result)" for name, v in past["values"].items())
+    grown = [f"image {k}'s reach {r[1]:.3g} px ({r[0]:.3g} px at the result)" for k, r in enumerate(past["reach_px"])
+             if r is not None and r[1] - r[0] > PAD_MARGIN_PX]
+    why = (f"there {', '.join(grown)}: past the black sky its finer models were sized for (the reach at the result and "
+           f"{PAD_MARGIN_PX:g} px; the reach is 5 sigma of the blur and the larger shift)" if grown
+           else f"there the change is not finite with no reach past the black sky: a render at {SUPERSAMPLE}x is not finite")
+    return [f"the pixel grid's step to the model made at {SUPERSAMPLE}x was not taken: its fixed point's iterations tried {tried}; "
+            f"{why}. The values and their standard errors are the fit's on the pixel grid, without the step, and carry neither "
+            "the grid's model error nor a bound on it; fit at a finer resolution, or with the blur fixed."]

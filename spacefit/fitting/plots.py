@@ -20,7 +20,8 @@ from matplotlib.ticker import MaxNLocator
 from spacefit.errors import check_choice, check_range
 from spacefit.fitting.result import FitResult
 from spacefit.output import PREVIEW_PERCENTILE, preview_scale, to_srgb8
-from spacefit.plotting import AxesArg, FigureArg, axis_label, cropped, image_box, panels, show_image, unit_label
+from spacefit.plotting import (AxesArg, FigureArg, axis_label, cropped, image_box, log_scale, panels, show_image, suptitle,
+                               unit_label, wrapped)
 from spacefit.units import RADIANCE_UNIT
 
 
@@ -73,7 +74,7 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
             panel.set_xticks([])
             panel.set_yticks([])
     if ax is None:
-        axes[0, 0].figure.suptitle(f"{result.solver}, {result.loss_name} loss: {result.status}", fontsize=10)
+        suptitle(axes[0, 0].figure, f"{result.solver}, {result.loss_name} loss: {result.status}", 10)
     return axes
 
 
@@ -95,7 +96,7 @@ def plot_residuals(result: FitResult, *, ax: AxesArg = None, fig: FigureArg = No
     if not images:
         axes[0].text(0.5, 0.5, "no residuals: the fit has no render", ha="center", va="center", transform=axes[0].transAxes)
     if ax is None:
-        axes[0].figure.suptitle(f"{result.status}", fontsize=9)
+        suptitle(axes[0].figure, f"{result.status}", 9)
     return axes
 
 
@@ -137,7 +138,8 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
     """The loss per step (log axis; accepted steps joined, rejected trials as crosses, the loss's
     Monte Carlo noise as a band above the best loss) and, one panel each, every parameter's value
     per step in its unit, with the fitted value's one-standard-error band and, where ``truths``
-    gives it (parameter name -> value, in the parameter's unit), the true value as a dashed line;
+    gives it (parameter name -> value, in the parameter's unit), the true value as a dashed line
+    (their legend once, in the first parameter's panel);
     into ``ax`` (the loss's, then one per parameter) or ``fig``.
 
     Returns:
@@ -174,9 +176,10 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
     steps = np.array([h["step"] for h in history])
     losses = np.array([h["loss"] for h in history], dtype=float)
     accepted = np.array([h.get("accepted", True) for h in history], dtype=bool)
-    ax_loss.semilogy(steps[accepted], losses[accepted], "o-", ms=3, label="accepted")
+    log_scale(ax_loss)
+    ax_loss.plot(steps[accepted], losses[accepted], "o-", ms=3, label="accepted")
     if (~accepted).any():
-        ax_loss.semilogy(steps[~accepted], losses[~accepted], "x", color="C3", ms=5, label="rejected")
+        ax_loss.plot(steps[~accepted], losses[~accepted], "x", color="C3", ms=5, label="rejected")
     noise = np.array([h.get("loss_noise", np.nan) for h in history], dtype=float)
     if np.isfinite(noise).any():
         best = np.minimum.accumulate(np.where(np.isfinite(losses), losses, np.inf))
@@ -193,9 +196,13 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
         panel.axhline(final, color=f"C{i}", lw=0.8)
         if name in truths:
             panel.axhline(truths[name], color="k", ls="--", lw=1.0, label="truth")
-        panel.set_ylabel(axis_label(name), fontsize=7)
-        if name in truths or np.isfinite(stderr):
-            panel.legend(fontsize=6, loc="best")
+        # in lines as long as the panel is high (before the layout, which makes it higher): one line ran into its neighbours'
+        panel.set_ylabel(wrapped(axis_label(name), panel.get_window_extent().height, panel.figure.dpi, 7), fontsize=7)
+        if ax is None:  # its own column, sharing the steps: numbered once, under it
+            panel.tick_params(labelbottom=panel is axes[-1])
+    column = {label: handle for panel in axes[1:] for handle, label in zip(*panel.get_legend_handles_labels())}
+    if column:  # the band's and the truth's meaning once, in the column's first panel: every panel's would say the same
+        axes[1].legend(column.values(), column.keys(), fontsize=6, loc="best")
     axes[-1].set_xlabel("step")
     for panel in axes:
         panel.xaxis.set_major_locator(MaxNLocator(integer=True))

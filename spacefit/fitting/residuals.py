@@ -8,7 +8,7 @@ renderer sees the free values that are its own (``target.attitude_z_deg@k``) or 
 (:meth:`~spacefit.fitting.params.FreeParameters.rendered`); the image nuisances act on its render in
 JAX (:mod:`spacefit.fitting.nuisance`), the frames of a joint fit alike as one program whatever their
 count (:mod:`spacefit.fitting.frame_models`). The renders are callbacks into Python inside a program
-(:func:`~spacefit.fitting.frames.batched_renders`), or made before it (:mod:`spacefit.fitting.outside`).
+(:func:`~spacefit.fitting.render_batches.batched_renders`), or made before it (:mod:`spacefit.fitting.outside`).
 The set-up that checks the inputs and builds the problem is :mod:`spacefit.fitting.problem`.
 """
 
@@ -26,8 +26,7 @@ import numpy as np
 from spacefit.executors import Executor
 from spacefit.formation import noise_variance_terms
 from spacefit.fitting.frame_models import AlikePrograms, FrameModels, concurrently, frame_model
-from spacefit.fitting.frames import (FrameSpec, InProcess, batched_renders, frame_part_image, frame_renders, given_renders, render_runs,
-                                     run_frames, share_views)
+from spacefit.fitting.frames import FrameSpec, InProcess, frame_part_image, run_frames, share_views
 from spacefit.fitting.nuisance import image_model as image_model_of, nuisance_index
 from spacefit.fitting.observations.base import Block
 from spacefit.fitting.observations.image import Observation, check_reference, image_residual, in_unit_of
@@ -35,6 +34,8 @@ from spacefit.fitting.outside import DESCENT, Outside, Rendered
 from spacefit.fitting.params import FreeParameters
 from spacefit.fitting.fine_models import grid_error_models
 from spacefit.fitting.pixel_grid import GridChanges, ImageColumns
+from spacefit.fitting.render_batches import batched_renders, frame_renders, given_renders, render_runs
+from spacefit.precision import on_device
 from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.memory import release_freed_memory
 from spacefit.rendering.parts import PartImage
@@ -63,13 +64,13 @@ class Problem:
     residual_x: Callable[[jax.Array], jax.Array]  # physical x -> stacked residuals (J by forward mode)
     residual_x_independent: Callable[[jax.Array], jax.Array]  # the same with independent seeds
     loss_u_reverse: Callable[[jax.Array], jax.Array] | None  # unconstrained u -> the descended loss (reverse mode)
-    renders_x: Callable[[jax.Array], list[jax.Array]]  # each observation's model in its data's unit
+    renders_x: Callable[[jax.Array], list[np.ndarray]]  # each observation's model in its data's unit
     part_images: list[PartImage]  # which part each pixel of each image sees
     references: list[np.ndarray]  # the checked references, (h, w, 3) or (h, w, 1) float32, 0 where not used
     # (x, j) -> each observation's model (images, then blocks) at the j-th seeds (0 the fit's, 1 the
     # independent ones, more further independent ones: the goodness of fit's verdict render,
-    # spacefit.fitting.goodness) ...
-    models_seeded: Callable[[jax.Array, int], list[jax.Array]]
+    # spacefit.fitting.goodness), host arrays ...
+    models_seeded: Callable[[jax.Array, int], list[np.ndarray]]
     # ... the stacked residuals of given models (the noise sigma taken at them) ...
     residual_of: Callable[[list[jax.Array]], jax.Array]
     # ... and factor -> the same problem rendered with factor times the samples per pixel (the verdict render)
@@ -217,17 +218,18 @@ def build_problem(
             others = block_models(x, 0)  # none rendered: the seeds change none
             return [*stacked, *others], with_blocks(r, others), with_blocks(descended, others)
 
-        def each(out: list[jax.Array]) -> list[jax.Array]:
+        def each(out: list[np.ndarray]) -> list[np.ndarray]:
             """evaluate's models, each batch's stacked, the blocks' after them, one per observation."""
             batches = len(out) - len(blocks)
             return [*FrameModels.each(out[:batches]), *out[batches:]]
 
         outside = Outside(render_outside, jax.jit(evaluate), each, models.operands)
 
-    def models_seeded(x: jax.Array, j: int) -> list[jax.Array]:
+    def models_seeded(x: jax.Array, j: int) -> list[np.ndarray]:
         if outside is not None:
             return outside.models(x, j)
-        return [*FrameModels.each(models_residuals(x, seeds_of(j))[0]), *block_models(x, j)]
+        return [np.asarray(m) for m in (*FrameModels.each([np.asarray(b) for b in models_residuals(x, seeds_of(j))[0]]),
+                                        *block_models(x, j))]
 
     def residual_at(x: jax.Array, seeds: jax.Array, j: int, kind: int = 1) -> jax.Array:
         """The stacked residuals (``kind`` 1; 2: those a solver descends) at the j-th seeds ``seeds``."""
@@ -289,7 +291,7 @@ def build_problem(
             return each, coarser.mean(axis=0), derivatives.mean(axis=0)
 
         programs = AlikePrograms(sum(m is not None for m in made) > 1)  # one program each, not one per operation; a pass's frames share it
-        y_of = lambda k, y: jnp.asarray(np.asarray(y)[read[k]])  # noqa: E731
+        y_of = lambda k, y: on_device(np.asarray(y)[read[k]], np.float64)  # noqa: E731
 
         def fine(y: np.ndarray) -> np.ndarray:
             # the images' programs two at a time (concurrently): each runs mostly on one core
@@ -309,7 +311,7 @@ def build_problem(
                     blocks.append(((), np.zeros((0, size))))
                     continue
                 own = [i for i, j in enumerate(columns) if j in read[k]]
-                directions = jnp.eye(len(read[k]))[np.searchsorted(read[k], [columns[i] for i in own]).astype(int)]
+                directions = np.eye(len(read[k]))[np.searchsorted(read[k], [columns[i] for i in own]).astype(int)]
                 each, coarser, own_derivatives = (np.asarray(p, dtype=float) for p in programs(
                     (settled_changes, k, len(own)), lambda *a, k=k: settled_changes(k, *a), m.renders, y_of(k, y), directions))
                 parts.append((each, coarser))

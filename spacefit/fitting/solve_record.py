@@ -21,6 +21,7 @@ from spacefit.fitting.drivers import Outcome, Step
 from spacefit.fitting.problem import Setup
 from spacefit.fitting.status import Status
 from spacefit.fitting.stopping import NoiseFloor, loss_noise
+from spacefit.precision import on_device
 from spacefit.progress import ProgressCallback
 
 # A solve fails when this many consecutive evaluations are not finite; a line search or trust
@@ -65,7 +66,7 @@ class SolveRecord:
                 driver.close()
                 # the step that reached the noise floor may be a rejected trial: the best point is the result
                 stopped_here = status in (Status.NOISE_FLOOR, Status.NO_BETTER_POINT)
-                return Outcome(status, jnp.asarray(self.best_u) if stopped_here else step.iterate, k)
+                return Outcome(status, on_device(self.best_u, np.float64) if stopped_here else step.iterate, k)
 
     def record(self, k: int, step: Step) -> Status | None:
         """Record one step; :attr:`Status.NOISE_FLOOR` or :attr:`Status.NO_BETTER_POINT` when the solve
@@ -122,7 +123,7 @@ class SolveRecord:
     def ending(self, outcome: Outcome) -> dict[str, Any]:
         """The record of an ended solve that :meth:`ended` (``fit(resume=Resume(ended=...))``) takes: status, steps,
         history and the values the result reports (the start where no step lowered the loss)."""
-        x = self.s.solver_params.to_physical(jnp.asarray(outcome.u)) if self.moved else jnp.asarray(self.s.x0)
+        x = self.s.solver_params.to_physical(jnp.asarray(outcome.u)) if self.moved else on_device(self.s.x0, np.float64)
         values = dict(zip(self.s.user.names, np.asarray(self.s.to_user(x)).tolist()))
         return {"status": outcome.status.value, "steps": outcome.steps, "values": values, "history": self.history}
 

@@ -13,13 +13,14 @@ import enum
 class Status(enum.Enum):
     """How a fit ended. ``value`` is the words a report prints on its first line.
 
-    The solver's own endings (converged, noise floor, step limit, failures, signals), and five
+    The solver's own endings (converged, noise floor, step limit, failures, signals), and six
     verdicts on a solve that ended without a failure, in this order of precedence:
     :attr:`NO_PROGRESS` (no step lowered the loss: the start is returned), :attr:`AT_BOUND` (a
     parameter ended at a bound of its range), :attr:`UNJUDGED` (the noise is known but the model's
-    own render noise is too large to judge its residuals), :attr:`MISFIT` (the residuals exceed the noise, :attr:`FitResult.goodness`)
-    and :attr:`UNSETTLED` (with a blur free, the step to the model made at 4x the resolution short of its fixed point;
-    not over :attr:`MAX_STEPS`, the solver's own shortfall). Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
+    own render noise is too large to judge its residuals), :attr:`MISFIT` (the residuals exceed the noise, :attr:`FitResult.goodness`),
+    :attr:`UNSTEPPED` (with a blur free, the step to the model made at 4x the resolution not taken: its iterations moved
+    a blur or shift past the black sky its finer models were sized for, or a render at 4x is not finite) and :attr:`UNSETTLED` (that step short of its
+    fixed point); neither over :attr:`MAX_STEPS`, the solver's own shortfall. Only :attr:`CONVERGED`, :attr:`NOISE_FLOOR` and
     :attr:`NO_BETTER_POINT` (``sf.fit(stop=...)``) are a success, and only where the
     verdicts leave them: a solve stopped there whose residuals exceed the noise is a :attr:`MISFIT`.
 
@@ -44,6 +45,9 @@ class Status(enum.Enum):
                 "render with more samples")
     UNSETTLED = ("not settled: the pixel grid's step to a model made at a finer resolution stopped short of its fixed point; "
                  "the values it moves are short of it by more than its tolerance (the warnings name them)")
+    UNSTEPPED = ("not stepped: the pixel grid's step to a model made at a finer resolution moved a blur or shift past the black "
+                 "sky its finer models were sized for (or a render at that resolution is not finite); the values and their "
+                 "errors are the fit's on the pixel grid, without the step (the warnings name the values and their reach)")
     DIVERGED = "failed: the solve diverged"
     NONFINITE = "failed: the loss or a parameter became NaN"
     FAILED = "failed: the solver reported an error"
@@ -64,13 +68,14 @@ class Status(enum.Enum):
         return self.value
 
 
-def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool, unjudged: bool = False, unsettled: bool = False) -> Status:
+def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool, unjudged: bool = False, unsettled: bool = False,
+            unstepped: bool = False) -> Status:
     """The fit's status from the solver's: a solve that ended without failing is
     :attr:`Status.NO_PROGRESS` if no step lowered the loss, else :attr:`Status.AT_BOUND` if a
     parameter ended at a bound, else :attr:`Status.UNJUDGED` if its residuals could not be judged
     (``unjudged``), else :attr:`Status.MISFIT` if the residuals exceed the noise, else, one that
-    did not stop at its step limit, :attr:`Status.UNSETTLED` if the pixel grid's step stopped short of its fixed
-    point (``unsettled``)."""
+    did not stop at its step limit, :attr:`Status.UNSTEPPED` if the pixel grid's step was not taken (``unstepped``),
+    else :attr:`Status.UNSETTLED` if it stopped short of its fixed point (``unsettled``)."""
     if status not in (Status.CONVERGED, Status.NOISE_FLOOR, Status.NO_BETTER_POINT, Status.MAX_STEPS):
         return status
     if not moved:
@@ -81,6 +86,10 @@ def verdict(status: Status, moved: bool, at_bound: bool, misfit: bool, unjudged:
         return Status.UNJUDGED
     if misfit:
         return Status.MISFIT
-    if unsettled and status is not Status.MAX_STEPS:
+    if status is Status.MAX_STEPS:
+        return status
+    if unstepped:
+        return Status.UNSTEPPED
+    if unsettled:
         return Status.UNSETTLED
     return status

@@ -1,4 +1,5 @@
-"""How far to trust a fit: the sandwich covariance, the delta method, warnings.
+"""How far to trust a fit: the sandwich covariance, the delta method (what its values' errors warn of:
+:mod:`spacefit.fitting.value_warnings`).
 
 References:
     White, H. (1980), "A heteroskedasticity-consistent covariance matrix estimator and a direct
@@ -23,25 +24,13 @@ import numpy as np
 from spacefit.fitting.noise_weight import weight_bias
 from spacefit.fitting.normal_equations import by_columns, chunk_for
 from spacefit.fitting.nuisance import nuisance_index
-from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.pixel_grid import grid_step
+from spacefit.fitting.pixel_grid import PastBlackSky, grid_step, past_black_sky
 from spacefit.fitting.problem import Setup
 from spacefit.fitting.render_seeds import seed_excess, seed_shift
 from spacefit.fitting.residuals import Problem, column_owners
+from spacefit.precision import on_device
 from spacefit.rendering.memory import release_freed_memory
-from spacefit.scene.entries import Bounds
-from spacefit.scene.parameters import is_image, parameter
-
-# |correlation| above which two parameters are reported as not separately determined.
-CORRELATION_WARN = 0.95
-# Standard error, relative to the larger of the value and the parameter's own scale
-# (:attr:`~spacefit.scene.entries.Parameter.scale`), above which it is reported as poorly determined.
-REL_STDERR_WARN = 0.2
-# |correlation| at or above which a parameter near a bound of its range is named beside it (:func:`near_bound`).
-NEAR_BOUND_CORRELATION = 0.3
-# A value within this many standard errors of a finite bound of its range is near it (:func:`near_bound`).
-NEAR_BOUND_STDERRS = 2.0
-
+from spacefit.scene.parameters import is_image
 
 @dataclass(frozen=True)
 class Linearisation:
@@ -83,14 +72,14 @@ class Linearisation:
         undetermined, and for a non-finite ``d``."""
         if not np.all(np.isfinite(difference)):
             return np.zeros(len(self.x))
-        d = jnp.asarray(difference)
+        d = on_device(difference, np.float64)
         return -_pseudo_inverse(self.information)[0] @ (0.5 * (np.asarray(self.J1T(d)) + np.asarray(self.J2T(d))))
 
 
 def linearise(problem: Problem, x: np.ndarray) -> Linearisation:
     """The problem's :class:`Linearisation` at ``x`` (physical units): one Jacobian render per seed, the independent
     seeds' begun while the fit's seeds' tangents are traced (:meth:`~spacefit.fitting.residuals.Problem.render_ahead`)."""
-    xj = jnp.asarray(x)
+    xj = on_device(x, np.float64)
     problem.render_ahead(xj, 1)
     r, J1 = problem.linearised(xj, 0)
     r_alt, J2 = problem.linearised(xj, 1)
@@ -168,14 +157,14 @@ def covariance(problem: Problem, x: np.ndarray,
     s2 = float(r @ r) / dof
     # the fit stops where J^T r = 0 for its noisy J, off by (J^T J)^-1 dJ^T r, whose covariance per
     # row is r^2 (J1 - J2)(J1 - J2)^T / 2
-    r2 = jnp.asarray(r**2)
+    r2 = on_device(r**2, np.float64)
 
     def jacobian_noise_column(e: jax.Array) -> jax.Array:
-        v = r2 * (J1(e) - J2(e))
+        v = _weighted_difference(r2, J1(e), J2(e))
         return J1T(v) - J2T(v)
 
     jacobian_noise = 0.5 * lin.columns(jacobian_noise_column)
-    correction = -bread @ (0.5 * (np.asarray(J1T(jnp.asarray(r_alt))) + np.asarray(J2T(jnp.asarray(r)))))
+    correction = -bread @ (0.5 * (np.asarray(J1T(on_device(r_alt, np.float64))) + np.asarray(J2T(on_device(r, np.float64)))))
     if problem.noise_known:
         # the observation's noise, (J^T J)^-1, plus the fit's own render noise, per residual
         # (r - r_alt)^2 / 2 from the two seeds, and the Jacobian's, both at half weight
@@ -193,6 +182,13 @@ def covariance(problem: Problem, x: np.ndarray,
         cov[:, touched] = np.inf
         correction = np.zeros(len(x))  # a step in the determined directions alone would move the undetermined
     return cov, 0.5 * float(r @ r), np.clip(eigval, 0.0, None) / s2, correction
+
+
+# one program: run operation by operation (the products are), two single-operation programs
+@jax.jit
+def _weighted_difference(w: jax.Array, a: jax.Array, b: jax.Array) -> jax.Array:
+    """``w * (a - b)``."""
+    return w * (a - b)
 
 
 def _unknown_noise_draw(problem: Problem, mean: np.ndarray, r: np.ndarray, informative: int, dof: int) -> np.ndarray:
@@ -229,7 +225,7 @@ def render_meat(cross: Callable[[Callable[[jax.Array], jax.Array]], np.ndarray],
     laid_out = problem.pixels if problem.pixels + sum(b.data.value.size for b in problem.blocks) == d.size else 0
     images = shapes if laid_out else []
     sizes = [2 * noise_reach_px(problem, x, k) + 1 for k in range(len(images))]
-    dj, shaped = jnp.asarray(d), tuple(tuple(shape) for shape in images)
+    dj, shaped = on_device(d, np.float64), tuple(tuple(shape) for shape in images)
     return _psd_part(cross(lambda v: _near_weighted(shaped, tuple(sizes), dj, v)))
 
 
@@ -286,50 +282,6 @@ def stderr_corr(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return stderr, corr
 
 
-def near_bound(bounds: Bounds, value: float, stderr: float) -> str | None:
-    """"lower" or "upper" where ``value`` lies within :data:`NEAR_BOUND_STDERRS` standard errors ``stderr`` of that
-    finite bound of ``bounds``: there its 95 % interval reaches out of the range, and the delta method's normal error
-    does not describe an estimate that cannot cross the bound (a blur whose truth is 0, at its bound: 0.030 +- 0.046 px
-    on average over 24 fits of a pass, every one above it; docs/measurements/validation.md)."""
-    if value - bounds.lo < NEAR_BOUND_STDERRS * stderr:
-        return "lower"
-    return "upper" if bounds.hi - value < NEAR_BOUND_STDERRS * stderr else None
-
-
-def warnings_for(params: FreeParameters, values: np.ndarray, stderr: np.ndarray, corr: np.ndarray) -> list[str]:
-    out = []
-    names = params.names
-    for name, b, value in zip(names, params.bijections, values):
-        if side := b.at_bound(float(value)):
-            out.append(f"{name} = {value:.4g} is at the {side} bound of its range {b.describe()}: the solver pushed "
-                       "it there, so neither it nor its standard error is an estimate; the model may not be able "
-                       "to match the images (another start, or another free parameter?).")
-    for i, (name, b) in enumerate(zip(names, params.bijections)):
-        if np.isnan(stderr[i]):
-            continue  # no error estimate at all: reported by the caller
-        if not np.isfinite(stderr[i]):
-            out.append(f"{name} is not determined by these observations (singular J^T J).")
-        elif stderr[i] > REL_STDERR_WARN * (scale := max(abs(values[i]), parameter(name).scale, 1e-12)):
-            out.append(f"{name} is poorly determined: standard error {stderr[i]:.3g} on {values[i]:.4g} "
-                       f"(more than {REL_STDERR_WARN:g} x {scale:.3g}, the larger of its value and its scale).")
-        if np.isfinite(stderr[i]) and not b.at_bound(float(values[i])) and (side := near_bound(b, float(values[i]), float(stderr[i]))):
-            bound = b.lo if side == "lower" else b.hi
-            linked = [f"{names[j]} ({corr[i, j]:+.2f})" for j in range(len(names)) if j != i and abs(corr[i, j]) >= NEAR_BOUND_CORRELATION]
-            out.append(f"{name} = {values[i]:.4g} +- {stderr[i]:.2g} lies within {NEAR_BOUND_STDERRS:g} standard errors of the {side} bound "
-                       f"{bound:g} of its range: its interval is cut there, so it is not a normal error (the estimate "
-                       "cannot fall beyond the bound, so it is biased away from it)"
-                       + (f"; the errors of the parameters correlated with it, {', '.join(linked)}, take it as normal and "
-                          "may be understated." if linked else "."))
-    for i in range(len(names)):
-        for j in range(i + 1, len(names)):
-            if abs(corr[i, j]) > CORRELATION_WARN:
-                out.append(
-                    f"{names[i]} and {names[j]} are correlated ({corr[i, j]:+.3f}): the images determine a "
-                    "combination of them better than each; add views, resolution or samples."
-                )
-    return out
-
-
 def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray, np.ndarray, float, dict[str, Any]]:
     """User-facing values, their covariance, the loss and extras at solver values ``x``: the
     values are ``x`` moved by :func:`covariance`'s correction for the render noise's bias (where
@@ -338,7 +290,9 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     a blur width free (the pixel loss), the values take the step ``delta`` from the fit's model on the pixel grid to
     one made at 4x the resolution (:func:`~spacefit.fitting.pixel_grid.grid_step`; extras ``pixel_grid_error``,
     solver coordinates; skipped where it would leave a range; ``pixel_grid_evaluations``, its fixed point's iterations,
-    and where taken ``pixel_grid_short``, each value's distance to the fixed point in standard errors), and the
+    and where taken ``pixel_grid_short``, each value's distance to the fixed point in standard errors; none of them, and
+    the values and covariance the fit's on the pixel grid, where its iterations reach past the finer models' black sky:
+    extras ``pixel_grid_past_black_sky``, :func:`~spacefit.fitting.pixel_grid.past_black_sky`), and the
     covariance carries ``b b^T``, ``b``
     the bound on what remains of the grid's error after it (a third of the step from the model made at 2x
     to the one made at 4x; extras ``pixel_grid_remainder``, its magnitude), and the step's render noise
@@ -359,8 +313,9 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     extras: dict[str, Any] = {"fisher_eigenvalues": fisher.tolist(),
                               "noise_bias_correction": dict(zip(s.solver_params.names, correction.tolist()))}
     if (bias := weight_bias(s.problem, lin.r, lin.r_alt, lin.step)) is not None and correct:  # flagged, not subtracted
-        extras["noise_weight_bias"] = dict(zip(s.user.names, (np.asarray(jax.jacfwd(s.to_user)(jnp.asarray(x))) @ bias).tolist()))
+        extras["noise_weight_bias"] = dict(zip(s.user.names, (s.user_jacobian(x) @ bias).tolist()))
     changes = s.problem.pixel_grid(x) if s.problem.pixel_grid is not None and np.all(np.isfinite(cov)) else None
+    grid = None
     if changes is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
         padding = np.zeros(lin.r.size - s.problem.pixels)
         columns = [i for i, n in enumerate(s.solver_params.names) if is_image(n)]
@@ -372,12 +327,16 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
                 release_freed_memory()
             return moved
 
-        grid = grid_step(changes, grid_moves, x, np.sqrt(np.diag(cov)), columns)
-        delta, remainder, noise, feedback = grid.delta, grid.remainder, grid.noise, grid.feedback
+        try:
+            grid = grid_step(changes, grid_moves, x, np.sqrt(np.diag(cov)), columns)
+        except PastBlackSky as past:  # no step: the values and errors the fit's on the pixel grid, flagged (Status.UNSTEPPED)
+            extras["pixel_grid_past_black_sky"] = past_black_sky(s.solver_params.names, x, past.tried, len(s.problem.references))
         # the models at 4x (each image's renders at 4x, 6.3 MiB a 128 x 128 px frame) dropped before the products below,
         # whose intermediates would come on top of them, and the pages their programs' threads freed handed back
         del changes
         release_freed_memory()
+    if grid is not None:
+        delta, remainder, noise, feedback = grid.delta, grid.remainder, grid.noise, grid.feedback
         # the step's render noise: the mean of two renders' changes, through the sandwich as the fit's own render noise
         bread = _pseudo_inverse(lin.information)[0]
         cov = cov + 0.5 * bread @ render_meat(lin.cross, np.concatenate([noise, padding]), s.problem, x) @ bread
@@ -395,7 +354,7 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
         # the render noise the error carries: the meat's half of the render noise's (the mean residual's share)
         bread = _pseudo_inverse(lin.information)[0]
         modelled = 0.5 * bread @ render_meat(lin.cross, (lin.r - lin.r_alt) / math.sqrt(2.0), s.problem, x) @ bread
-        T = np.asarray(jax.jacfwd(s.to_user)(jnp.asarray(x)))
+        T = s.user_jacobian(x)
         before = np.sqrt(np.diag(map_covariance(T, cov)))
         cov = cov + np.diag(seed_excess(shift, np.diag(modelled)))
         with np.errstate(invalid="ignore", divide="ignore"):
@@ -405,5 +364,5 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     if s.rms_index is not None:
         i = s.rms_index
         extras.update({"wrinkles.rms_m": float(x[i]), "wrinkles.rms_m.stderr": float(np.sqrt(cov[i, i]))})
-        cov = map_covariance(np.asarray(jax.jacfwd(s.to_user)(jnp.asarray(x))), cov)
-    return np.asarray(s.to_user(jnp.asarray(x)), dtype=float), cov, loss_value, extras
+        cov = map_covariance(s.user_jacobian(x), cov)
+    return np.asarray(s.to_user(on_device(x, np.float64)), dtype=float), cov, loss_value, extras

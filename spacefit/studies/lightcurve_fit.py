@@ -5,7 +5,7 @@ Each point's irradiance is its image's sum of radiance x pixel solid angle, resc
 camera's range to the observer's; the residuals compare ln E with the magnitudes' errors
 (0.4 ln 10 sigma_m). A point is a scene: the target's scene with the point's geometry (its camera,
 sun and target pose, given as any scene values of them). The points are the frames of one batch
-(:func:`spacefit.fitting.frames.batched_renders`): one loaded scene on which each point sets its
+(:func:`spacefit.fitting.render_batches.batched_renders`): one loaded scene on which each point sets its
 own view, rendered one after another, their Jacobian columns the bridge's. The model is rendered:
 its render noise, measured from renders with independent seeds, enters the fit's goodness and its
 errors as an image's does (:func:`spacefit.fitting.uncertainty.covariance`).
@@ -30,7 +30,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from spacefit.errors import InputError, check_array, check_choice, check_count, check_name_list, check_range, check_type, check_vector, quote
-from spacefit.fitting.frames import POSE, POSE_KEYS, VIEW, VIEW_KEYS, FrameSpec, InProcess, batched_renders, share_views
+from spacefit.fitting.frames import POSE, POSE_KEYS, VIEW, VIEW_KEYS, FrameSpec, InProcess, share_views
+from spacefit.fitting.render_batches import batched_renders
 from spacefit.fitting.loop import fit
 from spacefit.fitting.resume import Resume
 from spacefit.fitting.result import FitResult

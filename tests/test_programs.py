@@ -1,0 +1,78 @@
+"""A fit's host arithmetic stays out of JAX: spacefit computes on concrete values with NumPy and copies them to the
+device with ``precision.on_device``, so no program of one operation (``jit(add)``, ``jit(convert_element_type)``,
+``jit(stage)`` for JAX 0.10's ``jnp.asarray`` of a NumPy array) is traced, lowered and read from JAX's cache in every
+process, 15 to 30 ms each (experiments/fit_programs.py lists each program a fit lowers)."""
+
+from __future__ import annotations
+
+import collections
+import os
+import traceback
+
+import equinox
+import jax
+import jax.monitoring
+import jax.numpy as jnp
+import lineax
+import optimistix
+from helpers import write_sphere_fit_case
+
+import spacefit as sf
+from spacefit.cli import main
+from spacefit.rendering.exr import read_exr
+from spacefit.scene.assembly import assemble
+from spacefit.scene.toml import load_scene
+
+# A program's name that is one operation's: a lax primitive or jax.numpy function run on concrete values (`stage`: the
+# program of `jnp.asarray` of a NumPy array in JAX 0.10).
+OPERATIONS = {*vars(jax.lax), *vars(jnp), "stage"}
+
+# The single-operation programs a fit may lower, each with where it comes from and why it stays.
+ALLOWED = collections.Counter({
+    # while the step is traced, optimistix's result (equinox's `RESULTS.promote`: `jnp.asarray(base_offsets)` of its
+    # enum's offsets) and lineax's `result == RESULTS.successful` on concrete enum values: not spacefit's code
+    ("jit(convert_element_type)", "equinox/_enum.py:promote"): 1,
+    ("jit(convert_element_type)", "equinox/_enum.py:__eq__"): 2,
+    ("jit(stage)", "equinox/_enum.py:promote"): 1,
+    # the Jacobian noise's column J1^T v - J2^T v under by_columns's vmap: the two products are programs of their own,
+    # and jitting their difference with them would trace and compile both products once more
+    ("jit(subtract)", "spacefit/fitting/uncertainty.py:jacobian_noise_column"): 1,
+})
+
+# The packages whose frames name where a program was asked for.
+PACKAGES = [os.path.dirname(m.__file__) for m in (sf, equinox, lineax, optimistix)]
+
+# About 600 DN on the lit sphere in 12 bits: an observation with its sensor, as a user's fit reads one.
+SENSOR = sf.Sensor(exposure_time_s=3e-7, gain_dn_per_electron=0.5, bias_dn=50.0, bit_depth=12, full_well_electrons=None)
+
+
+def _origin() -> str:
+    """The innermost frame of spacefit's code or its solvers' in the stack, "package/file.py:function"."""
+    for frame in reversed(traceback.extract_stack()):
+        for package in PACKAGES:
+            if frame.filename.startswith(package + os.sep):
+                return f"{os.path.relpath(frame.filename, os.path.dirname(package))}:{frame.name}"
+    return "elsewhere"
+
+
+def test_a_fit_lowers_no_program_of_one_operation_from_spacefit(tmp_path):
+    case = write_sphere_fit_case(tmp_path, subdivisions=2, size=32, spp=4)
+    dn = sf.observe(read_exr(case / "ref.exr"), SENSOR, assemble(load_scene(case / "scene.toml")).intrinsics, seed=3)
+    sf.write_observation(case / "obs.fits", dn, SENSOR)
+    lowered = []
+
+    def listener(event: str, seconds: float, **kwargs: object) -> None:
+        if event == "/jax/core/compile/jaxpr_to_mlir_module_duration":
+            lowered.append((str(kwargs.get("fun_name")), _origin()))
+
+    jax.clear_caches()  # every program the fit runs lowered again, as in a process of its own
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        main(["fit", str(case / "obs.fits"), "--scene", str(case / "scene.toml"), "--free", "parts.sphere.kd",
+              "--out", str(tmp_path / "run"), "--max-steps", "3", "--spp", "2", "--quiet"])
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    # the listener heard the fit's own programs, by name and origin
+    assert len(lowered) >= 10 and ("jit(_weighted_difference)", "spacefit/fitting/uncertainty.py:jacobian_noise_column") in lowered
+    single = collections.Counter((name, origin) for name, origin in lowered if name.removeprefix("jit(").removesuffix(")") in OPERATIONS)
+    assert single - ALLOWED == collections.Counter(), f"single-operation programs from the fit's host code: {single - ALLOWED}"
