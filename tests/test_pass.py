@@ -582,7 +582,7 @@ BENCH_COLUMNS, BENCH_SPP = 9, 16  # experiments/bench_pass.py's pass: a frame's 
 # the runs of experiments/bench_pass.py stored in experiments/results/pass_memory/ that the estimate's constants are fitted
 # to (spacefit/rendering/memory.py): the code's own at 128 x 128 px, and at 64 x 64 px an earlier commit's, whose peaks the
 # C heap's pages handed back between the phases can only lower (the others there: earlier code, higher peaks)
-CALIBRATION = ("bench_pass_64px.txt", "bench_pass_128px_ad0af01.txt")
+CALIBRATION = ("bench_pass_64px.txt", "bench_pass_128px_ad0af01.txt", "bench_pass_128px_2c682df.txt")
 
 
 def bench_peaks() -> list[tuple[int, int, float]]:
@@ -624,6 +624,21 @@ def test_the_freed_pages_a_fit_s_phases_leave_in_the_c_heap_are_handed_back_to_t
     handed_back = held - resident()
     libc.free(above)
     assert handed_back >= 60 * 2**20
+
+
+def test_a_pass_s_render_batch_hands_the_freed_heap_back_before_and_after_and_a_single_image_s_does_not(monkeypatch):
+    """Several frames' renders (a pass's): the C heap's freed pages handed back before the batch (what the solver's step
+    freed) and after it (what the renders freed); one frame's renders (a single image's fit, whose CPU is the concern):
+    never. The frames' results are the function's, in order."""
+    calls = []
+    monkeypatch.setattr("spacefit.fitting.frames.release_freed_memory", lambda: calls.append("released"))
+    fn = lambda spec, key, value, loaded=None: calls.append(value) or 2 * value  # noqa: E731
+    specs = tiny_frames(2)
+    assert run_frames(InProcess(), fn, specs, [1, 2]) == [2, 4]
+    assert calls == ["released", 1, 2, "released"]
+    calls.clear()
+    assert run_frames(InProcess(), fn, specs[:1], [3]) == [6]
+    assert calls == [3]
 
 
 def test_a_fit_too_large_for_the_machine_is_refused_with_its_estimate_and_nothing_written(small_pass, tmp_path, monkeypatch, capsys):

@@ -35,6 +35,7 @@ from spacefit.executors import Cluster, Executor, executor_of
 from spacefit.precision import float64, on_device
 from spacefit.rendering.bridge import outside_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
+from spacefit.rendering.memory import release_freed_memory
 from spacefit.rendering.parts import PartImage
 from spacefit.rendering.values import View, scene_view, view_values_fn
 from spacefit.scene.assembly import Assembly, assemble
@@ -295,8 +296,16 @@ def run_frames(executor: Executor, fn: Callable[..., Any], specs: Sequence[Frame
     """``[fn(spec_k, key_k, *args_k) for each frame k]`` in frame order on ``executor``. Each render traces
     its samples on all of Dr.Jit's threads and, when deterministic, splats them on one, in their order
     (:meth:`~spacefit.rendering.renderer.Renderer.radiance`, :meth:`~spacefit.rendering.bridge.DrJitScene.forward`):
-    a frame's image and Jacobian are those of a render wholly on one thread, bit for bit."""
+    a frame's image and Jacobian are those of a render wholly on one thread, bit for bit. Several frames (a pass): the
+    C heap's freed pages handed back before and after (:func:`~spacefit.rendering.memory.release_freed_memory`), those
+    the solver's step freed on XLA's threads and those the renders freed on Dr.Jit's, which the other's threads do not
+    reuse: kept, they lay under each step's peak."""
     keys = [spec.key for spec in specs]
-    if isinstance(executor, InProcess):
-        return executor.map(functools.partial(fn, loaded=executor.loaded), keys, specs, keys, *per_frame)
-    return executor.map(fn, keys, specs, keys, *per_frame)
+    joint = len(specs) > 1
+    if joint:
+        release_freed_memory()
+    local = isinstance(executor, InProcess)
+    out = executor.map(functools.partial(fn, loaded=executor.loaded) if local else fn, keys, specs, keys, *per_frame)
+    if joint:
+        release_freed_memory()
+    return out

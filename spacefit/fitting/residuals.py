@@ -37,6 +37,7 @@ from spacefit.fitting.pixel_grid import GridChanges, ImageColumns
 from spacefit.fitting.render_batches import batched_renders, frame_renders, given_renders, render_runs
 from spacefit.precision import on_device
 from spacefit.rendering.bridge import seeds_array
+from spacefit.rendering.memory import release_freed_memory
 from spacefit.rendering.parts import PartImage
 from spacefit.scene.assembly import assemble
 from spacefit.scene.sections import FILTER_RADIUS_PX
@@ -262,6 +263,11 @@ def build_problem(
                 if blurred[k] else None for k, obs in enumerate(observations)]
         if not any(m is not None for m in made):
             return None
+        # a pass's: the pages its programs' and renders' threads freed handed back at each evaluation's end, held in their
+        # arenas they lay under the next one's (rendering.memory; 4x renders 6.3 MiB a 128 x 128 px frame)
+        several = len(observations) > 1
+        if several:
+            release_freed_memory()
 
         def render_changes(k: int, render: jax.Array, y: jax.Array) -> tuple[jax.Array, jax.Array]:
             """Image k's residuals with the model made at 4x from one ``render`` less those with the fit's own, and the
@@ -289,9 +295,12 @@ def build_problem(
 
         def fine(y: np.ndarray) -> np.ndarray:
             # the images' programs two at a time (concurrently): each runs mostly on one core
-            return np.concatenate(concurrently([lambda k=k, m=m: np.zeros((2, references[k].size)) if m is None else np.asarray(
+            out = np.concatenate(concurrently([lambda k=k, m=m: np.zeros((2, references[k].size)) if m is None else np.asarray(
                 programs((fine_changes, k), lambda *a, k=k: fine_changes(k, *a), m.renders, y_of(k, y))[0], dtype=float)
                 for k, m in enumerate(made)]), axis=1)
+            if several:
+                release_freed_memory()
+            return out
 
         def settled(y: np.ndarray, columns: Sequence[int]) -> tuple[np.ndarray, np.ndarray, ImageColumns]:
             parts, blocks = [], []
@@ -308,6 +317,8 @@ def build_problem(
                 parts.append((each, coarser))
                 blocks.append((own, own_derivatives))
             each, coarser = (np.concatenate(p, axis=-1) for p in zip(*parts))
+            if several:
+                release_freed_memory()
             # each image's derivatives in its own columns, a column made whole when read (held whole: frames^2)
             return each, coarser, ImageColumns(len(columns), [r.size for r in references], blocks)
 

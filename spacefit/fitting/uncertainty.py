@@ -319,8 +319,16 @@ def estimate(s: Setup, x: np.ndarray, correct: bool = True) -> tuple[np.ndarray,
     if changes is not None:  # the pixel grid's model error of a free blur: stepped over, what remains carried (spacefit.fitting.pixel_grid)
         padding = np.zeros(lin.r.size - s.problem.pixels)
         columns = [i for i, n in enumerate(s.solver_params.names) if is_image(n)]
+        joint = len(s.problem.references) > 1
+
+        def grid_moves(d: np.ndarray) -> np.ndarray:
+            moved = lin.step(np.concatenate([d, padding]) if padding.size else d)
+            if joint:  # a pass's feedback: each column's rows-long vectors, freed on the threads that take them two at a time
+                release_freed_memory()
+            return moved
+
         try:
-            grid = grid_step(changes, lambda d: lin.step(np.concatenate([d, padding])), x, np.sqrt(np.diag(cov)), columns)
+            grid = grid_step(changes, grid_moves, x, np.sqrt(np.diag(cov)), columns)
         except PastBlackSky as past:  # no step: the values and errors the fit's on the pixel grid, flagged (Status.UNSTEPPED)
             extras["pixel_grid_past_black_sky"] = past_black_sky(s.solver_params.names, x, past.tried, len(s.problem.references))
         # the models at 4x (each image's renders at 4x, 6.3 MiB a 128 x 128 px frame) dropped before the products below,

@@ -66,7 +66,9 @@ def check_memory(width: int, height: int, window_pixels: int, spp: int, split: b
 # frames' pixels less than in proportion) and 100 B per pixel for its image and each column (reference, renders,
 # Jacobian columns, the pixel grid's renders at 4x), from the growth of 10.6 MiB a frame at 64 x 64 px and 25.6 MiB at
 # 128 x 128 px. It puts the 2-column pass of docs/measurements/reliability.md ("Memory per frame") 6 to 37 % above its
-# peaks, and a 100-frame pass of 128 x 128 px (2 steps at 4 spp) 7 % above its peak (3386 MiB for 3176). The Jacobian
+# peaks, and a 100-frame pass of 128 x 128 px (2 steps at 4 spp) 7 % above its peak (3386 MiB for 3176).
+# With the freed heap handed back around each batch of a pass's renders too (2c682df), the 128 x 128 px pass peaked at
+# 997, 1149 and 1713 MiB at 12, 24 and 48 frames (also in CALIBRATION): 6 to 20 % below the estimate, 20 MiB a frame. The Jacobian
 # is never held whole (fitting/normal_equations.py): held whole, rows of every frame by the columns of every frame, it
 # grew as frames^2, as the pixel grid's derivatives held whole did (4928 MiB at 48 frames of 128 x 128 px).
 FIT_BASE_BYTES = 720 * 2**20
@@ -115,7 +117,9 @@ def release_freed_memory() -> None:
     where there is none). glibc keeps what a thread frees in that thread's arena for its own later use, and XLA's
     and Dr.Jit's threads each have one: between a joint fit's phases (the solve, the covariance's products, the pixel
     grid's programs) 0.3 to 0.6 GB of a 48-frame pass of 128 x 128 px lay freed in arenas that the next phase's
-    threads do not reuse (docs/measurements/performance-history.md, "A pass's memory: programs and the allocator"). Changes
+    threads do not reuse (docs/measurements/performance-history.md, "A pass's memory: programs and the allocator"); so
+    within the phases too, around each batch of a pass's renders and each evaluation of its pixel grid's models (the solve's
+    peak 980 MiB at 24 frames of 128 x 128 px, 3 steps, where it was 1344: experiments/results/pass_memory/). Changes
     no setting of the allocator; a call costs some milliseconds, and the pages handed back fault in again when reused."""
     trim = _malloc_trim()
     if trim is not None:
