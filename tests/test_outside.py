@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import spacefit as sf
-from spacefit.fitting import drivers, frames
+from spacefit.fitting import drivers, frames, render_batches
 from spacefit.fitting.loop import _rendered_first
 from spacefit.fitting.drivers import RenderedFirst, Step, drive
 from spacefit.fitting.solvers import make_solver
@@ -109,7 +109,8 @@ def _assert_same_steps(steps: list[Step], reference: list[Step]) -> None:
 
 @pytest.fixture
 def jacobian_renders(monkeypatch):
-    """Per Jacobian render of a frame (frames.frame_jacobian), whether its image was given (rendered before)."""
+    """Per Jacobian render of a frame (frames.frame_jacobian, as frames.frame_columns and render_batches call it),
+    whether its image was given (rendered before)."""
     calls: list[bool] = []
     render = frames.frame_jacobian
 
@@ -118,6 +119,7 @@ def jacobian_renders(monkeypatch):
         return render(spec, key, x, seed, seed_grad, loaded, image)
 
     monkeypatch.setattr(frames, "frame_jacobian", counted)
+    monkeypatch.setattr(render_batches, "frame_jacobian", counted)
     return calls
 
 
