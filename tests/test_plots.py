@@ -190,6 +190,17 @@ def test_images_are_cropped_to_the_target_unless_asked_for_the_whole_film():
         sf.plot_comparison(fit_result(), [film()], crop="yes")
 
 
+def test_the_comparison_and_the_residuals_figure_show_one_sign_reference_minus_fit():
+    """The comparison's residual panel and ``residuals.png``'s are both reference - fit (FitResult.residuals' sign):
+    the fit renders the target 0.1 above its reference, both show -0.1 there."""
+    comparison = sf.plot_comparison(fit_result(), [film()])[0, 2]
+    residual = plot_residuals(fit_result())[0]
+    shown = [np.ma.getdata(ax.get_images()[0].get_array()) for ax in (comparison, residual)]
+    np.testing.assert_allclose(shown[0], shown[1], atol=1e-6)  # the figure's renders are float32
+    assert shown[0].min() == pytest.approx(-0.1) and shown[0].max() == pytest.approx(0.0)
+    assert comparison.get_title().startswith("reference - fit") and residual.get_title().startswith("reference - fit")
+
+
 def test_axes_are_labelled_in_words_with_units():
     assert axis_label("target.attitude_z_deg") == "target attitude about z (deg)"
     assert axis_label("parts.panels.kd") == "albedo kd of panels"  # dimensionless: no "(1)"

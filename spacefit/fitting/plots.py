@@ -27,7 +27,7 @@ from spacefit.units import RADIANCE_UNIT
 
 def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: AxesArg = None,
                     fig: FigureArg = None, crop: bool = True) -> np.ndarray:
-    """Reference | fit | residual fit - reference, one row per observation.
+    """Reference | fit | residual reference - fit (the sign of :attr:`FitResult.residuals`), one row per observation.
 
     Args:
         result: the fit's outcome (its renders; missing where the solve failed).
@@ -63,10 +63,10 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
             render = _rgb(result.renders[i])
             show_image(row[1], to_srgb8(render, scale), box)
             row[1].set_title(f"fit {i} (same exposure)", fontsize=9)
-            residual = (render - ref).mean(axis=-1)
+            residual = (ref - render).mean(axis=-1)
             image = show_image(row[2], residual, box, cmap="RdBu_r", **_centred(cropped(residual, box)))
-            row[2].set_title(f"fit - reference {i}", fontsize=9)
-            row[2].figure.colorbar(image, ax=row[2], extend="both", label=f"fit - reference ({unit})")
+            row[2].set_title(f"reference - fit {i}", fontsize=9)
+            row[2].figure.colorbar(image, ax=row[2], extend="both", label=f"reference - fit ({unit})")
         else:
             for panel in row[1:]:
                 panel.text(0.5, 0.5, "no render: the solve failed", ha="center", va="center", transform=panel.transAxes)
