@@ -132,7 +132,6 @@ import math
 from collections.abc import Callable, Sequence
 from typing import Any
 
-import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Float
 
@@ -288,7 +287,7 @@ def past_black_sky(names: Sequence[str], x: Float[np.ndarray, " n"], tried: Floa
         moves = [nuisance_index(names, n, k) for n in MOVES]
         free = moves[0] is not None
         values.update({names[i]: [float(x[i]), float(tried[i])] for i in moves if i is not None and free})
-        reach.append([float(reach_px(jnp.asarray(v, dtype=float), moves)) for v in (x, tried)] if free else None)
+        reach.append([float(reach_px(np.asarray(v, dtype=float), moves)) for v in (x, tried)] if free else None)
     return {"values": values, "reach_px": reach}
 
 
