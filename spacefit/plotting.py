@@ -47,10 +47,15 @@ TARGET_THRESHOLD = 0.01
 SUPERSCRIPTS = str.maketrans("0123456789-", "⁰¹²³⁴⁵⁶⁷⁸⁹⁻")
 
 
+def _superscript(power: re.Match[str]) -> str:
+    """A matched exponent (its first group) in Unicode superscripts."""
+    return power[1].translate(SUPERSCRIPTS)
+
+
 def unit_label(unit: str) -> str:
     """A unit as axis text, powers as Unicode superscripts (``W m^-2 sr^-1`` -> ``W m⁻² sr⁻¹``: plain text, which
     matplotlib draws without its mathtext parser); "" for a dimensionless one ("1")."""
-    return "" if unit in ("1", "") else re.sub(r"\^(-?\d+)", lambda power: power[1].translate(SUPERSCRIPTS), unit)
+    return "" if unit in ("1", "") else re.sub(r"\^(-?\d+)", _superscript, unit)
 
 
 def with_unit(words: str, unit: str) -> str:
@@ -73,7 +78,7 @@ class PlainLogFormatter(LogFormatterSciNotation):
     def __call__(self, x: float, pos: int | None = None) -> str:
         """The label of the tick at ``x``, "" for a tick left unlabelled."""
         text = super().__call__(x, pos).removeprefix(r"$\mathdefault{").removesuffix("}$").replace(r"\times", "×")
-        return re.sub(r"\^\{(-?\d+)\}", lambda power: power[1].translate(SUPERSCRIPTS), text).replace("-", "−")  # mathtext's minus
+        return re.sub(r"\^\{(-?\d+)\}", _superscript, text).replace("-", "−")  # mathtext's minus
 
 
 def log_scale(ax: Axes) -> None:
