@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Generator
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import Any
 
@@ -71,14 +70,11 @@ class RenderedFirst:
         linearised: (u, ``render(u, False)``'s operands) -> ``render(u, True)``'s: the Jacobian's columns rendered beside
             the images made.
         residual: (u, renders) -> the residuals at u from renders made at u: a function with no callback.
-        blank: unconstrained u -> ``render(u, True)``'s operands with zeros in place of its renders, on which the first
-            step's programs are traced and lowered before its renders are made, and compiled while they are; None: after.
     """
 
     render: Callable[[jax.Array, bool], Any]
     linearised: Callable[[jax.Array, Any], Any]
     residual: Callable[[jax.Array, Any], jax.Array]
-    blank: Callable[[jax.Array], Any] | None = None
 
 
 class _Evaluations:
@@ -228,15 +224,11 @@ def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: j
 
     tags: frozenset = frozenset()
     try:
+        args = given.render(u, True)
         step, terminate, evaluate = eqx.filter_jit(solver.step), eqx.filter_jit(solver.terminate), jax.jit(evaluated)
-        # one program: optimistix's init, run op by op, made some 24 single-operation programs, each traced and lowered per process
-        init = eqx.filter_jit(solver.init)
-        if given.blank is None:
-            args = given.render(u, True)
-        else:
-            args = _rendered_compiling(given, init, step, terminate, evaluate, fn, u, tags)
         first = evaluate(u, args)  # the first step's (its trial point is u), and the residuals' shape without another trace
-        state = init(fn, u, args, {}, jax.ShapeDtypeStruct(first[0].shape, first[0].dtype), None, tags)
+        # one program: optimistix's init, run op by op, made some 24 single-operation programs, each traced and lowered per process
+        state = eqx.filter_jit(solver.init)(fn, u, args, {}, jax.ShapeDtypeStruct(first[0].shape, first[0].dtype), None, tags)
         accepted_loss = math.inf  # the loss of the solver's last accepted point (the first step accepts its own)
 
         def advance(k: int, u: jax.Array) -> Step:
@@ -263,25 +255,6 @@ def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: j
         return (yield from _stepped(advance, lambda u: terminate(fn, u, args, {}, state, tags), u, max_steps))
     finally:
         held.clear()
-
-
-def _rendered_compiling(given: RenderedFirst, init: Any, step: Any, terminate: Any, evaluate: Any, fn: Any, u: jax.Array,
-                        tags: frozenset) -> Any:
-    """``given.render(u, True)``, made while the first step's programs compile (or are read from JAX's cache) on a thread
-    of their own: XLA's compilation leaves the interpreter's lock free, where tracing and lowering (done here first, on
-    ``given.blank``'s zeros: the programs read the renders' shapes alone) and the renders' recording hold it. The calls
-    that follow find the programs in JAX's caches. optimistix's ``init`` reads its args' shapes alone (a state of zeros):
-    the state lowered on here is not the one stepped on."""
-    blank = given.blank(u)
-    lowered = evaluate.lower(u, blank)
-    state = init(fn, u, blank, {}, jax.ShapeDtypeStruct(lowered.out_info[0].shape, lowered.out_info[0].dtype), None, tags)
-    programs = [lowered, step.lower(fn, u, blank, {}, state, tags), terminate.lower(fn, u, blank, {}, state, tags)]
-    del blank, state
-    with ThreadPoolExecutor(1, "spacefit-compile") as pool:
-        compiled = pool.submit(lambda: [p.compile() for p in programs])
-        args = given.render(u, True)
-        compiled.result()
-    return args
 
 
 def _adam(solver: Adam, residual_u: ResidualFn, u: jax.Array, max_steps: int,

@@ -257,7 +257,4 @@ def _rendered_first(s: Setup, steps: SolveRecord | None = None) -> RenderedFirst
     def residual(u: jax.Array, renders: Any) -> jax.Array:
         return outside.evaluate(fp.to_physical(u), *renders)[DESCENT].astype(u.dtype)  # as residual_u's
 
-    def blank(u: jax.Array) -> Any:
-        return (*outside.blank(), outside.operands(np.asarray(fp.to_physical(u)).dtype))  # as rendered's
-
-    return RenderedFirst(rendered, linearised, residual, None if outside.blank is None else blank)
+    return RenderedFirst(rendered, linearised, residual)

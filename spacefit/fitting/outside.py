@@ -67,15 +67,12 @@ class Outside:
             stacked, :mod:`spacefit.fitting.frame_models`: split inside, the program grew by each frame).
         operands: the dtype of x -> evaluate's ``operands`` (the same arrays at every call, on the device): a program that
             calls evaluate takes them as its own operands (a solver's step: beside the renders), not as constants.
-        blank: () -> zeros in the shapes and dtypes of ``render(x, j, True)``'s renders, on which a program that takes them
-            is traced and compiled while they are made (:mod:`spacefit.fitting.drivers`); None: not known before.
     """
 
     render: Callable[..., Rendered]
     evaluate: Evaluate
     each: Callable[[list[np.ndarray]], list[np.ndarray]] = list
     operands: Callable[[np.dtype], Any] = lambda dtype: None
-    blank: Callable[[], Rendered] | None = None
     kept: dict[tuple[bytes, int], Rendered] = field(default_factory=dict)  # one point's renders with their Jacobian (keep)
     ahead: dict[tuple[bytes, int], Future] = field(default_factory=dict)  # renders with their Jacobian being made (render_ahead)
     images_ahead: dict[tuple[bytes, int], Future] = field(default_factory=dict)  # one point's images being made (render_images_ahead)

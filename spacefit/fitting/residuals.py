@@ -223,12 +223,7 @@ def build_problem(
             batches = len(out) - len(blocks)
             return [*FrameModels.each(out[:batches]), *out[batches:]]
 
-        def blank() -> Rendered:
-            """Zeros as render_outside's renders with the Jacobian (float32, stacked per run): never written, so never in memory."""
-            images = tuple(np.zeros((len(run), *shapes[run.start]), np.float32) for run in runs)
-            return images, tuple(np.zeros((*i.shape, len(indices[run.start])), np.float32) for i, run in zip(images, runs))
-
-        outside = Outside(render_outside, jax.jit(evaluate), each, models.operands, blank)
+        outside = Outside(render_outside, jax.jit(evaluate), each, models.operands)
 
     def models_seeded(x: jax.Array, j: int) -> list[np.ndarray]:
         if outside is not None:

@@ -46,12 +46,8 @@ class SolveRecord:
         self.last: tuple[np.ndarray, Any] | None = None  # the last step's point and renders (rendered first)
 
     def rendered(self, x: np.ndarray, rendered: Any) -> None:
-        """The renders with their Jacobian (the fit's seeds) made at ``x`` for the step to be recorded next. The first
-        step's: its point is accepted where its loss is finite (:meth:`record`), and the noise floor reads its images with
-        the independent seeds next, begun here while the solver's first programs are traced (the Dr.Jit thread idle)."""
+        """The renders with their Jacobian (the fit's seeds) made at ``x`` for the step to be recorded next."""
         self.last = (x, rendered)
-        if self.noise_stop and not self.history and not self.restarted:
-            self.s.problem.outside.render_images_ahead(x, 1)
 
     def run(self, driver: Generator[Step, None, Outcome], interrupts: Any) -> Outcome:
         """Record the driver's steps until it ends or a stop of this record's own."""
