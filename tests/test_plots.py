@@ -16,7 +16,6 @@ from matplotlib.figure import Figure
 
 import spacefit as sf
 from spacefit.fitting.result import FitResult
-from spacefit.fitting.plots import plot_residuals
 from spacefit.fitting.status import Status
 from spacefit.html_tables import html_table
 from spacefit.plotting import PlainLogFormatter, axis_label, target_box, unit_label
@@ -72,7 +71,6 @@ def frame_rows() -> list[dict[str, float]]:
 # Each figure function: name -> (call with keyword arguments, how many axes it draws, the counts of Axes it takes).
 FIGURES = {
     "plot_comparison": (lambda **kw: sf.plot_comparison(fit_result(), [film()], **kw), 3, "3"),
-    "plot_residuals": (lambda **kw: plot_residuals(fit_result(), **kw), 1, "1"),
     "plot_convergence": (lambda **kw: sf.plot_convergence(fit_result(), **kw), 3, "3"),
     "plot_frames": (lambda **kw: sf.plot_frames(frame_rows(), **kw), 2, "2"),
     "Sensitivity.figure": (lambda **kw: sensitivity().figure(**kw), 4, "4"),
@@ -183,22 +181,30 @@ def test_images_are_cropped_to_the_target_unless_asked_for_the_whole_film():
     assert cropped.get_xlim() == (17.5, 29.5) and cropped.get_ylim() == (41.5, 27.5)  # film pixel coordinates, y down
     whole = sf.plot_comparison(fit_result(), [film()], crop=False)[0, 0]
     assert whole.get_xlim() == (-0.5, SIZE - 0.5) and whole.get_ylim() == (SIZE - 0.5, -0.5)
-    assert plot_residuals(fit_result())[0].get_xlim() == (17.5, 29.5)
+    assert sf.plot_comparison(fit_result(), [film()])[0, 2].get_xlim() == (17.5, 29.5)  # the residual's crop too
     assert sensitivity().figure()[0].get_xlim() == (17.5, 29.5)
     assert sensitivity().figure(crop=False)[0].get_xlim() == (-0.5, SIZE - 0.5)
     with pytest.raises(sf.InputError, match="`crop`"):
         sf.plot_comparison(fit_result(), [film()], crop="yes")
 
 
-def test_the_comparison_and_the_residuals_figure_show_one_sign_reference_minus_fit():
-    """The comparison's residual panel and ``residuals.png``'s are both reference - fit (FitResult.residuals' sign):
-    the fit renders the target 0.1 above its reference, both show -0.1 there."""
-    comparison = sf.plot_comparison(fit_result(), [film()])[0, 2]
-    residual = plot_residuals(fit_result())[0]
-    shown = [np.ma.getdata(ax.get_images()[0].get_array()) for ax in (comparison, residual)]
-    np.testing.assert_allclose(shown[0], shown[1], atol=1e-6)  # the figure's renders are float32
-    assert shown[0].min() == pytest.approx(-0.1) and shown[0].max() == pytest.approx(0.0)
-    assert comparison.get_title().startswith("reference - fit") and residual.get_title().startswith("reference - fit")
+def test_the_comparison_s_residual_column_is_the_fit_s_residuals_on_a_symmetric_scale_in_their_unit():
+    """The picture of residuals.fits: FitResult.residuals (reference - fit: the fit renders the target 0.1 above its
+    reference, -0.1 there), grey where not fitted, on a colour scale symmetric about 0 with a colour bar in the
+    observation's unit; a fit without residuals (one interrupted) shows the reference less its render."""
+    result = fit_result()
+    result.residuals[0][BLOB[0].start, BLOB[1].start] = np.nan  # a pixel the mask left out
+    panel = sf.plot_comparison(result, [film()])[0, 2]
+    image = panel.get_images()[0]
+    shown = image.get_array()
+    assert shown.mask.sum() == 1 and shown.min() == pytest.approx(-0.1) and shown.max() == pytest.approx(0.0)
+    assert image.cmap.get_bad()[:3] == pytest.approx((0.6, 0.6, 0.6))  # grey where not fitted
+    assert image.norm.vmin == -image.norm.vmax == pytest.approx(-0.1) and image.cmap.name.startswith("RdBu_r")
+    assert panel.get_title() == "reference - fit, observation 0"
+    colorbar = [ax for ax in panel.figure.axes if ax.get_ylabel().startswith("reference - fit")]
+    assert [ax.get_ylabel() for ax in colorbar] == [f"reference - fit ({unit_label('W m^-2 sr^-1')})"]
+    interrupted = sf.plot_comparison(dataclasses.replace(fit_result(), residuals=[]), [film()])[0, 2].get_images()[0]
+    np.testing.assert_allclose(interrupted.get_array(), fit_result().residuals[0].mean(axis=-1)[28:42, 18:30], atol=1e-6)
 
 
 def test_axes_are_labelled_in_words_with_units():
@@ -247,10 +253,9 @@ def test_convergence_overlays_truths_and_the_standard_error():
         sf.plot_convergence(fit_result(), truths={"parts.body.kd": math.nan})
 
 
-@pytest.mark.parametrize("plot", [lambda r: sf.plot_comparison(r, [film()]), plot_residuals])
-def test_a_long_verdict_is_drawn_whole_in_the_figure_s_title(plot):
+def test_a_long_verdict_is_drawn_whole_in_the_figure_s_title():
     result = dataclasses.replace(fit_result(), status=Status.NO_BETTER_POINT)  # its words: 250 characters
-    figure = plot(result).flat[0].figure
+    figure = sf.plot_comparison(result, [film()]).flat[0].figure
     canvas = FigureCanvasAgg(figure)
     canvas.draw()
     title = figure.get_suptitle()

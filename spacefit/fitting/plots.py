@@ -39,7 +39,8 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
             the whole film.
     Returns:
         The axes drawn, an array of one row of 3 per image (the fit at the reference's sRGB exposure,
-        the residual's RGB mean in that unit on a diverging colour map centred at 0).
+        the residual's RGB mean in that unit on a diverging colour map centred at 0, grey where not fitted:
+        :func:`residual_panel`, the picture of residuals.fits).
 
     Example:
         Not run by the tests (an image fit takes minutes)::
@@ -63,10 +64,7 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
             render = _rgb(result.renders[i])
             show_image(row[1], to_srgb8(render, scale), box)
             row[1].set_title(f"fit {i} (same exposure)", fontsize=9)
-            residual = (ref - render).mean(axis=-1)
-            image = show_image(row[2], residual, box, cmap="RdBu_r", **_centred(cropped(residual, box)))
-            row[2].set_title(f"reference - fit {i}", fontsize=9)
-            row[2].figure.colorbar(image, ax=row[2], extend="both", label=f"reference - fit ({unit})")
+            residual_panel(row[2], result, i, crop, reference)
         else:
             for panel in row[1:]:
                 panel.text(0.5, 0.5, "no render: the solve failed", ha="center", va="center", transform=panel.transAxes)
@@ -78,32 +76,14 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
     return axes
 
 
-def plot_residuals(result: FitResult, *, ax: AxesArg = None, fig: FigureArg = None,
-                   crop: bool = True) -> np.ndarray:
-    """Each image's residual, reference - model (:attr:`FitResult.residuals`; a table's or a light
-    curve's are its own figure), the channels' mean in the observation's unit on a diverging colour map centred at 0 (grey where not fitted),
-    cropped to the target (found in the fit's render) and a margin unless ``crop=False``; into
-    ``ax`` (one per observation) or ``fig``.
-
-    Returns:
-        the array of axes drawn (one per image; one that says so where the fit has no image residuals).
-    """
-    images = result.images
-    n = max(len(images), 1)
-    axes = panels(ax, fig, n, (4.0 * n, 3.6), lambda f: f.subplots(1, n, squeeze=False))
-    for k, panel in zip(images, axes):
-        residual_panel(panel, result, k, crop)
-    if not images:
-        axes[0].text(0.5, 0.5, "no residuals: the fit has no render", ha="center", va="center", transform=axes[0].transAxes)
-    if ax is None:
-        suptitle(axes[0].figure, f"{result.status}", 9)
-    return axes
-
-
-def residual_panel(panel: Axes, result: FitResult, k: int, crop: bool = True) -> None:
-    """Image ``k``'s residual, reference - model (:attr:`FitResult.residuals`), the channels' mean in
-    its unit on a diverging colour map centred at 0 (grey where not fitted), into ``panel``."""
-    mean = np.asarray(result.residuals[k], dtype=float).mean(axis=-1)
+def residual_panel(panel: Axes, result: FitResult, k: int, crop: bool = True, reference: np.ndarray | None = None) -> None:
+    """Image ``k``'s residual, reference - fit, into ``panel``: the channels' mean in its unit on a diverging colour
+    map centred at 0 (its scale symmetric, a colour bar in the unit), grey where not fitted, titled "reference - fit,
+    observation k". The fit's :attr:`FitResult.residuals` (what residuals.fits holds); for a fit without them (one
+    interrupted), ``reference`` less the fit's render. Cropped to the target (in the fit's render) and a margin unless
+    ``crop=False``."""
+    fitted = k < len(result.residuals) and np.ndim(result.residuals[k]) == 3
+    mean = (np.asarray(result.residuals[k], dtype=float) if fitted else _rgb(reference) - _rgb(result.renders[k])).mean(axis=-1)
     box = image_box([result.renders[k] if k < len(result.renders) else mean], crop)
     cmap = colormaps["RdBu_r"].with_extremes(bad="0.6")
     image = show_image(panel, np.ma.masked_invalid(mean), box, cmap=cmap, **_centred(cropped(mean, box)))
