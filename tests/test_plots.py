@@ -217,7 +217,8 @@ def test_axes_are_labelled_in_words_with_units():
     convergence = sf.plot_convergence(fit_result())
     assert [ax.get_ylabel().replace("\n", " ") for ax in convergence[1:]] == ["albedo kd of body", "target attitude about z (deg)"]
     lc = light_curve().figure()
-    assert lc[0].get_xlabel() == "solar phase angle (deg)" and "(W m$^{-2}$)" in lc[0].get_ylabel() and "(mag" in lc[1].get_ylabel()
+    assert lc[0].get_xlabel() == "solar phase angle (deg)" and "(mag" in lc[1].get_ylabel()
+    assert lc[0].get_ylabel() == f"irradiance at the observer ({unit_label('W m^-2')})"  # the one home of units' text
     frames = sf.plot_frames(frame_rows())
     assert frames[0].get_ylabel() == "target attitude about z (deg)" and frames[-1].get_xlabel() == "time since the first frame (s)"
     sens = sensitivity().figure()
