@@ -13,6 +13,7 @@ import pytest
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.text import Text
 
 import spacefit as sf
 from spacefit.fitting.result import FitResult
@@ -252,6 +253,52 @@ def test_convergence_overlays_truths_and_the_standard_error():
         sf.plot_convergence(fit_result(), truths={"wrinkles.D": 2.5})
     with pytest.raises(sf.InputError, match="truths"):
         sf.plot_convergence(fit_result(), truths={"parts.body.kd": math.nan})
+
+
+def many_parameters(count: int) -> FitResult:
+    """A fit of ``count`` parameters with long names and values of every size: tiny, around 1e4 with a spread that
+    matplotlib writes as an offset ("+1.23456e4"), negative and large."""
+    kinds = ("parts.solar_array_panel_number_{}_of_the_spacecraft_bus.alpha_x", "image.offset_w_m2_sr@{}", "parts.p{}.kd",
+             "sun.irradiance_w_m2@{}")
+    names = tuple(kinds[i % 4].format(i) for i in range(count))
+    scales = [(3e-6, 1e-6), (12345.678, 0.01), (0.3, 0.2), (-2.5e5, 4e4)]
+    value = {name: (lambda k, i=i: scales[i % 4][0] + scales[i % 4][1] * (-0.7) ** k) for i, name in enumerate(names)}
+    history = [{"step": k + 1, "loss": 10.0 / (k + 1), "accepted": True, "values": {n: value[n](k) for n in names}} for k in range(6)]
+    final = {n: value[n](5) for n in names}
+    return FitResult(names, final, {n: 0.05 * scales[i % 4][1] for i, n in enumerate(names)}, np.eye(count), True, Status.CONVERGED, [],
+                     history, [film(1.1)], 1.0, "lm", "pixel", 6, 0.1, start={n: value[n](0) for n in names}, units=["W m^-2 sr^-1"])
+
+
+@pytest.mark.parametrize("count", [1, 3, 8, pytest.param(64, marks=pytest.mark.slow)])
+def test_the_convergence_figure_s_labels_are_whole_and_apart_for_any_count_of_parameters(count, monkeypatch):
+    """Its layout, computed once from its labels' sizes: every text it draws (tick labels, offset texts, axis labels,
+    titles, the legends) lies inside the figure and clear of every other text and every other panel."""
+    result = many_parameters(count)
+    figure = sf.plot_convergence(result, truths={result.names[0]: result.values[result.names[0]]})[0].figure
+    drawn = []
+    draw = Text.draw
+
+    def recording(text: Text, renderer) -> None:
+        draw(text, renderer)
+        if text.get_visible() and text.get_text():
+            drawn.append((text, text.get_window_extent(renderer)))
+
+    monkeypatch.setattr(Text, "draw", recording)
+    FigureCanvasAgg(figure).draw()
+    width, height = figure.bbox.width, figure.bbox.height
+    texts = {text.get_text() for text, _ in drawn}
+    assert {"step", "loss, 0.5 sum of squared residuals", "truth"} <= texts and ("+1.23456e4" in texts) == (count > 1)
+    for text, box in drawn:  # whole: within the figure (to the rounding of a pixel)
+        assert -1 <= box.x0 and box.x1 <= width + 1 and -1 <= box.y0 and box.y1 <= height + 1, text.get_text()
+    boxes = np.array([box.extents for _, box in drawn]) + [0.5, 0.5, -0.5, -0.5]  # apart by more than a pixel's rounding
+    apart = ((boxes[:, None, 2] <= boxes[None, :, 0]) | (boxes[None, :, 2] <= boxes[:, None, 0])
+             | (boxes[:, None, 3] <= boxes[None, :, 1]) | (boxes[None, :, 3] <= boxes[:, None, 1]))
+    np.fill_diagonal(apart, True)
+    overlapping = [(drawn[i][0].get_text(), drawn[j][0].get_text()) for i, j in zip(*np.nonzero(~apart))]
+    assert not overlapping
+    for text, box in drawn:  # no text in another panel
+        others = [ax for ax in figure.axes if ax is not text.axes]
+        assert not any(box.padded(-0.5).overlaps(ax.bbox) for ax in others), text.get_text()
 
 
 def test_a_long_verdict_is_drawn_whole_in_the_figure_s_title():

@@ -11,18 +11,26 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
+import matplotlib as mpl
 import numpy as np
 from matplotlib import colormaps
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure, SubFigure
+from matplotlib.font_manager import FontProperties
 from matplotlib.ticker import MaxNLocator
 
 from spacefit.errors import check_choice, check_range
 from spacefit.fitting.result import FitResult
 from spacefit.output import PREVIEW_PERCENTILE, preview_scale, to_srgb8
-from spacefit.plotting import (AxesArg, FigureArg, axis_label, cropped, image_box, log_scale, panels, show_image, suptitle,
-                               unit_label, wrapped)
+from spacefit.plotting import (AxesArg, FigureArg, axis_label, cropped, image_box, left_decoration_pt, line_pt, log_scale, panels,
+                               points_renderer, show_image, suptitle, tick_labels, unit_label, wrapped)
 from spacefit.units import RADIANCE_UNIT
+
+# The convergence figure's room beyond its labels' own, points: at its edges, and between its columns and its panels
+# (what matplotlib's constrained layout leaves).
+PAD_PT = 3.0
+# matplotlib's gap between an axes and its y axis's offset text ("1e-5", "+1.5e-1", above it), points.
+OFFSET_TEXT_PAD_PT = 3.0
 
 
 def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: AxesArg = None,
@@ -146,11 +154,11 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
     n = len(result.names)
 
     def layout(f: Figure | SubFigure) -> list[Axes]:
-        grid = f.add_gridspec(max(n, 1), 2)
+        grid = f.add_gridspec(max(n, 1), 2, **_rows(f, n))
         loss = f.add_subplot(grid[:, 0])
         return [loss, *(f.add_subplot(grid[i, 1], sharex=loss) for i in range(n))]
 
-    axes = panels(ax, fig, n + 1, (10.0, max(3.6, 1.4 * n)), layout)
+    axes = panels(ax, fig, n + 1, (10.0, max(3.6, 1.4 * n)), layout, layout="none")
     ax_loss = axes[0]
     history = result.history
     steps = np.array([h["step"] for h in history])
@@ -176,7 +184,7 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
         panel.axhline(final, color=f"C{i}", lw=0.8)
         if name in truths:
             panel.axhline(truths[name], color="k", ls="--", lw=1.0, label="truth")
-        # in lines as long as the panel is high (before the layout, which makes it higher): one line ran into its neighbours'
+        # in lines as long as the panel is high (its own figure's rows are laid out already): one line ran into its neighbours'
         panel.set_ylabel(wrapped(axis_label(name), panel.get_window_extent().height, panel.figure.dpi, 7), fontsize=7)
         if ax is None:  # its own column, sharing the steps: numbered once, under it
             panel.tick_params(labelbottom=panel is axes[-1])
@@ -187,4 +195,41 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
     for panel in axes:
         panel.xaxis.set_major_locator(MaxNLocator(integer=True))
         panel.grid(alpha=0.3)
+    if ax is None and fig is None:
+        _columns(axes)
     return axes
+
+
+def _rows(figure: Figure | SubFigure, n: int) -> dict[str, float]:
+    """The convergence figure's rows (GridSpec's top, bottom and hspace) in ``figure``: room above for the loss's title
+    (or the first panel's offset text), below for the steps' numbers and label, and between two of the ``n``
+    parameters' panels for a tick label's line, which holds the lower one's offset text; from the fonts alone, so
+    that the panels have their heights before anything is drawn in them."""
+    renderer = points_renderer()
+    tick = line_pt(renderer, FontProperties(size=mpl.rcParams["ytick.labelsize"]))
+    label = line_pt(renderer, FontProperties(size=mpl.rcParams["axes.labelsize"]))
+    title = line_pt(renderer, FontProperties(size=9)) + mpl.rcParams["axes.titlepad"]
+    steps = mpl.rcParams["xtick.major.size"] + mpl.rcParams["xtick.major.pad"] + tick + mpl.rcParams["axes.labelpad"] + label
+    top, bottom, gap = PAD_PT + max(title, OFFSET_TEXT_PAD_PT + tick), PAD_PT + steps, OFFSET_TEXT_PAD_PT + tick + PAD_PT
+    height = figure.bbox.height / figure.dpi * 72
+    rows = max(n, 1)
+    return {"top": 1 - top / height, "bottom": bottom / height, "hspace": gap * rows / (height - top - bottom - gap * (rows - 1))}
+
+
+def _columns(axes: np.ndarray) -> None:
+    """Lay the convergence figure's two columns out once, from its labels' extents in points (its axes' positions set;
+    it has no layout engine): the loss's y axis within the left edge, the parameters' (the widest) between the
+    columns, the steps' last label within the right edge. matplotlib's constrained layout measured every axes twice
+    at every draw, each time making and placing its ticks: 60 % of the figure's drawing."""
+    renderer, figure = points_renderer(), axes[0].figure
+    width = figure.bbox.width / figure.dpi * 72
+    prop = axes[-1].xaxis.get_major_ticks(1)[0].label1.get_fontproperties()
+    overhang = max((renderer.get_text_width_height_descent(text, prop, False)[0] / 2 for text in tick_labels(axes[-1].xaxis)),
+                   default=0.0)  # a step's number centred at the right edge
+    left = PAD_PT + left_decoration_pt(axes[0], renderer)
+    right = PAD_PT + overhang
+    gap = overhang + PAD_PT + max((left_decoration_pt(panel, renderer) for panel in axes[1:]), default=0.0)
+    grid = axes[0].get_subplotspec().get_gridspec()
+    grid.update(left=left / width, right=1 - right / width, wspace=2 * gap / (width - left - right - gap))
+    for panel in axes:
+        panel.set_position(panel.get_subplotspec().get_position(figure))
