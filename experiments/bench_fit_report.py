@@ -1,6 +1,6 @@
 """The report's share of the ``spacefit fit`` process of ``bench_fit_process.py`` (issue 33's 8-parameter observation
 fit): the CPU seconds of importing :mod:`spacefit.fitting.report` after the modules the CLI loads before it (its
-share: matplotlib and the figures) and of writing the report folder once (:func:`write_fit_report`: its JSON, FITS and three figures), each in a fresh process, as the fit
+share: matplotlib and the figures) and of writing the report folder once (:func:`write_fit_report`: its JSON, FITS and two figures), each in a fresh process, as the fit
 process pays them; then each figure's drawing and saving alone, warm (the median of ``--repeats``).
 The fit is solved once here and its result handed to the fresh processes as a pickle.
 Run: ``.venv/bin/python experiments/bench_fit_report.py [--processes N] [--repeats N]``.
@@ -54,12 +54,11 @@ def fresh(pickled: Path, out: Path) -> tuple[float, float]:
 
 def warm(pickled: Path, out: Path, repeats: int) -> dict[str, tuple[float, float]]:
     """Each figure's median CPU s to draw (the figure function) and to save (:func:`_save`), warm, in this process."""
-    from spacefit.fitting.plots import plot_comparison, plot_convergence, plot_residuals
+    from spacefit.fitting.plots import plot_comparison, plot_convergence
     from spacefit.fitting.report import _save  # the report's own saving
 
     result, references, _ = pickle.load(open(pickled, "rb"))
-    figures = {"convergence": lambda: plot_convergence(result), "comparison": lambda: plot_comparison(result, references),
-               "residuals": lambda: plot_residuals(result)}
+    figures = {"convergence": lambda: plot_convergence(result), "comparison": lambda: plot_comparison(result, references)}
     times = {}
     for name, figure in figures.items():
         runs = []

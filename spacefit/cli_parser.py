@@ -62,7 +62,7 @@ def parser(command: str | None = "fit") -> argparse.ArgumentParser:
     e.add_argument("--out", required=True, help="STL file to write")
     f = sub.add_parser("fit", parents=[overrides],
                        help="fit scene parameters to reference images: fit.json, fit.toml, uncertainty.json, comparison.png, "
-                            "convergence.png, residuals.fits, residuals.png",
+                            "convergence.png, residuals.fits",
                        description="Fit free scene parameters to reference images: radiance (EXR, FITS) or "
                                    "DN (FITS, 16-bit PNG / TIFF) with their sensor's noise model. "
                                    "--set applies to every scene. The report's first line is the verdict. Exit codes: "

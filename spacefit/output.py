@@ -95,6 +95,8 @@ STAGE_PREFIX = ".spacefit-stage-"
 # The files each command writes into its output folder, and the one that marks it as spacefit's.
 RESULT_FILES = {
     "render": ({"radiance.exr", "preview.png", "scene.toml", "render.json"}, "render.json"),
+    # residuals.png: written by spacefit fit before 2026-11-29 (now comparison.png's third column); still a fit's file, so
+    # --overwrite takes such a folder (and leaves that file, as it leaves any file the new fit does not write)
     "fit": ({"fit.json", "fit.toml", "uncertainty.json", "comparison.png", "convergence.png", "residuals.fits", "residuals.png",
              "checkpoint.json", "frames.csv", "frames.png"}, "fit.json"),
     "light-curve-fit": ({"fit.json", "fit.toml", "uncertainty.json", "convergence.png", "observation0.png", "checkpoint.json"}, "fit.json"),

@@ -25,7 +25,11 @@ from typing import Any, TypeAlias
 
 import numpy as np
 from matplotlib.axes import Axes
+from matplotlib.axis import Axis
+from matplotlib.backends.backend_agg import RendererAgg
+from matplotlib.cbook import is_math_text
 from matplotlib.figure import Figure, SubFigure
+from matplotlib.font_manager import FontProperties
 from matplotlib.image import AxesImage
 from matplotlib.ticker import LogFormatterSciNotation
 
@@ -100,6 +104,43 @@ def suptitle(figure: Figure | SubFigure, text: str, fontsize: float) -> None:
     figure.suptitle(wrapped(text, figure.bbox.width, figure.dpi, fontsize), fontsize=fontsize)
 
 
+def points_renderer() -> RendererAgg:
+    """A renderer that measures text in points (72 dots per inch), for a layout computed before the figure is drawn."""
+    return RendererAgg(1, 1, 72)
+
+
+def line_pt(renderer: RendererAgg, prop: FontProperties) -> float:
+    """The height of a line of text in ``prop``'s font, points (``renderer``: :func:`points_renderer`): that of "lp",
+    as matplotlib measures a line."""
+    return renderer.get_text_width_height_descent("lp", prop, False)[1]
+
+
+def tick_labels(axis: Axis) -> list[str]:
+    """The tick labels ``axis`` draws at its present view and size (major and minor; those left empty left out), as its
+    locators and formatters make them when it is drawn, without making its ticks: what a layout computed before the
+    draw measures."""
+    view = np.sort(axis.get_transform().transform(np.asarray(axis.get_view_interval(), dtype=float)))
+    close = 1e-10 * (view[1] - view[0])  # matplotlib draws the ticks within the view, or this close to it
+    labels = []
+    for locs, formatter in ((axis.get_majorticklocs(), axis.get_major_formatter()),
+                            (axis.get_minorticklocs(), axis.get_minor_formatter())):
+        at = axis.get_transform().transform(np.asarray(locs, dtype=float))
+        labels += [text for text, x in zip(formatter.format_ticks(locs), at) if text and view[0] - close <= x <= view[1] + close]
+    return labels
+
+
+def left_decoration_pt(ax: Axes, renderer: RendererAgg) -> float:
+    """How far ``ax``'s y axis reaches to the left of it, points (``renderer``: :func:`points_renderer`): its ticks,
+    their labels (:func:`tick_labels`, where shown) and its label."""
+    axis = ax.yaxis
+    tick = axis.get_major_ticks(1)[0]
+    prop = tick.label1.get_fontproperties()
+    widest = max((renderer.get_text_width_height_descent(text, prop, is_math_text(text))[0] for text in tick_labels(axis)),
+                 default=0.0) if tick.label1.get_visible() else 0.0
+    label = axis.label.get_window_extent(renderer).width + axis.labelpad if axis.label.get_text() else 0.0
+    return tick.get_tick_padding() + tick.get_pad() + widest + label
+
+
 def target_box(images: Sequence[np.ndarray], margin: float = TARGET_MARGIN) -> tuple[int, int, int, int]:
     """(x0, y0, x1, y1), the half-open pixel bounds of what differs from the background in any of
     ``images`` ((h, w) or (h, w, channels), all as large), with ``margin`` of the box (at least
@@ -145,18 +186,19 @@ def show_image(ax: Axes, image: np.ndarray, box: tuple[int, int, int, int], **kw
 
 
 def panels(ax: AxesArg, fig: FigureArg, count: int | Sequence[int], figsize: tuple[float, float],
-           make: Callable[[Figure | SubFigure], Any]) -> np.ndarray:
+           make: Callable[[Figure | SubFigure], Any], layout: str = "constrained") -> np.ndarray:
     """The axes a figure function draws, flat: ``ax`` (:data:`AxesArg`: one Axes, or a sequence or
     array of them in any shape: the user's layout), checked to hold ``count`` Axes (or one of the
     counts ``count`` lists, for a figure that draws fewer panels into fewer axes); else
-    ``make(figure)``'s, on ``fig`` or on a new Figure of ``figsize`` (inches) made without pyplot.
+    ``make(figure)``'s, on ``fig`` or on a new Figure of ``figsize`` (inches) made without pyplot,
+    laid out by matplotlib's ``layout`` engine ("none": by the figure function).
 
     Raises:
         InputError: ``ax`` and ``fig`` both given, an ``ax`` that is not Axes, or a count of them that
             is not ``count`` (naming both).
     """
     if ax is None:
-        return np.asarray(make(new_figure(fig, figsize)), dtype=object).ravel()
+        return np.asarray(make(new_figure(fig, figsize, layout)), dtype=object).ravel()
     if fig is not None:
         raise InputError("give `ax` (the axes to draw into) or `fig` (a figure to lay them out in), not both.")
     counts = (count,) if isinstance(count, int) else tuple(count)
@@ -169,10 +211,10 @@ def panels(ax: AxesArg, fig: FigureArg, count: int | Sequence[int], figsize: tup
     return axes
 
 
-def new_figure(fig: FigureArg, figsize: tuple[float, float]) -> Figure | SubFigure:
-    """``fig``, checked, or a new Figure of ``figsize`` (inches) made without pyplot."""
+def new_figure(fig: FigureArg, figsize: tuple[float, float], layout: str = "constrained") -> Figure | SubFigure:
+    """``fig``, checked, or a new Figure of ``figsize`` (inches) made without pyplot, laid out by ``layout``."""
     if fig is None:
-        return Figure(figsize=figsize, layout="constrained")
+        return Figure(figsize=figsize, layout=layout)
     check_type("fig", fig, (Figure, SubFigure), "a matplotlib Figure or SubFigure (fig.subfigures() makes one)")
     return fig
 

@@ -28,7 +28,7 @@ from spacefit.fitting.compile_cache import ENV as JAX_CACHE_ENV, compile_cache_d
 from spacefit.geometry.cache import ENV as SPACEFIT_CACHE_ENV
 
 TRUE_KD = 0.5
-REPORT = ["comparison.png", "convergence.png", "fit.json", "fit.toml", "residuals.fits", "residuals.png", "uncertainty.json"]
+REPORT = ["comparison.png", "convergence.png", "fit.json", "fit.toml", "residuals.fits", "uncertainty.json"]
 
 
 @pytest.fixture(scope="module")

@@ -226,16 +226,21 @@ def test_a_refused_scheduler_leaves_nothing(slow_sweep, tmp_path, capsys, addres
 def test_overwrite_refusal_names_only_the_foreign_files(tmp_path, capsys):
     out = tmp_path / "out"
     out.mkdir()
-    for name in ("fit.json", "residuals.png", "notes.txt"):
+    for name in ("fit.json", "comparison.png", "notes.txt"):
         (out / name).write_text("x")
     assert main(["render", "--out", str(out), "--overwrite", "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert "did not write (fit.json, notes.txt, residuals.png)" in err  # a fit's files are not a render's
+    assert "did not write (comparison.png, fit.json, notes.txt)" in err  # a fit's files are not a render's
     (out / "render.json").write_text("{}")
-    for name in ("fit.json", "residuals.png"):
+    for name in ("fit.json", "comparison.png"):
         (out / name).unlink()
     with pytest.raises(sf.InputError, match=r"did not write \(notes.txt, render.json\)"):
         prepare_output(out, "fit", overwrite=True)
+    earlier = tmp_path / "earlier"  # a fit's folder of spacefit before residuals.png became comparison.png's third column
+    earlier.mkdir()
+    (earlier / "fit.json").write_text('{"versions": {"spacefit": "0.1"}}')
+    (earlier / "residuals.png").write_text("x")
+    assert prepare_output(earlier, "fit", overwrite=True) == earlier
 
 
 # spacefit's command line under a file-size limit of 150 kB (`ulimit -f`); Python ignores SIGXFSZ, so a write past it fails

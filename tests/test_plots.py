@@ -13,10 +13,10 @@ import pytest
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.text import Text
 
 import spacefit as sf
 from spacefit.fitting.result import FitResult
-from spacefit.fitting.plots import plot_residuals
 from spacefit.fitting.status import Status
 from spacefit.html_tables import html_table
 from spacefit.plotting import PlainLogFormatter, axis_label, target_box, unit_label
@@ -72,7 +72,6 @@ def frame_rows() -> list[dict[str, float]]:
 # Each figure function: name -> (call with keyword arguments, how many axes it draws, the counts of Axes it takes).
 FIGURES = {
     "plot_comparison": (lambda **kw: sf.plot_comparison(fit_result(), [film()], **kw), 3, "3"),
-    "plot_residuals": (lambda **kw: plot_residuals(fit_result(), **kw), 1, "1"),
     "plot_convergence": (lambda **kw: sf.plot_convergence(fit_result(), **kw), 3, "3"),
     "plot_frames": (lambda **kw: sf.plot_frames(frame_rows(), **kw), 2, "2"),
     "Sensitivity.figure": (lambda **kw: sensitivity().figure(**kw), 4, "4"),
@@ -183,22 +182,30 @@ def test_images_are_cropped_to_the_target_unless_asked_for_the_whole_film():
     assert cropped.get_xlim() == (17.5, 29.5) and cropped.get_ylim() == (41.5, 27.5)  # film pixel coordinates, y down
     whole = sf.plot_comparison(fit_result(), [film()], crop=False)[0, 0]
     assert whole.get_xlim() == (-0.5, SIZE - 0.5) and whole.get_ylim() == (SIZE - 0.5, -0.5)
-    assert plot_residuals(fit_result())[0].get_xlim() == (17.5, 29.5)
+    assert sf.plot_comparison(fit_result(), [film()])[0, 2].get_xlim() == (17.5, 29.5)  # the residual's crop too
     assert sensitivity().figure()[0].get_xlim() == (17.5, 29.5)
     assert sensitivity().figure(crop=False)[0].get_xlim() == (-0.5, SIZE - 0.5)
     with pytest.raises(sf.InputError, match="`crop`"):
         sf.plot_comparison(fit_result(), [film()], crop="yes")
 
 
-def test_the_comparison_and_the_residuals_figure_show_one_sign_reference_minus_fit():
-    """The comparison's residual panel and ``residuals.png``'s are both reference - fit (FitResult.residuals' sign):
-    the fit renders the target 0.1 above its reference, both show -0.1 there."""
-    comparison = sf.plot_comparison(fit_result(), [film()])[0, 2]
-    residual = plot_residuals(fit_result())[0]
-    shown = [np.ma.getdata(ax.get_images()[0].get_array()) for ax in (comparison, residual)]
-    np.testing.assert_allclose(shown[0], shown[1], atol=1e-6)  # the figure's renders are float32
-    assert shown[0].min() == pytest.approx(-0.1) and shown[0].max() == pytest.approx(0.0)
-    assert comparison.get_title().startswith("reference - fit") and residual.get_title().startswith("reference - fit")
+def test_the_comparison_s_residual_column_is_the_fit_s_residuals_on_a_symmetric_scale_in_their_unit():
+    """The picture of residuals.fits: FitResult.residuals (reference - fit: the fit renders the target 0.1 above its
+    reference, -0.1 there), grey where not fitted, on a colour scale symmetric about 0 with a colour bar in the
+    observation's unit; a fit without residuals (one interrupted) shows the reference less its render."""
+    result = fit_result()
+    result.residuals[0][BLOB[0].start, BLOB[1].start] = np.nan  # a pixel the mask left out
+    panel = sf.plot_comparison(result, [film()])[0, 2]
+    image = panel.get_images()[0]
+    shown = image.get_array()
+    assert shown.mask.sum() == 1 and shown.min() == pytest.approx(-0.1) and shown.max() == pytest.approx(0.0)
+    assert image.cmap.get_bad()[:3] == pytest.approx((0.6, 0.6, 0.6))  # grey where not fitted
+    assert image.norm.vmin == -image.norm.vmax == pytest.approx(-0.1) and image.cmap.name.startswith("RdBu_r")
+    assert panel.get_title() == "reference - fit, observation 0"
+    colorbar = [ax for ax in panel.figure.axes if ax.get_ylabel().startswith("reference - fit")]
+    assert [ax.get_ylabel() for ax in colorbar] == [f"reference - fit ({unit_label('W m^-2 sr^-1')})"]
+    interrupted = sf.plot_comparison(dataclasses.replace(fit_result(), residuals=[]), [film()])[0, 2].get_images()[0]
+    np.testing.assert_allclose(interrupted.get_array(), fit_result().residuals[0].mean(axis=-1)[28:42, 18:30], atol=1e-6)
 
 
 def test_axes_are_labelled_in_words_with_units():
@@ -211,7 +218,8 @@ def test_axes_are_labelled_in_words_with_units():
     convergence = sf.plot_convergence(fit_result())
     assert [ax.get_ylabel().replace("\n", " ") for ax in convergence[1:]] == ["albedo kd of body", "target attitude about z (deg)"]
     lc = light_curve().figure()
-    assert lc[0].get_xlabel() == "solar phase angle (deg)" and "(W m$^{-2}$)" in lc[0].get_ylabel() and "(mag" in lc[1].get_ylabel()
+    assert lc[0].get_xlabel() == "solar phase angle (deg)" and "(mag" in lc[1].get_ylabel()
+    assert lc[0].get_ylabel() == f"irradiance at the observer ({unit_label('W m^-2')})"  # the one home of units' text
     frames = sf.plot_frames(frame_rows())
     assert frames[0].get_ylabel() == "target attitude about z (deg)" and frames[-1].get_xlabel() == "time since the first frame (s)"
     sens = sensitivity().figure()
@@ -247,10 +255,55 @@ def test_convergence_overlays_truths_and_the_standard_error():
         sf.plot_convergence(fit_result(), truths={"parts.body.kd": math.nan})
 
 
-@pytest.mark.parametrize("plot", [lambda r: sf.plot_comparison(r, [film()]), plot_residuals])
-def test_a_long_verdict_is_drawn_whole_in_the_figure_s_title(plot):
+def many_parameters(count: int) -> FitResult:
+    """A fit of ``count`` parameters with long names and values of every size: tiny, around 1e4 with a spread that
+    matplotlib writes as an offset ("+1.23456e4"), negative and large."""
+    kinds = ("parts.solar_array_panel_number_{}_of_the_spacecraft_bus.alpha_x", "image.offset_w_m2_sr@{}", "parts.p{}.kd",
+             "sun.irradiance_w_m2@{}")
+    names = tuple(kinds[i % 4].format(i) for i in range(count))
+    scales = [(3e-6, 1e-6), (12345.678, 0.01), (0.3, 0.2), (-2.5e5, 4e4)]
+    value = {name: (lambda k, i=i: scales[i % 4][0] + scales[i % 4][1] * (-0.7) ** k) for i, name in enumerate(names)}
+    history = [{"step": k + 1, "loss": 10.0 / (k + 1), "accepted": True, "values": {n: value[n](k) for n in names}} for k in range(6)]
+    final = {n: value[n](5) for n in names}
+    return FitResult(names, final, {n: 0.05 * scales[i % 4][1] for i, n in enumerate(names)}, np.eye(count), True, Status.CONVERGED, [],
+                     history, [film(1.1)], 1.0, "lm", "pixel", 6, 0.1, start={n: value[n](0) for n in names}, units=["W m^-2 sr^-1"])
+
+
+@pytest.mark.parametrize("count", [1, 3, 8, pytest.param(64, marks=pytest.mark.slow)])
+def test_the_convergence_figure_s_labels_are_whole_and_apart_for_any_count_of_parameters(count, monkeypatch):
+    """Its layout, computed once from its labels' sizes: every text it draws (tick labels, offset texts, axis labels,
+    titles, the legends) lies inside the figure and clear of every other text and every other panel."""
+    result = many_parameters(count)
+    figure = sf.plot_convergence(result, truths={result.names[0]: result.values[result.names[0]]})[0].figure
+    drawn = []
+    draw = Text.draw
+
+    def recording(text: Text, renderer) -> None:
+        draw(text, renderer)
+        if text.get_visible() and text.get_text():
+            drawn.append((text, text.get_window_extent(renderer)))
+
+    monkeypatch.setattr(Text, "draw", recording)
+    FigureCanvasAgg(figure).draw()
+    width, height = figure.bbox.width, figure.bbox.height
+    texts = {text.get_text() for text, _ in drawn}
+    assert {"step", "loss, 0.5 sum of squared residuals", "truth"} <= texts and ("+1.23456e4" in texts) == (count > 1)
+    for text, box in drawn:  # whole: within the figure (to the rounding of a pixel)
+        assert -1 <= box.x0 and box.x1 <= width + 1 and -1 <= box.y0 and box.y1 <= height + 1, text.get_text()
+    boxes = np.array([box.extents for _, box in drawn]) + [0.5, 0.5, -0.5, -0.5]  # apart by more than a pixel's rounding
+    apart = ((boxes[:, None, 2] <= boxes[None, :, 0]) | (boxes[None, :, 2] <= boxes[:, None, 0])
+             | (boxes[:, None, 3] <= boxes[None, :, 1]) | (boxes[None, :, 3] <= boxes[:, None, 1]))
+    np.fill_diagonal(apart, True)
+    overlapping = [(drawn[i][0].get_text(), drawn[j][0].get_text()) for i, j in zip(*np.nonzero(~apart))]
+    assert not overlapping
+    for text, box in drawn:  # no text in another panel
+        others = [ax for ax in figure.axes if ax is not text.axes]
+        assert not any(box.padded(-0.5).overlaps(ax.bbox) for ax in others), text.get_text()
+
+
+def test_a_long_verdict_is_drawn_whole_in_the_figure_s_title():
     result = dataclasses.replace(fit_result(), status=Status.NO_BETTER_POINT)  # its words: 250 characters
-    figure = plot(result).flat[0].figure
+    figure = sf.plot_comparison(result, [film()]).flat[0].figure
     canvas = FigureCanvasAgg(figure)
     canvas.draw()
     title = figure.get_suptitle()

@@ -26,7 +26,7 @@ from spacefit.cli import INTERRUPTED, TERMINATED, main
 from spacefit.output import STAGE_PREFIX, write_json
 
 RENDER_FILES = ["preview.png", "radiance.exr", "render.json", "scene.toml"]
-FIT_FILES = ["comparison.png", "convergence.png", "fit.json", "fit.toml", "residuals.fits", "residuals.png", "uncertainty.json"]
+FIT_FILES = ["comparison.png", "convergence.png", "fit.json", "fit.toml", "residuals.fits", "uncertainty.json"]
 
 
 def listing(folder: Path) -> list[str]:

@@ -264,6 +264,13 @@ MUTANTS = (
            ("tests/test_plots.py",)),
     Mutant("figures-never-crop", "spacefit/plotting.py", "return target_box(images) if crop else", "return None or",
            ("tests/test_plots.py",)),
+    # the comparison's residual column is residuals.fits's picture (grey where not fitted); the convergence figure's own layout
+    Mutant("comparison-residual-not-the-fit-s", "spacefit/fitting/plots.py",
+           "fitted = k < len(result.residuals) and np.ndim(result.residuals[k]) == 3", "fitted = False",
+           ("tests/test_plots.py::test_the_comparison_s_residual_column_is_the_fit_s_residuals_on_a_symmetric_scale_in_their_unit",)),
+    Mutant("convergence-columns-without-the-parameters-labels", "spacefit/fitting/plots.py",
+           "gap = overhang + PAD_PT + max(", "gap = overhang + PAD_PT + 0 * max(",
+           ("tests/test_plots.py::test_the_convergence_figure_s_labels_are_whole_and_apart_for_any_count_of_parameters",)),
     Mutant("part-means-count-masked-nan", "spacefit/rendering/parts.py", "counted = self.ids >= 0 if used is None else (self.ids >= 0) & np.asarray(used, dtype=bool)",
            "counted = self.ids >= 0",
            ("tests/test_api.py::test_part_image_and_table_match_the_parts_lit_pixels",)),

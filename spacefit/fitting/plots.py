@@ -11,18 +11,26 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
+import matplotlib as mpl
 import numpy as np
 from matplotlib import colormaps
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure, SubFigure
+from matplotlib.font_manager import FontProperties
 from matplotlib.ticker import MaxNLocator
 
 from spacefit.errors import check_choice, check_range
 from spacefit.fitting.result import FitResult
 from spacefit.output import PREVIEW_PERCENTILE, preview_scale, to_srgb8
-from spacefit.plotting import (AxesArg, FigureArg, axis_label, cropped, image_box, log_scale, panels, show_image, suptitle,
-                               unit_label, wrapped)
+from spacefit.plotting import (AxesArg, FigureArg, axis_label, cropped, image_box, left_decoration_pt, line_pt, log_scale, panels,
+                               points_renderer, show_image, suptitle, tick_labels, unit_label, wrapped)
 from spacefit.units import RADIANCE_UNIT
+
+# The convergence figure's room beyond its labels' own, points: at its edges, and between its columns and its panels
+# (what matplotlib's constrained layout leaves).
+PAD_PT = 3.0
+# matplotlib's gap between an axes and its y axis's offset text ("1e-5", "+1.5e-1", above it), points.
+OFFSET_TEXT_PAD_PT = 3.0
 
 
 def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: AxesArg = None,
@@ -39,7 +47,8 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
             the whole film.
     Returns:
         The axes drawn, an array of one row of 3 per image (the fit at the reference's sRGB exposure,
-        the residual's RGB mean in that unit on a diverging colour map centred at 0).
+        the residual's RGB mean in that unit on a diverging colour map centred at 0, grey where not fitted:
+        :func:`residual_panel`, the picture of residuals.fits).
 
     Example:
         Not run by the tests (an image fit takes minutes)::
@@ -63,10 +72,7 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
             render = _rgb(result.renders[i])
             show_image(row[1], to_srgb8(render, scale), box)
             row[1].set_title(f"fit {i} (same exposure)", fontsize=9)
-            residual = (ref - render).mean(axis=-1)
-            image = show_image(row[2], residual, box, cmap="RdBu_r", **_centred(cropped(residual, box)))
-            row[2].set_title(f"reference - fit {i}", fontsize=9)
-            row[2].figure.colorbar(image, ax=row[2], extend="both", label=f"reference - fit ({unit})")
+            residual_panel(row[2], result, i, crop, reference)
         else:
             for panel in row[1:]:
                 panel.text(0.5, 0.5, "no render: the solve failed", ha="center", va="center", transform=panel.transAxes)
@@ -78,32 +84,14 @@ def plot_comparison(result: FitResult, references: Sequence[np.ndarray], *, ax: 
     return axes
 
 
-def plot_residuals(result: FitResult, *, ax: AxesArg = None, fig: FigureArg = None,
-                   crop: bool = True) -> np.ndarray:
-    """Each image's residual, reference - model (:attr:`FitResult.residuals`; a table's or a light
-    curve's are its own figure), the channels' mean in the observation's unit on a diverging colour map centred at 0 (grey where not fitted),
-    cropped to the target (found in the fit's render) and a margin unless ``crop=False``; into
-    ``ax`` (one per observation) or ``fig``.
-
-    Returns:
-        the array of axes drawn (one per image; one that says so where the fit has no image residuals).
-    """
-    images = result.images
-    n = max(len(images), 1)
-    axes = panels(ax, fig, n, (4.0 * n, 3.6), lambda f: f.subplots(1, n, squeeze=False))
-    for k, panel in zip(images, axes):
-        residual_panel(panel, result, k, crop)
-    if not images:
-        axes[0].text(0.5, 0.5, "no residuals: the fit has no render", ha="center", va="center", transform=axes[0].transAxes)
-    if ax is None:
-        suptitle(axes[0].figure, f"{result.status}", 9)
-    return axes
-
-
-def residual_panel(panel: Axes, result: FitResult, k: int, crop: bool = True) -> None:
-    """Image ``k``'s residual, reference - model (:attr:`FitResult.residuals`), the channels' mean in
-    its unit on a diverging colour map centred at 0 (grey where not fitted), into ``panel``."""
-    mean = np.asarray(result.residuals[k], dtype=float).mean(axis=-1)
+def residual_panel(panel: Axes, result: FitResult, k: int, crop: bool = True, reference: np.ndarray | None = None) -> None:
+    """Image ``k``'s residual, reference - fit, into ``panel``: the channels' mean in its unit on a diverging colour
+    map centred at 0 (its scale symmetric, a colour bar in the unit), grey where not fitted, titled "reference - fit,
+    observation k". The fit's :attr:`FitResult.residuals` (what residuals.fits holds); for a fit without them (one
+    interrupted), ``reference`` less the fit's render. Cropped to the target (in the fit's render) and a margin unless
+    ``crop=False``."""
+    fitted = k < len(result.residuals) and np.ndim(result.residuals[k]) == 3
+    mean = (np.asarray(result.residuals[k], dtype=float) if fitted else _rgb(reference) - _rgb(result.renders[k])).mean(axis=-1)
     box = image_box([result.renders[k] if k < len(result.renders) else mean], crop)
     cmap = colormaps["RdBu_r"].with_extremes(bad="0.6")
     image = show_image(panel, np.ma.masked_invalid(mean), box, cmap=cmap, **_centred(cropped(mean, box)))
@@ -166,11 +154,11 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
     n = len(result.names)
 
     def layout(f: Figure | SubFigure) -> list[Axes]:
-        grid = f.add_gridspec(max(n, 1), 2)
+        grid = f.add_gridspec(max(n, 1), 2, **_rows(f, n))
         loss = f.add_subplot(grid[:, 0])
         return [loss, *(f.add_subplot(grid[i, 1], sharex=loss) for i in range(n))]
 
-    axes = panels(ax, fig, n + 1, (10.0, max(3.6, 1.4 * n)), layout)
+    axes = panels(ax, fig, n + 1, (10.0, max(3.6, 1.4 * n)), layout, layout="none")
     ax_loss = axes[0]
     history = result.history
     steps = np.array([h["step"] for h in history])
@@ -196,7 +184,7 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
         panel.axhline(final, color=f"C{i}", lw=0.8)
         if name in truths:
             panel.axhline(truths[name], color="k", ls="--", lw=1.0, label="truth")
-        # in lines as long as the panel is high (before the layout, which makes it higher): one line ran into its neighbours'
+        # in lines as long as the panel is high (its own figure's rows are laid out already): one line ran into its neighbours'
         panel.set_ylabel(wrapped(axis_label(name), panel.get_window_extent().height, panel.figure.dpi, 7), fontsize=7)
         if ax is None:  # its own column, sharing the steps: numbered once, under it
             panel.tick_params(labelbottom=panel is axes[-1])
@@ -207,4 +195,41 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
     for panel in axes:
         panel.xaxis.set_major_locator(MaxNLocator(integer=True))
         panel.grid(alpha=0.3)
+    if ax is None and fig is None:
+        _columns(axes)
     return axes
+
+
+def _rows(figure: Figure | SubFigure, n: int) -> dict[str, float]:
+    """The convergence figure's rows (GridSpec's top, bottom and hspace) in ``figure``: room above for the loss's title
+    (or the first panel's offset text), below for the steps' numbers and label, and between two of the ``n``
+    parameters' panels for a tick label's line, which holds the lower one's offset text; from the fonts alone, so
+    that the panels have their heights before anything is drawn in them."""
+    renderer = points_renderer()
+    tick = line_pt(renderer, FontProperties(size=mpl.rcParams["ytick.labelsize"]))
+    label = line_pt(renderer, FontProperties(size=mpl.rcParams["axes.labelsize"]))
+    title = line_pt(renderer, FontProperties(size=9)) + mpl.rcParams["axes.titlepad"]
+    steps = mpl.rcParams["xtick.major.size"] + mpl.rcParams["xtick.major.pad"] + tick + mpl.rcParams["axes.labelpad"] + label
+    top, bottom, gap = PAD_PT + max(title, OFFSET_TEXT_PAD_PT + tick), PAD_PT + steps, OFFSET_TEXT_PAD_PT + tick + PAD_PT
+    height = figure.bbox.height / figure.dpi * 72
+    rows = max(n, 1)
+    return {"top": 1 - top / height, "bottom": bottom / height, "hspace": gap * rows / (height - top - bottom - gap * (rows - 1))}
+
+
+def _columns(axes: np.ndarray) -> None:
+    """Lay the convergence figure's two columns out once, from its labels' extents in points (its axes' positions set;
+    it has no layout engine): the loss's y axis within the left edge, the parameters' (the widest) between the
+    columns, the steps' last label within the right edge. matplotlib's constrained layout measured every axes twice
+    at every draw, each time making and placing its ticks: 60 % of the figure's drawing."""
+    renderer, figure = points_renderer(), axes[0].figure
+    width = figure.bbox.width / figure.dpi * 72
+    prop = axes[-1].xaxis.get_major_ticks(1)[0].label1.get_fontproperties()
+    overhang = max((renderer.get_text_width_height_descent(text, prop, False)[0] / 2 for text in tick_labels(axes[-1].xaxis)),
+                   default=0.0)  # a step's number centred at the right edge
+    left = PAD_PT + left_decoration_pt(axes[0], renderer)
+    right = PAD_PT + overhang
+    gap = overhang + PAD_PT + max((left_decoration_pt(panel, renderer) for panel in axes[1:]), default=0.0)
+    grid = axes[0].get_subplotspec().get_gridspec()
+    grid.update(left=left / width, right=1 - right / width, wspace=2 * gap / (width - left - right - gap))
+    for panel in axes:
+        panel.set_position(panel.get_subplotspec().get_position(figure))

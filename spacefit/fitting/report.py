@@ -15,8 +15,8 @@
   its :meth:`~spacefit.fitting.observations.base.Reported.plot`;
 * ``residuals.fits`` (a fit of images): :attr:`FitResult.residuals`, reference - model, one image extension per
   observation (``EXTNAME`` ``OBS<k>``, (channels, height, width) float32 in the unit ``BUNIT`` of the
-  observation, NaN where not fitted; rows stored top row first, ``ROWORDER = 'TOP-DOWN'``), and
-  ``residuals.png``, its picture (:func:`~spacefit.fitting.plots.plot_residuals`).
+  observation, NaN where not fitted; rows stored top row first, ``ROWORDER = 'TOP-DOWN'``), drawn as
+  ``comparison.png``'s third column (:func:`~spacefit.fitting.plots.residual_panel`).
 
 :func:`read_fit` reads the folder back into its :class:`FitResult` (without
 the renders). The summary's (:func:`format_result`) first line is the verdict, :class:`~spacefit.fitting.status.Status`;
@@ -41,7 +41,7 @@ from spacefit.fitting.observations.passes import PassObservation
 from spacefit.fitting.result import FitResult
 from spacefit.fitting.status import Status
 from spacefit.fitting.pass_report import frame_panels, frame_table, plot_frames, write_frame_table
-from spacefit.fitting.plots import plot_comparison, plot_convergence, plot_residuals
+from spacefit.fitting.plots import plot_comparison, plot_convergence
 from spacefit.locks import holding_lock
 from spacefit.output import prepare_output, staged_output, versions, write_json
 from spacefit.units import DN_UNIT
@@ -64,8 +64,8 @@ def write_fit_report(
     inputs: Mapping[str, Any] | None = None,
     timings_s: Mapping[str, float] | None = None,
 ) -> Path:
-    """Write fit.json, fit.toml, uncertainty.json, convergence.png and, with images, comparison.png,
-    residuals.fits and residuals.png into ``out_dir`` all at once.
+    """Write fit.json, fit.toml, uncertainty.json, convergence.png and, with images, comparison.png
+    and residuals.fits into ``out_dir`` all at once.
 
     Args:
         out_dir: output folder (created; on any error nothing is left behind).
@@ -109,7 +109,6 @@ def write_fit_report(
             # its residuals not computed); a table's or a light curve's is its observation<i>.png
             _save(plot_comparison(result, references), stage / "comparison.png")
             write_residuals(stage / "residuals.fits", result)
-            _save(plot_residuals(result), stage / "residuals.png")
         passes = [i for i, o in enumerate(result.observations) if isinstance(o, PassObservation)]
         for i, (observation, entries) in enumerate(zip(result.observations, result.entries)):
             if i in passes:  # its frames against time
@@ -118,7 +117,7 @@ def write_fit_report(
                 write_frame_table(stage / f"frames{own}.csv", rows)
                 if frame_panels(rows):
                     _save(plot_frames(rows), stage / f"frames{own}.png")
-            elif not isinstance(observation, Observation):  # an image's figures are comparison.png and residuals.png
+            elif not isinstance(observation, Observation):  # an image's figure is comparison.png
                 _save(observation.plot(result, entries), stage / f"observation{i}.png")
         if not passes and inputs is not None and inputs.get("times"):  # a pass given as its frames' images
             rows = frame_table(result, files=inputs["references"], times=inputs["times"])

@@ -204,9 +204,10 @@ class LightCurve:
         Axes (irradiance, magnitude) or one (the magnitude, with the irradiance it stands for on a
         second y axis), or ``fig`` (a matplotlib Figure or SubFigure; default: a new one with both
         panels). Returns the array of the axes drawn."""
-        from spacefit.plotting import axis_label, panels  # here: only a figure needs matplotlib (optional; slow to import)
+        from spacefit.plotting import axis_label, panels, with_unit  # here: only a figure needs matplotlib (optional; slow to import)
 
         axes = panels(ax, fig, (1, 2), (9.0, 3.6), lambda f: f.subplots(1, 2))
+        irradiance_label = with_unit("irradiance at the observer", "W m^-2")
         known = self.seeds > 1
         bright, faint = self.magnitude_interval()
         faint = np.where(np.isfinite(faint), faint, np.nanmax(np.where(np.isfinite(faint), faint, self.magnitude)) + 1.0)
@@ -215,7 +216,7 @@ class LightCurve:
             irradiance = axes[0]
             irradiance.errorbar(self.x, self.irradiance_w_m2, yerr=self.irradiance_se_w_m2 if known else None, fmt="o-", capsize=2)
             irradiance.set_yscale("log")
-            irradiance.set_ylabel("irradiance at the observer (W m$^{-2}$)")
+            irradiance.set_ylabel(irradiance_label)
         magnitude.errorbar(self.x, self.magnitude, yerr=np.stack([self.magnitude - bright, faint - self.magnitude]) if known else None,
                            fmt="o-", capsize=2)
         magnitude.invert_yaxis()  # brighter up
@@ -230,7 +231,7 @@ class LightCurve:
                 return sun_m - 2.5 * np.log10(np.maximum(np.asarray(e), np.finfo(float).tiny) / sun_e)
 
             second = magnitude.secondary_yaxis("right", functions=(irradiance_of, magnitude_of))
-            second.set_ylabel("irradiance at the observer (W m$^{-2}$)")
+            second.set_ylabel(irradiance_label)
         for panel in axes:
             panel.set_xlabel(axis_label(self.against))
         errors = f"1-sigma Monte Carlo errors of {self.seeds} seeds" if known else "one seed: Monte Carlo error unknown"
