@@ -16,7 +16,7 @@ import platform
 import shutil
 import tempfile
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Collection, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from pathlib import Path
@@ -96,7 +96,7 @@ STAGE_PREFIX = ".spacefit-stage-"
 RESULT_FILES = {
     "render": ({"radiance.exr", "preview.png", "scene.toml", "render.json"}, "render.json"),
     # residuals.png: written by spacefit fit before 2026-11-29 (now comparison.png's third column); still a fit's file, so
-    # --overwrite takes such a folder (and leaves that file, as it leaves any file the new fit does not write)
+    # --overwrite takes such a folder (and removes it with the previous result's other files the new one does not write)
     "fit": ({"fit.json", "fit.toml", "uncertainty.json", "comparison.png", "convergence.png", "residuals.fits", "residuals.png",
              "checkpoint.json", "frames.csv", "frames.png"}, "fit.json"),
     "light-curve-fit": ({"fit.json", "fit.toml", "uncertainty.json", "convergence.png", "observation0.png", "checkpoint.json"}, "fit.json"),
@@ -131,6 +131,13 @@ def clean_stale_stages(folder: Path, of: str = "") -> list[Path]:
 def _entries(out: Path) -> set[str]:
     """The names in an output folder but staging folders and locks."""
     return {p.name for p in out.iterdir() if not p.name.startswith(STAGE_PREFIX) and not is_lock_file(p.name)}
+
+
+def previous_result(out_dir: str | Path, command: str) -> frozenset[str]:
+    """The files of a previous spacefit ``command`` result in ``out_dir`` (which :func:`prepare_output` checked holds only
+    such files) but its checkpoint: those a new result replaces whole (:func:`staged_output`'s ``replaces``)."""
+    out = Path(out_dir)
+    return frozenset(_entries(out) & RESULT_FILES[command][0] - {"checkpoint.json"}) if out.is_dir() else frozenset()
 
 
 def _is_result(out: Path, command: str) -> bool:
@@ -186,10 +193,11 @@ def prepare_output(out_dir: str | Path, command: str, *, overwrite: bool = False
 
 
 @contextmanager
-def staged_output(out_dir: str | Path) -> Iterator[Path]:
+def staged_output(out_dir: str | Path, replaces: Collection[str] = ()) -> Iterator[Path]:
     """Yield a staging folder; on success its files move into ``out_dir``, on error nothing is left.
 
-    Files already in ``out_dir`` with other names are kept; same names are replaced at the end only.
+    Files already in ``out_dir`` with other names are kept; same names are replaced at the end only, and the files named
+    in ``replaces`` (a previous result's, :func:`previous_result`) that the stage does not hold are removed after them.
     On an error or interruption only what this call created goes: its stage, and ``out_dir`` if
     this call created it and it is still empty (another process may have written there since).
     """
@@ -199,8 +207,11 @@ def staged_output(out_dir: str | Path) -> Iterator[Path]:
     stage = Path(tempfile.mkdtemp(prefix=f"{STAGE_PREFIX}{os.getpid()}-", dir=out))
     try:
         yield stage
-        for item in stage.iterdir():
-            os.replace(item, out / item.name)
+        written = {item.name for item in stage.iterdir()}
+        for name in written:
+            os.replace(stage / name, out / name)
+        for name in set(replaces) - written:
+            (out / name).unlink(missing_ok=True)
     except BaseException as err:
         shutil.rmtree(stage, ignore_errors=True)
         if created:

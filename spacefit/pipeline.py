@@ -19,7 +19,7 @@ from spacefit.errors import InputError, check_path, check_type
 from spacefit.executors import Cluster, cluster_of
 from spacefit.fitting.resume import Resume
 from spacefit.locks import holding_lock
-from spacefit.output import prepare_output, staged_output, versions, write_json
+from spacefit.output import prepare_output, previous_result, staged_output, versions, write_json
 from spacefit.progress import Progress, ProgressCallback, say
 from spacefit.scene.overrides import parse_override
 from spacefit.scene.parameters import scene_keys
@@ -90,7 +90,7 @@ def fit_to_folder(files: ObservationFiles, free: Sequence[str], out_dir: str | P
         return fit(observations, free, progress=progress, resume=plumbing, cluster=cluster,
                    **dataclasses.replace(options, **resumed).keywords())
 
-    return _checkpointed_fit(out_dir, solve, images, inputs=inputs, read=read, label=f"fit {', '.join(free)}",
+    return _checkpointed_fit(out_dir, "fit", solve, images, inputs=inputs, read=read, label=f"fit {', '.join(free)}",
                              max_steps=options.max_steps, resume=resume, quiet=quiet, t_read=t_read)
 
 
@@ -144,17 +144,18 @@ def fit_light_curve_to_folder(files: LightCurveFiles, free: Sequence[str], out_d
         given = {"max_steps": max_steps, "start": start, **resumed}
         return fit(curve, free, allow_large=allow_large, progress=progress, resume=plumbing, **given)
 
-    return _checkpointed_fit(out_dir, solve, [], inputs=inputs, read=[*files.files, *curve.scene.mesh_files()],
+    return _checkpointed_fit(out_dir, "light-curve-fit", solve, [], inputs=inputs, read=[*files.files, *curve.scene.mesh_files()],
                              label=f"light-curve fit {', '.join(free)}", max_steps=max_steps, resume=resume, quiet=quiet,
                              t_read=t_read)
 
 
-def _checkpointed_fit(out_dir: str | Path, solve: Callable[[dict[str, Any], ProgressCallback, Resume], FitResult],
+def _checkpointed_fit(out_dir: str | Path, command: str, solve: Callable[[dict[str, Any], ProgressCallback, Resume], FitResult],
                       references: Sequence[np.ndarray], *, inputs: dict[str, Any], read: Sequence[str | Path], label: str,
                       max_steps: int, resume: bool, quiet: bool, t_read: float) -> FitResult:
     """Run a fit (``solve``, given the options a resume changes, the progress callback and the checkpoint
     plumbing) with a progress display (``label``) and a checkpoint in ``out_dir``, then write its report
-    (:func:`~spacefit.fitting.report.write_fit_report` of ``references``). ``inputs``: what fit.json
+    (:func:`~spacefit.fitting.report.write_fit_report` of ``references``), which replaces the files of a previous
+    ``command`` result there whole (:func:`~spacefit.output.previous_result`). ``inputs``: what fit.json
     records and the checkpoint compares on ``resume``; ``read``: the files whose SHA-256 it keeps.
     On an error nothing of this run stays (an interruption keeps the checkpoint)."""
     from spacefit.fitting.problem import SAY_SIZE  # deferred: the fitting stack, which renders never need
@@ -174,7 +175,7 @@ def _checkpointed_fit(out_dir: str | Path, solve: Callable[[dict[str, Any], Prog
         say(f"the solve in {out_dir} had ended at step {checkpoint.ended['steps']}; writing its report" if checkpoint.ended
              else f"resuming from step {checkpoint.steps} of the checkpoint in {out_dir}", quiet)
 
-    created = not Path(out_dir).exists()
+    created, replaces = not Path(out_dir).exists(), previous_result(out_dir, command)
     t0 = time.perf_counter()
     try:
         plumbing = Resume(checkpoint.update, checkpoint.end, checkpoint.ended, checkpoint.history if resume else ())
@@ -191,7 +192,7 @@ def _checkpointed_fit(out_dir: str | Path, solve: Callable[[dict[str, Any], Prog
         if not quiet and last[0] < last[1]:
             display(last[0], last[0])  # the solve stopped before its step limit: end the display there
         timings = {"read_inputs": t_read, "setup": t_fit - result.wall_time_s}
-        write_fit_report(out_dir, result, references, inputs=inputs, timings_s=timings)
+        write_fit_report(out_dir, result, references, inputs=inputs, timings_s=timings, replaces=replaces)
     except Exception:
         # an error, not an interruption: nothing of this run stays (an interruption keeps the checkpoint)
         if not resume:

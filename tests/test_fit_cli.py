@@ -195,6 +195,20 @@ def test_cli_fit_that_does_not_converge_exits_3_with_its_report(case, tmp_path, 
     assert "did not converge" in capsys.readouterr().err
 
 
+def test_overwrite_replaces_a_previous_fit_whole_and_keeps_other_files(case, tmp_path):
+    # a pass's fit before it (frames.csv, frames.png) and an older spacefit's residuals.png: none of them is this fit's
+    out = tmp_path / "run"
+    out.mkdir()
+    (out / "fit.json").write_text('{"versions": {"spacefit": "0.1"}}')
+    for name in ("frames.csv", "frames.png", "residuals.png", "comparison.png"):
+        (out / name).write_text("an earlier fit's")
+    assert main(_args(case, out, "--spp", "2")) == 2  # refused without --overwrite, nothing changed
+    assert sorted(os.listdir(out)) == ["comparison.png", "fit.json", "frames.csv", "frames.png", "residuals.png"]
+    code = main(_args(case, out, "--spp", "2", "--overwrite"))
+    assert sorted(os.listdir(out)) == REPORT and (out / "comparison.png").read_bytes()[:4] == b"\x89PNG"
+    assert code == exit_code(sf.Status(json.loads((out / "fit.json").read_text())["status"]))
+
+
 def test_fit_to_folder_returns_the_result(case, tmp_path):
     refs = [case / "a.exr", case / "b.exr"]
     result = fit_to_folder(sf.ObservationFiles(refs, [case / "a.toml", case / "b.toml"]), ["parts.sphere.kd"], tmp_path / "run",

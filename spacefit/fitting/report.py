@@ -26,7 +26,7 @@ the second the goodness of fit (:mod:`spacefit.fitting.goodness`).
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -63,6 +63,7 @@ def write_fit_report(
     *,
     inputs: Mapping[str, Any] | None = None,
     timings_s: Mapping[str, float] | None = None,
+    replaces: Collection[str] = (),
 ) -> Path:
     """Write fit.json, fit.toml, uncertainty.json, convergence.png and, with images, comparison.png
     and residuals.fits into ``out_dir`` all at once.
@@ -73,6 +74,8 @@ def write_fit_report(
         references: the reference images (h, w, 3), in observation order, in the units of the fit (``result.units``).
         inputs: what was fitted (reference files, scenes, options), recorded in fit.json.
         timings_s: timings (s) to record besides the solve's own ``result.wall_time_s``.
+        replaces: names of a previous report's files in ``out_dir`` (``spacefit fit --overwrite`` passes those its
+            previous result held): those this one does not write are removed once its own are in place.
 
     Returns:
         The folder's path.
@@ -99,7 +102,7 @@ def write_fit_report(
         "versions": versions(),
         **({"inputs": dict(inputs)} if inputs is not None else {}),
     }
-    with staged_output(out_dir) as stage:
+    with staged_output(out_dir, replaces) as stage:
         write_json(stage / "fit.json", data)
         write_json(stage / "uncertainty.json", result.uncertainty())
         if result.scene is not None:
