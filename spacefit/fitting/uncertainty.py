@@ -77,11 +77,11 @@ class Linearisation:
             return (d * w) @ d.T
         wj = on_device(w, np.float64)
 
-        def column(e: jax.Array) -> jax.Array:
+        def difference_column(e: jax.Array) -> jax.Array:
             v = _weighted_difference(wj, self.J1(e), self.J2(e))
             return self.J1T(v) - self.J2T(v)
 
-        return self.columns(column)
+        return self.columns(difference_column)
 
     def images(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """J1 v and J2 v, for a direction ``v`` of x."""
