@@ -123,8 +123,7 @@ def main() -> None:
         for seed in seeds:
             obs = sf.Observation(scene, sf.observe(truth, sensor, intrinsics, seed).astype(float), sensor=sensor)
             ref, used = check_reference(obs, 0)
-            r = jnp.asarray(np.asarray(image_residual(obs, ref, used, "pixel")(model), dtype=float))
-            steps.append(-bread @ (0.5 * (np.asarray(lin.J1T(r)) + np.asarray(lin.J2T(r)))))
+            steps.append(lin.step(np.asarray(image_residual(obs, ref, used, "pixel")(model), dtype=float)))
         if args.source == "decompose":
             print(decomposition(names, [[fits[seed][n] for n in names] for seed in seeds], np.asarray(steps), bread))
             return

@@ -35,18 +35,23 @@ from spacefit.scene.parameters import is_image
 @dataclass(frozen=True)
 class Linearisation:
     """A problem's residuals at x with the fit's seeds (``r``) and with independent ones (``r_alt``),
-    and their Jacobians as linear maps (``J1``, ``J2``: a direction of x to the residuals' change) with
-    their transposes (``J1T``, ``J2T``): the products the errors need are formed a few columns at a
-    time (:func:`~spacefit.fitting.normal_equations.by_columns`), no rows x columns matrix held."""
+    and their Jacobians J1, J2: as linear maps (``J1``, ``J2``: a direction of x to the residuals' change)
+    with their transposes (``J1T``, ``J2T``), the products the errors need formed a few columns at a time
+    (:func:`~spacefit.fitting.normal_equations.by_columns`), no rows x columns matrix held; or, where every
+    value is shared (an image fitted alone: ``owners`` None), as their columns (``held``: J1's and J2's, each
+    (n, rows), float64), which the solver's normal equations hold too
+    (:func:`~spacefit.fitting.normal_equations.all_shared`): the products are then NumPy's, summed in float64,
+    with no program of the maps' transposes or of their products traced and lowered in each process."""
 
     x: jax.Array
     r: np.ndarray
     r_alt: np.ndarray
     J1: Callable[[jax.Array], jax.Array]
     J2: Callable[[jax.Array], jax.Array]
-    J1T: Callable[[jax.Array], jax.Array]
-    J2T: Callable[[jax.Array], jax.Array]
+    J1T: Callable[[jax.Array], jax.Array] | None = None  # None where held
+    J2T: Callable[[jax.Array], jax.Array] | None = None
     owners: tuple[int, ...] | None = None  # per value, the image whose residuals alone it moves (column_owners)
+    held: tuple[np.ndarray, np.ndarray] | None = None
 
     def columns(self, fn: Callable[[jax.Array], jax.Array], transposed: Callable[[jax.Array], jax.Array] | None = None) -> np.ndarray:
         """The n x n matrix M whose column j is ``fn(e_j)``, for a map J^T W J that joins no two images'
@@ -58,8 +63,38 @@ class Linearisation:
 
     def cross(self, weight: Callable[[jax.Array], jax.Array]) -> np.ndarray:
         """sym(J1^T W J2) for a symmetric linear map W of the residuals that joins no two images' residuals."""
-        m = self.columns(lambda e: self.J1T(weight(self.J2(e))), lambda e: self.J2T(weight(self.J1(e))))
+        if self.held is not None:
+            c1, c2 = self.held
+            m = c1 @ np.stack([np.asarray(weight(on_device(c, np.float64)), dtype=float) for c in c2]).T
+        else:
+            m = self.columns(lambda e: self.J1T(weight(self.J2(e))), lambda e: self.J2T(weight(self.J1(e))))
         return 0.5 * (m + m.T)
+
+    def difference(self, w: np.ndarray) -> np.ndarray:
+        """(J1 - J2)^T diag(w) (J1 - J2), for per-residual weights ``w``."""
+        if self.held is not None:
+            d = self.held[0] - self.held[1]
+            return (d * w) @ d.T
+        wj = on_device(w, np.float64)
+
+        def difference_column(e: jax.Array) -> jax.Array:
+            v = _weighted_difference(wj, self.J1(e), self.J2(e))
+            return self.J1T(v) - self.J2T(v)
+
+        return self.columns(difference_column)
+
+    def images(self, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """J1 v and J2 v, for a direction ``v`` of x."""
+        if self.held is not None:
+            return self.held[0].T @ v, self.held[1].T @ v
+        vj = on_device(v, np.float64)
+        return np.asarray(self.J1(vj), dtype=float), np.asarray(self.J2(vj), dtype=float)
+
+    def adjoint(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """J1^T a + J2^T b, for residual changes ``a`` and ``b``."""
+        if self.held is not None:
+            return self.held[0] @ a + self.held[1] @ b
+        return np.asarray(self.J1T(on_device(a, np.float64))) + np.asarray(self.J2T(on_device(b, np.float64)))
 
     @cached_property
     def information(self) -> np.ndarray:
@@ -72,21 +107,29 @@ class Linearisation:
         undetermined, and for a non-finite ``d``."""
         if not np.all(np.isfinite(difference)):
             return np.zeros(len(self.x))
-        d = on_device(difference, np.float64)
-        return -_pseudo_inverse(self.information)[0] @ (0.5 * (np.asarray(self.J1T(d)) + np.asarray(self.J2T(d))))
+        return -_pseudo_inverse(self.information)[0] @ (0.5 * self.adjoint(difference, difference))
 
 
 def linearise(problem: Problem, x: np.ndarray) -> Linearisation:
     """The problem's :class:`Linearisation` at ``x`` (physical units): one Jacobian render per seed, the independent
-    seeds' begun while the fit's seeds' tangents are traced (:meth:`~spacefit.fitting.residuals.Problem.render_ahead`)."""
+    seeds' begun while the fit's seeds' tangents are traced (:meth:`~spacefit.fitting.residuals.Problem.render_ahead`);
+    the Jacobians' columns held where every value is shared (:func:`~spacefit.fitting.residuals.column_owners` None)."""
     xj = on_device(x, np.float64)
     problem.render_ahead(xj, 1)
     r, J1 = problem.linearised(xj, 0)
     r_alt, J2 = problem.linearised(xj, 1)
+    owners, dtype = column_owners(problem.free, problem.blocks), r.dtype
+    r, r_alt = np.asarray(r, dtype=float), np.asarray(r_alt, dtype=float)
+    if owners is None:  # one column at a time: vmapped, JAX batched the tangent's program anew in each process (0.2 s of CPU)
+        eye = [on_device(e, np.float64) for e in np.eye(len(x))]
+        held = tuple(np.stack([np.asarray(J(e), dtype=float) for e in eye]) for J in (J1, J2))
+        # the pages the solve freed handed back, as the products by columns do (Linearisation.columns): kept, the pixel
+        # grid's programs at 4x came on top of them (the 8-parameter observation fit's peak 120 MiB higher)
+        release_freed_memory()
+        return Linearisation(xj, r, r_alt, J1, J2, held=held)
     # the transposes take the residuals' dtype (float32 renders: J^T v sums in float32, ~1e-6 relative)
-    J1T, J2T = ((lambda v, t=jax.linear_transpose(J, xj), dtype=r.dtype: t(v.astype(dtype))[0]) for J in (J1, J2))
-    return Linearisation(xj, np.asarray(r, dtype=float), np.asarray(r_alt, dtype=float), J1, J2, J1T, J2T,
-                         column_owners(problem.free, problem.blocks))
+    J1T, J2T = ((lambda v, t=jax.linear_transpose(J, xj): t(v.astype(dtype))[0]) for J in (J1, J2))
+    return Linearisation(xj, r, r_alt, J1, J2, J1T, J2T, owners)
 
 
 def _pseudo_inverse(information: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -146,25 +189,19 @@ def covariance(problem: Problem, x: np.ndarray,
     ``lin``: the problem's :func:`linearise` at ``x`` where the caller has it.
     """
     lin = linearise(problem, x) if lin is None else lin
-    r, r_alt, J1, J2, J1T, J2T, n = lin.r, lin.r_alt, lin.J1, lin.J2, lin.J1T, lin.J2T, len(x)
+    r, r_alt, n = lin.r, lin.r_alt, len(x)
     if not (np.all(np.isfinite(r)) and np.all(np.isfinite(lin.information))):
         return np.full((n, n), np.nan), math.nan, np.full(n, np.nan), np.zeros(n)
     bread, eigval, eigvec, tiny = _pseudo_inverse(lin.information)
     # a row no parameter moves shows as 0 in J1 times a random direction (with probability 1)
-    probe = np.asarray(J1(jnp.asarray(np.random.default_rng(0).normal(size=n), dtype=lin.x.dtype)), dtype=float)
+    probe = lin.images(np.random.default_rng(0).normal(size=n))[0]
     informative = int(((probe != 0) | (r != 0)).sum())
     dof = max(informative - len(x), 1)
     s2 = float(r @ r) / dof
     # the fit stops where J^T r = 0 for its noisy J, off by (J^T J)^-1 dJ^T r, whose covariance per
     # row is r^2 (J1 - J2)(J1 - J2)^T / 2
-    r2 = on_device(r**2, np.float64)
-
-    def jacobian_noise_column(e: jax.Array) -> jax.Array:
-        v = _weighted_difference(r2, J1(e), J2(e))
-        return J1T(v) - J2T(v)
-
-    jacobian_noise = 0.5 * lin.columns(jacobian_noise_column)
-    correction = -bread @ (0.5 * (np.asarray(J1T(on_device(r_alt, np.float64))) + np.asarray(J2T(on_device(r, np.float64)))))
+    jacobian_noise = 0.5 * lin.difference(r**2)
+    correction = -bread @ (0.5 * lin.adjoint(r_alt, r))
     if problem.noise_known:
         # the observation's noise, (J^T J)^-1, plus the fit's own render noise, per residual
         # (r - r_alt)^2 / 2 from the two seeds, and the Jacobian's, both at half weight
@@ -172,8 +209,7 @@ def covariance(problem: Problem, x: np.ndarray,
         cov, s2 = bread + 0.5 * bread @ noise @ bread, 1.0
     else:
         # the data's noise and half the render noise: the two seeds' mean residual at the root
-        step = jnp.asarray(correction, dtype=lin.x.dtype)
-        mean = 0.5 * (r + r_alt + np.asarray(J1(step), dtype=float) + np.asarray(J2(step), dtype=float))
+        mean = 0.5 * (r + r_alt + sum(lin.images(correction)))
         meat = render_meat(lin.cross, _unknown_noise_draw(problem, mean, r, informative, dof), problem, x)
         cov = bread @ (meat + 0.5 * jacobian_noise) @ bread
     if tiny.any():
