@@ -12,7 +12,14 @@ one :class:`Batch`: the program traced once (:func:`jax.make_jaxpr`, two frames'
 their printed forms are, literals included), its arrays stacked over the frames and run frame after
 frame by :func:`jax.lax.map`, so that the step holds one frame's program, and one frame's temporaries,
 whatever the count. Images of another size, other free nuisances or other sensor settings (or the
-``stats`` loss's lit pixels) make batches of their own; an image alone runs its own function.
+``stats`` loss's lit pixels) make batches of their own; an image alone is a batch of one.
+
+*A program's arrays are its operands.* Every array a model holds (a reference, a mask, a sensor's per-pixel factors,
+the frequencies of its Fourier filters) is taken out of its traced program (:func:`operand_program`) and handed to
+every program that evaluates it as an operand (:meth:`FrameModels.operands`), as the pixel grid's arrays are
+(:class:`AlikePrograms`): closed over, JAX embedded each as a constant in every program's module (the 8-parameter
+observation fit's step 5.6 MB, its pixel grid's 14.7 MB, issue 33), which made lowering, the persistent cache's
+hashing and its reads slow, and each compiled program held its own copy.
 In a joint fit each model is recomputed where linearised (:func:`jax.checkpoint`): a linearisation
 kept every intermediate of the image model and the sensor's (76 image-sized float64 arrays a frame,
 26 MiB at 128 x 128 px) in each of the solver's two copies of it, where it keeps the render, the
@@ -64,9 +71,9 @@ class Batch:
         frames: the images, in the fit's order.
         run: the render run they are in (:func:`~spacefit.fitting.render_batches.render_runs`), from ``offset``.
         values: (images, p) where each one's nuisance values are in the free values.
-        program: the first image's model traced; None: one image, its own function.
+        program: the first image's model traced, its arrays its first operands (:func:`operand_program`).
         own: the program's arrays that differ between the images, each stacked (images, ...), once, on the device.
-        common: those every image shares.
+        common: those every image shares (all of an image alone's), on the device.
         consts: per array of ``program``, where it is: (True, i) ``own[i]``, (False, i) ``common[i]``.
     """
 
@@ -74,9 +81,9 @@ class Batch:
     run: int
     offset: int
     values: np.ndarray
-    program: ClosedJaxpr | None = None
+    program: Callable[..., list[Array]]
     own: tuple[Array, ...] = ()
-    common: tuple[np.ndarray, ...] = ()
+    common: tuple[Array, ...] = ()
     consts: tuple[tuple[bool, int], ...] = ()
 
 
@@ -86,26 +93,27 @@ def batches(models: Sequence[FrameModel], values: Sequence[np.ndarray], runs: Se
     (a render of its ``shapes`` and values of ``dtype``) are one program with arrays of the same shapes."""
     out = []
     for r, run in enumerate(runs):
-        if len(run) == 1:
-            out.append(Batch(run, r, 0, values[run.start][None]))
-            continue
         traced = [jax.make_jaxpr(models[k])(jax.ShapeDtypeStruct(shapes[k], jnp.float32),
                                             jax.ShapeDtypeStruct(values[k].shape, dtype)) for k in run]
-        keys = [traced_alike(t) for t in traced]
+        keys = [traced_alike(t) for t in traced] if len(run) > 1 else [None]  # an image alone: not printed
         start = 0
         for end in range(1, len(run) + 1):
             if end < len(run) and keys[end] == keys[start]:
                 continue
             frames, alike = run[start:end], traced[start:end]
-            indices = np.stack([values[k] for k in frames])
-            if len(frames) == 1:
-                out.append(Batch(frames, r, start, indices))
-            else:
-                own, common, consts = _arrays(alike)
-                # on the device once: handed to each call of a program as its operands (FrameModels.operands), not copied each time
-                out.append(Batch(frames, r, start, indices, alike[0], tuple(on_device(a, a.dtype) for a in own), common, consts))
+            own, common, consts = _arrays(alike)
+            # on the device once: handed to each call of a program as its operands (FrameModels.operands), not copied each time
+            out.append(Batch(frames, r, start, np.stack([values[k] for k in frames]), operand_program(alike[0]),
+                             *(tuple(on_device(a, a.dtype) for a in arrays) for arrays in (own, common)), consts))
             start = end
     return out
+
+
+def operand_program(traced: ClosedJaxpr) -> Callable[..., list[Array]]:
+    """``traced``'s function with its arrays as its first operand, ``(arrays, *args) -> outputs`` (both flat), for the
+    programs that evaluate it to take them as theirs, not to embed them as constants (the module's docstring)."""
+    jaxpr = traced.jaxpr  # not its arrays: the caller holds those, once
+    return lambda arrays, *args: jaxpr_as_fun(ClosedJaxpr(jaxpr, arrays))(*jax.tree.leaves(args))
 
 
 def traced_alike(traced: ClosedJaxpr) -> tuple[str, tuple[tuple[tuple[int, ...], np.dtype], ...]]:
@@ -120,28 +128,27 @@ class AlikePrograms:
     traced once per key and its arrays handed to the shared program as operands, held for the callers' life: each
     array once, those equal between keys shared (a pass's frames' response matrices and frequency grids, 10 of a
     128 x 128 px frame's 11.4 MiB; their references and masks are their own). ``share`` False (one caller of a
-    kind, an image fitted alone): each key's function compiled as it is, not traced twice nor printed."""
+    kind, an image fitted alone): each key's program its own, its traced form not printed; its arrays its operands
+    still (:func:`operand_program`)."""
 
     def __init__(self, share: bool = True) -> None:
         self.share = share
-        self._programs: dict[tuple[str, tuple[tuple[tuple[int, ...], np.dtype], ...]], Callable[..., list[Array]]] = {}
-        self._traced: dict[object, tuple[Callable[..., object], list[Array] | None]] = {}
+        self._programs: dict[object, Callable[..., list[Array]]] = {}
+        self._traced: dict[object, tuple[Callable[..., list[Array]], list[Array]]] = {}
         self._held: dict[tuple[tuple[int, ...], str, bytes], Array] = {}
         self._holding = threading.Lock()  # keys traced first on concurrently's threads: each array still held once
 
     def __call__(self, key: object, fn: Callable[..., object], *args: Array) -> list[Array]:
         """``fn(*args)``'s outputs, flattened, by the program of its kind: traced for ``key`` (an image's and the
         shapes', which must not change between calls with one key) on its first call."""
-        if key not in self._traced and not self.share:
-            self._traced[key] = (jax.jit(fn), None)
-        elif key not in self._traced:
+        if key not in self._traced:
             traced = jax.make_jaxpr(fn)(*args)
-            kind = traced_alike(traced)
+            kind = traced_alike(traced) if self.share else key
             if kind not in self._programs:
-                self._programs[kind] = jax.jit(lambda consts, *a, jaxpr=traced.jaxpr: jaxpr_as_fun(ClosedJaxpr(jaxpr, consts))(*a))
+                self._programs[kind] = jax.jit(operand_program(traced))
             self._traced[key] = (self._programs[kind], [self._once(c) for c in traced.consts])
         program, consts = self._traced[key]
-        return jax.tree.leaves(program(*args)) if consts is None else program(consts, *args)
+        return program(consts, *args)
 
     def _once(self, array: object) -> Array:
         """``array`` on the device, the one held already where an equal one is (same shape, dtype and bytes)."""
@@ -219,10 +226,10 @@ class FrameModels:
             self._batches[dtype] = batches(self.models, self.values, self.runs, self.shapes, dtype)
         return self._batches[dtype]
 
-    def operands(self, dtype: np.dtype) -> tuple[tuple[Array, ...], ...]:
-        """Each batch's own arrays (:attr:`Batch.own`) for values of ``dtype``, for a caller that hands them to
-        :meth:`__call__` as operands of its program."""
-        return tuple(batch.own for batch in self.batches(np.dtype(dtype)))
+    def operands(self, dtype: np.dtype) -> tuple[tuple[tuple[Array, ...], tuple[Array, ...]], ...]:
+        """Each batch's arrays (:attr:`Batch.own`, :attr:`Batch.common`) for values of ``dtype``, for a caller that hands
+        them to :meth:`__call__` as operands of its program."""
+        return tuple((batch.own, batch.common) for batch in self.batches(np.dtype(dtype)))
 
     def __call__(self, rendered: Sequence[Array], x: Array, operands: Sequence[tuple[Array, ...]] | None = None) -> tuple[
             list[Array], Array, Array]:
@@ -234,24 +241,23 @@ class FrameModels:
             renders, values = rendered[batch.run], x[batch.values]
             if len(batch.frames) < renders.shape[0]:
                 renders = renders[batch.offset:batch.offset + len(batch.frames)]
-            if batch.program is None:
-                model = self.models[batch.frames.start]
-                one = jax.checkpoint(model) if self.recompute else model
-                out.append([o[None] for o in one(renders[0], values[0])])
-                continue
-
-            def each(args: tuple[Array, Array, tuple[Array, ...]], batch: Batch = batch) -> list[Array]:
-                render, value, own = args
-                consts = [own[i] if is_own else batch.common[i] for is_own, i in batch.consts]
-                return jaxpr_as_fun(ClosedJaxpr(batch.program.jaxpr, consts))(render, value)
-
-            # the frames' own arrays as operands: held as constants, each compiled program of the fit (the step, the residuals,
+            # the batch's arrays as operands: held as constants, each compiled program of the fit (the step, the residuals,
             # the covariance's products) would hold a copy of them, more while compiling. The caller's arguments where it
             # hands them in; else from the host by a callback, which JAX's persistent cache refuses (the program compiles
             # in every process: the 12-frame pass's solver step, 13.5 s of wall at load 12 at 64 px)
-            own = operands[b] if operands is not None else jax.pure_callback(
-                lambda batch=batch: batch.own, tuple(jax.ShapeDtypeStruct(a.shape, a.dtype) for a in batch.own), vmap_method="sequential")
-            out.append(jax.lax.map(jax.checkpoint(each) if self.recompute else each, (renders, values, own)))
+            own, common = operands[b] if operands is not None else jax.pure_callback(
+                lambda batch=batch: (batch.own, batch.common), jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype),
+                                                                            (batch.own, batch.common)), vmap_method="sequential")
+
+            def each(args: tuple[Array, Array, tuple[Array, ...]], batch: Batch = batch, common: tuple[Array, ...] = common) -> list[Array]:
+                render, value, own = args
+                return batch.program([own[i] if is_own else common[i] for is_own, i in batch.consts], render, value)
+
+            one = jax.checkpoint(each) if self.recompute else each
+            if len(batch.frames) == 1:  # not mapped: its arrays are its own as they are
+                out.append([o[None] for o in one((renders[0], values[0], ()))])
+                continue
+            out.append(jax.lax.map(one, (renders, values, own)))
         if not out:
             return [], jnp.zeros(0), jnp.zeros(0)
         return [o[0] for o in out], jnp.concatenate([o[1].reshape(-1) for o in out]), jnp.concatenate([o[2].reshape(-1) for o in out])

@@ -236,11 +236,16 @@ def build_problem(
         return with_blocks(models_residuals(x, seeds)[kind], block_models(x, j))
 
     n_images = len(observations)
-    image_residual_of = jax.jit(lambda models: jnp.concatenate([res(model) for res, model in zip(residuals, models)]) if models
-                                else jnp.zeros(0))
+    residual_programs = AlikePrograms(share=False)  # the residual functions' arrays (references, masks) as operands
 
     def residual_of(models: list[jax.Array]) -> jax.Array:
-        return with_blocks(image_residual_of(models[:n_images]), models[n_images:])
+        images = models[:n_images]
+        if not images:
+            return with_blocks(np.zeros(0), models)
+        # traced again for other shapes or dtypes of the models (a key's must not change)
+        key = ("residual_of", *((np.shape(m), np.dtype(m.dtype)) for m in images))
+        stacked = residual_programs(key, lambda images: jnp.concatenate([res(m) for res, m in zip(residuals, images)]), images)[0]
+        return with_blocks(stacked, models[n_images:])
 
     spps = tuple(spp or o.scene.render.spp for o in observations)
     # the pixel loss's residuals are the pixels', which the pixel grid's change is laid out as
