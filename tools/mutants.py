@@ -234,8 +234,8 @@ MUTANTS = (
            ("tests/test_file_inputs.py",)),
     Mutant("vignetting-applied-when-off", "spacefit/sensor.py",
            "return (not self.calibrated) if self.vignetting is None else self.vignetting", "return True", ("tests/test_sensor.py",)),
-    Mutant("psf-integrated-over-the-pixel-again", "spacefit/formation.py", "sigma_px**2 * (fx**2 + fy**2))",
-           "sigma_px**2 * (fx**2 + fy**2)) * jnp.sinc(fx) * jnp.sinc(fy)",
+    Mutant("psf-integrated-over-the-pixel-again", "spacefit/formation.py", "sigma_px**2 * (jnp.asarray(fx) ** 2 + jnp.asarray(fy) ** 2))",
+           "sigma_px**2 * (jnp.asarray(fx) ** 2 + jnp.asarray(fy) ** 2)) * jnp.sinc(fx) * jnp.sinc(fy)",
            ("tests/test_sensor.py", "tests/test_nuisance.py::test_blur_is_the_sensors_continuous_gaussian_and_keeps_the_light")),
     # back faces, closed meshes and folded wrinkles (issues 11 and 13)
     # one vocabulary, checked everywhere (issue 18 item 7)
