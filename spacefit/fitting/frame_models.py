@@ -14,12 +14,10 @@ frame by :func:`jax.lax.map`, so that the step holds one frame's program, and on
 whatever the count. Images of another size, other free nuisances or other sensor settings (or the
 ``stats`` loss's lit pixels) make batches of their own; an image alone is a batch of one.
 
-*A program's arrays are its operands.* Every array a model holds (a reference, a mask, a sensor's per-pixel factors,
-the frequencies of its Fourier filters) is taken out of its traced program (:func:`operand_program`) and handed to
-every program that evaluates it as an operand (:meth:`FrameModels.operands`), as the pixel grid's arrays are
-(:class:`AlikePrograms`): closed over, JAX embedded each as a constant in every program's module (the 8-parameter
-observation fit's step 5.6 MB, its pixel grid's 14.7 MB, issue 33), which made lowering, the persistent cache's
-hashing and its reads slow, and each compiled program held its own copy.
+*A program's arrays are its operands* (:mod:`spacefit.programs`). Every array a model holds (a reference, a mask, a
+sensor's per-pixel factors) is taken out of its traced program (:func:`~spacefit.programs.operand_program`) and handed
+to every program that evaluates it as an operand (:meth:`FrameModels.operands`): closed over, JAX embedded each as a
+constant in every program's module (the 8-parameter observation fit's step 5.6 MB, issue 33).
 In a joint fit each model is recomputed where linearised (:func:`jax.checkpoint`): a linearisation
 kept every intermediate of the image model and the sensor's (76 image-sized float64 arrays a frame,
 26 MiB at 128 x 128 px) in each of the solver's two copies of it, where it keeps the render, the
@@ -29,8 +27,6 @@ not its memory).
 
 from __future__ import annotations
 
-import hashlib
-import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -39,11 +35,12 @@ from typing import TypeVar
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.extend.core import ClosedJaxpr, jaxpr_as_fun
+from jax.extend.core import ClosedJaxpr
 from jaxtyping import Array, Float
 
 from spacefit.fitting.nuisance import nuisance_indices, with_nuisances
 from spacefit.precision import on_device
+from spacefit.programs import operand_program, traced_alike
 
 T = TypeVar("T")
 # (render (h, w, 3) float32, the image's nuisance values (p,)) -> (model, residuals, descended residuals)
@@ -71,7 +68,7 @@ class Batch:
         frames: the images, in the fit's order.
         run: the render run they are in (:func:`~spacefit.fitting.render_batches.render_runs`), from ``offset``.
         values: (images, p) where each one's nuisance values are in the free values.
-        program: the first image's model traced, its arrays its first operands (:func:`operand_program`).
+        program: the first image's model traced, its arrays its first operands (:func:`~spacefit.programs.operand_program`).
         own: the program's arrays that differ between the images, each stacked (images, ...), once, on the device.
         common: those every image shares (all of an image alone's), on the device.
         consts: per array of ``program``, where it is: (True, i) ``own[i]``, (False, i) ``common[i]``.
@@ -103,62 +100,10 @@ def batches(models: Sequence[FrameModel], values: Sequence[np.ndarray], runs: Se
             frames, alike = run[start:end], traced[start:end]
             own, common, consts = _arrays(alike)
             # on the device once: handed to each call of a program as its operands (FrameModels.operands), not copied each time
-            out.append(Batch(frames, r, start, np.stack([values[k] for k in frames]), operand_program(alike[0]),
+            out.append(Batch(frames, r, start, np.stack([values[k] for k in frames]), operand_program(alike[0], "model"),
                              *(tuple(on_device(a, a.dtype) for a in arrays) for arrays in (own, common)), consts))
             start = end
     return out
-
-
-def operand_program(traced: ClosedJaxpr) -> Callable[..., list[Array]]:
-    """``traced``'s function with its arrays as its first operand, ``(arrays, *args) -> outputs`` (both flat), for the
-    programs that evaluate it to take them as theirs, not to embed them as constants (the module's docstring)."""
-    jaxpr = traced.jaxpr  # not its arrays: the caller holds those, once
-    return lambda arrays, *args: jaxpr_as_fun(ClosedJaxpr(jaxpr, arrays))(*jax.tree.leaves(args))
-
-
-def traced_alike(traced: ClosedJaxpr) -> tuple[str, tuple[tuple[tuple[int, ...], np.dtype], ...]]:
-    """What makes two traced programs one program but for their arrays: their printed form (literals included) and
-    the arrays' shapes and dtypes."""
-    return str(traced.jaxpr), tuple((np.shape(c), np.asarray(c).dtype) for c in traced.consts)
-
-
-class AlikePrograms:
-    """Functions compiled once for every caller whose function traces alike (:func:`traced_alike`: a pass's frames'
-    pixel grid, whose programs differ in their arrays alone, the reference, the mask, a sensor's factors), each
-    traced once per key and its arrays handed to the shared program as operands, held for the callers' life: each
-    array once, those equal between keys shared (a pass's frames' response matrices and frequency grids, 10 of a
-    128 x 128 px frame's 11.4 MiB; their references and masks are their own). ``share`` False (one caller of a
-    kind, an image fitted alone): each key's program its own, its traced form not printed; its arrays its operands
-    still (:func:`operand_program`)."""
-
-    def __init__(self, share: bool = True) -> None:
-        self.share = share
-        self._programs: dict[object, Callable[..., list[Array]]] = {}
-        self._traced: dict[object, tuple[Callable[..., list[Array]], list[Array]]] = {}
-        self._held: dict[tuple[tuple[int, ...], str, bytes], Array] = {}
-        self._holding = threading.Lock()  # keys traced first on concurrently's threads: each array still held once
-
-    def __call__(self, key: object, fn: Callable[..., object], *args: Array) -> list[Array]:
-        """``fn(*args)``'s outputs, flattened, by the program of its kind: traced for ``key`` (an image's and the
-        shapes', which must not change between calls with one key) on its first call."""
-        if key not in self._traced:
-            traced = jax.make_jaxpr(fn)(*args)
-            kind = traced_alike(traced) if self.share else key
-            if kind not in self._programs:
-                self._programs[kind] = jax.jit(operand_program(traced))
-            self._traced[key] = (self._programs[kind], [self._once(c) for c in traced.consts])
-        program, consts = self._traced[key]
-        return program(consts, *args)
-
-    def _once(self, array: object) -> Array:
-        """``array`` on the device, the one held already where an equal one is (same shape, dtype and bytes)."""
-        host = np.asarray(array)
-        key = (host.shape, host.dtype.str, hashlib.blake2b(host.tobytes(), digest_size=16).digest())
-        with self._holding:
-            held = self._held.get(key)
-            if held is None or not np.array_equal(np.asarray(held), host):
-                held = self._held[key] = on_device(host, host.dtype)
-        return held
 
 
 # How many programs :func:`concurrently` runs at once: XLA runs the programs that one thread dispatches one after another,
@@ -169,7 +114,7 @@ PROGRAM_THREADS = 2
 
 
 def concurrently(calls: Sequence[Callable[[], T]]) -> list[T]:
-    """``[call() for call in calls]``, each an image's program (:class:`AlikePrograms`): the first in this thread (it
+    """``[call() for call in calls]``, each an image's program (:class:`~spacefit.programs.AlikePrograms`): the first in this thread (it
     traces and compiles what the others share), the others :data:`PROGRAM_THREADS` at a time on threads of their own,
     in this thread's 64-bit mode (a thread's own: ``jax.enable_x64``); the same results, in order."""
     if len(calls) < 3:
