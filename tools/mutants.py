@@ -469,6 +469,9 @@ MUTANTS = (
            ("tests/test_lightcurve.py::test_a_magnitudes_error_is_ln_es_over_1086",)),
     Mutant("pass-seeds-seed-plus-i", "spacefit/rendering/sample_passes.py", "return (seed + i * 0x9E3779B1) % (1 << 32)", "return (seed + i) % (1 << 32)",
            ("tests/test_render.py::test_a_renders_pass_seeds_are_not_another_seeds",)),
+    # a program's arrays are its operands (spacefit.programs): embedded as constants, the fit's test hears JAX's warning
+    Mutant("program-arrays-embedded", "spacefit/programs.py", "return jaxpr_as_fun(ClosedJaxpr(jaxpr, arrays))(",
+           "return jaxpr_as_fun(traced)(", ("tests/test_programs.py::test_a_fit_s_programs_embed_no_array_as_a_constant",)),
 )
 
 
