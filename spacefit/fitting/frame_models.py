@@ -176,7 +176,7 @@ class FrameModels:
         them to :meth:`__call__` as operands of its program."""
         return tuple((batch.own, batch.common) for batch in self.batches(np.dtype(dtype)))
 
-    def __call__(self, rendered: Sequence[Array], x: Array, operands: Sequence[tuple[Array, ...]] | None = None) -> tuple[
+    def __call__(self, rendered: Sequence[Array], x: Array, operands: Sequence[tuple[tuple[Array, ...], tuple[Array, ...]]] | None = None) -> tuple[
             list[Array], Array, Array]:
         """Each batch's model images stacked, (images, h, w, c), and every image's residuals in order, those
         judged and those descended, from ``rendered`` (each run's renders stacked) and the free values ``x``;
