@@ -3,7 +3,8 @@ where it came from: the fit of ``bench_fit_process.py`` run in this process (``s
 arguments, which ends without ``os._exit``) under a ``jax.monitoring`` listener, its JAX cache folder warmed first
 by one child process. Prints each program's name and its last spacefit frames (a program named after one
 operation, ``jit(add)``, is an operation run on concrete values outside any compiled program), then the listener's
-totals: tracing, lowering, compiling (from the cache) and reading the cache.
+totals: tracing, lowering, compiling (from the cache) and reading the cache, and the lowered modules' sizes (JAX's dump
+of each, ``jax_dump_ir_to``: an array a program closes over is a constant in its module, development.md).
 Run: ``.venv/bin/python experiments/fit_programs.py``.
 """
 
@@ -40,13 +41,18 @@ def main() -> None:
         args = write_inputs(folder)
         run_fit(args, folder / "warm", str(folder / "jax"))  # the cache warmed, as a user's second fit finds it
         os.environ[JAX_CACHE_ENV] = str(folder / "jax")
+        jax.config.update("jax_dump_ir_to", str(folder / "ir"))
         jax.monitoring.register_event_duration_secs_listener(listener)
         cli_main(["fit", *args, "--out", str(folder / "out")])
+        modules = sorted(((p.stat().st_size, p.name) for p in (folder / "ir").glob("*_compile.mlir")), reverse=True)
     print(f"{len(programs)} programs lowered:")
     for name, origin in programs:
         print(f"  {name:32s} {origin}")
     for event, (seconds, count) in sorted(totals.items(), key=lambda kv: -kv[1][0]):
         print(f"{seconds:8.3f} s {count:4d}  {event}")
+    print(f"{len(modules)} modules lowered, {sum(size for size, _ in modules) / 1e6:.2f} MB in all; the largest:")
+    for size, name in modules[:6]:
+        print(f"  {size / 1e6:7.3f} MB  {name}")
 
 
 if __name__ == "__main__":

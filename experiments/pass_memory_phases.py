@@ -36,11 +36,11 @@ from bench_pass import MAX_STEPS, SENSOR, base, fit_frames
 from studyio import commit, machine
 
 import spacefit as sf
-import spacefit.fitting.frame_models as frame_models
 import spacefit.fitting.frames as frames
 import spacefit.fitting.loop as loop
 import spacefit.fitting.pixel_grid as pixel_grid
 import spacefit.fitting.uncertainty as uncertainty
+import spacefit.programs as programs
 from spacefit.rendering.backend import on_drjit_thread
 
 
@@ -102,21 +102,21 @@ class Phases:
 
 
 def analyse_alike_programs() -> None:
-    """Print XLA's memory analysis of each program of :class:`~spacefit.fitting.frame_models.AlikePrograms` (the pixel
+    """Print XLA's memory analysis of each program of :class:`~spacefit.programs.AlikePrograms` (the pixel
     grid's) at its first call (compiled once more for it)."""
-    call, seen = frame_models.AlikePrograms.__call__, set()
+    call, seen = programs.AlikePrograms.__call__, set()
 
     def analysed(self: Any, key: object, fn: Callable[..., object], *args: Any) -> Any:
         out = call(self, key, fn, *args)
-        program, consts = self._traced[key]
+        program, consts, _ = self._traced[key]
         if id(program) not in seen:
             seen.add(id(program))
-            m = (program.lower(*args) if consts is None else program.lower(consts, *args)).compile().memory_analysis()
+            m = program.lower(consts, *args).compile().memory_analysis()
             print(f"  program {getattr(key[0], '__name__', key[0])}: temporaries {m.temp_size_in_bytes / 2**20:.1f}, arguments "
                   f"{m.argument_size_in_bytes / 2**20:.1f}, outputs {m.output_size_in_bytes / 2**20:.1f} MiB", flush=True)
         return out
 
-    frame_models.AlikePrograms.__call__ = analysed
+    programs.AlikePrograms.__call__ = analysed
 
 
 def main() -> None:

@@ -38,7 +38,10 @@ def on_device(values: Any, dtype: np.dtype | type) -> Array:
     makes a program of one operation for ``jnp.asarray`` of a NumPy array without a dtype or of one to convert,
     traced, lowered and read from its cache in every process (8 to 11 ms of CPU each, a warm fit's set-up three of
     them; docs/measurements/performance.md); a NumPy array of the dtype asked is only copied. The same values:
-    both round to nearest, bit for bit (subnormals and overflow too)."""
-    import jax.numpy as jnp  # on first call: as float64's
+    both round to nearest, bit for bit (subnormals and overflow too). On the device even while JAX traces (not a
+    value of the program traced: arrays held for programs' operands, made where a program is first traced)."""
+    import jax  # on first call: as float64's
+    import jax.numpy as jnp
 
-    return jnp.asarray(np.asarray(values, dtype=dtype), dtype=dtype)
+    with jax.ensure_compile_time_eval():
+        return jnp.asarray(np.asarray(values, dtype=dtype), dtype=dtype)

@@ -45,7 +45,11 @@ def test_each_batch_equals_its_frames_own_models_and_derivatives():
     models = FrameModels([m for m, _ in frames], [v for _, v in frames], runs, shapes, recompute=True)
     batches = models.batches(np.dtype(np.float64))
     assert [b.frames for b in batches] == [range(0, 3), range(3, 4), range(4, 5), range(5, 6)]
-    assert [b.program is not None for b in batches] == [True, False, False, False]
+    # the batch of three stacks the arrays that differ (references, masks, factors); an image alone holds its own, every
+    # array of each an operand of the programs that evaluate it (FrameModels.operands)
+    assert [len(b.own) > 0 for b in batches] == [True, False, False, False] and all(b.common for b in batches[1:])
+    assert [len(own) + len(common) for own, common in models.operands(np.dtype(np.float64))] == [
+        len(b.own) + len(b.common) for b in batches]
     renders = [rng.uniform(0.0, 1.0, shapes[k]).astype(np.float32) for k in range(len(shapes))]
     stacked = [jnp.stack([renders[k] for k in run]) for run in runs]
     x = jnp.asarray([0.4, 0.7, 1.1, 0.9, 1.2, 1.0, 0.8, 0.05])

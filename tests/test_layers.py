@@ -21,7 +21,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "spacefit"
 FLOORS: tuple[tuple[str, ...], ...] = (
     ("spacefit.errors", "spacefit.units", "spacefit.precision", "spacefit.interrupts", "spacefit.progress",
      "spacefit.versions", "spacefit.locks", "spacefit.output", "spacefit.digests", "spacefit.executors",
-     "spacefit.timescales", "spacefit.html_tables"),
+     "spacefit.timescales", "spacefit.html_tables", "spacefit.programs"),
     ("spacefit.geometry",),
     ("spacefit.materials",),
     ("spacefit.scene",),

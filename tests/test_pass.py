@@ -332,7 +332,7 @@ def test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_v
     derivatives (forward mode) in each value are the central differences of the changes to the finer model, in the
     rows of every frame for the shared blur and of its own frame alone for a frame's shift; the three frames alike
     share their two programs, and the arrays their programs hold that are equal."""
-    from spacefit.fitting.frame_models import AlikePrograms
+    from spacefit.programs import AlikePrograms
 
     made: list[AlikePrograms] = []
     monkeypatch.setattr(residuals, "AlikePrograms", lambda share: made.append(AlikePrograms(share)) or made[-1])
@@ -354,7 +354,7 @@ def test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_v
             assert touched == ([True] * 3 if j == 1 else [k == j - 2 for k in range(3)]), j
     assert len(made[0]._traced) == 6 and len(made[0]._programs) == 2  # each frame's two programs traced, compiled once
     # the arrays equal between frames (response matrices, frequency grids) held once, each frame's reference its own
-    (_, first), (_, second) = list(made[0]._traced.values())[:2]
+    (_, first, _), (_, second, _) = list(made[0]._traced.values())[:2]
     shared = [a is b for a, b in zip(first, second)]
     assert shared == [bool(np.array_equal(a, b)) for a, b in zip(first, second)] and 0 < sum(shared) < len(shared)
 

@@ -1,13 +1,16 @@
-"""A fit's host arithmetic stays out of JAX: spacefit computes on concrete values with NumPy and copies them to the
-device with ``precision.on_device``, so no program of one operation (``jit(add)``, ``jit(convert_element_type)``,
-``jit(stage)`` for JAX 0.10's ``jnp.asarray`` of a NumPy array) is traced, lowered and read from JAX's cache in every
-process, 15 to 30 ms each (experiments/fit_programs.py lists each program a fit lowers)."""
+"""A fit's programs, lowered as in a process of its own. Its host arithmetic stays out of JAX: spacefit computes on
+concrete values with NumPy and copies them to the device with ``precision.on_device``, so no program of one operation
+(``jit(add)``, ``jit(convert_element_type)``, ``jit(stage)`` for JAX 0.10's ``jnp.asarray`` of a NumPy array) is
+traced, lowered and read from JAX's cache in every process, 15 to 30 ms each (experiments/fit_programs.py lists each
+program a fit lowers). And its programs take their arrays (references, masks, a sensor's factors, the pixel grid's
+renders and response matrices) as operands, embedding none as a constant (spacefit.fitting.frame_models's docstring)."""
 
 from __future__ import annotations
 
 import collections
 import os
 import traceback
+import warnings
 
 import equinox
 import jax
@@ -15,6 +18,7 @@ import jax.monitoring
 import jax.numpy as jnp
 import lineax
 import optimistix
+import pytest
 from helpers import write_sphere_fit_case
 
 import spacefit as sf
@@ -42,8 +46,16 @@ ALLOWED = collections.Counter({
 # The packages whose frames name where a program was asked for.
 PACKAGES = [os.path.dirname(m.__file__) for m in (sf, equinox, lineax, optimistix)]
 
-# About 600 DN on the lit sphere in 12 bits: an observation with its sensor, as a user's fit reads one.
-SENSOR = sf.Sensor(exposure_time_s=3e-7, gain_dn_per_electron=0.5, bias_dn=50.0, bit_depth=12, full_well_electrons=None)
+# About 600 DN on the lit sphere in 12 bits: an observation with its sensor, as a user's fit reads one, with a PSF (its
+# Fourier filter's frequencies in the model).
+SENSOR = sf.Sensor(exposure_time_s=3e-7, gain_dn_per_electron=0.5, bias_dn=50.0, bit_depth=12, full_well_electrons=None,
+                   psf_sigma_px=0.5)
+
+# The most bytes of constants one of a fit's programs may embed (JAX's own count, ``jax_captured_constants_warn_bytes``):
+# less than one of the test's images (48 x 48 x 3 float32, 27 KiB), more than the mesh's vertices that render the sphere.
+CONSTANT_BYTES = 16 * 1024
+# JAX's warning when a program embeds more
+CONSTANTS_WARNING = "A large amount of constants were captured during lowering"
 
 
 def _origin() -> str:
@@ -55,8 +67,12 @@ def _origin() -> str:
     return "elsewhere"
 
 
-def test_a_fit_lowers_no_program_of_one_operation_from_spacefit(tmp_path):
-    case = write_sphere_fit_case(tmp_path, subdivisions=2, size=32, spp=4)
+@pytest.fixture(scope="module")
+def fit_programs(tmp_path_factory: pytest.TempPathFactory) -> tuple[list[tuple[str, str]], list[str]]:
+    """The programs a small observation fit lowers, each (name, origin: :func:`_origin`), and JAX's warnings of the
+    constants any embeds past :data:`CONSTANT_BYTES`: its image nuisances free, so that the pixel grid's programs run."""
+    tmp_path = tmp_path_factory.mktemp("fit")
+    case = write_sphere_fit_case(tmp_path, subdivisions=2, size=48, spp=4)
     dn = sf.observe(read_exr(case / "ref.exr"), SENSOR, assemble(load_scene(case / "scene.toml")).intrinsics, seed=3)
     sf.write_observation(case / "obs.fits", dn, SENSOR)
     lowered = []
@@ -67,12 +83,33 @@ def test_a_fit_lowers_no_program_of_one_operation_from_spacefit(tmp_path):
 
     jax.clear_caches()  # every program the fit runs lowered again, as in a process of its own
     jax.monitoring.register_event_duration_secs_listener(listener)
+    limit, frames = jax.config.jax_captured_constants_warn_bytes, jax.config.jax_captured_constants_report_frames
+    jax.config.update("jax_captured_constants_warn_bytes", CONSTANT_BYTES)
+    jax.config.update("jax_captured_constants_report_frames", 12)  # the warning says where each was captured
     try:
-        main(["fit", str(case / "obs.fits"), "--scene", str(case / "scene.toml"), "--free", "parts.sphere.kd",
-              "--out", str(tmp_path / "run"), "--max-steps", "3", "--spp", "2", "--quiet"])
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            main(["fit", str(case / "obs.fits"), "--scene", str(case / "scene.toml"), "--free",
+                  "parts.sphere.kd,image.blur_sigma_px,image.shift_x_px", "--out", str(tmp_path / "run"), "--max-steps", "3",
+                  "--spp", "2", "--quiet"])
     finally:
         jax.monitoring.unregister_event_duration_listener(listener)
-    # the listener heard the fit's own programs, by name and origin
+        jax.config.update("jax_captured_constants_warn_bytes", limit)
+        jax.config.update("jax_captured_constants_report_frames", frames)
+    return lowered, [str(w.message) for w in caught if CONSTANTS_WARNING in str(w.message)]
+
+
+def test_a_fit_lowers_no_program_of_one_operation_from_spacefit(fit_programs):
+    lowered, _ = fit_programs
+    # the listener heard the fit's own programs, by name and origin, those whose arrays are operands (spacefit.programs:
+    # the pixel grid's, the scene values') among them
     assert len(lowered) >= 10 and ("jit(_near_weighted)", "spacefit/fitting/uncertainty.py:<lambda>") in lowered
+    assert sum(origin.startswith("spacefit/programs.py:") for _, origin in lowered) >= 3
     single = collections.Counter((name, origin) for name, origin in lowered if name.removeprefix("jit(").removesuffix(")") in OPERATIONS)
     assert single - ALLOWED == collections.Counter(), f"single-operation programs from the fit's host code: {single - ALLOWED}"
+
+
+def test_a_fit_s_programs_embed_no_array_as_a_constant(fit_programs):
+    """JAX warns of each program that embeds more than CONSTANT_BYTES of constants (an array it closes over): none does."""
+    _, embedded = fit_programs
+    assert embedded == [], "\n\n".join(embedded)

@@ -234,8 +234,8 @@ MUTANTS = (
            ("tests/test_file_inputs.py",)),
     Mutant("vignetting-applied-when-off", "spacefit/sensor.py",
            "return (not self.calibrated) if self.vignetting is None else self.vignetting", "return True", ("tests/test_sensor.py",)),
-    Mutant("psf-integrated-over-the-pixel-again", "spacefit/formation.py", "sigma_px**2 * (fx**2 + fy**2))",
-           "sigma_px**2 * (fx**2 + fy**2)) * jnp.sinc(fx) * jnp.sinc(fy)",
+    Mutant("psf-integrated-over-the-pixel-again", "spacefit/formation.py", "sigma_px**2 * (jnp.asarray(fx) ** 2 + jnp.asarray(fy) ** 2))",
+           "sigma_px**2 * (jnp.asarray(fx) ** 2 + jnp.asarray(fy) ** 2)) * jnp.sinc(fx) * jnp.sinc(fy)",
            ("tests/test_sensor.py", "tests/test_nuisance.py::test_blur_is_the_sensors_continuous_gaussian_and_keeps_the_light")),
     # back faces, closed meshes and folded wrinkles (issues 11 and 13)
     # one vocabulary, checked everywhere (issue 18 item 7)
@@ -476,6 +476,9 @@ MUTANTS = (
            ("tests/test_lightcurve.py::test_a_magnitudes_error_is_ln_es_over_1086",)),
     Mutant("pass-seeds-seed-plus-i", "spacefit/rendering/sample_passes.py", "return (seed + i * 0x9E3779B1) % (1 << 32)", "return (seed + i) % (1 << 32)",
            ("tests/test_render.py::test_a_renders_pass_seeds_are_not_another_seeds",)),
+    # a program's arrays are its operands (spacefit.programs): embedded as constants, the fit's test hears JAX's warning
+    Mutant("program-arrays-embedded", "spacefit/programs.py", "return jaxpr_as_fun(ClosedJaxpr(jaxpr, arrays))(",
+           "return jaxpr_as_fun(traced)(", ("tests/test_programs.py::test_a_fit_s_programs_embed_no_array_as_a_constant",)),
 )
 
 

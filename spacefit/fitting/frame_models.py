@@ -12,7 +12,12 @@ one :class:`Batch`: the program traced once (:func:`jax.make_jaxpr`, two frames'
 their printed forms are, literals included), its arrays stacked over the frames and run frame after
 frame by :func:`jax.lax.map`, so that the step holds one frame's program, and one frame's temporaries,
 whatever the count. Images of another size, other free nuisances or other sensor settings (or the
-``stats`` loss's lit pixels) make batches of their own; an image alone runs its own function.
+``stats`` loss's lit pixels) make batches of their own; an image alone is a batch of one.
+
+*A program's arrays are its operands* (:mod:`spacefit.programs`). Every array a model holds (a reference, a mask, a
+sensor's per-pixel factors) is taken out of its traced program (:func:`~spacefit.programs.operand_program`) and handed
+to every program that evaluates it as an operand (:meth:`FrameModels.operands`): closed over, JAX embedded each as a
+constant in every program's module (the 8-parameter observation fit's step 5.6 MB, issue 33).
 In a joint fit each model is recomputed where linearised (:func:`jax.checkpoint`): a linearisation
 kept every intermediate of the image model and the sensor's (76 image-sized float64 arrays a frame,
 26 MiB at 128 x 128 px) in each of the solver's two copies of it, where it keeps the render, the
@@ -22,8 +27,6 @@ not its memory).
 
 from __future__ import annotations
 
-import hashlib
-import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -32,11 +35,12 @@ from typing import TypeVar
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jax.extend.core import ClosedJaxpr, jaxpr_as_fun
+from jax.extend.core import ClosedJaxpr
 from jaxtyping import Array, Float
 
 from spacefit.fitting.nuisance import nuisance_indices, with_nuisances
 from spacefit.precision import on_device
+from spacefit.programs import operand_program, traced_alike
 
 T = TypeVar("T")
 # (render (h, w, 3) float32, the image's nuisance values (p,)) -> (model, residuals, descended residuals)
@@ -64,9 +68,9 @@ class Batch:
         frames: the images, in the fit's order.
         run: the render run they are in (:func:`~spacefit.fitting.render_batches.render_runs`), from ``offset``.
         values: (images, p) where each one's nuisance values are in the free values.
-        program: the first image's model traced; None: one image, its own function.
+        program: the first image's model traced, its arrays its first operands (:func:`~spacefit.programs.operand_program`).
         own: the program's arrays that differ between the images, each stacked (images, ...), once, on the device.
-        common: those every image shares.
+        common: those every image shares (all of an image alone's), on the device.
         consts: per array of ``program``, where it is: (True, i) ``own[i]``, (False, i) ``common[i]``.
     """
 
@@ -74,9 +78,9 @@ class Batch:
     run: int
     offset: int
     values: np.ndarray
-    program: ClosedJaxpr | None = None
+    program: Callable[..., list[Array]]
     own: tuple[Array, ...] = ()
-    common: tuple[np.ndarray, ...] = ()
+    common: tuple[Array, ...] = ()
     consts: tuple[tuple[bool, int], ...] = ()
 
 
@@ -86,72 +90,20 @@ def batches(models: Sequence[FrameModel], values: Sequence[np.ndarray], runs: Se
     (a render of its ``shapes`` and values of ``dtype``) are one program with arrays of the same shapes."""
     out = []
     for r, run in enumerate(runs):
-        if len(run) == 1:
-            out.append(Batch(run, r, 0, values[run.start][None]))
-            continue
         traced = [jax.make_jaxpr(models[k])(jax.ShapeDtypeStruct(shapes[k], jnp.float32),
                                             jax.ShapeDtypeStruct(values[k].shape, dtype)) for k in run]
-        keys = [traced_alike(t) for t in traced]
+        keys = [traced_alike(t) for t in traced] if len(run) > 1 else [None]  # an image alone: not printed
         start = 0
         for end in range(1, len(run) + 1):
             if end < len(run) and keys[end] == keys[start]:
                 continue
             frames, alike = run[start:end], traced[start:end]
-            indices = np.stack([values[k] for k in frames])
-            if len(frames) == 1:
-                out.append(Batch(frames, r, start, indices))
-            else:
-                own, common, consts = _arrays(alike)
-                # on the device once: handed to each call of a program as its operands (FrameModels.operands), not copied each time
-                out.append(Batch(frames, r, start, indices, alike[0], tuple(on_device(a, a.dtype) for a in own), common, consts))
+            own, common, consts = _arrays(alike)
+            # on the device once: handed to each call of a program as its operands (FrameModels.operands), not copied each time
+            out.append(Batch(frames, r, start, np.stack([values[k] for k in frames]), operand_program(alike[0], "model"),
+                             *(tuple(on_device(a, a.dtype) for a in arrays) for arrays in (own, common)), consts))
             start = end
     return out
-
-
-def traced_alike(traced: ClosedJaxpr) -> tuple[str, tuple[tuple[tuple[int, ...], np.dtype], ...]]:
-    """What makes two traced programs one program but for their arrays: their printed form (literals included) and
-    the arrays' shapes and dtypes."""
-    return str(traced.jaxpr), tuple((np.shape(c), np.asarray(c).dtype) for c in traced.consts)
-
-
-class AlikePrograms:
-    """Functions compiled once for every caller whose function traces alike (:func:`traced_alike`: a pass's frames'
-    pixel grid, whose programs differ in their arrays alone, the reference, the mask, a sensor's factors), each
-    traced once per key and its arrays handed to the shared program as operands, held for the callers' life: each
-    array once, those equal between keys shared (a pass's frames' response matrices and frequency grids, 10 of a
-    128 x 128 px frame's 11.4 MiB; their references and masks are their own). ``share`` False (one caller of a
-    kind, an image fitted alone): each key's function compiled as it is, not traced twice nor printed."""
-
-    def __init__(self, share: bool = True) -> None:
-        self.share = share
-        self._programs: dict[tuple[str, tuple[tuple[tuple[int, ...], np.dtype], ...]], Callable[..., list[Array]]] = {}
-        self._traced: dict[object, tuple[Callable[..., object], list[Array] | None]] = {}
-        self._held: dict[tuple[tuple[int, ...], str, bytes], Array] = {}
-        self._holding = threading.Lock()  # keys traced first on concurrently's threads: each array still held once
-
-    def __call__(self, key: object, fn: Callable[..., object], *args: Array) -> list[Array]:
-        """``fn(*args)``'s outputs, flattened, by the program of its kind: traced for ``key`` (an image's and the
-        shapes', which must not change between calls with one key) on its first call."""
-        if key not in self._traced and not self.share:
-            self._traced[key] = (jax.jit(fn), None)
-        elif key not in self._traced:
-            traced = jax.make_jaxpr(fn)(*args)
-            kind = traced_alike(traced)
-            if kind not in self._programs:
-                self._programs[kind] = jax.jit(lambda consts, *a, jaxpr=traced.jaxpr: jaxpr_as_fun(ClosedJaxpr(jaxpr, consts))(*a))
-            self._traced[key] = (self._programs[kind], [self._once(c) for c in traced.consts])
-        program, consts = self._traced[key]
-        return jax.tree.leaves(program(*args)) if consts is None else program(consts, *args)
-
-    def _once(self, array: object) -> Array:
-        """``array`` on the device, the one held already where an equal one is (same shape, dtype and bytes)."""
-        host = np.asarray(array)
-        key = (host.shape, host.dtype.str, hashlib.blake2b(host.tobytes(), digest_size=16).digest())
-        with self._holding:
-            held = self._held.get(key)
-            if held is None or not np.array_equal(np.asarray(held), host):
-                held = self._held[key] = on_device(host, host.dtype)
-        return held
 
 
 # How many programs :func:`concurrently` runs at once: XLA runs the programs that one thread dispatches one after another,
@@ -162,7 +114,7 @@ PROGRAM_THREADS = 2
 
 
 def concurrently(calls: Sequence[Callable[[], T]]) -> list[T]:
-    """``[call() for call in calls]``, each an image's program (:class:`AlikePrograms`): the first in this thread (it
+    """``[call() for call in calls]``, each an image's program (:class:`~spacefit.programs.AlikePrograms`): the first in this thread (it
     traces and compiles what the others share), the others :data:`PROGRAM_THREADS` at a time on threads of their own,
     in this thread's 64-bit mode (a thread's own: ``jax.enable_x64``); the same results, in order."""
     if len(calls) < 3:
@@ -219,12 +171,12 @@ class FrameModels:
             self._batches[dtype] = batches(self.models, self.values, self.runs, self.shapes, dtype)
         return self._batches[dtype]
 
-    def operands(self, dtype: np.dtype) -> tuple[tuple[Array, ...], ...]:
-        """Each batch's own arrays (:attr:`Batch.own`) for values of ``dtype``, for a caller that hands them to
-        :meth:`__call__` as operands of its program."""
-        return tuple(batch.own for batch in self.batches(np.dtype(dtype)))
+    def operands(self, dtype: np.dtype) -> tuple[tuple[tuple[Array, ...], tuple[Array, ...]], ...]:
+        """Each batch's arrays (:attr:`Batch.own`, :attr:`Batch.common`) for values of ``dtype``, for a caller that hands
+        them to :meth:`__call__` as operands of its program."""
+        return tuple((batch.own, batch.common) for batch in self.batches(np.dtype(dtype)))
 
-    def __call__(self, rendered: Sequence[Array], x: Array, operands: Sequence[tuple[Array, ...]] | None = None) -> tuple[
+    def __call__(self, rendered: Sequence[Array], x: Array, operands: Sequence[tuple[tuple[Array, ...], tuple[Array, ...]]] | None = None) -> tuple[
             list[Array], Array, Array]:
         """Each batch's model images stacked, (images, h, w, c), and every image's residuals in order, those
         judged and those descended, from ``rendered`` (each run's renders stacked) and the free values ``x``;
@@ -234,24 +186,23 @@ class FrameModels:
             renders, values = rendered[batch.run], x[batch.values]
             if len(batch.frames) < renders.shape[0]:
                 renders = renders[batch.offset:batch.offset + len(batch.frames)]
-            if batch.program is None:
-                model = self.models[batch.frames.start]
-                one = jax.checkpoint(model) if self.recompute else model
-                out.append([o[None] for o in one(renders[0], values[0])])
-                continue
-
-            def each(args: tuple[Array, Array, tuple[Array, ...]], batch: Batch = batch) -> list[Array]:
-                render, value, own = args
-                consts = [own[i] if is_own else batch.common[i] for is_own, i in batch.consts]
-                return jaxpr_as_fun(ClosedJaxpr(batch.program.jaxpr, consts))(render, value)
-
-            # the frames' own arrays as operands: held as constants, each compiled program of the fit (the step, the residuals,
+            # the batch's arrays as operands: held as constants, each compiled program of the fit (the step, the residuals,
             # the covariance's products) would hold a copy of them, more while compiling. The caller's arguments where it
             # hands them in; else from the host by a callback, which JAX's persistent cache refuses (the program compiles
             # in every process: the 12-frame pass's solver step, 13.5 s of wall at load 12 at 64 px)
-            own = operands[b] if operands is not None else jax.pure_callback(
-                lambda batch=batch: batch.own, tuple(jax.ShapeDtypeStruct(a.shape, a.dtype) for a in batch.own), vmap_method="sequential")
-            out.append(jax.lax.map(jax.checkpoint(each) if self.recompute else each, (renders, values, own)))
+            own, common = operands[b] if operands is not None else jax.pure_callback(
+                lambda batch=batch: (batch.own, batch.common), jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype),
+                                                                            (batch.own, batch.common)), vmap_method="sequential")
+
+            def each(args: tuple[Array, Array, tuple[Array, ...]], batch: Batch = batch, common: tuple[Array, ...] = common) -> list[Array]:
+                render, value, own = args
+                return batch.program([own[i] if is_own else common[i] for is_own, i in batch.consts], render, value)
+
+            one = jax.checkpoint(each) if self.recompute else each
+            if len(batch.frames) == 1:  # not mapped: its arrays are its own as they are
+                out.append([o[None] for o in one((renders[0], values[0], ()))])
+                continue
+            out.append(jax.lax.map(one, (renders, values, own)))
         if not out:
             return [], jnp.zeros(0), jnp.zeros(0)
         return [o[0] for o in out], jnp.concatenate([o[1].reshape(-1) for o in out]), jnp.concatenate([o[2].reshape(-1) for o in out])

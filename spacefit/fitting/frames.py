@@ -33,6 +33,7 @@ import numpy as np
 from spacefit import executors
 from spacefit.executors import Cluster, Executor, executor_of
 from spacefit.precision import float64, on_device
+from spacefit.programs import operand_jit
 from spacefit.rendering.bridge import outside_render_params, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
 from spacefit.rendering.memory import release_freed_memory
@@ -142,8 +143,9 @@ class Stage:
     @cached_property
     def compiled_values(self) -> Callable[[jax.Array, View], dict[str, jax.Array]]:
         """:attr:`values` as one program for every frame on the scene, the view an operand (a program per frame
-        held one compiled executable a frame for the fit's life: about 2.5 MiB a frame of a pass)."""
-        return jax.jit(self.values)
+        held one compiled executable a frame for the fit's life: about 2.5 MiB a frame of a pass), the arrays it closes
+        over (the parts' vertices) its operands."""
+        return operand_jit(self.values)
 
 
 @dataclass

@@ -8,9 +8,9 @@ least-squares step, the noise floor or the standard errors evaluate is known bef
 (optimistix's Gauss-Newton family evaluates its function at the trial point ``y_eval`` of its state
 only), so the renders are made first, at that point (:attr:`Outside.render`), and handed to a program
 that holds no callback (:attr:`Outside.evaluate`, through :func:`~spacefit.fitting.render_batches.given_renders`):
-the same images and the same Jacobian columns times the tangent, and a program JAX's cache keeps. The arrays a
-pass's frames' models hold (their references, masks: :meth:`~spacefit.fitting.frame_models.FrameModels.operands`)
-are its operands too (:attr:`Outside.operands`), not fetched by a callback.
+the same images and the same Jacobian columns times the tangent, and a program JAX's cache keeps. The arrays the
+images' models hold (their references, masks: :meth:`~spacefit.fitting.frame_models.FrameModels.operands`) are its
+operands too (:attr:`Outside.operands`), neither fetched by a callback nor embedded as constants.
 The solver's renders of its best point are kept (:meth:`Outside.keep`): the standard errors linearise
 there again with the fit's seeds, the same renders (a fit that ends on rejected trial steps rendered
 others since). Renders a caller will ask for next may begin on a thread of their own while it works

@@ -25,7 +25,7 @@ import numpy as np
 
 from spacefit.executors import Executor
 from spacefit.formation import noise_variance_terms
-from spacefit.fitting.frame_models import AlikePrograms, FrameModels, concurrently, frame_model
+from spacefit.fitting.frame_models import FrameModels, concurrently, frame_model
 from spacefit.fitting.frames import FrameSpec, InProcess, frame_part_image, run_frames, share_views
 from spacefit.fitting.nuisance import image_model as image_model_of, nuisance_index
 from spacefit.fitting.observations.base import Block
@@ -36,6 +36,7 @@ from spacefit.fitting.fine_models import grid_error_models
 from spacefit.fitting.pixel_grid import GridChanges, ImageColumns
 from spacefit.fitting.render_batches import batched_renders, frame_renders, given_renders, render_runs
 from spacefit.precision import on_device
+from spacefit.programs import AlikePrograms, operand_jit
 from spacefit.rendering.bridge import seeds_array
 from spacefit.rendering.memory import release_freed_memory
 from spacefit.rendering.parts import PartImage
@@ -236,11 +237,11 @@ def build_problem(
         return with_blocks(models_residuals(x, seeds)[kind], block_models(x, j))
 
     n_images = len(observations)
-    image_residual_of = jax.jit(lambda models: jnp.concatenate([res(model) for res, model in zip(residuals, models)]) if models
-                                else jnp.zeros(0))
+    # the residual functions' arrays (references, masks) the program's operands
+    image_residual_of = operand_jit(lambda models: jnp.concatenate([res(model) for res, model in zip(residuals, models)]))
 
     def residual_of(models: list[jax.Array]) -> jax.Array:
-        return with_blocks(image_residual_of(models[:n_images]), models[n_images:])
+        return with_blocks(image_residual_of(models[:n_images]) if n_images else np.zeros(0), models[n_images:])
 
     spps = tuple(spp or o.scene.render.spp for o in observations)
     # the pixel loss's residuals are the pixels', which the pixel grid's change is laid out as
@@ -296,7 +297,7 @@ def build_problem(
         def fine(y: np.ndarray) -> np.ndarray:
             # the images' programs two at a time (concurrently): each runs mostly on one core
             out = np.concatenate(concurrently([lambda k=k, m=m: np.zeros((2, references[k].size)) if m is None else np.asarray(
-                programs((fine_changes, k), lambda *a, k=k: fine_changes(k, *a), m.renders, y_of(k, y))[0], dtype=float)
+                programs((fine_changes, k), lambda *a, k=k: fine_changes(k, *a), m.renders, y_of(k, y)), dtype=float)
                 for k, m in enumerate(made)]), axis=1)
             if several:
                 release_freed_memory()

@@ -37,6 +37,7 @@ import numpy as np
 from jaxtyping import Array, Float
 
 from spacefit.precision import on_device
+from spacefit.programs import operand_jit
 from spacefit.rendering.backend import dr, in_variant, mi, on_drjit_thread
 from spacefit.rendering.frozen import splat
 from spacefit.rendering.drjit_values import differentiable, to_value
@@ -312,8 +313,9 @@ def outside_render_params(
     :func:`seeded_render_params`'s and its Jacobian's, from the same values. The Jacobian's ``image=``: the
     image at x for these seeds, rendered before (the first function's): the columns alone are rendered."""
     renders = _Renders(scene, fd_steps)
-    values = jax.jit(lambda x, *view: _flat(values_of(x, *view)))
-    inputs = jax.jit(_jacobian_inputs(values_of, renders.steps))
+    # the arrays the scene values close over (the parts' vertices, a wrinkled part's refinement) the programs' operands
+    values = operand_jit(lambda x, *view: _flat(values_of(x, *view)))
+    inputs = operand_jit(_jacobian_inputs(values_of, renders.steps))
 
     def image(x: Array, seeds: Array, *view: object) -> np.ndarray:
         return renders.primal(values(x, *view), seeds)
