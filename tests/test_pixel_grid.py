@@ -80,7 +80,7 @@ def test_the_fine_models_black_sky_covers_its_blur_and_shift_at_the_fine_scale_a
         np.testing.assert_allclose(model(edge, wide, None), truth, rtol=0, atol=1e-13 * truth.max())
         past = np.asarray(model(edge, wide, fits_pad))
         assert np.isnan(past).all()  # past its pad: refused
-        refused = GridChanges(lambda y: np.stack([past.ravel()] * 2), lambda y, columns: None)
+        refused = GridChanges(lambda y: np.stack([past.ravel()] * 2), lambda y, columns, last=False: None)
         with pytest.raises(PastBlackSky, match="not finite at the values") as refusal:  # the fixed point's iterations stop there
             grid_step(refused, lambda d: np.zeros(len(wide)), wide, np.ones(len(wide)), [])
         np.testing.assert_array_equal(refusal.value.tried, wide)
@@ -113,7 +113,7 @@ def linear_changes(A: np.ndarray, a: np.ndarray, c: np.ndarray, calls: list[np.n
         (calls if calls is not None else []).append(y)
         return np.stack([A @ y + a + 0.1 * y[0] * a, A @ y + a - 0.1 * y[0] * a])
 
-    return GridChanges(fine, lambda y, columns: (fine(y), A @ y + c, A[:, list(columns)].T))
+    return GridChanges(fine, lambda y, columns, last=False: (fine(y), A @ y + c, A[:, list(columns)].T))
 
 
 def test_the_grid_step_is_the_fixed_point_of_the_step_and_carries_a_third_of_the_coarser_models_step():
