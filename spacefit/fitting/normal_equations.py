@@ -39,7 +39,7 @@ from jaxtyping import Array, PyTree
 # vector) did not lower that pass's peak (docs/measurements/performance-history.md, "A pass's memory: programs and the allocator"),
 # nor a product's own: one covariance product of 24 frames of 128 x 128 px rose 300 MiB above its start 5 and 3 directions
 # at a time, 500 MiB one at a time (experiments/results/pass_memory/products_chunk_128px_24frames.txt).
-MAX_CHUNK = 4
+MAX_CHUNK = 8
 CHUNK_ELEMENTS = 1 << 24
 
 
