@@ -287,7 +287,13 @@ def test_a_small_pass_s_accelerated_step_is_its_long_plain_iterations_and_a_cut_
     free = ["parts.legs.kd", "image.blur_sigma_px", *frames.per_frame(["image.shift_x_px", "image.shift_y_px"])]
     seen: list[tuple] = []
     real = uncertainty.grid_step
-    monkeypatch.setattr(uncertainty, "grid_step", lambda *args: seen.append((args, real(*args))) or seen[-1][1])
+
+    def kept(changes: GridChanges, *args: object) -> object:  # the renders kept for the plain iterations below: no `last`
+        held = GridChanges(changes.fine, lambda y, columns, last=False: changes.settled(y, columns))
+        seen.append(((held, *args), real(held, *args)))
+        return seen[-1][1]
+
+    monkeypatch.setattr(uncertainty, "grid_step", kept)
     monkeypatch.setattr(pixel_grid, "FIXED_POINT_STEPS", 2)
     result = sf.fit(obs, free, start={"parts.legs.kd": 0.45}, render=sf.FitRender(spp=8), max_steps=8)
     (changes, step, x, stderr, columns), cut = seen[-1]
