@@ -29,6 +29,7 @@ from pathlib import Path
 from typing import Any
 
 import drjit as dr
+import equinox as eqx
 import jax
 import numpy as np
 import psutil
@@ -39,6 +40,7 @@ import spacefit as sf
 import spacefit.fitting.frames as frames
 import spacefit.fitting.loop as loop
 import spacefit.fitting.pixel_grid as pixel_grid
+import spacefit.fitting.render_batches as render_batches
 import spacefit.fitting.uncertainty as uncertainty
 import spacefit.programs as programs
 from spacefit.rendering.backend import on_drjit_thread
@@ -59,6 +61,7 @@ class Phases:
 
     def __init__(self) -> None:
         self.process, self.compiles, self.peak, self.t0 = psutil.Process(), 0, 0.0, time.perf_counter()
+        self.at_peak = (0.0, 0.0)
         self.libc = ctypes.CDLL("libc.so.6")
         self.libc.mallinfo2.restype = MallInfo2
         jax.monitoring.register_event_duration_secs_listener(self._event)
@@ -72,7 +75,9 @@ class Phases:
 
     def _sample(self) -> None:
         while True:
-            self.peak = max(self.peak, self.rss())
+            if (rss := self.rss()) > self.peak:
+                m = self.libc.mallinfo2()
+                self.peak, self.at_peak = rss, (m.uordblks / 2**20, m.hblkhd / 2**20)
             time.sleep(0.02)
 
     def show(self, name: str) -> None:
@@ -81,8 +86,15 @@ class Phases:
         live = sum(a.nbytes for a in jax.live_arrays()) / 2**20
         print(f"[{time.perf_counter() - self.t0:6.1f} s] {name:26s} RSS {rss:5.0f} (peak since {max(self.peak, rss):5.0f}), heap in use "
               f"{m.uordblks / 2**20:5.0f}, held free {m.fordblks / 2**20:5.0f}, mapped {m.hblkhd / 2**20:4.0f}; {self.compiles:3d} XLA programs; "
-              f"live JAX arrays {live:4.0f}", flush=True)
-        self.peak = rss
+              f"live JAX arrays {live:4.0f}; at the peak heap in use {self.at_peak[0]:4.0f}, mapped {self.at_peak[1]:4.0f}", flush=True)
+        self.peak, self.at_peak = rss, (m.uordblks / 2**20, m.hblkhd / 2**20)
+        if os.environ.get("LIVE") and name.endswith(">"):
+            groups: dict[tuple[Any, ...], list[float]] = {}
+            for a in jax.live_arrays():
+                g = groups.setdefault((a.shape, str(a.dtype)), [0, 0.0])
+                g[0], g[1] = g[0] + 1, g[1] + a.nbytes / 2**20
+            for (shape, dtype), (count, mib) in sorted(groups.items(), key=lambda kv: -kv[1][1])[:8]:
+                print(f"      live {count:3d} x {shape} {dtype}: {mib:6.1f} MiB", flush=True)
         if TRIM and (TRIM == "all" or not name.startswith("  ")):
             if "drjit" in TRIM:
                 on_drjit_thread(dr.flush_malloc_cache)()
@@ -149,7 +161,31 @@ def main() -> None:
     if hasattr(uncertainty, "grid_feedback"):  # a commit before the feedback was taken inside grid_step (51b17e1)
         uncertainty.grid_feedback = phases.marked("pixel grid's feedback", uncertainty.grid_feedback)
     run_frames = frames.run_frames
-    frames.run_frames = lambda executor, fn, specs, *args: phases.marked(f"  {fn.__name__}", run_frames)(executor, fn, specs, *args)
+    # the batches' home: frames.py before 821ef45's merge, render_batches.py since
+    batches = render_batches if hasattr(render_batches, "run_frames") else frames
+    batches.run_frames = lambda executor, fn, specs, *args: phases.marked(f"  {fn.__name__}", run_frames)(executor, fn, specs, *args)
+    filter_jit = eqx.filter_jit  # the solver's step program (drivers.py jits it per solve)
+
+    def step_program(fn: Callable[..., Any], **kw: Any) -> Callable[..., Any]:
+        jitted = filter_jit(fn, **kw)
+        if getattr(fn, "__name__", "") != "step":
+            return jitted
+        if os.environ.get("ANALYSE"):
+            def analysed(*args: Any, **kwargs: Any) -> Any:
+                compiled = jitted.lower(*args, **kwargs).compile()
+                m = compiled.compiled.memory_analysis()
+                print(f"  program step: temporaries {m.temp_size_in_bytes / 2**20:.1f}, arguments {m.argument_size_in_bytes / 2**20:.1f}, "
+                      f"outputs {m.output_size_in_bytes / 2**20:.1f}, aliased {m.alias_size_in_bytes / 2**20:.1f} MiB", flush=True)
+                cpu, wall = time.process_time(), time.perf_counter()
+                out = jax.block_until_ready(compiled(*args, **kwargs))
+                print(f"  step: {time.process_time() - cpu:.2f} s CPU, {time.perf_counter() - wall:.2f} s wall", flush=True)
+                if os.environ.get("ANALYSE") == "step":  # the step's analysis alone
+                    os._exit(0)
+                return out
+            return phases.marked("  solver's step", analysed)
+        return phases.marked("  solver's step", jitted)
+
+    eqx.filter_jit = step_program
     if os.environ.get("ANALYSE"):
         analyse_alike_programs()
     rng = np.random.default_rng(3)

@@ -98,7 +98,8 @@ def main() -> None:
 
     def recorded(changes: GridChanges, step: object, x: np.ndarray, stderr: np.ndarray, columns: object) -> object:
         points: list[np.ndarray] = []
-        counted = GridChanges(lambda y: points.append(np.array(y)) or changes.fine(y), changes.settled)
+        # settled without its `last`: the renders kept for the plain iterations after the fit
+        counted = GridChanges(lambda y: points.append(np.array(y)) or changes.fine(y), lambda y, columns, last=False: changes.settled(y, columns))
         c0, t0, before = cpu(), time.perf_counter(), high_water_mib()
         out = real(counted, step, x, stderr, columns)
         seen.update(peak_before_grid_mib=before, peak_after_grid_mib=high_water_mib(), changes=changes, step=step, x=np.array(x), stderr=np.array(stderr), cpu=cpu() - c0, wall=time.perf_counter() - t0,

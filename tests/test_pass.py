@@ -352,6 +352,13 @@ def test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_v
             np.testing.assert_allclose(derivatives[i], central, rtol=0, atol=1e-5 * np.abs(central).max())
             touched = [bool(np.abs(derivatives[i][frame == k]).max() > 0) for k in range(3)]
             assert touched == ([True] * 3 if j == 1 else [k == j - 2 for k in range(3)]), j
+        # the last evaluation (the grid step's): the same outputs, its renders dropped after, so nothing evaluates them again
+        again = changes.settled(x, columns, last=True)
+        np.testing.assert_array_equal(again[0], each)
+        for i in range(len(columns)):
+            np.testing.assert_array_equal(again[2][i], derivatives[i])
+        with pytest.raises(RuntimeError, match="dropped by its last settled evaluation"):
+            changes.fine(x)
     assert len(made[0]._traced) == 6 and len(made[0]._programs) == 2  # each frame's two programs traced, compiled once
     # the arrays equal between frames (response matrices, frequency grids) held once, each frame's reference its own
     (_, first, _), (_, second, _) = list(made[0]._traced.values())[:2]

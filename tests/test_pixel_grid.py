@@ -80,7 +80,7 @@ def test_the_fine_models_black_sky_covers_its_blur_and_shift_at_the_fine_scale_a
         np.testing.assert_allclose(model(edge, wide, None), truth, rtol=0, atol=1e-13 * truth.max())
         past = np.asarray(model(edge, wide, fits_pad))
         assert np.isnan(past).all()  # past its pad: refused
-        refused = GridChanges(lambda y: np.stack([past.ravel()] * 2), lambda y, columns: None)
+        refused = GridChanges(lambda y: np.stack([past.ravel()] * 2), lambda y, columns, last=False: None)
         with pytest.raises(PastBlackSky, match="not finite at the values") as refusal:  # the fixed point's iterations stop there
             grid_step(refused, lambda d: np.zeros(len(wide)), wide, np.ones(len(wide)), [])
         np.testing.assert_array_equal(refusal.value.tried, wide)
@@ -113,7 +113,7 @@ def linear_changes(A: np.ndarray, a: np.ndarray, c: np.ndarray, calls: list[np.n
         (calls if calls is not None else []).append(y)
         return np.stack([A @ y + a + 0.1 * y[0] * a, A @ y + a - 0.1 * y[0] * a])
 
-    return GridChanges(fine, lambda y, columns: (fine(y), A @ y + c, A[:, list(columns)].T))
+    return GridChanges(fine, lambda y, columns, last=False: (fine(y), A @ y + c, A[:, list(columns)].T))
 
 
 def test_the_grid_step_is_the_fixed_point_of_the_step_and_carries_a_third_of_the_coarser_models_step():
@@ -287,7 +287,13 @@ def test_a_small_pass_s_accelerated_step_is_its_long_plain_iterations_and_a_cut_
     free = ["parts.legs.kd", "image.blur_sigma_px", *frames.per_frame(["image.shift_x_px", "image.shift_y_px"])]
     seen: list[tuple] = []
     real = uncertainty.grid_step
-    monkeypatch.setattr(uncertainty, "grid_step", lambda *args: seen.append((args, real(*args))) or seen[-1][1])
+
+    def kept(changes: GridChanges, *args: object) -> object:  # the renders kept for the plain iterations below: no `last`
+        held = GridChanges(changes.fine, lambda y, columns, last=False: changes.settled(y, columns))
+        seen.append(((held, *args), real(held, *args)))
+        return seen[-1][1]
+
+    monkeypatch.setattr(uncertainty, "grid_step", kept)
     monkeypatch.setattr(pixel_grid, "FIXED_POINT_STEPS", 2)
     result = sf.fit(obs, free, start={"parts.legs.kd": 0.45}, render=sf.FitRender(spp=8), max_steps=8)
     (changes, step, x, stderr, columns), cut = seen[-1]

@@ -203,6 +203,17 @@ def _accepts(after: Any, before: Any) -> bool:
     return int(after.num_accepted_steps) > int(before.num_accepted_steps)
 
 
+def _linearisation_once(state: Any) -> Any:
+    """A Gauss-Newton-family solver's state with its accepted point's linearisation held once: optimistix keeps it as
+    ``f_info`` and again as its descent's ``descent_state.f_info`` (a damped Newton descent's), equal after every step (both
+    taken from the trial on acceptance, both kept on rejection; both zeros at the start), but two outputs of the compiled
+    step, two copies: of a pass's, every frame's Jacobian columns, images and residuals (1.7 MiB a 128 x 128 px frame).
+    The step's next call takes the state as its input beside its new one, so the copy lay under each step's peak."""
+    if getattr(state.descent_state, "f_info", None) is None:
+        return state
+    return eqx.tree_at(lambda s: s.descent_state.f_info, state, state.f_info)
+
+
 def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: jax.Array, max_steps: int) -> Driver:
     """Step a Gauss-Newton-family solver with the renders made before each step at its trial point
     (its state's ``y_eval``), handed to the compiled step as its ``args``: no program calls back.
@@ -228,7 +239,8 @@ def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: j
         step, terminate, evaluate = eqx.filter_jit(solver.step), eqx.filter_jit(solver.terminate), jax.jit(evaluated)
         first = evaluate(u, args)  # the first step's (its trial point is u), and the residuals' shape without another trace
         # one program: optimistix's init, run op by op, made some 24 single-operation programs, each traced and lowered per process
-        state = eqx.filter_jit(solver.init)(fn, u, args, {}, jax.ShapeDtypeStruct(first[0].shape, first[0].dtype), None, tags)
+        state = _linearisation_once(eqx.filter_jit(solver.init)(fn, u, args, {}, jax.ShapeDtypeStruct(first[0].shape, first[0].dtype),
+                                                                None, tags))
         accepted_loss = math.inf  # the loss of the solver's last accepted point (the first step accepts its own)
 
         def advance(k: int, u: jax.Array) -> Step:
@@ -249,7 +261,7 @@ def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: j
             u, after, _ = taken
             if _accepts(after, state):
                 accepted_loss = float(value)
-            state = after
+            state = _linearisation_once(after)
             return Step(np.asarray(trial), float(value), np.asarray(r), iterate=u, next_u=np.asarray(state.y_eval))
 
         return (yield from _stepped(advance, lambda u: terminate(fn, u, args, {}, state, tags), u, max_steps))

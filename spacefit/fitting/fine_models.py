@@ -164,9 +164,10 @@ class GridModels:
     """Image observation k's renders at :data:`SUPERSAMPLE` times the resolution (float32, as rendered) and its
     models made from one of them at the free values ``y`` (:func:`fine_and_grid_models`): ``fine(render, y)``,
     the model made at :data:`SUPERSAMPLE` and the fit's own on the pixel grid; ``coarser(render, y)``, the model
-    made at :data:`COARSER` (the render binned). Both are JAX functions, for the caller's programs to trace."""
+    made at :data:`COARSER` (the render binned). Both are JAX functions, for the caller's programs to trace. ``renders``
+    None: dropped after their last use (the pixel grid's last settled evaluation, :class:`~spacefit.fitting.pixel_grid.GridChanges`)."""
 
-    renders: Float[Array, "renders H W 3"]
+    renders: Float[Array, "renders H W 3"] | None
     fine: Callable[[Array, Array], tuple[Array, Array]]
     coarser: Callable[[Array, Array], Array]
 

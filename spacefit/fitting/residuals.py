@@ -32,7 +32,7 @@ from spacefit.fitting.observations.base import Block
 from spacefit.fitting.observations.image import Observation, check_reference, image_residual, in_unit_of
 from spacefit.fitting.outside import DESCENT, Outside, Rendered
 from spacefit.fitting.params import FreeParameters
-from spacefit.fitting.fine_models import grid_error_models
+from spacefit.fitting.fine_models import GridModels, grid_error_models
 from spacefit.fitting.pixel_grid import GridChanges, ImageColumns
 from spacefit.fitting.render_batches import batched_renders, frame_renders, given_renders, render_runs
 from spacefit.precision import on_device
@@ -294,16 +294,21 @@ def build_problem(
         programs = AlikePrograms(sum(m is not None for m in made) > 1)  # one program each, not one per operation; a pass's frames share it
         y_of = lambda k, y: on_device(np.asarray(y)[read[k]], np.float64)  # noqa: E731
 
+        def renders_of(m: GridModels) -> jax.Array:
+            if m.renders is None:
+                raise RuntimeError("the pixel grid's renders were dropped by its last settled evaluation (settled's `last`)")
+            return m.renders
+
         def fine(y: np.ndarray) -> np.ndarray:
             # the images' programs two at a time (concurrently): each runs mostly on one core
             out = np.concatenate(concurrently([lambda k=k, m=m: np.zeros((2, references[k].size)) if m is None else np.asarray(
-                programs((fine_changes, k), lambda *a, k=k: fine_changes(k, *a), m.renders, y_of(k, y)), dtype=float)
+                programs((fine_changes, k), lambda *a, k=k: fine_changes(k, *a), renders_of(m), y_of(k, y)), dtype=float)
                 for k, m in enumerate(made)]), axis=1)
             if several:
                 release_freed_memory()
             return out
 
-        def settled(y: np.ndarray, columns: Sequence[int]) -> tuple[np.ndarray, np.ndarray, ImageColumns]:
+        def settled(y: np.ndarray, columns: Sequence[int], last: bool = False) -> tuple[np.ndarray, np.ndarray, ImageColumns]:
             parts, blocks = [], []
             for k, m in enumerate(made):
                 size = references[k].size
@@ -314,7 +319,9 @@ def build_problem(
                 own = [i for i, j in enumerate(columns) if j in read[k]]
                 directions = np.eye(len(read[k]))[np.searchsorted(read[k], [columns[i] for i in own]).astype(int)]
                 each, coarser, own_derivatives = (np.asarray(p, dtype=float) for p in programs(
-                    (settled_changes, k, len(own)), lambda *a, k=k: settled_changes(k, *a), m.renders, y_of(k, y), directions))
+                    (settled_changes, k, len(own)), lambda *a, k=k: settled_changes(k, *a), renders_of(m), y_of(k, y), directions))
+                if last:  # each image's renders dropped once read: a pass's frames' outputs took their place, not came on top
+                    made[k] = dataclasses.replace(m, renders=None)
                 parts.append((each, coarser))
                 blocks.append((own, own_derivatives))
             each, coarser = (np.concatenate(p, axis=-1) for p in zip(*parts))
