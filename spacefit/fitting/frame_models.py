@@ -186,13 +186,13 @@ class FrameModels:
             renders, values = rendered[batch.run], x[batch.values]
             if len(batch.frames) < renders.shape[0]:
                 renders = renders[batch.offset:batch.offset + len(batch.frames)]
-            # the batch's arrays as operands: held as constants, each compiled program of the fit (the step, the residuals,
-            # the covariance's products) would hold a copy of them, more while compiling. The caller's arguments where it
-            # hands them in; else from the host by a callback, which JAX's persistent cache refuses (the program compiles
-            # in every process: the 12-frame pass's solver step, 13.5 s of wall at load 12 at 64 px)
-            own, common = operands[b] if operands is not None else jax.pure_callback(
-                lambda batch=batch: (batch.own, batch.common), jax.tree.map(lambda a: jax.ShapeDtypeStruct(a.shape, a.dtype),
-                                                                            (batch.own, batch.common)), vmap_method="sequential")
+            # the batch's arrays as operands where the caller hands them in: held as constants, each compiled program of the
+            # fit (the step, the residuals, the covariance's products) would hold a copy of them, more while compiling, and
+            # its persistent cache's entry would be the observation's alone. A program without them calls back for its renders
+            # (Adam's, BFGS's steps, a residual function traced whole), which JAX's cache refuses anyway: there they are its
+            # constants. Not fetched by a callback: a callback run on one of XLA's threads, where the caller's 64-bit mode
+            # is off, returns its float64 arrays as float32 (JAX canonicalises a callback's outputs in the thread's mode)
+            own, common = operands[b] if operands is not None else (batch.own, batch.common)
 
             def each(args: tuple[Array, Array, tuple[Array, ...]], batch: Batch = batch, common: tuple[Array, ...] = common) -> list[Array]:
                 render, value, own = args
