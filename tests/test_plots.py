@@ -318,9 +318,10 @@ def test_log_axes_are_labelled_as_matplotlib_labels_them_in_plain_text():
     assert [formatter(x) for x in (1e5, 3e4, 2e-4, 1.0, -2e3)] == ["10⁵", "3×10⁴", "2×10⁻⁴", "10⁰", "−2×10³"]
     assert PlainLogFormatter(labelOnlyBase=True)(2e4) == ""  # asked for the decades alone
     loss = sf.plot_convergence(fit_result())[0]
-    FigureCanvasAgg(loss.figure).draw()
-    labels = [t.get_text() for t in [*loss.yaxis.get_ticklabels(), *loss.yaxis.get_ticklabels(minor=True)] if t.get_text()]
-    assert labels and not any("$" in text for text in labels)
+    for axes in (loss, light_curve().figure()[0]):  # the fit's loss, a light curve's irradiance
+        FigureCanvasAgg(axes.figure).draw()
+        labels = [t.get_text() for t in [*axes.yaxis.get_ticklabels(), *axes.yaxis.get_ticklabels(minor=True)] if t.get_text()]
+        assert labels and not any("$" in text for text in labels)
 
 
 def test_light_curve_error_bars_only_where_errors_are_known():

@@ -204,7 +204,7 @@ class LightCurve:
         Axes (irradiance, magnitude) or one (the magnitude, with the irradiance it stands for on a
         second y axis), or ``fig`` (a matplotlib Figure or SubFigure; default: a new one with both
         panels). Returns the array of the axes drawn."""
-        from spacefit.plotting import axis_label, panels, with_unit  # here: only a figure needs matplotlib (optional; slow to import)
+        from spacefit.plotting import axis_label, log_scale, panels, with_unit  # here: only a figure needs matplotlib (optional; slow to import)
 
         axes = panels(ax, fig, (1, 2), (9.0, 3.6), lambda f: f.subplots(1, 2))
         irradiance_label = with_unit("irradiance at the observer", "W m^-2")
@@ -215,7 +215,7 @@ class LightCurve:
         if len(axes) == 2:
             irradiance = axes[0]
             irradiance.errorbar(self.x, self.irradiance_w_m2, yerr=self.irradiance_se_w_m2 if known else None, fmt="o-", capsize=2)
-            irradiance.set_yscale("log")
+            log_scale(irradiance)
             irradiance.set_ylabel(irradiance_label)
         magnitude.errorbar(self.x, self.magnitude, yerr=np.stack([self.magnitude - bright, faint - self.magnitude]) if known else None,
                            fmt="o-", capsize=2)
