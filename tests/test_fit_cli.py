@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import os
 import subprocess
@@ -15,6 +16,7 @@ from astropy.io import fits
 from helpers import small_scene, write_sphere_obj
 
 import spacefit as sf
+from spacefit import cli
 from spacefit.cli import AT_BOUND, MISFIT, NO_PROGRESS, NOT_CONVERGED, UNJUDGED, exit_code, main
 from spacefit import FitResult
 from spacefit.imageio import sidecar_path
@@ -152,6 +154,25 @@ def test_the_fit_program_ends_at_once_with_its_report_and_reads_jax_s_programs_f
     assert len(written) >= 10 and read == written
     assert second >= first + len(written) - 1  # every program written is read back (one may be compiled twice in a process)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["jax", "run0", "run1"]
+
+
+def test_the_program_s_modules_load_with_the_collector_off_and_are_frozen_out_of_its_scans():
+    """Run as the program (``frozen``), what the command's imports leave is frozen (gc.freeze: a fit's 350 000 objects,
+    which every full collection scanned) and the collector is on again after them, an import that fails included;
+    main called in a process of its own (a test's, a notebook's) leaves the collector as it is."""
+    assert gc.isenabled()
+    frozen = gc.get_freeze_count()
+    try:
+        cli._load("json", frozen=False)
+        assert gc.get_freeze_count() == frozen and gc.isenabled()
+        cli._load("json", frozen=True)
+        assert gc.get_freeze_count() > frozen and gc.isenabled()
+        with pytest.raises(ModuleNotFoundError):
+            cli._load("spacefit.no_such_module", frozen=True)
+        assert gc.isenabled()
+    finally:
+        gc.unfreeze()
+        gc.enable()
 
 
 def test_jax_s_cache_folder_follows_the_environment_and_a_folder_the_process_chose(monkeypatch, tmp_path):

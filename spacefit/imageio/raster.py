@@ -11,13 +11,14 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import tifffile
 
 from spacefit.errors import InputError
 
 
 def read_tiff(path: Path) -> tuple[np.ndarray, np.ndarray | None]:
     """TIFF values and, when its last sample is an unassociated alpha (ExtraSamples = 2, as PNG's), the alpha channel."""
+    import tifffile  # here: only TIFF files need it (10 ms to import, on every fit's path through spacefit.imageio)
+
     try:
         with tifffile.TiffFile(path) as tif:
             series = tif.series[0]

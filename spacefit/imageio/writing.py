@@ -13,7 +13,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import tifffile
 from astropy.io import fits
 
 from spacefit.errors import InputError, check_array, check_count
@@ -63,6 +62,8 @@ def write_observation(path: str | Path, dn: np.ndarray, sensor: Sensor, metadata
 
         write_png(p, data.astype(np.uint16))
     elif kind == "tiff":
+        import tifffile  # here: only TIFF files need it (10 ms to import, on every fit's path through spacefit.imageio)
+
         tifffile.imwrite(p, data if data.shape[2] > 1 else data[..., 0], photometric="rgb" if data.shape[2] == 3 else "minisblack")
     else:
         planes = np.moveaxis(data[::-1], -1, 0)  # FITS rows run bottom-up; channels are NAXIS3
