@@ -282,6 +282,30 @@ def test_the_frames_of_a_pass_compile_once_not_once_per_frame():
     assert np.array_equal(parts[1].ids, frame_part_image(specs[2], specs[2].key, alone).ids)
 
 
+def test_a_frame_s_part_image_and_primal_render_share_their_scene_values_program():
+    """A frame's part image sets its scene values from the program its primal renders take them from (one trace and one
+    compilation per process, not two): its first primal render compiles no JAX program, and renders as alone."""
+    spec = tiny_frames(1)[0]
+    x = np.array([0.5, 0.1])
+    loaded = Loaded()
+    parts = frame_part_image(spec, spec.key, loaded)
+    compiled: list[str] = []
+
+    def listen(event: str, seconds: float, **_: object) -> None:
+        if event == XLA_COMPILE:
+            compiled.append(event)
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        primal = frame_primal(spec, spec.key, x, 5, loaded)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+    assert compiled == []
+    alone = Loaded()
+    assert np.array_equal(frame_primal(spec, spec.key, x, 5, alone), primal)
+    assert np.array_equal(frame_part_image(spec, spec.key, alone).ids, parts.ids) and np.any(parts.ids >= 0)
+
+
 def test_a_process_keeps_at_most_max_scenes_loaded_dropping_the_least_recently_used():
     """Frames rendered at 1, 2 and 3 spp need three loaded scenes; with room for two, the least recently
     used one goes with its frames and compiled functions, and comes back (the same image) when asked again."""
