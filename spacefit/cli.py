@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import argparse
 import errno
+import gc
 import importlib
 import os
 import signal
@@ -46,7 +47,6 @@ def _cluster(args: argparse.Namespace) -> int | str | None:
 
 def _sweep(args: argparse.Namespace) -> int:
     """Run ``spacefit sweep``; on Ctrl-C say where the finished points are; a dask sweep that cannot go on exits 1."""
-    _load("spacefit.studies.sweep", "xarray", "zarr", "dask.array")  # deferred: the studies' modules and the store's (1 s), which render never needs
     from spacefit.studies.store import verify_store
     from spacefit.studies.sweep import read_sweep_file, sweep
 
@@ -103,9 +103,6 @@ def _sensor_values(items: Sequence[str]) -> dict[str, object]:
 
 def _fit(args: argparse.Namespace) -> int:
     """Run ``spacefit fit``; exit code 0 when the fit succeeded, else the verdict's (:func:`exit_code`)."""
-    # deferred: the fitting stack imports JAX and optimistix (1.5 s), which render never needs
-    _load("spacefit.fitting.loop", "spacefit.fitting.observation_files", "spacefit.fitting.problem", "spacefit.fitting.report",
-          "spacefit.pipeline")
     from spacefit.fitting.loop import FitOptions  # here: JAX and optimistix, which render never needs
     from spacefit.fitting.observation_files import ObservationFiles
     from spacefit.fitting.problem import FitRender
@@ -141,8 +138,6 @@ def _fit(args: argparse.Namespace) -> int:
 
 def _fit_light_curve(args: argparse.Namespace) -> int:
     """Run ``spacefit fit-light-curve``; exit code 0 when the fit succeeded, else the verdict's (:func:`exit_code`)."""
-    # deferred: the fitting stack imports JAX and optimistix (1.5 s), which render never needs
-    _load("spacefit.fitting.loop", "spacefit.studies.lightcurve_files", "spacefit.fitting.report", "spacefit.pipeline")
     from spacefit.pipeline import fit_light_curve_to_folder  # here: with the light-curve readers (astropy, JAX) loaded above
     from spacefit.studies.lightcurve_files import LightCurveFiles
 
@@ -198,12 +193,31 @@ def exit_code(status: Status) -> int:
             Status.INTERRUPTED: INTERRUPTED, Status.TERMINATED: TERMINATED}.get(status, NOT_CONVERGED)
 
 
+# The modules a command loads besides Mitsuba and the scene stack (main's), deferred: not loaded by --help, nor by the
+# commands that never need them: the fitting stack imports JAX and optimistix (1.5 s), a sweep the studies' modules and
+# the store's (1 s).
+COMMAND_MODULES = {
+    "fit": ("spacefit.fitting.loop", "spacefit.fitting.observation_files", "spacefit.fitting.problem", "spacefit.fitting.report",
+            "spacefit.pipeline"),
+    "fit-light-curve": ("spacefit.fitting.loop", "spacefit.studies.lightcurve_files", "spacefit.fitting.report", "spacefit.pipeline"),
+    "sweep": ("spacefit.studies.sweep", "xarray", "zarr", "dask.array"),
+}
+
+
 def _load(*modules: str) -> None:
     """Import ``modules`` with Ctrl-C and SIGTERM waiting for the end (then raised as KeyboardInterrupt /
-    Terminated): a signal inside an extension module's import surfaces as an ImportError traceback."""
-    with deferred_interrupts() as interrupts:
-        for name in modules:
-            importlib.import_module(name)
+    Terminated): a signal inside an extension module's import surfaces as an ImportError traceback. The cyclic
+    garbage collector waits too: its full collections, each a scan of every object the imports had made, took
+    0.3 s of CPU of a fit's imports (issue 33's fit; the garbage left, under 1 MiB of memory)."""
+    collecting = gc.isenabled()
+    gc.disable()
+    try:
+        with deferred_interrupts() as interrupts:
+            for name in modules:
+                importlib.import_module(name)
+    finally:
+        if collecting:
+            gc.enable()
     interrupts.check()
 
 
@@ -263,7 +277,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         t0 = time.perf_counter()
         # deferred: Mitsuba and the scene stack, timed as the "imports" stage of --timings (and not loaded by --help);
         # a signal waits for their end (about 1 s): one inside an import leaves Mitsuba half-loaded, and the exit aborts
-        _load("spacefit.render_job", "spacefit.scene.toml")
+        _load("spacefit.render_job", "spacefit.scene.toml", *COMMAND_MODULES.get(args.command, ()))
+        if program:
+            # the modules' objects, held for the process's life, out of the collector's generations: each full collection
+            # scanned them all again (issue 33's fit: the collector's 0.75 s of CPU -> 0.2 s with the pause above); not in a
+            # caller's process (its garbage would stay)
+            gc.freeze()
         from spacefit.render_job import export_part_stl, render_to_folder  # here: Mitsuba, not loaded by --help
         from spacefit.scene.toml import load_scene
 

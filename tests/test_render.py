@@ -2,8 +2,12 @@
 
 from __future__ import annotations
 
+import gc
 import json
 import os
+import subprocess
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -94,6 +98,30 @@ def test_scene_command_writes_loadable_defaults(tmp_path):
     assert main(["scene", "--out", str(path), "--set", "render.spp=8"]) == 0
     scene = load_scene(path)
     assert scene.render.spp == 8 and scene == load_scene(None, ["render.spp=8"])
+
+
+@pytest.mark.parametrize("collecting", [True, False])
+def test_a_command_in_a_caller_s_process_leaves_its_garbage_collector_as_it_was(tmp_path, collecting):
+    """The command line pauses the cyclic garbage collector while it imports, and freezes the modules' objects only when
+    it is the program: in a caller's process the collector is as it was and nothing is frozen (its garbage would stay)."""
+    frozen = gc.get_freeze_count()
+    (gc.enable if collecting else gc.disable)()
+    try:
+        assert main(["scene", "--out", str(tmp_path / "scene.toml")]) == 0
+        assert gc.isenabled() == collecting and gc.get_freeze_count() == frozen
+    finally:
+        gc.enable()
+
+
+def test_the_program_freezes_the_objects_of_the_modules_it_loaded(tmp_path):
+    """Run as the program, the command line moves the objects its imports made out of the collector's generations (each
+    full collection scanned them again) and leaves the collector on."""
+    script = ("import gc, sys\nfrom spacefit.cli import main\n"
+              f"sys.argv = ['spacefit', 'scene', '--out', {str(tmp_path / 'scene.toml')!r}]\n"
+              "code = main()\nprint(code, gc.isenabled(), gc.get_freeze_count() > 10000)\n")
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    ran = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+    assert ran.stdout.split() == ["0", "True", "True"]
 
 
 def test_export_unknown_part(tmp_path, capsys):
