@@ -47,6 +47,7 @@ def _cluster(args: argparse.Namespace) -> int | str | None:
 
 def _sweep(args: argparse.Namespace) -> int:
     """Run ``spacefit sweep``; on Ctrl-C say where the finished points are; a dask sweep that cannot go on exits 1."""
+    # here: the studies' modules and the store's, loaded by main with the command's (COMMAND_MODULES), which render never needs
     from spacefit.studies.store import verify_store
     from spacefit.studies.sweep import read_sweep_file, sweep
 

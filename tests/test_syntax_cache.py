@@ -31,11 +31,17 @@ SOURCE = textwrap.dedent("""
 """)
 
 
-def load(path: Path, module: str):
-    """Import the file at ``path`` as ``module`` and decorate its count_to as Mitsuba's modules do."""
+def imported(path: Path, module: str):
+    """The file at ``path`` imported as ``module``."""
     spec = importlib.util.spec_from_file_location(module, path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
+    return mod
+
+
+def load(path: Path, module: str):
+    """Import the file at ``path`` as ``module`` and decorate its count_to as Mitsuba's modules do."""
+    mod = imported(path, module)
     mod.count_to.__module__ = module
     return syntax_cache.cached_syntax(mod.count_to)
 
@@ -97,10 +103,7 @@ def test_a_method_is_read_back_as_dr_jit_s_rewrite(calls, tmp_path):
     """Mitsuba's integrators' functions are methods: Dr.Jit compiles a method's source alone, under its bare name."""
     src = tmp_path / "method.py"
     src.write_text(METHOD)
-    spec = importlib.util.spec_from_file_location("mitsuba.fake_method", src)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    method = mod.Integrator.count_to
+    method = imported(src, "mitsuba.fake_method").Integrator.count_to
     method.__module__ = "mitsuba.fake_method"
     first = syntax_cache.cached_syntax(method)
     second = syntax_cache.cached_syntax(method)
@@ -240,9 +243,7 @@ NESTED = textwrap.dedent("""
 def test_recursive_and_plain_rewrites_are_separate_entries(calls, tmp_path):
     src = tmp_path / "nested.py"
     src.write_text(NESTED)
-    spec = importlib.util.spec_from_file_location("mitsuba.nested", src)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = imported(src, "mitsuba.nested")
     mod.outer.__module__ = "mitsuba.nested"
     plain = syntax_cache.cached_syntax(mod.outer)
     deep = syntax_cache.cached_syntax(mod.outer, recursive=True)
