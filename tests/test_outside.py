@@ -165,3 +165,32 @@ def test_images_begun_ahead_are_the_images_made_in_turn(small):
     ahead = outside.residuals(jnp.asarray(x), 1)
     assert not outside.images_ahead
     np.testing.assert_array_equal(ahead, outside.residuals(jnp.asarray(x), 1))
+
+
+@pytest.mark.slow  # a primal render and three Jacobian renders at 32 x 32 px
+@float64
+def test_a_point_s_images_are_rendered_once_per_seed_index(small, jacobian_renders, monkeypatch):
+    """The images rendered at a point with seed index j are those asked there again, and beside them the point's Jacobian
+    renders its columns alone; the images of the renders kept are not rendered again either: the renders made from nothing,
+    bit for bit."""
+    primals: list[int] = []
+    render = render_batches.frame_primal
+
+    def counted(spec, key, x, seed, loaded=None):
+        primals.append(seed)
+        return render(spec, key, x, seed, loaded)
+
+    monkeypatch.setattr(render_batches, "frame_primal", counted)
+    outside, x = small.problem.outside, 1.02 * np.asarray(small.x0)  # a point no test rendered before
+    residuals = outside.residuals(jnp.asarray(x), 1)
+    linearisable = outside.linearisable(x, 1)
+    np.testing.assert_array_equal(outside.residuals(jnp.asarray(x), 1), residuals)
+    assert len(primals) == 1 and jacobian_renders == [True]  # the Jacobian's columns beside the images
+    outside.keep(x, 0, outside.render(x, 0, True))
+    assert outside.images(x, 0)[0] is outside.kept[next(iter(outside.kept))][0] and len(primals) == 1
+    outside.render(1.01 * x, 1, True)  # another point: the frames' last Jacobian (frames.frame_jacobian) no longer x's
+    jacobian_renders.clear()
+    from_nothing = outside.render(x, 1, True)
+    assert jacobian_renders == [False]
+    for a, b in zip(jax.tree.leaves(linearisable), jax.tree.leaves(from_nothing), strict=True):
+        np.testing.assert_array_equal(a, b)

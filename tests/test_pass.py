@@ -4,6 +4,7 @@ pass with per-frame attitude errors."""
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import dataclasses
 import os
@@ -248,6 +249,22 @@ def test_a_caller_s_own_mitsuba_variant_changes_no_frame_and_is_kept():
 XLA_COMPILE = "/jax/core/compile/backend_compile_duration"
 
 
+@contextlib.contextmanager
+def xla_compilations():
+    """A list of the XLA compilations made inside (one entry each)."""
+    compiled: list[str] = []
+
+    def listen(event: str, seconds: float, **_: object) -> None:
+        if event == XLA_COMPILE:
+            compiled.append(event)
+
+    jax.monitoring.register_event_duration_secs_listener(listen)
+    try:
+        yield compiled
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listen)
+
+
 def test_the_frames_of_a_pass_compile_once_not_once_per_frame():
     """Three frames of a pass on one loaded scene: the first compiles its JAX programs and Dr.Jit
     kernels; the second and third (their own camera, sun and attitude: data, not code) compile
@@ -258,19 +275,9 @@ def test_the_frames_of_a_pass_compile_once_not_once_per_frame():
     frame_jacobian(specs[0], specs[0].key, x, 3, 4, loaded)
     frame_primal(specs[0], specs[0].key, x, 5, loaded)
     frame_part_image(specs[0], specs[0].key, loaded)
-    compiled: list[str] = []
-
-    def listen(event: str, seconds: float, **_: object) -> None:
-        if event == XLA_COMPILE:
-            compiled.append(event)
-
-    jax.monitoring.register_event_duration_secs_listener(listen)
-    try:
-        with kernel_log() as kernels:
-            together = [(frame_jacobian(s, s.key, x, 3, 4, loaded), frame_primal(s, s.key, x, 5, loaded)) for s in specs[1:]]
-            parts = [frame_part_image(s, s.key, loaded) for s in specs[1:]]
-    finally:
-        jax.monitoring.unregister_event_duration_listener(listen)
+    with xla_compilations() as compiled, kernel_log() as kernels:
+        together = [(frame_jacobian(s, s.key, x, 3, 4, loaded), frame_primal(s, s.key, x, 5, loaded)) for s in specs[1:]]
+        parts = [frame_part_image(s, s.key, loaded) for s in specs[1:]]
     assert compiled == []
     assert kernels["launched"] > 0 and kernels["new"] == 0
     assert len(loaded.compiled) == 1  # one pair of programs (image, Jacobian) for the three frames
@@ -280,6 +287,21 @@ def test_the_frames_of_a_pass_compile_once_not_once_per_frame():
     assert np.array_equal(frame_primal(specs[2], specs[2].key, x, 5, alone), primal)
     assert not np.array_equal(together[0][1], primal)  # the frames do differ
     assert np.array_equal(parts[1].ids, frame_part_image(specs[2], specs[2].key, alone).ids)
+
+
+def test_a_frame_s_part_image_and_primal_render_share_their_scene_values_program():
+    """A frame's part image sets its scene values from the program its primal renders take them from (one trace and one
+    compilation per process, not two): its first primal render compiles no JAX program, and renders as alone."""
+    spec = tiny_frames(1)[0]
+    x = np.array([0.5, 0.1])
+    loaded = Loaded()
+    parts = frame_part_image(spec, spec.key, loaded)
+    with xla_compilations() as compiled:
+        primal = frame_primal(spec, spec.key, x, 5, loaded)
+    assert compiled == []
+    alone = Loaded()
+    assert np.array_equal(frame_primal(spec, spec.key, x, 5, alone), primal)
+    assert np.array_equal(frame_part_image(spec, spec.key, alone).ids, parts.ids) and np.any(parts.ids >= 0)
 
 
 def test_a_process_keeps_at_most_max_scenes_loaded_dropping_the_least_recently_used():

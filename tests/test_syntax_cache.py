@@ -31,11 +31,17 @@ SOURCE = textwrap.dedent("""
 """)
 
 
-def load(path: Path, module: str):
-    """Import the file at ``path`` as ``module`` and decorate its count_to as Mitsuba's modules do."""
+def imported(path: Path, module: str):
+    """The file at ``path`` imported as ``module``."""
     spec = importlib.util.spec_from_file_location(module, path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
+    return mod
+
+
+def load(path: Path, module: str):
+    """Import the file at ``path`` as ``module`` and decorate its count_to as Mitsuba's modules do."""
+    mod = imported(path, module)
     mod.count_to.__module__ = module
     return syntax_cache.cached_syntax(mod.count_to)
 
@@ -78,6 +84,34 @@ def load_plain(path: Path):
     return mod.count_to
 
 
+METHOD = textwrap.dedent("""
+    import drjit as dr
+    from drjit.llvm import Float, UInt32
+
+    class Integrator:
+        def count_to(self, n: int, step=2):
+            i = UInt32(0)
+            total = Float(0)
+            while i < n:
+                total += Float(i) * step
+                i += 1
+            return total
+""")
+
+
+def test_a_method_is_read_back_as_dr_jit_s_rewrite(calls, tmp_path):
+    """Mitsuba's integrators' functions are methods: Dr.Jit compiles a method's source alone, under its bare name."""
+    src = tmp_path / "method.py"
+    src.write_text(METHOD)
+    method = imported(src, "mitsuba.fake_method").Integrator.count_to
+    method.__module__ = "mitsuba.fake_method"
+    first = syntax_cache.cached_syntax(method)
+    second = syntax_cache.cached_syntax(method)
+    assert calls == ["Integrator.count_to"] and len(entries(tmp_path)) == 1  # read from the disk the second time
+    assert same_code(second, first) and same_code(second, drjit.ast.syntax(method))
+    assert second(None, 5)[0] == 20.0
+
+
 def test_a_changed_source_is_rewritten_again(calls, tmp_path):
     src = tmp_path / "fake.py"
     src.write_text(SOURCE)
@@ -112,19 +146,23 @@ def test_other_functions_and_a_cache_turned_off_go_to_dr_jit_unchanged(calls, tm
 
 
 def test_mitsuba_s_integrators_set_up_from_the_cache_in_a_new_process(tmp_path):
-    """Two processes: the first fills the cache with Mitsuba's AD integrators, the second reads them, and
-    its PRB integrator's rewritten functions are the first's byte for byte."""
+    """Two processes: the first fills the cache with Mitsuba's AD integrators, the second reads them all (Dr.Jit
+    rewrites none), and its PRB integrator's rewritten functions are the first's byte for byte."""
     script = (
-        "import marshal, hashlib, spacefit.rendering.backend as b\n"
+        "import marshal, hashlib, spacefit.rendering.backend as b, spacefit.rendering.syntax_cache as c\n"
+        "rewritten = []\n"
+        "rewrite = c._dr_syntax\n"
+        "c._dr_syntax = lambda f, **kw: rewritten.append(f.__qualname__) or rewrite(f, **kw)\n"
         "b.mi.set_variant('llvm_ad_rgb')\n"
         "prb = b.mi.ad.integrators.prb.PRBIntegrator.sample\n"
-        "print(hashlib.sha256(marshal.dumps(prb.__code__)).hexdigest())\n"
+        "print(hashlib.sha256(marshal.dumps(prb.__code__)).hexdigest(), len(rewritten))\n"
     )
     env = {"SPACEFIT_CACHE_DIR": str(tmp_path / "cache"), "PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
-    runs = [subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
+    runs = [subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True).stdout.split()
             for _ in range(2)]
     assert len(entries(tmp_path)) >= 5  # PRB, its basic, volumetric and projective forms
-    assert runs[0].stdout == runs[1].stdout and len(runs[0].stdout.strip()) == 64
+    assert int(runs[0][1]) >= 5 and runs[1][1] == "0"  # the variant's integrators: the second process rewrote none
+    assert runs[0][0] == runs[1][0] and len(runs[0][0]) == 64
 
 
 def same_code(f, g) -> bool:
@@ -205,9 +243,7 @@ NESTED = textwrap.dedent("""
 def test_recursive_and_plain_rewrites_are_separate_entries(calls, tmp_path):
     src = tmp_path / "nested.py"
     src.write_text(NESTED)
-    spec = importlib.util.spec_from_file_location("mitsuba.nested", src)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = imported(src, "mitsuba.nested")
     mod.outer.__module__ = "mitsuba.nested"
     plain = syntax_cache.cached_syntax(mod.outer)
     deep = syntax_cache.cached_syntax(mod.outer, recursive=True)

@@ -33,8 +33,7 @@ import numpy as np
 from spacefit import executors
 from spacefit.executors import Cluster, Executor, executor_of
 from spacefit.precision import float64, on_device
-from spacefit.programs import operand_jit
-from spacefit.rendering.bridge import outside_render_params, seeds_array
+from spacefit.rendering.bridge import outside_render_params, scene_values_program, seeds_array
 from spacefit.rendering.derivatives import RenderChain, render_chain
 from spacefit.rendering.memory import release_freed_memory
 from spacefit.rendering.parts import PartImage
@@ -144,8 +143,9 @@ class Stage:
     def compiled_values(self) -> Callable[[jax.Array, View], dict[str, jax.Array]]:
         """:attr:`values` as one program for every frame on the scene, the view an operand (a program per frame
         held one compiled executable a frame for the fit's life: about 2.5 MiB a frame of a pass), the arrays it closes
-        over (the parts' vertices) its operands."""
-        return operand_jit(self.values)
+        over (the parts' vertices) its operands, its values as the renders set them
+        (:func:`~spacefit.rendering.bridge.scene_values_program`): the part image's and the primal renders' one program."""
+        return scene_values_program(self.values)
 
 
 @dataclass
@@ -211,7 +211,8 @@ class Loaded:
         stage, _, view = self.chains[key]
         name = (stage, spec.fd_steps)
         if name not in self.compiled:
-            self.compiled[name] = outside_render_params(chain.drjit, self.stages[stage].values, spec.fd_steps)
+            on = self.stages[stage]
+            self.compiled[name] = outside_render_params(chain.drjit, on.values, spec.fd_steps, on.compiled_values)
         compiled = self.compiled[name][kind == "jacobian"]
         return lambda x, seeds, **image: compiled(x, seeds, view, **image)
 
@@ -233,7 +234,7 @@ def frame_part_image(spec: FrameSpec, key: str, loaded: Loaded | None = None) ->
     stage, _, view = loaded.chains[key]
     x = on_device([scene_value(spec.scene, n) for n in spec.names], np.float64)
     # one program per loaded scene, the frame's view an operand: run operation by operation, the scene values made
-    # some 20 single-operation programs per frame
+    # some 20 single-operation programs per frame; the primal renders' program (float32 values, as Mitsuba's)
     chain.renderer.set_params({name: np.asarray(value) for name, value in loaded.stages[stage].compiled_values(x, view).items()})
     return chain.renderer.part_image()
 

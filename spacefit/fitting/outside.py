@@ -15,7 +15,10 @@ The solver's renders of its best point are kept (:meth:`Outside.keep`): the stan
 there again with the fit's seeds, the same renders (a fit that ends on rejected trial steps rendered
 others since). Renders a caller will ask for next may begin on a thread of their own while it works
 (:meth:`Outside.render_ahead`, :meth:`Outside.render_images_ahead`): the same renders, made while the Dr.Jit
-thread would idle.
+thread would idle. The images its own methods render last with each seed index are kept (:attr:`Outside.last_images`),
+and the images of the point kept: a point's images are rendered once per seed index, not again by the standard errors'
+Jacobian (its columns alone) or the goodness of fit (the noise floor's record rendered the best point's with the independent
+seeds, the solver's Jacobian there its images with the fit's; issue 33's fit: 3 primal renders).
 """
 
 from __future__ import annotations
@@ -76,6 +79,7 @@ class Outside:
     kept: dict[tuple[bytes, int], Rendered] = field(default_factory=dict)  # one point's renders with their Jacobian (keep)
     ahead: dict[tuple[bytes, int], Future] = field(default_factory=dict)  # renders with their Jacobian being made (render_ahead)
     images_ahead: dict[tuple[bytes, int], Future] = field(default_factory=dict)  # one point's images being made (render_images_ahead)
+    last_images: dict[int, tuple[bytes, tuple[np.ndarray, ...]]] = field(default_factory=dict)  # per j: x's bytes, its images
 
     def keep(self, x: np.ndarray, j: int, rendered: Rendered) -> None:
         """Keep ``rendered``, the renders with their Jacobian at ``x`` with the j-th seeds, in place of those kept before."""
@@ -87,7 +91,7 @@ class Outside:
         for :meth:`linearisable` to take, unless kept."""
         key = _key(x, j)
         if key not in self.kept and key not in self.ahead:
-            self.ahead[key] = _started(self.render, np.array(x), j, True)
+            self.ahead[key] = _started(self._rendered, np.array(x), j, True)
 
     def linearisable(self, x: np.ndarray, j: int) -> Rendered:
         """The renders with their Jacobian at ``x`` with the j-th seeds: those kept where they are ``x``'s, or begun
@@ -96,7 +100,7 @@ class Outside:
         kept, pending = self.kept.get(key), self.ahead.pop(key, None)
         if kept is not None:
             return kept
-        return pending.result() if pending is not None else self.render(np.asarray(x), j, True)
+        return pending.result() if pending is not None else self._rendered(np.asarray(x), j, True)
 
     def render_images_ahead(self, x: np.ndarray, j: int) -> None:
         """Begin the images (no Jacobian) at ``x`` with the j-th seeds on a thread of their own (:func:`_started`), for
@@ -104,12 +108,29 @@ class Outside:
         key = _key(x, j)
         if key not in self.images_ahead:
             self.images_ahead.clear()
-            self.images_ahead[key] = _started(self.render, np.array(x), j, False)
+            self.images_ahead[key] = _started(self._rendered, np.array(x), j, False)
 
     def images(self, x: np.ndarray, j: int) -> Rendered:
-        """The images (no Jacobian) at ``x`` with the j-th seeds: those begun (:meth:`render_images_ahead`), else made."""
-        pending = self.images_ahead.pop(_key(x, j), None)
-        return pending.result() if pending is not None else self.render(np.asarray(x), j, False)
+        """The images (no Jacobian) at ``x`` with the j-th seeds: those begun (:meth:`render_images_ahead`), or those of the
+        renders kept (:meth:`keep`), else :meth:`_rendered`'s."""
+        key = _key(x, j)
+        pending, kept = self.images_ahead.pop(key, None), self.kept.get(key)
+        if pending is not None:
+            return pending.result()
+        return (kept[0], None) if kept is not None else self._rendered(np.asarray(x), j, False)
+
+    def _rendered(self, x: np.ndarray, j: int, jacobian: bool) -> Rendered:
+        """The renders at ``x`` with the j-th seeds (:attr:`render`), beside the images this object's renders with those
+        seeds made last where they are x's (:attr:`last_images`): the Jacobian's columns alone rendered, the images not
+        rendered again. Renders are deterministic for a point and seed: the same images."""
+        point = _key(x, j)[0]
+        last = self.last_images.get(j)
+        images = last[1] if last is not None and last[0] == point else None
+        if images is not None and not jacobian:
+            return images, None
+        made = self.render(x, j, jacobian) if images is None else self.render(x, j, jacobian, images)
+        self.last_images[j] = (point, made[0])
+        return made
 
     def models(self, x: jax.Array, j: int) -> list[np.ndarray]:
         """Each observation's model at ``x`` (concrete) with the j-th seeds, split on the host (JAX's split of a stacked

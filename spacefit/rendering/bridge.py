@@ -301,20 +301,28 @@ def seeded_render_params(
     return render
 
 
+def scene_values_program(values_of: Callable[..., dict[str, Array]]) -> Callable[..., dict[str, Array]]:
+    """``values_of`` ((x, *view) -> scene values) as one program (:func:`~spacefit.programs.operand_jit`: the arrays it
+    closes over, the parts' vertices, its operands), its values flat float32 arrays, as the renders set them."""
+    return operand_jit(lambda x, *view: _flat(values_of(x, *view)))
+
+
 def outside_render_params(
     scene: DrJitScene,
     values_of: Callable[..., dict[str, Array]],
     fd_steps: Float[np.ndarray, " n"],
+    values: Callable[..., dict[str, Array]] | None = None,
 ) -> tuple[Callable[..., np.ndarray], Callable[..., tuple[np.ndarray, np.ndarray]]]:
     """:func:`seeded_render_params`'s image, and its image with its Jacobian (h, w, 3, n), as Python
     functions ``(x, seeds, *view)`` that render outside JAX: the scene values (and their derivatives,
     the finite differences' points) come from compiled programs that call nothing back, so JAX's
     cache keeps them, and the renders run after them. The same images and columns as
     :func:`seeded_render_params`'s and its Jacobian's, from the same values. The Jacobian's ``image=``: the
-    image at x for these seeds, rendered before (the first function's): the columns alone are rendered."""
+    image at x for these seeds, rendered before (the first function's): the columns alone are rendered. ``values``:
+    :func:`scene_values_program` of ``values_of`` where the caller holds it already (None: one of its own)."""
     renders = _Renders(scene, fd_steps)
     # the arrays the scene values close over (the parts' vertices, a wrinkled part's refinement) the programs' operands
-    values = operand_jit(lambda x, *view: _flat(values_of(x, *view)))
+    values = scene_values_program(values_of) if values is None else values
     inputs = operand_jit(_jacobian_inputs(values_of, renders.steps))
 
     def image(x: Array, seeds: Array, *view: object) -> np.ndarray:

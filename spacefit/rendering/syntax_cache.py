@@ -14,8 +14,8 @@ old entry.
 
 An entry is checked before it is used, never executed on trust: it holds that identity (one JSON
 line), the SHA-256 of the marshalled code and the code; an entry whose identity is not the one asked
-for, whose checksum fails, or whose code object is not the function's (name, qualified name, file,
-first line) is discarded and Dr.Jit rewrites the function again (a bit flipped in marshalled code can
+for, whose checksum fails, or whose code object is not the function's (name, file, first line, and
+the qualified name Dr.Jit compiles it under) is discarded and Dr.Jit rewrites the function again (a bit flipped in marshalled code can
 crash the interpreter, and another function's valid code would run silently as this one). Writers
 write a temporary file and ``os.replace`` it (:func:`~spacefit.geometry.cache.write_atomically`), so
 concurrent processes see a whole entry or none. A missing, damaged or unreadable entry costs time at
@@ -91,9 +91,11 @@ def _entry(line: bytes, code: types.CodeType) -> bytes:
 
 
 def _is_rewrite_of(code: object, f: types.FunctionType) -> bool:
-    """Whether ``code`` is a code object of ``f`` itself: its name, qualified name, file and first line."""
+    """Whether ``code`` is Dr.Jit's rewrite of ``f`` itself: its name, file and first line, and the qualified name Dr.Jit
+    compiles it under, its bare name (it compiles the function's source alone: a method ``PRBIntegrator.sample`` is
+    ``sample``; compared with ``f``'s own, every method's entry was discarded and rewritten in every process)."""
     own = f.__code__
-    return (isinstance(code, types.CodeType) and code.co_name == own.co_name and code.co_qualname == own.co_qualname
+    return (isinstance(code, types.CodeType) and code.co_name == own.co_name and code.co_qualname == own.co_name
             and code.co_filename == own.co_filename and code.co_firstlineno == own.co_firstlineno)
 
 
