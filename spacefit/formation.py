@@ -84,7 +84,7 @@ def fast_pad(shape: tuple[int, ...], pad: int) -> int:
 
 
 def fourier_filter(image: Float[Array, "h w c"], transfer: Callable[[np.ndarray, np.ndarray], Array], pad: int,
-                   even: bool = False) -> Float[Array, "h w c"]:
+                   even: bool = False, real: bool = False) -> Float[Array, "h w c"]:
     """``image`` multiplied in Fourier space by ``transfer(fy, fx)`` (frequencies in cycles per px,
     shaped (H, 1, 1) and (1, W, 1); the result broadcasts against (H, W, channels)), after
     ``pad`` px of black sky on every side so that nothing wraps round: a convolution with a kernel
@@ -92,17 +92,29 @@ def fourier_filter(image: Float[Array, "h w c"], transfer: Callable[[np.ndarray,
     (:mod:`spacefit.fitting.nuisance`) and the sensor's PSF share it. ``even``: the transfer is real and
     even, ``T(-f) = T(f)`` (a symmetric kernel's, a PSF's), applied by the real FFT: half the work, the same
     result to the round-off (which the FFTs' own differs by: kept off where an image's exact values matter,
-    a simulated observation's draws)."""
+    a simulated observation's draws). ``real``: any transfer by the real FFT, as its Hermitian part
+    ``(T(f) + conj T(-f)) / 2`` (-f of the Nyquist frequency, -1/2 cycle per px, is itself): the part of the
+    product whose transform is the real part the complex FFT's result is taken as, so the same result to the
+    round-off, the transforms half the work (the fine models' blur and shift, :mod:`spacefit.fitting.fine_models`)."""
     h, w = image.shape[:2]
     padded = jnp.pad(image, ((pad, pad), (pad, pad), (0, 0)))
     fy = np.fft.fftfreq(padded.shape[0])[:, None, None]  # NumPy: known while JAX traces, for NumPy transfers too
     fx = np.fft.fftfreq(padded.shape[1])[None, :, None]
-    if not even:
-        filtered = jnp.real(jnp.fft.ifft2(jnp.fft.fft2(padded, axes=(0, 1)) * transfer(fy, fx), axes=(0, 1)))
-    else:
+    if even:
         filtered = jnp.fft.irfft2(jnp.fft.rfft2(padded, axes=(0, 1)) * transfer(fy, np.fft.rfftfreq(padded.shape[1])[None, :, None]),
                                   s=padded.shape[:2], axes=(0, 1))
+    elif real:
+        half = fx[:, : padded.shape[1] // 2 + 1]  # the real FFT's frequencies as the complex FFT's (its Nyquist -1/2)
+        hermitian = 0.5 * (transfer(fy, half) + jnp.conj(transfer(_negated(fy), _negated(half))))
+        filtered = jnp.fft.irfft2(jnp.fft.rfft2(padded, axes=(0, 1)) * hermitian, s=padded.shape[:2], axes=(0, 1))
+    else:
+        filtered = jnp.real(jnp.fft.ifft2(jnp.fft.fft2(padded, axes=(0, 1)) * transfer(fy, fx), axes=(0, 1)))
     return filtered[pad : pad + h, pad : pad + w]
+
+
+def _negated(f: np.ndarray) -> np.ndarray:
+    """The FFT's frequencies ``f`` (cycles per px) negated as the FFT takes them, modulo 1: the Nyquist -1/2 is itself."""
+    return np.where(f == -0.5, f, -f)
 
 
 def psf_transfer(sensor: Sensor, intrinsics: Intrinsics, wavelength_m: float) -> Callable[[np.ndarray, np.ndarray], Array]:

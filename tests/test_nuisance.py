@@ -11,7 +11,7 @@ import pytest
 import spacefit as sf
 from spacefit.formation import expected_electrons
 from spacefit.fitting.goodness import RESIDUALS
-from spacefit.fitting.nuisance import blur, shift
+from spacefit.fitting.nuisance import blur, blur_and_shift, shift
 from spacefit.fitting.problem import setup
 from spacefit.geometry.frames import Intrinsics
 from spacefit.precision import float64
@@ -55,6 +55,22 @@ def test_shift_by_whole_pixels_moves_the_image_and_by_sub_pixels_its_centroid():
     out = np.asarray(shift(jnp.asarray(blob), 0.3, -0.45))[..., 0]
     assert (out * cols).sum() / out.sum() == pytest.approx(16.3, abs=1e-3)
     assert (out * rows).sum() / out.sum() == pytest.approx(14.55, abs=1e-3)
+
+
+@pytest.mark.parametrize("shape", [(20, 24, 3), (19, 23, 1)])
+@pytest.mark.parametrize("sigma, dx, dy", [(0.0, 0.5, -0.5), (0.1, 0.37, -0.81), (0.8, 1.3, -2.2)])
+def test_blur_and_shift_by_the_real_fft_is_the_complex_ffts_to_the_round_off_with_its_derivatives(shape, sigma, dx, dy):
+    """Even and odd sizes, no blur and half-pixel shifts (the Nyquist frequency's phase, which the Hermitian part of the
+    transfer takes as the real part of the complex FFT's result does), and a blur: values and forward-mode derivatives."""
+    with jax.enable_x64(True):
+        image = jnp.asarray(np.random.default_rng(1).random(shape))
+
+        def moved(v: jax.Array, real: bool) -> jax.Array:
+            return blur_and_shift(image, v[0], v[1], v[2], pad=5, real=real)
+
+        v = jnp.asarray([sigma, dx, dy])
+        np.testing.assert_allclose(moved(v, True), moved(v, False), rtol=0, atol=1e-14)
+        np.testing.assert_allclose(jax.jacfwd(moved)(v, True), jax.jacfwd(moved)(v, False), rtol=0, atol=1e-13)
 
 
 def test_nuisances_are_registered_and_fit_only():

@@ -63,8 +63,9 @@ def test_the_fine_models_black_sky_covers_its_blur_and_shift_at_the_fine_scale_a
         return fine_and_grid_models(jnp.asarray(fine), "box", x, 0, image_model(NAMES), same, same, same, moves, FACTOR, NAMES, pad)[0]
 
     def unchecked(fine: np.ndarray, x: np.ndarray, pad: int) -> jax.Array:
-        """The same on ``pad`` as given (names None: the image model's own pad), as before the pad was sized at 4x."""
-        return fine_and_grid_models(jnp.asarray(fine), "box", x, 0, image_model(NAMES, pad), same, same, same, moves, FACTOR)[0]
+        """The same on ``pad`` as given (names None: the image model's own pad, by the real FFT as the fine models'), as
+        before the pad was sized at 4x."""
+        return fine_and_grid_models(jnp.asarray(fine), "box", x, 0, image_model(NAMES, pad, real=True), same, same, same, moves, FACTOR)[0]
 
     with jax.enable_x64(True):  # float64: the wrap against the FFT's round-off
         size = 16

@@ -36,14 +36,15 @@ ImageModel = Callable[[Float[Array, "h w c"], Float[Array, " n"], int], Float[Ar
 
 
 def blur_and_shift(image: Float[Array, "h w c"], sigma_px: Float[Array, ""], dx_px: Float[Array, ""],
-                   dy_px: Float[Array, ""], pad: int = PAD_PX) -> Float[Array, "h w c"]:
+                   dy_px: Float[Array, ""], pad: int = PAD_PX, real: bool = False) -> Float[Array, "h w c"]:
     """``image`` blurred by a continuous Gaussian of ``sigma_px`` (px, >= 0) and moved by (dx, dy)
-    px (+x rightwards, +y downwards), per channel, on black sky (``pad`` px on every side): no light enters from outside."""
+    px (+x rightwards, +y downwards), per channel, on black sky (``pad`` px on every side): no light enters from outside;
+    ``real``: by the real FFT (:func:`~spacefit.formation.fourier_filter`'s, the same to the round-off)."""
 
     def transfer(fy: np.ndarray, fx: np.ndarray) -> Array:
         return gaussian_transfer(sigma_px, fy, fx) * jnp.exp(-2j * jnp.pi * (fx * dx_px + fy * dy_px))
 
-    return fourier_filter(image, transfer, pad)
+    return fourier_filter(image, transfer, pad, real=real)
 
 
 def blur(image: Float[Array, "h w c"], sigma_px: Float[Array, ""]) -> Float[Array, "h w c"]:
@@ -71,12 +72,13 @@ def nuisance_indices(names: Sequence[str], k: int) -> dict[str, int]:
     return {n: i for n in IMAGE if (i := nuisance_index(names, n, k)) is not None}
 
 
-def with_nuisances(image: Float[Array, "h w c"], values: Mapping[str, Float[Array, ""]], pad: int = PAD_PX) -> Float[Array, "h w c"]:
+def with_nuisances(image: Float[Array, "h w c"], values: Mapping[str, Float[Array, ""]], pad: int = PAD_PX,
+                   real: bool = False) -> Float[Array, "h w c"]:
     """``image`` with the image nuisances ``values`` (registered name -> value) applied, those absent left out
-    (the blur and shift on ``pad`` px of black sky, :func:`blur_and_shift`)."""
+    (the blur and shift on ``pad`` px of black sky, by the real FFT where ``real``: :func:`blur_and_shift`)."""
     moves = ("image.blur_sigma_px", "image.shift_x_px", "image.shift_y_px")
     if any(n in values for n in moves):
-        image = blur_and_shift(image, *(values[n] if n in values else 0.0 for n in moves), pad=pad)
+        image = blur_and_shift(image, *(values[n] if n in values else 0.0 for n in moves), pad=pad, real=real)
     if "image.scale" in values:
         image = values["image.scale"] * image
     if "image.offset_w_m2_sr" in values:
@@ -84,12 +86,13 @@ def with_nuisances(image: Float[Array, "h w c"], values: Mapping[str, Float[Arra
     return image
 
 
-def image_model(names: Sequence[str], pad: int = PAD_PX) -> ImageModel:
+def image_model(names: Sequence[str], pad: int = PAD_PX, real: bool = False) -> ImageModel:
     """``model(render, x, k)``: observation k's render with the image nuisances of the full vector
     ``x`` of the free parameters ``names`` applied (a per-observation value, ``image.scale@k``, where
-    free, else the shared one); ``pad``: the black sky round it for the blur and shift (px)."""
+    free, else the shared one); ``pad``: the black sky round it for the blur and shift (px); ``real``: those by the
+    real FFT (:func:`with_nuisances`)."""
 
     def model(image: Float[Array, "h w c"], x: Float[Array, " n"], k: int) -> Float[Array, "h w c"]:
-        return with_nuisances(image, {n: x[i] for n, i in nuisance_indices(names, k).items()}, pad)
+        return with_nuisances(image, {n: x[i] for n, i in nuisance_indices(names, k).items()}, pad, real)
 
     return model
