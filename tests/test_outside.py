@@ -194,3 +194,8 @@ def test_a_point_s_images_are_rendered_once_per_seed_index(small, jacobian_rende
     assert jacobian_renders == [False]
     for a, b in zip(jax.tree.leaves(linearisable), jax.tree.leaves(from_nothing), strict=True):
         np.testing.assert_array_equal(a, b)
+    y = 1.03 * x  # another point, the same seed index: its own images, not the last ones (x's)
+    for a, b, at_x in zip(jax.tree.leaves(outside.images(y, 1)[0]), jax.tree.leaves(outside.render(y, 1, False)[0]),
+                          jax.tree.leaves(from_nothing[0]), strict=True):
+        np.testing.assert_array_equal(a, b)
+        assert not np.array_equal(a, at_x)

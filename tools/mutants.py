@@ -58,6 +58,10 @@ MUTANTS = (
     # a render's fixed cost: the system libLLVM searched once per process, not per render
     Mutant("libllvm-searched-per-render", "spacefit/rendering/backend.py", "@functools.cache  # the file system's search",
            "# the file system's search", ("tests/test_api.py::test_a_render_asks_the_file_system_nothing",)),
+    # a point's images taken again only at that point and seed index
+    Mutant("outside-last-images-of-another-point", "spacefit/fitting/outside.py",
+           "images = last[1] if last is not None and last[0] == point else None", "images = last[1] if last is not None else None",
+           ("tests/test_outside.py::test_a_point_s_images_are_rendered_once_per_seed_index",)),
     # Mitsuba's rewritten integrators read from the disk only while their source is the one rewritten
     Mutant("syntax-cache-ignores-the-source", "spacefit/rendering/syntax_cache.py", "\"source\": source, ",
            "", ("tests/test_syntax_cache.py::test_a_changed_source_is_rewritten_again",)),
@@ -498,7 +502,8 @@ def copy_checkout(dest: Path) -> None:
 def run_tests(tree: Path, tests: tuple[str, ...], timeout_s: float = TIMEOUT_S) -> tuple[int | None, str]:
     """pytest's exit code (None on timeout after ``timeout_s``) and the first failing test, run in the copy."""
     env = {**os.environ, "PYTHONPATH": str(tree), "PYTHONDONTWRITEBYTECODE": "1"}
-    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", *tests]
+    # -m "": the tests a mutant names run whatever their marks (pyproject's addopts leaves the slow ones out)
+    cmd = [sys.executable, "-m", "pytest", "-x", "-q", "-p", "no:cacheprovider", "-m", "", *tests]
     try:
         out = subprocess.run(cmd, cwd=tree, env=env, capture_output=True, text=True, timeout=timeout_s)
     except subprocess.TimeoutExpired:
