@@ -7,6 +7,7 @@ import os
 
 import numpy as np
 import pytest
+from helpers import small_scene, write_plate_obj
 
 from spacefit.cli import main
 from spacefit.errors import InputError
@@ -249,3 +250,17 @@ def test_a_renders_pass_seeds_are_not_another_seeds():
     for seed in (0, 1, 7, 1000):
         assert pass_seed(seed, 0) == seed
         assert {pass_seed(seed, i) for i in range(1, 8)}.isdisjoint({pass_seed(seed + i, 0) for i in range(1, 8)})
+
+
+def test_a_target_no_pixel_sees_renders_black(tmp_path):
+    """A plate just past the view's edge passes the view's check (its bounds reach into the view) but no pixel's
+    samples reach its silhouette: the render is black, not Dr.Jit's error on an empty wavefront (found by
+    test_fuzz_long's scene values)."""
+    scene = small_scene(write_plate_obj(tmp_path / "plate.obj"), {"material": "white_paint", "kd": 0.5},
+                        render={"resolution": [8, 8], "spp": 1})
+    aside = scene.with_values({"camera.focal_length_mm": 25.0, "camera.look_at_m": [0.0, -1.0, 1.0],
+                               "target.attitude_deg": [0.0, 0.0, 2.0]})
+    renderer = Renderer(aside)
+    assert not renderer.traced.any()
+    image = renderer.render()
+    assert image.shape == (8, 8, 3) and np.all(image == 0)

@@ -24,7 +24,10 @@ def pass_seeds(seed: int, spp: int, pixels: int, sampler: str = "independent") -
     """Split a render of ``pixels`` pixels at ``spp`` into passes: the counts the sampler takes
     (:func:`~spacefit.scene.sampling.split_sample_count`), each over pixel ranges of at most
     :data:`MAX_SAMPLES_PER_PASS` samples (one pixel at least), a pixel's samples of one count in one
-    pass so that a stratifying sampler keeps its pattern: (seed, spp, first pixel, pixels) each."""
+    pass so that a stratifying sampler keeps its pattern: (seed, spp, first pixel, pixels) each. No pixel: no pass (a
+    target whose silhouette no pixel's samples reach, though its bounds pass the view's check, renders black)."""
+    if pixels == 0:
+        return []
     passes = []
     for count in split_sample_count(sampler, spp):
         n = max(1, math.ceil(pixels / max(1, MAX_SAMPLES_PER_PASS // count)))
