@@ -320,3 +320,13 @@ def test_the_psf_reaches_five_sigma_and_its_widths_add_in_quadrature():
     airy = psf_rms_px(Sensor(psf_sigma_px=0.0, diffraction=True, aperture_diameter_m=2e-3), intrinsics, 1)
     both = psf_rms_px(Sensor(psf_sigma_px=2.0, diffraction=True, aperture_diameter_m=2e-3), intrinsics, 1)
     assert airy > 0.5 and both == pytest.approx(np.hypot(2.0, airy), rel=1e-12)
+
+
+def test_a_sensor_s_integer_values_past_int32_are_held_as_floats_and_model_the_dn():
+    """A gain of 2**31 DN per electron given as an integer: held as a float, the expected DN its hand formula (JAX
+    refused the integer past int32's range with an OverflowError; found by test_fuzz_long's sensor)."""
+    camera = Intrinsics(focal_length=0.05, pixel_pitch=5e-5, width=8, height=8)
+    big = Sensor(gain_dn_per_electron=2**31, bias_dn=100, psf_sigma_px=0, diffraction=False)
+    assert all(type(getattr(big, f)) is float for f in ("gain_dn_per_electron", "bias_dn", "psf_sigma_px"))
+    radiance = np.full((8, 8, 3), 0.1)
+    np.testing.assert_allclose(expected_dn(radiance, big, camera), 100.0 + 2.0**31 * expected_electrons(radiance, big, camera), rtol=1e-12)
