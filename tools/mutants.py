@@ -97,6 +97,11 @@ MUTANTS = (
            "return c * right + s * up, c * up - s * right", ("tests/test_camera.py",)),
     Mutant("fit-roll-counts-the-scene-roll-twice", "spacefit/rendering/values.py", "jnp.deg2rad(x[index[ROLL]] - view[ROLL])",
            "jnp.deg2rad(x[index[ROLL]])", ("tests/test_nuisance.py",)),
+    # a rigid pose by the camera and the sun: their motion the pose's inverse, the wrinkles' vertices still moved
+    Mutant("pose-by-view-moves-the-camera-with-the-target", "spacefit/rendering/values.py", "turn = to_world[:3, :3] @ rotation.T",
+           "turn = rotation @ to_world[:3, :3].T", ("tests/test_pose_by_view.py",)),
+    Mutant("pose-by-view-with-the-wrinkles-free", "spacefit/rendering/values.py", " and not any(n in names for n in GEOMETRY)", "",
+           ("tests/test_pose_by_view.py",)),
     Mutant("per-observation-nuisance-ignored", "spacefit/fitting/nuisance.py", "for candidate in (Name(name, k), name):",
            "for candidate in (name,):", ("tests/test_nuisance.py",)),
     Mutant("per-observation-pose-rendered-by-the-others", "spacefit/fitting/params.py", "ref.observation not in (None, k)",

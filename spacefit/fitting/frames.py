@@ -102,12 +102,13 @@ POSE_KEYS = {"target": ("attitude_deg", "position_m")}
 def _stage(spec: FrameSpec, assembly: Assembly) -> str:
     """A digest of what frames sharing one loaded scene have in common: the scene but its camera
     pose, sun direction and (a pose parameter free) target pose, the meshes as loaded, the
-    materials, the free names and how they are rendered."""
+    materials, the free names and how they are rendered (their steps among it: they choose how a pose is set,
+    :func:`~spacefit.rendering.values.pose_by_view`)."""
     text = spec.scene.to_dict()
     for section, keys in (*VIEW_KEYS.items(), *(POSE_KEYS.items() if spec.view_pose or set(spec.names) & set(POSE) else ())):
         text[section] = {k: v for k, v in text.get(section, {}).items() if k not in keys}
     meshes = {name: hashlib.sha256(np.ascontiguousarray(assembly.faces(name)).tobytes()).hexdigest() for name in assembly.parts}
-    return hashlib.sha256(repr((sorted(text.items()), meshes, sorted(assembly.materials.items()), spec.names, spec.spp,
+    return hashlib.sha256(repr((sorted(text.items()), meshes, sorted(assembly.materials.items()), spec.names, spec.fd_steps, spec.spp,
                                 spec.spp_grad, spec.integrator)).encode()).hexdigest()
 
 
@@ -119,12 +120,14 @@ def _view_names(spec: FrameSpec) -> tuple[str, ...]:
     return tuple(n for n in (*VIEW, *(POSE if spec.view_pose else ())) if n not in spec.names)
 
 
-def _frame_values(assembly: Assembly, names: Sequence[str], extra: Sequence[str]) -> Callable[[jax.Array, View], dict[str, jax.Array]]:
-    """A frame's scene values as a function of its free values (``names``) and its view
-    (:func:`~spacefit.rendering.values.scene_view`, an operand), which gives the ``extra`` ones
-    (:func:`_view_names`): on a loaded scene shared with other views every render sets the frame's
-    camera and sun (and its pose, when free or :attr:`FrameSpec.view_pose`)."""
-    values = view_values_fn(assembly, (*names, *extra))
+def _frame_values(assembly: Assembly, names: Sequence[str], fd_steps: Sequence[float],
+                  extra: Sequence[str]) -> Callable[[jax.Array, View], dict[str, jax.Array]]:
+    """A frame's scene values as a function of its free values (``names``, their finite-difference steps
+    ``fd_steps``, 0 for a forward-mode AD column) and its view (:func:`~spacefit.rendering.values.scene_view`,
+    an operand), which gives the ``extra`` ones (:func:`_view_names`): on a loaded scene shared with other views
+    every render sets the frame's camera and sun (and its pose, when free or :attr:`FrameSpec.view_pose`). A
+    rigid pose moves the camera and the sun, the vertices kept as loaded (:func:`~spacefit.rendering.values.pose_by_view`)."""
+    values = view_values_fn(assembly, (*names, *extra), [n for n, step in zip(names, fd_steps) if step == 0])
 
     def values_of(x: jax.Array, view: View) -> dict[str, jax.Array]:
         return values(jnp.concatenate([jnp.asarray(x), jnp.asarray([view[n] for n in extra], dtype=jnp.result_type(x))]), view)
@@ -184,7 +187,7 @@ class Loaded:
             chain = render_chain(assembly, (*spec.names, *extra), spp=spec.spp, spp_grad=spec.spp_grad, integrator=spec.integrator,
                                  fd_steps=None if spec.shared_view else np.asarray(spec.fd_steps, dtype=float),
                                  crop=False if spec.shared_view else None)
-            self.stages[stage] = Stage(chain, _frame_values(assembly, spec.names, extra))
+            self.stages[stage] = Stage(chain, _frame_values(assembly, spec.names, spec.fd_steps, extra))
         self.stages.move_to_end(stage)
         on, view = self.stages[stage], scene_view(assembly)
         chain = RenderChain(spec.names, on.chain.renderer, on.chain.drjit, lambda x: on.values(x, view),

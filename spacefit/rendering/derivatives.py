@@ -66,7 +66,8 @@ class RenderChain:
     def reverse(self, seed: int, seed_grad: int) -> ImageFn:
         """The image differentiable in reverse mode, one Dr.Jit backward pass whatever the number of
         parameters (:func:`~spacefit.rendering.bridge.render_values`); it carries AD derivatives only
-        (a frame's, the sun's or the camera's, is zero)."""
+        (a frame's, the sun's or the camera's, is zero, and so is the pose's where the camera and the sun
+        move for it: :func:`~spacefit.rendering.values.pose_by_view`)."""
         image = render_values(self.drjit, seed, seed_grad)
         return lambda x: image(self.values_of(x))
 
@@ -86,7 +87,9 @@ def render_chain(
     ``prb_projective``); ``fd_steps``: each parameter's finite-difference step, 0 for an AD column
     (default: the registry's). Only the film window around the target is rendered unless a
     parameter moves vertices (D, G, the pose), which the window would not hold, or ``crop`` is
-    False (the whole film, for a scene whose camera will move). The names are not checked here:
+    False (the whole film, for a scene whose camera will move). A pose whose columns are finite
+    differences moves the camera and the sun the other way, not the vertices, so that its renders replay
+    (:func:`~spacefit.rendering.values.pose_by_view`). The names are not checked here:
     the callers check them against their own vocabulary first.
     """
     check_spp(spp, spp_grad)
@@ -99,7 +102,8 @@ def render_chain(
     intr, window = assembly.intrinsics, renderer.window
     check_memory(intr.width, intr.height, window[2] * window[3], max(spp, spp_grad or spp), split=False)
     steps = np.array([fd_step(assembly.scene, n) for n in names], dtype=float) if fd_steps is None else np.asarray(fd_steps, float)
-    return RenderChain(names, renderer, DrJitScene(renderer, spp, spp_grad or spp, integrator), scene_values_fn(assembly, names),
+    ad = [n for n, step in zip(names, steps) if step == 0]
+    return RenderChain(names, renderer, DrJitScene(renderer, spp, spp_grad or spp, integrator), scene_values_fn(assembly, names, ad),
                        steps)
 
 

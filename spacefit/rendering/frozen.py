@@ -20,7 +20,8 @@ What a pass's samples are a function of:
   :class:`FrozenPasses` belongs to one loaded scene, so a new film or integrator is a new object with
   recordings of its own.
 - the scene's ray-tracing acceleration structure: not an operand; rebuilt when vertices move, which
-  drops the recordings (:meth:`FrozenPasses.functions`).
+  drops the recordings (:meth:`FrozenPasses.functions`). A rigid pose of the target moves the camera and
+  the sun instead where a chain can (:func:`~spacefit.rendering.values.pose_by_view`): its renders replay.
 
 Only the samples are frozen: each sample's value is computed on all of Dr.Jit's threads, the same
 whichever thread computes it, and its splatting into the film, where neighbours' samples add into
@@ -121,7 +122,7 @@ class FrozenPasses:
     light at 2 deg of attitude). :meth:`functions` is therefore asked with the scene's geometry
     (:attr:`~spacefit.rendering.renderer.Renderer.geometry`, counted up at each rebuild): a new one drops
     the recordings, and its first render runs unfrozen (a fit that moves vertices at every render, its
-    pose free, renders as before: a recording costs about a trace), its later ones record and replay.
+    wrinkles free, renders as before: a recording costs about a trace), its later ones record and replay.
     """
 
     def __init__(self, enabled: bool = True) -> None:

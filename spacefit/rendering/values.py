@@ -6,14 +6,21 @@ of the part's material model, :func:`spacefit.rendering.materials.material_keys`
 D and G set every wrinkled part's ``vertex_positions`` through the JAX W-M heights (so their
 tangents are exact), the sun's angles set its frame ``'sun.to_world'`` (by the direction its
 light travels), the camera's roll the camera's frame ``'sensor.to_world'`` (whole). The bridge differentiates through the result; a :class:`Renderer` sets it in place.
+
+The target's pose sets every part's ``vertex_positions``, or, where it moves the whole target rigidly and a
+chain differentiates it by finite differences (:func:`pose_by_view`), the camera's and the sun's frames moved
+the other way: the same picture (the target, the camera and the directional sun, the scene's one emitter,
+turned and shifted together), the vertices left as loaded, so that the ray-tracing acceleration structure
+stays and the renders replay (:mod:`spacefit.rendering.frozen`).
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from typing import Any
 
 import jax.numpy as jnp
+import numpy as np
 from jaxtyping import Array
 
 from spacefit.errors import InputError
@@ -43,10 +50,30 @@ def scene_view(assembly: Assembly) -> View:
             **{n: scene_value(assembly.scene, n) for n in (ROLL, *SUN_ANGLES, *ATTITUDE, *POSITION)}}
 
 
-def scene_values_fn(assembly: Assembly, names: Sequence[str]) -> SceneValuesFn:
-    """JAX function: physical values (n,) of the parameters ``names`` -> the scene values they set."""
-    values, view = view_values_fn(assembly, names), scene_view(assembly)
+def scene_values_fn(assembly: Assembly, names: Sequence[str], ad: Collection[str] | None = None) -> SceneValuesFn:
+    """JAX function: physical values (n,) of the parameters ``names`` -> the scene values they set
+    (``ad``: as :func:`view_values_fn` takes it)."""
+    values, view = view_values_fn(assembly, names, ad), scene_view(assembly)
     return lambda x: values(x, view)
+
+
+def pose_by_view(names: Sequence[str], ad: Collection[str]) -> bool:
+    """Whether a chain of the parameters ``names`` renders the target's pose by moving the camera and the
+    sun the other way (:func:`view_values_fn`): a pose value among them, no wrinkle value (D, G, the rms
+    height move the vertices anyway) and no pose value among ``ad``, those differentiated by forward-mode AD
+    (which follows the vertices, not a frame: :func:`~spacefit.rendering.drjit_values.differentiable`)."""
+    return (any(n in names for n in (*ATTITUDE, *POSITION)) and not any(n in names for n in GEOMETRY)
+            and not any(n in ad for n in (*ATTITUDE, *POSITION)))
+
+
+def _view_motion(to_world: np.ndarray, rotation: Array, position: Array) -> Array:
+    """The 4 x 4 world motion that takes a target at ``rotation`` (object to world) and ``position`` (m) to the
+    pose of the homogeneous object-to-world matrix ``to_world`` (its pose as loaded): applied to the camera and
+    the sun, the picture of the target at (``rotation``, ``position``) with its vertices at ``to_world``."""
+    to_world = jnp.asarray(to_world)  # here: float64 where the caller's values are
+    turn = to_world[:3, :3] @ rotation.T
+    top = jnp.concatenate([turn, (to_world[:3, 3] - turn @ position)[:, None]], axis=1)
+    return jnp.concatenate([top, jnp.asarray([[0.0, 0.0, 0.0, 1.0]])], axis=0)
 
 
 def _check_laws(assembly: Assembly, free: Sequence[str]) -> None:
@@ -63,9 +90,14 @@ def _check_laws(assembly: Assembly, free: Sequence[str]) -> None:
                              "sun when it is assembled (assemble the scene again for another sun).")
 
 
-def view_values_fn(assembly: Assembly, names: Sequence[str]) -> Callable[[Array, View], dict[str, Array]]:
+def view_values_fn(assembly: Assembly, names: Sequence[str], ad: Collection[str] | None = None) -> Callable[[Array, View], dict[str, Array]]:
     """JAX function: physical values (n,) of the parameters ``names`` and a view (:func:`scene_view`
-    of this scene or of one differing in its view only) -> the scene values they set."""
+    of this scene or of one differing in its view only) -> the scene values they set.
+
+    ``ad``: the names whose derivatives a chain takes by forward-mode AD. Given, a rigid pose
+    (:func:`pose_by_view`) moves the camera and the sun the other way and the vertices stay as loaded.
+    None: the pose moves the vertices (:meth:`~spacefit.rendering.renderer.Renderer.set_values`, whose
+    earlier values stay set: a pose by the view would undo a roll or a sun set before it)."""
     index = {name: i for i, name in enumerate(names)}
     scene = assembly.scene
     w = scene.wrinkles
@@ -74,23 +106,30 @@ def view_values_fn(assembly: Assembly, names: Sequence[str]) -> Callable[[Array,
     sun_angles = [n for n in SUN_ANGLES if n in index]
     _check_laws(assembly, [n for n in (*ATTITUDE, *sun_angles) if n in index])
     law_rotation = None if scene.target.attitude == "fixed" else jnp.asarray(assembly.to_world[:3, :3])
+    by_view = ad is not None and pose_by_view(names, ad)
 
     def values_of(x: Array, view: View) -> dict[str, Array]:
         def value(name: str) -> Array:
             return x[index[name]] if name in index else view[name]
 
         out: dict[str, Array] = {}
-        if sun_angles:
+        if sun_angles or by_view:
             out["sun.to_world"] = sun_direction(*(value(n) for n in SUN_ANGLES), xp=jnp)
-        if ROLL in index:  # the assembled camera is turned by the scene's roll already
-            out["sensor.to_world"] = CameraFrame(*view[CAMERA]).mitsuba_to_world(jnp.deg2rad(x[index[ROLL]] - view[ROLL]), jnp)
+        if ROLL in index or by_view:  # the assembled camera is turned by the scene's roll already
+            roll = jnp.deg2rad(x[index[ROLL]] - view[ROLL]) if ROLL in index else 0.0
+            out["sensor.to_world"] = CameraFrame(*view[CAMERA]).mitsuba_to_world(roll, jnp)
         if geometry or pose:
+            rotation = attitude_matrix(jnp.deg2rad(jnp.stack([value(n) for n in ATTITUDE])), jnp) if law_rotation is None else law_rotation
+            position = jnp.stack([value(n) for n in POSITION])
+        if by_view:
+            motion = _view_motion(assembly.to_world, rotation, position)
+            out["sun.to_world"] = motion[:3, :3] @ out["sun.to_world"]
+            out["sensor.to_world"] = motion @ out["sensor.to_world"]
+        elif geometry or pose:
             D = x[index["wrinkles.D"]] if "wrinkles.D" in index else w.D
             G = x[index["wrinkles.G"]] if "wrinkles.G" in index else w.G
             if "wrinkles.rms_m" in index:
                 G = G_of(w, D, x[index["wrinkles.rms_m"]])
-            rotation = attitude_matrix(jnp.deg2rad(jnp.stack([value(n) for n in ATTITUDE])), jnp) if law_rotation is None else law_rotation
-            position = jnp.stack([value(n) for n in POSITION])
             for part in assembly.parts if pose else assembly.refinements:
                 out[f"{part}.vertex_positions"] = jnp.ravel(assembly.object_vertices(part, D, G) @ rotation.T + position)
         for name, i in index.items():
