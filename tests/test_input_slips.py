@@ -85,3 +85,13 @@ def test_out_a_dangling_link_exits_2_and_leaves_everything(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith(f"spacefit: error: `--out` '{tmp_path / 'out'}' is a symbolic link to") and len(err.splitlines()) == 1
     assert sorted(os.listdir(tmp_path)) == before and not (tmp_path / "nowhere").exists()
+
+
+@pytest.mark.parametrize("name", ["sun", "observer"])
+def test_light_curve_directions_of_no_component_are_refused_by_name(name):
+    """Rows of no component (shape (n, 0)) are refused as directions of the wrong shape, naming the argument (NumPy's
+    reduction over an empty axis raised a ValueError; found by test_fuzz_long's new constructors)."""
+    good = {"sun": np.array([[0.0, 0.0, 1.0]] * 2), "observer": np.array([[0.0, 0.6, 0.8]] * 2)}
+    args = {**good, name: np.zeros((2, 0))}
+    with pytest.raises(sf.InputError, match=f"`{name}` must be \\(2, 3\\) directions"):
+        sf.LightCurveObservations(np.ones(2), None, "V", args["sun"], args["observer"], np.ones(2), np.zeros(2, bool), None, "x")
