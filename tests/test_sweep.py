@@ -67,6 +67,10 @@ def test_bad_axes_name_the_argument(tmp_path):
         sf.sweep(scene, {"camera.postion_m": [[0, 0, 10]]}, quiet=True)
     with pytest.raises(sf.InputError, match="equal length"):
         sf.sweep(scene, {"z": {"sun.elevation_deg": [10, 20], "sun.azimuth_deg": [0]}}, quiet=True)
+    # an integer past 64 bits (found by test_fuzz_long's studies: the store's coordinates overflowed), and nothing written
+    with pytest.raises(sf.InputError, match=r"`axes\['wrinkles.gamma'\]` holds 18446744073709551616, an integer past 64 bits"):
+        sf.sweep(scene, {"wrinkles.gamma": [2, 2**64]}, store=tmp_path / "store", quiet=True)
+    assert not (tmp_path / "store").exists()
 
 
 SCRIPT = """

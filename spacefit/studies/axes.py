@@ -115,6 +115,9 @@ def parse_axes(scene: Scene, axes: AxesSpec) -> list[Axis]:
                 raise InputError(f"`axes` may not sweep {key!r}: it fixes the store's images and parts; run one sweep per value.")
             for v in dict.fromkeys(map(json.dumps, vals)):  # every distinct value, checked as the scene would
                 value = json.loads(v)
+                if isinstance(value, int) and not isinstance(value, bool) and not -(2**63) <= value < 2**63:
+                    raise InputError(f"`axes[{key!r}]` holds {value}, an integer past 64 bits, which the store cannot hold: "
+                                     "give it as a float.")
                 try:
                     scene.with_values({key: value})
                 except InputError as err:
