@@ -37,7 +37,7 @@ from spacefit.rendering.bridge import outside_render_params, scene_values_progra
 from spacefit.rendering.derivatives import RenderChain, render_chain
 from spacefit.rendering.memory import release_freed_memory
 from spacefit.rendering.parts import PartImage
-from spacefit.rendering.values import View, scene_view, view_values_fn
+from spacefit.rendering.values import View, ad_names, scene_view, view_values_fn
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.parameters import ATTITUDE, POSITION, ROLL, SUN_ANGLES, scene_value
 from spacefit.scene.schema import Scene
@@ -127,7 +127,7 @@ def _frame_values(assembly: Assembly, names: Sequence[str], fd_steps: Sequence[f
     an operand), which gives the ``extra`` ones (:func:`_view_names`): on a loaded scene shared with other views
     every render sets the frame's camera and sun (and its pose, when free or :attr:`FrameSpec.view_pose`). A
     rigid pose moves the camera and the sun, the vertices kept as loaded (:func:`~spacefit.rendering.values.pose_by_view`)."""
-    values = view_values_fn(assembly, (*names, *extra), [n for n, step in zip(names, fd_steps) if step == 0])
+    values = view_values_fn(assembly, (*names, *extra), ad_names(names, fd_steps))
 
     def values_of(x: jax.Array, view: View) -> dict[str, jax.Array]:
         return values(jnp.concatenate([jnp.asarray(x), jnp.asarray([view[n] for n in extra], dtype=jnp.result_type(x))]), view)

@@ -27,7 +27,7 @@ from spacefit.precision import float64
 from spacefit.rendering.bridge import DrJitScene, render_params, render_values
 from spacefit.rendering.renderer import Renderer
 from spacefit.rendering.memory import check_memory
-from spacefit.rendering.values import SceneValuesFn, scene_values_fn
+from spacefit.rendering.values import SceneValuesFn, ad_names, scene_values_fn
 from spacefit.scene.assembly import Assembly, assemble
 from spacefit.scene.schema import Scene
 from spacefit.scene.sections import MAX_SEED, MAX_SPP, check_scene
@@ -102,9 +102,8 @@ def render_chain(
     intr, window = assembly.intrinsics, renderer.window
     check_memory(intr.width, intr.height, window[2] * window[3], max(spp, spp_grad or spp), split=False)
     steps = np.array([fd_step(assembly.scene, n) for n in names], dtype=float) if fd_steps is None else np.asarray(fd_steps, float)
-    ad = [n for n, step in zip(names, steps) if step == 0]
-    return RenderChain(names, renderer, DrJitScene(renderer, spp, spp_grad or spp, integrator), scene_values_fn(assembly, names, ad),
-                       steps)
+    return RenderChain(names, renderer, DrJitScene(renderer, spp, spp_grad or spp, integrator),
+                       scene_values_fn(assembly, names, ad_names(names, steps)), steps)
 
 
 def render_function(

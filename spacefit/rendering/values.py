@@ -57,6 +57,12 @@ def scene_values_fn(assembly: Assembly, names: Sequence[str], ad: Collection[str
     return lambda x: values(x, view)
 
 
+def ad_names(names: Sequence[str], fd_steps: Sequence[float]) -> list[str]:
+    """The names among ``names`` whose columns a chain takes by forward-mode AD: their finite-difference step
+    (``fd_steps``, one per name) 0."""
+    return [n for n, step in zip(names, fd_steps, strict=True) if step == 0]
+
+
 def pose_by_view(names: Sequence[str], ad: Collection[str]) -> bool:
     """Whether a chain of the parameters ``names`` renders the target's pose by moving the camera and the
     sun the other way (:func:`view_values_fn`): a pose value among them, no wrinkle value (D, G, the rms
