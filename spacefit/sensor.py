@@ -67,11 +67,6 @@ MAX_PSF_SIGMA_PX = 100.0
 image padded by its 5-sigma reach for the Fourier blur grows with it (at 1e300 px XLA aborted the process)."""
 SATURATION_MARGIN_READ_SIGMA = 3.0
 """A pixel within this many read-noise sigmas of the full well's DN counts as saturated."""
-FLOAT_FIELDS = ("exposure_time_s", "aperture_diameter_m", "quantum_efficiency", "gain_dn_per_electron", "bias_dn",
-                "read_noise_electrons", "full_well_electrons", "psf_sigma_px", "radiometric_scale_dn_per_w_m2_sr",
-                "saturation_level_dn")
-"""The sensor's fields held as Python floats whatever number type they are given in (None kept where allowed): an
-integer past int32's range (a gain of 2**31 DN per electron) overflowed JAX's parsing of it (test_fuzz_long's sensor)."""
 
 
 @dataclass(frozen=True)
@@ -160,9 +155,11 @@ class Sensor:
         for i, w in enumerate(waves):
             check_range(f"Sensor.wavelength_m[{i}]", w, 1e-8, 1e-4, unit="m")
         object.__setattr__(self, "wavelength_m", tuple(float(w) for w in waves))
-        for field in FLOAT_FIELDS:
-            if getattr(self, field) is not None:
-                object.__setattr__(self, field, float(getattr(self, field)))
+        # the fields typed float held as Python floats whatever number type they are given in (None kept where allowed):
+        # an integer past int32's range (a gain of 2**31 DN per electron) overflowed JAX's parsing of it
+        for field in dataclasses.fields(self):
+            if field.type in ("float", "float | None") and getattr(self, field.name) is not None:
+                object.__setattr__(self, field.name, float(getattr(self, field.name)))
 
     @property
     def aperture_area_m2(self) -> float:
