@@ -138,7 +138,7 @@ def _fit(args: argparse.Namespace) -> int:
 
 def _fit_light_curve(args: argparse.Namespace) -> int:
     """Run ``spacefit fit-light-curve``; exit code 0 when the fit succeeded, else the verdict's (:func:`exit_code`)."""
-    from spacefit.pipeline import fit_light_curve_to_folder  # here: with the light-curve readers (astropy, JAX) loaded above
+    from spacefit.pipeline import fit_light_curve_to_folder  # here (main loads them: COMMAND_MODULES): the light-curve readers (astropy, JAX)
     from spacefit.studies.lightcurve_files import LightCurveFiles
 
     files = LightCurveFiles(args.curve, args.scene, overrides=args.overrides, band=args.band, site=_site(args.site),

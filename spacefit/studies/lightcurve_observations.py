@@ -75,8 +75,8 @@ class LightCurveObservations:
                 raise InputError(f"`magnitude_sigma` must be None or positive, got {quote(self.magnitude_sigma)}.")
         for name in ("sun", "observer"):
             v = _finite(name, getattr(self, name), 2, n)
-            unit = unit_rows(v) if v.shape[1:] == (3,) else v  # its shape first: rows of no component have no largest
-            if v.shape[1:] != (3,) or not np.all(np.isfinite(unit)):
+            # its shape first: rows of no component have no largest to scale by (unit_rows)
+            if v.shape[1:] != (3,) or not np.all(np.isfinite(unit := unit_rows(v))):
                 raise InputError(f"`{name}` must be ({n}, 3) directions, none (0, 0, 0), got {quote(getattr(self, name))}.")
             fields[name] = unit
         shadow = check_array("in_shadow", self.in_shadow, "a bool array")
