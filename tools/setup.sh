@@ -36,9 +36,22 @@ if ! command -v chromium >/dev/null && ! command -v chromium-browser >/dev/null;
     fi
 fi
 
+# The interpreter .venv is made from: PYTHON where set; else the system's /usr/bin/python3 where it is 3.11 or newer and
+# can make a venv (Debian's links the interpreter into its binary: the fit process took 0.94 of the wall and 0.95 of the CPU
+# it took on pyenv's build, which calls it from a shared library; docs/measurements/performance.md); else python3.
+interpreter() {
+    if [ -n "${PYTHON:-}" ]; then
+        echo "$PYTHON"
+    elif [ -x /usr/bin/python3 ] && /usr/bin/python3 -c 'import sys, ensurepip, venv; sys.exit(sys.version_info < (3, 11))' 2>/dev/null; then
+        echo /usr/bin/python3
+    else
+        echo python3
+    fi
+}
+
 if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c "import spacefit, pytest, xdist, hypothesis, xarray, zarr, dask.distributed, tqdm, sphinx, myst_nb, sphinx_gallery, pydata_sphinx_theme, sphinxarg; import importlib; importlib.import_module('sphinx-mathjax-offline')" 2>/dev/null; then
-    echo "setup: creating .venv and installing spacefit (a few minutes the first time)" >&2
-    python3 -m venv .venv
+    echo "setup: creating .venv from $(interpreter) and installing spacefit (a few minutes the first time)" >&2
+    "$(interpreter)" -m venv .venv
     .venv/bin/python -m pip install -q --upgrade pip
     .venv/bin/python -m pip install -q -e ".[dev,docs]"
 fi
