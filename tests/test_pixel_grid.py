@@ -10,7 +10,8 @@ import pytest
 
 from spacefit.cli import NOT_CONVERGED, exit_code
 from spacefit.fitting.nuisance import PAD_PX, image_model
-from spacefit.fitting.fine_models import MOVES, binned, fine_and_grid_models, response_matrix
+from spacefit.fitting.fine_models import (COARSER, MOVES, RESPONSE_REACH_PX, RESPONSES, STEPS_PER_FINE_PX, SUPERSAMPLE, binned,
+                                          fine_and_grid_models, response_matrix)
 from spacefit.fitting.pixel_grid import (FIXED_POINT_STEPS, FIXED_POINT_TOLERANCE, REMAINDER_RATIO, GridChanges, ImageColumns, PastBlackSky,
                                          black_sky_notes, grid_step, past_black_sky, unsettled_notes)
 from spacefit.formation import fast_pad
@@ -28,6 +29,19 @@ def test_a_box_pixel_averages_its_own_fine_pixels_and_a_tent_weighs_its_neighbou
     tent = response_matrix(5, 2, "tent")  # fine px centred at +-0.25 and +-0.75 px: the tent's integrals over each, 3/8 and 1/8
     np.testing.assert_allclose(tent[2], [0, 0, 0, 0.125, 0.375, 0.375, 0.125, 0, 0, 0], atol=1e-12)
     np.testing.assert_allclose(tent.sum(axis=1), 1.0)
+
+
+@pytest.mark.parametrize("pixel_filter", sorted(RESPONSES))
+def test_a_response_matrix_is_each_rows_response_integrated_over_the_whole_axis(pixel_filter):
+    """One pixel's fine weights placed along the diagonal: the same bits as the midpoint rule over every fine pixel of
+    the axis for each row, at the factors the pixel grid uses (and the edges' rows cut and renormalised alike)."""
+    beyond = np.linspace(RESPONSE_REACH_PX + 0.5, RESPONSE_REACH_PX + 3.0, 11)
+    assert not RESPONSES[pixel_filter](beyond).any() and not RESPONSES[pixel_filter](-beyond).any()
+    for size in (1, 2, 5, 129):
+        for factor in (COARSER, SUPERSAMPLE):
+            t = (np.arange(size * factor * STEPS_PER_FINE_PX) + 0.5) / (factor * STEPS_PER_FINE_PX)
+            fine = RESPONSES[pixel_filter](t[None, :] - (np.arange(size)[:, None] + 0.5)).reshape(size, size * factor, -1).sum(axis=-1)
+            np.testing.assert_array_equal(response_matrix(size, factor, pixel_filter), fine / fine.sum(axis=1, keepdims=True))
 
 
 def _models(fine: np.ndarray, pixel_filter: str = "box") -> tuple[np.ndarray, np.ndarray]:
