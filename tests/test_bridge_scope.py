@@ -93,7 +93,7 @@ def test_a_vertex_column_is_rendered_again_when_a_sample_held_its_branch(case, m
     plain = scene.forward(values, columns[2], 5)
     assert np.any(plain != 0)
     renders, render = [], scene._render_forward
-    monkeypatch.setattr(scene, "_render_forward", lambda seed_grad: renders.append(seed_grad) or render(seed_grad))
+    monkeypatch.setattr(scene, "_render_forward", lambda seed_grad, states: renders.append(seed_grad) or render(seed_grad, states))
     with KeepFrames(("_if_stmt_true",), limit=1) as keep:
         held = scene.forward(values, columns[2], 5)
     assert len(keep.kept) == 1 and renders == [5, 5]  # the first render met the held frame's variables
@@ -103,7 +103,7 @@ def test_a_vertex_column_is_rendered_again_when_a_sample_held_its_branch(case, m
 
 def test_a_tangent_that_moves_nothing_gives_a_zero_column_without_a_render(case, monkeypatch):
     scene, values, _ = case
-    monkeypatch.setattr(scene, "_render_forward", lambda seed_grad: pytest.fail("rendered"))
+    monkeypatch.setattr(scene, "_render_forward", lambda *args: pytest.fail("rendered"))
     out = scene.forward(values, {k: np.zeros_like(v) for k, v in values.items()}, 5)
     np.testing.assert_array_equal(out, np.zeros(scene.shape, np.float32))
     assert grads_left(scene) == []
@@ -115,7 +115,7 @@ def test_other_render_errors_are_not_repeated_and_leave_the_values_detached(case
     scene, values, columns = case
     calls = []
 
-    def broken(seed_grad):
+    def broken(seed_grad, *states):
         calls.append(seed_grad)
         raise RuntimeError("the render failed")
 

@@ -163,3 +163,24 @@ def test_kernel_log_counts_the_drjit_threads_kernels_and_leaves_the_recordings_a
     assert renderer.frozen.recordings == recordings
     assert np.array_equal(here, first)
     assert recording["generated"] > replay["generated"] > 0 and recording["compile_s"] > 0
+
+
+def test_a_jacobians_columns_share_one_primal_pass_and_are_each_columns_own_render(scene, monkeypatch):
+    """The forward-mode columns of one call (``forward_columns``) replay one primal pass per pass of the render (two
+    here: 30 + 2 multijitter samples), not one per column, and each is the column rendered alone, bit for bit; a
+    column whose tangent moves nothing renders nothing."""
+    from spacefit.rendering import frozen
+
+    chain = render_chain(scene, MATERIALS)
+    vals = values(chain, np.array([scene_value(scene, n) for n in MATERIALS]))
+    tangents = [{key: np.full_like(vals[key], 0.7)} for key in vals] + [{key: np.zeros_like(v) for key, v in vals.items()}]
+    alone = [chain.drjit.forward(vals, tangent, 9) for tangent in tangents]
+    states = []
+    primal_state = frozen.primal_state
+    monkeypatch.setattr(frozen, "primal_state", lambda *args: states.append(args) or primal_state(*args))
+    chain.renderer.frozen = FrozenPasses(enabled=False)  # every pass traced in Python: each primal pass counted
+    shared = chain.drjit.forward_columns(vals, tangents, 9)
+    assert len(states) == 2 and len(tangents) == 3
+    assert np.any(shared[0] != 0) and np.any(shared[1] != 0) and not np.any(shared[2])
+    for a, b in zip(shared, alone, strict=True):
+        np.testing.assert_array_equal(a, b)

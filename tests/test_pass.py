@@ -203,7 +203,7 @@ def test_a_pass_s_renders_trace_on_every_thread_and_equal_the_one_thread_renders
             return samples(*args)
         return traced
 
-    for name in ("camera_samples", "derivative_samples"):
+    for name in ("camera_samples", "primal_state", "derivative_samples"):
         monkeypatch.setattr(frozen, name, counted(getattr(frozen, name)))
     specs, x = tiny_frames(2, spp=16, size=48), [np.array([0.5, 0.1])] * 2  # 36864 samples a pass: several blocks of work
     threads = dr.thread_count()

@@ -141,9 +141,12 @@ MUTANTS = (
     Mutant("fd-column-one-sided-step", BRIDGE, "(up - down) / (2.0 * self.steps[j])", "(up - down) / self.steps[j]",
            ("tests/test_bridge.py::test_jacobian_columns_match_finite_differences",)),
     Mutant("forward-derivative-with-primal-seed", BRIDGE,
-           "{k: t[..., j] for k, t in tangents.items()}, seed_grad))", "{k: t[..., j] for k, t in tangents.items()}, seed))",
+           "for k, t in tangents.items()} for j in ad], seed_grad)))", "for k, t in tangents.items()} for j in ad], seed)))",
            (CONVENTIONS,)),
     Mutant("backward-with-primal-seed", BRIDGE, "scene.backward(v, c, seed_grad)", "scene.backward(v, c, seed)", (CONVENTIONS,)),
+    # a Jacobian's forward-mode columns share one primal pass, and each is the column rendered alone
+    Mutant("forward-columns-each-own-primal-pass", BRIDGE, "            if key not in states:\n", "            if True:\n",
+           ("tests/test_frozen.py::test_a_jacobians_columns_share_one_primal_pass_and_are_each_columns_own_render",)),
     # a forward-mode column survives a profiler holding PRB's frames (a pass on dask died of it), and leaves no AD state behind
     Mutant("forward-attaches-every-value", BRIDGE, "if np.any(np.asarray(t) != 0) and differentiable(", "if differentiable(",
            ("tests/test_bridge_scope.py::test_a_material_column_is_the_same_with_prb_frames_held",)),

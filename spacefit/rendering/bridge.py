@@ -27,7 +27,7 @@ every render of :class:`DrJitScene` runs on the process's one Dr.Jit thread
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Callable, Collection, Mapping
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -145,9 +145,22 @@ class DrJitScene:
     @on_drjit_thread
     @in_variant
     def forward(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
-        """Directional derivative of the image along ``tangent`` (same keys as ``values``), one render.
+        """Directional derivative of the image along ``tangent`` (same keys as ``values``), one render
+        (:meth:`forward_columns` of one column)."""
+        return self.forward_columns(values, [tangent], seed_grad)[0]
 
-        Only the values the tangent moves are attached to the AD graph: a material's column leaves the
+    @on_drjit_thread
+    @in_variant
+    def forward_columns(self, values: Mapping[str, np.ndarray], tangents: Sequence[Mapping[str, np.ndarray]],
+                        seed_grad: int) -> list[np.ndarray]:
+        """Directional derivatives of the image along each of ``tangents`` (same keys as ``values``): one forward
+        pass each, from one primal pass that they share (:func:`~spacefit.rendering.frozen.primal_state`, made at the
+        first column's render, the gradients suspended; made again for a column whose values rebuilt the geometry: a
+        pose or wrinkles differentiated by forward mode). A column's forward-mode
+        render was its own primal pass and forward pass; the primal pass took about 0.6 of its CPU (the panels case,
+        128 x 128 px, 32 spp), so that three columns cost about 0.6 of what they did.
+
+        Only the values a tangent moves are attached to the AD graph: a material's column leaves the
         meshes detached. Dr.Jit's forward mode follows every AD edge out of an attached value and
         refuses one to a variable made before its isolation scope; a stack-sampling profiler (dask's
         worker profiler, every 10 ms) that holds a frame of PRB's first trace of a symbolic branch as
@@ -155,40 +168,59 @@ class DrJitScene:
         moves vertices must attach them: its render is tried again on that refusal, from freshly set
         values (the same seed, so the same image). The values are detached again after an error too.
         """
-        moved = [key for key, t in tangent.items() if np.any(np.asarray(t) != 0) and differentiable(self.params[key])]
-        if not moved:  # nothing the render differentiates moves (Dr.Jit would refuse an image attached to nothing)
-            return np.zeros(self.shape, np.float32)
-        attempt = 1
-        while True:
-            try:
-                return self._forward_once(values, {key: tangent[key] for key in moved}, seed_grad)
-            except RuntimeError as err:
-                if attempt == FORWARD_ATTEMPTS or not _outside_scope(err):
-                    raise
-                attempt += 1
+        states: dict[tuple[int, int], tuple[object]] = {}  # per pass and geometry, its primal pass's state
+        columns = []
+        for tangent in tangents:
+            moved = [key for key, t in tangent.items() if np.any(np.asarray(t) != 0) and differentiable(self.params[key])]
+            if not moved:  # nothing the render differentiates moves (Dr.Jit would refuse an image attached to nothing)
+                columns.append(np.zeros(self.shape, np.float32))
+                continue
+            attempt = 1
+            while True:
+                try:
+                    columns.append(self._forward_once(values, {key: tangent[key] for key in moved}, seed_grad, states))
+                    break
+                except RuntimeError as err:
+                    if attempt == FORWARD_ATTEMPTS or not _outside_scope(err):
+                        raise
+                    attempt += 1
+        return columns
 
-    def _forward_once(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int) -> np.ndarray:
-        """One forward-mode render of :meth:`forward`, with AD on the keys of ``tangent`` only."""
+    def _primal_states(self, seed_grad: int, states: dict[tuple[int, int], tuple[object]]) -> None:
+        """Each pass's primal state (:func:`~spacefit.rendering.frozen.primal_state`) in the scene's present geometry, into
+        ``states``, unless there."""
+        _, state, _ = self.renderer.frozen.functions(self.renderer.geometry)
+        for i, (seed, count, _) in enumerate(self._passes(self.spp_grad, seed_grad)):
+            key = (i, self.renderer.geometry)
+            if key not in states:
+                states[key] = state(self.renderer.scene, self._integrator, mi.UInt32(seed), count)
+                dr.eval(states[key])
+
+    def _forward_once(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int,
+                      states: dict[tuple[int, int], tuple[object]]) -> np.ndarray:
+        """One forward-mode render of :meth:`forward_columns`, with AD on the keys of ``tangent`` only."""
         self._set(values, grad=tangent)
         try:
             for key, t in tangent.items():
                 dr.set_grad(self.params[key], to_value(self.params[key], t))
-            return self.renderer.to_film(np.asarray(self._render_forward(seed_grad), dtype=np.float32))
+            return self.renderer.to_film(np.asarray(self._render_forward(seed_grad, states), dtype=np.float32))
         finally:
             self._set(values)
 
-    def _render_forward(self, seed_grad: int) -> "mi.TensorXf":
-        """The window's forward-mode derivative image along the gradients set on the scene's values:
-        each pass's samples on all threads (:func:`~spacefit.rendering.frozen.derivative_samples`,
-        replayed after its first call), splatted on one thread when the render is deterministic, in the
-        samples' order, as Mitsuba's ``render_forward`` splats them (the image it gives wholly on one
-        thread, bit for bit), the passes weighted by their shares of the samples."""
+    def _render_forward(self, seed_grad: int, states: dict[tuple[int, int], tuple[object]]) -> "mi.TensorXf":
+        """The window's forward-mode derivative image along the gradients set on the scene's values, from each pass's
+        primal state in ``states`` (made where missing): each pass's samples on all threads
+        (:func:`~spacefit.rendering.frozen.derivative_samples`, replayed after its first call), splatted on one thread
+        when the render is deterministic, in the samples' order, as Mitsuba's ``render_forward`` splats them (the image
+        it gives wholly on one thread, bit for bit), the passes weighted by their shares of the samples."""
         film = self.renderer.scene.sensors()[0].film()
-        _, derivative = self.renderer.frozen.functions(self.renderer.geometry)
+        self._primal_states(seed_grad, states)
+        _, _, derivative = self.renderer.frozen.functions(self.renderer.geometry)
         image = None
         with errors_only():  # projective integrators warn about film borders per call
-            for seed, count, weight in self._passes(self.spp_grad, seed_grad):
-                position, value = derivative(self.renderer.scene, self._integrator, mi.UInt32(seed), count)
+            for i, (seed, count, weight) in enumerate(self._passes(self.spp_grad, seed_grad)):
+                position, value = derivative(self.renderer.scene, self._integrator, mi.UInt32(seed), count,
+                                             *states[(i, self.renderer.geometry)])
                 dr.eval(position, value)
                 with render_threads(self.renderer.assembly.scene.render.deterministic):
                     block = film.create_block()
@@ -356,13 +388,15 @@ class _Renders:
         seed, seed_grad = (int(s) for s in np.asarray(seeds))
         tangents = {k: np.asarray(t) for k, t in tangents.items()}
         img = self.scene.primal(values, seed) if image is None else image
+        ad = [j for j in range(self.n) if j not in plus]  # the forward-mode columns, from one primal pass
+        forward = dict(zip(ad, self.scene.forward_columns(values, [{k: t[..., j] for k, t in tangents.items()} for j in ad], seed_grad)))
         cols = []
         for j in range(self.n):
             if j in plus:
                 up, down = self.scene.render_primal(plus[j], seed), self.scene.render_primal(minus[j], seed)
                 cols.append((up - down) / (2.0 * self.steps[j]))
             else:
-                cols.append(self.scene.forward(values, {k: t[..., j] for k, t in tangents.items()}, seed_grad))
+                cols.append(forward[j])
         return img, np.stack(cols, axis=-1).astype(np.float32)
 
 

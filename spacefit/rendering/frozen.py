@@ -72,19 +72,37 @@ def camera_samples(scene: "mi.Scene", pixels: "mi.UInt32", seed: "mi.UInt32", sp
     return position, radiance * weight
 
 
-def derivative_samples(scene: "mi.Scene", integrator: "mi.SamplingIntegrator", seed: "mi.UInt32",
-                       spp: int) -> tuple["mi.Point2f", "mi.Color3f"]:
-    """Film positions (px) and forward-mode derivatives of radiance times the camera's weight of ``spp``
-    samples in every pixel of the film window, along the gradients set on the scene's values: the
-    samples of Mitsuba's ``RBIntegrator.render_forward`` (Mitsuba 3.9, ``python/ad/integrators/common.py``:
-    a primal pass, then the forward pass from its state; Vicini et al. 2021, "Path replay
-    backpropagation"), before they are splatted."""
+def _wavefront(scene: "mi.Scene", integrator: "mi.SamplingIntegrator", seed: "mi.UInt32",
+               spp: int) -> tuple["mi.Sampler", dict, "mi.Spectrum", "mi.Point2f"]:
+    """``spp`` samples in every pixel of the film window as Mitsuba's ``RBIntegrator.render_forward`` starts them
+    (Mitsuba 3.9, ``python/ad/integrators/common.py``): the sampler after the camera's rays, the keywords of the
+    integrator's passes, the camera's weights and the film positions (px). The same for the same seed."""
     sensor = scene.sensors()[0]
+    sampler, spp = integrator.prepare(sensor, seed, spp, integrator.aov_names())
+    ray, weight, position = integrator.sample_rays(scene, sensor, sampler)
+    return sampler, {"scene": scene, "ray": ray, "depth": mi.UInt32(0), "δL": None, "active": mi.Bool(True)}, weight, position
+
+
+def primal_state(scene: "mi.Scene", integrator: "mi.SamplingIntegrator", seed: "mi.UInt32", spp: int) -> tuple[object]:
+    """The primal pass of ``render_forward`` (its samples as :func:`_wavefront` starts them), as the one-tuple of its
+    state, which the forward pass replays from (PRB's radiance; Vicini et al. 2021, "Path replay backpropagation"):
+    computed with the gradients suspended, so the same whatever gradients are set, and a Jacobian's columns share one
+    (:meth:`~spacefit.rendering.bridge.DrJitScene.forward_columns`)."""
     with dr.suspend_grad():
-        sampler, spp = integrator.prepare(sensor, seed, spp, integrator.aov_names())
-        ray, weight, position = integrator.sample_rays(scene, sensor, sampler)
-        common = {"scene": scene, "ray": ray, "depth": mi.UInt32(0), "δL": None, "active": mi.Bool(True)}
-        _, _, _, state = integrator.sample(mode=dr.ADMode.Primal, sampler=sampler.clone(), state_in=None, **common)
+        sampler, common, _, _ = _wavefront(scene, integrator, seed, spp)
+        _, _, _, state = integrator.sample(mode=dr.ADMode.Primal, sampler=sampler, state_in=None, **common)
+        return (state,)
+
+
+def derivative_samples(scene: "mi.Scene", integrator: "mi.SamplingIntegrator", seed: "mi.UInt32", spp: int,
+                       state: object) -> tuple["mi.Point2f", "mi.Color3f"]:
+    """Film positions (px) and forward-mode derivatives of radiance times the camera's weight of ``spp``
+    samples in every pixel of the film window, along the gradients set on the scene's values: the forward pass of
+    ``render_forward`` from ``state``, its primal pass's (:func:`primal_state` of the same seed and count), before
+    the samples are splatted. ``render_forward`` runs the primal pass on a clone of the sampler after the rays and
+    the forward pass on the sampler: both from the state :func:`_wavefront` leaves, as here."""
+    with dr.suspend_grad():
+        sampler, common, weight, position = _wavefront(scene, integrator, seed, spp)
         derivative, _, _, _ = integrator.sample(mode=dr.ADMode.Forward, sampler=sampler, state_in=state, δaovs=None, **common)
         return position, derivative * weight
 
@@ -114,8 +132,8 @@ def _history_off(frozen: Callable[..., tuple]) -> Callable[..., tuple]:
 
 
 class FrozenPasses:
-    """One loaded scene's frozen passes: :func:`camera_samples` and :func:`derivative_samples`, each
-    recorded per key and replayed after (see the module's notes), for one geometry at a time.
+    """One loaded scene's frozen passes: :func:`camera_samples`, :func:`primal_state` and :func:`derivative_samples`,
+    each recorded per key and replayed after (see the module's notes), for one geometry at a time.
 
     A recording holds the scene's ray-tracing acceleration structure as it was: after vertices move
     (the pose, W-M wrinkles), which rebuilds it, a replay traced the old one (an image of half the
@@ -131,23 +149,23 @@ class FrozenPasses:
         self._drop()
 
     def _drop(self) -> None:
-        self.camera = dr.freeze(_recorded(camera_samples), warn_after=WARN_AFTER, enabled=self.enabled)
-        self.derivative = dr.freeze(_recorded(derivative_samples), warn_after=WARN_AFTER, enabled=self.enabled)
-        self._calls = _history_off(self.camera), _history_off(self.derivative)
+        self.camera, self.state, self.derivative = (dr.freeze(_recorded(f), warn_after=WARN_AFTER, enabled=self.enabled)
+                                                    for f in (camera_samples, primal_state, derivative_samples))
+        self._calls = tuple(_history_off(f) for f in (self.camera, self.state, self.derivative))
 
-    def functions(self, geometry: int) -> tuple[Callable[..., tuple], Callable[..., tuple]]:
-        """The (camera, derivative) pass functions for the scene's ``geometry``: the frozen ones while it
+    def functions(self, geometry: int) -> tuple[Callable[..., tuple], ...]:
+        """The (camera, primal state, derivative) pass functions for the scene's ``geometry``: the frozen ones while it
         is the one of the last call, the plain ones at the first call of a new one."""
         if geometry == self.geometry:
             return self._calls
         self.geometry = geometry
         self._drop()
-        return camera_samples, derivative_samples
+        return camera_samples, primal_state, derivative_samples
 
     @property
     def recordings(self) -> int:
-        """How many recordings the two hold: one more means a render was traced anew, not replayed."""
-        return self.camera.n_recordings + self.derivative.n_recordings
+        """How many recordings the three hold: one more means a render was traced anew, not replayed."""
+        return self.camera.n_recordings + self.state.n_recordings + self.derivative.n_recordings
 
 
 def splat(block: "mi.ImageBlock", position: "mi.Point2f", value: "mi.Color3f") -> None:
