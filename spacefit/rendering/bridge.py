@@ -194,7 +194,7 @@ class DrJitScene:
         for i, (seed, count, _) in enumerate(self._passes(self.spp_grad, seed_grad)):
             key = (i, self.renderer.geometry)
             if key not in states:
-                states[key] = state(self.renderer.scene, self._integrator, mi.UInt32(seed), count)
+                states[key] = state(self.renderer.scene, self._integrator, dr.opaque(mi.UInt32, seed), count)
                 dr.eval(states[key])
 
     def _forward_once(self, values: Mapping[str, np.ndarray], tangent: Mapping[str, np.ndarray], seed_grad: int,
@@ -220,7 +220,7 @@ class DrJitScene:
         image = None
         with errors_only():  # projective integrators warn about film borders per call
             for i, (seed, count, weight) in enumerate(self._passes(self.spp_grad, seed_grad)):
-                position, value = derivative(self.renderer.scene, self._integrator, mi.UInt32(seed), count,
+                position, value = derivative(self.renderer.scene, self._integrator, dr.opaque(mi.UInt32, seed), count,
                                              *states[(i, self.renderer.geometry)])
                 dr.eval(position, value)
                 with render_threads(self.renderer.assembly.scene.render.deterministic):
