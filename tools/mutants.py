@@ -144,6 +144,10 @@ MUTANTS = (
            "for k, t in tangents.items()} for j in ad], seed_grad)))", "for k, t in tangents.items()} for j in ad], seed)))",
            (CONVENTIONS,)),
     Mutant("backward-with-primal-seed", BRIDGE, "scene.backward(v, c, seed_grad)", "scene.backward(v, c, seed)", (CONVENTIONS,)),
+    # a render's seed is an operand of its recordings: another seed replays them
+    Mutant("forward-seed-literal", BRIDGE, "derivative(self.renderer.scene, self._integrator, dr.opaque(mi.UInt32, seed), count,",
+           "derivative(self.renderer.scene, self._integrator, mi.UInt32(seed), count,",
+           ("tests/test_frozen.py::test_a_new_seed_is_replayed_not_recorded_again",)),
     # a Jacobian's forward-mode columns share one primal pass, and each is the column rendered alone
     Mutant("forward-columns-each-own-primal-pass", BRIDGE, "            if key not in states:\n", "            if True:\n",
            ("tests/test_frozen.py::test_a_jacobians_columns_share_one_primal_pass_and_are_each_columns_own_render",)),

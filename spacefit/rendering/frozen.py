@@ -12,8 +12,8 @@ What a pass's samples are a function of:
   in a derivative pass, the gradients set on them: inputs of the recording, replayed with their new
   values. A value that was a literal at the first call is baked into its kernel; when it changes,
   Dr.Jit records again with it opaque (``auto_opaque``), so it is never replayed stale.
-- the seed: an opaque ``mi.UInt32`` operand, replayed (made as a literal, each pass's second seed had recorded it
-  again, opaque: 7 of the 8-parameter fit's 18 recordings).
+- the seed: an opaque ``mi.UInt32`` operand, replayed (made as a literal, a derivative render's passes recorded again,
+  opaque, at their second seed: 7 of the 8-parameter fit's 18 recordings; the camera's pass replays either way).
 - the sample count, the pixel range and the set of values differentiated (their AD status): each a
   key of its own recording (Python integers are compared, AD status is part of Dr.Jit's key), made at
   its first call and replayed at the next with the same key.
