@@ -226,7 +226,8 @@ def check_studies(plate: dict[str, Any], data: st.DataObject) -> None:
     study = data.draw(st.sampled_from(["sensitivity", "light_curve", "sweep", "jacobian", "render_function"]))
     if study == "sensitivity":
         names = data.draw(st.one_of(JUNK, st.just(["parts.plate.kd"])))
-        seeds = data.draw(st.one_of(JUNK, st.integers(-2, 3)))
+        # a valid count past 3 is that many Jacobians, rightly rendered: 215433 of them (drawn) ran for hours
+        seeds = data.draw(st.one_of(JUNK, st.integers(-2, 3)).filter(lambda s: not (isinstance(s, int) and 3 < s <= 2**30)))
         spp = data.draw(st.one_of(st.none(), JUNK))
         outcome(lambda: sf.sensitivity(scene, names, seeds=seeds, spp=spp, quiet=True))
     elif study == "light_curve":

@@ -289,3 +289,13 @@ def test_a_light_curve_fit_names_free_when_it_is_not_a_list_of_names():
     scene = sf.load_case("panels").truth_scene
     with pytest.raises(sf.InputError, match=r"`free` must be a list of names, got None"):
         sf.fit_light_curve(scene, None, [{"target.attitude_z_deg": 0.0}], [1.0], 0.01)
+
+
+def test_a_light_curve_fit_refuses_a_seed_past_mitsubas_range_before_any_render():
+    """The renders' seeds are Mitsuba's 32-bit ones, plus the fit's offsets: a seed past 2^31 - 1 is refused by name,
+    as an image fit's (the slow fuzz test's find: 4294966295 reached JAX's uint32 seeds as an OverflowError)."""
+    scene = sf.load_case("panels").truth_scene
+    with pytest.raises(sf.InputError, match=r"`seed` must be an integer in \[0, 2147483647\].*got 4294966295"):
+        sf.fit_light_curve(scene, ["parts.body.kd"], [{"target.attitude_z_deg": 0.0}], [1.0], 0.01, seed=4294966295)
+    with pytest.raises(sf.InputError, match=r"`seed` must be an integer in \[0, 2147483647\].*got 2147483648"):
+        sf.LightCurveFiles("curve.csv", "scene.toml", seed=2**31)  # the command line's light-curve fit, checked as it is built

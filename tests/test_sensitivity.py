@@ -88,6 +88,17 @@ def test_bad_input_names_the_argument(tmp_path):
         sf.sensitivity(scene, ["parts.sphere.kd"], seeds=1, quiet=True)
 
 
+def test_seeds_past_mitsubas_range_are_refused_before_their_pairs_are_made(tmp_path):
+    """2**70 estimates (a fuzz test's) filled the memory making their seed pairs; the last pair's seeds, render.seed + 2 k
+    and + 2 k + 1, must be Mitsuba's (below 2^31): refused by name, with the largest count allowed."""
+    scene = sphere_scene(tmp_path)
+    high = scene.with_values({"render.seed": 2**31 - 5})
+    with pytest.raises(sf.InputError, match=r"`seeds` must be an integer in \[2, 2\].*got 3"):
+        sf.sensitivity(high, ["parts.sphere.kd"], seeds=3, quiet=True)
+    with pytest.raises(sf.InputError, match=r"`seeds` must be an integer in \[2, 1073741823\].*got 1180591620717411303424"):
+        sf.sensitivity(scene, ["parts.sphere.kd"], seeds=2**70, quiet=True)
+
+
 def test_a_sweep_stores_derivatives_per_point(tmp_path):
     scene = sphere_scene(tmp_path)
     ds = sf.sweep(scene, {"sun.elevation_deg": [40.0, 80.0]}, derivatives=["parts.sphere.kd", "target.attitude_x_deg"],

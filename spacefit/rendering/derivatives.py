@@ -147,12 +147,18 @@ def check_spp(spp: int | None, spp_grad: int | None) -> None:
         check_count(name, value, 1, MAX_SPP, "as `render.spp`")
 
 
+def check_seed(name: str, value: object) -> None:
+    """Raise :class:`InputError` unless ``value`` is a fit's render seed: an integer in [0,
+    :data:`~spacefit.scene.schema.MAX_SEED`], to which the fit adds its offsets."""
+    check_count(name, value, 0, MAX_SEED, "Mitsuba's seeds are 32-bit, and a fit adds offsets", optional=False)
+
+
 def check_seeds(seeds: Sequence[tuple[int, int]]) -> None:
     """Raise :class:`InputError` for a seed outside [0, :data:`~spacefit.scene.schema.MAX_SEED`] or a
     pair whose primal and derivative seeds are equal."""
     for seed, seed_grad in seeds:
-        for name, value in (("seed", seed), ("seed_grad", seed_grad)):
-            check_count(name, value, 0, MAX_SEED, "Mitsuba's seeds are 32-bit, and a fit adds offsets", optional=False)
+        check_seed("seed", seed)
+        check_seed("seed_grad", seed_grad)
     if any(seed == seed_grad for seed, seed_grad in seeds):
         raise InputError("`seed` and `seed_grad` must differ (a shared seed biases L2 gradients).")
 

@@ -26,8 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from spacefit.errors import InputError, check_count, check_path, check_range, check_type
+from spacefit.errors import InputError, check_path, check_range, check_type
 from spacefit.fitting.passes import COMPONENTS, VECTOR_KEYS, cell, scene_columns, table_column
+from spacefit.rendering.derivatives import check_seed
 from spacefit.scene.toml import load_scene
 from spacefit.studies.lightcurve_fit import POINT_KEYS, RenderedLightCurve
 from spacefit.studies.lightcurve_observations import LightCurveObservations
@@ -63,7 +64,7 @@ class LightCurveFiles:
         band: the magnitudes' band (default: the file's, else V).
         site: the observer, for a file whose geometry is seen from a site.
         sigma_mag: the magnitudes' error (mag) where the file gives none (None: unknown).
-        seed: the renders' seed.
+        seed: the renders' seed, in [0, 2^31 - 1].
 
     Raises:
         InputError: a bad option value (the files themselves are read when the fit runs).
@@ -89,7 +90,7 @@ class LightCurveFiles:
         check_type("site", self.site, (Site, type(None)), "an sf.Site or None")
         if self.sigma_mag is not None:
             check_range("sigma_mag", self.sigma_mag, 0.0, lo_open=True, unit="mag")
-        check_count("seed", self.seed, 0, optional=False)
+        check_seed("seed", self.seed)
         object.__setattr__(self, "overrides", tuple(self.overrides))
 
     @property

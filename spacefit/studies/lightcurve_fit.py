@@ -41,6 +41,7 @@ from spacefit.geometry.frames import pixel_solid_angles
 from spacefit.precision import float64
 from spacefit.progress import Progress, ProgressCallback
 from spacefit.rendering.bridge import seeds_array
+from spacefit.rendering.derivatives import check_seed
 from spacefit.rendering.memory import check_fit_memory, describe_fit
 from spacefit.scene.assembly import assemble
 from spacefit.scene.parameters import IMAGE, available, fd_step, scene_value
@@ -75,7 +76,7 @@ class RenderedLightCurve(LightCurveKind):
         band: the band (``V`` or ``AB532``).
         sun_magnitude: the sun's magnitude in it (None: the band's).
         observer_range_m: the observer's range (None: each point's camera's).
-        seed: the renders' seed (independent ones: ``seed + 1000 j``).
+        seed: the renders' seed, in [0, 2^31 - 1] (independent ones: ``seed + 1000 j``).
         film_px: the width (px) of the film the points are rendered on, over the scene's field of
             view (its height and pixel pitch scaled with it), or None: the scene's own film.
 
@@ -108,7 +109,7 @@ class RenderedLightCurve(LightCurveKind):
         check_choice("band", self.band, SUN_MAGNITUDES)
         if self.sun_magnitude is not None:
             check_range("sun_magnitude", self.sun_magnitude)
-        check_count("seed", self.seed, 0, optional=False)
+        check_seed("seed", self.seed)
         check_count("film_px", self.film_px, 1)
         film = on_film(self.scene, self.film_px)
         magnitude = check_vector("magnitude", self.magnitude, None)
@@ -289,7 +290,7 @@ def fit_light_curve(
         band: the magnitudes' band, ``V`` or ``AB532``.
         sun_magnitude: the sun's magnitude in ``band`` (None: the band's).
         observer_range_m: the observer's distance (m; None: the camera's).
-        seed: the renders' seed.
+        seed: the renders' seed, in [0, 2^31 - 1].
         film_px: the width (px) of the points' film over the scene's field of view (None: the coarsest
             the magnitudes' errors allow; the scene's width: the scene's own film).
         max_steps: the solver's step limit.

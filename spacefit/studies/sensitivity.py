@@ -28,7 +28,7 @@ from spacefit.errors import check_choice, check_count, check_range
 from spacefit.progress import progress_bar
 from spacefit.scene.parameters import check_names, label, parameter
 from spacefit.scene.schema import Scene
-from spacefit.scene.sections import check_scene
+from spacefit.scene.sections import MAX_SEED, check_scene
 from spacefit.units import RADIANCE_UNIT
 
 if TYPE_CHECKING:  # types only: matplotlib loads where a figure is drawn
@@ -292,7 +292,8 @@ def sensitivity(
         A :class:`Sensitivity`.
 
     Raises:
-        InputError: a name the scene cannot free, ``seeds`` < 2.
+        InputError: a name the scene cannot free, ``seeds`` < 2 or past (2^31 - ``render.seed``) / 2 (the
+            estimates' render seeds, ``render.seed`` + 2 k and + 2 k + 1, are Mitsuba's, below 2^31).
 
     Example:
         >>> import spacefit as sf
@@ -306,12 +307,14 @@ def sensitivity(
     from spacefit.rendering.derivatives import jacobians
 
     check_scene(scene)
-    check_count("seeds", seeds, 2, optional=False)
     names = check_names(scene, names, "names")
     if at:
         scene = scene.with_values(at)
     scene = fit_scene(scene, names)  # as the fit: wrinkles rendered as geometry, where D and G act
     s0 = scene.render.seed
+    # before the pairs are made: 2**70 seeds would fill the memory building them, not be refused
+    check_count("seeds", seeds, 2, (MAX_SEED + 1 - s0) // 2, f"estimate k's renders take the seeds render.seed + 2 k and "
+                f"+ 2 k + 1 (render.seed = {s0}), Mitsuba's, at most 2^31 - 1", optional=False)
     pairs = tuple((s0 + 2 * k, s0 + 2 * k + 1) for k in range(seeds))
     bar = progress_bar(seeds, "sensitivity", quiet=quiet)
     try:
