@@ -187,10 +187,9 @@ class DrJitScene:
                     attempt += 1
         return columns
 
-    def _primal_states(self, seed_grad: int, states: dict[tuple[int, int], tuple[object]]) -> None:
-        """Each pass's primal state (:func:`~spacefit.rendering.frozen.primal_state`) in the scene's present geometry, into
-        ``states``, unless there."""
-        _, state, _ = self.renderer.frozen.functions(self.renderer.geometry)
+    def _primal_states(self, state: Callable[..., tuple[object]], seed_grad: int, states: dict[tuple[int, int], tuple[object]]) -> None:
+        """Each pass's primal state by ``state`` (:func:`~spacefit.rendering.frozen.primal_state`, frozen or not) in the
+        scene's present geometry, into ``states``, unless there."""
         for i, (seed, count, _) in enumerate(self._passes(self.spp_grad, seed_grad)):
             key = (i, self.renderer.geometry)
             if key not in states:
@@ -215,8 +214,8 @@ class DrJitScene:
         when the render is deterministic, in the samples' order, as Mitsuba's ``render_forward`` splats them (the image
         it gives wholly on one thread, bit for bit), the passes weighted by their shares of the samples."""
         film = self.renderer.scene.sensors()[0].film()
-        self._primal_states(seed_grad, states)
-        _, _, derivative = self.renderer.frozen.functions(self.renderer.geometry)
+        _, state, derivative = self.renderer.frozen.functions(self.renderer.geometry)  # once: a new geometry's first render is unfrozen
+        self._primal_states(state, seed_grad, states)
         image = None
         with errors_only():  # projective integrators warn about film borders per call
             for i, (seed, count, weight) in enumerate(self._passes(self.spp_grad, seed_grad)):
