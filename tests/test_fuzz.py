@@ -62,6 +62,14 @@ def near(default: Any) -> st.SearchStrategy:
     return JUNK
 
 
+@pytest.fixture(autouse=True)
+def in_a_scratch_folder(tmp_path, monkeypatch) -> None:
+    """Every case runs in a folder of its own: a path drawn from JUNK ("auto", "1", "plate") is a name relative to it,
+    so that an output written there (``sf.write_table_fit("auto", fit)`` rightly makes that folder) is not left in the
+    checkout, as one was in a ``make slow`` run."""
+    monkeypatch.chdir(tmp_path)
+
+
 @pytest.fixture(scope="module")
 def plate(tmp_path_factory) -> dict[str, Any]:
     """An 8 x 8 px plate filling the view: its scene, scene file and a reference image of it."""
