@@ -189,7 +189,10 @@ class DrJitScene:
 
     def _primal_states(self, state: Callable[..., tuple[object]], seed_grad: int, states: dict[tuple[int, int], tuple[object]]) -> None:
         """Each pass's primal state by ``state`` (:func:`~spacefit.rendering.frozen.primal_state`, frozen or not) in the
-        scene's present geometry, into ``states``, unless there."""
+        scene's present geometry, into ``states``, unless there; those of an earlier geometry dropped (a vertex-moving
+        column rebuilds it: its columns' states would otherwise all be held until the last column)."""
+        for key in [key for key in states if key[1] != self.renderer.geometry]:
+            del states[key]
         for i, (seed, count, _) in enumerate(self._passes(self.spp_grad, seed_grad)):
             key = (i, self.renderer.geometry)
             if key not in states:
