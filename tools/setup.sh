@@ -50,8 +50,9 @@ interpreter() {
 }
 
 if [ ! -x .venv/bin/python ] || ! .venv/bin/python -c "import spacefit, pytest, xdist, hypothesis, xarray, zarr, dask.distributed, tqdm, sphinx, myst_nb, sphinx_gallery, pydata_sphinx_theme, sphinxarg; import importlib; importlib.import_module('sphinx-mathjax-offline')" 2>/dev/null; then
-    echo "setup: creating .venv from $(interpreter) and installing spacefit (a few minutes the first time)" >&2
-    "$(interpreter)" -m venv .venv
+    python=$(interpreter)
+    echo "setup: creating .venv from $python and installing spacefit (a few minutes the first time)" >&2
+    "$python" -m venv .venv
     .venv/bin/python -m pip install -q --upgrade pip
     .venv/bin/python -m pip install -q -e ".[dev,docs]"
 fi
