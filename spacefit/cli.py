@@ -203,6 +203,13 @@ COMMAND_MODULES = {
 }
 
 
+# A command's process collects its youngest generation after this many new objects (Python's default 700): JAX's
+# tracing makes and drops some 10^6 in an 8-parameter fit, whose 290 young collections led to 26 of the middle
+# generation and two full ones, 70 ms of its 5 s; at 20,000, 52 young, 4 middle, no full one, 20 ms; the same peak
+# memory (docs/measurements/performance.md, "The collector's thresholds").
+PROGRAM_GC_YOUNG = 20_000
+
+
 def _load(*modules: str, frozen: bool = False) -> None:
     """Import ``modules`` with Ctrl-C and SIGTERM waiting for the end (then raised as KeyboardInterrupt /
     Terminated): a signal inside an extension module's import surfaces as an ImportError traceback.
@@ -211,7 +218,8 @@ def _load(*modules: str, frozen: bool = False) -> None:
     then is frozen (``gc.freeze``), out of every later collection's scan. The modules live as long as the process;
     a fit's imports leave 350 000 objects (about 1 MiB of them the imports' own garbage, kept), which each full
     collection scanned: 0.1 to 0.3 s each, five or six times in an 8-parameter fit (0.4 to 1.1 s of CPU, one of
-    them often in the report), 0.15 s of them during the imports."""
+    them often in the report), 0.15 s of them during the imports. After them its youngest generation is collected
+    every :data:`PROGRAM_GC_YOUNG` new objects, not Python's 700."""
     if frozen:
         gc.disable()
     try:
@@ -222,6 +230,7 @@ def _load(*modules: str, frozen: bool = False) -> None:
     finally:
         if frozen:
             gc.freeze()
+            gc.set_threshold(PROGRAM_GC_YOUNG, *gc.get_threshold()[1:])
             gc.enable()
 
 

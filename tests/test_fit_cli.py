@@ -158,21 +158,25 @@ def test_the_fit_program_ends_at_once_with_its_report_and_reads_jax_s_programs_f
 
 def test_the_program_s_modules_load_with_the_collector_off_and_are_frozen_out_of_its_scans():
     """Run as the program (``frozen``), what the command's imports leave is frozen (gc.freeze: a fit's 350 000 objects,
-    which every full collection scanned) and the collector is on again after them, an import that fails included;
-    main called in a process of its own (a test's, a notebook's) leaves the collector as it is."""
+    which every full collection scanned) and the collector is on again after them, its youngest generation collected
+    every PROGRAM_GC_YOUNG new objects, an import that fails included; main called in a process of its own (a test's, a
+    notebook's) leaves the collector as it is."""
     assert gc.isenabled()
-    frozen = gc.get_freeze_count()
+    frozen, thresholds = gc.get_freeze_count(), gc.get_threshold()
     try:
         cli._load("json", frozen=False)
-        assert gc.get_freeze_count() == frozen and gc.isenabled()
+        assert gc.get_freeze_count() == frozen and gc.isenabled() and gc.get_threshold() == thresholds
         cli._load("json", frozen=True)
         assert gc.get_freeze_count() > frozen and gc.isenabled()
+        assert gc.get_threshold() == (cli.PROGRAM_GC_YOUNG, *thresholds[1:])
+        gc.set_threshold(*thresholds)
         with pytest.raises(ModuleNotFoundError):
             cli._load("spacefit.no_such_module", frozen=True)
-        assert gc.isenabled()
+        assert gc.isenabled() and gc.get_threshold()[0] == cli.PROGRAM_GC_YOUNG
     finally:
         gc.unfreeze()
         gc.enable()
+        gc.set_threshold(*thresholds)
 
 
 def test_jax_s_cache_folder_follows_the_environment_and_a_folder_the_process_chose(monkeypatch, tmp_path):
