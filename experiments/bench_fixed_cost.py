@@ -37,7 +37,7 @@ from studyio import commit, machine
 
 import spacefit as sf
 from spacefit.rendering.backend import dr, on_drjit_thread
-from spacefit.rendering.bridge import DrJitScene
+from spacefit.rendering.drjit_scene import DrJitScene
 from spacefit.rendering.derivatives import render_chain
 from spacefit.rendering.frozen import FrozenPasses
 from spacefit.scene.sampling import split_sample_count

@@ -1,7 +1,7 @@
 """Where a frozen render call's time goes outside its kernels, on a loaded machine too: the panels case at
 128 x 128 px, 32 spp (bench_fixed_cost.py's calls), its primal render and a forward-mode column re-run step
 by step as :meth:`~spacefit.rendering.renderer.Renderer.radiance` and
-:meth:`~spacefit.rendering.bridge.DrJitScene._render_forward` run them, each step timed in wall time and in
+:meth:`~spacefit.rendering.drjit_scene.DrJitScene._render_forward` run them, each step timed in wall time and in
 the Dr.Jit thread's CPU time. A step's CPU time is what it costs on a quiet machine (a loaded one delays it,
 but does not make it use more), so the CPU time of the steps outside the kernels estimates the quiet fixed
 cost per call whatever the load. The steps marked K run or wait for kernels. Each call's image is checked
@@ -22,7 +22,7 @@ from studyio import commit, machine
 
 import spacefit as sf
 from spacefit.rendering.backend import dr, mi, on_drjit_thread, variant_scope
-from spacefit.rendering.bridge import DrJitScene
+from spacefit.rendering.drjit_scene import DrJitScene
 from spacefit.rendering.derivatives import render_chain
 from spacefit.rendering.drjit_values import to_value
 from spacefit.rendering.logs import errors_only

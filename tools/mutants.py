@@ -30,6 +30,7 @@ RENDERER = "spacefit/rendering/renderer.py"
 MITSUBA_SCENE = "spacefit/rendering/mitsuba_scene.py"
 MITSUBA_MATERIALS = "spacefit/rendering/materials.py"
 BRIDGE = "spacefit/rendering/bridge.py"
+DRJIT_SCENE = "spacefit/rendering/drjit_scene.py"
 WM = "spacefit/geometry/wm.py"
 # A mutant whose tests run longer than this is counted as killed (the suite would hang on it).
 TIMEOUT_S = 900
@@ -145,21 +146,21 @@ MUTANTS = (
            (CONVENTIONS,)),
     Mutant("backward-with-primal-seed", BRIDGE, "scene.backward(v, c, seed_grad)", "scene.backward(v, c, seed)", (CONVENTIONS,)),
     # a render's seed is an operand of its recordings: another seed replays them
-    Mutant("forward-seed-literal", BRIDGE, "derivative(self.renderer.scene, self._integrator, dr.opaque(mi.UInt32, seed), count,",
+    Mutant("forward-seed-literal", DRJIT_SCENE, "derivative(self.renderer.scene, self._integrator, dr.opaque(mi.UInt32, seed), count,",
            "derivative(self.renderer.scene, self._integrator, mi.UInt32(seed), count,",
            ("tests/test_frozen.py::test_a_new_seed_is_replayed_not_recorded_again",)),
     # a Jacobian's forward-mode columns share one primal pass, and each is the column rendered alone
-    Mutant("forward-columns-each-own-primal-pass", BRIDGE, "            if key not in states:\n", "            if True:\n",
+    Mutant("forward-columns-each-own-primal-pass", DRJIT_SCENE, "            if key not in states:\n", "            if True:\n",
            ("tests/test_frozen.py::test_a_jacobians_columns_share_one_primal_pass_and_are_each_columns_own_render",)),
     # a forward-mode column survives a profiler holding PRB's frames (a pass on dask died of it), and leaves no AD state behind
-    Mutant("forward-attaches-every-value", BRIDGE, "if np.any(np.asarray(t) != 0) and differentiable(", "if differentiable(",
+    Mutant("forward-attaches-every-value", DRJIT_SCENE, "if np.any(np.asarray(t) != 0) and differentiable(", "if differentiable(",
            ("tests/test_bridge_scope.py::test_a_material_column_is_the_same_with_prb_frames_held",)),
-    Mutant("forward-tried-once", BRIDGE, "FORWARD_ATTEMPTS = 2", "FORWARD_ATTEMPTS = 1",
+    Mutant("forward-tried-once", DRJIT_SCENE, "FORWARD_ATTEMPTS = 2", "FORWARD_ATTEMPTS = 1",
            ("tests/test_bridge_scope.py::test_a_vertex_column_is_rendered_again_when_a_sample_held_its_branch",)),
-    Mutant("forward-leaves-values-attached-on-error", BRIDGE, "        finally:\n            self._set(values)\n\n    def _render_forward",
+    Mutant("forward-leaves-values-attached-on-error", DRJIT_SCENE, "        finally:\n            self._set(values)\n\n    def _render_forward",
            "        finally:\n            pass\n\n    def _render_forward",
            ("tests/test_bridge_scope.py::test_other_render_errors_are_not_repeated_and_leave_the_values_detached",)),
-    Mutant("primal-kept-whatever-the-seed", BRIDGE, "return seed, digest.digest()", "return 0, digest.digest()",
+    Mutant("primal-kept-whatever-the-seed", DRJIT_SCENE, "return seed, digest.digest()", "return 0, digest.digest()",
            ("tests/test_stopping.py::test_history_flags_match_the_loss_sequence",)),
     Mutant("no-better-point-after-any-two-rejections", "spacefit/fitting/stopping.py",
            "abs(last[-1] - last[-2]) < self.noise", "abs(last[-1] - last[-2]) >= 0.0",

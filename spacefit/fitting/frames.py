@@ -301,7 +301,7 @@ def frame_executor(cluster: Cluster | None) -> Executor:
 def run_frames(executor: Executor, fn: Callable[..., Any], specs: Sequence[FrameSpec], *per_frame: Sequence[Any]) -> list[Any]:
     """``[fn(spec_k, key_k, *args_k) for each frame k]`` in frame order on ``executor``. Each render traces
     its samples on all of Dr.Jit's threads and, when deterministic, splats them on one, in their order
-    (:meth:`~spacefit.rendering.renderer.Renderer.radiance`, :meth:`~spacefit.rendering.bridge.DrJitScene.forward`):
+    (:meth:`~spacefit.rendering.renderer.Renderer.radiance`, :meth:`~spacefit.rendering.drjit_scene.DrJitScene.forward`):
     a frame's image and Jacobian are those of a render wholly on one thread, bit for bit. Several frames (a pass): the
     C heap's freed pages handed back before and after (:func:`~spacefit.rendering.memory.release_freed_memory`), those
     the solver's step freed on XLA's threads and those the renders freed on Dr.Jit's, which the other's threads do not

@@ -1,7 +1,7 @@
 """Derivatives of the image with respect to registered parameters, for notebooks and solvers.
 
 :func:`render_chain` is the one constructor of the chain "loaded scene -> JAX image function":
-Renderer (the scene loaded into Mitsuba) -> :class:`~spacefit.rendering.bridge.DrJitScene` ->
+Renderer (the scene loaded into Mitsuba) -> :class:`~spacefit.rendering.drjit_scene.DrJitScene` ->
 scene values (:func:`~spacefit.rendering.values.scene_values_fn`) -> the bridge's forward
 (:func:`~spacefit.rendering.bridge.render_params`) or reverse
 (:func:`~spacefit.rendering.bridge.render_values`) function; the fit, the sensitivities, the
@@ -24,7 +24,8 @@ from jaxtyping import Array, Float
 
 from spacefit.errors import InputError, check_count, check_type
 from spacefit.precision import float64
-from spacefit.rendering.bridge import DrJitScene, render_params, render_values
+from spacefit.rendering.bridge import render_params, render_values
+from spacefit.rendering.drjit_scene import DrJitScene
 from spacefit.rendering.renderer import Renderer
 from spacefit.rendering.memory import check_memory
 from spacefit.rendering.values import SceneValuesFn, ad_names, scene_values_fn

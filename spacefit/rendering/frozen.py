@@ -88,7 +88,7 @@ def primal_state(scene: "mi.Scene", integrator: "mi.SamplingIntegrator", seed: "
     """The primal pass of ``render_forward`` (its samples as :func:`_wavefront` starts them), as the one-tuple of its
     state, which the forward pass replays from (PRB's radiance; Vicini et al. 2021, "Path replay backpropagation"):
     computed with the gradients suspended, so the same whatever gradients are set, and a Jacobian's columns share one
-    (:meth:`~spacefit.rendering.bridge.DrJitScene.forward_columns`)."""
+    (:meth:`~spacefit.rendering.drjit_scene.DrJitScene.forward_columns`)."""
     with dr.suspend_grad():
         sampler, common, _, _ = _wavefront(scene, integrator, seed, spp)
         _, _, _, state = integrator.sample(mode=dr.ADMode.Primal, sampler=sampler, state_in=None, **common)
