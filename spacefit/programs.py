@@ -56,7 +56,8 @@ class AlikePrograms:
 
     def __init__(self, share: bool = True) -> None:
         self.share = share
-        self._programs: dict[object, Callable[..., list[jax.Array]]] = {}
+        self._programs: dict[object, Callable[..., list[jax.Array]]] = {}  # per kind: jitted, or compiled ahead
+        self._kinds: dict[object, object] = {}  # per key, its kind
         self._traced: dict[object, tuple[Callable[..., list[jax.Array]], list[jax.Array], Any]] = {}
         self._held: dict[tuple[tuple[int, ...], str, bytes], jax.Array] = {}
         self._holding = threading.Lock()  # keys traced first on concurrent threads: each array still held once
@@ -64,14 +65,29 @@ class AlikePrograms:
     def __call__(self, key: object, fn: Callable[..., Any], *args: Any) -> Any:
         """``fn(*args)``, by the program of its kind: traced for ``key`` (which names ``fn`` and its arguments' shapes
         and dtypes: they must not change between calls with one key) on its first call."""
+        program, consts, outputs = self._trace(key, fn, args)
+        return jax.tree.unflatten(outputs, program(consts, *args))
+
+    def compile_ahead(self, key: object, fn: Callable[..., Any], *args: Any) -> None:
+        """Trace ``fn`` for ``key`` and compile its kind's program for arguments shaped as ``args`` (their values
+        unused), without running it: a thread may make a program while others run (the pixel grid's last one beside its
+        fixed point's iterations, :func:`~spacefit.fitting.pixel_grid.grid_step`), and the call with ``key`` then runs
+        the compiled program with no tracing, lowering or cache read. The same program: the same outputs bit for bit."""
+        program, consts, _ = self._trace(key, fn, args)
+        if not isinstance(program, jax.stages.Compiled):
+            kind = self._kinds[key]
+            self._programs[kind] = program.lower(consts, *args).compile()
+            self._traced[key] = (self._programs[kind], *self._traced[key][1:])
+
+    def _trace(self, key: object, fn: Callable[..., Any], args: tuple[Any, ...]) -> tuple[Callable[..., list[jax.Array]], list[jax.Array], Any]:
+        """``key``'s program, its arrays and its outputs' structure, ``fn`` traced on ``args`` for it first."""
         if key not in self._traced:
             traced, shapes = jax.make_jaxpr(fn, return_shape=True)(*args)
-            kind = traced_alike(traced) if self.share else key
+            kind = self._kinds[key] = traced_alike(traced) if self.share else key
             if kind not in self._programs:
                 self._programs[kind] = jax.jit(operand_program(traced, getattr(fn, "__name__", "program")))
             self._traced[key] = (self._programs[kind], [self._once(c) for c in traced.consts], jax.tree.structure(shapes))
-        program, consts, outputs = self._traced[key]
-        return jax.tree.unflatten(outputs, program(consts, *args))
+        return self._traced[key]
 
     def _once(self, array: object) -> jax.Array:
         """``array`` on the device, the one held already where an equal one is (same shape, dtype and bytes)."""

@@ -13,7 +13,7 @@ import pytest
 
 import spacefit as sf
 from spacefit.fitting import problem
-from spacefit.fitting.frame_models import FrameModels, concurrently, frame_model
+from spacefit.fitting.frame_models import FrameModels, concurrently, frame_model, meanwhile
 from spacefit.fitting.render_batches import render_runs
 from spacefit.fitting.losses import AffineVariance, residual_fn
 from spacefit.precision import float64
@@ -110,3 +110,26 @@ def test_the_images_programs_run_on_threads_in_order_in_the_callers_64_bit_mode(
     out = concurrently(calls)
     assert [k for *_, k in out] == list(range(5)) and all(dtype == jnp.float64 for _, dtype, _ in out)
     assert out[0][0] == threading.current_thread().name and all(name.startswith("spacefit-programs") for name, *_ in out[1:])
+
+
+@float64
+def test_meanwhile_runs_its_call_beside_the_block_in_the_callers_mode_and_raises_its_error_at_the_end():
+    """meanwhile: the call on a thread of its own, in the caller's 64-bit mode, done by the block's end; its error raised
+    there; the block's own error raised in its place where the block raised; None runs nothing."""
+    seen = []
+    with meanwhile(lambda: seen.append((threading.current_thread().name, jnp.asarray(np.float64(1) / 3).dtype))):
+        pass
+    assert seen == [(seen[0][0], jnp.float64)] and seen[0][0].startswith("spacefit-ahead")
+
+    def fails() -> None:
+        raise ValueError("from the thread")
+
+    with pytest.raises(ValueError, match="from the thread"):
+        with meanwhile(fails):
+            pass
+    with pytest.raises(KeyError, match="the block's"):
+        with meanwhile(fails):
+            raise KeyError("the block's")
+    with meanwhile(None):
+        seen.append("block")
+    assert seen[-1] == "block"

@@ -381,7 +381,15 @@ def test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_v
             np.testing.assert_array_equal(again[2][i], derivatives[i])
         with pytest.raises(RuntimeError, match="dropped by its last settled evaluation"):
             changes.fine(x)
+        # settled's programs compiled ahead (the grid step's thread, beside the fixed point's iterations): the same bits
+        ahead = s.problem.pixel_grid(x)
+        ahead.ahead(x + 0.01, columns)  # values of the same shape: theirs are not used
+        early = ahead.settled(x, columns, last=True)
+        np.testing.assert_array_equal(early[0], each)
+        for i in range(len(columns)):
+            np.testing.assert_array_equal(early[2][i], derivatives[i])
     assert len(made[0]._traced) == 6 and len(made[0]._programs) == 2  # each frame's two programs traced, compiled once
+    assert len(made[1]._traced) == 3 and all(isinstance(program, jax.stages.Compiled) for program, *_ in made[1]._traced.values())
     # the arrays equal between frames (response matrices, frequency grids) held once, each frame's reference its own
     (_, first, _), (_, second, _) = list(made[0]._traced.values())[:2]
     shared = [a is b for a, b in zip(first, second)]

@@ -1,6 +1,8 @@
 """The pixel grid's model error of a fitted blur (spacefit.fitting.pixel_grid): the pixel's
 response, the fine and grid models made from one render, the step it moves the estimate by."""
 
+import dataclasses
+import threading
 from types import SimpleNamespace
 
 import jax
@@ -334,3 +336,28 @@ def test_a_small_pass_s_accelerated_step_is_its_long_plain_iterations_and_a_cut_
     np.testing.assert_allclose(grid.short, (long - grid.delta) / stderr, rtol=0, atol=0.1 * FIXED_POINT_TOLERANCE)
     # the cut step's distance, 0.2 of a standard error at most, to first order: measured within 0.3 of it (0.26 the worst)
     np.testing.assert_allclose(cut.short, (long - cut.delta) / stderr, rtol=0.3, atol=0.1 * FIXED_POINT_TOLERANCE)
+
+
+def test_the_grid_step_compiles_its_last_programs_on_a_thread_beside_the_iterations_and_raises_its_error():
+    """grid_step hands ``ahead`` the fit's values and the columns once, on a thread of its own while the fixed point's
+    iterations run (in the caller's 64-bit mode), and the same step comes out; an error there is the step's."""
+    rng = np.random.default_rng(5)
+    J, A = rng.normal(size=(40, 3)), 0.3 * rng.normal(size=(40, 3))
+    a, c = rng.normal(size=40), rng.normal(size=40)
+    step = lambda d: -np.linalg.lstsq(J, d, rcond=None)[0]  # noqa: E731
+    x = np.array([0.1, -0.2, 0.3])
+    plain = grid_step(linear_changes(A, a, c), step, x, np.ones(3), [0, 2])
+    seen = []
+    changes = dataclasses.replace(linear_changes(A, a, c), ahead=lambda y, columns: seen.append(
+        (threading.current_thread().name, y.copy(), list(columns), bool(jax.config.jax_enable_x64))))
+    with jax.enable_x64(True):
+        early = grid_step(changes, step, x, np.ones(3), [0, 2])
+    assert len(seen) == 1 and seen[0][0].startswith("spacefit-ahead") and seen[0][2:] == ([0, 2], True)
+    np.testing.assert_array_equal(seen[0][1], x)
+    np.testing.assert_array_equal(early.delta, plain.delta)
+
+    def fails(y: np.ndarray, columns: list[int]) -> None:
+        raise MemoryError("compiling ahead")
+
+    with pytest.raises(MemoryError, match="compiling ahead"):
+        grid_step(dataclasses.replace(linear_changes(A, a, c), ahead=fails), step, x, np.ones(3), [0, 2])

@@ -17,6 +17,7 @@ import jax
 import jax.monitoring
 import jax.numpy as jnp
 import lineax
+import numpy as np
 import optimistix
 import pytest
 from helpers import write_sphere_fit_case
@@ -113,3 +114,35 @@ def test_a_fit_s_programs_embed_no_array_as_a_constant(fit_programs):
     """JAX warns of each program that embeds more than CONSTANT_BYTES of constants (an array it closes over): none does."""
     _, embedded = fit_programs
     assert embedded == [], "\n\n".join(embedded)
+
+
+def test_a_program_compiled_ahead_runs_with_no_trace_and_gives_the_same_bits():
+    """AlikePrograms.compile_ahead: the key's program compiled for arguments shaped as those given (their values unused),
+    not run; the call with the key then traces, lowers and compiles nothing (JAX's own events), runs the program
+    compiled ahead and gives the plain call's outputs bit for bit; another key of its kind shares the compiled program."""
+    from spacefit.programs import AlikePrograms
+
+    weights = np.linspace(0.5, 2.0, 12)  # an array the function closes over: an operand of its program
+    events: list[str] = []
+
+    def listener(event: str, seconds: float, **kwargs: object) -> None:
+        events.append(event)
+
+    def fn(a: jax.Array, b: jax.Array) -> tuple[jax.Array, jax.Array]:
+        return jnp.sin(a * weights) @ b, jnp.cumsum(a)
+
+    a, b = np.arange(12.0) / 7, np.ones(12) / 3
+    plain = AlikePrograms()("plain", fn, a, b)
+    ahead = AlikePrograms()
+    ahead.compile_ahead("k", fn, np.zeros(12), np.zeros(12))
+    assert isinstance(ahead._programs[ahead._kinds["k"]], jax.stages.Compiled)
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        out = ahead("k", fn, a, b)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert not [e for e in events if e.endswith(("trace_duration", "mlir_module_duration", "compile_duration"))], events
+    for got, want in zip(out, plain):
+        np.testing.assert_array_equal(np.asarray(got), np.asarray(want))
+    np.testing.assert_array_equal(np.asarray(ahead("other", fn, b, a)[0]), np.asarray(AlikePrograms()("x", fn, b, a)[0]))
+    assert ahead._traced["other"][0] is ahead._traced["k"][0]  # the other key's kind: the program compiled ahead

@@ -27,7 +27,8 @@ not its memory).
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+import contextlib
+from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TypeVar
@@ -128,6 +129,25 @@ def concurrently(calls: Sequence[Callable[[], T]]) -> list[T]:
     first = calls[0]()
     with ThreadPoolExecutor(PROGRAM_THREADS, thread_name_prefix="spacefit-programs") as pool:
         return [first, *pool.map(run, calls[1:])]
+
+
+@contextlib.contextmanager
+def meanwhile(call: Callable[[], object] | None) -> Iterator[None]:
+    """Run ``call`` (None: nothing) on a thread of its own, in this thread's 64-bit mode, while the ``with`` block runs;
+    the block's end waits for it, and its error is raised there (the block's own, if the block raised)."""
+    if call is None:
+        yield
+        return
+    x64 = bool(jax.config.jax_enable_x64)
+
+    def run() -> object:
+        with jax.enable_x64(x64):
+            return call()
+
+    with ThreadPoolExecutor(1, thread_name_prefix="spacefit-ahead") as pool:
+        done = pool.submit(run)
+        yield
+        done.result()
 
 
 def _arrays(alike: Sequence[ClosedJaxpr]) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...], tuple[tuple[bool, int], ...]]:

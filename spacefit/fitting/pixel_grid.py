@@ -140,7 +140,7 @@ from jaxtyping import Float
 
 from spacefit.fitting.fine_models import COARSER, MOVES, PAD_MARGIN_PX, SUPERSAMPLE, reach_px
 from spacefit.fitting.fixed_point import anderson
-from spacefit.fitting.frame_models import concurrently
+from spacefit.fitting.frame_models import concurrently, meanwhile
 from spacefit.fitting.nuisance import nuisance_index
 
 REMAINDER_RATIO = 1.0 / 3.0
@@ -185,10 +185,13 @@ class GridChanges:
     :data:`~spacefit.fitting.fine_models.COARSER` (rows) and the derivatives of the renders' mean change to the model made at :data:`~spacefit.fitting.fine_models.SUPERSAMPLE`
     in each of the free values ``columns`` (len(columns) of rows, :class:`ImageColumns`; forward mode, no render);
     ``settled(y, columns, last=True)``: the same, the renders dropped as each image's are read (the last evaluation: neither
-    may be called after it; at 48 frames of 128 x 128 px the renders are 6.3 MiB a frame, and the outputs 2.6)."""
+    may be called after it; at 48 frames of 128 x 128 px the renders are 6.3 MiB a frame, and the outputs 2.6);
+    ``ahead(y, columns)``: ``settled``'s programs traced and compiled for values shaped as ``y`` and these ``columns``,
+    not run (:func:`grid_step` makes them on a thread while the fixed point's iterations run; none: nothing ahead)."""
 
     fine: Callable[[np.ndarray], np.ndarray]
     settled: Callable[..., tuple[np.ndarray, np.ndarray, Sequence[np.ndarray]]]
+    ahead: Callable[[np.ndarray, Sequence[int]], None] | None = None
 
 
 @dataclasses.dataclass(frozen=True)
@@ -247,8 +250,11 @@ def grid_step(changes: GridChanges, step: Callable[[np.ndarray], np.ndarray], x:
     taken as a constant leaves out (measured in the coverage study: the blur's error 1.2 times its pre-step error,
     ``D`` 0.16 for the blur)."""
     scale = np.where(stderr > 0, stderr, 1.0)  # a value without a standard error (no information in the pixels: its step 0) in its units
-    delta, evaluations = anderson(lambda y: step(finite(changes.fine(x + y), x + y).mean(axis=0)), scale, FIXED_POINT_STEPS,
-                                  FIXED_POINT_TOLERANCE)
+    # settled's programs traced and compiled on a thread while the iterations' programs run (0.1 s of the 8-parameter fit's
+    # wall: docs/measurements/performance.md, "The pixel grid's last programs made ahead")
+    with meanwhile(None if changes.ahead is None else lambda: changes.ahead(x, columns)):
+        delta, evaluations = anderson(lambda y: step(finite(changes.fine(x + y), x + y).mean(axis=0)), scale, FIXED_POINT_STEPS,
+                                      FIXED_POINT_TOLERANCE)
     each, coarser, derivatives = changes.settled(x + delta, columns, last=True)
     finite(each, x + delta)
     finite(coarser, x + delta)

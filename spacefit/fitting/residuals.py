@@ -308,6 +308,13 @@ def build_problem(
                 release_freed_memory()
             return out
 
+        def settled_call(k: int, m: GridModels, y: np.ndarray, columns: Sequence[int]) -> tuple[list[int], tuple[Any, ...]]:
+            """Image k's own ``columns`` (their indices) and what its settled program is called with (key, function,
+            arguments)."""
+            own = [i for i, j in enumerate(columns) if j in read[k]]
+            directions = np.eye(len(read[k]))[np.searchsorted(read[k], [columns[i] for i in own]).astype(int)]
+            return own, ((settled_changes, k, len(own)), lambda *a: settled_changes(k, *a), renders_of(m), y_of(k, y), directions)
+
         def settled(y: np.ndarray, columns: Sequence[int], last: bool = False) -> tuple[np.ndarray, np.ndarray, ImageColumns]:
             parts, blocks = [], []
             for k, m in enumerate(made):
@@ -316,10 +323,8 @@ def build_problem(
                     parts.append((np.zeros((2, size)), np.zeros(size)))
                     blocks.append(((), np.zeros((0, size))))
                     continue
-                own = [i for i, j in enumerate(columns) if j in read[k]]
-                directions = np.eye(len(read[k]))[np.searchsorted(read[k], [columns[i] for i in own]).astype(int)]
-                each, coarser, own_derivatives = (np.asarray(p, dtype=float) for p in programs(
-                    (settled_changes, k, len(own)), lambda *a, k=k: settled_changes(k, *a), renders_of(m), y_of(k, y), directions))
+                own, call = settled_call(k, m, y, columns)
+                each, coarser, own_derivatives = (np.asarray(p, dtype=float) for p in programs(*call))
                 if last:  # each image's renders dropped once read: a pass's frames' outputs took their place, not came on top
                     made[k] = dataclasses.replace(m, renders=None)
                 parts.append((each, coarser))
@@ -330,7 +335,12 @@ def build_problem(
             # each image's derivatives in its own columns, a column made whole when read (held whole: frames^2)
             return each, coarser, ImageColumns(len(columns), [r.size for r in references], blocks)
 
-        return GridChanges(fine, settled)
+        def ahead(y: np.ndarray, columns: Sequence[int]) -> None:
+            for k, m in enumerate(made):
+                if m is not None:
+                    programs.compile_ahead(*settled_call(k, m, y, columns)[1])
+
+        return GridChanges(fine, settled, ahead)
 
     def resampled(factor: int) -> Problem:
         finer = [dataclasses.replace(o, scene=o.scene.with_values({"render.spp": factor * n})) for o, n in zip(observations, spps)]
