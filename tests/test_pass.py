@@ -4,6 +4,7 @@ pass with per-frame attitude errors."""
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import ctypes
 import dataclasses
@@ -356,6 +357,7 @@ def test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_v
     share their two programs, and the arrays their programs hold that are equal."""
     from spacefit.programs import AlikePrograms
 
+    real_parse = ast.parse
     made: list[AlikePrograms] = []
     monkeypatch.setattr(residuals, "AlikePrograms", lambda share: made.append(AlikePrograms(share)) or made[-1])
     obs = small_pass[0]
@@ -381,15 +383,22 @@ def test_the_pixel_grids_derivatives_are_each_frames_in_its_own_and_the_shared_v
             np.testing.assert_array_equal(again[2][i], derivatives[i])
         with pytest.raises(RuntimeError, match="dropped by its last settled evaluation"):
             changes.fine(x)
-        # settled's programs compiled ahead (the grid step's thread, beside the fixed point's iterations): the same bits
+        # settled's programs compiled ahead (the grid step's thread, beside the fixed point's iterations): the same bits;
+        # and neither side parses Python with `ast` (CPython 3.11's parse trees are not safe across threads: the history,
+        # "The report's modules imported on a thread")
         ahead = s.problem.pixel_grid(x)
+        parsed: list[object] = []
+        monkeypatch.setattr(ast, "parse", lambda *a, **k: parsed.append(a) or real_parse(*a, **k))
         ahead.ahead(x + 0.01, columns)  # values of the same shape: theirs are not used
+        ahead.fine(x + 0.01)
         early = ahead.settled(x, columns, last=True)
+        assert parsed == []
         np.testing.assert_array_equal(early[0], each)
         for i in range(len(columns)):
             np.testing.assert_array_equal(early[2][i], derivatives[i])
     assert len(made[0]._traced) == 6 and len(made[0]._programs) == 2  # each frame's two programs traced, compiled once
-    assert len(made[1]._traced) == 3 and all(isinstance(program, jax.stages.Compiled) for program, *_ in made[1]._traced.values())
+    settled_programs = [program for key, (program, *_) in made[1]._traced.items() if key[0].__name__ == "settled_changes"]
+    assert len(settled_programs) == 3 and all(isinstance(program, jax.stages.Compiled) for program in settled_programs)
     # the arrays equal between frames (response matrices, frequency grids) held once, each frame's reference its own
     (_, first, _), (_, second, _) = list(made[0]._traced.values())[:2]
     shared = [a is b for a, b in zip(first, second)]
