@@ -152,6 +152,17 @@ def test_verdicts_and_their_precedence(solver_status, moved, at_bound, misfit, e
     assert status.success == (expected in (sf.Status.CONVERGED, sf.Status.NOISE_FLOOR, sf.Status.NO_BETTER_POINT))
 
 
+def test_a_status_in_a_few_words_says_its_verdict_first():
+    """Status.headline, a panel's title: the description's first clause, and the name in words where it says more."""
+    assert {s: s.headline for s in sf.Status} == {
+        sf.Status.CONVERGED: "converged", sf.Status.NOISE_FLOOR: "converged: noise floor",
+        sf.Status.NO_BETTER_POINT: "converged: no better point", sf.Status.MAX_STEPS: "stopped: max steps",
+        sf.Status.NO_PROGRESS: "failed: no progress", sf.Status.AT_BOUND: "failed: at bound", sf.Status.MISFIT: "misfit",
+        sf.Status.UNJUDGED: "not judged", sf.Status.UNSETTLED: "not settled", sf.Status.UNSTEPPED: "not stepped",
+        sf.Status.DIVERGED: "failed: diverged", sf.Status.NONFINITE: "failed: nonfinite", sf.Status.FAILED: "failed",
+        sf.Status.INTERRUPTED: "stopped: interrupted", sf.Status.TERMINATED: "stopped: terminated"}
+
+
 # The panels case at 32 x 32 px (same field of view), fitted at 16 spp, observed by a bright calibrated
 # sensor (its noise below the fit's render noise: v about 0.9), the references rendered at 1024 spp.
 FIT_SPP = 16

@@ -217,6 +217,8 @@ def test_axes_are_labelled_in_words_with_units():
     assert all(p.label for p in PARAMETERS.values())  # every registered parameter has its words
     convergence = sf.plot_convergence(fit_result())
     assert [ax.get_ylabel().replace("\n", " ") for ax in convergence[1:]] == ["albedo kd of body", "target attitude about z (deg)"]
+    stopped = sf.plot_convergence(dataclasses.replace(fit_result(), status=Status.NO_BETTER_POINT))
+    assert stopped[0].get_title() == "lm, pixel loss: converged: no better point"  # the verdict in words, not its code name
     lc = light_curve().figure()
     assert lc[0].get_xlabel() == "solar phase angle (deg)" and "(mag" in lc[1].get_ylabel()
     assert lc[0].get_ylabel() == f"irradiance at the observer ({unit_label('W m^-2')})"  # the one home of units' text

@@ -174,7 +174,7 @@ def plot_convergence(result: FitResult, *, truths: Mapping[str, float] | None = 
         ax_loss.fill_between(steps, best, best + noise, color="0.6", alpha=0.4, step="post", label="Monte Carlo noise")
     ax_loss.set_xlabel("step")
     ax_loss.set_ylabel("loss, 0.5 sum of squared residuals")
-    ax_loss.set_title(f"{result.solver}, {result.loss_name} loss: {result.status.name.lower()}", fontsize=9)
+    ax_loss.set_title(f"{result.solver}, {result.loss_name} loss: {result.status.headline}", fontsize=9)
     ax_loss.legend(fontsize=8)
     for i, (name, panel) in enumerate(zip(result.names, axes[1:])):
         final, stderr = result.values[name], result.stderr[name]

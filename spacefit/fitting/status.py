@@ -64,6 +64,13 @@ class Status(enum.Enum):
         """Whether a signal (Ctrl-C or SIGTERM) stopped the solve."""
         return self in (Status.INTERRUPTED, Status.TERMINATED)
 
+    @property
+    def headline(self) -> str:
+        """The status in a few words, for a panel's title: its description's first clause, and the status's name in words
+        where that says more ("converged: no better point", "failed: at bound", "misfit", "not judged")."""
+        first, words = self.value.split(":")[0], self.name.lower().replace("_", " ")
+        return first if first.startswith("not ") or words in first else f"{first}: {words}"
+
     def __str__(self) -> str:
         return self.value
 
