@@ -31,10 +31,11 @@ def test_the_registry_imports_neither_jax_nor_mitsuba():
     assert out.stdout.strip() == "[]"
 
 
-@pytest.mark.parametrize("module", ["spacefit.sensor", "spacefit.imageio", "spacefit.scene.toml", "spacefit.rendering.renderer"])
+@pytest.mark.parametrize("module", ["spacefit.sensor", "spacefit.imageio", "spacefit.scene.toml", "spacefit.rendering.renderer",
+                                    "spacefit.rendering.drjit_scene"])
 def test_the_light_modules_import_no_jax(module):
-    """Reading a sensor file or a FITS image, loading a scene and rendering load no JAX: only the
-    fitting seam (spacefit.fitting, the image formation included) and the rendering bridge do."""
+    """Reading a sensor file or a FITS image, loading a scene and rendering (derivative renders too: DrJitScene) load no
+    JAX: only the fitting seam (spacefit.fitting, the image formation included) and the rendering bridge do."""
     code = f"import sys, {module}\nprint(sorted(m for m in sys.modules if m.split('.')[0] in ('jax', 'jaxtyping')))"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300,
                          env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})

@@ -43,7 +43,8 @@ def _outside_scope(err: BaseException | None) -> bool:
 
 @dataclass
 class DrJitScene:
-    """A loaded Mitsuba scene whose values are set by traverse key from JAX, rendered with an AD integrator.
+    """A loaded Mitsuba scene whose values are set by traverse key (the bridge's JAX functions call it back), rendered with
+    an AD integrator.
 
     Args:
         renderer: the loaded scene (its film, camera and parts).
