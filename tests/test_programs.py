@@ -24,6 +24,7 @@ from helpers import write_sphere_fit_case
 
 import spacefit as sf
 from spacefit.cli import main
+from spacefit.programs import AlikePrograms
 from spacefit.rendering.exr import read_exr
 from spacefit.scene.assembly import assemble
 from spacefit.scene.toml import load_scene
@@ -120,8 +121,6 @@ def test_a_program_compiled_ahead_runs_with_no_trace_and_gives_the_same_bits():
     """AlikePrograms.compile_ahead: the key's program compiled for arguments shaped as those given (their values unused),
     not run; the call with the key then traces, lowers and compiles nothing (JAX's own events), runs the program
     compiled ahead and gives the plain call's outputs bit for bit; another key of its kind shares the compiled program."""
-    from spacefit.programs import AlikePrograms
-
     weights = np.linspace(0.5, 2.0, 12)  # an array the function closes over: an operand of its program
     events: list[str] = []
 
