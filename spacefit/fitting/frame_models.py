@@ -120,15 +120,10 @@ def concurrently(calls: Sequence[Callable[[], T]]) -> list[T]:
     in this thread's 64-bit mode (a thread's own: ``jax.enable_x64``); the same results, in order."""
     if len(calls) < 3:
         return [call() for call in calls]
-    x64 = bool(jax.config.jax_enable_x64)
-
-    def run(call: Callable[[], T]) -> T:
-        with jax.enable_x64(x64):
-            return call()
-
     first = calls[0]()
     with ThreadPoolExecutor(PROGRAM_THREADS, thread_name_prefix="spacefit-programs") as pool:
-        return [first, *pool.map(run, calls[1:])]
+        others = [pool.submit(_in_this_mode(call)) for call in calls[1:]]
+        return [first, *(other.result() for other in others)]
 
 
 @contextlib.contextmanager
@@ -138,16 +133,21 @@ def meanwhile(call: Callable[[], object] | None) -> Iterator[None]:
     if call is None:
         yield
         return
+    with ThreadPoolExecutor(1, thread_name_prefix="spacefit-ahead") as pool:
+        done = pool.submit(_in_this_mode(call))
+        yield
+        done.result()
+
+
+def _in_this_mode(call: Callable[[], T]) -> Callable[[], T]:
+    """``call``, to run on another thread in this thread's 64-bit mode (each thread has its own: ``jax.enable_x64``)."""
     x64 = bool(jax.config.jax_enable_x64)
 
-    def run() -> object:
+    def run() -> T:
         with jax.enable_x64(x64):
             return call()
 
-    with ThreadPoolExecutor(1, thread_name_prefix="spacefit-ahead") as pool:
-        done = pool.submit(run)
-        yield
-        done.result()
+    return run
 
 
 def _arrays(alike: Sequence[ClosedJaxpr]) -> tuple[tuple[np.ndarray, ...], tuple[np.ndarray, ...], tuple[tuple[bool, int], ...]]:
