@@ -52,3 +52,23 @@ def test_a_state_holding_its_linearisation_once_steps_the_same_bits(name):
             assert all(a is b for a, b in zip(arrays(held.descent_state.f_info), arrays(held.f_info), strict=True))
     if name == "lm":
         assert rejected > 0
+
+
+def _rendered_first_rosenbrock(columns_held: bool) -> drivers.RenderedFirst:
+    """Rosenbrock's residuals as renders made first: the 'renders' the point's own coordinates, read back by the residual
+    through its operands (a Gauss-Newton step's arguments), so that every step's operands move with its trial point."""
+    return drivers.RenderedFirst(lambda u, jacobian: (jnp.asarray(u),), lambda u, operands: operands,
+                                 lambda y, operands: rosenbrock(y + 0.0 * operands[0], None)[0], columns_held=columns_held)
+
+
+@pytest.mark.parametrize("name", ["lm", "gn", "dogleg"])
+@float64
+def test_a_solve_holding_the_jacobians_columns_takes_the_same_steps(name):
+    """With its Jacobian's columns held in the state (an image fitted alone), a solver evaluates the same trial points
+    with the same losses, to the round-off of its linearisation applied as columns, accepted and rejected alike."""
+    y = jnp.asarray([-1.2, 1.0, 3.0])
+    solves = [list(drivers.drive(SOLVERS[name](), None, y, 12, None, _rendered_first_rosenbrock(held))) for held in (False, True)]
+    assert len(solves[0]) == len(solves[1]) > 3
+    for a, b in zip(*solves):
+        np.testing.assert_allclose(a.u, b.u, rtol=1e-12, atol=1e-14)
+        assert a.loss == pytest.approx(b.loss, rel=1e-12, abs=1e-24)

@@ -12,7 +12,7 @@ import numpy as np
 import optimistix as optx
 import pytest
 
-from spacefit.fitting.normal_equations import NormalEquations, by_columns, gram, probes
+from spacefit.fitting.normal_equations import NormalEquations, by_columns, gram, held_columns, probes
 from spacefit.precision import float64
 
 
@@ -136,3 +136,21 @@ def test_levenberg_marquardt_of_frames_own_columns_takes_the_qr_steps():
             for solver in (lx.QR(), NormalEquations(chunk=2, owners=owners))]
     np.testing.assert_allclose(ends[1], ends[0], rtol=1e-7)
     assert np.max(np.abs(np.asarray(ends[1]) - np.asarray(truth))) < 0.01
+
+
+@float64
+def test_a_residual_with_held_columns_is_linearised_as_its_columns_alone():
+    """:func:`held_columns`: the same residuals and tangents, and a linearisation that holds J's columns (n x rows) and
+    nothing else, where the model's own holds its intermediates."""
+    t = jnp.linspace(0.0, 4.0, 400)
+    data = decays(jnp.asarray([2.0, 1.3, 0.7, 0.2, 0.1]), t)
+    fn = lambda u, offset: decays(u, t) - data + offset  # noqa: E731
+    u, tangent = jnp.asarray([1.0, 2.0, 1.0, 0.5, 0.0]), jnp.asarray([0.3, -0.1, 0.2, 0.05, 1.0])
+    held = held_columns(fn)
+    np.testing.assert_array_equal(held(u, 0.5), fn(u, 0.5))
+    np.testing.assert_allclose(jax.jvp(lambda v: held(v, 0.5), (u,), (tangent,))[1],
+                               jax.jvp(lambda v: fn(v, 0.5), (u,), (tangent,))[1], rtol=1e-13, atol=1e-15)
+    kept = {name: [c.shape for c in jax.make_jaxpr(jax.linearize(lambda v, f=f: f(v, 0.5), u)[1])(u).consts]
+            for name, f in (("model", fn), ("held", held))}
+    assert kept["held"] == [(5, 400)]
+    assert len(kept["model"]) > 2

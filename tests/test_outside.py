@@ -3,6 +3,8 @@ the programs that call back into Python for them."""
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -62,6 +64,7 @@ def test_the_solver_steps_the_same_on_renders_made_first(small):
     def residual_u(y: jax.Array) -> jax.Array:
         return problem.descent_x(fp.to_physical(y)).astype(y.dtype)
 
+    assert _rendered_first(small).columns_held  # an image fitted alone: its Jacobian's columns held in the solver's state
     solves = [list(drive(make_solver("lm"), residual_u, u, 4, None, rendered_first)) for rendered_first in (None, _rendered_first(small))]
     assert [len(s) for s in solves] == [4, 4]
     for called_back, first in zip(*solves):
@@ -96,7 +99,7 @@ def _stepped(small, solver: str, max_steps: int, rendered_first: RenderedFirst) 
 def _every_trial_linearised(given: RenderedFirst) -> RenderedFirst:
     """``given`` rendering every trial point's Jacobian with its images (the driver's renders before rejected trials
     were stepped on their images alone)."""
-    return RenderedFirst(lambda u, jacobian: given.render(u, True), lambda u, operands: operands, given.residual)
+    return dataclasses.replace(given, render=lambda u, jacobian: given.render(u, True), linearised=lambda u, operands: operands)
 
 
 def _assert_same_steps(steps: list[Step], reference: list[Step]) -> None:

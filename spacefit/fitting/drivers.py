@@ -20,6 +20,7 @@ import numpy as np
 import optimistix as optx
 
 from spacefit.fitting.compile_cache import CALLBACK_COMPILER_OPTIONS, jit_calling_back
+from spacefit.fitting.normal_equations import held_columns
 from spacefit.fitting.solvers import ADAM_PATIENCE, Adam, Solver, is_least_squares
 from spacefit.fitting.status import Status
 
@@ -70,11 +71,15 @@ class RenderedFirst:
         linearised: (u, ``render(u, False)``'s operands) -> ``render(u, True)``'s: the Jacobian's columns rendered beside
             the images made.
         residual: (u, renders) -> the residuals at u from renders made at u: a function with no callback.
+        columns_held: every Jacobian column moves every observation's residuals (an image fitted alone): the solver's
+            state holds the Jacobian's columns (:func:`~spacefit.fitting.normal_equations.held_columns`), not the
+            residuals' linearisation.
     """
 
     render: Callable[[jax.Array, bool], Any]
     linearised: Callable[[jax.Array, Any], Any]
     residual: Callable[[jax.Array, Any], jax.Array]
+    columns_held: bool = False
 
 
 class _Evaluations:
@@ -226,8 +231,13 @@ def _rendered_first(solver: optx.AbstractGaussNewton, given: RenderedFirst, u: j
     held = [given.residual]  # dropped when the solve ends (as :func:`_optimistix`'s)
     on_loss = _rejects_above(solver)
 
+    def residual(y: jax.Array, args: Any) -> jax.Array:
+        return held[0](y, args)
+
+    linearisable = held_columns(residual) if given.columns_held else residual
+
     def fn(y: jax.Array, args: Any) -> tuple[jax.Array, None]:
-        return held[0](y, args), None
+        return linearisable(y, args), None
 
     def evaluated(y: jax.Array, args: Any) -> tuple[jax.Array, jax.Array]:
         r = held[0](y, args)

@@ -257,4 +257,4 @@ def _rendered_first(s: Setup, steps: SolveRecord | None = None) -> RenderedFirst
     def residual(u: jax.Array, renders: Any) -> jax.Array:
         return outside.evaluate(fp.to_physical(u), *renders)[DESCENT].astype(u.dtype)  # as residual_u's
 
-    return RenderedFirst(rendered, linearised, residual)
+    return RenderedFirst(rendered, linearised, residual, columns_held=column_owners(fp, s.problem.blocks) is None)

@@ -144,6 +144,28 @@ def images(operator: lx.AbstractLinearOperator) -> Array:
     return jax.lax.map(image, jnp.eye(operator.in_size(), dtype=dtype))
 
 
+def held_columns(residual: Callable[[Array, Any], Array]) -> Callable[[Array, Any], Array]:
+    """``residual`` ((y, args) -> residuals, y a vector) whose JVP forms J's columns at y (:func:`images` of its
+    linearisation) and applies them, so that a linearisation holds J's columns (n x rows) alone, not the model's
+    intermediates (the 8-parameter observation fit's: some 80 arrays of 128 x 128 x 3 values, 31 MiB, which each
+    solver step's program took in and copied with its state; its step's run 90 to 60 ms, its first call's tracing and
+    lowering 0.1 s less). For an image fitted alone, whose columns :class:`NormalEquations` forms anyway; a joint fit's
+    (frames' own columns, rows x columns growing as frames^2) are never held. ``args`` are not differentiated."""
+
+    @jax.custom_jvp
+    def held(y: Array, args: Any) -> Array:
+        return residual(y, args)
+
+    @held.defjvp
+    def held_jvp(primals: tuple[Array, Any], tangents: tuple[Array, Any]) -> tuple[Array, Array]:
+        (y, args), t = primals, tangents[0]
+        r, linear = jax.linearize(lambda z: residual(z, args), y)
+        columns = images(lx.FunctionLinearOperator(linear, jax.eval_shape(lambda: y)))
+        return r, jnp.reshape(t @ columns, r.shape)
+
+    return held
+
+
 def gram(operator: lx.AbstractLinearOperator, chunk: int | None = None, owners: Sequence[int] | None = None) -> Array:
     """J^T J of a linear operator J: where every column is shared (:func:`all_shared`), the products of J's columns
     (:func:`images`); else applied with J^T to :func:`probes`' directions of the columns' ``owners`` in
