@@ -168,6 +168,13 @@ MUTANTS = (
     Mutant("program-gc-threshold-default", "spacefit/cli.py", "gc.set_threshold(PROGRAM_GC_YOUNG, *gc.get_threshold()[1:])",
            "gc.set_threshold(700, *gc.get_threshold()[1:])",
            ("tests/test_fit_cli.py::test_the_program_s_modules_load_with_the_collector_off_and_are_frozen_out_of_its_scans",)),
+    # an image fit's solver state: its Jacobian's columns held, not its model's linearisation
+    Mutant("held-columns-tangent-unapplied", "spacefit/fitting/normal_equations.py",
+           "        return r, jnp.reshape(t @ columns, r.shape)\n", "        return r, jnp.reshape(columns[0], r.shape)\n",
+           ("tests/test_normal_equations.py::test_a_residual_with_held_columns_is_linearised_as_its_columns_alone",
+            "tests/test_drivers.py::test_a_solve_holding_the_jacobians_columns_takes_the_same_steps")),
+    Mutant("held-columns-never", "spacefit/fitting/loop.py", "columns_held=column_owners(fp, s.problem.blocks) is None)",
+           "columns_held=False)", ("tests/test_outside.py::test_the_solver_steps_the_same_on_renders_made_first",)),
     Mutant("primal-kept-whatever-the-seed", DRJIT_SCENE, "return seed, digest.digest()", "return 0, digest.digest()",
            ("tests/test_stopping.py::test_history_flags_match_the_loss_sequence",)),
     Mutant("no-better-point-after-any-two-rejections", "spacefit/fitting/stopping.py",
