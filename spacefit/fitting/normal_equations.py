@@ -149,8 +149,13 @@ def held_columns(residual: Callable[[Array, Any], Array]) -> Callable[[Array, An
     linearisation) and applies them, so that a linearisation holds J's columns (n x rows) alone, not the model's
     intermediates (the 8-parameter observation fit's: some 80 arrays of 128 x 128 x 3 values, 31 MiB, which each
     solver step's program took in and copied with its state; its step's run 90 to 60 ms, its first call's tracing and
-    lowering 0.1 s less). For an image fitted alone, whose columns :class:`NormalEquations` forms anyway; a joint fit's
+    lowering 0.1 s less; the columns one jitted function, whose trace the solver's ``init`` and its step share). For an image fitted alone, whose columns :class:`NormalEquations` forms anyway; a joint fit's
     (frames' own columns, rows x columns growing as frames^2) are never held. ``args`` are not differentiated."""
+
+    @jax.jit
+    def with_columns(y: Array, args: Any) -> tuple[Array, Array]:
+        r, linear = jax.linearize(lambda z: residual(z, args), y)
+        return r, images(lx.FunctionLinearOperator(linear, jax.eval_shape(lambda: y)))
 
     @jax.custom_jvp
     def held(y: Array, args: Any) -> Array:
@@ -159,8 +164,7 @@ def held_columns(residual: Callable[[Array, Any], Array]) -> Callable[[Array, An
     @held.defjvp
     def held_jvp(primals: tuple[Array, Any], tangents: tuple[Array, Any]) -> tuple[Array, Array]:
         (y, args), t = primals, tangents[0]
-        r, linear = jax.linearize(lambda z: residual(z, args), y)
-        columns = images(lx.FunctionLinearOperator(linear, jax.eval_shape(lambda: y)))
+        r, columns = with_columns(y, args)
         return r, jnp.reshape(t @ columns, r.shape)
 
     return held
