@@ -149,8 +149,9 @@ def held_columns(residual: Callable[[Array, Any], Array]) -> Callable[[Array, An
     linearisation) and applies them, so that a linearisation holds J's columns (n x rows) alone, not the model's
     intermediates (the 8-parameter observation fit's: some 80 arrays of 128 x 128 x 3 values, 31 MiB, which each
     solver step's program took in and copied with its state; its step's run 90 to 60 ms, its first call's tracing and
-    lowering 0.1 s less; the columns one jitted function, whose trace the solver's ``init`` and its step share). For an image fitted alone, whose columns :class:`NormalEquations` forms anyway; a joint fit's
-    (frames' own columns, rows x columns growing as frames^2) are never held. ``args`` are not differentiated."""
+    lowering 0.1 s less). The columns are one jitted function, whose trace the solver's ``init`` and its step share.
+    For an image fitted alone, whose columns :class:`NormalEquations` forms anyway; a joint fit's (frames' own
+    columns, rows x columns growing as frames^2) are never held. ``args`` are not differentiated."""
 
     @jax.jit
     def with_columns(y: Array, args: Any) -> tuple[Array, Array]:
