@@ -64,8 +64,8 @@ def primal(ds: DrJitScene, values: dict[str, np.ndarray], seed: int, step: Steps
     block.set_offset(film.crop_offset())
     step("set up the film")
     for seed_i, spp_i, start, count in passes:
-        camera, _ = r.frozen.functions(r.geometry)
-        position, rgb = camera(r.scene, r._pixels, mi.UInt32(seed_i), spp_i, start, count, r.window[2])
+        camera, _, _ = r.frozen.functions(r.geometry)
+        position, rgb = camera(r.scene, r._pixels, dr.opaque(mi.UInt32, seed_i), spp_i, start, count, r.window[2])
         dr.eval(position, rgb)
         step("call the replay")
         dr.sync_thread()
@@ -85,17 +85,22 @@ def primal(ds: DrJitScene, values: dict[str, np.ndarray], seed: int, step: Steps
 
 
 def column(ds: DrJitScene, values: dict[str, np.ndarray], key: str, seed: int, step: Steps) -> np.ndarray:
-    """``ds.forward(values, {key: ones}, seed)`` step by step (a material's column: nothing moves)."""
+    """``ds.forward(values, {key: ones}, seed)`` step by step (a material's column: nothing moves): each pass's primal
+    state made (the primal pass a Jacobian's columns share, :meth:`~spacefit.rendering.drjit_scene.DrJitScene.forward_columns`),
+    then its forward pass."""
     r = ds.renderer
     tangent = {key: np.ones_like(values[key])}
     r.set_params(values, tangent)
     dr.set_grad(ds.params[key], to_value(ds.params[key], tangent[key]))
     step("set the values")
     film, image = r.scene.sensors()[0].film(), None
+    _, state, derivative = r.frozen.functions(r.geometry)
+    states: dict[tuple[int, int], tuple[object]] = {}
+    ds._primal_states(state, seed, states)
+    step("K the primal pass (one per Jacobian)")
     with errors_only():
-        for seed_i, count, weight in ds._passes(ds.spp_grad, seed):
-            _, derivative = r.frozen.functions(r.geometry)
-            position, value = derivative(r.scene, ds._integrator, mi.UInt32(seed_i), count)
+        for i, (seed_i, count, weight) in enumerate(ds._passes(ds.spp_grad, seed)):
+            position, value = derivative(r.scene, ds._integrator, dr.opaque(mi.UInt32, seed_i), count, *states[(i, r.geometry)])
             dr.eval(position, value)
             step("call the replay")
             dr.sync_thread()

@@ -54,3 +54,16 @@ def test_sample_allocation_bound_matches_its_closed_form():
     # equal sigmas: nothing to gain; a noisy first pass only loses
     flat = allocation_gains(np.ones(4), np.array([0.5, 1.0, 1.5, 1.0]))
     assert flat["ideal"] == pytest.approx(1.0) and flat["two_pass"] > 1.0
+
+
+def test_the_frozen_call_s_steps_are_still_the_renderer_s_and_the_fixed_cost_benchmark_gives_its_verdict():
+    """``make bench``'s fixed-cost section at its smallest: profile_frozen_call.py re-runs a primal render and a
+    forward-mode column step by step as the renderer runs them and asserts each image equals the renderer's, bit for
+    bit (its copy of the steps had fallen behind the renderer's three frozen passes, and ``make bench`` stopped
+    there); bench_fixed_cost.py reads the frozen calls' fixed cost from its zero-work line."""
+    out = run_script("profile_frozen_call", "--calls", "2")
+    assert "outside the kernels" in out and out.count("outside the kernels") == 2
+    out = run_script("bench_fixed_cost", "--calls", "2", "--rounds", "1")
+    verdicts = [line for line in out.splitlines() if line.startswith("per-call fixed cost")]
+    assert [v.split(":")[0] for v in verdicts] == ["per-call fixed cost, primal", "per-call fixed cost, derivative"]
+    assert all("the zero-work line at 0 spp" in v for v in verdicts)
