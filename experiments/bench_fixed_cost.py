@@ -131,12 +131,14 @@ def main() -> None:
                 rows.setdefault((kind, mode), []).extend(calls(chain.drjit, x0, chain.values_of, kind, args.calls, mode == "traced"))
     print(f"{'render':<11} {'mode':<7} {'wall ms':>8} {'CPU ms':>7} {'kernels ms':>10} {'fixed ms':>9} {'least':>6}  (medians; "
           "fixed = wall - kernels per call; least: the call with the least, the one a loaded machine delayed least)")
-    fixed = {}
+    traced = {}  # per kind, the traced calls' median wall less kernels (a frozen call's history lacks its samples' kernels)
     for (kind, mode), samples in rows.items():
-        fixed[kind, mode] = statistics.median(c.wall - c.kernels for c in samples)
-        kernels, least = statistics.median(c.kernels for c in samples), min(c.wall - c.kernels for c in samples)
-        counted = (f"{kernels:>10.1f} {fixed[kind, mode]:>9.1f} {least:>6.1f}" if mode == "traced"
-                   else f"{'-':>10} {'-':>9} {'-':>6}  (its samples' kernels run with the history off: the zero-work line below)")
+        if mode == "traced":
+            traced[kind] = statistics.median(c.wall - c.kernels for c in samples)
+            kernels, least = statistics.median(c.kernels for c in samples), min(c.wall - c.kernels for c in samples)
+            counted = f"{kernels:>10.1f} {traced[kind]:>9.1f} {least:>6.1f}"
+        else:
+            counted = f"{'-':>10} {'-':>9} {'-':>6}  (its samples' kernels run with the history off: the zero-work line below)"
         print(f"{kind:<11} {mode:<7} {statistics.median(c.wall for c in samples):>8.1f} {statistics.median(c.cpu for c in samples):>7.1f} {counted}")
     frozen, line = chains["frozen"], {}
     for kind in KINDS:
@@ -155,7 +157,7 @@ def main() -> None:
         f = line[kind][0]
         print(f"per-call fixed cost, {kind}: {f:.1f} ms wall frozen, the zero-work line at 0 spp (target {TARGET_MS:.0f} ms: "
               f"{'met' if f <= TARGET_MS else 'NOT met'} at load {load:.1f}; {line[kind][1]:.1f} ms CPU), "
-              f"{fixed[kind, 'traced']:.1f} ms traced (wall less its kernels)")
+              f"{traced[kind]:.1f} ms traced (wall less its kernels)")
     if load > os.cpu_count():
         print(f"the machine was loaded (load average up to {load:.1f} on {os.cpu_count()} cores): a call's wall time counted "
               "its waits for a core; the target is for a quiet machine")

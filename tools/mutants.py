@@ -173,7 +173,7 @@ MUTANTS = (
            "        return r, jnp.reshape(t @ columns, r.shape)\n", "        return r, jnp.reshape(columns[0], r.shape)\n",
            ("tests/test_normal_equations.py::test_a_residual_with_held_columns_is_linearised_as_its_columns_alone",
             "tests/test_drivers.py::test_a_solve_holding_the_jacobians_columns_takes_the_same_steps")),
-    Mutant("held-columns-never", "spacefit/fitting/loop.py", "columns_held=column_owners(fp, s.problem.blocks) is None)",
+    Mutant("held-columns-never", "spacefit/fitting/loop.py", "columns_held=all_shared(column_owners(fp, s.problem.blocks)))",
            "columns_held=False)", ("tests/test_outside.py::test_the_solver_steps_the_same_on_renders_made_first",)),
     Mutant("primal-kept-whatever-the-seed", DRJIT_SCENE, "return seed, digest.digest()", "return 0, digest.digest()",
            ("tests/test_stopping.py::test_history_flags_match_the_loss_sequence",)),

@@ -23,6 +23,7 @@ from spacefit.fitting.compile_cache import use_compile_cache
 from spacefit.fitting.conclusion import conclude
 from spacefit.fitting.drivers import Outcome, RenderedFirst, drive
 from spacefit.fitting.frames import frame_executor
+from spacefit.fitting.normal_equations import all_shared
 from spacefit.fitting.observations.base import Sequenced, ValueObservation
 from spacefit.fitting.observations.image import Observation
 from spacefit.fitting.outside import DESCENT
@@ -257,4 +258,4 @@ def _rendered_first(s: Setup, steps: SolveRecord | None = None) -> RenderedFirst
     def residual(u: jax.Array, renders: Any) -> jax.Array:
         return outside.evaluate(fp.to_physical(u), *renders)[DESCENT].astype(u.dtype)  # as residual_u's
 
-    return RenderedFirst(rendered, linearised, residual, columns_held=column_owners(fp, s.problem.blocks) is None)
+    return RenderedFirst(rendered, linearised, residual, columns_held=all_shared(column_owners(fp, s.problem.blocks)))
